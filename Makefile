@@ -1,0 +1,54 @@
+# voxlat: two set-up commands on a fresh Debian machine.
+#   make run   installs missing Debian packages, builds Release, runs the default recipe
+#   make test  installs, builds, runs every test
+#   make bench runs the benchmarks in bench/ (installs their reference tools too)
+
+BUILD ?= build
+JOBS ?= $(shell nproc)
+RECIPE ?= data/recipes/gyroid.yaml
+OUT ?= out
+
+DEB_PACKAGES := cmake ninja-build g++ libopenvdb-dev libboost-iostreams-dev libtbb-dev libopenmesh-dev \
+	libopenexr-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libgtest-dev
+BENCH_PACKAGES := python3 python3-numpy python3-openvdb
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+CCACHE := $(shell command -v ccache 2>/dev/null)
+
+.PHONY: all deps bench-deps build run test bench format clean
+
+all: build
+
+# Installs only what is missing (apt-get update first: a fresh machine has no package lists).
+define install_missing
+	@missing=$$(for p in $(1); do dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q 'ok installed' || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+	  echo "installing Debian packages:" $$missing; \
+	  $(SUDO) apt-get update -qq && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends $$missing; \
+	fi
+endef
+
+deps:
+	$(call install_missing,$(DEB_PACKAGES))
+
+bench-deps:
+	$(call install_missing,$(BENCH_PACKAGES))
+
+build: deps
+	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Release $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+	cmake --build $(BUILD) -j $(JOBS)
+
+run: build
+	$(BUILD)/voxlat run $(RECIPE) --out $(OUT)
+	@echo "outputs are in $(abspath $(OUT)) (mesh and report.json)"
+
+test: build
+	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+
+bench: build bench-deps
+	/usr/bin/python3 bench/run.py --voxlat $(BUILD)/voxlat
+
+format:
+	clang-format -i $$(git ls-files '*.cpp' '*.h')
+
+clean:
+	rm -rf $(BUILD) $(OUT)

@@ -1,0 +1,29 @@
+/// @file DensitySolver.h
+/// @brief Finds the level at which a solid fills a target share of the domain.
+#pragma once
+
+#include "engine/Domain.h"
+
+#include <cstdint>
+
+namespace voxlat {
+
+struct DensitySolution {
+    double level = 0.0;             ///< level of the indicator field: solid = {g < level}
+    double achieved = 0.0;          ///< share of domain voxel centres inside, measured on the grid
+    std::uint64_t insideVoxels = 0;
+    std::uint64_t domainVoxels = 0;
+    bool coverage = false;          ///< measured with sub-voxel coverage (value ties), not a count
+    int rounds = 0;                 ///< fine passes needed (1 unless the coarse bracket missed)
+    std::uint64_t evaluatedLeaves = 0;
+};
+
+/// Solves vol{g < level} / vol(domain) = @a target over the domain's voxel centres, as an exact
+/// quantile: a coarse strided pass brackets the level, a sparse pass evaluates only the leaves
+/// whose bound meets the bracket, and a selection over the bracketed values picks the level. The
+/// achieved share is within half a voxel's share of the target. When value ties (a symmetric
+/// field on a regular grid) leave no level within 0.1 % of the target by count, the level is
+/// bisected on a sub-voxel coverage measure instead (continuous in the level).
+DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target);
+
+}  // namespace voxlat

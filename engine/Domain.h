@@ -1,0 +1,37 @@
+/// @file Domain.h
+/// @brief The box a job lives in and the voxel grid that samples it.
+#pragma once
+
+#include "fields/FieldNode.h"
+
+#include <openvdb/math/Coord.h>
+#include <openvdb/math/Transform.h>
+
+#include <cstdint>
+
+namespace voxlat {
+
+/// A box sampled at voxel centres: voxel (i, j, k) has its centre at
+/// min + (i + 0.5, j + 0.5, k + 0.5) * voxel, for 0 <= i < dims.x and so on.
+struct Domain {
+    Box3 box;
+    double voxel = 0.1;
+    openvdb::Coord dims{0, 0, 0};
+
+    /// Snaps the box to a whole number of voxels per axis (round to nearest, at least one); the
+    /// returned box is the one actually sampled.
+    static Domain fromBox(const Box3& box, double voxel);
+
+    Vec3d worldOf(const openvdb::Coord& ijk) const
+    {
+        return box.min + voxel * Vec3d(ijk.x() + 0.5, ijk.y() + 0.5, ijk.z() + 0.5);
+    }
+    /// Number of voxels inside the domain.
+    std::uint64_t voxelCount() const { return std::uint64_t(dims.x()) * dims.y() * dims.z(); }
+    /// Index-space box of the domain's voxels (inclusive).
+    openvdb::CoordBBox indexBox() const { return {openvdb::Coord(0), dims - openvdb::Coord(1)}; }
+    /// OpenVDB transform mapping voxel indices to voxel centres.
+    openvdb::math::Transform::Ptr transform() const;
+};
+
+}  // namespace voxlat

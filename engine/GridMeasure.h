@@ -1,0 +1,24 @@
+/// @file GridMeasure.h
+/// @brief Counting voxels of a sparse grid inside a region, tiles included.
+#pragma once
+
+#include <openvdb/openvdb.h>
+
+#include <cstdint>
+#include <vector>
+
+namespace voxlat {
+
+/// The voxels of a region split by a band [lo, hi]: those below are counted, those inside are
+/// collected (in leaf order), those above are dropped. Tiles never meet the surface, so an
+/// active tile below lo counts whole.
+struct BandSplit {
+    std::uint64_t below = 0;
+    std::vector<float> band;
+};
+BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi);
+
+/// Number of voxels in @a region whose value is below @a threshold (tiles included).
+std::uint64_t countBelow(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float threshold);
+
+}  // namespace voxlat

@@ -1,0 +1,59 @@
+/// @file Job.h
+/// @brief One recipe taken through the stages: build fields, solve levels, evaluate, mesh, write.
+#pragma once
+
+#include "engine/Domain.h"
+#include "engine/FieldBuilder.h"
+#include "engine/Recipe.h"
+#include "mesher/TriangleMesh.h"
+
+#include <nlohmann/json.hpp>
+#include <openvdb/openvdb.h>
+
+#include <filesystem>
+
+namespace voxlat {
+
+/// Runs a recipe stage by stage; each stage runs once, on first need, and records its time in
+/// the report. Every file it writes appears whole or not at all.
+class Job {
+public:
+    explicit Job(Recipe recipe);
+
+    const Recipe& recipe() const { return mRecipe; }
+    const Domain& domain() const { return mDomain; }
+
+    /// Solves every `density:` level (in dependency order). Idempotent.
+    void solveLevels();
+    /// A named field, with its levels solved.
+    FieldPtr field(const std::string& name);
+    /// The sparse grid of the result clipped to the domain (negative inside), evaluated once.
+    const openvdb::FloatGrid& grid();
+    /// The watertight mesh of the grid, built once.
+    const TriangleMesh& mesh();
+
+    /// Writes the recipe's outputs (paths relative to @a outDir) and report.json.
+    void writeOutputs(const std::filesystem::path& outDir);
+    /// Writes only the mesh, to @a path.
+    void writeMesh(const std::filesystem::path& path);
+    void writeReport(const std::filesystem::path& path);
+
+    /// Levels, densities, counts, timings and peak memory so far.
+    nlohmann::json report() const;
+
+private:
+    template <typename Fn>
+    auto timed(const std::string& stage, Fn&& fn);
+
+    Recipe mRecipe;
+    FieldBuilder mBuilder;
+    Domain mDomain;
+    FieldPtr mResult;
+    bool mSolved = false;
+    openvdb::FloatGrid::Ptr mGrid;
+    std::unique_ptr<TriangleMesh> mMesh;
+    nlohmann::json mReport;
+    nlohmann::json mTimings = nlohmann::json::object();
+};
+
+}  // namespace voxlat

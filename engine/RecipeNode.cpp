@@ -1,0 +1,136 @@
+#include "engine/RecipeNode.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace voxlat {
+
+RecipeNode::RecipeNode(YAML::Node node, std::shared_ptr<const RecipeSource> source, std::string context)
+    : mNode(std::move(node)), mSource(std::move(source)), mContext(std::move(context))
+{
+}
+
+std::string RecipeNode::where() const
+{
+    for (const YAML::Node& o : mSource->overrides)
+        if (o.is(mNode)) return mSource->path + " (from --set)";
+    const YAML::Mark mark = mNode.Mark();
+    if (mark.is_null() || mark.line < 0) return mSource->path;
+    return mSource->path + ":" + std::to_string(mark.line + 1) + ":" + std::to_string(mark.column + 1);
+}
+
+void RecipeNode::fail(const std::string& message) const
+{
+    throw InputError(where() + ": " + mContext + ": " + message);
+}
+
+RecipeNode RecipeNode::operator[](const std::string& key) const
+{
+    if (!mNode.IsMap()) fail("expected a map with key `" + key + "`");
+    YAML::Node child = mNode[key];
+    if (!child) fail("missing key `" + key + "`");
+    return RecipeNode(child, mSource, mContext + " `" + key + "`");
+}
+
+RecipeNode RecipeNode::at(std::size_t index) const
+{
+    return RecipeNode(mNode[index], mSource, mContext + " item " + std::to_string(index + 1));
+}
+
+double RecipeNode::number() const
+{
+    if (!mNode.IsScalar()) fail("expected a number");
+    double v = 0.0;
+    try {
+        v = mNode.as<double>();
+    } catch (const YAML::Exception&) {
+        fail("expected a number, got `" + mNode.Scalar() + "`");
+    }
+    if (!std::isfinite(v)) fail("expected a finite number, got `" + mNode.Scalar() + "`");
+    return v;
+}
+
+double RecipeNode::positiveNumber() const
+{
+    const double v = number();
+    if (!(v > 0.0)) fail("must be greater than zero, got " + mNode.Scalar());
+    return v;
+}
+
+std::string RecipeNode::string() const
+{
+    if (!mNode.IsScalar()) fail("expected a word or a file name");
+    return mNode.Scalar();
+}
+
+bool RecipeNode::boolean() const
+{
+    if (mNode.IsScalar()) {
+        try {
+            return mNode.as<bool>();
+        } catch (const YAML::Exception&) {
+        }
+    }
+    fail("expected true or false");
+}
+
+Vec3d RecipeNode::vec3() const
+{
+    if (!mNode.IsSequence() || mNode.size() != 3) fail("expected a list of three numbers, like [0, 0, 1]");
+    return {at(0).number(), at(1).number(), at(2).number()};
+}
+
+Vec3d RecipeNode::scalarOrVec3() const
+{
+    if (mNode.IsScalar()) return Vec3d(number());
+    return vec3();
+}
+
+Box3 RecipeNode::box() const
+{
+    if (!mNode.IsSequence() || mNode.size() != 2) fail("expected [[x0, y0, z0], [x1, y1, z1]]");
+    Box3 b{at(0).vec3(), at(1).vec3()};
+    for (int a = 0; a < 3; ++a)
+        if (!(b.max[a] > b.min[a])) fail("the box's second corner must be above the first on every axis");
+    return b;
+}
+
+void RecipeNode::checkKeys(const std::vector<std::string>& allowed) const
+{
+    if (!mNode.IsMap()) fail("expected a map");
+    for (auto it = mNode.begin(); it != mNode.end(); ++it) {
+        const std::string key = it->first.Scalar();
+        if (std::find(allowed.begin(), allowed.end(), key) != allowed.end()) continue;
+        std::string message = "unknown key `" + key + "`";
+        const std::string guess = closestMatch(key, allowed);
+        if (!guess.empty()) message += "; did you mean `" + guess + "`?";
+        std::ostringstream valid;
+        for (std::size_t i = 0; i < allowed.size(); ++i) valid << (i ? ", " : "") << allowed[i];
+        RecipeNode(it->first, mSource, mContext).fail(message + " (valid keys: " + valid.str() + ")");
+    }
+}
+
+std::string closestMatch(const std::string& word, const std::vector<std::string>& candidates)
+{
+    std::string best;
+    std::size_t bestDistance = std::max<std::size_t>(2, word.size() / 3) + 1;
+    for (const std::string& c : candidates) {
+        // Levenshtein distance, two rows.
+        std::vector<std::size_t> prev(c.size() + 1), cur(c.size() + 1);
+        for (std::size_t j = 0; j <= c.size(); ++j) prev[j] = j;
+        for (std::size_t i = 1; i <= word.size(); ++i) {
+            cur[0] = i;
+            for (std::size_t j = 1; j <= c.size(); ++j)
+                cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (word[i - 1] != c[j - 1])});
+            std::swap(prev, cur);
+        }
+        if (prev[c.size()] < bestDistance) {
+            bestDistance = prev[c.size()];
+            best = c;
+        }
+    }
+    return best;
+}
+
+}  // namespace voxlat

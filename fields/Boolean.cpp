@@ -1,0 +1,90 @@
+#include "fields/Boolean.h"
+
+#include <algorithm>
+#include <array>
+#include <stdexcept>
+
+namespace voxlat {
+
+BooleanField::BooleanField(BooleanOp op, std::vector<FieldPtr> operands, double blendRadius)
+    : mOp(op), mOperands(std::move(operands)), mBlend(blendRadius)
+{
+    if (mOperands.empty()) throw std::invalid_argument("a boolean needs at least one operand");
+    if (mOp == BooleanOp::Difference && mOperands.size() < 2)
+        throw std::invalid_argument("a difference needs at least two operands");
+}
+
+void BooleanField::combine(double& a, Vec3d* ga, double b, const Vec3d* gb) const
+{
+    // Intersection and difference are negated unions: max(a, b) = -min(-a, -b).
+    const double sa = mOp == BooleanOp::Union ? 1.0 : -1.0;
+    const double sb = mOp == BooleanOp::Intersection ? -1.0 : 1.0;
+    const double x = sa * a, y = sb * b;  // minimise x and y
+    double m, h;
+    if (mBlend > 0.0) {
+        h = std::clamp(0.5 + 0.5 * (y - x) / mBlend, 0.0, 1.0);
+        m = y + h * (x - y) - mBlend * h * (1.0 - h);
+    } else {
+        h = x <= y ? 1.0 : 0.0;
+        m = x <= y ? x : y;
+    }
+    a = sa * m;
+    if (ga) *ga = sa * (h * sa * (*ga) + (1.0 - h) * sb * (*gb));
+}
+
+void BooleanField::values(std::span<const Vec3d> points, std::span<double> out) const
+{
+    mOperands[0]->values(points, out);
+    std::array<double, kBatchSize> buf;
+    for (std::size_t o = 1; o < mOperands.size(); ++o)
+        forEachChunk(points.size(), [&](std::size_t b, std::size_t n) {
+            mOperands[o]->values(points.subspan(b, n), std::span<double>(buf.data(), n));
+            for (std::size_t i = 0; i < n; ++i) combine(out[b + i], nullptr, buf[i], nullptr);
+        });
+}
+
+void BooleanField::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
+{
+    mOperands[0]->gradients(points, out, grad);
+    std::array<double, kBatchSize> buf;
+    std::array<Vec3d, kBatchSize> gbuf;
+    for (std::size_t o = 1; o < mOperands.size(); ++o)
+        forEachChunk(points.size(), [&](std::size_t b, std::size_t n) {
+            mOperands[o]->gradients(points.subspan(b, n), std::span<double>(buf.data(), n),
+                                    std::span<Vec3d>(gbuf.data(), n));
+            for (std::size_t i = 0; i < n; ++i) combine(out[b + i], &grad[b + i], buf[i], &gbuf[i]);
+        });
+}
+
+void BooleanField::gridValues(const GridBatch& batch, std::span<double> out) const
+{
+    if (batch.size() > kBatchSize) {
+        FieldNode::gridValues(batch, out);
+        return;
+    }
+    mOperands[0]->gridValues(batch, out);
+    std::array<double, kBatchSize> buf;
+    for (std::size_t o = 1; o < mOperands.size(); ++o) {
+        mOperands[o]->gridValues(batch, std::span<double>(buf.data(), batch.size()));
+        for (std::size_t i = 0; i < batch.size(); ++i) combine(out[i], nullptr, buf[i], nullptr);
+    }
+}
+
+Interval BooleanField::bound(const Box3& box) const
+{
+    Interval r = mOperands[0]->bound(box);
+    for (std::size_t o = 1; o < mOperands.size(); ++o) {
+        const Interval b = mOperands[o]->bound(box);
+        switch (mOp) {
+        case BooleanOp::Union: r = min(r, b); break;
+        case BooleanOp::Intersection: r = max(r, b); break;
+        case BooleanOp::Difference: r = max(r, -b); break;
+        }
+        // The smooth minimum lies within r/4 below the hard one (above it for max).
+        if (mBlend > 0.0) r = mOp == BooleanOp::Union ? Interval{r.lo - 0.25 * mBlend, r.hi}
+                                                      : Interval{r.lo, r.hi + 0.25 * mBlend};
+    }
+    return r;
+}
+
+}  // namespace voxlat

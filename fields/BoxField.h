@@ -1,0 +1,30 @@
+/// @file BoxField.h
+/// @brief Exact signed distance to an axis-aligned box.
+#pragma once
+
+#include "fields/PointField.h"
+
+namespace voxlat {
+
+/// Signed distance to the box [min, max]: the usual q = |p - c| - h construction.
+class BoxField final : public PointField<BoxField> {
+public:
+    explicit BoxField(const Box3& box) : mCenter(box.center()), mHalf(0.5 * box.extent()) {}
+
+    template <typename T>
+    T eval(const T& x, const T& y, const T& z) const
+    {
+        using std::abs, std::max, std::min, std::sqrt;
+        const T qx = abs(x - mCenter[0]) - mHalf[0];
+        const T qy = abs(y - mCenter[1]) - mHalf[1];
+        const T qz = abs(z - mCenter[2]) - mHalf[2];
+        const T zero(0.0);
+        const T ox = max(qx, zero), oy = max(qy, zero), oz = max(qz, zero);
+        return sqrt(ox * ox + oy * oy + oz * oz) + min(max(qx, max(qy, qz)), zero);
+    }
+
+private:
+    Vec3d mCenter, mHalf;
+};
+
+}  // namespace voxlat

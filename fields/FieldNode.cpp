@@ -1,0 +1,39 @@
+#include "fields/FieldNode.h"
+
+#include <vector>
+
+namespace voxlat {
+
+void FieldNode::gridValues(const GridBatch& batch, std::span<double> out) const
+{
+    std::vector<Vec3d> points;
+    points.reserve(batch.size());
+    for (int i = 0; i < batch.nx; ++i)
+        for (int j = 0; j < batch.ny; ++j)
+            for (int k = 0; k < batch.nz; ++k) points.push_back(batch.point(i, j, k));
+    values(points, out);
+}
+
+double FieldNode::value(const Vec3d& p) const
+{
+    double v = 0.0;
+    values(std::span<const Vec3d>(&p, 1), std::span<double>(&v, 1));
+    return v;
+}
+
+std::pair<double, Vec3d> FieldNode::valueAndGradient(const Vec3d& p) const
+{
+    double v = 0.0;
+    Vec3d g(0.0);
+    gradients(std::span<const Vec3d>(&p, 1), std::span<double>(&v, 1), std::span<Vec3d>(&g, 1));
+    return {v, g};
+}
+
+Interval lipschitzBound(const FieldNode& node, const Box3& box, double lipschitz)
+{
+    const double c = node.value(box.center());
+    const double r = lipschitz * box.radius();
+    return {c - r, c + r};
+}
+
+}  // namespace voxlat

@@ -1,0 +1,88 @@
+/// @file FieldNode.h
+/// @brief The one interface every field node implements.
+///
+/// Sign convention everywhere: a value is negative inside the solid and positive outside
+/// (OpenVDB's level-set convention). Nodes are immutable once built and safe to evaluate from
+/// many threads at once.
+#pragma once
+
+#include "fields/Interval.h"
+
+#include <openvdb/math/Vec3.h>
+
+#include <cstddef>
+#include <memory>
+#include <span>
+#include <utility>
+
+namespace voxlat {
+
+using Vec3d = openvdb::math::Vec3<double>;
+
+/// An axis-aligned box in world units (millimetres).
+struct Box3 {
+    Vec3d min{0.0};
+    Vec3d max{0.0};
+
+    Vec3d center() const { return 0.5 * (min + max); }
+    Vec3d extent() const { return max - min; }
+    /// Half the length of the diagonal: the largest distance from the centre to the box.
+    double radius() const { return 0.5 * extent().length(); }
+};
+
+/// A regular block of sample points origin + (i*spacing.x, j*spacing.y, k*spacing.z) for
+/// i < nx, j < ny, k < nz. Values are laid out with k fastest: offset = (i*ny + j)*nz + k, which
+/// is the linear voxel order of an OpenVDB leaf when the block is one 8x8x8 leaf.
+struct GridBatch {
+    Vec3d origin{0.0};
+    Vec3d spacing{1.0};
+    int nx = 8, ny = 8, nz = 8;
+
+    std::size_t size() const { return std::size_t(nx) * ny * nz; }
+    Vec3d point(int i, int j, int k) const
+    {
+        return {origin.x() + i * spacing.x(), origin.y() + j * spacing.y(), origin.z() + k * spacing.z()};
+    }
+    /// The box spanned by the sample points.
+    Box3 bounds() const { return {origin, point(nx - 1, ny - 1, nz - 1)}; }
+};
+
+/// A scalar field that can be evaluated in batches, differentiated and bounded.
+class FieldNode {
+public:
+    virtual ~FieldNode() = default;
+
+    /// Values at @a points; @a out has the same size.
+    virtual void values(std::span<const Vec3d> points, std::span<double> out) const = 0;
+
+    /// Values and analytic gradients at @a points.
+    virtual void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const = 0;
+
+    /// Values on a regular block of points. The default expands the block into points; nodes
+    /// that can share work along the axes (separable TPMS terms) override it.
+    virtual void gridValues(const GridBatch& batch, std::span<double> out) const;
+
+    /// A conservative bound of the value over @a box: every value inside lies in the interval.
+    virtual Interval bound(const Box3& box) const = 0;
+
+    /// Convenience single-point queries (slow path; batches are the fast path).
+    double value(const Vec3d& p) const;
+    std::pair<double, Vec3d> valueAndGradient(const Vec3d& p) const;
+};
+
+using FieldPtr = std::shared_ptr<const FieldNode>;
+
+/// Largest batch composite nodes process at once (one VDB leaf).
+inline constexpr std::size_t kBatchSize = 512;
+
+/// Calls fn(begin, count) over [0, n) in chunks of at most kBatchSize.
+template <typename Fn>
+void forEachChunk(std::size_t n, Fn&& fn)
+{
+    for (std::size_t b = 0; b < n; b += kBatchSize) fn(b, std::min(kBatchSize, n - b));
+}
+
+/// A bound from a Lipschitz constant: value(centre) +- lipschitz * radius.
+Interval lipschitzBound(const FieldNode& node, const Box3& box, double lipschitz);
+
+}  // namespace voxlat

@@ -1,0 +1,75 @@
+#include "fields/LevelSolid.h"
+
+#include "fields/Unary.h"
+
+#include <cmath>
+
+namespace voxlat {
+
+LevelSolid::LevelSolid(FieldPtr raw, SolidSide side, double level) : mRaw(std::move(raw)), mSide(side), mLevel(level) {}
+
+namespace {
+/// Maps raw values in place to the solid's value and derivative factor.
+inline double applySide(SolidSide side, double raw, double level, double& slope)
+{
+    switch (side) {
+    case SolidSide::Below: slope = 1.0; return raw - level;
+    case SolidSide::Band: slope = raw < 0 ? -1.0 : 1.0; return std::abs(raw) - level;
+    case SolidSide::Above: slope = -1.0; return level - raw;
+    }
+    slope = 1.0;
+    return raw;
+}
+}  // namespace
+
+void LevelSolid::values(std::span<const Vec3d> points, std::span<double> out) const
+{
+    mRaw->values(points, out);
+    double slope;
+    for (double& v : out) v = applySide(mSide, v, mLevel, slope);
+}
+
+void LevelSolid::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
+{
+    mRaw->gradients(points, out, grad);
+    for (std::size_t n = 0; n < out.size(); ++n) {
+        double slope;
+        out[n] = applySide(mSide, out[n], mLevel, slope);
+        grad[n] *= slope;
+    }
+}
+
+void LevelSolid::gridValues(const GridBatch& batch, std::span<double> out) const
+{
+    mRaw->gridValues(batch, out);
+    double slope;
+    for (double& v : out) v = applySide(mSide, v, mLevel, slope);
+}
+
+Interval LevelSolid::bound(const Box3& box) const
+{
+    const Interval r = mRaw->bound(box);
+    switch (mSide) {
+    case SolidSide::Below: return r - mLevel;
+    case SolidSide::Band: return abs(r) - mLevel;
+    case SolidSide::Above: return mLevel - r;
+    }
+    return r;
+}
+
+FieldPtr LevelSolid::indicator() const
+{
+    switch (mSide) {
+    case SolidSide::Below: return mRaw;
+    case SolidSide::Band: return std::make_shared<UnaryField>(mRaw, UnaryOp::Abs);
+    case SolidSide::Above: return std::make_shared<UnaryField>(mRaw, UnaryOp::Negate);
+    }
+    return mRaw;
+}
+
+double LevelSolid::levelFromIndicator(double indicatorLevel) const
+{
+    return mSide == SolidSide::Above ? -indicatorLevel : indicatorLevel;
+}
+
+}  // namespace voxlat

@@ -1,0 +1,78 @@
+#include "fields/Transform.h"
+
+#include <array>
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+
+namespace voxlat {
+
+TransformField::TransformField(FieldPtr child, const Mat3d& linear, const Vec3d& translation)
+    : mChild(std::move(child)), mTranslation(translation)
+{
+    if (std::abs(linear.det()) < 1e-12) throw std::invalid_argument("transform is singular (a zero scale?)");
+    mInverse = linear.inverse();
+    mDiagonal = true;
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+            if (r != c && mInverse(r, c) != 0.0) mDiagonal = false;
+}
+
+Mat3d TransformField::rotation(const Vec3d& axis, double degrees)
+{
+    if (axis.length() <= 0.0) throw std::invalid_argument("rotation axis has zero length");
+    const Vec3d u = axis.unit();
+    const double a = degrees * std::numbers::pi / 180.0, c = std::cos(a), s = std::sin(a), t = 1.0 - c;
+    // Rodrigues' rotation matrix about the unit axis u.
+    return Mat3d(t * u[0] * u[0] + c, t * u[0] * u[1] - s * u[2], t * u[0] * u[2] + s * u[1],
+                 t * u[0] * u[1] + s * u[2], t * u[1] * u[1] + c, t * u[1] * u[2] - s * u[0],
+                 t * u[0] * u[2] - s * u[1], t * u[1] * u[2] + s * u[0], t * u[2] * u[2] + c);
+}
+
+void TransformField::values(std::span<const Vec3d> points, std::span<double> out) const
+{
+    std::array<Vec3d, kBatchSize> local;
+    forEachChunk(points.size(), [&](std::size_t b, std::size_t n) {
+        for (std::size_t i = 0; i < n; ++i) local[i] = toLocal(points[b + i]);
+        mChild->values(std::span<const Vec3d>(local.data(), n), out.subspan(b, n));
+    });
+}
+
+void TransformField::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
+{
+    std::array<Vec3d, kBatchSize> local;
+    const Mat3d inverseTranspose = mInverse.transpose();
+    forEachChunk(points.size(), [&](std::size_t b, std::size_t n) {
+        for (std::size_t i = 0; i < n; ++i) local[i] = toLocal(points[b + i]);
+        mChild->gradients(std::span<const Vec3d>(local.data(), n), out.subspan(b, n), grad.subspan(b, n));
+        // Chain rule: grad_world = A^-T grad_local.
+        for (std::size_t i = 0; i < n; ++i) grad[b + i] = inverseTranspose * grad[b + i];
+    });
+}
+
+void TransformField::gridValues(const GridBatch& batch, std::span<double> out) const
+{
+    if (!mDiagonal) {
+        FieldNode::gridValues(batch, out);
+        return;
+    }
+    GridBatch local = batch;
+    local.origin = toLocal(batch.origin);
+    for (int a = 0; a < 3; ++a) local.spacing[a] = mInverse(a, a) * batch.spacing[a];
+    mChild->gridValues(local, out);
+}
+
+Interval TransformField::bound(const Box3& box) const
+{
+    Box3 local{Vec3d(std::numeric_limits<double>::max()), Vec3d(std::numeric_limits<double>::lowest())};
+    for (int corner = 0; corner < 8; ++corner) {
+        const Vec3d p(corner & 1 ? box.max[0] : box.min[0], corner & 2 ? box.max[1] : box.min[1],
+                      corner & 4 ? box.max[2] : box.min[2]);
+        const Vec3d q = toLocal(p);
+        local.min = openvdb::math::minComponent(local.min, q);
+        local.max = openvdb::math::maxComponent(local.max, q);
+    }
+    return mChild->bound(local);
+}
+
+}  // namespace voxlat

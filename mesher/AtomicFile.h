@@ -1,0 +1,48 @@
+/// @file AtomicFile.h
+/// @brief Write-to-temporary-then-rename, so a reader never sees a half-written output file.
+#pragma once
+
+#include <fstream>
+#include <ostream>
+#include <string>
+
+namespace voxlat {
+
+/// A binary output file that appears at its final path only once it is complete.
+///
+/// The data goes to "<path>.tmp-<pid>" in the same directory; commit() flushes and closes it and
+/// renames it onto @a path, atomically replacing any existing file. If the object is destroyed
+/// without a successful commit() (an exception, an early return), the temporary file is removed
+/// and @a path is left untouched.
+class AtomicFile {
+public:
+    /// Opens the temporary file. Throws std::runtime_error naming @a path if it cannot.
+    explicit AtomicFile(std::string path);
+    ~AtomicFile();
+
+    AtomicFile(const AtomicFile&) = delete;
+    AtomicFile& operator=(const AtomicFile&) = delete;
+
+    /// The stream to write the content to (binary mode).
+    std::ostream& stream() { return mStream; }
+
+    /// The final path.
+    const std::string& path() const { return mPath; }
+    /// Where the data is written until commit().
+    const std::string& tempPath() const { return mTempPath; }
+    bool committed() const { return mCommitted; }
+
+    /// Flushes, closes and renames the temporary file onto path(). Throws std::runtime_error
+    /// naming path() if any step fails (the temporary file is then removed).
+    void commit();
+
+private:
+    void discard() noexcept;
+
+    std::string mPath;
+    std::string mTempPath;
+    std::ofstream mStream;
+    bool mCommitted = false;
+};
+
+}  // namespace voxlat

@@ -1,0 +1,32 @@
+/// @file TriangleMesh.h
+/// @brief The indexed triangle mesh every mesher stage produces and every writer consumes.
+#pragma once
+
+#include <openvdb/Types.h>
+
+#include <vector>
+
+namespace voxlat {
+
+/// An indexed triangle mesh in world units (millimetres).
+///
+/// Triangles are counter-clockwise when seen from outside, so normals computed with the right-hand
+/// rule point from the solid (negative field values) into the void (positive values).
+struct TriangleMesh {
+    std::vector<openvdb::Vec3f> points;
+    std::vector<openvdb::Vec3I> triangles;
+
+    /// Signed enclosed volume by the divergence theorem, accumulated in double. Positive for a
+    /// closed, outward-oriented mesh; meaningless for an open one.
+    double volume() const;
+
+    /// Total surface area, accumulated in double.
+    double area() const;
+
+    /// Axis-aligned bounds of all points (an empty box, min > max, when there are none).
+    openvdb::BBoxd bounds() const;
+
+    bool empty() const { return triangles.empty(); }
+};
+
+}  // namespace voxlat

@@ -1,0 +1,72 @@
+// Helpers shared by the engine and command-line tests.
+#pragma once
+
+#include "engine/Recipe.h"
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <vector>
+
+namespace voxlat::test {
+
+/// A fresh, empty temporary folder, removed when the object goes away.
+struct TempDir {
+    std::filesystem::path path;
+    TempDir()
+    {
+        path = std::filesystem::temp_directory_path() /
+               ("voxlat-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter()++));
+        std::filesystem::remove_all(path);
+        std::filesystem::create_directories(path);
+    }
+    ~TempDir() { std::filesystem::remove_all(path); }
+    static int& counter()
+    {
+        static int c = 0;
+        return c;
+    }
+    std::filesystem::path write(const std::string& name, const std::string& text) const
+    {
+        std::ofstream(path / name) << text;
+        return path / name;
+    }
+};
+
+/// Runs a shell command, returning its exit status and capturing stdout+stderr.
+inline int runCommand(const std::string& command, std::string* output = nullptr)
+{
+    std::string full = command + " 2>&1";
+    FILE* pipe = ::popen(full.c_str(), "r");
+    std::string text;
+    char buf[4096];
+    while (std::size_t n = std::fread(buf, 1, sizeof buf, pipe)) text.append(buf, n);
+    const int status = ::pclose(pipe);
+    if (output) *output = text;
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+inline std::string voxlatBinary() { return VOXLAT_BINARY; }
+inline std::filesystem::path sourceDir() { return VOXLAT_SOURCE_DIR; }
+
+inline std::string readFile(const std::filesystem::path& p)
+{
+    std::ifstream in(p, std::ios::binary);
+    std::stringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+/// Files in a folder (names only), to check nothing half-written is left.
+inline std::vector<std::string> listFolder(const std::filesystem::path& p)
+{
+    std::vector<std::string> names;
+    for (const auto& e : std::filesystem::directory_iterator(p)) names.push_back(e.path().filename().string());
+    return names;
+}
+
+}  // namespace voxlat::test

@@ -1,0 +1,109 @@
+// The `voxlat` command end to end: outputs, report, errors with no partial files, sampling.
+#include "TestUtil.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <numbers>
+
+using namespace voxlat::test;
+
+namespace {
+const char* kSmall = R"(voxel: 0.25
+domain: {box: [[0, 0, 0], [12, 12, 12]]}
+fields:
+  lattice: {tpms: gyroid, cell: 6, solid: network, density: 0.30}
+result: lattice
+outputs: {mesh: [part.stl, part.ply], vdb: part.vdb}
+)";
+}
+
+TEST(Cli, RunWritesOutputsAndReport)
+{
+    TempDir dir;
+    const auto recipe = dir.write("small.yaml", kSmall);
+    std::string out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " run " + recipe.string() + " --out " + (dir.path / "out").string(), &out), 0) << out;
+    for (const char* f : {"part.stl", "part.ply", "part.vdb", "report.json"})
+        EXPECT_TRUE(std::filesystem::exists(dir.path / "out" / f)) << f;
+    const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
+    EXPECT_NEAR(report["fields"]["lattice"]["achieved_density"].get<double>(), 0.30, 0.0015);
+    EXPECT_GT(report["mesh"]["triangles"].get<int>(), 1000);
+    const auto tris = report["mesh"]["triangles"].get<std::uintmax_t>();
+    EXPECT_EQ(std::filesystem::file_size(dir.path / "out" / "part.stl"), 84 + 50 * tris);
+    EXPECT_TRUE(report["timings_s"].contains("mesh"));
+    EXPECT_GT(report["peak_memory_mb"].get<double>(), 0.0);
+}
+
+TEST(Cli, SameBytesForAnyThreadCount)
+{
+    TempDir dir;
+    const auto recipe = dir.write("small.yaml", kSmall);
+    for (int threads : {1, 2, 3})
+        ASSERT_EQ(runCommand(voxlatBinary() + " --threads " + std::to_string(threads) + " mesh " + recipe.string() +
+                             " -o " + (dir.path / ("t" + std::to_string(threads) + ".stl")).string()),
+                  0);
+    const std::string one = readFile(dir.path / "t1.stl");
+    EXPECT_GT(one.size(), 10000u);
+    EXPECT_EQ(one, readFile(dir.path / "t2.stl"));
+    EXPECT_EQ(one, readFile(dir.path / "t3.stl"));
+}
+
+TEST(Cli, BadInputExitsNonZeroAndWritesNothing)
+{
+    TempDir dir;
+    std::string text = kSmall;
+    text.replace(text.find("density: 0.30"), 13, "density: 1.5");
+    const auto recipe = dir.write("bad.yaml", text);
+    std::string out;
+    EXPECT_NE(runCommand(voxlatBinary() + " run " + recipe.string() + " --out " + (dir.path / "out").string(), &out), 0);
+    EXPECT_NE(out.find("bad.yaml:4:"), std::string::npos) << out;
+    EXPECT_FALSE(std::filesystem::exists(dir.path / "out"));
+    // Too much memory: refused before any output appears.
+    const auto huge = dir.write("huge.yaml", std::string(kSmall).replace(0, 11, "voxel: 0.0005"));
+    EXPECT_EQ(runCommand(voxlatBinary() + " -q run " + huge.string() + " --out " + (dir.path / "out2").string(), &out), 3)
+        << out;
+    EXPECT_NE(out.find("raise `voxel:`"), std::string::npos) << out;
+    EXPECT_TRUE(!std::filesystem::exists(dir.path / "out2") || listFolder(dir.path / "out2").empty());
+    EXPECT_EQ(runCommand(voxlatBinary() + " run " + (dir.path / "missing.yaml").string(), &out), 2);
+}
+
+TEST(Cli, SampleMatchesTheEquation)
+{
+    TempDir dir;
+    const auto recipe = dir.write("g.yaml", R"(voxel: 0.5
+domain: {box: [[0, 0, 0], [10, 10, 10]]}
+fields:
+  lattice: {tpms: gyroid, cell: 10, solid: network, level: 0.25}
+result: lattice
+)");
+    const auto input = dir.write("points.txt", "1 2 3\n# comment\n-4.5 0.25 7\n");
+    std::string out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " sample " + recipe.string() + " --gradient < " + input.string(), &out), 0) << out;
+    std::istringstream lines(out);
+    for (const auto& p : {std::array<double, 3>{1, 2, 3}, std::array<double, 3>{-4.5, 0.25, 7}}) {
+        const double k = 2 * std::numbers::pi / 10, X = k * p[0], Y = k * p[1], Z = k * p[2];
+        const double f = std::sin(X) * std::cos(Y) + std::sin(Y) * std::cos(Z) + std::sin(Z) * std::cos(X) - 0.25;
+        double v, gx, gy, gz;
+        ASSERT_TRUE(lines >> v >> gx >> gy >> gz) << out;
+        EXPECT_NEAR(v, f, 1e-8);
+        EXPECT_NEAR(gx, k * (std::cos(X) * std::cos(Y) - std::sin(Z) * std::sin(X)), 1e-8);
+    }
+}
+
+TEST(Cli, AcceptanceRecipeRunsUnchanged)
+{
+    // data/recipes/gyroid.yaml as shipped: 50 mm cube at 0.1 mm, 30 % density.
+    TempDir dir;
+    std::string out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " -q run " + (sourceDir() / "data/recipes/gyroid.yaml").string() + " --out " +
+                             dir.path.string(), &out), 0) << out;
+    const auto report = nlohmann::json::parse(readFile(dir.path / "report.json"));
+    const double achieved = report["fields"]["lattice"]["achieved_density"].get<double>();
+    EXPECT_NEAR(achieved, 0.30, 0.0015);
+    // Independent: the mesh's enclosed volume over the domain volume.
+    EXPECT_NEAR(report["mesh"]["volume_mm3"].get<double>() / 125000.0, 0.30, 0.0015);
+    EXPECT_TRUE(std::filesystem::exists(dir.path / "gyroid.stl"));
+    EXPECT_LT(report["peak_memory_mb"].get<double>(), 1024.0);
+}

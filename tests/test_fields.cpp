@@ -1,0 +1,254 @@
+// Field nodes: TPMS values and gradients against the written equations and finite differences,
+// bounds that contain every sampled value, primitives against their analytic distances.
+#include "fields/Boolean.h"
+#include "fields/BoxField.h"
+#include "fields/Cylinder.h"
+#include "fields/LevelSolid.h"
+#include "fields/Sphere.h"
+#include "fields/TpmsField.h"
+#include "fields/Transform.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+#include <random>
+
+using namespace voxlat;
+
+namespace {
+
+/// The reference table's equations written out by hand with std::sin/cos (independent of the
+/// templated code under test).
+double referenceTpms(TpmsType type, double x, double y, double z, double cell)
+{
+    const double k = 2 * std::numbers::pi / cell, X = k * x, Y = k * y, Z = k * z;
+    using std::cos, std::sin;
+    switch (type) {
+    case TpmsType::Gyroid: return sin(X) * cos(Y) + sin(Y) * cos(Z) + sin(Z) * cos(X);
+    case TpmsType::SchwarzP: return cos(X) + cos(Y) + cos(Z);
+    case TpmsType::SchwarzD:
+        return sin(X) * sin(Y) * sin(Z) + sin(X) * cos(Y) * cos(Z) + cos(X) * sin(Y) * cos(Z) + cos(X) * cos(Y) * sin(Z);
+    case TpmsType::IWP:
+        return 2 * (cos(X) * cos(Y) + cos(Y) * cos(Z) + cos(Z) * cos(X)) - (cos(2 * X) + cos(2 * Y) + cos(2 * Z));
+    case TpmsType::Neovius: return 3 * (cos(X) + cos(Y) + cos(Z)) + 4 * cos(X) * cos(Y) * cos(Z);
+    case TpmsType::FischerKochS:
+        return cos(2 * X) * sin(Y) * cos(Z) + cos(X) * cos(2 * Y) * sin(Z) + sin(X) * cos(Y) * cos(2 * Z);
+    case TpmsType::Lidinoid:
+        return (sin(2 * X) * cos(Y) * sin(Z) + sin(2 * Y) * cos(Z) * sin(X) + sin(2 * Z) * cos(X) * sin(Y)) -
+               (cos(2 * X) * cos(2 * Y) + cos(2 * Y) * cos(2 * Z) + cos(2 * Z) * cos(2 * X)) + 0.3;
+    case TpmsType::SplitP:
+        return 1.1 * (sin(2 * X) * cos(Y) * sin(Z) + sin(2 * Y) * cos(Z) * sin(X) + sin(2 * Z) * cos(X) * sin(Y)) -
+               0.2 * (cos(2 * X) * cos(2 * Y) + cos(2 * Y) * cos(2 * Z) + cos(2 * Z) * cos(2 * X)) -
+               0.4 * (cos(2 * X) + cos(2 * Y) + cos(2 * Z));
+    case TpmsType::FRD:
+        return 8 * cos(X) * cos(Y) * cos(Z) + cos(2 * X) * cos(2 * Y) * cos(2 * Z) -
+               (cos(2 * X) * cos(2 * Y) + cos(2 * Y) * cos(2 * Z) + cos(2 * Z) * cos(2 * X));
+    }
+    return 0;
+}
+
+std::vector<Vec3d> randomPoints(std::size_t n, double lo, double hi, unsigned seed)
+{
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(lo, hi);
+    std::vector<Vec3d> p(n);
+    for (auto& v : p) v = Vec3d(u(rng), u(rng), u(rng));
+    return p;
+}
+
+/// Checks gradients against central differences of the node's own values.
+void expectGradientsMatchFiniteDifferences(const FieldNode& f, const std::vector<Vec3d>& pts, double tol)
+{
+    std::vector<double> v(pts.size());
+    std::vector<Vec3d> g(pts.size());
+    f.gradients(pts, v, g);
+    const double h = 1e-5;
+    for (std::size_t n = 0; n < pts.size(); ++n) {
+        EXPECT_NEAR(v[n], f.value(pts[n]), 1e-12);
+        for (int a = 0; a < 3; ++a) {
+            Vec3d p1 = pts[n], p0 = pts[n];
+            p1[a] += h;
+            p0[a] -= h;
+            const double fd = (f.value(p1) - f.value(p0)) / (2 * h);
+            EXPECT_NEAR(g[n][a], fd, tol * (1 + std::abs(fd))) << "axis " << a << " at " << pts[n];
+        }
+    }
+}
+
+/// Checks that bound() over random boxes contains the values at random points inside.
+void expectBoundsContainValues(const FieldNode& f, double span, double boxSize, unsigned seed)
+{
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(-span, span), s(0.01, boxSize), t(0.0, 1.0);
+    for (int trial = 0; trial < 200; ++trial) {
+        const Vec3d lo(u(rng), u(rng), u(rng));
+        const Box3 box{lo, lo + Vec3d(s(rng), s(rng), s(rng))};
+        const Interval b = f.bound(box);
+        for (int n = 0; n < 40; ++n) {
+            const Vec3d p = box.min + Vec3d(t(rng), t(rng), t(rng)) * box.extent();
+            const double v = f.value(p);
+            EXPECT_LE(b.lo, v + 1e-12);
+            EXPECT_GE(b.hi, v - 1e-12);
+        }
+    }
+}
+
+const std::vector<TpmsType> kAllTpms{TpmsType::Gyroid,       TpmsType::SchwarzP, TpmsType::SchwarzD,
+                                     TpmsType::IWP,          TpmsType::Neovius,  TpmsType::FischerKochS,
+                                     TpmsType::Lidinoid,     TpmsType::SplitP,   TpmsType::FRD};
+
+}  // namespace
+
+TEST(Tpms, ValuesMatchReferenceEquations)
+{
+    const auto pts = randomPoints(500, -20, 20, 1);
+    for (TpmsType type : kAllTpms) {
+        TpmsField f(type, Vec3d(7.5));
+        std::vector<double> v(pts.size());
+        f.values(pts, v);
+        for (std::size_t n = 0; n < pts.size(); ++n)
+            ASSERT_NEAR(v[n], referenceTpms(type, pts[n][0], pts[n][1], pts[n][2], 7.5), 1e-12) << tpmsName(type);
+    }
+}
+
+TEST(Tpms, GradientsMatchFiniteDifferences)
+{
+    const auto pts = randomPoints(100, -10, 10, 2);
+    for (TpmsType type : kAllTpms) {
+        SCOPED_TRACE(std::string(tpmsName(type)));
+        expectGradientsMatchFiniteDifferences(TpmsField(type, Vec3d(6, 8, 10)), pts, 1e-6);
+    }
+}
+
+TEST(Tpms, GyroidGradientMatchesHandDerivative)
+{
+    const double cell = 10, k = 2 * std::numbers::pi / cell;
+    TpmsField f(TpmsType::Gyroid, Vec3d(cell));
+    for (const Vec3d& p : randomPoints(200, -15, 15, 3)) {
+        const double X = k * p[0], Y = k * p[1], Z = k * p[2];
+        const Vec3d expected(k * (std::cos(X) * std::cos(Y) - std::sin(Z) * std::sin(X)),
+                             k * (-std::sin(X) * std::sin(Y) + std::cos(Y) * std::cos(Z)),
+                             k * (-std::sin(Y) * std::sin(Z) + std::cos(Z) * std::cos(X)));
+        const Vec3d g = f.valueAndGradient(p).second;
+        for (int a = 0; a < 3; ++a) EXPECT_NEAR(g[a], expected[a], 1e-12);
+    }
+}
+
+TEST(Tpms, CellSizePerAxisSetsPeriod)
+{
+    TpmsField f(TpmsType::SchwarzP, Vec3d(4, 6, 9));
+    for (const Vec3d& p : randomPoints(50, -5, 5, 4)) {
+        EXPECT_NEAR(f.value(p), f.value(p + Vec3d(4, 0, 0)), 1e-12);
+        EXPECT_NEAR(f.value(p), f.value(p + Vec3d(0, 6, 0)), 1e-12);
+        EXPECT_NEAR(f.value(p), f.value(p + Vec3d(0, 0, 9)), 1e-12);
+    }
+}
+
+TEST(Tpms, GridBatchFastPathEqualsPointPath)
+{
+    for (TpmsType type : kAllTpms) {
+        TpmsField f(type, Vec3d(5, 7, 9));
+        GridBatch batch;
+        batch.origin = Vec3d(-3.05, 1.15, 7.25);
+        batch.spacing = Vec3d(0.1, 0.2, 0.3);
+        std::vector<double> fast(batch.size()), slow(batch.size());
+        f.gridValues(batch, fast);
+        f.FieldNode::gridValues(batch, slow);
+        for (std::size_t n = 0; n < fast.size(); ++n) ASSERT_EQ(fast[n], slow[n]);
+    }
+}
+
+TEST(Tpms, BoundsContainValues)
+{
+    for (TpmsType type : kAllTpms) {
+        SCOPED_TRACE(std::string(tpmsName(type)));
+        expectBoundsContainValues(TpmsField(type, Vec3d(5)), 10, 3, 5);
+    }
+}
+
+TEST(Tpms, LevelSolidSidesAndGradients)
+{
+    auto raw = std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(10));
+    const auto pts = randomPoints(100, -10, 10, 6);
+    for (SolidSide side : {SolidSide::Below, SolidSide::Band, SolidSide::Above}) {
+        LevelSolid s(raw, side, 0.3);
+        for (const Vec3d& p : pts) {
+            const double f = raw->value(p);
+            const double expected = side == SolidSide::Below ? f - 0.3 : side == SolidSide::Band ? std::abs(f) - 0.3 : 0.3 - f;
+            EXPECT_DOUBLE_EQ(s.value(p), expected);
+            // The indicator's sub-level set at levelFromIndicator^-1 is the same solid.
+            const double g = s.indicator()->value(p);
+            const double indicatorLevel = side == SolidSide::Above ? -0.3 : 0.3;
+            EXPECT_EQ(g < indicatorLevel, s.value(p) < 0);
+        }
+        expectGradientsMatchFiniteDifferences(s, pts, 1e-6);
+        expectBoundsContainValues(s, 10, 3, 7);
+    }
+}
+
+TEST(Primitives, DistancesAreExact)
+{
+    Sphere sphere(Vec3d(1, 2, 3), 4);
+    EXPECT_NEAR(sphere.value(Vec3d(1, 2, 3)), -4, 1e-12);
+    EXPECT_NEAR(sphere.value(Vec3d(1, 2, 10)), 3, 1e-12);
+    BoxField box(Box3{Vec3d(0), Vec3d(2, 4, 6)});
+    EXPECT_NEAR(box.value(Vec3d(1, 2, 3)), -1, 1e-12);              // nearest face x
+    EXPECT_NEAR(box.value(Vec3d(5, 2, 3)), 3, 1e-12);               // face
+    EXPECT_NEAR(box.value(Vec3d(5, 8, 3)), 5, 1e-12);               // edge: 3-4-5
+    Cylinder cyl(Vec3d(0), Vec3d(0, 0, 2), 1, 4);
+    EXPECT_NEAR(cyl.value(Vec3d(0, 0, 0)), -1, 1e-12);
+    EXPECT_NEAR(cyl.value(Vec3d(3, 0, 0)), 2, 1e-12);
+    EXPECT_NEAR(cyl.value(Vec3d(0, 0, 5)), 3, 1e-12);
+    EXPECT_NEAR(cyl.value(Vec3d(4, 0, 6)), 5, 1e-12);  // rim: 3-4-5
+    const auto pts = randomPoints(100, -6, 6, 8);
+    for (const FieldNode* f : std::initializer_list<const FieldNode*>{&sphere, &box, &cyl}) {
+        expectGradientsMatchFiniteDifferences(*f, pts, 1e-5);
+        expectBoundsContainValues(*f, 6, 4, 9);
+    }
+}
+
+TEST(Booleans, HardAndSmoothCombinations)
+{
+    auto a = std::make_shared<Sphere>(Vec3d(0), 2.0), b = std::make_shared<Sphere>(Vec3d(2, 0, 0), 2.0);
+    BooleanField uni(BooleanOp::Union, {a, b}), inter(BooleanOp::Intersection, {a, b}),
+        diff(BooleanOp::Difference, {a, b}), smooth(BooleanOp::Union, {a, b}, 1.0);
+    const auto pts = randomPoints(200, -4, 6, 10);
+    for (const Vec3d& p : pts) {
+        const double va = a->value(p), vb = b->value(p);
+        EXPECT_DOUBLE_EQ(uni.value(p), std::min(va, vb));
+        EXPECT_DOUBLE_EQ(inter.value(p), std::max(va, vb));
+        EXPECT_DOUBLE_EQ(diff.value(p), std::max(va, -vb));
+        EXPECT_LE(smooth.value(p), std::min(va, vb) + 1e-12);
+        EXPECT_GE(smooth.value(p), std::min(va, vb) - 0.25 - 1e-12);
+    }
+    for (const FieldNode* f : std::initializer_list<const FieldNode*>{&uni, &inter, &diff, &smooth}) {
+        expectGradientsMatchFiniteDifferences(*f, pts, 1e-4);
+        expectBoundsContainValues(*f, 5, 3, 11);
+    }
+}
+
+TEST(Transforms, MoveTheChild)
+{
+    auto s = std::make_shared<Sphere>(Vec3d(1, 0, 0), 1.0);
+    TransformField moved(s, Mat3d::identity(), Vec3d(0, 5, 0));
+    EXPECT_NEAR(moved.value(Vec3d(1, 5, 0)), -1, 1e-12);
+    TransformField turned(s, TransformField::rotation(Vec3d(0, 0, 1), 90), Vec3d(0));
+    EXPECT_NEAR(turned.value(Vec3d(0, 1, 0)), -1, 1e-12);  // (1,0,0) rotated to (0,1,0)
+    auto g = std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(5));
+    Mat3d scale = Mat3d::zero();
+    scale(0, 0) = 2, scale(1, 1) = 1, scale(2, 2) = 0.5;
+    TransformField scaled(g, scale, Vec3d(1, 2, 3));
+    GridBatch batch;
+    batch.origin = Vec3d(0.3, -1, 2);
+    batch.spacing = Vec3d(0.1);
+    std::vector<double> fast(batch.size()), slow(batch.size());
+    scaled.gridValues(batch, fast);
+    scaled.FieldNode::gridValues(batch, slow);
+    for (std::size_t n = 0; n < fast.size(); ++n) EXPECT_NEAR(fast[n], slow[n], 1e-12);
+    const auto pts = randomPoints(100, -5, 5, 12);
+    for (const FieldNode* f : std::initializer_list<const FieldNode*>{&moved, &turned, &scaled}) {
+        expectGradientsMatchFiniteDifferences(*f, pts, 1e-5);
+        expectBoundsContainValues(*f, 5, 3, 13);
+    }
+}

@@ -1,0 +1,664 @@
+// Tests of the mesher: marching cubes topology and determinism, mesh checks, writers.
+
+#include "mesher/AtomicFile.h"
+#include "mesher/MarchingCubes.h"
+#include "mesher/MeshCheck.h"
+#include "mesher/MeshWriters.h"
+
+#include <gtest/gtest.h>
+#include <openvdb/openvdb.h>
+#include <openvdb/tools/LevelSetSphere.h>
+#include <tbb/global_control.h>
+#include <tbb/task_arena.h>
+#include <unistd.h>
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <numbers>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace voxlat;
+using openvdb::Coord;
+using openvdb::Vec3d;
+using FloatGrid = openvdb::FloatGrid;
+
+namespace fs = std::filesystem;
+
+/// A fresh directory per test, removed afterwards.
+class TempDir {
+public:
+    TempDir()
+    {
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        mPath = fs::temp_directory_path() /
+                ("voxlat_mesher_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
+        fs::remove_all(mPath);
+        fs::create_directories(mPath);
+    }
+    ~TempDir() { fs::remove_all(mPath); }
+    std::string file(const std::string& name) const { return (mPath / name).string(); }
+    std::size_t entries() const { return std::size_t(std::distance(fs::directory_iterator(mPath), {})); }
+
+private:
+    fs::path mPath;
+};
+
+std::string readBytes(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+/// Every voxel of the 8^3 block at @a origin set to fn(index-space voxel).
+template <typename Fn>
+void fillLeaf(FloatGrid& grid, const Coord& origin, Fn&& fn)
+{
+    auto* leaf = grid.tree().touchLeaf(origin);
+    for (auto it = leaf->beginValueAll(); it; ++it) it.setValue(float(fn(it.getCoord())));
+    leaf->setValuesOn();
+}
+
+struct BandGrid {
+    FloatGrid::Ptr grid;
+    std::size_t insideVoxels = 0;
+    std::size_t tiles = 0;
+};
+
+/// A Lipschitz-1 field @a fn (index space, in voxels) sampled into leaves wherever some voxel of
+/// the leaf is within @a margin voxels of zero, with inside tiles where the whole block is below
+/// -margin and background where it is above. Values are stored in world units. A margin just over
+/// one voxel is the thinnest band that still honours the mesher's contract, so cubes that poke
+/// from a tile into a leaf occur.
+template <typename Fn>
+BandGrid makeBandGrid(Fn&& fn, const openvdb::CoordBBox& region, double voxelSize, double margin = 1.01)
+{
+    BandGrid s;
+    s.grid = FloatGrid::create(float(3.0 * voxelSize));
+    auto xform = openvdb::math::Transform::createLinearTransform(voxelSize);
+    xform->postTranslate(Vec3d(12.3, -4.56, 0.789));  // away from the origin, off the voxel lattice
+    s.grid->setTransform(xform);
+    for (int x = region.min().x() & ~7; x <= region.max().x(); x += 8) {
+        for (int y = region.min().y() & ~7; y <= region.max().y(); y += 8) {
+            for (int z = region.min().z() & ~7; z <= region.max().z(); z += 8) {
+                const Coord origin(x, y, z);
+                std::vector<double> values;
+                for (auto it = openvdb::CoordBBox::createCube(origin, 8).begin(); it; ++it) values.push_back(fn(*it));
+                const auto [lo, hi] = std::minmax_element(values.begin(), values.end());
+                if (*lo > margin) continue;
+                if (*hi < -margin) {
+                    s.grid->tree().addTile(1, origin, float(-3.0 * voxelSize), false);
+                    s.insideVoxels += 512;
+                    ++s.tiles;
+                    continue;
+                }
+                fillLeaf(*s.grid, origin, [&](const Coord& ijk) { return fn(ijk) * voxelSize; });
+            }
+        }
+    }
+    for (auto leaf = s.grid->tree().cbeginLeaf(); leaf; ++leaf) {
+        for (auto it = leaf->cbeginValueAll(); it; ++it) s.insideVoxels += *it < 0.0f;
+    }
+    return s;
+}
+
+/// Index-space centre of the test solids: off the lattice so no symmetry hides an error.
+const Vec3d kCentre = Vec3d(0.37, -0.21, 0.13) + Vec3d(5.0);
+
+openvdb::CoordBBox regionAround(double reach)
+{
+    const int r = int(std::ceil(reach)) + 10;
+    return openvdb::CoordBBox(Coord(5 - r), Coord(5 + r));
+}
+
+BandGrid makeSphere(double radiusVoxels, double voxelSize)
+{
+    auto sphere = [radiusVoxels](const Coord& ijk) {
+        return (Vec3d(ijk.x(), ijk.y(), ijk.z()) - kCentre).length() - radiusVoxels;
+    };
+    return makeBandGrid(sphere, regionAround(radiusVoxels), voxelSize);
+}
+
+/// A gyroid solid capped by a box: max(gyroid, box distance), dense leaves around the box.
+FloatGrid::Ptr makeGyroid(int size, double voxelSize, double period)
+{
+    auto grid = FloatGrid::create(float(voxelSize));
+    grid->setTransform(openvdb::math::Transform::createLinearTransform(voxelSize));
+    const double k = 2.0 * std::numbers::pi / period;
+    const double lo = 2.0 * voxelSize, hi = (size - 3) * voxelSize;  // the box, in world units
+    for (int x = 0; x < size; x += 8) {
+        for (int y = 0; y < size; y += 8) {
+            for (int z = 0; z < size; z += 8) {
+                fillLeaf(*grid, Coord(x, y, z), [&](const Coord& ijk) {
+                    const Vec3d p = grid->indexToWorld(ijk);
+                    const double g =
+                        (std::sin(k * p.x()) * std::cos(k * p.y()) + std::sin(k * p.y()) * std::cos(k * p.z()) +
+                         std::sin(k * p.z()) * std::cos(k * p.x())) /
+                        k;
+                    double box = -1e9;
+                    for (int i = 0; i < 3; ++i) box = std::max({box, lo - p[i], p[i] - hi});
+                    return std::max(g, box);
+                });
+            }
+        }
+    }
+    return grid;
+}
+
+/// Random values in a block of n^3 leaves; the outermost voxel layer is outside so the surface
+/// closes inside leaves. Discrete values come from a small set (many exact zeros and exact ties
+/// of the face decider); continuous ones are uniform with a quarter exactly at @a iso.
+FloatGrid::Ptr makeRandom(unsigned seed, int leavesPerAxis, float iso, bool continuous)
+{
+    static const float kValues[] = {-2.0f, -1.0f, -0.5f, 0.0f, 0.0f, 0.0f, 0.5f, 1.0f, 2.0f, -0.25f, 0.75f};
+    std::mt19937 rng(seed);
+    std::uniform_int_distribution<int> pick(0, int(std::size(kValues)) - 1);
+    std::uniform_real_distribution<float> uniform(-1.0f, 1.0f);
+    const float outside = iso + 3.0f;
+    auto grid = FloatGrid::create(outside);
+    const int n = 8 * leavesPerAxis;
+    for (int x = 0; x < n; x += 8) {
+        for (int y = 0; y < n; y += 8) {
+            for (int z = 0; z < n; z += 8) grid->tree().touchLeaf(Coord(x, y, z));
+        }
+    }
+    // Fill in a fixed order (not leaf by leaf) so the values depend only on the seed.
+    auto acc = grid->getAccessor();
+    for (int x = 0; x < n; ++x) {
+        for (int y = 0; y < n; ++y) {
+            for (int z = 0; z < n; ++z) {
+                const bool border = x == 0 || y == 0 || z == 0 || x == n - 1 || y == n - 1 || z == n - 1;
+                float v = 0.0f;
+                if (!continuous) {
+                    v = kValues[pick(rng)];
+                } else {
+                    v = uniform(rng);
+                    v = v > 0.5f ? iso : iso + v;
+                }
+                acc.setValue(Coord(x, y, z), border ? outside : v);
+            }
+        }
+    }
+    return grid;
+}
+
+/// Counts the voxel faces (2x2 value squares) whose inside corners lie on one diagonal.
+std::size_t countAmbiguousFaces(const FloatGrid& grid, float iso)
+{
+    std::size_t count = 0;
+    auto acc = grid.getConstAccessor();
+    const openvdb::CoordBBox box = grid.evalActiveVoxelBoundingBox();
+    for (auto it = box.begin(); it; ++it) {
+        const Coord p = *it;
+        for (int axis = 0; axis < 3; ++axis) {
+            static const Coord kU[3] = {Coord(0, 1, 0), Coord(1, 0, 0), Coord(1, 0, 0)};
+            static const Coord kV[3] = {Coord(0, 0, 1), Coord(0, 0, 1), Coord(0, 1, 0)};
+            const Coord u = kU[axis], v = kV[axis];
+            const bool a = acc.getValue(p) < iso, b = acc.getValue(p + u) < iso;
+            const bool c = acc.getValue(p + u + v) < iso, d = acc.getValue(p + v) < iso;
+            count += a == c && b == d && a != b;
+        }
+    }
+    return count;
+}
+
+void expectClosedManifold(const TriangleMesh& mesh, const char* what)
+{
+    const MeshTopology topo = checkTopology(mesh);
+    EXPECT_EQ(topo.boundaryEdges, 0u) << what;
+    EXPECT_EQ(topo.nonManifoldEdges, 0u) << what;
+    EXPECT_EQ(topo.nonManifoldVertices, 0u) << what;
+    EXPECT_EQ(topo.inconsistentlyOrientedEdges, 0u) << what;
+    EXPECT_EQ(topo.degenerateTriangles, 0u) << what;
+    EXPECT_TRUE(topo.closedManifold()) << what;
+    // Closed orientable surfaces have even Euler characteristic.
+    EXPECT_EQ(topo.eulerCharacteristic % 2, 0) << what;
+}
+
+/// Every vertex is used: no stray points from miscounted offsets.
+void expectAllPointsUsed(const TriangleMesh& mesh)
+{
+    std::vector<bool> used(mesh.points.size(), false);
+    for (const auto& t : mesh.triangles) {
+        for (int k = 0; k < 3; ++k) {
+            ASSERT_LT(t[k], mesh.points.size());
+            used[t[k]] = true;
+        }
+    }
+    EXPECT_EQ(std::count(used.begin(), used.end(), false), 0);
+}
+
+TriangleMesh meshWithThreads(const FloatGrid& grid, int threads, float iso = 0.0f)
+{
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+    tbb::task_arena arena(threads);
+    TriangleMesh mesh;
+    arena.execute([&] { mesh = marchingCubes(grid, iso); });
+    return mesh;
+}
+
+class Mesher : public ::testing::Test {
+protected:
+    static void SetUpTestSuite() { openvdb::initialize(); }
+};
+
+TEST_F(Mesher, TableIsConsistent)
+{
+    const MarchingCubesTableInfo info = marchingCubesTableInfo();  // validates every entry on build
+    EXPECT_GT(info.entries, 256u);
+    EXPECT_LE(info.maxTriangles, 12u);
+    EXPECT_GE(info.loops, info.entries - 2);  // every entry but the two empty cases has a loop
+    EXPECT_LT(info.centroidLoops, info.loops);
+}
+
+TEST_F(Mesher, SingleInsideCornerTrianglesFaceAway)
+{
+    auto grid = FloatGrid::create(1.0f);
+    fillLeaf(*grid, Coord(0), [](const Coord& ijk) { return ijk == Coord(3, 3, 3) ? -1.0 : 1.0; });
+    const TriangleMesh mesh = marchingCubes(*grid);
+    // Each of the eight cubes around the voxel has exactly that one corner inside: an octahedron.
+    ASSERT_EQ(mesh.triangles.size(), 8u);
+    EXPECT_EQ(mesh.points.size(), 6u);
+    const Vec3d corner(3.0);
+    for (const auto& t : mesh.triangles) {
+        const Vec3d a(mesh.points[t[0]]), b(mesh.points[t[1]]), c(mesh.points[t[2]]);
+        const Vec3d normal = (b - a).cross(c - a);
+        EXPECT_GT(normal.dot((a + b + c) / 3.0 - corner), 0.0);
+    }
+    const MeshTopology topo = checkTopology(mesh);
+    EXPECT_TRUE(topo.closedManifold());
+    EXPECT_EQ(topo.eulerCharacteristic, 2);
+    EXPECT_GT(mesh.volume(), 0.0);
+    // Vertices sit at t = 0.5 on the six edges: an octahedron of "radius" 0.5.
+    EXPECT_NEAR(mesh.volume(), 4.0 / 3.0 * 0.125, 1e-6);
+}
+
+TEST_F(Mesher, EveryCornerCaseIsClosed)
+{
+    // Each of the 256 inside/outside patterns of one cube, embedded in outside values, with
+    // magnitudes spread over several orders so every feasible combination of ambiguous-face
+    // verdicts shows up (the decider compares products of diagonal magnitudes).
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> logMagnitude(-4.0, 4.0);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    auto grid = FloatGrid::create(1.0f);
+    for (int cs = 0; cs < 256; ++cs) {
+        // Ambiguous faces: inside corners on one diagonal of the face, outside on the other.
+        int ambiguousFaces = 0;
+        for (int axis = 0; axis < 3; ++axis) {
+            const int u = axis == 0 ? 1 : 0, v = axis == 2 ? 1 : 2;
+            for (int side = 0; side < 2; ++side) {
+                const int c0 = side << axis, c1 = c0 | (1 << u), c2 = c1 | (1 << v), c3 = c0 | (1 << v);
+                auto in = [cs](int c) { return (cs >> c) & 1; };
+                ambiguousFaces += in(c0) == in(c2) && in(c1) == in(c3) && in(c0) != in(c1);
+            }
+        }
+        for (int trial = 0; trial < (24 << ambiguousFaces); ++trial) {
+            fillLeaf(*grid, Coord(0), [&](const Coord& ijk) {
+                const Coord d = ijk - Coord(3);
+                if (d.x() < 0 || d.y() < 0 || d.z() < 0 || d.x() > 1 || d.y() > 1 || d.z() > 1) return 1.0;
+                const int corner = d.x() | (d.y() << 1) | (d.z() << 2);
+                const double m = std::exp(logMagnitude(rng));
+                if ((cs >> corner) & 1) return -m;
+                return unit(rng) < 0.15 ? 0.0 : m;  // exact zeros are outside
+            });
+            const TriangleMesh mesh = marchingCubes(*grid);
+            const MeshTopology topo = checkTopology(mesh);
+            ASSERT_TRUE(topo.closedManifold()) << "case " << cs << " trial " << trial;
+            ASSERT_EQ(mesh.triangles.empty(), cs == 0);
+            if (cs != 0) {
+                ASSERT_GT(mesh.volume(), 0.0) << "case " << cs;
+            }
+        }
+    }
+}
+
+TEST_F(Mesher, SphereIsClosedAndAccurate)
+{
+    const double voxel = 0.1, radius = 20.0 * voxel;
+    const BandGrid s = makeSphere(20.0, voxel);
+    ASSERT_GT(s.tiles, 0u);
+    MarchingCubesStats stats;
+    int calls = 0;
+    double last = 0.0;
+    bool increasing = true;
+    const TriangleMesh mesh = marchingCubes(
+        *s.grid, 0.0f,
+        [&](double f) {
+            increasing = increasing && f > last;
+            last = f;
+            ++calls;
+        },
+        &stats);
+
+    EXPECT_EQ(stats.skippedEdges, 0u);
+    EXPECT_EQ(stats.droppedCubes, 0u);
+    // The one-voxel band puts cubes with a tile corner on the surface; they must be meshed too.
+    EXPECT_GT(stats.tileBlocks, 0u);
+    EXPECT_LE(calls, 101);
+    EXPECT_TRUE(increasing);
+    EXPECT_EQ(last, 1.0);
+
+    const MeshTopology topo = checkTopology(mesh);
+    EXPECT_TRUE(topo.closedManifold());
+    EXPECT_EQ(topo.boundaryEdges, 0u);
+    EXPECT_EQ(topo.nonManifoldEdges, 0u);
+    EXPECT_EQ(topo.nonManifoldVertices, 0u);
+    EXPECT_EQ(topo.inconsistentlyOrientedEdges, 0u);
+    EXPECT_EQ(topo.degenerateTriangles, 0u);
+    EXPECT_EQ(topo.eulerCharacteristic, 2);
+    expectAllPointsUsed(mesh);
+
+    const double exact = 4.0 / 3.0 * std::numbers::pi * std::pow(radius, 3);
+    const double voxels = double(s.insideVoxels) * std::pow(voxel, 3);
+    EXPECT_GT(mesh.volume(), 0.0);
+    EXPECT_NEAR(mesh.volume(), exact, 0.01 * exact);
+    EXPECT_NEAR(mesh.volume(), voxels, 0.01 * voxels);
+    EXPECT_NEAR(mesh.area(), 4.0 * std::numbers::pi * radius * radius, 0.01 * 4.0 * std::numbers::pi * radius * radius);
+
+    // Centred where makeSphere put it.
+    const openvdb::BBoxd box = mesh.bounds();
+    const Vec3d centre = s.grid->indexToWorld(kCentre);
+    for (int i = 0; i < 3; ++i) {
+        EXPECT_NEAR(box.min()[i], centre[i] - radius, voxel);
+        EXPECT_NEAR(box.max()[i], centre[i] + radius, voxel);
+    }
+}
+
+TEST_F(Mesher, CubesWithTileCornersAreMeshed)
+{
+    // An octahedron's faces are normal to (1,1,1)/sqrt(3): a tile voxel 1.01..1.73 voxels inside
+    // has all face neighbours inside but the far corner of its cube outside. Such a cube's minimum
+    // corner is in no leaf, yet it carries surface; losing it would leave holes.
+    const double voxel = 0.1, size = 40.0;  // |x| + |y| + |z| <= size, in voxels
+    auto octahedron = [size](const Coord& ijk) {
+        const Vec3d p = Vec3d(ijk.x(), ijk.y(), ijk.z()) - kCentre;
+        return (std::abs(p.x()) + std::abs(p.y()) + std::abs(p.z()) - size) / std::sqrt(3.0);
+    };
+    const BandGrid s = makeBandGrid(octahedron, regionAround(size), voxel);
+    ASSERT_GT(s.tiles, 0u);
+    MarchingCubesStats stats;
+    const TriangleMesh mesh = marchingCubes(*s.grid, 0.0f, {}, &stats);
+    EXPECT_EQ(stats.skippedEdges, 0u);
+    EXPECT_EQ(stats.droppedCubes, 0u);
+    EXPECT_GT(stats.tileBlockTriangles, 0u);
+    expectClosedManifold(mesh, "octahedron");
+    EXPECT_EQ(checkTopology(mesh).eulerCharacteristic, 2);
+    const double exact = 4.0 / 3.0 * std::pow(size * voxel, 3);
+    EXPECT_NEAR(mesh.volume(), exact, 0.01 * exact);
+    EXPECT_NEAR(mesh.volume(), double(s.insideVoxels) * std::pow(voxel, 3), 0.01 * exact);
+}
+
+TEST_F(Mesher, OpenVdbLevelSetSphereIsClosed)
+{
+    // OpenVDB's own narrow-band level set: inside filled by signed flood fill, not by our tiles.
+    auto grid = openvdb::tools::createLevelSetSphere<FloatGrid>(1.5f, openvdb::Vec3f(0.3f, 0.2f, -0.1f), 0.05f);
+    MarchingCubesStats stats;
+    const TriangleMesh mesh = marchingCubes(*grid, 0.0f, {}, &stats);
+    EXPECT_EQ(stats.skippedEdges, 0u);
+    expectClosedManifold(mesh, "level set sphere");
+    EXPECT_EQ(checkTopology(mesh).eulerCharacteristic, 2);
+    const double exact = 4.0 / 3.0 * std::numbers::pi * 1.5 * 1.5 * 1.5;
+    EXPECT_NEAR(mesh.volume(), exact, 0.01 * exact);
+}
+
+TEST_F(Mesher, GyroidIsClosedAndThreadCountInvariant)
+{
+    auto grid = makeGyroid(48, 0.1, 1.6);
+    MarchingCubesStats stats;
+    const TriangleMesh mesh = marchingCubes(*grid, 0.0f, {}, &stats);
+    EXPECT_EQ(stats.skippedEdges, 0u);
+    EXPECT_EQ(stats.droppedCubes, 0u);
+    ASSERT_GT(mesh.triangles.size(), 10000u);
+    expectClosedManifold(mesh, "gyroid");
+    expectAllPointsUsed(mesh);
+    // A solid gyroid fills about half of the box it is capped by.
+    const double box = std::pow((48 - 5) * 0.1, 3);
+    EXPECT_GT(mesh.volume(), 0.4 * box);
+    EXPECT_LT(mesh.volume(), 0.6 * box);
+
+    // Nonzero iso value: a thicker solid, still closed.
+    const TriangleMesh thick = marchingCubes(*grid, 0.05f);
+    expectClosedManifold(thick, "gyroid iso 0.05");
+    EXPECT_GT(thick.volume(), mesh.volume());
+
+    TempDir dir;
+    const TriangleMesh one = meshWithThreads(*grid, 1);
+    const TriangleMesh four = meshWithThreads(*grid, 4);
+    writeStl(mesh, dir.file("default.stl"));
+    writeStl(one, dir.file("one.stl"));
+    writeStl(four, dir.file("four.stl"));
+    const std::string bytes = readBytes(dir.file("default.stl"));
+    EXPECT_EQ(bytes.size(), 84 + 50 * mesh.triangles.size());
+    EXPECT_TRUE(bytes == readBytes(dir.file("one.stl")));
+    EXPECT_TRUE(bytes == readBytes(dir.file("four.stl")));
+}
+
+TEST_F(Mesher, RandomValuesWithTiesAndZerosAreClosed)
+{
+    std::size_t ambiguous = 0, centroids = 0, meshes = 0;
+    for (unsigned seed = 1; seed <= 40; ++seed) {
+        for (const bool continuous : {false, true}) {
+            for (const float iso : {0.0f, 0.5f}) {
+                auto grid = makeRandom(seed, seed % 4 == 0 ? 3 : 2, iso, continuous);
+                ambiguous += countAmbiguousFaces(*grid, iso);
+                MarchingCubesStats stats;
+                const TriangleMesh mesh = marchingCubes(*grid, iso, {}, &stats);
+                const std::string what = "seed " + std::to_string(seed) + (continuous ? " continuous" : " discrete") +
+                                         " iso " + std::to_string(iso);
+                EXPECT_EQ(stats.skippedEdges, 0u) << what;
+                EXPECT_EQ(stats.droppedCubes, 0u) << what;
+                centroids += stats.centroidVertices;
+                expectClosedManifold(mesh, what.c_str());
+                expectAllPointsUsed(mesh);
+                EXPECT_GT(mesh.volume(), 0.0) << what;
+                if (seed <= 2) {
+                    const TriangleMesh single = meshWithThreads(*grid, 1, iso);
+                    EXPECT_TRUE(single.points == mesh.points) << what;
+                    EXPECT_TRUE(single.triangles == mesh.triangles) << what;
+                }
+                ++meshes;
+            }
+        }
+    }
+    // The data must actually exercise the face decider and the centroid fallback.
+    EXPECT_GT(ambiguous, 100 * meshes);
+    EXPECT_GT(centroids, meshes);
+}
+
+TEST_F(Mesher, ContractViolationIsCountedNotFatal)
+{
+    // An inside tile right next to an outside leaf: the sign changes across the tile's face are
+    // owned by tile voxels and have no vertex.
+    auto grid = FloatGrid::create(1.0f);
+    grid->tree().addTile(1, Coord(-8, 0, 0), -1.0f, true);
+    fillLeaf(*grid, Coord(0), [](const Coord&) { return 1.0; });
+    MarchingCubesStats stats;
+    const TriangleMesh mesh = marchingCubes(*grid, 0.0f, {}, &stats);
+    EXPECT_GE(stats.skippedEdges, 64u);
+    EXPECT_GT(stats.droppedCubes, 0u);
+    for (const auto& t : mesh.triangles) {
+        for (int k = 0; k < 3; ++k) EXPECT_LT(t[k], mesh.points.size());
+    }
+    MarchingCubesStats again;
+    const TriangleMesh second = meshWithThreads(*grid, 1);
+    marchingCubes(*grid, 0.0f, {}, &again);
+    EXPECT_EQ(again.skippedEdges, stats.skippedEdges);
+    EXPECT_TRUE(second.triangles == mesh.triangles);
+}
+
+TEST_F(Mesher, EmptyGridGivesEmptyMesh)
+{
+    auto grid = FloatGrid::create(1.0f);
+    const TriangleMesh mesh = marchingCubes(*grid);
+    EXPECT_TRUE(mesh.empty());
+    EXPECT_TRUE(mesh.points.empty());
+    EXPECT_EQ(mesh.volume(), 0.0);
+}
+
+TEST_F(Mesher, CheckTopologyFindsDefects)
+{
+    // A tetrahedron: closed, chi = 2, then break it in several ways.
+    TriangleMesh tet;
+    tet.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    tet.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+    MeshTopology topo = checkTopology(tet);
+    EXPECT_TRUE(topo.closedManifold());
+    EXPECT_EQ(topo.eulerCharacteristic, 2);
+    EXPECT_NEAR(tet.volume(), 1.0 / 6.0, 1e-12);
+
+    TriangleMesh open = tet;
+    open.triangles.pop_back();
+    topo = checkTopology(open);
+    EXPECT_EQ(topo.boundaryEdges, 3u);
+    EXPECT_FALSE(topo.closedManifold());
+
+    TriangleMesh flipped = tet;
+    std::swap(flipped.triangles[3][1], flipped.triangles[3][2]);
+    topo = checkTopology(flipped);
+    EXPECT_EQ(topo.inconsistentlyOrientedEdges, 3u);
+    EXPECT_EQ(topo.boundaryEdges, 0u);
+
+    TriangleMesh degenerate = tet;
+    degenerate.triangles.push_back({0, 0, 1});
+    degenerate.points.push_back({2, 0, 0});  // collinear with 0 and 1
+    degenerate.triangles.push_back({0, 1, 4});
+    topo = checkTopology(degenerate);
+    EXPECT_EQ(topo.degenerateTriangles, 2u);
+
+    // Two tetrahedra sharing one vertex: every edge fine, the shared vertex is not a single fan.
+    TriangleMesh bowtie = tet;
+    bowtie.points.insert(bowtie.points.end(), {{-1, 0, 0}, {0, -1, 0}, {0, 0, -1}});
+    for (const auto& t : tet.triangles) {
+        auto map = [](unsigned i) { return i == 0 ? 0u : i + 3u; };
+        bowtie.triangles.push_back({map(t[0]), map(t[2]), map(t[1])});
+    }
+    topo = checkTopology(bowtie);
+    EXPECT_EQ(topo.boundaryEdges, 0u);
+    EXPECT_EQ(topo.nonManifoldEdges, 0u);
+    EXPECT_EQ(topo.nonManifoldVertices, 1u);
+    EXPECT_FALSE(topo.closedManifold());
+
+    // Three triangles on one edge.
+    TriangleMesh fin = tet;
+    fin.points.push_back({1, 1, 1});
+    fin.triangles.push_back({1, 2, 4});
+    topo = checkTopology(fin);
+    EXPECT_EQ(topo.nonManifoldEdges, 1u);
+    EXPECT_GE(topo.nonManifoldVertices, 2u);
+}
+
+TEST_F(Mesher, StlRoundTrip)
+{
+    const BandGrid s = makeSphere(12.0, 0.25);
+    const TriangleMesh mesh = marchingCubes(*s.grid);
+    TempDir dir;
+    writeStl(mesh, dir.file("sphere.stl"));
+    const std::string bytes = readBytes(dir.file("sphere.stl"));
+    ASSERT_EQ(bytes.size(), 84 + 50 * mesh.triangles.size());
+    EXPECT_EQ(bytes.substr(0, 80), "voxlat binary STL" + std::string(80 - 17, ' '));
+
+    const TriangleMesh back = readStl(dir.file("sphere.stl"));
+    EXPECT_EQ(back.triangles.size(), mesh.triangles.size());
+    EXPECT_EQ(back.points.size(), mesh.points.size());  // welding restores the sharing
+    EXPECT_NEAR(back.volume(), mesh.volume(), 1e-9 * mesh.volume());
+    EXPECT_TRUE(checkTopology(back).closedManifold());
+    EXPECT_EQ(dir.entries(), 1u);  // no temporary files left behind
+
+    // ASCII STL of the tetrahedron.
+    std::ofstream(dir.file("tet.stl"))
+        << "solid t\n"
+           "facet normal 0 0 -1\n outer loop\n vertex 0 0 0\n vertex 0 1 0\n vertex 1 0 0\n endloop\nendfacet\n"
+           "facet normal 0 -1 0\n outer loop\n vertex 0 0 0\n vertex 1 0 0\n vertex 0 0 1\n endloop\nendfacet\n"
+           "facet normal -1 0 0\n outer loop\n vertex 0 0 0\n vertex 0 0 1\n vertex 0 1 0\n endloop\nendfacet\n"
+           "facet normal 1 1 1\n outer loop\n vertex 1 0 0\n vertex 0 1 0\n vertex -0 0 1e0\n endloop\nendfacet\n"
+           "endsolid t\n";
+    const TriangleMesh tet = readStl(dir.file("tet.stl"));
+    EXPECT_EQ(tet.points.size(), 4u);
+    EXPECT_EQ(tet.triangles.size(), 4u);
+    EXPECT_TRUE(checkTopology(tet).closedManifold());
+    EXPECT_NEAR(tet.volume(), 1.0 / 6.0, 1e-9);
+}
+
+TEST_F(Mesher, AtomicFileLeavesNothingUnlessCommitted)
+{
+    TempDir dir;
+    const std::string path = dir.file("out.bin");
+    {
+        AtomicFile file(path);
+        file.stream() << "partial";
+        EXPECT_TRUE(fs::exists(file.tempPath()));
+        EXPECT_FALSE(fs::exists(path));
+    }
+    EXPECT_FALSE(fs::exists(path));
+    EXPECT_EQ(dir.entries(), 0u);
+
+    {
+        AtomicFile file(path);
+        file.stream() << "complete";
+        file.commit();
+        EXPECT_TRUE(file.committed());
+    }
+    EXPECT_EQ(readBytes(path), "complete");
+    EXPECT_EQ(dir.entries(), 1u);
+
+    // A failed write keeps the old file.
+    try {
+        AtomicFile file(path);
+        file.stream() << "half";
+        throw std::runtime_error("writer failed");
+    } catch (const std::runtime_error&) {
+    }
+    EXPECT_EQ(readBytes(path), "complete");
+    EXPECT_EQ(dir.entries(), 1u);
+
+    const std::string missing = dir.file("no/such/dir/out.stl");
+    try {
+        AtomicFile file(missing);
+        FAIL() << "opened a file in a missing directory";
+    } catch (const std::runtime_error& e) {
+        EXPECT_NE(std::string(e.what()).find(missing), std::string::npos) << e.what();
+    }
+}
+
+TEST_F(Mesher, WriteMeshFormats)
+{
+    const BandGrid s = makeSphere(8.0, 0.5);
+    const TriangleMesh mesh = marchingCubes(*s.grid);
+    ASSERT_GT(mesh.triangles.size(), 100u);
+    TempDir dir;
+    for (const std::string name : {"m.ply", "m.obj", "M.STL"}) {
+        writeMesh(mesh, dir.file(name));
+        OpenMesh::TriMesh_ArrayKernelT<> back;
+        OpenMesh::IO::Options options;
+        ASSERT_TRUE(OpenMesh::IO::read_mesh(back, dir.file(name), options)) << name;
+        EXPECT_EQ(back.n_faces(), mesh.triangles.size()) << name;
+        EXPECT_EQ(back.n_vertices(), mesh.points.size()) << name;
+    }
+    // PLY is binary; STL through writeMesh is the same bytes as writeStl.
+    EXPECT_NE(readBytes(dir.file("m.ply")).find("format binary_little_endian"), std::string::npos);
+    writeStl(mesh, dir.file("direct.stl"));
+    EXPECT_TRUE(readBytes(dir.file("direct.stl")) == readBytes(dir.file("M.STL")));
+    EXPECT_EQ(dir.entries(), 4u);
+
+    try {
+        writeMesh(mesh, dir.file("m.xyz"));
+        FAIL() << "accepted .xyz";
+    } catch (const std::invalid_argument& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find(".stl"), std::string::npos);
+        EXPECT_NE(what.find(".ply"), std::string::npos);
+        EXPECT_NE(what.find(".obj"), std::string::npos);
+    }
+    EXPECT_EQ(dir.entries(), 4u);
+}
+
+}  // namespace
