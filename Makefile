@@ -9,8 +9,9 @@ RECIPE ?= data/recipes/gyroid.yaml
 OUT ?= out
 
 DEB_PACKAGES := cmake ninja-build g++ libopenvdb-dev libboost-iostreams-dev libtbb-dev libopenmesh-dev \
-	libopenexr-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libgtest-dev
-BENCH_PACKAGES := python3 python3-numpy python3-openvdb
+	libopenexr-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libgtest-dev libpng-dev libzip-dev \
+	lib3mf-dev pybind11-dev python3-dev python3-numpy
+BENCH_PACKAGES := python3 python3-numpy python3-openvdb python3-scipy python3-skimage prusa-slicer
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 CCACHE := $(shell command -v ccache 2>/dev/null)
 

@@ -26,6 +26,10 @@ struct Domain {
     {
         return box.min + voxel * Vec3d(ijk.x() + 0.5, ijk.y() + 0.5, ijk.z() + 0.5);
     }
+    /// The voxels of this domain whose centres lie in @a box, as a domain of its own (same voxel
+    /// lattice). Throws std::invalid_argument if none do.
+    Domain subDomain(const Box3& box) const;
+
     /// Number of voxels inside the domain.
     std::uint64_t voxelCount() const { return std::uint64_t(dims.x()) * dims.y() * dims.z(); }
     /// Index-space box of the domain's voxels (inclusive).

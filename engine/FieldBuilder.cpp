@@ -11,6 +11,9 @@ const std::vector<NodeType>& FieldBuilder::nodeTypes()
     static const std::vector<NodeType> types = [] {
         std::vector<NodeType> t;
         addLatticeNodeTypes(t);
+        addStrutNodeTypes(t);
+        addDesignNodeTypes(t);
+        addExprNodeTypes(t);
         addShapeNodeTypes(t);
         return t;
     }();

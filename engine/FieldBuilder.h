@@ -17,7 +17,10 @@ struct LevelNode {
     std::string name;
     std::string description;  ///< e.g. "gyroid network"
     std::shared_ptr<LevelSolid> solid;
-    std::optional<double> density;  ///< target relative density over the domain
+    std::optional<double> density;  ///< target relative density
+    /// Where the density is measured: the domain unless a node narrows it (a strut lattice
+    /// measures over its frame's bounding box).
+    std::optional<Box3> densityBox;
 };
 
 class FieldBuilder;
@@ -57,7 +60,10 @@ private:
 };
 
 /// Node types by family; each family lives in its own file.
-void addShapeNodeTypes(std::vector<NodeType>& types);
-void addLatticeNodeTypes(std::vector<NodeType>& types);
+void addShapeNodeTypes(std::vector<NodeType>& types);    // ShapeNodes.cpp: primitives, booleans, transforms
+void addLatticeNodeTypes(std::vector<NodeType>& types);  // LatticeNodes.cpp: tpms
+void addStrutNodeTypes(std::vector<NodeType>& types);    // StrutNodes.cpp: strut lattices
+void addDesignNodeTypes(std::vector<NodeType>& types);   // DesignNodes.cpp: meshes, shells, infill
+void addExprNodeTypes(std::vector<NodeType>& types);     // ExprNodes.cpp: user equations
 
 }  // namespace voxlat

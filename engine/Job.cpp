@@ -75,7 +75,8 @@ void Job::solveLevels()
         nlohmann::json entry{{"type", node.description}};
         if (node.density) {
             const DensitySolution s = timed("solve " + node.name, [&] {
-                return solveDensity(*node.solid->indicator(), mDomain, *node.density);
+                return solveDensity(*node.solid->indicator(),
+                                    node.densityBox ? mDomain.subDomain(*node.densityBox) : mDomain, *node.density);
             });
             node.solid->setLevel(node.solid->levelFromIndicator(s.level));
             entry["target_density"] = *node.density;

@@ -60,6 +60,16 @@ TEST(Domain, SnapsToWholeVoxels)
     EXPECT_TRUE((w - d.worldOf(openvdb::Coord(3, 4, 5))).length() < 1e-12);
 }
 
+TEST(Domain, SubDomainKeepsTheVoxelLattice)
+{
+    const Domain d = Domain::fromBox(Box3{Vec3d(0), Vec3d(10)}, 0.5);
+    const Domain s = d.subDomain(Box3{Vec3d(2.1, 0, 3), Vec3d(4.9, 10, 3.3)});
+    EXPECT_EQ(s.dims, openvdb::Coord(6, 20, 1));  // centres 2.25..4.75, all, 3.25
+    EXPECT_NEAR(s.worldOf(openvdb::Coord(0))[0], 2.25, 1e-12);
+    EXPECT_NEAR(s.worldOf(openvdb::Coord(0))[2], 3.25, 1e-12);
+    EXPECT_THROW(d.subDomain(Box3{Vec3d(20), Vec3d(30)}), std::invalid_argument);
+}
+
 TEST(SparseEvaluator, SignsMatchBruteForceEverywhere)
 {
     const Domain d = Domain::fromBox(Box3{Vec3d(-1), Vec3d(12.2, 11, 9)}, 0.2);

@@ -1,0 +1,22 @@
+"""W1: the acceptance gyroid (network, 30 %, 50 mm cube, 0.1 mm voxels) from recipe to STL,
+side by side with OpenVDB's own tools on a dense grid (bench/reference/w1_openvdb_dense.py)."""
+import json
+
+from common import PYTHON, ROOT, measure, row, verdict
+
+TITLE = "W1  gyroid network 30 %, 50 mm cube, 0.1 mm voxels, recipe -> STL"
+
+
+def run(voxlat, tmp):
+    t_v, m_v, _ = measure([voxlat, "-q", "run", ROOT / "data/recipes/gyroid.yaml", "--out", tmp / "w1"])
+    report = json.loads((tmp / "w1" / "report.json").read_text())
+    t_r, m_r, out_r = measure([PYTHON, ROOT / "bench/reference/w1_openvdb_dense.py", "--out", tmp / "w1-ref.stl"])
+    row("voxlat", t_v, m_v)
+    row("OpenVDB python, dense grid", t_r, m_r)
+    ratio = t_r / t_v
+    print(f"  speed-up {ratio:.1f}x (target >= 5x: {verdict(ratio >= 5)}); "
+          f"voxlat peak {m_v:.0f} MB (target <= 1024 MB: {verdict(m_v <= 1024)})")
+    print(f"  voxlat: density {report['fields']['lattice']['achieved_density']:.5f}, "
+          f"{report['mesh']['triangles']} triangles; reference: {out_r.strip().splitlines()[-1]}")
+    print("  voxlat stages: " + ", ".join(f"{k} {v:.2f}s" for k, v in report["timings_s"].items()))
+    return {"voxlat_s": t_v, "reference_s": t_r, "ratio": ratio, "voxlat_mb": m_v, "reference_mb": m_r}
