@@ -411,9 +411,9 @@ struct SkippedEdge {
 };
 
 /// Serialized, monotonic progress reporting in whole percents.
-class Progress {
+class ProgressReporter {
 public:
-    Progress(ProgressFn fn, std::size_t total) : mFn(std::move(fn)), mTotal(std::max<std::size_t>(total, 1)) {}
+    ProgressReporter(ProgressFn fn, std::size_t total) : mFn(std::move(fn)), mTotal(std::max<std::size_t>(total, 1)) {}
 
     void advance()
     {
@@ -773,7 +773,7 @@ TriangleMesh Mesher::run(ProgressFn progressFn, MarchingCubesStats& stats)
     mEdgeMasks.resize(mNumLeaves);
     mEdgeRanks.resize(mNumLeaves);
     mCounts.resize(numBlocks);
-    Progress progress(std::move(progressFn), 2 * numBlocks);
+    ProgressReporter progress(std::move(progressFn), 2 * numBlocks);
 
     // The grain keeps accessor set-up and scheduling overhead small; the result never depends
     // on how ranges are split, since every block writes only its own slots.

@@ -14,7 +14,6 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <limits>
 #include <stdexcept>
 #include <string_view>
@@ -85,6 +84,9 @@ void writeOpenMesh(const TriangleMesh& mesh, const std::string& path, const std:
     // OpenMesh writes ASCII unless asked; OBJ is ASCII only, with enough digits to round-trip floats.
     const OpenMesh::IO::Options options =
         ext == ".ply" ? OpenMesh::IO::Options::Binary : OpenMesh::IO::Options::Default;
+    // OpenMesh chats on its log streams ("[OBJWriter] : write file"); our callers report instead.
+    ::omlog().disable();
+    ::omout().disable();
     if (!OpenMesh::IO::write_mesh(om, file.stream(), ext, options, std::numeric_limits<float>::max_digits10)) {
         throw std::runtime_error("OpenMesh failed to write '" + path + "'");
     }
@@ -108,7 +110,13 @@ struct PointKeyHash {
 
 class Welder {
 public:
-    explicit Welder(TriangleMesh& mesh) : mMesh(mesh) {}
+    /// @a expectedPoints sizes the table up front: a closed triangle mesh has about half as
+    /// many vertices as triangles.
+    Welder(TriangleMesh& mesh, std::size_t expectedPoints) : mMesh(mesh)
+    {
+        mIndex.reserve(expectedPoints);
+        mMesh.points.reserve(expectedPoints);
+    }
 
     std::uint32_t add(const openvdb::Vec3f& p)
     {
@@ -126,7 +134,7 @@ private:
 
 void parseAsciiStl(const std::string& text, const std::string& path, TriangleMesh& mesh)
 {
-    Welder welder(mesh);
+    Welder welder(mesh, 0);
     std::vector<std::uint32_t> corners;
     const char* p = text.c_str();
     const char* end = p + text.size();
@@ -213,15 +221,19 @@ TriangleMesh readStl(const std::string& path)
 {
     std::ifstream in(path, std::ios::binary);
     if (!in) throw std::runtime_error("cannot open STL file '" + path + "'");
-    const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (in.bad()) throw std::runtime_error("cannot read STL file '" + path + "'");
+    std::string data;
+    in.seekg(0, std::ios::end);
+    data.resize(std::size_t(std::max<std::streamoff>(in.tellg(), 0)));
+    in.seekg(0, std::ios::beg);
+    in.read(data.data(), std::streamsize(data.size()));
+    if (!in) throw std::runtime_error("cannot read STL file '" + path + "'");
 
     TriangleMesh mesh;
     // The size test comes first: binary files may also begin with "solid".
     if (data.size() >= kStlHeaderSize + 4) {
         const std::uint64_t count = getU32(data.data() + kStlHeaderSize);
         if (data.size() == kStlHeaderSize + 4 + count * kStlFacetSize) {
-            Welder welder(mesh);
+            Welder welder(mesh, count / 2 + 3);
             mesh.triangles.reserve(count);
             const char* p = data.data() + kStlHeaderSize + 4;
             for (std::uint64_t i = 0; i < count; ++i, p += kStlFacetSize) {
