@@ -1,5 +1,9 @@
 #include "mesher/TriangleMesh.h"
 
+#include <tbb/parallel_reduce.h>
+
+#include <functional>
+
 namespace voxlat {
 
 namespace {
@@ -7,6 +11,20 @@ namespace {
 openvdb::Vec3d toDouble(const openvdb::Vec3f& p)
 {
     return {p.x(), p.y(), p.z()};
+}
+
+/// Sums term(triangle) over all triangles in parallel. The deterministic reduce splits the range
+/// the same way for any thread count, so the floating-point sum is reproducible bit for bit.
+template <typename Term>
+double sumOverTriangles(const std::vector<openvdb::Vec3I>& triangles, Term term)
+{
+    return tbb::parallel_deterministic_reduce(
+        tbb::blocked_range<std::size_t>(0, triangles.size(), 1 << 14), 0.0,
+        [&](const tbb::blocked_range<std::size_t>& r, double sum) {
+            for (std::size_t n = r.begin(); n != r.end(); ++n) sum += term(triangles[n]);
+            return sum;
+        },
+        std::plus<>());
 }
 
 }  // namespace
@@ -17,24 +35,21 @@ double TriangleMesh::volume() const
     // Measuring the tetrahedra from a point on the mesh instead of the world origin keeps the
     // terms small for a part far from the origin, so they do not cancel catastrophically.
     const openvdb::Vec3d ref = toDouble(points[triangles.front()[0]]);
-    double sum = 0.0;
-    for (const openvdb::Vec3I& t : triangles) {
-        const openvdb::Vec3d a = toDouble(points[t[0]]) - ref;
-        const openvdb::Vec3d b = toDouble(points[t[1]]) - ref;
-        const openvdb::Vec3d c = toDouble(points[t[2]]) - ref;
-        sum += a.dot(b.cross(c));
-    }
-    return sum / 6.0;
+    return sumOverTriangles(triangles, [&](const openvdb::Vec3I& t) {
+               const openvdb::Vec3d a = toDouble(points[t[0]]) - ref;
+               const openvdb::Vec3d b = toDouble(points[t[1]]) - ref;
+               const openvdb::Vec3d c = toDouble(points[t[2]]) - ref;
+               return a.dot(b.cross(c));
+           }) /
+           6.0;
 }
 
 double TriangleMesh::area() const
 {
-    double sum = 0.0;
-    for (const openvdb::Vec3I& t : triangles) {
-        const openvdb::Vec3d a = toDouble(points[t[0]]);
-        sum += (toDouble(points[t[1]]) - a).cross(toDouble(points[t[2]]) - a).length();
-    }
-    return 0.5 * sum;
+    return 0.5 * sumOverTriangles(triangles, [&](const openvdb::Vec3I& t) {
+               const openvdb::Vec3d a = toDouble(points[t[0]]);
+               return (toDouble(points[t[1]]) - a).cross(toDouble(points[t[2]]) - a).length();
+           });
 }
 
 openvdb::BBoxd TriangleMesh::bounds() const
