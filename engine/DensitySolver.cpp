@@ -169,7 +169,7 @@ DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, d
         // Coarse or symmetric grids repeat values in large groups, so no level may leave exactly
         // `wanted` voxels below it. Then measure with sub-voxel coverage, which is continuous in
         // the level, and bisect on it.
-        if (std::abs(double(sol.insideVoxels) - double(wanted)) > 1e-3 * double(wanted)) {
+        if (std::abs(double(sol.insideVoxels) - double(wanted)) > 5e-4 * double(wanted)) {
             const auto samples = coverageSamples(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi));
             double a = options.band.lo, b = std::min(options.band.hi, 1e30);
             for (int iteration = 0; iteration < 60; ++iteration) {

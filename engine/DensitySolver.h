@@ -22,7 +22,7 @@ struct DensitySolution {
 /// quantile: a coarse strided pass brackets the level, a sparse pass evaluates only the leaves
 /// whose bound meets the bracket, and a selection over the bracketed values picks the level. The
 /// achieved share is within half a voxel's share of the target. When value ties (a symmetric
-/// field on a regular grid) leave no level within 0.1 % of the target by count, the level is
+/// field on a regular grid) leave no level within 0.05 % of the target by count, the level is
 /// bisected on a sub-voxel coverage measure instead (continuous in the level).
 DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target);
 
