@@ -251,14 +251,15 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             auto samples = coverageSamples(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi));
             double a = options.band.lo, b = std::min(options.band.hi, 1e30);
             std::uint64_t fullyBelow = below;
-            // A voxel is partly inside while the level is within half its step of its value, so
-            // every voxel within a step of the level must be measured, not only those in the
-            // bracket (which can be far narrower than a voxel's change): widen the band to the
-            // largest step either side and measure again.
+            // Within a mask the bracket (a share of the mask's voxels) can be far narrower than a
+            // voxel's change, and the coverage of the voxels just outside it then never reaches
+            // the target. A voxel is partly inside while the level is within half its step of
+            // its value: widen the band to the largest step either side and measure again.
+            // (Unmasked solves keep the bracket, whose coverage tracks the meshed volume.)
             float widest = 0.0f;
             for (const CoverageSample& c : samples)
                 if (c.step < 1e29f) widest = std::max(widest, c.step);
-            if (widest > 0.0f && widest < 1e29f) {
+            if (masked && widest > 0.0f && widest < 1e29f) {
                 SparseOptions wide = options;
                 wide.band = Interval(sol.level - widest, sol.level + widest);
                 const auto wideGrid = evaluateSparse(indicator, domain, wide);

@@ -79,8 +79,8 @@ double wallThickness(const RecipeNode& node, double voxel, const std::string& wh
 {
     const double t = node.number();
     if (!(t >= voxel))
-        node.fail(what + " must be at least one voxel (" + std::to_string(voxel) +
-                  " mm) to show in the result; got " + node.yaml().Scalar());
+        node.fail(what + " must be at least one voxel (" + std::to_string(voxel) + " mm) to show in the result; got " +
+                  node.yaml().Scalar());
     return t;
 }
 
@@ -110,7 +110,8 @@ FieldPtr buildInfill(FieldBuilder& builder, const RecipeNode& spec, const std::s
     if (skin < 0.0) s["skin"].fail("the skin is a thickness in millimetres, zero or more");
     const double blend = s.has("blend") ? s["blend"].number() : 0.0;
     if (blend < 0.0) s["blend"].fail("the blend radius must be zero or positive (millimetres)");
-    if (blend > 0.0 && skin == 0.0) s["blend"].fail("a blend rounds the joint between lattice and skin: give `skin:` too");
+    if (blend > 0.0 && skin == 0.0)
+        s["blend"].fail("a blend rounds the joint between lattice and skin: give `skin:` too");
     std::optional<double> materialDensity;
     if (s.has("material_density")) materialDensity = s["material_density"].positiveNumber();
     if (MeshDesignSpace* space = meshSpaceOf(part)) space->requireInteriorBand(skin + blend + 2 * voxel);
@@ -121,12 +122,14 @@ FieldPtr buildInfill(FieldBuilder& builder, const RecipeNode& spec, const std::s
         std::make_shared<BooleanField>(BooleanOp::Intersection, std::vector<FieldPtr>{lattice, core});
     FieldPtr result = latticeInCore;
     if (skin > 0.0) {
-        const FieldPtr skinSolid = std::make_shared<BooleanField>(BooleanOp::Difference, std::vector<FieldPtr>{part, core});
+        const FieldPtr skinSolid =
+            std::make_shared<BooleanField>(BooleanOp::Difference, std::vector<FieldPtr>{part, core});
         // The smooth union fillets the joint; the final intersection keeps the fillet inside the part.
         const FieldPtr joined =
             std::make_shared<BooleanField>(BooleanOp::Union, std::vector<FieldPtr>{skinSolid, latticeInCore}, blend);
-        result = blend > 0.0 ? std::make_shared<BooleanField>(BooleanOp::Intersection, std::vector<FieldPtr>{joined, part})
-                             : joined;
+        result = blend > 0.0
+                     ? std::make_shared<BooleanField>(BooleanOp::Intersection, std::vector<FieldPtr>{joined, part})
+                     : joined;
     }
 
     std::optional<double> density;
@@ -143,10 +146,11 @@ FieldPtr buildInfill(FieldBuilder& builder, const RecipeNode& spec, const std::s
         const RecipeNode latticeSpec = s["lattice"].isScalar() ? builder.recipe().fieldSpec(latticeName) : s["lattice"];
         for (const char* key : {"level", "density"})
             if (latticeSpec.has(key))
-                latticeSpec[key].fail(std::string("the infill `") + name + "` solves this lattice's level for its density: remove `" +
-                                      key + ":` here");
+                latticeSpec[key].fail(std::string("the infill `") + name +
+                                      "` solves this lattice's level for its density: remove `" + key + ":` here");
         if (node->densityMask)
-            d.fail("the lattice `" + latticeName + "` already fills another infill; give each infill its own lattice node");
+            d.fail("the lattice `" + latticeName +
+                   "` already fills another infill; give each infill its own lattice node");
         node->density = density;
         node->densityMask = core;
         node->densityOf = "the space inside the " + std::to_string(skin) + " mm skin of `" + partName + "`";
@@ -167,8 +171,10 @@ FieldPtr buildInfill(FieldBuilder& builder, const RecipeNode& spec, const std::s
         if (result0 == name) {
             // The printed solid: skin plus lattice, from the mesh when there is one.
             double solid = -1.0;
-            if (report.contains("mesh")) solid = report["mesh"]["volume_mm3"].get<double>();
-            else if (report.contains("result")) solid = report["result"]["volume_mm3"].get<double>();
+            if (report.contains("mesh"))
+                solid = report["mesh"]["volume_mm3"].get<double>();
+            else if (report.contains("result"))
+                solid = report["result"]["volume_mm3"].get<double>();
             if (solid >= 0.0) {
                 r["solid_volume_mm3"] = solid;
                 if (r.contains("part_volume_mm3"))
@@ -206,8 +212,9 @@ FieldPtr applyFrame(const RecipeNode& frame, FieldPtr raw, const Vec3d& cell)
     constexpr double pi = std::numbers::pi;
     frame.checkKeys({"cylinder", "sphere"});
     if (frame.has("cylinder") == frame.has("sphere"))
-        frame.fail("a frame is one of `{cylinder: {center, axis, around}}` or `{sphere: {center, axis, around, "
-                   "pole_to_pole}}`");
+        frame.fail(
+            "a frame is one of `{cylinder: {center, axis, around}}` or `{sphere: {center, axis, around, "
+            "pole_to_pole}}`");
     auto count = [](const RecipeNode& n) {
         const double v = n.number();
         if (!(v >= 1.0) || v != std::floor(v))

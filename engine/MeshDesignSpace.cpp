@@ -25,7 +25,10 @@ std::string mm(double v)
     return s.str();
 }
 
-std::string sizeText(const Vec3d& e) { return mm(e[0]) + " x " + mm(e[1]) + " x " + mm(e[2]) + " mm"; }
+std::string sizeText(const Vec3d& e)
+{
+    return mm(e[0]) + " x " + mm(e[1]) + " x " + mm(e[2]) + " mm";
+}
 
 std::uint64_t edgeKey(std::uint32_t a, std::uint32_t b)
 {
@@ -54,7 +57,10 @@ std::vector<EdgeUse> edgeUses(const TriangleMesh& m)
 }  // namespace
 
 MeshDesignSpace::MeshDesignSpace(PartMesh part, std::string shown, const MeshSpaceOptions& options)
-    : mMesh(std::move(part.mesh)), mShown(std::move(shown)), mFormat(part.format), mVoxel(options.voxel),
+    : mMesh(std::move(part.mesh)),
+      mShown(std::move(shown)),
+      mFormat(part.format),
+      mVoxel(options.voxel),
       mSampleOrigin(options.sampleOrigin)
 {
     mUnitMm = options.unitMm.value_or(part.fileUnitMm.value_or(1.0));
@@ -64,7 +70,8 @@ MeshDesignSpace::MeshDesignSpace(PartMesh part, std::string shown, const MeshSpa
 
     // Triangles with a repeated corner enclose nothing: drop them.
     const std::size_t before = mMesh.triangles.size();
-    std::erase_if(mMesh.triangles, [](const openvdb::Vec3I& t) { return t[0] == t[1] || t[1] == t[2] || t[0] == t[2]; });
+    std::erase_if(mMesh.triangles,
+                  [](const openvdb::Vec3I& t) { return t[0] == t[1] || t[1] == t[2] || t[0] == t[2]; });
     mDegenerateDropped = before - mMesh.triangles.size();
     if (mMesh.triangles.empty()) throw InputError(mShown + ": every triangle is degenerate (no area)");
 
@@ -151,8 +158,8 @@ void MeshDesignSpace::fillHoles(bool repair)
     std::map<std::uint32_t, std::uint32_t> next;
     std::size_t boundary = 0;
     for (std::size_t i = 0; i < uses.size(); ++i) {
-        const bool single = (i == 0 || uses[i - 1].key != uses[i].key) &&
-                            (i + 1 == uses.size() || uses[i + 1].key != uses[i].key);
+        const bool single =
+            (i == 0 || uses[i - 1].key != uses[i].key) && (i + 1 == uses.size() || uses[i + 1].key != uses[i].key);
         if (!single) continue;
         ++boundary;
         const auto& t = mMesh.triangles[uses[i].triangle];
@@ -160,7 +167,8 @@ void MeshDesignSpace::fillHoles(bool repair)
         if (!next.emplace(a, b).second)
             throw InputError(mShown + ": the mesh is open: " + std::to_string(boundary) +
                              "+ boundary edges (edges with one triangle), and holes meet at vertex " +
-                             std::to_string(a) + ", so they cannot be filled automatically: close the mesh in your "
+                             std::to_string(a) +
+                             ", so they cannot be filled automatically: close the mesh in your "
                              "CAD tool");
     }
     if (boundary == 0) return;
@@ -202,9 +210,10 @@ void MeshDesignSpace::fillHoles(bool repair)
         const double across = box.extents().length();
         if (across > 0.2 * partSize)
             throw InputError(mShown + ": the mesh is open and a hole of " + std::to_string(loop.size()) +
-                             " edges spans " + mm(across) + " mm, too large for `repair: true` to fill safely "
-                             "(at most a fifth of the part, " + mm(0.2 * partSize) +
-                             " mm): close the mesh in your CAD tool");
+                             " edges spans " + mm(across) +
+                             " mm, too large for `repair: true` to fill safely "
+                             "(at most a fifth of the part, " +
+                             mm(0.2 * partSize) + " mm): close the mesh in your CAD tool");
         // A fan around the centroid; each new triangle runs its boundary edge backwards (b -> a),
         // so the patch takes the orientation of the triangles around the hole.
         const auto c = std::uint32_t(mMesh.points.size());
@@ -219,7 +228,8 @@ void MeshDesignSpace::fillHoles(bool repair)
     // The patches join shells: find shells again (their orientation is already consistent).
     orientShells();
     if (checkTopology(mMesh).boundaryEdges != 0)
-        throw InputError(mShown + ": the mesh is open and filling its holes did not close it: close the mesh in your "
+        throw InputError(mShown +
+                         ": the mesh is open and filling its holes did not close it: close the mesh in your "
                          "CAD tool");
     mWarnings.push_back("filled " + std::to_string(mHolesFilled) + " holes (" + std::to_string(mHoleEdges) +
                         " boundary edges) as asked by `repair: true`");
@@ -248,7 +258,8 @@ void MeshDesignSpace::checkSize(const MeshSpaceOptions& options)
         const double domainLargest = std::max({d[0], d[1], d[2]});
         if (largest > 10.0 * domainLargest)
             throw InputError(mShown + ": the mesh (" + sizeText(extent) + ") is far larger than the domain (" +
-                             sizeText(d) + "): set the mesh's `units:` if it is not in millimetres (um, mm, cm, m, in), "
+                             sizeText(d) +
+                             "): set the mesh's `units:` if it is not in millimetres (um, mm, cm, m, in), "
                              "or fix `domain:` (or leave it out: the part's box is then used)");
     }
 }
@@ -322,8 +333,8 @@ void MeshDesignSpace::convert()
         const double share = agree[s] / total[s];
         if (share >= 0.75) continue;
         if (share > 0.25)
-            throw InputError(mShown + ": cannot tell which way shell " + std::to_string(s + 1) +
-                             " faces: only " + std::to_string(int(std::lround(100 * share))) +
+            throw InputError(mShown + ": cannot tell which way shell " + std::to_string(s + 1) + " faces: only " +
+                             std::to_string(int(std::lround(100 * share))) +
                              " % of its surface has normals pointing out (the mesh intersects itself or has "
                              "internal faces): fix it in your CAD tool");
         for (std::uint32_t t = 0; t < mMesh.triangles.size(); ++t)
@@ -351,7 +362,8 @@ void MeshDesignSpace::convert()
     const double meshVol = mMesh.volume();
     if (std::abs(mGridVolume - meshVol) > 0.02 * meshVol + 0.5 * area * mVoxel)
         mWarnings.push_back("the mesh's own volume (" + mm(meshVol) + " mm3) and the volume inside it (" +
-                            mm(mGridVolume) + " mm3) differ: the mesh probably intersects itself or has overlapping "
+                            mm(mGridVolume) +
+                            " mm3) differ: the mesh probably intersects itself or has overlapping "
                             "shells (the part is taken as their union)");
 }
 

@@ -21,9 +21,9 @@ struct MeshSpaceOptions {
     /// World position of one grid sample: the domain's first voxel centre, so that a job's voxel
     /// centres are the grid's own samples (looked up, not interpolated).
     Vec3d sampleOrigin{0.0};
-    bool repair = false;              ///< fill small holes instead of refusing an open mesh
-    std::optional<double> unitMm;     ///< millimetres per file unit, when the recipe says
-    std::optional<Box3> domain;       ///< the recipe's domain, to catch a mesh far larger
+    bool repair = false;           ///< fill small holes instead of refusing an open mesh
+    std::optional<double> unitMm;  ///< millimetres per file unit, when the recipe says
+    std::optional<Box3> domain;    ///< the recipe's domain, to catch a mesh far larger
 };
 
 /// Checks a part mesh on construction (closed, manifold, orientable; repairs small holes when

@@ -2,10 +2,10 @@
 
 #include "engine/Errors.h"
 
+#include <Model/COM/NMR_DLLInterfaces.h>
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <OpenMesh/Core/System/omstream.hh>
-#include <Model/COM/NMR_DLLInterfaces.h>
 
 #include <algorithm>
 #include <array>
@@ -35,7 +35,8 @@ void checkReadable(const std::filesystem::path& path, const std::string& shown)
         throw InputError(shown + ": no such file (looked for " + path.string() +
                          "; paths in a recipe are relative to the recipe's folder)");
     if (std::filesystem::is_directory(path, ec)) throw InputError(shown + ": is a folder, not a mesh file");
-    if (!std::ifstream(path, std::ios::binary)) throw InputError(shown + ": cannot open the file (check its permissions)");
+    if (!std::ifstream(path, std::ios::binary))
+        throw InputError(shown + ": cannot open the file (check its permissions)");
 }
 
 std::string readBytes(const std::filesystem::path& path, const std::string& shown)
@@ -201,12 +202,23 @@ TriangleMesh read3mf(const std::filesystem::path& path, const std::string& shown
     DWORD unit = MODELUNIT_MILLIMETER;
     lib3mf_model_getunit(model, &unit);
     switch (unit) {
-    case MODELUNIT_MICROMETER: unitMm = 0.001; break;
-    case MODELUNIT_CENTIMETER: unitMm = 10.0; break;
-    case MODELUNIT_INCH: unitMm = 25.4; break;
-    case MODELUNIT_FOOT: unitMm = 304.8; break;
-    case MODELUNIT_METER: unitMm = 1000.0; break;
-    default: unitMm = 1.0;
+        case MODELUNIT_MICROMETER:
+            unitMm = 0.001;
+            break;
+        case MODELUNIT_CENTIMETER:
+            unitMm = 10.0;
+            break;
+        case MODELUNIT_INCH:
+            unitMm = 25.4;
+            break;
+        case MODELUNIT_FOOT:
+            unitMm = 304.8;
+            break;
+        case MODELUNIT_METER:
+            unitMm = 1000.0;
+            break;
+        default:
+            unitMm = 1.0;
     }
 
     TriangleMesh m;

@@ -13,8 +13,8 @@ namespace voxlat {
 /// A mesh as read from a file, vertices welded (equal coordinates are one vertex).
 struct PartMesh {
     TriangleMesh mesh;
-    std::string format;                 ///< "binary STL", "ASCII STL", "OBJ", "PLY", "3MF"
-    std::optional<double> fileUnitMm;   ///< millimetres per file unit, where the file says (3MF)
+    std::string format;                ///< "binary STL", "ASCII STL", "OBJ", "PLY", "3MF"
+    std::optional<double> fileUnitMm;  ///< millimetres per file unit, where the file says (3MF)
 };
 
 /// Reads @a path by its extension (.stl, .obj, .ply, .3mf). Throws InputError with a message

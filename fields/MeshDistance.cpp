@@ -10,7 +10,10 @@ namespace voxlat {
 
 namespace {
 constexpr int kBlock = 8;
-int blockOf(int i) { return i >= 0 ? i / kBlock : -((-i + kBlock - 1) / kBlock); }
+int blockOf(int i)
+{
+    return i >= 0 ? i / kBlock : -((-i + kBlock - 1) / kBlock);
+}
 }  // namespace
 
 MeshDistance::MeshDistance(openvdb::FloatGrid::ConstPtr grid, std::optional<Box3> support)
