@@ -131,7 +131,9 @@ TEST(MeshDistance, SphereMatchesAnalyticDistanceWithinHalfAVoxel)
     for (int n = 0; n < 5000; ++n) {
         const Vec3d p(u(rng), u(rng), u(rng));
         const double e = exact.value(p), v = d->value(p);
-        if (std::abs(e) > voxel) EXPECT_EQ(e < 0, v < 0) << p;
+        if (std::abs(e) > voxel) {
+            EXPECT_EQ(e < 0, v < 0) << p;
+        }
         const Box3 b{p - Vec3d(0.3), p + Vec3d(0.45)};
         const Interval bound = d->bound(b);
         EXPECT_TRUE(bound.contains(v)) << p;
@@ -312,7 +314,9 @@ TEST(Density, MaskedSolveCountsOnlyInsideTheMask)
             }
     EXPECT_EQ(s.domainVoxels, den);
     EXPECT_NEAR(double(num) / double(den), 0.3, 0.001);
-    if (!s.coverage) EXPECT_EQ(s.insideVoxels, num);
+    if (!s.coverage) {
+        EXPECT_EQ(s.insideVoxels, num);
+    }
 }
 
 TEST(Infill, AcceptanceRecipeDensityMeasuredIndependently)
