@@ -1,5 +1,7 @@
 #include "engine/DensitySolver.h"
 
+#include "engine/Errors.h"
+
 #include "engine/GridMeasure.h"
 #include "engine/Progress.h"
 #include "engine/SparseEvaluator.h"
@@ -15,6 +17,60 @@
 namespace voxlat {
 
 namespace {
+
+/// The indicator's value outside the mask: above every level the solve can choose.
+constexpr double kOutsideMask = 1e36;
+
+/// g where mask < 0, kOutsideMask elsewhere: a level below kOutsideMask then selects only voxels
+/// inside the mask, so the unmasked quantile machinery measures density relative to the mask.
+class MaskedIndicator final : public FieldNode {
+public:
+    MaskedIndicator(const FieldNode& g, const FieldNode& mask) : mG(g), mMask(mask) {}
+
+    void values(std::span<const Vec3d> points, std::span<double> out) const override
+    {
+        mG.values(points, out);
+        std::array<double, kBatchSize> m;
+        forEachChunk(points.size(), [&](std::size_t b, std::size_t n) {
+            mMask.values(points.subspan(b, n), std::span<double>(m.data(), n));
+            for (std::size_t i = 0; i < n; ++i) out[b + i] = apply(out[b + i], m[i]);
+        });
+    }
+    void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override
+    {
+        mG.gradients(points, out, grad);
+        std::array<double, kBatchSize> m;
+        forEachChunk(points.size(), [&](std::size_t b, std::size_t n) {
+            mMask.values(points.subspan(b, n), std::span<double>(m.data(), n));
+            for (std::size_t i = 0; i < n; ++i) out[b + i] = apply(out[b + i], m[i]);
+        });
+    }
+    void gridValues(const GridBatch& batch, std::span<double> out) const override
+    {
+        if (batch.size() > kBatchSize) {
+            FieldNode::gridValues(batch, out);
+            return;
+        }
+        mG.gridValues(batch, out);
+        std::array<double, kBatchSize> m;
+        mMask.gridValues(batch, std::span<double>(m.data(), batch.size()));
+        for (std::size_t i = 0; i < batch.size(); ++i) out[i] = apply(out[i], m[i]);
+    }
+    Interval bound(const Box3& box) const override
+    {
+        const Interval m = mMask.bound(box);
+        if (!(float(m.lo) < 0.0f)) return Interval(kOutsideMask);
+        const Interval g = mG.bound(box);
+        return float(m.hi) < 0.0f ? g : hull(g, Interval(kOutsideMask));
+    }
+
+private:
+    // The test is made in float, as the grid that counts the mask's voxels stores it.
+    static double apply(double g, double mask) { return float(mask) < 0.0f ? g : kOutsideMask; }
+
+    const FieldNode& mG;
+    const FieldNode& mMask;
+};
 
 /// Samples g at every stride-th voxel centre of the domain, in parallel and in a fixed order.
 std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int stride)
@@ -89,8 +145,10 @@ std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, cons
                     openvdb::Coord up = c, down = c;
                     up[a] += 1;
                     down[a] -= 1;
-                    const bool hasUp = region.isInside(up) && acc.probeConstLeaf(up);
-                    const bool hasDown = region.isInside(down) && acc.probeConstLeaf(down);
+                    // Neighbours outside a density mask hold kOutsideMask: not a neighbour.
+                    const bool hasUp = region.isInside(up) && acc.probeConstLeaf(up) && acc.getValue(up) < 1e30f;
+                    const bool hasDown =
+                        region.isInside(down) && acc.probeConstLeaf(down) && acc.getValue(down) < 1e30f;
                     double d = 0.0;
                     if (hasUp && hasDown) d = 0.5 * (acc.getValue(up) - acc.getValue(down));
                     else if (hasUp) d = acc.getValue(up) - data[i];
@@ -120,19 +178,39 @@ double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
 
 }  // namespace
 
-DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target)
+DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain, double target, const FieldNode* mask)
 {
     DensitySolution sol;
     sol.domainVoxels = domain.voxelCount();
+    std::unique_ptr<MaskedIndicator> masked;
+    if (mask) {
+        masked = std::make_unique<MaskedIndicator>(rawIndicator, *mask);
+        SparseOptions options;
+        options.margin = 0;
+        options.stage = "measuring the density's space";
+        sol.domainVoxels = countBelow(*evaluateSparse(*mask, domain, options), domain.indexBox(), 0.0f);
+        if (sol.domainVoxels == 0)
+            throw JobError("the space the density is measured in has no voxel inside the domain: check the "
+                           "part, the skin thickness and the domain");
+    }
+    const FieldNode& indicator = masked ? *masked : rawIndicator;
     const auto wanted = std::uint64_t(std::llround(target * double(sol.domainVoxels)));
 
-    const int stride = std::max(1, int(std::ceil(std::cbrt(double(sol.domainVoxels) / 2.0e6))));
+    const int stride = std::max(1, int(std::ceil(std::cbrt(double(domain.voxelCount()) / 2.0e6))));
     std::vector<float> samples = coarseSamples(indicator, domain, stride);
+    // Share of the samples inside the mask: the quantiles of the target sit within that share.
+    const double share =
+        masked ? double(std::count_if(samples.begin(), samples.end(), [](float v) { return v < 1e30f; })) /
+                     double(std::max<std::size_t>(1, samples.size()))
+               : 1.0;
 
-    // Widen the bracket until the exact quantile falls inside it (usually the first round).
+    // Widen the bracket until the exact quantile falls inside it (usually the first round; the
+    // last round brackets every value).
     for (const double margin : {0.01, 0.05, 1.0}) {
         ++sol.rounds;
-        const double lo = quantile(samples, target - margin), hi = quantile(samples, target + margin);
+        const double inf = std::numeric_limits<double>::infinity();
+        const double lo = margin >= 1.0 ? -inf : quantile(samples, (target - margin) * share);
+        const double hi = margin >= 1.0 ? inf : quantile(samples, (target + margin) * share);
         SparseOptions options;
         options.band = Interval(std::max(lo, -1e30), std::min(hi, 1e30));
         options.margin = 0;
@@ -170,15 +248,33 @@ DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, d
         // `wanted` voxels below it. Then measure with sub-voxel coverage, which is continuous in
         // the level, and bisect on it.
         if (std::abs(double(sol.insideVoxels) - double(wanted)) > 5e-4 * double(wanted)) {
-            const auto samples = coverageSamples(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi));
+            auto samples = coverageSamples(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi));
             double a = options.band.lo, b = std::min(options.band.hi, 1e30);
+            std::uint64_t fullyBelow = below;
+            // Within a mask the bracket (a share of the mask's voxels) can be far narrower than a
+            // voxel's change, and the coverage of the voxels just outside it then never reaches
+            // the target. A voxel is partly inside while the level is within half its step of
+            // its value: widen the band to the largest step either side and measure again.
+            // (Unmasked solves keep the bracket, whose coverage tracks the meshed volume.)
+            float widest = 0.0f;
+            for (const CoverageSample& c : samples)
+                if (c.step < 1e29f) widest = std::max(widest, c.step);
+            if (masked && widest > 0.0f && widest < 1e29f) {
+                SparseOptions wide = options;
+                wide.band = Interval(sol.level - widest, sol.level + widest);
+                const auto wideGrid = evaluateSparse(indicator, domain, wide);
+                fullyBelow = splitByBand(*wideGrid, domain.indexBox(), float(wide.band.lo), float(wide.band.hi)).below;
+                samples = coverageSamples(*wideGrid, domain.indexBox(), float(wide.band.lo), float(wide.band.hi));
+                a = wide.band.lo;
+                b = wide.band.hi;
+            }
             for (int iteration = 0; iteration < 60; ++iteration) {
                 const double mid = 0.5 * (a + b);
-                (double(below) + coveredVoxels(samples, mid) < double(wanted) ? a : b) = mid;
+                (double(fullyBelow) + coveredVoxels(samples, mid) < double(wanted) ? a : b) = mid;
             }
             sol.level = 0.5 * (a + b);
             sol.coverage = true;
-            sol.achieved = (double(below) + coveredVoxels(samples, sol.level)) / double(sol.domainVoxels);
+            sol.achieved = (double(fullyBelow) + coveredVoxels(samples, sol.level)) / double(sol.domainVoxels);
         }
         return sol;
     }

@@ -12,7 +12,7 @@ struct DensitySolution {
     double level = 0.0;             ///< level of the indicator field: solid = {g < level}
     double achieved = 0.0;          ///< share of domain voxel centres inside, measured on the grid
     std::uint64_t insideVoxels = 0;
-    std::uint64_t domainVoxels = 0;
+    std::uint64_t domainVoxels = 0;  ///< the denominator: domain voxels (inside the mask, if any)
     bool coverage = false;          ///< measured with sub-voxel coverage (value ties), not a count
     int rounds = 0;                 ///< fine passes needed (1 unless the coarse bracket missed)
     std::uint64_t evaluatedLeaves = 0;
@@ -24,6 +24,11 @@ struct DensitySolution {
 /// achieved share is within half a voxel's share of the target. When value ties (a symmetric
 /// field on a regular grid) leave no level within 0.05 % of the target by count, the level is
 /// bisected on a sub-voxel coverage measure instead (continuous in the level).
-DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target);
+///
+/// With a @a mask the density is relative to the space the mask encloses: the denominator is the
+/// number of domain voxels whose centre has mask < 0, the numerator those that are also inside
+/// the solid. Regions whose mask bound is wholly positive are never evaluated.
+DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target,
+                             const FieldNode* mask = nullptr);
 
 }  // namespace voxlat

@@ -5,6 +5,8 @@
 #include "engine/Recipe.h"
 #include "fields/LevelSolid.h"
 
+#include <nlohmann/json.hpp>
+
 #include <functional>
 #include <map>
 #include <optional>
@@ -21,6 +23,10 @@ struct LevelNode {
     /// Where the density is measured: the domain unless a node narrows it (a strut lattice
     /// measures over its frame's bounding box).
     std::optional<Box3> densityBox;
+    /// Where the density is measured when the solid fills a part: the voxels with mask < 0 (the
+    /// space inside an infill's skin); see solveDensity().
+    FieldPtr densityMask;
+    std::string densityOf;  ///< what the mask is, for the report ("inside the skin of `part`")
 };
 
 class FieldBuilder;
@@ -45,6 +51,26 @@ public:
     /// Level nodes in dependency order (a node's inputs come before it).
     const std::vector<LevelNode>& levelNodes() const { return mLevelNodes; }
     void addLevelNode(LevelNode node) { mLevelNodes.push_back(std::move(node)); }
+    /// The level node called @a name, or null (nodes such as `infill` set its density).
+    LevelNode* findLevelNode(const std::string& name)
+    {
+        for (LevelNode& n : mLevelNodes)
+            if (n.name == name) return &n;
+        return nullptr;
+    }
+
+    /// Work a node defers until every field is built (a mesh is converted once all its users
+    /// have said how deep a band they need). The Job runs these in order, timed, before solving.
+    struct Preparation {
+        std::string stage;
+        std::function<void()> run;
+    };
+    void addPreparation(Preparation p) { mPreparations.push_back(std::move(p)); }
+    const std::vector<Preparation>& preparations() const { return mPreparations; }
+    /// Entries a node adds to report.json; called on the report as it stands (levels, result
+    /// and mesh filled in as far as the job got).
+    void addReporter(std::function<void(nlohmann::json&)> r) { mReporters.push_back(std::move(r)); }
+    const std::vector<std::function<void(nlohmann::json&)>>& reporters() const { return mReporters; }
     const Recipe& recipe() const { return mRecipe; }
 
     /// Every node type the recipe language knows.
@@ -57,6 +83,8 @@ private:
     std::map<std::string, FieldPtr> mBuilt;
     std::vector<std::string> mInProgress;
     std::vector<LevelNode> mLevelNodes;
+    std::vector<Preparation> mPreparations;
+    std::vector<std::function<void(nlohmann::json&)>> mReporters;
 };
 
 /// Node types by family; each family lives in its own file.
@@ -65,5 +93,12 @@ void addLatticeNodeTypes(std::vector<NodeType>& types);  // LatticeNodes.cpp: tp
 void addStrutNodeTypes(std::vector<NodeType>& types);    // StrutNodes.cpp: strut lattices
 void addDesignNodeTypes(std::vector<NodeType>& types);   // DesignNodes.cpp: meshes, shells, infill
 void addExprNodeTypes(std::vector<NodeType>& types);     // ExprNodes.cpp: user equations
+
+/// DesignNodes.cpp: true when an `infill` node solves the level of the lattice field @a name (its
+/// `density:` counts for that lattice, which then needs no level of its own).
+bool levelSolvedByInfill(const Recipe& recipe, const std::string& name);
+/// DesignNodes.cpp: wraps a lattice's raw field in the conformal frame given by @a frame
+/// (`{cylinder: ...}` or `{sphere: ...}`); @a cell is the lattice's cell size per axis.
+FieldPtr applyFrame(const RecipeNode& frame, FieldPtr raw, const Vec3d& cell);
 
 }  // namespace voxlat

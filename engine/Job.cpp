@@ -19,11 +19,31 @@
 namespace voxlat {
 
 namespace {
-Domain domainOf(const Recipe& recipe)
+/// Voxels of margin around the result's box when the recipe gives no domain (room for the
+/// mesher's cap and the blend of a smooth union).
+constexpr int kAutoDomainMargin = 3;
+
+/// The recipe's domain, or without `domain:` the result's box plus a margin, with its voxel
+/// centres on the lattice (k + 1/2) * voxel, where a part's distance grid has its samples (and
+/// where the faces of a part drawn in whole or half millimetres never lie).
+Domain domainOf(const Recipe& recipe, const FieldNode& result)
 {
-    if (!recipe.domainBox)
-        throw InputError(recipe.source->path + ": no `domain:` given; add one, e.g. `domain: {box: [[0, 0, 0], [50, 50, 50]]}`");
-    return Domain::fromBox(*recipe.domainBox, recipe.voxel);
+    if (recipe.domainBox) return Domain::fromBox(*recipe.domainBox, recipe.voxel);
+    const std::optional<Box3> support = result.support();
+    if (!support)
+        throw InputError(recipe.source->path + ": no `domain:` given and the result `" + recipe.result +
+                         "` is unbounded (a lattice fills all space): add `domain: {box: [[x0, y0, z0], [x1, y1, z1]]}`"
+                         " or intersect the result with a part or a shape");
+    const double v = recipe.voxel;
+    Box3 box;
+    for (int a = 0; a < 3; ++a) {
+        if (!(support->max[a] > support->min[a]))
+            throw InputError(recipe.source->path + ": no `domain:` given and the result `" + recipe.result +
+                             "` is empty (its operands do not overlap): check the result or give a domain");
+        box.min[a] = (std::floor(support->min[a] / v) - kAutoDomainMargin) * v;
+        box.max[a] = box.min[a] + (std::ceil((support->max[a] - box.min[a]) / v) + kAutoDomainMargin) * v;
+    }
+    return Domain::fromBox(box, v);
 }
 
 nlohmann::json vec(const Vec3d& v) { return {v[0], v[1], v[2]}; }
@@ -45,7 +65,7 @@ auto Job::timed(const std::string& stage, Fn&& fn)
     return fn();
 }
 
-Job::Job(Recipe recipe) : mRecipe(std::move(recipe)), mBuilder(mRecipe), mDomain(domainOf(mRecipe))
+Job::Job(Recipe recipe) : mRecipe(std::move(recipe)), mBuilder(mRecipe)
 {
     timed("build fields", [&] {
         // Build every field, so a mistake anywhere in the recipe is reported before any work.
@@ -53,13 +73,19 @@ Job::Job(Recipe recipe) : mRecipe(std::move(recipe)), mBuilder(mRecipe), mDomain
         mResult = mBuilder.field(mRecipe.result);
         return 0;
     });
+    mDomain = domainOf(mRecipe, *mResult);
+    for (const FieldBuilder::Preparation& p : mBuilder.preparations()) timed(p.stage, [&] {
+            p.run();
+            return 0;
+        });
     mReport["recipe"] = mRecipe.source->path;
-    mReport["domain"] = {{"min", vec(mDomain.box.min)},
+    mReport["domain"] = {{"from", mRecipe.domainBox ? "recipe" : "result's bounding box plus a margin"},
+                         {"min", vec(mDomain.box.min)},
                          {"max", vec(mDomain.box.max)},
                          {"voxel", mDomain.voxel},
                          {"dims", {mDomain.dims.x(), mDomain.dims.y(), mDomain.dims.z()}},
                          {"voxels", mDomain.voxelCount()}};
-    if (recipe.domainBox) {
+    if (mRecipe.domainBox) {
         for (int a = 0; a < 3; ++a)
             if (std::abs(mDomain.box.max[a] - mRecipe.domainBox->max[a]) > 1e-6 * mDomain.voxel)
                 std::cerr << "note: the domain is snapped to a whole number of voxels: " << mDomain.box.max[a]
@@ -76,8 +102,10 @@ void Job::solveLevels()
         if (node.density) {
             const DensitySolution s = timed("solve " + node.name, [&] {
                 return solveDensity(*node.solid->indicator(),
-                                    node.densityBox ? mDomain.subDomain(*node.densityBox) : mDomain, *node.density);
+                                    node.densityBox ? mDomain.subDomain(*node.densityBox) : mDomain, *node.density,
+                                    node.densityMask.get());
             });
+            if (node.densityMask) entry["density_of"] = node.densityOf;
             node.solid->setLevel(node.solid->levelFromIndicator(s.level));
             entry["target_density"] = *node.density;
             entry["achieved_density"] = s.achieved;
@@ -174,6 +202,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir)
 nlohmann::json Job::report() const
 {
     nlohmann::json r = mReport;
+    for (const auto& reporter : mBuilder.reporters()) reporter(r);
     r["timings_s"] = mTimings;
     r["peak_memory_mb"] = double(peakMemoryBytes()) / (1024.0 * 1024.0);
     r["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);

@@ -51,10 +51,13 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
     else if (solidName == "sheet") side = SolidSide::Band;
     else spec["solid"].fail("solid is `network` (f <= level) or `sheet` (|f| <= level), got `" + solidName + "`");
 
-    auto raw = std::make_shared<TpmsField>(type, cell);
+    FieldPtr raw = std::make_shared<TpmsField>(type, cell);
+    if (spec.has("frame")) raw = applyFrame(spec["frame"], raw, cell);
     LevelNode node{name, std::string(tpmsName(type)) + " " + solidName, std::make_shared<LevelSolid>(raw, side, 0.0), {}};
-    readLevelKeys(spec, node, 0.0, side == SolidSide::Band);
-    if (side == SolidSide::Band && !node.density && !(node.solid->level() > 0.0))
+    // An infill's `density:` solves this lattice's level: then it needs none of its own.
+    const bool solvedByInfill = levelSolvedByInfill(builder.recipe(), name);
+    readLevelKeys(spec, node, 0.0, side == SolidSide::Band && !solvedByInfill);
+    if (side == SolidSide::Band && !node.density && !solvedByInfill && !(node.solid->level() > 0.0))
         spec["level"].fail("a sheet's level is its half-thickness t in |f| <= t and must be greater than zero");
     const Interval range = tpmsLevelRange(type);
     if (!node.density && side == SolidSide::Below && !range.contains(node.solid->level())) {
@@ -72,7 +75,7 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
 
 void addLatticeNodeTypes(std::vector<NodeType>& types)
 {
-    types.push_back({"tpms", {"tpms", "cell", "solid", "level", "density"}, buildTpms});
+    types.push_back({"tpms", {"tpms", "cell", "solid", "level", "density", "frame"}, buildTpms});
 }
 
 }  // namespace voxlat

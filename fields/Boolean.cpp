@@ -87,4 +87,24 @@ Interval BooleanField::bound(const Box3& box) const
     return r;
 }
 
+std::optional<Box3> BooleanField::support() const
+{
+    if (mOp == BooleanOp::Difference) return mOperands[0]->support();
+    std::optional<Box3> r;
+    for (std::size_t o = 0; o < mOperands.size(); ++o) {
+        const std::optional<Box3> b = mOperands[o]->support();
+        if (mOp == BooleanOp::Union) {
+            if (!b) return std::nullopt;  // one unbounded operand makes the union unbounded
+            r = o == 0 ? *b : Box3{openvdb::math::minComponent(r->min, b->min), openvdb::math::maxComponent(r->max, b->max)};
+        } else if (b) {
+            // The smooth maximum is never below the hard one, so any box bounds the result.
+            r = !r ? *b : Box3{openvdb::math::maxComponent(r->min, b->min), openvdb::math::minComponent(r->max, b->max)};
+        }
+    }
+    if (r && mOp == BooleanOp::Union && mBlend > 0.0) r = Box3{r->min - Vec3d(mBlend), r->max + Vec3d(mBlend)};
+    if (r)
+        for (int a = 0; a < 3; ++a) r->max[a] = std::max(r->max[a], r->min[a]);  // disjoint: an empty box
+    return r;
+}
+
 }  // namespace voxlat

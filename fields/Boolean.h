@@ -21,6 +21,9 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    /// Intersection: the overlap of the operands' boxes; union: their hull (grown by the blend
+    /// radius, which assumes distance-like operands); difference: the first operand's box.
+    std::optional<Box3> support() const override;
 
 private:
     /// Combines accumulated value a (gradient ga) with operand b (gradient gb) in place.

@@ -10,6 +10,7 @@ namespace voxlat {
 class BoxField final : public PointField<BoxField> {
 public:
     explicit BoxField(const Box3& box) : mCenter(box.center()), mHalf(0.5 * box.extent()) {}
+    std::optional<Box3> support() const override { return Box3{mCenter - mHalf, mCenter + mHalf}; }
 
     template <typename T>
     T eval(const T& x, const T& y, const T& z) const

@@ -1,5 +1,6 @@
 #include "fields/Cylinder.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -45,5 +46,14 @@ void Cylinder::gradients(std::span<const Vec3d> points, std::span<double> out, s
 }
 
 Interval Cylinder::bound(const Box3& box) const { return lipschitzBound(*this, box, 1.0); }
+
+std::optional<Box3> Cylinder::support() const
+{
+    // Per world axis: the caps' centres reach halfHeight * |a_i|, their rims radius * sin(angle).
+    Vec3d half;
+    for (int i = 0; i < 3; ++i)
+        half[i] = mHalfHeight * std::abs(mAxis[i]) + mRadius * std::sqrt(std::max(0.0, 1.0 - mAxis[i] * mAxis[i]));
+    return Box3{mCenter - half, mCenter + half};
+}
 
 }  // namespace voxlat

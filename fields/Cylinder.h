@@ -15,6 +15,7 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     /// Distance fields are 1-Lipschitz: value(centre) +- box radius.
     Interval bound(const Box3& box) const override;
+    std::optional<Box3> support() const override;
 
 private:
     double distance(const Vec3d& p, Vec3d* gradient) const;

@@ -12,6 +12,7 @@
 
 #include <cstddef>
 #include <memory>
+#include <optional>
 #include <span>
 #include <utility>
 
@@ -64,6 +65,10 @@ public:
 
     /// A conservative bound of the value over @a box: every value inside lies in the interval.
     virtual Interval bound(const Box3& box) const = 0;
+
+    /// A box outside which the field is positive (the solid lies inside it), or none when the
+    /// solid is unbounded (a bare lattice). The engine uses it for the domain when none is given.
+    virtual std::optional<Box3> support() const { return std::nullopt; }
 
     /// Convenience single-point queries (slow path; batches are the fast path).
     double value(const Vec3d& p) const;

@@ -17,6 +17,7 @@ public:
         using std::sqrt;
         return sqrt(sqr(x - mCenter[0]) + sqr(y - mCenter[1]) + sqr(z - mCenter[2])) - mRadius;
     }
+    std::optional<Box3> support() const override { return Box3{mCenter - Vec3d(mRadius), mCenter + Vec3d(mRadius)}; }
 
 private:
     Vec3d mCenter;

@@ -2,6 +2,7 @@
 
 #include <array>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <stdexcept>
 
@@ -73,6 +74,22 @@ Interval TransformField::bound(const Box3& box) const
         local.max = openvdb::math::maxComponent(local.max, q);
     }
     return mChild->bound(local);
+}
+
+std::optional<Box3> TransformField::support() const
+{
+    const std::optional<Box3> local = mChild->support();
+    if (!local) return std::nullopt;
+    const Mat3d forward = mInverse.inverse();
+    Box3 world{Vec3d(std::numeric_limits<double>::max()), Vec3d(std::numeric_limits<double>::lowest())};
+    for (int corner = 0; corner < 8; ++corner) {
+        const Vec3d p(corner & 1 ? local->max[0] : local->min[0], corner & 2 ? local->max[1] : local->min[1],
+                      corner & 4 ? local->max[2] : local->min[2]);
+        const Vec3d q = forward * p + mTranslation;
+        world.min = openvdb::math::minComponent(world.min, q);
+        world.max = openvdb::math::maxComponent(world.max, q);
+    }
+    return world;
 }
 
 }  // namespace voxlat

@@ -25,6 +25,7 @@ public:
     /// still applies; rotations fall back to points.
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    std::optional<Box3> support() const override;
 
 private:
     Vec3d toLocal(const Vec3d& p) const { return mInverse * (p - mTranslation); }

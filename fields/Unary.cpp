@@ -52,4 +52,10 @@ Interval UnaryField::bound(const Box3& box) const
     return b;
 }
 
+std::optional<Box3> UnaryField::support() const
+{
+    if (mOp == UnaryOp::Offset && mOffset >= 0.0) return mChild->support();
+    return std::nullopt;
+}
+
 }  // namespace voxlat

@@ -1,0 +1,38 @@
+"""W6: the acceptance infill (data/recipes/bracket-infill.yaml: bracket.stl, 1 mm skin, gyroid
+sheet at 25 % of the space inside the skin, 0.1 mm voxels) from recipe to STL, side by side with
+the same lattice in a box of the same volume as the bracket (cube of the part's volume, gyroid
+sheet at 25 %, same voxel). Target: the part within 2x the box's time."""
+import json
+
+from common import measure, ROOT, row, verdict
+
+TITLE = "W6  bracket infill (mesh part, 1 mm skin, gyroid sheet 25 %) vs the same lattice in a box"
+
+
+def run(voxlat, tmp):
+    t_p, m_p, _ = measure([voxlat, "-q", "run", ROOT / "data/recipes/bracket-infill.yaml", "--out", tmp / "part"])
+    report = json.loads((tmp / "part" / "report.json").read_text())
+    volume = report["parts"]["part"]["mesh_volume_mm3"]
+    side = volume ** (1.0 / 3.0)
+    box = tmp / "box.yaml"
+    box.write_text(f"""voxel: 0.1
+domain: {{box: [[0, 0, 0], [{side:.3f}, {side:.3f}, {side:.3f}]]}}
+fields:
+  lattice: {{tpms: gyroid, cell: 6, solid: sheet, density: 0.25}}
+result: lattice
+outputs: {{mesh: box.stl}}
+""")
+    t_b, m_b, _ = measure([voxlat, "-q", "run", box, "--out", tmp / "box"])
+    box_report = json.loads((tmp / "box" / "report.json").read_text())
+    row("bracket infill (design space + infill mesh)", t_p, m_p)
+    row(f"gyroid sheet in a {side:.1f} mm cube", t_b, m_b)
+    ratio = t_p / t_b
+    stages = report["timings_s"]
+    print(f"  time ratio {ratio:.2f}x (target <= 2x: {verdict(ratio <= 2.0)}); peak memory {m_p:.0f} MB vs {m_b:.0f} MB")
+    print(f"  design space {stages.get('design space part', 0):.2f}s; lattice density "
+          f"{report['fields']['gyroid']['achieved_density']:.4f} of the space inside the skin; part "
+          f"{volume:.0f} mm3 (grid {report['parts']['part']['grid_volume_mm3']:.0f}); "
+          f"{report['mesh']['triangles']} triangles vs {box_report['mesh']['triangles']} in the box")
+    print("  part stages: " + ", ".join(f"{k} {v:.2f}s" for k, v in stages.items()))
+    return {"part_s": t_p, "box_s": t_b, "ratio": ratio, "part_mb": m_p, "box_mb": m_b,
+            "design_space_s": stages.get("design space part", 0)}
