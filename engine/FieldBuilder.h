@@ -23,6 +23,18 @@ struct LevelNode {
     std::optional<Box3> densityBox;
 };
 
+/// A lattice whose level follows a target-density field (GradedLevel); the job reports its
+/// achieved density slab by slab along `axis`.
+struct GradedNode {
+    std::string name;
+    std::string description;  ///< e.g. "gyroid network"
+    std::string density;      ///< e.g. "ramp along z from 0.1 to 0.4"
+    FieldPtr node;            ///< the GradedLevel
+    FieldPtr densityField;    ///< the target density
+    int axis = 2;             ///< slabs are taken along this axis
+    double slab = 0.0;        ///< slab thickness (mm): one cell along the axis
+};
+
 class FieldBuilder;
 
 /// One node type of the recipe language: the key that names it, its valid keys, its builder.
@@ -45,6 +57,12 @@ public:
     /// Level nodes in dependency order (a node's inputs come before it).
     const std::vector<LevelNode>& levelNodes() const { return mLevelNodes; }
     void addLevelNode(LevelNode node) { mLevelNodes.push_back(std::move(node)); }
+    /// Graded-density lattices, in build order.
+    const std::vector<GradedNode>& gradedNodes() const { return mGradedNodes; }
+    void addGradedNode(GradedNode node) { mGradedNodes.push_back(std::move(node)); }
+    /// Prints "warning: ..." to stderr and keeps it for report.json.
+    void warn(const std::string& message);
+    const std::vector<std::string>& warnings() const { return mWarnings; }
     const Recipe& recipe() const { return mRecipe; }
 
     /// Every node type the recipe language knows.
@@ -57,6 +75,8 @@ private:
     std::map<std::string, FieldPtr> mBuilt;
     std::vector<std::string> mInProgress;
     std::vector<LevelNode> mLevelNodes;
+    std::vector<GradedNode> mGradedNodes;
+    std::vector<std::string> mWarnings;
 };
 
 /// Node types by family; each family lives in its own file.

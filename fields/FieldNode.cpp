@@ -14,6 +14,16 @@ void FieldNode::gridValues(const GridBatch& batch, std::span<double> out) const
     values(points, out);
 }
 
+void FieldNode::gridGradients(const GridBatch& batch, std::span<double> out, std::span<Vec3d> grad) const
+{
+    std::vector<Vec3d> points;
+    points.reserve(batch.size());
+    for (int i = 0; i < batch.nx; ++i)
+        for (int j = 0; j < batch.ny; ++j)
+            for (int k = 0; k < batch.nz; ++k) points.push_back(batch.point(i, j, k));
+    gradients(points, out, grad);
+}
+
 double FieldNode::value(const Vec3d& p) const
 {
     double v = 0.0;

@@ -62,6 +62,10 @@ public:
     /// that can share work along the axes (separable TPMS terms) override it.
     virtual void gridValues(const GridBatch& batch, std::span<double> out) const;
 
+    /// Values and gradients on a regular block of points (same layout as gridValues). The
+    /// default expands the block into points; separable nodes (TPMS) override it.
+    virtual void gridGradients(const GridBatch& batch, std::span<double> out, std::span<Vec3d> grad) const;
+
     /// A conservative bound of the value over @a box: every value inside lies in the interval.
     virtual Interval bound(const Box3& box) const = 0;
 

@@ -103,6 +103,30 @@ void TpmsField::gridValues(const GridBatch& batch, std::span<double> out) const
             for (int k = 0; k < batch.nz; ++k) out[n++] = tpmsEquation(mType, tx[i], ty[j], tz[k]);
 }
 
+void TpmsField::gridGradients(const GridBatch& batch, std::span<double> out, std::span<Vec3d> grad) const
+{
+    constexpr int kMax = 64;
+    if (batch.nx > kMax || batch.ny > kMax || batch.nz > kMax) {
+        FieldNode::gridGradients(batch, out, grad);
+        return;
+    }
+    std::array<TrigTerms<Dual3>, kMax> tx, ty, tz;
+    for (int i = 0; i < batch.nx; ++i)
+        tx[i] = trigTerms(Dual3(mWave[0] * (batch.origin[0] + i * batch.spacing[0]), mWave[0], 0, 0));
+    for (int j = 0; j < batch.ny; ++j)
+        ty[j] = trigTerms(Dual3(mWave[1] * (batch.origin[1] + j * batch.spacing[1]), 0, mWave[1], 0));
+    for (int k = 0; k < batch.nz; ++k)
+        tz[k] = trigTerms(Dual3(mWave[2] * (batch.origin[2] + k * batch.spacing[2]), 0, 0, mWave[2]));
+    std::size_t n = 0;
+    for (int i = 0; i < batch.nx; ++i)
+        for (int j = 0; j < batch.ny; ++j)
+            for (int k = 0; k < batch.nz; ++k, ++n) {
+                const Dual3 f = tpmsEquation(mType, tx[i], ty[j], tz[k]);
+                out[n] = f.v;
+                grad[n] = Vec3d(f.d[0], f.d[1], f.d[2]);
+            }
+}
+
 Interval TpmsField::bound(const Box3& box) const
 {
     const Interval x(mWave[0] * box.min[0], mWave[0] * box.max[0]);
