@@ -46,9 +46,10 @@ nlohmann::json densityBySlab(const openvdb::FloatGrid& grid, const Domain& domai
         // About 2e5 samples per slab, in a fixed order.
         const int stride = std::max(1, int(std::cbrt(double(region.volume()) / 2e5)));
         std::vector<Vec3d> points;
-        for (int i = region.min().x(); i <= region.max().x(); i += stride)
-            for (int j = region.min().y(); j <= region.max().y(); j += stride)
-                for (int k = region.min().z(); k <= region.max().z(); k += stride)
+        const int skip = (stride - 1) / 2;  // centre the strided samples in the slab
+        for (int i = region.min().x() + skip; i <= region.max().x(); i += stride)
+            for (int j = region.min().y() + skip; j <= region.max().y(); j += stride)
+                for (int k = region.min().z() + skip; k <= region.max().z(); k += stride)
                     points.push_back(domain.worldOf(openvdb::Coord(i, j, k)));
         std::vector<double> rho(points.size());
         density.values(points, rho);

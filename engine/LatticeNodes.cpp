@@ -180,7 +180,11 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
 
     auto raw = std::make_shared<TpmsField>(type, cell);
     if (hasShiftKeys(spec)) {
-        const std::string key = spec.has("thickness") ? "thickness" : spec.has("wall") ? "wall" : spec.has("layer") ? "layer" : spec.has("build") ? "build" : "rotation";
+        const std::string key = spec.has("thickness") ? "thickness"
+                                : spec.has("wall")    ? "wall"
+                                : spec.has("layer")   ? "layer"
+                                : spec.has("build")   ? "build"
+                                                      : "rotation";
         if (side != SolidSide::Band)
             spec[key].fail("a wall thickness makes a sheet: add `solid: sheet` (a network has no walls to thicken)");
         if (spec.has("level") || spec.has("density"))

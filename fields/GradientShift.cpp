@@ -74,16 +74,19 @@ Vec3d GradientShift::anisotropicShift(const Vec3d& n, const Vec3d& b, double d, 
     return {m.x() * n.x(), m.y() * n.y(), m.z() * n.z()};
 }
 
-void GradientShift::shiftsFromGradients(std::span<const Vec3d> points, const Vec3d* grad, Vec3d* out) const
+void GradientShift::shiftsFromGradients(std::span<const Vec3d> points, const Vec3d* grad, Vec3d* out,
+                                        std::size_t n) const
 {
-    const std::size_t n = points.size();
     auto unit = [](const Vec3d& g) {
         const double len = g.length();
         return len > 0.0 ? g / len : Vec3d(0.0);
     };
     if (mConstantMagnitudes) {
         if (mSpec.uniform) {
-            for (std::size_t i = 0; i < n; ++i) out[i] = mConstantUniform * unit(grad[i]);
+            for (std::size_t i = 0; i < n; ++i) {
+                const double len2 = grad[i].lengthSqr();
+                out[i] = grad[i] * (len2 > 0.0 ? mConstantUniform / std::sqrt(len2) : 0.0);
+            }
         } else if (mSpec.rotation == ShiftRotation::Rodrigues) {
             for (std::size_t i = 0; i < n; ++i) {
                 const Vec3d u = unit(grad[i]);
@@ -153,7 +156,7 @@ void GradientShift::shifts(std::span<const Vec3d> points, std::span<Vec3d> out) 
         std::vector<double> f(count);
         std::vector<Vec3d> g(count);
         mField->gradients(p, f, g);
-        shiftsFromGradients(p, g.data(), out.data() + begin);
+        shiftsFromGradients(p, g.data(), out.data() + begin, count);
     });
 }
 
@@ -164,7 +167,7 @@ void GradientShift::values(std::span<const Vec3d> points, std::span<double> out)
         std::vector<double> f(count);
         std::vector<Vec3d> g(count), s(count);
         mField->gradients(p, f, g);
-        shiftsFromGradients(p, g.data(), s.data());
+        shiftsFromGradients(p, g.data(), s.data(), count);
         sheetValues(p, s.data(), out.data() + begin, nullptr, nullptr);
     });
 }
@@ -172,15 +175,19 @@ void GradientShift::values(std::span<const Vec3d> points, std::span<double> out)
 void GradientShift::gridValues(const GridBatch& batch, std::span<double> out) const
 {
     const std::size_t n = batch.size();
-    std::vector<double> f(n);
+    std::vector<double> f(n), minus(n);
     std::vector<Vec3d> g(n), s(n), points;
-    points.reserve(n);
-    for (int i = 0; i < batch.nx; ++i)
-        for (int j = 0; j < batch.ny; ++j)
-            for (int k = 0; k < batch.nz; ++k) points.push_back(batch.point(i, j, k));
+    if (!mConstantMagnitudes) {  // the points are only needed to evaluate magnitude fields
+        points.reserve(n);
+        for (int i = 0; i < batch.nx; ++i)
+            for (int j = 0; j < batch.ny; ++j)
+                for (int k = 0; k < batch.nz; ++k) points.push_back(batch.point(i, j, k));
+    }
     mField->gridGradients(batch, f, g);
-    shiftsFromGradients(points, g.data(), s.data());
-    sheetValues(points, s.data(), out.data(), nullptr, nullptr);
+    shiftsFromGradients(points, g.data(), s.data(), n);
+    // f is no longer needed: it receives f+.
+    mField->gridValuesShifted(batch, s, f, minus);
+    for (std::size_t i = 0; i < n; ++i) out[i] = std::max(minus[i], -f[i]);
 }
 
 void GradientShift::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const

@@ -69,8 +69,9 @@ public:
     static Vec3d anisotropicShift(const Vec3d& n, const Vec3d& b, double d, double l, ShiftRotation rotation);
 
 private:
-    /// Shift vectors from the child's gradients @a grad at @a points.
-    void shiftsFromGradients(std::span<const Vec3d> points, const Vec3d* grad, Vec3d* out) const;
+    /// @a n shift vectors from the child's gradients @a grad at @a points (@a points may be empty
+    /// when every magnitude and the direction are constants).
+    void shiftsFromGradients(std::span<const Vec3d> points, const Vec3d* grad, Vec3d* out, std::size_t n) const;
     /// Sheet values from points and their shift vectors (one child values() call).
     void sheetValues(std::span<const Vec3d> points, const Vec3d* shift, double* out, double* fPlus,
                      double* fMinus) const;

@@ -275,8 +275,9 @@ TEST(GradientShift, RotationIsContinuousAtTheSpecialCases)
             }
             // ... and the Rodrigues form along the meridians of the axes and diagonals (phi = k pi/4),
             // the neighbours of the half-turn about x that defines b = -z.
-            if (k % 8 == 0)
+            if (k % 8 == 0) {
                 EXPECT_LT((GradientShift::rotatedMagnitudes(b, d, l) - m).length(), 4 * eps * (d + l)) << phi;
+            }
         }
     }
     // The Rodrigues magnitude vector cannot be continuous at -z from every azimuth: its limit there
@@ -321,7 +322,7 @@ TEST(GradientShift, GridValuesMatchPointValuesAndBoundsContainThem)
         for (int j = 0; j < 8; ++j)
             for (int k = 0; k < 8; ++k) p.push_back(batch.point(i, j, k));
     sheet->values(p, points);
-    for (int i = 0; i < 512; ++i) EXPECT_DOUBLE_EQ(grid[i], points[i]);
+    for (int i = 0; i < 512; ++i) EXPECT_NEAR(grid[i], points[i], 1e-13);
     // The TPMS separable gradients agree with the point ones.
     std::vector<double> v1(512), v2(512);
     std::vector<Vec3d> g1(512), g2(512);
@@ -333,6 +334,33 @@ TEST(GradientShift, GridValuesMatchPointValuesAndBoundsContainThem)
     }
     expectBoundsContainValues(*sheet, 16.0, 2.0, 9);
     expectBoundsContainValues(*uniformShift(f, 0.3), 16.0, 2.0, 10);
+}
+
+TEST(GradientShift, TpmsShiftedValuesMatchPointValues)
+{
+    // The angle-addition fast path against the generic one (2N points through values()), for every
+    // TPMS, small shifts (polynomial sin/cos) and large ones (libm).
+    std::mt19937 rng(21);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (const std::string& name : tpmsNames()) {
+        TpmsType type;
+        ASSERT_TRUE(parseTpmsType(name, type));
+        const TpmsField f(type, Vec3d(7.0, 8.0, 9.0));
+        GridBatch batch;
+        batch.origin = Vec3d(-3.1, 2.2, 10.7);
+        batch.spacing = Vec3d(0.07, 0.05, 0.09);
+        for (const double size : {0.3, 3.0}) {
+            std::vector<Vec3d> shift(512);
+            for (auto& s : shift) s = size * Vec3d(u(rng), u(rng), u(rng));
+            std::vector<double> p1(512), m1(512), p2(512), m2(512);
+            f.gridValuesShifted(batch, shift, p1, m1);
+            f.FieldNode::gridValuesShifted(batch, shift, p2, m2);
+            for (int i = 0; i < 512; ++i) {
+                EXPECT_NEAR(p1[i], p2[i], 1e-13) << name;
+                EXPECT_NEAR(m1[i], m2[i], 1e-13) << name;
+            }
+        }
+    }
 }
 
 TEST(DensityTable, InvertsMonotonicallyAndMatchesTheCatalog)
