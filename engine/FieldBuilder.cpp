@@ -1,6 +1,7 @@
 #include "engine/FieldBuilder.h"
 
 #include <algorithm>
+#include <iostream>
 
 namespace voxlat {
 
@@ -18,6 +19,12 @@ const std::vector<NodeType>& FieldBuilder::nodeTypes()
         return t;
     }();
     return types;
+}
+
+void FieldBuilder::warn(const std::string& message)
+{
+    std::cerr << "warning: " << message << "\n";
+    mWarnings.push_back(message);
 }
 
 FieldPtr FieldBuilder::field(const std::string& name)

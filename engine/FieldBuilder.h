@@ -29,6 +29,18 @@ struct LevelNode {
     std::string densityOf;  ///< what the mask is, for the report ("inside the skin of `part`")
 };
 
+/// A lattice whose level follows a target-density field (GradedLevel); the job reports its
+/// achieved density slab by slab along `axis`.
+struct GradedNode {
+    std::string name;
+    std::string description;  ///< e.g. "gyroid network"
+    std::string density;      ///< e.g. "ramp along z from 0.1 to 0.4"
+    FieldPtr node;            ///< the GradedLevel
+    FieldPtr densityField;    ///< the target density
+    int axis = 2;             ///< slabs are taken along this axis
+    double slab = 0.0;        ///< slab thickness (mm): one cell along the axis
+};
+
 class FieldBuilder;
 
 /// One node type of the recipe language: the key that names it, its valid keys, its builder.
@@ -71,6 +83,12 @@ public:
     /// and mesh filled in as far as the job got).
     void addReporter(std::function<void(nlohmann::json&)> r) { mReporters.push_back(std::move(r)); }
     const std::vector<std::function<void(nlohmann::json&)>>& reporters() const { return mReporters; }
+    /// Graded-density lattices, in build order.
+    const std::vector<GradedNode>& gradedNodes() const { return mGradedNodes; }
+    void addGradedNode(GradedNode node) { mGradedNodes.push_back(std::move(node)); }
+    /// Prints "warning: ..." to stderr and keeps it for report.json.
+    void warn(const std::string& message);
+    const std::vector<std::string>& warnings() const { return mWarnings; }
     const Recipe& recipe() const { return mRecipe; }
 
     /// Every node type the recipe language knows.
@@ -85,6 +103,8 @@ private:
     std::vector<LevelNode> mLevelNodes;
     std::vector<Preparation> mPreparations;
     std::vector<std::function<void(nlohmann::json&)>> mReporters;
+    std::vector<GradedNode> mGradedNodes;
+    std::vector<std::string> mWarnings;
 };
 
 /// Node types by family; each family lives in its own file.

@@ -5,6 +5,7 @@
 #include "engine/Progress.h"
 #include "engine/SparseEvaluator.h"
 #include "engine/SystemInfo.h"
+#include "fields/GradedLevel.h"
 #include "mesher/AtomicFile.h"
 #include "mesher/MarchingCubes.h"
 #include "mesher/MeshWriters.h"
@@ -47,6 +48,42 @@ Domain domainOf(const Recipe& recipe, const FieldNode& result)
 }
 
 nlohmann::json vec(const Vec3d& v) { return {v[0], v[1], v[2]}; }
+
+/// Target (mean of the density field over the slab's voxel centres, sampled with a stride) and
+/// achieved (inside voxels of the grid) density per slab of @a slab mm along @a axis.
+nlohmann::json densityBySlab(const openvdb::FloatGrid& grid, const Domain& domain, const FieldNode& density, int axis,
+                             double slab)
+{
+    const int perSlab = std::max(1, int(std::lround(slab / domain.voxel)));
+    const int n = domain.dims[axis];
+    nlohmann::json slabs = nlohmann::json::array();
+    double worst = 0.0;
+    for (int first = 0; first < n; first += perSlab) {
+        openvdb::CoordBBox region = domain.indexBox();
+        region.min()[axis] = first;
+        region.max()[axis] = std::min(n, first + perSlab) - 1;
+        const double achieved = double(countBelow(grid, region, 0.0f)) / double(region.volume());
+        // About 2e5 samples per slab, in a fixed order.
+        const int stride = std::max(1, int(std::cbrt(double(region.volume()) / 2e5)));
+        std::vector<Vec3d> points;
+        const int skip = (stride - 1) / 2;  // centre the strided samples in the slab
+        for (int i = region.min().x() + skip; i <= region.max().x(); i += stride)
+            for (int j = region.min().y() + skip; j <= region.max().y(); j += stride)
+                for (int k = region.min().z() + skip; k <= region.max().z(); k += stride)
+                    points.push_back(domain.worldOf(openvdb::Coord(i, j, k)));
+        std::vector<double> rho(points.size());
+        density.values(points, rho);
+        double sum = 0.0;
+        for (double r : rho) sum += r;
+        const double target = sum / double(rho.size());
+        worst = std::max(worst, std::abs(achieved - target));
+        slabs.push_back({{"from_mm", domain.box.min[axis] + first * domain.voxel},
+                         {"to_mm", domain.box.min[axis] + (region.max()[axis] + 1) * domain.voxel},
+                         {"target", target},
+                         {"achieved", achieved}});
+    }
+    return {{"axis", std::string(1, "xyz"[axis])}, {"slabs", slabs}, {"max_abs_error", worst}};
+}
 }  // namespace
 
 template <typename Fn>
@@ -79,6 +116,7 @@ Job::Job(Recipe recipe) : mRecipe(std::move(recipe)), mBuilder(mRecipe)
             return 0;
         });
     mReport["recipe"] = mRecipe.source->path;
+    if (!mBuilder.warnings().empty()) mReport["warnings"] = mBuilder.warnings();
     mReport["domain"] = {{"from", mRecipe.domainBox ? "recipe" : "result's bounding box plus a margin"},
                          {"min", vec(mDomain.box.min)},
                          {"max", vec(mDomain.box.max)},
@@ -116,6 +154,15 @@ void Job::solveLevels()
         entry["level"] = node.solid->level();
         fields[node.name] = entry;
     }
+    for (const GradedNode& node : mBuilder.gradedNodes()) {
+        const auto& table = static_cast<const GradedLevel&>(*node.node).table();
+        fields[node.name] = {{"type", node.description + " (graded)"},
+                             {"target_density", node.density},
+                             {"density_table", {{"samples", table.sampleCount()},
+                                                {"level_at_10_percent", table.levelAt(0.1)},
+                                                {"level_at_50_percent", table.levelAt(0.5)},
+                                                {"level_at_90_percent", table.levelAt(0.9)}}}};
+    }
     mReport["fields"] = fields;
     mSolved = true;
 }
@@ -144,6 +191,21 @@ const openvdb::FloatGrid& Job::grid()
                          {"volume_mm3", double(inside) * std::pow(mDomain.voxel, 3)},
                          {"evaluated_leaves", stats.leaves},
                          {"inside_tiles", stats.insideTiles}};
+    if (!mBuilder.gradedNodes().empty()) timed("measure slabs", [&] {
+        for (const GradedNode& node : mBuilder.gradedNodes()) {
+            // Measure the graded node itself: on the result grid when it is the result, else on
+            // a grid of its own.
+            openvdb::FloatGrid::ConstPtr own = mGrid;
+            if (node.node != mResult) {
+                SparseOptions options;
+                options.clipToDomain = true;
+                options.stage = "measuring " + node.name;
+                own = evaluateSparse(*node.node, mDomain, options);
+            }
+            mReport["fields"][node.name]["slabs"] = densityBySlab(*own, mDomain, *node.densityField, node.axis, node.slab);
+        }
+        return 0;
+    });
     return *mGrid;
 }
 

@@ -1,5 +1,6 @@
 #include "fields/FieldNode.h"
 
+#include <algorithm>
 #include <vector>
 
 namespace voxlat {
@@ -12,6 +13,35 @@ void FieldNode::gridValues(const GridBatch& batch, std::span<double> out) const
         for (int j = 0; j < batch.ny; ++j)
             for (int k = 0; k < batch.nz; ++k) points.push_back(batch.point(i, j, k));
     values(points, out);
+}
+
+void FieldNode::gridGradients(const GridBatch& batch, std::span<double> out, std::span<Vec3d> grad) const
+{
+    std::vector<Vec3d> points;
+    points.reserve(batch.size());
+    for (int i = 0; i < batch.nx; ++i)
+        for (int j = 0; j < batch.ny; ++j)
+            for (int k = 0; k < batch.nz; ++k) points.push_back(batch.point(i, j, k));
+    gradients(points, out, grad);
+}
+
+void FieldNode::gridValuesShifted(const GridBatch& batch, std::span<const Vec3d> shift, std::span<double> plus,
+                                  std::span<double> minus) const
+{
+    const std::size_t n = batch.size();
+    std::vector<Vec3d> points(2 * n);
+    std::size_t m = 0;
+    for (int i = 0; i < batch.nx; ++i)
+        for (int j = 0; j < batch.ny; ++j)
+            for (int k = 0; k < batch.nz; ++k, ++m) {
+                const Vec3d p = batch.point(i, j, k);
+                points[m] = p + shift[m];
+                points[n + m] = p - shift[m];
+            }
+    std::vector<double> values(2 * n);
+    this->values(points, values);
+    std::copy(values.begin(), values.begin() + n, plus.begin());
+    std::copy(values.begin() + n, values.end(), minus.begin());
 }
 
 double FieldNode::value(const Vec3d& p) const

@@ -63,6 +63,16 @@ public:
     /// that can share work along the axes (separable TPMS terms) override it.
     virtual void gridValues(const GridBatch& batch, std::span<double> out) const;
 
+    /// Values and gradients on a regular block of points (same layout as gridValues). The
+    /// default expands the block into points; separable nodes (TPMS) override it.
+    virtual void gridGradients(const GridBatch& batch, std::span<double> out, std::span<Vec3d> grad) const;
+
+    /// Values at the block's points moved both ways by a per-point shift (same layout):
+    /// plus[n] = value(p_n + shift[n]), minus[n] = value(p_n - shift[n]). The default forms the
+    /// 2N points; a TPMS reuses its per-axis terms through the angle-addition formulas.
+    virtual void gridValuesShifted(const GridBatch& batch, std::span<const Vec3d> shift, std::span<double> plus,
+                                   std::span<double> minus) const;
+
     /// A conservative bound of the value over @a box: every value inside lies in the interval.
     virtual Interval bound(const Box3& box) const = 0;
 

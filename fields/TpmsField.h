@@ -17,6 +17,12 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     /// Separable fast path: the trigonometric terms are computed once per axis coordinate.
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
+    /// Separable gradients: the dual-number trigonometric terms are computed once per axis.
+    void gridGradients(const GridBatch& batch, std::span<double> out, std::span<Vec3d> grad) const override;
+    /// Shifted values from the per-axis terms: sin(X +- S) = sin X cos S +- cos X sin S, with
+    /// sin S and cos S of the small shift angle shared by both signs.
+    void gridValuesShifted(const GridBatch& batch, std::span<const Vec3d> shift, std::span<double> plus,
+                           std::span<double> minus) const override;
     Interval bound(const Box3& box) const override;
 
     TpmsType type() const { return mType; }
