@@ -3,6 +3,7 @@
 #include "engine/DensitySolver.h"
 #include "engine/GridMeasure.h"
 #include "engine/Progress.h"
+#include "engine/RecipeParams.h"
 #include "engine/SparseEvaluator.h"
 #include "engine/SystemInfo.h"
 #include "mesher/AtomicFile.h"
@@ -54,6 +55,9 @@ Job::Job(Recipe recipe) : mRecipe(std::move(recipe)), mBuilder(mRecipe), mDomain
         return 0;
     });
     mReport["recipe"] = mRecipe.source->path;
+    // The recipe as run (includes merged, parameters and --set applied), so any part can be re-made.
+    mReport["recipe_canonical"] = canonicalRecipe(mRecipe);
+    mReport["recipe_sha256"] = recipeHash(mRecipe);
     mReport["domain"] = {{"min", vec(mDomain.box.min)},
                          {"max", vec(mDomain.box.max)},
                          {"voxel", mDomain.voxel},

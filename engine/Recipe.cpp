@@ -1,5 +1,7 @@
 #include "engine/Recipe.h"
 
+#include "engine/RecipeParams.h"
+
 #include <fstream>
 #include <sstream>
 
@@ -7,7 +9,7 @@ namespace voxlat {
 
 namespace {
 
-const std::vector<std::string> kTopKeys{"voxel", "domain", "fields", "result", "outputs"};
+const std::vector<std::string> kTopKeys{"voxel", "domain", "fields", "result", "outputs", "params", "include"};
 const std::vector<std::string> kOutputKeys{"mesh", "vdb"};
 
 /// Records @a node and everything below it as set from the command line.
@@ -60,11 +62,16 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
              const std::vector<std::string>& overrides)
 {
     Recipe r;
-    r.source = std::make_shared<RecipeSource>(RecipeSource{name});
+    r.source = std::make_shared<RecipeSource>();
+    r.source->path = name;
     r.folder = folder;
     if (!root.IsDefined() || root.IsNull()) throw InputError(name + ": the recipe is empty");
     if (!root.IsMap()) throw InputError(name + ":1:1: a recipe is a map of keys (voxel, domain, fields, result, outputs)");
-    for (const std::string& o : overrides) applyOverride(root, o, name, r.source->overrides);
+    mergeIncludes(root, name, folder, *r.source);
+    const auto declared = declaredParams(root, r.source);
+    for (const std::string& o : overrides)
+        applyOverride(root, routeAssignment(root, o, name, kTopKeys), name, r.source->overrides);
+    r.params = substituteParams(root, r.source, declared);
     r.root = root;
 
     const RecipeNode top(root, r.source, "recipe");
