@@ -89,7 +89,10 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
     }
     const RecipeNode fields = top["fields"];
     if (!fields.isMap() || fields.size() == 0) fields.fail("expected a map of named fields, like `lattice: {tpms: gyroid, cell: 10}`");
-    for (auto it = root["fields"].begin(); it != root["fields"].end(); ++it) r.fieldNames.push_back(it->first.Scalar());
+    for (auto it = root["fields"].begin(); it != root["fields"].end(); ++it) {
+        r.fieldNames.push_back(it->first.Scalar());
+        r.fieldIndex.emplace(it->first.Scalar(), it->second);
+    }
 
     const RecipeNode result = top["result"];
     r.result = result.string();
@@ -116,6 +119,7 @@ RecipeNode Recipe::node(const std::string& key) const { return RecipeNode(root, 
 
 RecipeNode Recipe::fieldSpec(const std::string& name) const
 {
+    if (auto it = fieldIndex.find(name); it != fieldIndex.end()) return RecipeNode(it->second, source, "field `" + name + "`");
     const RecipeNode fields = node("fields");
     if (!fields.has(name)) {
         std::string message = "no field named `" + name + "`";

@@ -30,6 +30,8 @@ struct Recipe {
     std::vector<OutputSpec> outputs;
     /// Effective parameter values (`params:` defaults after --set), by name.
     std::map<std::string, YAML::Node> params;
+    /// The nodes of `fields:` by name (yaml-cpp looks map keys up linearly, converting each).
+    std::map<std::string, YAML::Node> fieldIndex;
 
     /// The spec of field @a name (throws InputError naming the valid names if absent).
     RecipeNode fieldSpec(const std::string& name) const;
