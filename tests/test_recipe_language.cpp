@@ -187,7 +187,10 @@ TEST(RecipeLanguage, EquationLatticeSolvesLikeTheBuiltIn)
     EXPECT_NEAR(ra["fields"]["f"]["level"].get<double>(), rb["fields"]["f"]["level"].get<double>(), 1e-12);
     EXPECT_EQ(ra["fields"]["f"]["achieved_density"], rb["fields"]["f"]["achieved_density"]);
     EXPECT_EQ(a.mesh().triangles.size(), b.mesh().triangles.size());
-    EXPECT_EQ(rb["fields"]["f"]["type"], "expr network");
+    EXPECT_EQ(b.report()["fields"]["f"]["type"], "expr network");
+    // Interval bounds as tight as the built-in's: culling skips exactly the same leaves.
+    EXPECT_EQ(a.report()["result"]["evaluated_leaves"], b.report()["result"]["evaluated_leaves"]);
+    EXPECT_EQ(a.report()["result"]["inside_tiles"], b.report()["result"]["inside_tiles"]);
 }
 
 TEST(RecipeLanguage, VectorFieldsGiveDirections)
@@ -472,4 +475,30 @@ TEST(RecipeLanguage, RunRecordsTheRecipeInTheReport)
         runCommand(voxlatBinary() + " -q run " + again.string() + " --out " + (dir.path / "again").string(), &out), 0)
         << out;
     EXPECT_EQ(readFile(dir.path / "out/part_6.stl"), readFile(dir.path / "again/part_6.stl"));
+}
+
+TEST(RecipeLanguage, BadEquationOnTheCommandLineWritesNothing)
+{
+    TempDir dir;
+    const auto path = dir.write("bad.yaml", recipeWith("  g: {tpms: gyroid, cell: 5, solid: network, level: 0}\n"
+                                                       "  f: {expr: \"max(g, gg - 1)\"}\n") +
+                                                "outputs: {mesh: part.stl}\n");
+    std::string out;
+    EXPECT_EQ(runCommand(voxlatBinary() + " run " + path.string() + " --out " + (dir.path / "out").string(), &out), 2);
+    EXPECT_HAS(out,
+               "error: " + path.string() + ":5:13: field `f` `expr`: equation: unknown name `gg`; did you mean `g`?");
+    EXPECT_HAS(out, "    max(g, gg - 1)\n           ^");
+    EXPECT_FALSE(std::filesystem::exists(dir.path / "out" / "part.stl"));
+    EXPECT_FALSE(std::filesystem::exists(dir.path / "out" / "report.json"));
+    // Sampling an equation from the command line gives its value and exact gradient.
+    const auto good = dir.write("good.yaml", recipeWith("  f: {expr: \"x*y + sin(z)\"}\n"));
+    ASSERT_EQ(runCommand("echo '2 3 0.5' | " + voxlatBinary() + " sample " + good.string() + " --gradient", &out), 0)
+        << out;
+    std::istringstream values(out);
+    double v, gx, gy, gz;
+    values >> v >> gx >> gy >> gz;
+    EXPECT_NEAR(v, 6 + std::sin(0.5), 1e-8);
+    EXPECT_NEAR(gx, 3, 1e-8);
+    EXPECT_NEAR(gy, 2, 1e-8);
+    EXPECT_NEAR(gz, std::cos(0.5), 1e-8);
 }
