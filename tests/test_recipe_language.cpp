@@ -2,6 +2,7 @@
 // the canonical hashed copy, the JSON Schema against the node table and docs/recipes.md, and
 // every ```yaml example of the docs run as a recipe.
 #include "TestUtil.h"
+#include "engine/ExprNodes.h"
 #include "engine/FieldBuilder.h"
 #include "engine/Job.h"
 #include "engine/Recipe.h"
@@ -208,6 +209,18 @@ TEST(RecipeLanguage, VectorFieldsGiveDirections)
     swirl->directions(pts, dirs);
     EXPECT_EQ(dirs[0], Vec3d(-3, 2, 1));
     EXPECT_NEAR(swirl->value(Vec3d(2, 3, 4)), std::sqrt(14.0), 1e-15);
+    // Where a node expects a direction: a vector field's name, an inline vector, or a constant.
+    const Recipe r = parseRecipe(text, "v.yaml", ".");
+    FieldBuilder builder(r);
+    const YAML::Node extra = YAML::Load("[[0.1, 0.2, 3], swirl, {vector: [z, 0, 0]}]");
+    const auto source = r.source;
+    const Vec3d expected[3] = {Vec3d(0.1, 0.2, 3), Vec3d(-3, 2, 1), Vec3d(4, 0, 0)};
+    for (int i = 0; i < 3; ++i) {
+        const auto dir = directionField(builder, RecipeNode(extra[i], source, "direction"), "d");
+        dir->directions(pts, dirs);
+        EXPECT_EQ(dirs[0], expected[i]) << i;
+    }
+    EXPECT_THROW(directionField(builder, RecipeNode(YAML::Load("f"), source, "direction"), "d"), InputError);
 }
 
 TEST(RecipeLanguage, CanonicalCopyIsHashedAndReproducible)
