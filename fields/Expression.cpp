@@ -568,10 +568,16 @@ void expand(const T* in, std::uint8_t from, T* out, std::uint8_t to, int nx, int
     const std::size_t sk = (from & 4) ? 1 : 0;
     const std::size_t sj = (from & 2) ? ((from & 4) ? nz : 1) : 0;
     const std::size_t si = (from & 1) ? std::size_t((from & 2) ? ny : 1) * ((from & 4) ? nz : 1) : 0;
-    std::size_t t = 0;
+    // Rows along z are either one repeated value or a contiguous run of the source.
     for (int i = 0; i < ni; ++i)
-        for (int j = 0; j < nj; ++j)
-            for (int k = 0; k < nk; ++k) out[t++] = in[i * si + j * sj + k * sk];
+        for (int j = 0; j < nj; ++j) {
+            T* row = out + (std::size_t(i) * nj + j) * nk;
+            const T* src = in + i * si + j * sj;
+            if (sk == 0)
+                std::fill(row, row + nk, src[0]);
+            else
+                std::copy(src, src + nk, row);
+        }
 }
 
 }  // namespace
