@@ -1,8 +1,179 @@
-// Recipe node types for user equations (issue 7).
-#include "engine/FieldBuilder.h"
+// Recipe node types for user equations (`expr`) and direction fields (`vector`).
+#include "engine/ExprNodes.h"
+
+#include "fields/ExprField.h"
+#include "fields/LevelSolid.h"
+
+#include <algorithm>
+#include <map>
 
 namespace voxlat {
 
-void addExprNodeTypes(std::vector<NodeType>& /*types*/) {}
+namespace {
+
+std::string joined(const std::vector<std::string>& words)
+{
+    std::string s;
+    for (const auto& w : words) s += (s.empty() ? "" : ", ") + w;
+    return s;
+}
+
+/// Answers the names in one equation: parameters become constants, fields become inputs.
+class EquationNames {
+public:
+    explicit EquationNames(FieldBuilder& builder) : mBuilder(builder) {}
+
+    ExprSymbol operator()(const std::string& name, bool isParam)
+    {
+        const Recipe& recipe = mBuilder.recipe();
+        if (isParam) {
+            const auto it = recipe.params.find(name);
+            if (it == recipe.params.end()) return {};
+            try {
+                return {ExprSymbol::Kind::Constant, it->second.as<double>(), -1};
+            } catch (const YAML::Exception&) {
+                throw ExprError("parameter `$" + name + "` is `" +
+                                    (it->second.IsScalar() ? it->second.Scalar() : "a list") + "`, not a number",
+                                std::string::npos);
+            }
+        }
+        const auto dot = name.find('.');
+        const std::string base = name.substr(0, dot);
+        if (std::find(recipe.fieldNames.begin(), recipe.fieldNames.end(), base) == recipe.fieldNames.end()) {
+            if (recipe.params.count(name))
+                throw ExprError("`" + name + "` is a parameter: write `$" + name + "`", std::string::npos);
+            return {};
+        }
+        FieldPtr f = mBuilder.field(base);  // detects cycles through equations too
+        if (dot != std::string::npos) {
+            const std::string axis = name.substr(dot + 1);
+            const auto* vec = dynamic_cast<const VectorField*>(f.get());
+            if (!vec)
+                throw ExprError(
+                    "`" + base + "` is not a vector field: `." + axis + "` reads a component of a `vector:` node",
+                    std::string::npos);
+            if (axis != "x" && axis != "y" && axis != "z")
+                throw ExprError("a vector field has components `.x`, `.y` and `.z`, not `." + axis + "`",
+                                std::string::npos);
+            f = vec->component(axis[0] - 'x');
+        }
+        if (auto it = mIndex.find(name); it != mIndex.end()) return {ExprSymbol::Kind::Input, 0.0, it->second};
+        mInputs.push_back(f);
+        mIndex[name] = int(mInputs.size()) - 1;
+        return {ExprSymbol::Kind::Input, 0.0, mIndex[name]};
+    }
+
+    std::vector<FieldPtr> inputs() const { return mInputs; }
+
+private:
+    FieldBuilder& mBuilder;
+    std::vector<FieldPtr> mInputs;
+    std::map<std::string, int> mIndex;
+};
+
+FieldPtr buildExpr(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
+{
+    FieldPtr raw = equationField(builder, spec["expr"]);
+    if (!spec.has("solid") && !spec.has("level") && !spec.has("density")) return raw;
+    const std::string solidName = spec.has("solid") ? spec["solid"].string() : "network";
+    SolidSide side;
+    if (solidName == "network")
+        side = SolidSide::Below;
+    else if (solidName == "sheet")
+        side = SolidSide::Band;
+    else
+        spec["solid"].fail("solid is `network` (f <= level) or `sheet` (|f| <= level), got `" + solidName + "`");
+    LevelNode node{name, "expr " + solidName, std::make_shared<LevelSolid>(raw, side, 0.0), {}, {}};
+    if (spec.has("level") && spec.has("density"))
+        spec.fail("give either `level:` or `density:`, not both (density solves the level)");
+    if (spec.has("density")) {
+        const RecipeNode d = spec["density"];
+        const double rho = d.number();
+        if (!(rho > 0.0 && rho < 1.0))
+            d.fail("density is a relative density between 0 and 1 (exclusive), got " + d.yaml().Scalar() +
+                   "; for 30 % write 0.30");
+        node.density = rho;
+    } else if (spec.has("level")) {
+        node.solid->setLevel(spec["level"].number());
+        if (side == SolidSide::Band && !(node.solid->level() > 0.0))
+            spec["level"].fail("a sheet's level is its half-thickness t in |f| <= t and must be greater than zero");
+    } else if (side == SolidSide::Band) {
+        spec.fail("give `level:` (for a sheet, the half-thickness t in |f| <= t) or `density:`");
+    }
+    FieldPtr result = node.solid;
+    builder.addLevelNode(std::move(node));
+    return result;
+}
+
+FieldPtr buildVector(FieldBuilder& builder, const RecipeNode& spec, const std::string&)
+{
+    const RecipeNode list = spec["vector"];
+    if (!list.isSequence() || list.size() != 3)
+        list.fail("expected three components (numbers or equations), like [0, 0, 1] or [\"-y\", \"x\", 0]");
+    std::array<FieldPtr, 3> components;
+    for (int a = 0; a < 3; ++a) components[a] = equationField(builder, list.at(a));
+    return std::make_shared<VectorField>(components);
+}
+
+}  // namespace
+
+FieldPtr equationField(FieldBuilder& builder, const RecipeNode& textNode)
+{
+    if (!textNode.isScalar()) textNode.fail("expected an equation in x, y, z, like \"sin(x) + cos(y)\"");
+    const std::string text = textNode.string();
+    EquationNames names(builder);
+    try {
+        auto program = std::make_shared<const ExprProgram>(
+            ExprProgram::compile(text, [&](const std::string& n, bool isParam) { return names(n, isParam); }));
+        return std::make_shared<ExprField>(program, names.inputs());
+    } catch (const ExprError& e) {
+        std::string message = e.what();
+        if (!e.unknownName().empty()) {
+            const Recipe& recipe = builder.recipe();
+            std::vector<std::string> candidates;
+            std::string known;
+            if (e.unknownName()[0] == '$') {
+                for (const auto& [p, v] : recipe.params) candidates.push_back("$" + p);
+                known = candidates.empty() ? "the recipe declares no `params:`" : "parameters: " + joined(candidates);
+            } else {
+                candidates = recipe.fieldNames;
+                for (const auto& c : exprConstantNames()) candidates.push_back(c);
+                known = "fields: " + joined(recipe.fieldNames) + "; coordinates x, y, z; constants pi, tau, e";
+            }
+            const std::string guess = closestMatch(e.unknownName(), candidates);
+            if (!guess.empty()) message += "; did you mean `" + guess + "`?";
+            message += " (" + known + ")";
+        }
+        textNode.fail("equation: " + message + " (character " + std::to_string(e.position() + 1) + ")\n" +
+                      exprCaret(text, e.position()));
+    }
+}
+
+std::shared_ptr<const VectorField> directionField(FieldBuilder& builder, const RecipeNode& spec,
+                                                  const std::string& name)
+{
+    if (spec.isSequence()) {
+        const Vec3d v = spec.vec3();
+        std::array<FieldPtr, 3> c;
+        for (int a = 0; a < 3; ++a) {
+            const double value = v[a];
+            auto constant = [value](const std::string&, bool) {
+                return ExprSymbol{ExprSymbol::Kind::Constant, value, -1};
+            };
+            c[a] = std::make_shared<ExprField>(std::make_shared<const ExprProgram>(ExprProgram::compile("c", constant)),
+                                               std::vector<FieldPtr>{});
+        }
+        return std::make_shared<VectorField>(c);
+    }
+    auto f = std::dynamic_pointer_cast<const VectorField>(builder.operand(spec, name));
+    if (!f) spec.fail("expected a direction: the name of a `vector:` field, {vector: [...]} or [x, y, z]");
+    return f;
+}
+
+void addExprNodeTypes(std::vector<NodeType>& types)
+{
+    types.push_back({"expr", {"expr", "solid", "level", "density"}, buildExpr});
+    types.push_back({"vector", {"vector"}, buildVector});
+}
 
 }  // namespace voxlat

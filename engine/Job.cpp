@@ -3,6 +3,7 @@
 #include "engine/DensitySolver.h"
 #include "engine/GridMeasure.h"
 #include "engine/Progress.h"
+#include "engine/RecipeParams.h"
 #include "engine/SparseEvaluator.h"
 #include "engine/SystemInfo.h"
 #include "fields/GradedLevel.h"
@@ -117,6 +118,9 @@ Job::Job(Recipe recipe) : mRecipe(std::move(recipe)), mBuilder(mRecipe)
         });
     mReport["recipe"] = mRecipe.source->path;
     if (!mBuilder.warnings().empty()) mReport["warnings"] = mBuilder.warnings();
+    // The recipe as run (includes merged, parameters and --set applied), so any part can be re-made.
+    mReport["recipe_canonical"] = canonicalRecipe(mRecipe);
+    mReport["recipe_sha256"] = recipeHash(mRecipe);
     mReport["domain"] = {{"from", mRecipe.domainBox ? "recipe" : "result's bounding box plus a margin"},
                          {"min", vec(mDomain.box.min)},
                          {"max", vec(mDomain.box.max)},

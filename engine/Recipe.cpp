@@ -1,5 +1,7 @@
 #include "engine/Recipe.h"
 
+#include "engine/RecipeParams.h"
+
 #include <fstream>
 #include <sstream>
 
@@ -7,7 +9,7 @@ namespace voxlat {
 
 namespace {
 
-const std::vector<std::string> kTopKeys{"voxel", "domain", "fields", "result", "outputs"};
+const std::vector<std::string> kTopKeys{"voxel", "domain", "fields", "result", "outputs", "params", "include"};
 const std::vector<std::string> kOutputKeys{"mesh", "vdb"};
 
 /// Records @a node and everything below it as set from the command line.
@@ -60,11 +62,16 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
              const std::vector<std::string>& overrides)
 {
     Recipe r;
-    r.source = std::make_shared<RecipeSource>(RecipeSource{name});
+    r.source = std::make_shared<RecipeSource>();
+    r.source->path = name;
     r.folder = folder;
     if (!root.IsDefined() || root.IsNull()) throw InputError(name + ": the recipe is empty");
     if (!root.IsMap()) throw InputError(name + ":1:1: a recipe is a map of keys (voxel, domain, fields, result, outputs)");
-    for (const std::string& o : overrides) applyOverride(root, o, name, r.source->overrides);
+    mergeIncludes(root, name, folder, *r.source);
+    const auto declared = declaredParams(root, r.source);
+    for (const std::string& o : overrides)
+        applyOverride(root, routeAssignment(root, o, name, kTopKeys), name, r.source->overrides);
+    r.params = substituteParams(root, r.source, declared);
     r.root = root;
 
     const RecipeNode top(root, r.source, "recipe");
@@ -82,7 +89,10 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
     }
     const RecipeNode fields = top["fields"];
     if (!fields.isMap() || fields.size() == 0) fields.fail("expected a map of named fields, like `lattice: {tpms: gyroid, cell: 10}`");
-    for (auto it = root["fields"].begin(); it != root["fields"].end(); ++it) r.fieldNames.push_back(it->first.Scalar());
+    for (auto it = root["fields"].begin(); it != root["fields"].end(); ++it) {
+        r.fieldNames.push_back(it->first.Scalar());
+        r.fieldIndex.emplace(it->first.Scalar(), it->second);
+    }
 
     const RecipeNode result = top["result"];
     r.result = result.string();
@@ -109,6 +119,7 @@ RecipeNode Recipe::node(const std::string& key) const { return RecipeNode(root, 
 
 RecipeNode Recipe::fieldSpec(const std::string& name) const
 {
+    if (auto it = fieldIndex.find(name); it != fieldIndex.end()) return RecipeNode(it->second, source, "field `" + name + "`");
     const RecipeNode fields = node("fields");
     if (!fields.has(name)) {
         std::string message = "no field named `" + name + "`";

@@ -5,6 +5,7 @@
 #include "engine/RecipeNode.h"
 
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -27,6 +28,10 @@ struct Recipe {
     std::string result;
     std::vector<std::string> fieldNames;  ///< in file order
     std::vector<OutputSpec> outputs;
+    /// Effective parameter values (`params:` defaults after --set), by name.
+    std::map<std::string, YAML::Node> params;
+    /// The nodes of `fields:` by name (yaml-cpp looks map keys up linearly, converting each).
+    std::map<std::string, YAML::Node> fieldIndex;
 
     /// The spec of field @a name (throws InputError naming the valid names if absent).
     RecipeNode fieldSpec(const std::string& name) const;

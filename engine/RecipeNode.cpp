@@ -13,11 +13,19 @@ RecipeNode::RecipeNode(YAML::Node node, std::shared_ptr<const RecipeSource> sour
 
 std::string RecipeNode::where() const
 {
+    for (const auto& [node, label] : mSource->substituted)
+        if (node.is(mNode)) return label;
     for (const YAML::Node& o : mSource->overrides)
         if (o.is(mNode)) return mSource->path + " (from --set)";
+    std::string path = mSource->path;
+    for (const auto& [node, file] : mSource->included)
+        if (node.is(mNode)) {
+            path = file;
+            break;
+        }
     const YAML::Mark mark = mNode.Mark();
-    if (mark.is_null() || mark.line < 0) return mSource->path;
-    return mSource->path + ":" + std::to_string(mark.line + 1) + ":" + std::to_string(mark.column + 1);
+    if (mark.is_null() || mark.line < 0) return path;
+    return path + ":" + std::to_string(mark.line + 1) + ":" + std::to_string(mark.column + 1);
 }
 
 void RecipeNode::fail(const std::string& message) const

@@ -18,6 +18,10 @@ namespace voxlat {
 struct RecipeSource {
     std::string path;                   ///< as the user gave it
     std::vector<YAML::Node> overrides;  ///< nodes set from the command line (--set), with their children
+    /// Nodes merged from `include:` files, with the file each came from.
+    std::vector<std::pair<YAML::Node, std::string>> included;
+    /// Nodes that replaced a `$name` reference, with "file:line:col (`$name`, declared at ...)".
+    std::vector<std::pair<YAML::Node, std::string>> substituted;
 };
 
 /// A YAML node plus the file it came from and a human description of where it sits

@@ -2,8 +2,12 @@
 #include "engine/Errors.h"
 #include "engine/Job.h"
 #include "engine/Progress.h"
+#include "engine/RecipeParams.h"
+#include "engine/Schema.h"
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
 #include <tbb/global_control.h>
 
 #include <cstdio>
@@ -94,6 +98,14 @@ int main(int argc, char** argv)
     sampleCmd->add_option("--field", sampleField, "field to sample (default: the result)");
     sampleCmd->add_flag("--gradient", sampleGradient, "also print the gradient");
 
+    auto* schemaCmd = app.add_subcommand("schema", "print the recipe language as a JSON Schema");
+    Common checkArgs;
+    int checkRepeat = 1;
+    auto* check = app.add_subcommand("check", "load and validate a recipe and build its fields, without evaluating");
+    addCommon(check, checkArgs);
+    check->add_option("--repeat", checkRepeat, "time this many loads and report the fastest and the median")
+        ->check(CLI::PositiveNumber);
+
     CLI11_PARSE(app, argc, argv);
     voxlat::Progress::setQuiet(quiet);
     std::unique_ptr<tbb::global_control> limit;
@@ -116,6 +128,23 @@ int main(int argc, char** argv)
             voxlat::Job job(voxlat::loadRecipe(infoArgs.recipe, infoArgs.sets));
             job.grid();
             printSummary(job);
+        } else if (*schemaCmd) {
+            std::cout << voxlat::recipeSchema().dump(2) << "\n";
+        } else if (*check) {
+            // Times recipe load + validation in this process: reading, includes, parameters,
+            // key checks and building every field node (no evaluation).
+            std::vector<double> ms;
+            std::unique_ptr<voxlat::Job> job;
+            for (int i = 0; i < checkRepeat; ++i) {
+                const auto start = std::chrono::steady_clock::now();
+                job = std::make_unique<voxlat::Job>(voxlat::loadRecipe(checkArgs.recipe, checkArgs.sets));
+                ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+            }
+            std::sort(ms.begin(), ms.end());
+            std::cout << "ok: " << job->recipe().fieldNames.size() << " fields, result `" << job->recipe().result
+                      << "`, recipe sha256 " << voxlat::recipeHash(job->recipe()) << "\n"
+                      << "load + validation: " << ms.front() << " ms fastest, " << ms[ms.size() / 2] << " ms median of "
+                      << ms.size() << "\n";
         } else if (*sampleCmd) {
             voxlat::Job job(voxlat::loadRecipe(sampleArgs.recipe, sampleArgs.sets));
             return sample(job, sampleField, sampleGradient);

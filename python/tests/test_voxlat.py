@@ -1,0 +1,175 @@
+"""The Python module: graphs, recipes, sampling with gradients, the density solve, meshes as
+numpy arrays, writers, and byte-for-byte agreement with the command line."""
+import json
+import os
+import subprocess
+import tempfile
+import threading
+import time
+import unittest
+from pathlib import Path
+
+import numpy as np
+
+import voxlat
+
+ROOT = Path(os.environ.get("VOXLAT_SOURCE_DIR", Path(__file__).resolve().parents[2]))
+BINARY = os.environ.get("VOXLAT_BINARY", str(ROOT / "build" / "voxlat"))
+
+
+def gyroid_reference(p, cell):
+    k = 2 * np.pi / cell
+    x, y, z = (k * p[:, i] for i in range(3))
+    value = np.sin(x) * np.cos(y) + np.sin(y) * np.cos(z) + np.sin(z) * np.cos(x)
+    grad = k * np.stack([np.cos(x) * np.cos(y) - np.sin(z) * np.sin(x),
+                         -np.sin(x) * np.sin(y) + np.cos(y) * np.cos(z),
+                         -np.sin(y) * np.sin(z) + np.cos(z) * np.cos(x)], axis=1)
+    return value, grad
+
+
+class VoxlatModule(unittest.TestCase):
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory(prefix="voxlat-py-")
+        self.dir = Path(self.tmp.name)
+
+    def tearDown(self):
+        self.tmp.cleanup()
+
+    def test_sampling_values_and_gradients(self):
+        rng = np.random.default_rng(3)
+        pts = rng.uniform(-20, 20, size=(5000, 3))
+        raw = voxlat.gyroid(cell=8).network(level=0)
+        values, grads = raw.gradients(pts)
+        ref_v, ref_g = gyroid_reference(pts, 8)
+        self.assertLess(np.max(np.abs(values - ref_v)), 1e-12)
+        self.assertLess(np.max(np.abs(grads - ref_g)), 1e-12)
+        eq = voxlat.expr("sin(2*pi*x/8)*cos(2*pi*y/8) + sin(2*pi*y/8)*cos(2*pi*z/8) + sin(2*pi*z/8)*cos(2*pi*x/8)")
+        ev, eg = eq.gradients(pts)
+        self.assertLess(np.max(np.abs(ev - ref_v)), 1e-12)
+        self.assertLess(np.max(np.abs(eg - ref_g)), 1e-12)
+        self.assertEqual(eq.values(pts).shape, (5000,))
+
+    def test_graph_operators_match_the_definitions(self):
+        rng = np.random.default_rng(4)
+        pts = rng.uniform(0, 50, size=(2000, 3))
+        part = voxlat.gyroid(cell=8).sheet(0.3) & voxlat.sphere(radius=20, center=[25, 25, 25])
+        g, _ = gyroid_reference(pts, 8)
+        ball = np.linalg.norm(pts - 25, axis=1) - 20
+        np.testing.assert_allclose(part.values(pts), np.maximum(np.abs(g) - 0.3, ball), atol=1e-12)
+        cut = voxlat.sphere(radius=10) - voxlat.sphere(radius=5).translate([3, 0, 0])
+        a = np.linalg.norm(pts, axis=1) - 10
+        b = np.linalg.norm(pts - [3, 0, 0], axis=1) - 5
+        np.testing.assert_allclose(cut.values(pts), np.maximum(a, -b), atol=1e-12)
+
+    def test_vector_fields(self):
+        rec = voxlat.Recipe("f", domain=[[0, 0, 0], [10, 10, 10]], voxel=0.5,
+                            fields={"dir": voxlat.vector("-y", "x", 1), "f": voxlat.expr("dir.x + dir.y")})
+        job = rec.job()
+        pts = np.array([[1.0, 2.0, 3.0], [4.0, -1.0, 0.5]])
+        np.testing.assert_array_equal(job.field("dir").directions(pts), [[-2, 1, 1], [1, 4, 1]])
+        np.testing.assert_array_equal(job.field("f").values(pts), [-1, 5])
+
+    def test_recipe_round_trip_and_cli_bytes(self):
+        part = voxlat.gyroid(cell=6).sheet(density=0.2) & voxlat.sphere(radius=9, center=[10, 10, 10])
+        recipe = voxlat.Recipe(part, domain=[[0, 0, 0], [20, 20, 20]], voxel=0.25, outputs={"mesh": "part.stl"})
+        path = self.dir / "part.yaml"
+        recipe.save(path)
+        loaded = voxlat.Recipe.load(path)
+        self.assertEqual(loaded.text, recipe.text)
+        self.assertEqual(loaded.sha256(), recipe.sha256())
+        # The graph survives the round trip: the canonical copy holds the same nodes.
+        canonical = loaded.canonical()
+        self.assertEqual(canonical["fields"]["result"]["intersection"][0]["density"], 0.2)
+        # The module's mesh and the command line's mesh are the same bytes.
+        report = loaded.write_mesh(self.dir / "py.stl")
+        subprocess.run([BINARY, "-q", "mesh", str(path), "-o", str(self.dir / "cli.stl")], check=True)
+        self.assertEqual((self.dir / "py.stl").read_bytes(), (self.dir / "cli.stl").read_bytes())
+        self.assertGreater(report["mesh"]["triangles"], 1000)
+        # run() writes the recipe's outputs and report.json like `voxlat run`.
+        rep = loaded.run(self.dir / "out")
+        subprocess.run([BINARY, "-q", "run", str(path), "--out", str(self.dir / "cli")], check=True)
+        self.assertEqual((self.dir / "out/part.stl").read_bytes(), (self.dir / "cli/part.stl").read_bytes())
+        cli_report = json.loads((self.dir / "cli/report.json").read_text())
+        self.assertEqual(rep["recipe_sha256"], cli_report["recipe_sha256"])
+
+    def test_density_solve_and_mesh_arrays(self):
+        recipe = voxlat.Recipe(voxlat.gyroid(cell=5).network(density=0.3), domain=[[0, 0, 0], [10, 10, 10]], voxel=0.2)
+        job = recipe.job()
+        job.solve()
+        report = job.report()
+        self.assertAlmostEqual(report["fields"]["result"]["achieved_density"], 0.3, delta=0.002)
+        points, triangles = job.mesh()
+        report = job.report()
+        self.assertEqual(points.dtype, np.float32)
+        self.assertEqual(points.shape[1], 3)
+        self.assertEqual(triangles.shape, (job.report()["mesh"]["triangles"], 3))
+        self.assertLess(int(triangles.max()), len(points))
+        # Closed, outward mesh: the divergence-theorem volume matches the report.
+        p = points.astype(np.float64)[triangles]
+        volume = np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6
+        self.assertAlmostEqual(volume, report["mesh"]["volume_mm3"], delta=1e-6 * abs(volume))
+        for ext in ("ply", "obj", "stl"):
+            job.write_mesh(str(self.dir / f"m.{ext}"))
+            self.assertGreater((self.dir / f"m.{ext}").stat().st_size, 1000)
+
+    def test_params_and_sets(self):
+        recipe = voxlat.Recipe(voxlat.Node({"tpms": "gyroid", "cell": "$cell", "solid": "sheet", "level": "$t"}),
+                               domain=[[0, 0, 0], [8, 8, 8]], voxel=0.5, params={"cell": 4, "t": 0.3})
+        pts = np.array([[1.0, 2.0, 3.0]])
+        a = recipe.job().field().values(pts)
+        b = recipe.job(sets=["cell=8"]).field().values(pts)
+        g4, _ = gyroid_reference(pts, 4)
+        g8, _ = gyroid_reference(pts, 8)
+        np.testing.assert_allclose(a, np.abs(g4) - 0.3, atol=1e-12)
+        np.testing.assert_allclose(b, np.abs(g8) - 0.3, atol=1e-12)
+        with self.assertRaises(voxlat.InputError) as e:
+            recipe.job(sets=["cell=abc"])
+        self.assertIn("expected a number like its default", str(e.exception))
+
+    def test_errors_are_input_errors(self):
+        with self.assertRaises(voxlat.InputError) as e:
+            voxlat.expr("sin(x) + (y").values(np.zeros((1, 3)))
+        self.assertIn("expected `)`", str(e.exception))
+        self.assertIn("^", str(e.exception))
+        with self.assertRaises(voxlat.InputError):
+            voxlat.Recipe.load(self.dir / "missing.yaml")
+        with self.assertRaises(ValueError):
+            voxlat.expr("x").values(np.zeros((4, 2)))
+
+    def test_schema(self):
+        s = voxlat.schema()
+        self.assertIn("node_expr", s["$defs"])
+        self.assertEqual(set(s["$defs"]["node_expr"]["properties"]), {"expr", "solid", "level", "density"})
+
+    def test_gil_is_released_while_the_engine_works(self):
+        recipe = voxlat.Recipe(voxlat.gyroid(cell=5).network(density=0.3), domain=[[0, 0, 0], [30, 30, 30]], voxel=0.1)
+        ticks = []
+        done = threading.Event()
+
+        def ticker():
+            while not done.is_set():
+                ticks.append(time.perf_counter())
+                time.sleep(0.005)
+
+        t = threading.Thread(target=ticker)
+        t.start()
+        start = time.perf_counter()
+        recipe.job().solve()
+        elapsed = time.perf_counter() - start
+        done.set()
+        t.join()
+        during = [x for x in ticks if start < x < start + elapsed]
+        # With the GIL held the ticker could not run at all while the solve works.
+        self.assertGreater(elapsed, 0.05)
+        self.assertGreater(len(during), 3)
+
+    def test_example_scripts_run(self):
+        for script in sorted((ROOT / "data/scripts").glob("*.py")):
+            with self.subTest(script=script.name):
+                out = subprocess.run(["/usr/bin/python3", str(script), str(self.dir / script.stem)], capture_output=True,
+                                     text=True, env=dict(os.environ))
+                self.assertEqual(out.returncode, 0, out.stdout + out.stderr)
+
+
+if __name__ == "__main__":
+    unittest.main()

@@ -1,0 +1,218 @@
+// The compiled core of the Python module `voxlat` (imported as voxlat._voxlat): recipes, jobs
+// and fields of the engine, with numpy arrays in and out. The GIL is released while the engine
+// works, so Python threads run alongside.
+#include "engine/Errors.h"
+#include "engine/Job.h"
+#include "engine/RecipeParams.h"
+#include "engine/Schema.h"
+#include "fields/VectorField.h"
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+#include <tbb/parallel_for.h>
+
+namespace py = pybind11;
+using namespace voxlat;
+
+namespace {
+
+using Points = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+/// The (N, 3) points of @a a as a span of Vec3d (numpy's C layout is three doubles per row).
+std::span<const Vec3d> pointsOf(const Points& a)
+{
+    if (a.ndim() != 2 || a.shape(1) != 3) throw py::value_error("expected an array of points with shape (N, 3)");
+    static_assert(sizeof(Vec3d) == 3 * sizeof(double));
+    return {reinterpret_cast<const Vec3d*>(a.data()), std::size_t(a.shape(0))};
+}
+
+/// A field of a job, sampled on numpy arrays.
+struct Field {
+    FieldPtr field;
+    std::string name;
+
+    py::array_t<double> values(const Points& pts) const
+    {
+        const auto p = pointsOf(pts);
+        py::array_t<double> out(py::ssize_t(p.size()));
+        double* o = out.mutable_data();
+        {
+            py::gil_scoped_release release;
+            const std::size_t chunks = (p.size() + kBatchSize - 1) / kBatchSize;
+            tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+                const std::size_t b = c * kBatchSize, n = std::min(kBatchSize, p.size() - b);
+                field->values(p.subspan(b, n), std::span<double>(o + b, n));
+            });
+        }
+        return out;
+    }
+
+    py::tuple gradients(const Points& pts) const
+    {
+        const auto p = pointsOf(pts);
+        py::array_t<double> values(py::ssize_t(p.size()));
+        py::array_t<double> grads({py::ssize_t(p.size()), py::ssize_t(3)});
+        double* v = values.mutable_data();
+        Vec3d* g = reinterpret_cast<Vec3d*>(grads.mutable_data());
+        {
+            py::gil_scoped_release release;
+            const std::size_t chunks = (p.size() + kBatchSize - 1) / kBatchSize;
+            tbb::parallel_for(std::size_t(0), chunks, [&](std::size_t c) {
+                const std::size_t b = c * kBatchSize, n = std::min(kBatchSize, p.size() - b);
+                field->gradients(p.subspan(b, n), std::span<double>(v + b, n), std::span<Vec3d>(g + b, n));
+            });
+        }
+        return py::make_tuple(values, grads);
+    }
+
+    py::tuple bound(const std::array<double, 3>& lo, const std::array<double, 3>& hi) const
+    {
+        Interval b;
+        {
+            py::gil_scoped_release release;
+            b = field->bound({Vec3d(lo[0], lo[1], lo[2]), Vec3d(hi[0], hi[1], hi[2])});
+        }
+        return py::make_tuple(b.lo, b.hi);
+    }
+
+    py::array_t<double> directions(const Points& pts) const
+    {
+        const auto* vec = dynamic_cast<const VectorField*>(field.get());
+        if (!vec) throw py::type_error("field `" + name + "` is not a vector field");
+        const auto p = pointsOf(pts);
+        py::array_t<double> out({py::ssize_t(p.size()), py::ssize_t(3)});
+        Vec3d* o = reinterpret_cast<Vec3d*>(out.mutable_data());
+        {
+            py::gil_scoped_release release;
+            vec->directions(p, std::span<Vec3d>(o, p.size()));
+        }
+        return out;
+    }
+};
+
+py::object jsonToPython(const nlohmann::json& j)
+{
+    return py::module_::import("json").attr("loads")(j.dump());
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_voxlat, m)
+{
+    m.doc() = "voxlat engine core: recipes, jobs, fields (see the `voxlat` package for the graph builder)";
+    static py::exception<InputError> inputError(m, "InputError", PyExc_ValueError);
+    static py::exception<JobError> jobError(m, "JobError", PyExc_RuntimeError);
+    py::register_exception_translator([](std::exception_ptr p) {
+        try {
+            if (p) std::rethrow_exception(p);
+        } catch (const InputError& e) {
+            inputError(e.what());
+        } catch (const JobError& e) {
+            jobError(e.what());
+        }
+    });
+    openvdb::initialize();
+
+    m.def(
+        "schema", [] { return recipeSchema().dump(2); }, "the recipe language as JSON Schema text");
+
+    py::class_<Recipe>(m, "Recipe", "a loaded and checked recipe")
+        .def_static(
+            "load",
+            [](const std::string& path, const std::vector<std::string>& sets) {
+                py::gil_scoped_release release;
+                return loadRecipe(path, sets);
+            },
+            py::arg("path"), py::arg("sets") = std::vector<std::string>{})
+        .def_static(
+            "parse",
+            [](const std::string& text, const std::string& name, const std::string& folder,
+               const std::vector<std::string>& sets) {
+                py::gil_scoped_release release;
+                return parseRecipe(text, name, std::filesystem::absolute(folder), sets);
+            },
+            py::arg("text"), py::arg("name") = "<python>", py::arg("folder") = ".",
+            py::arg("sets") = std::vector<std::string>{})
+        .def_property_readonly("path", [](const Recipe& r) { return r.source->path; })
+        .def_property_readonly("result", [](const Recipe& r) { return r.result; })
+        .def_property_readonly("field_names", [](const Recipe& r) { return r.fieldNames; })
+        .def_property_readonly("voxel", [](const Recipe& r) { return r.voxel; })
+        .def(
+            "canonical", [](const Recipe& r) { return jsonToPython(canonicalRecipe(r)); },
+            "the recipe as run (includes merged, parameters applied), as a dict")
+        .def("canonical_text", [](const Recipe& r) { return canonicalRecipe(r).dump(); })
+        .def("sha256", [](const Recipe& r) { return recipeHash(r); });
+
+    py::class_<Field>(m, "Field", "a field of a job, sampled on numpy arrays of points (N, 3)")
+        .def_readonly("name", &Field::name)
+        .def("values", &Field::values, py::arg("points"), "values at points (N, 3) -> (N,)")
+        .def("gradients", &Field::gradients, py::arg("points"), "values (N,) and analytic gradients (N, 3)")
+        .def("bound", &Field::bound, py::arg("lo"), py::arg("hi"), "(lo, hi) bounding the value over a box")
+        .def("directions", &Field::directions, py::arg("points"), "vectors (N, 3) of a vector field");
+
+    py::class_<Job, std::shared_ptr<Job>>(m, "Job", "a recipe taken through the stages")
+        .def(py::init([](const Recipe& r) {
+                 py::gil_scoped_release release;
+                 return std::make_shared<Job>(r);
+             }),
+             py::arg("recipe"))
+        .def(
+            "solve",
+            [](Job& j) {
+                py::gil_scoped_release release;
+                j.solveLevels();
+            },
+            "solve every density: level")
+        .def(
+            "field",
+            [](Job& j, const std::string& name) {
+                FieldPtr f;
+                {
+                    py::gil_scoped_release release;
+                    f = j.field(name.empty() ? j.recipe().result : name);
+                }
+                return Field{f, name.empty() ? j.recipe().result : name};
+            },
+            py::arg("name") = "", "a named field (levels solved); the result by default")
+        .def(
+            "mesh",
+            [](Job& j) {
+                const TriangleMesh* mesh;
+                {
+                    py::gil_scoped_release release;
+                    mesh = &j.mesh();
+                }
+                py::array_t<float> points({py::ssize_t(mesh->points.size()), py::ssize_t(3)});
+                py::array_t<std::uint32_t> tris({py::ssize_t(mesh->triangles.size()), py::ssize_t(3)});
+                std::memcpy(points.mutable_data(), mesh->points.data(), mesh->points.size() * 3 * sizeof(float));
+                std::memcpy(tris.mutable_data(), mesh->triangles.data(),
+                            mesh->triangles.size() * 3 * sizeof(std::uint32_t));
+                return py::make_tuple(points, tris);
+            },
+            "the mesh of the result: points (V, 3) float32 and triangles (T, 3) uint32")
+        .def(
+            "write_outputs",
+            [](Job& j, const std::string& dir) {
+                py::gil_scoped_release release;
+                j.writeOutputs(dir);
+            },
+            py::arg("out_dir"), "write the recipe's outputs and report.json")
+        .def(
+            "write_mesh",
+            [](Job& j, const std::string& path) {
+                py::gil_scoped_release release;
+                j.writeMesh(path);
+            },
+            py::arg("path"), "write the mesh (.stl, .ply, .obj)")
+        .def(
+            "write_report",
+            [](Job& j, const std::string& path) {
+                py::gil_scoped_release release;
+                j.writeReport(path);
+            },
+            py::arg("path"))
+        .def(
+            "report", [](const Job& j) { return jsonToPython(j.report()); }, "levels, densities, counts, timings");
+}
