@@ -23,7 +23,9 @@ struct DensitySolution {
 /// whose bound meets the bracket, and a selection over the bracketed values picks the level. The
 /// achieved share is within half a voxel's share of the target. When value ties (a symmetric
 /// field on a regular grid) leave no level within 0.1 % of the target by count, the level is
-/// bisected on a sub-voxel coverage measure instead (continuous in the level).
-DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target);
+/// bisected on a sub-voxel coverage measure instead (continuous in the level). @a subVoxel
+/// always uses the coverage measure: for solids whose features line up with the voxel lattice
+/// (strut lattices with cells of a whole number of voxels), where counting voxel centres aliases.
+DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target, bool subVoxel = false);
 
 }  // namespace voxlat

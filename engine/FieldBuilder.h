@@ -21,6 +21,13 @@ struct LevelNode {
     /// Where the density is measured: the domain unless a node narrows it (a strut lattice
     /// measures over its frame's bounding box).
     std::optional<Box3> densityBox;
+    /// Called with the solved level after a density solve (checks and notes that need it).
+    std::function<void(double level)> onSolved;
+    /// Measure the density with sub-voxel coverage rather than by counting voxel centres.
+    bool subVoxelDensity = false;
+    /// Measure the density on its own voxel lattice over densityBox (a spacing incommensurate
+    /// with a lattice's cells, so periodic features do not alias with the voxels).
+    std::optional<double> densityVoxel;
 };
 
 class FieldBuilder;
