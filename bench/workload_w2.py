@@ -3,6 +3,7 @@ voxels) from recipe to STL, side by side with the seed paper's method written in
 (bench/reference/w2_numpy_convolution.py). Both also run at 0.2 mm, where the dense reference
 is cheap, so the solved levels can be compared at two resolutions."""
 import json
+import math
 import re
 
 from common import PYTHON, ROOT, measure, row, verdict
@@ -17,7 +18,13 @@ def one(voxlat, tmp, voxel):
     report = json.loads((tmp / tag / "report.json").read_text())
     t_r, m_r, out_r = measure([PYTHON, ROOT / "bench/reference/w2_numpy_convolution.py", "--voxel", str(voxel),
                                "--out", tmp / f"ref-{tag}.stl"])
-    level_v = report["fields"]["lattice"]["level"]
+    # voxlat reports the level as an isolated strut's radius rho (mm); the iso-value is
+    # t = P exp(-rho^2 / (2 sigma^2)) with P and sigma given in the field's type.
+    field = report["fields"]["lattice"]
+    peak = float(re.search(r"P = ([0-9.eE+-]+)", field["type"]).group(1))
+    sigma = float(re.search(r"sigma = ([0-9.eE+-]+)", field["type"]).group(1))
+    rho = field["level"]
+    level_v = peak * math.exp(-math.copysign(rho * rho, rho) / (2 * sigma * sigma))
     level_r = float(re.search(r"level ([0-9.eE+-]+) achieved", out_r).group(1))
     print(f" voxel {voxel} mm")
     row("voxlat", t_v, m_v)
