@@ -178,7 +178,8 @@ double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
 
 }  // namespace
 
-DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain, double target, const FieldNode* mask)
+DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain, double target, const FieldNode* mask,
+                             bool subVoxel)
 {
     DensitySolution sol;
     sol.domainVoxels = domain.voxelCount();
@@ -247,7 +248,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         // Coarse or symmetric grids repeat values in large groups, so no level may leave exactly
         // `wanted` voxels below it. Then measure with sub-voxel coverage, which is continuous in
         // the level, and bisect on it.
-        if (std::abs(double(sol.insideVoxels) - double(wanted)) > 5e-4 * double(wanted)) {
+        if (subVoxel || std::abs(double(sol.insideVoxels) - double(wanted)) > 5e-4 * double(wanted)) {
             auto samples = coverageSamples(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi));
             double a = options.band.lo, b = std::min(options.band.hi, 1e30);
             std::uint64_t fullyBelow = below;
@@ -267,6 +268,11 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 samples = coverageSamples(*wideGrid, domain.indexBox(), float(wide.band.lo), float(wide.band.hi));
                 a = wide.band.lo;
                 b = wide.band.hi;
+            }
+            // An open bracket (a target within 1 % of 0 or 1): bisect over the values present.
+            for (const CoverageSample& c : samples) {
+                if (options.band.lo <= -1e30) a = std::min(a == options.band.lo ? 1e300 : a, double(c.value) - c.step);
+                if (options.band.hi >= 1e30) b = std::max(b == 1e30 ? -1e300 : b, double(c.value) + c.step);
             }
             for (int iteration = 0; iteration < 60; ++iteration) {
                 const double mid = 0.5 * (a + b);

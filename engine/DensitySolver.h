@@ -23,12 +23,14 @@ struct DensitySolution {
 /// whose bound meets the bracket, and a selection over the bracketed values picks the level. The
 /// achieved share is within half a voxel's share of the target. When value ties (a symmetric
 /// field on a regular grid) leave no level within 0.05 % of the target by count, the level is
-/// bisected on a sub-voxel coverage measure instead (continuous in the level).
+/// bisected on a sub-voxel coverage measure instead (continuous in the level). @a subVoxel
+/// always uses the coverage measure: for solids whose features line up with the voxel lattice
+/// (strut lattices with cells of a whole number of voxels), where counting voxel centres aliases.
 ///
 /// With a @a mask the density is relative to the space the mask encloses: the denominator is the
 /// number of domain voxels whose centre has mask < 0, the numerator those that are also inside
 /// the solid. Regions whose mask bound is wholly positive are never evaluated.
 DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target,
-                             const FieldNode* mask = nullptr);
+                             const FieldNode* mask = nullptr, bool subVoxel = false);
 
 }  // namespace voxlat

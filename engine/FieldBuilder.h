@@ -19,14 +19,21 @@ struct LevelNode {
     std::string name;
     std::string description;  ///< e.g. "gyroid network"
     std::shared_ptr<LevelSolid> solid;
-    std::optional<double> density;  ///< target relative density
+    std::optional<double> density{};  ///< target relative density
     /// Where the density is measured: the domain unless a node narrows it (a strut lattice
     /// measures over its frame's bounding box).
-    std::optional<Box3> densityBox;
+    std::optional<Box3> densityBox{};
     /// Where the density is measured when the solid fills a part: the voxels with mask < 0 (the
     /// space inside an infill's skin); see solveDensity().
-    FieldPtr densityMask;
-    std::string densityOf;  ///< what the mask is, for the report ("inside the skin of `part`")
+    FieldPtr densityMask{};
+    std::string densityOf{};  ///< what the mask is, for the report ("inside the skin of `part`")
+    /// Called with the solved level after a density solve (checks and notes that need it).
+    std::function<void(double level)> onSolved{};
+    /// Measure the density with sub-voxel coverage rather than by counting voxel centres.
+    bool subVoxelDensity = false;
+    /// Measure the density on its own voxel lattice over densityBox (a spacing incommensurate
+    /// with a lattice's cells, so periodic features do not alias with the voxels).
+    std::optional<double> densityVoxel{};
 };
 
 /// A lattice whose level follows a target-density field (GradedLevel); the job reports its

@@ -144,11 +144,14 @@ void Job::solveLevels()
         if (node.density) {
             const DensitySolution s = timed("solve " + node.name, [&] {
                 return solveDensity(*node.solid->indicator(),
-                                    node.densityBox ? mDomain.subDomain(*node.densityBox) : mDomain, *node.density,
-                                    node.densityMask.get());
+                                    node.densityBox && node.densityVoxel ? Domain::fromBox(*node.densityBox, *node.densityVoxel)
+                                    : node.densityBox                     ? mDomain.subDomain(*node.densityBox)
+                                                                          : mDomain,
+                                    *node.density, node.densityMask.get(), node.subVoxelDensity);
             });
             if (node.densityMask) entry["density_of"] = node.densityOf;
             node.solid->setLevel(node.solid->levelFromIndicator(s.level));
+            if (node.onSolved) node.onSolved(node.solid->level());
             entry["target_density"] = *node.density;
             entry["achieved_density"] = s.achieved;
             entry["solve_rounds"] = s.rounds;

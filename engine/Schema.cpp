@@ -88,6 +88,17 @@ const std::map<std::string, json>& keySchemas()
                     {"blend", number("smooth-union radius where lattice meets skin (mm)")},
                     {"material_density", number("material density (g/cm^3) for the part's mass")}},
                    {"part", "lattice"});
+        t["struts.struts"] = object(
+            {{"cell", described(json::object(), "a preset name, {lines: [...]} or {obj: file}")},
+             {"size", numberOrVec3("cell size in mm, or [x, y, z]")},
+             {"count", described(json::object(), "cells per axis: a number or [x, y, z]")},
+             {"origin", vec3("the frame's corner (mm)")},
+             {"cylinder", described(json::object(), "{radius, inner, height, base, cells}: a cylinder frame")},
+             {"within", described(defRef("field"), "a solid the uniform frame is trimmed to")},
+             {"min_length", number("trimmed pieces shorter than this are dropped (mm)")},
+             {"wireframe", described({{"type", "string"}}, "OBJ or CSV file used directly as the frame")}});
+        t["struts.kernel"] = described(json::object(), "{gaussian: {sigma, cutoff}}, capsule or {capsule: {blend}}");
+        t["struts.radius"] = described(json::object(), "strut radius (mm): a number, a list or {gradient, min, max, axis}");
         t["expr.expr"] = described({{"type", "string"}}, "an equation in x, y, z, $params and field names");
         t["vector.vector"] = described({{"type", "array"},
                                         {"items", {{"anyOf", {{{"type", "number"}}, {{"type", "string"}}}}}},

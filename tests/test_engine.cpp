@@ -86,7 +86,9 @@ TEST(SparseEvaluator, SignsMatchBruteForceEverywhere)
                 const double v = f->value(d.worldOf(c));
                 const float g = acc.getValue(c);
                 ASSERT_EQ(v < 0, g < 0) << c;
-                if (acc.probeConstLeaf(c)) ASSERT_NEAR(g, v, 1e-6 * (1 + std::abs(v)));
+                if (acc.probeConstLeaf(c)) {
+                    ASSERT_NEAR(g, v, 1e-6 * (1 + std::abs(v)));
+                }
                 ++checked;
             }
     EXPECT_EQ(checked, std::uint64_t(d.dims.x() + 2) * (d.dims.y() + 2) * (d.dims.z() + 2));

@@ -1,0 +1,662 @@
+// Strut lattices: the closed-form segment integral against quadrature, its cut-off bound, the
+// convolution and capsule nodes (gradients, bounds, fast path), unit cells, frames, recipes.
+#include "TestUtil.h"
+#include "engine/DensitySolver.h"
+#include "engine/Job.h"
+#include "engine/SparseEvaluator.h"
+#include "engine/StrutFrames.h"
+#include "engine/UnitCells.h"
+#include "fields/Sphere.h"
+#include "fields/StrutCapsules.h"
+#include "fields/StrutConvolution.h"
+#include "mesher/MarchingCubes.h"
+#include "mesher/MeshCheck.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <cmath>
+#include <random>
+
+using namespace voxlat;
+using namespace voxlat::test;
+
+namespace {
+
+Vec3d randomVec(std::mt19937& rng, double lo, double hi)
+{
+    std::uniform_real_distribution<double> u(lo, hi);
+    return Vec3d(u(rng), u(rng), u(rng));
+}
+
+/// The convolution integral by composite Simpson quadrature of the kernel along the segment.
+double quadrature(const Vec3d& p, const Vec3d& a, const Vec3d& b, double sigma, double w0, double w1)
+{
+    const int n = 20000;  // even
+    const double length = (b - a).length();
+    double sum = 0.0;
+    for (int i = 0; i <= n; ++i) {
+        const double s = double(i) / n;
+        const Vec3d q = a + s * (b - a);
+        const double f = (w0 + (w1 - w0) * s) * std::exp(-(p - q).lengthSqr() / (2 * sigma * sigma));
+        sum += f * (i == 0 || i == n ? 1 : (i % 2 ? 4 : 2));
+    }
+    return sum * length / (3.0 * n);
+}
+
+/// A small BCC lattice (2 x 2 x 2 cells of 5 mm) as convolution struts.
+std::vector<ConvolutionStrut> bccStruts(double sigma, int cells = 2)
+{
+    const Frame f = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(5.0), {cells, cells, cells});
+    std::vector<ConvolutionStrut> s;
+    for (const auto& e : f.struts) s.push_back({f.nodes[e[0]], f.nodes[e[1]], sigma, 1.0, 1.0});
+    return s;
+}
+
+std::string runRecipe(const TempDir& dir, const std::string& text, int* status, const std::string& extra = "")
+{
+    const auto recipe = dir.write("recipe.yaml", text);
+    std::string out;
+    *status = runCommand(
+        voxlatBinary() + " -q run " + recipe.string() + " --out " + (dir.path / "out").string() + extra, &out);
+    return out;
+}
+
+}  // namespace
+
+TEST(GaussianSegment, ClosedFormMatchesQuadrature)
+{
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    double worst = 0.0;
+    for (int n = 0; n < 400; ++n) {
+        const Vec3d a = randomVec(rng, -2, 2), b = randomVec(rng, -2, 2);
+        const double sigma = 0.2 + u(rng), w0 = 0.2 + 2 * u(rng), w1 = (n % 2) ? w0 : 0.2 + 2 * u(rng);
+        const GaussianSegment s(a, b, sigma, w0, w1);
+        const Vec3d p = randomVec(rng, -3, 3);
+        double h, r2;
+        s.distanceSqr(p, h, r2);
+        const double peak = std::max(w0, w1) * sigma * kSqrtTwoPi;
+        const double ref = quadrature(p, a, b, sigma, w0, w1);
+        worst = std::max(worst, std::abs(s.value(h, r2) - ref) / peak);
+        Vec3d g;
+        EXPECT_NEAR(s.valueAndGradient(p, g), ref, 1e-9 * peak);
+    }
+    EXPECT_LT(worst, 1e-9);
+}
+
+TEST(GaussianSegment, GradientMatchesFiniteDifferences)
+{
+    std::mt19937 rng(5);
+    for (int n = 0; n < 200; ++n) {
+        const GaussianSegment s(randomVec(rng, -2, 2), randomVec(rng, -2, 2), 0.4, 1.3, n % 2 ? 0.7 : 1.3);
+        const Vec3d p = randomVec(rng, -2.5, 2.5);
+        Vec3d g;
+        s.valueAndGradient(p, g);
+        for (int a = 0; a < 3; ++a) {
+            Vec3d d(0.0);
+            d[a] = 1e-6;
+            double h1, r1, h2, r2;
+            s.distanceSqr(p + d, h1, r1);
+            s.distanceSqr(p - d, h2, r2);
+            EXPECT_NEAR(g[a], (s.value(h1, r1) - s.value(h2, r2)) / 2e-6, 1e-6);
+        }
+    }
+}
+
+TEST(GaussianSegment, CutoffErrorBelowItsBound)
+{
+    // Beyond r_c every contribution is below eps times the infinite strut's peak.
+    std::mt19937 rng(7);
+    for (const double eps : {1e-2, 1e-4, 1e-6}) {
+        double worstRatio = 0.0;
+        for (int n = 0; n < 2000; ++n) {
+            const Vec3d a = randomVec(rng, -1, 1), b = randomVec(rng, -1, 1);
+            const double sigma = 0.3, w0 = 0.5, w1 = 2.0;
+            const GaussianSegment s(a, b, sigma, w0, w1);
+            const double rc = gaussianCutoffRadius(sigma, eps);
+            // A random direction from a random point of the segment, at distance >= r_c.
+            Vec3d p = a + (b - a) * (n % 3 == 0 ? 0.0 : 0.37) + randomVec(rng, -1, 1) * 10.0;
+            double h, r2;
+            const double d = std::sqrt(s.distanceSqr(p, h, r2));
+            if (d < rc) continue;
+            const double peak = std::max(w0, w1) * sigma * kSqrtTwoPi;
+            worstRatio = std::max(worstRatio, s.value(h, r2) / (eps * peak));
+            // the general bound at distance d
+            EXPECT_LE(s.value(h, r2), gaussianSegmentUpperBound(d, sigma, std::max(w0, w1)) * (1 + 1e-12));
+        }
+        EXPECT_LE(worstRatio, 1.0);
+        // Right at the cut-off, next to the middle of a long strut, the bound is nearly reached.
+        const GaussianSegment longStrut(Vec3d(-50, 0, 0), Vec3d(50, 0, 0), 0.3, 1.0, 1.0);
+        const double rc = gaussianCutoffRadius(0.3, eps);
+        EXPECT_NEAR(longStrut.value(50.0, rc * rc), eps * 0.3 * kSqrtTwoPi, 1e-9 * eps);
+    }
+}
+
+TEST(GaussianSegment, RadiusOfAnIsolatedStrutHoldsAtItsWeight)
+{
+    for (const double r : {0.3, 0.8, 1.5}) {
+        const double sigma = 0.5, t = 0.37;
+        const double w = gaussianStrutWeight(r, sigma, t);
+        const GaussianSegment s(Vec3d(0, 0, -40), Vec3d(0, 0, 40), sigma, w, w);
+        EXPECT_NEAR(s.value(40.0, r * r), t, 1e-12);
+        EXPECT_NEAR(gaussianStrutRadius(w, sigma, t), r, 1e-12);
+    }
+}
+
+TEST(StrutConvolution, MatchesTheUntruncatedSumWithinTheCutoffBound)
+{
+    const auto struts = bccStruts(0.5);
+    const StrutConvolution f(struts, 1e-4);
+    std::mt19937 rng(11);
+    double peaks = 0.0;
+    for (std::size_t j = 0; j < f.strutCount(); ++j) peaks += f.peak(j);
+    for (int n = 0; n < 3000; ++n) {
+        const Vec3d p = randomVec(rng, -2, 12);
+        double full = 0.0;
+        for (const auto& s : struts) {
+            const GaussianSegment g(s.a, s.b, s.sigma, s.w0, s.w1);
+            double h, r2;
+            g.distanceSqr(p, h, r2);
+            full += g.value(h, r2);
+        }
+        const double v = f.value(p);
+        EXPECT_LE(v, full + 1e-12);
+        EXPECT_GE(v, full - 1e-4 * peaks);
+        // Only the struts that reach p can drop anything: a much tighter check in practice.
+        EXPECT_NEAR(v, full, 1e-4 * 0.5 * kSqrtTwoPi * 8);
+    }
+}
+
+TEST(StrutConvolution, GridValuesEqualValuesBitForBit)
+{
+    std::vector<ConvolutionStrut> struts = bccStruts(0.6);
+    for (std::size_t j = 0; j < struts.size(); ++j) {
+        struts[j].w1 = 0.5 + 0.01 * j;  // graded weights
+        struts[j].sigma = 0.4 + 0.005 * j;
+    }
+    const StrutConvolution f(struts);
+    for (const Vec3d& origin : {Vec3d(0.05), Vec3d(2.33, 4.1, 7.9), Vec3d(-1.5, 3.0, 9.5)}) {
+        GridBatch batch;
+        batch.origin = origin;
+        batch.spacing = Vec3d(0.1);
+        std::vector<double> fast(512), slow(512);
+        f.gridValues(batch, fast);
+        std::vector<Vec3d> pts;
+        for (int i = 0; i < 8; ++i)
+            for (int j = 0; j < 8; ++j)
+                for (int k = 0; k < 8; ++k) pts.push_back(batch.point(i, j, k));
+        f.values(pts, slow);
+        for (int n = 0; n < 512; ++n) ASSERT_EQ(fast[n], slow[n]) << n;
+    }
+}
+
+TEST(StrutConvolution, GradientMatchesFiniteDifferences)
+{
+    std::vector<ConvolutionStrut> struts = bccStruts(0.5);
+    for (std::size_t j = 0; j < struts.size(); j += 3) struts[j].w0 = 1.7;
+    const StrutConvolution f(struts);
+    std::mt19937 rng(13);
+    for (int n = 0; n < 300; ++n) {
+        const Vec3d p = randomVec(rng, 0, 10);
+        const auto [v, g] = f.valueAndGradient(p);
+        for (int a = 0; a < 3; ++a) {
+            Vec3d d(0.0);
+            d[a] = 1e-6;
+            // Finite differences are only meaningful away from a cut-off jump (<= 1e-4 peak).
+            const double fd = (f.value(p + d) - f.value(p - d)) / 2e-6;
+            if (std::abs(fd - g[a]) > 1e-3) {
+                const double jump = std::abs(f.value(p + d) - f.value(p - d));
+                EXPECT_LE(jump, 1e-4 * 0.5 * kSqrtTwoPi * 3) << "not a cut-off crossing";
+            } else {
+                EXPECT_NEAR(g[a], fd, 1e-5 * (1 + std::abs(fd)));
+            }
+        }
+        EXPECT_EQ(v, f.value(p));
+    }
+}
+
+TEST(StrutConvolution, BoundContainsSampledValues)
+{
+    std::vector<ConvolutionStrut> struts = bccStruts(0.5);
+    for (std::size_t j = 0; j < struts.size(); j += 2) struts[j].w1 = 2.0;
+    const StrutConvolution f(struts);
+    std::mt19937 rng(17);
+    std::uniform_real_distribution<double> size(0.05, 3.0);
+    int tight = 0;
+    for (int n = 0; n < 400; ++n) {
+        const Vec3d lo = randomVec(rng, -3, 12);
+        const Box3 box{lo, lo + Vec3d(size(rng), size(rng), size(rng))};
+        const Interval b = f.bound(box);
+        EXPECT_GE(b.lo, 0.0);
+        for (int s = 0; s < 200; ++s) {
+            const Vec3d p = box.min + randomVec(rng, 0, 1) * box.extent();
+            const double v = f.value(p);
+            ASSERT_TRUE(b.contains(v)) << v << " not in [" << b.lo << ", " << b.hi << "]";
+        }
+        tight += b.lo > 0.0;
+    }
+    EXPECT_GT(tight, 10);  // the lower bound is not just zero everywhere
+}
+
+TEST(StrutCapsules, RoundConeMatchesUnionOfSpheresOutside)
+{
+    std::mt19937 rng(19);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    for (int n = 0; n < 300; ++n) {
+        const CapsuleStrut s{randomVec(rng, -2, 2), randomVec(rng, -2, 2), 0.1 + 0.6 * u(rng),
+                             n % 3 ? 0.1 + 0.6 * u(rng) : 0.0};
+        const Vec3d p = randomVec(rng, -4, 4);
+        // Brute force: the hull of the end spheres is the union of the interpolated spheres.
+        double best = 1e300;
+        for (int i = 0; i <= 20000; ++i) {
+            const double t = i / 20000.0;
+            best = std::min(best, (p - (s.a + t * (s.b - s.a))).length() - (s.ra + t * (s.rb - s.ra)));
+        }
+        Vec3d g;
+        const double d = roundConeDistance(p, s, &g);
+        if (best > 0.0)
+            EXPECT_NEAR(d, best, 2e-4 * (1 + (s.b - s.a).length()));
+        else
+            EXPECT_LE(d, 1e-9);
+        EXPECT_NEAR(g.length(), 1.0, 1e-9);
+        for (int a = 0; a < 3; ++a) {
+            Vec3d e(0.0);
+            e[a] = 1e-6;
+            EXPECT_NEAR(g[a], (roundConeDistance(p + e, s) - roundConeDistance(p - e, s)) / 2e-6, 1e-5);
+        }
+    }
+}
+
+TEST(StrutCapsules, BoundsAndFastPathAgree)
+{
+    const Frame frame = boxFrame(presetUnitCell("octet"), Vec3d(0.0), Vec3d(4.0), {2, 2, 2});
+    std::vector<CapsuleStrut> struts;
+    for (const auto& e : frame.struts) struts.push_back({frame.nodes[e[0]], frame.nodes[e[1]], 0.4, 0.3});
+    for (const double blend : {0.0, 0.3}) {
+        const StrutCapsules f(struts, blend, 3.0);
+        std::mt19937 rng(23);
+        std::uniform_real_distribution<double> size(0.05, 3.0);
+        for (int n = 0; n < 200; ++n) {
+            const Vec3d lo = randomVec(rng, -3, 10);
+            const Box3 box{lo, lo + Vec3d(size(rng), size(rng), size(rng))};
+            const Interval b = f.bound(box);
+            for (int s = 0; s < 100; ++s) {
+                const double v = f.value(box.min + randomVec(rng, 0, 1) * box.extent());
+                ASSERT_TRUE(b.contains(v)) << v << " not in [" << b.lo << ", " << b.hi << "]";
+            }
+        }
+        GridBatch batch;
+        batch.origin = Vec3d(1.03, 2.2, 3.9);
+        batch.spacing = Vec3d(0.1);
+        std::vector<double> fast(512), slow(512);
+        f.gridValues(batch, fast);
+        std::vector<Vec3d> pts;
+        for (int i = 0; i < 8; ++i)
+            for (int j = 0; j < 8; ++j)
+                for (int k = 0; k < 8; ++k) pts.push_back(batch.point(i, j, k));
+        f.values(pts, slow);
+        for (int n = 0; n < 512; ++n) ASSERT_EQ(fast[n], slow[n]);
+        // Gradients against finite differences.
+        for (int n = 0; n < 100; ++n) {
+            const Vec3d p = randomVec(rng, 0.2, 7.8);
+            const auto [v, g] = f.valueAndGradient(p);
+            for (int a = 0; a < 3; ++a) {
+                Vec3d e(0.0);
+                e[a] = 1e-7;
+                EXPECT_NEAR(g[a], (f.value(p + e) - f.value(p - e)) / 2e-7, 1e-4);
+            }
+        }
+    }
+}
+
+TEST(UnitCells, EveryPresetIsValidWithExactCounts)
+{
+    // nodes, struts after splitting crossings (X's diagonals meet at the centre, cross's and
+    // fcc's face diagonals at the face centres).
+    const std::map<std::string, std::pair<int, int>> expected{
+        {"grid", {8, 12}},       {"x", {9, 8}},          {"star", {9, 20}},   {"cross", {14, 24}},
+        {"tesseract", {16, 32}}, {"vintiles", {28, 36}}, {"octet", {14, 36}}, {"diamond", {17, 16}},
+        {"honeycomb", {14, 21}}, {"bcc", {9, 8}},        {"fcc", {14, 24}},   {"kelvin", {24, 36}}};
+    for (const std::string& name : unitCellPresetNames()) {
+        SCOPED_TRACE(name);
+        const UnitCell c = presetUnitCell(name);
+        EXPECT_TRUE(unitCellProblems(c).empty()) << unitCellProblems(c).front();
+        ASSERT_TRUE(expected.count(name));
+        EXPECT_EQ(int(c.nodes.size()), expected.at(name).first);
+        EXPECT_EQ(int(c.struts.size()), expected.at(name).second);
+        for (const Vec3d& p : c.nodes)
+            for (int a = 0; a < 3; ++a) EXPECT_TRUE(p[a] >= -1e-12 && p[a] <= 1 + 1e-12);
+        // Every strut of the same length class joins distinct nodes.
+        for (const auto& s : c.struts) EXPECT_GT((c.nodes[s[0]] - c.nodes[s[1]]).length(), 0.1);
+    }
+    EXPECT_EQ(unitCellPresetNames().size(), expected.size());
+}
+
+TEST(UnitCells, LinesAreSplitNormalisedAndDeduplicated)
+{
+    // Two crossing diagonals of a 2 x 2 x 2 box, a duplicate (reversed), and an edge with a
+    // T-junction: a line ending on another's interior splits it.
+    std::vector<CellLine> lines{{Vec3d(0, 0, 0), Vec3d(2, 2, 2), "l1"},
+                                {Vec3d(2, 0, 0), Vec3d(0, 2, 2), "l2"},
+                                {Vec3d(2, 2, 2), Vec3d(0, 0, 0), "l3"},
+                                {Vec3d(0, 0, 0), Vec3d(2, 0, 0), "l4"},
+                                {Vec3d(1, 0, 0), Vec3d(1, 1, 1), "l5"}};
+    const UnitCell c = unitCellFromLines(lines, "test");
+    EXPECT_EQ(c.nodes.size(), 6u);   // 4 ends, centre, (1, 0, 0) -> (0.5, 0, 0)
+    EXPECT_EQ(c.struts.size(), 7u);  // 4 half diagonals, 2 half edges, the T
+    for (const Vec3d& p : c.nodes) EXPECT_LE(std::max({p[0], p[1], p[2]}), 1.0 + 1e-12);
+}
+
+TEST(UnitCells, BrokenCellsAreRejectedWithTheUnmatchedNodes)
+{
+    // One body diagonal: (0,0,0) has no mirror on x = 1, y = 1, z = 1.
+    const UnitCell diag = unitCellFromLines({{Vec3d(0.0), Vec3d(1.0), "d"}}, "diag");
+    const auto problems = unitCellProblems(diag);
+    ASSERT_FALSE(problems.empty());
+    EXPECT_NE(problems.front().find("node (0, 0, 0) on face x=0 has no mirror node (1, 0, 0)"), std::string::npos)
+        << problems.front();
+    // A face with no node: a cell touching x = 0 and x = 1 only along lines inside y, z (0, 1).
+    UnitCell empty;
+    empty.nodes = {Vec3d(0, 0.5, 0.5), Vec3d(1, 0.5, 0.5)};
+    empty.struts = {{0, 1}};
+    bool emptyFace = false;
+    for (const auto& p : unitCellProblems(empty)) emptyFace |= p.find("face y=0 has no node") != std::string::npos;
+    EXPECT_TRUE(emptyFace);
+    EXPECT_THROW(unitCellFromLines({{Vec3d(0.0), Vec3d(0.0), "file.obj:3"}}, "zero"), InputError);
+}
+
+TEST(StrutFrames, ExactNodeAndStrutCounts)
+{
+    const Frame bcc = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(5.0), {2, 2, 2});
+    EXPECT_EQ(bcc.nodes.size(), 27u + 8u);
+    EXPECT_EQ(bcc.struts.size(), 64u);
+    const Frame grid = boxFrame(presetUnitCell("grid"), Vec3d(1.0), Vec3d(2, 3, 4), {2, 2, 2});
+    EXPECT_EQ(grid.nodes.size(), 27u);
+    EXPECT_EQ(grid.struts.size(), 54u);  // 3 directions x 2 x 3 x 3, shared faces counted once
+    const Box3 b = grid.bounds();
+    EXPECT_EQ(b.min, Vec3d(1.0));
+    EXPECT_EQ(b.max, Vec3d(5, 7, 9));
+    const Frame octet = boxFrame(presetUnitCell("octet"), Vec3d(0.0), Vec3d(1.0), {2, 1, 1});
+    EXPECT_EQ(octet.struts.size(), 36u * 2 - 4);  // the shared face's 4 half diagonals once
+    // Cylinder: grid cells, 1 axial x 8 angular x 1 radial, hollow and solid.
+    const Frame hollow = cylinderFrame(presetUnitCell("grid"), Vec3d(0.0), 5.0, 10.0, 4.0, {1, 8, 1});
+    EXPECT_EQ(hollow.nodes.size(), 32u);
+    EXPECT_EQ(hollow.struts.size(), 64u);
+    const Frame solid = cylinderFrame(presetUnitCell("grid"), Vec3d(0.0), 0.0, 10.0, 4.0, {1, 8, 1});
+    EXPECT_EQ(solid.nodes.size(), 18u);   // the axis nodes merge
+    EXPECT_EQ(solid.struts.size(), 41u);  // 16 spokes, 16 rim chords, 8 + 1 axial
+}
+
+TEST(StrutFrames, ClippedFrameIsTrimmedAtTheBoundary)
+{
+    const Sphere ball(Vec3d(5.0), 3.7);
+    const double minLength = 0.2;
+    const Frame f = clippedFrame(
+        presetUnitCell("grid"), Box3{Vec3d(0.0), Vec3d(10.0)}, Vec3d(1.0),
+        [&](const Vec3d& p) { return ball.value(p); }, minLength);
+    ASSERT_GT(f.struts.size(), 100u);
+    // The exit point of a grid edge p -> q (p inside) from the ball, solved analytically.
+    auto exitParam = [&](const Vec3d& p, const Vec3d& q) {
+        const Vec3d d = q - p, m = p - Vec3d(5.0);
+        const double a = d.lengthSqr(), b = 2 * m.dot(d), c = m.lengthSqr() - 3.7 * 3.7;
+        return (-b + std::sqrt(b * b - 4 * a * c)) / (2 * a);
+    };
+    std::size_t trimmed = 0;
+    for (const Vec3d& p : f.nodes) {
+        EXPECT_LE(ball.value(p), minLength);  // whole struts may poke out by less than minLength
+        trimmed += std::abs(ball.value(p)) < 1e-9;
+    }
+    EXPECT_GT(trimmed, 20u);
+    for (const auto& s : f.struts) EXPECT_GE((f.nodes[s[0]] - f.nodes[s[1]]).length(), minLength - 1e-12);
+    // Independent count of struts, by IntraLattice's rule applied to every grid edge.
+    std::size_t expected = 0;
+    for (int x = 0; x <= 10; ++x)
+        for (int y = 0; y <= 10; ++y)
+            for (int z = 0; z <= 10; ++z)
+                for (int a = 0; a < 3; ++a) {
+                    Vec3d p(x, y, z), q = p;
+                    q[a] += 1;
+                    if (q[a] > 10) continue;
+                    const bool inP = ball.value(p) <= 0, inQ = ball.value(q) <= 0;
+                    if (inP && inQ)
+                        ++expected;
+                    else if (inP || inQ)
+                        expected += (inP ? exitParam(p, q) : exitParam(q, p)) >= minLength;
+                }
+    EXPECT_EQ(f.struts.size(), expected);
+}
+
+TEST(StrutFrames, WireframeFilesAndTheirErrors)
+{
+    TempDir dir;
+    const auto csv = dir.write(
+        "frame.csv", "# a triangle\nnode,0,0,0\nnode,1,0,0\nnode,0,1,0\nstrut,0,1\nstrut,1,2\nstrut,2,0\nstrut,1,0\n");
+    const Frame f = readWireframe(csv.string());
+    EXPECT_EQ(f.nodes.size(), 3u);
+    EXPECT_EQ(f.struts.size(), 3u);  // the repeated strut once
+    const auto obj = dir.write("frame.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nl 1 2 3\n");
+    EXPECT_EQ(readWireframe(obj.string()).struts.size(), 2u);
+    auto message = [](const std::string& path) {
+        try {
+            readWireframe(path);
+        } catch (const InputError& e) {
+            return std::string(e.what());
+        }
+        return std::string("no error");
+    };
+    const auto dangling = dir.write("bad.csv", "node,0,0,0\nnode,1,0,0\nstrut,0,1\nstrut,1,5\n");
+    EXPECT_NE(message(dangling.string()).find("bad.csv:4: strut refers to node 5"), std::string::npos)
+        << message(dangling.string());
+    const auto danglingObj = dir.write("bad.obj", "v 0 0 0\nv 1 0 0\nl 1 2\nl 2 3\n");
+    EXPECT_NE(message(danglingObj.string()).find("bad.obj:4: vertex index 3 does not exist"), std::string::npos)
+        << message(danglingObj.string());
+    const auto zero = dir.write("zero.csv", "0,0,0,1,0,0\n1,0,0,1,0,0\n");
+    EXPECT_NE(message(zero.string()).find("zero.csv:2: zero-length strut"), std::string::npos)
+        << message(zero.string());
+}
+
+TEST(StrutLattice, DensityHitsTargetMeasuredOnTheMesh)
+{
+    // 2 x 2 x 2 BCC cells of 5 mm, sigma 0.5, 20 %: the meshed volume over the frame box.
+    const std::string text =
+        "voxel: 0.1\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\n"
+        "fields:\n  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, density: 0.20}\n"
+        "result: lattice\n";
+    Job job(parseRecipe(text, "bcc.yaml", "."));
+    job.solveLevels();
+    const TriangleMesh& mesh = job.mesh();
+    EXPECT_NEAR(mesh.volume() / 1000.0, 0.20, 0.005 * 0.20);
+    const MeshTopology t = checkTopology(mesh);
+    EXPECT_TRUE(t.closedManifold());
+    EXPECT_EQ(t.boundaryEdges + t.nonManifoldEdges + t.nonManifoldVertices + t.inconsistentlyOrientedEdges +
+                  t.degenerateTriangles,
+              0u);
+    // One piece: BCC is connected, so the mesh is one closed surface of genus > 0.
+    EXPECT_LT(t.eulerCharacteristic, 0);
+}
+
+TEST(StrutLattice, DensityMeasuredOverTheFrameBoxOnly)
+{
+    // The frame covers [2, 10]^3 of a 12 mm domain: density is relative to the frame's box.
+    const std::string text =
+        "voxel: 0.1\ndomain: {box: [[0, 0, 0], [12, 12, 12]]}\n"
+        "fields:\n  lattice: {struts: {cell: grid, size: 4, origin: [2, 2, 2], count: 2}, "
+        "kernel: {gaussian: {sigma: 0.4}}, density: 0.15}\nresult: lattice\n";
+    Job job(parseRecipe(text, "grid.yaml", "."));
+    job.solveLevels();
+    const TriangleMesh& mesh = job.mesh();
+    // The solid spills a little past the frame box (round ends); measure inside it by voxels.
+    const auto report = job.report();
+    EXPECT_NEAR(report["fields"]["lattice"]["achieved_density"].get<double>(), 0.15, 0.005 * 0.15);
+    EXPECT_TRUE(checkTopology(mesh).closedManifold());
+}
+
+TEST(StrutLattice, CapsulesWithBlendMeshCleanly)
+{
+    const std::string text =
+        "voxel: 0.1\ndomain: {box: [[0, 0, 0], [8, 8, 8]]}\n"
+        "fields:\n  lattice: {struts: {cell: octet, size: 4}, kernel: {capsule: {blend: 0.3}}, "
+        "radius: {gradient: linear, min: 0.3, max: 0.6}}\nresult: lattice\n";
+    Job job(parseRecipe(text, "capsule.yaml", "."));
+    const TriangleMesh& mesh = job.mesh();
+    EXPECT_TRUE(checkTopology(mesh).closedManifold());
+    EXPECT_GT(mesh.volume(), 0.0);
+    // Capsules with density: a uniform radius offset solved for the target.
+    const std::string dens =
+        "voxel: 0.1\ndomain: {box: [[0, 0, 0], [8, 8, 8]]}\n"
+        "fields:\n  lattice: {struts: {cell: octet, size: 4}, kernel: capsule, density: 0.25}\nresult: lattice\n";
+    Job job2(parseRecipe(dens, "capsule2.yaml", "."));
+    job2.solveLevels();
+    EXPECT_NEAR(job2.report()["fields"]["lattice"]["achieved_density"].get<double>(), 0.25, 0.005 * 0.25);
+    // Struts of about 3 voxels radius: the measured volume (voxel coverage) and the mesh are
+    // within 2 % of the analytic solid's (Monte Carlo); thin convex struts bias both slightly.
+    const FieldPtr solid = job2.field("lattice");
+    std::mt19937 rng(29);
+    int inside = 0;
+    for (int n = 0; n < 200000; ++n) inside += solid->value(randomVec(rng, 0, 8)) < 0;
+    const double truth = inside / 200000.0;
+    EXPECT_NEAR(truth, 0.25, 0.02 * 0.25);
+    EXPECT_NEAR(job2.mesh().volume() / 512.0, truth, 0.02 * truth);
+    EXPECT_TRUE(checkTopology(job2.mesh()).closedManifold());
+}
+
+TEST(StrutLattice, ListedRadiiHoldAtTheLevel)
+{
+    // One long strut (a wireframe) of radius 0.8 at sigma 0.5: the mesh's cross-section area in
+    // the middle is pi r^2 (measured by the solid's value along a ring).
+    TempDir dir;
+    dir.write("rod.csv", "node,0,0,0\nnode,0,0,30\nstrut,0,1\n");
+    const auto recipe =
+        dir.write("rod.yaml",
+                  "voxel: 0.1\ndomain: {box: [[-3, -3, 0], [3, 3, 30]]}\nfields:\n"
+                  "  rod: {struts: {wireframe: rod.csv}, kernel: {gaussian: {sigma: 0.5}}, radius: [[0.8, 0.8]]}\n"
+                  "result: rod\n");
+    Job job(loadRecipe(recipe.string()));
+    const FieldPtr f = job.field("rod");
+    EXPECT_NEAR(f->value(Vec3d(0.8, 0, 15)), 0.0, 1e-9);
+    EXPECT_LT(f->value(Vec3d(0.79, 0, 15)), 0.0);
+    EXPECT_GT(f->value(Vec3d(0, 0.81, 15)), 0.0);
+}
+
+TEST(StrutLattice, SameGridForAnyThreadCount)
+{
+    const StrutConvolution raw(bccStruts(0.5));
+    const auto solid =
+        std::make_shared<LevelSolid>(std::make_shared<StrutConvolution>(bccStruts(0.5)), SolidSide::Above, 0.3);
+    const Domain d = Domain::fromBox(Box3{Vec3d(0), Vec3d(10)}, 0.1);
+    auto run = [&](int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        return marchingCubes(*evaluateSparse(*solid, d, SparseOptions{}), 0.0f);
+    };
+    const TriangleMesh one = run(1), many = run(4);
+    ASSERT_EQ(one.points.size(), many.points.size());
+    EXPECT_TRUE(std::equal(one.points.begin(), one.points.end(), many.points.begin()));
+    EXPECT_TRUE(std::equal(one.triangles.begin(), one.triangles.end(), many.triangles.begin()));
+}
+
+TEST(StrutRecipes, BadInputNamesFileAndLineAndWritesNothing)
+{
+    TempDir dir;
+    const std::string head = "voxel: 0.2\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n";
+    const std::string tail = "result: lattice\noutputs: {mesh: out.stl}\n";
+    struct Case {
+        std::string field;
+        std::string expect;
+    };
+    const std::vector<Case> cases{
+        {"  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0}}, density: 0.2}\n", "recipe.yaml:4:"},
+        {"  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: -1}}, density: 0.2}\n",
+         "sigma must be greater than zero"},
+        {"  lattice: {struts: {cell: {lines: [[[0, 0, 0], [1, 1, 1]]]}, size: 5}, kernel: {gaussian: {sigma: 0.5}}, "
+         "density: 0.2}\n",
+         "node (0, 0, 0) on face x=0 has no mirror node (1, 0, 0)"},
+        {"  lattice: {struts: {cell: {lines: [[[0, 0, 0], [1, 1, 1]], [[1, 0, 0], [1, 0, 0]]]}, size: 5}, kernel: "
+         "{gaussian: {sigma: 0.5}}, density: 0.2}\n",
+         "line 2: zero-length line"},
+        {"  lattice: {struts: {cell: bcd, size: 5}, kernel: {gaussian: {sigma: 0.5}}, density: 0.2}\n",
+         "did you mean `bcc`?"},
+        {"  lattice: {struts: {wireframe: bad.csv}, kernel: {gaussian: {sigma: 0.5}}, level: 0.1}\n",
+         "bad.csv:3: strut refers to node 7"},
+        {"  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, radius: [1, 2]}\n",
+         "the radius list has 2 entries but the frame has 64 struts"},
+    };
+    dir.write("bad.csv", "node,0,0,0\nnode,1,1,1\nstrut,0,7\n");
+    for (const Case& c : cases) {
+        int status = 0;
+        const std::string out = runRecipe(dir, head + c.field + tail, &status);
+        EXPECT_EQ(status, 2) << out;
+        EXPECT_NE(out.find(c.expect), std::string::npos) << out;
+        if (c.expect.find("bad.csv") == std::string::npos) {
+            EXPECT_NE(out.find("recipe.yaml:"), std::string::npos) << out;
+        }
+        EXPECT_FALSE(std::filesystem::exists(dir.path / "out" / "out.stl"));
+    }
+    // The empty-face cell read from an OBJ file names the file.
+    dir.write("flat.obj", "v 0 0 0\nv 1 1 0\nl 1 2\n");
+    int status = 0;
+    std::string out = runRecipe(
+        dir,
+        head +
+            "  lattice: {struts: {cell: {obj: flat.obj}, size: 5}, kernel: {gaussian: {sigma: 0.5}}, density: 0.2}\n" +
+            tail,
+        &status);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("flat.obj:3: the cell is flat along z"), std::string::npos) << out;
+}
+
+TEST(StrutRecipes, WarnsWhenTheLatticeFallsApart)
+{
+    TempDir dir;
+    int status = 0;
+    // Large sigma at low density: the joints take the material (seed 002: sigma 1.6 at 10 %).
+    const std::string out =
+        runRecipe(dir,
+                  "voxel: 0.2\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
+                  "  lattice: {struts: {cell: x, size: 5}, kernel: {gaussian: {sigma: 1.6}}, density: 0.05}\n"
+                  "result: lattice\noutputs: {mesh: a.stl}\n",
+                  &status);
+    EXPECT_EQ(status, 0) << out;
+    EXPECT_NE(out.find("warning: field `lattice`:"), std::string::npos) << out;
+    EXPECT_NE(out.find("struts are broken in the middle at level t = "), std::string::npos) << out;
+    // A sensible lattice gives no warning.
+    const std::string fine =
+        runRecipe(dir,
+                  "voxel: 0.2\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
+                  "  lattice: {struts: {cell: x, size: 5}, kernel: {gaussian: {sigma: 0.5}}, density: 0.2}\n"
+                  "result: lattice\noutputs: {mesh: a.stl}\n",
+                  &status);
+    EXPECT_EQ(fine.find("warning"), std::string::npos) << fine;
+}
+
+TEST(StrutLattice, SparseGridMatchesBruteForce)
+{
+    // 4 x 4 x 4 BCC cells: several 128-voxel blocks, so block and leaf culling both act.
+    const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 4));
+    const auto solid = std::make_shared<LevelSolid>(raw, SolidSide::Above, 0.88);
+    const Domain d = Domain::fromBox(Box3{Vec3d(0), Vec3d(20)}, 0.15);
+    const auto grid = evaluateSparse(*solid, d, SparseOptions{});
+    auto acc = grid->getConstAccessor();
+    std::uint64_t inside = 0, insideBrute = 0, mismatched = 0;
+    std::vector<double> values(512);
+    for (int x = 0; x < d.dims.x(); x += 8)
+        for (int y = 0; y < d.dims.y(); y += 8)
+            for (int z = 0; z < d.dims.z(); z += 8) {
+                GridBatch batch;
+                batch.origin = d.worldOf(openvdb::Coord(x, y, z));
+                batch.spacing = Vec3d(d.voxel);
+                solid->gridValues(batch, values);
+                for (int i = 0; i < 8; ++i)
+                    for (int j = 0; j < 8; ++j)
+                        for (int k = 0; k < 8; ++k) {
+                            const openvdb::Coord c(x + i, y + j, z + k);
+                            if (c.x() >= d.dims.x() || c.y() >= d.dims.y() || c.z() >= d.dims.z()) continue;
+                            const bool in = values[(i * 8 + j) * 8 + k] < 0, inGrid = acc.getValue(c) < 0;
+                            insideBrute += in;
+                            inside += inGrid;
+                            mismatched += in != inGrid;
+                        }
+            }
+    EXPECT_EQ(mismatched, 0u);
+    EXPECT_EQ(inside, insideBrute);
+}
