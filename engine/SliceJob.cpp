@@ -456,8 +456,10 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
 
     std::string previewPath;
     if (settings.preview != "off") {
+        // A relative preview name sits next to the slices (like every output, relative to --out).
         previewPath = settings.preview.empty() ? (path.parent_path() / (path.stem().string() + ".preview.png")).string()
-                                               : settings.preview;
+                      : fs::path(settings.preview).is_absolute() ? settings.preview
+                                                                 : (path.parent_path() / settings.preview).string();
         writeWhole(previewPath, sheet.render());
     }
 

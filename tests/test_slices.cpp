@@ -207,6 +207,12 @@ TEST(Slices, ArchiveOpensAndConfigIsConsistent)
     }
     EXPECT_NEAR(std::stod(config.at("usedMaterial")) * 1000.0, exposed * 0.05 * 0.05 * 0.05, 1e-3);
     EXPECT_TRUE(std::filesystem::exists(dir.path / "out" / "small.preview.png"));
+    // A preview named in the recipe goes next to the outputs too.
+    std::string text = kSmallSlices;
+    text.replace(text.find("file: small.sl1s"), 16, "file: b.sl1s, preview: sheet.png");
+    const auto second = dir.write("named.yaml", text);
+    ASSERT_EQ(runCommand(voxlatBinary() + " -q run " + second.string() + " --out " + (dir.path / "out2").string()), 0);
+    EXPECT_TRUE(std::filesystem::exists(dir.path / "out2" / "sheet.png"));
     const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
     EXPECT_FALSE(report.contains("mesh"));    // no mesh built
     EXPECT_FALSE(report.contains("result"));  // and no volume grid
