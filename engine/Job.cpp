@@ -4,6 +4,7 @@
 #include "engine/GridMeasure.h"
 #include "engine/Progress.h"
 #include "engine/RecipeParams.h"
+#include "engine/SliceJob.h"
 #include "engine/SparseEvaluator.h"
 #include "engine/SystemInfo.h"
 #include "fields/GradedLevel.h"
@@ -263,9 +264,26 @@ void Job::writeOutputs(const std::filesystem::path& outDir)
                 return 0;
             });
             mReport["outputs"].push_back(path.string());
+        } else if (out.kind == "slices") {
+            writeSlices(out.spec, path);
         }
     }
     writeReport(outDir / "report.json");
+}
+
+void Job::writeSlices(const YAML::Node& spec, const std::filesystem::path& path)
+{
+    const RecipeNode node(spec, mRecipe.source, "outputs `slices`");
+    const SliceSettings settings = parseSliceSettings(node);
+    const PrinterProfile printer = loadPrinterProfile(settings.printer, settings.printerWhere);
+    solveLevels();  // a `density:` level is solved on the recipe's voxel grid first
+    // The part is the recipe's domain box as written (not snapped to voxels): slices need no voxels.
+    const Box3 part = *mRecipe.domainBox;
+    const SliceResult result = timed("slice " + path.filename().string(), [&] {
+        return sliceToFile(*mResult, part, printer, settings, path, mRecipe.node("domain").where());
+    });
+    mReport["slices"].push_back(result.report);
+    mReport["outputs"].push_back(path.string());
 }
 
 nlohmann::json Job::report() const

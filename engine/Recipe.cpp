@@ -1,6 +1,7 @@
 #include "engine/Recipe.h"
 
 #include "engine/RecipeParams.h"
+#include "engine/SliceJob.h"
 
 #include <fstream>
 #include <sstream>
@@ -10,7 +11,7 @@ namespace voxlat {
 namespace {
 
 const std::vector<std::string> kTopKeys{"voxel", "domain", "fields", "result", "outputs", "params", "include"};
-const std::vector<std::string> kOutputKeys{"mesh", "vdb"};
+const std::vector<std::string> kOutputKeys{"mesh", "vdb", "slices"};
 
 /// Records @a node and everything below it as set from the command line.
 void collectNodes(const YAML::Node& node, std::vector<YAML::Node>& out)
@@ -104,10 +105,18 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
         for (const std::string& kind : kOutputKeys) {
             if (!outputs.has(kind)) continue;
             const RecipeNode entry = outputs[kind];
+            if (kind == "slices") {  // a map (or a list of maps) of slice settings
+                for (std::size_t i = 0; i < (entry.isSequence() ? entry.size() : 1); ++i) {
+                    const RecipeNode one = entry.isSequence() ? entry.at(i) : entry;
+                    parseSliceSettings(one);  // checks keys and values now, before any work
+                    r.outputs.push_back({kind, one["file"].string(), one.yaml()});
+                }
+                continue;
+            }
             if (entry.isSequence())
-                for (std::size_t i = 0; i < entry.size(); ++i) r.outputs.push_back({kind, entry.at(i).string()});
+                for (std::size_t i = 0; i < entry.size(); ++i) r.outputs.push_back({kind, entry.at(i).string(), {}});
             else
-                r.outputs.push_back({kind, entry.string()});
+                r.outputs.push_back({kind, entry.string(), {}});
         }
     }
     return r;

@@ -14,8 +14,9 @@ namespace voxlat {
 
 /// One entry of `outputs:`.
 struct OutputSpec {
-    std::string kind;  ///< "mesh" or "vdb"
+    std::string kind;  ///< "mesh", "vdb" or "slices"
     std::string file;  ///< relative to the output folder
+    YAML::Node spec;   ///< the entry's own map (`slices`: printer, layer, file, ...)
 };
 
 struct Recipe {

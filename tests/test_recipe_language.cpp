@@ -1,6 +1,7 @@
 // The recipe language: parameters and --set, includes, equations and vector fields in recipes,
 // the canonical hashed copy, the JSON Schema against the node table and docs/recipes.md, and
-// every ```yaml example of the docs run as a recipe.
+// every ```yaml example of the docs run as a recipe (blocks tagged ```yaml <kind>, such as
+// `printer-profile`, show other file formats and are left out).
 #include "TestUtil.h"
 #include "engine/ExprNodes.h"
 #include "engine/FieldBuilder.h"

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -105,6 +106,20 @@ int main(int argc, char** argv)
     addCommon(check, checkArgs);
     check->add_option("--repeat", checkRepeat, "time this many loads and report the fastest and the median")
         ->check(CLI::PositiveNumber);
+    Common sliceArgs;
+    std::string slicePrinter, sliceFile, sliceAa, sliceFormat, slicePreview;
+    double sliceLayer = 0.0, sliceGamma = -1.0;
+    std::vector<double> slicePosition;
+    auto* sliceCmd = app.add_subcommand("slice", "slice a recipe's result for a resin printer (.sl1, .sl1s, .zip, PNG or EXR folder)");
+    addCommon(sliceCmd, sliceArgs);
+    sliceCmd->add_option("--printer", slicePrinter, "printer profile: sl1, sl1s, mono-4k, mono-8k, mono-12k or a profile file");
+    sliceCmd->add_option("-o,--output", sliceFile, "archive (.sl1, .sl1s, .zip) or folder (with --format png|exr)");
+    sliceCmd->add_option("--layer", sliceLayer, "layer height in mm (default: the recipe's, else the printer's)");
+    sliceCmd->add_option("--aa", sliceAa, "anti-aliasing: on (default), off (binary, pixel centre) or sub-samples per axis");
+    sliceCmd->add_option("--gamma", sliceGamma, "grey = 255 * coverage^gamma; 0 = threshold at half coverage");
+    sliceCmd->add_option("--position", slicePosition, "where the part's centre goes on the display, X Y in mm")->expected(2);
+    sliceCmd->add_option("--format", sliceFormat, "sl1, sl1s, zip, png (folder) or exr (folder)");
+    sliceCmd->add_option("--preview", slicePreview, "contact-sheet PNG (default FILE.preview.png; `off` for none)");
 
     CLI11_PARSE(app, argc, argv);
     voxlat::Progress::setQuiet(quiet);
@@ -145,6 +160,39 @@ int main(int argc, char** argv)
                       << "`, recipe sha256 " << voxlat::recipeHash(job->recipe()) << "\n"
                       << "load + validation: " << ms.front() << " ms fastest, " << ms[ms.size() / 2] << " ms median of "
                       << ms.size() << "\n";
+        } else if (*sliceCmd) {
+            // Command-line settings override the recipe's `slices:` entry (or make one).
+            std::vector<std::string> sets = sliceArgs.sets;
+            auto set = [&](const std::string& key, const std::string& value) {
+                sets.push_back("outputs.slices." + key + "=" + value);
+            };
+            if (!slicePrinter.empty()) set("printer", slicePrinter);
+            if (!sliceFile.empty()) set("file", sliceFile);
+            if (sliceLayer != 0.0 || sliceCmd->count("--layer")) set("layer", std::to_string(sliceLayer));
+            if (!sliceAa.empty()) set("aa", sliceAa);
+            if (sliceGamma >= 0.0 || sliceCmd->count("--gamma")) set("gamma", std::to_string(sliceGamma));
+            if (!slicePosition.empty())
+                set("position", "[" + std::to_string(slicePosition[0]) + ", " + std::to_string(slicePosition[1]) + "]");
+            if (!sliceFormat.empty()) set("format", sliceFormat);
+            if (!slicePreview.empty()) set("preview", slicePreview);
+            voxlat::Recipe recipe = voxlat::loadRecipe(sliceArgs.recipe, sets);
+            const auto spec = std::find_if(recipe.outputs.begin(), recipe.outputs.end(),
+                                           [](const voxlat::OutputSpec& o) { return o.kind == "slices"; });
+            if (spec == recipe.outputs.end())
+                throw voxlat::InputError(sliceArgs.recipe + ": no printer given; use --printer NAME -o FILE");
+            const YAML::Node sliceSpec = spec->spec;
+            const std::string file = spec->file;
+            voxlat::Job job(std::move(recipe));
+            job.writeSlices(sliceSpec, file);
+            const auto r = job.report();
+            const auto& s = r["slices"].back();
+            std::cout << "slices  " << s["layers"] << " layers of " << s["layer_height_mm"] << " mm for "
+                      << s["printer"].get<std::string>() << " (" << s["display_pixels"][0] << " x "
+                      << s["display_pixels"][1] << " px), " << s["format"].get<std::string>() << " -> " << file
+                      << "\n        exposed volume " << s["exposed_volume_mm3"] << " mm3, " << s["num_slow"]
+                      << " slow layers, peak memory " << r["peak_memory_mb"] << " MB\n";
+            if (!s["preview"].get<std::string>().empty())
+                std::cout << "preview " << s["preview"].get<std::string>() << "\n";
         } else if (*sampleCmd) {
             voxlat::Job job(voxlat::loadRecipe(sampleArgs.recipe, sampleArgs.sets));
             return sample(job, sampleField, sampleGradient);

@@ -1,0 +1,104 @@
+"""W3: the acceptance recipe data/recipes/gyroid-sl1s.yaml (gyroid sheet, 60 x 60 x 30 mm, SL1S,
+0.05 mm layers) sliced straight from the field, side by side with the mesh-first route a user has
+today: the gyroid meshed at 0.1 mm by scikit-image, written as STL and sliced by PrusaSlicer's
+command line (bench/reference/w3_mesh_prusaslicer.py). Both archives' per-layer exposed areas
+(sum of pixel/255 x pixel area) are compared with the exact slice area from a fine (5 um)
+supersampling of the analytic field on a few layers."""
+import json
+import os
+import shutil
+import subprocess
+import time
+import zipfile
+
+import numpy as np
+
+from common import PYTHON, ROOT, measure, row, verdict
+
+TITLE = "W3  gyroid sheet 60 x 60 x 30 mm -> Prusa SL1S slices (600 layers): field vs mesh + PrusaSlicer"
+LAYERS = [10, 150, 299, 450, 590]
+LAYER_H, CELL, LEVEL, SIZE, PIXEL = 0.05, 8.0, 0.3, 60.0, 0.05
+REFERENCE_TIMEOUT_S = 1800
+
+
+def exact_area(z, step=0.005):
+    """Area of |f| <= LEVEL at height z over the 60 x 60 mm domain, sampled every `step` mm."""
+    k = 2 * np.pi / CELL
+    t = (np.arange(int(round(SIZE / step))) + 0.5) * step
+    s, c = np.sin(k * t), np.cos(k * t)
+    sz, cz = np.sin(k * z), np.cos(k * z)
+    inside = 0
+    for a in range(0, len(t), 500):
+        sx, cx = s[a:a + 500, None], c[a:a + 500, None]
+        f = sx * c[None, :] + s[None, :] * cz + sz * cx
+        inside += np.count_nonzero(np.abs(f) <= LEVEL)
+    return inside * step * step
+
+
+def layer_areas(archive, indices):
+    from skimage.io import imread
+    import io
+    with zipfile.ZipFile(archive) as z:
+        names = sorted(n for n in z.namelist() if n.endswith(".png") and "/" not in n)
+        areas = {}
+        for i in indices:
+            img = imread(io.BytesIO(z.read(names[i])))
+            areas[i] = float(img.astype(np.float64).sum() / 255.0 * PIXEL * PIXEL)
+        return areas, len(names)
+
+
+def run(voxlat, tmp):
+    t_v, m_v, _ = measure([voxlat, "-q", "run", ROOT / "data/recipes/gyroid-sl1s.yaml", "--out", tmp / "w3"])
+    report = json.loads((tmp / "w3" / "report.json").read_text())
+    ours, n_ours = layer_areas(tmp / "w3" / "gyroid.sl1s", LAYERS)
+    row("voxlat (field -> .sl1s)", t_v, m_v)
+
+    result = {"voxlat_s": t_v, "voxlat_mb": m_v, "voxlat_layers": n_ours}
+    ref = ROOT / "bench/reference/w3_mesh_prusaslicer.py"
+    ini, stl, out = tmp / "sl1s.ini", tmp / "part.stl", tmp / "ref.sl1s"
+    subprocess.run([PYTHON, ref, "config", "--out", ini], check=True)
+    t_m, m_m, mesh_log = measure([PYTHON, ref, "mesh", "--out", stl])
+    row("  scikit-image marching cubes -> STL", t_m, m_m)
+    slicer = shutil.which("prusa-slicer")
+    theirs = None
+    if slicer is None:
+        print("  prusa-slicer is not installed: the reference route cannot run here")
+    else:
+        start = time.perf_counter()
+        proc = subprocess.Popen(["timeout", str(REFERENCE_TIMEOUT_S), slicer, "--export-sla", "--load", ini,
+                                 "--center", "64,40.5", "-o", out, stl],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        _, status, usage = os.wait4(proc.pid, 0)
+        t_p, m_p = time.perf_counter() - start, usage.ru_maxrss / 1024.0
+        if os.waitstatus_to_exitcode(status) != 0 or not out.exists():
+            print(f"  prusa-slicer failed or passed {REFERENCE_TIMEOUT_S} s (exit {os.waitstatus_to_exitcode(status)})")
+        else:
+            row("  PrusaSlicer --export-sla", t_p, m_p)
+            t_r, m_r = t_m + t_p, max(m_m, m_p)
+            row("mesh-first route (total, peak)", t_r, m_r)
+            theirs, n_theirs = layer_areas(out, LAYERS)
+            ratio = t_r / t_v
+            print(f"  speed-up {ratio:.0f}x (target >= 50x: {verdict(ratio >= 50)}); voxlat peak {m_v:.0f} MB "
+                  f"(target < 500 MB: {verdict(m_v < 500)}); layers: voxlat {n_ours}, PrusaSlicer {n_theirs}")
+            result.update({"reference_s": t_r, "reference_mb": m_r, "ratio": ratio, "mesh_s": t_m,
+                           "prusaslicer_s": t_p, "reference_layers": n_theirs,
+                           "triangles": mesh_log.strip().splitlines()[-1]})
+    errors_v, errors_r = [], []
+    print("  layer  z (mm)   exact mm2   voxlat err   PrusaSlicer err")
+    for i in LAYERS:
+        exact = exact_area((i + 0.5) * LAYER_H)
+        ev = (ours[i] - exact) / exact
+        errors_v.append(abs(ev))
+        line = f"  {i:5d}  {(i + 0.5) * LAYER_H:6.3f}  {exact:10.2f}   {ev:+.2e}"
+        if theirs:
+            er = (theirs[i] - exact) / exact
+            errors_r.append(abs(er))
+            line += f"      {er:+.2e}"
+        print(line)
+    print(f"  mean |area error|: voxlat {np.mean(errors_v):.2e}" +
+          (f", PrusaSlicer {np.mean(errors_r):.2e} (voxlat closer: {verdict(np.mean(errors_v) < np.mean(errors_r))})"
+           if errors_r else ""))
+    print("  voxlat stages: " + ", ".join(f"{k} {v:.2f}s" for k, v in report["timings_s"].items()))
+    result.update({"voxlat_area_error": float(np.mean(errors_v)),
+                   "reference_area_error": float(np.mean(errors_r)) if errors_r else None})
+    return result

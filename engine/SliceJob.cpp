@@ -1,0 +1,487 @@
+#include "engine/SliceJob.h"
+
+#include "engine/Errors.h"
+#include "engine/Progress.h"
+#include "mesher/AtomicFile.h"
+#include "mesher/SliceWriters.h"
+#include "mesher/Slicer.h"
+
+#include <tbb/info.h>
+#include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
+
+#include <unistd.h>
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <sstream>
+
+namespace voxlat {
+
+namespace fs = std::filesystem;
+
+const std::vector<std::string>& sliceKeys()
+{
+    static const std::vector<std::string> keys{"printer", "layer",    "file",           "format",  "position", "aa",
+                                               "gamma",   "exposure", "exposure_first", "preview", "timestamp"};
+    return keys;
+}
+
+SliceSettings parseSliceSettings(const RecipeNode& spec)
+{
+    if (!spec.isMap()) spec.fail("expected a map like `{printer: sl1s, layer: 0.05, file: part.sl1s}`");
+    spec.checkKeys(sliceKeys());
+    SliceSettings s;
+    s.printer = spec["printer"].string();
+    s.printerWhere = spec["printer"].where();
+    if (spec.has("layer")) s.layer = spec["layer"].positiveNumber();
+    s.file = spec["file"].string();
+    if (spec.has("format")) {
+        s.format = spec["format"].string();
+        if (s.format != "sl1" && s.format != "sl1s" && s.format != "zip" && s.format != "png" && s.format != "exr")
+            spec["format"].fail("unknown format `" + s.format + "` (valid: sl1, sl1s, zip, png, exr)");
+    }
+    if (spec.has("position")) {
+        const RecipeNode p = spec["position"];
+        if (!p.isSequence() || p.size() != 2)
+            p.fail("expected [x, y]: where the part's centre goes on the display (mm)");
+        s.position = std::array<double, 2>{p.at(0).number(), p.at(1).number()};
+    }
+    if (spec.has("aa")) {
+        const RecipeNode aa = spec["aa"];
+        const std::string word = aa.yaml().Scalar();
+        if (word == "off" || word == "false") {
+            s.supersample = 0;
+        } else if (word == "on" || word == "true") {
+            s.supersample = 8;
+        } else {
+            const double v = aa.number();
+            if (v != std::floor(v) || v < 1 || v > 16)
+                aa.fail("expected `off`, `on` or a number of sub-samples per axis from 1 to 16");
+            s.supersample = int(v);
+        }
+    }
+    if (spec.has("gamma")) {
+        s.gamma = spec["gamma"].number();
+        if (s.gamma < 0 || s.gamma > 10)
+            spec["gamma"].fail("expected a gamma from 0 (binary) to 10; 1 is linear coverage");
+    }
+    if (spec.has("exposure")) s.exposure = spec["exposure"].positiveNumber();
+    if (spec.has("exposure_first")) s.exposureFirst = spec["exposure_first"].positiveNumber();
+    if (spec.has("preview")) {
+        const std::string word = spec["preview"].yaml().Scalar();
+        s.preview = word == "false" || word == "off" ? "off" : word;
+    }
+    if (spec.has("timestamp")) s.timestamp = spec["timestamp"].string();
+    return s;
+}
+
+namespace {
+
+std::string number(double v)
+{
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.10g", v);
+    return buf;
+}
+
+std::string layerName(const std::string& prefix, int index, const char* ext)
+{
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%05d", index);
+    return prefix + buf + ext;
+}
+
+/// A small top view of the part: the highest exposed layer per cell, shaded, for thumbnails.
+struct HeightMap {
+    int w = 0, h = 0, step = 1;
+    std::vector<int> top;  ///< -1: never exposed
+    void init(int nx, int ny)
+    {
+        step = std::max(1, std::max((nx + 799) / 800, (ny + 799) / 800));
+        w = (nx + step - 1) / step;
+        h = (ny + step - 1) / step;
+        top.assign(std::size_t(w) * h, -1);
+    }
+    void add(const LayerImage& image)
+    {
+        // Sampled every `step` pixels: a thumbnail needs no more.
+        for (int j = 0; j < image.ny; j += step)
+            for (int i = 0, c = 0; i < image.nx; i += step, ++c)
+                if (image.pixels[std::size_t(j) * image.nx + i] >= 128)
+                    top[std::size_t(j / step) * w + c] = image.index;
+    }
+    /// An RGBA image of tw x th with the map fitted in, y up.
+    std::string render(int tw, int th, int layers) const
+    {
+        const double scale = std::min(double(tw) / std::max(1, w), double(th) / std::max(1, h));
+        const double ox = 0.5 * (tw - scale * w), oy = 0.5 * (th - scale * h);
+        return encodePng(
+            tw, th, 4,
+            [&](int row, std::uint8_t* out) {
+                for (int c = 0; c < tw; ++c) {
+                    const int i = int(std::floor((c + 0.5 - ox) / scale));
+                    const int j = h - 1 - int(std::floor((row + 0.5 - oy) / scale));
+                    int t = -1;
+                    if (i >= 0 && i < w && j >= 0 && j < h) t = top[std::size_t(j) * w + i];
+                    std::uint8_t* p = out + 4 * c;
+                    if (t < 0) {
+                        p[0] = p[1] = p[2] = 40;
+                        p[3] = 255;
+                    } else {
+                        const double shade = 0.45 + 0.55 * double(t + 1) / std::max(1, layers);
+                        p[0] = std::uint8_t(std::lround(250 * shade));
+                        p[1] = std::uint8_t(std::lround(140 * shade));
+                        p[2] = std::uint8_t(std::lround(30 * shade));
+                        p[3] = 255;
+                    }
+                }
+            },
+            6);
+    }
+};
+
+/// A few layers, downsampled by area averaging, laid out on a grid (a contact sheet).
+struct ContactSheet {
+    std::vector<int> layers;
+    int cell = 320, columns = 4, step = 1, cw = 0, ch = 0;
+    std::vector<std::vector<std::uint8_t>> cells;
+    void init(int count, int nx, int ny)
+    {
+        const int n = std::min(count, 12);
+        for (int k = 0; k < n; ++k) layers.push_back(int((k + 0.5) * count / n));
+        step = std::max(1, std::max((nx + cell - 1) / cell, (ny + cell - 1) / cell));
+        cw = std::max(1, (nx + step - 1) / step);
+        ch = std::max(1, (ny + step - 1) / step);
+        cells.resize(layers.size());
+        columns = std::min<int>(columns, std::max<std::size_t>(1, layers.size()));
+    }
+    void add(const LayerImage& image)
+    {
+        const auto it = std::find(layers.begin(), layers.end(), image.index);
+        if (it == layers.end()) return;
+        std::vector<std::uint32_t> sum(std::size_t(cw) * ch, 0);
+        for (int j = 0; j < image.ny; ++j)
+            for (int i = 0; i < image.nx; ++i)
+                sum[std::size_t(j / step) * cw + i / step] += image.pixels[std::size_t(j) * image.nx + i];
+        auto& c = cells[it - layers.begin()];
+        c.resize(sum.size());
+        for (std::size_t k = 0; k < sum.size(); ++k) c[k] = std::uint8_t(sum[k] / (step * step));
+    }
+    std::string render() const
+    {
+        const int rows = int((layers.size() + columns - 1) / columns), gap = 4;
+        const int width = columns * (cw + gap) + gap, height = rows * (ch + gap) + gap;
+        return encodePng(
+            width, height, 1,
+            [&](int r, std::uint8_t* out) {
+                std::fill(out, out + width, std::uint8_t(96));
+                const int cr = (r - gap) / (ch + gap), y = (r - gap) % (ch + gap);
+                if (r < gap || y >= ch || cr >= rows) return;
+                for (int cc = 0; cc < columns; ++cc) {
+                    const std::size_t k = std::size_t(cr) * columns + cc;
+                    if (k >= cells.size()) break;
+                    const int j = ch - 1 - y;  // y up, as seen from above
+                    for (int x = 0; x < cw; ++x)
+                        out[gap + cc * (cw + gap) + x] = cells[k].empty() ? 0 : cells[k][std::size_t(j) * cw + x];
+                }
+            },
+            6);
+    }
+};
+
+/// Output folder that appears whole: written under a temporary name, renamed at commit.
+struct AtomicFolder {
+    fs::path path, temp;
+    bool committed = false;
+    explicit AtomicFolder(fs::path p) : path(std::move(p))
+    {
+        temp = path;
+        temp += ".tmp-" + std::to_string(::getpid());
+        fs::remove_all(temp);
+        fs::create_directories(temp);
+    }
+    ~AtomicFolder()
+    {
+        std::error_code ec;
+        if (!committed) fs::remove_all(temp, ec);
+    }
+    void commit()
+    {
+        fs::remove_all(path);
+        fs::rename(temp, path);
+        committed = true;
+    }
+};
+
+void writeWhole(const std::string& path, const std::string& bytes)
+{
+    AtomicFile file(path);
+    file.stream().write(bytes.data(), std::streamsize(bytes.size()));
+    file.commit();
+}
+
+std::string formatOf(const SliceSettings& s, const fs::path& path)
+{
+    if (!s.format.empty()) return s.format;
+    const std::string ext = path.extension().string();
+    if (ext == ".sl1") return "sl1";
+    if (ext == ".sl1s") return "sl1s";
+    if (ext == ".zip") return "zip";
+    throw InputError(s.printerWhere + ": cannot tell the slice format from the file name `" + path.string() +
+                     "`; name it .sl1, .sl1s or .zip, or set `format: png` or `format: exr` for a folder of layers");
+}
+
+}  // namespace
+
+SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterProfile& printer,
+                        const SliceSettings& settings, const fs::path& path, const std::string& partWhere)
+{
+    // Check everything before the first byte is written.
+    const double layer = settings.layer.value_or(printer.layerMm);
+    const double height = part.max.z() - part.min.z();
+    const std::string printerRef = "printer `" + printer.key + "` (" + printer.file + ")";
+    if (height > printer.maxHeightMm + 1e-9)
+        throw InputError(partWhere + ": the part is " + number(height) + " mm tall, taller than the " +
+                         number(printer.maxHeightMm) + " mm build height (`max_height`) of " + printerRef +
+                         "; lower the domain or split the part");
+    if (layer > height)
+        throw InputError(settings.printerWhere + ": the layer height " + number(layer) +
+                         " mm is larger than the part (" + number(height) +
+                         " mm tall); set `layer:` below the part height");
+    const int count = int(std::floor(height / layer - 0.5 + 1e-9)) + 1;
+    const std::string format = formatOf(settings, path);
+    Display display;
+    display.widthMm = printer.widthMm;
+    display.heightMm = printer.heightMm;
+    display.pixelsX = printer.pixelsX;
+    display.pixelsY = printer.pixelsY;
+    display.mirrorX = printer.mirrorX;
+    display.mirrorY = printer.mirrorY;
+    display.portrait = printer.portrait;
+    const Vec3d centre = part.center();
+    const double px = settings.position ? (*settings.position)[0] : 0.5 * printer.widthMm;
+    const double py = settings.position ? (*settings.position)[1] : 0.5 * printer.heightMm;
+    RasterOptions options;
+    options.supersample = settings.supersample;
+    options.gamma = settings.gamma;
+    const Slicer slicer(field, part, px - centre.x(), py - centre.y(), display, options);
+    if (!slicer.fitsDisplay())
+        throw InputError(partWhere + ": the part (" + number(part.extent().x()) + " x " + number(part.extent().y()) +
+                         " mm, centred at " + number(px) + ", " + number(py) + ") does not fit the " +
+                         number(printer.widthMm) + " x " + number(printer.heightMm) + " mm display (`display`) of " +
+                         printerRef + "; shrink the domain, move it with `position:` or pick a larger printer");
+
+    const bool archive = format == "sl1" || format == "sl1s" || format == "zip";
+    const std::string jobDir = format == "zip" ? "" : path.stem().string();
+    std::unique_ptr<AtomicFile> file;
+    std::unique_ptr<ZipStreamWriter> zip;
+    std::unique_ptr<AtomicFolder> folder;
+    if (archive) {
+        fs::create_directories(fs::absolute(path).parent_path());
+        file = std::make_unique<AtomicFile>(path.string());
+        zip = std::make_unique<ZipStreamWriter>(file->stream());
+    } else {
+        folder = std::make_unique<AtomicFolder>(path);
+    }
+
+    SliceResult result;
+    result.layerAreas.resize(count);
+    const double pixelArea = display.pitchX() * display.pitchY();
+    const double displayArea = printer.widthMm * printer.heightMm;
+    HeightMap heights;
+    heights.init(slicer.nx(), slicer.ny());
+    ContactSheet sheet;
+    sheet.init(count, slicer.nx(), slicer.ny());
+    RasterStats stats;
+
+    struct Token {
+        LayerImage image;
+        std::string bytes;
+        std::vector<float> values;
+        std::atomic<int>* held;
+        explicit Token(std::atomic<int>* h) : held(h) {}
+        ~Token() { --*held; }
+    };
+    std::atomic<int> held{0}, maxHeld{0};
+    const int threads = tbb::this_task_arena::max_concurrency();
+    const std::size_t tokens = std::size_t(threads) + 2;
+    int next = 0;
+    Progress progress("slicing", count, true);
+    const int storedW = display.storedWidth(), storedH = display.storedHeight();
+
+    tbb::parallel_pipeline(
+        tokens, tbb::make_filter<void, Token*>(tbb::filter_mode::serial_in_order, [&](tbb::flow_control& fc) -> Token* {
+                    if (next >= count) {
+                        fc.stop();
+                        return nullptr;
+                    }
+                    const int now = ++held;
+                    int seen = maxHeld.load();
+                    while (now > seen && !maxHeld.compare_exchange_weak(seen, now)) {
+                    }
+                    auto* t = new Token(&held);
+                    t->image.index = next++;
+                    return t;
+                }) & tbb::make_filter<Token*, Token*>(tbb::filter_mode::parallel, [&](Token* t) {
+                    const double z = part.min.z() + (t->image.index + 0.5) * layer;
+                    slicer.rasterize(z, t->image, &stats);
+                    if (format == "exr") {
+                        slicer.fieldValues(z, t->values);
+                    } else {
+                        std::vector<std::uint8_t> window;
+                        int col0, row0, w, h;
+                        t->image.storedWindow(display, window, col0, row0, w, h);
+                        t->bytes = encodePng(storedW, storedH, 1, [&](int row, std::uint8_t* out) {
+                            std::fill(out, out + storedW, std::uint8_t(0));
+                            if (row >= row0 && row < row0 + h)
+                                std::copy_n(&window[std::size_t(row - row0) * w], w, out + col0);
+                        });
+                    }
+                    return t;
+                }) & tbb::make_filter<Token*, void>(tbb::filter_mode::serial_in_order, [&](Token* raw) {
+                    std::unique_ptr<Token> t(raw);
+                    const int i = t->image.index;
+                    result.layerAreas[i] = t->image.exposedPixels() * pixelArea;
+                    heights.add(t->image);
+                    sheet.add(t->image);
+                    if (format == "exr")
+                        writeExrFloat((folder->temp / layerName("", i, ".exr")).string(), slicer.nx(), slicer.ny(),
+                                      slicer.i0(), slicer.j0(), t->values);
+                    else if (zip)
+                        zip->add(layerName(jobDir, i, ".png"), t->bytes);
+                    else
+                        writeWhole((folder->temp / layerName("", i, ".png")).string(), t->bytes);
+                    progress.add();
+                }));
+
+    // Statistics for config.ini: slow tilts where a layer covers more than area_fill of the display.
+    int slow = 0;
+    double volume = 0.0, printTime = 0.0;
+    const double exposure = settings.exposure.value_or(printer.exposureS);
+    const double exposureFirst = settings.exposureFirst.value_or(printer.exposureFirstS);
+    for (int i = 0; i < count; ++i) {
+        const bool isSlow = result.layerAreas[i] > printer.areaFillPercent / 100.0 * displayArea;
+        slow += isSlow;
+        volume += result.layerAreas[i] * layer;
+        const double e = i < printer.fadeLayers
+                             ? exposureFirst + (exposure - exposureFirst) * double(i) / printer.fadeLayers
+                             : exposure;
+        printTime += e + (isSlow ? printer.slowTiltS : printer.fastTiltS);
+    }
+
+    nlohmann::json meta = {{"printer", printer.key},
+                           {"printer_profile", printer.file},
+                           {"format", format},
+                           {"layers", count},
+                           {"layer_height_mm", layer},
+                           {"first_layer_z_mm", part.min.z() + 0.5 * layer},
+                           {"display_pixels", {printer.pixelsX, printer.pixelsY}},
+                           {"display_mm", {printer.widthMm, printer.heightMm}},
+                           {"stored_png_size", {storedW, storedH}},
+                           {"orientation", printer.portrait ? "portrait" : "landscape"},
+                           {"mirror", {printer.mirrorX, printer.mirrorY}},
+                           {"part_centre_on_display_mm", {px, py}},
+                           {"window_pixels", {slicer.i0(), slicer.j0(), slicer.nx(), slicer.ny()}},
+                           {"anti_aliasing", settings.supersample > 0 ? "edge coverage" : "off (pixel centre)"},
+                           {"supersample", settings.supersample},
+                           {"gamma", settings.gamma}};
+
+    if (archive) {
+        if (format != "zip") {
+            std::ostringstream config;
+            const std::vector<std::pair<std::string, std::string>> keys{{"action", "print"},
+                                                                        {"expTime", number(exposure)},
+                                                                        {"expTimeFirst", number(exposureFirst)},
+                                                                        {"expUserProfile", "0"},
+                                                                        {"fileCreationTimestamp", settings.timestamp},
+                                                                        {"hollow", "0"},
+                                                                        {"jobDir", jobDir},
+                                                                        {"layerHeight", number(layer)},
+                                                                        {"materialName", "voxlat"},
+                                                                        {"numFade", std::to_string(printer.fadeLayers)},
+                                                                        {"numFast", std::to_string(count - slow)},
+                                                                        {"numSlow", std::to_string(slow)},
+                                                                        {"printProfile", "voxlat"},
+                                                                        {"printTime", number(std::round(printTime))},
+                                                                        {"printerModel", printer.model},
+                                                                        {"printerProfile", printer.name},
+                                                                        {"printerVariant", "default"},
+                                                                        {"prusaSlicerVersion", "voxlat 0.1.0"},
+                                                                        {"usedMaterial", number(volume / 1000.0)}};
+            for (const auto& [k, v] : keys) config << k << " = " << v << "\n";
+            zip->add("config.ini", config.str());
+            std::ostringstream ini;
+            ini << "# generated by voxlat 0.1.0\n"
+                << "area_fill = " << number(printer.areaFillPercent) << "\n"
+                << "bed_shape = 0x0," << number(printer.widthMm) << "x0," << number(printer.widthMm) << "x"
+                << number(printer.heightMm) << ",0x" << number(printer.heightMm) << "\n"
+                << "display_height = " << number(printer.heightMm) << "\n"
+                << "display_mirror_x = " << int(printer.mirrorX) << "\n"
+                << "display_mirror_y = " << int(printer.mirrorY) << "\n"
+                << "display_orientation = " << (printer.portrait ? "portrait" : "landscape") << "\n"
+                << "display_pixels_x = " << printer.pixelsX << "\n"
+                << "display_pixels_y = " << printer.pixelsY << "\n"
+                << "display_width = " << number(printer.widthMm) << "\n"
+                << "exposure_time = " << number(exposure) << "\n"
+                << "faded_layers = " << printer.fadeLayers << "\n"
+                << "fast_tilt_time = " << number(printer.fastTiltS) << "\n"
+                << "gamma_correction = " << number(settings.supersample > 0 ? settings.gamma : 0.0) << "\n"
+                << "initial_exposure_time = " << number(exposureFirst) << "\n"
+                << "initial_layer_height = " << number(layer) << "\n"
+                << "layer_height = " << number(layer) << "\n"
+                << "max_print_height = " << number(printer.maxHeightMm) << "\n"
+                << "pad_enable = 0\n"
+                << "printer_model = " << printer.model << "\n"
+                << "printer_settings_id = " << printer.name << "\n"
+                << "printer_technology = SLA\n"
+                << "printer_variant = default\n"
+                << "slow_tilt_time = " << number(printer.slowTiltS) << "\n"
+                << "supports_enable = 0\n"
+                << "thumbnails = 400x400,800x480\n";
+            zip->add("prusaslicer.ini", ini.str());
+            zip->add("thumbnail/thumbnail400x400.png", heights.render(400, 400, count));
+            zip->add("thumbnail/thumbnail800x480.png", heights.render(800, 480, count));
+        } else {
+            zip->add("slices.json", meta.dump(2) + "\n");
+        }
+        zip->finish();
+        file->commit();
+    } else {
+        writeWhole((folder->temp / "slices.json").string(), meta.dump(2) + "\n");
+        folder->commit();
+    }
+
+    std::string previewPath;
+    if (settings.preview != "off") {
+        // A relative preview name sits next to the slices (like every output, relative to --out).
+        previewPath = settings.preview.empty() ? (path.parent_path() / (path.stem().string() + ".preview.png")).string()
+                      : fs::path(settings.preview).is_absolute() ? settings.preview
+                                                                 : (path.parent_path() / settings.preview).string();
+        writeWhole(previewPath, sheet.render());
+    }
+
+    double total = 0.0;
+    for (double a : result.layerAreas) total += a;
+    result.maxLayersHeld = maxHeld.load();
+    result.report = meta;
+    result.report["file"] = path.string();
+    result.report["num_fast"] = count - slow;
+    result.report["num_slow"] = slow;
+    result.report["exposed_volume_mm3"] = volume;
+    result.report["mean_layer_area_mm2"] = total / count;
+    result.report["print_time_s"] = std::round(printTime);
+    result.report["preview"] = previewPath;
+    result.report["preview_layers"] = sheet.layers;
+    result.report["max_layers_held"] = result.maxLayersHeld;
+    result.report["tiles"] = {
+        {"inside", stats.tilesInside.load()}, {"outside", stats.tilesOutside.load()}, {"edge", stats.tilesEdge.load()}};
+    result.report["pixels_evaluated"] = stats.pixelsEvaluated.load();
+    result.report["pixels_supersampled"] = stats.pixelsSupersampled.load();
+    result.report["pixels_total"] = double(count) * slicer.nx() * slicer.ny();
+    return result;
+}
+
+}  // namespace voxlat

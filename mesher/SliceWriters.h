@@ -1,0 +1,50 @@
+/// @file SliceWriters.h
+/// @brief Byte-exact writers for slice jobs: PNG (libpng), a streaming zip, OpenEXR float images.
+///
+/// Everything here is deterministic: fixed compression settings, fixed zip timestamps, entries in
+/// the order they are added, so the same images give the same bytes on any machine and thread count.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <ostream>
+#include <string>
+#include <vector>
+
+namespace voxlat {
+
+/// Encodes a PNG of @a width x @a height pixels with @a channels (1 grey, 4 RGBA) 8-bit samples;
+/// @a row(r, out) fills row r (width * channels bytes). zlib level @a level (deterministic).
+std::string encodePng(int width, int height, int channels, const std::function<void(int, std::uint8_t*)>& row,
+                      int level = 1);
+
+/// Decodes an 8-bit grey or RGBA PNG (for tests and previews); throws std::runtime_error if it cannot.
+std::vector<std::uint8_t> decodePng(const std::string& bytes, int& width, int& height, int& channels);
+
+/// Writes a zip archive to a stream as entries arrive (no entry is held in memory after add()):
+/// entries are stored (PNG data is already deflated), with CRC-32, a fixed DOS timestamp and
+/// Zip64 records once the archive passes 4 GiB.
+class ZipStreamWriter {
+public:
+    explicit ZipStreamWriter(std::ostream& out) : mOut(out) {}
+    void add(const std::string& name, const std::string& data);
+    /// Writes the central directory; call once, after the last add().
+    void finish();
+    std::uint64_t bytesWritten() const { return mOffset; }
+
+private:
+    struct Entry {
+        std::string name;
+        std::uint32_t crc = 0;
+        std::uint64_t size = 0, offset = 0;
+    };
+    std::ostream& mOut;
+    std::vector<Entry> mEntries;
+    std::uint64_t mOffset = 0;
+};
+
+/// Writes one float channel "Y" (@a width x @a height, row-major, row 0 first) to an OpenEXR file,
+/// with the data window at (@a x0, @a y0). Throws std::runtime_error naming the file on failure.
+void writeExrFloat(const std::string& path, int width, int height, int x0, int y0, const std::vector<float>& data);
+
+}  // namespace voxlat

@@ -1,0 +1,338 @@
+#include "mesher/Slicer.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace voxlat {
+
+namespace {
+
+/// Area of {u, v in [0, 1]: a u + b v < c} for a, b >= 0: the share of a unit pixel on the inside
+/// of a straight edge. Exact (piecewise quadratic in c).
+double squareCoverage(double a, double b, double c)
+{
+    if (a > b) std::swap(a, b);
+    if (b <= 0.0) return c > 0.0 ? 1.0 : 0.0;
+    if (a < 1e-4 * b) return std::clamp(c / b, 0.0, 1.0);  // an edge along a pixel side
+    auto r = [](double x) { return x > 0.0 ? x * x : 0.0; };
+    const double area = (r(c) - r(c - a) - r(c - b) + r(c - a - b)) / (2.0 * a * b);
+    return std::clamp(area, 0.0, 1.0);
+}
+
+/// Second-order correction to squareCoverage: where the field is f + g.p + p'Hp/2 (p in pixels from the
+/// centre), the boundary moves off the straight chord by -p'Hp / (2|g|); integrated along the chord
+/// inside the pixel this changes the inside area by -(L m'Hm + L^3/12 t'Ht) / (2|g|) (m the chord's
+/// midpoint, t its direction, L its length).
+double curvatureCorrection(double f, double gx, double gy, double hxx, double hyy, double hxy)
+{
+    double pts[4][2];
+    int n = 0;
+    for (double side : {-0.5, 0.5}) {
+        if (gy != 0.0) {
+            const double v = (-f - gx * side) / gy;
+            if (std::abs(v) <= 0.5) pts[n][0] = side, pts[n++][1] = v;
+        }
+        if (gx != 0.0 && n < 4) {
+            const double u = (-f - gy * side) / gx;
+            if (std::abs(u) <= 0.5) pts[n][0] = u, pts[n++][1] = side;
+        }
+    }
+    if (n < 2) return 0.0;
+    int a = 0, b = 1;
+    double best = -1.0;
+    for (int i = 0; i < n; ++i)
+        for (int j = i + 1; j < n; ++j) {
+            const double d = sqr(pts[i][0] - pts[j][0]) + sqr(pts[i][1] - pts[j][1]);
+            if (d > best) best = d, a = i, b = j;
+        }
+    const double length = std::sqrt(best);
+    if (length <= 0.0) return 0.0;
+    const double mx = 0.5 * (pts[a][0] + pts[b][0]), my = 0.5 * (pts[a][1] + pts[b][1]);
+    const double tx = (pts[b][0] - pts[a][0]) / length, ty = (pts[b][1] - pts[a][1]) / length;
+    const double mHm = hxx * mx * mx + 2.0 * hxy * mx * my + hyy * my * my;
+    const double tHt = hxx * tx * tx + 2.0 * hxy * tx * ty + hyy * ty * ty;
+    return -(length * mHm + length * length * length / 12.0 * tHt) / (2.0 * std::sqrt(gx * gx + gy * gy));
+}
+
+}  // namespace
+
+double LayerImage::exposedPixels() const
+{
+    std::uint64_t sum = 0;
+    for (std::uint8_t p : pixels) sum += p;
+    return double(sum) / 255.0;
+}
+
+void LayerImage::storedRow(const Display& display, int row, std::uint8_t* out) const
+{
+    const int width = display.storedWidth();
+    std::fill(out, out + width, std::uint8_t(0));
+    int i, j, i1, j1;
+    display.landscapeOf(0, row, i, j);
+    display.landscapeOf(width - 1, row, i1, j1);
+    if (display.portrait) {  // the row is a column of the landscape grid (fixed i)
+        if (i < i0 || i >= i0 + nx) return;
+        const int step = j1 >= j ? 1 : -1;
+        for (int c = 0; c < width; ++c) {
+            const int jj = j + step * c;
+            if (jj >= j0 && jj < j0 + ny) out[c] = pixels[std::size_t(jj - j0) * nx + (i - i0)];
+        }
+    } else {  // the row is a row of the landscape grid (fixed j)
+        if (j < j0 || j >= j0 + ny) return;
+        const int step = i1 >= i ? 1 : -1;
+        const std::uint8_t* src = &pixels[std::size_t(j - j0) * nx];
+        for (int c = 0; c < width; ++c) {
+            const int ii = i + step * c;
+            if (ii >= i0 && ii < i0 + nx) out[c] = src[ii - i0];
+        }
+    }
+}
+
+void LayerImage::storedWindow(const Display& display, std::vector<std::uint8_t>& out, int& col0, int& row0, int& w,
+                              int& h) const
+{
+    w = display.portrait ? ny : nx;
+    h = display.portrait ? nx : ny;
+    out.assign(std::size_t(w) * h, 0);
+    if (nx == 0 || ny == 0) return;
+    // Stored corners of the window's first and last pixels give its placement and directions.
+    const bool mx = display.portrait ? !display.mirrorX : display.mirrorX, my = !display.mirrorY;
+    const int W = display.storedWidth(), H = display.storedHeight();
+    auto colOf = [&](int i, int j) {
+        const int u = display.portrait ? j : i;
+        return mx ? W - 1 - u : u;
+    };
+    auto rowOf = [&](int i, int j) {
+        const int v = display.portrait ? i : j;
+        return my ? H - 1 - v : v;
+    };
+    col0 = std::min(colOf(i0, j0), colOf(i0 + nx - 1, j0 + ny - 1));
+    row0 = std::min(rowOf(i0, j0), rowOf(i0 + nx - 1, j0 + ny - 1));
+    // Stored row and column are each a function of one landscape axis: rows of the source map
+    // to a fixed stored column (portrait) or row (landscape) with a constant step along the other.
+    const std::ptrdiff_t di = display.portrait ? (my ? -1 : 1) * std::ptrdiff_t(w) : (mx ? -1 : 1);
+    const std::ptrdiff_t dj = display.portrait ? (mx ? -1 : 1) : (my ? -1 : 1) * std::ptrdiff_t(w);
+    const std::ptrdiff_t origin = std::ptrdiff_t(rowOf(i0, j0) - row0) * w + (colOf(i0, j0) - col0);
+    constexpr int kBlock = 64;
+    for (int jb0 = 0; jb0 < ny; jb0 += kBlock)
+        for (int ib0 = 0; ib0 < nx; ib0 += kBlock)
+            for (int j = jb0; j < std::min(ny, jb0 + kBlock); ++j) {
+                const std::uint8_t* src = &pixels[std::size_t(j) * nx];
+                std::uint8_t* dst = out.data() + origin + dj * j;
+                for (int i = ib0; i < std::min(nx, ib0 + kBlock); ++i) dst[di * i] = src[i];
+            }
+}
+
+Slicer::Slicer(const FieldNode& field, const Box3& part, double offsetX, double offsetY, const Display& display,
+               const RasterOptions& options)
+    : mField(field), mPart(part), mOffsetX(offsetX), mOffsetY(offsetY), mDisplay(display), mOptions(options)
+{
+    const double px = display.pitchX(), py = display.pitchY();
+    const double x0 = part.min.x() + offsetX, x1 = part.max.x() + offsetX;
+    const double y0 = part.min.y() + offsetY, y1 = part.max.y() + offsetY;
+    const double tolerance = 1e-6;
+    mFits =
+        x0 >= -tolerance && y0 >= -tolerance && x1 <= display.widthMm + tolerance && y1 <= display.heightMm + tolerance;
+    // Pixels whose footprint [i, i+1) px meets [x0, x1].
+    mI0 = std::clamp(int(std::floor(x0 / px + 1e-9)), 0, display.pixelsX);
+    const int i1 = std::clamp(int(std::ceil(x1 / px - 1e-9)), 0, display.pixelsX);
+    mJ0 = std::clamp(int(std::floor(y0 / py + 1e-9)), 0, display.pixelsY);
+    const int j1 = std::clamp(int(std::ceil(y1 / py - 1e-9)), 0, display.pixelsY);
+    mNx = std::max(0, i1 - mI0);
+    mNy = std::max(0, j1 - mJ0);
+    const int s = std::max(1, options.supersample);
+    mLevels.resize(std::size_t(s * s) + 1);
+    for (int k = 0; k <= s * s; ++k) {
+        const double coverage = double(k) / (s * s);
+        mLevels[k] = options.gamma <= 0.0 ? (coverage >= 0.5 ? 255 : 0)
+                                          : std::uint8_t(std::lround(255.0 * std::pow(coverage, options.gamma)));
+    }
+}
+
+void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
+{
+    out.i0 = mI0;
+    out.j0 = mJ0;
+    out.nx = mNx;
+    out.ny = mNy;
+    out.pixels.assign(std::size_t(mNx) * mNy, 0);
+    if (z < mPart.min.z() || z > mPart.max.z()) return;
+    const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
+    const int tile = std::max(2, mOptions.tile), block = 4 * tile;
+    std::vector<double> values, sub;
+
+    // Classifies the pixel box [i, i + n) x [j, j + m) of the window: -1 inside, +1 outside, 0 both.
+    auto classify = [&](int i, int j, int n, int m) {
+        const double lx = (mI0 + i) * px - mOffsetX, hx = (mI0 + i + n) * px - mOffsetX;
+        const double ly = (mJ0 + j) * py - mOffsetY, hy = (mJ0 + j + m) * py - mOffsetY;
+        const Box3 box{{std::max(lx, mPart.min.x()), std::max(ly, mPart.min.y()), z},
+                       {std::min(hx, mPart.max.x()), std::min(hy, mPart.max.y()), z}};
+        if (box.min.x() > box.max.x() || box.min.y() > box.max.y()) return 1;
+        const Interval b = mField.bound(box);
+        if (b.lo > 0.0) return 1;
+        const bool whole = lx >= mPart.min.x() && hx <= mPart.max.x() && ly >= mPart.min.y() && hy <= mPart.max.y();
+        return b.hi < 0.0 && whole ? -1 : 0;
+    };
+    auto fill = [&](int i, int j, int n, int m) {
+        for (int b = 0; b < m; ++b) std::fill_n(&out.pixels[std::size_t(j + b) * mNx + i], n, std::uint8_t(255));
+    };
+    for (int bj = 0; bj < mNy; bj += block)
+        for (int bi = 0; bi < mNx; bi += block) {
+            const int bnx = std::min(block, mNx - bi), bny = std::min(block, mNy - bj);
+            const int side = classify(bi, bj, bnx, bny);
+            const std::uint64_t tiles = std::uint64_t((bnx + tile - 1) / tile) * ((bny + tile - 1) / tile);
+            if (side != 0) {
+                if (side < 0) fill(bi, bj, bnx, bny);
+                if (stats) (side < 0 ? stats->tilesInside : stats->tilesOutside) += tiles;
+                continue;
+            }
+            for (int tj = bj; tj < bj + bny; tj += tile)
+                for (int ti = bi; ti < bi + bnx; ti += tile) {
+                    const int tnx = std::min(tile, bi + bnx - ti), tny = std::min(tile, bj + bny - tj);
+                    const int tside = classify(ti, tj, tnx, tny);
+                    if (tside < 0) fill(ti, tj, tnx, tny);
+                    if (tside != 0) {
+                        if (stats) ++(tside < 0 ? stats->tilesInside : stats->tilesOutside);
+                        continue;
+                    }
+                    if (stats) ++stats->tilesEdge;
+                    edgeTile(z, ti, tj, tnx, tny, out, values, sub, stats);
+                }
+        }
+}
+
+void Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, std::vector<double>& values,
+                      std::vector<double>& sub, RasterStats* stats) const
+{
+    const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
+    // Pixel centres of the tile plus a one-pixel halo, for the neighbourhood tests and gradients.
+    GridBatch grid;
+    grid.origin = Vec3d(xOf(mI0 + ti - 1), yOf(mJ0 + tj - 1), z);
+    grid.spacing = Vec3d(px, py, 1.0);
+    grid.nx = tnx + 2;
+    grid.ny = tny + 2;
+    grid.nz = 1;
+    values.resize(grid.size());
+    mField.gridValues(grid, values);
+    const int hy = grid.ny;
+    auto v = [&](int a, int b) { return values[std::size_t(a) * hy + b]; };
+    const int s = std::max(1, mOptions.supersample);
+    std::uint64_t supersampled = 0;
+
+    // The largest difference between neighbouring centres (axis and diagonal) over the tile: a pixel
+    // with |f| above it cannot hold the boundary (see below), a one-compare fast path.
+    double tileDiff = 0.0;
+    for (int a = 0; a + 1 < grid.nx; ++a)
+        for (int b = 0; b + 1 < hy; ++b) {
+            const double f00 = v(a, b), f10 = v(a + 1, b), f01 = v(a, b + 1), f11 = v(a + 1, b + 1);
+            tileDiff = std::max(
+                {tileDiff, std::abs(f10 - f00), std::abs(f01 - f00), std::abs(f11 - f00), std::abs(f10 - f01)});
+        }
+    for (int b = 0; b < grid.ny - 1; ++b)
+        tileDiff = std::max(tileDiff, std::abs(v(grid.nx - 1, b + 1) - v(grid.nx - 1, b)));
+    for (int a = 0; a < grid.nx - 1; ++a) tileDiff = std::max(tileDiff, std::abs(v(a + 1, hy - 1) - v(a, hy - 1)));
+    const bool wholeTileInPart =
+        xOf(mI0 + ti) - 0.5 * px >= mPart.min.x() && xOf(mI0 + ti + tnx - 1) + 0.5 * px <= mPart.max.x() &&
+        yOf(mJ0 + tj) - 0.5 * py >= mPart.min.y() && yOf(mJ0 + tj + tny - 1) + 0.5 * py <= mPart.max.y();
+
+    for (int b = 0; b < tny; ++b)
+        for (int a = 0; a < tnx; ++a) {
+            const int i = mI0 + ti + a, j = mJ0 + tj + b;
+            const double x = xOf(i), y = yOf(j), f = v(a + 1, b + 1);
+            std::uint8_t& pixel = out.pixels[std::size_t(tj + b) * mNx + (ti + a)];
+            if (wholeTileInPart && std::abs(f) > tileDiff) {
+                pixel = f < 0.0 ? 255 : 0;
+                continue;
+            }
+            const bool centreInPart =
+                x >= mPart.min.x() && x <= mPart.max.x() && y >= mPart.min.y() && y <= mPart.max.y();
+            if (mOptions.supersample <= 0) {
+                pixel = f < 0.0 && centreInPart ? 255 : 0;
+                continue;
+            }
+            const double lx = x - 0.5 * px, hx = x + 0.5 * px, ly = y - 0.5 * py, hy2 = y + 0.5 * py;
+            if (hx <= mPart.min.x() || lx >= mPart.max.x() || hy2 <= mPart.min.y() || ly >= mPart.max.y()) {
+                pixel = 0;
+                continue;
+            }
+            const bool partial = lx < mPart.min.x() || hx > mPart.max.x() || ly < mPart.min.y() || hy2 > mPart.max.y();
+            // May the boundary pass through this pixel? A sign change among the 3x3 centres, or |f| no
+            // larger than the largest difference to a neighbour (sure for a locally linear field).
+            double maxDiff = 0.0;
+            bool signChange = false;
+            for (int da = -1; da <= 1; ++da)
+                for (int db = -1; db <= 1; ++db) {
+                    const double g = v(a + 1 + da, b + 1 + db);
+                    maxDiff = std::max(maxDiff, std::abs(g - f));
+                    signChange |= (g < 0.0) != (f < 0.0);
+                }
+            if (!partial && !signChange && !(std::abs(f) <= maxDiff)) {
+                pixel = f < 0.0 ? 255 : 0;
+                continue;
+            }
+            // Coverage of the linearised edge: f + gx u + gy v < 0 over the pixel (gradient by central
+            // differences, per pixel), exact for a straight edge. Where the field bends within the
+            // pixel (second differences not small against the gradient) or the part's box cuts the
+            // pixel, count s x s sub-samples instead.
+            const double gx = 0.5 * (v(a + 2, b + 1) - v(a, b + 1)), gy = 0.5 * (v(a + 1, b + 2) - v(a + 1, b));
+            const double dxx = v(a + 2, b + 1) + v(a, b + 1) - 2.0 * f, dyy = v(a + 1, b + 2) + v(a + 1, b) - 2.0 * f;
+            const double dxy = 0.25 * (v(a + 2, b + 2) - v(a + 2, b) - v(a, b + 2) + v(a, b));
+            const double gradient = std::abs(gx) + std::abs(gy);
+            const double bend = std::abs(dxx) + std::abs(dyy) + 2.0 * std::abs(dxy);
+            if (!partial && std::isfinite(f) && bend <= mOptions.linearTolerance * gradient) {
+                const double coverage = std::clamp(squareCoverage(std::abs(gx), std::abs(gy), -f + 0.5 * gradient) +
+                                                       curvatureCorrection(f, gx, gy, dxx, dyy, dxy),
+                                                   0.0, 1.0);
+                pixel = mOptions.gamma <= 0.0   ? (coverage >= 0.5 ? 255 : 0)
+                        : mOptions.gamma == 1.0 ? std::uint8_t(std::lround(255.0 * coverage))
+                                                : std::uint8_t(std::lround(255.0 * std::pow(coverage, mOptions.gamma)));
+                continue;
+            }
+            ++supersampled;
+            GridBatch g;
+            g.origin = Vec3d(lx + 0.5 * px / s, ly + 0.5 * py / s, z);
+            g.spacing = Vec3d(px / s, py / s, 1.0);
+            g.nx = s;
+            g.ny = s;
+            g.nz = 1;
+            sub.resize(g.size());
+            mField.gridValues(g, sub);
+            int inside = 0;
+            for (int sa = 0; sa < s; ++sa) {
+                const double sx = g.origin.x() + sa * g.spacing.x();
+                const bool xIn = sx >= mPart.min.x() && sx <= mPart.max.x();
+                for (int sb = 0; sb < s; ++sb) {
+                    const double sy = g.origin.y() + sb * g.spacing.y();
+                    inside += xIn && sy >= mPart.min.y() && sy <= mPart.max.y() && sub[std::size_t(sa) * s + sb] < 0.0;
+                }
+            }
+            pixel = mLevels[inside];
+        }
+    if (stats) {
+        stats->pixelsEvaluated += std::uint64_t(tnx) * tny;
+        stats->pixelsSupersampled += supersampled;
+    }
+}
+
+void Slicer::fieldValues(double z, std::vector<float>& out) const
+{
+    out.assign(std::size_t(mNx) * mNy, 0.0f);
+    std::vector<double> values;
+    const int tile = 32;
+    for (int tj = 0; tj < mNy; tj += tile)
+        for (int ti = 0; ti < mNx; ti += tile) {
+            GridBatch g;
+            g.origin = Vec3d(xOf(mI0 + ti), yOf(mJ0 + tj), z);
+            g.spacing = Vec3d(mDisplay.pitchX(), mDisplay.pitchY(), 1.0);
+            g.nx = std::min(tile, mNx - ti);
+            g.ny = std::min(tile, mNy - tj);
+            g.nz = 1;
+            values.resize(g.size());
+            mField.gridValues(g, values);
+            for (int a = 0; a < g.nx; ++a)
+                for (int b = 0; b < g.ny; ++b)
+                    out[std::size_t(tj + b) * mNx + ti + a] = float(values[std::size_t(a) * g.ny + b]);
+        }
+}
+
+}  // namespace voxlat

@@ -1,0 +1,118 @@
+/// @file Slicer.h
+/// @brief Layer images for resin printers decided straight from the field (no volume, no mesh).
+///
+/// Pixel grid: the printer's landscape frame, pixel (i, j) covers [i, i+1) x [j, j+1) pitches and
+/// is sampled at its centre ((i + 1/2) pitchX, (j + 1/2) pitchY) on the display ("bed"). A part
+/// point p maps to the bed at p + offset. Stored images follow PrusaSlicer's raster convention
+/// (SLA/RasterBase Trafo): portrait swaps the axes and toggles the x mirror, and the raster's
+/// y axis is flipped unless mirror_y (row 0 is the top of the image).
+///
+/// Anti-aliasing is by supersampling: a pixel whose 3x3 neighbourhood of centre values shows the
+/// boundary may pass through it (a sign change, or |f| no larger than the largest difference to a
+/// neighbour, which for a locally linear field is a sure test) is sampled on an s x s grid of
+/// sub-pixel centres and its coverage is the exact count of inside samples / s^2. The grey level is
+/// 255 * coverage^gamma (gamma 0: a threshold at coverage 1/2, as PrusaSlicer's gamma_correction).
+#pragma once
+
+#include "fields/FieldNode.h"
+
+#include <atomic>
+#include <cstdint>
+#include <vector>
+
+namespace voxlat {
+
+/// A printer display: size, pixels and the orientation of the stored image.
+struct Display {
+    double widthMm = 0, heightMm = 0;  ///< landscape frame
+    int pixelsX = 0, pixelsY = 0;
+    bool mirrorX = false, mirrorY = false, portrait = false;
+
+    double pitchX() const { return widthMm / pixelsX; }
+    double pitchY() const { return heightMm / pixelsY; }
+    int storedWidth() const { return portrait ? pixelsY : pixelsX; }
+    int storedHeight() const { return portrait ? pixelsX : pixelsY; }
+    /// The landscape pixel (i, j) shown at stored image column @a col, row @a row.
+    void landscapeOf(int col, int row, int& i, int& j) const
+    {
+        const bool mx = portrait ? !mirrorX : mirrorX, my = !mirrorY;
+        const int u = mx ? storedWidth() - 1 - col : col, v = my ? storedHeight() - 1 - row : row;
+        i = portrait ? v : u;
+        j = portrait ? u : v;
+    }
+};
+
+struct RasterOptions {
+    int supersample = 8;  ///< sub-samples per axis in an edge pixel; 0 = no anti-aliasing (centre test)
+    double gamma = 1.0;   ///< grey = 255 * coverage^gamma; 0 = binary threshold at coverage 1/2
+    /// Edge pixels use the linearised edge when the field's second differences are at most this
+    /// share of its first differences (so the edge bends by a small part of a pixel); else sub-samples.
+    double linearTolerance = 0.25;
+    int tile = 8;  ///< tile side in pixels for culling by bound() (blocks of 4 x 4 tiles first)
+};
+
+/// A window [i0, i0 + nx) x [j0, j0 + ny) of the landscape pixel grid, row-major (row = j).
+struct LayerImage {
+    int index = 0;
+    int i0 = 0, j0 = 0, nx = 0, ny = 0;
+    std::vector<std::uint8_t> pixels;
+
+    std::uint8_t at(int i, int j) const
+    {
+        return (i < i0 || j < j0 || i >= i0 + nx || j >= j0 + ny) ? 0 : pixels[std::size_t(j - j0) * nx + (i - i0)];
+    }
+    /// Sum of pixel / 255: the exposed area in pixels.
+    double exposedPixels() const;
+    /// The stored (oriented, mirrored) image row @a row of the full display, @a out has storedWidth() bytes.
+    void storedRow(const Display& display, int row, std::uint8_t* out) const;
+    /// The window in the stored orientation: @a w x @a h bytes at stored column @a col0, row @a row0
+    /// (a cache-blocked transpose for portrait displays), so stored rows are contiguous copies.
+    void storedWindow(const Display& display, std::vector<std::uint8_t>& out, int& col0, int& row0, int& w,
+                      int& h) const;
+};
+
+/// Counters of the work done (summed over layers; read after slicing).
+struct RasterStats {
+    std::atomic<std::uint64_t> tilesInside{0}, tilesOutside{0}, tilesEdge{0};
+    std::atomic<std::uint64_t> pixelsEvaluated{0}, pixelsSupersampled{0};
+};
+
+/// Rasterizes slices of one field (negative inside), clipped to the part box.
+class Slicer {
+public:
+    /// @a field in part coordinates, @a part the box it is clipped to, bed = part + (offsetX, offsetY).
+    Slicer(const FieldNode& field, const Box3& part, double offsetX, double offsetY, const Display& display,
+           const RasterOptions& options);
+
+    /// The window every layer covers: the pixels whose footprint meets the part's xy box.
+    int i0() const { return mI0; }
+    int j0() const { return mJ0; }
+    int nx() const { return mNx; }
+    int ny() const { return mNy; }
+    /// False when the part's xy box does not lie within the display.
+    bool fitsDisplay() const { return mFits; }
+
+    /// The layer image at height @a z (part coordinates).
+    void rasterize(double z, LayerImage& out, RasterStats* stats = nullptr) const;
+    /// The field's values at the window's pixel centres at height @a z (row = j), no culling.
+    void fieldValues(double z, std::vector<float>& out) const;
+
+    /// Part x of the centre of landscape pixel column i (and y of row j).
+    double xOf(double i) const { return (i + 0.5) * mDisplay.pitchX() - mOffsetX; }
+    double yOf(double j) const { return (j + 0.5) * mDisplay.pitchY() - mOffsetY; }
+
+private:
+    void edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, std::vector<double>& values,
+                  std::vector<double>& sub, RasterStats* stats) const;
+
+    const FieldNode& mField;
+    Box3 mPart;
+    double mOffsetX, mOffsetY;
+    Display mDisplay;
+    RasterOptions mOptions;
+    int mI0 = 0, mJ0 = 0, mNx = 0, mNy = 0;
+    bool mFits = true;
+    std::vector<std::uint8_t> mLevels;  ///< grey of k inside sub-samples, k = 0..s^2
+};
+
+}  // namespace voxlat
