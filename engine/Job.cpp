@@ -10,12 +10,14 @@
 #include "fields/GradedLevel.h"
 #include "mesher/AtomicFile.h"
 #include "mesher/MarchingCubes.h"
+#include "mesher/MeshPreview.h"
 #include "mesher/MeshWriters.h"
 
 #include <openvdb/io/Stream.h>
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 
+#include <algorithm>
 #include <chrono>
 #include <iostream>
 
@@ -268,7 +270,27 @@ void Job::writeOutputs(const std::filesystem::path& outDir)
             writeSlices(out.spec, path);
         }
     }
+    // A picture of what was meshed, next to the first mesh, so the part can be checked by eye.
+    const auto firstMesh = std::find_if(mRecipe.outputs.begin(), mRecipe.outputs.end(),
+                                        [](const OutputSpec& o) { return o.kind == "mesh"; });
+    if (firstMesh != mRecipe.outputs.end()) {
+        std::filesystem::path preview = outDir / firstMesh->file;
+        preview.replace_extension(".preview.png");
+        writePreview(preview);
+    }
     writeReport(outDir / "report.json");
+}
+
+void Job::writePreview(const std::filesystem::path& path)
+{
+    const TriangleMesh& m = mesh();
+    timed("preview", [&] {
+        AtomicFile file(path.string());
+        file.stream() << renderMeshPreview(m);
+        file.commit();
+        return 0;
+    });
+    mReport["preview"] = path.string();
 }
 
 void Job::writeSlices(const YAML::Node& spec, const std::filesystem::path& path)

@@ -37,6 +37,8 @@ public:
     /// Writes only the mesh, to @a path.
     void writeMesh(const std::filesystem::path& path);
     void writeReport(const std::filesystem::path& path);
+    /// Writes a shaded PNG picture of the mesh (front-right-top view).
+    void writePreview(const std::filesystem::path& path);
     /// Slices the result for a resin printer into @a path; @a spec is a `slices:` entry. Builds
     /// no grid and no mesh: every pixel is decided from the field (engine/SliceJob).
     void writeSlices(const YAML::Node& spec, const std::filesystem::path& path);
