@@ -249,7 +249,7 @@ void Job::writeMesh(const std::filesystem::path& path)
     mReport["outputs"].push_back(path.string());
 }
 
-void Job::writeOutputs(const std::filesystem::path& outDir)
+void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
 {
     std::filesystem::create_directories(outDir);
     for (const OutputSpec& out : mRecipe.outputs) {
@@ -273,10 +273,10 @@ void Job::writeOutputs(const std::filesystem::path& outDir)
     // A picture of what was meshed, next to the first mesh, so the part can be checked by eye.
     const auto firstMesh = std::find_if(mRecipe.outputs.begin(), mRecipe.outputs.end(),
                                         [](const OutputSpec& o) { return o.kind == "mesh"; });
-    if (firstMesh != mRecipe.outputs.end()) {
-        std::filesystem::path preview = outDir / firstMesh->file;
-        preview.replace_extension(".preview.png");
-        writePreview(preview);
+    if (preview && firstMesh != mRecipe.outputs.end()) {
+        std::filesystem::path picture = outDir / firstMesh->file;
+        picture.replace_extension(".preview.png");
+        writePreview(picture);
     }
     writeReport(outDir / "report.json");
 }

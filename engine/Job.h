@@ -33,7 +33,8 @@ public:
     const TriangleMesh& mesh();
 
     /// Writes the recipe's outputs (paths relative to @a outDir) and report.json.
-    void writeOutputs(const std::filesystem::path& outDir);
+    /// With @a preview, also a picture of the first mesh (NAME.preview.png).
+    void writeOutputs(const std::filesystem::path& outDir, bool preview = true);
     /// Writes only the mesh, to @a path.
     void writeMesh(const std::filesystem::path& path);
     void writeReport(const std::filesystem::path& path);

@@ -65,14 +65,16 @@ void rasterise(const TriangleMesh& mesh, const std::vector<Vec3d>& screen, int s
     for (std::size_t t = begin; t < end; ++t) {
         const openvdb::Vec3I& tri = mesh.triangles[t];
         const Vec3d &a = screen[tri[0]], &b = screen[tri[1]], &c = screen[tri[2]];
-        const double area = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
-        if (area == 0.0) continue;
         // Only pixel centres (x + 0.5) inside the triangle's bounds: most triangles of a fine
-        // mesh are smaller than a pixel and cover no centre at all.
+        // mesh are smaller than a pixel and cover no centre at all, so test that first.
         const int x0 = std::max(0, int(std::ceil(std::min({a.x(), b.x(), c.x()}) - 0.5)));
         const int x1 = std::min(size - 1, int(std::floor(std::max({a.x(), b.x(), c.x()}) - 0.5)));
+        if (x0 > x1) continue;
         const int y0 = std::max(0, int(std::ceil(std::min({a.y(), b.y(), c.y()}) - 0.5)));
         const int y1 = std::min(size - 1, int(std::floor(std::max({a.y(), b.y(), c.y()}) - 0.5)));
+        if (y0 > y1) continue;
+        const double area = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
+        if (area == 0.0) continue;
         const double inverseArea = 1.0 / area;
         for (int y = y0; y <= y1; ++y)
             for (int x = x0; x <= x1; ++x) {

@@ -89,6 +89,8 @@ int main(int argc, char** argv)
     auto* run = app.add_subcommand("run", "run a recipe: write its outputs and report.json");
     addCommon(run, runArgs);
     run->add_option("--out", outDir, "output folder (default: current folder)");
+    bool noPreview = false;
+    run->add_flag("--no-preview", noPreview, "do not render NAME.preview.png next to the first mesh");
     auto* mesh = app.add_subcommand("mesh", "mesh a recipe's result to one file (.stl, .ply, .obj)");
     addCommon(mesh, meshArgs);
     mesh->add_option("-o,--output", meshFile, "mesh file")->required();
@@ -131,7 +133,7 @@ int main(int argc, char** argv)
         openvdb::initialize();
         if (*run) {
             voxlat::Job job(voxlat::loadRecipe(runArgs.recipe, runArgs.sets));
-            job.writeOutputs(outDir);
+            job.writeOutputs(outDir, !noPreview);
             printSummary(job);
             std::cout << "outputs written to " << std::filesystem::absolute(outDir).lexically_normal().string()
                       << " (report.json has levels, densities and timings)\n";
