@@ -94,10 +94,17 @@ const std::map<std::string, json>& keySchemas()
              {"count", described(json::object(), "cells per axis: a number or [x, y, z]")},
              {"origin", vec3("the frame's corner (mm)")},
              {"cylinder", described(json::object(), "{radius, inner, height, base, cells}: a cylinder frame")},
+             {"sphere", described(json::object(), "{radius, inner, center, cells}: a spherical frame")},
              {"within", described(defRef("field"), "a solid the uniform frame is trimmed to")},
              {"min_length", number("trimmed pieces shorter than this are dropped (mm)")},
              {"wireframe", described({{"type", "string"}}, "OBJ or CSV file used directly as the frame")}});
         t["struts.kernel"] = described(json::object(), "{gaussian: {sigma, cutoff}}, capsule or {capsule: {blend}}");
+        // A density may also be a map (ramp, distance, field, file) that grades it point by point.
+        const json gradedDensity = described(
+            {{"anyOf", {defRef("density"), {{"type", "object"}}, {{"type", "string"}}}}},
+            "target relative density in (0, 1): a number (the level is solved) or a map setting it point by point");
+        t["tpms.density"] = gradedDensity;
+        t["struts.density"] = gradedDensity;
         t["struts.radius"] = described(json::object(), "strut radius (mm): a number, a list or {gradient, min, max, axis}");
         t["expr.expr"] = described({{"type", "string"}}, "an equation in x, y, z, $params and field names");
         t["vector.vector"] = described({{"type", "array"},

@@ -85,6 +85,25 @@ Frame cylinderFrame(const UnitCell& cell, const Vec3d& base, double innerRadius,
     });
 }
 
+Frame sphereFrame(const UnitCell& cell, const Vec3d& centre, double innerRadius, double outerRadius,
+                  const std::array<int, 3>& counts)
+{
+    const int polar = counts[0], azimuthal = counts[1], radial = counts[2];
+    // The smallest spacing is between nodes next to a pole on the inner shell (or the outer one
+    // when the inner radius is 0); merge well below it.
+    const double shortest = std::min(outerRadius - innerRadius, (innerRadius > 0 ? innerRadius : outerRadius) *
+                                                                    std::sin(std::numbers::pi / polar) *
+                                                                    std::sin(std::numbers::pi / azimuthal));
+    const double tol = 1e-6 * shortest / std::max({polar, azimuthal, radial});
+    // Cell coordinates: x radial (count radial), y azimuthal, z polar.
+    return mapCells(cell, {radial, azimuthal, polar}, tol, [&](const Vec3d& u) {
+        const double r = innerRadius + u[0] / radial * (outerRadius - innerRadius);
+        const double phi = u[1] / azimuthal * 2.0 * std::numbers::pi;
+        const double theta = u[2] / polar * std::numbers::pi;
+        return centre + r * Vec3d(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta));
+    });
+}
+
 Frame clippedFrame(const UnitCell& cell, const Box3& region, const Vec3d& cellSize,
                    const std::function<double(const Vec3d&)>& inside, double minLength)
 {

@@ -48,6 +48,13 @@ Frame boxFrame(const UnitCell& cell, const Vec3d& origin, const Vec3d& cellSize,
 Frame cylinderFrame(const UnitCell& cell, const Vec3d& base, double innerRadius, double outerRadius, double height,
                     const std::array<int, 3>& counts);
 
+/// Cells mapped into a spherical shell around @a centre: the cell's x runs radially from
+/// @a innerRadius to @a outerRadius, y around the z axis (azimuth), z from the +z pole to the -z
+/// pole (polar angle). @a counts = {polar, azimuthal, radial}. Nodes that meet at the poles and
+/// at the centre (inner radius 0) merge, and struts that shrink to a point there are dropped.
+Frame sphereFrame(const UnitCell& cell, const Vec3d& centre, double innerRadius, double outerRadius,
+                  const std::array<int, 3>& counts);
+
 /// Uniform cells filling @a region, kept where @a inside says a point is in the design space
 /// (value <= 0): struts with both ends inside are kept whole, struts with one end inside are
 /// trimmed at the boundary (found by bisection) unless the piece is shorter than

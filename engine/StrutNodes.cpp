@@ -1,11 +1,14 @@
 // Recipe node types for strut lattices (issue 3): `struts`, a frame of unit cells (or a
 // wireframe file) solidified by Gaussian convolution or by round capsules.
 #include "engine/FieldBuilder.h"
+#include "engine/ScalarMaps.h"
 #include "engine/StrutFrames.h"
+#include "fields/GradedLevel.h"
 #include "fields/IsoRadius.h"
 #include "fields/StrutCapsules.h"
 #include "fields/StrutConvolution.h"
 
+#include <algorithm>
 #include <cmath>
 #include <iostream>
 #include <numbers>
@@ -83,11 +86,19 @@ std::array<int, 3> readCounts(const RecipeNode& n)
     return counts;
 }
 
-Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& name)
+/// The repeating cell of a frame of uniform cells (a box, or `within:` a solid).
+struct UniformCells {
+    UnitCell cell;
+    Vec3d size{0.0};
+};
+
+/// @a uniform receives the cell and its size when the frame is made of uniform cells.
+Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& name,
+                 std::optional<UniformCells>& uniform)
 {
-    s.checkKeys({"cell", "size", "count", "origin", "cylinder", "within", "min_length", "wireframe"});
+    s.checkKeys({"cell", "size", "count", "origin", "cylinder", "sphere", "within", "min_length", "wireframe"});
     if (s.has("wireframe")) {
-        for (const char* k : {"cell", "size", "count", "origin", "cylinder", "within"})
+        for (const char* k : {"cell", "size", "count", "origin", "cylinder", "sphere", "within"})
             if (s.has(k)) s[k].fail("a wireframe is used as the frame as it is; remove `" + std::string(k) + "`");
         return readWireframe(builder.recipe().resolve(s["wireframe"].string()).string());
     }
@@ -108,6 +119,25 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
         if (!c.has("cells")) c.fail("give `cells: [axial, angular, radial]` (cell counts)");
         return cylinderFrame(cell, base, inner, outer, height, readCounts(c["cells"]));
     }
+    if (s.has("sphere")) {
+        const RecipeNode c = s["sphere"];
+        c.checkKeys({"radius", "inner", "center", "cells"});
+        for (const char* k : {"size", "count", "origin", "within"})
+            if (s.has(k))
+                s[k].fail("a sphere frame sets its cells from `sphere: {radius, inner, cells}`; remove `" +
+                          std::string(k) + "`");
+        const double outer = c["radius"].positiveNumber();
+        const double inner = c.has("inner") ? c["inner"].number() : 0.0;
+        if (!(inner >= 0.0 && inner < outer)) c["inner"].fail("the inner radius is at least 0 and below the radius");
+        Vec3d centre = c.has("center") ? c["center"].vec3() : (domainBox ? domainBox->center() : Vec3d(0.0));
+        if (!c.has("cells")) c.fail("give `cells: [polar, azimuthal, radial]` (cell counts)");
+        const std::array<int, 3> counts = readCounts(c["cells"]);
+        if (counts[0] < 2 || counts[1] < 3)
+            c["cells"].fail(
+                "a sphere needs at least 2 cells from pole to pole (polar) and 3 around the axis "
+                "(azimuthal), or the shell folds flat");
+        return sphereFrame(cell, centre, inner, outer, counts);
+    }
     if (!s.has("size")) s.fail("give the cell size `size:` in mm (a number or [x, y, z])");
     const Vec3d size = s["size"].scalarOrVec3();
     for (int a = 0; a < 3; ++a)
@@ -117,6 +147,7 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
         const FieldPtr solid = builder.operand(s["within"], name + "/within");
         const double minLength =
             s.has("min_length") ? s["min_length"].number() : 0.1 * std::min({size[0], size[1], size[2]});
+        uniform = UniformCells{cell, size};
         return clippedFrame(
             cell, *domainBox, size, [&](const Vec3d& p) { return solid->value(p); }, minLength);
     }
@@ -134,7 +165,48 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
                                std::string(1, "xyz"[a]) + "; give a smaller size or `count:`");
         }
     }
+    uniform = UniformCells{cell, size};
     return boxFrame(cell, origin, size, counts);
+}
+
+/// A frame of (2 margin + 1)^3 of the cells and its middle cell: the middle cell sees every strut
+/// within margin cells, as a cell deep inside a large frame does, so its density table is the
+/// periodic lattice's.
+std::pair<Frame, Box3> tableFrame(const UniformCells& cells, int margin)
+{
+    const int n = 2 * margin + 1;
+    const Frame frame = boxFrame(cells.cell, Vec3d(0.0), cells.size, {n, n, n});
+    return {frame, Box3{double(margin) * cells.size, double(margin + 1) * cells.size}};
+}
+
+bool isNumber(const RecipeNode& n)
+{
+    if (!n.isScalar()) return false;
+    try {
+        (void)n.yaml().as<double>();
+        return true;
+    } catch (const YAML::Exception&) {
+        return false;
+    }
+}
+
+/// `density:` as a map (a ramp, a field, a file): the level follows the target density point by
+/// point through the density table of one interior cell (@a tableIndicator over @a tableCell).
+FieldPtr buildGradedStruts(FieldBuilder& builder, const RecipeNode& spec, const std::string& name,
+                           const FieldPtr& indicator, const FieldNode& tableIndicator, const Box3& tableCell,
+                           const std::string& description)
+{
+    const RecipeNode d = spec["density"];
+    ScalarMap rho = readScalarMap(builder, d, name + "/density");
+    checkScalarRange(builder, rho, d, 0.0, 1.0, true, "density",
+                     "; a relative density is between 0 and 1 (exclusive): for 20 % write 0.20");
+    auto table = std::make_shared<const DensityTable>(tableIndicator, tableCell);
+    checkScalarRange(builder, rho, d, table->minDensity(), table->maxDensity(), false, "density",
+                     " (the range this strut cell can reach, resolved by its density table)");
+    auto graded = std::make_shared<GradedLevel>(indicator, rho.field, table);
+    const int axis = rho.axis.value_or(2);
+    builder.addGradedNode({name, description, rho.description, graded, rho.field, axis, tableCell.extent()[axis]});
+    return graded;
 }
 
 /// Radius at each end of each strut from `radius:` (a number, a list, or a gradient preset).
@@ -220,10 +292,24 @@ void warnIfDisconnected(const std::string& name, const StrutConvolution& f, cons
 
 FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
 {
-    const Frame frame = buildFrame(builder, spec["struts"], name);
+    std::optional<UniformCells> uniform;
+    const Frame frame = buildFrame(builder, spec["struts"], name, uniform);
     if (frame.struts.empty()) spec["struts"].fail("the frame has no struts (is the design space empty?)");
     if (spec.has("level") && spec.has("density"))
         spec.fail("give either `level:` or `density:`, not both (density solves the level)");
+    // A density map (ramp, field, file) sets the level point by point from one cell's table.
+    const bool graded = spec.has("density") && !isNumber(spec["density"]);
+    if (graded) {
+        if (!uniform)
+            spec["density"].fail(
+                "a graded density needs uniform cells (`cell:` with `size:`, in a box or `within:` a "
+                "solid): the level comes from one cell's density table; a cylinder frame or a "
+                "wireframe takes a single density (a number)");
+        if (spec.has("radius") && !spec["radius"].isScalar())
+            spec["radius"].fail(
+                "with a graded density the radius is one number: the density sets the strut "
+                "thickness point by point");
+    }
     if (!spec.has("kernel"))
         spec.fail("give `kernel:`: {gaussian: {sigma: 0.5}} (convolution joints) or capsule / {capsule: {blend: 0.3}}");
     const RecipeNode kernel = spec["kernel"];
@@ -237,7 +323,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     const Box3 box = frame.bounds();
     LevelNode node;
     node.name = name;
-    if (spec.has("density")) {
+    if (spec.has("density") && !graded) {
         const RecipeNode d = spec["density"];
         const double rho = d.number();
         if (!(rho > 0.0 && rho < 1.0))
@@ -268,20 +354,33 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
                 }
             }
         }
-        if (!radii && !node.density)
+        if (!radii && !node.density && !graded)
             spec.fail("capsules need `radius:` (or `density:`, which solves a uniform radius)");
-        std::vector<CapsuleStrut> struts;
+        auto capsuleStruts = [](const Frame& f, const std::optional<std::vector<std::array<double, 2>>>& r) {
+            std::vector<CapsuleStrut> struts;
+            for (std::size_t j = 0; j < f.struts.size(); ++j)
+                struts.push_back(
+                    {f.nodes[f.struts[j][0]], f.nodes[f.struts[j][1]], r ? (*r)[j][0] : 0.0, r ? (*r)[j][1] : 0.0});
+            return struts;
+        };
+        const std::vector<CapsuleStrut> struts = capsuleStruts(frame, radii);
         double rMax = 0.0, longest = 0.0;
-        for (std::size_t j = 0; j < n; ++j) {
-            const Vec3d a = frame.nodes[frame.struts[j][0]], b = frame.nodes[frame.struts[j][1]];
-            const double ra = radii ? (*radii)[j][0] : 0.0, rb = radii ? (*radii)[j][1] : 0.0;
-            struts.push_back({a, b, ra, rb});
-            rMax = std::max({rMax, ra, rb});
-            longest = std::max(longest, (b - a).length());
+        for (const CapsuleStrut& c : struts) {
+            rMax = std::max({rMax, c.ra, c.rb});
+            longest = std::max(longest, (c.b - c.a).length());
         }
         // The cap must exceed any level the density solve can reach (a radius offset).
-        auto raw = std::make_shared<StrutCapsules>(struts, blend, rMax + blend + longest);
+        const double cap = rMax + blend + longest;
+        auto raw = std::make_shared<StrutCapsules>(struts, blend, cap);
         node.description = std::string("strut capsules") + (blend > 0 ? " (blended)" : "");
+        if (graded) {
+            // Struts reach into the next cell only by their radius and blend: one cell of margin.
+            const auto [cells, cellBox] = tableFrame(*uniform, 1);
+            std::optional<std::vector<std::array<double, 2>>> cellRadii;
+            if (radii) cellRadii = readRadii(spec["radius"], cells);
+            const StrutCapsules cellField(capsuleStruts(cells, cellRadii), blend, cap);
+            return buildGradedStruts(builder, spec, name, raw, cellField, cellBox, node.description);
+        }
         node.solid =
             std::make_shared<LevelSolid>(raw, SolidSide::Below, spec.has("level") ? spec["level"].number() : 0.0);
         FieldPtr result = node.solid;
@@ -299,6 +398,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         return v;
     };
     if (sn.isSequence()) {
+        if (graded) sn.fail("with a graded density sigma is one number (the table is computed for one cell)");
         if (sn.size() != n)
             sn.fail("the sigma list has " + std::to_string(sn.size()) + " entries but the frame has " +
                     std::to_string(n) + " struts (one per strut, or a single number)");
@@ -312,28 +412,31 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         if (!(eps > 0.0 && eps < 0.1))
             g["cutoff"].fail("the cut-off is a small fraction of a strut's peak, in (0, 0.1); default 1e-4");
     }
-    if (!radii && !node.density && !spec.has("level"))
+    if (!radii && !node.density && !spec.has("level") && !graded)
         spec.fail("give `density:` (solves the iso-value), `level:` (the iso-value t in F >= t) or `radius:`");
     // Weights: with radii, w = t0 exp(R^2 / (2 sigma^2)) / (sigma sqrt(2 pi)) at t0 = 1, so an
     // isolated long strut has radius R at level 1 (and radius sqrt(R^2 + 2 sigma^2 ln(1 / t))
     // at level t). Without radii every weight is 1.
-    std::vector<ConvolutionStrut> struts;
-    for (std::size_t j = 0; j < n; ++j) {
-        ConvolutionStrut s;
-        s.a = frame.nodes[frame.struts[j][0]];
-        s.b = frame.nodes[frame.struts[j][1]];
-        s.sigma = sigma[j];
-        if (radii) {
-            s.w0 = gaussianStrutWeight((*radii)[j][0], sigma[j], 1.0);
-            s.w1 = gaussianStrutWeight((*radii)[j][1], sigma[j], 1.0);
-            if (!std::isfinite(s.w0) || !std::isfinite(s.w1))
-                spec["radius"].fail("radius " + std::to_string(std::max((*radii)[j][0], (*radii)[j][1])) +
-                                    " is too large for sigma " + std::to_string(sigma[j]) +
-                                    " (the weight exp(R^2 / 2 sigma^2) overflows): raise sigma");
+    auto convolutionStruts = [&](const Frame& f, const std::optional<std::vector<std::array<double, 2>>>& r) {
+        std::vector<ConvolutionStrut> struts;
+        for (std::size_t j = 0; j < f.struts.size(); ++j) {
+            ConvolutionStrut s;
+            s.a = f.nodes[f.struts[j][0]];
+            s.b = f.nodes[f.struts[j][1]];
+            s.sigma = graded ? sigma.front() : sigma[j];
+            if (r) {
+                s.w0 = gaussianStrutWeight((*r)[j][0], s.sigma, 1.0);
+                s.w1 = gaussianStrutWeight((*r)[j][1], s.sigma, 1.0);
+                if (!std::isfinite(s.w0) || !std::isfinite(s.w1))
+                    spec["radius"].fail("radius " + std::to_string(std::max((*r)[j][0], (*r)[j][1])) +
+                                        " is too large for sigma " + std::to_string(s.sigma) +
+                                        " (the weight exp(R^2 / 2 sigma^2) overflows): raise sigma");
+            }
+            struts.push_back(s);
         }
-        struts.push_back(s);
-    }
-    auto raw = std::make_shared<StrutConvolution>(struts, eps);
+        return struts;
+    };
+    auto raw = std::make_shared<StrutConvolution>(convolutionStruts(frame, radii), eps);
     // The solid F >= t is evaluated as IsoRadius(F) <= rho(t) (same solid, same density; a
     // field marching cubes interpolates without bias). P: the largest strut peak.
     double peak = 0.0, sigmaMax = 0.0, rcMax = 0.0;
@@ -350,6 +453,29 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
              "iso-value t, with P = "
           << peak << ", sigma = " << sigmaMax;
         node.description = d.str();
+    }
+    if (graded) {
+        // Every strut within the cut-off of the middle cell must be in the table's frame.
+        const double smallest = std::min({uniform->size[0], uniform->size[1], uniform->size[2]});
+        const int margin = std::max(1, int(std::ceil(rcMax / smallest)));
+        const auto [cells, cellBox] = tableFrame(*uniform, margin);
+        std::optional<std::vector<std::array<double, 2>>> cellRadii;
+        if (radii) cellRadii = readRadii(spec["radius"], cells);
+        auto cellRaw = std::make_shared<StrutConvolution>(convolutionStruts(cells, cellRadii), eps);
+        // The same peak and sigma as the frame's, so that both measure levels alike.
+        const IsoRadius cellField(cellRaw, peak, sigmaMax, 2.0 * rcMax);
+        FieldPtr result = buildGradedStruts(builder, spec, name, iso, cellField, cellBox, node.description);
+        // Struts broken in the middle at their local density: the graded solid is outside there.
+        std::vector<Vec3d> mid;
+        for (const auto& s : frame.struts) mid.push_back(0.5 * (frame.nodes[s[0]] + frame.nodes[s[1]]));
+        std::vector<double> v(mid.size());
+        result->values(mid, v);
+        const auto broken = std::count_if(v.begin(), v.end(), [](double x) { return x > 0.0; });
+        if (broken > 0)
+            std::cerr << "warning: field `" << name << "`: " << broken << " of " << v.size()
+                      << " struts are broken in the middle at their local density; with sigma = " << sigmaMax
+                      << " the joints take the material: lower sigma or raise the density\n";
+        return result;
     }
     node.solid = std::make_shared<LevelSolid>(iso, SolidSide::Below, iso->radiusOf(t));
     const double sigmaShown = sigma.front();

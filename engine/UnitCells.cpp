@@ -149,6 +149,23 @@ Lines presetLines(const std::string& name)
         for (const Vec3d& p : hex) l.emplace_back(p, p + Vec3d(0, 0, 1));
         return l;
     }
+    if (name == "honeycomb-auxetic") {
+        // Re-entrant (bow-tie) hexagons in the xy plane, extruded along z: a vertical strut on
+        // x = 1/2 from y = 1/4 to 3/4 whose ends send two arms outwards and back towards it
+        // (down from the top end, up from the bottom end: the hexagons' re-entrant corners) to
+        // vertical struts on the side faces x = 0 and x = 1, which run through the faces y = 0, 1.
+        // Arms rise 1/6 over 1/2: 30 degrees for cell sizes x : y = 1 : 1.732 (that is, 2 : 3.46).
+        const std::vector<Vec3d> hex = {{h, q, 0},        {h, t, 0},        {0, 5.0 / 12, 0}, {1, 5.0 / 12, 0},
+                                        {0, 7.0 / 12, 0}, {1, 7.0 / 12, 0}, {0, 0, 0},        {1, 0, 0},
+                                        {0, 1, 0},        {1, 1, 0}};
+        const int e[9][2] = {{0, 1}, {1, 4}, {1, 5}, {0, 2}, {0, 3}, {4, 8}, {5, 9}, {6, 2}, {7, 3}};
+        for (double z : {0.0, 1.0})
+            for (const auto& ij : e) l.emplace_back(hex[ij[0]] + Vec3d(0, 0, z), hex[ij[1]] + Vec3d(0, 0, z));
+        // Struts along z at the hexagons' corners (the first six nodes), not where the side
+        // struts merely pass through the y faces.
+        for (int i = 0; i < 6; ++i) l.emplace_back(hex[i], hex[i] + Vec3d(0, 0, 1));
+        return l;
+    }
     if (name == "kelvin") {
         // Truncated octahedron centred in the cell: vertices at the permutations of
         // (0, +-1/4, +-1/2) around the centre, edges between nearest vertices (36).
@@ -243,8 +260,9 @@ std::string fmt(const Vec3d& p)
 
 std::vector<std::string> unitCellPresetNames()
 {
-    return {"grid",  "x",       "star",      "cross", "tesseract", "vintiles",
-            "octet", "diamond", "honeycomb", "bcc",   "fcc",       "kelvin"};
+    return {"grid",     "x",     "star",    "cross",     "tesseract",
+            "vintiles", "octet", "diamond", "honeycomb", "honeycomb-auxetic",
+            "bcc",      "fcc",   "kelvin"};
 }
 
 UnitCell presetUnitCell(const std::string& name)

@@ -12,6 +12,11 @@ GradedLevel::GradedLevel(FieldPtr indicator, FieldPtr density, const Box3& cell,
 {
 }
 
+GradedLevel::GradedLevel(FieldPtr indicator, FieldPtr density, std::shared_ptr<const DensityTable> table)
+    : mIndicator(std::move(indicator)), mDensity(std::move(density)), mTable(std::move(table))
+{
+}
+
 double GradedLevel::clampDensity(double rho) const
 {
     return std::clamp(rho, mTable->minDensity(), mTable->maxDensity());

@@ -17,6 +17,9 @@ namespace voxlat {
 class GradedLevel final : public FieldNode {
 public:
     GradedLevel(FieldPtr indicator, FieldPtr density, const Box3& cell, int samplesPerAxis = 96);
+    /// With a table computed elsewhere: for a field that is periodic only away from its edges (a
+    /// strut frame), the table comes from an interior cell of a small frame of the same cells.
+    GradedLevel(FieldPtr indicator, FieldPtr density, std::shared_ptr<const DensityTable> table);
 
     void values(std::span<const Vec3d> points, std::span<double> out) const override;
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;

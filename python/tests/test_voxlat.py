@@ -163,6 +163,43 @@ class VoxlatModule(unittest.TestCase):
         self.assertGreater(elapsed, 0.05)
         self.assertGreater(len(during), 3)
 
+    def test_mesh_node_signed_distance_of_the_bracket(self):
+        # data/meshes/bracket.stl: an L of 5 mm plates, base y 0-24 z 0-5, upright y 0-5 z 0-24,
+        # x 0-30, a 3 mm fillet in the inner corner (centre y = z = 8) and 2.5 mm holes through
+        # the base at x = 7.5, 22.5, y = 16. Distances are exact within 3 voxels of the surface.
+        bracket = ROOT / "data/meshes/bracket.stl"
+        part = voxlat.mesh(bracket)
+        self.assertEqual(part.spec, {"mesh": str(bracket.resolve())})
+        self.assertEqual(voxlat.mesh("part.stl", units="in").spec,
+                         {"mesh": os.path.join(os.getcwd(), "part.stl"), "units": "in"})
+        recipe = voxlat.Recipe(part, domain=[[-2, -2, -2], [32, 26, 26]], voxel=0.5)
+        field = recipe.field()
+        exact = {  # point: signed distance (negative inside)
+            (15, 12, 4.0): -1.0,        # base, 1 mm under its top face
+            (15, 12, 5.6): 0.6,         # above the base
+            (15, 12, -0.8): 0.8,        # below it
+            (-0.7, 12, 2.5): 0.7,       # off the end face x = 0
+            (15, 4.0, 12): -1.0,        # upright, 1 mm inside its face y = 5
+            (7.5, 17.5, 2.5): 1.0,      # in a hole, 1 mm from its wall
+            (7.5, 19.0, 2.5): -0.5,     # in the base, 0.5 mm from the same hole
+            (15, 6.5, 6.5): 3 - 1.5 * np.sqrt(2),     # inside the fillet's circle (air), on its bisector
+            (15, 8 - 3.5 / np.sqrt(2), 8 - 3.5 / np.sqrt(2)): -0.5,  # in the fillet, 0.5 mm from its arc
+        }
+        pts = np.array(list(exact), dtype=float)
+        np.testing.assert_allclose(field.values(pts), list(exact.values()), atol=0.08)
+        # Beyond the band the value is clamped but keeps its sign.
+        far = np.array([[15, 12, 2.5], [7.5, 16, 2.5], [15, 20, 15], [15, 2.5, 20]], dtype=float)
+        self.assertEqual(list(np.sign(field.values(far))), [-1, 1, 1, -1])
+        # The tutorial's part: a gyroid sheet clipped to the mesh, meshed in an automatic domain.
+        lattice = voxlat.gyroid(cell=8).sheet(0.3)
+        clipped = voxlat.Recipe(lattice & part, voxel=0.5)
+        g, _ = gyroid_reference(pts, 8)
+        np.testing.assert_allclose(clipped.field().values(pts), np.maximum(np.abs(g) - 0.3, field.values(pts)),
+                                   atol=1e-6)
+        points, _ = clipped.mesh()
+        self.assertGreater(len(points), 1000)
+        self.assertTrue(np.all(points.min(axis=0) > -0.5) and np.all(points.max(axis=0) < [30.5, 24.5, 24.5]))
+
     def test_example_scripts_run(self):
         for script in sorted((ROOT / "data/scripts").glob("*.py")):
             with self.subTest(script=script.name):

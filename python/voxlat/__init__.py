@@ -21,7 +21,7 @@ from ._voxlat import InputError, JobError
 
 __all__ = [
     "Node", "Recipe", "InputError", "JobError", "schema", "tpms", "gyroid", "schwarz_p", "schwarz_d", "iwp",
-    "neovius", "expr", "vector", "sphere", "box", "cylinder", "union", "intersection", "difference", "load",
+    "neovius", "expr", "vector", "sphere", "box", "cylinder", "mesh", "union", "intersection", "difference", "load",
 ]
 
 
@@ -103,16 +103,17 @@ class Node:
         """A recipe whose result is this node (keyword arguments as for Recipe)."""
         return Recipe(self, **kwargs)
 
-    def _probe(self, domain):
-        return Recipe(self, domain=domain or [[-1, -1, -1], [1, 1, 1]], voxel=None).job().field()
+    def _probe(self, domain, voxel=None):
+        return Recipe(self, domain=domain or [[-1, -1, -1], [1, 1, 1]], voxel=voxel).job().field()
 
-    def values(self, points, domain=None):
-        """Values at points (N, 3). A node with density= needs the domain its level is solved in."""
-        return self._probe(domain).values(np.asarray(points, dtype=float))
+    def values(self, points, domain=None, voxel=None):
+        """Values at points (N, 3). A node with density= needs the domain its level is solved in;
+        a mesh node needs a domain holding the part and the voxel its distance grid is sampled at."""
+        return self._probe(domain, voxel).values(np.asarray(points, dtype=float))
 
-    def gradients(self, points, domain=None):
+    def gradients(self, points, domain=None, voxel=None):
         """(values (N,), gradients (N, 3)), exact (automatic differentiation)."""
-        return self._probe(domain).gradients(np.asarray(points, dtype=float))
+        return self._probe(domain, voxel).gradients(np.asarray(points, dtype=float))
 
 
 def tpms(kind, cell):
@@ -155,6 +156,19 @@ def box(lo, hi):
 
 def cylinder(radius, height, center=(0, 0, 0), axis=(0, 0, 1)):
     return Node({"cylinder": {"center": _spec(center), "axis": _spec(axis), "radius": radius, "height": height}})
+
+
+def mesh(path, units=None, repair=False):
+    """A part from a closed triangle mesh (.stl, .obj, .ply, .3mf): its signed distance, negative
+    inside, on a narrow-band grid at the recipe's voxel. units: the file's unit ("mm", "in", ...);
+    repair=True fills small holes. A relative path is made absolute here (against the working
+    directory), so the recipe finds the file wherever it is saved."""
+    spec = {"mesh": os.path.abspath(os.fspath(path))}
+    if units is not None:
+        spec["units"] = units
+    if repair:
+        spec["repair"] = True
+    return Node(spec)
 
 
 def _boolean(kind, nodes, blend):
