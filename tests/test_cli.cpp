@@ -40,10 +40,17 @@ TEST(Cli, SameBytesForAnyThreadCount)
 {
     TempDir dir;
     const auto recipe = dir.write("small.yaml", kSmall);
-    for (int threads : {1, 2, 3})
-        ASSERT_EQ(runCommand(voxlatBinary() + " --threads " + std::to_string(threads) + " mesh " + recipe.string() +
-                             " -o " + (dir.path / ("t" + std::to_string(threads) + ".stl")).string()),
-                  0);
+    const auto output = [&](int threads) {
+        std::ostringstream name;
+        name << "t" << threads << ".stl";
+        return dir.path / name.str();
+    };
+    for (int threads : {1, 2, 3}) {
+        std::ostringstream command;
+        command << voxlatBinary() << " --threads " << threads << " mesh " << recipe.string() << " -o "
+                << output(threads).string();
+        ASSERT_EQ(runCommand(command.str()), 0);
+    }
     const std::string one = readFile(dir.path / "t1.stl");
     EXPECT_GT(one.size(), 10000u);
     EXPECT_EQ(one, readFile(dir.path / "t2.stl"));
@@ -61,7 +68,9 @@ TEST(Cli, BadInputExitsNonZeroAndWritesNothing)
     EXPECT_NE(out.find("bad.yaml:4:"), std::string::npos) << out;
     EXPECT_FALSE(std::filesystem::exists(dir.path / "out"));
     // Too much memory: refused before any output appears.
-    const auto huge = dir.write("huge.yaml", std::string(kSmall).replace(0, 11, "voxel: 0.0005"));
+    std::string hugeText = kSmall;
+    hugeText.replace(hugeText.find("voxel: 0.25"), 11, "voxel: 0.0005");
+    const auto huge = dir.write("huge.yaml", hugeText);
     EXPECT_EQ(runCommand(voxlatBinary() + " -q run " + huge.string() + " --out " + (dir.path / "out2").string(), &out), 3)
         << out;
     EXPECT_NE(out.find("raise `voxel:`"), std::string::npos) << out;
