@@ -334,11 +334,7 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
                         std::vector<std::uint8_t> window;
                         int col0, row0, w, h;
                         t->image.storedWindow(display, window, col0, row0, w, h);
-                        t->bytes = encodePng(storedW, storedH, 1, [&](int row, std::uint8_t* out) {
-                            std::fill(out, out + storedW, std::uint8_t(0));
-                            if (row >= row0 && row < row0 + h)
-                                std::copy_n(&window[std::size_t(row - row0) * w], w, out + col0);
-                        });
+                        t->bytes = encodeWindowPng(storedW, storedH, window.data(), col0, row0, w, h);
                     }
                     return t;
                 }) & tbb::make_filter<Token*, void>(tbb::filter_mode::serial_in_order, [&](Token* raw) {

@@ -98,10 +98,30 @@ void TpmsField::gridValues(const GridBatch& batch, std::span<double> out) const
     for (int i = 0; i < batch.nx; ++i) tx[i] = trigTerms(mWave[0] * (batch.origin[0] + i * batch.spacing[0]));
     for (int j = 0; j < batch.ny; ++j) ty[j] = trigTerms(mWave[1] * (batch.origin[1] + j * batch.spacing[1]));
     for (int k = 0; k < batch.nz; ++k) tz[k] = trigTerms(mWave[2] * (batch.origin[2] + k * batch.spacing[2]));
-    std::size_t n = 0;
-    for (int i = 0; i < batch.nx; ++i)
-        for (int j = 0; j < batch.ny; ++j)
-            for (int k = 0; k < batch.nz; ++k) out[n++] = tpmsEquation(mType, tx[i], ty[j], tz[k]);
+    // The surface type is fixed per call: one loop nest per type lets the compiler inline the
+    // equation (no switch per point); a single z (slices) drops the innermost loop.
+    auto fill = [&]<TpmsType kType>() {
+        std::size_t n = 0;
+        if (batch.nz == 1) {
+            for (int i = 0; i < batch.nx; ++i)
+                for (int j = 0; j < batch.ny; ++j) out[n++] = tpmsEquation(kType, tx[i], ty[j], tz[0]);
+            return;
+        }
+        for (int i = 0; i < batch.nx; ++i)
+            for (int j = 0; j < batch.ny; ++j)
+                for (int k = 0; k < batch.nz; ++k) out[n++] = tpmsEquation(kType, tx[i], ty[j], tz[k]);
+    };
+    switch (mType) {
+    case TpmsType::Gyroid: fill.operator()<TpmsType::Gyroid>(); break;
+    case TpmsType::SchwarzP: fill.operator()<TpmsType::SchwarzP>(); break;
+    case TpmsType::SchwarzD: fill.operator()<TpmsType::SchwarzD>(); break;
+    case TpmsType::IWP: fill.operator()<TpmsType::IWP>(); break;
+    case TpmsType::Neovius: fill.operator()<TpmsType::Neovius>(); break;
+    case TpmsType::FischerKochS: fill.operator()<TpmsType::FischerKochS>(); break;
+    case TpmsType::Lidinoid: fill.operator()<TpmsType::Lidinoid>(); break;
+    case TpmsType::SplitP: fill.operator()<TpmsType::SplitP>(); break;
+    case TpmsType::FRD: fill.operator()<TpmsType::FRD>(); break;
+    }
 }
 
 void TpmsField::gridGradients(const GridBatch& batch, std::span<double> out, std::span<Vec3d> grad) const

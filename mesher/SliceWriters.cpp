@@ -58,7 +58,172 @@ constexpr std::uint32_t kDosTime = 0;
 constexpr std::uint32_t kDosDate = ((2020 - 1980) << 9) | (1 << 5) | 1;
 constexpr std::uint64_t kMax32 = 0xffffffffull;
 
+/// A deflate stream of one fixed-Huffman block that codes each run of equal bytes as a literal and
+/// matches at distance 1 (RFC 1951 3.2.6), with the zlib wrapper's Adler-32 kept alongside.
+class RunDeflater {
+public:
+    explicit RunDeflater(std::string& out) : mOut(out)
+    {
+        static const Tables tables;
+        mTables = &tables;
+        put(1, 1);  // BFINAL
+        put(1, 2);  // BTYPE 01: fixed Huffman codes
+    }
+    void zeros(std::uint64_t n)
+    {
+        mB = (mB + (n % kBase) * mA) % kBase;
+        if (mRunByte != 0) flushRun(), mRunByte = 0;
+        mRun += n;
+    }
+    void bytes(const std::uint8_t* p, std::size_t n)
+    {
+        const uLong adler = adler32((uLong(mB) << 16) | mA, p, uInt(n));
+        mA = adler & 0xffff;
+        mB = adler >> 16;
+        std::size_t k = 0;
+        while (k < n) {
+            if (p[k] != mRunByte) flushRun(), mRunByte = p[k];
+            std::size_t e = k + 1;
+            const std::uint64_t pattern = 0x0101010101010101ull * mRunByte;
+            for (std::uint64_t word; e + 8 <= n; e += 8) {  // eight bytes at a time through long runs
+                std::memcpy(&word, p + e, 8);
+                if (word != pattern) break;
+            }
+            while (e < n && p[e] == mRunByte) ++e;
+            mRun += e - k;
+            k = e;
+        }
+    }
+    /// Ends the block and returns the Adler-32 of everything coded.
+    std::uint32_t finish()
+    {
+        flushRun();
+        put(mTables->code[256], mTables->bits[256]);
+        for (; mCount > 0; mCount -= 8, mBits >>= 8) mOut.push_back(char(mBits & 0xff));
+        return std::uint32_t((mB << 16) | mA);
+    }
+
+private:
+    static constexpr std::uint32_t kBase = 65521;
+    struct Tables {
+        std::uint16_t code[288];
+        std::uint8_t bits[288];
+        std::uint32_t lengthCode[259];  ///< length symbol code, then its extra bits, then distance code 0
+        std::uint8_t lengthBits[259];
+        Tables()
+        {
+            auto reversed = [](std::uint32_t c, int n) {
+                std::uint32_t r = 0;
+                for (int i = 0; i < n; ++i) r |= ((c >> i) & 1u) << (n - 1 - i);
+                return r;
+            };
+            for (int s = 0; s < 288; ++s) {
+                const int n = s < 144 ? 8 : s < 256 ? 9 : s < 280 ? 7 : 8;
+                const std::uint32_t c = s < 144   ? 0x30 + s
+                                        : s < 256 ? 0x190 + (s - 144)
+                                        : s < 280 ? s - 256
+                                                  : 0xc0 + (s - 280);
+                code[s] = std::uint16_t(reversed(c, n));
+                bits[s] = std::uint8_t(n);
+            }
+            static const int base[29] = {3,  4,  5,  6,  7,  8,  9,  10, 11,  13,  15,  17,  19,  23, 27,
+                                         31, 35, 43, 51, 59, 67, 83, 99, 115, 131, 163, 195, 227, 258};
+            static const int extra[29] = {0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2,
+                                          2, 3, 3, 3, 3, 4, 4, 4, 4, 5, 5, 5, 5, 0};
+            for (int len = 3; len <= 258; ++len) {
+                int s = 28;
+                while (base[s] > len) --s;
+                const int sym = 257 + s, n = bits[sym];
+                lengthCode[len] = code[sym] | (std::uint32_t(len - base[s]) << n);  // distance code 0: 5 zero bits
+                lengthBits[len] = std::uint8_t(n + extra[s] + 5);
+            }
+        }
+    };
+
+    void put(std::uint32_t value, int n)
+    {
+        mBits |= std::uint64_t(value) << mCount;
+        mCount += n;
+        if (mCount >= 32) {
+            const std::uint32_t word = std::uint32_t(mBits);
+            const char b[4] = {char(word), char(word >> 8), char(word >> 16), char(word >> 24)};
+            mOut.append(b, 4);
+            mBits >>= 32;
+            mCount -= 32;
+        }
+    }
+    void flushRun()
+    {
+        if (mRun == 0) return;
+        put(mTables->code[mRunByte], mTables->bits[mRunByte]);
+        std::uint64_t rest = mRun - 1;
+        for (; rest >= 258 + 3; rest -= 258) put(mTables->lengthCode[258], mTables->lengthBits[258]);
+        if (rest > 258) {  // leave at least 3 for the last match
+            put(mTables->lengthCode[rest - 3], mTables->lengthBits[rest - 3]);
+            rest = 3;
+        }
+        if (rest >= 3)
+            put(mTables->lengthCode[rest], mTables->lengthBits[rest]);
+        else
+            for (; rest > 0; --rest) put(mTables->code[mRunByte], mTables->bits[mRunByte]);
+        mRun = 0;
+    }
+
+    std::string& mOut;
+    const Tables* mTables;
+    std::uint64_t mBits = 0;
+    int mCount = 0;
+    std::uint8_t mRunByte = 0;
+    std::uint64_t mRun = 0;
+    std::uint32_t mA = 1, mB = 0;
+};
+
+void putBig32(std::string& s, std::uint32_t v)
+{
+    for (int shift = 24; shift >= 0; shift -= 8) s.push_back(char((v >> shift) & 0xff));
+}
+
+/// Appends a PNG chunk (length, type, data, CRC of type and data).
+void pngChunk(std::string& out, const char* type, const std::string& data)
+{
+    putBig32(out, std::uint32_t(data.size()));
+    const std::size_t start = out.size();
+    out.append(type, 4);
+    out += data;
+    putBig32(out,
+             std::uint32_t(crc32(0L, reinterpret_cast<const Bytef*>(out.data() + start), uInt(out.size() - start))));
+}
+
 }  // namespace
+
+std::string encodeWindowPng(int width, int height, const std::uint8_t* window, int col0, int row0, int w, int h)
+{
+    if (w <= 0 || h <= 0) col0 = row0 = w = h = 0;
+    if (col0 < 0 || row0 < 0 || col0 + w > width || row0 + h > height)
+        throw std::runtime_error("PNG window lies outside the image");
+    std::string idat{char(0x78), char(0x01)};  // zlib header: deflate, 32K window, no dictionary
+    idat.reserve(1 << 16);
+    RunDeflater deflater(idat);
+    const std::uint64_t rowBytes = std::uint64_t(width) + 1;  // filter byte NONE (0), then the pixels
+    deflater.zeros(std::uint64_t(row0) * rowBytes);
+    for (int r = 0; r < h; ++r) {
+        deflater.zeros(1 + std::uint64_t(col0));
+        deflater.bytes(window + std::size_t(r) * w, std::size_t(w));
+        deflater.zeros(std::uint64_t(width - col0 - w));
+    }
+    deflater.zeros(std::uint64_t(height - row0 - h) * rowBytes);
+    putBig32(idat, deflater.finish());
+
+    std::string out("\x89PNG\r\n\x1a\n", 8);
+    std::string ihdr;
+    putBig32(ihdr, std::uint32_t(width));
+    putBig32(ihdr, std::uint32_t(height));
+    ihdr += std::string{char(8), char(0), char(0), char(0), char(0)};  // 8-bit grey, deflate, adaptive, no interlace
+    pngChunk(out, "IHDR", ihdr);
+    pngChunk(out, "IDAT", idat);
+    pngChunk(out, "IEND", std::string());
+    return out;
+}
 
 std::string encodePng(int width, int height, int channels, const std::function<void(int, std::uint8_t*)>& row,
                       int level)

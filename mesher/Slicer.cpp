@@ -159,7 +159,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     if (z < mPart.min.z() || z > mPart.max.z()) return;
     const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
     const int tile = std::max(2, mOptions.tile), block = 4 * tile;
-    std::vector<double> values, sub;
+    std::vector<double> values, cells, sub;
 
     // Classifies the pixel box [i, i + n) x [j, j + m) of the window: -1 inside, +1 outside, 0 both.
     auto classify = [&](int i, int j, int n, int m) {
@@ -186,64 +186,86 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
                 if (stats) (side < 0 ? stats->tilesInside : stats->tilesOutside) += tiles;
                 continue;
             }
+            // One batch for the block's pixel centres and a one-pixel halo: per-axis terms are shared
+            // by the whole block (the separable fast paths), and no per-tile bounds are needed, as
+            // the tiles' own centre values decide which pixels are sure (edgeTile's fast path).
+            GridBatch grid;
+            grid.origin = Vec3d(xOf(mI0 + bi - 1), yOf(mJ0 + bj - 1), z);
+            grid.spacing = Vec3d(px, py, 1.0);
+            grid.nx = bnx + 2;
+            grid.ny = bny + 2;
+            grid.nz = 1;
+            values.resize(grid.size());
+            mField.gridValues(grid, values);
+            if (stats) stats->pixelsEvaluated += std::uint64_t(bnx) * bny;
+            // The largest difference between the four corners of each grid cell (both axes and both
+            // diagonals), for edgeTile's fast pass; written to vectorize.
+            const int cy = grid.ny - 1;
+            cells.resize(std::size_t(grid.nx - 1) * cy);
+            for (int a = 0; a + 1 < grid.nx; ++a) {
+                const double* c0 = &values[std::size_t(a) * grid.ny];
+                const double* c1 = c0 + grid.ny;
+                double* e = &cells[std::size_t(a) * cy];
+                for (int b = 0; b < cy; ++b) {
+                    const double d0 = std::abs(c1[b] - c0[b]), d1 = std::abs(c0[b + 1] - c0[b]);
+                    const double d2 = std::abs(c1[b + 1] - c0[b]), d3 = std::abs(c1[b] - c0[b + 1]);
+                    e[b] = std::max(std::max(d0, d1), std::max(d2, d3));
+                }
+            }
             for (int tj = bj; tj < bj + bny; tj += tile)
                 for (int ti = bi; ti < bi + bnx; ti += tile) {
                     const int tnx = std::min(tile, bi + bnx - ti), tny = std::min(tile, bj + bny - tj);
-                    const int tside = classify(ti, tj, tnx, tny);
-                    if (tside < 0) fill(ti, tj, tnx, tny);
-                    if (tside != 0) {
-                        if (stats) ++(tside < 0 ? stats->tilesInside : stats->tilesOutside);
-                        continue;
-                    }
-                    if (stats) ++stats->tilesEdge;
-                    edgeTile(z, ti, tj, tnx, tny, out, values, sub, stats);
+                    const int tside =
+                        edgeTile(z, ti, tj, tnx, tny, out, &values[std::size_t(ti - bi) * grid.ny + (tj - bj)], grid.ny,
+                                 &cells[std::size_t(ti - bi) * cy + (tj - bj)], sub, stats);
+                    if (stats) ++(tside < 0 ? stats->tilesInside : tside > 0 ? stats->tilesOutside : stats->tilesEdge);
                 }
         }
 }
 
-void Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, std::vector<double>& values,
-                      std::vector<double>& sub, RasterStats* stats) const
+int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, const double* values, int stride,
+                     const double* cells, std::vector<double>& sub, RasterStats* stats) const
 {
     const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
-    // Pixel centres of the tile plus a one-pixel halo, for the neighbourhood tests and gradients.
-    GridBatch grid;
-    grid.origin = Vec3d(xOf(mI0 + ti - 1), yOf(mJ0 + tj - 1), z);
-    grid.spacing = Vec3d(px, py, 1.0);
-    grid.nx = tnx + 2;
-    grid.ny = tny + 2;
-    grid.nz = 1;
-    values.resize(grid.size());
-    mField.gridValues(grid, values);
-    const int hy = grid.ny;
-    auto v = [&](int a, int b) { return values[std::size_t(a) * hy + b]; };
+    // values: the pixel centres of the tile plus a one-pixel halo (column a of the halo grid at
+    // values[a * stride]), for the neighbourhood tests and gradients; cells: the largest difference
+    // between the corners of each halo-grid cell (a, b) .. (a + 1, b + 1), at cells[a * (stride - 1) + b].
+    auto v = [&](int a, int b) { return values[std::size_t(a) * stride + b]; };
     const int s = std::max(1, mOptions.supersample);
     std::uint64_t supersampled = 0;
-
-    // The largest difference between neighbouring centres (axis and diagonal) over the tile: a pixel
-    // with |f| above it cannot hold the boundary (see below), a one-compare fast path.
-    double tileDiff = 0.0;
-    for (int a = 0; a + 1 < grid.nx; ++a)
-        for (int b = 0; b + 1 < hy; ++b) {
-            const double f00 = v(a, b), f10 = v(a + 1, b), f01 = v(a, b + 1), f11 = v(a + 1, b + 1);
-            tileDiff = std::max(
-                {tileDiff, std::abs(f10 - f00), std::abs(f01 - f00), std::abs(f11 - f00), std::abs(f10 - f01)});
-        }
-    for (int b = 0; b < grid.ny - 1; ++b)
-        tileDiff = std::max(tileDiff, std::abs(v(grid.nx - 1, b + 1) - v(grid.nx - 1, b)));
-    for (int a = 0; a < grid.nx - 1; ++a) tileDiff = std::max(tileDiff, std::abs(v(a + 1, hy - 1) - v(a, hy - 1)));
     const bool wholeTileInPart =
         xOf(mI0 + ti) - 0.5 * px >= mPart.min.x() && xOf(mI0 + ti + tnx - 1) + 0.5 * px <= mPart.max.x() &&
         yOf(mJ0 + tj) - 0.5 * py >= mPart.min.y() && yOf(mJ0 + tj + tny - 1) + 0.5 * py <= mPart.max.y();
 
+    // Fast pass: every difference between a pixel's centre and one of its eight neighbours lies in
+    // one of the four cells around it, so a pixel with |f| above their largest difference has no
+    // sign change in its 3x3 neighbourhood and |f| above every difference to a neighbour: it is
+    // surely inside or outside (the exact test below would say the same). Most pixels end here.
+    int sure = 0, sureInside = 0;
+    std::uint8_t slow[64 * 64];
+    const bool useSlow = tnx * tny <= 64 * 64;
+    for (int a = 0; a < tnx; ++a) {
+        const double* c0 = cells + std::size_t(a) * (stride - 1);
+        const double* c1 = c0 + (stride - 1);
+        const double* f = values + std::size_t(a + 1) * stride + 1;
+        std::uint8_t* pixel = &out.pixels[std::size_t(tj) * mNx + ti + a];
+        for (int b = 0; b < tny; ++b) {
+            const double bound = std::max(std::max(c0[b], c0[b + 1]), std::max(c1[b], c1[b + 1]));
+            const bool isSure = wholeTileInPart && std::abs(f[b]) > bound;
+            const bool inside = f[b] < 0.0;
+            pixel[std::size_t(b) * mNx] = isSure && inside ? 255 : 0;
+            sure += isSure;
+            sureInside += isSure && inside;
+            if (useSlow) slow[a * tny + b] = !isSure;
+        }
+    }
+
     for (int b = 0; b < tny; ++b)
         for (int a = 0; a < tnx; ++a) {
+            if (useSlow && !slow[a * tny + b]) continue;
             const int i = mI0 + ti + a, j = mJ0 + tj + b;
             const double x = xOf(i), y = yOf(j), f = v(a + 1, b + 1);
             std::uint8_t& pixel = out.pixels[std::size_t(tj + b) * mNx + (ti + a)];
-            if (wholeTileInPart && std::abs(f) > tileDiff) {
-                pixel = f < 0.0 ? 255 : 0;
-                continue;
-            }
             const bool centreInPart =
                 x >= mPart.min.x() && x <= mPart.max.x() && y >= mPart.min.y() && y <= mPart.max.y();
             if (mOptions.supersample <= 0) {
@@ -308,10 +330,9 @@ void Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& ou
             }
             pixel = mLevels[inside];
         }
-    if (stats) {
-        stats->pixelsEvaluated += std::uint64_t(tnx) * tny;
-        stats->pixelsSupersampled += supersampled;
-    }
+    if (stats) stats->pixelsSupersampled += supersampled;
+    if (sure < tnx * tny) return 0;
+    return sureInside == sure ? -1 : sureInside == 0 ? 1 : 0;
 }
 
 void Slicer::fieldValues(double z, std::vector<float>& out) const

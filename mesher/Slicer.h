@@ -102,8 +102,11 @@ public:
     double yOf(double j) const { return (j + 0.5) * mDisplay.pitchY() - mOffsetY; }
 
 private:
-    void edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, std::vector<double>& values,
-                  std::vector<double>& sub, RasterStats* stats) const;
+    /// Decides the pixels of one tile from its centre values (with a one-pixel halo, column-major
+    /// with @a stride) and the largest corner difference of each halo cell (@a cells); returns -1 (+1) if every pixel
+    /// was surely inside (outside), else 0.
+    int edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, const double* values, int stride,
+                 const double* cells, std::vector<double>& sub, RasterStats* stats) const;
 
     const FieldNode& mField;
     Box3 mPart;

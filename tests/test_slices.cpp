@@ -17,6 +17,7 @@
 #include <zip.h>
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <cmath>
 #include <map>
 #include <numbers>
@@ -310,6 +311,41 @@ TEST(Slices, MemoryBoundedByAFewLayersForATallPart)
     EXPECT_GE(r.maxLayersHeld, 1);
     EXPECT_LE(r.maxLayersHeld, 4);
     EXPECT_EQ(r.report["max_layers_held"], r.maxLayersHeld);
+}
+
+TEST(Slices, WindowPngDecodesToTheSamePixels)
+{
+    // Runs of every awkward length (1, 2, 3, 258 to 261, long) of 0, 255 and greys, a window touching
+    // the image border and one inside it; libpng must read back exactly the pixels.
+    std::uint32_t state = 12345;
+    auto random = [&] { return state = state * 1664525u + 1013904223u; };
+    for (const auto& [W, H, col0, row0, w, h] : std::vector<std::array<int, 6>>{
+             {300, 200, 17, 33, 260, 150}, {300, 200, 0, 0, 300, 200}, {70, 9, 69, 8, 1, 1}, {40, 30, 5, 5, 0, 0}}) {
+        std::vector<std::uint8_t> window(std::size_t(w) * h);
+        for (std::size_t k = 0; k < window.size();) {
+            const std::uint32_t r = random();
+            const std::size_t lengths[] = {1, 2, 3, 4, 258, 259, 260, 261, 700, 5};
+            const std::size_t run = std::min(window.size() - k, lengths[(r >> 8) % 10]);
+            const std::uint8_t value = r % 3 == 0 ? 0 : r % 3 == 1 ? 255 : std::uint8_t(r >> 24);
+            std::fill_n(window.begin() + std::ptrdiff_t(k), run, value);
+            k += run;
+        }
+        const std::string png = encodeWindowPng(W, H, window.data(), col0, row0, w, h);
+        int dw, dh, c;
+        const auto pixels = decodePng(png, dw, dh, c);
+        ASSERT_EQ(dw, W);
+        ASSERT_EQ(dh, H);
+        ASSERT_EQ(c, 1);
+        std::size_t wrong = 0;
+        for (int r = 0; r < H; ++r)
+            for (int col = 0; col < W; ++col) {
+                const bool in = col >= col0 && col < col0 + w && r >= row0 && r < row0 + h;
+                const std::uint8_t expected = in ? window[std::size_t(r - row0) * w + (col - col0)] : 0;
+                wrong += pixels[std::size_t(r) * W + col] != expected;
+            }
+        EXPECT_EQ(wrong, 0u) << W << " x " << H;
+    }
+    EXPECT_THROW(encodeWindowPng(10, 10, nullptr, 5, 5, 6, 1), std::runtime_error);
 }
 
 TEST(Slices, PngAndExrFolders)
