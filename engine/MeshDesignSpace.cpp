@@ -1,6 +1,7 @@
 #include "engine/MeshDesignSpace.h"
 
 #include "engine/Errors.h"
+#include "engine/InteriorDistance.h"
 #include "engine/SystemInfo.h"
 #include "mesher/MeshCheck.h"
 
@@ -295,8 +296,13 @@ void MeshDesignSpace::convert()
     auto xform = openvdb::math::Transform::createLinearTransform(mVoxel);
     xform->postTranslate(mSampleOrigin);
     const std::vector<openvdb::Vec4I> quads;
+    // OpenVDB converts a thin band (its flood fill decides inside and outside); a deeper inside
+    // band is filled with exact distances to the triangles, which is far faster than letting
+    // meshToVolume grow its band voxel layer by voxel layer.
+    const float thin = std::min(interior, 3.0f);
     openvdb::FloatGrid::Ptr grid = openvdb::tools::meshToSignedDistanceField<openvdb::FloatGrid>(
-        *xform, mMesh.points, mMesh.triangles, quads, exterior, interior);
+        *xform, mMesh.points, mMesh.triangles, quads, exterior, thin);
+    if (interior > thin) deepenInteriorBand(*grid, mMesh, interior);
     grid->setGridClass(openvdb::GRID_LEVEL_SET);
     const Box3 support{mBounds.min - Vec3d(mVoxel), mBounds.max + Vec3d(mVoxel)};
     mDistance = std::make_shared<MeshDistance>(grid, support);
