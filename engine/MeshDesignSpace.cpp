@@ -1,6 +1,7 @@
 #include "engine/MeshDesignSpace.h"
 
 #include "engine/Errors.h"
+#include "engine/MeshSdf.h"
 #include "engine/SystemInfo.h"
 #include "mesher/MeshCheck.h"
 
@@ -294,12 +295,32 @@ void MeshDesignSpace::convert()
     }
     auto xform = openvdb::math::Transform::createLinearTransform(mVoxel);
     xform->postTranslate(mSampleOrigin);
-    const std::vector<openvdb::Vec4I> quads;
-    openvdb::FloatGrid::Ptr grid = openvdb::tools::meshToSignedDistanceField<openvdb::FloatGrid>(
-        *xform, mMesh.points, mMesh.triangles, quads, exterior, interior);
-    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    // Our own conversion (exact distances, ray parity) unless the mesh overlaps itself, where
+    // parity would hollow out the overlap: then OpenVDB's, which takes the union.
+    openvdb::FloatGrid::Ptr grid = meshToSdf(mMesh, *xform, exterior, interior);
+    orientAndMeasure(grid);
+    const double meshVol = mMesh.volume();
+    if (std::abs(mGridVolume - meshVol) > 0.02 * meshVol + 0.5 * area * mVoxel) {
+        const std::vector<openvdb::Vec4I> quads;
+        grid = openvdb::tools::meshToSignedDistanceField<openvdb::FloatGrid>(*xform, mMesh.points, mMesh.triangles,
+                                                                             quads, exterior, interior);
+        grid->setGridClass(openvdb::GRID_LEVEL_SET);
+        orientAndMeasure(grid);
+        mConverter = "openvdb (the mesh overlaps itself)";
+    }
+    // Overlapping shells count twice in the divergence theorem but once in the grid.
+    if (std::abs(mGridVolume - mMesh.volume()) > 0.02 * mMesh.volume() + 0.5 * area * mVoxel)
+        mWarnings.push_back("the mesh's own volume (" + mm(mMesh.volume()) + " mm3) and the volume inside it (" +
+                            mm(mGridVolume) +
+                            " mm3) differ: the mesh probably intersects itself or has overlapping "
+                            "shells (the part is taken as their union)");
+}
+
+void MeshDesignSpace::orientAndMeasure(const openvdb::FloatGrid::Ptr& grid)
+{
     const Box3 support{mBounds.min - Vec3d(mVoxel), mBounds.max + Vec3d(mVoxel)};
     mDistance = std::make_shared<MeshDistance>(grid, support);
+    const std::size_t flippedBefore = mFlippedShells;
 
     // Orientation: the grid knows inside from outside whatever the normals say. Compare each
     // shell's normals with the distance gradient at its triangles (area weighted, up to 4096
@@ -341,9 +362,10 @@ void MeshDesignSpace::convert()
             if (mShellOf[t] == s) std::swap(mMesh.triangles[t][1], mMesh.triangles[t][2]);
         ++mFlippedShells;
     }
-    if (mFlippedShells > 0)
-        mWarnings.push_back("turned " + std::to_string(mFlippedShells) + " inside-out shell" +
-                            (mFlippedShells == 1 ? "" : "s") + " (normals pointing inward) the right way");
+    if (mFlippedShells > flippedBefore)
+        mWarnings.push_back("turned " + std::to_string(mFlippedShells - flippedBefore) + " inside-out shell" +
+                            (mFlippedShells - flippedBefore == 1 ? "" : "s") +
+                            " (normals pointing inward) the right way");
 
     // Volume inside the grid: each sample's cell counts by how much of it lies inside, 1/2 - d/voxel
     // clamped to [0, 1] (exact for a face parallel to the cells; a plain count of samples below
@@ -358,13 +380,6 @@ void MeshDesignSpace::convert()
         covered += std::clamp(0.5 - double(*it) / mVoxel, 0.0, 1.0);
     }
     mGridVolume = covered * mVoxel * mVoxel * mVoxel;
-    // Overlapping shells count twice in the divergence theorem but once in the grid.
-    const double meshVol = mMesh.volume();
-    if (std::abs(mGridVolume - meshVol) > 0.02 * meshVol + 0.5 * area * mVoxel)
-        mWarnings.push_back("the mesh's own volume (" + mm(meshVol) + " mm3) and the volume inside it (" +
-                            mm(mGridVolume) +
-                            " mm3) differ: the mesh probably intersects itself or has overlapping "
-                            "shells (the part is taken as their union)");
 }
 
 nlohmann::json MeshDesignSpace::report() const
@@ -380,6 +395,7 @@ nlohmann::json MeshDesignSpace::report() const
                      {"mesh_volume_mm3", mMesh.volume()},
                      {"area_mm2", mMesh.area()},
                      {"interior_band_mm", mInteriorMm},
+                     {"converter", mConverter},
                      {"degenerate_triangles_dropped", mDegenerateDropped},
                      {"triangles_reoriented", mReorientedTriangles},
                      {"shells_turned", mFlippedShells},

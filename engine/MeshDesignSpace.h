@@ -61,6 +61,8 @@ private:
     void fillHoles(bool repair);
     void checkSize(const MeshSpaceOptions& options);
     void convert();
+    /// Turns inside-out shells by @a grid's gradients, then measures the part's volume on it.
+    void orientAndMeasure(const openvdb::FloatGrid::Ptr& grid);
 
     TriangleMesh mMesh;
     std::string mShown, mFormat;
@@ -75,6 +77,7 @@ private:
     std::once_flag mBuilt;
     std::shared_ptr<const MeshDistance> mDistance;
     double mGridVolume = 0.0;
+    std::string mConverter = "exact distances, ray parity";  ///< which conversion made the grid
 
     // What the checks found and fixed, for the report.
     std::size_t mDegenerateDropped = 0, mReorientedTriangles = 0, mHolesFilled = 0, mHoleEdges = 0;

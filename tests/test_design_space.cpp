@@ -5,6 +5,7 @@
 #include "engine/DensitySolver.h"
 #include "engine/Job.h"
 #include "engine/MeshDesignSpace.h"
+#include "engine/MeshSdf.h"
 #include "fields/BoxField.h"
 #include "fields/CoordinateMap.h"
 #include "fields/LevelSolid.h"
@@ -13,7 +14,9 @@
 #include "mesher/MeshWriters.h"
 
 #include <gtest/gtest.h>
+#include <openvdb/math/Proximity.h>
 #include <openvdb/tools/Interpolation.h>
+#include <tbb/global_control.h>
 #include <nlohmann/json.hpp>
 
 #include <cmath>
@@ -517,4 +520,47 @@ outputs: {mesh: out.stl}
         EXPECT_NE(out.find(expected), std::string::npos) << out;
         EXPECT_FALSE(std::filesystem::exists(dir.path / ("o-" + file)));
     }
+}
+
+TEST(MeshSdf, BracketDistancesMatchBruteForceAndThreadCount)
+{
+    // Every active sample against the brute-force nearest triangle, the sign against the part's
+    // known geometry, and the same bytes with one thread or many.
+    MeshSpaceOptions o;
+    o.voxel = 0.25;
+    MeshDesignSpace space(readPartMesh(bracket(), "bracket.stl"), "bracket.stl", o);
+    const TriangleMesh& mesh = space.mesh();
+    auto xform = openvdb::math::Transform::createLinearTransform(0.25);
+    xform->postTranslate(Vec3d(0.125));
+    const auto grid = meshToSdf(mesh, *xform, 3.0f, 9.0f);
+    openvdb::FloatGrid::Ptr single;
+    {
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        single = meshToSdf(mesh, *xform, 3.0f, 9.0f);
+    }
+    std::size_t active = 0, checked = 0;
+    for (auto it = grid->tree().cbeginValueOn(); it; ++it, ++active) {
+        EXPECT_EQ(*it, single->tree().getValue(it.getCoord()));
+        if (active % 7 != 0) continue;
+        const Vec3d p = xform->indexToWorld(it.getCoord());
+        double best = std::numeric_limits<double>::infinity();
+        for (const auto& t : mesh.triangles) {
+            const Vec3d a = mesh.points[t[0]], b = mesh.points[t[1]], c = mesh.points[t[2]];
+            Vec3d uvw;
+            best = std::min(best, (openvdb::math::closestPointOnTriangleToPoint(a, b, c, p, uvw) - p).length());
+        }
+        EXPECT_NEAR(std::abs(*it), best, 1e-5) << p;
+        EXPECT_LT(best, (*it < 0 ? 9.0 : 3.0) * 0.25);
+        ++checked;
+    }
+    EXPECT_EQ(single->activeVoxelCount(), grid->activeVoxelCount());
+    EXPECT_GT(checked, 5000u);
+    // Signs: base plate (z in [0, 5]), upright plate, the crook of the L and a hole.
+    auto at = [&](double x, double y, double z) {
+        return grid->tree().getValue(xform->worldToIndexCellCentered(Vec3d(x, y, z)));
+    };
+    EXPECT_LT(at(15, 12, 2.5), 0.0f);
+    EXPECT_GT(at(15, 15, 15), 0.0f);
+    EXPECT_GT(at(7.5, 16, 2.5), 0.0f);
+    EXPECT_FLOAT_EQ(at(15, 12.1, 2.4), -9.0f * 0.25f);  // deeper than the band (2.5 mm from the faces)
 }
