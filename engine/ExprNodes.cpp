@@ -11,13 +11,6 @@ namespace voxlat {
 
 namespace {
 
-std::string joined(const std::vector<std::string>& words)
-{
-    std::string s;
-    for (const auto& w : words) s += (s.empty() ? "" : ", ") + w;
-    return s;
-}
-
 /// Answers the names in one equation: parameters become constants, fields become inputs.
 class EquationNames {
 public:
@@ -75,31 +68,10 @@ FieldPtr buildExpr(FieldBuilder& builder, const RecipeNode& spec, const std::str
 {
     FieldPtr raw = equationField(builder, spec["expr"]);
     if (!spec.has("solid") && !spec.has("level") && !spec.has("density")) return raw;
-    const std::string solidName = spec.has("solid") ? spec["solid"].string() : "network";
-    SolidSide side;
-    if (solidName == "network")
-        side = SolidSide::Below;
-    else if (solidName == "sheet")
-        side = SolidSide::Band;
-    else
-        spec["solid"].fail("solid is `network` (f <= level) or `sheet` (|f| <= level), got `" + solidName + "`");
-    LevelNode node{name, "expr " + solidName, std::make_shared<LevelSolid>(raw, side, 0.0), {}, {}};
-    if (spec.has("level") && spec.has("density"))
-        spec.fail("give either `level:` or `density:`, not both (density solves the level)");
-    if (spec.has("density")) {
-        const RecipeNode d = spec["density"];
-        const double rho = d.number();
-        if (!(rho > 0.0 && rho < 1.0))
-            d.fail("density is a relative density between 0 and 1 (exclusive), got " + d.yaml().Scalar() +
-                   "; for 30 % write 0.30");
-        node.density = rho;
-    } else if (spec.has("level")) {
-        node.solid->setLevel(spec["level"].number());
-        if (side == SolidSide::Band && !(node.solid->level() > 0.0))
-            spec["level"].fail("a sheet's level is its half-thickness t in |f| <= t and must be greater than zero");
-    } else if (side == SolidSide::Band) {
-        spec.fail("give `level:` (for a sheet, the half-thickness t in |f| <= t) or `density:`");
-    }
+    const SolidSide side = readSolidSide(spec);
+    LevelNode node{name, side == SolidSide::Band ? "expr sheet" : "expr network",
+                   std::make_shared<LevelSolid>(raw, side, 0.0)};
+    readLevelKeys(spec, node, 0.0, side == SolidSide::Band);
     FieldPtr result = node.solid;
     builder.addLevelNode(std::move(node));
     return result;
@@ -134,11 +106,11 @@ FieldPtr equationField(FieldBuilder& builder, const RecipeNode& textNode)
             std::string known;
             if (e.unknownName()[0] == '$') {
                 for (const auto& [p, v] : recipe.params) candidates.push_back("$" + p);
-                known = candidates.empty() ? "the recipe declares no `params:`" : "parameters: " + joined(candidates);
+                known = candidates.empty() ? "the recipe declares no `params:`" : "parameters: " + joinWords(candidates);
             } else {
                 candidates = recipe.fieldNames;
                 for (const auto& c : exprConstantNames()) candidates.push_back(c);
-                known = "fields: " + joined(recipe.fieldNames) + "; coordinates x, y, z; constants pi, tau, e";
+                known = "fields: " + joinWords(recipe.fieldNames) + "; coordinates x, y, z; constants pi, tau, e";
             }
             const std::string guess = closestMatch(e.unknownName(), candidates);
             if (!guess.empty()) message += "; did you mean `" + guess + "`?";

@@ -55,11 +55,7 @@ FieldPtr FieldBuilder::buildSpec(const RecipeNode& spec, const std::string& name
     const auto& types = nodeTypes();
     std::vector<std::string> typeKeys;
     for (const NodeType& t : types) typeKeys.push_back(t.key);
-    if (!spec.isMap()) spec.fail("expected a map naming the node type, one of: " + [&] {
-        std::string s;
-        for (const auto& k : typeKeys) s += (s.empty() ? "" : ", ") + k;
-        return s;
-    }());
+    if (!spec.isMap()) spec.fail("expected a map naming the node type, one of: " + joinWords(typeKeys));
     const NodeType* found = nullptr;
     for (const NodeType& t : types) {
         if (!spec.has(t.key)) continue;
@@ -75,12 +71,40 @@ FieldPtr FieldBuilder::buildSpec(const RecipeNode& spec, const std::string& name
                 break;
             }
         }
-        std::string valid;
-        for (const auto& k : typeKeys) valid += (valid.empty() ? "" : ", ") + k;
-        spec.fail(message + " (types: " + valid + ")");
+        spec.fail(message + " (types: " + joinWords(typeKeys) + ")");
     }
     spec.checkKeys(found->keys);
     return found->build(*this, spec, name);
+}
+
+SolidSide readSolidSide(const RecipeNode& spec)
+{
+    const std::string solid = spec.has("solid") ? spec["solid"].string() : "network";
+    if (solid == "network") return SolidSide::Below;
+    if (solid == "sheet") return SolidSide::Band;
+    spec["solid"].fail("solid is `network` (f <= level) or `sheet` (|f| <= level), got `" + solid + "`");
+}
+
+void readLevelKeys(const RecipeNode& spec, LevelNode& node, double defaultLevel, bool levelRequired)
+{
+    if (spec.has("level") && spec.has("density"))
+        spec.fail("give either `level:` or `density:`, not both (density solves the level)");
+    if (spec.has("density")) {
+        const RecipeNode d = spec["density"];
+        const double rho = d.number();
+        if (!(rho > 0.0 && rho < 1.0))
+            d.fail("density is a relative density between 0 and 1 (exclusive), got " + d.yaml().Scalar() +
+                   "; for 30 % write 0.30");
+        node.density = rho;
+    } else if (spec.has("level")) {
+        node.solid->setLevel(spec["level"].number());
+        if (node.solid->side() == SolidSide::Band && !(node.solid->level() > 0.0))
+            spec["level"].fail("a sheet's level is its half-thickness t in |f| <= t and must be greater than zero");
+    } else if (levelRequired) {
+        spec.fail("give `level:` (for a sheet, the half-thickness t in |f| <= t) or `density:`");
+    } else {
+        node.solid->setLevel(defaultLevel);
+    }
 }
 
 }  // namespace voxlat

@@ -114,6 +114,12 @@ private:
     std::vector<std::string> mWarnings;
 };
 
+/// Reads `solid:` of a lattice node: `network` (f <= level, the default) or `sheet` (|f| <= level).
+SolidSide readSolidSide(const RecipeNode& spec);
+/// Reads `level:` / `density:` of a lattice node into @a node (a density in (0, 1)); without
+/// either, the level is @a defaultLevel unless @a levelRequired. A sheet's level must be > 0.
+void readLevelKeys(const RecipeNode& spec, LevelNode& node, double defaultLevel, bool levelRequired);
+
 /// Node types by family; each family lives in its own file.
 void addShapeNodeTypes(std::vector<NodeType>& types);    // ShapeNodes.cpp: primitives, booleans, transforms
 void addLatticeNodeTypes(std::vector<NodeType>& types);  // LatticeNodes.cpp: tpms

@@ -62,10 +62,8 @@ PrinterProfile loadPrinterProfile(const std::string& nameOrPath, const std::stri
             std::string message = "unknown printer `" + nameOrPath + "`";
             const std::string guess = closestMatch(nameOrPath, names);
             if (!guess.empty()) message += "; did you mean `" + guess + "`?";
-            std::string valid;
-            for (const auto& n : names) valid += (valid.empty() ? "" : ", ") + n;
             throw InputError((where.empty() ? "" : where + ": ") + message + " (printers in " + printersFolder() +
-                             ": " + valid + "; or give the path of a profile file)");
+                             ": " + joinWords(names) + "; or give the path of a profile file)");
         }
     }
     std::ifstream in(path);

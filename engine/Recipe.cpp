@@ -134,9 +134,7 @@ RecipeNode Recipe::fieldSpec(const std::string& name) const
         std::string message = "no field named `" + name + "`";
         const std::string guess = closestMatch(name, fieldNames);
         if (!guess.empty()) message += "; did you mean `" + guess + "`?";
-        std::string valid;
-        for (const auto& n : fieldNames) valid += (valid.empty() ? "" : ", ") + n;
-        fields.fail(message + " (fields: " + valid + ")");
+        fields.fail(message + " (fields: " + joinWords(fieldNames) + ")");
     }
     return RecipeNode(root["fields"][name], source, "field `" + name + "`");
 }

@@ -113,10 +113,15 @@ void RecipeNode::checkKeys(const std::vector<std::string>& allowed) const
         std::string message = "unknown key `" + key + "`";
         const std::string guess = closestMatch(key, allowed);
         if (!guess.empty()) message += "; did you mean `" + guess + "`?";
-        std::ostringstream valid;
-        for (std::size_t i = 0; i < allowed.size(); ++i) valid << (i ? ", " : "") << allowed[i];
-        RecipeNode(it->first, mSource, mContext).fail(message + " (valid keys: " + valid.str() + ")");
+        RecipeNode(it->first, mSource, mContext).fail(message + " (valid keys: " + joinWords(allowed) + ")");
     }
+}
+
+std::string joinWords(const std::vector<std::string>& words)
+{
+    std::string s;
+    for (const auto& w : words) s += (s.empty() ? "" : ", ") + w;
+    return s;
 }
 
 std::string closestMatch(const std::string& word, const std::vector<std::string>& candidates)

@@ -63,6 +63,9 @@ private:
     std::string mContext;
 };
 
+/// "a, b, c": for lists of valid names in messages.
+std::string joinWords(const std::vector<std::string>& words);
+
 /// The valid word closest to @a word by edit distance, or "" if none is close.
 std::string closestMatch(const std::string& word, const std::vector<std::string>& candidates);
 

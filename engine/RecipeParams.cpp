@@ -35,13 +35,6 @@ bool isName(const std::string& s)
                        [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_'; });
 }
 
-std::string joined(const std::vector<std::string>& words)
-{
-    std::string s;
-    for (const auto& w : words) s += (s.empty() ? "" : ", ") + w;
-    return s;
-}
-
 bool isNumber(const YAML::Node& n)
 {
     if (!n.IsScalar() || n.Tag() == "!") return false;
@@ -140,7 +133,7 @@ private:
         const std::string guess = closestMatch(name, names);
         if (!guess.empty()) message += "; did you mean `$" + guess + "`?";
         message += names.empty() ? " (declare it under `params:`, e.g. `params: {" + name + ": 1}`)"
-                                 : " (parameters: " + joined(names) + ")";
+                                 : " (parameters: " + joinWords(names) + ")";
         RecipeNode(at, mSource, "parameter reference").fail(message);
     }
 
@@ -324,7 +317,7 @@ std::string routeAssignment(const YAML::Node& root, const std::string& assignmen
     const std::string guess = closestMatch(key, candidates);
     if (!guess.empty()) message += "; did you mean `" + guess + "`?";
     message += names.empty() ? " (the recipe declares no `params:`; use a key path such as fields.NAME.KEY)"
-                             : " (parameters: " + joined(names) + "; or a key path such as fields.NAME.KEY)";
+                             : " (parameters: " + joinWords(names) + "; or a key path such as fields.NAME.KEY)";
     throw InputError(message);
 }
 

@@ -157,7 +157,9 @@ void checkScalarRange(const FieldBuilder& builder, const ScalarMap& map, const R
                       bool open, const std::string& what, const std::string& fix)
 {
     auto outside = [&](double v) { return open ? !(v > lo && v < hi) : !(v >= lo && v <= hi); };
-    const std::string range = (open ? "(" : "[") + number(lo) + ", " + number(hi) + (open ? ")" : "]");
+    std::ostringstream rangeText;  // a stream: GCC 12 flags `const char* + std::string` here (-Wrestrict)
+    rangeText << (open ? "(" : "[") << number(lo) << ", " << number(hi) << (open ? ")" : "]");
+    const std::string range = rangeText.str();
     if (map.constant) {
         if (outside(*map.constant)) node.fail(what + " must lie in " + range + ", got " + number(*map.constant) + fix);
         return;

@@ -18,13 +18,6 @@ namespace voxlat {
 
 namespace {
 
-std::string joined(const std::vector<std::string>& words)
-{
-    std::string s;
-    for (const auto& w : words) s += (s.empty() ? "" : ", ") + w;
-    return s;
-}
-
 std::string fmtPoint(const Vec3d& p)
 {
     std::ostringstream s;
@@ -42,7 +35,7 @@ UnitCell readCell(const FieldBuilder& builder, const RecipeNode& c)
         if (std::find(names.begin(), names.end(), name) == names.end()) {
             const std::string guess = closestMatch(name, names);
             c.fail("unknown unit cell `" + name + "`" + (guess.empty() ? "" : "; did you mean `" + guess + "`?") +
-                   " (presets: " + joined(names) + "; or {lines: [[[x, y, z], [x, y, z]], ...]} or {obj: cell.obj})");
+                   " (presets: " + joinWords(names) + "; or {lines: [[[x, y, z], [x, y, z]], ...]} or {obj: cell.obj})");
         }
         return presetUnitCell(name);
     }
@@ -243,7 +236,7 @@ std::vector<std::array<double, 2>> readRadii(const RecipeNode& r, const Frame& f
     const std::string preset = r["gradient"].string();
     const std::vector<std::string> presets = {"linear", "centred", "cylindrical", "spherical"};
     if (std::find(presets.begin(), presets.end(), preset) == presets.end())
-        r["gradient"].fail("unknown gradient `" + preset + "` (presets: " + joined(presets) + ")");
+        r["gradient"].fail("unknown gradient `" + preset + "` (presets: " + joinWords(presets) + ")");
     const double lo = positive(r["min"]), hi = positive(r["max"]);
     int axis = 0;
     if (r.has("axis")) {
