@@ -8,6 +8,8 @@
 #include "fields/TpmsField.h"
 #include "fields/Transform.h"
 
+#include "FieldChecks.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -15,6 +17,7 @@
 #include <random>
 
 using namespace voxlat;
+using namespace voxlat::test;
 
 namespace {
 
@@ -46,52 +49,6 @@ double referenceTpms(TpmsType type, double x, double y, double z, double cell)
                (cos(2 * X) * cos(2 * Y) + cos(2 * Y) * cos(2 * Z) + cos(2 * Z) * cos(2 * X));
     }
     return 0;
-}
-
-std::vector<Vec3d> randomPoints(std::size_t n, double lo, double hi, unsigned seed)
-{
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<double> u(lo, hi);
-    std::vector<Vec3d> p(n);
-    for (auto& v : p) v = Vec3d(u(rng), u(rng), u(rng));
-    return p;
-}
-
-/// Checks gradients against central differences of the node's own values.
-void expectGradientsMatchFiniteDifferences(const FieldNode& f, const std::vector<Vec3d>& pts, double tol)
-{
-    std::vector<double> v(pts.size());
-    std::vector<Vec3d> g(pts.size());
-    f.gradients(pts, v, g);
-    const double h = 1e-5;
-    for (std::size_t n = 0; n < pts.size(); ++n) {
-        EXPECT_NEAR(v[n], f.value(pts[n]), 1e-12);
-        for (int a = 0; a < 3; ++a) {
-            Vec3d p1 = pts[n], p0 = pts[n];
-            p1[a] += h;
-            p0[a] -= h;
-            const double fd = (f.value(p1) - f.value(p0)) / (2 * h);
-            EXPECT_NEAR(g[n][a], fd, tol * (1 + std::abs(fd))) << "axis " << a << " at " << pts[n];
-        }
-    }
-}
-
-/// Checks that bound() over random boxes contains the values at random points inside.
-void expectBoundsContainValues(const FieldNode& f, double span, double boxSize, unsigned seed)
-{
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<double> u(-span, span), s(0.01, boxSize), t(0.0, 1.0);
-    for (int trial = 0; trial < 200; ++trial) {
-        const Vec3d lo(u(rng), u(rng), u(rng));
-        const Box3 box{lo, lo + Vec3d(s(rng), s(rng), s(rng))};
-        const Interval b = f.bound(box);
-        for (int n = 0; n < 40; ++n) {
-            const Vec3d p = box.min + Vec3d(t(rng), t(rng), t(rng)) * box.extent();
-            const double v = f.value(p);
-            EXPECT_LE(b.lo, v + 1e-12);
-            EXPECT_GE(b.hi, v - 1e-12);
-        }
-    }
 }
 
 const std::vector<TpmsType> kAllTpms{TpmsType::Gyroid,       TpmsType::SchwarzP, TpmsType::SchwarzD,
@@ -163,7 +120,7 @@ TEST(Tpms, BoundsContainValues)
 {
     for (TpmsType type : kAllTpms) {
         SCOPED_TRACE(std::string(tpmsName(type)));
-        expectBoundsContainValues(TpmsField(type, Vec3d(5)), 10, 3, 5);
+        expectBoundsContainValues(TpmsField(type, Vec3d(5)), -10, 10, 3, 5);
     }
 }
 
@@ -183,7 +140,7 @@ TEST(Tpms, LevelSolidSidesAndGradients)
             EXPECT_EQ(g < indicatorLevel, s.value(p) < 0);
         }
         expectGradientsMatchFiniteDifferences(s, pts, 1e-6);
-        expectBoundsContainValues(s, 10, 3, 7);
+        expectBoundsContainValues(s, -10, 10, 3, 7);
     }
 }
 
@@ -204,7 +161,7 @@ TEST(Primitives, DistancesAreExact)
     const auto pts = randomPoints(100, -6, 6, 8);
     for (const FieldNode* f : std::initializer_list<const FieldNode*>{&sphere, &box, &cyl}) {
         expectGradientsMatchFiniteDifferences(*f, pts, 1e-5);
-        expectBoundsContainValues(*f, 6, 4, 9);
+        expectBoundsContainValues(*f, -6, 6, 4, 9);
     }
 }
 
@@ -224,7 +181,7 @@ TEST(Booleans, HardAndSmoothCombinations)
     }
     for (const FieldNode* f : std::initializer_list<const FieldNode*>{&uni, &inter, &diff, &smooth}) {
         expectGradientsMatchFiniteDifferences(*f, pts, 1e-4);
-        expectBoundsContainValues(*f, 5, 3, 11);
+        expectBoundsContainValues(*f, -5, 5, 3, 11);
     }
 }
 
@@ -249,6 +206,6 @@ TEST(Transforms, MoveTheChild)
     const auto pts = randomPoints(100, -5, 5, 12);
     for (const FieldNode* f : std::initializer_list<const FieldNode*>{&moved, &turned, &scaled}) {
         expectGradientsMatchFiniteDifferences(*f, pts, 1e-5);
-        expectBoundsContainValues(*f, 5, 3, 13);
+        expectBoundsContainValues(*f, -5, 5, 3, 13);
     }
 }

@@ -14,6 +14,8 @@
 #include "fields/Sphere.h"
 #include "fields/TpmsField.h"
 
+#include "FieldChecks.h"
+
 #include <gtest/gtest.h>
 #include <openvdb/tools/Interpolation.h>
 
@@ -21,6 +23,7 @@
 #include <random>
 
 using namespace voxlat;
+using namespace voxlat::test;
 
 namespace {
 
@@ -90,52 +93,6 @@ double chordAcross(Fn&& value, double step, double reach)
         return reach;
     };
     return crossing(1.0) + crossing(-1.0);
-}
-
-void expectGradientsMatchFiniteDifferences(const FieldNode& f, const std::vector<Vec3d>& pts, double tol)
-{
-    std::vector<double> v(pts.size());
-    std::vector<Vec3d> g(pts.size());
-    f.gradients(pts, v, g);
-    const double h = 1e-6;
-    for (std::size_t n = 0; n < pts.size(); ++n) {
-        EXPECT_NEAR(v[n], f.value(pts[n]), 1e-12);
-        for (int a = 0; a < 3; ++a) {
-            Vec3d p1 = pts[n], p0 = pts[n];
-            p1[a] += h;
-            p0[a] -= h;
-            const double fd = (f.value(p1) - f.value(p0)) / (2 * h);
-            EXPECT_NEAR(g[n][a], fd, tol * (1 + std::abs(fd))) << "axis " << a << " at " << pts[n];
-        }
-    }
-}
-
-void expectBoundsContainValues(const FieldNode& f, double span, double boxSize, unsigned seed)
-{
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<double> u(0.0, 1.0);
-    for (int b = 0; b < 40; ++b) {
-        const Vec3d lo(u(rng) * span, u(rng) * span, u(rng) * span);
-        const Box3 box{lo, lo + Vec3d(boxSize * (0.2 + u(rng)))};
-        const Interval bound = f.bound(box);
-        std::vector<Vec3d> pts(200);
-        for (auto& p : pts) p = box.min + Vec3d(u(rng), u(rng), u(rng)) * box.extent();
-        std::vector<double> v(pts.size());
-        f.values(pts, v);
-        for (double x : v) {
-            EXPECT_LE(bound.lo, x + 1e-12);
-            EXPECT_GE(bound.hi, x - 1e-12);
-        }
-    }
-}
-
-std::vector<Vec3d> randomPoints(std::size_t n, double lo, double hi, unsigned seed)
-{
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<double> u(lo, hi);
-    std::vector<Vec3d> p(n);
-    for (auto& v : p) v = Vec3d(u(rng), u(rng), u(rng));
-    return p;
 }
 
 Recipe recipe(const std::string& text, const test::TempDir& dir)
@@ -296,16 +253,16 @@ TEST(GradientShift, GradientsMatchFiniteDifferences)
 {
     const auto f = gyroid(8.0);
     const auto pts = randomPoints(60, 0.0, 16.0, 5);
-    expectGradientsMatchFiniteDifferences(*uniformShift(f, 0.3), pts, 1e-5);
-    expectGradientsMatchFiniteDifferences(*anisotropicShift(f, 0.3, 0.15, Vec3d(1, 2, 3)), pts, 1e-5);
+    expectGradientsMatchFiniteDifferences(*uniformShift(f, 0.3), pts, 1e-5, 1e-6);
+    expectGradientsMatchFiniteDifferences(*anisotropicShift(f, 0.3, 0.15, Vec3d(1, 2, 3)), pts, 1e-5, 1e-6);
     expectGradientsMatchFiniteDifferences(*anisotropicShift(f, 0.3, 0.15, Vec3d(1, 2, 3), ShiftRotation::Tensor), pts,
-                                          1e-5);
+                                          1e-5, 1e-6);
     // Magnitudes and direction from fields.
     ShiftSpec spec;
     spec.wall = std::make_shared<RampField>(0, 0.0, 16.0, 0.1, 0.4);
     spec.layer = std::make_shared<ConstantField>(0.1);
     spec.directionGradient = std::make_shared<Sphere>(Vec3d(8, 8, -20), 1.0);
-    expectGradientsMatchFiniteDifferences(GradientShift(f, spec), pts, 1e-5);
+    expectGradientsMatchFiniteDifferences(GradientShift(f, spec), pts, 1e-5, 1e-6);
 }
 
 TEST(GradientShift, GridValuesMatchPointValuesAndBoundsContainThem)
@@ -332,8 +289,8 @@ TEST(GradientShift, GridValuesMatchPointValuesAndBoundsContainThem)
         EXPECT_NEAR(v1[i], v2[i], 1e-12);
         EXPECT_LT((g1[i] - g2[i]).length(), 1e-12);
     }
-    expectBoundsContainValues(*sheet, 16.0, 2.0, 9);
-    expectBoundsContainValues(*uniformShift(f, 0.3), 16.0, 2.0, 10);
+    expectBoundsContainValues(*sheet, 0.0, 16.0, 2.0, 9);
+    expectBoundsContainValues(*uniformShift(f, 0.3), 0.0, 16.0, 2.0, 10);
 }
 
 TEST(GradientShift, TpmsShiftedValuesMatchPointValues)
@@ -455,8 +412,8 @@ TEST(GradedDensity, FieldsAndFilesDriveTheDensity)
     // The graded node's gradient and bound.
     const auto graded = std::dynamic_pointer_cast<const GradedLevel>(byName.field("lattice"));
     ASSERT_TRUE(graded);
-    expectGradientsMatchFiniteDifferences(*graded, randomPoints(40, 1.0, 11.0, 8), 1e-4);
-    expectBoundsContainValues(*graded, 10.0, 2.0, 12);
+    expectGradientsMatchFiniteDifferences(*graded, randomPoints(40, 1.0, 11.0, 8), 1e-4, 1e-6);
+    expectBoundsContainValues(*graded, 0.0, 10.0, 2.0, 12);
 }
 
 TEST(SampledGrid, InterpolatesTrilinearly)
@@ -471,8 +428,8 @@ TEST(SampledGrid, InterpolatesTrilinearly)
     const SampledGridField g(coords, values);
     for (const Vec3d& p : randomPoints(100, 0.0, 1.9, 2)) EXPECT_NEAR(g.value(p), linear(p[0], p[1], p[2]), 1e-12);
     EXPECT_NEAR(g.value(Vec3d(10, 1, 0)), linear(3, 1, 0), 1e-12);  // clamped outside
-    expectGradientsMatchFiniteDifferences(g, randomPoints(30, 0.05, 1.9, 6), 1e-6);
-    expectBoundsContainValues(g, 3.0, 1.0, 1);
+    expectGradientsMatchFiniteDifferences(g, randomPoints(30, 0.05, 1.9, 6), 1e-6, 1e-6);
+    expectBoundsContainValues(g, 0.0, 3.0, 1.0, 1);
 }
 
 TEST(ThicknessRecipes, AcceptanceRecipesLoadUnchanged)

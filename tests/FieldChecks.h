@@ -1,0 +1,65 @@
+// Property checks shared by the field tests: gradients against central differences of the
+// node's own values, bounds that contain every sampled value.
+#pragma once
+
+#include "fields/FieldNode.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+namespace voxlat::test {
+
+inline std::vector<Vec3d> randomPoints(std::size_t n, double lo, double hi, unsigned seed)
+{
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(lo, hi);
+    std::vector<Vec3d> p(n);
+    for (auto& v : p) v = Vec3d(u(rng), u(rng), u(rng));
+    return p;
+}
+
+/// gradients() against central differences (step @a h) of values(), and the values of
+/// gradients() against values().
+inline void expectGradientsMatchFiniteDifferences(const FieldNode& f, const std::vector<Vec3d>& pts, double tol,
+                                                  double h = 1e-5)
+{
+    std::vector<double> v(pts.size());
+    std::vector<Vec3d> g(pts.size());
+    f.gradients(pts, v, g);
+    for (std::size_t n = 0; n < pts.size(); ++n) {
+        EXPECT_NEAR(v[n], f.value(pts[n]), 1e-12);
+        for (int a = 0; a < 3; ++a) {
+            Vec3d p1 = pts[n], p0 = pts[n];
+            p1[a] += h;
+            p0[a] -= h;
+            const double fd = (f.value(p1) - f.value(p0)) / (2 * h);
+            EXPECT_NEAR(g[n][a], fd, tol * (1 + std::abs(fd))) << "axis " << a << " at " << pts[n];
+        }
+    }
+}
+
+/// bound() over random boxes (corners in [lo, hi]^3, sides up to @a boxSize) contains the values
+/// at random points inside each box.
+inline void expectBoundsContainValues(const FieldNode& f, double lo, double hi, double boxSize, unsigned seed)
+{
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> corner(lo, hi), side(0.01, boxSize), t(0.0, 1.0);
+    for (int trial = 0; trial < 100; ++trial) {
+        const Vec3d min(corner(rng), corner(rng), corner(rng));
+        const Box3 box{min, min + Vec3d(side(rng), side(rng), side(rng))};
+        const Interval b = f.bound(box);
+        std::vector<Vec3d> pts(100);
+        for (auto& p : pts) p = box.min + Vec3d(t(rng), t(rng), t(rng)) * box.extent();
+        std::vector<double> v(pts.size());
+        f.values(pts, v);
+        for (double x : v) {
+            EXPECT_LE(b.lo, x + 1e-12);
+            EXPECT_GE(b.hi, x - 1e-12);
+        }
+    }
+}
+
+}  // namespace voxlat::test
