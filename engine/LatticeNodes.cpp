@@ -4,6 +4,7 @@
 #include "fields/GradedLevel.h"
 #include "fields/GradientShift.h"
 #include "fields/TpmsField.h"
+#include "fields/VectorField.h"
 
 #include <algorithm>
 #include <sstream>
@@ -83,6 +84,11 @@ ShiftSpec readShiftSpec(FieldBuilder& builder, const RecipeNode& spec, const std
                 for (std::size_t i = 0; i < 3; ++i)
                     shift.directionComponents[i] = readScalarMap(builder, b.at(i), name + "/build/" + "xyz"[i]).field;
                 description += ", build direction from three fields";
+            } else if (auto vector = std::dynamic_pointer_cast<const VectorField>(builder.operand(b, name + "/build"))) {
+                // A `vector:` direction field (by name or inline): its components are the direction.
+                for (int i = 0; i < 3; ++i) shift.directionComponents[i] = vector->component(i);
+                description += ", build direction from the vector field " +
+                               (b.isScalar() ? "`" + b.string() + "`" : std::string("given inline"));
             } else {
                 shift.directionGradient = builder.operand(b, name + "/build");
                 description += ", build direction along the gradient of " +

@@ -512,3 +512,31 @@ outputs: {mesh: out.stl}
     EXPECT_NE(out.find("build direction is zero"), std::string::npos) << out;
     EXPECT_FALSE(std::filesystem::exists(dir.path / "out" / "out.stl"));
 }
+
+TEST(ThicknessRecipes, BuildDirectionFromAVectorField)
+{
+    // A `vector:` field named as the build direction must give the same walls as the same
+    // direction written as three component fields.
+    const std::string head = R"(voxel: 0.25
+domain: {box: [[0, 0, 0], [8, 8, 8]]}
+fields:
+  tilt: {vector: ["x - 4", 1, 2]}
+  tx: {expr: "x - 4"}
+)";
+    const auto build = [&](const std::string& direction) {
+        const Recipe r = parseRecipe(head + "  s: {tpms: gyroid, cell: 8, solid: sheet, wall: 0.4, layer: 0.2, build: " +
+                                         direction + "}\nresult: s\n",
+                                     "v.yaml", ".");
+        Job job(r);
+        return job.field("s");
+    };
+    const FieldPtr byVector = build("tilt"), byComponents = build("[tx, 1, 2]");
+    for (const Vec3d& p : randomPoints(50, 0.5, 7.5, 21)) EXPECT_DOUBLE_EQ(byVector->value(p), byComponents->value(p));
+    // And it differs from the default +z build direction, so the field was really used.
+    const FieldPtr vertical = build("[0, 0, 1]");
+    double largest = 0.0;
+    for (const Vec3d& p : randomPoints(200, 0.5, 7.5, 22))
+        largest = std::max(largest, std::abs(byVector->value(p) - vertical->value(p)));
+    EXPECT_GT(largest, 1e-3);
+}
+
