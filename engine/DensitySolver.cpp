@@ -176,6 +176,33 @@ double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
     return covered;
 }
 
+/// The level in [a, b] at which fullyBelow + coveredVoxels(samples, level) reaches @a wanted, by
+/// 60 bisection steps. Samples whose coverage is constant (0 or 1) over what is left of the
+/// bracket are set aside as it narrows, so later steps visit only the voxels the level still
+/// cuts; each kept sample contributes exactly what coveredVoxels() would give it.
+double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b)
+{
+    auto coverage = [](const CoverageSample& s, double level) {
+        return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
+    };
+    std::vector<CoverageSample> active = samples;
+    double settled = fullyBelow;  // whole voxels below every level left in the bracket
+    for (int iteration = 0; iteration < 60; ++iteration) {
+        const double mid = 0.5 * (a + b);
+        double covered = settled;
+        for (const CoverageSample& s : active) covered += coverage(s, mid);
+        (covered < wanted ? a : b) = mid;
+        // Coverage is monotone in the level: full at a means full on [a, b], empty at b empty.
+        std::size_t kept = 0;
+        for (const CoverageSample& s : active) {
+            if (coverage(s, a) >= 1.0) settled += 1.0;
+            else if (coverage(s, b) > 0.0) active[kept++] = s;
+        }
+        active.resize(kept);
+    }
+    return 0.5 * (a + b);
+}
+
 }  // namespace
 
 DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain, double target, const FieldNode* mask,
@@ -274,11 +301,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 if (options.band.lo <= -1e30) a = std::min(a == options.band.lo ? 1e300 : a, double(c.value) - c.step);
                 if (options.band.hi >= 1e30) b = std::max(b == 1e30 ? -1e300 : b, double(c.value) + c.step);
             }
-            for (int iteration = 0; iteration < 60; ++iteration) {
-                const double mid = 0.5 * (a + b);
-                (double(fullyBelow) + coveredVoxels(samples, mid) < double(wanted) ? a : b) = mid;
-            }
-            sol.level = 0.5 * (a + b);
+            sol.level = bisectCoverage(samples, double(fullyBelow), double(wanted), a, b);
             sol.coverage = true;
             sol.achieved = (double(fullyBelow) + coveredVoxels(samples, sol.level)) / double(sol.domainVoxels);
         }
