@@ -226,18 +226,37 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
     };
     std::vector<CoverageSample> active = samples;
     double settled = fullyBelow;  // whole voxels below every level left in the bracket
+    // Once every sample left is partly covered across the whole bracket, the coverage is linear
+    // there: settled + constant + level * slope, and the remaining steps cost nothing.
+    bool linear = false;
+    double constant = 0.0, slope = 0.0;
     for (int iteration = 0; iteration < 60; ++iteration) {
         const double mid = 0.5 * (a + b);
         double covered = settled;
-        for (const CoverageSample& s : active) covered += coverage(s, mid);
+        if (linear) covered += constant + mid * slope;
+        else
+            for (const CoverageSample& s : active) covered += coverage(s, mid);
         (covered < wanted ? a : b) = mid;
+        if (linear) continue;
         // Coverage is monotone in the level: full at a means full on [a, b], empty at b empty.
         std::size_t kept = 0;
+        bool ramps = true;
         for (const CoverageSample& s : active) {
-            if (coverage(s, a) >= 1.0) settled += 1.0;
-            else if (coverage(s, b) > 0.0) active[kept++] = s;
+            const double atA = coverage(s, a), atB = coverage(s, b);
+            if (atA >= 1.0) settled += 1.0;
+            else if (atB > 0.0) {
+                active[kept++] = s;
+                ramps = ramps && s.step > 0.0f && atA > 0.0 && atB < 1.0;
+            }
         }
         active.resize(kept);
+        if (ramps) {
+            linear = true;
+            for (const CoverageSample& s : active) {
+                constant += 0.5 - double(s.value) / s.step;
+                slope += 1.0 / s.step;
+            }
+        }
     }
     return 0.5 * (a + b);
 }
