@@ -5,7 +5,13 @@ sheet at 25 %, same voxel). Target: the part within 2x the box's time.
 
 Measured (2 shared cores, loaded machine, side by side): before the own mesh conversion 3.3 s vs
 0.40 s (8.2x, design space 2.1 s); after 1.6-1.7 s vs 0.40-0.49 s (3.3-4.2x, design space
-0.5-0.6 s, density solve 0.55 s, evaluate 0.3 s). Target missed."""
+0.5-0.6 s, density solve 0.55 s, evaluate 0.3 s). After one evaluation for the masked solve's
+bracket and coverage band, buffer-read coverage neighbours, a bisection over the voxels the level
+still cuts and leaf-wise mesh-distance reads (side by side with the previous binary, three
+rounds): part 0.90 s vs box 0.41 s (2.19x; before 1.09 s, 2.69x) on a quiet machine, 1.47-1.80 s
+vs 0.57 s (2.6-3.1x) loaded; density solve 0.19-0.30 s (before 0.37-0.54 s), evaluate 0.11-0.22 s
+(before 0.14-0.28 s); the design space (exact distances over the 1.5 mm interior band) is now
+most of the gap. Target missed."""
 import json
 
 from common import measure, ROOT, row, verdict

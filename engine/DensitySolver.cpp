@@ -73,12 +73,15 @@ private:
 };
 
 /// Samples g at every stride-th voxel centre of the domain, in parallel and in a fixed order.
-std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int stride)
+/// @a maxStep, when given, receives the largest change of g per voxel seen between neighbouring
+/// samples that are both below 1e30 (inside a mask): an estimate of the widest voxel step.
+std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int stride, double* maxStep = nullptr)
 {
     int n[3];
     for (int a = 0; a < 3; ++a) n[a] = (domain.dims[a] + stride - 1) / stride;
     const int bx = (n[0] + 7) / 8, by = (n[1] + 7) / 8, bz = (n[2] + 7) / 8;
     std::vector<std::vector<float>> perBlock(std::size_t(bx) * by * bz);
+    std::vector<double> blockStep(perBlock.size(), 0.0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, perBlock.size()), [&](const auto& range) {
         std::array<double, 512> values;
         for (std::size_t b = range.begin(); b != range.end(); ++b) {
@@ -92,6 +95,20 @@ std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int s
             batch.origin = domain.worldOf(first);
             batch.spacing = Vec3d(domain.voxel * stride);
             g.gridValues(batch, std::span<double>(values.data(), batch.size()));
+            if (maxStep) {
+                // Forward differences within the block (x-major, z fastest, as gridValues fills).
+                const int sx = batch.ny * batch.nz, sy = batch.nz;
+                double step = 0.0;
+                for (int i = 0; i + 1 < batch.nx; ++i)
+                    for (int j = 0; j + 1 < batch.ny; ++j)
+                        for (int k = 0; k + 1 < batch.nz; ++k) {
+                            const int v = i * sx + j * sy + k;
+                            const double c = values[v], dx = values[v + sx], dy = values[v + sy], dz = values[v + 1];
+                            if (c > 1e30 || dx > 1e30 || dy > 1e30 || dz > 1e30) continue;
+                            step = std::max(step, (dx - c) * (dx - c) + (dy - c) * (dy - c) + (dz - c) * (dz - c));
+                        }
+                blockStep[b] = std::sqrt(step) / stride;
+            }
             // Drop samples past the domain (the last stride may overhang).
             auto& out = perBlock[b];
             std::size_t v = 0;
@@ -106,8 +123,13 @@ std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int s
     });
     std::vector<float> all;
     for (const auto& block : perBlock) all.insert(all.end(), block.begin(), block.end());
+    if (maxStep) *maxStep = blockStep.empty() ? 0.0 : *std::max_element(blockStep.begin(), blockStep.end());
     return all;
 }
+
+/// How far beyond the bracket a masked solve evaluates, in coarse estimates of the voxel step:
+/// the coverage pass needs the widest step either side of the level.
+constexpr double kStepReserve = 1.25;
 
 /// The sample quantile at share q (a selection, no full sort); -inf / +inf outside (0, 1).
 double quantile(std::vector<float>& samples, double q)
@@ -124,6 +146,10 @@ struct CoverageSample {
     float value;
     float step;
 };
+
+/// Offset strides and shifts of the x, y, z coordinates in an 8^3 leaf's buffer.
+constexpr int kLeafStride[3] = {64, 8, 1};
+constexpr int kLeafShift[3] = {6, 3, 0};
 
 /// Band voxels with their per-voxel change, for the sub-voxel coverage estimate. Neighbours that
 /// were not evaluated (tiles, background, outside the domain) fall back to one-sided differences.
@@ -145,14 +171,27 @@ std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, cons
                     openvdb::Coord up = c, down = c;
                     up[a] += 1;
                     down[a] -= 1;
-                    // Neighbours outside a density mask hold kOutsideMask: not a neighbour.
-                    const bool hasUp = region.isInside(up) && acc.probeConstLeaf(up) && acc.getValue(up) < 1e30f;
-                    const bool hasDown =
-                        region.isInside(down) && acc.probeConstLeaf(down) && acc.getValue(down) < 1e30f;
+                    // Neighbours inside the leaf are read from its buffer; others through the
+                    // accessor. Neighbours outside a density mask hold kOutsideMask: not a neighbour.
+                    const int local = (i >> kLeafShift[a]) & 7;
+                    float upValue = 0.0f, downValue = 0.0f;
+                    bool hasUp = region.isInside(up), hasDown = region.isInside(down);
+                    if (hasUp) {
+                        if (local < 7) upValue = data[i + kLeafStride[a]];
+                        else if (acc.probeConstLeaf(up)) upValue = acc.getValue(up);
+                        else hasUp = false;
+                        hasUp = hasUp && upValue < 1e30f;
+                    }
+                    if (hasDown) {
+                        if (local > 0) downValue = data[i - kLeafStride[a]];
+                        else if (acc.probeConstLeaf(down)) downValue = acc.getValue(down);
+                        else hasDown = false;
+                        hasDown = hasDown && downValue < 1e30f;
+                    }
                     double d = 0.0;
-                    if (hasUp && hasDown) d = 0.5 * (acc.getValue(up) - acc.getValue(down));
-                    else if (hasUp) d = acc.getValue(up) - data[i];
-                    else if (hasDown) d = data[i] - acc.getValue(down);
+                    if (hasUp && hasDown) d = 0.5 * (upValue - downValue);
+                    else if (hasUp) d = upValue - data[i];
+                    else if (hasDown) d = data[i] - downValue;
                     sum += d * d;
                 }
                 perLeaf[n].push_back({data[i], float(std::sqrt(sum))});
@@ -174,6 +213,52 @@ double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
         else covered += s.value < level;
     }
     return covered;
+}
+
+/// The level in [a, b] at which fullyBelow + coveredVoxels(samples, level) reaches @a wanted, by
+/// 60 bisection steps. Samples whose coverage is constant (0 or 1) over what is left of the
+/// bracket are set aside as it narrows, so later steps visit only the voxels the level still
+/// cuts; each kept sample contributes exactly what coveredVoxels() would give it.
+double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b)
+{
+    auto coverage = [](const CoverageSample& s, double level) {
+        return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
+    };
+    std::vector<CoverageSample> active = samples;
+    double settled = fullyBelow;  // whole voxels below every level left in the bracket
+    // Once every sample left is partly covered across the whole bracket, the coverage is linear
+    // there: settled + constant + level * slope, and the remaining steps cost nothing.
+    bool linear = false;
+    double constant = 0.0, slope = 0.0;
+    for (int iteration = 0; iteration < 60; ++iteration) {
+        const double mid = 0.5 * (a + b);
+        double covered = settled;
+        if (linear) covered += constant + mid * slope;
+        else
+            for (const CoverageSample& s : active) covered += coverage(s, mid);
+        (covered < wanted ? a : b) = mid;
+        if (linear) continue;
+        // Coverage is monotone in the level: full at a means full on [a, b], empty at b empty.
+        std::size_t kept = 0;
+        bool ramps = true;
+        for (const CoverageSample& s : active) {
+            const double atA = coverage(s, a), atB = coverage(s, b);
+            if (atA >= 1.0) settled += 1.0;
+            else if (atB > 0.0) {
+                active[kept++] = s;
+                ramps = ramps && s.step > 0.0f && atA > 0.0 && atB < 1.0;
+            }
+        }
+        active.resize(kept);
+        if (ramps) {
+            linear = true;
+            for (const CoverageSample& s : active) {
+                constant += 0.5 - double(s.value) / s.step;
+                slope += 1.0 / s.step;
+            }
+        }
+    }
+    return 0.5 * (a + b);
 }
 
 }  // namespace
@@ -198,7 +283,8 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
     const auto wanted = std::uint64_t(std::llround(target * double(sol.domainVoxels)));
 
     const int stride = std::max(1, int(std::ceil(std::cbrt(double(domain.voxelCount()) / 2.0e6))));
-    std::vector<float> samples = coarseSamples(indicator, domain, stride);
+    double coarseStep = 0.0;
+    std::vector<float> samples = coarseSamples(indicator, domain, stride, masked ? &coarseStep : nullptr);
     // Share of the samples inside the mask: the quantiles of the target sit within that share.
     const double share =
         masked ? double(std::count_if(samples.begin(), samples.end(), [](float v) { return v < 1e30f; })) /
@@ -218,7 +304,14 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         options.insideValue = -std::numeric_limits<float>::max();
         options.outsideValue = std::numeric_limits<float>::max();
         options.stage = "solving density";
-        const auto grid = evaluateSparse(indicator, domain, options);
+        // A masked solve measures coverage in a band of the widest voxel step about the level
+        // (below). Evaluating the bracket grown by an estimate of that step up front lets the
+        // same grid serve both passes; splitting by the bracket ignores the extra values.
+        SparseOptions evaluated = options;
+        if (masked && margin < 1.0)
+            evaluated.band =
+                Interval(options.band.lo - kStepReserve * coarseStep, options.band.hi + kStepReserve * coarseStep);
+        const auto grid = evaluateSparse(indicator, domain, evaluated);
         sol.evaluatedLeaves = grid->tree().leafCount();
 
         BandSplit split = splitByBand(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi));
@@ -263,7 +356,11 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             if (masked && widest > 0.0f && widest < 1e29f) {
                 SparseOptions wide = options;
                 wide.band = Interval(sol.level - widest, sol.level + widest);
-                const auto wideGrid = evaluateSparse(indicator, domain, wide);
+                // Every voxel valued within the wide band lies in an evaluated leaf of a grid
+                // whose band contains it: reuse the first grid when it does.
+                const bool covered = evaluated.band.lo <= wide.band.lo && wide.band.hi <= evaluated.band.hi;
+                const auto wideGrid = covered ? grid : evaluateSparse(indicator, domain, wide);
+                if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
                 fullyBelow = splitByBand(*wideGrid, domain.indexBox(), float(wide.band.lo), float(wide.band.hi)).below;
                 samples = coverageSamples(*wideGrid, domain.indexBox(), float(wide.band.lo), float(wide.band.hi));
                 a = wide.band.lo;
@@ -274,11 +371,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 if (options.band.lo <= -1e30) a = std::min(a == options.band.lo ? 1e300 : a, double(c.value) - c.step);
                 if (options.band.hi >= 1e30) b = std::max(b == 1e30 ? -1e300 : b, double(c.value) + c.step);
             }
-            for (int iteration = 0; iteration < 60; ++iteration) {
-                const double mid = 0.5 * (a + b);
-                (double(fullyBelow) + coveredVoxels(samples, mid) < double(wanted) ? a : b) = mid;
-            }
-            sol.level = 0.5 * (a + b);
+            sol.level = bisectCoverage(samples, double(fullyBelow), double(wanted), a, b);
             sol.coverage = true;
             sol.achieved = (double(fullyBelow) + coveredVoxels(samples, sol.level)) / double(sol.domainVoxels);
         }

@@ -109,11 +109,36 @@ void MeshDistance::gridValues(const GridBatch& batch, std::span<double> out) con
         return;
     }
     const openvdb::Coord base(int(std::round(first[0])), int(std::round(first[1])), int(std::round(first[2])));
+    const openvdb::Coord last = base.offsetBy(batch.nx - 1, batch.ny - 1, batch.nz - 1);
     auto acc = mGrid->getConstAccessor();
-    std::size_t n = 0;
-    for (int i = 0; i < batch.nx; ++i)
-        for (int j = 0; j < batch.ny; ++j)
-            for (int k = 0; k < batch.nz; ++k) out[n++] = acc.getValue(base.offsetBy(i, j, k));
+    // One lookup per 8^3 leaf of the grid the batch overlaps, then its values straight from the
+    // leaf's buffer (a leaf's value is its buffer's, active or not; elsewhere a tile's value).
+    using Leaf = openvdb::FloatTree::LeafNodeType;
+    const int sj = batch.nz, si = batch.ny * batch.nz;
+    const openvdb::Coord leafLo = base & ~(Leaf::DIM - 1), leafHi = last & ~(Leaf::DIM - 1);
+    for (int lx = leafLo.x(); lx <= leafHi.x(); lx += Leaf::DIM)
+        for (int ly = leafLo.y(); ly <= leafHi.y(); ly += Leaf::DIM)
+            for (int lz = leafLo.z(); lz <= leafHi.z(); lz += Leaf::DIM) {
+                const openvdb::Coord leafOrigin(lx, ly, lz);
+                const openvdb::Coord lo = openvdb::Coord::maxComponent(leafOrigin, base);
+                const openvdb::Coord hi = openvdb::Coord::minComponent(leafOrigin.offsetBy(Leaf::DIM - 1), last);
+                if (const Leaf* leaf = acc.probeConstLeaf(leafOrigin)) {
+                    const float* data = leaf->buffer().data();
+                    for (int x = lo.x(); x <= hi.x(); ++x)
+                        for (int y = lo.y(); y <= hi.y(); ++y) {
+                            const float* row = data + Leaf::coordToOffset(openvdb::Coord(x, y, lo.z()));
+                            double* dst = out.data() + (x - base.x()) * si + (y - base.y()) * sj - base.z();
+                            for (int z = lo.z(); z <= hi.z(); ++z) dst[z] = row[z - lo.z()];
+                        }
+                } else {
+                    const double value = acc.getValue(leafOrigin);
+                    for (int x = lo.x(); x <= hi.x(); ++x)
+                        for (int y = lo.y(); y <= hi.y(); ++y) {
+                            double* dst = out.data() + (x - base.x()) * si + (y - base.y()) * sj - base.z();
+                            for (int z = lo.z(); z <= hi.z(); ++z) dst[z] = value;
+                        }
+                }
+            }
 }
 
 Interval MeshDistance::bound(const Box3& box) const
