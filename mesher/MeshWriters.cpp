@@ -2,6 +2,8 @@
 
 #include "mesher/AtomicFile.h"
 
+#include <tbb/parallel_pipeline.h>
+
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 
@@ -15,6 +17,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <memory>
 #include <stdexcept>
 #include <string_view>
 #include <unordered_map>
@@ -179,28 +182,47 @@ void writeStl(const TriangleMesh& mesh, const std::string& path)
     putU32(header + kStlHeaderSize, std::uint32_t(mesh.triangles.size()));
     out.write(header, sizeof(header));
 
-    std::vector<char> chunk(kStlChunkFacets * kStlFacetSize);
-    for (std::size_t begin = 0; begin < mesh.triangles.size(); begin += kStlChunkFacets) {
-        const std::size_t count = std::min(kStlChunkFacets, mesh.triangles.size() - begin);
-        char* p = chunk.data();
-        for (std::size_t i = begin; i < begin + count; ++i, p += kStlFacetSize) {
-            const openvdb::Vec3I& t = mesh.triangles[i];
-            const openvdb::Vec3f& a = mesh.points[t[0]];
-            const openvdb::Vec3f& b = mesh.points[t[1]];
-            const openvdb::Vec3f& c = mesh.points[t[2]];
-            openvdb::Vec3d n = (openvdb::Vec3d(b) - openvdb::Vec3d(a)).cross(openvdb::Vec3d(c) - openvdb::Vec3d(a));
-            const double length = n.length();
-            n = length > 0.0 ? n / length : openvdb::Vec3d(0.0);
-            for (int k = 0; k < 3; ++k) {
-                putF32(p + 4 * k, float(n[k]));
-                putF32(p + 12 + 4 * k, a[k]);
-                putF32(p + 24 + 4 * k, b[k]);
-                putF32(p + 36 + 4 * k, c[k]);
-            }
-            p[48] = p[49] = 0;
-        }
-        out.write(chunk.data(), std::streamsize(count * kStlFacetSize));
-    }
+    // Facets are formatted in parallel, chunk by chunk, and written in order: the bytes are the
+    // same for any thread count, and formatting (normals) overlaps the writing.
+    const std::size_t chunks = (mesh.triangles.size() + kStlChunkFacets - 1) / kStlChunkFacets;
+    std::size_t next = 0;
+    tbb::parallel_pipeline(
+        4,
+        tbb::make_filter<void, std::size_t>(tbb::filter_mode::serial_in_order,
+                                            [&](tbb::flow_control& fc) -> std::size_t {
+                                                if (next == chunks) fc.stop();
+                                                return next++;
+                                            }) &
+            tbb::make_filter<std::size_t, std::shared_ptr<std::vector<char>>>(
+                tbb::filter_mode::parallel,
+                [&](std::size_t index) {
+                    const std::size_t begin = index * kStlChunkFacets;
+                    const std::size_t count = std::min(kStlChunkFacets, mesh.triangles.size() - begin);
+                    auto chunk = std::make_shared<std::vector<char>>(count * kStlFacetSize);
+                    char* p = chunk->data();
+                    for (std::size_t i = begin; i < begin + count; ++i, p += kStlFacetSize) {
+                        const openvdb::Vec3I& t = mesh.triangles[i];
+                        const openvdb::Vec3f& a = mesh.points[t[0]];
+                        const openvdb::Vec3f& b = mesh.points[t[1]];
+                        const openvdb::Vec3f& c = mesh.points[t[2]];
+                        openvdb::Vec3d n =
+                            (openvdb::Vec3d(b) - openvdb::Vec3d(a)).cross(openvdb::Vec3d(c) - openvdb::Vec3d(a));
+                        const double length = n.length();
+                        n = length > 0.0 ? n / length : openvdb::Vec3d(0.0);
+                        for (int k = 0; k < 3; ++k) {
+                            putF32(p + 4 * k, float(n[k]));
+                            putF32(p + 12 + 4 * k, a[k]);
+                            putF32(p + 24 + 4 * k, b[k]);
+                            putF32(p + 36 + 4 * k, c[k]);
+                        }
+                        p[48] = p[49] = 0;
+                    }
+                    return chunk;
+                }) &
+            tbb::make_filter<std::shared_ptr<std::vector<char>>, void>(
+                tbb::filter_mode::serial_in_order, [&](const std::shared_ptr<std::vector<char>>& chunk) {
+                    out.write(chunk->data(), std::streamsize(chunk->size()));
+                }));
     file.commit();
 }
 
