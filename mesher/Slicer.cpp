@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace voxlat {
 
@@ -52,6 +53,19 @@ double curvatureCorrection(double f, double gx, double gy, double hxx, double hy
     const double mHm = hxx * mx * mx + 2.0 * hxy * mx * my + hyy * my * my;
     const double tHt = hxx * tx * tx + 2.0 * hxy * tx * ty + hyy * ty * ty;
     return -(length * mHm + length * length * length / 12.0 * tHt) / (2.0 * std::sqrt(gx * gx + gy * gy));
+}
+
+/// Transposes the 8 x 8 byte matrix held one row per word (little-endian: byte c of r[k] is column c).
+void transpose8x8(std::uint64_t r[8])
+{
+    auto swap = [](std::uint64_t& a, std::uint64_t& b, int shift, std::uint64_t mask) {
+        const std::uint64_t t = ((a >> shift) ^ b) & mask;
+        b ^= t;
+        a ^= t << shift;
+    };
+    for (int k : {0, 2, 4, 6}) swap(r[k], r[k + 1], 8, 0x00FF00FF00FF00FFull);
+    for (int k : {0, 1, 4, 5}) swap(r[k], r[k + 2], 16, 0x0000FFFF0000FFFFull);
+    for (int k : {0, 1, 2, 3}) swap(r[k], r[k + 4], 32, 0x00000000FFFFFFFFull);
 }
 
 }  // namespace
@@ -113,6 +127,41 @@ void LayerImage::storedWindow(const Display& display, std::vector<std::uint8_t>&
     const std::ptrdiff_t di = display.portrait ? (my ? -1 : 1) * std::ptrdiff_t(w) : (mx ? -1 : 1);
     const std::ptrdiff_t dj = display.portrait ? (mx ? -1 : 1) : (my ? -1 : 1) * std::ptrdiff_t(w);
     const std::ptrdiff_t origin = std::ptrdiff_t(rowOf(i0, j0) - row0) * w + (colOf(i0, j0) - col0);
+    // Portrait: each source row becomes a stored column. Transpose 8 x 8 pixel blocks in 64-bit
+    // words (a byte reversal where the stored column runs backwards), so stores are whole words;
+    // the ragged right and bottom edges take the plain loop below.
+    int iDone = 0, jDone = 0;
+    if (display.portrait && (dj == 1 || dj == -1)) {
+        iDone = nx / 8 * 8;
+        jDone = ny / 8 * 8;
+        for (int jb = 0; jb < jDone; jb += 8)
+            for (int ib = 0; ib < iDone; ib += 8) {
+                std::uint64_t r[8];
+                for (int k = 0; k < 8; ++k) std::memcpy(&r[k], &pixels[std::size_t(jb + k) * nx + ib], 8);
+                transpose8x8(r);  // r[c] byte k: source row jb + k, column ib + c
+                for (int c = 0; c < 8; ++c) {
+                    std::uint8_t* dst = out.data() + origin + di * (ib + c) + dj * jb;
+                    if (dj == 1) {
+                        std::memcpy(dst, &r[c], 8);
+                    } else {
+                        const std::uint64_t reversed = __builtin_bswap64(r[c]);
+                        std::memcpy(dst - 7, &reversed, 8);
+                    }
+                }
+            }
+    }
+    auto copy = [&](int iBegin, int iEnd, int jBegin, int jEnd) {
+        for (int j = jBegin; j < jEnd; ++j) {
+            const std::uint8_t* src = &pixels[std::size_t(j) * nx];
+            std::uint8_t* dst = out.data() + origin + dj * j;
+            for (int i = iBegin; i < iEnd; ++i) dst[di * i] = src[i];
+        }
+    };
+    if (iDone > 0 || jDone > 0) {
+        copy(iDone, nx, 0, ny);     // right strip
+        copy(0, iDone, jDone, ny);  // bottom strip
+        return;
+    }
     constexpr int kBlock = 64;
     for (int jb0 = 0; jb0 < ny; jb0 += kBlock)
         for (int ib0 = 0; ib0 < nx; ib0 += kBlock)
