@@ -282,103 +282,116 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
     auto v = [&](int a, int b) { return values[std::size_t(a) * stride + b]; };
     const int s = std::max(1, mOptions.supersample);
     std::uint64_t supersampled = 0;
-    const bool wholeTileInPart =
-        xOf(mI0 + ti) - 0.5 * px >= mPart.min.x() && xOf(mI0 + ti + tnx - 1) + 0.5 * px <= mPart.max.x() &&
-        yOf(mJ0 + tj) - 0.5 * py >= mPart.min.y() && yOf(mJ0 + tj + tny - 1) + 0.5 * py <= mPart.max.y();
 
     // Fast pass: every difference between a pixel's centre and one of its eight neighbours lies in
     // one of the four cells around it, so a pixel with |f| above their largest difference has no
     // sign change in its 3x3 neighbourhood and |f| above every difference to a neighbour: it is
-    // surely inside or outside (the exact test below would say the same). Most pixels end here.
+    // surely inside or outside (the exact test below would say the same for a pixel wholly inside
+    // the part, tested per row and column with the slow path's own expressions). Most pixels end
+    // here; the rest are listed for the exact test.
+    constexpr int kMaxListed = 64 * 64;
+    const bool listSlow = tnx * tny <= kMaxListed;
+    std::uint16_t slowList[kMaxListed];
+    int slowCount = 0;
+    bool rowInPart[64];
+    const bool rowsListed = tny <= 64;
+    if (rowsListed)
+        for (int b = 0; b < tny; ++b) {
+            const double y = yOf(mJ0 + tj + b);
+            rowInPart[b] = y - 0.5 * py >= mPart.min.y() && y + 0.5 * py <= mPart.max.y();
+        }
     int sure = 0, sureInside = 0;
-    std::uint8_t slow[64 * 64];
-    const bool useSlow = tnx * tny <= 64 * 64;
     for (int a = 0; a < tnx; ++a) {
         const double* c0 = cells + std::size_t(a) * (stride - 1);
         const double* c1 = c0 + (stride - 1);
         const double* f = values + std::size_t(a + 1) * stride + 1;
         std::uint8_t* pixel = &out.pixels[std::size_t(tj) * mNx + ti + a];
+        const double x = xOf(mI0 + ti + a);
+        const bool columnInPart = rowsListed && x - 0.5 * px >= mPart.min.x() && x + 0.5 * px <= mPart.max.x();
         for (int b = 0; b < tny; ++b) {
             const double bound = std::max(std::max(c0[b], c0[b + 1]), std::max(c1[b], c1[b + 1]));
-            const bool isSure = wholeTileInPart && std::abs(f[b]) > bound;
+            const bool isSure = columnInPart && rowInPart[rowsListed ? b : 0] && std::abs(f[b]) > bound;
             const bool inside = f[b] < 0.0;
             pixel[std::size_t(b) * mNx] = isSure && inside ? 255 : 0;
             sure += isSure;
             sureInside += isSure && inside;
-            if (useSlow) slow[a * tny + b] = !isSure;
+            if (listSlow) {
+                slowList[slowCount] = std::uint16_t(a * tny + b);
+                slowCount += !isSure;
+            }
         }
     }
 
-    for (int b = 0; b < tny; ++b)
-        for (int a = 0; a < tnx; ++a) {
-            if (useSlow && !slow[a * tny + b]) continue;
-            const int i = mI0 + ti + a, j = mJ0 + tj + b;
-            const double x = xOf(i), y = yOf(j), f = v(a + 1, b + 1);
-            std::uint8_t& pixel = out.pixels[std::size_t(tj + b) * mNx + (ti + a)];
-            const bool centreInPart =
-                x >= mPart.min.x() && x <= mPart.max.x() && y >= mPart.min.y() && y <= mPart.max.y();
-            if (mOptions.supersample <= 0) {
-                pixel = f < 0.0 && centreInPart ? 255 : 0;
-                continue;
-            }
-            const double lx = x - 0.5 * px, hx = x + 0.5 * px, ly = y - 0.5 * py, hy2 = y + 0.5 * py;
-            if (hx <= mPart.min.x() || lx >= mPart.max.x() || hy2 <= mPart.min.y() || ly >= mPart.max.y()) {
-                pixel = 0;
-                continue;
-            }
-            const bool partial = lx < mPart.min.x() || hx > mPart.max.x() || ly < mPart.min.y() || hy2 > mPart.max.y();
-            // May the boundary pass through this pixel? A sign change among the 3x3 centres, or |f| no
-            // larger than the largest difference to a neighbour (sure for a locally linear field).
-            double maxDiff = 0.0;
-            bool signChange = false;
-            for (int da = -1; da <= 1; ++da)
-                for (int db = -1; db <= 1; ++db) {
-                    const double g = v(a + 1 + da, b + 1 + db);
-                    maxDiff = std::max(maxDiff, std::abs(g - f));
-                    signChange |= (g < 0.0) != (f < 0.0);
-                }
-            if (!partial && !signChange && !(std::abs(f) <= maxDiff)) {
-                pixel = f < 0.0 ? 255 : 0;
-                continue;
-            }
-            // Coverage of the linearised edge: f + gx u + gy v < 0 over the pixel (gradient by central
-            // differences, per pixel), exact for a straight edge. Where the field bends within the
-            // pixel (second differences not small against the gradient) or the part's box cuts the
-            // pixel, count s x s sub-samples instead.
-            const double gx = 0.5 * (v(a + 2, b + 1) - v(a, b + 1)), gy = 0.5 * (v(a + 1, b + 2) - v(a + 1, b));
-            const double dxx = v(a + 2, b + 1) + v(a, b + 1) - 2.0 * f, dyy = v(a + 1, b + 2) + v(a + 1, b) - 2.0 * f;
-            const double dxy = 0.25 * (v(a + 2, b + 2) - v(a + 2, b) - v(a, b + 2) + v(a, b));
-            const double gradient = std::abs(gx) + std::abs(gy);
-            const double bend = std::abs(dxx) + std::abs(dyy) + 2.0 * std::abs(dxy);
-            if (!partial && std::isfinite(f) && bend <= mOptions.linearTolerance * gradient) {
-                const double coverage = std::clamp(squareCoverage(std::abs(gx), std::abs(gy), -f + 0.5 * gradient) +
-                                                       curvatureCorrection(f, gx, gy, dxx, dyy, dxy),
-                                                   0.0, 1.0);
-                pixel = mOptions.gamma <= 0.0   ? (coverage >= 0.5 ? 255 : 0)
-                        : mOptions.gamma == 1.0 ? std::uint8_t(std::lround(255.0 * coverage))
-                                                : std::uint8_t(std::lround(255.0 * std::pow(coverage, mOptions.gamma)));
-                continue;
-            }
-            ++supersampled;
-            GridBatch g;
-            g.origin = Vec3d(lx + 0.5 * px / s, ly + 0.5 * py / s, z);
-            g.spacing = Vec3d(px / s, py / s, 1.0);
-            g.nx = s;
-            g.ny = s;
-            g.nz = 1;
-            sub.resize(g.size());
-            mField.gridValues(g, sub);
-            int inside = 0;
-            for (int sa = 0; sa < s; ++sa) {
-                const double sx = g.origin.x() + sa * g.spacing.x();
-                const bool xIn = sx >= mPart.min.x() && sx <= mPart.max.x();
-                for (int sb = 0; sb < s; ++sb) {
-                    const double sy = g.origin.y() + sb * g.spacing.y();
-                    inside += xIn && sy >= mPart.min.y() && sy <= mPart.max.y() && sub[std::size_t(sa) * s + sb] < 0.0;
-                }
-            }
-            pixel = mLevels[inside];
+    const int toDecide = listSlow ? slowCount : tnx * tny;
+    for (int k = 0; k < toDecide; ++k) {
+        const int index = listSlow ? slowList[k] : k;
+        const int a = index / tny, b = index % tny;
+        const int i = mI0 + ti + a, j = mJ0 + tj + b;
+        const double x = xOf(i), y = yOf(j), f = v(a + 1, b + 1);
+        std::uint8_t& pixel = out.pixels[std::size_t(tj + b) * mNx + (ti + a)];
+        const bool centreInPart = x >= mPart.min.x() && x <= mPart.max.x() && y >= mPart.min.y() && y <= mPart.max.y();
+        if (mOptions.supersample <= 0) {
+            pixel = f < 0.0 && centreInPart ? 255 : 0;
+            continue;
         }
+        const double lx = x - 0.5 * px, hx = x + 0.5 * px, ly = y - 0.5 * py, hy2 = y + 0.5 * py;
+        if (hx <= mPart.min.x() || lx >= mPart.max.x() || hy2 <= mPart.min.y() || ly >= mPart.max.y()) {
+            pixel = 0;
+            continue;
+        }
+        const bool partial = lx < mPart.min.x() || hx > mPart.max.x() || ly < mPart.min.y() || hy2 > mPart.max.y();
+        // May the boundary pass through this pixel? A sign change among the 3x3 centres, or |f| no
+        // larger than the largest difference to a neighbour (sure for a locally linear field).
+        double maxDiff = 0.0;
+        bool signChange = false;
+        for (int da = -1; da <= 1; ++da)
+            for (int db = -1; db <= 1; ++db) {
+                const double g = v(a + 1 + da, b + 1 + db);
+                maxDiff = std::max(maxDiff, std::abs(g - f));
+                signChange |= (g < 0.0) != (f < 0.0);
+            }
+        if (!partial && !signChange && !(std::abs(f) <= maxDiff)) {
+            pixel = f < 0.0 ? 255 : 0;
+            continue;
+        }
+        // Coverage of the linearised edge: f + gx u + gy v < 0 over the pixel (gradient by central
+        // differences, per pixel), exact for a straight edge. Where the field bends within the
+        // pixel (second differences not small against the gradient) or the part's box cuts the
+        // pixel, count s x s sub-samples instead.
+        const double gx = 0.5 * (v(a + 2, b + 1) - v(a, b + 1)), gy = 0.5 * (v(a + 1, b + 2) - v(a + 1, b));
+        const double dxx = v(a + 2, b + 1) + v(a, b + 1) - 2.0 * f, dyy = v(a + 1, b + 2) + v(a + 1, b) - 2.0 * f;
+        const double dxy = 0.25 * (v(a + 2, b + 2) - v(a + 2, b) - v(a, b + 2) + v(a, b));
+        const double gradient = std::abs(gx) + std::abs(gy);
+        const double bend = std::abs(dxx) + std::abs(dyy) + 2.0 * std::abs(dxy);
+        if (!partial && std::isfinite(f) && bend <= mOptions.linearTolerance * gradient) {
+            const double coverage = std::clamp(squareCoverage(std::abs(gx), std::abs(gy), -f + 0.5 * gradient) +
+                                                   curvatureCorrection(f, gx, gy, dxx, dyy, dxy),
+                                               0.0, 1.0);
+            pixel = mOptions.gamma <= 0.0   ? (coverage >= 0.5 ? 255 : 0)
+                    : mOptions.gamma == 1.0 ? std::uint8_t(std::lround(255.0 * coverage))
+                                            : std::uint8_t(std::lround(255.0 * std::pow(coverage, mOptions.gamma)));
+            continue;
+        }
+        ++supersampled;
+        GridBatch g;
+        g.origin = Vec3d(lx + 0.5 * px / s, ly + 0.5 * py / s, z);
+        g.spacing = Vec3d(px / s, py / s, 1.0);
+        g.nx = s;
+        g.ny = s;
+        g.nz = 1;
+        sub.resize(g.size());
+        mField.gridValues(g, sub);
+        int inside = 0;
+        for (int sa = 0; sa < s; ++sa) {
+            const double sx = g.origin.x() + sa * g.spacing.x();
+            const bool xIn = sx >= mPart.min.x() && sx <= mPart.max.x();
+            for (int sb = 0; sb < s; ++sb) {
+                const double sy = g.origin.y() + sb * g.spacing.y();
+                inside += xIn && sy >= mPart.min.y() && sy <= mPart.max.y() && sub[std::size_t(sa) * s + sb] < 0.0;
+            }
+        }
+        pixel = mLevels[inside];
+    }
     if (stats) stats->pixelsSupersampled += supersampled;
     if (sure < tnx * tny) return 0;
     return sureInside == sure ? -1 : sureInside == 0 ? 1 : 0;
