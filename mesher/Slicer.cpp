@@ -340,6 +340,22 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
             continue;
         }
         const bool partial = lx < mPart.min.x() || hx > mPart.max.x() || ly < mPart.min.y() || hy2 > mPart.max.y();
+        // Coverage of the linearised edge: f + gx u + gy v < 0 over the pixel (gradient by central
+        // differences, per pixel), exact for a straight edge. Where the field bends within the
+        // pixel (second differences not small against the gradient) or the part's box cuts the
+        // pixel, count s x s sub-samples instead.
+        const double gx = 0.5 * (v(a + 2, b + 1) - v(a, b + 1)), gy = 0.5 * (v(a + 1, b + 2) - v(a + 1, b));
+        const double dxx = v(a + 2, b + 1) + v(a, b + 1) - 2.0 * f, dyy = v(a + 1, b + 2) + v(a + 1, b) - 2.0 * f;
+        const double dxy = 0.25 * (v(a + 2, b + 2) - v(a + 2, b) - v(a, b + 2) + v(a, b));
+        const double gradient = std::abs(gx) + std::abs(gy);
+        const double bend = std::abs(dxx) + std::abs(dyy) + 2.0 * std::abs(dxy);
+        const bool linear = !partial && std::isfinite(f) && bend <= mOptions.linearTolerance * gradient;
+        // The linearised edge misses the pixel (|f| > (|gx| + |gy|) / 2, with a margin for rounding):
+        // the coverage below would be exactly 0 or 1 and no chord would bend it, so skip it.
+        if (linear && std::abs(f) > 0.5 * gradient * (1.0 + 1e-9)) {
+            pixel = f < 0.0 ? 255 : 0;
+            continue;
+        }
         // May the boundary pass through this pixel? A sign change among the 3x3 centres, or |f| no
         // larger than the largest difference to a neighbour (sure for a locally linear field).
         double maxDiff = 0.0;
@@ -354,16 +370,7 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
             pixel = f < 0.0 ? 255 : 0;
             continue;
         }
-        // Coverage of the linearised edge: f + gx u + gy v < 0 over the pixel (gradient by central
-        // differences, per pixel), exact for a straight edge. Where the field bends within the
-        // pixel (second differences not small against the gradient) or the part's box cuts the
-        // pixel, count s x s sub-samples instead.
-        const double gx = 0.5 * (v(a + 2, b + 1) - v(a, b + 1)), gy = 0.5 * (v(a + 1, b + 2) - v(a + 1, b));
-        const double dxx = v(a + 2, b + 1) + v(a, b + 1) - 2.0 * f, dyy = v(a + 1, b + 2) + v(a + 1, b) - 2.0 * f;
-        const double dxy = 0.25 * (v(a + 2, b + 2) - v(a + 2, b) - v(a, b + 2) + v(a, b));
-        const double gradient = std::abs(gx) + std::abs(gy);
-        const double bend = std::abs(dxx) + std::abs(dyy) + 2.0 * std::abs(dxy);
-        if (!partial && std::isfinite(f) && bend <= mOptions.linearTolerance * gradient) {
+        if (linear) {
             const double coverage = std::clamp(squareCoverage(std::abs(gx), std::abs(gy), -f + 0.5 * gradient) +
                                                    curvatureCorrection(f, gx, gy, dxx, dyy, dxy),
                                                0.0, 1.0);
