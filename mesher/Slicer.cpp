@@ -283,6 +283,10 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
     // xOf / yOf with the pitches hoisted (the same arithmetic, without a division per call).
     auto centreX = [&](int i) { return (double(i) + 0.5) * px - mOffsetX; };
     auto centreY = [&](int j) { return (double(j) + 0.5) * py - mOffsetY; };
+    // A pixel that overhangs the part's box by a rounding error only (pixel edges on the box's
+    // faces, as when a part is centred on the display) counts as whole: sub-sampling it would
+    // only quantise its coverage.
+    const double slackX = 1e-9 * px, slackY = 1e-9 * py;
     const int s = std::max(1, mOptions.supersample);
     std::uint64_t supersampled = 0;
 
@@ -301,7 +305,7 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
     if (rowsListed)
         for (int b = 0; b < tny; ++b) {
             const double y = centreY(mJ0 + tj + b);
-            rowInPart[b] = y - 0.5 * py >= mPart.min.y() && y + 0.5 * py <= mPart.max.y();
+            rowInPart[b] = y - 0.5 * py >= mPart.min.y() - slackY && y + 0.5 * py <= mPart.max.y() + slackY;
         }
     int sure = 0, sureInside = 0;
     for (int a = 0; a < tnx; ++a) {
@@ -310,7 +314,8 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
         const double* f = values + std::size_t(a + 1) * stride + 1;
         std::uint8_t* pixel = &out.pixels[std::size_t(tj) * mNx + ti + a];
         const double x = centreX(mI0 + ti + a);
-        const bool columnInPart = rowsListed && x - 0.5 * px >= mPart.min.x() && x + 0.5 * px <= mPart.max.x();
+        const bool columnInPart =
+            rowsListed && x - 0.5 * px >= mPart.min.x() - slackX && x + 0.5 * px <= mPart.max.x() + slackX;
         for (int b = 0; b < tny; ++b) {
             const double bound = std::max(std::max(c0[b], c0[b + 1]), std::max(c1[b], c1[b + 1]));
             const bool isSure = columnInPart & rowInPart[rowsListed ? b : 0] & (std::abs(f[b]) > bound);
@@ -342,7 +347,8 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
             pixel = 0;
             continue;
         }
-        const bool partial = lx < mPart.min.x() || hx > mPart.max.x() || ly < mPart.min.y() || hy2 > mPart.max.y();
+        const bool partial = lx < mPart.min.x() - slackX || hx > mPart.max.x() + slackX ||
+                             ly < mPart.min.y() - slackY || hy2 > mPart.max.y() + slackY;
         // Coverage of the linearised edge: f + gx u + gy v < 0 over the pixel (gradient by central
         // differences, per pixel), exact for a straight edge. Where the field bends within the
         // pixel (second differences not small against the gradient) or the part's box cuts the
