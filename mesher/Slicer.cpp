@@ -308,19 +308,22 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
             rowInPart[b] = y - 0.5 * py >= mPart.min.y() - slackY && y + 0.5 * py <= mPart.max.y() + slackY;
         }
     int sure = 0, sureInside = 0;
+    // Locals, not members: the byte stores below may alias any member, which would be reloaded.
+    const std::size_t rowStride = std::size_t(mNx);
+    std::uint8_t* const tilePixels = out.pixels.data() + std::size_t(tj) * rowStride + ti;
+    const double partMinX = mPart.min.x() - slackX, partMaxX = mPart.max.x() + slackX;
     for (int a = 0; a < tnx; ++a) {
         const double* c0 = cells + std::size_t(a) * (stride - 1);
         const double* c1 = c0 + (stride - 1);
         const double* f = values + std::size_t(a + 1) * stride + 1;
-        std::uint8_t* pixel = &out.pixels[std::size_t(tj) * mNx + ti + a];
+        std::uint8_t* pixel = tilePixels + a;
         const double x = centreX(mI0 + ti + a);
-        const bool columnInPart =
-            rowsListed && x - 0.5 * px >= mPart.min.x() - slackX && x + 0.5 * px <= mPart.max.x() + slackX;
+        const bool columnInPart = rowsListed && x - 0.5 * px >= partMinX && x + 0.5 * px <= partMaxX;
         for (int b = 0; b < tny; ++b) {
             const double bound = std::max(std::max(c0[b], c0[b + 1]), std::max(c1[b], c1[b + 1]));
             const bool isSure = columnInPart & rowInPart[rowsListed ? b : 0] & (std::abs(f[b]) > bound);
             const bool inside = f[b] < 0.0;
-            pixel[std::size_t(b) * mNx] = std::uint8_t(-int(isSure & inside));
+            pixel[std::size_t(b) * rowStride] = std::uint8_t(-int(isSure & inside));
             sure += isSure;
             sureInside += isSure & inside;
             if (listSlow) {
