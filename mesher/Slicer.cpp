@@ -207,7 +207,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     out.pixels.assign(std::size_t(mNx) * mNy, 0);
     if (z < mPart.min.z() || z > mPart.max.z()) return;
     const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
-    const int tile = std::max(2, mOptions.tile), block = 4 * tile;
+    const int tile = std::max(2, mOptions.tile), block = 8 * tile;
     std::vector<double> values, cells, sub;
 
     // Classifies the pixel box [i, i + n) x [j, j + m) of the window: -1 inside, +1 outside, 0 both.
@@ -225,50 +225,79 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     auto fill = [&](int i, int j, int n, int m) {
         for (int b = 0; b < m; ++b) std::fill_n(&out.pixels[std::size_t(j + b) * mNx + i], n, std::uint8_t(255));
     };
+    // Decides the pixel box of a block already classified as @a side: fills it, leaves it empty or
+    // evaluates it as one batch.
+    auto decideBlock = [&](int bi, int bj, int bnx, int bny, int side) {
+        const std::uint64_t tiles = std::uint64_t((bnx + tile - 1) / tile) * ((bny + tile - 1) / tile);
+        if (side != 0) {
+            if (side < 0) fill(bi, bj, bnx, bny);
+            if (stats) (side < 0 ? stats->tilesInside : stats->tilesOutside) += tiles;
+            return;
+        }
+        // One batch for the block's pixel centres and a one-pixel halo: per-axis terms are shared
+        // by the whole block (the separable fast paths), and no per-tile bounds are needed, as
+        // the tiles' own centre values decide which pixels are sure (edgeTile's fast path).
+        GridBatch grid;
+        grid.origin = Vec3d(xOf(mI0 + bi - 1), yOf(mJ0 + bj - 1), z);
+        grid.spacing = Vec3d(px, py, 1.0);
+        grid.nx = bnx + 2;
+        grid.ny = bny + 2;
+        grid.nz = 1;
+        values.resize(grid.size());
+        mField.gridValues(grid, values);
+        if (stats) stats->pixelsEvaluated += std::uint64_t(bnx) * bny;
+        // The largest difference between the four corners of each grid cell (both axes and both
+        // diagonals), for edgeTile's fast pass; written to vectorize.
+        const int cy = grid.ny - 1;
+        cells.resize(std::size_t(grid.nx - 1) * cy);
+        for (int a = 0; a + 1 < grid.nx; ++a) {
+            const double* c0 = &values[std::size_t(a) * grid.ny];
+            const double* c1 = c0 + grid.ny;
+            double* e = &cells[std::size_t(a) * cy];
+            for (int b = 0; b < cy; ++b) {
+                const double d0 = std::abs(c1[b] - c0[b]), d1 = std::abs(c0[b + 1] - c0[b]);
+                const double d2 = std::abs(c1[b + 1] - c0[b]), d3 = std::abs(c1[b] - c0[b + 1]);
+                e[b] = std::max(std::max(d0, d1), std::max(d2, d3));
+            }
+        }
+        for (int tj = bj; tj < bj + bny; tj += tile)
+            for (int ti = bi; ti < bi + bnx; ti += tile) {
+                const int tnx = std::min(tile, bi + bnx - ti), tny = std::min(tile, bj + bny - tj);
+                const int tside =
+                    edgeTile(z, ti, tj, tnx, tny, out, &values[std::size_t(ti - bi) * grid.ny + (tj - bj)], grid.ny,
+                             &cells[std::size_t(ti - bi) * cy + (tj - bj)], sub, stats);
+                if (stats) ++(tside < 0 ? stats->tilesInside : tside > 0 ? stats->tilesOutside : stats->tilesEdge);
+            }
+    };
+    // Blocks of 8 x 8 tiles, culled by their quarters (4 x 4 tiles): a block whose quarters all
+    // straddle the surface is evaluated as one batch (per-axis terms shared by twice the pixels per
+    // side), otherwise quarter by quarter as the culling allows.
     for (int bj = 0; bj < mNy; bj += block)
         for (int bi = 0; bi < mNx; bi += block) {
             const int bnx = std::min(block, mNx - bi), bny = std::min(block, mNy - bj);
             const int side = classify(bi, bj, bnx, bny);
-            const std::uint64_t tiles = std::uint64_t((bnx + tile - 1) / tile) * ((bny + tile - 1) / tile);
             if (side != 0) {
-                if (side < 0) fill(bi, bj, bnx, bny);
-                if (stats) (side < 0 ? stats->tilesInside : stats->tilesOutside) += tiles;
+                decideBlock(bi, bj, bnx, bny, side);
                 continue;
             }
-            // One batch for the block's pixel centres and a one-pixel halo: per-axis terms are shared
-            // by the whole block (the separable fast paths), and no per-tile bounds are needed, as
-            // the tiles' own centre values decide which pixels are sure (edgeTile's fast path).
-            GridBatch grid;
-            grid.origin = Vec3d(xOf(mI0 + bi - 1), yOf(mJ0 + bj - 1), z);
-            grid.spacing = Vec3d(px, py, 1.0);
-            grid.nx = bnx + 2;
-            grid.ny = bny + 2;
-            grid.nz = 1;
-            values.resize(grid.size());
-            mField.gridValues(grid, values);
-            if (stats) stats->pixelsEvaluated += std::uint64_t(bnx) * bny;
-            // The largest difference between the four corners of each grid cell (both axes and both
-            // diagonals), for edgeTile's fast pass; written to vectorize.
-            const int cy = grid.ny - 1;
-            cells.resize(std::size_t(grid.nx - 1) * cy);
-            for (int a = 0; a + 1 < grid.nx; ++a) {
-                const double* c0 = &values[std::size_t(a) * grid.ny];
-                const double* c1 = c0 + grid.ny;
-                double* e = &cells[std::size_t(a) * cy];
-                for (int b = 0; b < cy; ++b) {
-                    const double d0 = std::abs(c1[b] - c0[b]), d1 = std::abs(c0[b + 1] - c0[b]);
-                    const double d2 = std::abs(c1[b + 1] - c0[b]), d3 = std::abs(c1[b] - c0[b + 1]);
-                    e[b] = std::max(std::max(d0, d1), std::max(d2, d3));
+            const int half = block / 2;
+            int quarterSide[4], quarters = 0;
+            bool allStraddle = true;
+            for (int qj = bj; qj < bj + bny; qj += half)
+                for (int qi = bi; qi < bi + bnx; qi += half) {
+                    quarterSide[quarters] =
+                        classify(qi, qj, std::min(half, bi + bnx - qi), std::min(half, bj + bny - qj));
+                    allStraddle &= quarterSide[quarters++] == 0;
                 }
+            if (allStraddle) {
+                decideBlock(bi, bj, bnx, bny, 0);
+                continue;
             }
-            for (int tj = bj; tj < bj + bny; tj += tile)
-                for (int ti = bi; ti < bi + bnx; ti += tile) {
-                    const int tnx = std::min(tile, bi + bnx - ti), tny = std::min(tile, bj + bny - tj);
-                    const int tside =
-                        edgeTile(z, ti, tj, tnx, tny, out, &values[std::size_t(ti - bi) * grid.ny + (tj - bj)], grid.ny,
-                                 &cells[std::size_t(ti - bi) * cy + (tj - bj)], sub, stats);
-                    if (stats) ++(tside < 0 ? stats->tilesInside : tside > 0 ? stats->tilesOutside : stats->tilesEdge);
-                }
+            quarters = 0;
+            for (int qj = bj; qj < bj + bny; qj += half)
+                for (int qi = bi; qi < bi + bnx; qi += half)
+                    decideBlock(qi, qj, std::min(half, bi + bnx - qi), std::min(half, bj + bny - qj),
+                                quarterSide[quarters++]);
         }
 }
 
