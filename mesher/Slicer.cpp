@@ -72,8 +72,16 @@ void transpose8x8(std::uint64_t r[8])
 
 double LayerImage::exposedPixels() const
 {
+    // 32-bit partial sums over chunks that cannot overflow them, so the inner loop vectorises.
+    constexpr std::size_t kChunk = std::size_t(1) << 16;
     std::uint64_t sum = 0;
-    for (std::uint8_t p : pixels) sum += p;
+    for (std::size_t start = 0; start < pixels.size(); start += kChunk) {
+        const std::uint8_t* p = pixels.data() + start;
+        const std::size_t n = std::min(kChunk, pixels.size() - start);
+        std::uint32_t part = 0;
+        for (std::size_t k = 0; k < n; ++k) part += p[k];
+        sum += part;
+    }
     return double(sum) / 255.0;
 }
 
