@@ -89,7 +89,7 @@ void TpmsField::gradients(std::span<const Vec3d> points, std::span<double> out, 
 
 void TpmsField::gridValues(const GridBatch& batch, std::span<double> out) const
 {
-    constexpr int kMax = 64;
+    constexpr int kMax = 128;  // a slicer block with its halo is 66 wide
     if (batch.nx > kMax || batch.ny > kMax || batch.nz > kMax) {
         FieldNode::gridValues(batch, out);
         return;
@@ -126,7 +126,7 @@ void TpmsField::gridValues(const GridBatch& batch, std::span<double> out) const
 
 void TpmsField::gridGradients(const GridBatch& batch, std::span<double> out, std::span<Vec3d> grad) const
 {
-    constexpr int kMax = 64;
+    constexpr int kMax = 128;  // a slicer block with its halo is 66 wide
     if (batch.nx > kMax || batch.ny > kMax || batch.nz > kMax) {
         FieldNode::gridGradients(batch, out, grad);
         return;
@@ -173,7 +173,7 @@ inline TrigTerms<double> termsFrom(double s, double c) { return {s, c, 2.0 * s *
 void TpmsField::gridValuesShifted(const GridBatch& batch, std::span<const Vec3d> shift, std::span<double> plus,
                                   std::span<double> minus) const
 {
-    constexpr int kMax = 64;
+    constexpr int kMax = 128;  // a slicer block with its halo is 66 wide
     if (batch.nx > kMax || batch.ny > kMax || batch.nz > kMax) {
         FieldNode::gridValuesShifted(batch, shift, plus, minus);
         return;

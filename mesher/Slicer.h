@@ -48,7 +48,7 @@ struct RasterOptions {
     /// Edge pixels use the linearised edge when the field's second differences are at most this
     /// share of its first differences (so the edge bends by a small part of a pixel); else sub-samples.
     double linearTolerance = 0.25;
-    int tile = 8;  ///< tile side in pixels for culling by bound() (blocks of 4 x 4 tiles first)
+    int tile = 8;  ///< tile side in pixels for culling by bound() (blocks of 8 x 8 tiles first)
 };
 
 /// A window [i0, i0 + nx) x [j0, j0 + ny) of the landscape pixel grid, row-major (row = j).
