@@ -279,46 +279,21 @@ VOXLAT_EXPR_FORWARD1(exp)
 VOXLAT_EXPR_FORWARD1(sqrt)
 VOXLAT_EXPR_FORWARD1(abs)
 #undef VOXLAT_EXPR_FORWARD1
-inline double tan(double a)
-{
-    return std::tan(a);
-}
-inline double asin(double a)
-{
-    return std::asin(a);
-}
-inline double acos(double a)
-{
-    return std::acos(a);
-}
-inline double atan(double a)
-{
-    return std::atan(a);
-}
-inline double sinh(double a)
-{
-    return std::sinh(a);
-}
-inline double cosh(double a)
-{
-    return std::cosh(a);
-}
-inline double tanh(double a)
-{
-    return std::tanh(a);
-}
-inline double log(double a)
-{
-    return std::log(a);
-}
-inline double floor(double a)
-{
-    return std::floor(a);
-}
-inline double ceil(double a)
-{
-    return std::ceil(a);
-}
+// Plain double versions under the same names, so the templated evaluation loop calls one name
+// for every number type.
+#define VOXLAT_EXPR_DOUBLE1(name) \
+    inline double name(double a) { return std::name(a); }
+VOXLAT_EXPR_DOUBLE1(tan)
+VOXLAT_EXPR_DOUBLE1(asin)
+VOXLAT_EXPR_DOUBLE1(acos)
+VOXLAT_EXPR_DOUBLE1(atan)
+VOXLAT_EXPR_DOUBLE1(sinh)
+VOXLAT_EXPR_DOUBLE1(cosh)
+VOXLAT_EXPR_DOUBLE1(tanh)
+VOXLAT_EXPR_DOUBLE1(log)
+VOXLAT_EXPR_DOUBLE1(floor)
+VOXLAT_EXPR_DOUBLE1(ceil)
+#undef VOXLAT_EXPR_DOUBLE1
 inline double pow(double a, double b)
 {
     return std::pow(a, b);
