@@ -40,7 +40,7 @@ build: deps
 
 run: build
 	$(BUILD)/voxlat run $(RECIPE) --out $(OUT)
-	@echo "outputs are in $(abspath $(OUT)) (mesh and report.json)"
+	@echo "outputs are in $(abspath $(OUT)): the mesh, a preview picture (*.preview.png) and report.json"
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
