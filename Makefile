@@ -8,7 +8,7 @@ JOBS ?= $(shell nproc)
 RECIPE ?= data/recipes/gyroid.yaml
 OUT ?= out
 
-DEB_PACKAGES := cmake ninja-build g++ libopenvdb-dev libboost-iostreams-dev libtbb-dev libopenmesh-dev \
+DEB_PACKAGES := cmake ninja-build g++ pkg-config libopenvdb-dev libboost-iostreams-dev libtbb-dev libopenmesh-dev \
 	libopenexr-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libgtest-dev libpng-dev libzip-dev \
 	lib3mf-dev pybind11-dev python3-dev python3-numpy
 BENCH_PACKAGES := python3 python3-numpy python3-openvdb python3-scipy python3-skimage prusa-slicer
