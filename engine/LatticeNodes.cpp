@@ -65,14 +65,7 @@ ShiftSpec readShiftSpec(FieldBuilder& builder, const RecipeNode& spec, const std
         if (spec.has("build")) {
             const RecipeNode b = spec["build"];
             bool allNumbers = b.isSequence() && b.size() == 3;
-            for (std::size_t i = 0; allNumbers && i < 3; ++i) allNumbers = b.at(i).isScalar() && [&] {
-                try {
-                    (void)b.at(i).yaml().as<double>();
-                    return true;
-                } catch (const YAML::Exception&) {
-                    return false;
-                }
-            }();
+            for (std::size_t i = 0; allNumbers && i < 3; ++i) allNumbers = b.at(i).isNumber();
             if (allNumbers) {
                 shift.direction = b.vec3();
                 if (!(shift.direction.length() > 0.0))
@@ -180,14 +173,7 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
         builder.addLevelNode(std::move(node));
         return result;
     }
-    if (spec.has("density") && !(spec["density"].isScalar() && [&] {
-            try {
-                (void)spec["density"].yaml().as<double>();
-                return true;
-            } catch (const YAML::Exception&) {
-                return false;
-            }
-        }()))
+    if (spec.has("density") && !spec["density"].isNumber())
         return buildGraded(builder, spec, name, raw, side, cell, std::string(tpmsName(type)) + " " + solidName);
     LevelNode node{name, std::string(tpmsName(type)) + " " + solidName, std::make_shared<LevelSolid>(raw, side, 0.0), {}};
     // An infill's `density:` solves this lattice's level: then it needs none of its own.

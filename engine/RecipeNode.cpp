@@ -1,5 +1,7 @@
 #include "engine/RecipeNode.h"
 
+#include "fields/EditDistance.h"
+
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -44,6 +46,17 @@ RecipeNode RecipeNode::operator[](const std::string& key) const
 RecipeNode RecipeNode::at(std::size_t index) const
 {
     return RecipeNode(mNode[index], mSource, mContext + " item " + std::to_string(index + 1));
+}
+
+bool RecipeNode::isNumber() const
+{
+    if (!mNode.IsScalar()) return false;
+    try {
+        (void)mNode.as<double>();
+        return true;
+    } catch (const YAML::Exception&) {
+        return false;
+    }
 }
 
 double RecipeNode::number() const
@@ -129,17 +142,8 @@ std::string closestMatch(const std::string& word, const std::vector<std::string>
     std::string best;
     std::size_t bestDistance = std::max<std::size_t>(2, word.size() / 3) + 1;
     for (const std::string& c : candidates) {
-        // Levenshtein distance, two rows.
-        std::vector<std::size_t> prev(c.size() + 1), cur(c.size() + 1);
-        for (std::size_t j = 0; j <= c.size(); ++j) prev[j] = j;
-        for (std::size_t i = 1; i <= word.size(); ++i) {
-            cur[0] = i;
-            for (std::size_t j = 1; j <= c.size(); ++j)
-                cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (word[i - 1] != c[j - 1])});
-            std::swap(prev, cur);
-        }
-        if (prev[c.size()] < bestDistance) {
-            bestDistance = prev[c.size()];
+        if (const std::size_t d = editDistance(word, c); d < bestDistance) {
+            bestDistance = d;
             best = c;
         }
     }

@@ -35,6 +35,8 @@ public:
     bool isMap() const { return mNode.IsMap(); }
     bool isSequence() const { return mNode.IsSequence(); }
     bool isScalar() const { return mNode.IsScalar(); }
+    /// A scalar that reads as a number (so a key may take a number or something richer).
+    bool isNumber() const;
     bool has(const std::string& key) const { return mNode.IsMap() && mNode[key]; }
 
     /// The child at @a key (must exist unless optional; check has() first for optional keys).

@@ -30,17 +30,6 @@ std::string number(double v)
     return s.str();
 }
 
-bool isNumber(const RecipeNode& node)
-{
-    if (!node.isScalar()) return false;
-    try {
-        (void)node.yaml().as<double>();
-        return true;
-    } catch (const YAML::Exception&) {
-        return false;
-    }
-}
-
 }  // namespace
 
 ScalarMap readRamp(FieldBuilder& builder, const RecipeNode& r)
@@ -83,7 +72,7 @@ ScalarMap readDistanceRamp(FieldBuilder& builder, const RecipeNode& r, const std
 ScalarMap readScalarMap(FieldBuilder& builder, const RecipeNode& node, const std::string& name)
 {
     ScalarMap map;
-    if (isNumber(node)) {
+    if (node.isNumber()) {
         map.constant = node.number();
         map.field = std::make_shared<ConstantField>(*map.constant);
         map.description = number(*map.constant);

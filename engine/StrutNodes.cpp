@@ -172,17 +172,6 @@ std::pair<Frame, Box3> tableFrame(const UniformCells& cells, int margin)
     return {frame, Box3{double(margin) * cells.size, double(margin + 1) * cells.size}};
 }
 
-bool isNumber(const RecipeNode& n)
-{
-    if (!n.isScalar()) return false;
-    try {
-        (void)n.yaml().as<double>();
-        return true;
-    } catch (const YAML::Exception&) {
-        return false;
-    }
-}
-
 /// `density:` as a map (a ramp, a field, a file): the level follows the target density point by
 /// point through the density table of one interior cell (@a tableIndicator over @a tableCell).
 FieldPtr buildGradedStruts(FieldBuilder& builder, const RecipeNode& spec, const std::string& name,
@@ -291,7 +280,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     if (spec.has("level") && spec.has("density"))
         spec.fail("give either `level:` or `density:`, not both (density solves the level)");
     // A density map (ramp, field, file) sets the level point by point from one cell's table.
-    const bool graded = spec.has("density") && !isNumber(spec["density"]);
+    const bool graded = spec.has("density") && !spec["density"].isNumber();
     if (graded) {
         if (!uniform)
             spec["density"].fail(

@@ -1,4 +1,5 @@
 #include "fields/Expression.h"
+#include "fields/EditDistance.h"
 
 #include "fields/ExprMath.h"
 #include "fields/Scratch.h"
@@ -89,19 +90,6 @@ int arity(Op op)
         default:
             return 1;
     }
-}
-
-std::size_t editDistance(const std::string& a, const std::string& b)
-{
-    std::vector<std::size_t> prev(b.size() + 1), cur(b.size() + 1);
-    for (std::size_t j = 0; j <= b.size(); ++j) prev[j] = j;
-    for (std::size_t i = 1; i <= a.size(); ++i) {
-        cur[0] = i;
-        for (std::size_t j = 1; j <= b.size(); ++j)
-            cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (a[i - 1] != b[j - 1])});
-        std::swap(prev, cur);
-    }
-    return prev[b.size()];
 }
 
 /// Applies one instruction elementwise over @a n values. Operands are arrays of the same length.

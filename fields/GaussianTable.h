@@ -42,17 +42,9 @@ public:
             g = 0.0;
             return;
         }
-        const double s = a * kPerUnit;
-        const int i = int(s);
-        const double t = s - i;
-        const Node& p = mNodes[i];
-        const Node& q = mNodes[i + 1];
-        const double t2 = t * t, t3 = t2 * t;
-        const double h00 = 2 * t3 - 3 * t2 + 1, h10 = (t3 - 2 * t2 + t) * kDelta, h01 = -2 * t3 + 3 * t2,
-                     h11 = (t3 - t2) * kDelta;
-        const double uu = h00 * p.u + h10 * p.g + h01 * q.u + h11 * q.g;
-        u = std::copysign(uu, y);
-        g = h00 * p.g + h10 * p.dg + h01 * q.g + h11 * q.dg;
+        const Span h = span(a);
+        u = std::copysign(h.h00 * h.p->u + h.h10 * h.p->g + h.h01 * h.q->u + h.h11 * h.q->g, y);
+        g = h.h00 * h.p->g + h.h10 * h.p->dg + h.h01 * h.q->g + h.h11 * h.q->dg;
     }
 
     /// U(y) only.
@@ -60,15 +52,8 @@ public:
     {
         const double a = std::abs(y);
         if (!(a < kEnd)) return std::copysign(kHalfRootTwoPi, y);
-        const double s = a * kPerUnit;
-        const int i = int(s);
-        const double t = s - i;
-        const Node& p = mNodes[i];
-        const Node& q = mNodes[i + 1];
-        const double t2 = t * t, t3 = t2 * t;
-        const double uu = (2 * t3 - 3 * t2 + 1) * p.u + (t3 - 2 * t2 + t) * kDelta * p.g + (-2 * t3 + 3 * t2) * q.u +
-                          (t3 - t2) * kDelta * q.g;
-        return std::copysign(uu, y);
+        const Span h = span(a);
+        return std::copysign(h.h00 * h.p->u + h.h10 * h.p->g + h.h01 * h.q->u + h.h11 * h.q->g, y);
     }
 
 private:
@@ -78,6 +63,23 @@ private:
     struct Node {
         double u, g, dg;
     };
+
+    /// The two nodes around a (0 <= a < kEnd) and the cubic Hermite weights of their values and
+    /// slopes (slopes per node spacing).
+    struct Span {
+        const Node* p;
+        const Node* q;
+        double h00, h10, h01, h11;
+    };
+    Span span(double a) const
+    {
+        const double s = a * kPerUnit;
+        const int i = int(s);
+        const double t = s - i;
+        const double t2 = t * t, t3 = t2 * t;
+        return {&mNodes[i], &mNodes[i + 1], 2 * t3 - 3 * t2 + 1, (t3 - 2 * t2 + t) * kDelta, -2 * t3 + 3 * t2,
+                (t3 - t2) * kDelta};
+    }
 
     GaussianTable()
     {
