@@ -14,7 +14,9 @@ TITLE = "W2  BCC convolution lattice 20 %, sigma 0.5, 50 mm cube, recipe -> STL"
 def one(voxlat, tmp, voxel):
     tag = f"{voxel:g}"
     extra = [] if voxel == 0.1 else ["--set", f"voxel={voxel}"]
-    t_v, m_v, _ = measure([voxlat, "-q", "run", ROOT / "data/recipes/bcc-convolution.yaml", "--out", tmp / tag] + extra)
+    # --no-preview: the reference makes no picture either (as W1).
+    t_v, m_v, _ = measure([voxlat, "-q", "run", ROOT / "data/recipes/bcc-convolution.yaml", "--out", tmp / tag,
+                           "--no-preview"] + extra)
     report = json.loads((tmp / tag / "report.json").read_text())
     t_r, m_r, out_r = measure([PYTHON, ROOT / "bench/reference/w2_numpy_convolution.py", "--voxel", str(voxel),
                                "--out", tmp / f"ref-{tag}.stl"])

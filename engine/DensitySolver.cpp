@@ -151,14 +151,17 @@ struct CoverageSample {
 constexpr int kLeafStride[3] = {64, 8, 1};
 constexpr int kLeafShift[3] = {6, 3, 0};
 
-/// Band voxels with their per-voxel change, for the sub-voxel coverage estimate. Neighbours that
-/// were not evaluated (tiles, background, outside the domain) fall back to one-sided differences.
-std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region,
-                                            float lo, float hi)
+/// Band voxels with their per-voxel change along each axis (make(value, d) builds a sample), for
+/// the sub-voxel coverage estimates. Neighbours that were not evaluated (tiles, background,
+/// outside @a around) fall back to one-sided differences.
+template <class Make>
+auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
+                 const openvdb::CoordBBox& around, Make make)
 {
+    using Sample = decltype(make(0.0f, std::array<double, 3>{}));
     std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
     grid.tree().getNodes(leaves);
-    std::vector<std::vector<CoverageSample>> perLeaf(leaves.size());
+    std::vector<std::vector<Sample>> perLeaf(leaves.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
         auto acc = grid.getConstAccessor();
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
@@ -166,7 +169,7 @@ std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, cons
             for (int i = 0; i < 512; ++i) {
                 const openvdb::Coord c = leaves[n]->offsetToGlobalCoord(i);
                 if (data[i] < lo || data[i] > hi || !region.isInside(c)) continue;
-                double sum = 0.0;
+                std::array<double, 3> change{};
                 for (int a = 0; a < 3; ++a) {
                     openvdb::Coord up = c, down = c;
                     up[a] += 1;
@@ -175,7 +178,7 @@ std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, cons
                     // accessor. Neighbours outside a density mask hold kOutsideMask: not a neighbour.
                     const int local = (i >> kLeafShift[a]) & 7;
                     float upValue = 0.0f, downValue = 0.0f;
-                    bool hasUp = region.isInside(up), hasDown = region.isInside(down);
+                    bool hasUp = around.isInside(up), hasDown = around.isInside(down);
                     if (hasUp) {
                         if (local < 7) upValue = data[i + kLeafStride[a]];
                         else if (acc.probeConstLeaf(up)) upValue = acc.getValue(up);
@@ -192,15 +195,88 @@ std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, cons
                     if (hasUp && hasDown) d = 0.5 * (upValue - downValue);
                     else if (hasUp) d = upValue - data[i];
                     else if (hasDown) d = data[i] - downValue;
-                    sum += d * d;
+                    change[a] = d;
                 }
-                perLeaf[n].push_back({data[i], float(std::sqrt(sum))});
+                perLeaf[n].push_back(make(data[i], change));
             }
         }
     });
-    std::vector<CoverageSample> all;
+    std::vector<Sample> all;
     for (const auto& v : perLeaf) all.insert(all.end(), v.begin(), v.end());
     return all;
+}
+
+/// Band voxels with the length of their per-voxel change, for the linear coverage estimate.
+std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region,
+                                            float lo, float hi)
+{
+    return bandSamples(grid, region, lo, hi, region, [](float v, const std::array<double, 3>& d) {
+        return CoverageSample{v, float(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))};
+    });
+}
+
+/// A voxel cut by the plane of its value and per-axis changes, counted `weight` times.
+struct PlaneSample {
+    float value;
+    float change[3];  ///< |per-voxel change| along x, y, z
+    float weight;
+};
+
+/// Share of the unit cube with m . u < alpha (m >= 0 sorted ascending, m0 + m1 + m2 = 1,
+/// 0 <= alpha <= 1/2), the analytic relation of Scardovelli & Zaleski (2000), written so that
+/// no case divides by a component that may vanish without a bounded numerator.
+double cubeShareBelowPlane(const double m[3], double alpha)
+{
+    const double m0 = m[0], m1 = m[1], m2 = m[2], m01 = m0 + m1;
+    if (alpha < m0) return alpha * alpha * alpha / (6.0 * m0 * m1 * m2);
+    const double corner = (3.0 * alpha * alpha - 3.0 * alpha * m0 + m0 * m0) / (6.0 * m1 * m2);
+    if (alpha < m1) return corner;
+    if (alpha < m01 && alpha < m2) return corner - std::pow(alpha - m1, 3) / (6.0 * m0 * m1 * m2);
+    if (alpha < m01)  // m2 <= alpha: the plane has passed three corners
+        return corner - (std::pow(alpha - m1, 3) + std::pow(alpha - m2, 3)) / (6.0 * m0 * m1 * m2);
+    return (2.0 * alpha - m01) / (2.0 * m2);  // m01 <= alpha (and m01 <= m2 since alpha <= 1/2)
+}
+
+/// The share of a voxel below @a level, the voxel's field taken as the plane through its value
+/// with its per-axis changes (exact for planes at any orientation).
+double planeCoverage(const PlaneSample& s, double level)
+{
+    double m[3] = {s.change[0], s.change[1], s.change[2]};
+    const double sum = m[0] + m[1] + m[2];
+    if (!(sum > 0.0)) return s.value < level ? 1.0 : 0.0;
+    const double alpha = (level - double(s.value)) / sum + 0.5;
+    if (alpha <= 0.0) return 0.0;
+    if (alpha >= 1.0) return 1.0;
+    for (double& v : m) v /= sum;
+    std::sort(m, m + 3);
+    return alpha <= 0.5 ? cubeShareBelowPlane(m, alpha) : 1.0 - cubeShareBelowPlane(m, 1.0 - alpha);
+}
+
+/// Weighted voxels below @a level by planeCoverage().
+double planeCovered(const std::vector<PlaneSample>& samples, double level)
+{
+    double covered = 0.0;
+    for (const PlaneSample& s : samples) covered += s.weight * planeCoverage(s, level);
+    return covered;
+}
+
+/// The level in [a, b] at which planeCovered() reaches @a wanted, by 60 bisection steps; samples
+/// whose coverage no longer changes over what is left of the bracket are set aside as it narrows.
+double bisectPlaneCoverage(std::vector<PlaneSample> active, double wanted, double a, double b)
+{
+    double settled = 0.0;
+    for (int iteration = 0; iteration < 60; ++iteration) {
+        const double mid = 0.5 * (a + b);
+        (settled + planeCovered(active, mid) < wanted ? a : b) = mid;
+        std::size_t kept = 0;
+        for (const PlaneSample& s : active) {
+            const double atA = planeCoverage(s, a), atB = planeCoverage(s, b);
+            if (atA >= 1.0) settled += s.weight;
+            else if (atB > 0.0) active[kept++] = s;
+        }
+        active.resize(kept);
+    }
+    return 0.5 * (a + b);
 }
 
 /// Voxels below @a level counted with sub-voxel coverage: a voxel whose value is within half a
@@ -378,6 +454,103 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         return sol;
     }
     return sol;  // unreachable: the last round brackets everything
+}
+
+std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, double reach, double voxel)
+{
+    if (!(voxel > 0.0) || std::abs(period[1] - period[0]) > 1e-12 * period[0] ||
+        std::abs(period[2] - period[0]) > 1e-12 * period[0])
+        return {};
+    const double p = period[0];
+    const long perPeriod = std::max(1L, long(std::ceil(p / voxel - 1e-9)));
+    const double step = p / double(perPeriod);
+    struct Segment {
+        double start;  ///< in lattice steps from box.min
+        long voxels;
+        double weight;
+    };
+    std::array<std::vector<Segment>, 3> segments;
+    for (int a = 0; a < 3; ++a) {
+        const double cells = box.extent()[a] / p;
+        const long whole = std::lround(cells);
+        if (whole < 1 || std::abs(cells - double(whole)) > 1e-9 * cells) return {};
+        const long zone = long(std::ceil(reach / step - 1e-9)) + 1;  // a step of safety
+        const long total = whole * perPeriod;
+        const long folds = (total - 2 * zone) / perPeriod;
+        if (folds < 2) return {};
+        segments[a].push_back({0.0, zone, 1.0});
+        segments[a].push_back({double(zone), perPeriod, double(folds)});
+        segments[a].push_back({double(zone + folds * perPeriod), total - zone - folds * perPeriod, 1.0});
+    }
+    std::vector<DensityPiece> pieces;
+    for (const Segment& x : segments[0])
+        for (const Segment& y : segments[1])
+            for (const Segment& z : segments[2]) {
+                DensityPiece piece;
+                piece.domain.voxel = step;
+                piece.domain.box.min = box.min + step * Vec3d(x.start, y.start, z.start);
+                piece.domain.dims = openvdb::Coord(int(x.voxels), int(y.voxels), int(z.voxels));
+                piece.domain.box.max =
+                    piece.domain.box.min + step * Vec3d(double(x.voxels), double(y.voxels), double(z.voxels));
+                piece.weight = x.weight * y.weight * z.weight;
+                pieces.push_back(piece);
+            }
+    return pieces;
+}
+
+DensitySolution solveDensity(const FieldNode& indicator, std::span<const DensityPiece> pieces, double target)
+{
+    DensitySolution sol;
+    std::vector<PlaneSample> samples;
+    double total = 0.0;
+    // The pieces' union: on its faces the coverage takes one-sided differences, as a solve over
+    // the whole box would; elsewhere a margin of one voxel gives the neighbour the box has there.
+    Box3 all = pieces.empty() ? Box3{} : pieces.front().domain.box;
+    for (const DensityPiece& piece : pieces)
+        for (int a = 0; a < 3; ++a) {
+            all.min[a] = std::min(all.min[a], piece.domain.box.min[a]);
+            all.max[a] = std::max(all.max[a], piece.domain.box.max[a]);
+        }
+    for (const DensityPiece& piece : pieces) {
+        openvdb::CoordBBox around = piece.domain.indexBox();
+        const double tolerance = 0.25 * piece.domain.voxel;
+        for (int a = 0; a < 3; ++a) {
+            if (piece.domain.box.min[a] > all.min[a] + tolerance) around.min()[a] -= 1;
+            if (piece.domain.box.max[a] < all.max[a] - tolerance) around.max()[a] += 1;
+        }
+        SparseOptions options;
+        options.margin = 1;
+        options.band = Interval(-1e30, 1e30);
+        options.insideValue = -std::numeric_limits<float>::max();
+        options.outsideValue = std::numeric_limits<float>::max();
+        options.stage = "solving density";
+        const auto grid = evaluateSparse(indicator, piece.domain, options);
+        sol.evaluatedLeaves += grid->tree().leafCount();
+        const float w = float(piece.weight);
+        const std::vector<PlaneSample> some =
+            bandSamples(*grid, piece.domain.indexBox(), -std::numeric_limits<float>::max(),
+                        std::numeric_limits<float>::max(), around, [w](float v, const std::array<double, 3>& d) {
+                            return PlaneSample{v, {float(std::abs(d[0])), float(std::abs(d[1])), float(std::abs(d[2]))}, w};
+                        });
+        samples.insert(samples.end(), some.begin(), some.end());
+        total += piece.weight * double(piece.domain.voxelCount());
+    }
+    if (samples.empty()) throw std::invalid_argument("no voxel to measure a density on");
+    double a = std::numeric_limits<double>::infinity(), b = -a;
+    for (const PlaneSample& c : samples) {
+        const double reach = double(c.change[0]) + c.change[1] + c.change[2];
+        a = std::min(a, double(c.value) - reach);
+        b = std::max(b, double(c.value) + reach);
+    }
+    const double wanted = target * total;
+    sol.level = bisectPlaneCoverage(samples, wanted, a, b);
+    const double covered = planeCovered(samples, sol.level);
+    sol.domainVoxels = std::uint64_t(std::llround(total));
+    sol.insideVoxels = std::uint64_t(std::llround(covered));
+    sol.achieved = covered / total;
+    sol.coverage = true;
+    sol.rounds = 1;
+    return sol;
 }
 
 }  // namespace voxlat

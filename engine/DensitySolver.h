@@ -5,6 +5,9 @@
 #include "engine/Domain.h"
 
 #include <cstdint>
+#include <optional>
+#include <span>
+#include <vector>
 
 namespace voxlat {
 
@@ -32,5 +35,25 @@ struct DensitySolution {
 /// the solid. Regions whose mask bound is wholly positive are never evaluated.
 DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target,
                              const FieldNode* mask = nullptr, bool subVoxel = false);
+
+/// A part of a measuring region, sampled on its own domain and counted @a weight times.
+struct DensityPiece {
+    Domain domain;
+    double weight = 1.0;
+};
+
+/// Pieces that measure @a box for a field that repeats with @a period at least @a reach inside
+/// the box (PeriodicTiling's condition), so only one period of the deep interior is sampled.
+/// Per axis: the zone below lo + reach, one period counted k times (k whole periods fit
+/// between the zones), and the rest; the 3D pieces are their products. All pieces share one
+/// lattice of spacing period / n, n = ceil(period / voxel), from the box's corner, so they tile
+/// the box exactly. Empty when that does not apply (the box is not a whole number of periods,
+/// fewer than two periods fold, or the period differs between axes).
+std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, double reach, double voxel);
+
+/// solveDensity() with sub-voxel coverage over weighted @a pieces: the level at which the
+/// weighted coverage of {g < level} is @a target of the pieces' weighted voxels. Every voxel of
+/// every piece is evaluated (pieces are meant to be small).
+DensitySolution solveDensity(const FieldNode& indicator, std::span<const DensityPiece> pieces, double target);
 
 }  // namespace voxlat

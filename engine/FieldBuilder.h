@@ -34,6 +34,14 @@ struct LevelNode {
     /// Measure the density on its own voxel lattice over densityBox (a spacing incommensurate
     /// with a lattice's cells, so periodic features do not alias with the voxels).
     std::optional<double> densityVoxel{};
+    /// The solid repeats with this period deeper than densityReach inside densityBox (a box frame
+    /// of identical cells): the density is measured on one period of the interior, weighted
+    /// (periodicPieces()), instead of the whole box.
+    std::optional<Vec3d> densityPeriod{};
+    double densityReach = 0.0;
+    /// The field the density solve measures when it is not the solid's indicator (the same
+    /// values; e.g. without a tiling whose tables would not pay off on the measuring pieces).
+    FieldPtr densityIndicator{};
 };
 
 /// A lattice whose level follows a target-density field (GradedLevel); the job reports its

@@ -145,7 +145,14 @@ void Job::solveLevels()
     for (const LevelNode& node : mBuilder.levelNodes()) {
         nlohmann::json entry{{"type", node.description}};
         if (node.density) {
+            const std::vector<DensityPiece> pieces =
+                node.densityPeriod && node.densityBox && node.densityVoxel
+                    ? periodicPieces(*node.densityBox, *node.densityPeriod, node.densityReach, *node.densityVoxel)
+                    : std::vector<DensityPiece>{};
             const DensitySolution s = timed("solve " + node.name, [&] {
+                if (!pieces.empty())
+                    return solveDensity(node.densityIndicator ? *node.densityIndicator : *node.solid->indicator(), pieces,
+                                        *node.density);
                 return solveDensity(*node.solid->indicator(),
                                     node.densityBox && node.densityVoxel ? Domain::fromBox(*node.densityBox, *node.densityVoxel)
                                     : node.densityBox                     ? mDomain.subDomain(*node.densityBox)
@@ -160,6 +167,7 @@ void Job::solveLevels()
             entry["solve_rounds"] = s.rounds;
             entry["density_measure"] = s.coverage ? "sub-voxel coverage" : "voxel count";
             entry["evaluated_leaves"] = s.evaluatedLeaves;
+            if (!pieces.empty()) entry["density_measured_on"] = "one period of the interior (" + std::to_string(pieces.size()) + " weighted pieces)";
         }
         entry["level"] = node.solid->level();
         fields[node.name] = entry;

@@ -36,6 +36,8 @@ Box3 grownBox(const Domain& d, const Coord& lo, int size)
 Side classify(const FieldNode& f, const BoxField* clip, const Domain& d, const Coord& lo, int size,
               const Interval& band)
 {
+    // A band that takes every value needs no bound (they cost more than some evaluations).
+    if (band.lo <= -1e30 && band.hi >= 1e30) return Side::Straddle;
     const Box3 box = grownBox(d, lo, size);
     Interval b = f.bound(box);
     if (clip) b = max(b, clip->bound(box));

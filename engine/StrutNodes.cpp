@@ -5,6 +5,7 @@
 #include "engine/StrutFrames.h"
 #include "fields/GradedLevel.h"
 #include "fields/IsoRadius.h"
+#include "fields/PeriodicTiling.h"
 #include "fields/StrutCapsules.h"
 #include "fields/StrutConvolution.h"
 
@@ -428,6 +429,12 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         rcMax = std::max(rcMax, raw->cutoffRadius(j));
     }
     auto iso = std::make_shared<IsoRadius>(raw, peak, sigmaMax, 2.0 * rcMax);
+    // A box of identical cells with identical struts repeats cell by cell wherever the box's
+    // faces are beyond the cut-off: evaluate one cell of the interior and tile it.
+    const bool sameStruts = (!radii || spec["radius"].isScalar()) && !g["sigma"].isSequence();
+    const bool periodic = uniform && !spec["struts"].has("within") && sameStruts && !graded;
+    FieldPtr evaluated = iso;
+    if (periodic) evaluated = std::make_shared<PeriodicTiling>(iso, box, uniform->size, rcMax);
     const double t = spec.has("level") ? spec["level"].positiveNumber() : 1.0;
     {
         std::ostringstream d;
@@ -459,7 +466,16 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
                       << " the joints take the material: lower sigma or raise the density\n";
         return result;
     }
-    node.solid = std::make_shared<LevelSolid>(iso, SolidSide::Below, iso->radiusOf(t));
+    node.solid = std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
+    if (periodic && node.density) {
+        node.densityPeriod = uniform->size;
+        node.densityReach = rcMax;
+        node.densityIndicator = iso;
+        // One period is sampled at a fixed phase, so its lattice does not average over phases
+        // as the whole box's incommensurate one does: sample it 1.5 times finer (level within
+        // 0.0002 mm of the converged one for BCC at 0.1 mm, against 0.001 mm at the same spacing).
+        node.densityVoxel = *node.densityVoxel / 1.5;
+    }
     const double sigmaShown = sigma.front();
     if (node.density) {
         const bool withRadii = bool(radii);

@@ -1,0 +1,252 @@
+#include "fields/PeriodicTiling.h"
+
+#include <oneapi/tbb/blocked_range.h>
+#include <oneapi/tbb/collaborative_call_once.h>
+#include <oneapi/tbb/parallel_for.h>
+
+#include <array>
+#include <cmath>
+#include <stdexcept>
+#include <unordered_map>
+
+namespace voxlat {
+
+namespace {
+
+/// Grid positions x0 + n h along one axis and the table slot of each: the zone below the box's
+/// inner margin and one period kept as they are, positions deeper inside folded onto that
+/// period, the zone above kept as it is.
+struct AxisMap {
+    double h = 0.0, x0 = 0.0;
+    long n0 = 0, n1 = -1;  ///< covered positions (inclusive)
+    long nA = 0, nB = -1;  ///< positions at least `reach` (plus a voxel) inside both faces
+    long period = 0;       ///< in positions; 0: nothing folds
+    long size() const { return period > 0 ? (nA + period - n0) + (n1 - nB) : n1 - n0 + 1; }
+
+    /// The table slot of position n, or -1 outside the covered range.
+    long slot(long n) const
+    {
+        if (n < n0 || n > n1) return -1;
+        if (period == 0 || n < nA + period) return n - n0;
+        if (n > nB) return (nA + period - n0) + (n - nB - 1);
+        return nA + (n - nA) % period - n0;
+    }
+    /// The position a slot holds (the inverse of slot() on the canonical positions).
+    long position(long t) const
+    {
+        return (period == 0 || t < nA + period - n0) ? n0 + t : nB + 1 + (t - (nA + period - n0));
+    }
+};
+
+/// A leaf of padding beyond the box, so that leaves straddling the box's faces are covered.
+constexpr long kPad = 8;
+
+AxisMap makeAxis(double h, double x0, double lo, double hi, double period, double reach)
+{
+    AxisMap m;
+    m.h = h;
+    m.x0 = x0;
+    m.n0 = long(std::floor((lo - x0) / h)) - kPad;
+    m.n1 = long(std::ceil((hi - x0) / h)) + kPad;
+    const double steps = period / h;
+    const long whole = std::lround(steps);
+    if (whole < 1 || std::abs(steps - double(whole)) > 1e-9 * steps) return m;  // not commensurate
+    // One voxel of safety on each side, so rounding of positions never crosses the margin.
+    m.nA = long(std::ceil((lo + reach - x0) / h)) + 1;
+    m.nB = long(std::floor((hi - reach - x0) / h)) - 1;
+    if (m.nB - m.nA + 1 > whole) m.period = whole;
+    return m;
+}
+
+}  // namespace
+
+struct PeriodicTiling::BoundCache {
+    using Key = std::array<long long, 6>;
+    struct Hash {
+        std::size_t operator()(const Key& k) const
+        {
+            std::size_t h = 1469598103934665603ull;
+            for (long long v : k) h = (h ^ std::size_t(v)) * 1099511628211ull;
+            return h;
+        }
+    };
+    static constexpr std::size_t kShards = 64;
+    static constexpr std::size_t kMaxPerShard = 1 << 16;
+    struct Shard {
+        std::mutex mutex;
+        std::unordered_map<Key, Interval, Hash> map;
+    };
+    std::array<Shard, kShards> shards;
+};
+
+struct PeriodicTiling::Table {
+    std::array<AxisMap, 3> axis;
+    bool useful = false;
+    std::vector<double> values;
+    tbb::collaborative_once_flag once;
+};
+
+PeriodicTiling::PeriodicTiling(FieldPtr child, const Box3& box, const Vec3d& period, double reach)
+    : mChild(std::move(child)), mBox(box), mPeriod(period), mReach(reach), mBounds(std::make_unique<BoundCache>())
+{
+    for (int a = 0; a < 3; ++a)
+        if (!(period[a] > 0.0) || !(box.max[a] >= box.min[a]))
+            throw std::invalid_argument("a periodic tiling needs a positive period and a box");
+}
+
+PeriodicTiling::~PeriodicTiling() = default;
+
+void PeriodicTiling::values(std::span<const Vec3d> points, std::span<double> out) const
+{
+    mChild->values(points, out);
+}
+
+void PeriodicTiling::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
+{
+    mChild->gradients(points, out, grad);
+}
+
+Interval PeriodicTiling::bound(const Box3& box) const
+{
+    constexpr double kQuantum = 1e-6;  // mm
+    BoundCache::Key key;
+    for (int a = 0; a < 3; ++a) {
+        double lo = box.min[a], hi = box.max[a];
+        const double inner = mBox.min[a] + mReach, outer = mBox.max[a] - mReach;
+        if (lo >= inner && hi <= outer && outer - inner >= mPeriod[a]) {
+            const double shift = std::floor((lo - inner) / mPeriod[a]) * mPeriod[a];
+            lo = std::max(inner, lo - shift);
+            hi = std::min(outer, hi - shift);
+        }
+        if (!(std::abs(lo) < 1e12 && std::abs(hi) < 1e12)) return mChild->bound(box);
+        key[a] = (long long)std::floor(lo / kQuantum) - 1;  // one quantum out: the snapped box holds the box
+        key[a + 3] = (long long)std::ceil(hi / kQuantum) + 1;
+    }
+    BoundCache::Shard& shard = mBounds->shards[BoundCache::Hash()(key) % BoundCache::kShards];
+    {
+        std::lock_guard<std::mutex> lock(shard.mutex);
+        const auto it = shard.map.find(key);
+        if (it != shard.map.end()) return it->second;
+    }
+    const Box3 snapped{Vec3d(double(key[0]), double(key[1]), double(key[2])) * kQuantum,
+                       Vec3d(double(key[3]), double(key[4]), double(key[5])) * kQuantum};
+    const Interval b = mChild->bound(snapped);
+    std::lock_guard<std::mutex> lock(shard.mutex);
+    if (shard.map.size() < BoundCache::kMaxPerShard) shard.map.emplace(key, b);
+    return b;
+}
+
+std::size_t PeriodicTiling::tabledValues() const
+{
+    std::lock_guard<std::mutex> lock(mMutex);
+    std::size_t n = 0;
+    for (const auto& t : mTables) n += t->values.size();
+    return n;
+}
+
+const PeriodicTiling::Table* PeriodicTiling::table(const GridBatch& batch) const
+{
+    Table* found = nullptr;
+    {
+        std::lock_guard<std::mutex> lock(mMutex);
+        for (const auto& t : mTables) {
+            bool same = true;
+            for (int a = 0; a < 3 && same; ++a) {
+                const double h = t->axis[a].h;
+                const double f = (batch.origin[a] - t->axis[a].x0) / h;
+                same = std::abs(batch.spacing[a] - h) <= 1e-12 * h && std::abs(f - std::round(f)) <= 1e-6;
+            }
+            if (same) {
+                found = t.get();
+                break;
+            }
+        }
+        if (!found) {
+            auto t = std::make_unique<Table>();
+            double total = 1.0, folded = 1.0;
+            for (int a = 0; a < 3; ++a) {
+                const double h = batch.spacing[a];
+                // The grid's phase, reduced next to the box and rounded to 2^-20 of a voxel: every
+                // batch of the grid gives the same x0, whichever thread comes first.
+                const double lo = mBox.min[a];
+                double q = (batch.origin[a] - lo) / h;
+                q -= std::floor(q);
+                q = std::round(q * 1048576.0) / 1048576.0;
+                t->axis[a] = makeAxis(h, lo + q * h, lo, mBox.max[a], mPeriod[a], mReach);
+                total *= double(t->axis[a].n1 - t->axis[a].n0 + 1);
+                folded *= double(t->axis[a].size());
+            }
+            // Worth a table only when folding saves most of the work.
+            t->useful = folded < 0.25 * total;
+            found = t.get();
+            mTables.push_back(std::move(t));
+        }
+    }
+    if (!found->useful) return nullptr;
+    tbb::collaborative_call_once(found->once, [&] {
+        Table& t = *found;
+        const long sx = t.axis[0].size(), sy = t.axis[1].size(), sz = t.axis[2].size();
+        t.values.assign(std::size_t(sx * sy * sz), 0.0);
+        // Blocks of up to 8 slots per axis whose positions are consecutive.
+        std::array<std::vector<std::pair<long, int>>, 3> runs;
+        for (int a = 0; a < 3; ++a) {
+            const AxisMap& m = t.axis[a];
+            for (long s = 0; s < m.size();) {
+                int len = 1;
+                while (len < 8 && s + len < m.size() && m.position(s + len) == m.position(s) + len) ++len;
+                runs[a].push_back({s, len});
+                s += len;
+            }
+        }
+        const std::size_t ny = runs[1].size(), nz = runs[2].size();
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, runs[0].size() * ny * nz), [&](const auto& range) {
+            std::vector<double> block(512);
+            for (std::size_t b = range.begin(); b != range.end(); ++b) {
+                const auto [s0, l0] = runs[0][b / (ny * nz)];
+                const auto [s1, l1] = runs[1][(b / nz) % ny];
+                const auto [s2, l2] = runs[2][b % nz];
+                GridBatch g;
+                g.spacing = Vec3d(t.axis[0].h, t.axis[1].h, t.axis[2].h);
+                g.origin = Vec3d(t.axis[0].x0 + double(t.axis[0].position(s0)) * t.axis[0].h,
+                                 t.axis[1].x0 + double(t.axis[1].position(s1)) * t.axis[1].h,
+                                 t.axis[2].x0 + double(t.axis[2].position(s2)) * t.axis[2].h);
+                g.nx = l0;
+                g.ny = l1;
+                g.nz = l2;
+                mChild->gridValues(g, block);
+                std::size_t n = 0;
+                for (int i = 0; i < l0; ++i)
+                    for (int j = 0; j < l1; ++j)
+                        for (int k = 0; k < l2; ++k)
+                            t.values[std::size_t(((s0 + i) * sy + s1 + j) * sz + s2 + k)] = block[n++];
+            }
+        });
+    });
+    return found;
+}
+
+void PeriodicTiling::gridValues(const GridBatch& batch, std::span<double> out) const
+{
+    const Table* t = table(batch);
+    if (!t) return mChild->gridValues(batch, out);
+    const int counts[3] = {batch.nx, batch.ny, batch.nz};
+    std::array<std::array<long, 64>, 3> slots;
+    for (int a = 0; a < 3; ++a) {
+        if (counts[a] > 64) return mChild->gridValues(batch, out);
+        const AxisMap& m = t->axis[a];
+        const long first = std::lround((batch.origin[a] - m.x0) / m.h);
+        for (int i = 0; i < counts[a]; ++i) {
+            slots[a][i] = m.slot(first + i);
+            if (slots[a][i] < 0) return mChild->gridValues(batch, out);
+        }
+    }
+    const long sy = t->axis[1].size(), sz = t->axis[2].size();
+    std::size_t n = 0;
+    for (int i = 0; i < batch.nx; ++i)
+        for (int j = 0; j < batch.ny; ++j) {
+            const double* row = t->values.data() + (slots[0][i] * sy + slots[1][j]) * sz;
+            for (int k = 0; k < batch.nz; ++k) out[n++] = row[slots[2][k]];
+        }
+}
+
+}  // namespace voxlat

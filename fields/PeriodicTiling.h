@@ -1,0 +1,61 @@
+/// @file PeriodicTiling.h
+/// @brief A field that repeats with a period inside a box, sampled once per period on a grid.
+#pragma once
+
+#include "fields/FieldNode.h"
+
+#include <memory>
+#include <mutex>
+#include <vector>
+
+namespace voxlat {
+
+/// value(p) = child(p), with gridValues() taken from a table of one period when the batch's
+/// spacing divides the period. The child must satisfy
+///   child(p) = child(p + m * period)   (m a vector of integers)
+/// whenever, along every axis where m is non-zero, both points lie at least @a reach inside
+/// @a box. A box frame of identical cells with identical struts does: every strut within the
+/// kernel's cut-off radius (@a reach) of such a point belongs to the infinite periodic lattice,
+/// so the box's faces are out of sight.
+///
+/// Per axis, grid positions closer than @a reach to a face (the faces' zones, up to a leaf
+/// beyond the box) are tabled as they are, and the positions between the zones map onto one
+/// period, so a W x W x W domain needs (2 zones + 1 period)^3 evaluations of the child instead
+/// of W^3. The table is built the first time a grid (spacing and phase) is seen, by all threads
+/// that need it, from sample positions that depend only on the grid: results are identical for
+/// any thread count. Batches the table does not cover, or grids whose spacing does not divide the
+/// period, are evaluated by the child. values() and gradients() are the child's; bound() is the
+/// child's bound of the box moved into the first period (boxes deep inside repeat, so a sparse
+/// evaluation bounds each distinct leaf once), snapped outwards to 1e-6 mm so the bound depends
+/// only on the box and not on which thread asked first.
+class PeriodicTiling final : public FieldNode {
+public:
+    PeriodicTiling(FieldPtr child, const Box3& box, const Vec3d& period, double reach);
+    ~PeriodicTiling() override;
+
+    void values(std::span<const Vec3d> points, std::span<double> out) const override;
+    void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
+    void gridValues(const GridBatch& batch, std::span<double> out) const override;
+    Interval bound(const Box3& box) const override;
+    std::optional<Box3> support() const override { return mChild->support(); }
+
+    /// Values held in tables so far (grids whose spacing divides the period; for tests).
+    std::size_t tabledValues() const;
+
+private:
+    struct Table;
+    /// The table for the batch's grid, building it on first use; null when none applies.
+    const Table* table(const GridBatch& batch) const;
+
+    struct BoundCache;
+
+    FieldPtr mChild;
+    Box3 mBox;
+    Vec3d mPeriod;
+    double mReach;
+    mutable std::mutex mMutex;
+    mutable std::vector<std::unique_ptr<Table>> mTables;
+    std::unique_ptr<BoundCache> mBounds;
+};
+
+}  // namespace voxlat

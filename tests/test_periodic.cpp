@@ -1,0 +1,167 @@
+// Periodic lattices: a box of identical cells tabled one period deep (PeriodicTiling) and its
+// density measured on one period of the interior (periodicPieces), each against the direct way.
+#include "TestUtil.h"
+#include "engine/DensitySolver.h"
+#include "engine/Job.h"
+#include "engine/SparseEvaluator.h"
+#include "engine/StrutFrames.h"
+#include "engine/UnitCells.h"
+#include "fields/IsoRadius.h"
+#include "fields/PeriodicTiling.h"
+#include "fields/StrutConvolution.h"
+#include "mesher/MeshCheck.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <cstring>
+#include <random>
+
+using namespace voxlat;
+using namespace voxlat::test;
+
+namespace {
+
+/// A box of cells x cells x cells BCC cells of @a size mm as convolution struts, in mm form.
+struct BccBox {
+    Box3 box;
+    double reach = 0.0;
+    std::shared_ptr<IsoRadius> iso;
+};
+
+BccBox bccBox(int cells, double size, double sigma)
+{
+    const Frame f = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(size), {cells, cells, cells});
+    std::vector<ConvolutionStrut> struts;
+    for (const auto& e : f.struts) struts.push_back({f.nodes[e[0]], f.nodes[e[1]], sigma, 1.0, 1.0});
+    auto raw = std::make_shared<StrutConvolution>(struts);
+    BccBox b;
+    b.box = f.bounds();
+    b.reach = raw->cutoffRadius(0);
+    b.iso = std::make_shared<IsoRadius>(raw, raw->peak(0), sigma, 2.0 * b.reach);
+    return b;
+}
+
+/// Largest difference between two fields' gridValues over every leaf of @a d.
+double largestLeafDifference(const FieldNode& a, const FieldNode& b, const Domain& d)
+{
+    std::vector<double> va(512), vb(512);
+    double worst = 0.0;
+    for (int x = -8; x < d.dims.x() + 8; x += 8)
+        for (int y = -8; y < d.dims.y() + 8; y += 8)
+            for (int z = -8; z < d.dims.z() + 8; z += 8) {
+                GridBatch batch;
+                batch.origin = d.worldOf(openvdb::Coord(x, y, z));
+                batch.spacing = Vec3d(d.voxel);
+                a.gridValues(batch, va);
+                b.gridValues(batch, vb);
+                for (int i = 0; i < 512; ++i) worst = std::max(worst, std::abs(va[i] - vb[i]));
+            }
+    return worst;
+}
+
+}  // namespace
+
+TEST(PeriodicTiling, GridValuesMatchTheFieldEverywhere)
+{
+    // 6^3 cells of 2 mm, sigma 0.25 (cut-off 1.07 mm): zones, folded interior and the outside.
+    const BccBox b = bccBox(6, 2.0, 0.25);
+    const PeriodicTiling tiled(b.iso, b.box, Vec3d(2.0), b.reach);
+    const Domain d = Domain::fromBox(Box3{Vec3d(-1.0), Vec3d(13.0)}, 0.1);
+    EXPECT_LT(largestLeafDifference(tiled, *b.iso, d), 1e-9);
+    // The values did come from a table, and one much smaller than the domain.
+    EXPECT_GT(tiled.tabledValues(), 0u);
+    EXPECT_LT(tiled.tabledValues(), d.voxelCount() / 4);
+}
+
+TEST(PeriodicTiling, SpacingThatDoesNotDivideThePeriodEvaluatesTheField)
+{
+    const BccBox b = bccBox(6, 2.0, 0.25);
+    const PeriodicTiling tiled(b.iso, b.box, Vec3d(2.0), b.reach);
+    const Domain d = Domain::fromBox(Box3{Vec3d(0.0), Vec3d(12.0)}, 0.13);
+    EXPECT_EQ(largestLeafDifference(tiled, *b.iso, d), 0.0);
+    EXPECT_EQ(tiled.tabledValues(), 0u);
+}
+
+TEST(PeriodicTiling, BoundContainsSampledValues)
+{
+    const BccBox b = bccBox(6, 2.0, 0.25);
+    const PeriodicTiling tiled(b.iso, b.box, Vec3d(2.0), b.reach);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> corner(-1.0, 12.0), size(0.05, 2.0), u(0.0, 1.0);
+    for (int n = 0; n < 300; ++n) {
+        Box3 box;
+        box.min = Vec3d(corner(rng), corner(rng), corner(rng));
+        box.max = box.min + Vec3d(size(rng), size(rng), size(rng));
+        // Twice: the second answer comes from the cache.
+        for (int again = 0; again < 2; ++again) {
+            const Interval bound = tiled.bound(box);
+            for (int s = 0; s < 40; ++s) {
+                const Vec3d p = box.min + Vec3d(u(rng), u(rng), u(rng)) * box.extent();
+                const double v = b.iso->value(p);
+                ASSERT_LE(bound.lo, v) << "box at " << box.min;
+                ASSERT_GE(bound.hi, v) << "box at " << box.min;
+            }
+        }
+    }
+}
+
+TEST(PeriodicTiling, SameGridForAnyThreadCount)
+{
+    const BccBox b = bccBox(6, 2.0, 0.25);
+    const Domain d = Domain::fromBox(b.box, 0.05);
+    auto run = [&](int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        // A fresh tiling each time: the table is built by however many threads there are.
+        const auto solid = std::make_shared<LevelSolid>(
+            std::make_shared<PeriodicTiling>(b.iso, b.box, Vec3d(2.0), b.reach), SolidSide::Below, 0.2);
+        SparseOptions options;
+        options.band = Interval(-0.1, 0.1);
+        return evaluateSparse(*solid, d, options);
+    };
+    const auto one = run(1), three = run(3);
+    std::vector<const openvdb::FloatTree::LeafNodeType*> a, c;
+    one->tree().getNodes(a);
+    three->tree().getNodes(c);
+    ASSERT_EQ(a.size(), c.size());
+    ASSERT_GT(a.size(), 0u);
+    for (std::size_t n = 0; n < a.size(); ++n) {
+        ASSERT_EQ(a[n]->origin(), c[n]->origin());
+        ASSERT_EQ(std::memcmp(a[n]->buffer().data(), c[n]->buffer().data(), 512 * sizeof(float)), 0);
+    }
+}
+
+TEST(DensityPieces, TileTheBoxAndMatchTheWholeBoxOnTheSameLattice)
+{
+    const BccBox b = bccBox(4, 4.0, 0.5);
+    const std::vector<DensityPiece> pieces = periodicPieces(b.box, Vec3d(4.0), b.reach, 0.2);
+    ASSERT_EQ(pieces.size(), 27u);
+    double voxels = 0.0;
+    for (const DensityPiece& p : pieces) voxels += p.weight * double(p.domain.voxelCount());
+    const DensityPiece whole{Domain::fromBox(b.box, pieces.front().domain.voxel), 1.0};
+    EXPECT_EQ(voxels, double(whole.domain.voxelCount()));
+    // The same lattice over the whole box: the pieces are translates of its parts, so the same
+    // measure gives the same level.
+    const DensitySolution fromPieces = solveDensity(*b.iso, pieces, 0.25);
+    const DensitySolution fromBox = solveDensity(*b.iso, std::span(&whole, 1), 0.25);
+    EXPECT_NEAR(fromPieces.level, fromBox.level, 1e-5);
+    EXPECT_NEAR(fromPieces.achieved, 0.25, 1e-6);
+    // Too few cells to fold twice: no pieces, the caller measures the whole box.
+    EXPECT_TRUE(periodicPieces(Box3{Vec3d(0.0), Vec3d(12.0)}, Vec3d(4.0), b.reach, 0.1).empty());
+}
+
+TEST(DensityPieces, BoxOfCellsHitsTheTargetOnTheMesh)
+{
+    // 3^3 BCC cells of 5 mm (sigma 0.5, 20 %, the acceptance recipe's cells): folded twice per
+    // axis. The mesh's own volume is the independent measure.
+    const std::string text =
+        "voxel: 0.1\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\n"
+        "fields:\n  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, density: 0.20}\n"
+        "result: lattice\n";
+    Job job(parseRecipe(text, "bcc.yaml", "."));
+    job.solveLevels();
+    ASSERT_TRUE(job.report()["fields"]["lattice"].contains("density_measured_on"));
+    const TriangleMesh& mesh = job.mesh();
+    EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.005 * 0.20);
+    EXPECT_TRUE(checkTopology(mesh).closedManifold());
+}
