@@ -1,6 +1,7 @@
 // Recipe node types for user equations (`expr`) and direction fields (`vector`).
 #include "engine/ExprNodes.h"
 
+#include "fields/Constant.h"
 #include "fields/ExprField.h"
 #include "fields/LevelSolid.h"
 
@@ -87,6 +88,18 @@ FieldPtr buildVector(FieldBuilder& builder, const RecipeNode& spec, const std::s
     return std::make_shared<VectorField>(components);
 }
 
+/// A direction field that is @a v everywhere.
+std::shared_ptr<const VectorField> constantDirection(const Vec3d& v)
+{
+    return std::make_shared<VectorField>(std::array<FieldPtr, 3>{
+        std::make_shared<ConstantField>(v[0]), std::make_shared<ConstantField>(v[1]), std::make_shared<ConstantField>(v[2])});
+}
+
+FieldPtr buildOrient(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
+{
+    return orientedField(builder, spec["orient"], builder.operand(spec["field"], name + "/field"), name);
+}
+
 }  // namespace
 
 FieldPtr equationField(FieldBuilder& builder, const RecipeNode& textNode)
@@ -124,28 +137,49 @@ FieldPtr equationField(FieldBuilder& builder, const RecipeNode& textNode)
 std::shared_ptr<const VectorField> directionField(FieldBuilder& builder, const RecipeNode& spec,
                                                   const std::string& name)
 {
-    if (spec.isSequence()) {
-        const Vec3d v = spec.vec3();
-        std::array<FieldPtr, 3> c;
-        for (int a = 0; a < 3; ++a) {
-            const double value = v[a];
-            auto constant = [value](const std::string&, bool) {
-                return ExprSymbol{ExprSymbol::Kind::Constant, value, -1};
-            };
-            c[a] = std::make_shared<ExprField>(std::make_shared<const ExprProgram>(ExprProgram::compile("c", constant)),
-                                               std::vector<FieldPtr>{});
+    if (spec.isSequence()) return constantDirection(spec.vec3());
+    if (spec.isScalar()) {
+        // An unknown name is reported here, at its use, rather than at the recipe's `fields:`.
+        const std::vector<std::string>& names = builder.recipe().fieldNames;
+        if (std::find(names.begin(), names.end(), spec.string()) == names.end()) {
+            const std::string guess = closestMatch(spec.string(), names);
+            spec.fail("no field named `" + spec.string() + "`" + (guess.empty() ? "" : "; did you mean `" + guess + "`?") +
+                      " (fields: " + joinWords(names) + ")");
         }
-        return std::make_shared<VectorField>(c);
     }
     auto f = std::dynamic_pointer_cast<const VectorField>(builder.operand(spec, name));
     if (!f) spec.fail("expected a direction: the name of a `vector:` field, {vector: [...]} or [x, y, z]");
     return f;
 }
 
+FieldPtr orientedField(FieldBuilder& builder, const RecipeNode& spec, FieldPtr child, const std::string& name)
+{
+    if (spec.isMap()) spec.checkKeys({"along", "x", "origin"});
+    if (!spec.isMap() || !(spec.has("along") || spec.has("x")))
+        spec.fail("expected an orientation {along: DIRECTION, x: DIRECTION, origin: [x, y, z]} with `along` (the "
+                  "cells' z axis) or `x` (their x axis) or both; a direction is the name of a `vector` field, "
+                  "{vector: [...]} or [x, y, z]");
+    // Constant directions are checked here, where the recipe line is known; fields at run time.
+    for (const char* key : {"along", "x"})
+        if (spec.has(key) && spec[key].isSequence() && spec[key].size() == 3 && spec[key].vec3().length() <= 0.0)
+            spec[key].fail(std::string("the `") + key + "` direction must not be the zero vector");
+    if (spec.has("along") && spec.has("x") && spec["along"].isSequence() && spec["x"].isSequence()) {
+        const Vec3d z = spec["along"].vec3(), x = spec["x"].vec3();
+        if (z.cross(x).length() <= 1e-6 * z.length() * x.length())
+            spec["x"].fail("`x` is parallel to `along`: the x axis needs a reference that is not along z");
+    }
+    auto z = spec.has("along") ? directionField(builder, spec["along"], name + "/along") : constantDirection({0, 0, 1});
+    auto x = spec.has("x") ? directionField(builder, spec["x"], name + "/x") : nullptr;
+    auto frame = std::make_shared<const FrameField>(std::move(z), std::move(x), "field `" + name + "`");
+    const Vec3d origin = spec.has("origin") ? spec["origin"].vec3() : Vec3d(0.0);
+    return std::make_shared<OrientField>(std::move(child), std::move(frame), origin);
+}
+
 void addExprNodeTypes(std::vector<NodeType>& types)
 {
     types.push_back({"expr", {"expr", "solid", "level", "density"}, buildExpr});
     types.push_back({"vector", {"vector"}, buildVector});
+    types.push_back({"orient", {"orient", "field"}, buildOrient});
 }
 
 }  // namespace voxlat

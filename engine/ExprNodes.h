@@ -3,6 +3,7 @@
 #pragma once
 
 #include "engine/FieldBuilder.h"
+#include "fields/OrientField.h"
 #include "fields/VectorField.h"
 
 namespace voxlat {
@@ -15,5 +16,10 @@ FieldPtr equationField(FieldBuilder& builder, const RecipeNode& text);
 /// inline `{vector: [...]}`, or a constant `[x, y, z]`.
 std::shared_ptr<const VectorField> directionField(FieldBuilder& builder, const RecipeNode& spec,
                                                   const std::string& name);
+
+/// Orients @a child by the frame in @a orientation, a map `{along: DIRECTION, x: DIRECTION,
+/// origin: [x, y, z]}` (the `orient` node's value and the `axes:` key of `tpms`): the child's z
+/// axis follows `along`, its x axis the reference `x` (Gram-Schmidt), rotating about `origin`.
+FieldPtr orientedField(FieldBuilder& builder, const RecipeNode& orientation, FieldPtr child, const std::string& name);
 
 }  // namespace voxlat

@@ -1,4 +1,5 @@
 // Recipe node types for lattices: `tpms`.
+#include "engine/ExprNodes.h"
 #include "engine/FieldBuilder.h"
 #include "engine/ScalarMaps.h"
 #include "fields/GradedLevel.h"
@@ -116,14 +117,21 @@ FieldPtr buildGradientShift(FieldBuilder& builder, const RecipeNode& spec, const
 }
 
 /// `density:` given as a map or a field name: a GradedLevel over one unit cell of the TPMS.
+/// @a tableSource, when given, is the unit cell the density table is measured on (the plain
+/// TPMS of an oriented one, whose cells are rotated copies of it).
 FieldPtr buildGraded(FieldBuilder& builder, const RecipeNode& spec, const std::string& name, const FieldPtr& raw,
-                     SolidSide side, const Vec3d& cell, const std::string& description)
+                     SolidSide side, const Vec3d& cell, const std::string& description,
+                     const FieldPtr& tableSource = nullptr)
 {
     if (spec.has("level")) spec["level"].fail("give either `level:` or `density:`, not both (density solves the level)");
     const RecipeNode d = spec["density"];
     ScalarMap rho = readScalarMap(builder, d, name + "/density");
     const FieldPtr indicator = LevelSolid(raw, side, 0.0).indicator();
-    auto graded = std::make_shared<GradedLevel>(indicator, rho.field, Box3{Vec3d(0.0), cell});
+    auto graded = tableSource ? std::make_shared<GradedLevel>(
+                                    indicator, rho.field,
+                                    std::make_shared<const DensityTable>(
+                                        *LevelSolid(tableSource, side, 0.0).indicator(), Box3{Vec3d(0.0), cell}))
+                              : std::make_shared<GradedLevel>(indicator, rho.field, Box3{Vec3d(0.0), cell});
     const DensityTable& table = graded->table();
     checkScalarRange(builder, rho, d, 0.0, 1.0, true, "density",
                      "; a relative density is between 0 and 1 (exclusive): for 30 % write 0.30");
@@ -152,7 +160,9 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
     const std::string solidName = side == SolidSide::Band ? "sheet" : "network";
 
     FieldPtr raw = std::make_shared<TpmsField>(type, cell);
+    const FieldPtr plain = raw;
     if (spec.has("frame")) raw = applyFrame(spec["frame"], raw, cell);
+    if (spec.has("axes")) raw = orientedField(builder, spec["axes"], raw, name);
     if (hasShiftKeys(spec)) {
         const std::string key = spec.has("thickness") ? "thickness"
                                 : spec.has("wall")    ? "wall"
@@ -174,7 +184,8 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
         return result;
     }
     if (spec.has("density") && !spec["density"].isNumber())
-        return buildGraded(builder, spec, name, raw, side, cell, std::string(tpmsName(type)) + " " + solidName);
+        return buildGraded(builder, spec, name, raw, side, cell, std::string(tpmsName(type)) + " " + solidName,
+                           spec.has("axes") && !spec.has("frame") ? plain : nullptr);
     LevelNode node{name, std::string(tpmsName(type)) + " " + solidName, std::make_shared<LevelSolid>(raw, side, 0.0), {}};
     // An infill's `density:` solves this lattice's level: then it needs none of its own.
     const bool solvedByInfill = levelSolvedByInfill(builder.recipe(), name);
@@ -197,7 +208,7 @@ void addLatticeNodeTypes(std::vector<NodeType>& types)
 {
     types.push_back({"tpms",
                      {"tpms", "cell", "solid", "level", "density", "frame", "thickness", "wall", "layer", "build",
-                      "rotation"},
+                      "rotation", "axes"},
                      buildTpms});
     addScalarMapNodeTypes(types);
     types.push_back({"gradient-shift", {"gradient-shift", "thickness", "wall", "layer", "build", "rotation"},

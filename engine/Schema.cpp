@@ -112,6 +112,13 @@ const std::map<std::string, json>& keySchemas()
                                         {"minItems", 3},
                                         {"maxItems", 3}},
                                        "three components: numbers or equations");
+        const json direction = described(json::object(), "a direction: a vector field's name, {vector: [...]} or [x, y, z]");
+        const json orientation =
+            object({{"along", described(direction, "the cells' z axis, default [0, 0, 1]")},
+                    {"x", described(direction, "reference for the cells' x axis (made orthogonal to z)")},
+                    {"origin", vec3("the point the cells are rotated about (mm), default the origin")}});
+        t["orient.orient"] = described(orientation, "a frame field: the field's axes follow it point by point");
+        t["tpms.axes"] = described(orientation, "the cells' axes follow a frame field (as the orient node)");
         return t;
     }();
     return table;

@@ -69,6 +69,27 @@ class VoxlatModule(unittest.TestCase):
         np.testing.assert_array_equal(job.field("dir").directions(pts), [[-2, 1, 1], [1, 4, 1]])
         np.testing.assert_array_equal(job.field("f").values(pts), [-1, 5])
 
+    def test_orient_follows_a_frame_field(self):
+        # Constant directions: the rigid rotation (z axis to y, x axis to z is a turn of -120
+        # degrees about [1, 1, 1]); a swirl: the field at q = o + R^T (p - o) by hand.
+        g = voxlat.gyroid(cell=6).network(0.1)
+        pts = np.random.default_rng(3).uniform(-8, 8, (50, 3))
+        turned = g.orient(along=[0, 1, 0], x=[0, 0, 1]).values(pts)
+        np.testing.assert_allclose(turned, g.rotate([1, 1, 1], -120).values(pts), atol=1e-12)
+        swirled = g.orient(along=voxlat.vector("-y", "x", 5), origin=[1, 2, 3]).values(pts)
+        o = np.array([1.0, 2.0, 3.0])
+        expected = []
+        for p in pts:
+            ez = np.array([-p[1], p[0], 5.0])
+            ez /= np.linalg.norm(ez)
+            ex = np.array([1.0, 0, 0]) - ez[0] * ez
+            ex /= np.linalg.norm(ex)
+            r = np.column_stack([ex, np.cross(ez, ex), ez])
+            expected.append(g.values(np.array([o + r.T @ (p - o)]))[0])
+        np.testing.assert_allclose(swirled, expected, atol=1e-12)
+        with self.assertRaises(ValueError):
+            g.orient(origin=[0, 0, 0])
+
     def test_recipe_round_trip_and_cli_bytes(self):
         part = voxlat.gyroid(cell=6).sheet(density=0.2) & voxlat.sphere(radius=9, center=[10, 10, 10])
         recipe = voxlat.Recipe(part, domain=[[0, 0, 0], [20, 20, 20]], voxel=0.25, outputs={"mesh": "part.stl"})

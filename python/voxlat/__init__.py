@@ -99,6 +99,14 @@ class Node:
     def scale(self, factor):
         return Node({"scale": _spec(factor), "field": self.spec})
 
+    def orient(self, along=None, x=None, origin=None):
+        """This field with its axes following a frame field: z along `along`, x towards `x`
+        (directions: a vector node, a field name or [x, y, z]), turned about `origin`."""
+        if along is None and x is None:
+            raise ValueError("give along= (the z axis), x= (the x axis) or both")
+        frame = {k: _spec(v) for k, v in (("along", along), ("x", x), ("origin", origin)) if v is not None}
+        return Node({"orient": frame, "field": self.spec})
+
     def recipe(self, **kwargs):
         """A recipe whose result is this node (keyword arguments as for Recipe)."""
         return Recipe(self, **kwargs)
