@@ -1,6 +1,7 @@
 // Recipe node types for lattices: `tpms`.
 #include "engine/FieldBuilder.h"
 #include "engine/ScalarMaps.h"
+#include "engine/SkinNodes.h"
 #include "fields/GradedLevel.h"
 #include "fields/GradientShift.h"
 #include "fields/TpmsField.h"
@@ -152,7 +153,14 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
     const std::string solidName = side == SolidSide::Band ? "sheet" : "network";
 
     FieldPtr raw = std::make_shared<TpmsField>(type, cell);
-    if (spec.has("frame")) raw = applyFrame(spec["frame"], raw, cell);
+    if (spec.has("frame"))
+        raw = spec["frame"].has("skin") ? applySkinFrame(builder, spec["frame"], raw, cell, name)
+                                        : applyFrame(spec["frame"], raw, cell);
+    // A skin frame's lattice exists only in its cells: its density is measured there.
+    const FieldPtr region = skinRegionOf(raw);
+    if (region && spec.has("density") && !spec["density"].isNumber())
+        spec["density"].fail("a graded density needs box cells (its table comes from one box cell); on a skin frame "
+                             "give one number");
     if (hasShiftKeys(spec)) {
         const std::string key = spec.has("thickness") ? "thickness"
                                 : spec.has("wall")    ? "wall"
@@ -176,6 +184,10 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
     if (spec.has("density") && !spec["density"].isNumber())
         return buildGraded(builder, spec, name, raw, side, cell, std::string(tpmsName(type)) + " " + solidName);
     LevelNode node{name, std::string(tpmsName(type)) + " " + solidName, std::make_shared<LevelSolid>(raw, side, 0.0), {}};
+    if (region) {
+        node.region = node.densityMask = region;
+        node.densityOf = "the cells of the skin frame";
+    }
     // An infill's `density:` solves this lattice's level: then it needs none of its own.
     const bool solvedByInfill = levelSolvedByInfill(builder.recipe(), name);
     readLevelKeys(spec, node, 0.0, side == SolidSide::Band && !solvedByInfill);
