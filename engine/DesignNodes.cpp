@@ -148,12 +148,18 @@ FieldPtr buildInfill(FieldBuilder& builder, const RecipeNode& spec, const std::s
             if (latticeSpec.has(key))
                 latticeSpec[key].fail(std::string("the infill `") + name +
                                       "` solves this lattice's level for its density: remove `" + key + ":` here");
-        if (node->densityMask)
+        if (node->densityMask && node->densityMask != node->region)
             d.fail("the lattice `" + latticeName +
                    "` already fills another infill; give each infill its own lattice node");
         node->density = density;
         node->densityMask = core;
         node->densityOf = "the space inside the " + std::to_string(skin) + " mm skin of `" + partName + "`";
+        if (node->region) {
+            // A skin frame's lattice fills only its cells: its share of the core within them.
+            node->densityMask =
+                std::make_shared<BooleanField>(BooleanOp::Intersection, std::vector<FieldPtr>{core, node->region});
+            node->densityOf += " within the cells of its skin frame";
+        }
     }
 
     const std::string result0 = builder.recipe().result;
@@ -210,11 +216,11 @@ bool levelSolvedByInfill(const Recipe& recipe, const std::string& name)
 FieldPtr applyFrame(const RecipeNode& frame, FieldPtr raw, const Vec3d& cell)
 {
     constexpr double pi = std::numbers::pi;
-    frame.checkKeys({"cylinder", "sphere"});
+    frame.checkKeys({"cylinder", "sphere", "skin"});
     if (frame.has("cylinder") == frame.has("sphere"))
         frame.fail(
-            "a frame is one of `{cylinder: {center, axis, around}}` or `{sphere: {center, axis, around, "
-            "pole_to_pole}}`");
+            "a frame is one of `{cylinder: {center, axis, around}}`, `{sphere: {center, axis, around, "
+            "pole_to_pole}}` or `{skin: {part, depth, layers}}`");
     auto count = [](const RecipeNode& n) {
         const double v = n.number();
         if (!(v >= 1.0) || v != std::floor(v))

@@ -27,6 +27,9 @@ struct LevelNode {
     /// space inside an infill's skin); see solveDensity().
     FieldPtr densityMask{};
     std::string densityOf{};  ///< what the mask is, for the report ("inside the skin of `part`")
+    /// Where a lattice laid out in cells of its own exists (a skin frame's cells, negative
+    /// inside); its density is measured there (and an infill intersects it with its core).
+    FieldPtr region{};
     /// Called with the solved level after a density solve (checks and notes that need it).
     std::function<void(double level)> onSolved{};
     /// Measure the density with sub-voxel coverage rather than by counting voxel centres.

@@ -2,6 +2,7 @@
 #include "engine/ExprNodes.h"
 #include "engine/FieldBuilder.h"
 #include "engine/ScalarMaps.h"
+#include "engine/SkinNodes.h"
 #include "fields/GradedLevel.h"
 #include "fields/GradientShift.h"
 #include "fields/TpmsField.h"
@@ -161,7 +162,14 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
 
     FieldPtr raw = std::make_shared<TpmsField>(type, cell);
     const FieldPtr plain = raw;
-    if (spec.has("frame")) raw = applyFrame(spec["frame"], raw, cell);
+    if (spec.has("frame"))
+        raw = spec["frame"].has("skin") ? applySkinFrame(builder, spec["frame"], raw, cell, name)
+                                        : applyFrame(spec["frame"], raw, cell);
+    // A skin frame's lattice exists only in its cells: its density is measured there.
+    const FieldPtr region = skinRegionOf(raw);
+    if (region && spec.has("density") && !spec["density"].isNumber())
+        spec["density"].fail("a graded density needs box cells (its table comes from one box cell); on a skin frame "
+                             "give one number");
     if (spec.has("axes")) raw = orientedField(builder, spec["axes"], raw, name);
     if (hasShiftKeys(spec)) {
         const std::string key = spec.has("thickness") ? "thickness"
@@ -187,6 +195,10 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
         return buildGraded(builder, spec, name, raw, side, cell, std::string(tpmsName(type)) + " " + solidName,
                            spec.has("axes") && !spec.has("frame") ? plain : nullptr);
     LevelNode node{name, std::string(tpmsName(type)) + " " + solidName, std::make_shared<LevelSolid>(raw, side, 0.0), {}};
+    if (region) {
+        node.region = node.densityMask = region;
+        node.densityOf = "the cells of the skin frame";
+    }
     // An infill's `density:` solves this lattice's level: then it needs none of its own.
     const bool solvedByInfill = levelSolvedByInfill(builder.recipe(), name);
     readLevelKeys(spec, node, 0.0, side == SolidSide::Band && !solvedByInfill);

@@ -97,7 +97,13 @@ const std::map<std::string, json>& keySchemas()
              {"sphere", described(json::object(), "{radius, inner, center, cells}: a spherical frame")},
              {"within", described(defRef("field"), "a solid the uniform frame is trimmed to")},
              {"min_length", number("trimmed pieces shorter than this are dropped (mm)")},
-             {"wireframe", described({{"type", "string"}}, "OBJ or CSV file used directly as the frame")}});
+             {"wireframe", described({{"type", "string"}}, "OBJ or CSV file used directly as the frame")},
+             {"skin", described(object({{"part", described(defRef("field"), "the part whose skin the cells follow")},
+                                        {"depth", described(json::object(),
+                                                            "[outer, inner] mm below the surface, or the outer alone")},
+                                        {"layers", number("cells across, from the outer to the inner depth")}},
+                                       {"part", "depth"}),
+                                "cells between two offset surfaces of a part")}});
         t["struts.kernel"] = described(json::object(), "{gaussian: {sigma, cutoff}}, capsule or {capsule: {blend}}");
         // A density may also be a map (ramp, distance, field, file) that grades it point by point.
         const json gradedDensity = described(

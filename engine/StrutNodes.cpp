@@ -2,6 +2,7 @@
 // wireframe file) solidified by Gaussian convolution or by round capsules.
 #include "engine/FieldBuilder.h"
 #include "engine/ScalarMaps.h"
+#include "engine/SkinNodes.h"
 #include "engine/StrutFrames.h"
 #include "fields/GradedLevel.h"
 #include "fields/IsoRadius.h"
@@ -87,17 +88,19 @@ struct UniformCells {
 };
 
 /// @a uniform receives the cell and its size when the frame is made of uniform cells.
+/// @a region receives the cells' space for a skin frame (its density is measured there).
 Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& name,
-                 std::optional<UniformCells>& uniform)
+                 std::optional<UniformCells>& uniform, FieldPtr& region)
 {
-    s.checkKeys({"cell", "size", "count", "origin", "cylinder", "sphere", "within", "min_length", "wireframe"});
+    s.checkKeys({"cell", "size", "count", "origin", "cylinder", "sphere", "within", "min_length", "wireframe", "skin"});
     if (s.has("wireframe")) {
-        for (const char* k : {"cell", "size", "count", "origin", "cylinder", "sphere", "within"})
+        for (const char* k : {"cell", "size", "count", "origin", "cylinder", "sphere", "within", "skin"})
             if (s.has(k)) s[k].fail("a wireframe is used as the frame as it is; remove `" + std::string(k) + "`");
         return readWireframe(builder.recipe().resolve(s["wireframe"].string()).string());
     }
     if (!s.has("cell")) s.fail("give `cell:` (a preset such as bcc, or custom lines) or `wireframe:` (a file)");
     const UnitCell cell = readCell(builder, s["cell"]);
+    if (s.has("skin")) return buildSkinStrutFrame(builder, s, cell, name, region);
     const auto& domainBox = builder.recipe().domainBox;
     if (s.has("cylinder")) {
         const RecipeNode c = s["cylinder"];
@@ -276,7 +279,8 @@ void warnIfDisconnected(const std::string& name, const StrutConvolution& f, cons
 FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
 {
     std::optional<UniformCells> uniform;
-    const Frame frame = buildFrame(builder, spec["struts"], name, uniform);
+    FieldPtr region;
+    const Frame frame = buildFrame(builder, spec["struts"], name, uniform, region);
     if (frame.struts.empty()) spec["struts"].fail("the frame has no struts (is the design space empty?)");
     if (spec.has("level") && spec.has("density"))
         spec.fail("give either `level:` or `density:`, not both (density solves the level)");
@@ -306,6 +310,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     const Box3 box = frame.bounds();
     LevelNode node;
     node.name = name;
+    node.region = region;
     if (spec.has("density") && !graded) {
         const RecipeNode d = spec["density"];
         const double rho = d.number();
@@ -313,11 +318,17 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
             d.fail("density is a relative density between 0 and 1 (exclusive), got " + d.yaml().Scalar() +
                    "; for 20 % write 0.20");
         node.density = rho;
-        for (int a = 0; a < 3; ++a)
+        if (region) {
+            // A skin frame: the density is the lattice's share of its cells' space.
+            node.densityMask = region;
+            node.densityOf = "the cells of the skin frame";
+            node.subVoxelDensity = true;
+        }
+        for (int a = 0; a < 3 && !region; ++a)
             if (!(box.extent()[a] > 0.0))
                 d.fail("the frame is flat along " + std::string(1, "xyz"[a]) +
                        ": its bounding box has no volume to measure a density in; give `level:` or `radius:`");
-        node.densityBox = box;
+        if (!region) node.densityBox = box;
         // Cells of a whole number of voxels line struts up with the voxel lattice, and counting
         // voxel centres then aliases (about 2 % for BCC at 0.1 mm); coverage does not.
         node.subVoxelDensity = true;
