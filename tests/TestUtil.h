@@ -2,6 +2,7 @@
 #pragma once
 
 #include "engine/Recipe.h"
+#include "mesher/TriangleMesh.h"
 
 #include <cstdio>
 #include <filesystem>
@@ -67,6 +68,20 @@ inline std::vector<std::string> listFolder(const std::filesystem::path& p)
     std::vector<std::string> names;
     for (const auto& e : std::filesystem::directory_iterator(p)) names.push_back(e.path().filename().string());
     return names;
+}
+
+inline /// A cube [lo, hi]^3 as 12 outward triangles.
+TriangleMesh cubeMesh(double lo, double hi)
+{
+    TriangleMesh m;
+    for (int i = 0; i < 8; ++i)
+        m.points.emplace_back(float(i & 1 ? hi : lo), float(i & 2 ? hi : lo), float(i & 4 ? hi : lo));
+    const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+    for (const auto& q : quads) {
+        m.triangles.emplace_back(q[0], q[1], q[2]);
+        m.triangles.emplace_back(q[0], q[2], q[3]);
+    }
+    return m;
 }
 
 }  // namespace voxlat::test

@@ -70,20 +70,6 @@ std::string errorOf(const std::function<void()>& fn)
     return "";
 }
 
-/// A cube [lo, hi]^3 as 12 outward triangles.
-TriangleMesh cubeMesh(double lo, double hi)
-{
-    TriangleMesh m;
-    for (int i = 0; i < 8; ++i)
-        m.points.emplace_back(float(i & 1 ? hi : lo), float(i & 2 ? hi : lo), float(i & 4 ? hi : lo));
-    const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
-    for (const auto& q : quads) {
-        m.triangles.emplace_back(q[0], q[1], q[2]);
-        m.triangles.emplace_back(q[0], q[2], q[3]);
-    }
-    return m;
-}
-
 }  // namespace
 
 TEST(SkinFrame, CornersLieAtTheRequestedDepthsOnASphere)
