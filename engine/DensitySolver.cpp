@@ -229,7 +229,16 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
     auto coverage = [](const CoverageSample& s, double level) {
         return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
     };
-    std::vector<CoverageSample> active = samples;
+    // Each sample's coverage at both ends of the bracket, carried along: the end that moves takes
+    // the coverage at the midpoint just summed, so each step computes one coverage per sample.
+    struct Active {
+        CoverageSample s;
+        double atA, atB;
+    };
+    std::vector<Active> active;
+    active.reserve(samples.size());
+    for (const CoverageSample& s : samples) active.push_back({s, coverage(s, a), coverage(s, b)});
+    std::vector<double> atMid(active.size());
     double settled = fullyBelow;  // whole voxels below every level left in the bracket
     // Once every sample left is partly covered across the whole bracket, the coverage is linear
     // there: settled + constant + level * slope, and the remaining steps cost nothing.
@@ -240,26 +249,28 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
         double covered = settled;
         if (linear) covered += constant + mid * slope;
         else
-            for (const CoverageSample& s : active) covered += coverage(s, mid);
-        (covered < wanted ? a : b) = mid;
+            for (std::size_t i = 0; i < active.size(); ++i) covered += atMid[i] = coverage(active[i].s, mid);
+        const bool raiseA = covered < wanted;
+        (raiseA ? a : b) = mid;
         if (linear) continue;
         // Coverage is monotone in the level: full at a means full on [a, b], empty at b empty.
         std::size_t kept = 0;
         bool ramps = true;
-        for (const CoverageSample& s : active) {
-            const double atA = coverage(s, a), atB = coverage(s, b);
-            if (atA >= 1.0) settled += 1.0;
-            else if (atB > 0.0) {
-                active[kept++] = s;
-                ramps = ramps && s.step > 0.0f && atA > 0.0 && atB < 1.0;
+        for (std::size_t i = 0; i < active.size(); ++i) {
+            Active t = active[i];
+            (raiseA ? t.atA : t.atB) = atMid[i];
+            if (t.atA >= 1.0) settled += 1.0;
+            else if (t.atB > 0.0) {
+                active[kept++] = t;
+                ramps = ramps && t.s.step > 0.0f && t.atA > 0.0 && t.atB < 1.0;
             }
         }
         active.resize(kept);
         if (ramps) {
             linear = true;
-            for (const CoverageSample& s : active) {
-                constant += 0.5 - double(s.value) / s.step;
-                slope += 1.0 / s.step;
+            for (const Active& t : active) {
+                constant += 0.5 - double(t.s.value) / t.s.step;
+                slope += 1.0 / t.s.step;
             }
         }
     }
