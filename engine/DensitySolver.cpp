@@ -51,9 +51,14 @@ public:
             FieldNode::gridValues(batch, out);
             return;
         }
-        mG.gridValues(batch, out);
+        // The mask first: a batch wholly outside it needs no g.
         std::array<double, kBatchSize> m;
         mMask.gridValues(batch, std::span<double>(m.data(), batch.size()));
+        if (std::none_of(m.begin(), m.begin() + batch.size(), [](double v) { return float(v) < 0.0f; })) {
+            std::fill(out.begin(), out.begin() + batch.size(), kOutsideMask);
+            return;
+        }
+        mG.gridValues(batch, out);
         for (std::size_t i = 0; i < batch.size(); ++i) out[i] = apply(out[i], m[i]);
     }
     Interval bound(const Box3& box) const override
@@ -300,7 +305,16 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
     auto coverage = [](const CoverageSample& s, double level) {
         return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
     };
-    std::vector<CoverageSample> active = samples;
+    // Each sample's coverage at both ends of the bracket, carried along: the end that moves takes
+    // the coverage at the midpoint just summed, so each step computes one coverage per sample.
+    struct Active {
+        CoverageSample s;
+        double atA, atB;
+    };
+    std::vector<Active> active;
+    active.reserve(samples.size());
+    for (const CoverageSample& s : samples) active.push_back({s, coverage(s, a), coverage(s, b)});
+    std::vector<double> atMid(active.size());
     double settled = fullyBelow;  // whole voxels below every level left in the bracket
     // Once every sample left is partly covered across the whole bracket, the coverage is linear
     // there: settled + constant + level * slope, and the remaining steps cost nothing.
@@ -311,26 +325,28 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
         double covered = settled;
         if (linear) covered += constant + mid * slope;
         else
-            for (const CoverageSample& s : active) covered += coverage(s, mid);
-        (covered < wanted ? a : b) = mid;
+            for (std::size_t i = 0; i < active.size(); ++i) covered += atMid[i] = coverage(active[i].s, mid);
+        const bool raiseA = covered < wanted;
+        (raiseA ? a : b) = mid;
         if (linear) continue;
         // Coverage is monotone in the level: full at a means full on [a, b], empty at b empty.
         std::size_t kept = 0;
         bool ramps = true;
-        for (const CoverageSample& s : active) {
-            const double atA = coverage(s, a), atB = coverage(s, b);
-            if (atA >= 1.0) settled += 1.0;
-            else if (atB > 0.0) {
-                active[kept++] = s;
-                ramps = ramps && s.step > 0.0f && atA > 0.0 && atB < 1.0;
+        for (std::size_t i = 0; i < active.size(); ++i) {
+            Active t = active[i];
+            (raiseA ? t.atA : t.atB) = atMid[i];
+            if (t.atA >= 1.0) settled += 1.0;
+            else if (t.atB > 0.0) {
+                active[kept++] = t;
+                ramps = ramps && t.s.step > 0.0f && t.atA > 0.0 && t.atB < 1.0;
             }
         }
         active.resize(kept);
         if (ramps) {
             linear = true;
-            for (const CoverageSample& s : active) {
-                constant += 0.5 - double(s.value) / s.step;
-                slope += 1.0 / s.step;
+            for (const Active& t : active) {
+                constant += 0.5 - double(t.s.value) / t.s.step;
+                slope += 1.0 / t.s.step;
             }
         }
     }
@@ -418,7 +434,18 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         // `wanted` voxels below it. Then measure with sub-voxel coverage, which is continuous in
         // the level, and bisect on it.
         if (subVoxel || std::abs(double(sol.insideVoxels) - double(wanted)) > 5e-4 * double(wanted)) {
-            auto samples = coverageSamples(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi));
+            // Every evaluated band voxel once (a voxel's step does not depend on the band); the
+            // bracket's and the wide band's samples are picked from them, in the same order.
+            const float evaluatedLo = float(evaluated.band.lo), evaluatedHi = float(evaluated.band.hi);
+            const std::vector<CoverageSample> evaluatedSamples =
+                coverageSamples(*grid, domain.indexBox(), evaluatedLo, evaluatedHi);
+            auto within = [&](float lo, float hi) {
+                std::vector<CoverageSample> picked;
+                for (const CoverageSample& c : evaluatedSamples)
+                    if (!(c.value < lo || c.value > hi)) picked.push_back(c);
+                return picked;
+            };
+            auto samples = within(float(options.band.lo), float(options.band.hi));
             double a = options.band.lo, b = std::min(options.band.hi, 1e30);
             std::uint64_t fullyBelow = below;
             // Within a mask the bracket (a share of the mask's voxels) can be far narrower than a
@@ -435,10 +462,24 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 // Every voxel valued within the wide band lies in an evaluated leaf of a grid
                 // whose band contains it: reuse the first grid when it does.
                 const bool covered = evaluated.band.lo <= wide.band.lo && wide.band.hi <= evaluated.band.hi;
-                const auto wideGrid = covered ? grid : evaluateSparse(indicator, domain, wide);
-                if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
-                fullyBelow = splitByBand(*wideGrid, domain.indexBox(), float(wide.band.lo), float(wide.band.hi)).below;
-                samples = coverageSamples(*wideGrid, domain.indexBox(), float(wide.band.lo), float(wide.band.hi));
+                const float wideLo = float(wide.band.lo), wideHi = float(wide.band.hi);
+                if (covered && evaluatedLo <= wideLo && wideHi <= evaluatedHi) {
+                    // Below the wide band: those below the bracket, moved by the voxels between the
+                    // two low ends, which the evaluated band holds.
+                    const float bracketLo = float(options.band.lo);
+                    std::uint64_t belowWide = 0, belowBracket = 0;
+                    for (const CoverageSample& c : evaluatedSamples) {
+                        belowWide += c.value < wideLo;
+                        belowBracket += c.value < bracketLo;
+                    }
+                    fullyBelow = below + belowWide - belowBracket;
+                    samples = within(wideLo, wideHi);
+                } else {
+                    const auto wideGrid = covered ? grid : evaluateSparse(indicator, domain, wide);
+                    if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
+                    fullyBelow = splitByBand(*wideGrid, domain.indexBox(), wideLo, wideHi).below;
+                    samples = coverageSamples(*wideGrid, domain.indexBox(), wideLo, wideHi);
+                }
                 a = wide.band.lo;
                 b = wide.band.hi;
             }

@@ -6,6 +6,7 @@
 #include "mesher/MeshCheck.h"
 
 #include <openvdb/tools/MeshToVolume.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
@@ -370,15 +371,24 @@ void MeshDesignSpace::orientAndMeasure(const openvdb::FloatGrid::Ptr& grid)
     // Volume inside the grid: each sample's cell counts by how much of it lies inside, 1/2 - d/voxel
     // clamped to [0, 1] (exact for a face parallel to the cells; a plain count of samples below
     // zero would be half a voxel off wherever a face runs through a plane of samples). Tiles
-    // (the inactive inside ones too) count whole. Summed per leaf in a fixed order.
-    double covered = 0.0;
-    for (auto it = grid->tree().cbeginValueAll(); it; ++it) {
-        if (!it.isVoxelValue()) {
-            if (*it < 0.0f) covered += double(it.getVoxelCount());
-            continue;
+    // (the inactive inside ones too) count whole. Summed per leaf in parallel, then in leaf order.
+    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    grid->tree().getNodes(leaves);
+    std::vector<double> perLeaf(leaves.size(), 0.0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+        for (std::size_t n = range.begin(); n != range.end(); ++n) {
+            const float* data = leaves[n]->buffer().data();
+            double sum = 0.0;
+            for (int i = 0; i < 512; ++i) sum += std::clamp(0.5 - double(data[i]) / mVoxel, 0.0, 1.0);
+            perLeaf[n] = sum;
         }
-        covered += std::clamp(0.5 - double(*it) / mVoxel, 0.0, 1.0);
-    }
+    });
+    double covered = 0.0;
+    auto tile = grid->tree().cbeginValueAll();
+    tile.setMaxDepth(tile.getLeafDepth() - 1);  // tiles only
+    for (; tile; ++tile)
+        if (!tile.isVoxelValue() && *tile < 0.0f) covered += double(tile.getVoxelCount());
+    for (const double sum : perLeaf) covered += sum;
     mGridVolume = covered * mVoxel * mVoxel * mVoxel;
 }
 

@@ -15,14 +15,44 @@ namespace {
 
 using Leaf = openvdb::FloatTree::LeafNodeType;
 
-/// A triangle as corner a and edges ab, ac (double, world units).
+/// A triangle as corner a and edges ab, ac (double, world units), with its plane and the planes
+/// through its edges perpendicular to it, for the common case of a point over the face.
 struct Triangle {
     openvdb::Vec3d a, ab, ac;
+    openvdb::Vec3d normal;     ///< unit normal (zero for a triangle without area)
+    double offset;             ///< normal . a
+    openvdb::Vec3d inward[3];  ///< per edge, in the plane and pointing into the triangle
+    double inwardOffset[3];    ///< inward[e] . (the edge's first corner)
+
+    Triangle(const openvdb::Vec3d& pa, const openvdb::Vec3d& pb, const openvdb::Vec3d& pc)
+        : a(pa), ab(pb - pa), ac(pc - pa)
+    {
+        const openvdb::Vec3d n = ab.cross(ac);
+        const double length = n.length();
+        normal = length > 0.0 ? n / length : openvdb::Vec3d(0.0);
+        offset = normal.dot(a);
+        const openvdb::Vec3d corner[3] = {pa, pb, pc};
+        for (int e = 0; e < 3; ++e) {
+            inward[e] = normal.cross(corner[(e + 1) % 3] - corner[e]);
+            // Without area no point is over the face: an offset no zero vector reaches.
+            inwardOffset[e] = length > 0.0 ? inward[e].dot(corner[e]) : 1.0;
+        }
+    }
 };
 
-/// Squared distance from @a p to the triangle (Ericson, Real-Time Collision Detection, 5.1.5).
-double distanceSq(const Triangle& t, const openvdb::Vec3d& p)
+/// Distance from @a p to the triangle's plane: a lower bound of the distance to the triangle.
+double planeDistance(const Triangle& t, const openvdb::Vec3d& p)
 {
+    return std::abs(t.normal.dot(p) - t.offset);
+}
+
+/// Squared distance from @a p to the triangle (Ericson, Real-Time Collision Detection, 5.1.5),
+/// short cut where @a p lies over the face: the distance to the plane (@a h), squared.
+double distanceSq(const Triangle& t, const openvdb::Vec3d& p, double h)
+{
+    if (t.inward[0].dot(p) >= t.inwardOffset[0] && t.inward[1].dot(p) >= t.inwardOffset[1] &&
+        t.inward[2].dot(p) >= t.inwardOffset[2])
+        return h * h;
     const openvdb::Vec3d ap = p - t.a;
     const double d1 = t.ab.dot(ap), d2 = t.ac.dot(ap);
     if (d1 <= 0.0 && d2 <= 0.0) return ap.lengthSqr();  // corner a
@@ -112,6 +142,24 @@ public:
         return (std::lower_bound(first, last, z) - first) % 2 == 1;
     }
 
+    /// inside() of the @a n samples from @a c up the column, into @a out: one search, then a walk.
+    void insideRun(const openvdb::Coord& c, int n, bool* out) const
+    {
+        const int i = c.x() - mI0, j = c.y() - mJ0;
+        if (i < 0 || j < 0 || i >= mNi || j >= mNj) {
+            std::fill(out, out + n, false);
+            return;
+        }
+        const std::uint32_t col = std::uint32_t(i) * mNj + j;
+        const auto first = mZ.begin() + mStart[col], last = mZ.begin() + mStart[col + 1];
+        auto it = std::lower_bound(first, last, mOrigin[2] + c.z() * mVoxel);
+        for (int k = 0; k < n; ++k) {
+            const double z = mOrigin[2] + (c.z() + k) * mVoxel;
+            while (it != last && *it < z) ++it;
+            out[k] = (it - first) % 2 == 1;
+        }
+    }
+
 private:
     static double orient(const openvdb::Vec2d& a, const openvdb::Vec2d& b, const openvdb::Vec2d& p)
     {
@@ -142,7 +190,7 @@ public:
         mTriangles.reserve(mesh.triangles.size());
         for (const auto& t : mesh.triangles) {
             const openvdb::Vec3d a = mesh.points[t[0]], b = mesh.points[t[1]], c = mesh.points[t[2]];
-            mTriangles.push_back({a, b - a, c - a});
+            mTriangles.emplace_back(a, b, c);
         }
         mGrid = openvdb::FloatGrid::create(float(mExterior));
         mGrid->setTransform(xform.copy());
@@ -163,8 +211,9 @@ public:
         for (int x = lo.x(); x <= hi.x(); x += kTop)
             for (int y = lo.y(); y <= hi.y(); y += kTop)
                 for (int z = lo.z(); z <= hi.z(); z += kTop) tops.emplace_back(x, y, z);
-        std::vector<std::uint32_t> all(mTriangles.size());
-        for (std::uint32_t i = 0; i < all.size(); ++i) all[i] = i;
+        // Every triangle, at distance 0 from a point infinitely far: none is skipped at the top.
+        std::vector<Candidate> all(mTriangles.size());
+        for (std::uint32_t i = 0; i < all.size(); ++i) all[i] = {i, 0.0};
 
         // Leaves and inside tiles per top cube, put in the tree after the parallel pass.
         std::vector<Output> outputs(tops.size());
@@ -172,7 +221,7 @@ public:
             Scratch s;
             for (std::size_t n = range.begin(); n != range.end(); ++n) {
                 s.out = &outputs[n];
-                descend(tops[n], kTop, all, s, 0);
+                descend(tops[n], kTop, all, std::numeric_limits<double>::infinity(), s, 0);
             }
         });
         auto& tree = mGrid->tree();
@@ -189,9 +238,14 @@ private:
         std::vector<std::unique_ptr<Leaf>> leaves;
         std::vector<openvdb::CoordBBox> insideTiles;
     };
+    /// A triangle that can be nearest to some sample of a cube, and its distance from the cube's centre.
+    struct Candidate {
+        std::uint32_t triangle;
+        double distance;
+    };
     struct Scratch {
         Output* out = nullptr;
-        std::vector<std::uint32_t> candidates[8];  ///< per depth of the descent
+        std::vector<Candidate> candidates[8];  ///< per depth of the descent
         std::vector<double> distances;
         Leaf* leaf = nullptr;  ///< the leaf being filled
         bool inside[512];      ///< its samples' sides
@@ -206,31 +260,55 @@ private:
 
     /// Keeps the triangles of @a in that can be nearest to some point within @a r of @a c (those
     /// within the nearest one's distance plus 2 r); returns the distance from @a c to the nearest.
-    double filter(const std::vector<std::uint32_t>& in, const openvdb::Vec3d& c, double r,
-                  std::vector<std::uint32_t>& out, Scratch& s) const
+    /// The distances in @a in are from a point @a shift away from @a c (the parent cube's centre):
+    /// a triangle whose distance from there, less the shift, exceeds the nearest one's so far plus
+    /// 2 r cannot be kept, so its distance from @a c is never computed.
+    double filter(const std::vector<Candidate>& in, double shift, const openvdb::Vec3d& c, double r,
+                  std::vector<Candidate>& out, Scratch& s) const
     {
+        // A little slack for rounding: a kept triangle too many costs nothing but time.
+        const double slack = 1e-6 * mVoxel;
+        const double skipped = std::numeric_limits<double>::infinity();
         s.distances.resize(in.size());
+        // The first candidate is the one nearest the parent's centre: it makes the nearest so far
+        // small early.
+        const std::size_t first = 0;
         double nearest = std::numeric_limits<double>::infinity();
+        if (!in.empty()) {
+            const Triangle& t = mTriangles[in[first].triangle];
+            nearest = s.distances[first] = std::sqrt(distanceSq(t, c, planeDistance(t, c)));
+        }
         for (std::size_t i = 0; i < in.size(); ++i) {
-            s.distances[i] = std::sqrt(distanceSq(mTriangles[in[i]], c));
+            if (i == first) continue;
+            // Two lower bounds: from the parent's centre, and the distance to the plane.
+            const Triangle& t = mTriangles[in[i].triangle];
+            const double h = in[i].distance - shift > nearest + 2.0 * r + slack ? skipped : planeDistance(t, c);
+            if (h > nearest + 2.0 * r + slack) {
+                s.distances[i] = skipped;
+                continue;
+            }
+            s.distances[i] = std::sqrt(distanceSq(t, c, h));
             nearest = std::min(nearest, s.distances[i]);
         }
-        // A little slack for rounding: a kept triangle too many costs nothing but time.
-        const double keep = nearest + 2.0 * r + 1e-6 * mVoxel;
+        const double keep = nearest + 2.0 * r + slack;
         out.clear();
         for (std::size_t i = 0; i < in.size(); ++i)
-            if (s.distances[i] <= keep) out.push_back(in[i]);
+            if (s.distances[i] <= keep) out.push_back({in[i].triangle, s.distances[i]});
+        // The nearest first, for the children and the samples.
+        const auto best = std::min_element(
+            out.begin(), out.end(), [](const Candidate& a, const Candidate& b) { return a.distance < b.distance; });
+        if (best != out.end()) std::iter_swap(out.begin(), best);
         return nearest;
     }
 
     /// The cube of @a size samples from @a origin (a power of two), with its parent's candidates.
-    void descend(const openvdb::Coord& origin, int size, const std::vector<std::uint32_t>& parent, Scratch& s,
+    void descend(const openvdb::Coord& origin, int size, const std::vector<Candidate>& parent, double shift, Scratch& s,
                  int depth) const
     {
         const double r = 0.5 * std::sqrt(3.0) * (size - 1) * mVoxel;
         const openvdb::Vec3d centre = world(origin) + openvdb::Vec3d(0.5 * (size - 1) * mVoxel);
-        std::vector<std::uint32_t>& mine = s.candidates[depth];
-        const double nearest = filter(parent, centre, r, mine, s);
+        std::vector<Candidate>& mine = s.candidates[depth];
+        const double nearest = filter(parent, shift, centre, r, mine, s);
         if (nearest - r > 0.0) {
             // No surface in the cube: one side throughout. Past the band on that side it keeps
             // the band's constant (a tile inside, the background outside, the leaf's default).
@@ -249,11 +327,13 @@ private:
                     for (int k = 0; k < 2; ++k) sampleAt(origin.offsetBy(i, j, k), mine, s);
             return;
         }
+        // A child's centre lies a quarter of this cube's diagonal from this one's.
         const int half = size / 2;
+        const double childShift = 0.5 * std::sqrt(3.0) * half * mVoxel;
         for (int i = 0; i < 2; ++i)
             for (int j = 0; j < 2; ++j)
                 for (int k = 0; k < 2; ++k)
-                    descend(origin.offsetBy(i * half, j * half, k * half), half, mine, s, depth + 1);
+                    descend(origin.offsetBy(i * half, j * half, k * half), half, mine, childShift, s, depth + 1);
         if (size == 8) leaveLeaf(origin, s);
     }
 
@@ -263,12 +343,12 @@ private:
         s.out->leaves.push_back(std::make_unique<Leaf>(origin, float(mExterior), false));
         s.leaf = s.out->leaves.back().get();
         for (int i = 0; i < 8; ++i)
-            for (int j = 0; j < 8; ++j)
-                for (int k = 0; k < 8; ++k) {
-                    const int offset = (i << 6) | (j << 3) | k;
-                    s.inside[offset] = mParity.inside(origin.offsetBy(i, j, k));
-                    if (s.inside[offset]) s.leaf->setValueOnly(offset, float(-mInterior));
-                }
+            for (int j = 0; j < 8; ++j) {
+                const int row = (i << 6) | (j << 3);
+                mParity.insideRun(origin.offsetBy(i, j, 0), 8, s.inside + row);
+                for (int k = 0; k < 8; ++k)
+                    if (s.inside[row + k]) s.leaf->setValueOnly(row + k, float(-mInterior));
+            }
     }
 
     /// A leaf that took no distance is a constant: a tile inside, nothing outside.
@@ -282,11 +362,19 @@ private:
         if (allInside) s.out->insideTiles.emplace_back(origin, origin.offsetBy(7));
     }
 
-    void sampleAt(const openvdb::Coord& c, const std::vector<std::uint32_t>& candidates, Scratch& s) const
+    /// The distance at a corner @a c of a cube of 2^3 samples: a candidate whose plane is no
+    /// nearer than the nearest triangle so far cannot be nearer (the face beside the nearest one
+    /// on a flat side, say), so its distance is never computed.
+    void sampleAt(const openvdb::Coord& c, const std::vector<Candidate>& candidates, Scratch& s) const
     {
         const openvdb::Vec3d p = world(c);
         double best = std::numeric_limits<double>::infinity();
-        for (std::uint32_t t : candidates) best = std::min(best, distanceSq(mTriangles[t], p));
+        for (const Candidate& candidate : candidates) {
+            const Triangle& t = mTriangles[candidate.triangle];
+            const double h = planeDistance(t, p);
+            if (h * h >= best) continue;
+            best = std::min(best, distanceSq(t, p, h));
+        }
         const double d = std::sqrt(best);
         const int offset = Leaf::coordToOffset(c);
         const bool inside = s.inside[offset];

@@ -26,7 +26,11 @@ namespace voxlat {
 /// triangles cut, which costs far more than the distances themselves. Here cubes of 32^3 samples
 /// down to 2^3 keep only the triangles that can be nearest to some point of the cube (those within
 /// the nearest one's distance plus 2 half-diagonals of the centre), so each sample tests a few
-/// triangles; cubes wholly past the band become tiles untouched. Cubes are independent: the grid
+/// triangles; cubes wholly past the band become tiles untouched. Lower bounds skip exact
+/// distances that cannot matter: a triangle's distance from the parent cube's centre less the
+/// shift between centres, and the distance to its plane (beside the nearest face on a flat side,
+/// its neighbours on the same plane are never measured); a point over a face takes the plane
+/// distance without the corner and edge cases. Cubes are independent: the grid
 /// does not depend on the thread count.
 openvdb::FloatGrid::Ptr meshToSdf(const TriangleMesh& mesh, const openvdb::math::Transform& xform, float exteriorVoxels,
                                   float interiorVoxels);

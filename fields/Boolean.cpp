@@ -64,9 +64,25 @@ void BooleanField::gridValues(const GridBatch& batch, std::span<double> out) con
     }
     mOperands[0]->gridValues(batch, out);
     std::array<double, kBatchSize> buf;
+    const std::size_t n = batch.size();
+    // combine() without gradients, one loop per case (the same arithmetic, so the same values).
+    const double sa = mOp == BooleanOp::Union ? 1.0 : -1.0;
+    const double sb = mOp == BooleanOp::Intersection ? -1.0 : 1.0;
+    const double k = mBlend;
     for (std::size_t o = 1; o < mOperands.size(); ++o) {
-        mOperands[o]->gridValues(batch, std::span<double>(buf.data(), batch.size()));
-        for (std::size_t i = 0; i < batch.size(); ++i) combine(out[i], nullptr, buf[i], nullptr);
+        mOperands[o]->gridValues(batch, std::span<double>(buf.data(), n));
+        if (k > 0.0) {
+            for (std::size_t i = 0; i < n; ++i) {
+                const double x = sa * out[i], y = sb * buf[i];
+                const double h = std::clamp(0.5 + 0.5 * (y - x) / k, 0.0, 1.0);
+                out[i] = sa * (y + h * (x - y) - k * h * (1.0 - h));
+            }
+        } else {
+            for (std::size_t i = 0; i < n; ++i) {
+                const double x = sa * out[i], y = sb * buf[i];
+                out[i] = sa * (x <= y ? x : y);
+            }
+        }
     }
 }
 

@@ -101,9 +101,26 @@ void MeshDistance::gridValues(const GridBatch& batch, std::span<double> out) con
 {
     const Vec3d first = (batch.origin - mOrigin) / mVoxel;
     bool onSamples = true;
-    for (int a = 0; a < 3; ++a)
-        onSamples = onSamples && std::abs(batch.spacing[a] - mVoxel) <= 1e-9 * mVoxel &&
-                    std::abs(first[a] - std::round(first[a])) <= 1e-6;
+    for (int a = 0; a < 3; ++a) onSamples = onSamples && std::abs(first[a] - std::round(first[a])) <= 1e-6;
+    // Spacing in whole voxels (a coarse pass): every point is a sample, looked up alone (the
+    // interpolation at a sample gives the sample).
+    const double stride = std::round(batch.spacing[0] / mVoxel);
+    bool strided = onSamples && stride >= 2.0;
+    for (int a = 0; a < 3; ++a) {
+        strided = strided && std::abs(batch.spacing[a] - stride * mVoxel) <= 1e-9 * mVoxel;
+        onSamples = onSamples && std::abs(batch.spacing[a] - mVoxel) <= 1e-9 * mVoxel;
+    }
+    if (strided) {
+        const int step = int(stride);
+        const openvdb::Coord base(int(std::round(first[0])), int(std::round(first[1])), int(std::round(first[2])));
+        auto acc = mGrid->getConstAccessor();
+        std::size_t n = 0;
+        for (int i = 0; i < batch.nx; ++i)
+            for (int j = 0; j < batch.ny; ++j)
+                for (int k = 0; k < batch.nz; ++k, ++n)
+                    out[n] = acc.getValue(base.offsetBy(i * step, j * step, k * step));
+        return;
+    }
     if (!onSamples) {
         FieldNode::gridValues(batch, out);
         return;

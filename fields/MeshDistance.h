@@ -31,7 +31,8 @@ public:
 
     void values(std::span<const Vec3d> points, std::span<double> out) const override;
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
-    /// Blocks whose points are the grid's own sample points are looked up, not interpolated.
+    /// Blocks whose points are the grid's own sample points (also every n-th one, for coarse
+    /// passes) are looked up, not interpolated.
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
     std::optional<Box3> support() const override { return mSupport; }

@@ -37,8 +37,18 @@ void UnaryField::gradients(std::span<const Vec3d> points, std::span<double> out,
 void UnaryField::gridValues(const GridBatch& batch, std::span<double> out) const
 {
     mChild->gridValues(batch, out);
-    double slope;
-    for (double& v : out) v = apply(v, slope);
+    // apply() with its case chosen once per batch.
+    switch (mOp) {
+    case UnaryOp::Negate:
+        for (double& v : out) v = -v;
+        return;
+    case UnaryOp::Abs:
+        for (double& v : out) v = std::abs(v);
+        return;
+    case UnaryOp::Offset:
+        for (double& v : out) v += mOffset;
+        return;
+    }
 }
 
 Interval UnaryField::bound(const Box3& box) const
