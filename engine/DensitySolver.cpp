@@ -269,15 +269,24 @@ double planeCovered(const std::vector<PlaneSample>& samples, double level)
 /// whose coverage no longer changes over what is left of the bracket are set aside as it narrows.
 double bisectPlaneCoverage(std::vector<PlaneSample> active, double wanted, double a, double b)
 {
+    // A sample is wholly below levels >= value + half its total change and wholly above levels
+    // <= value - that half: only the ones in between need the cube-plane volume.
+    auto half = [](const PlaneSample& s) { return 0.5 * (double(s.change[0]) + s.change[1] + s.change[2]); };
     double settled = 0.0;
     for (int iteration = 0; iteration < 60; ++iteration) {
         const double mid = 0.5 * (a + b);
-        (settled + planeCovered(active, mid) < wanted ? a : b) = mid;
+        double covered = settled;
+        for (const PlaneSample& s : active) {
+            const double h = half(s);
+            if (mid >= s.value + h) covered += s.weight;
+            else if (mid > s.value - h) covered += s.weight * planeCoverage(s, mid);
+        }
+        (covered < wanted ? a : b) = mid;
         std::size_t kept = 0;
         for (const PlaneSample& s : active) {
-            const double atA = planeCoverage(s, a), atB = planeCoverage(s, b);
-            if (atA >= 1.0) settled += s.weight;
-            else if (atB > 0.0) active[kept++] = s;
+            const double h = half(s);
+            if (a >= s.value + h) settled += s.weight;
+            else if (b > s.value - h) active[kept++] = s;
         }
         active.resize(kept);
     }
