@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <sstream>
 #include <string>
 #include <sys/wait.h>
@@ -82,6 +83,17 @@ TriangleMesh cubeMesh(double lo, double hi)
         m.triangles.emplace_back(q[0], q[2], q[3]);
     }
     return m;
+}
+
+/// The message of what @a fn throws, or "" if it returns.
+inline std::string errorOf(const std::function<void()>& fn)
+{
+    try {
+        fn();
+    } catch (const std::exception& e) {
+        return e.what();
+    }
+    return "";
 }
 
 }  // namespace voxlat::test

@@ -68,16 +68,6 @@ PartMesh asPart(TriangleMesh m)
     return PartMesh{std::move(m), "test", std::nullopt};
 }
 
-std::string errorOf(const std::function<void()>& fn)
-{
-    try {
-        fn();
-    } catch (const std::exception& e) {
-        return e.what();
-    }
-    return "";
-}
-
 /// Largest |field - reference| over random points within @a band of the surface (by the reference).
 double maxErrorNearSurface(const FieldNode& field, const FieldNode& reference, const Box3& box, double band)
 {

@@ -60,16 +60,6 @@ void expectCornersAtDepths(const FieldNode& distance, const SkinCells& cells, co
     EXPECT_LE(worst, tol);
 }
 
-std::string errorOf(const std::function<void()>& fn)
-{
-    try {
-        fn();
-    } catch (const std::exception& e) {
-        return e.what();
-    }
-    return "";
-}
-
 }  // namespace
 
 TEST(SkinFrame, CornersLieAtTheRequestedDepthsOnASphere)
@@ -321,28 +311,24 @@ TEST(SkinFrame, BadInputNamesFileAndLine)
             job.solveLevels();
         });
     };
-    // b <= a
-    std::string e =
-        run("  lat: {struts: {cell: bcc, size: 2, skin: {part: ball, depth: [3, 2]}}, kernel: capsule, "
-            "radius: 0.3}\n");
-    EXPECT_NE(e.find("skin.yaml:4:"), std::string::npos) << e;
-    EXPECT_NE(e.find("greater than the outer"), std::string::npos) << e;
-    // no part
-    e = run("  lat: {struts: {cell: bcc, size: 2, skin: {depth: [1, 2]}}, kernel: capsule, radius: 0.3}\n");
-    EXPECT_NE(e.find("skin.yaml:4:"), std::string::npos) << e;
-    EXPECT_NE(e.find("part:"), std::string::npos) << e;
-    // no interior at the outer depth
-    e = run("  lat: {tpms: gyroid, cell: 2, level: 0, frame: {skin: {part: ball, depth: [7, 8]}}}\n");
-    EXPECT_NE(e.find("skin.yaml:4:"), std::string::npos) << e;
-    EXPECT_NE(e.find("no interior 7 mm below"), std::string::npos) << e;
-    // no cell at the inner depth
-    e = run("  lat: {tpms: gyroid, cell: 2, level: 0, frame: {skin: {part: ball, depth: [1, 9]}}}\n");
-    EXPECT_NE(e.find("skin.yaml:4:"), std::string::npos) << e;
-    EXPECT_NE(e.find("no cell reaches 9 mm"), std::string::npos) << e;
-    // a misspelt key
-    e = run("  lat: {tpms: gyroid, cell: 2, level: 0, frame: {skin: {part: ball, depht: [1, 2]}}}\n");
-    EXPECT_NE(e.find("skin.yaml:4:"), std::string::npos) << e;
-    EXPECT_NE(e.find("depth"), std::string::npos) << e;
+    // Each broken recipe line and what its message must say.
+    const std::pair<const char*, const char*> cases[] = {
+        {"  lat: {struts: {cell: bcc, size: 2, skin: {part: ball, depth: [3, 2]}}, kernel: capsule, radius: 0.3}\n",
+         "greater than the outer"},  // b <= a
+        {"  lat: {struts: {cell: bcc, size: 2, skin: {depth: [1, 2]}}, kernel: capsule, radius: 0.3}\n",
+         "part:"},  // no part
+        {"  lat: {tpms: gyroid, cell: 2, level: 0, frame: {skin: {part: ball, depth: [7, 8]}}}\n",
+         "no interior 7 mm below"},  // no interior at the outer depth
+        {"  lat: {tpms: gyroid, cell: 2, level: 0, frame: {skin: {part: ball, depth: [1, 9]}}}\n",
+         "no cell reaches 9 mm"},  // no cell at the inner depth
+        {"  lat: {tpms: gyroid, cell: 2, level: 0, frame: {skin: {part: ball, depht: [1, 2]}}}\n",
+         "depth"},  // a misspelt key
+    };
+    for (const auto& [fields, expected] : cases) {
+        const std::string e = run(fields);
+        EXPECT_NE(e.find("skin.yaml:4:"), std::string::npos) << e;
+        EXPECT_NE(e.find(expected), std::string::npos) << e;
+    }
 }
 
 TEST(SkinFrame, InfillDensityIsMeasuredInsideTheCells)
