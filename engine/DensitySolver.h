@@ -51,9 +51,11 @@ struct DensityPiece {
 /// fewer than two periods fold, or the period differs between axes).
 std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, double reach, double voxel);
 
-/// solveDensity() with sub-voxel coverage over weighted @a pieces: the level at which the
-/// weighted coverage of {g < level} is @a target of the pieces' weighted voxels. Every voxel of
-/// every piece is evaluated (pieces are meant to be small).
+/// solveDensity() over weighted @a pieces: the level at which the weighted share of {g < level}
+/// is @a target of the pieces' weighted voxels, each voxel's share being the exact volume below
+/// the plane through its value with its per-axis changes (central differences; one-sided only on
+/// the faces of the pieces' union, each piece being evaluated with a voxel of margin). Every
+/// voxel of every piece is evaluated (pieces are meant to be small).
 DensitySolution solveDensity(const FieldNode& indicator, std::span<const DensityPiece> pieces, double target);
 
 }  // namespace voxlat
