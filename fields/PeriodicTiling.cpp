@@ -38,6 +38,9 @@ struct AxisMap {
     }
 };
 
+/// Grids a tiling keeps tables for.
+constexpr std::size_t kMaxTables = 4;
+
 /// A leaf of padding beyond the box, so that leaves straddling the box's faces are covered.
 constexpr long kPad = 8;
 
@@ -161,6 +164,9 @@ const PeriodicTiling::Table* PeriodicTiling::table(const GridBatch& batch) const
                 break;
             }
         }
+        // A job uses one or two grids (the result, a density lattice); more means grids that
+        // change from batch to batch, where tables would only pile up.
+        if (!found && mTables.size() >= kMaxTables) return nullptr;
         if (!found) {
             auto t = std::make_unique<Table>();
             double total = 1.0, folded = 1.0;
@@ -227,6 +233,9 @@ const PeriodicTiling::Table* PeriodicTiling::table(const GridBatch& batch) const
 
 void PeriodicTiling::gridValues(const GridBatch& batch, std::span<double> out) const
 {
+    // A single sample along an axis says nothing about the grid's spacing there (a slice's
+    // layer): such batches would each start a table of their own.
+    if (batch.nx < 2 || batch.ny < 2 || batch.nz < 2) return mChild->gridValues(batch, out);
     const Table* t = table(batch);
     if (!t) return mChild->gridValues(batch, out);
     const int counts[3] = {batch.nx, batch.ny, batch.nz};

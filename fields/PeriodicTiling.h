@@ -23,8 +23,9 @@ namespace voxlat {
 /// period, so a W x W x W domain needs (2 zones + 1 period)^3 evaluations of the child instead
 /// of W^3. The table is built the first time a grid (spacing and phase) is seen, by all threads
 /// that need it, from sample positions that depend only on the grid: results are identical for
-/// any thread count. Batches the table does not cover, or grids whose spacing does not divide the
-/// period, are evaluated by the child. values() and gradients() are the child's; bound() is the
+/// any thread count. Batches the table does not cover, batches one sample thick (slices), grids
+/// whose spacing does not divide the period and grids beyond the first four are evaluated by the
+/// child. values() and gradients() are the child's; bound() is the
 /// child's bound of the box moved into the first period (boxes deep inside repeat, so a sparse
 /// evaluation bounds each distinct leaf once), snapped outwards to 1e-6 mm so the bound depends
 /// only on the box and not on which thread asked first.

@@ -81,6 +81,18 @@ TEST(PeriodicTiling, SpacingThatDoesNotDivideThePeriodEvaluatesTheField)
     const Domain d = Domain::fromBox(Box3{Vec3d(0.0), Vec3d(12.0)}, 0.13);
     EXPECT_EQ(largestLeafDifference(tiled, *b.iso, d), 0.0);
     EXPECT_EQ(tiled.tabledValues(), 0u);
+    // Slice-like batches (one sample in z, layer after layer) start no tables either.
+    std::vector<double> direct(64), viaTiling(64);
+    for (int layer = 0; layer < 20; ++layer) {
+        GridBatch g;
+        g.origin = Vec3d(3.0, 3.0, 0.05 + 0.5 * layer);
+        g.spacing = Vec3d(0.1, 0.1, 1.0);
+        g.nz = 1;
+        tiled.gridValues(g, viaTiling);
+        b.iso->gridValues(g, direct);
+        EXPECT_EQ(viaTiling, direct);
+    }
+    EXPECT_EQ(tiled.tabledValues(), 0u);
 }
 
 TEST(PeriodicTiling, BoundContainsSampledValues)
