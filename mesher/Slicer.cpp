@@ -3,6 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace voxlat {
 
@@ -26,37 +31,44 @@ double squareCoverage(double a, double b, double c)
 /// midpoint, t its direction, L its length).
 double curvatureCorrection(double f, double gx, double gy, double hxx, double hyy, double hxy)
 {
+    // Where the chord meets the pixel's sides u = +-1/2 and v = +-1/2 (one reciprocal per axis,
+    // no loops: this runs for every edge pixel).
     double pts[4][2];
     int n = 0;
-    for (double side : {-0.5, 0.5}) {
-        if (gy != 0.0) {
-            const double v = (-f - gx * side) / gy;
-            if (std::abs(v) <= 0.5) pts[n][0] = side, pts[n++][1] = v;
-        }
-        if (gx != 0.0 && n < 4) {
-            const double u = (-f - gy * side) / gx;
-            if (std::abs(u) <= 0.5) pts[n][0] = u, pts[n++][1] = side;
-        }
+    if (gy != 0.0) {
+        const double inv = 1.0 / gy;
+        const double v0 = (-f + 0.5 * gx) * inv, v1 = (-f - 0.5 * gx) * inv;  // at u = -1/2, +1/2
+        if (std::abs(v0) <= 0.5) pts[n][0] = -0.5, pts[n++][1] = v0;
+        if (std::abs(v1) <= 0.5) pts[n][0] = 0.5, pts[n++][1] = v1;
+    }
+    if (gx != 0.0) {
+        const double inv = 1.0 / gx;
+        const double u0 = (-f + 0.5 * gy) * inv, u1 = (-f - 0.5 * gy) * inv;  // at v = -1/2, +1/2
+        if (std::abs(u0) <= 0.5) pts[n][0] = u0, pts[n++][1] = -0.5;
+        if (std::abs(u1) <= 0.5) pts[n][0] = u1, pts[n++][1] = 0.5;
     }
     if (n < 2) return 0.0;
+    // Two points but for a chord through a corner, which both sides report: keep the farthest pair.
     int a = 0, b = 1;
-    double best = -1.0;
-    for (int i = 0; i < n; ++i)
-        for (int j = i + 1; j < n; ++j) {
-            const double d = sqr(pts[i][0] - pts[j][0]) + sqr(pts[i][1] - pts[j][1]);
-            if (d > best) best = d, a = i, b = j;
-        }
-    const double length = std::sqrt(best);
-    if (length <= 0.0) return 0.0;
+    double best = sqr(pts[0][0] - pts[1][0]) + sqr(pts[0][1] - pts[1][1]);
+    if (n > 2)
+        for (int i = 0; i < n; ++i)
+            for (int j = i + 1; j < n; ++j) {
+                const double d = sqr(pts[i][0] - pts[j][0]) + sqr(pts[i][1] - pts[j][1]);
+                if (d > best) best = d, a = i, b = j;
+            }
+    if (best <= 0.0) return 0.0;
+    // With d the chord (length L = |d|, t = d / L): L m'Hm + L^3/12 t'Ht = L (m'Hm + d'Hd / 12),
+    // and L / |g| is one square root.
     const double mx = 0.5 * (pts[a][0] + pts[b][0]), my = 0.5 * (pts[a][1] + pts[b][1]);
-    const double tx = (pts[b][0] - pts[a][0]) / length, ty = (pts[b][1] - pts[a][1]) / length;
+    const double dx = pts[b][0] - pts[a][0], dy = pts[b][1] - pts[a][1];
     const double mHm = hxx * mx * mx + 2.0 * hxy * mx * my + hyy * my * my;
-    const double tHt = hxx * tx * tx + 2.0 * hxy * tx * ty + hyy * ty * ty;
-    return -(length * mHm + length * length * length / 12.0 * tHt) / (2.0 * std::sqrt(gx * gx + gy * gy));
+    const double dHd = hxx * dx * dx + 2.0 * hxy * dx * dy + hyy * dy * dy;
+    return -0.5 * std::sqrt(best / (gx * gx + gy * gy)) * (mHm + dHd / 12.0);
 }
 
 /// Transposes the 8 x 8 byte matrix held one row per word (little-endian: byte c of r[k] is column c).
-void transpose8x8(std::uint64_t r[8])
+inline void transpose8x8(std::uint64_t r[8])
 {
     auto swap = [](std::uint64_t& a, std::uint64_t& b, int shift, std::uint64_t mask) {
         const std::uint64_t t = ((a >> shift) ^ b) & mask;
@@ -66,6 +78,159 @@ void transpose8x8(std::uint64_t r[8])
     for (int k : {0, 2, 4, 6}) swap(r[k], r[k + 1], 8, 0x00FF00FF00FF00FFull);
     for (int k : {0, 1, 4, 5}) swap(r[k], r[k + 2], 16, 0x0000FFFF0000FFFFull);
     for (int k : {0, 1, 2, 3}) swap(r[k], r[k + 4], 32, 0x00000000FFFFFFFFull);
+}
+
+/// Tile side of the vectorised path for whole tiles (the slicer's default tile).
+constexpr int kLanes = 8;
+
+/// Two doubles and their comparison masks (GCC/Clang vector extensions: SSE2 on x86-64, NEON
+/// elsewhere), written out because the compilers do not vectorise these eight-lane loops.
+using Pair = double __attribute__((vector_size(16)));
+using PairMask = long long __attribute__((vector_size(16)));
+
+inline Pair loadPair(const double* p)
+{
+    Pair v;
+    std::memcpy(&v, p, sizeof v);
+    return v;
+}
+inline Pair absPair(Pair v)
+{
+    return Pair(PairMask(v) & ~PairMask{std::numeric_limits<long long>::min(), std::numeric_limits<long long>::min()});
+}
+/// std::max and std::min per lane.
+inline Pair maxPair(Pair a, Pair b)
+{
+    return a < b ? b : a;
+}
+inline Pair minPair(Pair a, Pair b)
+{
+    return b < a ? b : a;
+}
+/// Bit k set where lane k of @a m is true.
+inline unsigned bitsOf(PairMask m)
+{
+#if defined(__SSE2__)
+    return unsigned(_mm_movemask_pd(__m128d(m)));
+#else
+    return unsigned(m[0] & 1) | unsigned(m[1] & 1) << 1;
+#endif
+}
+
+/// True when every value is finite (x * 0 is NaN for NaN and infinities, 0 otherwise).
+bool allFinite(const double* v, std::size_t n)
+{
+    Pair poison[4] = {};
+    std::size_t k = 0;
+    for (; k + 8 <= n; k += 8)
+        for (int p = 0; p < 4; ++p) poison[p] += loadPair(v + k + 2 * p) * 0.0;
+    double rest = 0.0;
+    for (; k < n; ++k) rest += v[k] * 0.0;
+    const Pair sum = poison[0] + poison[1] + poison[2] + poison[3];
+    return sum[0] == 0.0 && sum[1] == 0.0 && rest == 0.0;
+}
+
+/// Transposes an 8 x 8 bit matrix (byte r of @a m is row r, bit c its column c).
+inline std::uint64_t transposeBits8x8(std::uint64_t m)
+{
+    std::uint64_t t = (m ^ (m >> 7)) & 0x00AA00AA00AA00AAull;
+    m ^= t ^ (t << 7);
+    t = (m ^ (m >> 14)) & 0x0000CCCC0000CCCCull;
+    m ^= t ^ (t << 14);
+    t = (m ^ (m >> 28)) & 0x00000000F0F0F0F0ull;
+    return m ^ t ^ (t << 28);
+}
+
+/// Eight bytes, 0xFF where bit k of @a bits is set (byte k).
+inline std::uint64_t bytesOfBits(unsigned bits)
+{
+    std::uint64_t spread = ((bits * 0x8040201008040201ull) >> 7) & 0x0101010101010101ull;  // bit k -> byte 7 - k
+    spread = __builtin_bswap64(spread);                                                    // byte k
+    return spread * 0xFF;
+}
+
+/// Decides the pixels of a kLanes x kLanes tile that lies wholly inside the part's box as
+/// Slicer::edgeTile's per-pixel tests would, two lanes at a time. A pixel is decided when it is
+/// sure (|f| above the largest corner difference of its four cells: no sign change and no boundary
+/// within its 3x3 neighbourhood) or far (the field is locally linear and its linearised edge misses
+/// the pixel: the slow path's first exit, with the same expressions). The whole tile is tried
+/// first: min |f| over its pixels above the largest difference of every cell around them, with
+/// one sign, makes every pixel sure. Decided pixels are written (255 inside, 0 outside); the
+/// others are listed in @a slowList as a * kLanes + b. @a values and @a cells as in edgeTile.
+/// Every value must be finite (NaN and infinities take the general path). Returns the number of
+/// decided pixels plus 65536 times the decided inside ones.
+int decideFullTile(const double* values, int stride, const double* cells, double linearTolerance, std::uint8_t* pixels,
+                   std::size_t rowStride, std::uint16_t* slowList, int& slowCount)
+{
+    constexpr int kPairs = kLanes / 2;
+    constexpr double kInf = std::numeric_limits<double>::infinity();
+    Pair lo[kPairs], hi[kPairs], cellMax[kPairs];
+    for (int p = 0; p < kPairs; ++p) lo[p] = Pair{kInf, kInf}, hi[p] = -lo[p], cellMax[p] = Pair{0.0, 0.0};
+    for (int a = 0; a < kLanes; ++a) {
+        const double* f = values + std::size_t(a + 1) * stride + 1;
+        for (int p = 0; p < kPairs; ++p) {
+            lo[p] = minPair(lo[p], loadPair(f + 2 * p));
+            hi[p] = maxPair(hi[p], loadPair(f + 2 * p));
+        }
+    }
+    double cell = 0.0;
+    for (int a = 0; a <= kLanes; ++a) {
+        const double* c = cells + std::size_t(a) * (stride - 1);
+        for (int p = 0; p < kPairs; ++p) cellMax[p] = maxPair(cellMax[p], loadPair(c + 2 * p));
+        cell = std::max(cell, c[kLanes]);
+    }
+    double low = kInf, high = -kInf;
+    for (int p = 0; p < kPairs; ++p)
+        for (int k = 0; k < 2; ++k) {
+            low = std::min(low, lo[p][k]);
+            high = std::max(high, hi[p][k]);
+            cell = std::max(cell, cellMax[p][k]);
+        }
+    if (low > cell || high < -cell) {
+        const std::uint8_t grey = high < 0.0 ? 255 : 0;
+        for (int b = 0; b < kLanes; ++b) std::memset(pixels + std::size_t(b) * rowStride, grey, kLanes);
+        return kLanes * kLanes * (grey ? 65537 : 1);
+    }
+
+    const Pair half{0.5, 0.5}, quarter{0.25, 0.25}, two{2.0, 2.0};
+    const Pair tolerance{linearTolerance, linearTolerance}, margin{0.5 * (1.0 + 1e-9), 0.5 * (1.0 + 1e-9)};
+    std::uint64_t insideBits = 0;  // byte a, bit b: pixel (a, b) decided inside
+    int decided = 0, inside = 0;
+    for (int a = 0; a < kLanes; ++a) {
+        const double* left = values + std::size_t(a) * stride + 1;  // left[b] = v(a, b + 1)
+        const double* centre = left + stride;
+        const double* right = centre + stride;
+        const double* c0 = cells + std::size_t(a) * (stride - 1);
+        const double* c1 = c0 + (stride - 1);
+        unsigned open = 0, in = 0;
+        for (int p = 0; p < kPairs; ++p) {
+            const int b = 2 * p;
+            const Pair f = loadPair(centre + b), up = loadPair(centre + b + 1), down = loadPair(centre + b - 1);
+            const Pair l = loadPair(left + b), r = loadPair(right + b);
+            const Pair bound = maxPair(maxPair(loadPair(c0 + b), loadPair(c0 + b + 1)),
+                                       maxPair(loadPair(c1 + b), loadPair(c1 + b + 1)));
+            const Pair gx = half * (r - l), gy = half * (up - down);
+            const Pair dxx = r + l - two * f, dyy = up + down - two * f;
+            const Pair dxy = quarter * (loadPair(right + b + 1) - loadPair(right + b - 1) - loadPair(left + b + 1) +
+                                        loadPair(left + b - 1));
+            const Pair gradient = absPair(gx) + absPair(gy);
+            const Pair bend = absPair(dxx) + absPair(dyy) + two * absPair(dxy);
+            const PairMask far = (bend <= tolerance * gradient) & (absPair(f) > margin * gradient);
+            const PairMask sure = (absPair(f) > bound) | far;
+            open |= bitsOf(~sure) << b;
+            in |= bitsOf(sure & (f < 0.0)) << b;
+        }
+        insideBits |= std::uint64_t(in) << (8 * a);
+        inside += __builtin_popcount(in);
+        decided += kLanes - __builtin_popcount(open);
+        for (; open != 0; open &= open - 1) slowList[slowCount++] = std::uint16_t(a * kLanes + __builtin_ctz(open));
+    }
+    const std::uint64_t rowBits = transposeBits8x8(insideBits);  // byte b, bit a
+    for (int b = 0; b < kLanes; ++b) {
+        const std::uint64_t row = bytesOfBits(unsigned(rowBits >> (8 * b)) & 0xFF);
+        std::memcpy(pixels + std::size_t(b) * rowStride, &row, kLanes);
+    }
+    return decided + 65536 * inside;
 }
 
 }  // namespace
@@ -217,6 +382,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
     const int tile = std::max(2, mOptions.tile), block = 8 * tile;
     std::vector<double> values, cells, sub;
+    RasterCounts counts;
 
     // Classifies the pixel box [i, i + n) x [j, j + m) of the window: -1 inside, +1 outside, 0 both.
     auto classify = [&](int i, int j, int n, int m) {
@@ -239,7 +405,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         const std::uint64_t tiles = std::uint64_t((bnx + tile - 1) / tile) * ((bny + tile - 1) / tile);
         if (side != 0) {
             if (side < 0) fill(bi, bj, bnx, bny);
-            if (stats) (side < 0 ? stats->tilesInside : stats->tilesOutside) += tiles;
+            (side < 0 ? counts.tilesInside : counts.tilesOutside) += tiles;
             return;
         }
         // One batch for the block's pixel centres and a one-pixel halo: per-axis terms are shared
@@ -253,7 +419,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         grid.nz = 1;
         values.resize(grid.size());
         mField.gridValues(grid, values);
-        if (stats) stats->pixelsEvaluated += std::uint64_t(bnx) * bny;
+        counts.pixelsEvaluated += std::uint64_t(bnx) * bny;
         // The largest difference between the four corners of each grid cell (both axes and both
         // diagonals), for edgeTile's fast pass; written to vectorize.
         const int cy = grid.ny - 1;
@@ -268,13 +434,14 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
                 e[b] = std::max(std::max(d0, d1), std::max(d2, d3));
             }
         }
+        const bool finite = allFinite(values.data(), values.size());
         for (int tj = bj; tj < bj + bny; tj += tile)
             for (int ti = bi; ti < bi + bnx; ti += tile) {
                 const int tnx = std::min(tile, bi + bnx - ti), tny = std::min(tile, bj + bny - tj);
                 const int tside =
                     edgeTile(z, ti, tj, tnx, tny, out, &values[std::size_t(ti - bi) * grid.ny + (tj - bj)], grid.ny,
-                             &cells[std::size_t(ti - bi) * cy + (tj - bj)], sub, stats);
-                if (stats) ++(tside < 0 ? stats->tilesInside : tside > 0 ? stats->tilesOutside : stats->tilesEdge);
+                             &cells[std::size_t(ti - bi) * cy + (tj - bj)], finite, sub, counts);
+                ++(tside < 0 ? counts.tilesInside : tside > 0 ? counts.tilesOutside : counts.tilesEdge);
             }
     };
     // Blocks of 8 x 8 tiles, culled by their quarters (4 x 4 tiles): a block whose quarters all
@@ -307,10 +474,17 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
                     decideBlock(qi, qj, std::min(half, bi + bnx - qi), std::min(half, bj + bny - qj),
                                 quarterSide[quarters++]);
         }
+    if (stats) {
+        stats->tilesInside += counts.tilesInside;
+        stats->tilesOutside += counts.tilesOutside;
+        stats->tilesEdge += counts.tilesEdge;
+        stats->pixelsEvaluated += counts.pixelsEvaluated;
+        stats->pixelsSupersampled += counts.pixelsSupersampled;
+    }
 }
 
 int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, const double* values, int stride,
-                     const double* cells, std::vector<double>& sub, RasterStats* stats) const
+                     const double* cells, bool finite, std::vector<double>& sub, RasterCounts& counts) const
 {
     const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
     // values: the pixel centres of the tile plus a one-pixel halo (column a of the halo grid at
@@ -349,7 +523,20 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
     const std::size_t rowStride = std::size_t(mNx);
     std::uint8_t* const tilePixels = out.pixels.data() + std::size_t(tj) * rowStride + ti;
     const double partMinX = mPart.min.x() - slackX, partMaxX = mPart.max.x() + slackX;
-    for (int a = 0; a < tnx; ++a) {
+    bool tileInPart = rowsListed && tnx == kLanes && tny == kLanes;
+    for (int b = 0; tileInPart && b < tny; ++b) tileInPart = rowInPart[b];
+    for (int a : {0, tnx - 1}) {
+        const double x = centreX(mI0 + ti + a);
+        tileInPart = tileInPart && x - 0.5 * px >= partMinX && x + 0.5 * px <= partMaxX;
+    }
+    const int decided = tileInPart && finite ? decideFullTile(values, stride, cells, mOptions.linearTolerance,
+                                                              tilePixels, rowStride, slowList, slowCount)
+                                             : -1;
+    if (decided >= 0) {
+        sure = decided & 0xffff;
+        sureInside = decided >> 16;
+    }
+    for (int a = 0; decided < 0 && a < tnx; ++a) {
         const double* c0 = cells + std::size_t(a) * (stride - 1);
         const double* c1 = c0 + (stride - 1);
         const double* f = values + std::size_t(a + 1) * stride + 1;
@@ -424,7 +611,7 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
                                                    curvatureCorrection(f, gx, gy, dxx, dyy, dxy),
                                                0.0, 1.0);
             pixel = mOptions.gamma <= 0.0   ? (coverage >= 0.5 ? 255 : 0)
-                    : mOptions.gamma == 1.0 ? std::uint8_t(std::lround(255.0 * coverage))
+                    : mOptions.gamma == 1.0 ? std::uint8_t(255.0 * coverage + 0.5)  // coverage >= 0: lround
                                             : std::uint8_t(std::lround(255.0 * std::pow(coverage, mOptions.gamma)));
             continue;
         }
@@ -448,7 +635,7 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
         }
         pixel = mLevels[inside];
     }
-    if (stats) stats->pixelsSupersampled += supersampled;
+    counts.pixelsSupersampled += supersampled;
     if (sure < tnx * tny) return 0;
     return sureInside == sure ? -1 : sureInside == 0 ? 1 : 0;
 }

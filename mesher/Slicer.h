@@ -77,6 +77,12 @@ struct RasterStats {
     std::atomic<std::uint64_t> pixelsEvaluated{0}, pixelsSupersampled{0};
 };
 
+/// Plain counters of one layer, added to RasterStats once per layer: atomics updated per tile
+/// would bounce their cache line between the threads.
+struct RasterCounts {
+    std::uint64_t tilesInside = 0, tilesOutside = 0, tilesEdge = 0, pixelsEvaluated = 0, pixelsSupersampled = 0;
+};
+
 /// Rasterizes slices of one field (negative inside), clipped to the part box.
 class Slicer {
 public:
@@ -103,10 +109,11 @@ public:
 
 private:
     /// Decides the pixels of one tile from its centre values (with a one-pixel halo, column-major
-    /// with @a stride) and the largest corner difference of each halo cell (@a cells); returns -1 (+1) if every pixel
-    /// was surely inside (outside), else 0.
+    /// with @a stride) and the largest corner difference of each halo cell (@a cells); @a finite says
+    /// that every value of the batch is finite. Returns -1 (+1) if every pixel was surely inside
+    /// (outside), else 0.
     int edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, const double* values, int stride,
-                 const double* cells, std::vector<double>& sub, RasterStats* stats) const;
+                 const double* cells, bool finite, std::vector<double>& sub, RasterCounts& counts) const;
 
     const FieldNode& mField;
     Box3 mPart;
