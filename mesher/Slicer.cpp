@@ -83,51 +83,54 @@ inline void transpose8x8(std::uint64_t r[8])
 /// Tile side of the vectorised path for whole tiles (the slicer's default tile).
 constexpr int kLanes = 8;
 
-/// Two doubles and their comparison masks (GCC/Clang vector extensions: SSE2 on x86-64, NEON
-/// elsewhere), written out because the compilers do not vectorise these eight-lane loops.
-using Pair = double __attribute__((vector_size(16)));
-using PairMask = long long __attribute__((vector_size(16)));
+/// Four floats and their comparison masks (GCC/Clang vector extensions: SSE on x86-64, NEON
+/// elsewhere), written out because the compilers do not vectorise the eight-lane loops below.
+/// The tile tests run in single precision: they only decide which pixels are sure (a rounding
+/// there moves a pixel between the sure and the exact path, both of which give it the same grey
+/// but in a razor-thin case), and four lanes per vector halve their cost.
+using Quad = float __attribute__((vector_size(16)));
+using QuadMask = int __attribute__((vector_size(16)));
 
-inline Pair loadPair(const double* p)
+inline Quad loadQuad(const float* p)
 {
-    Pair v;
+    Quad v;
     std::memcpy(&v, p, sizeof v);
     return v;
 }
-inline Pair absPair(Pair v)
+inline Quad absQuad(Quad v)
 {
-    return Pair(PairMask(v) & ~PairMask{std::numeric_limits<long long>::min(), std::numeric_limits<long long>::min()});
+    return Quad(QuadMask(v) & 0x7fffffff);
 }
 /// std::max and std::min per lane.
-inline Pair maxPair(Pair a, Pair b)
+inline Quad maxQuad(Quad a, Quad b)
 {
     return a < b ? b : a;
 }
-inline Pair minPair(Pair a, Pair b)
+inline Quad minQuad(Quad a, Quad b)
 {
     return b < a ? b : a;
 }
 /// Bit k set where lane k of @a m is true.
-inline unsigned bitsOf(PairMask m)
+inline unsigned bitsOf(QuadMask m)
 {
 #if defined(__SSE2__)
-    return unsigned(_mm_movemask_pd(__m128d(m)));
+    return unsigned(_mm_movemask_ps(__m128(m)));
 #else
-    return unsigned(m[0] & 1) | unsigned(m[1] & 1) << 1;
+    return unsigned(m[0] & 1) | unsigned(m[1] & 1) << 1 | unsigned(m[2] & 1) << 2 | unsigned(m[3] & 1) << 3;
 #endif
 }
 
 /// True when every value is finite (x * 0 is NaN for NaN and infinities, 0 otherwise).
-bool allFinite(const double* v, std::size_t n)
+bool allFinite(const float* v, std::size_t n)
 {
-    Pair poison[4] = {};
+    Quad poison[2] = {};
     std::size_t k = 0;
     for (; k + 8 <= n; k += 8)
-        for (int p = 0; p < 4; ++p) poison[p] += loadPair(v + k + 2 * p) * 0.0;
-    double rest = 0.0;
-    for (; k < n; ++k) rest += v[k] * 0.0;
-    const Pair sum = poison[0] + poison[1] + poison[2] + poison[3];
-    return sum[0] == 0.0 && sum[1] == 0.0 && rest == 0.0;
+        for (int q = 0; q < 2; ++q) poison[q] += loadQuad(v + k + 4 * q) * 0.0f;
+    float rest = 0.0f;
+    for (; k < n; ++k) rest += v[k] * 0.0f;
+    const Quad sum = poison[0] + poison[1];
+    return sum[0] == 0.0f && sum[1] == 0.0f && sum[2] == 0.0f && sum[3] == 0.0f && rest == 0.0f;
 }
 
 /// Transposes an 8 x 8 bit matrix (byte r of @a m is row r, bit c its column c).
@@ -150,75 +153,75 @@ inline std::uint64_t bytesOfBits(unsigned bits)
 }
 
 /// Decides the pixels of a kLanes x kLanes tile that lies wholly inside the part's box as
-/// Slicer::edgeTile's per-pixel tests would, two lanes at a time. A pixel is decided when it is
+/// Slicer::edgeTile's per-pixel tests would, four lanes at a time. A pixel is decided when it is
 /// sure (|f| above the largest corner difference of its four cells: no sign change and no boundary
 /// within its 3x3 neighbourhood) or far (the field is locally linear and its linearised edge misses
-/// the pixel: the slow path's first exit, with the same expressions). The whole tile is tried
-/// first: min |f| over its pixels above the largest difference of every cell around them, with
-/// one sign, makes every pixel sure. Decided pixels are written (255 inside, 0 outside); the
-/// others are listed in @a slowList as a * kLanes + b. @a values and @a cells as in edgeTile.
-/// Every value must be finite (NaN and infinities take the general path). Returns the number of
-/// decided pixels plus 65536 times the decided inside ones.
-int decideFullTile(const double* values, int stride, const double* cells, double linearTolerance, std::uint8_t* pixels,
+/// the pixel: the slow path's first exit). The whole tile is tried first: min |f| over its pixels
+/// above the largest difference of every cell around them, with one sign, makes every pixel sure.
+/// Decided pixels are written (255 inside, 0 outside); the others are listed in @a slowList as
+/// a * kLanes + b. @a values and @a cells as in edgeTile, in single precision; every value must be
+/// finite (NaN and infinities take the general path). Returns the number of decided pixels plus
+/// 65536 times the decided inside ones.
+int decideFullTile(const float* values, int stride, const float* cells, float linearTolerance, std::uint8_t* pixels,
                    std::size_t rowStride, std::uint16_t* slowList, int& slowCount)
 {
-    constexpr int kPairs = kLanes / 2;
-    constexpr double kInf = std::numeric_limits<double>::infinity();
-    Pair lo[kPairs], hi[kPairs], cellMax[kPairs];
-    for (int p = 0; p < kPairs; ++p) lo[p] = Pair{kInf, kInf}, hi[p] = -lo[p], cellMax[p] = Pair{0.0, 0.0};
+    constexpr int kQuads = kLanes / 4;
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    Quad lo[kQuads], hi[kQuads], cellMax[kQuads];
+    for (int q = 0; q < kQuads; ++q) lo[q] = Quad{} + kInf, hi[q] = -lo[q], cellMax[q] = Quad{};
     for (int a = 0; a < kLanes; ++a) {
-        const double* f = values + std::size_t(a + 1) * stride + 1;
-        for (int p = 0; p < kPairs; ++p) {
-            lo[p] = minPair(lo[p], loadPair(f + 2 * p));
-            hi[p] = maxPair(hi[p], loadPair(f + 2 * p));
+        const float* f = values + std::size_t(a + 1) * stride + 1;
+        for (int q = 0; q < kQuads; ++q) {
+            lo[q] = minQuad(lo[q], loadQuad(f + 4 * q));
+            hi[q] = maxQuad(hi[q], loadQuad(f + 4 * q));
         }
     }
-    double cell = 0.0;
+    float cell = 0.0f;
     for (int a = 0; a <= kLanes; ++a) {
-        const double* c = cells + std::size_t(a) * (stride - 1);
-        for (int p = 0; p < kPairs; ++p) cellMax[p] = maxPair(cellMax[p], loadPair(c + 2 * p));
+        const float* c = cells + std::size_t(a) * (stride - 1);
+        for (int q = 0; q < kQuads; ++q) cellMax[q] = maxQuad(cellMax[q], loadQuad(c + 4 * q));
         cell = std::max(cell, c[kLanes]);
     }
-    double low = kInf, high = -kInf;
-    for (int p = 0; p < kPairs; ++p)
-        for (int k = 0; k < 2; ++k) {
-            low = std::min(low, lo[p][k]);
-            high = std::max(high, hi[p][k]);
-            cell = std::max(cell, cellMax[p][k]);
+    float low = kInf, high = -kInf;
+    for (int q = 0; q < kQuads; ++q)
+        for (int k = 0; k < 4; ++k) {
+            low = std::min(low, lo[q][k]);
+            high = std::max(high, hi[q][k]);
+            cell = std::max(cell, cellMax[q][k]);
         }
     if (low > cell || high < -cell) {
-        const std::uint8_t grey = high < 0.0 ? 255 : 0;
+        const std::uint8_t grey = high < 0.0f ? 255 : 0;
         for (int b = 0; b < kLanes; ++b) std::memset(pixels + std::size_t(b) * rowStride, grey, kLanes);
         return kLanes * kLanes * (grey ? 65537 : 1);
     }
 
-    const Pair half{0.5, 0.5}, quarter{0.25, 0.25}, two{2.0, 2.0};
-    const Pair tolerance{linearTolerance, linearTolerance}, margin{0.5 * (1.0 + 1e-9), 0.5 * (1.0 + 1e-9)};
+    // The slow path's margin of 1e-9 is below float's resolution: 1e-6 keeps its intent.
+    const float margin = 0.5f * (1.0f + 1e-6f);
     std::uint64_t insideBits = 0;  // byte a, bit b: pixel (a, b) decided inside
     int decided = 0, inside = 0;
     for (int a = 0; a < kLanes; ++a) {
-        const double* left = values + std::size_t(a) * stride + 1;  // left[b] = v(a, b + 1)
-        const double* centre = left + stride;
-        const double* right = centre + stride;
-        const double* c0 = cells + std::size_t(a) * (stride - 1);
-        const double* c1 = c0 + (stride - 1);
+        const float* left = values + std::size_t(a) * stride + 1;  // left[b] = v(a, b + 1)
+        const float* centre = left + stride;
+        const float* right = centre + stride;
+        const float* c0 = cells + std::size_t(a) * (stride - 1);
+        const float* c1 = c0 + (stride - 1);
         unsigned open = 0, in = 0;
-        for (int p = 0; p < kPairs; ++p) {
-            const int b = 2 * p;
-            const Pair f = loadPair(centre + b), up = loadPair(centre + b + 1), down = loadPair(centre + b - 1);
-            const Pair l = loadPair(left + b), r = loadPair(right + b);
-            const Pair bound = maxPair(maxPair(loadPair(c0 + b), loadPair(c0 + b + 1)),
-                                       maxPair(loadPair(c1 + b), loadPair(c1 + b + 1)));
-            const Pair gx = half * (r - l), gy = half * (up - down);
-            const Pair dxx = r + l - two * f, dyy = up + down - two * f;
-            const Pair dxy = quarter * (loadPair(right + b + 1) - loadPair(right + b - 1) - loadPair(left + b + 1) +
-                                        loadPair(left + b - 1));
-            const Pair gradient = absPair(gx) + absPair(gy);
-            const Pair bend = absPair(dxx) + absPair(dyy) + two * absPair(dxy);
-            const PairMask far = (bend <= tolerance * gradient) & (absPair(f) > margin * gradient);
-            const PairMask sure = (absPair(f) > bound) | far;
+        for (int q = 0; q < kQuads; ++q) {
+            const int b = 4 * q;
+            const Quad f = loadQuad(centre + b), up = loadQuad(centre + b + 1), down = loadQuad(centre + b - 1);
+            const Quad l = loadQuad(left + b), r = loadQuad(right + b);
+            const Quad bound = maxQuad(maxQuad(loadQuad(c0 + b), loadQuad(c0 + b + 1)),
+                                       maxQuad(loadQuad(c1 + b), loadQuad(c1 + b + 1)));
+            const Quad gx = 0.5f * (r - l), gy = 0.5f * (up - down);
+            const Quad dxx = r + l - 2.0f * f, dyy = up + down - 2.0f * f;
+            const Quad dxy = 0.25f * (loadQuad(right + b + 1) - loadQuad(right + b - 1) - loadQuad(left + b + 1) +
+                                      loadQuad(left + b - 1));
+            const Quad gradient = absQuad(gx) + absQuad(gy);
+            const Quad bend = absQuad(dxx) + absQuad(dyy) + 2.0f * absQuad(dxy);
+            const QuadMask far = (bend <= linearTolerance * gradient) & (absQuad(f) > margin * gradient);
+            const QuadMask sure = (absQuad(f) > bound) | far;
             open |= bitsOf(~sure) << b;
-            in |= bitsOf(sure & (f < 0.0)) << b;
+            in |= bitsOf(sure & (f < 0.0f)) << b;
         }
         insideBits |= std::uint64_t(in) << (8 * a);
         inside += __builtin_popcount(in);
@@ -381,8 +384,10 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     if (z < mPart.min.z() || z > mPart.max.z()) return;
     const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
     const int tile = std::max(2, mOptions.tile), block = 8 * tile;
-    std::vector<double> values, cells, sub;
+    std::vector<double> values, sub;
+    std::vector<float> single, cells;  // the values in single precision and their cells, for the tile tests
     RasterCounts counts;
+    int quartersTried = 0, quartersCulled = 0;
 
     // Classifies the pixel box [i, i + n) x [j, j + m) of the window: -1 inside, +1 outside, 0 both.
     auto classify = [&](int i, int j, int n, int m) {
@@ -423,23 +428,26 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         // The largest difference between the four corners of each grid cell (both axes and both
         // diagonals), for edgeTile's fast pass; written to vectorize.
         const int cy = grid.ny - 1;
+        single.resize(values.size());
+        for (std::size_t k = 0; k < values.size(); ++k) single[k] = float(values[k]);
         cells.resize(std::size_t(grid.nx - 1) * cy);
         for (int a = 0; a + 1 < grid.nx; ++a) {
-            const double* c0 = &values[std::size_t(a) * grid.ny];
-            const double* c1 = c0 + grid.ny;
-            double* e = &cells[std::size_t(a) * cy];
+            const float* c0 = &single[std::size_t(a) * grid.ny];
+            const float* c1 = c0 + grid.ny;
+            float* e = &cells[std::size_t(a) * cy];
             for (int b = 0; b < cy; ++b) {
-                const double d0 = std::abs(c1[b] - c0[b]), d1 = std::abs(c0[b + 1] - c0[b]);
-                const double d2 = std::abs(c1[b + 1] - c0[b]), d3 = std::abs(c1[b] - c0[b + 1]);
+                const float d0 = std::abs(c1[b] - c0[b]), d1 = std::abs(c0[b + 1] - c0[b]);
+                const float d2 = std::abs(c1[b + 1] - c0[b]), d3 = std::abs(c1[b] - c0[b + 1]);
                 e[b] = std::max(std::max(d0, d1), std::max(d2, d3));
             }
         }
-        const bool finite = allFinite(values.data(), values.size());
+        const bool finite = allFinite(single.data(), single.size());
         for (int tj = bj; tj < bj + bny; tj += tile)
             for (int ti = bi; ti < bi + bnx; ti += tile) {
                 const int tnx = std::min(tile, bi + bnx - ti), tny = std::min(tile, bj + bny - tj);
                 const int tside =
-                    edgeTile(z, ti, tj, tnx, tny, out, &values[std::size_t(ti - bi) * grid.ny + (tj - bj)], grid.ny,
+                    edgeTile(z, ti, tj, tnx, tny, out, &values[std::size_t(ti - bi) * grid.ny + (tj - bj)],
+                             &single[std::size_t(ti - bi) * grid.ny + (tj - bj)], grid.ny,
                              &cells[std::size_t(ti - bi) * cy + (tj - bj)], finite, sub, counts);
                 ++(tside < 0 ? counts.tilesInside : tside > 0 ? counts.tilesOutside : counts.tilesEdge);
             }
@@ -455,6 +463,13 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
                 decideBlock(bi, bj, bnx, bny, side);
                 continue;
             }
+            // Quarters are culled separately only while that pays: in a lattice every quarter
+            // straddles the surface and its bounds are wasted work. Decided per layer, in the
+            // layer's own block order, so the bytes do not depend on the threads.
+            if (quartersTried >= 64 && 8 * quartersCulled < quartersTried) {
+                decideBlock(bi, bj, bnx, bny, 0);
+                continue;
+            }
             const int half = block / 2;
             int quarterSide[4], quarters = 0;
             bool allStraddle = true;
@@ -464,6 +479,8 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
                         classify(qi, qj, std::min(half, bi + bnx - qi), std::min(half, bj + bny - qj));
                     allStraddle &= quarterSide[quarters++] == 0;
                 }
+            quartersTried += quarters;
+            for (int q = 0; q < quarters; ++q) quartersCulled += quarterSide[q] != 0;
             if (allStraddle) {
                 decideBlock(bi, bj, bnx, bny, 0);
                 continue;
@@ -483,8 +500,9 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     }
 }
 
-int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, const double* values, int stride,
-                     const double* cells, bool finite, std::vector<double>& sub, RasterCounts& counts) const
+int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, const double* values,
+                     const float* single, int stride, const float* cells, bool finite, std::vector<double>& sub,
+                     RasterCounts& counts) const
 {
     const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
     // values: the pixel centres of the tile plus a one-pixel halo (column a of the halo grid at
@@ -529,7 +547,7 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
         const double x = centreX(mI0 + ti + a);
         tileInPart = tileInPart && x - 0.5 * px >= partMinX && x + 0.5 * px <= partMaxX;
     }
-    const int decided = tileInPart && finite ? decideFullTile(values, stride, cells, mOptions.linearTolerance,
+    const int decided = tileInPart && finite ? decideFullTile(single, stride, cells, float(mOptions.linearTolerance),
                                                               tilePixels, rowStride, slowList, slowCount)
                                              : -1;
     if (decided >= 0) {
@@ -537,8 +555,8 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
         sureInside = decided >> 16;
     }
     for (int a = 0; decided < 0 && a < tnx; ++a) {
-        const double* c0 = cells + std::size_t(a) * (stride - 1);
-        const double* c1 = c0 + (stride - 1);
+        const float* c0 = cells + std::size_t(a) * (stride - 1);
+        const float* c1 = c0 + (stride - 1);
         const double* f = values + std::size_t(a + 1) * stride + 1;
         std::uint8_t* pixel = tilePixels + a;
         const double x = centreX(mI0 + ti + a);

@@ -109,11 +109,12 @@ public:
 
 private:
     /// Decides the pixels of one tile from its centre values (with a one-pixel halo, column-major
-    /// with @a stride) and the largest corner difference of each halo cell (@a cells); @a finite says
-    /// that every value of the batch is finite. Returns -1 (+1) if every pixel was surely inside
+    /// with @a stride; @a single holds them in single precision for the vectorised tests) and the
+    /// largest corner difference of each halo cell (@a cells); @a finite says that every value of
+    /// the batch is finite. Returns -1 (+1) if every pixel was surely inside
     /// (outside), else 0.
-    int edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, const double* values, int stride,
-                 const double* cells, bool finite, std::vector<double>& sub, RasterCounts& counts) const;
+    int edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, const double* values, const float* single,
+                 int stride, const float* cells, bool finite, std::vector<double>& sub, RasterCounts& counts) const;
 
     const FieldNode& mField;
     Box3 mPart;
