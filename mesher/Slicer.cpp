@@ -152,6 +152,56 @@ inline std::uint64_t bytesOfBits(unsigned bits)
     return spread * 0xFF;
 }
 
+inline Quad sqrtQuad(Quad v)
+{
+#if defined(__SSE2__)
+    return Quad(_mm_sqrt_ps(__m128(v)));
+#else
+    return Quad{std::sqrt(v[0]), std::sqrt(v[1]), std::sqrt(v[2]), std::sqrt(v[3])};
+#endif
+}
+
+/// squareCoverage plus curvatureCorrection, clamped to [0, 1], four pixels at once: the same
+/// formulas with selects for their branches. The chord's ends are the first side crossing and
+/// the crossing farthest from it (a chord through a corner is reported by both of its sides).
+inline Quad edgeCoverage(Quad f, Quad gx, Quad gy, Quad hxx, Quad hyy, Quad hxy)
+{
+    const Quad zero{}, one = zero + 1.0f, half = zero + 0.5f;
+    const Quad ax = absQuad(gx), ay = absQuad(gy);
+    const Quad a = minQuad(ax, ay), b = maxQuad(ax, ay), c = 0.5f * (ax + ay) - f;
+    auto ramp = [&](Quad x) {
+        const Quad p = maxQuad(x, zero);
+        return p * p;
+    };
+    const Quad ab2 = 2.0f * a * b;
+    Quad area = (ramp(c) - ramp(c - a) - ramp(c - b) + ramp(c - a - b)) / (ab2 > zero ? ab2 : one);
+    area = a < 1e-4f * b ? c / (b > zero ? b : one) : area;  // an edge along a pixel side
+    area = b <= zero ? (c > zero ? one : zero) : area;
+
+    const QuadMask hasY = gy != zero, hasX = gx != zero;
+    const Quad invY = one / (hasY ? gy : one), invX = one / (hasX ? gx : one);
+    const Quad v0 = (0.5f * gx - f) * invY, v1 = (-0.5f * gx - f) * invY;  // at u = -1/2, +1/2
+    const Quad u0 = (0.5f * gy - f) * invX, u1 = (-0.5f * gy - f) * invX;  // at v = -1/2, +1/2
+    const Quad px[4] = {-half, half, u0, u1}, py[4] = {v0, v1, -half, half};
+    const QuadMask valid[4] = {hasY & (absQuad(v0) <= half), hasY & (absQuad(v1) <= half), hasX & (absQuad(u0) <= half),
+                               hasX & (absQuad(u1) <= half)};
+    Quad sx = px[3], sy = py[3];
+    for (int k = 2; k >= 0; --k) sx = valid[k] ? px[k] : sx, sy = valid[k] ? py[k] : sy;
+    Quad ex = sx, ey = sy, best = zero;
+    for (int k = 0; k < 4; ++k) {
+        const Quad d = (px[k] - sx) * (px[k] - sx) + (py[k] - sy) * (py[k] - sy);
+        const QuadMask take = valid[k] & (d > best);
+        best = take ? d : best, ex = take ? px[k] : ex, ey = take ? py[k] : ey;
+    }
+    const Quad mx = 0.5f * (sx + ex), my = 0.5f * (sy + ey), dx = ex - sx, dy = ey - sy;
+    const Quad mHm = hxx * mx * mx + 2.0f * hxy * mx * my + hyy * my * my;
+    const Quad dHd = hxx * dx * dx + 2.0f * hxy * dx * dy + hyy * dy * dy;
+    const Quad g2 = gx * gx + gy * gy;
+    const Quad bend = -0.5f * sqrtQuad(best / (g2 > zero ? g2 : one)) * (mHm + dHd / 12.0f);
+    const Quad coverage = area + (best > zero ? bend : zero);
+    return minQuad(maxQuad(coverage, zero), one);
+}
+
 /// Decides the pixels of a kLanes x kLanes tile that lies wholly inside the part's box as
 /// Slicer::edgeTile's per-pixel tests would, four lanes at a time. A pixel is decided when it is
 /// sure (|f| above the largest corner difference of its four cells: no sign change and no boundary
@@ -159,11 +209,14 @@ inline std::uint64_t bytesOfBits(unsigned bits)
 /// the pixel: the slow path's first exit). The whole tile is tried first: min |f| over its pixels
 /// above the largest difference of every cell around them, with one sign, makes every pixel sure.
 /// Decided pixels are written (255 inside, 0 outside); the others are listed in @a slowList as
-/// a * kLanes + b. @a values and @a cells as in edgeTile, in single precision; every value must be
-/// finite (NaN and infinities take the general path). Returns the number of decided pixels plus
-/// 65536 times the decided inside ones.
-int decideFullTile(const float* values, int stride, const float* cells, float linearTolerance, std::uint8_t* pixels,
-                   std::size_t rowStride, std::uint16_t* slowList, int& slowCount)
+/// a * kLanes + b. With @a greyEdges (anti-aliasing with gamma 1) the pixels the boundary may pass
+/// through get the slow path's next tests here too: the 3x3 neighbourhood, then the coverage of
+/// the linearised edge with its curvature correction (edgeCoverage); only pixels where the field
+/// bends too much for that (sub-sampled) are listed. @a values and @a cells as in edgeTile, in
+/// single precision; every value must be finite (NaN and infinities take the general path).
+/// Returns the number of pixels decided as sure plus 65536 times the sure inside ones.
+int decideFullTile(const float* values, int stride, const float* cells, float linearTolerance, bool greyEdges,
+                   std::uint8_t* pixels, std::size_t rowStride, std::uint16_t* slowList, int& slowCount)
 {
     constexpr int kQuads = kLanes / 4;
     constexpr float kInf = std::numeric_limits<float>::infinity();
@@ -198,14 +251,15 @@ int decideFullTile(const float* values, int stride, const float* cells, float li
     // The slow path's margin of 1e-9 is below float's resolution: 1e-6 keeps its intent.
     const float margin = 0.5f * (1.0f + 1e-6f);
     std::uint64_t insideBits = 0;  // byte a, bit b: pixel (a, b) decided inside
-    int decided = 0, inside = 0;
+    int decided = 0, inside = 0, edgeCount = 0;
+    std::uint8_t edgeIndex[kLanes * kLanes], edgeGrey[kLanes * kLanes];  // grey edge pixels, a * kLanes + b
     for (int a = 0; a < kLanes; ++a) {
         const float* left = values + std::size_t(a) * stride + 1;  // left[b] = v(a, b + 1)
         const float* centre = left + stride;
         const float* right = centre + stride;
         const float* c0 = cells + std::size_t(a) * (stride - 1);
         const float* c1 = c0 + (stride - 1);
-        unsigned open = 0, in = 0;
+        unsigned open = 0, in = 0, covered = 0;
         for (int q = 0; q < kQuads; ++q) {
             const int b = 4 * q;
             const Quad f = loadQuad(centre + b), up = loadQuad(centre + b + 1), down = loadQuad(centre + b - 1);
@@ -218,14 +272,40 @@ int decideFullTile(const float* values, int stride, const float* cells, float li
                                       loadQuad(left + b - 1));
             const Quad gradient = absQuad(gx) + absQuad(gy);
             const Quad bend = absQuad(dxx) + absQuad(dyy) + 2.0f * absQuad(dxy);
-            const QuadMask far = (bend <= linearTolerance * gradient) & (absQuad(f) > margin * gradient);
-            const QuadMask sure = (absQuad(f) > bound) | far;
+            const QuadMask linear = bend <= linearTolerance * gradient;
+            const QuadMask far = linear & (absQuad(f) > margin * gradient);
+            QuadMask sure = (absQuad(f) > bound) | far;
+            if (greyEdges && bitsOf(~sure) != 0) {
+                // The 3x3 test: no sign change and |f| above every difference to a neighbour.
+                const Quad lu = loadQuad(left + b + 1), ld = loadQuad(left + b - 1);
+                const Quad ru = loadQuad(right + b + 1), rd = loadQuad(right + b - 1);
+                const Quad maxDiff = maxQuad(
+                    maxQuad(maxQuad(absQuad(l - f), absQuad(r - f)), maxQuad(absQuad(up - f), absQuad(down - f))),
+                    maxQuad(maxQuad(absQuad(lu - f), absQuad(ld - f)), maxQuad(absQuad(ru - f), absQuad(rd - f))));
+                const QuadMask negative = f < 0.0f;
+                const QuadMask sameSign =
+                    ~(((l < 0.0f) ^ negative) | ((r < 0.0f) ^ negative) | ((up < 0.0f) ^ negative) |
+                      ((down < 0.0f) ^ negative) | ((lu < 0.0f) ^ negative) | ((ld < 0.0f) ^ negative) |
+                      ((ru < 0.0f) ^ negative) | ((rd < 0.0f) ^ negative));
+                sure |= sameSign & (absQuad(f) > maxDiff);
+                const unsigned grey = bitsOf(~sure & linear);
+                if (grey != 0) {
+                    const Quad coverage = edgeCoverage(f, gx, gy, dxx, dyy, dxy);
+                    for (unsigned m = grey; m != 0; m &= m - 1) {
+                        const int k = __builtin_ctz(m);
+                        edgeIndex[edgeCount] = std::uint8_t(a * kLanes + b + k);
+                        edgeGrey[edgeCount++] = std::uint8_t(255.0f * coverage[k] + 0.5f);
+                    }
+                }
+                covered |= grey << b;
+            }
             open |= bitsOf(~sure) << b;
             in |= bitsOf(sure & (f < 0.0f)) << b;
         }
+        open &= ~covered;
         insideBits |= std::uint64_t(in) << (8 * a);
         inside += __builtin_popcount(in);
-        decided += kLanes - __builtin_popcount(open);
+        decided += kLanes - __builtin_popcount(open | covered);
         for (; open != 0; open &= open - 1) slowList[slowCount++] = std::uint16_t(a * kLanes + __builtin_ctz(open));
     }
     const std::uint64_t rowBits = transposeBits8x8(insideBits);  // byte b, bit a
@@ -233,6 +313,8 @@ int decideFullTile(const float* values, int stride, const float* cells, float li
         const std::uint64_t row = bytesOfBits(unsigned(rowBits >> (8 * b)) & 0xFF);
         std::memcpy(pixels + std::size_t(b) * rowStride, &row, kLanes);
     }
+    for (int e = 0; e < edgeCount; ++e)
+        pixels[std::size_t(edgeIndex[e] % kLanes) * rowStride + edgeIndex[e] / kLanes] = edgeGrey[e];
     return decided + 65536 * inside;
 }
 
@@ -548,6 +630,7 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
         tileInPart = tileInPart && x - 0.5 * px >= partMinX && x + 0.5 * px <= partMaxX;
     }
     const int decided = tileInPart && finite ? decideFullTile(single, stride, cells, float(mOptions.linearTolerance),
+                                                              mOptions.supersample > 0 && mOptions.gamma == 1.0,
                                                               tilePixels, rowStride, slowList, slowCount)
                                              : -1;
     if (decided >= 0) {
