@@ -69,8 +69,8 @@ void TpmsField::values(std::span<const Vec3d> points, std::span<double> out) con
 {
     for (std::size_t n = 0; n < points.size(); ++n) {
         const Vec3d& p = points[n];
-        out[n] = tpmsEquation(mType, trigTerms(mWave[0] * p[0]), trigTerms(mWave[1] * p[1]),
-                              trigTerms(mWave[2] * p[2]));
+        out[n] =
+            tpmsEquation(mType, trigTerms(mWave[0] * p[0]), trigTerms(mWave[1] * p[1]), trigTerms(mWave[2] * p[2]));
     }
 }
 
@@ -127,27 +127,55 @@ void TpmsField::gridValues(const GridBatch& batch, std::span<double> out) const
     axisTerms(mWave[2], batch.origin[2], batch.spacing[2], batch.nz, tz.data());
     // The surface type is fixed per call: one loop nest per type lets the compiler inline the
     // equation (no switch per point); a single z (slices) drops the innermost loop.
+    // The innermost axis's terms as four arrays (structure of arrays), so the inner loop reads
+    // each term contiguously and vectorises.
+    const bool slices = batch.nz == 1;
+    const TrigTerms<double>* inner = slices ? ty.data() : tz.data();
+    const int innerCount = slices ? batch.ny : batch.nz;
+    std::array<double, kMax> is, ic, is2, ic2;
+    for (int k = 0; k < innerCount; ++k)
+        is[k] = inner[k].s, ic[k] = inner[k].c, is2[k] = inner[k].s2, ic2[k] = inner[k].c2;
     auto fill = [&]<TpmsType kType>() {
-        std::size_t n = 0;
-        if (batch.nz == 1) {
-            for (int i = 0; i < batch.nx; ++i)
-                for (int j = 0; j < batch.ny; ++j) out[n++] = tpmsEquation(kType, tx[i], ty[j], tz[0]);
+        double* o = out.data();
+        if (slices) {
+            for (int i = 0; i < batch.nx; ++i, o += innerCount)
+                for (int j = 0; j < innerCount; ++j)
+                    o[j] = tpmsEquation(kType, tx[i], TrigTerms<double>{is[j], ic[j], is2[j], ic2[j]}, tz[0]);
             return;
         }
         for (int i = 0; i < batch.nx; ++i)
-            for (int j = 0; j < batch.ny; ++j)
-                for (int k = 0; k < batch.nz; ++k) out[n++] = tpmsEquation(kType, tx[i], ty[j], tz[k]);
+            for (int j = 0; j < batch.ny; ++j, o += innerCount)
+                for (int k = 0; k < innerCount; ++k)
+                    o[k] = tpmsEquation(kType, tx[i], ty[j], TrigTerms<double>{is[k], ic[k], is2[k], ic2[k]});
     };
     switch (mType) {
-    case TpmsType::Gyroid: fill.operator()<TpmsType::Gyroid>(); break;
-    case TpmsType::SchwarzP: fill.operator()<TpmsType::SchwarzP>(); break;
-    case TpmsType::SchwarzD: fill.operator()<TpmsType::SchwarzD>(); break;
-    case TpmsType::IWP: fill.operator()<TpmsType::IWP>(); break;
-    case TpmsType::Neovius: fill.operator()<TpmsType::Neovius>(); break;
-    case TpmsType::FischerKochS: fill.operator()<TpmsType::FischerKochS>(); break;
-    case TpmsType::Lidinoid: fill.operator()<TpmsType::Lidinoid>(); break;
-    case TpmsType::SplitP: fill.operator()<TpmsType::SplitP>(); break;
-    case TpmsType::FRD: fill.operator()<TpmsType::FRD>(); break;
+        case TpmsType::Gyroid:
+            fill.operator()<TpmsType::Gyroid>();
+            break;
+        case TpmsType::SchwarzP:
+            fill.operator()<TpmsType::SchwarzP>();
+            break;
+        case TpmsType::SchwarzD:
+            fill.operator()<TpmsType::SchwarzD>();
+            break;
+        case TpmsType::IWP:
+            fill.operator()<TpmsType::IWP>();
+            break;
+        case TpmsType::Neovius:
+            fill.operator()<TpmsType::Neovius>();
+            break;
+        case TpmsType::FischerKochS:
+            fill.operator()<TpmsType::FischerKochS>();
+            break;
+        case TpmsType::Lidinoid:
+            fill.operator()<TpmsType::Lidinoid>();
+            break;
+        case TpmsType::SplitP:
+            fill.operator()<TpmsType::SplitP>();
+            break;
+        case TpmsType::FRD:
+            fill.operator()<TpmsType::FRD>();
+            break;
     }
 }
 
@@ -194,7 +222,10 @@ inline double smallCos(double a)
     return 1.0 + a2 * (c2 + a2 * (c4 + a2 * (c6 + a2 * (c8 + a2 * (c10 + a2 * (c12 + a2 * c14))))));
 }
 
-inline TrigTerms<double> termsFrom(double s, double c) { return {s, c, 2.0 * s * c, c * c - s * s}; }
+inline TrigTerms<double> termsFrom(double s, double c)
+{
+    return {s, c, 2.0 * s * c, c * c - s * s};
+}
 }  // namespace
 
 void TpmsField::gridValuesShifted(const GridBatch& batch, std::span<const Vec3d> shift, std::span<double> plus,
@@ -255,8 +286,8 @@ Interval TpmsField::bound(const Box3& box) const
     const Interval z(mWave[2] * box.min[2], mWave[2] * box.max[2]);
     // The double-angle terms only where the equation uses them: each interval cos costs two libm
     // calls, and the slicer and the sparse evaluator ask for bounds of many small boxes.
-    const bool doubleAngles = mType != TpmsType::Gyroid && mType != TpmsType::SchwarzP &&
-                              mType != TpmsType::SchwarzD && mType != TpmsType::Neovius;
+    const bool doubleAngles = mType != TpmsType::Gyroid && mType != TpmsType::SchwarzP && mType != TpmsType::SchwarzD &&
+                              mType != TpmsType::Neovius;
     auto terms = [&](Interval a) {
         if (doubleAngles) return trigTerms(a);
         const Interval unused(0.0, 0.0);

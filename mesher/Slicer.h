@@ -7,11 +7,19 @@
 /// (SLA/RasterBase Trafo): portrait swaps the axes and toggles the x mirror, and the raster's
 /// y axis is flipped unless mirror_y (row 0 is the top of the image).
 ///
-/// Anti-aliasing is by supersampling: a pixel whose 3x3 neighbourhood of centre values shows the
+/// Anti-aliasing is by area coverage: a pixel whose 3x3 neighbourhood of centre values shows the
 /// boundary may pass through it (a sign change, or |f| no larger than the largest difference to a
-/// neighbour, which for a locally linear field is a sure test) is sampled on an s x s grid of
-/// sub-pixel centres and its coverage is the exact count of inside samples / s^2. The grey level is
-/// 255 * coverage^gamma (gamma 0: a threshold at coverage 1/2, as PrusaSlicer's gamma_correction).
+/// neighbour, which for a locally linear field is a sure test) gets the exact area of the
+/// linearised edge (value and central-difference gradient) in the pixel plus a second-order
+/// curvature correction; where the field bends too much within the pixel, or the part's box cuts
+/// it, an s x s grid of sub-samples is counted instead. The grey level is 255 * coverage^gamma
+/// (gamma 0: a threshold at coverage 1/2, as PrusaSlicer's gamma_correction).
+///
+/// Cost: blocks of 64 x 64 pixels (and their 32 x 32 quarters, while that culls anything) are
+/// culled by bound(); the rest is evaluated as one grid batch per block, and each whole 8 x 8 tile
+/// is decided by four-lane single-precision passes (the whole tile at once where it is surely on
+/// one side, else per pixel: sure, far from the linearised edge, or its coverage), so the scalar
+/// code only sees the pixels that need sub-samples and the tiles the part's box cuts.
 #pragma once
 
 #include "fields/FieldNode.h"
