@@ -55,7 +55,11 @@ std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, d
 /// is @a target of the pieces' weighted voxels, each voxel's share being the exact volume below
 /// the plane through its value with its per-axis changes (central differences; one-sided only on
 /// the faces of the pieces' union, each piece being evaluated with a voxel of margin). Every
-/// voxel of every piece is evaluated (pieces are meant to be small).
+/// voxel of every piece is evaluated, onto a dense array per piece (pieces are meant to be
+/// small). Histograms of where each voxel's coverage begins and ends bracket the level in one
+/// pass; only the voxels the bracket cuts take the cube-plane volume, and regula falsi
+/// (Illinois) closes the bracket. All sums run over fixed chunks in a fixed order: the level is
+/// the same for any thread count.
 DensitySolution solveDensity(const FieldNode& indicator, std::span<const DensityPiece> pieces, double target);
 
 }  // namespace voxlat

@@ -8,6 +8,7 @@
 #include "engine/UnitCells.h"
 #include "fields/IsoRadius.h"
 #include "fields/PeriodicTiling.h"
+#include "fields/PointField.h"
 #include "fields/StrutConvolution.h"
 #include "mesher/MeshCheck.h"
 
@@ -40,6 +41,25 @@ BccBox bccBox(int cells, double size, double sigma)
     b.reach = raw->cutoffRadius(0);
     b.iso = std::make_shared<IsoRadius>(raw, raw->peak(0), sigma, 2.0 * b.reach);
     return b;
+}
+
+/// g = x + 0.3 y: planes at every level, so the cube-plane coverage of each voxel is exact and
+/// the share of [0, 1]^3 below level L is known in closed form.
+struct TiltedPlane final : PointField<TiltedPlane> {
+    template <class T>
+    T eval(const T& x, const T& y, const T&) const
+    {
+        return x + T(0.3) * y;
+    }
+};
+
+/// Share of [0, 1]^3 with x + 0.3 y < L, for 0 <= L <= 1.3.
+double tiltedPlaneShare(double level)
+{
+    if (level <= 0.3) return level * level / 0.6;
+    if (level <= 1.0) return level - 0.15;
+    const double over = level - 1.0;  // the corner x + 0.3 y >= L cut off at x = 1
+    return 1.0 - (0.3 - over) * (0.3 - over) / 0.6;
 }
 
 /// Largest difference between two fields' gridValues over every leaf of @a d.
@@ -176,4 +196,45 @@ TEST(DensityPieces, BoxOfCellsHitsTheTargetOnTheMesh)
     const TriangleMesh& mesh = job.mesh();
     EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.005 * 0.20);
     EXPECT_TRUE(checkTopology(mesh).closedManifold());
+}
+
+TEST(DensityPieces, PlaneFieldGivesTheExactLevel)
+{
+    // The level from the pieces' measure against the closed form, on one piece and on the box
+    // split in two along z (unequal thicknesses, one counted twice against a thinner copy).
+    const TiltedPlane plane;
+    const Domain whole = Domain::fromBox(Box3{Vec3d(0.0), Vec3d(1.0)}, 1.0 / 40);
+    for (const double target : {0.05, 0.2, 0.5, 0.9}) {
+        // Solve share(L) = target for the reference by bisection on the closed form.
+        double lo = 0.0, hi = 1.3;
+        for (int i = 0; i < 100; ++i) (tiltedPlaneShare(0.5 * (lo + hi)) < target ? lo : hi) = 0.5 * (lo + hi);
+        const double exact = 0.5 * (lo + hi);
+        // The samples are stored as floats: about 1e-7 of the values.
+        const DensityPiece one{whole, 1.0};
+        const DensitySolution s1 = solveDensity(plane, std::span(&one, 1), target);
+        EXPECT_NEAR(s1.level, exact, 1e-6) << "target " << target;
+        EXPECT_NEAR(s1.achieved, target, 1e-9);
+        // The field does not depend on z: z in [0, 0.25] counted twice and z in [0.5, 1] once.
+        DensityPiece low{Domain::fromBox(Box3{Vec3d(0.0), Vec3d(1.0, 1.0, 0.25)}, 1.0 / 40), 2.0};
+        DensityPiece high{Domain::fromBox(Box3{Vec3d(0.0, 0.0, 0.5), Vec3d(1.0)}, 1.0 / 40), 1.0};
+        const std::vector<DensityPiece> two{low, high};
+        const DensitySolution s2 = solveDensity(plane, two, target);
+        EXPECT_NEAR(s2.level, exact, 1e-6) << "target " << target;
+        EXPECT_EQ(s2.domainVoxels, whole.voxelCount());
+    }
+}
+
+TEST(DensityPieces, SameLevelForAnyThreadCount)
+{
+    const BccBox b = bccBox(5, 2.0, 0.25);
+    const std::vector<DensityPiece> pieces = periodicPieces(b.box, Vec3d(2.0), b.reach, 0.06);
+    ASSERT_EQ(pieces.size(), 27u);
+    auto solve = [&](int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        return solveDensity(*b.iso, pieces, 0.2);
+    };
+    const DensitySolution one = solve(1), three = solve(3);
+    EXPECT_EQ(one.level, three.level);
+    EXPECT_EQ(one.achieved, three.achieved);
+    EXPECT_NEAR(one.achieved, 0.2, 1e-9);
 }
