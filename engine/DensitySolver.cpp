@@ -542,7 +542,8 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
     return sol;  // unreachable: the last round brackets everything
 }
 
-std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, double reach, double voxel)
+std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, double reach, double voxel,
+                                         std::array<bool, 3> mirror)
 {
     if (!(voxel > 0.0) || std::abs(period[1] - period[0]) > 1e-12 * period[0] ||
         std::abs(period[2] - period[0]) > 1e-12 * period[0])
@@ -551,7 +552,7 @@ std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, d
     const long perPeriod = std::max(1L, long(std::ceil(p / voxel - 1e-9)));
     const double step = p / double(perPeriod);
     struct Segment {
-        double start;  ///< in lattice steps from box.min
+        long start;  ///< in lattice steps from box.min
         long voxels;
         double weight;
     };
@@ -564,9 +565,13 @@ std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, d
         const long total = whole * perPeriod;
         const long folds = (total - 2 * zone) / perPeriod;
         if (folds < 2) return {};
-        segments[a].push_back({0.0, zone, 1.0});
-        segments[a].push_back({double(zone), perPeriod, double(folds)});
-        segments[a].push_back({double(zone + folds * perPeriod), total - zone - folds * perPeriod, 1.0});
+        // Samples between the zones past the last whole period: they repeat the period's first
+        // `extra` samples (all lie at least a zone inside the box).
+        const long extra = total - 2 * zone - folds * perPeriod;
+        segments[a].push_back({0, zone, mirror[a] ? 2.0 : 1.0});
+        if (extra > 0) segments[a].push_back({zone, extra, double(folds + 1)});
+        segments[a].push_back({zone + extra, perPeriod - extra, double(folds)});
+        if (!mirror[a]) segments[a].push_back({total - zone, zone, 1.0});
     }
     std::vector<DensityPiece> pieces;
     for (const Segment& x : segments[0])
@@ -574,11 +579,12 @@ std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, d
             for (const Segment& z : segments[2]) {
                 DensityPiece piece;
                 piece.domain.voxel = step;
-                piece.domain.box.min = box.min + step * Vec3d(x.start, y.start, z.start);
+                piece.domain.box.min = box.min + step * Vec3d(double(x.start), double(y.start), double(z.start));
                 piece.domain.dims = openvdb::Coord(int(x.voxels), int(y.voxels), int(z.voxels));
                 piece.domain.box.max =
                     piece.domain.box.min + step * Vec3d(double(x.voxels), double(y.voxels), double(z.voxels));
                 piece.weight = x.weight * y.weight * z.weight;
+                piece.within = box;
                 pieces.push_back(piece);
             }
     return pieces;
@@ -646,12 +652,14 @@ DensitySolution solveDensity(const FieldNode& indicator, std::span<const Density
     DensitySolution sol;
     // The pieces' union: on its faces the coverage takes one-sided differences, as a solve over
     // the whole box would; elsewhere a margin of one voxel gives the neighbour the box has there.
-    Box3 all = pieces.empty() ? Box3{} : pieces.front().domain.box;
+    // (Or the region the pieces say they measure.)
+    Box3 all = pieces.empty() ? Box3{} : pieces.front().within.value_or(pieces.front().domain.box);
     for (const DensityPiece& piece : pieces)
-        for (int a = 0; a < 3; ++a) {
-            all.min[a] = std::min(all.min[a], piece.domain.box.min[a]);
-            all.max[a] = std::max(all.max[a], piece.domain.box.max[a]);
-        }
+        for (const Box3& b : {piece.domain.box, piece.within.value_or(piece.domain.box)})
+            for (int a = 0; a < 3; ++a) {
+                all.min[a] = std::min(all.min[a], b.min[a]);
+                all.max[a] = std::max(all.max[a], b.max[a]);
+            }
     // Every piece on a dense array (pieces are small), evaluated in 8^3 batches from the corner of
     // its neighbourhood; each batch writes its own samples, so any thread count gives the same values.
     std::vector<DensePiece> dense(pieces.size());

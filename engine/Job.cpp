@@ -147,7 +147,8 @@ void Job::solveLevels()
         if (node.density) {
             const std::vector<DensityPiece> pieces =
                 node.densityPeriod && node.densityBox && node.densityVoxel
-                    ? periodicPieces(*node.densityBox, *node.densityPeriod, node.densityReach, *node.densityVoxel)
+                    ? periodicPieces(*node.densityBox, *node.densityPeriod, node.densityReach, *node.densityVoxel,
+                                     node.densityMirror)
                     : std::vector<DensityPiece>{};
             const DensitySolution s = timed("solve " + node.name, [&] {
                 if (!pieces.empty())
