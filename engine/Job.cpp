@@ -241,10 +241,11 @@ const TriangleMesh& Job::mesh()
             if (now > before) progress.add(now - before);
         }));
     });
+    const TriangleMesh::Measures measures = mMesh->measure();
     mReport["mesh"] = {{"triangles", mMesh->triangles.size()},
                        {"vertices", mMesh->points.size()},
-                       {"volume_mm3", mMesh->volume()},
-                       {"area_mm2", mMesh->area()}};
+                       {"volume_mm3", measures.volume},
+                       {"area_mm2", measures.area}};
     return *mMesh;
 }
 

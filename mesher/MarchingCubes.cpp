@@ -8,6 +8,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
 #include <array>
@@ -799,8 +800,9 @@ TriangleMesh Mesher::run(ProgressFn progressFn, MarchingCubesStats& stats)
     }
 
     TriangleMesh mesh;
-    mesh.points.resize(mVertexOffsets[numBlocks]);
-    mesh.triangles.resize(mTriangleOffsets[numBlocks]);
+    // Resizing zero-fills (and first touches) hundreds of MB for large meshes: both at once.
+    tbb::parallel_invoke([&] { mesh.points.resize(mVertexOffsets[numBlocks]); },
+                         [&] { mesh.triangles.resize(mTriangleOffsets[numBlocks]); });
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, kGrain),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                           Accessor acc(mTree);
