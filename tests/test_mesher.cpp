@@ -698,8 +698,13 @@ TEST_F(Mesher, StlBytesMatchAFacetByFacetReference)
     TempDir dir;
     for (const int threads : {1, 4}) {
         tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
-        writeStl(mesh, dir.file("random.stl"));
+        TriangleMesh::Measures measured;
+        writeStl(mesh, dir.file("random.stl"), &measured);
         EXPECT_TRUE(readBytes(dir.file("random.stl")) == expected) << threads << " threads";
+        // The writer's volume and area: the same terms as measure(), summed in another order.
+        const TriangleMesh::Measures direct = mesh.measure();
+        EXPECT_NEAR(measured.volume, direct.volume, 1e-9 * mesh.area());
+        EXPECT_NEAR(measured.area, direct.area, 1e-12 * direct.area);
     }
 }
 
