@@ -7,9 +7,16 @@ Measured (2 shared cores, side by side): leaf-by-leaf evaluation and a whole-box
 68 s vs 218 s (3.2x). With the box's cells tabled one period deep (fields/PeriodicTiling) and the
 density measured on one period of the interior (periodicPieces): 3.80 s vs 112 s (29.5x; solve
 1.33 s, mesh 0.77 s, STL 0.78 s, evaluate 0.61 s), peak 905 MB; 8.6 s vs 120 s (13.9x) and
-4.8 s vs 121 s (25.1x) in loaded runs. Target 50x missed. The levels differ by 1.15 % (target
-1 % missed): the reference counts voxel centres on a grid that aliases with 50-voxel cells; at its
-level the mesh holds 20.33 % of the box, at voxlat's 20.005 %."""
+4.8 s vs 121 s (25.1x) in loaded runs. Target 50x missed. With the density pieces on dense
+arrays (histogram bracket, regula falsi on the samples it cuts), the period split so the samples
+past the last whole period fold into it, one face zone per mirror-symmetric axis (174^3 -> 127^3
+samples), the STL formatted into reused buffers and measuring volume and area on the way, and
+exact segment-box distances for the bounds: 1.78 s vs 106 s (59.3x; solve 0.17 s, evaluate
+0.50 s, mesh 0.66 s, STL 0.28 s), peak 902 MB, level 0.39780 mm unchanged (to 1e-13); at 0.2 mm
+0.49 s vs 14.2 s (29x). Alone, alternating with the previous binary on a quiet machine: 1.74-1.79 s
+against 3.12-3.22 s; loaded runs take up to twice as long (3.3 s against 5.2 s). The levels differ
+by 1.15 % (target 1 % missed): the reference counts voxel centres on a grid that aliases with
+50-voxel cells; at its level the mesh holds 20.33 % of the box, at voxlat's 20.005 %."""
 import json
 import math
 import re

@@ -4,6 +4,7 @@
 
 #include "engine/Domain.h"
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -40,22 +41,35 @@ DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, d
 struct DensityPiece {
     Domain domain;
     double weight = 1.0;
+    /// The region measured: samples on its faces take one-sided differences, all others see
+    /// their neighbours (evaluated as a margin). Unset: the union of the pieces.
+    std::optional<Box3> within{};
 };
 
 /// Pieces that measure @a box for a field that repeats with @a period at least @a reach inside
 /// the box (PeriodicTiling's condition), so only one period of the deep interior is sampled.
-/// Per axis: the zone below lo + reach, one period counted k times (k whole periods fit
-/// between the zones), and the rest; the 3D pieces are their products. All pieces share one
-/// lattice of spacing period / n, n = ceil(period / voxel), from the box's corner, so they tile
-/// the box exactly. Empty when that does not apply (the box is not a whole number of periods,
-/// fewer than two periods fold, or the period differs between axes).
-std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, double reach, double voxel);
+/// All pieces share one lattice of spacing period / n, n = ceil(period / voxel), from the box's
+/// corner. Per axis, with m samples in the box and a face zone of z samples (reach plus one):
+/// the low zone; one period between the zones, its first e samples counted k + 1 times and the
+/// rest k times, where k whole periods and e more samples fit between the zones (the e samples
+/// past the last whole period repeat the period's first e); and the high zone. Where the field
+/// is @a mirror symmetric about the box's middle along an axis (and so is the lattice) the high
+/// zone is the low zone's mirror image: the low zone is counted twice instead. The 3D pieces are
+/// the products; their weighted voxels are exactly the box's. Empty when that does not apply
+/// (the box is not a whole number of periods, fewer than two periods fold, or the period
+/// differs between axes).
+std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, double reach, double voxel,
+                                         std::array<bool, 3> mirror = {});
 
 /// solveDensity() over weighted @a pieces: the level at which the weighted share of {g < level}
 /// is @a target of the pieces' weighted voxels, each voxel's share being the exact volume below
 /// the plane through its value with its per-axis changes (central differences; one-sided only on
 /// the faces of the pieces' union, each piece being evaluated with a voxel of margin). Every
-/// voxel of every piece is evaluated (pieces are meant to be small).
+/// voxel of every piece is evaluated, onto a dense array per piece (pieces are meant to be
+/// small). Histograms of where each voxel's coverage begins and ends bracket the level in one
+/// pass; only the voxels the bracket cuts take the cube-plane volume, and regula falsi
+/// (Illinois) closes the bracket. All sums run over fixed chunks in a fixed order: the level is
+/// the same for any thread count.
 DensitySolution solveDensity(const FieldNode& indicator, std::span<const DensityPiece> pieces, double target);
 
 }  // namespace voxlat

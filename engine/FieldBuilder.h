@@ -7,6 +7,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <functional>
 #include <map>
 #include <optional>
@@ -42,6 +43,9 @@ struct LevelNode {
     /// (periodicPieces()), instead of the whole box.
     std::optional<Vec3d> densityPeriod{};
     double densityReach = 0.0;
+    /// Along these axes the solid is its own mirror image about the middle of densityBox, so
+    /// periodicPieces() measures one face zone for both.
+    std::array<bool, 3> densityMirror{};
     /// The field the density solve measures when it is not the solid's indicator (the same
     /// values; e.g. without a tiling whose tables would not pay off on the measuring pieces).
     FieldPtr densityIndicator{};

@@ -147,7 +147,8 @@ void Job::solveLevels()
         if (node.density) {
             const std::vector<DensityPiece> pieces =
                 node.densityPeriod && node.densityBox && node.densityVoxel
-                    ? periodicPieces(*node.densityBox, *node.densityPeriod, node.densityReach, *node.densityVoxel)
+                    ? periodicPieces(*node.densityBox, *node.densityPeriod, node.densityReach, *node.densityVoxel,
+                                     node.densityMirror)
                     : std::vector<DensityPiece>{};
             const DensitySolution s = timed("solve " + node.name, [&] {
                 if (!pieces.empty())
@@ -240,10 +241,8 @@ const TriangleMesh& Job::mesh()
             if (now > before) progress.add(now - before);
         }));
     });
-    mReport["mesh"] = {{"triangles", mMesh->triangles.size()},
-                       {"vertices", mMesh->points.size()},
-                       {"volume_mm3", mMesh->volume()},
-                       {"area_mm2", mMesh->area()}};
+    // volume_mm3 and area_mm2 are added by report(): the STL writer measures them on its way.
+    mReport["mesh"] = {{"triangles", mMesh->triangles.size()}, {"vertices", mMesh->points.size()}};
     return *mMesh;
 }
 
@@ -251,7 +250,7 @@ void Job::writeMesh(const std::filesystem::path& path)
 {
     const TriangleMesh& m = mesh();
     timed("write " + path.filename().string(), [&] {
-        voxlat::writeMesh(m, path.string());
+        voxlat::writeMesh(m, path.string(), mMeshMeasures ? nullptr : &mMeshMeasures);
         return 0;
     });
     mReport["outputs"].push_back(path.string());
@@ -319,6 +318,11 @@ void Job::writeSlices(const YAML::Node& spec, const std::filesystem::path& path)
 nlohmann::json Job::report() const
 {
     nlohmann::json r = mReport;
+    if (mMesh) {
+        if (!mMeshMeasures) mMeshMeasures = mMesh->measure();
+        r["mesh"]["volume_mm3"] = mMeshMeasures->volume;
+        r["mesh"]["area_mm2"] = mMeshMeasures->area;
+    }
     for (const auto& reporter : mBuilder.reporters()) reporter(r);
     r["timings_s"] = mTimings;
     r["peak_memory_mb"] = double(peakMemoryBytes()) / (1024.0 * 1024.0);

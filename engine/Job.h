@@ -58,6 +58,9 @@ private:
     bool mSolved = false;
     openvdb::FloatGrid::Ptr mGrid;
     std::unique_ptr<TriangleMesh> mMesh;
+    /// The mesh's volume and area: from the STL writer when it wrote the mesh, else measured
+    /// when the report is made.
+    mutable std::optional<TriangleMesh::Measures> mMeshMeasures;
     nlohmann::json mReport;
     nlohmann::json mTimings = nlohmann::json::object();
 };

@@ -69,6 +69,37 @@ UnitCell readCell(const FieldBuilder& builder, const RecipeNode& c)
     return cell;
 }
 
+/// Whether every strut of @a f has a strut of @a f as its mirror image about the middle of
+/// @a box along @a axis (end points equal within 1e-9 of the box's size). A point near the
+/// rounding boundary of the comparison can only make a symmetric frame look asymmetric, which
+/// costs time, never accuracy.
+bool mirrorSymmetric(const Frame& f, const Box3& box, int axis)
+{
+    const double quantum = 1e-9 * std::max(1.0, box.extent().length());
+    using Key = std::array<long long, 6>;
+    auto point = [&](const Vec3d& p) {
+        std::array<long long, 3> k;
+        for (int a = 0; a < 3; ++a) k[a] = std::llround((p[a] - box.min[a]) / quantum);
+        return k;
+    };
+    auto key = [&](const Vec3d& p, const Vec3d& q) {
+        auto a = point(p), b = point(q);
+        if (b < a) std::swap(a, b);
+        return Key{a[0], a[1], a[2], b[0], b[1], b[2]};
+    };
+    std::vector<Key> keys;
+    for (const auto& s : f.struts) keys.push_back(key(f.nodes[s[0]], f.nodes[s[1]]));
+    std::sort(keys.begin(), keys.end());
+    const double mid = box.min[axis] + box.max[axis];
+    for (const auto& s : f.struts) {
+        Vec3d p = f.nodes[s[0]], q = f.nodes[s[1]];
+        p[axis] = mid - p[axis];
+        q[axis] = mid - q[axis];
+        if (!std::binary_search(keys.begin(), keys.end(), key(p, q))) return false;
+    }
+    return true;
+}
+
 std::array<int, 3> readCounts(const RecipeNode& n)
 {
     const Vec3d v = n.scalarOrVec3();
@@ -481,6 +512,9 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     if (periodic && node.density) {
         node.densityPeriod = uniform->size;
         node.densityReach = rcMax;
+        // Identical struts (same sigma and radius) whose frame is its own mirror image: the
+        // field is too, and the density pieces measure one face zone for both.
+        for (int a = 0; a < 3; ++a) node.densityMirror[a] = mirrorSymmetric(frame, box, a);
         node.densityIndicator = iso;
         // One period is sampled at a fixed phase, so its lattice does not average over phases
         // as the whole box's incommensurate one does: sample it 1.5 times finer (level within

@@ -122,8 +122,11 @@ Interval PeriodicTiling::bound(const Box3& box) const
             hi = std::min(outer, hi - shift);
         }
         if (!(std::abs(lo) < 1e12 && std::abs(hi) < 1e12)) return mChild->bound(box);
-        key[a] = (long long)std::floor(lo / kQuantum) - 1;  // one quantum out: the snapped box holds the box
-        key[a + 3] = (long long)std::ceil(hi / kQuantum) + 1;
+        // One quantum out: the snapped box holds the box. Rounded to the nearest quantum first,
+        // not down: a box moved by whole periods lands within rounding of a multiple of the
+        // quantum (decimal voxels and periods), where floor() would split one box into two keys.
+        key[a] = std::llround(lo / kQuantum) - 1;
+        key[a + 3] = std::llround(hi / kQuantum) + 1;
     }
     BoundCache::Shard& shard = mBounds->shards[BoundCache::Hash()(key) % BoundCache::kShards];
     {

@@ -27,34 +27,46 @@ double pointBoxDistance(const Vec3d& p, const Box3& box)
 
 double segmentBoxDistance(const Vec3d& a, const Vec3d& b, const Box3& box)
 {
-    // The distance to a convex set is convex along the segment: golden-section search finds
-    // its minimum; being 1-Lipschitz in arc length, the true minimum lies within the final
-    // bracket's length of the best value found, which is subtracted.
+    // The squared distance from a + t (b - a) to the box is a sum over axes of squared excesses
+    // beyond the box's slab, each zero or quadratic in t between the points where the segment
+    // crosses a slab face. Between consecutive crossings it is one convex quadratic: its minimum
+    // is at an end or where its derivative vanishes. Those few candidates give the minimum.
     const Vec3d ab = b - a;
-    const double length = ab.length();
-    double lo = 0.0, hi = 1.0;
-    constexpr double g = 0.6180339887498949;
-    double x1 = hi - g * (hi - lo), x2 = lo + g * (hi - lo);
-    double f1 = pointBoxDistance(a + x1 * ab, box), f2 = pointBoxDistance(a + x2 * ab, box);
-    double best = std::min({pointBoxDistance(a, box), pointBoxDistance(b, box), f1, f2});
-    while ((hi - lo) * length > 1e-6 * std::max(length, 1e-3) && best > 0.0) {
-        if (f1 < f2) {
-            hi = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = hi - g * (hi - lo);
-            f1 = pointBoxDistance(a + x1 * ab, box);
-            best = std::min(best, f1);
-        } else {
-            lo = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = lo + g * (hi - lo);
-            f2 = pointBoxDistance(a + x2 * ab, box);
-            best = std::min(best, f2);
+    double ts[8];
+    int n = 0;
+    ts[n++] = 0.0;
+    ts[n++] = 1.0;
+    for (int k = 0; k < 3; ++k) {
+        if (ab[k] == 0.0) continue;
+        for (const double face : {box.min[k], box.max[k]}) {
+            const double t = (face - a[k]) / ab[k];
+            if (t > 0.0 && t < 1.0) ts[n++] = t;
         }
     }
-    return std::max(0.0, best - (hi - lo) * length);
+    for (int i = 1; i < n; ++i)  // insertion sort: at most eight values
+        for (int j = i; j > 0 && ts[j] < ts[j - 1]; --j) std::swap(ts[j], ts[j - 1]);
+    double best = std::min(pointBoxDistance(a, box), pointBoxDistance(b, box));
+    for (int i = 0; i + 1 < n && best > 0.0; ++i) {
+        const double t0 = ts[i], t1 = ts[i + 1];
+        if (!(t1 > t0)) continue;
+        // The axes outside their slab in the interval's middle, and the face each is beyond.
+        const Vec3d mid = a + (0.5 * (t0 + t1)) * ab;
+        double A = 0.0, B = 0.0;
+        for (int k = 0; k < 3; ++k) {
+            const double face = mid[k] < box.min[k] ? box.min[k] : mid[k] > box.max[k] ? box.max[k] : mid[k];
+            if (face == mid[k]) continue;
+            // (a_k - face + t ab_k)^2: A t^2 + B t + const.
+            A += ab[k] * ab[k];
+            B += 2.0 * (a[k] - face) * ab[k];
+        }
+        best = std::min(best, pointBoxDistance(a + t1 * ab, box));
+        if (A > 0.0) {
+            const double t = std::clamp(-B / (2.0 * A), t0, t1);
+            best = std::min(best, pointBoxDistance(a + t * ab, box));
+        }
+    }
+    // Rounding in the candidates' positions: a hair below, so the result stays a lower bound.
+    return std::max(0.0, best - 1e-12 * (ab.length() + box.radius() + 1.0));
 }
 
 double segmentBoxMaxDistance(const Vec3d& a, const Vec3d& b, const Box3& box)

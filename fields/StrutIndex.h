@@ -13,8 +13,9 @@ namespace voxlat {
 /// Squared distance from point @a p to the segment [a, b].
 double pointSegmentDistanceSqr(const Vec3d& p, const Vec3d& a, const Vec3d& b);
 
-/// A lower bound of the distance between the segment [a, b] and @a box, tight to 1e-6 of the
-/// segment's length (golden-section search of the convex distance along the segment).
+/// A lower bound of the distance between the segment [a, b] and @a box, exact up to rounding
+/// (the squared distance is a convex quadratic between the points where the segment crosses
+/// the box's slab faces: the minimum is among their ends and stationary points).
 double segmentBoxDistance(const Vec3d& a, const Vec3d& b, const Box3& box);
 
 /// Largest distance from a point of @a box to the segment [a, b] (upper bound: centre distance

@@ -8,6 +8,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include <algorithm>
 #include <array>
@@ -487,6 +488,12 @@ class Mesher {
 public:
     Mesher(const openvdb::FloatGrid& grid, float iso) : mGrid(grid), mTree(grid.tree()), mIso(iso), mTable(caseTable())
     {
+        // Grids made by the engine map index to world by scale and translation: call that map
+        // directly (its applyMap is final, so the call inlines) instead of through the virtual
+        // MapBase for each of millions of vertices. Same function, same bits.
+        const auto map = grid.transform().baseMap();
+        if (map->isType<openvdb::math::ScaleTranslateMap>() || map->isType<openvdb::math::UniformScaleTranslateMap>())
+            mScaleTranslate = static_cast<const openvdb::math::ScaleTranslateMap*>(map.get());
     }
 
     TriangleMesh run(ProgressFn progressFn, MarchingCubesStats& stats);
@@ -504,7 +511,13 @@ private:
     uint32_t neighbourVertexIndex(std::size_t owner, int axis, int lx, int ly, int lz) const;
     Vec3d edgePoint(const Neighbourhood& n, const Coord& origin, int x, int y, int z, int axis) const;
 
+    Vec3d indexToWorld(const Vec3d& p) const
+    {
+        return mScaleTranslate ? mScaleTranslate->applyMap(p) : mGrid.indexToWorld(p);
+    }
+
     const openvdb::FloatGrid& mGrid;
+    const openvdb::math::ScaleTranslateMap* mScaleTranslate = nullptr;  ///< the grid's map, if of that type
     const FloatTree& mTree;
     const float mIso;
     const CaseTable& mTable;
@@ -684,7 +697,7 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh)
                 const int axis = w >> 3, x = w & 7;
                 for (std::uint64_t bits = mask[w]; bits; bits &= bits - 1) {
                     const int bit = std::countr_zero(bits);
-                    const Vec3d p = mGrid.indexToWorld(edgePoint(n, block.origin, x, bit >> 3, bit & 7, axis));
+                    const Vec3d p = indexToWorld(edgePoint(n, block.origin, x, bit >> 3, bit & 7, axis));
                     mesh->points[next] = openvdb::Vec3f(p);
                     ownIndex[w * 64 + bit] = uint32_t(next++);
                 }
@@ -751,7 +764,7 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh)
                             sum += edgePoint(n, block.origin, x + cornerBit(c, 0), y + cornerBit(c, 1),
                                              z + cornerBit(c, 2), edgeAxis(e));
                         }
-                        mesh->points[nextCentroid] = openvdb::Vec3f(mGrid.indexToWorld(sum / double(count)));
+                        mesh->points[nextCentroid] = openvdb::Vec3f(indexToWorld(sum / double(count)));
                         index[kCentroidBase + k] = uint32_t(nextCentroid++);
                     }
                     for (int t = 0; t < entry.numTriangles; ++t) {
@@ -799,8 +812,9 @@ TriangleMesh Mesher::run(ProgressFn progressFn, MarchingCubesStats& stats)
     }
 
     TriangleMesh mesh;
-    mesh.points.resize(mVertexOffsets[numBlocks]);
-    mesh.triangles.resize(mTriangleOffsets[numBlocks]);
+    // Resizing zero-fills (and first touches) hundreds of MB for large meshes: both at once.
+    tbb::parallel_invoke([&] { mesh.points.resize(mVertexOffsets[numBlocks]); },
+                         [&] { mesh.triangles.resize(mTriangleOffsets[numBlocks]); });
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, kGrain),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                           Accessor acc(mTree);

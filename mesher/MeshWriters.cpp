@@ -40,6 +40,14 @@ void putF32(char* p, float f)
 {
     putU32(p, std::bit_cast<std::uint32_t>(f));
 }
+/// Twelve floats, little-endian, as putF32 writes them one by one (one copy on little-endian hosts).
+void putF32s(char* p, const float (&f)[12])
+{
+    if constexpr (std::endian::native == std::endian::little)
+        std::memcpy(p, f, sizeof(f));
+    else
+        for (int k = 0; k < 12; ++k) putF32(p + 4 * k, f[k]);
+}
 std::uint32_t getU32(const char* p)
 {
     std::uint32_t v = 0;
@@ -166,7 +174,7 @@ void parseAsciiStl(const std::string& text, const std::string& path, TriangleMes
 
 }  // namespace
 
-void writeStl(const TriangleMesh& mesh, const std::string& path)
+void writeStl(const TriangleMesh& mesh, const std::string& path, TriangleMesh::Measures* measures)
 {
     if (mesh.triangles.size() > std::numeric_limits<std::uint32_t>::max()) {
         throw std::invalid_argument("binary STL holds at most 2^32 - 1 triangles");
@@ -183,54 +191,75 @@ void writeStl(const TriangleMesh& mesh, const std::string& path)
     out.write(header, sizeof(header));
 
     // Facets are formatted in parallel, chunk by chunk, and written in order: the bytes are the
-    // same for any thread count, and formatting (normals) overlaps the writing.
+    // same for any thread count, and formatting (normals) overlaps the writing. At most kTokens
+    // chunks are in flight and they leave the pipeline in order, so chunk i can reuse the buffer
+    // of chunk i - kTokens: the buffers are allocated (and their pages touched) once.
+    constexpr std::size_t kTokens = 8;
     const std::size_t chunks = (mesh.triangles.size() + kStlChunkFacets - 1) / kStlChunkFacets;
+    std::vector<std::vector<char>> buffers(std::min(kTokens, chunks));
+    // Volume and area terms as TriangleMesh::measure() takes them, summed per chunk.
+    std::vector<TriangleMesh::Measures> sums(measures ? chunks : 0);
+    const openvdb::Vec3d ref =
+        mesh.triangles.empty() ? openvdb::Vec3d(0.0) : openvdb::Vec3d(mesh.points[mesh.triangles.front()[0]]);
+    auto formatChunk = [&](std::size_t index) {
+        const std::size_t begin = index * kStlChunkFacets;
+        const std::size_t count = std::min(kStlChunkFacets, mesh.triangles.size() - begin);
+        std::vector<char>& chunk = buffers[index % kTokens];
+        chunk.resize(count * kStlFacetSize);
+        char* p = chunk.data();
+        TriangleMesh::Measures sum;
+        for (std::size_t i = begin; i < begin + count; ++i, p += kStlFacetSize) {
+            const openvdb::Vec3I& t = mesh.triangles[i];
+            const openvdb::Vec3f& a = mesh.points[t[0]];
+            const openvdb::Vec3f& b = mesh.points[t[1]];
+            const openvdb::Vec3f& c = mesh.points[t[2]];
+            const openvdb::Vec3d da(a), db(b), dc(c);
+            openvdb::Vec3d n = (db - da).cross(dc - da);
+            const double length = n.length();
+            if (measures) {
+                sum.area += length;
+                sum.volume += (da - ref).dot((db - ref).cross(dc - ref));
+            }
+            n = length > 0.0 ? n / length : openvdb::Vec3d(0.0);
+            const float facet[12] = {float(n[0]), float(n[1]), float(n[2]), a[0], a[1], a[2],
+                                     b[0],        b[1],        b[2],        c[0], c[1], c[2]};
+            putF32s(p, facet);
+            p[48] = p[49] = 0;
+        }
+        if (measures) sums[index] = sum;
+        return index;
+    };
     std::size_t next = 0;
-    tbb::parallel_pipeline(
-        4,
-        tbb::make_filter<void, std::size_t>(tbb::filter_mode::serial_in_order,
-                                            [&](tbb::flow_control& fc) -> std::size_t {
-                                                if (next == chunks) fc.stop();
-                                                return next++;
-                                            }) &
-            tbb::make_filter<std::size_t, std::shared_ptr<std::vector<char>>>(
-                tbb::filter_mode::parallel,
-                [&](std::size_t index) {
-                    const std::size_t begin = index * kStlChunkFacets;
-                    const std::size_t count = std::min(kStlChunkFacets, mesh.triangles.size() - begin);
-                    auto chunk = std::make_shared<std::vector<char>>(count * kStlFacetSize);
-                    char* p = chunk->data();
-                    for (std::size_t i = begin; i < begin + count; ++i, p += kStlFacetSize) {
-                        const openvdb::Vec3I& t = mesh.triangles[i];
-                        const openvdb::Vec3f& a = mesh.points[t[0]];
-                        const openvdb::Vec3f& b = mesh.points[t[1]];
-                        const openvdb::Vec3f& c = mesh.points[t[2]];
-                        openvdb::Vec3d n =
-                            (openvdb::Vec3d(b) - openvdb::Vec3d(a)).cross(openvdb::Vec3d(c) - openvdb::Vec3d(a));
-                        const double length = n.length();
-                        n = length > 0.0 ? n / length : openvdb::Vec3d(0.0);
-                        for (int k = 0; k < 3; ++k) {
-                            putF32(p + 4 * k, float(n[k]));
-                            putF32(p + 12 + 4 * k, a[k]);
-                            putF32(p + 24 + 4 * k, b[k]);
-                            putF32(p + 36 + 4 * k, c[k]);
-                        }
-                        p[48] = p[49] = 0;
-                    }
-                    return chunk;
-                }) &
-            tbb::make_filter<std::shared_ptr<std::vector<char>>, void>(
-                tbb::filter_mode::serial_in_order, [&](const std::shared_ptr<std::vector<char>>& chunk) {
-                    out.write(chunk->data(), std::streamsize(chunk->size()));
-                }));
+    auto nextChunk = [&](tbb::flow_control& fc) -> std::size_t {
+        if (next == chunks) fc.stop();
+        return next++;
+    };
+    auto writeChunk = [&](std::size_t index) {
+        const std::vector<char>& chunk = buffers[index % kTokens];
+        out.write(chunk.data(), std::streamsize(chunk.size()));
+    };
+    tbb::parallel_pipeline(kTokens,
+                           tbb::make_filter<void, std::size_t>(tbb::filter_mode::serial_in_order, nextChunk) &
+                               tbb::make_filter<std::size_t, std::size_t>(tbb::filter_mode::parallel, formatChunk) &
+                               tbb::make_filter<std::size_t, void>(tbb::filter_mode::serial_in_order, writeChunk));
     file.commit();
+    if (measures) {
+        TriangleMesh::Measures total;
+        for (const TriangleMesh::Measures& m : sums) {
+            total.volume += m.volume;
+            total.area += m.area;
+        }
+        *measures = {total.volume / 6.0, 0.5 * total.area};
+    }
 }
 
-void writeMesh(const TriangleMesh& mesh, const std::string& path)
+void writeMesh(const TriangleMesh& mesh, const std::string& path, std::optional<TriangleMesh::Measures>* measures)
 {
     const std::string ext = lowerExtension(path);
     if (ext == ".stl") {
-        writeStl(mesh, path);
+        TriangleMesh::Measures m;
+        writeStl(mesh, path, measures ? &m : nullptr);
+        if (measures) *measures = m;
     } else if (ext == ".ply" || ext == ".obj") {
         writeOpenMesh(mesh, path, ext);
     } else {

@@ -52,6 +52,29 @@ double TriangleMesh::area() const
            });
 }
 
+TriangleMesh::Measures TriangleMesh::measure() const
+{
+    if (triangles.empty()) return {};
+    // The terms of volume() and area(), summed over the same deterministic split.
+    const openvdb::Vec3d ref = toDouble(points[triangles.front()[0]]);
+    const Measures sums = tbb::parallel_deterministic_reduce(
+        tbb::blocked_range<std::size_t>(0, triangles.size(), 1 << 14), Measures{},
+        [&](const tbb::blocked_range<std::size_t>& r, Measures sum) {
+            for (std::size_t n = r.begin(); n != r.end(); ++n) {
+                const openvdb::Vec3I& t = triangles[n];
+                const openvdb::Vec3d p0 = toDouble(points[t[0]]), p1 = toDouble(points[t[1]]),
+                                     p2 = toDouble(points[t[2]]);
+                sum.volume += (p0 - ref).dot((p1 - ref).cross(p2 - ref));
+                sum.area += (p1 - p0).cross(p2 - p0).length();
+            }
+            return sum;
+        },
+        [](const Measures& a, const Measures& b) {
+            return Measures{a.volume + b.volume, a.area + b.area};
+        });
+    return {sums.volume / 6.0, 0.5 * sums.area};
+}
+
 openvdb::BBoxd TriangleMesh::bounds() const
 {
     openvdb::BBoxd box;  // default-constructed: min = +max, max = -max, i.e. empty

@@ -23,6 +23,13 @@ struct TriangleMesh {
     /// Total surface area, accumulated in double.
     double area() const;
 
+    struct Measures {
+        double volume = 0.0;
+        double area = 0.0;
+    };
+    /// volume() and area() in one pass over the triangles (the same sums, bit for bit).
+    Measures measure() const;
+
     /// Axis-aligned bounds of all points (an empty box, min > max, when there are none).
     openvdb::BBoxd bounds() const;
 

@@ -15,6 +15,7 @@
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -662,3 +663,58 @@ TEST_F(Mesher, WriteMeshFormats)
 }
 
 }  // namespace
+
+TEST_F(Mesher, StlBytesMatchAFacetByFacetReference)
+{
+    // More facets than the writer's ring of chunk buffers holds (8 x 16384), with a degenerate
+    // triangle; every facet checked byte by byte against a plain little-endian encoding, for one
+    // thread and for four.
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> coord(-50.0f, 50.0f);
+    TriangleMesh mesh;
+    for (int i = 0; i < 60000; ++i) mesh.points.emplace_back(coord(rng), coord(rng), coord(rng));
+    std::uniform_int_distribution<std::uint32_t> index(0, 59999);
+    for (int i = 0; i < 200000; ++i) mesh.triangles.emplace_back(index(rng), index(rng), index(rng));
+    mesh.triangles[1234] = openvdb::Vec3I(5, 5, 5);
+    auto le = [](float f) {
+        const auto u = std::bit_cast<std::uint32_t>(f);
+        return std::string{char(u & 0xFF), char((u >> 8) & 0xFF), char((u >> 16) & 0xFF), char(u >> 24)};
+    };
+    std::string expected(80, ' ');
+    expected.replace(0, 17, "voxlat binary STL");
+    const auto count = std::uint32_t(mesh.triangles.size());
+    expected +=
+        std::string{char(count & 0xFF), char((count >> 8) & 0xFF), char((count >> 16) & 0xFF), char(count >> 24)};
+    for (const openvdb::Vec3I& t : mesh.triangles) {
+        const openvdb::Vec3d a(mesh.points[t[0]]), b(mesh.points[t[1]]), c(mesh.points[t[2]]);
+        openvdb::Vec3d n = (b - a).cross(c - a);
+        const double length = n.length();
+        n = length > 0.0 ? n / length : openvdb::Vec3d(0.0);
+        for (int k = 0; k < 3; ++k) expected += le(float(n[k]));
+        for (const openvdb::Vec3I::value_type v : {t[0], t[1], t[2]})
+            for (int k = 0; k < 3; ++k) expected += le(mesh.points[v][k]);
+        expected += std::string(2, '\0');
+    }
+    TempDir dir;
+    for (const int threads : {1, 4}) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        TriangleMesh::Measures measured;
+        writeStl(mesh, dir.file("random.stl"), &measured);
+        EXPECT_TRUE(readBytes(dir.file("random.stl")) == expected) << threads << " threads";
+        // The writer's volume and area: the same terms as measure(), summed in another order.
+        const TriangleMesh::Measures direct = mesh.measure();
+        EXPECT_NEAR(measured.volume, direct.volume, 1e-9 * mesh.area());
+        EXPECT_NEAR(measured.area, direct.area, 1e-12 * direct.area);
+    }
+}
+
+TEST_F(Mesher, MeasureMatchesVolumeAndArea)
+{
+    auto grid = makeGyroid(48, 0.1, 1.6);
+    const TriangleMesh mesh = marchingCubes(*grid, 0.0f);
+    ASSERT_GT(mesh.triangles.size(), 10000u);
+    const TriangleMesh::Measures m = mesh.measure();
+    EXPECT_EQ(m.volume, mesh.volume());
+    EXPECT_EQ(m.area, mesh.area());
+    EXPECT_EQ(TriangleMesh{}.measure().area, 0.0);
+}

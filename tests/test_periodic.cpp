@@ -8,6 +8,7 @@
 #include "engine/UnitCells.h"
 #include "fields/IsoRadius.h"
 #include "fields/PeriodicTiling.h"
+#include "fields/PointField.h"
 #include "fields/StrutConvolution.h"
 #include "mesher/MeshCheck.h"
 
@@ -40,6 +41,25 @@ BccBox bccBox(int cells, double size, double sigma)
     b.reach = raw->cutoffRadius(0);
     b.iso = std::make_shared<IsoRadius>(raw, raw->peak(0), sigma, 2.0 * b.reach);
     return b;
+}
+
+/// g = x + 0.3 y: planes at every level, so the cube-plane coverage of each voxel is exact and
+/// the share of [0, 1]^3 below level L is known in closed form.
+struct TiltedPlane final : PointField<TiltedPlane> {
+    template <class T>
+    T eval(const T& x, const T& y, const T&) const
+    {
+        return x + T(0.3) * y;
+    }
+};
+
+/// Share of [0, 1]^3 with x + 0.3 y < L, for 0 <= L <= 1.3.
+double tiltedPlaneShare(double level)
+{
+    if (level <= 0.3) return level * level / 0.6;
+    if (level <= 1.0) return level - 0.15;
+    const double over = level - 1.0;  // the corner x + 0.3 y >= L cut off at x = 1
+    return 1.0 - (0.3 - over) * (0.3 - over) / 0.6;
 }
 
 /// Largest difference between two fields' gridValues over every leaf of @a d.
@@ -146,18 +166,27 @@ TEST(PeriodicTiling, SameGridForAnyThreadCount)
 TEST(DensityPieces, TileTheBoxAndMatchTheWholeBoxOnTheSameLattice)
 {
     const BccBox b = bccBox(4, 4.0, 0.5);
+    // 80 samples per axis: zones of 12, 2 periods of 20 and 16 more samples between them, so
+    // four segments per axis (zone, 16 samples x 3, 4 samples x 2, zone); with the mirror
+    // (a BCC box is symmetric) the high zone is the low one counted twice: three.
     const std::vector<DensityPiece> pieces = periodicPieces(b.box, Vec3d(4.0), b.reach, 0.2);
-    ASSERT_EQ(pieces.size(), 27u);
-    double voxels = 0.0;
-    for (const DensityPiece& p : pieces) voxels += p.weight * double(p.domain.voxelCount());
+    const std::vector<DensityPiece> mirrored = periodicPieces(b.box, Vec3d(4.0), b.reach, 0.2, {true, true, true});
+    ASSERT_EQ(pieces.size(), 64u);
+    ASSERT_EQ(mirrored.size(), 27u);
     const DensityPiece whole{Domain::fromBox(b.box, pieces.front().domain.voxel), 1.0};
-    EXPECT_EQ(voxels, double(whole.domain.voxelCount()));
-    // The same lattice over the whole box: the pieces are translates of its parts, so the same
-    // measure gives the same level.
-    const DensitySolution fromPieces = solveDensity(*b.iso, pieces, 0.25);
+    for (const auto* set : {&pieces, &mirrored}) {
+        double voxels = 0.0;
+        for (const DensityPiece& p : *set) voxels += p.weight * double(p.domain.voxelCount());
+        EXPECT_EQ(voxels, double(whole.domain.voxelCount()));
+    }
+    // The same lattice over the whole box: the pieces are translates (and mirror images) of its
+    // parts, so the same measure gives the same level.
     const DensitySolution fromBox = solveDensity(*b.iso, std::span(&whole, 1), 0.25);
-    EXPECT_NEAR(fromPieces.level, fromBox.level, 1e-5);
-    EXPECT_NEAR(fromPieces.achieved, 0.25, 1e-6);
+    for (const auto* set : {&pieces, &mirrored}) {
+        const DensitySolution fromPieces = solveDensity(*b.iso, *set, 0.25);
+        EXPECT_NEAR(fromPieces.level, fromBox.level, 1e-5);
+        EXPECT_NEAR(fromPieces.achieved, 0.25, 1e-6);
+    }
     // Too few cells to fold twice: no pieces, the caller measures the whole box.
     EXPECT_TRUE(periodicPieces(Box3{Vec3d(0.0), Vec3d(12.0)}, Vec3d(4.0), b.reach, 0.1).empty());
 }
@@ -173,7 +202,72 @@ TEST(DensityPieces, BoxOfCellsHitsTheTargetOnTheMesh)
     Job job(parseRecipe(text, "bcc.yaml", "."));
     job.solveLevels();
     ASSERT_TRUE(job.report()["fields"]["lattice"].contains("density_measured_on"));
+    // BCC is its own mirror image along every axis: one face zone per axis, three segments.
+    EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
+              "one period of the interior (27 weighted pieces)");
     const TriangleMesh& mesh = job.mesh();
     EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.005 * 0.20);
     EXPECT_TRUE(checkTopology(mesh).closedManifold());
+}
+
+TEST(DensityPieces, AsymmetricCellMeasuresBothFaceZones)
+{
+    // A grid cell with one body diagonal: valid (its faces carry the corners), periodic, but no
+    // mirror maps the diagonal onto a strut, so both face zones of every axis are measured.
+    const std::string text =
+        "voxel: 0.1\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\n"
+        "fields:\n  lattice: {struts: {cell: {lines: [[[0, 0, 0], [1, 0, 0]], [[0, 1, 0], [1, 1, 0]], "
+        "[[0, 0, 1], [1, 0, 1]], [[0, 1, 1], [1, 1, 1]], [[0, 0, 0], [0, 1, 0]], [[1, 0, 0], [1, 1, 0]], "
+        "[[0, 0, 1], [0, 1, 1]], [[1, 0, 1], [1, 1, 1]], [[0, 0, 0], [0, 0, 1]], [[1, 0, 0], [1, 0, 1]], "
+        "[[0, 1, 0], [0, 1, 1]], [[1, 1, 0], [1, 1, 1]], [[0, 0, 0], [1, 1, 1]]]}, size: 5}, "
+        "kernel: {gaussian: {sigma: 0.5}}, density: 0.20}\n"
+        "result: lattice\n";
+    Job job(parseRecipe(text, "diagonal.yaml", "."));
+    job.solveLevels();
+    EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
+              "one period of the interior (64 weighted pieces)");
+    const TriangleMesh& mesh = job.mesh();
+    EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.005 * 0.20);
+    EXPECT_TRUE(checkTopology(mesh).closedManifold());
+}
+
+TEST(DensityPieces, PlaneFieldGivesTheExactLevel)
+{
+    // The level from the pieces' measure against the closed form, on one piece and on the box
+    // split in two along z (unequal thicknesses, one counted twice against a thinner copy).
+    const TiltedPlane plane;
+    const Domain whole = Domain::fromBox(Box3{Vec3d(0.0), Vec3d(1.0)}, 1.0 / 40);
+    for (const double target : {0.05, 0.2, 0.5, 0.9}) {
+        // Solve share(L) = target for the reference by bisection on the closed form.
+        double lo = 0.0, hi = 1.3;
+        for (int i = 0; i < 100; ++i) (tiltedPlaneShare(0.5 * (lo + hi)) < target ? lo : hi) = 0.5 * (lo + hi);
+        const double exact = 0.5 * (lo + hi);
+        // The samples are stored as floats: about 1e-7 of the values.
+        const DensityPiece one{whole, 1.0};
+        const DensitySolution s1 = solveDensity(plane, std::span(&one, 1), target);
+        EXPECT_NEAR(s1.level, exact, 1e-6) << "target " << target;
+        EXPECT_NEAR(s1.achieved, target, 1e-9);
+        // The field does not depend on z: z in [0, 0.25] counted twice and z in [0.5, 1] once.
+        DensityPiece low{Domain::fromBox(Box3{Vec3d(0.0), Vec3d(1.0, 1.0, 0.25)}, 1.0 / 40), 2.0};
+        DensityPiece high{Domain::fromBox(Box3{Vec3d(0.0, 0.0, 0.5), Vec3d(1.0)}, 1.0 / 40), 1.0};
+        const std::vector<DensityPiece> two{low, high};
+        const DensitySolution s2 = solveDensity(plane, two, target);
+        EXPECT_NEAR(s2.level, exact, 1e-6) << "target " << target;
+        EXPECT_EQ(s2.domainVoxels, whole.voxelCount());
+    }
+}
+
+TEST(DensityPieces, SameLevelForAnyThreadCount)
+{
+    const BccBox b = bccBox(5, 2.0, 0.25);
+    const std::vector<DensityPiece> pieces = periodicPieces(b.box, Vec3d(2.0), b.reach, 0.06);
+    ASSERT_GE(pieces.size(), 27u);
+    auto solve = [&](int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        return solveDensity(*b.iso, pieces, 0.2);
+    };
+    const DensitySolution one = solve(1), three = solve(3);
+    EXPECT_EQ(one.level, three.level);
+    EXPECT_EQ(one.achieved, three.achieved);
+    EXPECT_NEAR(one.achieved, 0.2, 1e-9);
 }
