@@ -7,9 +7,9 @@ supersampling of the analytic field on a few layers.
 
 Measured (2 shared cores, side by side): 4.53 s vs 78.1 s (17x) before the tile passes. With whole
 8 x 8 tiles decided by four-lane single-precision passes (tile test; per pixel sure, far, 3x3 and
-edge coverage), TPMS axis terms by angle addition and in arrays, per-layer counters: 2.85 s vs
-119.5 s (42x) and 3.74 s vs 109.3 s (29x) in two loaded runs; single-threaded CPU time 8.3-8.6 s ->
-4.5 s. Target 50x missed. Areas: mean error 1.9e-4 vs PrusaSlicer's 1.2e-3; peak 53-57 MB."""
+edge coverage), TPMS axis terms by angle addition and in arrays, per-layer counters: 2.60 s vs
+75.0 s (29x) on a quiet machine, 2.85 s vs 119.5 s (42x) and 3.74 s vs 109.3 s (29x) in loaded
+runs; single-threaded CPU time 8.3-8.6 s -> 4.5 s. Target 50x missed. Areas: mean error 1.9e-4 vs PrusaSlicer's 1.2e-3; peak 53-57 MB."""
 import json
 import os
 import shutil
