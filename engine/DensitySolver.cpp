@@ -159,6 +159,16 @@ struct CoverageSample {
 constexpr int kLeafStride[3] = {64, 8, 1};
 constexpr int kLeafShift[3] = {6, 3, 0};
 
+/// A sample's change along one axis: the central difference, one-sided where a neighbour is
+/// absent (not evaluated, or outside a density mask), 0 with neither.
+double axisChange(float value, float up, bool hasUp, float down, bool hasDown)
+{
+    if (hasUp && hasDown) return 0.5 * (up - down);
+    if (hasUp) return up - value;
+    if (hasDown) return value - down;
+    return 0.0;
+}
+
 /// Band voxels with their per-voxel change along each axis (make(value, d) builds a sample), for
 /// the sub-voxel coverage estimates. Neighbours that were not evaluated (tiles, background,
 /// outside @a around) fall back to one-sided differences.
@@ -199,11 +209,7 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
                         else hasDown = false;
                         hasDown = hasDown && downValue < 1e30f;
                     }
-                    double d = 0.0;
-                    if (hasUp && hasDown) d = 0.5 * (upValue - downValue);
-                    else if (hasUp) d = upValue - data[i];
-                    else if (hasDown) d = data[i] - downValue;
-                    change[a] = d;
+                    change[a] = axisChange(data[i], upValue, hasUp, downValue, hasDown);
                 }
                 perLeaf[n].push_back(make(data[i], change));
             }
@@ -617,15 +623,7 @@ void forEachPlaneSample(const DensePiece& d, const SampleChunk& chunk, Fn&& fn)
     const float w = float(d.piece->weight);
     // Neighbours that were not evaluated (NaN) or lie outside a mask (>= 1e30) are no neighbours.
     auto change = [](float value, float up, float down) {
-        const bool hasUp = up < 1e30f, hasDown = down < 1e30f;
-        double dd = 0.0;
-        if (hasUp && hasDown)
-            dd = 0.5 * (up - down);
-        else if (hasUp)
-            dd = up - value;
-        else if (hasDown)
-            dd = value - down;
-        return float(std::abs(dd));
+        return float(std::abs(axisChange(value, up, up < 1e30f, down, down < 1e30f)));
     };
     for (int x = chunk.x0; x < chunk.x1; ++x)
         for (int y = 0; y < dims.y(); ++y)

@@ -88,6 +88,12 @@ void TpmsField::gradients(std::span<const Vec3d> points, std::span<double> out, 
 }
 
 namespace {
+/// trigTerms from the sine and cosine of the angle (the double angles by identity, as trigTerms).
+inline TrigTerms<double> termsFrom(double s, double c)
+{
+    return {s, c, 2.0 * s * c, c * c - s * s};
+}
+
 /// trigTerms of wave * (origin + i * spacing), i < n: sin and cos from libm at every eighth angle
 /// and rotated from it by exact offsets in between (angle addition, within a few ulp of libm), so
 /// a slicer block's 66 angles per axis cost 9 + 7 libm calls instead of 66.
@@ -105,11 +111,9 @@ void axisTerms(double wave, double origin, double spacing, int n, TrigTerms<doub
     }
     for (int i = 0; i < n; i += kStride) {
         const double angle = wave * (origin + i * spacing), sb = std::sin(angle), cb = std::cos(angle);
-        out[i] = trigTerms(angle);
-        for (int k = 1; k < kStride && i + k < n; ++k) {
-            const double s = sb * co[k] + cb * so[k], c = cb * co[k] - sb * so[k];
-            out[i + k] = {s, c, 2.0 * s * c, c * c - s * s};
-        }
+        out[i] = termsFrom(sb, cb);
+        for (int k = 1; k < kStride && i + k < n; ++k)
+            out[i + k] = termsFrom(sb * co[k] + cb * so[k], cb * co[k] - sb * so[k]);
     }
 }
 }  // namespace
@@ -148,35 +152,20 @@ void TpmsField::gridValues(const GridBatch& batch, std::span<double> out) const
                 for (int k = 0; k < innerCount; ++k)
                     o[k] = tpmsEquation(kType, tx[i], ty[j], TrigTerms<double>{is[k], ic[k], is2[k], ic2[k]});
     };
+    // clang-format misreads this switch after the template lambda and would spread it over 27 lines.
+    // clang-format off
     switch (mType) {
-        case TpmsType::Gyroid:
-            fill.operator()<TpmsType::Gyroid>();
-            break;
-        case TpmsType::SchwarzP:
-            fill.operator()<TpmsType::SchwarzP>();
-            break;
-        case TpmsType::SchwarzD:
-            fill.operator()<TpmsType::SchwarzD>();
-            break;
-        case TpmsType::IWP:
-            fill.operator()<TpmsType::IWP>();
-            break;
-        case TpmsType::Neovius:
-            fill.operator()<TpmsType::Neovius>();
-            break;
-        case TpmsType::FischerKochS:
-            fill.operator()<TpmsType::FischerKochS>();
-            break;
-        case TpmsType::Lidinoid:
-            fill.operator()<TpmsType::Lidinoid>();
-            break;
-        case TpmsType::SplitP:
-            fill.operator()<TpmsType::SplitP>();
-            break;
-        case TpmsType::FRD:
-            fill.operator()<TpmsType::FRD>();
-            break;
+    case TpmsType::Gyroid: fill.operator()<TpmsType::Gyroid>(); break;
+    case TpmsType::SchwarzP: fill.operator()<TpmsType::SchwarzP>(); break;
+    case TpmsType::SchwarzD: fill.operator()<TpmsType::SchwarzD>(); break;
+    case TpmsType::IWP: fill.operator()<TpmsType::IWP>(); break;
+    case TpmsType::Neovius: fill.operator()<TpmsType::Neovius>(); break;
+    case TpmsType::FischerKochS: fill.operator()<TpmsType::FischerKochS>(); break;
+    case TpmsType::Lidinoid: fill.operator()<TpmsType::Lidinoid>(); break;
+    case TpmsType::SplitP: fill.operator()<TpmsType::SplitP>(); break;
+    case TpmsType::FRD: fill.operator()<TpmsType::FRD>(); break;
     }
+    // clang-format on
 }
 
 void TpmsField::gridGradients(const GridBatch& batch, std::span<double> out, std::span<Vec3d> grad) const
@@ -222,10 +211,6 @@ inline double smallCos(double a)
     return 1.0 + a2 * (c2 + a2 * (c4 + a2 * (c6 + a2 * (c8 + a2 * (c10 + a2 * (c12 + a2 * c14))))));
 }
 
-inline TrigTerms<double> termsFrom(double s, double c)
-{
-    return {s, c, 2.0 * s * c, c * c - s * s};
-}
 }  // namespace
 
 void TpmsField::gridValuesShifted(const GridBatch& batch, std::span<const Vec3d> shift, std::span<double> plus,

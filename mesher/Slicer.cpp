@@ -13,60 +13,6 @@ namespace voxlat {
 
 namespace {
 
-/// Area of {u, v in [0, 1]: a u + b v < c} for a, b >= 0: the share of a unit pixel on the inside
-/// of a straight edge. Exact (piecewise quadratic in c).
-double squareCoverage(double a, double b, double c)
-{
-    if (a > b) std::swap(a, b);
-    if (b <= 0.0) return c > 0.0 ? 1.0 : 0.0;
-    if (a < 1e-4 * b) return std::clamp(c / b, 0.0, 1.0);  // an edge along a pixel side
-    auto r = [](double x) { return x > 0.0 ? x * x : 0.0; };
-    const double area = (r(c) - r(c - a) - r(c - b) + r(c - a - b)) / (2.0 * a * b);
-    return std::clamp(area, 0.0, 1.0);
-}
-
-/// Second-order correction to squareCoverage: where the field is f + g.p + p'Hp/2 (p in pixels from the
-/// centre), the boundary moves off the straight chord by -p'Hp / (2|g|); integrated along the chord
-/// inside the pixel this changes the inside area by -(L m'Hm + L^3/12 t'Ht) / (2|g|) (m the chord's
-/// midpoint, t its direction, L its length).
-double curvatureCorrection(double f, double gx, double gy, double hxx, double hyy, double hxy)
-{
-    // Where the chord meets the pixel's sides u = +-1/2 and v = +-1/2 (one reciprocal per axis,
-    // no loops: this runs for every edge pixel).
-    double pts[4][2];
-    int n = 0;
-    if (gy != 0.0) {
-        const double inv = 1.0 / gy;
-        const double v0 = (-f + 0.5 * gx) * inv, v1 = (-f - 0.5 * gx) * inv;  // at u = -1/2, +1/2
-        if (std::abs(v0) <= 0.5) pts[n][0] = -0.5, pts[n++][1] = v0;
-        if (std::abs(v1) <= 0.5) pts[n][0] = 0.5, pts[n++][1] = v1;
-    }
-    if (gx != 0.0) {
-        const double inv = 1.0 / gx;
-        const double u0 = (-f + 0.5 * gy) * inv, u1 = (-f - 0.5 * gy) * inv;  // at v = -1/2, +1/2
-        if (std::abs(u0) <= 0.5) pts[n][0] = u0, pts[n++][1] = -0.5;
-        if (std::abs(u1) <= 0.5) pts[n][0] = u1, pts[n++][1] = 0.5;
-    }
-    if (n < 2) return 0.0;
-    // Two points but for a chord through a corner, which both sides report: keep the farthest pair.
-    int a = 0, b = 1;
-    double best = sqr(pts[0][0] - pts[1][0]) + sqr(pts[0][1] - pts[1][1]);
-    if (n > 2)
-        for (int i = 0; i < n; ++i)
-            for (int j = i + 1; j < n; ++j) {
-                const double d = sqr(pts[i][0] - pts[j][0]) + sqr(pts[i][1] - pts[j][1]);
-                if (d > best) best = d, a = i, b = j;
-            }
-    if (best <= 0.0) return 0.0;
-    // With d the chord (length L = |d|, t = d / L): L m'Hm + L^3/12 t'Ht = L (m'Hm + d'Hd / 12),
-    // and L / |g| is one square root.
-    const double mx = 0.5 * (pts[a][0] + pts[b][0]), my = 0.5 * (pts[a][1] + pts[b][1]);
-    const double dx = pts[b][0] - pts[a][0], dy = pts[b][1] - pts[a][1];
-    const double mHm = hxx * mx * mx + 2.0 * hxy * mx * my + hyy * my * my;
-    const double dHd = hxx * dx * dx + 2.0 * hxy * dx * dy + hyy * dy * dy;
-    return -0.5 * std::sqrt(best / (gx * gx + gy * gy)) * (mHm + dHd / 12.0);
-}
-
 /// Transposes the 8 x 8 byte matrix held one row per word (little-endian: byte c of r[k] is column c).
 inline void transpose8x8(std::uint64_t r[8])
 {
@@ -161,9 +107,16 @@ inline Quad sqrtQuad(Quad v)
 #endif
 }
 
-/// squareCoverage plus curvatureCorrection, clamped to [0, 1], four pixels at once: the same
-/// formulas with selects for their branches. The chord's ends are the first side crossing and
-/// the crossing farthest from it (a chord through a corner is reported by both of its sides).
+/// The share of four pixels inside the boundary of a field that is f + g.p + p'Hp/2 over each
+/// (p in pixels from its centre; g = (gx, gy), H = [hxx hxy; hxy hyy]), clamped to [0, 1], with
+/// selects for branches so the lanes stay in vectors.
+/// - The straight edge f + g.p = 0: with a <= b the sorted |gx|, |gy| and c = (a + b)/2 - f, the
+///   area of {u, v in [0, 1]: a u + b v < c} is exact, piecewise quadratic in c (c / b where the
+///   edge runs along a pixel side).
+/// - Its curvature: the boundary moves off the chord by -p'Hp / (2|g|); integrated along the
+///   chord inside the pixel (midpoint m, vector d, length L) the area changes by
+///   -L (m'Hm + d'Hd / 12) / (2|g|). The chord's ends are the first side crossing and the crossing
+///   farthest from it (a chord through a corner is reported by both of its sides).
 inline Quad edgeCoverage(Quad f, Quad gx, Quad gy, Quad hxx, Quad hyy, Quad hxy)
 {
     const Quad zero{}, one = zero + 1.0f, half = zero + 0.5f;
@@ -177,6 +130,7 @@ inline Quad edgeCoverage(Quad f, Quad gx, Quad gy, Quad hxx, Quad hyy, Quad hxy)
     Quad area = (ramp(c) - ramp(c - a) - ramp(c - b) + ramp(c - a - b)) / (ab2 > zero ? ab2 : one);
     area = a < 1e-4f * b ? c / (b > zero ? b : one) : area;  // an edge along a pixel side
     area = b <= zero ? (c > zero ? one : zero) : area;
+    area = minQuad(maxQuad(area, zero), one);
 
     const QuadMask hasY = gy != zero, hasX = gx != zero;
     const Quad invY = one / (hasY ? gy : one), invX = one / (hasX ? gx : one);
@@ -708,9 +662,9 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
             continue;
         }
         if (linear) {
-            const double coverage = std::clamp(squareCoverage(std::abs(gx), std::abs(gy), -f + 0.5 * gradient) +
-                                                   curvatureCorrection(f, gx, gy, dxx, dyy, dxy),
-                                               0.0, 1.0);
+            // The tile passes' formula, one lane used.
+            auto lane = [](double v) { return Quad{} + float(v); };
+            const double coverage = edgeCoverage(lane(f), lane(gx), lane(gy), lane(dxx), lane(dyy), lane(dxy))[0];
             pixel = mOptions.gamma <= 0.0   ? (coverage >= 0.5 ? 255 : 0)
                     : mOptions.gamma == 1.0 ? std::uint8_t(255.0 * coverage + 0.5)  // coverage >= 0: lround
                                             : std::uint8_t(std::lround(255.0 * std::pow(coverage, mOptions.gamma)));
