@@ -33,6 +33,10 @@ struct SliceSettings {
     std::string preview;  ///< contact sheet file; "" = FILE.preview.png; "off"
     std::string timestamp = "2020-01-01 at 00:00:00 UTC";
     int threads = 0;  ///< 0: all
+    /// Where the field repeats along z over a whole number of layers, the encoded images of one
+    /// period are kept up to this many bytes and copied to the layers a period above (`reuse:
+    /// off` sets 0: every layer computed).
+    std::size_t reuseBytes = std::size_t(64) << 20;
 };
 
 /// Reads a `slices:` map (errors name file, line and key).
@@ -43,6 +47,8 @@ struct SliceResult {
     nlohmann::json report;
     std::vector<double> layerAreas;  ///< exposed area per layer (mm^2): sum of pixel/255 x pixel area
     int maxLayersHeld = 0;           ///< most layer images alive at once
+    int layersPerPeriod = 0;         ///< layers in one z-period of the field (0: not periodic)
+    int layersCopied = 0;            ///< layers copied from one a period below instead of computed
 };
 
 /// Slices @a field (negative inside) clipped to @a part for @a printer into @a path. @a recipeWhere

@@ -86,19 +86,32 @@ void BooleanField::gridValues(const GridBatch& batch, std::span<double> out) con
     }
 }
 
+double BooleanField::period(int axis) const
+{
+    double p = kInvariant;
+    for (const FieldPtr& operand : mOperands) p = commonPeriod(p, operand->period(axis));
+    return p;
+}
+
 Interval BooleanField::bound(const Box3& box) const
 {
     Interval r = mOperands[0]->bound(box);
     for (std::size_t o = 1; o < mOperands.size(); ++o) {
         const Interval b = mOperands[o]->bound(box);
         switch (mOp) {
-        case BooleanOp::Union: r = min(r, b); break;
-        case BooleanOp::Intersection: r = max(r, b); break;
-        case BooleanOp::Difference: r = max(r, -b); break;
+            case BooleanOp::Union:
+                r = min(r, b);
+                break;
+            case BooleanOp::Intersection:
+                r = max(r, b);
+                break;
+            case BooleanOp::Difference:
+                r = max(r, -b);
+                break;
         }
         // The smooth minimum lies within r/4 below the hard one (above it for max).
-        if (mBlend > 0.0) r = mOp == BooleanOp::Union ? Interval{r.lo - 0.25 * mBlend, r.hi}
-                                                      : Interval{r.lo, r.hi + 0.25 * mBlend};
+        if (mBlend > 0.0)
+            r = mOp == BooleanOp::Union ? Interval{r.lo - 0.25 * mBlend, r.hi} : Interval{r.lo, r.hi + 0.25 * mBlend};
     }
     return r;
 }
@@ -111,10 +124,12 @@ std::optional<Box3> BooleanField::support() const
         const std::optional<Box3> b = mOperands[o]->support();
         if (mOp == BooleanOp::Union) {
             if (!b) return std::nullopt;  // one unbounded operand makes the union unbounded
-            r = o == 0 ? *b : Box3{openvdb::math::minComponent(r->min, b->min), openvdb::math::maxComponent(r->max, b->max)};
+            r = o == 0 ? *b
+                       : Box3{openvdb::math::minComponent(r->min, b->min), openvdb::math::maxComponent(r->max, b->max)};
         } else if (b) {
             // The smooth maximum is never below the hard one, so any box bounds the result.
-            r = !r ? *b : Box3{openvdb::math::maxComponent(r->min, b->min), openvdb::math::minComponent(r->max, b->max)};
+            r = !r ? *b
+                   : Box3{openvdb::math::maxComponent(r->min, b->min), openvdb::math::minComponent(r->max, b->max)};
         }
     }
     if (r && mOp == BooleanOp::Union && mBlend > 0.0) r = Box3{r->min - Vec3d(mBlend), r->max + Vec3d(mBlend)};

@@ -24,6 +24,8 @@ public:
     /// Intersection: the overlap of the operands' boxes; union: their hull (grown by the blend
     /// radius, which assumes distance-like operands); difference: the first operand's box.
     std::optional<Box3> support() const override;
+    /// A period every operand shares (commonPeriod()).
+    double period(int axis) const override;
 
 private:
     /// Combines accumulated value a (gradient ga) with operand b (gradient gb) in place.

@@ -27,6 +27,7 @@ public:
         std::fill(out.begin(), out.end(), mValue);
     }
     Interval bound(const Box3&) const override { return Interval(mValue); }
+    double period(int) const override { return kInvariant; }
 
     double value() const { return mValue; }
 

@@ -1,6 +1,7 @@
 #include "fields/FieldNode.h"
 
 #include <algorithm>
+#include <cmath>
 #include <vector>
 
 namespace voxlat {
@@ -57,6 +58,16 @@ std::pair<double, Vec3d> FieldNode::valueAndGradient(const Vec3d& p) const
     Vec3d g(0.0);
     gradients(std::span<const Vec3d>(&p, 1), std::span<double>(&v, 1), std::span<Vec3d>(&g, 1));
     return {v, g};
+}
+
+double commonPeriod(double a, double b)
+{
+    if (a == FieldNode::kNoPeriod || b == FieldNode::kNoPeriod) return FieldNode::kNoPeriod;
+    if (std::isinf(a)) return b;
+    if (std::isinf(b)) return a;
+    const double small = std::min(a, b), large = std::max(a, b);
+    const double ratio = large / small;
+    return std::abs(ratio - std::round(ratio)) <= 1e-9 * ratio ? large : FieldNode::kNoPeriod;
 }
 
 Interval lipschitzBound(const FieldNode& node, const Box3& box, double lipschitz)

@@ -11,6 +11,7 @@
 #include <openvdb/math/Vec3.h>
 
 #include <cstddef>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <span>
@@ -80,6 +81,18 @@ public:
     /// solid is unbounded (a bare lattice). The engine uses it for the domain when none is given.
     virtual std::optional<Box3> support() const { return std::nullopt; }
 
+    /// The field's translation period along @a axis (0, 1, 2 for x, y, z): a length P with
+    /// value(p + P e_axis) = value(p) for every p; kNoPeriod when the node does not know one,
+    /// kInvariant when the value never changes along the axis. Composite nodes derive it from
+    /// their operands (commonPeriod()); the slicer copies layers one z-period apart.
+    virtual double period(int axis) const
+    {
+        (void)axis;
+        return kNoPeriod;
+    }
+    static constexpr double kNoPeriod = 0.0;
+    static constexpr double kInvariant = std::numeric_limits<double>::infinity();
+
     /// Convenience single-point queries (slow path; batches are the fast path).
     double value(const Vec3d& p) const;
     std::pair<double, Vec3d> valueAndGradient(const Vec3d& p) const;
@@ -96,6 +109,11 @@ void forEachChunk(std::size_t n, Fn&& fn)
 {
     for (std::size_t b = 0; b < n; b += kBatchSize) fn(b, std::min(kBatchSize, n - b));
 }
+
+/// A period shared by two fields that repeat with periods @a a and @a b (FieldNode::period()):
+/// the other one where either is invariant, the larger where it is a whole multiple of the
+/// smaller (to 1e-9 relative), otherwise kNoPeriod.
+double commonPeriod(double a, double b);
 
 /// A bound from a Lipschitz constant: value(centre) +- lipschitz * radius.
 Interval lipschitzBound(const FieldNode& node, const Box3& box, double lipschitz);

@@ -55,6 +55,11 @@ void GradedLevel::gradients(std::span<const Vec3d> points, std::span<double> out
     });
 }
 
+double GradedLevel::period(int axis) const
+{
+    return commonPeriod(mIndicator->period(axis), mDensity->period(axis));
+}
+
 Interval GradedLevel::bound(const Box3& box) const
 {
     const Interval rho = mDensity->bound(box);

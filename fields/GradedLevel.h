@@ -25,6 +25,8 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    /// A period the field and the target density share.
+    double period(int axis) const override;
 
     const DensityTable& table() const { return *mTable; }
     const FieldPtr& density() const { return mDensity; }

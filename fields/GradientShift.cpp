@@ -251,6 +251,15 @@ double GradientShift::maxShift(const Box3& box) const
     return std::sqrt(2.0 * d * d + l * l);
 }
 
+double GradientShift::period(int axis) const
+{
+    double p = mField->period(axis);
+    for (const FieldPtr& f : {mSpec.uniform, mSpec.wall, mSpec.layer, mSpec.directionGradient,
+                              mSpec.directionComponents[0], mSpec.directionComponents[1], mSpec.directionComponents[2]})
+        if (f) p = commonPeriod(p, f->period(axis));
+    return p;
+}
+
 Interval GradientShift::bound(const Box3& box) const
 {
     const double grow = maxShift(box);

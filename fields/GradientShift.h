@@ -55,6 +55,8 @@ public:
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     /// The child's bound over the box grown by the largest shift, folded through max(a, -b).
     Interval bound(const Box3& box) const override;
+    /// A period the field and every magnitude and direction field share.
+    double period(int axis) const override;
 
     /// Shift vectors s at @a points (evaluates the child's gradients there).
     void shifts(std::span<const Vec3d> points, std::span<Vec3d> out) const;

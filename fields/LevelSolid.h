@@ -23,6 +23,7 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    double period(int axis) const override { return mRaw->period(axis); }
 
     /// The level in the node's own units (c for a network, t for a sheet or a convolution).
     double level() const { return mLevel; }

@@ -73,6 +73,12 @@ void RampField::gradients(std::span<const Vec3d> points, std::span<double> out, 
     }
 }
 
+double RampField::period(int axis) const
+{
+    if (mSource) return mSource->period(axis);
+    return axis == mAxis ? kNoPeriod : kInvariant;
+}
+
 Interval RampField::bound(const Box3& box) const
 {
     const Interval u = mSource ? abs(mSource->bound(box)) : Interval(box.min[mAxis], box.max[mAxis]);

@@ -21,6 +21,8 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    /// Along an axis: invariant across it; from a source: the source's period.
+    double period(int axis) const override;
 
     int axis() const { return mAxis; }
 

@@ -24,6 +24,8 @@ public:
     void gridValuesShifted(const GridBatch& batch, std::span<const Vec3d> shift, std::span<double> plus,
                            std::span<double> minus) const override;
     Interval bound(const Box3& box) const override;
+    /// One cell: every equation repeats every 2 pi in each of its angles.
+    double period(int axis) const override { return mCell[axis]; }
 
     TpmsType type() const { return mType; }
     const Vec3d& cellSize() const { return mCell; }

@@ -63,6 +63,23 @@ void TransformField::gridValues(const GridBatch& batch, std::span<double> out) c
     mChild->gridValues(local, out);
 }
 
+double TransformField::period(int axis) const
+{
+    // A step P along the world axis moves the child's point by P times the inverse's column:
+    // a period when that column points along one child axis b (P |inverse(b, axis)| = child period).
+    // Entries below 1e-12 of the column's largest are the rounding of a rotation matrix's zeros.
+    const double largest =
+        std::max({std::abs(mInverse(0, axis)), std::abs(mInverse(1, axis)), std::abs(mInverse(2, axis))});
+    int along = -1;
+    for (int b = 0; b < 3; ++b) {
+        if (std::abs(mInverse(b, axis)) <= 1e-12 * largest) continue;
+        if (along >= 0) return kNoPeriod;
+        along = b;
+    }
+    if (along < 0) return kNoPeriod;
+    return mChild->period(along) / std::abs(mInverse(along, axis));
+}
+
 Interval TransformField::bound(const Box3& box) const
 {
     Box3 local{Vec3d(std::numeric_limits<double>::max()), Vec3d(std::numeric_limits<double>::lowest())};

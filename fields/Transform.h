@@ -26,6 +26,9 @@ public:
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
     std::optional<Box3> support() const override;
+    /// The child's period along the axis when the placement keeps the axis's direction
+    /// (translations, axis-aligned scales, rotations about the axis), scaled; otherwise none.
+    double period(int axis) const override;
 
 private:
     Vec3d toLocal(const Vec3d& p) const { return mInverse * (p - mTranslation); }

@@ -17,6 +17,7 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    double period(int axis) const override { return mChild->period(axis); }
     /// A positive offset only shrinks the solid: the child's box. Other maps: unbounded.
     std::optional<Box3> support() const override;
 

@@ -2,11 +2,14 @@
 // bounds that contain every sampled value, primitives against their analytic distances.
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
+#include "fields/Constant.h"
 #include "fields/Cylinder.h"
 #include "fields/LevelSolid.h"
+#include "fields/Ramp.h"
 #include "fields/Sphere.h"
 #include "fields/TpmsField.h"
 #include "fields/Transform.h"
+#include "fields/Unary.h"
 
 #include "FieldChecks.h"
 
@@ -28,32 +31,36 @@ double referenceTpms(TpmsType type, double x, double y, double z, double cell)
     const double k = 2 * std::numbers::pi / cell, X = k * x, Y = k * y, Z = k * z;
     using std::cos, std::sin;
     switch (type) {
-    case TpmsType::Gyroid: return sin(X) * cos(Y) + sin(Y) * cos(Z) + sin(Z) * cos(X);
-    case TpmsType::SchwarzP: return cos(X) + cos(Y) + cos(Z);
-    case TpmsType::SchwarzD:
-        return sin(X) * sin(Y) * sin(Z) + sin(X) * cos(Y) * cos(Z) + cos(X) * sin(Y) * cos(Z) + cos(X) * cos(Y) * sin(Z);
-    case TpmsType::IWP:
-        return 2 * (cos(X) * cos(Y) + cos(Y) * cos(Z) + cos(Z) * cos(X)) - (cos(2 * X) + cos(2 * Y) + cos(2 * Z));
-    case TpmsType::Neovius: return 3 * (cos(X) + cos(Y) + cos(Z)) + 4 * cos(X) * cos(Y) * cos(Z);
-    case TpmsType::FischerKochS:
-        return cos(2 * X) * sin(Y) * cos(Z) + cos(X) * cos(2 * Y) * sin(Z) + sin(X) * cos(Y) * cos(2 * Z);
-    case TpmsType::Lidinoid:
-        return (sin(2 * X) * cos(Y) * sin(Z) + sin(2 * Y) * cos(Z) * sin(X) + sin(2 * Z) * cos(X) * sin(Y)) -
-               (cos(2 * X) * cos(2 * Y) + cos(2 * Y) * cos(2 * Z) + cos(2 * Z) * cos(2 * X)) + 0.3;
-    case TpmsType::SplitP:
-        return 1.1 * (sin(2 * X) * cos(Y) * sin(Z) + sin(2 * Y) * cos(Z) * sin(X) + sin(2 * Z) * cos(X) * sin(Y)) -
-               0.2 * (cos(2 * X) * cos(2 * Y) + cos(2 * Y) * cos(2 * Z) + cos(2 * Z) * cos(2 * X)) -
-               0.4 * (cos(2 * X) + cos(2 * Y) + cos(2 * Z));
-    case TpmsType::FRD:
-        return 8 * cos(X) * cos(Y) * cos(Z) + cos(2 * X) * cos(2 * Y) * cos(2 * Z) -
-               (cos(2 * X) * cos(2 * Y) + cos(2 * Y) * cos(2 * Z) + cos(2 * Z) * cos(2 * X));
+        case TpmsType::Gyroid:
+            return sin(X) * cos(Y) + sin(Y) * cos(Z) + sin(Z) * cos(X);
+        case TpmsType::SchwarzP:
+            return cos(X) + cos(Y) + cos(Z);
+        case TpmsType::SchwarzD:
+            return sin(X) * sin(Y) * sin(Z) + sin(X) * cos(Y) * cos(Z) + cos(X) * sin(Y) * cos(Z) +
+                   cos(X) * cos(Y) * sin(Z);
+        case TpmsType::IWP:
+            return 2 * (cos(X) * cos(Y) + cos(Y) * cos(Z) + cos(Z) * cos(X)) - (cos(2 * X) + cos(2 * Y) + cos(2 * Z));
+        case TpmsType::Neovius:
+            return 3 * (cos(X) + cos(Y) + cos(Z)) + 4 * cos(X) * cos(Y) * cos(Z);
+        case TpmsType::FischerKochS:
+            return cos(2 * X) * sin(Y) * cos(Z) + cos(X) * cos(2 * Y) * sin(Z) + sin(X) * cos(Y) * cos(2 * Z);
+        case TpmsType::Lidinoid:
+            return (sin(2 * X) * cos(Y) * sin(Z) + sin(2 * Y) * cos(Z) * sin(X) + sin(2 * Z) * cos(X) * sin(Y)) -
+                   (cos(2 * X) * cos(2 * Y) + cos(2 * Y) * cos(2 * Z) + cos(2 * Z) * cos(2 * X)) + 0.3;
+        case TpmsType::SplitP:
+            return 1.1 * (sin(2 * X) * cos(Y) * sin(Z) + sin(2 * Y) * cos(Z) * sin(X) + sin(2 * Z) * cos(X) * sin(Y)) -
+                   0.2 * (cos(2 * X) * cos(2 * Y) + cos(2 * Y) * cos(2 * Z) + cos(2 * Z) * cos(2 * X)) -
+                   0.4 * (cos(2 * X) + cos(2 * Y) + cos(2 * Z));
+        case TpmsType::FRD:
+            return 8 * cos(X) * cos(Y) * cos(Z) + cos(2 * X) * cos(2 * Y) * cos(2 * Z) -
+                   (cos(2 * X) * cos(2 * Y) + cos(2 * Y) * cos(2 * Z) + cos(2 * Z) * cos(2 * X));
     }
     return 0;
 }
 
-const std::vector<TpmsType> kAllTpms{TpmsType::Gyroid,       TpmsType::SchwarzP, TpmsType::SchwarzD,
-                                     TpmsType::IWP,          TpmsType::Neovius,  TpmsType::FischerKochS,
-                                     TpmsType::Lidinoid,     TpmsType::SplitP,   TpmsType::FRD};
+const std::vector<TpmsType> kAllTpms{TpmsType::Gyroid,   TpmsType::SchwarzP, TpmsType::SchwarzD,
+                                     TpmsType::IWP,      TpmsType::Neovius,  TpmsType::FischerKochS,
+                                     TpmsType::Lidinoid, TpmsType::SplitP,   TpmsType::FRD};
 
 }  // namespace
 
@@ -102,6 +109,57 @@ TEST(Tpms, CellSizePerAxisSetsPeriod)
     }
 }
 
+TEST(Periods, CommonPeriodRules)
+{
+    const double none = FieldNode::kNoPeriod, any = FieldNode::kInvariant;
+    EXPECT_EQ(commonPeriod(none, 5), none);
+    EXPECT_EQ(commonPeriod(any, 5), 5);
+    EXPECT_EQ(commonPeriod(5, any), 5);
+    EXPECT_EQ(commonPeriod(any, any), any);
+    EXPECT_EQ(commonPeriod(5, 10), 10);
+    EXPECT_DOUBLE_EQ(commonPeriod(0.1 * 3, 0.3), 0.3);  // equal up to rounding
+    EXPECT_EQ(commonPeriod(5, 7.5), none);
+}
+
+TEST(Periods, ReportedPeriodsRepeatTheField)
+{
+    // Every period a node reports must repeat its values; a node that cannot know says none.
+    auto expectRepeats = [](const FieldNode& f, const std::array<double, 3>& expected, const char* what) {
+        for (int a = 0; a < 3; ++a) {
+            const double p = f.period(a);
+            if (std::isinf(expected[a]))
+                EXPECT_TRUE(std::isinf(p)) << what << " axis " << a;
+            else
+                EXPECT_NEAR(p, expected[a], 1e-12 * std::max(1.0, expected[a])) << what << " axis " << a;
+            if (p == FieldNode::kNoPeriod) continue;
+            Vec3d step(0.0);
+            step[a] = std::isinf(p) ? 123.4 : p;
+            for (const Vec3d& x : randomPoints(40, -6, 6, 20 + a))
+                EXPECT_NEAR(f.value(x), f.value(x + step), 1e-10 * (1 + std::abs(f.value(x)))) << what << " axis " << a;
+        }
+    };
+    const double none = FieldNode::kNoPeriod, any = FieldNode::kInvariant;
+    for (TpmsType type : kAllTpms) expectRepeats(TpmsField(type, Vec3d(4, 6, 9)), {4, 6, 9}, "tpms");
+    auto gyroid = std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(4, 6, 9));
+    auto p2 = std::make_shared<TpmsField>(TpmsType::SchwarzP, Vec3d(2));
+    expectRepeats(LevelSolid(gyroid, SolidSide::Band, 0.3), {4, 6, 9}, "sheet");
+    expectRepeats(UnaryField(gyroid, UnaryOp::Abs), {4, 6, 9}, "abs");
+    expectRepeats(BooleanField(BooleanOp::Union, {gyroid, p2}), {4, 6, none}, "union");  // 9 is not a multiple of 2
+    expectRepeats(TransformField(p2, TransformField::rotation(Vec3d(0, 0, 1), 30), Vec3d(1, 2, 3)), {none, none, 2},
+                  "rotated about z");
+    // A quarter turn about x takes the child's y to z and its z to y.
+    expectRepeats(TransformField(gyroid, TransformField::rotation(Vec3d(1, 0, 0), 90), Vec3d(0)), {4, 9, 6},
+                  "quarter turn");
+    Mat3d scale = Mat3d::zero();
+    scale(0, 0) = 2, scale(1, 1) = 1, scale(2, 2) = 0.5;
+    expectRepeats(TransformField(gyroid, scale, Vec3d(1, 2, 3)), {8, 6, 4.5}, "scaled");
+    expectRepeats(RampField(0, 0, 1, 0.1, 0.3), {none, any, any}, "ramp along x");
+    expectRepeats(ConstantField(2), {any, any, any}, "constant");
+    expectRepeats(BooleanField(BooleanOp::Intersection, {gyroid, std::make_shared<RampField>(0, 0, 1, 0.1, 0.3)}),
+                  {none, 6, 9}, "clipped along x");
+    expectRepeats(Sphere(Vec3d(0), 1), {none, none, none}, "sphere");
+}
+
 TEST(Tpms, GridBatchFastPathEqualsPointPath)
 {
     for (TpmsType type : kAllTpms) {
@@ -132,7 +190,9 @@ TEST(Tpms, LevelSolidSidesAndGradients)
         LevelSolid s(raw, side, 0.3);
         for (const Vec3d& p : pts) {
             const double f = raw->value(p);
-            const double expected = side == SolidSide::Below ? f - 0.3 : side == SolidSide::Band ? std::abs(f) - 0.3 : 0.3 - f;
+            const double expected = side == SolidSide::Below  ? f - 0.3
+                                    : side == SolidSide::Band ? std::abs(f) - 0.3
+                                                              : 0.3 - f;
             EXPECT_DOUBLE_EQ(s.value(p), expected);
             // The indicator's sub-level set at levelFromIndicator^-1 is the same solid.
             const double g = s.indicator()->value(p);
@@ -150,9 +210,9 @@ TEST(Primitives, DistancesAreExact)
     EXPECT_NEAR(sphere.value(Vec3d(1, 2, 3)), -4, 1e-12);
     EXPECT_NEAR(sphere.value(Vec3d(1, 2, 10)), 3, 1e-12);
     BoxField box(Box3{Vec3d(0), Vec3d(2, 4, 6)});
-    EXPECT_NEAR(box.value(Vec3d(1, 2, 3)), -1, 1e-12);              // nearest face x
-    EXPECT_NEAR(box.value(Vec3d(5, 2, 3)), 3, 1e-12);               // face
-    EXPECT_NEAR(box.value(Vec3d(5, 8, 3)), 5, 1e-12);               // edge: 3-4-5
+    EXPECT_NEAR(box.value(Vec3d(1, 2, 3)), -1, 1e-12);  // nearest face x
+    EXPECT_NEAR(box.value(Vec3d(5, 2, 3)), 3, 1e-12);   // face
+    EXPECT_NEAR(box.value(Vec3d(5, 8, 3)), 5, 1e-12);   // edge: 3-4-5
     Cylinder cyl(Vec3d(0), Vec3d(0, 0, 2), 1, 4);
     EXPECT_NEAR(cyl.value(Vec3d(0, 0, 0)), -1, 1e-12);
     EXPECT_NEAR(cyl.value(Vec3d(3, 0, 0)), 2, 1e-12);

@@ -7,6 +7,7 @@
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
 #include "fields/LevelSolid.h"
+#include "fields/Ramp.h"
 #include "fields/Sphere.h"
 #include "fields/TpmsField.h"
 #include "mesher/SliceWriters.h"
@@ -75,6 +76,13 @@ double layerArea(const Slicer& slicer, const Display& d, double z)
     LayerImage image;
     slicer.rasterize(z, image);
     return image.exposedPixels() * d.pitchX() * d.pitchY();
+}
+
+std::string layerName(const std::string& prefix, int index)
+{
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%05d.png", index);
+    return prefix + buf;
 }
 
 const char* kSmallSlices = R"(domain: {box: [[0, 0, 0], [20, 16, 3]]}
@@ -291,6 +299,94 @@ TEST(Slices, SameBytesForAnyThreadCount)
     EXPECT_GT(one.size(), 10000u);
     EXPECT_TRUE(one == readFile(dir.path / "t3" / "part.sl1s"));  // not EXPECT_EQ: binary
     EXPECT_TRUE(readFile(dir.path / "t1" / "part.preview.png") == readFile(dir.path / "t3" / "part.preview.png"));
+}
+
+/// Pixels of two PNG images that differ at all, and by more than one grey level.
+std::pair<std::size_t, std::size_t> pixelsDiffering(const std::string& a, const std::string& b)
+{
+    int wa, ha, ca, wb, hb, cb;
+    const auto pa = decodePng(a, wa, ha, ca), pb = decodePng(b, wb, hb, cb);
+    EXPECT_TRUE(wa == wb && ha == hb && ca == cb);
+    std::size_t any = 0, large = 0;
+    for (std::size_t k = 0; k < std::min(pa.size(), pb.size()); ++k) {
+        any += pa[k] != pb[k];
+        large += std::abs(int(pa[k]) - int(pb[k])) > 1;
+    }
+    return {any, large};
+}
+
+TEST(Slices, LayersAPeriodApartAreCopied)
+{
+    // A gyroid sheet of 2 mm cells at 0.05 mm layers repeats every 40 layers: of 100 layers, 60
+    // are copies. A copy is the slice one period below, the same plane up to the rounding of z,
+    // so the images must match the computed ones; with a budget that keeps only some phases, the
+    // bytes must still not depend on the thread count.
+    auto tpms = std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(2.0));
+    const LevelSolid solid(tpms, SolidSide::Band, 0.4);
+    const Box3 part{Vec3d(0), Vec3d(6, 5, 5)};
+    const PrinterProfile printer = loadPrinterProfile("sl1s");
+    TempDir dir;
+    auto slice = [&](const FieldNode& field, std::size_t reuseBytes, int threads, const std::string& folder,
+                     double layer = 0.05) {
+        SliceSettings settings;
+        settings.printer = "sl1s";
+        settings.layer = layer;
+        settings.reuseBytes = reuseBytes;
+        std::filesystem::create_directories(dir.path / folder);
+        const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        return sliceToFile(field, part, printer, settings, dir.path / folder / "part.sl1s", "test");
+    };
+    const SliceResult computed = slice(solid, 0, 2, "computed");
+    const SliceResult copied = slice(solid, std::size_t(64) << 20, 2, "copied");
+    EXPECT_EQ(computed.layersCopied, 0);
+    EXPECT_EQ(copied.layersPerPeriod, 40);
+    EXPECT_EQ(copied.layersCopied, 60);
+    EXPECT_EQ(copied.report["layers_copied"], 60);
+    const auto a = readZip(dir.path / "computed" / "part.sl1s");
+    const auto b = readZip(dir.path / "copied" / "part.sl1s");
+    ASSERT_EQ(a.size(), b.size());
+    std::size_t any = 0, large = 0, pixels = 0;
+    for (const auto& [name, bytes] : a) {
+        if (!name.ends_with(".png")) continue;
+        ASSERT_TRUE(b.count(name)) << name;
+        const auto [n, m] = pixelsDiffering(bytes, b.at(name));
+        any += n;
+        large += m;
+        pixels += std::size_t(1620) * 2560;
+    }
+    EXPECT_EQ(large, 0u);
+    EXPECT_LE(double(any), 1e-6 * double(pixels));
+    for (int i = 0; i < 100; ++i) EXPECT_NEAR(copied.layerAreas[i], computed.layerAreas[i], 1e-6) << i;
+    for (int i = 40; i < 100; ++i) EXPECT_EQ(copied.layerAreas[i], copied.layerAreas[i % 40]) << i;
+    const auto [previewAny, previewLarge] = pixelsDiffering(readFile(dir.path / "computed" / "part.preview.png"),
+                                                            readFile(dir.path / "copied" / "part.preview.png"));
+    EXPECT_EQ(previewLarge, 0u);
+
+    // A budget for the first 15 phases: 30 layers copied, the rest computed, the same bytes for 1
+    // and 3 threads.
+    std::size_t budget = 0;
+    for (int i = 0; i < 15; ++i) budget += b.at(layerName("part", i)).size();
+    const SliceResult one = slice(solid, budget, 1, "budget1");
+    const SliceResult three = slice(solid, budget, 3, "budget3");
+    EXPECT_EQ(one.layersCopied, 30);
+    EXPECT_EQ(three.layersCopied, 30);
+    EXPECT_TRUE(readFile(dir.path / "budget1" / "part.sl1s") == readFile(dir.path / "budget3" / "part.sl1s"));
+    EXPECT_TRUE(readFile(dir.path / "budget1" / "part.sl1s") == readFile(dir.path / "copied" / "part.sl1s"));
+
+    // 0.03 mm layers: 200 layers span three 2 mm cells, more than the part's 166 layers: none
+    // copied; 0.047 mm never spans whole cells; 0.08 mm: 25 layers span one cell (0.08 x 25 = 2), so
+    // every layer from 25 on is a copy. A field that does not change along z copies every layer from
+    // the first.
+    EXPECT_EQ(slice(solid, std::size_t(64) << 20, 2, "thirds", 0.03).layersPerPeriod, 0);
+    EXPECT_EQ(slice(solid, std::size_t(64) << 20, 2, "off-period", 0.047).layersPerPeriod, 0);
+    const SliceResult coarse = slice(solid, std::size_t(64) << 20, 2, "coarse", 0.08);
+    EXPECT_EQ(coarse.layersPerPeriod, 25);
+    EXPECT_EQ(coarse.layersCopied, int(coarse.layerAreas.size()) - 25);
+    const LevelSolid halfPlane(std::make_shared<RampField>(0, 0.0, 6.0, 0.0, 1.0), SolidSide::Below, 0.5);
+    const SliceResult prism = slice(halfPlane, std::size_t(64) << 20, 2, "prism");
+    EXPECT_EQ(prism.layersPerPeriod, 1);
+    EXPECT_EQ(prism.layersCopied, 99);
+    for (double area : prism.layerAreas) EXPECT_NEAR(area, 3.0 * 5.0, 0.05);  // x <= 3 of a 6 x 5 mm part
 }
 
 TEST(Slices, MemoryBoundedByAFewLayersForATallPart)

@@ -6,6 +6,12 @@ bounding box grown by the cut-off r_c = sigma sqrt(2 ln 1e4)), the closed-form G
 integral (scipy.special.erf) evaluated on the grid points of that box and summed into a dense
 grid; the iso-value t as the quantile of F for the target relative density (solid F >= t); and
 scikit-image marching cubes. Binary STL written with numpy.
+
+--offset moves the sample points within their voxels (default: the centres). The solved level
+depends on it: the 5 mm cells are exactly 50 voxels, so every cell is sampled at the same points
+and the count aliases. Issue 3: 0.90292 at the centres; 0.91439, 0.91500, 0.91652, 0.90909 and
+0.90810 at five random offsets, whose mean 0.91262 is 0.07 % from voxlat's 0.91329 (the volume
+integral).
 """
 import argparse
 import time
@@ -36,6 +42,8 @@ def main():
     ap.add_argument("--cell", type=float, default=5.0)
     ap.add_argument("--sigma", type=float, default=0.5)
     ap.add_argument("--density", type=float, default=0.20)
+    ap.add_argument("--offset", type=float, nargs=3, default=[0.5, 0.5, 0.5],
+                    help="sample points at (index + offset) * voxel; 0.5 = voxel centres (the method as written)")
     ap.add_argument("--out", required=True)
     a = ap.parse_args()
     t0 = time.perf_counter()
@@ -43,15 +51,16 @@ def main():
     n = int(round(a.size / a.voxel))
     v, s = a.voxel, a.sigma
     rc = s * np.sqrt(2 * np.log(1e4))
+    o = np.array(a.offset)
     F = np.zeros((n, n, n), dtype=np.float32)
     for A, B in bcc_frame(a.size, a.cell):
         L = np.linalg.norm(B - A)
         u = (B - A) / L
-        lo = np.maximum(np.floor((np.minimum(A, B) - rc) / v - 0.5).astype(int), 0)
-        hi = np.minimum(np.ceil((np.maximum(A, B) + rc) / v - 0.5).astype(int) + 1, n)
-        x = (np.arange(lo[0], hi[0]) + 0.5) * v - A[0]
-        y = (np.arange(lo[1], hi[1]) + 0.5) * v - A[1]
-        z = (np.arange(lo[2], hi[2]) + 0.5) * v - A[2]
+        lo = np.maximum(np.floor((np.minimum(A, B) - rc) / v - o).astype(int), 0)
+        hi = np.minimum(np.ceil((np.maximum(A, B) + rc) / v - o).astype(int) + 1, n)
+        x = (np.arange(lo[0], hi[0]) + o[0]) * v - A[0]
+        y = (np.arange(lo[1], hi[1]) + o[1]) * v - A[1]
+        z = (np.arange(lo[2], hi[2]) + o[2]) * v - A[2]
         X, Y, Z = x[:, None, None], y[None, :, None], z[None, None, :]
         h = X * u[0] + Y * u[1] + Z * u[2]
         r2 = X * X + Y * Y + Z * Z - h * h
