@@ -143,12 +143,17 @@ struct HeightMap {
     {
         // A thumbnail needs no more than every `step` pixels. The samples of a row are gathered
         // first so the select runs as a vector loop (a branch per pixel mispredicts on lattices).
-        std::vector<std::uint8_t> row(static_cast<std::size_t>(w));
-        for (int j = 0; j < image.ny; j += step) {
-            const std::uint8_t* src = &image.pixels[std::size_t(j) * image.nx];
-            for (int c = 0; c < w; ++c) row[c] = src[std::size_t(c) * step];
-            int* t = &into[std::size_t(j / step) * w];
-            for (int c = 0; c < w; ++c) t[c] = row[c] >= 128 ? value : t[c];
+        // Locals, not members: the byte stores may alias any member, which would be reloaded.
+        const int width = w, stride = step, rows = image.ny;
+        const std::size_t pitch = std::size_t(image.nx);
+        std::vector<std::uint8_t> row(static_cast<std::size_t>(width));
+        std::uint8_t* const samples = row.data();
+        const std::uint8_t* const pixels = image.pixels.data();
+        for (int j = 0; j < rows; j += stride) {
+            const std::uint8_t* src = pixels + std::size_t(j) * pitch;
+            for (int c = 0; c < width; ++c) samples[c] = src[std::size_t(c) * stride];
+            int* t = &into[std::size_t(j / stride) * width];
+            for (int c = 0; c < width; ++c) t[c] = samples[c] >= 128 ? value : t[c];
         }
     }
     /// An RGBA image of tw x th with the map fitted in, y up.

@@ -77,9 +77,12 @@ public:
     }
     void bytes(const std::uint8_t* p, std::size_t n)
     {
-        const uLong adler = adler32((uLong(mB) << 16) | mA, p, uInt(n));
-        mA = adler & 0xffff;
-        mB = adler >> 16;
+        // Rows longer than this are coded in parts, so the Adler sums below fit 64 bits.
+        constexpr std::size_t kPart = std::size_t(1) << 24;
+        for (; n > kPart; p += kPart, n -= kPart) bytes(p, kPart);
+        // Adler-32 run by run, reduced once at the end: m bytes c add m c to A and, to B, m A
+        // plus c m (m + 1) / 2 (A < 2^33 and B < 2^57 for at most 2^24 bytes).
+        std::uint64_t a = mA, b = mB;
         std::size_t k = 0;
         while (k < n) {
             if (p[k] != mRunByte) flushRun(), mRunByte = p[k];
@@ -90,9 +93,14 @@ public:
                 if (word != pattern) break;
             }
             while (e < n && p[e] == mRunByte) ++e;
-            mRun += e - k;
+            const std::uint64_t m = e - k;
+            b += m * a + mRunByte * (m * (m + 1) / 2);
+            a += m * mRunByte;
+            mRun += m;
             k = e;
         }
+        mA = std::uint32_t(a % kBase);
+        mB = std::uint32_t(b % kBase);
     }
     /// Ends the block and returns the Adler-32 of everything coded.
     std::uint32_t finish()
