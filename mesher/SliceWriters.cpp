@@ -223,6 +223,7 @@ std::string encodeWindowPng(int width, int height, const std::uint8_t* window, i
     putBig32(idat, deflater.finish());
 
     std::string out("\x89PNG\r\n\x1a\n", 8);
+    out.reserve(8 + 3 * 12 + 13 + idat.size());  // exactly: a layer kept for copies holds no slack
     std::string ihdr;
     putBig32(ihdr, std::uint32_t(width));
     putBig32(ihdr, std::uint32_t(height));
