@@ -210,6 +210,24 @@ TEST(DensityPieces, BoxOfCellsHitsTheTargetOnTheMesh)
     EXPECT_TRUE(checkTopology(mesh).closedManifold());
 }
 
+TEST(DensityPieces, CoarseJobVoxelKeepsTheLevel)
+{
+    // The density is a property of the field, not of the job's voxels: a 0.25 mm job measures
+    // one period at no more than sigma / 8 a step, as finely as a 0.1 mm job (before: 0.2 mm gave
+    // a level 0.0045 mm above the 0.1 mm one, 1 % more material).
+    auto level = [](double voxel) {
+        const std::string text =
+            "voxel: " + std::to_string(voxel) +
+            "\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\n"
+            "fields:\n  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, density: 0.20}\n"
+            "result: lattice\n";
+        Job job(parseRecipe(text, "bcc.yaml", "."));
+        job.solveLevels();
+        return job.report()["fields"]["lattice"]["level"].get<double>();
+    };
+    EXPECT_NEAR(level(0.25), level(0.1), 0.0006);
+}
+
 TEST(DensityPieces, AsymmetricCellMeasuresBothFaceZones)
 {
     // A grid cell with one body diagonal: valid (its faces carry the corners), periodic, but no
