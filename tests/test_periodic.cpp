@@ -191,15 +191,24 @@ TEST(DensityPieces, TileTheBoxAndMatchTheWholeBoxOnTheSameLattice)
     EXPECT_TRUE(periodicPieces(Box3{Vec3d(0.0), Vec3d(12.0)}, Vec3d(4.0), b.reach, 0.1).empty());
 }
 
+namespace {
+
+/// 3^3 BCC cells of 5 mm (sigma 0.5, 20 %: the acceptance recipe's cells) at @a voxel.
+std::string bccBoxRecipe(double voxel)
+{
+    return "voxel: " + std::to_string(voxel) +
+           "\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\n"
+           "fields:\n  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, density: 0.20}\n"
+           "result: lattice\n";
+}
+
+}  // namespace
+
 TEST(DensityPieces, BoxOfCellsHitsTheTargetOnTheMesh)
 {
     // 3^3 BCC cells of 5 mm (sigma 0.5, 20 %, the acceptance recipe's cells): folded twice per
     // axis. The mesh's own volume is the independent measure.
-    const std::string text =
-        "voxel: 0.1\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\n"
-        "fields:\n  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, density: 0.20}\n"
-        "result: lattice\n";
-    Job job(parseRecipe(text, "bcc.yaml", "."));
+    Job job(parseRecipe(bccBoxRecipe(0.1), "bcc.yaml", "."));
     job.solveLevels();
     ASSERT_TRUE(job.report()["fields"]["lattice"].contains("density_measured_on"));
     // BCC is its own mirror image along every axis: one face zone per axis, three segments.
@@ -216,12 +225,7 @@ TEST(DensityPieces, CoarseJobVoxelKeepsTheLevel)
     // one period at no more than sigma / 8 a step, as finely as a 0.1 mm job (before: 0.2 mm gave
     // a level 0.0045 mm above the 0.1 mm one, 1 % more material).
     auto level = [](double voxel) {
-        const std::string text =
-            "voxel: " + std::to_string(voxel) +
-            "\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\n"
-            "fields:\n  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, density: 0.20}\n"
-            "result: lattice\n";
-        Job job(parseRecipe(text, "bcc.yaml", "."));
+        Job job(parseRecipe(bccBoxRecipe(voxel), "bcc.yaml", "."));
         job.solveLevels();
         return job.report()["fields"]["lattice"]["level"].get<double>();
     };
