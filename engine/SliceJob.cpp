@@ -402,9 +402,8 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
     RasterStats stats;
 
     LayerRepeats repeats;
-    if (format != "exr") repeats.period = layersPerPeriod(field, layer, count);
+    if (format != "exr" && settings.reuseBytes > 0) repeats.period = layersPerPeriod(field, layer, count);
     repeats.budget = settings.reuseBytes;
-    if (repeats.budget == 0) repeats.period = 0;
 
     struct Token {
         LayerImage image;

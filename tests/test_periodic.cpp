@@ -202,6 +202,15 @@ std::string bccBoxRecipe(double voxel)
            "result: lattice\n";
 }
 
+/// The mesh, the independent measure, holds 20 % of the 15 mm box (within 0.5 % relative) and is
+/// closed and manifold.
+void expectMeshHoldsTheTarget(Job& job)
+{
+    const TriangleMesh& mesh = job.mesh();
+    EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.005 * 0.20);
+    EXPECT_TRUE(checkTopology(mesh).closedManifold());
+}
+
 }  // namespace
 
 TEST(DensityPieces, BoxOfCellsHitsTheTargetOnTheMesh)
@@ -214,9 +223,7 @@ TEST(DensityPieces, BoxOfCellsHitsTheTargetOnTheMesh)
     // BCC is its own mirror image along every axis: one face zone per axis, three segments.
     EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
               "one period of the interior (27 weighted pieces)");
-    const TriangleMesh& mesh = job.mesh();
-    EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.005 * 0.20);
-    EXPECT_TRUE(checkTopology(mesh).closedManifold());
+    expectMeshHoldsTheTarget(job);
 }
 
 TEST(DensityPieces, CoarseJobVoxelKeepsTheLevel)
@@ -248,9 +255,7 @@ TEST(DensityPieces, AsymmetricCellMeasuresBothFaceZones)
     job.solveLevels();
     EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
               "one period of the interior (64 weighted pieces)");
-    const TriangleMesh& mesh = job.mesh();
-    EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.005 * 0.20);
-    EXPECT_TRUE(checkTopology(mesh).closedManifold());
+    expectMeshHoldsTheTarget(job);
 }
 
 TEST(DensityPieces, PlaneFieldGivesTheExactLevel)
