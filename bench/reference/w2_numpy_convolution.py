@@ -44,6 +44,8 @@ def main():
     ap.add_argument("--density", type=float, default=0.20)
     ap.add_argument("--offset", type=float, nargs=3, default=[0.5, 0.5, 0.5],
                     help="sample points at (index + offset) * voxel; 0.5 = voxel centres (the method as written)")
+    ap.add_argument("--jitter", type=int, metavar="SEED",
+                    help="each grid plane at a random position within its voxel layer (overrides --offset)")
     ap.add_argument("--out", required=True)
     a = ap.parse_args()
     t0 = time.perf_counter()
@@ -51,16 +53,20 @@ def main():
     n = int(round(a.size / a.voxel))
     v, s = a.voxel, a.sigma
     rc = s * np.sqrt(2 * np.log(1e4))
-    o = np.array(a.offset)
+    if a.jitter is None:
+        axes = [(np.arange(n) + o) * v for o in a.offset]
+    else:
+        rng = np.random.default_rng(a.jitter)
+        axes = [(np.arange(n) + rng.random(n)) * v for _ in range(3)]
     F = np.zeros((n, n, n), dtype=np.float32)
     for A, B in bcc_frame(a.size, a.cell):
         L = np.linalg.norm(B - A)
         u = (B - A) / L
-        lo = np.maximum(np.floor((np.minimum(A, B) - rc) / v - o).astype(int), 0)
-        hi = np.minimum(np.ceil((np.maximum(A, B) + rc) / v - o).astype(int) + 1, n)
-        x = (np.arange(lo[0], hi[0]) + o[0]) * v - A[0]
-        y = (np.arange(lo[1], hi[1]) + o[1]) * v - A[1]
-        z = (np.arange(lo[2], hi[2]) + o[2]) * v - A[2]
+        # The sub-domain: the strut's box grown by r_c, from the last grid plane at or below its
+        # low side to the first at or above its high side.
+        lo = [max(np.searchsorted(c, m - rc, side="right") - 1, 0) for c, m in zip(axes, np.minimum(A, B))]
+        hi = [min(np.searchsorted(c, m + rc) + 1, n) for c, m in zip(axes, np.maximum(A, B))]
+        x, y, z = (c[l:h] - a0 for c, l, h, a0 in zip(axes, lo, hi, A))
         X, Y, Z = x[:, None, None], y[None, :, None], z[None, None, :]
         h = X * u[0] + Y * u[1] + Z * u[2]
         r2 = X * X + Y * Y + Z * Z - h * h
