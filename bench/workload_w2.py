@@ -21,7 +21,12 @@ Sampling at random offsets within the voxels instead of the centres (the referen
 its level is 0.91439, 0.91500, 0.91652, 0.90909 and 0.90810 (mean 0.91262, 0.07 % from voxlat's
 0.91329) against 0.90292 at the centres. Later run: 1.97 s vs 114.5 s (58.3x), levels 1.148 %
 apart; at 0.2 mm, with the one-period density step capped at sigma / 8, voxlat's level is
-0.91283 (0.05 % from its 0.1 mm one; before 0.90672), 1.31 % from the reference's 0.2 mm one."""
+0.91283 (0.05 % from its 0.1 mm one; before 0.90672), 1.31 % from the reference's 0.2 mm one.
+Which level is right, checked without a sample lattice (bench/reference/w2_level_monte_carlo.py:
+the reference's F at 16 million independent uniform points in the box): level 0.913462 +- 0.000312,
+0.02 % from voxlat's 0.913285; the points find 20.006 % +- 0.010 % of the box at voxlat's level and
+20.339 % at the reference's 0.90292. The reference's --jitter (each sample plane at a random place
+in its voxel layer) gives 0.91569 and 0.91485 (seeds 1, 2; at 0.2 mm 0.91716, 0.91385)."""
 import json
 import math
 import re

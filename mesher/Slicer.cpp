@@ -5,9 +5,8 @@
 #include <cstring>
 #include <limits>
 
-#if defined(__SSE2__)
-#include <emmintrin.h>
-#endif
+#include "mesher/SliceTiles.h"
+#include "mesher/SliceTilesAvx2.h"
 
 namespace voxlat {
 
@@ -26,43 +25,14 @@ inline void transpose8x8(std::uint64_t r[8])
     for (int k : {0, 1, 2, 3}) swap(r[k], r[k + 4], 32, 0x00000000FFFFFFFFull);
 }
 
-/// Tile side of the vectorised path for whole tiles (the slicer's default tile).
-constexpr int kLanes = 8;
-
-/// Four floats and their comparison masks (GCC/Clang vector extensions: SSE on x86-64, NEON
-/// elsewhere), written out because the compilers do not vectorise the eight-lane loops below.
-/// The tile tests run in single precision: they only decide which pixels are sure (a rounding
-/// there moves a pixel between the sure and the exact path, both of which give it the same grey
-/// but in a razor-thin case), and four lanes per vector halve their cost.
-using Quad = float __attribute__((vector_size(16)));
-using QuadMask = int __attribute__((vector_size(16)));
-
-inline Quad loadQuad(const float* p)
+/// True when this build has the eight-lane tile pass and the CPU running it has AVX2 (a check
+/// made here, outside the file built for AVX2, so it runs on any x86-64 CPU).
+bool avx2TilesAvailable()
 {
-    Quad v;
-    std::memcpy(&v, p, sizeof v);
-    return v;
-}
-inline Quad absQuad(Quad v)
-{
-    return Quad(QuadMask(v) & 0x7fffffff);
-}
-/// std::max and std::min per lane.
-inline Quad maxQuad(Quad a, Quad b)
-{
-    return a < b ? b : a;
-}
-inline Quad minQuad(Quad a, Quad b)
-{
-    return b < a ? b : a;
-}
-/// Bit k set where lane k of @a m is true.
-inline unsigned bitsOf(QuadMask m)
-{
-#if defined(__SSE2__)
-    return unsigned(_mm_movemask_ps(__m128(m)));
+#if defined(VOXLAT_AVX2_TILES)
+    return __builtin_cpu_supports("avx2");
 #else
-    return unsigned(m[0] & 1) | unsigned(m[1] & 1) << 1 | unsigned(m[2] & 1) << 2 | unsigned(m[3] & 1) << 3;
+    return false;
 #endif
 }
 
@@ -72,204 +42,11 @@ bool allFinite(const float* v, std::size_t n)
     Quad poison[2] = {};
     std::size_t k = 0;
     for (; k + 8 <= n; k += 8)
-        for (int q = 0; q < 2; ++q) poison[q] += loadQuad(v + k + 4 * q) * 0.0f;
+        for (int q = 0; q < 2; ++q) poison[q] += QuadLanes::load(v + k + 4 * q) * 0.0f;
     float rest = 0.0f;
     for (; k < n; ++k) rest += v[k] * 0.0f;
     const Quad sum = poison[0] + poison[1];
     return sum[0] == 0.0f && sum[1] == 0.0f && sum[2] == 0.0f && sum[3] == 0.0f && rest == 0.0f;
-}
-
-/// Transposes an 8 x 8 bit matrix (byte r of @a m is row r, bit c its column c).
-inline std::uint64_t transposeBits8x8(std::uint64_t m)
-{
-    std::uint64_t t = (m ^ (m >> 7)) & 0x00AA00AA00AA00AAull;
-    m ^= t ^ (t << 7);
-    t = (m ^ (m >> 14)) & 0x0000CCCC0000CCCCull;
-    m ^= t ^ (t << 14);
-    t = (m ^ (m >> 28)) & 0x00000000F0F0F0F0ull;
-    return m ^ t ^ (t << 28);
-}
-
-/// Eight bytes, 0xFF where bit k of @a bits is set (byte k).
-inline std::uint64_t bytesOfBits(unsigned bits)
-{
-    std::uint64_t spread = ((bits * 0x8040201008040201ull) >> 7) & 0x0101010101010101ull;  // bit k -> byte 7 - k
-    spread = __builtin_bswap64(spread);                                                    // byte k
-    return spread * 0xFF;
-}
-
-inline Quad sqrtQuad(Quad v)
-{
-#if defined(__SSE2__)
-    return Quad(_mm_sqrt_ps(__m128(v)));
-#else
-    return Quad{std::sqrt(v[0]), std::sqrt(v[1]), std::sqrt(v[2]), std::sqrt(v[3])};
-#endif
-}
-
-/// The share of four pixels inside the boundary of a field that is f + g.p + p'Hp/2 over each
-/// (p in pixels from its centre; g = (gx, gy), H = [hxx hxy; hxy hyy]), clamped to [0, 1], with
-/// selects for branches so the lanes stay in vectors.
-/// - The straight edge f + g.p = 0: with a <= b the sorted |gx|, |gy| and c = (a + b)/2 - f, the
-///   area of {u, v in [0, 1]: a u + b v < c} is exact, piecewise quadratic in c (c / b where the
-///   edge runs along a pixel side).
-/// - Its curvature: the boundary moves off the chord by -p'Hp / (2|g|); integrated along the
-///   chord inside the pixel (midpoint m, vector d, length L) the area changes by
-///   -L (m'Hm + d'Hd / 12) / (2|g|). The chord's ends are the first side crossing and the crossing
-///   farthest from it (a chord through a corner is reported by both of its sides).
-inline Quad edgeCoverage(Quad f, Quad gx, Quad gy, Quad hxx, Quad hyy, Quad hxy)
-{
-    const Quad zero{}, one = zero + 1.0f, half = zero + 0.5f;
-    const Quad ax = absQuad(gx), ay = absQuad(gy);
-    const Quad a = minQuad(ax, ay), b = maxQuad(ax, ay), c = 0.5f * (ax + ay) - f;
-    auto ramp = [&](Quad x) {
-        const Quad p = maxQuad(x, zero);
-        return p * p;
-    };
-    const Quad ab2 = 2.0f * a * b;
-    Quad area = (ramp(c) - ramp(c - a) - ramp(c - b) + ramp(c - a - b)) / (ab2 > zero ? ab2 : one);
-    area = a < 1e-4f * b ? c / (b > zero ? b : one) : area;  // an edge along a pixel side
-    area = b <= zero ? (c > zero ? one : zero) : area;
-    area = minQuad(maxQuad(area, zero), one);
-
-    const QuadMask hasY = gy != zero, hasX = gx != zero;
-    const Quad invY = one / (hasY ? gy : one), invX = one / (hasX ? gx : one);
-    const Quad v0 = (0.5f * gx - f) * invY, v1 = (-0.5f * gx - f) * invY;  // at u = -1/2, +1/2
-    const Quad u0 = (0.5f * gy - f) * invX, u1 = (-0.5f * gy - f) * invX;  // at v = -1/2, +1/2
-    const Quad px[4] = {-half, half, u0, u1}, py[4] = {v0, v1, -half, half};
-    const QuadMask valid[4] = {hasY & (absQuad(v0) <= half), hasY & (absQuad(v1) <= half), hasX & (absQuad(u0) <= half),
-                               hasX & (absQuad(u1) <= half)};
-    Quad sx = px[3], sy = py[3];
-    for (int k = 2; k >= 0; --k) sx = valid[k] ? px[k] : sx, sy = valid[k] ? py[k] : sy;
-    Quad ex = sx, ey = sy, best = zero;
-    for (int k = 0; k < 4; ++k) {
-        const Quad d = (px[k] - sx) * (px[k] - sx) + (py[k] - sy) * (py[k] - sy);
-        const QuadMask take = valid[k] & (d > best);
-        best = take ? d : best, ex = take ? px[k] : ex, ey = take ? py[k] : ey;
-    }
-    const Quad mx = 0.5f * (sx + ex), my = 0.5f * (sy + ey), dx = ex - sx, dy = ey - sy;
-    const Quad mHm = hxx * mx * mx + 2.0f * hxy * mx * my + hyy * my * my;
-    const Quad dHd = hxx * dx * dx + 2.0f * hxy * dx * dy + hyy * dy * dy;
-    const Quad g2 = gx * gx + gy * gy;
-    const Quad bend = -0.5f * sqrtQuad(best / (g2 > zero ? g2 : one)) * (mHm + dHd / 12.0f);
-    const Quad coverage = area + (best > zero ? bend : zero);
-    return minQuad(maxQuad(coverage, zero), one);
-}
-
-/// Decides the pixels of a kLanes x kLanes tile that lies wholly inside the part's box as
-/// Slicer::edgeTile's per-pixel tests would, four lanes at a time. A pixel is decided when it is
-/// sure (|f| above the largest corner difference of its four cells: no sign change and no boundary
-/// within its 3x3 neighbourhood) or far (the field is locally linear and its linearised edge misses
-/// the pixel: the slow path's first exit). The whole tile is tried first: min |f| over its pixels
-/// above the largest difference of every cell around them, with one sign, makes every pixel sure.
-/// Decided pixels are written (255 inside, 0 outside); the others are listed in @a slowList as
-/// a * kLanes + b. With @a greyEdges (anti-aliasing with gamma 1) the pixels the boundary may pass
-/// through get the slow path's next tests here too: the 3x3 neighbourhood, then the coverage of
-/// the linearised edge with its curvature correction (edgeCoverage); only pixels where the field
-/// bends too much for that (sub-sampled) are listed. @a values and @a cells as in edgeTile, in
-/// single precision; every value must be finite (NaN and infinities take the general path).
-/// Returns the number of pixels decided as sure plus 65536 times the sure inside ones.
-int decideFullTile(const float* values, int stride, const float* cells, float linearTolerance, bool greyEdges,
-                   std::uint8_t* pixels, std::size_t rowStride, std::uint16_t* slowList, int& slowCount)
-{
-    constexpr int kQuads = kLanes / 4;
-    constexpr float kInf = std::numeric_limits<float>::infinity();
-    Quad lo[kQuads], hi[kQuads], cellMax[kQuads];
-    for (int q = 0; q < kQuads; ++q) lo[q] = Quad{} + kInf, hi[q] = -lo[q], cellMax[q] = Quad{};
-    for (int a = 0; a < kLanes; ++a) {
-        const float* f = values + std::size_t(a + 1) * stride + 1;
-        for (int q = 0; q < kQuads; ++q) {
-            lo[q] = minQuad(lo[q], loadQuad(f + 4 * q));
-            hi[q] = maxQuad(hi[q], loadQuad(f + 4 * q));
-        }
-    }
-    float cell = 0.0f;
-    for (int a = 0; a <= kLanes; ++a) {
-        const float* c = cells + std::size_t(a) * (stride - 1);
-        for (int q = 0; q < kQuads; ++q) cellMax[q] = maxQuad(cellMax[q], loadQuad(c + 4 * q));
-        cell = std::max(cell, c[kLanes]);
-    }
-    float low = kInf, high = -kInf;
-    for (int q = 0; q < kQuads; ++q)
-        for (int k = 0; k < 4; ++k) {
-            low = std::min(low, lo[q][k]);
-            high = std::max(high, hi[q][k]);
-            cell = std::max(cell, cellMax[q][k]);
-        }
-    if (low > cell || high < -cell) {
-        const std::uint8_t grey = high < 0.0f ? 255 : 0;
-        for (int b = 0; b < kLanes; ++b) std::memset(pixels + std::size_t(b) * rowStride, grey, kLanes);
-        return kLanes * kLanes * (grey ? 65537 : 1);
-    }
-
-    // The slow path's margin of 1e-9 is below float's resolution: 1e-6 keeps its intent.
-    const float margin = 0.5f * (1.0f + 1e-6f);
-    std::uint64_t insideBits = 0;  // byte a, bit b: pixel (a, b) decided inside
-    int decided = 0, inside = 0, edgeCount = 0;
-    std::uint8_t edgeIndex[kLanes * kLanes], edgeGrey[kLanes * kLanes];  // grey edge pixels, a * kLanes + b
-    for (int a = 0; a < kLanes; ++a) {
-        const float* left = values + std::size_t(a) * stride + 1;  // left[b] = v(a, b + 1)
-        const float* centre = left + stride;
-        const float* right = centre + stride;
-        const float* c0 = cells + std::size_t(a) * (stride - 1);
-        const float* c1 = c0 + (stride - 1);
-        unsigned open = 0, in = 0, covered = 0;
-        for (int q = 0; q < kQuads; ++q) {
-            const int b = 4 * q;
-            const Quad f = loadQuad(centre + b), up = loadQuad(centre + b + 1), down = loadQuad(centre + b - 1);
-            const Quad l = loadQuad(left + b), r = loadQuad(right + b);
-            const Quad bound = maxQuad(maxQuad(loadQuad(c0 + b), loadQuad(c0 + b + 1)),
-                                       maxQuad(loadQuad(c1 + b), loadQuad(c1 + b + 1)));
-            const Quad gx = 0.5f * (r - l), gy = 0.5f * (up - down);
-            const Quad dxx = r + l - 2.0f * f, dyy = up + down - 2.0f * f;
-            const Quad dxy = 0.25f * (loadQuad(right + b + 1) - loadQuad(right + b - 1) - loadQuad(left + b + 1) +
-                                      loadQuad(left + b - 1));
-            const Quad gradient = absQuad(gx) + absQuad(gy);
-            const Quad bend = absQuad(dxx) + absQuad(dyy) + 2.0f * absQuad(dxy);
-            const QuadMask linear = bend <= linearTolerance * gradient;
-            const QuadMask far = linear & (absQuad(f) > margin * gradient);
-            QuadMask sure = (absQuad(f) > bound) | far;
-            if (greyEdges && bitsOf(~sure) != 0) {
-                // The 3x3 test: no sign change and |f| above every difference to a neighbour.
-                const Quad lu = loadQuad(left + b + 1), ld = loadQuad(left + b - 1);
-                const Quad ru = loadQuad(right + b + 1), rd = loadQuad(right + b - 1);
-                const Quad maxDiff = maxQuad(
-                    maxQuad(maxQuad(absQuad(l - f), absQuad(r - f)), maxQuad(absQuad(up - f), absQuad(down - f))),
-                    maxQuad(maxQuad(absQuad(lu - f), absQuad(ld - f)), maxQuad(absQuad(ru - f), absQuad(rd - f))));
-                const QuadMask negative = f < 0.0f;
-                const QuadMask sameSign =
-                    ~(((l < 0.0f) ^ negative) | ((r < 0.0f) ^ negative) | ((up < 0.0f) ^ negative) |
-                      ((down < 0.0f) ^ negative) | ((lu < 0.0f) ^ negative) | ((ld < 0.0f) ^ negative) |
-                      ((ru < 0.0f) ^ negative) | ((rd < 0.0f) ^ negative));
-                sure |= sameSign & (absQuad(f) > maxDiff);
-                const unsigned grey = bitsOf(~sure & linear);
-                if (grey != 0) {
-                    const Quad coverage = edgeCoverage(f, gx, gy, dxx, dyy, dxy);
-                    for (unsigned m = grey; m != 0; m &= m - 1) {
-                        const int k = __builtin_ctz(m);
-                        edgeIndex[edgeCount] = std::uint8_t(a * kLanes + b + k);
-                        edgeGrey[edgeCount++] = std::uint8_t(255.0f * coverage[k] + 0.5f);
-                    }
-                }
-                covered |= grey << b;
-            }
-            open |= bitsOf(~sure) << b;
-            in |= bitsOf(sure & (f < 0.0f)) << b;
-        }
-        open &= ~covered;
-        insideBits |= std::uint64_t(in) << (8 * a);
-        inside += __builtin_popcount(in);
-        decided += kLanes - __builtin_popcount(open | covered);
-        for (; open != 0; open &= open - 1) slowList[slowCount++] = std::uint16_t(a * kLanes + __builtin_ctz(open));
-    }
-    const std::uint64_t rowBits = transposeBits8x8(insideBits);  // byte b, bit a
-    for (int b = 0; b < kLanes; ++b) {
-        const std::uint64_t row = bytesOfBits(unsigned(rowBits >> (8 * b)) & 0xFF);
-        std::memcpy(pixels + std::size_t(b) * rowStride, &row, kLanes);
-    }
-    for (int e = 0; e < edgeCount; ++e)
-        pixels[std::size_t(edgeIndex[e] % kLanes) * rowStride + edgeIndex[e] / kLanes] = edgeGrey[e];
-    return decided + 65536 * inside;
 }
 
 }  // namespace
@@ -386,7 +163,13 @@ void LayerImage::storedWindow(const Display& display, std::vector<std::uint8_t>&
 
 Slicer::Slicer(const FieldNode& field, const Box3& part, double offsetX, double offsetY, const Display& display,
                const RasterOptions& options)
-    : mField(field), mPart(part), mOffsetX(offsetX), mOffsetY(offsetY), mDisplay(display), mOptions(options)
+    : mField(field),
+      mPart(part),
+      mOffsetX(offsetX),
+      mOffsetY(offsetY),
+      mDisplay(display),
+      mOptions(options),
+      mWideTiles(options.wideTiles && avx2TilesAvailable())
 {
     const double px = display.pitchX(), py = display.pitchY();
     const double x0 = part.min.x() + offsetX, x1 = part.max.x() + offsetX;
@@ -583,10 +366,18 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
         const double x = centreX(mI0 + ti + a);
         tileInPart = tileInPart && x - 0.5 * px >= partMinX && x + 0.5 * px <= partMaxX;
     }
-    const int decided = tileInPart && finite ? decideFullTile(single, stride, cells, float(mOptions.linearTolerance),
-                                                              mOptions.supersample > 0 && mOptions.gamma == 1.0,
-                                                              tilePixels, rowStride, slowList, slowCount)
-                                             : -1;
+    const bool greyEdges = mOptions.supersample > 0 && mOptions.gamma == 1.0;
+    const float tolerance = float(mOptions.linearTolerance);
+    auto decideWholeTile = [&] {
+#if defined(VOXLAT_AVX2_TILES)
+        if (mWideTiles)
+            return decideFullTileAvx2(single, stride, cells, tolerance, greyEdges, tilePixels, rowStride, slowList,
+                                      slowCount);
+#endif
+        return decideFullTile<QuadLanes>(single, stride, cells, tolerance, greyEdges, tilePixels, rowStride, slowList,
+                                         slowCount);
+    };
+    const int decided = tileInPart && finite ? decideWholeTile() : -1;
     if (decided >= 0) {
         sure = decided & 0xffff;
         sureInside = decided >> 16;
@@ -664,7 +455,8 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
         if (linear) {
             // The tile passes' formula, one lane used.
             auto lane = [](double v) { return Quad{} + float(v); };
-            const double coverage = edgeCoverage(lane(f), lane(gx), lane(gy), lane(dxx), lane(dyy), lane(dxy))[0];
+            const double coverage =
+                edgeCoverage<QuadLanes>(lane(f), lane(gx), lane(gy), lane(dxx), lane(dyy), lane(dxy))[0];
             pixel = mOptions.gamma <= 0.0   ? (coverage >= 0.5 ? 255 : 0)
                     : mOptions.gamma == 1.0 ? std::uint8_t(255.0 * coverage + 0.5)  // coverage >= 0: lround
                                             : std::uint8_t(std::lround(255.0 * std::pow(coverage, mOptions.gamma)));

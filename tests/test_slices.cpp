@@ -153,6 +153,50 @@ TEST(Slices, GyroidAreaMatchesFineSupersampling)
     }
 }
 
+TEST(Slices, EightLaneTilesWriteTheSameBytesAsFourLane)
+{
+    // The AVX2 pass decides whole tiles eight lanes at a time; it must write exactly what the
+    // four-lane pass writes, in every raster mode and for curved, thin and flat boundaries.
+#if defined(__x86_64__)
+    const bool cpuHasAvx2 = __builtin_cpu_supports("avx2");
+#else
+    const bool cpuHasAvx2 = false;
+#endif
+    if (!cpuHasAvx2) GTEST_SKIP() << "this CPU has no AVX2: the eight-lane pass cannot run here";
+    auto tpms = std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(3.0));
+    const LevelSolid sheet(tpms, SolidSide::Band, 0.2);
+    const Sphere sphere(Vec3d(0.013, -0.021, 0.0), 4.3);
+    const BoxField slab(Box3{Vec3d(-3.2, -2.05, -2.5), Vec3d(3.05, 2.6, 2.5)});
+    const Display d = testDisplay(0.05, 240, 220);
+    const Box3 part{Vec3d(-5.5, -5, -5), Vec3d(5.5, 5, 5)};
+    RasterOptions grey, binary, gamma, threshold;
+    binary.supersample = 0;
+    gamma.gamma = 2.2;
+    threshold.gamma = 0.0;
+    std::size_t compared = 0, greyPixels = 0;
+    for (const FieldNode* field : {static_cast<const FieldNode*>(&sheet), static_cast<const FieldNode*>(&sphere),
+                                   static_cast<const FieldNode*>(&slab)})
+        for (RasterOptions options : {grey, binary, gamma, threshold}) {
+            RasterOptions narrow = options;
+            narrow.wideTiles = false;
+            const Slicer wide(*field, part, 6.0, 5.5, d, options), four(*field, part, 6.0, 5.5, d, narrow);
+            ASSERT_TRUE(wide.wideTiles());
+            ASSERT_FALSE(four.wideTiles());
+            for (double z : {-2.31, 0.0, 0.77, 1.94}) {
+                LayerImage a, b;
+                RasterStats stats;
+                wide.rasterize(z, a, &stats);
+                four.rasterize(z, b);
+                ASSERT_EQ(a.pixels, b.pixels) << "z " << z;
+                EXPECT_GT(stats.tilesEdge.load(), 0u);
+                compared += a.pixels.size();
+                for (std::uint8_t p : a.pixels) greyPixels += p != 0 && p != 255;
+            }
+        }
+    EXPECT_GT(compared, 10'000'000u / 20);
+    EXPECT_GT(greyPixels, 10'000u);  // the edge coverage ran, not just the sure pixels
+}
+
 TEST(Slices, CullingSkipsInsideAndOutsideTiles)
 {
     const Sphere sphere(Vec3d(0.0), 20.0);

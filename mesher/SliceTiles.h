@@ -1,0 +1,285 @@
+#pragma once
+/// @file SliceTiles.h
+/// The slicer's whole-tile pass (decideFullTile) and the edge coverage formula, written once for
+/// any vector width. Slicer.cpp instantiates them with four-lane vectors (SSE on x86-64, NEON
+/// elsewhere); SliceTilesAvx2.cpp, compiled for AVX2, with eight lanes. Every lane runs the same
+/// IEEE operations in the same order at either width (no FMA: AVX2 does not bring it), so both
+/// write the same bytes.
+///
+/// Internal to the mesher. Everything here has internal linkage (an unnamed namespace) on
+/// purpose: the two files are compiled for different instruction sets, and an inline function
+/// or template shared between them by name would let the linker keep the AVX2 copy for both.
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
+namespace voxlat {
+namespace {  // NOLINT(cert-dcl59-cpp,google-build-namespaces): see the file comment
+
+/// Tile side of the vectorised path for whole tiles (the slicer's default tile).
+constexpr int kLanes = 8;
+
+/// Four floats and their comparison masks (GCC/Clang vector extensions), written out because the
+/// compilers do not vectorise the eight-lane loops below. The tile tests run in single precision:
+/// they only decide which pixels are sure (a rounding there moves a pixel between the sure and
+/// the exact path, both of which give it the same grey but in a razor-thin case), and more lanes
+/// per vector cut their cost.
+using Quad = float __attribute__((vector_size(16)));
+using QuadMask = int __attribute__((vector_size(16)));
+
+/// What the width-generic code needs of a vector type: its lanes and an unaligned load here; the
+/// lane bits of a mask (`bits`) and the square root (`sqrt`) in each width's own traits.
+template <class Vector, class Mask>
+struct LanesBase {
+    using V = Vector;
+    using M = Mask;
+    static constexpr int kWidth = int(sizeof(V) / sizeof(float));
+    static V load(const float* p)
+    {
+        V v;
+        std::memcpy(&v, p, sizeof v);
+        return v;
+    }
+};
+
+/// Four lanes: SSE on x86-64, NEON elsewhere.
+struct QuadLanes : LanesBase<Quad, QuadMask> {
+    /// Bit k set where lane k of @a m is true.
+    static unsigned bits(M m)
+    {
+#if defined(__SSE2__)
+        return unsigned(_mm_movemask_ps(__m128(m)));
+#else
+        return unsigned(m[0] & 1) | unsigned(m[1] & 1) << 1 | unsigned(m[2] & 1) << 2 | unsigned(m[3] & 1) << 3;
+#endif
+    }
+    static V sqrt(V v)
+    {
+#if defined(__SSE2__)
+        return V(_mm_sqrt_ps(__m128(v)));
+#else
+        return V{std::sqrt(v[0]), std::sqrt(v[1]), std::sqrt(v[2]), std::sqrt(v[3])};
+#endif
+    }
+};
+
+template <class V>
+inline V absLanes(V v)
+{
+    using M = decltype(v < v);
+    return V(M(v) & 0x7fffffff);
+}
+/// std::max and std::min per lane.
+template <class V>
+inline V maxLanes(V a, V b)
+{
+    return a < b ? b : a;
+}
+template <class V>
+inline V minLanes(V a, V b)
+{
+    return b < a ? b : a;
+}
+
+/// Transposes an 8 x 8 bit matrix (byte r of @a m is row r, bit c its column c).
+inline std::uint64_t transposeBits8x8(std::uint64_t m)
+{
+    std::uint64_t t = (m ^ (m >> 7)) & 0x00AA00AA00AA00AAull;
+    m ^= t ^ (t << 7);
+    t = (m ^ (m >> 14)) & 0x0000CCCC0000CCCCull;
+    m ^= t ^ (t << 14);
+    t = (m ^ (m >> 28)) & 0x00000000F0F0F0F0ull;
+    return m ^ t ^ (t << 28);
+}
+
+/// Eight bytes, 0xFF where bit k of @a bits is set (byte k).
+inline std::uint64_t bytesOfBits(unsigned bits)
+{
+    std::uint64_t spread = ((bits * 0x8040201008040201ull) >> 7) & 0x0101010101010101ull;  // bit k -> byte 7 - k
+    spread = __builtin_bswap64(spread);                                                    // byte k
+    return spread * 0xFF;
+}
+
+/// The share of each lane's pixel inside the boundary of a field that is f + g.p + p'Hp/2 over it
+/// (p in pixels from its centre; g = (gx, gy), H = [hxx hxy; hxy hyy]), clamped to [0, 1], with
+/// selects for branches so the lanes stay in vectors.
+/// - The straight edge f + g.p = 0: with a <= b the sorted |gx|, |gy| and c = (a + b)/2 - f, the
+///   area of {u, v in [0, 1]: a u + b v < c} is exact, piecewise quadratic in c (c / b where the
+///   edge runs along a pixel side).
+/// - Its curvature: the boundary moves off the chord by -p'Hp / (2|g|); integrated along the
+///   chord inside the pixel (midpoint m, vector d, length L) the area changes by
+///   -L (m'Hm + d'Hd / 12) / (2|g|). The chord's ends are the first side crossing and the crossing
+///   farthest from it (a chord through a corner is reported by both of its sides).
+template <class L>
+inline typename L::V edgeCoverage(typename L::V f, typename L::V gx, typename L::V gy, typename L::V hxx,
+                                  typename L::V hyy, typename L::V hxy)
+{
+    using V = typename L::V;
+    using M = typename L::M;
+    const V zero{}, one = zero + 1.0f, half = zero + 0.5f;
+    const V ax = absLanes(gx), ay = absLanes(gy);
+    const V a = minLanes(ax, ay), b = maxLanes(ax, ay), c = 0.5f * (ax + ay) - f;
+    auto ramp = [&](V x) {
+        const V p = maxLanes(x, zero);
+        return p * p;
+    };
+    const V ab2 = 2.0f * a * b;
+    V area = (ramp(c) - ramp(c - a) - ramp(c - b) + ramp(c - a - b)) / (ab2 > zero ? ab2 : one);
+    area = a < 1e-4f * b ? c / (b > zero ? b : one) : area;  // an edge along a pixel side
+    area = b <= zero ? (c > zero ? one : zero) : area;
+    area = minLanes(maxLanes(area, zero), one);
+
+    const M hasY = gy != zero, hasX = gx != zero;
+    const V invY = one / (hasY ? gy : one), invX = one / (hasX ? gx : one);
+    const V v0 = (0.5f * gx - f) * invY, v1 = (-0.5f * gx - f) * invY;  // at u = -1/2, +1/2
+    const V u0 = (0.5f * gy - f) * invX, u1 = (-0.5f * gy - f) * invX;  // at v = -1/2, +1/2
+    const V px[4] = {-half, half, u0, u1}, py[4] = {v0, v1, -half, half};
+    const M valid[4] = {hasY & (absLanes(v0) <= half), hasY & (absLanes(v1) <= half), hasX & (absLanes(u0) <= half),
+                        hasX & (absLanes(u1) <= half)};
+    V sx = px[3], sy = py[3];
+    for (int k = 2; k >= 0; --k) sx = valid[k] ? px[k] : sx, sy = valid[k] ? py[k] : sy;
+    V ex = sx, ey = sy, best = zero;
+    for (int k = 0; k < 4; ++k) {
+        const V d = (px[k] - sx) * (px[k] - sx) + (py[k] - sy) * (py[k] - sy);
+        const M take = valid[k] & (d > best);
+        best = take ? d : best, ex = take ? px[k] : ex, ey = take ? py[k] : ey;
+    }
+    const V mx = 0.5f * (sx + ex), my = 0.5f * (sy + ey), dx = ex - sx, dy = ey - sy;
+    const V mHm = hxx * mx * mx + 2.0f * hxy * mx * my + hyy * my * my;
+    const V dHd = hxx * dx * dx + 2.0f * hxy * dx * dy + hyy * dy * dy;
+    const V g2 = gx * gx + gy * gy;
+    const V bend = -0.5f * L::sqrt(best / (g2 > zero ? g2 : one)) * (mHm + dHd / 12.0f);
+    const V coverage = area + (best > zero ? bend : zero);
+    return minLanes(maxLanes(coverage, zero), one);
+}
+
+/// Decides the pixels of a kLanes x kLanes tile that lies wholly inside the part's box as
+/// Slicer::edgeTile's per-pixel tests would, L::kWidth lanes at a time. A pixel is decided when it
+/// is sure (|f| above the largest corner difference of its four cells: no sign change and no
+/// boundary within its 3x3 neighbourhood) or far (the field is locally linear and its linearised
+/// edge misses the pixel: the slow path's first exit). The whole tile is tried first: min |f| over
+/// its pixels above the largest difference of every cell around them, with one sign, makes every
+/// pixel sure. Decided pixels are written (255 inside, 0 outside); the others are listed in
+/// @a slowList as a * kLanes + b. With @a greyEdges (anti-aliasing with gamma 1) the pixels the
+/// boundary may pass through get the slow path's next tests here too: the 3x3 neighbourhood, then
+/// the coverage of the linearised edge with its curvature correction (edgeCoverage); only pixels
+/// where the field bends too much for that (sub-sampled) are listed. @a values and @a cells as in
+/// edgeTile, in single precision; every value must be finite (NaN and infinities take the general
+/// path). Returns the number of pixels decided as sure plus 65536 times the sure inside ones.
+template <class L>
+inline int decideFullTile(const float* values, int stride, const float* cells, float linearTolerance, bool greyEdges,
+                          std::uint8_t* pixels, std::size_t rowStride, std::uint16_t* slowList, int& slowCount)
+{
+    using V = typename L::V;
+    using M = typename L::M;
+    constexpr int kVectors = kLanes / L::kWidth;
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    V lo[kVectors], hi[kVectors], cellMax[kVectors];
+    for (int q = 0; q < kVectors; ++q) lo[q] = V{} + kInf, hi[q] = -lo[q], cellMax[q] = V{};
+    for (int a = 0; a < kLanes; ++a) {
+        const float* f = values + std::size_t(a + 1) * stride + 1;
+        for (int q = 0; q < kVectors; ++q) {
+            lo[q] = minLanes(lo[q], L::load(f + L::kWidth * q));
+            hi[q] = maxLanes(hi[q], L::load(f + L::kWidth * q));
+        }
+    }
+    float cell = 0.0f;
+    for (int a = 0; a <= kLanes; ++a) {
+        const float* c = cells + std::size_t(a) * (stride - 1);
+        for (int q = 0; q < kVectors; ++q) cellMax[q] = maxLanes(cellMax[q], L::load(c + L::kWidth * q));
+        cell = std::max(cell, c[kLanes]);
+    }
+    float low = kInf, high = -kInf;
+    for (int q = 0; q < kVectors; ++q)
+        for (int k = 0; k < L::kWidth; ++k) {
+            low = std::min(low, lo[q][k]);
+            high = std::max(high, hi[q][k]);
+            cell = std::max(cell, cellMax[q][k]);
+        }
+    if (low > cell || high < -cell) {
+        const std::uint8_t grey = high < 0.0f ? 255 : 0;
+        for (int b = 0; b < kLanes; ++b) std::memset(pixels + std::size_t(b) * rowStride, grey, kLanes);
+        return kLanes * kLanes * (grey ? 65537 : 1);
+    }
+
+    // The slow path's margin of 1e-9 is below float's resolution: 1e-6 keeps its intent.
+    const float margin = 0.5f * (1.0f + 1e-6f);
+    std::uint64_t insideBits = 0;  // byte a, bit b: pixel (a, b) decided inside
+    int decided = 0, inside = 0, edgeCount = 0;
+    std::uint8_t edgeIndex[kLanes * kLanes], edgeGrey[kLanes * kLanes];  // grey edge pixels, a * kLanes + b
+    for (int a = 0; a < kLanes; ++a) {
+        const float* left = values + std::size_t(a) * stride + 1;  // left[b] = v(a, b + 1)
+        const float* centre = left + stride;
+        const float* right = centre + stride;
+        const float* c0 = cells + std::size_t(a) * (stride - 1);
+        const float* c1 = c0 + (stride - 1);
+        unsigned open = 0, in = 0, covered = 0;
+        for (int q = 0; q < kVectors; ++q) {
+            const int b = L::kWidth * q;
+            const V f = L::load(centre + b), up = L::load(centre + b + 1), down = L::load(centre + b - 1);
+            const V l = L::load(left + b), r = L::load(right + b);
+            const V bound = maxLanes(maxLanes(L::load(c0 + b), L::load(c0 + b + 1)),
+                                     maxLanes(L::load(c1 + b), L::load(c1 + b + 1)));
+            const V gx = 0.5f * (r - l), gy = 0.5f * (up - down);
+            const V dxx = r + l - 2.0f * f, dyy = up + down - 2.0f * f;
+            const V dxy = 0.25f * (L::load(right + b + 1) - L::load(right + b - 1) - L::load(left + b + 1) +
+                                   L::load(left + b - 1));
+            const V gradient = absLanes(gx) + absLanes(gy);
+            const V bend = absLanes(dxx) + absLanes(dyy) + 2.0f * absLanes(dxy);
+            const M linear = bend <= linearTolerance * gradient;
+            const M far = linear & (absLanes(f) > margin * gradient);
+            M sure = (absLanes(f) > bound) | far;
+            if (greyEdges && L::bits(~sure) != 0) {
+                // The 3x3 test: no sign change and |f| above every difference to a neighbour.
+                const V lu = L::load(left + b + 1), ld = L::load(left + b - 1);
+                const V ru = L::load(right + b + 1), rd = L::load(right + b - 1);
+                const V maxDiff = maxLanes(maxLanes(maxLanes(absLanes(l - f), absLanes(r - f)),
+                                                    maxLanes(absLanes(up - f), absLanes(down - f))),
+                                           maxLanes(maxLanes(absLanes(lu - f), absLanes(ld - f)),
+                                                    maxLanes(absLanes(ru - f), absLanes(rd - f))));
+                const M negative = f < 0.0f;
+                const M sameSign = ~(((l < 0.0f) ^ negative) | ((r < 0.0f) ^ negative) | ((up < 0.0f) ^ negative) |
+                                     ((down < 0.0f) ^ negative) | ((lu < 0.0f) ^ negative) | ((ld < 0.0f) ^ negative) |
+                                     ((ru < 0.0f) ^ negative) | ((rd < 0.0f) ^ negative));
+                sure |= sameSign & (absLanes(f) > maxDiff);
+                const unsigned grey = L::bits(~sure & linear);
+                if (grey != 0) {
+                    const V coverage = edgeCoverage<L>(f, gx, gy, dxx, dyy, dxy);
+                    for (unsigned m = grey; m != 0; m &= m - 1) {
+                        const int k = __builtin_ctz(m);
+                        edgeIndex[edgeCount] = std::uint8_t(a * kLanes + b + k);
+                        // coverage >= 0, so adding 1/2 rounds to nearest.
+                        edgeGrey[edgeCount++] =
+                            std::uint8_t(255.0f * coverage[k] + 0.5f);  // NOLINT(bugprone-incorrect-roundings)
+                    }
+                }
+                covered |= grey << b;
+            }
+            open |= L::bits(~sure) << b;
+            in |= L::bits(sure & (f < 0.0f)) << b;
+        }
+        open &= ~covered;
+        insideBits |= std::uint64_t(in) << (8 * a);
+        inside += __builtin_popcount(in);
+        decided += kLanes - __builtin_popcount(open | covered);
+        for (; open != 0; open &= open - 1) slowList[slowCount++] = std::uint16_t(a * kLanes + __builtin_ctz(open));
+    }
+    const std::uint64_t rowBits = transposeBits8x8(insideBits);  // byte b, bit a
+    for (int b = 0; b < kLanes; ++b) {
+        const std::uint64_t row = bytesOfBits(unsigned(rowBits >> (8 * b)) & 0xFF);
+        std::memcpy(pixels + std::size_t(b) * rowStride, &row, kLanes);
+    }
+    for (int e = 0; e < edgeCount; ++e)
+        pixels[std::size_t(edgeIndex[e] % kLanes) * rowStride + edgeIndex[e] / kLanes] = edgeGrey[e];
+    return decided + 65536 * inside;
+}
+
+}  // namespace
+}  // namespace voxlat
