@@ -457,8 +457,10 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
             auto lane = [](double v) { return Quad{} + float(v); };
             const double coverage =
                 edgeCoverage<QuadLanes>(lane(f), lane(gx), lane(gy), lane(dxx), lane(dyy), lane(dxy))[0];
+            // coverage >= 0, so adding 1/2 rounds to nearest (as lround, without the call).
+            const auto linearGrey = std::uint8_t(255.0 * coverage + 0.5);  // NOLINT(bugprone-incorrect-roundings)
             pixel = mOptions.gamma <= 0.0   ? (coverage >= 0.5 ? 255 : 0)
-                    : mOptions.gamma == 1.0 ? std::uint8_t(255.0 * coverage + 0.5)  // coverage >= 0: lround
+                    : mOptions.gamma == 1.0 ? linearGrey
                                             : std::uint8_t(std::lround(255.0 * std::pow(coverage, mOptions.gamma)));
             continue;
         }

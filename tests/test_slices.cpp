@@ -193,7 +193,7 @@ TEST(Slices, EightLaneTilesWriteTheSameBytesAsFourLane)
                 for (std::uint8_t p : a.pixels) greyPixels += p != 0 && p != 255;
             }
         }
-    EXPECT_GT(compared, 10'000'000u / 20);
+    EXPECT_GT(compared, 2'000'000u);  // 48 layers of a 220 x 200 pixel window
     EXPECT_GT(greyPixels, 10'000u);  // the edge coverage ran, not just the sure pixels
 }
 
