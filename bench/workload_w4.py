@@ -11,7 +11,7 @@ eight lanes at a time on AVX2 CPUs: 11.47 s, 1208 Mpixel/s of the window, 170 MB
 the gain is within the noise (CPU 65.7 -> 62.1 s and 53.5 -> 52.3 s in alternating runs)."""
 import json
 
-from common import ROOT, measure, row, verdict
+from common import measure, row, verdict
 
 TITLE = "W4  12K mono-LCD (11520 x 5120, 19 um), gyroid sheet 50 x 50 x 100 mm, 2000 layers -> zip"
 

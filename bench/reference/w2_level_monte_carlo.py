@@ -44,12 +44,10 @@ def field(p, size, cell, sigma, rc):
     for d in itertools.product((-1, 0, 1), repeat=3):
         c = home + np.array(d)
         ok = np.all((c >= 0) & (c < n), axis=1)
-        centre = (c + 0.5) * cell
+        # Each point relative to the centre of its neighbour cell c: every cell's strut to a
+        # given corner is then the same segment, for all the points at once.
+        shifted = p - (c + 0.5) * cell
         for corner in itertools.product((0, 1), repeat=3):
-            end = (c + np.array(corner)) * cell
-            # The strut from the cell's centre to this corner, for every point at once: shift the
-            # points so that the strut is the same for all of them.
-            shifted = p - centre
             f = strut_field(shifted, np.zeros(3), (np.array(corner) - 0.5) * cell, sigma, rc)
             total += np.where(ok, f, 0.0)
     return total
