@@ -67,7 +67,8 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
     r.source->path = name;
     r.folder = folder;
     if (!root.IsDefined() || root.IsNull()) throw InputError(name + ": the recipe is empty");
-    if (!root.IsMap()) throw InputError(name + ":1:1: a recipe is a map of keys (voxel, domain, fields, result, outputs)");
+    if (!root.IsMap())
+        throw InputError(name + ":1:1: a recipe is a map of keys (voxel, domain, fields, result, outputs)");
     mergeIncludes(root, name, folder, *r.source);
     const auto declared = declaredParams(root, r.source);
     for (const std::string& o : overrides)
@@ -89,12 +90,17 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
                                   std::to_string(r.domainBox->extent()[a]) + ")");
     }
     const RecipeNode fields = top["fields"];
-    if (!fields.isMap() || fields.size() == 0) fields.fail("expected a map of named fields, like `lattice: {tpms: gyroid, cell: 10}`");
+    if (!fields.isMap() || fields.size() == 0)
+        fields.fail("expected a map of named fields, like `lattice: {tpms: gyroid, cell: 10}`");
     for (auto it = root["fields"].begin(); it != root["fields"].end(); ++it) {
         r.fieldNames.push_back(it->first.Scalar());
         r.fieldIndex.emplace(it->first.Scalar(), it->second);
     }
 
+    if (!top.has("result"))
+        top.fail(
+            "missing key `result`: name the field the recipe makes, like `result: lattice` (a file of "
+            "fields without one is a library: `include:` it from a recipe)");
     const RecipeNode result = top["result"];
     r.result = result.string();
     r.fieldSpec(r.result);  // must name a field
@@ -124,11 +130,15 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
 
 }  // namespace
 
-RecipeNode Recipe::node(const std::string& key) const { return RecipeNode(root, source, "recipe")[key]; }
+RecipeNode Recipe::node(const std::string& key) const
+{
+    return RecipeNode(root, source, "recipe")[key];
+}
 
 RecipeNode Recipe::fieldSpec(const std::string& name) const
 {
-    if (auto it = fieldIndex.find(name); it != fieldIndex.end()) return RecipeNode(it->second, source, "field `" + name + "`");
+    if (auto it = fieldIndex.find(name); it != fieldIndex.end())
+        return RecipeNode(it->second, source, "field `" + name + "`");
     const RecipeNode fields = node("fields");
     if (!fields.has(name)) {
         std::string message = "no field named `" + name + "`";

@@ -284,6 +284,9 @@ TEST(RecipeLanguage, BrokenRecipesGiveTheExpectedMessages)
         {recipeWith("  f: {expr: \"sin(x) +* 2\"}\n"), {"equation: unexpected `*`", "    sin(x) +* 2\n            ^"}},
         {recipeWith("  f: {expr: \"sinn(x)\"}\n"), {"unknown function `sinn`; did you mean `sin`?"}},
         {recipeWith("  f: {expr: \"x + $r\"}\n"), {"unknown parameter `$r` (the recipe declares no `params:`)"}},
+        {"fields:\n  f: {sphere: {radius: 1}}\n",
+         {"bad.yaml:1:1: recipe: missing key `result`: name the field the recipe makes, like `result: lattice`",
+          "`include:` it from a recipe"}},
     };
     for (const Case& c : cases) {
         const std::string e = errorOf(c.text);
