@@ -1,10 +1,10 @@
 // The compiled core of the Python module `voxlat` (imported as voxlat._voxlat): recipes, jobs
 // and fields of the engine, with numpy arrays in and out. The GIL is released while the engine
 // works, so Python threads run alongside.
-#include "engine/Errors.h"
-#include "engine/Job.h"
-#include "engine/RecipeParams.h"
-#include "engine/Schema.h"
+#include "engine/core/Errors.h"
+#include "engine/jobs/Job.h"
+#include "engine/recipe/RecipeParams.h"
+#include "engine/recipe/Schema.h"
 #include "fields/VectorField.h"
 
 #include <pybind11/numpy.h>

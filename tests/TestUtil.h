@@ -1,8 +1,8 @@
 // Helpers shared by the engine and command-line tests.
 #pragma once
 
-#include "engine/Recipe.h"
-#include "mesher/TriangleMesh.h"
+#include "engine/recipe/Recipe.h"
+#include "mesher/extract/TriangleMesh.h"
 
 #include <cstdio>
 #include <filesystem>

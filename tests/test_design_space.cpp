@@ -2,16 +2,16 @@
 // closed-mesh checks and repair, orientation, bad files, shells and infill measured on the
 // result, density relative to the space inside the skin, conformal frames, automatic domains.
 #include "TestUtil.h"
-#include "engine/DensitySolver.h"
-#include "engine/Job.h"
-#include "engine/MeshDesignSpace.h"
-#include "engine/MeshSdf.h"
+#include "engine/density/DensitySolver.h"
+#include "engine/jobs/Job.h"
+#include "engine/parts/MeshDesignSpace.h"
+#include "engine/parts/MeshSdf.h"
 #include "fields/BoxField.h"
 #include "fields/CoordinateMap.h"
 #include "fields/LevelSolid.h"
 #include "fields/Sphere.h"
 #include "fields/TpmsField.h"
-#include "mesher/MeshWriters.h"
+#include "mesher/writers/MeshWriters.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/math/Proximity.h>

@@ -1,17 +1,17 @@
 // Engine core: sparse evaluation against brute force, determinism, density solve measured
 // independently (Monte Carlo on the analytic field and mesh volume).
-#include "engine/DensitySolver.h"
-#include "engine/GridMeasure.h"
-#include "engine/Job.h"
-#include "engine/SparseEvaluator.h"
+#include "engine/density/DensitySolver.h"
+#include "engine/core/GridMeasure.h"
+#include "engine/jobs/Job.h"
+#include "engine/core/SparseEvaluator.h"
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
 #include "fields/LevelSolid.h"
 #include "fields/Sphere.h"
 #include "fields/TpmsField.h"
-#include "mesher/MarchingCubes.h"
-#include "mesher/MeshCheck.h"
-#include "mesher/MeshWriters.h"
+#include "mesher/extract/MarchingCubes.h"
+#include "mesher/extract/MeshCheck.h"
+#include "mesher/writers/MeshWriters.h"
 #include "TestUtil.h"
 
 #include <gtest/gtest.h>

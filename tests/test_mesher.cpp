@@ -1,9 +1,9 @@
 // Tests of the mesher: marching cubes topology and determinism, mesh checks, writers.
 
-#include "mesher/AtomicFile.h"
-#include "mesher/MarchingCubes.h"
-#include "mesher/MeshCheck.h"
-#include "mesher/MeshWriters.h"
+#include "mesher/writers/AtomicFile.h"
+#include "mesher/extract/MarchingCubes.h"
+#include "mesher/extract/MeshCheck.h"
+#include "mesher/writers/MeshWriters.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>

@@ -4,16 +4,16 @@
 // keys (`orient` node, `axes:` on tpms), bad input, and the acceptance recipe's mesh.
 #include "FieldChecks.h"
 #include "TestUtil.h"
-#include "engine/ExprNodes.h"
-#include "engine/Job.h"
-#include "engine/Recipe.h"
+#include "engine/recipe/ExprNodes.h"
+#include "engine/jobs/Job.h"
+#include "engine/recipe/Recipe.h"
 #include "fields/Constant.h"
 #include "fields/ExprField.h"
 #include "fields/Expression.h"
 #include "fields/OrientField.h"
 #include "fields/TpmsField.h"
 #include "fields/Transform.h"
-#include "mesher/MeshCheck.h"
+#include "mesher/extract/MeshCheck.h"
 
 #include <gtest/gtest.h>
 

@@ -1,16 +1,16 @@
 // Periodic lattices: a box of identical cells tabled one period deep (PeriodicTiling) and its
 // density measured on one period of the interior (periodicPieces), each against the direct way.
 #include "TestUtil.h"
-#include "engine/DensitySolver.h"
-#include "engine/Job.h"
-#include "engine/SparseEvaluator.h"
-#include "engine/StrutFrames.h"
-#include "engine/UnitCells.h"
+#include "engine/density/DensitySolver.h"
+#include "engine/jobs/Job.h"
+#include "engine/core/SparseEvaluator.h"
+#include "engine/frames/StrutFrames.h"
+#include "engine/frames/UnitCells.h"
 #include "fields/IsoRadius.h"
 #include "fields/PeriodicTiling.h"
 #include "fields/PointField.h"
 #include "fields/StrutConvolution.h"
-#include "mesher/MeshCheck.h"
+#include "mesher/extract/MeshCheck.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>

@@ -1,11 +1,11 @@
 // The mesh preview: a real picture of the part (a sphere renders as a filled disk), identical for
 // any thread count.
-#include "engine/Domain.h"
-#include "engine/SparseEvaluator.h"
+#include "engine/core/Domain.h"
+#include "engine/core/SparseEvaluator.h"
 #include "fields/Sphere.h"
-#include "mesher/MarchingCubes.h"
-#include "mesher/MeshPreview.h"
-#include "mesher/SliceWriters.h"
+#include "mesher/extract/MarchingCubes.h"
+#include "mesher/writers/MeshPreview.h"
+#include "mesher/writers/SliceWriters.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>

@@ -1,7 +1,7 @@
 // Recipe loading: every bad input gives one message naming the file, the line and the fix.
-#include "engine/FieldBuilder.h"
-#include "engine/Job.h"
-#include "engine/Recipe.h"
+#include "engine/recipe/FieldBuilder.h"
+#include "engine/jobs/Job.h"
+#include "engine/recipe/Recipe.h"
 #include "TestUtil.h"
 
 #include <gtest/gtest.h>

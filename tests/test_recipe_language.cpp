@@ -3,13 +3,13 @@
 // every ```yaml example of the docs run as a recipe (blocks tagged ```yaml <kind>, such as
 // `printer-profile`, show other file formats and are left out).
 #include "TestUtil.h"
-#include "engine/ExprNodes.h"
-#include "engine/FieldBuilder.h"
-#include "engine/Job.h"
-#include "engine/Recipe.h"
-#include "engine/RecipeParams.h"
-#include "engine/Schema.h"
-#include "engine/Sha256.h"
+#include "engine/recipe/ExprNodes.h"
+#include "engine/recipe/FieldBuilder.h"
+#include "engine/jobs/Job.h"
+#include "engine/recipe/Recipe.h"
+#include "engine/recipe/RecipeParams.h"
+#include "engine/recipe/Schema.h"
+#include "engine/recipe/Sha256.h"
 #include "fields/TpmsField.h"
 #include "fields/VectorField.h"
 
@@ -212,7 +212,7 @@ TEST(RecipeLanguage, VectorFieldsGiveDirections)
     EXPECT_NEAR(swirl->value(Vec3d(2, 3, 4)), std::sqrt(14.0), 1e-15);
     // Where a node expects a direction: a vector field's name, an inline vector, or a constant.
     const Recipe r = parseRecipe(text, "v.yaml", ".");
-    FieldBuilder builder(r);
+    FieldBuilder builder(r, JobContext::silent());
     const YAML::Node extra = YAML::Load("[[0.1, 0.2, 3], swirl, {vector: [z, 0, 0]}]");
     const auto source = r.source;
     const Vec3d expected[3] = {Vec3d(0.1, 0.2, 3), Vec3d(-3, 2, 1), Vec3d(4, 0, 0)};

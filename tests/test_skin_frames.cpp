@@ -2,16 +2,16 @@
 // TPMS. Depths against analytic parts, strut counts and sharing, the inverse map, bounds,
 // continuity across cell faces, bad input, recipes end to end.
 #include "TestUtil.h"
-#include "engine/Errors.h"
-#include "engine/Job.h"
-#include "engine/MeshSdf.h"
-#include "engine/SkinFrame.h"
+#include "engine/core/Errors.h"
+#include "engine/jobs/Job.h"
+#include "engine/parts/MeshSdf.h"
+#include "engine/frames/SkinFrame.h"
 #include "fields/BoxField.h"
 #include "fields/MeshDistance.h"
 #include "fields/SkinMap.h"
 #include "fields/Sphere.h"
 #include "fields/TpmsField.h"
-#include "mesher/MeshCheck.h"
+#include "mesher/extract/MeshCheck.h"
 
 #include <gtest/gtest.h>
 

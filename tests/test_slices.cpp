@@ -2,16 +2,16 @@
 // mirroring, determinism across thread counts, bounded memory, bad input.
 #include "TestUtil.h"
 
-#include "engine/PrinterProfile.h"
-#include "engine/SliceJob.h"
+#include "engine/jobs/PrinterProfile.h"
+#include "engine/jobs/SliceJob.h"
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
 #include "fields/LevelSolid.h"
 #include "fields/Ramp.h"
 #include "fields/Sphere.h"
 #include "fields/TpmsField.h"
-#include "mesher/SliceWriters.h"
-#include "mesher/Slicer.h"
+#include "mesher/writers/SliceWriters.h"
+#include "mesher/slice/Slicer.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>

@@ -1,18 +1,18 @@
 // Strut lattices: the closed-form segment integral against quadrature, its cut-off bound, the
 // convolution and capsule nodes (gradients, bounds, fast path), unit cells, frames, recipes.
 #include "TestUtil.h"
-#include "engine/DensitySolver.h"
-#include "engine/Job.h"
-#include "engine/SparseEvaluator.h"
-#include "engine/StrutFrames.h"
-#include "engine/UnitCells.h"
+#include "engine/density/DensitySolver.h"
+#include "engine/jobs/Job.h"
+#include "engine/core/SparseEvaluator.h"
+#include "engine/frames/StrutFrames.h"
+#include "engine/frames/UnitCells.h"
 #include "fields/GaussianTable.h"
 #include "fields/Sphere.h"
 #include "fields/StrutCapsules.h"
 #include "fields/StrutConvolution.h"
 #include "fields/StrutIndex.h"
-#include "mesher/MarchingCubes.h"
-#include "mesher/MeshCheck.h"
+#include "mesher/extract/MarchingCubes.h"
+#include "mesher/extract/MeshCheck.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>

@@ -3,8 +3,8 @@
 // rotation limits, graded density per slab counted on the grid, gradients against finite
 // differences, bounds against sampled values, and the recipe errors.
 #include "TestUtil.h"
-#include "engine/Job.h"
-#include "engine/ScalarMaps.h"
+#include "engine/jobs/Job.h"
+#include "engine/recipe/ScalarMaps.h"
 #include "fields/Constant.h"
 #include "fields/GradedLevel.h"
 #include "fields/GradientShift.h"
@@ -489,7 +489,9 @@ TEST(ThicknessRecipes, ThickWallsWarnWithNumbers)
         dir));
     const auto report = job.report();
     ASSERT_TRUE(report.contains("warnings"));
-    const std::string w = report["warnings"][0];
+    EXPECT_EQ(report["warnings"][0]["code"], "thick_walls");
+    EXPECT_EQ(report["warnings"][0]["wall_mm"], 1.2);
+    const std::string w = report["warnings"][0]["message"];
     EXPECT_NE(w.find("1.2 mm"), std::string::npos) << w;
     EXPECT_NE(w.find("15 %"), std::string::npos) << w;
 }

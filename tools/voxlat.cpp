@@ -1,16 +1,17 @@
 // The `voxlat` command line: run, mesh, info and sample a recipe.
-#include "engine/Errors.h"
-#include "engine/Job.h"
-#include "engine/Progress.h"
-#include "engine/RecipeParams.h"
-#include "engine/Schema.h"
+#include "engine/core/Errors.h"
+#include "engine/core/Version.h"
+#include "engine/jobs/Job.h"
+#include "engine/recipe/RecipeParams.h"
+#include "engine/recipe/Schema.h"
+#include "tools/TerminalProgress.h"
 
 #include <CLI/CLI.hpp>
-#include <algorithm>
-#include <chrono>
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -79,8 +80,11 @@ int main(int argc, char** argv)
     app.require_subcommand(1);
     int threads = 0;
     bool quiet = false;
+    // Global options are accepted before or after the subcommand (`voxlat run r.yaml --threads 2 -q`).
+    app.fallthrough();
     app.add_option("--threads", threads, "worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
     app.add_flag("-q,--quiet", quiet, "no progress bars");
+    app.set_version_flag("--version", "voxlat " + voxlat::versionString());
 
     Common runArgs, meshArgs, infoArgs, sampleArgs;
     std::string outDir = ".", meshFile, sampleField;
@@ -124,7 +128,9 @@ int main(int argc, char** argv)
     sliceCmd->add_option("--preview", slicePreview, "contact-sheet PNG (default FILE.preview.png; `off` for none)");
 
     CLI11_PARSE(app, argc, argv);
-    voxlat::Progress::setQuiet(quiet);
+    voxlat::JobContext context;
+    voxlat::cli::attachTerminal(context, quiet);
+    voxlat::cli::cancelOnSignals(context);
     std::unique_ptr<tbb::global_control> limit;
     if (threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, threads);
@@ -132,17 +138,17 @@ int main(int argc, char** argv)
     try {
         openvdb::initialize();
         if (*run) {
-            voxlat::Job job(voxlat::loadRecipe(runArgs.recipe, runArgs.sets));
+            voxlat::Job job(voxlat::loadRecipe(runArgs.recipe, runArgs.sets), &context);
             job.writeOutputs(outDir, !noPreview);
             printSummary(job);
             std::cout << "outputs written to " << std::filesystem::absolute(outDir).lexically_normal().string()
                       << " (report.json has levels, densities and timings)\n";
         } else if (*mesh) {
-            voxlat::Job job(voxlat::loadRecipe(meshArgs.recipe, meshArgs.sets));
+            voxlat::Job job(voxlat::loadRecipe(meshArgs.recipe, meshArgs.sets), &context);
             job.writeMesh(meshFile);
             printSummary(job);
         } else if (*info) {
-            voxlat::Job job(voxlat::loadRecipe(infoArgs.recipe, infoArgs.sets));
+            voxlat::Job job(voxlat::loadRecipe(infoArgs.recipe, infoArgs.sets), &context);
             job.grid();
             printSummary(job);
         } else if (*schemaCmd) {
@@ -154,7 +160,7 @@ int main(int argc, char** argv)
             std::unique_ptr<voxlat::Job> job;
             for (int i = 0; i < checkRepeat; ++i) {
                 const auto start = std::chrono::steady_clock::now();
-                job = std::make_unique<voxlat::Job>(voxlat::loadRecipe(checkArgs.recipe, checkArgs.sets));
+                job = std::make_unique<voxlat::Job>(voxlat::loadRecipe(checkArgs.recipe, checkArgs.sets), &context);
                 ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
             }
             std::sort(ms.begin(), ms.end());
@@ -184,7 +190,7 @@ int main(int argc, char** argv)
                 throw voxlat::InputError(sliceArgs.recipe + ": no printer given; use --printer NAME -o FILE");
             const YAML::Node sliceSpec = spec->spec;
             const std::string file = spec->file;
-            voxlat::Job job(std::move(recipe));
+            voxlat::Job job(std::move(recipe), &context);
             job.writeSlices(sliceSpec, file);
             const auto r = job.report();
             const auto& s = r["slices"].back();
@@ -196,9 +202,14 @@ int main(int argc, char** argv)
             if (!s["preview"].get<std::string>().empty())
                 std::cout << "preview " << s["preview"].get<std::string>() << "\n";
         } else if (*sampleCmd) {
-            voxlat::Job job(voxlat::loadRecipe(sampleArgs.recipe, sampleArgs.sets));
+            voxlat::Job job(voxlat::loadRecipe(sampleArgs.recipe, sampleArgs.sets), &context);
             return sample(job, sampleField, sampleGradient);
         }
+    } catch (const voxlat::Cancelled&) {
+        // Temporary files were removed while the job unwound; nothing carries a final name.
+        const int signal = voxlat::cli::receivedSignal();
+        std::fprintf(stderr, "\ncancelled: no output written\n");
+        return 128 + (signal ? signal : SIGINT);
     } catch (const voxlat::InputError& e) {
         std::cerr << "error: " << e.what() << "\n";
         return 2;

@@ -1,0 +1,46 @@
+#include "engine/core/Domain.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace voxlat {
+
+Domain Domain::fromBox(const Box3& box, double voxel)
+{
+    Domain d;
+    d.voxel = voxel;
+    d.box.min = box.min;
+    int n[3];
+    for (int a = 0; a < 3; ++a) {
+        n[a] = std::max(1, int(std::llround((box.max[a] - box.min[a]) / voxel)));
+        d.box.max[a] = box.min[a] + n[a] * voxel;
+    }
+    d.dims = openvdb::Coord(n[0], n[1], n[2]);
+    return d;
+}
+
+Domain Domain::subDomain(const Box3& sub) const
+{
+    Domain d = *this;
+    int first[3];
+    for (int a = 0; a < 3; ++a) {
+        // Voxel i is inside when min + (i + 0.5) * voxel lies in [sub.min, sub.max].
+        first[a] = std::max(0, int(std::ceil((sub.min[a] - box.min[a]) / voxel - 0.5 - 1e-9)));
+        const int last = std::min(dims[a] - 1, int(std::floor((sub.max[a] - box.min[a]) / voxel - 0.5 + 1e-9)));
+        if (last < first[a]) throw std::invalid_argument("the box holds no voxel centre of the domain");
+        d.dims[a] = last - first[a] + 1;
+        d.box.min[a] = box.min[a] + first[a] * voxel;
+        d.box.max[a] = d.box.min[a] + d.dims[a] * voxel;
+    }
+    return d;
+}
+
+openvdb::math::Transform::Ptr Domain::transform() const
+{
+    auto xform = openvdb::math::Transform::createLinearTransform(voxel);
+    xform->postTranslate(box.min + Vec3d(0.5 * voxel));
+    return xform;
+}
+
+}  // namespace voxlat

@@ -1,0 +1,89 @@
+#include "engine/core/GridMeasure.h"
+
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <vector>
+
+namespace voxlat {
+
+namespace {
+/// Voxels of active tiles inside @a region whose value is below @a threshold.
+std::uint64_t countTilesBelow(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float threshold)
+{
+    std::uint64_t tiles = 0;
+    auto it = grid.tree().cbeginValueOn();
+    it.setMaxDepth(it.getLeafDepth() - 1);  // tiles only: never visit leaf voxels
+    for (; it; ++it) {
+        if (it.isVoxelValue() || !(*it < threshold)) continue;
+        openvdb::CoordBBox box;
+        it.getBoundingBox(box);
+        box.intersect(region);
+        if (!box.empty()) tiles += box.volume();
+    }
+    return tiles;
+}
+}  // namespace
+
+BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi)
+{
+    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    grid.tree().getNodes(leaves);
+    std::vector<std::vector<float>> perLeaf(leaves.size());
+    std::vector<std::uint64_t> belowPerLeaf(leaves.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+        for (std::size_t n = range.begin(); n != range.end(); ++n) {
+            const auto* leaf = leaves[n];
+            const openvdb::CoordBBox box = leaf->getNodeBoundingBox();
+            if (!box.hasOverlap(region)) continue;
+            const float* data = leaf->buffer().data();
+            if (region.isInside(box)) {
+                for (int i = 0; i < 512; ++i) {
+                    if (data[i] < lo) ++belowPerLeaf[n];
+                    else if (data[i] <= hi) perLeaf[n].push_back(data[i]);
+                }
+            } else {
+                for (int i = 0; i < 512; ++i) {
+                    if (!region.isInside(leaf->offsetToGlobalCoord(i))) continue;
+                    if (data[i] < lo) ++belowPerLeaf[n];
+                    else if (data[i] <= hi) perLeaf[n].push_back(data[i]);
+                }
+            }
+        }
+    });
+    BandSplit split;
+    split.below = countTilesBelow(grid, region, lo);
+    std::size_t total = 0;
+    for (const auto& v : perLeaf) total += v.size();
+    split.band.reserve(total);
+    for (std::size_t n = 0; n < leaves.size(); ++n) {
+        split.below += belowPerLeaf[n];
+        split.band.insert(split.band.end(), perLeaf[n].begin(), perLeaf[n].end());
+    }
+    return split;
+}
+
+std::uint64_t countBelow(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float threshold)
+{
+    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    grid.tree().getNodes(leaves);
+    // Integer sums: the total is the same whatever the split between threads.
+    const std::uint64_t inLeaves = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, leaves.size()), std::uint64_t(0),
+        [&](const auto& range, std::uint64_t sum) {
+            for (std::size_t n = range.begin(); n != range.end(); ++n) {
+                const auto* leaf = leaves[n];
+                const openvdb::CoordBBox box = leaf->getNodeBoundingBox();
+                if (!box.hasOverlap(region)) continue;
+                const float* data = leaf->buffer().data();
+                const bool whole = region.isInside(box);
+                for (int i = 0; i < 512; ++i)
+                    if (data[i] < threshold && (whole || region.isInside(leaf->offsetToGlobalCoord(i)))) ++sum;
+            }
+            return sum;
+        },
+        std::plus<>());
+    return countTilesBelow(grid, region, threshold) + inLeaves;
+}
+
+}  // namespace voxlat

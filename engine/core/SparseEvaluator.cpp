@@ -1,0 +1,182 @@
+#include "engine/core/SparseEvaluator.h"
+
+#include "engine/core/Errors.h"
+#include "engine/core/SystemInfo.h"
+#include "fields/BoxField.h"
+
+#include <tbb/parallel_for.h>
+
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <mutex>
+#include <sstream>
+#include <vector>
+
+namespace voxlat {
+
+namespace {
+
+using openvdb::Coord;
+using openvdb::CoordBBox;
+using LeafT = openvdb::FloatTree::LeafNodeType;
+
+constexpr int kLeafDim = 8;
+constexpr int kBlockDim = 128;  // children of a level-1 internal node: a level-2 tile
+
+enum class Side { Inside, Outside, Straddle };
+
+/// World box of the voxel centres in [lo, lo + size) grown by one voxel on every side.
+Box3 grownBox(const Domain& d, const Coord& lo, int size)
+{
+    return {d.worldOf(lo - Coord(1)), d.worldOf(lo + Coord(size))};
+}
+
+Side classify(const FieldNode& f, const BoxField* clip, const Domain& d, const Coord& lo, int size,
+              const Interval& band)
+{
+    // A band that takes every value needs no bound (they cost more than some evaluations).
+    if (band.lo <= -1e30 && band.hi >= 1e30) return Side::Straddle;
+    const Box3 box = grownBox(d, lo, size);
+    Interval b = f.bound(box);
+    if (clip) b = max(b, clip->bound(box));
+    if (b.hi < band.lo) return Side::Inside;
+    if (b.lo > band.hi) return Side::Outside;
+    return Side::Straddle;
+}
+
+int floorTo(int v, int step) { return int(std::floor(double(v) / step)) * step; }
+
+struct BlockResult {
+    bool insideTile = false;
+    std::vector<Coord> leaves;
+    std::vector<Coord> insideLeafTiles;
+    std::uint64_t culled = 0;
+};
+
+}  // namespace
+
+openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& domain, const SparseOptions& options,
+                                       SparseStats* stats)
+{
+    const CoordBBox region(Coord(-options.margin), domain.dims - Coord(1) + Coord(options.margin));
+    const auto clip = options.clipToDomain ? std::make_unique<BoxField>(domain.box) : nullptr;
+    // Leaves wholly inside this index box are at least 1.5 voxels inside the domain.
+    const CoordBBox deepInside(Coord(1), domain.dims - Coord(2));
+
+    // Level-2 blocks covering the region.
+    std::vector<Coord> blocks;
+    const Coord first(floorTo(region.min().x(), kBlockDim), floorTo(region.min().y(), kBlockDim),
+                      floorTo(region.min().z(), kBlockDim));
+    for (int x = first.x(); x <= region.max().x(); x += kBlockDim)
+        for (int y = first.y(); y <= region.max().y(); y += kBlockDim)
+            for (int z = first.z(); z <= region.max().z(); z += kBlockDim) blocks.emplace_back(x, y, z);
+    if (blocks.size() > 4'000'000)
+        throw JobError("the domain has " + std::to_string(domain.voxelCount()) +
+                       " voxels, far more than this machine can evaluate: raise `voxel:` or shrink the domain");
+
+    // Stage 1: cull by bounds, block then leaf.
+    std::vector<BlockResult> results(blocks.size());
+    {
+        StageProgress progress(options.context, options.stage + " (cull)", blocks.size());
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1), [&](const auto& range) {
+            for (std::size_t b = range.begin(); b != range.end(); ++b) {
+                BlockResult& r = results[b];
+                const Side side = classify(field, clip.get(), domain, blocks[b], kBlockDim, options.band);
+                if (side == Side::Inside) r.insideTile = true;
+                if (side != Side::Straddle) {
+                    r.culled += side == Side::Outside;
+                    progress.add();
+                    continue;
+                }
+                const CoordBBox leafRange(blocks[b], blocks[b] + Coord(kBlockDim - 1));
+                for (int x = leafRange.min().x(); x <= leafRange.max().x(); x += kLeafDim)
+                    for (int y = leafRange.min().y(); y <= leafRange.max().y(); y += kLeafDim)
+                        for (int z = leafRange.min().z(); z <= leafRange.max().z(); z += kLeafDim) {
+                            const Coord lo(x, y, z);
+                            if (!region.hasOverlap(CoordBBox(lo, lo + Coord(kLeafDim - 1)))) continue;
+                            switch (classify(field, clip.get(), domain, lo, kLeafDim, options.band)) {
+                            case Side::Inside: r.insideLeafTiles.push_back(lo); break;
+                            case Side::Outside: ++r.culled; break;
+                            case Side::Straddle: r.leaves.push_back(lo); break;
+                            }
+                        }
+                progress.add();
+            }
+        });
+    }
+
+    // Deterministic order: block order, then loop order inside a block.
+    std::vector<Coord> leafOrigins;
+    SparseStats s;
+    for (const BlockResult& r : results) {
+        leafOrigins.insert(leafOrigins.end(), r.leaves.begin(), r.leaves.end());
+        s.insideTiles += r.insideTile + r.insideLeafTiles.size();
+        s.culledBoxes += r.culled;
+    }
+    s.leaves = leafOrigins.size();
+    const std::uint64_t maxLeaves =
+        options.maxLeaves ? options.maxLeaves : std::uint64_t(0.7 * double(availableMemoryBytes()) / kBytesPerLeaf);
+    if (s.leaves > maxLeaves) {
+        std::ostringstream msg;
+        msg << "this job needs about " << (s.leaves * kBytesPerLeaf >> 20) << " MB for " << s.leaves
+            << " surface leaves, more than the " << (maxLeaves * kBytesPerLeaf >> 20)
+            << " MB this machine can give: raise `voxel:` (memory grows as 1/voxel^2) or shrink the domain";
+        throw JobError(msg.str());
+    }
+
+    // Stage 2: evaluate each straddling leaf as one batch.
+    std::vector<LeafT*> leaves(leafOrigins.size(), nullptr);
+    std::atomic<bool> nonFinite{false};
+    std::mutex badMutex;
+    Vec3d badPoint(0.0);
+    {
+        StageProgress progress(options.context, options.stage, leafOrigins.size());
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leafOrigins.size(), 16), [&](const auto& range) {
+            std::array<double, 512> values;
+            for (std::size_t n = range.begin(); n != range.end(); ++n) {
+                const Coord& lo = leafOrigins[n];
+                GridBatch batch;
+                batch.origin = domain.worldOf(lo);
+                batch.spacing = Vec3d(domain.voxel);
+                field.gridValues(batch, values);
+                if (clip && !deepInside.isInside(CoordBBox(lo, lo + Coord(kLeafDim - 1))))
+                    for (int i = 0; i < 512; ++i) {
+                        const Vec3d p = batch.point(i >> 6, (i >> 3) & 7, i & 7);
+                        values[i] = std::max(values[i], clip->eval(p[0], p[1], p[2]));
+                    }
+                auto* leaf = new LeafT(lo, options.outsideValue, true);
+                float* data = leaf->buffer().data();
+                for (int i = 0; i < 512; ++i) {
+                    if (!std::isfinite(values[i])) [[unlikely]] {
+                        std::lock_guard<std::mutex> lock(badMutex);
+                        if (!nonFinite.exchange(true)) badPoint = batch.point(i >> 6, (i >> 3) & 7, i & 7);
+                    }
+                    data[i] = float(values[i]);
+                }
+                leaves[n] = leaf;
+            }
+            progress.add(range.size());
+        });
+    }
+    if (nonFinite) {
+        for (LeafT* leaf : leaves) delete leaf;
+        std::ostringstream msg;
+        msg << "the field is not finite (NaN or infinity) at (" << badPoint[0] << ", " << badPoint[1] << ", "
+            << badPoint[2] << "): check divisions, logarithms and square roots in the recipe's fields";
+        throw JobError(msg.str());
+    }
+
+    auto grid = openvdb::FloatGrid::create(options.outsideValue);
+    grid->setTransform(domain.transform());
+    auto& tree = grid->tree();
+    for (std::size_t b = 0; b < blocks.size(); ++b) {
+        if (results[b].insideTile) tree.addTile(2, blocks[b], options.insideValue, true);
+        for (const Coord& lo : results[b].insideLeafTiles) tree.addTile(1, lo, options.insideValue, true);
+    }
+    for (LeafT* leaf : leaves) tree.addLeaf(leaf);
+    if (stats) *stats = s;
+    return grid;
+}
+
+}  // namespace voxlat

@@ -1,0 +1,50 @@
+/// @file SparseEvaluator.h
+/// @brief Evaluates a field onto a sparse OpenVDB grid, following the surface, not the volume.
+#pragma once
+
+#include "engine/core/Domain.h"
+#include "engine/core/JobContext.h"
+
+#include <openvdb/openvdb.h>
+
+#include <cstdint>
+#include <string>
+
+namespace voxlat {
+
+/// What to evaluate and what to skip.
+struct SparseOptions {
+    /// Leaves whose bound meets this interval are evaluated voxel by voxel. Regions whose bound
+    /// lies wholly below become inside tiles; wholly above, background. Bounds are taken over
+    /// each box grown by one voxel, so every grid edge that crosses a level inside the interval
+    /// has both ends in evaluated leaves (what the mesher relies on).
+    Interval band{0.0, 0.0};
+    float insideValue = -1.0f;   ///< value of inside tiles
+    float outsideValue = 1.0f;   ///< background
+    int margin = 1;              ///< voxels beyond the domain on every side (1 caps the mesh)
+    /// Intersect with the domain box (max with its signed distance) so the solid is capped where
+    /// it meets the domain. Applied to leaves within a voxel of the boundary only: deeper inside
+    /// the box's distance is below -1.5 voxels and never changes a sign.
+    bool clipToDomain = false;
+    std::uint64_t maxLeaves = 0; ///< 0: as many as available memory allows
+    std::string stage = "evaluating field";
+    const JobContext* context = nullptr;  ///< progress and cancellation (none: silent)
+};
+
+struct SparseStats {
+    std::uint64_t leaves = 0;       ///< evaluated 8^3 leaves
+    std::uint64_t insideTiles = 0;  ///< inside tiles (any level)
+    std::uint64_t culledBoxes = 0;  ///< boxes skipped as outside
+};
+
+/// Evaluates @a field over the domain (plus the margin) in parallel: hierarchical culling by
+/// bounds over 128^3 blocks and 8^3 leaves, then one batched gridValues() call per leaf. The
+/// result is identical for any thread count. Throws JobError when the leaves would not fit in
+/// memory or the field returns a non-finite value.
+openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& domain, const SparseOptions& options,
+                                       SparseStats* stats = nullptr);
+
+/// Bytes one evaluated leaf costs through evaluation and meshing (grid values plus mesh share).
+inline constexpr std::uint64_t kBytesPerLeaf = 6 * 1024;
+
+}  // namespace voxlat

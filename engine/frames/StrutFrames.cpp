@@ -1,0 +1,226 @@
+#include "engine/frames/StrutFrames.h"
+
+#include "engine/core/Errors.h"
+
+#include <cmath>
+#include <fstream>
+#include <numbers>
+#include <sstream>
+
+namespace voxlat {
+
+Box3 Frame::bounds() const
+{
+    Box3 b{Vec3d(1e300), Vec3d(-1e300)};
+    for (const Vec3d& p : nodes)
+        for (int a = 0; a < 3; ++a) {
+            b.min[a] = std::min(b.min[a], p[a]);
+            b.max[a] = std::max(b.max[a], p[a]);
+        }
+    return b;
+}
+
+int FrameBuilder::node(const Vec3d& p)
+{
+    const long x = std::lround(p[0] / mTol), y = std::lround(p[1] / mTol), z = std::lround(p[2] / mTol);
+    // Look in the neighbouring bins too: two equal points may round to adjacent bins.
+    for (long dx = -1; dx <= 1; ++dx)
+        for (long dy = -1; dy <= 1; ++dy)
+            for (long dz = -1; dz <= 1; ++dz) {
+                auto it = mBins.find({x + dx, y + dy, z + dz});
+                if (it == mBins.end()) continue;
+                for (int i : it->second)
+                    if ((mFrame.nodes[i] - p).length() <= mTol) return i;
+            }
+    mFrame.nodes.push_back(p);
+    const int i = int(mFrame.nodes.size() - 1);
+    mBins[{x, y, z}].push_back(i);
+    return i;
+}
+
+bool FrameBuilder::strut(const Vec3d& a, const Vec3d& b)
+{
+    const int i = node(a), j = node(b);
+    if (i == j) return false;
+    const auto key = std::minmax(i, j);
+    if (!mStruts.emplace(std::pair<int, int>(key.first, key.second), 0).second) return false;
+    mFrame.struts.push_back({key.first, key.second});
+    return true;
+}
+
+namespace {
+template <typename Map>
+Frame mapCells(const UnitCell& cell, const std::array<int, 3>& counts, double tol, Map&& map)
+{
+    FrameBuilder builder(tol);
+    for (int i = 0; i < counts[0]; ++i)
+        for (int j = 0; j < counts[1]; ++j)
+            for (int k = 0; k < counts[2]; ++k)
+                for (const auto& s : cell.struts) {
+                    const Vec3d off(i, j, k);
+                    builder.strut(map(cell.nodes[s[0]] + off), map(cell.nodes[s[1]] + off));
+                }
+    return builder.take();
+}
+}  // namespace
+
+Frame boxFrame(const UnitCell& cell, const Vec3d& origin, const Vec3d& cellSize, const std::array<int, 3>& counts)
+{
+    const double tol = 1e-6 * std::min({cellSize[0], cellSize[1], cellSize[2]});
+    return mapCells(cell, counts, tol, [&](const Vec3d& u) {
+        return Vec3d(origin[0] + u[0] * cellSize[0], origin[1] + u[1] * cellSize[1], origin[2] + u[2] * cellSize[2]);
+    });
+}
+
+Frame cylinderFrame(const UnitCell& cell, const Vec3d& base, double innerRadius, double outerRadius, double height,
+                    const std::array<int, 3>& counts)
+{
+    const int axial = counts[0], angular = counts[1], radial = counts[2];
+    const double tol = 1e-6 * std::min(outerRadius - innerRadius, height) / std::max({axial, angular, radial});
+    // Cell coordinates: x radial (count radial), y angular, z axial.
+    return mapCells(cell, {radial, angular, axial}, tol, [&](const Vec3d& u) {
+        const double r = innerRadius + u[0] / radial * (outerRadius - innerRadius);
+        const double theta = u[1] / angular * 2.0 * std::numbers::pi;
+        return base + Vec3d(r * std::cos(theta), r * std::sin(theta), u[2] / axial * height);
+    });
+}
+
+Frame sphereFrame(const UnitCell& cell, const Vec3d& centre, double innerRadius, double outerRadius,
+                  const std::array<int, 3>& counts)
+{
+    const int polar = counts[0], azimuthal = counts[1], radial = counts[2];
+    // The smallest spacing is between nodes next to a pole on the inner shell (or the outer one
+    // when the inner radius is 0); merge well below it.
+    const double shortest = std::min(outerRadius - innerRadius, (innerRadius > 0 ? innerRadius : outerRadius) *
+                                                                    std::sin(std::numbers::pi / polar) *
+                                                                    std::sin(std::numbers::pi / azimuthal));
+    const double tol = 1e-6 * shortest / std::max({polar, azimuthal, radial});
+    // Cell coordinates: x radial (count radial), y azimuthal, z polar.
+    return mapCells(cell, {radial, azimuthal, polar}, tol, [&](const Vec3d& u) {
+        const double r = innerRadius + u[0] / radial * (outerRadius - innerRadius);
+        const double phi = u[1] / azimuthal * 2.0 * std::numbers::pi;
+        const double theta = u[2] / polar * std::numbers::pi;
+        return centre + r * Vec3d(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta));
+    });
+}
+
+Frame clippedFrame(const UnitCell& cell, const Box3& region, const Vec3d& cellSize,
+                   const std::function<double(const Vec3d&)>& inside, double minLength)
+{
+    std::array<int, 3> counts;
+    for (int a = 0; a < 3; ++a) counts[a] = std::max(1, int(std::ceil(region.extent()[a] / cellSize[a] - 1e-9)));
+    const double tol = 1e-6 * std::min({cellSize[0], cellSize[1], cellSize[2]});
+    FrameBuilder builder(tol);
+    auto map = [&](const Vec3d& u) {
+        return Vec3d(region.min[0] + u[0] * cellSize[0], region.min[1] + u[1] * cellSize[1],
+                     region.min[2] + u[2] * cellSize[2]);
+    };
+    for (int i = 0; i < counts[0]; ++i)
+        for (int j = 0; j < counts[1]; ++j)
+            for (int k = 0; k < counts[2]; ++k)
+                for (const auto& s : cell.struts) {
+                    const Vec3d off(i, j, k);
+                    Vec3d a = map(cell.nodes[s[0]] + off), b = map(cell.nodes[s[1]] + off);
+                    const bool inA = inside(a) <= 0.0, inB = inside(b) <= 0.0;
+                    if (!inA && !inB) continue;
+                    if (inA && inB) {
+                        builder.strut(a, b);
+                        continue;
+                    }
+                    if (!inA) std::swap(a, b);  // a inside, b outside
+                    double lo = 0.0, hi = 1.0;
+                    for (int it = 0; it < 60; ++it) {
+                        const double mid = 0.5 * (lo + hi);
+                        (inside(a + mid * (b - a)) <= 0.0 ? lo : hi) = mid;
+                    }
+                    const double length = (b - a).length(), kept = lo * length;
+                    if (kept < minLength) continue;
+                    if (length - kept < minLength)
+                        builder.strut(a, b);
+                    else
+                        builder.strut(a, a + lo * (b - a));
+                }
+    return builder.take();
+}
+
+Frame readWireframe(const std::string& path)
+{
+    const bool csv = path.size() >= 4 && path.substr(path.size() - 4) == ".csv";
+    if (!csv) {
+        const std::vector<CellLine> lines = readObjLines(path);
+        double size = 0.0;
+        for (const CellLine& l : lines) size = std::max(size, (l.b - l.a).length());
+        FrameBuilder builder(1e-9 * size);
+        for (const CellLine& l : lines) {
+            if ((l.b - l.a).length() <= 1e-9 * size)
+                throw InputError(l.where + ": zero-length strut (both ends at the same point); remove it");
+            builder.strut(l.a, l.b);
+        }
+        return builder.take();
+    }
+    std::ifstream in(path);
+    if (!in) throw InputError(path + ": cannot open the file (check the path; it is relative to the recipe's folder)");
+    std::vector<Vec3d> nodes;
+    std::vector<std::tuple<Vec3d, Vec3d, int>> struts;
+    std::vector<std::tuple<long, long, int>> indexed;
+    std::string text;
+    int lineNo = 0;
+    while (std::getline(in, text)) {
+        ++lineNo;
+        const std::string where = path + ":" + std::to_string(lineNo);
+        if (text.find_first_not_of(" \t\r") == std::string::npos || text[text.find_first_not_of(" \t")] == '#')
+            continue;
+        std::vector<std::string> cells;
+        std::stringstream s(text);
+        std::string c;
+        while (std::getline(s, c, ',')) {
+            const auto b = c.find_first_not_of(" \t\r"), e = c.find_last_not_of(" \t\r");
+            cells.push_back(b == std::string::npos ? "" : c.substr(b, e - b + 1));
+        }
+        auto num = [&](std::size_t i) {
+            try {
+                std::size_t used = 0;
+                const double v = std::stod(cells.at(i), &used);
+                if (used != cells[i].size()) throw std::invalid_argument("");
+                return v;
+            } catch (const std::exception&) {
+                throw InputError(where + ": column " + std::to_string(i + 1) + " is not a number");
+            }
+        };
+        if (!cells.empty() && cells[0] == "node" && cells.size() == 4) {
+            nodes.emplace_back(num(1), num(2), num(3));
+        } else if (!cells.empty() && cells[0] == "strut" && cells.size() == 3) {
+            const double i = num(1), j = num(2);
+            if (i != std::floor(i) || j != std::floor(j))
+                throw InputError(where + ": node indices are whole numbers (0-based)");
+            indexed.emplace_back(long(i), long(j), lineNo);
+        } else if (cells.size() == 6) {
+            struts.emplace_back(Vec3d(num(0), num(1), num(2)), Vec3d(num(3), num(4), num(5)), lineNo);
+        } else if (lineNo == 1) {
+            continue;  // a header row
+        } else {
+            throw InputError(where + ": expected `node,x,y,z`, `strut,i,j` or six numbers `x1,y1,z1,x2,y2,z2`");
+        }
+    }
+    for (const auto& [i, j, no] : indexed) {
+        for (long k : {i, j})
+            if (k < 0 || k >= long(nodes.size()))
+                throw InputError(path + ":" + std::to_string(no) + ": strut refers to node " + std::to_string(k) +
+                                 ", but the file defines " + std::to_string(nodes.size()) + " nodes (indices 0 to " +
+                                 std::to_string(long(nodes.size()) - 1) + ")");
+        struts.emplace_back(nodes[i], nodes[j], no);
+    }
+    if (struts.empty()) throw InputError(path + ": no struts in the file");
+    double size = 0.0;
+    for (const auto& [a, b, no] : struts) size = std::max(size, (b - a).length());
+    FrameBuilder builder(1e-9 * size);
+    for (const auto& [a, b, no] : struts) {
+        if ((b - a).length() <= 1e-9 * size)
+            throw InputError(path + ":" + std::to_string(no) +
+                             ": zero-length strut (both ends at the same point); remove it");
+        builder.strut(a, b);
+    }
+    return builder.take();
+}
+
+}  // namespace voxlat

@@ -1,0 +1,70 @@
+/// @file StrutFrames.h
+/// @brief Lattice frames (IntraLattice's frame module): unit cells mapped into a box, a
+/// cylinder or any solid (trimmed at its boundary), or a wireframe read from a file. Nodes and
+/// struts shared by neighbouring cells appear once.
+#pragma once
+
+#include "engine/frames/UnitCells.h"
+
+#include <array>
+#include <functional>
+#include <map>
+#include <tuple>
+
+namespace voxlat {
+
+/// Nodes and struts (node index pairs, each strut once) of a lattice.
+struct Frame {
+    std::vector<Vec3d> nodes;
+    std::vector<std::array<int, 2>> struts;
+
+    /// The box holding every node.
+    Box3 bounds() const;
+};
+
+/// Builds a frame, merging nodes closer than a tolerance and dropping repeated or
+/// zero-length struts. Insertion order is kept, so frames are deterministic.
+class FrameBuilder {
+public:
+    explicit FrameBuilder(double tolerance) : mTol(tolerance) {}
+    int node(const Vec3d& p);
+    /// Adds the strut a-b unless it has zero length or exists already; true if added.
+    bool strut(const Vec3d& a, const Vec3d& b);
+    Frame take() { return std::move(mFrame); }
+
+private:
+    double mTol;
+    Frame mFrame;
+    std::map<std::tuple<long, long, long>, std::vector<int>> mBins;
+    std::map<std::pair<int, int>, int> mStruts;
+};
+
+/// Cells of size @a cellSize from @a origin, @a counts per axis.
+Frame boxFrame(const UnitCell& cell, const Vec3d& origin, const Vec3d& cellSize, const std::array<int, 3>& counts);
+
+/// Cells mapped into a cylinder around the z axis through @a base (its bottom centre): the cell's
+/// x runs radially from @a innerRadius to @a outerRadius, y around the axis, z along it.
+/// @a counts = {axial, angular, radial}. Struts are straight between the mapped nodes.
+Frame cylinderFrame(const UnitCell& cell, const Vec3d& base, double innerRadius, double outerRadius, double height,
+                    const std::array<int, 3>& counts);
+
+/// Cells mapped into a spherical shell around @a centre: the cell's x runs radially from
+/// @a innerRadius to @a outerRadius, y around the z axis (azimuth), z from the +z pole to the -z
+/// pole (polar angle). @a counts = {polar, azimuthal, radial}. Nodes that meet at the poles and
+/// at the centre (inner radius 0) merge, and struts that shrink to a point there are dropped.
+Frame sphereFrame(const UnitCell& cell, const Vec3d& centre, double innerRadius, double outerRadius,
+                  const std::array<int, 3>& counts);
+
+/// Uniform cells filling @a region, kept where @a inside says a point is in the design space
+/// (value <= 0): struts with both ends inside are kept whole, struts with one end inside are
+/// trimmed at the boundary (found by bisection) unless the piece is shorter than
+/// @a minLength (dropped) or the cut-off part is (kept whole); struts with both ends outside go.
+Frame clippedFrame(const UnitCell& cell, const Box3& region, const Vec3d& cellSize,
+                   const std::function<double(const Vec3d&)>& inside, double minLength);
+
+/// A wireframe file: OBJ (`v` and `l` elements) or CSV (rows `node,x,y,z` and `strut,i,j` with
+/// 0-based node indices, or six numbers `x1,y1,z1,x2,y2,z2` per strut). Throws InputError naming
+/// file and line for dangling indices, zero-length struts and unreadable rows.
+Frame readWireframe(const std::string& path);
+
+}  // namespace voxlat

@@ -1,0 +1,359 @@
+#include "engine/jobs/Job.h"
+
+#include "engine/density/DensitySolver.h"
+#include "engine/core/Format.h"
+#include "engine/core/GridMeasure.h"
+#include "engine/recipe/RecipeParams.h"
+#include "engine/jobs/SliceJob.h"
+#include "engine/core/SparseEvaluator.h"
+#include "engine/core/SystemInfo.h"
+#include "engine/core/Version.h"
+#include "fields/GradedLevel.h"
+#include "mesher/writers/AtomicFile.h"
+#include "mesher/extract/MarchingCubes.h"
+#include "mesher/writers/MeshPreview.h"
+#include "mesher/writers/MeshWriters.h"
+
+#include <openvdb/io/Stream.h>
+#include <tbb/global_control.h>
+#include <tbb/info.h>
+
+#include <algorithm>
+#include <chrono>
+#include <iostream>
+
+namespace voxlat {
+
+namespace {
+/// Voxels of margin around the result's box when the recipe gives no domain (room for the
+/// mesher's cap and the blend of a smooth union).
+constexpr int kAutoDomainMargin = 3;
+
+/// The recipe's domain, or without `domain:` the result's box plus a margin, with its voxel
+/// centres on the lattice (k + 1/2) * voxel, where a part's distance grid has its samples (and
+/// where the faces of a part drawn in whole or half millimetres never lie).
+Domain domainOf(const Recipe& recipe, const FieldNode& result)
+{
+    if (recipe.domainBox) return Domain::fromBox(*recipe.domainBox, recipe.voxel);
+    const std::optional<Box3> support = result.support();
+    if (!support)
+        throw InputError(recipe.source->path + ": no `domain:` given and the result `" + recipe.result +
+                         "` is unbounded (a lattice fills all space): add `domain: {box: [[x0, y0, z0], [x1, y1, z1]]}`"
+                         " or intersect the result with a part or a shape");
+    const double v = recipe.voxel;
+    Box3 box;
+    for (int a = 0; a < 3; ++a) {
+        if (!(support->max[a] > support->min[a]))
+            throw InputError(recipe.source->path + ": no `domain:` given and the result `" + recipe.result +
+                             "` is empty (its operands do not overlap): check the result or give a domain");
+        box.min[a] = (std::floor(support->min[a] / v) - kAutoDomainMargin) * v;
+        box.max[a] = box.min[a] + (std::ceil((support->max[a] - box.min[a]) / v) + kAutoDomainMargin) * v;
+    }
+    return Domain::fromBox(box, v);
+}
+
+nlohmann::json vec(const Vec3d& v) { return {v[0], v[1], v[2]}; }
+
+/// Target (mean of the density field over the slab's voxel centres, sampled with a stride) and
+/// achieved (inside voxels of the grid) density per slab of @a slab mm along @a axis.
+nlohmann::json densityBySlab(const openvdb::FloatGrid& grid, const Domain& domain, const FieldNode& density, int axis,
+                             double slab)
+{
+    const int perSlab = std::max(1, int(std::lround(slab / domain.voxel)));
+    const int n = domain.dims[axis];
+    nlohmann::json slabs = nlohmann::json::array();
+    double worst = 0.0;
+    for (int first = 0; first < n; first += perSlab) {
+        openvdb::CoordBBox region = domain.indexBox();
+        region.min()[axis] = first;
+        region.max()[axis] = std::min(n, first + perSlab) - 1;
+        const double achieved = double(countBelow(grid, region, 0.0f)) / double(region.volume());
+        // About 2e5 samples per slab, in a fixed order.
+        const int stride = std::max(1, int(std::cbrt(double(region.volume()) / 2e5)));
+        std::vector<Vec3d> points;
+        const int skip = (stride - 1) / 2;  // centre the strided samples in the slab
+        for (int i = region.min().x() + skip; i <= region.max().x(); i += stride)
+            for (int j = region.min().y() + skip; j <= region.max().y(); j += stride)
+                for (int k = region.min().z() + skip; k <= region.max().z(); k += stride)
+                    points.push_back(domain.worldOf(openvdb::Coord(i, j, k)));
+        std::vector<double> rho(points.size());
+        density.values(points, rho);
+        double sum = 0.0;
+        for (double r : rho) sum += r;
+        const double target = sum / double(rho.size());
+        worst = std::max(worst, std::abs(achieved - target));
+        slabs.push_back({{"from_mm", domain.box.min[axis] + first * domain.voxel},
+                         {"to_mm", domain.box.min[axis] + (region.max()[axis] + 1) * domain.voxel},
+                         {"target", target},
+                         {"achieved", achieved}});
+    }
+    return {{"axis", std::string(1, "xyz"[axis])}, {"slabs", slabs}, {"max_abs_error", worst}};
+}
+}  // namespace
+
+template <typename Fn>
+auto Job::timed(const std::string& stage, Fn&& fn)
+{
+    const auto start = std::chrono::steady_clock::now();
+    struct Record {
+        nlohmann::json& timings;
+        const std::string& stage;
+        std::chrono::steady_clock::time_point start;
+        ~Record()
+        {
+            timings[stage] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        }
+    } record{mTimings, stage, start};
+    return fn();
+}
+
+Job::Job(Recipe recipe, JobContext* context)
+    : mOwnContext(context ? nullptr : std::make_unique<JobContext>()), mContext(context ? context : mOwnContext.get()),
+      mRecipe(std::move(recipe)), mBuilder(mRecipe, *mContext)
+{
+    timed("build fields", [&] {
+        // Build every field, so a mistake anywhere in the recipe is reported before any work.
+        for (const std::string& name : mRecipe.fieldNames) mBuilder.field(name);
+        mResult = mBuilder.field(mRecipe.result);
+        return 0;
+    });
+    mDomain = domainOf(mRecipe, *mResult);
+    for (const FieldBuilder::Preparation& p : mBuilder.preparations()) timed(p.stage, [&] {
+            p.run();
+            return 0;
+        });
+    mReport["recipe"] = mRecipe.source->path;
+    mReport["voxlat_version"] = versionString();
+    // The recipe as run (includes merged, parameters and --set applied), so any part can be re-made.
+    mReport["recipe_canonical"] = canonicalRecipe(mRecipe);
+    mReport["recipe_sha256"] = recipeHash(mRecipe);
+    mReport["domain"] = {{"from", mRecipe.domainBox ? "recipe" : "result's bounding box plus a margin"},
+                         {"min", vec(mDomain.box.min)},
+                         {"max", vec(mDomain.box.max)},
+                         {"voxel", mDomain.voxel},
+                         {"dims", {mDomain.dims.x(), mDomain.dims.y(), mDomain.dims.z()}},
+                         {"voxels", mDomain.voxelCount()}};
+    if (mRecipe.domainBox) {
+        for (int a = 0; a < 3; ++a)
+            if (std::abs(mDomain.box.max[a] - mRecipe.domainBox->max[a]) > 1e-6 * mDomain.voxel)
+                mContext->warn("domain_snapped",
+                               "the domain is snapped to a whole number of voxels: " + formatNumber(mDomain.box.max[a]) +
+                                   " instead of " + formatNumber(mRecipe.domainBox->max[a]) + " on axis " + "xyz"[a],
+                               {{"axis", std::string(1, "xyz"[a])},
+                                {"snapped_mm", mDomain.box.max[a]},
+                                {"recipe_mm", mRecipe.domainBox->max[a]}});
+    }
+}
+
+void Job::solveLevels()
+{
+    if (mSolved) return;
+    nlohmann::json fields = nlohmann::json::object();
+    for (const LevelNode& node : mBuilder.levelNodes()) {
+        nlohmann::json entry{{"type", node.description}};
+        if (node.density) {
+            const std::vector<DensityPiece> pieces =
+                node.densityPeriod && node.densityBox && node.densityVoxel
+                    ? periodicPieces(*node.densityBox, *node.densityPeriod, node.densityReach, *node.densityVoxel,
+                                     node.densityMirror)
+                    : std::vector<DensityPiece>{};
+            const DensitySolution s = timed("solve " + node.name, [&] {
+                if (!pieces.empty())
+                    return solveDensity(node.densityIndicator ? *node.densityIndicator : *node.solid->indicator(), pieces,
+                                        *node.density, mContext);
+                return solveDensity(*node.solid->indicator(),
+                                    node.densityBox && node.densityVoxel ? Domain::fromBox(*node.densityBox, *node.densityVoxel)
+                                    : node.densityBox                     ? mDomain.subDomain(*node.densityBox)
+                                                                          : mDomain,
+                                    *node.density, node.densityMask.get(), node.subVoxelDensity, mContext);
+            });
+            if (node.densityMask) entry["density_of"] = node.densityOf;
+            node.solid->setLevel(node.solid->levelFromIndicator(s.level));
+            if (node.onSolved) node.onSolved(node.solid->level());
+            entry["target_density"] = *node.density;
+            entry["achieved_density"] = s.achieved;
+            entry["solve_rounds"] = s.rounds;
+            entry["density_measure"] = s.coverage ? "sub-voxel coverage" : "voxel count";
+            entry["evaluated_leaves"] = s.evaluatedLeaves;
+            if (!pieces.empty()) entry["density_measured_on"] = "one period of the interior (" + std::to_string(pieces.size()) + " weighted pieces)";
+        }
+        entry["level"] = node.solid->level();
+        fields[node.name] = entry;
+    }
+    for (const GradedNode& node : mBuilder.gradedNodes()) {
+        const auto& table = static_cast<const GradedLevel&>(*node.node).table();
+        fields[node.name] = {{"type", node.description + " (graded)"},
+                             {"target_density", node.density},
+                             {"density_table", {{"samples", table.sampleCount()},
+                                                {"level_at_10_percent", table.levelAt(0.1)},
+                                                {"level_at_50_percent", table.levelAt(0.5)},
+                                                {"level_at_90_percent", table.levelAt(0.9)}}}};
+    }
+    mReport["fields"] = fields;
+    mSolved = true;
+}
+
+FieldPtr Job::field(const std::string& name)
+{
+    solveLevels();
+    return mBuilder.field(name);
+}
+
+const openvdb::FloatGrid& Job::grid()
+{
+    if (mGrid) return *mGrid;
+    solveLevels();
+    SparseStats stats;
+    mGrid = timed("evaluate", [&] {
+        SparseOptions options;
+        options.clipToDomain = true;
+        options.stage = "evaluating " + mRecipe.result;
+        options.context = mContext;
+        return evaluateSparse(*mResult, mDomain, options, &stats);
+    });
+    mGrid->setName(mRecipe.result);
+    const std::uint64_t inside = countBelow(*mGrid, mDomain.indexBox(), 0.0f);
+    mReport["result"] = {{"field", mRecipe.result},
+                         {"volume_fraction", double(inside) / double(mDomain.voxelCount())},
+                         {"volume_mm3", double(inside) * std::pow(mDomain.voxel, 3)},
+                         {"evaluated_leaves", stats.leaves},
+                         {"inside_tiles", stats.insideTiles}};
+    if (!mBuilder.gradedNodes().empty()) timed("measure slabs", [&] {
+        for (const GradedNode& node : mBuilder.gradedNodes()) {
+            // Measure the graded node itself: on the result grid when it is the result, else on
+            // a grid of its own.
+            openvdb::FloatGrid::ConstPtr own = mGrid;
+            if (node.node != mResult) {
+                SparseOptions options;
+                options.clipToDomain = true;
+                options.stage = "measuring " + node.name;
+                options.context = mContext;
+                own = evaluateSparse(*node.node, mDomain, options);
+            }
+            mReport["fields"][node.name]["slabs"] = densityBySlab(*own, mDomain, *node.densityField, node.axis, node.slab);
+        }
+        return 0;
+    });
+    return *mGrid;
+}
+
+const TriangleMesh& Job::mesh()
+{
+    if (mMesh) return *mMesh;
+    const openvdb::FloatGrid& g = grid();
+    mMesh = timed("mesh", [&] {
+        StageProgress progress(mContext, "meshing", 1000);
+        std::atomic<std::uint64_t> last{0};
+        return std::make_unique<TriangleMesh>(marchingCubes(g, 0.0f, [&](double fraction) {
+            const auto now = std::uint64_t(fraction * 1000);
+            const std::uint64_t before = last.exchange(now);
+            if (now > before) progress.add(now - before);
+        }));
+    });
+    // volume_mm3 and area_mm2 are added by report(): the STL writer measures them on its way.
+    mReport["mesh"] = {{"triangles", mMesh->triangles.size()}, {"vertices", mMesh->points.size()}};
+    return *mMesh;
+}
+
+void Job::writeMesh(const std::filesystem::path& path)
+{
+    const TriangleMesh& m = mesh();
+    timed("write " + path.filename().string(), [&] {
+        voxlat::writeMesh(m, path.string(), mMeshMeasures ? nullptr : &mMeshMeasures);
+        return 0;
+    });
+    mReport["outputs"].push_back(path.string());
+}
+
+void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
+{
+    std::filesystem::create_directories(outDir);
+    for (const OutputSpec& out : mRecipe.outputs) {
+        const std::filesystem::path path = outDir / out.file;
+        if (out.kind == "mesh") {
+            writeMesh(path);
+        } else if (out.kind == "vdb") {
+            const openvdb::FloatGrid& g = grid();
+            timed("write " + out.file, [&] {
+                AtomicFile file(path.string());
+                openvdb::GridCPtrVec grids{g.copyGrid()};
+                openvdb::io::Stream(file.stream()).write(grids);
+                file.commit();
+                return 0;
+            });
+            mReport["outputs"].push_back(path.string());
+        } else if (out.kind == "slices") {
+            writeSlices(out.spec, path);
+        }
+    }
+    // A picture of what was meshed, next to the first mesh, so the part can be checked by eye.
+    const auto firstMesh = std::find_if(mRecipe.outputs.begin(), mRecipe.outputs.end(),
+                                        [](const OutputSpec& o) { return o.kind == "mesh"; });
+    if (preview && firstMesh != mRecipe.outputs.end()) {
+        std::filesystem::path picture = outDir / firstMesh->file;
+        picture.replace_extension(".preview.png");
+        writePreview(picture);
+    }
+    writeReport(outDir / "report.json");
+}
+
+void Job::writePreview(const std::filesystem::path& path)
+{
+    const TriangleMesh& m = mesh();
+    timed("preview", [&] {
+        AtomicFile file(path.string());
+        file.stream() << renderMeshPreview(m);
+        file.commit();
+        return 0;
+    });
+    mReport["preview"] = path.string();
+}
+
+void Job::writeSlices(const YAML::Node& spec, const std::filesystem::path& path)
+{
+    const RecipeNode node(spec, mRecipe.source, "outputs `slices`");
+    const SliceSettings settings = parseSliceSettings(node);
+    const PrinterProfile printer = loadPrinterProfile(settings.printer, settings.printerWhere);
+    solveLevels();  // a `density:` level is solved on the recipe's voxel grid first
+    // The part is the recipe's domain box as written (not snapped to voxels): slices need no voxels.
+    const Box3 part = *mRecipe.domainBox;
+    const SliceResult result = timed("slice " + path.filename().string(), [&] {
+        return sliceToFile(*mResult, part, printer, settings, path, mRecipe.node("domain").where(), mContext);
+    });
+    mReport["slices"].push_back(result.report);
+    mReport["outputs"].push_back(path.string());
+}
+
+nlohmann::json Job::report() const
+{
+    nlohmann::json r = mReport;
+    if (mMesh) {
+        if (!mMeshMeasures) mMeshMeasures = mMesh->measure();
+        r["mesh"]["volume_mm3"] = mMeshMeasures->volume;
+        r["mesh"]["area_mm2"] = mMeshMeasures->area;
+    }
+    for (const auto& reporter : mBuilder.reporters()) reporter(r);
+    const std::vector<Warning> warnings = mContext->warnings();
+    if (!warnings.empty()) {
+        r["warnings"] = nlohmann::json::array();
+        for (const Warning& w : warnings) {
+            nlohmann::json entry = w.details;
+            entry["code"] = w.code;
+            entry["message"] = w.message;
+            r["warnings"].push_back(entry);
+        }
+    }
+    r["timings_s"] = mTimings;
+    r["peak_memory_mb"] = double(peakMemoryBytes()) / (1024.0 * 1024.0);
+    r["threads"] = tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism);
+    return r;
+}
+
+void Job::writeReport(const std::filesystem::path& path)
+{
+    AtomicFile file(path.string());
+    file.stream() << report().dump(2) << "\n";
+    file.commit();
+}
+
+}  // namespace voxlat

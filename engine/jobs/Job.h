@@ -1,0 +1,75 @@
+/// @file Job.h
+/// @brief One recipe taken through the stages: build fields, solve levels, evaluate, mesh, write.
+#pragma once
+
+#include "engine/core/Domain.h"
+#include "engine/core/JobContext.h"
+#include "engine/recipe/FieldBuilder.h"
+#include "engine/recipe/Recipe.h"
+#include "mesher/extract/TriangleMesh.h"
+
+#include <nlohmann/json.hpp>
+#include <openvdb/openvdb.h>
+
+#include <filesystem>
+
+namespace voxlat {
+
+/// Runs a recipe stage by stage; each stage runs once, on first need, and records its time in
+/// the report. Every file it writes appears whole or not at all.
+class Job {
+public:
+    /// @a context receives progress and warnings and may cancel the job; it must outlive the
+    /// job. Without one the job is silent (warnings still land in report.json).
+    explicit Job(Recipe recipe, JobContext* context = nullptr);
+
+    JobContext& context() const { return *mContext; }
+
+    const Recipe& recipe() const { return mRecipe; }
+    const Domain& domain() const { return mDomain; }
+
+    /// Solves every `density:` level (in dependency order). Idempotent.
+    void solveLevels();
+    /// A named field, with its levels solved.
+    FieldPtr field(const std::string& name);
+    /// The sparse grid of the result clipped to the domain (negative inside), evaluated once.
+    const openvdb::FloatGrid& grid();
+    /// The watertight mesh of the grid, built once.
+    const TriangleMesh& mesh();
+
+    /// Writes the recipe's outputs (paths relative to @a outDir) and report.json.
+    /// With @a preview, also a picture of the first mesh (NAME.preview.png).
+    void writeOutputs(const std::filesystem::path& outDir, bool preview = true);
+    /// Writes only the mesh, to @a path.
+    void writeMesh(const std::filesystem::path& path);
+    void writeReport(const std::filesystem::path& path);
+    /// Writes a shaded PNG picture of the mesh (front-right-top view).
+    void writePreview(const std::filesystem::path& path);
+    /// Slices the result for a resin printer into @a path; @a spec is a `slices:` entry. Builds
+    /// no grid and no mesh: every pixel is decided from the field (engine/SliceJob).
+    void writeSlices(const YAML::Node& spec, const std::filesystem::path& path);
+
+    /// Levels, densities, counts, timings and peak memory so far.
+    nlohmann::json report() const;
+
+private:
+    template <typename Fn>
+    auto timed(const std::string& stage, Fn&& fn);
+
+    std::unique_ptr<JobContext> mOwnContext;  ///< the context when the caller gave none
+    JobContext* mContext;
+    Recipe mRecipe;
+    FieldBuilder mBuilder;
+    Domain mDomain;
+    FieldPtr mResult;
+    bool mSolved = false;
+    openvdb::FloatGrid::Ptr mGrid;
+    std::unique_ptr<TriangleMesh> mMesh;
+    /// The mesh's volume and area: from the STL writer when it wrote the mesh, else measured
+    /// when the report is made.
+    mutable std::optional<TriangleMesh::Measures> mMeshMeasures;
+    nlohmann::json mReport;
+    nlohmann::json mTimings = nlohmann::json::object();
+};
+
+}  // namespace voxlat

@@ -1,0 +1,123 @@
+#include "engine/jobs/PrinterProfile.h"
+
+#include "engine/recipe/RecipeNode.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#ifndef VOXLAT_DATA_DIR
+#define VOXLAT_DATA_DIR "data"
+#endif
+
+namespace voxlat {
+
+namespace fs = std::filesystem;
+
+namespace {
+const std::vector<std::string> kProfileKeys{"name",           "model",       "format",     "display",   "mirror_x",
+                                            "mirror_y",       "orientation", "max_height", "layer",     "exposure",
+                                            "exposure_first", "fade_layers", "fast_tilt",  "slow_tilt", "area_fill"};
+const std::vector<std::string> kFormats{"sl1", "sl1s", "zip", "png", "exr"};
+
+bool looksLikePath(const std::string& s)
+{
+    return s.find('/') != std::string::npos || s.ends_with(".yaml") || s.ends_with(".yml");
+}
+
+int positiveInt(const RecipeNode& n)
+{
+    const double v = n.positiveNumber();
+    if (v != std::floor(v) || v > 1e6) n.fail("expected a whole number of pixels, got " + n.yaml().Scalar());
+    return int(v);
+}
+}  // namespace
+
+std::string printersFolder()
+{
+    if (const char* env = std::getenv("VOXLAT_PRINTERS"); env && *env) return env;
+    return std::string(VOXLAT_DATA_DIR) + "/printers";
+}
+
+std::vector<std::string> printerNames()
+{
+    std::vector<std::string> names;
+    std::error_code ec;
+    for (const auto& e : fs::directory_iterator(printersFolder(), ec))
+        if (e.path().extension() == ".yaml") names.push_back(e.path().stem().string());
+    std::sort(names.begin(), names.end());
+    return names;
+}
+
+PrinterProfile loadPrinterProfile(const std::string& nameOrPath, const std::string& where)
+{
+    std::string path = nameOrPath;
+    if (!looksLikePath(nameOrPath)) {
+        path = printersFolder() + "/" + nameOrPath + ".yaml";
+        if (!fs::exists(path)) {
+            const std::vector<std::string> names = printerNames();
+            std::string message = "unknown printer `" + nameOrPath + "`";
+            const std::string guess = closestMatch(nameOrPath, names);
+            if (!guess.empty()) message += "; did you mean `" + guess + "`?";
+            throw InputError((where.empty() ? "" : where + ": ") + message + " (printers in " + printersFolder() +
+                             ": " + joinWords(names) + "; or give the path of a profile file)");
+        }
+    }
+    std::ifstream in(path);
+    if (!in)
+        throw InputError((where.empty() ? "" : where + ": ") + path +
+                         ": cannot open the printer profile (check the path)");
+    std::stringstream text;
+    text << in.rdbuf();
+    YAML::Node root;
+    try {
+        root = YAML::Load(text.str());
+    } catch (const YAML::ParserException& e) {
+        throw InputError(path + ":" + std::to_string(e.mark.line + 1) + ":" + std::to_string(e.mark.column + 1) +
+                         ": not valid YAML: " + e.msg);
+    }
+    auto source = std::make_shared<RecipeSource>();
+    source->path = path;
+    if (!root.IsMap()) throw InputError(path + ":1:1: a printer profile is a map of keys (display, orientation, ...)");
+    const RecipeNode top(root, source, "printer profile");
+    top.checkKeys(kProfileKeys);
+
+    PrinterProfile p;
+    p.file = path;
+    p.key = looksLikePath(nameOrPath) ? fs::path(path).stem().string() : nameOrPath;
+    p.name = top.has("name") ? top["name"].string() : p.key;
+    p.model = top.has("model") ? top["model"].string() : p.key;
+    p.format = top.has("format") ? top["format"].string() : "zip";
+    if (std::find(kFormats.begin(), kFormats.end(), p.format) == kFormats.end())
+        top["format"].fail("unknown format `" + p.format + "` (valid: sl1, sl1s, zip, png, exr)");
+    const RecipeNode display = top["display"];
+    display.checkKeys({"width", "height", "pixels_x", "pixels_y"});
+    p.widthMm = display["width"].positiveNumber();
+    p.heightMm = display["height"].positiveNumber();
+    p.pixelsX = positiveInt(display["pixels_x"]);
+    p.pixelsY = positiveInt(display["pixels_y"]);
+    p.mirrorX = top["mirror_x"].boolean();
+    p.mirrorY = top["mirror_y"].boolean();
+    const std::string orientation = top["orientation"].string();
+    if (orientation != "portrait" && orientation != "landscape")
+        top["orientation"].fail("expected `portrait` or `landscape`, got `" + orientation + "`");
+    p.portrait = orientation == "portrait";
+    p.maxHeightMm = top["max_height"].positiveNumber();
+    if (top.has("layer")) p.layerMm = top["layer"].positiveNumber();
+    if (top.has("exposure")) p.exposureS = top["exposure"].positiveNumber();
+    if (top.has("exposure_first")) p.exposureFirstS = top["exposure_first"].positiveNumber();
+    if (top.has("fade_layers")) {
+        const double v = top["fade_layers"].number();
+        if (v < 0 || v != std::floor(v)) top["fade_layers"].fail("expected a whole number >= 0");
+        p.fadeLayers = int(v);
+    }
+    if (top.has("fast_tilt")) p.fastTiltS = top["fast_tilt"].number();
+    if (top.has("slow_tilt")) p.slowTiltS = top["slow_tilt"].number();
+    if (top.has("area_fill")) p.areaFillPercent = top["area_fill"].positiveNumber();
+    return p;
+}
+
+}  // namespace voxlat

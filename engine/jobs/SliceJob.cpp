@@ -1,0 +1,557 @@
+#include "engine/jobs/SliceJob.h"
+
+#include "engine/core/Errors.h"
+#include "engine/core/Version.h"
+#include "mesher/writers/AtomicFile.h"
+#include "mesher/writers/SliceWriters.h"
+#include "mesher/slice/Slicer.h"
+
+#include <tbb/info.h>
+#include <tbb/parallel_pipeline.h>
+#include <tbb/task_arena.h>
+
+#include <unistd.h>
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <sstream>
+
+namespace voxlat {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string number(double v)
+{
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.10g", v);
+    return buf;
+}
+
+std::string layerName(const std::string& prefix, int index, const char* ext)
+{
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%05d", index);
+    return prefix + buf + ext;
+}
+
+/// A small top view of the part: the highest exposed layer per cell, shaded, for thumbnails.
+struct HeightMap {
+    int w = 0, h = 0, step = 1;
+    std::vector<int> top;  ///< -1: never exposed
+    /// For layers copied from a period below (LayerRepeats): per cell the highest kept phase
+    /// exposed there, over all phases and over the phases up to `lastPhase`.
+    std::vector<int> phaseTop, phaseTopLow;
+    int lastPhase = -1;
+    void init(int nx, int ny)
+    {
+        step = std::max(1, std::max((nx + 799) / 800, (ny + 799) / 800));
+        w = (nx + step - 1) / step;
+        h = (ny + step - 1) / step;
+        top.assign(std::size_t(w) * h, -1);
+    }
+    void add(const LayerImage& image) { mark(image, top, image.index); }
+    /// Layer @a image.index is a phase whose copies go up to layer @a count - 1, @a period apart.
+    void addPhase(const LayerImage& image, int period, int count)
+    {
+        if (phaseTop.empty()) {
+            phaseTop.assign(top.size(), -1);
+            phaseTopLow.assign(top.size(), -1);
+            lastPhase = (count - 1) % period;
+        }
+        mark(image, phaseTop, image.index);
+        if (image.index <= lastPhase) mark(image, phaseTopLow, image.index);
+    }
+    /// Adds the copies of the kept phases: phase j's last copy is layer j + period floor((count -
+    /// 1 - j) / period), so the phases up to lastPhase rank above the others.
+    void addCopies(int period, int count)
+    {
+        for (std::size_t c = 0; c < phaseTop.size(); ++c) {
+            const int j = phaseTopLow[c] >= 0 ? phaseTopLow[c] : phaseTop[c];
+            if (j >= 0) top[c] = std::max(top[c], j + period * ((count - 1 - j) / period));
+        }
+    }
+    /// Sets @a into to @a value where the image is exposed (at least half), sampled every `step`.
+    void mark(const LayerImage& image, std::vector<int>& into, int value) const
+    {
+        // A thumbnail needs no more than every `step` pixels. The samples of a row are gathered
+        // first so the select runs as a vector loop (a branch per pixel mispredicts on lattices).
+        // Locals, not members: the byte stores may alias any member, which would be reloaded.
+        const int width = w, stride = step, rows = image.ny;
+        const std::size_t pitch = std::size_t(image.nx);
+        std::vector<std::uint8_t> row(static_cast<std::size_t>(width));
+        std::uint8_t* const samples = row.data();
+        const std::uint8_t* const pixels = image.pixels.data();
+        for (int j = 0; j < rows; j += stride) {
+            const std::uint8_t* src = pixels + std::size_t(j) * pitch;
+            for (int c = 0; c < width; ++c) samples[c] = src[std::size_t(c) * stride];
+            int* t = &into[std::size_t(j / stride) * width];
+            for (int c = 0; c < width; ++c) t[c] = samples[c] >= 128 ? value : t[c];
+        }
+    }
+    /// An RGBA image of tw x th with the map fitted in, y up.
+    std::string render(int tw, int th, int layers) const
+    {
+        const double scale = std::min(double(tw) / std::max(1, w), double(th) / std::max(1, h));
+        const double ox = 0.5 * (tw - scale * w), oy = 0.5 * (th - scale * h);
+        return encodePng(
+            tw, th, 4,
+            [&](int row, std::uint8_t* out) {
+                for (int c = 0; c < tw; ++c) {
+                    const int i = int(std::floor((c + 0.5 - ox) / scale));
+                    const int j = h - 1 - int(std::floor((row + 0.5 - oy) / scale));
+                    int t = -1;
+                    if (i >= 0 && i < w && j >= 0 && j < h) t = top[std::size_t(j) * w + i];
+                    std::uint8_t* p = out + 4 * c;
+                    if (t < 0) {
+                        p[0] = p[1] = p[2] = 40;
+                        p[3] = 255;
+                    } else {
+                        const double shade = 0.45 + 0.55 * double(t + 1) / std::max(1, layers);
+                        p[0] = std::uint8_t(std::lround(250 * shade));
+                        p[1] = std::uint8_t(std::lround(140 * shade));
+                        p[2] = std::uint8_t(std::lround(30 * shade));
+                        p[3] = 255;
+                    }
+                }
+            },
+            6);
+    }
+};
+
+/// A few layers, downsampled by area averaging, laid out on a grid (a contact sheet).
+struct ContactSheet {
+    std::vector<int> layers;
+    int cell = 320, columns = 4, step = 1, cw = 0, ch = 0;
+    std::vector<std::vector<std::uint8_t>> cells;
+    void init(int count, int nx, int ny)
+    {
+        const int n = std::min(count, 12);
+        for (int k = 0; k < n; ++k) layers.push_back(int((k + 0.5) * count / n));
+        step = std::max(1, std::max((nx + cell - 1) / cell, (ny + cell - 1) / cell));
+        cw = std::max(1, (nx + step - 1) / step);
+        ch = std::max(1, (ny + step - 1) / step);
+        cells.resize(layers.size());
+        columns = std::min<int>(columns, std::max<std::size_t>(1, layers.size()));
+    }
+    /// Takes @a image for its own layer and, with @a period > 0, for the layers copied from it
+    /// (a period and more above).
+    void add(const LayerImage& image, int period = 0)
+    {
+        auto shows = [&](int layer) {
+            return layer == image.index || (period > 0 && layer >= period && layer % period == image.index);
+        };
+        if (std::none_of(layers.begin(), layers.end(), shows)) return;
+        std::vector<std::uint32_t> sum(std::size_t(cw) * ch, 0);
+        for (int j = 0; j < image.ny; ++j) {
+            std::uint32_t* target = &sum[std::size_t(j / step) * cw];
+            const std::uint8_t* src = &image.pixels[std::size_t(j) * image.nx];
+            for (int i = 0, c = 0, k = 0; i < image.nx; ++i) {
+                target[c] += src[i];
+                if (++k == step) k = 0, ++c;  // c = i / step without a division per pixel
+            }
+        }
+        std::vector<std::uint8_t> cell(sum.size());
+        for (std::size_t k = 0; k < sum.size(); ++k) cell[k] = std::uint8_t(sum[k] / (step * step));
+        for (std::size_t k = 0; k < layers.size(); ++k)
+            if (shows(layers[k])) cells[k] = cell;
+    }
+    std::string render() const
+    {
+        const int rows = int((layers.size() + columns - 1) / columns), gap = 4;
+        const int width = columns * (cw + gap) + gap, height = rows * (ch + gap) + gap;
+        return encodePng(
+            width, height, 1,
+            [&](int r, std::uint8_t* out) {
+                std::fill(out, out + width, std::uint8_t(96));
+                const int cr = (r - gap) / (ch + gap), y = (r - gap) % (ch + gap);
+                if (r < gap || y >= ch || cr >= rows) return;
+                for (int cc = 0; cc < columns; ++cc) {
+                    const std::size_t k = std::size_t(cr) * columns + cc;
+                    if (k >= cells.size()) break;
+                    const int j = ch - 1 - y;  // y up, as seen from above
+                    for (int x = 0; x < cw; ++x)
+                        out[gap + cc * (cw + gap) + x] = cells[k].empty() ? 0 : cells[k][std::size_t(j) * cw + x];
+                }
+            },
+            6);
+    }
+};
+
+/// Output folder that appears whole: written under a temporary name, renamed at commit.
+struct AtomicFolder {
+    fs::path path, temp;
+    bool committed = false;
+    explicit AtomicFolder(fs::path p) : path(std::move(p))
+    {
+        temp = path;
+        temp += ".tmp-" + std::to_string(::getpid());
+        fs::remove_all(temp);
+        fs::create_directories(temp);
+    }
+    ~AtomicFolder()
+    {
+        std::error_code ec;
+        if (!committed) fs::remove_all(temp, ec);
+    }
+    void commit()
+    {
+        fs::remove_all(path);
+        fs::rename(temp, path);
+        committed = true;
+    }
+};
+
+void writeWhole(const std::string& path, const std::string& bytes)
+{
+    AtomicFile file(path);
+    file.stream().write(bytes.data(), std::streamsize(bytes.size()));
+    file.commit();
+}
+
+std::string formatOf(const SliceSettings& s, const fs::path& path)
+{
+    if (!s.format.empty()) return s.format;
+    const std::string ext = path.extension().string();
+    if (ext == ".sl1") return "sl1";
+    if (ext == ".sl1s") return "sl1s";
+    if (ext == ".zip") return "zip";
+    throw InputError(s.printerWhere + ": cannot tell the slice format from the file name `" + path.string() +
+                     "`; name it .sl1, .sl1s or .zip, or set `format: png` or `format: exr` for a folder of layers");
+}
+
+/// The fewest layers, below @a count, whose height spans a whole number of @a field's z-periods
+/// (to 1e-9 relative): 8 mm cells at 0.05 mm give 160, at 0.03 mm 800 (three cells); 1 when
+/// the field does not change along z; 0 when it does not repeat within the part.
+int layersPerPeriod(const FieldNode& field, double layer, int count)
+{
+    const double period = field.period(2);
+    if (period == FieldNode::kNoPeriod) return 0;
+    if (std::isinf(period)) return count > 1 ? 1 : 0;
+    for (int layers = 1; layers < count; ++layers) {
+        const double periods = layers * layer / period;
+        if (periods >= 0.5 && std::abs(periods - std::round(periods)) <= 1e-9 * periods) return layers;
+    }
+    return 0;
+}
+
+/// Layers a z-period apart (layersPerPeriod()): layer i >= period shows the slice of layer
+/// i % period (its phase), the same plane of a field that repeats along z (up to the rounding of
+/// z, about 1e-15 mm).
+/// The phases' encoded images are kept in order while they fit the budget; a layer whose phase
+/// was kept is copied, any other computed. What is kept depends only on the images' sizes, never
+/// on timing, so the archive's bytes are the same for any thread count.
+struct LayerRepeats {
+    int period = 0;  ///< 0: every layer computed
+    std::size_t budget = 0, bytes = 0;
+    std::vector<std::string> images;  ///< encoded images of the kept phases
+    std::vector<double> exposed;      ///< exposed pixels of the kept phases
+    std::atomic<int> kept{0};         ///< phases kept so far (always a prefix)
+    std::atomic<bool> closed{false};  ///< no further phase will be kept
+    int copied = 0;
+
+    bool repeats(int layer) const { return period > 0 && layer >= period; }
+    /// Whether a layer may be copied, as far as the input stage can tell (the writer decides).
+    bool mayCopy(int layer) const { return repeats(layer) && !(closed.load() && layer % period >= kept.load()); }
+    bool copies(int layer) const { return repeats(layer) && layer % period < kept.load(); }
+    /// Keeps the next phase's image (moved from @a image) if it and every phase before it fit;
+    /// the kept image, or null (@a image untouched).
+    const std::string* keep(std::string& image, double exposedPixels)
+    {
+        if (closed.load() || bytes + image.size() > budget) {
+            closed = true;
+            return nullptr;
+        }
+        bytes += image.size();
+        images.push_back(std::move(image));
+        exposed.push_back(exposedPixels);
+        kept = int(images.size());
+        if (kept.load() == period) closed = true;
+        return &images.back();
+    }
+};
+
+}  // namespace
+
+SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterProfile& printer,
+                        const SliceSettings& settings, const fs::path& path, const std::string& partWhere,
+                        const JobContext* context)
+{
+    // Check everything before the first byte is written.
+    const double layer = settings.layer.value_or(printer.layerMm);
+    const double height = part.max.z() - part.min.z();
+    const std::string printerRef = "printer `" + printer.key + "` (" + printer.file + ")";
+    if (height > printer.maxHeightMm + 1e-9)
+        throw InputError(partWhere + ": the part is " + number(height) + " mm tall, taller than the " +
+                         number(printer.maxHeightMm) + " mm build height (`max_height`) of " + printerRef +
+                         "; lower the domain or split the part");
+    if (layer > height)
+        throw InputError(settings.printerWhere + ": the layer height " + number(layer) +
+                         " mm is larger than the part (" + number(height) +
+                         " mm tall); set `layer:` below the part height");
+    const int count = int(std::floor(height / layer - 0.5 + 1e-9)) + 1;
+    const std::string format = formatOf(settings, path);
+    Display display;
+    display.widthMm = printer.widthMm;
+    display.heightMm = printer.heightMm;
+    display.pixelsX = printer.pixelsX;
+    display.pixelsY = printer.pixelsY;
+    display.mirrorX = printer.mirrorX;
+    display.mirrorY = printer.mirrorY;
+    display.portrait = printer.portrait;
+    const Vec3d centre = part.center();
+    const double px = settings.position ? (*settings.position)[0] : 0.5 * printer.widthMm;
+    const double py = settings.position ? (*settings.position)[1] : 0.5 * printer.heightMm;
+    RasterOptions options;
+    options.supersample = settings.supersample;
+    options.gamma = settings.gamma;
+    const Slicer slicer(field, part, px - centre.x(), py - centre.y(), display, options);
+    if (!slicer.fitsDisplay())
+        throw InputError(partWhere + ": the part (" + number(part.extent().x()) + " x " + number(part.extent().y()) +
+                         " mm, centred at " + number(px) + ", " + number(py) + ") does not fit the " +
+                         number(printer.widthMm) + " x " + number(printer.heightMm) + " mm display (`display`) of " +
+                         printerRef + "; shrink the domain, move it with `position:` or pick a larger printer");
+
+    const bool archive = format == "sl1" || format == "sl1s" || format == "zip";
+    const std::string jobDir = format == "zip" ? "" : path.stem().string();
+    std::unique_ptr<AtomicFile> file;
+    std::unique_ptr<ZipStreamWriter> zip;
+    std::unique_ptr<AtomicFolder> folder;
+    if (archive) {
+        fs::create_directories(fs::absolute(path).parent_path());
+        file = std::make_unique<AtomicFile>(path.string());
+        zip = std::make_unique<ZipStreamWriter>(file->stream());
+    } else {
+        folder = std::make_unique<AtomicFolder>(path);
+    }
+
+    SliceResult result;
+    result.layerAreas.resize(count);
+    const double pixelArea = display.pitchX() * display.pitchY();
+    const double displayArea = printer.widthMm * printer.heightMm;
+    HeightMap heights;
+    heights.init(slicer.nx(), slicer.ny());
+    ContactSheet sheet;
+    sheet.init(count, slicer.nx(), slicer.ny());
+    RasterStats stats;
+
+    LayerRepeats repeats;
+    if (format != "exr" && settings.reuseBytes > 0) repeats.period = layersPerPeriod(field, layer, count);
+    repeats.budget = settings.reuseBytes;
+
+    struct Token {
+        LayerImage image;
+        bool copy = false;           ///< the layer's phase image is expected to be kept (LayerRepeats)
+        double exposedPixels = 0.0;  ///< summed in the parallel stage
+        std::string bytes;
+        std::vector<float> values;
+        std::atomic<int>* held;
+        explicit Token(std::atomic<int>* h) : held(h) {}
+        ~Token() { --*held; }
+    };
+    std::atomic<int> held{0}, maxHeld{0};
+    const int threads = tbb::this_task_arena::max_concurrency();
+    const std::size_t tokens = std::size_t(threads) + 2;
+    int next = 0;
+    StageProgress progress(context, "slicing", count);
+    const int storedW = display.storedWidth(), storedH = display.storedHeight();
+    auto render = [&](Token* t) {
+        const double z = part.min.z() + (t->image.index + 0.5) * layer;
+        slicer.rasterize(z, t->image, &stats);
+        t->exposedPixels = t->image.exposedPixels();
+        if (format == "exr") {
+            slicer.fieldValues(z, t->values);
+        } else {
+            std::vector<std::uint8_t> window;
+            int col0, row0, w, h;
+            t->image.storedWindow(display, window, col0, row0, w, h);
+            t->bytes = encodeWindowPng(storedW, storedH, window.data(), col0, row0, w, h);
+        }
+    };
+
+    auto writePng = [&](int i, const std::string& png) {
+        if (zip)
+            zip->add(layerName(jobDir, i, ".png"), png);
+        else
+            writeWhole((folder->temp / layerName("", i, ".png")).string(), png);
+    };
+
+    tbb::parallel_pipeline(
+        tokens, tbb::make_filter<void, Token*>(tbb::filter_mode::serial_in_order, [&](tbb::flow_control& fc) -> Token* {
+                    if (next >= count) {
+                        fc.stop();
+                        return nullptr;
+                    }
+                    const int now = ++held;
+                    int seen = maxHeld.load();
+                    while (now > seen && !maxHeld.compare_exchange_weak(seen, now)) {
+                    }
+                    auto* t = new Token(&held);
+                    t->image.index = next++;
+                    t->copy = repeats.mayCopy(t->image.index);
+                    return t;
+                }) & tbb::make_filter<Token*, Token*>(tbb::filter_mode::parallel, [&](Token* t) {
+                    if (!t->copy) render(t);
+                    return t;
+                }) & tbb::make_filter<Token*, void>(tbb::filter_mode::serial_in_order, [&](Token* raw) {
+                    std::unique_ptr<Token> t(raw);
+                    const int i = t->image.index;
+                    if (repeats.copies(i)) {
+                        const int phase = i % repeats.period;
+                        result.layerAreas[i] = repeats.exposed[phase] * pixelArea;
+                        ++repeats.copied;
+                        writePng(i, repeats.images[phase]);
+                        progress.add();
+                        return;
+                    }
+                    // The budget ran out while this layer waited as a copy: computed here.
+                    if (t->copy) render(t.get());
+                    result.layerAreas[i] = t->exposedPixels * pixelArea;
+                    heights.add(t->image);
+                    const std::string* kept = i < repeats.period ? repeats.keep(t->bytes, t->exposedPixels) : nullptr;
+                    if (kept) heights.addPhase(t->image, repeats.period, count);
+                    sheet.add(t->image, kept ? repeats.period : 0);
+                    if (format == "exr")
+                        writeExrFloat((folder->temp / layerName("", i, ".exr")).string(), slicer.nx(), slicer.ny(),
+                                      slicer.i0(), slicer.j0(), t->values);
+                    else
+                        writePng(i, kept ? *kept : t->bytes);
+                    progress.add();
+                }));
+    if (repeats.kept.load() > 0) heights.addCopies(repeats.period, count);
+
+    // Statistics for config.ini: slow tilts where a layer covers more than area_fill of the display.
+    int slow = 0;
+    double volume = 0.0, printTime = 0.0;
+    const double exposure = settings.exposure.value_or(printer.exposureS);
+    const double exposureFirst = settings.exposureFirst.value_or(printer.exposureFirstS);
+    for (int i = 0; i < count; ++i) {
+        const bool isSlow = result.layerAreas[i] > printer.areaFillPercent / 100.0 * displayArea;
+        slow += isSlow;
+        volume += result.layerAreas[i] * layer;
+        const double e = i < printer.fadeLayers
+                             ? exposureFirst + (exposure - exposureFirst) * double(i) / printer.fadeLayers
+                             : exposure;
+        printTime += e + (isSlow ? printer.slowTiltS : printer.fastTiltS);
+    }
+
+    nlohmann::json meta = {{"printer", printer.key},
+                           {"printer_profile", printer.file},
+                           {"format", format},
+                           {"layers", count},
+                           {"layer_height_mm", layer},
+                           {"first_layer_z_mm", part.min.z() + 0.5 * layer},
+                           {"display_pixels", {printer.pixelsX, printer.pixelsY}},
+                           {"display_mm", {printer.widthMm, printer.heightMm}},
+                           {"stored_png_size", {storedW, storedH}},
+                           {"orientation", printer.portrait ? "portrait" : "landscape"},
+                           {"mirror", {printer.mirrorX, printer.mirrorY}},
+                           {"part_centre_on_display_mm", {px, py}},
+                           {"window_pixels", {slicer.i0(), slicer.j0(), slicer.nx(), slicer.ny()}},
+                           {"anti_aliasing", settings.supersample > 0 ? "edge coverage" : "off (pixel centre)"},
+                           {"supersample", settings.supersample},
+                           {"gamma", settings.gamma}};
+
+    if (archive) {
+        if (format != "zip") {
+            std::ostringstream config;
+            const std::vector<std::pair<std::string, std::string>> keys{{"action", "print"},
+                                                                        {"expTime", number(exposure)},
+                                                                        {"expTimeFirst", number(exposureFirst)},
+                                                                        {"expUserProfile", "0"},
+                                                                        {"fileCreationTimestamp", settings.timestamp},
+                                                                        {"hollow", "0"},
+                                                                        {"jobDir", jobDir},
+                                                                        {"layerHeight", number(layer)},
+                                                                        {"materialName", "voxlat"},
+                                                                        {"numFade", std::to_string(printer.fadeLayers)},
+                                                                        {"numFast", std::to_string(count - slow)},
+                                                                        {"numSlow", std::to_string(slow)},
+                                                                        {"printProfile", "voxlat"},
+                                                                        {"printTime", number(std::round(printTime))},
+                                                                        {"printerModel", printer.model},
+                                                                        {"printerProfile", printer.name},
+                                                                        {"printerVariant", "default"},
+                                                                        {"prusaSlicerVersion", "voxlat " + versionString()},
+                                                                        {"usedMaterial", number(volume / 1000.0)}};
+            for (const auto& [k, v] : keys) config << k << " = " << v << "\n";
+            zip->add("config.ini", config.str());
+            std::ostringstream ini;
+            ini << "# generated by voxlat " << versionString() << "\n"
+                << "area_fill = " << number(printer.areaFillPercent) << "\n"
+                << "bed_shape = 0x0," << number(printer.widthMm) << "x0," << number(printer.widthMm) << "x"
+                << number(printer.heightMm) << ",0x" << number(printer.heightMm) << "\n"
+                << "display_height = " << number(printer.heightMm) << "\n"
+                << "display_mirror_x = " << int(printer.mirrorX) << "\n"
+                << "display_mirror_y = " << int(printer.mirrorY) << "\n"
+                << "display_orientation = " << (printer.portrait ? "portrait" : "landscape") << "\n"
+                << "display_pixels_x = " << printer.pixelsX << "\n"
+                << "display_pixels_y = " << printer.pixelsY << "\n"
+                << "display_width = " << number(printer.widthMm) << "\n"
+                << "exposure_time = " << number(exposure) << "\n"
+                << "faded_layers = " << printer.fadeLayers << "\n"
+                << "fast_tilt_time = " << number(printer.fastTiltS) << "\n"
+                << "gamma_correction = " << number(settings.supersample > 0 ? settings.gamma : 0.0) << "\n"
+                << "initial_exposure_time = " << number(exposureFirst) << "\n"
+                << "initial_layer_height = " << number(layer) << "\n"
+                << "layer_height = " << number(layer) << "\n"
+                << "max_print_height = " << number(printer.maxHeightMm) << "\n"
+                << "pad_enable = 0\n"
+                << "printer_model = " << printer.model << "\n"
+                << "printer_settings_id = " << printer.name << "\n"
+                << "printer_technology = SLA\n"
+                << "printer_variant = default\n"
+                << "slow_tilt_time = " << number(printer.slowTiltS) << "\n"
+                << "supports_enable = 0\n"
+                << "thumbnails = 400x400,800x480\n";
+            zip->add("prusaslicer.ini", ini.str());
+            zip->add("thumbnail/thumbnail400x400.png", heights.render(400, 400, count));
+            zip->add("thumbnail/thumbnail800x480.png", heights.render(800, 480, count));
+        } else {
+            zip->add("slices.json", meta.dump(2) + "\n");
+        }
+        zip->finish();
+        file->commit();
+    } else {
+        writeWhole((folder->temp / "slices.json").string(), meta.dump(2) + "\n");
+        folder->commit();
+    }
+
+    std::string previewPath;
+    if (settings.preview != "off") {
+        // A relative preview name sits next to the slices (like every output, relative to --out).
+        previewPath = settings.preview.empty() ? (path.parent_path() / (path.stem().string() + ".preview.png")).string()
+                      : fs::path(settings.preview).is_absolute() ? settings.preview
+                                                                 : (path.parent_path() / settings.preview).string();
+        writeWhole(previewPath, sheet.render());
+    }
+
+    double total = 0.0;
+    for (double a : result.layerAreas) total += a;
+    result.maxLayersHeld = maxHeld.load();
+    result.layersPerPeriod = repeats.period;
+    result.layersCopied = repeats.copied;
+    result.report = meta;
+    result.report["file"] = path.string();
+    result.report["num_fast"] = count - slow;
+    result.report["num_slow"] = slow;
+    result.report["exposed_volume_mm3"] = volume;
+    result.report["mean_layer_area_mm2"] = total / count;
+    result.report["print_time_s"] = std::round(printTime);
+    result.report["preview"] = previewPath;
+    result.report["preview_layers"] = sheet.layers;
+    result.report["max_layers_held"] = result.maxLayersHeld;
+    result.report["layers_per_z_period"] = result.layersPerPeriod;
+    result.report["layers_copied"] = result.layersCopied;
+    result.report["tiles"] = {
+        {"inside", stats.tilesInside.load()}, {"outside", stats.tilesOutside.load()}, {"edge", stats.tilesEdge.load()}};
+    result.report["pixels_evaluated"] = stats.pixelsEvaluated.load();
+    result.report["pixels_supersampled"] = stats.pixelsSupersampled.load();
+    result.report["pixels_total"] = double(count) * slicer.nx() * slicer.ny();
+    return result;
+}
+
+}  // namespace voxlat

@@ -1,0 +1,358 @@
+#include "engine/parts/MeshReader.h"
+
+#include "engine/core/Errors.h"
+
+#include <Model/COM/NMR_DLLInterfaces.h>
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
+#include <OpenMesh/Core/System/omstream.hh>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cctype>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <unordered_map>
+
+namespace voxlat {
+
+namespace {
+
+std::string lower(std::string s)
+{
+    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return s;
+}
+
+void checkReadable(const std::filesystem::path& path, const std::string& shown)
+{
+    std::error_code ec;
+    if (!std::filesystem::exists(path, ec))
+        throw InputError(shown + ": no such file (looked for " + path.string() +
+                         "; paths in a recipe are relative to the recipe's folder)");
+    if (std::filesystem::is_directory(path, ec)) throw InputError(shown + ": is a folder, not a mesh file");
+    if (!std::ifstream(path, std::ios::binary))
+        throw InputError(shown + ": cannot open the file (check its permissions)");
+}
+
+std::string readBytes(const std::filesystem::path& path, const std::string& shown)
+{
+    checkReadable(path, shown);
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError(shown + ": cannot open the file (check its permissions)");
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+float getF32(const char* p)
+{
+    std::uint32_t v = 0;
+    for (int i = 0; i < 4; ++i) v |= std::uint32_t(std::uint8_t(p[i])) << (8 * i);
+    return std::bit_cast<float>(v);
+}
+
+void checkFinite(const openvdb::Vec3f& p, const std::string& shown, const std::string& where)
+{
+    if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z()))
+        throw InputError(shown + ": corrupted file: a vertex coordinate is not a number (" + where + ")");
+}
+
+TriangleMesh readBinaryStl(const std::string& bytes, const std::string& shown)
+{
+    std::uint32_t count = 0;
+    for (int i = 0; i < 4; ++i) count |= std::uint32_t(std::uint8_t(bytes[80 + i])) << (8 * i);
+    TriangleMesh m;
+    m.points.reserve(std::size_t(count) * 3);
+    m.triangles.reserve(count);
+    for (std::uint32_t t = 0; t < count; ++t) {
+        const char* f = bytes.data() + 84 + std::size_t(t) * 50 + 12;  // skip the normal
+        for (int c = 0; c < 3; ++c) {
+            openvdb::Vec3f p(getF32(f + 12 * c), getF32(f + 12 * c + 4), getF32(f + 12 * c + 8));
+            checkFinite(p, shown, "triangle " + std::to_string(t + 1));
+            m.points.push_back(p);
+        }
+        m.triangles.emplace_back(3 * t, 3 * t + 1, 3 * t + 2);
+    }
+    return m;
+}
+
+TriangleMesh readAsciiStl(const std::string& text, const std::string& shown)
+{
+    TriangleMesh m;
+    std::istringstream in(text);
+    std::string line;
+    int lineNo = 0, corners = 0;
+    while (std::getline(in, line)) {
+        ++lineNo;
+        std::istringstream words(line);
+        std::string word;
+        if (!(words >> word)) continue;
+        word = lower(word);
+        if (word == "vertex") {
+            openvdb::Vec3f p;
+            if (!(words >> p[0] >> p[1] >> p[2]))
+                throw InputError(shown + ":" + std::to_string(lineNo) +
+                                 ": corrupted ASCII STL: expected `vertex x y z`, got `" + line + "`");
+            checkFinite(p, shown, "line " + std::to_string(lineNo));
+            m.points.push_back(p);
+            ++corners;
+        } else if (word == "endloop") {
+            if (corners != 3)
+                throw InputError(shown + ":" + std::to_string(lineNo) + ": corrupted ASCII STL: a facet has " +
+                                 std::to_string(corners) + " vertices, not 3");
+            const auto n = std::uint32_t(m.points.size());
+            m.triangles.emplace_back(n - 3, n - 2, n - 1);
+            corners = 0;
+        } else if (word != "solid" && word != "facet" && word != "outer" && word != "endfacet" && word != "endsolid") {
+            throw InputError(shown + ":" + std::to_string(lineNo) + ": corrupted ASCII STL: unexpected `" + word +
+                             "` (expected solid, facet, outer loop, vertex, endloop, endfacet or endsolid)");
+        }
+    }
+    if (corners != 0) throw InputError(shown + ": corrupted ASCII STL: the file ends inside a facet (truncated?)");
+    return m;
+}
+
+TriangleMesh readStl(const std::string& bytes, const std::string& shown, std::string& format)
+{
+    // A binary STL's size follows from its triangle count; an ASCII one starts with "solid"
+    // (some binary files do too, so the size decides first).
+    if (bytes.size() >= 84) {
+        std::uint32_t count = 0;
+        for (int i = 0; i < 4; ++i) count |= std::uint32_t(std::uint8_t(bytes[80 + i])) << (8 * i);
+        if (bytes.size() == 84 + 50 * std::uint64_t(count)) {
+            format = "binary STL";
+            return readBinaryStl(bytes, shown);
+        }
+    }
+    std::size_t start = bytes.find_first_not_of(" \t\r\n");
+    if (start != std::string::npos && lower(bytes.substr(start, 5)) == "solid" &&
+        bytes.find('\0') == std::string::npos) {
+        format = "ASCII STL";
+        return readAsciiStl(bytes, shown);
+    }
+    if (bytes.size() < 84)
+        throw InputError(shown + ": corrupted STL: only " + std::to_string(bytes.size()) +
+                         " bytes, shorter than a binary STL header (84 bytes), and not ASCII STL");
+    std::uint32_t count = 0;
+    for (int i = 0; i < 4; ++i) count |= std::uint32_t(std::uint8_t(bytes[80 + i])) << (8 * i);
+    throw InputError(shown + ": corrupted binary STL: the header says " + std::to_string(count) +
+                     " triangles, which take " + std::to_string(84 + 50 * std::uint64_t(count)) +
+                     " bytes, but the file has " + std::to_string(bytes.size()) + " (truncated or damaged)");
+}
+
+TriangleMesh readWithOpenMesh(const std::filesystem::path& path, const std::string& shown, const std::string& kind)
+{
+    using Mesh = OpenMesh::TriMesh_ArrayKernelT<>;
+    Mesh om;
+    OpenMesh::IO::Options options;
+    // OpenMesh reports its own complaints on stderr; ours name the file and the fix.
+    omerr().disable();
+    omlog().disable();
+    const bool ok = OpenMesh::IO::read_mesh(om, path.string(), options);
+    omerr().enable();
+    if (!ok) throw InputError(shown + ": cannot read the file as " + kind + " (corrupted or an unsupported variant)");
+    TriangleMesh m;
+    m.points.reserve(om.n_vertices());
+    for (const auto& v : om.vertices()) {
+        const auto& p = om.point(v);
+        m.points.emplace_back(float(p[0]), float(p[1]), float(p[2]));
+        checkFinite(m.points.back(), shown, "vertex " + std::to_string(v.idx() + 1));
+    }
+    for (const auto& f : om.faces()) {
+        std::array<std::uint32_t, 3> idx{};
+        int n = 0;
+        for (const auto& v : om.fv_range(f))
+            if (n < 3) idx[n++] = std::uint32_t(v.idx());
+        if (n == 3) m.triangles.emplace_back(idx[0], idx[1], idx[2]);
+    }
+    return m;
+}
+
+/// Reads every mesh object of a 3MF's build items (components one level down), in the build's
+/// placement.
+TriangleMesh read3mf(const std::filesystem::path& path, const std::string& shown, std::optional<double>& unitMm)
+{
+    using namespace NMR;
+    PLib3MFModel* model = nullptr;
+    if (lib3mf_createmodel(&model) != LIB3MF_OK) throw InputError(shown + ": cannot start the 3MF reader");
+    struct Release {
+        PLib3MFBase* p;
+        ~Release()
+        {
+            if (p) lib3mf_release(p);
+        }
+    };
+    Release modelGuard{model};
+    PLib3MFModelReader* reader = nullptr;
+    if (lib3mf_model_queryreader(model, "3mf", &reader) != LIB3MF_OK)
+        throw InputError(shown + ": cannot start the 3MF reader");
+    Release readerGuard{reader};
+    if (lib3mf_reader_readfromfileutf8(reader, path.string().c_str()) != LIB3MF_OK) {
+        DWORD code = 0;
+        LPCSTR message = nullptr;
+        lib3mf_getlasterror(reader, &code, &message);
+        throw InputError(shown + ": corrupted 3MF: " + (message ? std::string(message) : "the reader failed") +
+                         " (error " + std::to_string(code) + ")");
+    }
+    DWORD unit = MODELUNIT_MILLIMETER;
+    lib3mf_model_getunit(model, &unit);
+    switch (unit) {
+        case MODELUNIT_MICROMETER:
+            unitMm = 0.001;
+            break;
+        case MODELUNIT_CENTIMETER:
+            unitMm = 10.0;
+            break;
+        case MODELUNIT_INCH:
+            unitMm = 25.4;
+            break;
+        case MODELUNIT_FOOT:
+            unitMm = 304.8;
+            break;
+        case MODELUNIT_METER:
+            unitMm = 1000.0;
+            break;
+        default:
+            unitMm = 1.0;
+    }
+
+    TriangleMesh m;
+    auto addMesh = [&](PLib3MFModelObjectResource* object, const std::array<std::array<double, 4>, 3>& xf) {
+        BOOL isMesh = false;
+        lib3mf_object_ismeshobject(object, &isMesh);
+        if (!isMesh) return false;
+        DWORD nv = 0, nt = 0;
+        lib3mf_meshobject_getvertexcount(object, &nv);
+        lib3mf_meshobject_gettrianglecount(object, &nt);
+        std::vector<MODELMESHVERTEX> vertices(nv);
+        std::vector<MODELMESHTRIANGLE> triangles(nt);
+        if (nv) lib3mf_meshobject_getvertices(object, vertices.data(), nv, nullptr);
+        if (nt) lib3mf_meshobject_gettriangleindices(object, triangles.data(), nt, nullptr);
+        const auto base = std::uint32_t(m.points.size());
+        for (const auto& v : vertices) {
+            openvdb::Vec3f p;
+            for (int r = 0; r < 3; ++r)
+                p[r] = float(xf[r][0] * v.m_fPosition[0] + xf[r][1] * v.m_fPosition[1] + xf[r][2] * v.m_fPosition[2] +
+                             xf[r][3]);
+            checkFinite(p, shown, "a vertex of a mesh object");
+            m.points.push_back(p);
+        }
+        for (const auto& t : triangles) {
+            for (int c = 0; c < 3; ++c)
+                if (t.m_nIndices[c] >= nv)
+                    throw InputError(shown + ": corrupted 3MF: a triangle refers to vertex " +
+                                     std::to_string(t.m_nIndices[c]) + " of " + std::to_string(nv));
+            m.triangles.emplace_back(base + t.m_nIndices[0], base + t.m_nIndices[1], base + t.m_nIndices[2]);
+        }
+        return true;
+    };
+    // A 3MF transform is a 3x4 matrix, rows first, translation in the last column.
+    auto toMatrix = [](const MODELTRANSFORM& t) {
+        std::array<std::array<double, 4>, 3> xf{};
+        for (int r = 0; r < 3; ++r)
+            for (int c = 0; c < 4; ++c) xf[r][c] = t.m_fFields[r][c];
+        return xf;
+    };
+    auto compose = [](const std::array<std::array<double, 4>, 3>& a, const std::array<std::array<double, 4>, 3>& b) {
+        std::array<std::array<double, 4>, 3> r{};  // a after b
+        for (int i = 0; i < 3; ++i) {
+            for (int j = 0; j < 3; ++j) r[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
+            r[i][3] = a[i][0] * b[0][3] + a[i][1] * b[1][3] + a[i][2] * b[2][3] + a[i][3];
+        }
+        return r;
+    };
+
+    PLib3MFModelBuildItemIterator* items = nullptr;
+    if (lib3mf_model_getbuilditems(model, &items) != LIB3MF_OK) throw InputError(shown + ": corrupted 3MF: no build");
+    Release itemsGuard{items};
+    BOOL hasNext = false;
+    while (lib3mf_builditemiterator_movenext(items, &hasNext) == LIB3MF_OK && hasNext) {
+        PLib3MFModelBuildItem* item = nullptr;
+        if (lib3mf_builditemiterator_getcurrent(items, &item) != LIB3MF_OK) continue;
+        Release itemGuard{item};
+        MODELTRANSFORM t;
+        lib3mf_builditem_getobjecttransform(item, &t);
+        const auto itemXf = toMatrix(t);
+        PLib3MFModelObjectResource* object = nullptr;
+        if (lib3mf_builditem_getobjectresource(item, &object) != LIB3MF_OK) continue;
+        Release objectGuard{object};
+        if (addMesh(object, itemXf)) continue;
+        BOOL isComponents = false;
+        lib3mf_object_iscomponentsobject(object, &isComponents);
+        if (!isComponents) continue;
+        DWORD count = 0;
+        lib3mf_componentsobject_getcomponentcount(object, &count);
+        for (DWORD c = 0; c < count; ++c) {
+            PLib3MFModelComponent* component = nullptr;
+            if (lib3mf_componentsobject_getcomponent(object, c, &component) != LIB3MF_OK) continue;
+            Release componentGuard{component};
+            MODELTRANSFORM ct;
+            lib3mf_component_gettransform(component, &ct);
+            PLib3MFModelObjectResource* child = nullptr;
+            if (lib3mf_component_getobjectresource(component, &child) != LIB3MF_OK) continue;
+            Release childGuard{child};
+            addMesh(child, compose(itemXf, toMatrix(ct)));
+        }
+    }
+    return m;
+}
+
+struct Vec3fHash {
+    std::size_t operator()(const openvdb::Vec3f& p) const
+    {
+        std::size_t h = 0;
+        for (int i = 0; i < 3; ++i)
+            h = h * 0x9E3779B97F4A7C15ull ^ std::bit_cast<std::uint32_t>(p[i] == 0.0f ? 0.0f : p[i]);
+        return h;
+    }
+};
+
+}  // namespace
+
+void weldVertices(TriangleMesh& mesh)
+{
+    std::unordered_map<openvdb::Vec3f, std::uint32_t, Vec3fHash> index;
+    index.reserve(mesh.points.size());
+    std::vector<openvdb::Vec3f> points;
+    std::vector<std::uint32_t> remap(mesh.points.size());
+    for (std::size_t i = 0; i < mesh.points.size(); ++i) {
+        openvdb::Vec3f p = mesh.points[i];
+        for (int a = 0; a < 3; ++a)
+            if (p[a] == 0.0f) p[a] = 0.0f;  // -0 and +0 are one place
+        const auto [it, added] = index.emplace(p, std::uint32_t(points.size()));
+        if (added) points.push_back(p);
+        remap[i] = it->second;
+    }
+    for (auto& t : mesh.triangles)
+        for (int c = 0; c < 3; ++c) t[c] = t[c] < remap.size() ? remap[t[c]] : t[c];
+    mesh.points = std::move(points);
+}
+
+PartMesh readPartMesh(const std::filesystem::path& path, const std::string& shown)
+{
+    const std::string ext = lower(path.extension().string());
+    PartMesh part;
+    if (ext == ".stl") {
+        part.mesh = readStl(readBytes(path, shown), shown, part.format);
+    } else if (ext == ".obj" || ext == ".ply") {
+        checkReadable(path, shown);
+        part.format = ext == ".obj" ? "OBJ" : "PLY";
+        part.mesh = readWithOpenMesh(path, shown, part.format);
+    } else if (ext == ".3mf") {
+        checkReadable(path, shown);
+        part.format = "3MF";
+        part.mesh = read3mf(path, shown, part.fileUnitMm);
+    } else {
+        throw InputError(shown + ": unknown mesh format `" + ext + "` (readable: .stl, .obj, .ply, .3mf)");
+    }
+    if (part.mesh.triangles.empty()) throw InputError(shown + ": the file holds no triangles (" + part.format + ")");
+    weldVertices(part.mesh);
+    return part;
+}
+
+}  // namespace voxlat

@@ -1,0 +1,104 @@
+#include "engine/recipe/FieldBuilder.h"
+
+#include <algorithm>
+#include <iostream>
+
+namespace voxlat {
+
+FieldBuilder::FieldBuilder(const Recipe& recipe, JobContext& context) : mRecipe(recipe), mContext(context) {}
+
+const std::vector<NodeType>& FieldBuilder::nodeTypes()
+{
+    static const std::vector<NodeType> types = [] {
+        std::vector<NodeType> t;
+        addLatticeNodeTypes(t);
+        addStrutNodeTypes(t);
+        addDesignNodeTypes(t);
+        addExprNodeTypes(t);
+        addShapeNodeTypes(t);
+        return t;
+    }();
+    return types;
+}
+
+FieldPtr FieldBuilder::field(const std::string& name)
+{
+    if (auto it = mBuilt.find(name); it != mBuilt.end()) return it->second;
+    const RecipeNode spec = mRecipe.fieldSpec(name);
+    if (std::find(mInProgress.begin(), mInProgress.end(), name) != mInProgress.end()) {
+        std::string cycle;
+        for (auto it = std::find(mInProgress.begin(), mInProgress.end(), name); it != mInProgress.end(); ++it)
+            cycle += *it + " -> ";
+        spec.fail("fields refer to each other in a cycle: " + cycle + name);
+    }
+    mInProgress.push_back(name);
+    FieldPtr f = buildSpec(spec, name);
+    mInProgress.pop_back();
+    mBuilt[name] = f;
+    return f;
+}
+
+FieldPtr FieldBuilder::operand(const RecipeNode& spec, const std::string& name)
+{
+    if (spec.isScalar()) return field(spec.string());
+    return buildSpec(spec, name);
+}
+
+FieldPtr FieldBuilder::buildSpec(const RecipeNode& spec, const std::string& name)
+{
+    const auto& types = nodeTypes();
+    std::vector<std::string> typeKeys;
+    for (const NodeType& t : types) typeKeys.push_back(t.key);
+    if (!spec.isMap()) spec.fail("expected a map naming the node type, one of: " + joinWords(typeKeys));
+    const NodeType* found = nullptr;
+    for (const NodeType& t : types) {
+        if (!spec.has(t.key)) continue;
+        if (found) spec.fail("a field has one type, but this one has both `" + found->key + "` and `" + t.key + "`");
+        found = &t;
+    }
+    if (!found) {
+        std::string message = "no node type given";
+        for (auto it = spec.yaml().begin(); it != spec.yaml().end(); ++it) {
+            const std::string guess = closestMatch(it->first.Scalar(), typeKeys);
+            if (!guess.empty()) {
+                message = "unknown node type `" + it->first.Scalar() + "`; did you mean `" + guess + "`?";
+                break;
+            }
+        }
+        spec.fail(message + " (types: " + joinWords(typeKeys) + ")");
+    }
+    spec.checkKeys(found->keys);
+    return found->build(*this, spec, name);
+}
+
+SolidSide readSolidSide(const RecipeNode& spec)
+{
+    const std::string solid = spec.has("solid") ? spec["solid"].string() : "network";
+    if (solid == "network") return SolidSide::Below;
+    if (solid == "sheet") return SolidSide::Band;
+    spec["solid"].fail("solid is `network` (f <= level) or `sheet` (|f| <= level), got `" + solid + "`");
+}
+
+void readLevelKeys(const RecipeNode& spec, LevelNode& node, double defaultLevel, bool levelRequired)
+{
+    if (spec.has("level") && spec.has("density"))
+        spec.fail("give either `level:` or `density:`, not both (density solves the level)");
+    if (spec.has("density")) {
+        const RecipeNode d = spec["density"];
+        const double rho = d.number();
+        if (!(rho > 0.0 && rho < 1.0))
+            d.fail("density is a relative density between 0 and 1 (exclusive), got " + d.yaml().Scalar() +
+                   "; for 30 % write 0.30");
+        node.density = rho;
+    } else if (spec.has("level")) {
+        node.solid->setLevel(spec["level"].number());
+        if (node.solid->side() == SolidSide::Band && !(node.solid->level() > 0.0))
+            spec["level"].fail("a sheet's level is its half-thickness t in |f| <= t and must be greater than zero");
+    } else if (levelRequired) {
+        spec.fail("give `level:` (for a sheet, the half-thickness t in |f| <= t) or `density:`");
+    } else {
+        node.solid->setLevel(defaultLevel);
+    }
+}
+
+}  // namespace voxlat

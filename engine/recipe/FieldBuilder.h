@@ -1,0 +1,157 @@
+/// @file FieldBuilder.h
+/// @brief Turns a recipe's `fields:` map into a graph of field nodes.
+#pragma once
+
+#include "engine/core/JobContext.h"
+#include "engine/recipe/Recipe.h"
+#include "fields/LevelSolid.h"
+
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <functional>
+#include <map>
+#include <optional>
+#include <set>
+
+namespace voxlat {
+
+/// A node whose level is either fixed or solved for a target density.
+struct LevelNode {
+    std::string name;
+    std::string description;  ///< e.g. "gyroid network"
+    std::shared_ptr<LevelSolid> solid;
+    std::optional<double> density{};  ///< target relative density
+    /// Where the density is measured: the domain unless a node narrows it (a strut lattice
+    /// measures over its frame's bounding box).
+    std::optional<Box3> densityBox{};
+    /// Where the density is measured when the solid fills a part: the voxels with mask < 0 (the
+    /// space inside an infill's skin); see solveDensity().
+    FieldPtr densityMask{};
+    std::string densityOf{};  ///< what the mask is, for the report ("inside the skin of `part`")
+    /// Where a lattice laid out in cells of its own exists (a skin frame's cells, negative
+    /// inside); its density is measured there (and an infill intersects it with its core).
+    FieldPtr region{};
+    /// Called with the solved level after a density solve (checks and notes that need it).
+    std::function<void(double level)> onSolved{};
+    /// Measure the density with sub-voxel coverage rather than by counting voxel centres.
+    bool subVoxelDensity = false;
+    /// Measure the density on its own voxel lattice over densityBox (a spacing incommensurate
+    /// with a lattice's cells, so periodic features do not alias with the voxels).
+    std::optional<double> densityVoxel{};
+    /// The solid repeats with this period deeper than densityReach inside densityBox (a box frame
+    /// of identical cells): the density is measured on one period of the interior, weighted
+    /// (periodicPieces()), instead of the whole box.
+    std::optional<Vec3d> densityPeriod{};
+    double densityReach = 0.0;
+    /// Along these axes the solid is its own mirror image about the middle of densityBox, so
+    /// periodicPieces() measures one face zone for both.
+    std::array<bool, 3> densityMirror{};
+    /// The field the density solve measures when it is not the solid's indicator (the same
+    /// values; e.g. without a tiling whose tables would not pay off on the measuring pieces).
+    FieldPtr densityIndicator{};
+};
+
+/// A lattice whose level follows a target-density field (GradedLevel); the job reports its
+/// achieved density slab by slab along `axis`.
+struct GradedNode {
+    std::string name;
+    std::string description;  ///< e.g. "gyroid network"
+    std::string density;      ///< e.g. "ramp along z from 0.1 to 0.4"
+    FieldPtr node;            ///< the GradedLevel
+    FieldPtr densityField;    ///< the target density
+    int axis = 2;             ///< slabs are taken along this axis
+    double slab = 0.0;        ///< slab thickness (mm): one cell along the axis
+};
+
+class FieldBuilder;
+
+/// One node type of the recipe language: the key that names it, its valid keys, its builder.
+struct NodeType {
+    std::string key;
+    std::vector<std::string> keys;
+    std::function<FieldPtr(FieldBuilder&, const RecipeNode& spec, const std::string& name)> build;
+};
+
+/// Builds fields by name on demand, once each, rejecting cycles and unknown names.
+class FieldBuilder {
+public:
+    /// Warnings of the nodes go to @a context (it must outlive the builder).
+    FieldBuilder(const Recipe& recipe, JobContext& context);
+
+    /// The field called @a name in the recipe.
+    FieldPtr field(const std::string& name);
+    /// A field given either by name (a string) or inline (a map); @a name labels inline ones.
+    FieldPtr operand(const RecipeNode& spec, const std::string& name);
+
+    /// Level nodes in dependency order (a node's inputs come before it).
+    const std::vector<LevelNode>& levelNodes() const { return mLevelNodes; }
+    void addLevelNode(LevelNode node) { mLevelNodes.push_back(std::move(node)); }
+    /// The level node called @a name, or null (nodes such as `infill` set its density).
+    LevelNode* findLevelNode(const std::string& name)
+    {
+        for (LevelNode& n : mLevelNodes)
+            if (n.name == name) return &n;
+        return nullptr;
+    }
+
+    /// Work a node defers until every field is built (a mesh is converted once all its users
+    /// have said how deep a band they need). The Job runs these in order, timed, before solving.
+    struct Preparation {
+        std::string stage;
+        std::function<void()> run;
+    };
+    void addPreparation(Preparation p) { mPreparations.push_back(std::move(p)); }
+    const std::vector<Preparation>& preparations() const { return mPreparations; }
+    /// Entries a node adds to report.json; called on the report as it stands (levels, result
+    /// and mesh filled in as far as the job got).
+    void addReporter(std::function<void(nlohmann::json&)> r) { mReporters.push_back(std::move(r)); }
+    const std::vector<std::function<void(nlohmann::json&)>>& reporters() const { return mReporters; }
+    /// Graded-density lattices, in build order.
+    const std::vector<GradedNode>& gradedNodes() const { return mGradedNodes; }
+    void addGradedNode(GradedNode node) { mGradedNodes.push_back(std::move(node)); }
+    /// Passes a warning to the job's context (it lands in report.json too).
+    void warn(const std::string& code, const std::string& message, nlohmann::json details = nlohmann::json::object())
+    {
+        mContext.warn(code, message, std::move(details));
+    }
+    JobContext& context() const { return mContext; }
+    const Recipe& recipe() const { return mRecipe; }
+
+    /// Every node type the recipe language knows.
+    static const std::vector<NodeType>& nodeTypes();
+
+private:
+    FieldPtr buildSpec(const RecipeNode& spec, const std::string& name);
+
+    const Recipe& mRecipe;
+    JobContext& mContext;
+    std::map<std::string, FieldPtr> mBuilt;
+    std::vector<std::string> mInProgress;
+    std::vector<LevelNode> mLevelNodes;
+    std::vector<Preparation> mPreparations;
+    std::vector<std::function<void(nlohmann::json&)>> mReporters;
+    std::vector<GradedNode> mGradedNodes;
+};
+
+/// Reads `solid:` of a lattice node: `network` (f <= level, the default) or `sheet` (|f| <= level).
+SolidSide readSolidSide(const RecipeNode& spec);
+/// Reads `level:` / `density:` of a lattice node into @a node (a density in (0, 1)); without
+/// either, the level is @a defaultLevel unless @a levelRequired. A sheet's level must be > 0.
+void readLevelKeys(const RecipeNode& spec, LevelNode& node, double defaultLevel, bool levelRequired);
+
+/// Node types by family; each family lives in its own file.
+void addShapeNodeTypes(std::vector<NodeType>& types);    // ShapeNodes.cpp: primitives, booleans, transforms
+void addLatticeNodeTypes(std::vector<NodeType>& types);  // LatticeNodes.cpp: tpms
+void addStrutNodeTypes(std::vector<NodeType>& types);    // StrutNodes.cpp: strut lattices
+void addDesignNodeTypes(std::vector<NodeType>& types);   // DesignNodes.cpp: meshes, shells, infill
+void addExprNodeTypes(std::vector<NodeType>& types);     // ExprNodes.cpp: user equations
+
+/// DesignNodes.cpp: true when an `infill` node solves the level of the lattice field @a name (its
+/// `density:` counts for that lattice, which then needs no level of its own).
+bool levelSolvedByInfill(const Recipe& recipe, const std::string& name);
+/// DesignNodes.cpp: wraps a lattice's raw field in the conformal frame given by @a frame
+/// (`{cylinder: ...}` or `{sphere: ...}`); @a cell is the lattice's cell size per axis.
+FieldPtr applyFrame(const RecipeNode& frame, FieldPtr raw, const Vec3d& cell);
+
+}  // namespace voxlat

@@ -1,0 +1,230 @@
+// Recipe node types for lattices: `tpms`.
+#include "engine/recipe/ExprNodes.h"
+#include "engine/recipe/FieldBuilder.h"
+#include "engine/recipe/ScalarMaps.h"
+#include "engine/recipe/SkinNodes.h"
+#include "fields/GradedLevel.h"
+#include "fields/GradientShift.h"
+#include "fields/TpmsField.h"
+#include "fields/VectorField.h"
+
+#include <algorithm>
+#include <sstream>
+
+namespace voxlat {
+
+namespace {
+
+std::string mm(double v)
+{
+    std::ostringstream s;
+    s << v;
+    return s.str();
+}
+
+/// True when the node has one of the gradient-shift keys.
+bool hasShiftKeys(const RecipeNode& spec)
+{
+    return spec.has("thickness") || spec.has("wall") || spec.has("layer") || spec.has("build") || spec.has("rotation");
+}
+
+/// Reads `thickness:` or `wall:` + `layer:` (+ `build:`, `rotation:`): total wall thicknesses in
+/// millimetres, each a number or a scalar map. @a cell (may be zero) is used for the warning.
+ShiftSpec readShiftSpec(FieldBuilder& builder, const RecipeNode& spec, const std::string& name, double cell,
+                        std::string& description)
+{
+    ShiftSpec shift;
+    shift.scale = 0.5;  // recipes give total thicknesses; the shift on each side is half
+    shift.label = "field `" + name + "`";
+    const bool uniform = spec.has("thickness");
+    if (uniform && (spec.has("wall") || spec.has("layer")))
+        spec["thickness"].fail("give either `thickness:` (the same in every direction) or `wall:` and `layer:`, not both");
+    if (!uniform && !(spec.has("wall") && spec.has("layer")))
+        spec[spec.has("wall") ? "wall" : spec.has("layer") ? "layer" : spec.has("build") ? "build" : "rotation"]
+            .fail("give `thickness:`, or both `wall:` (in the build plane) and `layer:` (along the build direction)");
+    if (uniform && (spec.has("build") || spec.has("rotation")))
+        spec[spec.has("build") ? "build" : "rotation"]
+            .fail("a build direction only matters with `wall:` and `layer:`; `thickness:` is the same in every direction");
+    double largest = 0.0;
+    auto readThickness = [&](const std::string& key) {
+        const RecipeNode node = spec[key];
+        ScalarMap map = readScalarMap(builder, node, name + "/" + key);
+        checkScalarRange(builder, map, node, 0.0, 1e300, false, "the " + key + " thickness (mm)",
+                         "; thicknesses are zero or more millimetres");
+        if (map.constant && !(*map.constant > 0.0))
+            node.fail("the " + key + " thickness must be greater than zero (millimetres), got " + mm(*map.constant));
+        double top = map.constant ? *map.constant : 0.0;
+        if (!map.constant && builder.recipe().domainBox) top = sampleRange(*map.field, *builder.recipe().domainBox).hi;
+        largest = std::max(largest, top);
+        description += (description.empty() ? "" : ", ") + key + " " + map.description + (map.constant ? " mm" : "");
+        return map.field;
+    };
+    if (uniform) {
+        shift.uniform = readThickness("thickness");
+    } else {
+        shift.wall = readThickness("wall");
+        shift.layer = readThickness("layer");
+        if (spec.has("build")) {
+            const RecipeNode b = spec["build"];
+            bool allNumbers = b.isSequence() && b.size() == 3;
+            for (std::size_t i = 0; allNumbers && i < 3; ++i) allNumbers = b.at(i).isNumber();
+            if (allNumbers) {
+                shift.direction = b.vec3();
+                if (!(shift.direction.length() > 0.0))
+                    b.fail("the build direction has zero length; give a direction such as [0, 0, 1]");
+                description += ", build [" + mm(shift.direction[0]) + ", " + mm(shift.direction[1]) + ", " +
+                               mm(shift.direction[2]) + "]";
+            } else if (b.isSequence()) {
+                if (b.size() != 3) b.fail("expected [x, y, z]: three numbers or fields");
+                for (std::size_t i = 0; i < 3; ++i)
+                    shift.directionComponents[i] = readScalarMap(builder, b.at(i), name + "/build/" + "xyz"[i]).field;
+                description += ", build direction from three fields";
+            } else if (auto vector = std::dynamic_pointer_cast<const VectorField>(builder.operand(b, name + "/build"))) {
+                // A `vector:` direction field (by name or inline): its components are the direction.
+                for (int i = 0; i < 3; ++i) shift.directionComponents[i] = vector->component(i);
+                description += ", build direction from the vector field " +
+                               (b.isScalar() ? "`" + b.string() + "`" : std::string("given inline"));
+            } else {
+                shift.directionGradient = builder.operand(b, name + "/build");
+                description += ", build direction along the gradient of " +
+                               (b.isScalar() ? "`" + b.string() + "`" : std::string("an inline field"));
+            }
+        }
+        if (spec.has("rotation")) {
+            const std::string r = spec["rotation"].string();
+            if (r == "rodrigues") shift.rotation = ShiftRotation::Rodrigues;
+            else if (r == "tensor") shift.rotation = ShiftRotation::Tensor;
+            else spec["rotation"].fail("rotation is `rodrigues` (seed 004: the magnitude vector is rotated) or `tensor` "
+                                       "(the magnitude ellipsoid is rotated), got `" + r + "`");
+        }
+    }
+    // Seed 004: the shift stays uniform for gyroids while the wall is below ~10 % of the cell.
+    if (cell > 0.0 && largest > 0.1 * cell) {
+        std::ostringstream msg;
+        msg << "field `" << name << "`: walls " << largest << " mm thick are " << std::lround(100.0 * largest / cell)
+            << " % of the " << cell << " mm cell; the gradient shift keeps walls uniform only up to about 10 % ("
+            << 0.1 * cell << " mm) for gyroids: beyond that the shifted surfaces cross and walls come out uneven";
+        builder.warn("thick_walls", msg.str(), {{"field", name}, {"wall_mm", largest}, {"cell_mm", cell}});
+    }
+    return shift;
+}
+
+FieldPtr buildGradientShift(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
+{
+    FieldPtr f = builder.operand(spec["gradient-shift"], name + "/field");
+    std::string description;
+    ShiftSpec shift = readShiftSpec(builder, spec, name, 0.0, description);
+    return std::make_shared<GradientShift>(std::move(f), std::move(shift));
+}
+
+/// `density:` given as a map or a field name: a GradedLevel over one unit cell of the TPMS.
+/// @a tableSource, when given, is the unit cell the density table is measured on (the plain
+/// TPMS of an oriented one, whose cells are rotated copies of it).
+FieldPtr buildGraded(FieldBuilder& builder, const RecipeNode& spec, const std::string& name, const FieldPtr& raw,
+                     SolidSide side, const Vec3d& cell, const std::string& description,
+                     const FieldPtr& tableSource = nullptr)
+{
+    if (spec.has("level")) spec["level"].fail("give either `level:` or `density:`, not both (density solves the level)");
+    const RecipeNode d = spec["density"];
+    ScalarMap rho = readScalarMap(builder, d, name + "/density");
+    const FieldPtr indicator = LevelSolid(raw, side, 0.0).indicator();
+    auto graded = tableSource ? std::make_shared<GradedLevel>(
+                                    indicator, rho.field,
+                                    std::make_shared<const DensityTable>(
+                                        *LevelSolid(tableSource, side, 0.0).indicator(), Box3{Vec3d(0.0), cell}))
+                              : std::make_shared<GradedLevel>(indicator, rho.field, Box3{Vec3d(0.0), cell});
+    const DensityTable& table = graded->table();
+    checkScalarRange(builder, rho, d, 0.0, 1.0, true, "density",
+                     "; a relative density is between 0 and 1 (exclusive): for 30 % write 0.30");
+    checkScalarRange(builder, rho, d, table.minDensity(), table.maxDensity(), false, "density",
+                     " (the range this " + description + " cell can reach, resolved by its density table)");
+    const int axis = rho.axis.value_or(2);
+    builder.addGradedNode({name, description, rho.description, graded, rho.field, axis, cell[axis]});
+    return graded;
+}
+
+FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
+{
+    const RecipeNode typeNode = spec["tpms"];
+    TpmsType type;
+    if (!parseTpmsType(typeNode.string(), type)) {
+        const auto names = tpmsNames();
+        const std::string guess = closestMatch(typeNode.string(), names);
+        typeNode.fail("unknown TPMS `" + typeNode.string() + "`" + (guess.empty() ? "" : "; did you mean `" + guess + "`?") +
+                      " (known: " + joinWords(names) + ")");
+    }
+    const RecipeNode cellNode = spec["cell"];
+    const Vec3d cell = cellNode.scalarOrVec3();
+    for (int a = 0; a < 3; ++a)
+        if (!(cell[a] > 0.0)) cellNode.fail("cell sizes must be greater than zero (millimetres)");
+    const SolidSide side = readSolidSide(spec);
+    const std::string solidName = side == SolidSide::Band ? "sheet" : "network";
+
+    FieldPtr raw = std::make_shared<TpmsField>(type, cell);
+    const FieldPtr plain = raw;
+    if (spec.has("frame"))
+        raw = spec["frame"].has("skin") ? applySkinFrame(builder, spec["frame"], raw, cell, name)
+                                        : applyFrame(spec["frame"], raw, cell);
+    // A skin frame's lattice exists only in its cells: its density is measured there.
+    const FieldPtr region = skinRegionOf(raw);
+    if (region && spec.has("density") && !spec["density"].isNumber())
+        spec["density"].fail("a graded density needs box cells (its table comes from one box cell); on a skin frame "
+                             "give one number");
+    if (spec.has("axes")) raw = orientedField(builder, spec["axes"], raw, name);
+    if (hasShiftKeys(spec)) {
+        const std::string key = spec.has("thickness") ? "thickness"
+                                : spec.has("wall")    ? "wall"
+                                : spec.has("layer")   ? "layer"
+                                : spec.has("build")   ? "build"
+                                                      : "rotation";
+        if (side != SolidSide::Band)
+            spec[key].fail("a wall thickness makes a sheet: add `solid: sheet` (a network has no walls to thicken)");
+        if (spec.has("level") || spec.has("density"))
+            spec[spec.has("level") ? "level" : "density"]
+                .fail("give either a thickness in millimetres or `level:`/`density:`, not both");
+        std::string walls;
+        ShiftSpec shift = readShiftSpec(builder, spec, name, std::min({cell[0], cell[1], cell[2]}), walls);
+        auto sheet = std::make_shared<GradientShift>(raw, std::move(shift));
+        LevelNode node{name, std::string(tpmsName(type)) + " sheet, " + walls + " (gradient shift)",
+                       std::make_shared<LevelSolid>(sheet, SolidSide::Below, 0.0), {}, {}};
+        FieldPtr result = node.solid;
+        builder.addLevelNode(std::move(node));
+        return result;
+    }
+    if (spec.has("density") && !spec["density"].isNumber())
+        return buildGraded(builder, spec, name, raw, side, cell, std::string(tpmsName(type)) + " " + solidName,
+                           spec.has("axes") && !spec.has("frame") ? plain : nullptr);
+    LevelNode node{name, std::string(tpmsName(type)) + " " + solidName, std::make_shared<LevelSolid>(raw, side, 0.0), {}};
+    if (region) {
+        node.region = node.densityMask = region;
+        node.densityOf = "the cells of the skin frame";
+    }
+    // An infill's `density:` solves this lattice's level: then it needs none of its own.
+    const bool solvedByInfill = levelSolvedByInfill(builder.recipe(), name);
+    readLevelKeys(spec, node, 0.0, side == SolidSide::Band && !solvedByInfill);
+    const Interval range = tpmsLevelRange(type);
+    if (!node.density && side == SolidSide::Below && !range.contains(node.solid->level())) {
+        std::ostringstream msg;
+        msg << "level " << node.solid->level() << " is outside the range where " << tpmsName(type)
+            << " has a surface [" << range.lo << ", " << range.hi << "]: the part would be empty or solid";
+        spec["level"].fail(msg.str());
+    }
+    FieldPtr result = node.solid;
+    builder.addLevelNode(std::move(node));
+    return result;
+}
+
+}  // namespace
+
+void addLatticeNodeTypes(std::vector<NodeType>& types)
+{
+    types.push_back({"tpms",
+                     {"tpms", "cell", "solid", "level", "density", "frame", "thickness", "wall", "layer", "build",
+                      "rotation", "axes"},
+                     buildTpms});
+    addScalarMapNodeTypes(types);
+    types.push_back({"gradient-shift", {"gradient-shift", "thickness", "wall", "layer", "build", "rotation"},
+                     buildGradientShift});
+}
+
+}  // namespace voxlat

@@ -1,0 +1,181 @@
+#include "engine/recipe/Recipe.h"
+
+#include "engine/recipe/RecipeParams.h"
+#include "engine/recipe/SliceSettings.h"
+
+#include <fstream>
+#include <sstream>
+
+namespace voxlat {
+
+namespace {
+
+const std::vector<std::string> kTopKeys{"voxel", "domain", "fields", "result", "outputs", "params", "include"};
+const std::vector<std::string> kOutputKeys{"mesh", "vdb", "slices"};
+
+/// Records @a node and everything below it as set from the command line.
+void collectNodes(const YAML::Node& node, std::vector<YAML::Node>& out)
+{
+    out.push_back(node);
+    if (node.IsSequence() || node.IsMap())
+        for (auto it = node.begin(); it != node.end(); ++it) {
+            if (node.IsMap()) {
+                out.push_back(it->first);
+                collectNodes(it->second, out);
+            } else {
+                collectNodes(*it, out);
+            }
+        }
+}
+
+/// Applies one --set override "a.b.c=value" to the YAML tree.
+void applyOverride(YAML::Node root, const std::string& assignment, const std::string& path,
+                   std::vector<YAML::Node>& overrides)
+{
+    const auto eq = assignment.find('=');
+    if (eq == std::string::npos || eq == 0)
+        throw InputError(path + ": --set " + assignment + ": expected KEY=VALUE, for example --set voxel=0.2");
+    const std::string key = assignment.substr(0, eq), value = assignment.substr(eq + 1);
+    std::vector<std::string> parts;
+    std::stringstream ss(key);
+    for (std::string part; std::getline(ss, part, '.');) parts.push_back(part);
+    YAML::Node parsed;
+    try {
+        parsed = YAML::Load(value);
+    } catch (const YAML::Exception& e) {
+        throw InputError(path + ": --set " + assignment + ": cannot read the value: " + e.msg);
+    }
+    // Walk with copies of the handles (yaml-cpp nodes are references into one tree).
+    std::vector<YAML::Node> chain{root};
+    for (std::size_t i = 0; i + 1 < parts.size(); ++i) {
+        YAML::Node next = chain.back()[parts[i]];
+        if (!next.IsDefined() || !next.IsMap()) {
+            chain.back()[parts[i]] = YAML::Node(YAML::NodeType::Map);
+            next = chain.back()[parts[i]];
+        }
+        chain.push_back(next);
+    }
+    chain.back()[parts.back()] = parsed;
+    collectNodes(chain.back()[parts.back()], overrides);
+}
+
+Recipe build(YAML::Node root, const std::string& name, const std::filesystem::path& folder,
+             const std::vector<std::string>& overrides)
+{
+    Recipe r;
+    r.source = std::make_shared<RecipeSource>();
+    r.source->path = name;
+    r.folder = folder;
+    if (!root.IsDefined() || root.IsNull()) throw InputError(name + ": the recipe is empty");
+    if (!root.IsMap())
+        throw InputError(name + ":1:1: a recipe is a map of keys (voxel, domain, fields, result, outputs)");
+    mergeIncludes(root, name, folder, *r.source);
+    const auto declared = declaredParams(root, r.source);
+    for (const std::string& o : overrides)
+        applyOverride(root, routeAssignment(root, o, name, kTopKeys), name, r.source->overrides);
+    r.params = substituteParams(root, r.source, declared);
+    r.root = root;
+
+    const RecipeNode top(root, r.source, "recipe");
+    top.checkKeys(kTopKeys);
+    if (top.has("voxel")) r.voxel = top["voxel"].positiveNumber();
+    if (top.has("domain")) {
+        const RecipeNode domain = top["domain"];
+        domain.checkKeys({"box"});
+        r.domainBox = domain["box"].box();
+        for (int a = 0; a < 3; ++a)
+            if (r.voxel > r.domainBox->extent()[a])
+                top["voxel"].fail("the voxel (" + std::to_string(r.voxel) +
+                                  ") is larger than the domain; use a voxel well below the smallest domain side (" +
+                                  std::to_string(r.domainBox->extent()[a]) + ")");
+    }
+    const RecipeNode fields = top["fields"];
+    if (!fields.isMap() || fields.size() == 0)
+        fields.fail("expected a map of named fields, like `lattice: {tpms: gyroid, cell: 10}`");
+    for (auto it = root["fields"].begin(); it != root["fields"].end(); ++it) {
+        r.fieldNames.push_back(it->first.Scalar());
+        r.fieldIndex.emplace(it->first.Scalar(), it->second);
+    }
+
+    if (!top.has("result"))
+        top.fail(
+            "missing key `result`: name the field the recipe makes, like `result: lattice` (a file of "
+            "fields without one is a library: `include:` it from a recipe)");
+    const RecipeNode result = top["result"];
+    r.result = result.string();
+    r.fieldSpec(r.result);  // must name a field
+
+    if (top.has("outputs")) {
+        const RecipeNode outputs = top["outputs"];
+        outputs.checkKeys(kOutputKeys);
+        for (const std::string& kind : kOutputKeys) {
+            if (!outputs.has(kind)) continue;
+            const RecipeNode entry = outputs[kind];
+            if (kind == "slices") {  // a map (or a list of maps) of slice settings
+                for (std::size_t i = 0; i < (entry.isSequence() ? entry.size() : 1); ++i) {
+                    const RecipeNode one = entry.isSequence() ? entry.at(i) : entry;
+                    parseSliceSettings(one);  // checks keys and values now, before any work
+                    r.outputs.push_back({kind, one["file"].string(), one.yaml()});
+                }
+                continue;
+            }
+            if (entry.isSequence())
+                for (std::size_t i = 0; i < entry.size(); ++i) r.outputs.push_back({kind, entry.at(i).string(), {}});
+            else
+                r.outputs.push_back({kind, entry.string(), {}});
+        }
+    }
+    return r;
+}
+
+}  // namespace
+
+RecipeNode Recipe::node(const std::string& key) const
+{
+    return RecipeNode(root, source, "recipe")[key];
+}
+
+RecipeNode Recipe::fieldSpec(const std::string& name) const
+{
+    if (auto it = fieldIndex.find(name); it != fieldIndex.end())
+        return RecipeNode(it->second, source, "field `" + name + "`");
+    const RecipeNode fields = node("fields");
+    if (!fields.has(name)) {
+        std::string message = "no field named `" + name + "`";
+        const std::string guess = closestMatch(name, fieldNames);
+        if (!guess.empty()) message += "; did you mean `" + guess + "`?";
+        fields.fail(message + " (fields: " + joinWords(fieldNames) + ")");
+    }
+    return RecipeNode(root["fields"][name], source, "field `" + name + "`");
+}
+
+std::filesystem::path Recipe::resolve(const std::string& path) const
+{
+    const std::filesystem::path p(path);
+    return p.is_absolute() ? p : folder / p;
+}
+
+Recipe parseRecipe(const std::string& text, const std::string& name, const std::filesystem::path& folder,
+                   const std::vector<std::string>& overrides)
+{
+    YAML::Node root;
+    try {
+        root = YAML::Load(text);
+    } catch (const YAML::ParserException& e) {
+        throw InputError(name + ":" + std::to_string(e.mark.line + 1) + ":" + std::to_string(e.mark.column + 1) +
+                         ": not valid YAML: " + e.msg);
+    }
+    return build(root, name, folder, overrides);
+}
+
+Recipe loadRecipe(const std::string& path, const std::vector<std::string>& overrides)
+{
+    std::ifstream in(path);
+    if (!in) throw InputError(path + ": cannot open the recipe file (check the path)");
+    std::stringstream text;
+    text << in.rdbuf();
+    const std::filesystem::path folder = std::filesystem::absolute(path).parent_path();
+    return parseRecipe(text.str(), path, folder, overrides);
+}
+
+}  // namespace voxlat

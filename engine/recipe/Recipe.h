@@ -1,0 +1,52 @@
+/// @file Recipe.h
+/// @brief A YAML recipe, loaded and checked: domain, named fields, result, outputs.
+#pragma once
+
+#include "engine/recipe/RecipeNode.h"
+
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace voxlat {
+
+/// One entry of `outputs:`.
+struct OutputSpec {
+    std::string kind;  ///< "mesh", "vdb" or "slices"
+    std::string file;  ///< relative to the output folder
+    YAML::Node spec;   ///< the entry's own map (`slices`: printer, layer, file, ...)
+};
+
+struct Recipe {
+    std::shared_ptr<RecipeSource> source;
+    std::filesystem::path folder;  ///< paths inside the recipe are relative to this
+    YAML::Node root;
+
+    double voxel = 0.1;
+    std::optional<Box3> domainBox;
+    std::string result;
+    std::vector<std::string> fieldNames;  ///< in file order
+    std::vector<OutputSpec> outputs;
+    /// Effective parameter values (`params:` defaults after --set), by name.
+    std::map<std::string, YAML::Node> params;
+    /// The nodes of `fields:` by name (yaml-cpp looks map keys up linearly, converting each).
+    std::map<std::string, YAML::Node> fieldIndex;
+
+    /// The spec of field @a name (throws InputError naming the valid names if absent).
+    RecipeNode fieldSpec(const std::string& name) const;
+    RecipeNode node(const std::string& key) const;
+    /// A path written in the recipe, resolved against the recipe's folder.
+    std::filesystem::path resolve(const std::string& path) const;
+};
+
+/// Reads and validates a recipe file. @a overrides are "key.path=value" strings from --set;
+/// values are parsed as YAML (numbers, words, [lists]).
+Recipe loadRecipe(const std::string& path, const std::vector<std::string>& overrides = {});
+
+/// Parses recipe text (for tests and for scripting); @a name stands in for the file name.
+Recipe parseRecipe(const std::string& text, const std::string& name, const std::filesystem::path& folder,
+                   const std::vector<std::string>& overrides = {});
+
+}  // namespace voxlat

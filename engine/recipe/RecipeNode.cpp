@@ -1,0 +1,153 @@
+#include "engine/recipe/RecipeNode.h"
+
+#include "fields/EditDistance.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace voxlat {
+
+RecipeNode::RecipeNode(YAML::Node node, std::shared_ptr<const RecipeSource> source, std::string context)
+    : mNode(std::move(node)), mSource(std::move(source)), mContext(std::move(context))
+{
+}
+
+std::string RecipeNode::where() const
+{
+    for (const auto& [node, label] : mSource->substituted)
+        if (node.is(mNode)) return label;
+    for (const YAML::Node& o : mSource->overrides)
+        if (o.is(mNode)) return mSource->path + " (from --set)";
+    std::string path = mSource->path;
+    for (const auto& [node, file] : mSource->included)
+        if (node.is(mNode)) {
+            path = file;
+            break;
+        }
+    const YAML::Mark mark = mNode.Mark();
+    if (mark.is_null() || mark.line < 0) return path;
+    return path + ":" + std::to_string(mark.line + 1) + ":" + std::to_string(mark.column + 1);
+}
+
+void RecipeNode::fail(const std::string& message) const
+{
+    throw InputError(where() + ": " + mContext + ": " + message);
+}
+
+RecipeNode RecipeNode::operator[](const std::string& key) const
+{
+    if (!mNode.IsMap()) fail("expected a map with key `" + key + "`");
+    YAML::Node child = mNode[key];
+    if (!child) fail("missing key `" + key + "`");
+    return RecipeNode(child, mSource, mContext + " `" + key + "`");
+}
+
+RecipeNode RecipeNode::at(std::size_t index) const
+{
+    return RecipeNode(mNode[index], mSource, mContext + " item " + std::to_string(index + 1));
+}
+
+bool RecipeNode::isNumber() const
+{
+    if (!mNode.IsScalar()) return false;
+    try {
+        (void)mNode.as<double>();
+        return true;
+    } catch (const YAML::Exception&) {
+        return false;
+    }
+}
+
+double RecipeNode::number() const
+{
+    if (!mNode.IsScalar()) fail("expected a number");
+    double v = 0.0;
+    try {
+        v = mNode.as<double>();
+    } catch (const YAML::Exception&) {
+        fail("expected a number, got `" + mNode.Scalar() + "`");
+    }
+    if (!std::isfinite(v)) fail("expected a finite number, got `" + mNode.Scalar() + "`");
+    return v;
+}
+
+double RecipeNode::positiveNumber() const
+{
+    const double v = number();
+    if (!(v > 0.0)) fail("must be greater than zero, got " + mNode.Scalar());
+    return v;
+}
+
+std::string RecipeNode::string() const
+{
+    if (!mNode.IsScalar()) fail("expected a word or a file name");
+    return mNode.Scalar();
+}
+
+bool RecipeNode::boolean() const
+{
+    if (mNode.IsScalar()) {
+        try {
+            return mNode.as<bool>();
+        } catch (const YAML::Exception&) {
+        }
+    }
+    fail("expected true or false");
+}
+
+Vec3d RecipeNode::vec3() const
+{
+    if (!mNode.IsSequence() || mNode.size() != 3) fail("expected a list of three numbers, like [0, 0, 1]");
+    return {at(0).number(), at(1).number(), at(2).number()};
+}
+
+Vec3d RecipeNode::scalarOrVec3() const
+{
+    if (mNode.IsScalar()) return Vec3d(number());
+    return vec3();
+}
+
+Box3 RecipeNode::box() const
+{
+    if (!mNode.IsSequence() || mNode.size() != 2) fail("expected [[x0, y0, z0], [x1, y1, z1]]");
+    Box3 b{at(0).vec3(), at(1).vec3()};
+    for (int a = 0; a < 3; ++a)
+        if (!(b.max[a] > b.min[a])) fail("the box's second corner must be above the first on every axis");
+    return b;
+}
+
+void RecipeNode::checkKeys(const std::vector<std::string>& allowed) const
+{
+    if (!mNode.IsMap()) fail("expected a map");
+    for (auto it = mNode.begin(); it != mNode.end(); ++it) {
+        const std::string key = it->first.Scalar();
+        if (std::find(allowed.begin(), allowed.end(), key) != allowed.end()) continue;
+        std::string message = "unknown key `" + key + "`";
+        const std::string guess = closestMatch(key, allowed);
+        if (!guess.empty()) message += "; did you mean `" + guess + "`?";
+        RecipeNode(it->first, mSource, mContext).fail(message + " (valid keys: " + joinWords(allowed) + ")");
+    }
+}
+
+std::string joinWords(const std::vector<std::string>& words)
+{
+    std::string s;
+    for (const auto& w : words) s += (s.empty() ? "" : ", ") + w;
+    return s;
+}
+
+std::string closestMatch(const std::string& word, const std::vector<std::string>& candidates)
+{
+    std::string best;
+    std::size_t bestDistance = std::max<std::size_t>(2, word.size() / 3) + 1;
+    for (const std::string& c : candidates) {
+        if (const std::size_t d = editDistance(word, c); d < bestDistance) {
+            bestDistance = d;
+            best = c;
+        }
+    }
+    return best;
+}
+
+}  // namespace voxlat

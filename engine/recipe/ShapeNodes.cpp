@@ -1,0 +1,100 @@
+// Recipe node types for primitives, booleans and transforms.
+#include "engine/recipe/FieldBuilder.h"
+#include "fields/Boolean.h"
+#include "fields/BoxField.h"
+#include "fields/Cylinder.h"
+#include "fields/Sphere.h"
+#include "fields/Transform.h"
+
+namespace voxlat {
+
+namespace {
+
+FieldPtr buildSphere(FieldBuilder&, const RecipeNode& spec, const std::string&)
+{
+    const RecipeNode s = spec["sphere"];
+    s.checkKeys({"center", "radius"});
+    return std::make_shared<Sphere>(s.has("center") ? s["center"].vec3() : Vec3d(0.0), s["radius"].positiveNumber());
+}
+
+FieldPtr buildBox(FieldBuilder&, const RecipeNode& spec, const std::string&)
+{
+    return std::make_shared<BoxField>(spec["box"].box());
+}
+
+FieldPtr buildCylinder(FieldBuilder&, const RecipeNode& spec, const std::string&)
+{
+    const RecipeNode c = spec["cylinder"];
+    c.checkKeys({"center", "axis", "radius", "height"});
+    const Vec3d axis = c.has("axis") ? c["axis"].vec3() : Vec3d(0, 0, 1);
+    if (axis.length() <= 0.0) c["axis"].fail("the axis must not be the zero vector");
+    return std::make_shared<Cylinder>(c.has("center") ? c["center"].vec3() : Vec3d(0.0), axis,
+                                      c["radius"].positiveNumber(), c["height"].positiveNumber());
+}
+
+NodeType booleanType(const std::string& key, BooleanOp op)
+{
+    return {key, {key, "blend"}, [key, op](FieldBuilder& b, const RecipeNode& spec, const std::string& name) -> FieldPtr {
+                const RecipeNode list = spec[key];
+                const std::size_t minimum = op == BooleanOp::Difference ? 2 : 1;
+                if (!list.isSequence() || list.size() < minimum)
+                    list.fail("expected a list of fields (names or inline nodes), like [a, b]");
+                std::vector<FieldPtr> operands;
+                for (std::size_t i = 0; i < list.size(); ++i)
+                    operands.push_back(b.operand(list.at(i), name + "/" + std::to_string(i + 1)));
+                double blend = 0.0;
+                if (spec.has("blend")) {
+                    blend = spec["blend"].number();
+                    if (blend < 0.0) spec["blend"].fail("the blend radius must be zero or positive (millimetres)");
+                }
+                return std::make_shared<BooleanField>(op, std::move(operands), blend);
+            }};
+}
+
+FieldPtr transformed(FieldBuilder& b, const RecipeNode& spec, const std::string& name, const Mat3d& linear,
+                     const Vec3d& translation)
+{
+    return std::make_shared<TransformField>(b.operand(spec["field"], name + "/field"), linear, translation);
+}
+
+FieldPtr buildTranslate(FieldBuilder& b, const RecipeNode& spec, const std::string& name)
+{
+    return transformed(b, spec, name, Mat3d::identity(), spec["translate"].vec3());
+}
+
+FieldPtr buildRotate(FieldBuilder& b, const RecipeNode& spec, const std::string& name)
+{
+    const RecipeNode r = spec["rotate"];
+    r.checkKeys({"axis", "degrees"});
+    const Vec3d axis = r["axis"].vec3();
+    if (axis.length() <= 0.0) r["axis"].fail("the rotation axis must not be the zero vector");
+    return transformed(b, spec, name, TransformField::rotation(axis, r["degrees"].number()), Vec3d(0.0));
+}
+
+FieldPtr buildScale(FieldBuilder& b, const RecipeNode& spec, const std::string& name)
+{
+    const RecipeNode s = spec["scale"];
+    const Vec3d factors = s.scalarOrVec3();
+    for (int a = 0; a < 3; ++a)
+        if (!(factors[a] > 0.0)) s.fail("scale factors must be greater than zero");
+    Mat3d m = Mat3d::zero();
+    for (int a = 0; a < 3; ++a) m(a, a) = factors[a];
+    return transformed(b, spec, name, m, Vec3d(0.0));
+}
+
+}  // namespace
+
+void addShapeNodeTypes(std::vector<NodeType>& types)
+{
+    types.push_back({"sphere", {"sphere"}, buildSphere});
+    types.push_back({"box", {"box"}, buildBox});
+    types.push_back({"cylinder", {"cylinder"}, buildCylinder});
+    types.push_back(booleanType("union", BooleanOp::Union));
+    types.push_back(booleanType("intersection", BooleanOp::Intersection));
+    types.push_back(booleanType("difference", BooleanOp::Difference));
+    types.push_back({"translate", {"translate", "field"}, buildTranslate});
+    types.push_back({"rotate", {"rotate", "field"}, buildRotate});
+    types.push_back({"scale", {"scale", "field"}, buildScale});
+}
+
+}  // namespace voxlat

@@ -1,0 +1,41 @@
+/// @file SliceSettings.h
+/// @brief A `slices:` output entry as the recipe states it, checked when the recipe is loaded.
+#pragma once
+
+#include "engine/recipe/RecipeNode.h"
+
+#include <array>
+#include <cstddef>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace voxlat {
+
+/// The keys a `slices:` entry may have.
+const std::vector<std::string>& sliceKeys();
+
+/// A `slices:` entry, checked.
+struct SliceSettings {
+    std::string printer;          ///< profile name or path
+    std::string printerWhere;     ///< file:line:col of `printer` (for messages)
+    std::optional<double> layer;  ///< layer height (mm); default: the printer's
+    std::string file;
+    std::string format;                             ///< sl1, sl1s, zip, png, exr; "" = from the file name
+    std::optional<std::array<double, 2>> position;  ///< where the part's xy centre goes on the display
+    int supersample = 8;                            ///< sub-samples per axis in bent edge pixels; 0 = aa off
+    double gamma = 1.0;
+    std::optional<double> exposure, exposureFirst;
+    std::string preview;  ///< contact sheet file; "" = FILE.preview.png; "off"
+    std::string timestamp = "2020-01-01 at 00:00:00 UTC";
+    int threads = 0;  ///< 0: all
+    /// Where the field repeats along z over a whole number of layers, the encoded images of one
+    /// period are kept up to this many bytes and copied to the layers a period above (`reuse:
+    /// off` sets 0: every layer computed).
+    std::size_t reuseBytes = std::size_t(64) << 20;
+};
+
+/// Reads a `slices:` map (errors name file, line and key).
+SliceSettings parseSliceSettings(const RecipeNode& spec);
+
+}  // namespace voxlat

@@ -1,0 +1,859 @@
+#include "mesher/extract/MarchingCubes.h"
+
+#include <openvdb/tree/ValueAccessor.h>
+
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <bit>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace voxlat {
+
+namespace {
+
+////////////////////////////////////////////////////////////////////////////////////////////////////
+// Cube geometry
+//
+// Corner c of a cube sits at offset (c & 1, (c >> 1) & 1, (c >> 2) & 1) from the cube's minimum
+// voxel. Edge e runs along axis e >> 2; bits 0 and 1 of (e & 3) give its offset along the other two
+// axes in increasing axis order. Face f lies on axis f >> 1 at side f & 1 (0: minimum, 1: maximum).
+
+constexpr int kNumCases = 256 * 64;
+constexpr int kCentroidBase = 12;  // triangle vertex ids >= this name a loop centroid
+
+/// The two axes other than @a axis, in increasing order.
+constexpr std::array<int, 2> otherAxes(int axis)
+{
+    return axis == 0 ? std::array<int, 2>{1, 2} : axis == 1 ? std::array<int, 2>{0, 2} : std::array<int, 2>{0, 1};
+}
+
+constexpr int cornerBit(int corner, int axis)
+{
+    return (corner >> axis) & 1;
+}
+
+constexpr int edgeAxis(int edge)
+{
+    return edge >> 2;
+}
+
+constexpr int edgeLowerCorner(int edge)
+{
+    const int axis = edgeAxis(edge);
+    const auto [u, v] = otherAxes(axis);
+    return ((edge & 1) << u) | (((edge >> 1) & 1) << v);
+}
+
+constexpr int edgeUpperCorner(int edge)
+{
+    return edgeLowerCorner(edge) | (1 << edgeAxis(edge));
+}
+
+/// The four corners of face @a face in cyclic order around it.
+constexpr std::array<int, 4> faceCorners(int face)
+{
+    const int axis = face >> 1, side = face & 1;
+    const auto [u, v] = otherAxes(axis);
+    const int base = side << axis;
+    return {base, base | (1 << u), base | (1 << u) | (1 << v), base | (1 << v)};
+}
+
+constexpr int edgeBetween(int c0, int c1)
+{
+    for (int e = 0; e < 12; ++e) {
+        const int lo = edgeLowerCorner(e), hi = edgeUpperCorner(e);
+        if ((lo == c0 && hi == c1) || (lo == c1 && hi == c0)) return e;
+    }
+    return -1;
+}
+
+constexpr bool edgeOnFace(int edge, int face)
+{
+    const int axis = face >> 1, side = face & 1;
+    return edgeAxis(edge) != axis && cornerBit(edgeLowerCorner(edge), axis) == side;
+}
+
+constexpr bool edgesShareFace(int e0, int e1)
+{
+    for (int f = 0; f < 6; ++f) {
+        if (edgeOnFace(e0, f) && edgeOnFace(e1, f)) return true;
+    }
+    return false;
+}
+
+using Vec3d = openvdb::Vec3d;
+
+Vec3d cornerPosition(int corner)
+{
+    return Vec3d(cornerBit(corner, 0), cornerBit(corner, 1), cornerBit(corner, 2));
+}
+
+Vec3d edgeMidpoint(int edge)
+{
+    return 0.5 * (cornerPosition(edgeLowerCorner(edge)) + cornerPosition(edgeUpperCorner(edge)));
+}
+
+////////////////////////////////////////////////////////////////////////////////////////////////////
+// Case table
+
+constexpr int kMaxTriangles = 12;
+constexpr int kMaxCentroids = 4;
+
+/// Triangles of one (corner case, ambiguous face decisions) combination, in cube-edge numbering.
+struct CaseEntry {
+    std::uint8_t numTriangles = 0;
+    std::uint8_t numCentroids = 0;
+    /// Per centroid vertex: bit mask of the cube edges whose vertices it averages.
+    std::uint16_t centroidLoop[kMaxCentroids] = {};
+    std::uint8_t triangles[kMaxTriangles][3] = {};
+};
+
+struct CaseTable {
+    std::array<CaseEntry, kNumCases> entries;
+    /// Per corner case: faces whose inside corners lie on one diagonal (need the decider).
+    std::array<std::uint8_t, 256> ambiguousFaces{};
+    /// Per corner case: cube edges with a sign change.
+    std::array<std::uint16_t, 256> crossingEdges{};
+    MarchingCubesTableInfo info;
+};
+
+/// One oriented segment of the surface on a cube face, from vertex (edge) @c from to @c to.
+struct Segment {
+    int from, to;
+};
+
+/// Segments on @a face for corner case @a cs, oriented so the inside corners are on the right
+/// when the face is viewed from outside the cube. @a connectInside is the decider's verdict, used
+/// only if the face is ambiguous.
+std::vector<Segment> faceSegments(int cs, int face, bool connectInside)
+{
+    const std::array<int, 4> corners = faceCorners(face);
+    auto inside = [cs](int corner) { return ((cs >> corner) & 1) != 0; };
+    std::array<int, 4> sideEdge{};  // sideEdge[i] joins corners[i] and corners[i + 1]
+    int numCrossing = 0;
+    for (int i = 0; i < 4; ++i) {
+        sideEdge[i] = edgeBetween(corners[i], corners[(i + 1) % 4]);
+        if (inside(corners[i]) != inside(corners[(i + 1) % 4])) ++numCrossing;
+    }
+
+    const int axis = face >> 1;
+    Vec3d normal(0.0);
+    normal[axis] = (face & 1) ? 1.0 : -1.0;
+    // Orients a segment given a face corner it separates from the rest of the face: viewed along
+    // -normal, a point p is on the left of a -> b exactly when ((b - a) x (p - a)) . normal > 0.
+    auto orient = [&](int e0, int e1, int corner) {
+        const Vec3d a = edgeMidpoint(e0), b = edgeMidpoint(e1);
+        const bool onLeft = (b - a).cross(cornerPosition(corner) - a).dot(normal) > 0.0;
+        return onLeft == inside(corner) ? Segment{e1, e0} : Segment{e0, e1};
+    };
+
+    std::vector<Segment> segments;
+    if (numCrossing == 2) {
+        int ends[2], n = 0;
+        for (int i = 0; i < 4; ++i) {
+            if (inside(corners[i]) != inside(corners[(i + 1) % 4])) ends[n++] = sideEdge[i];
+        }
+        // Every corner lies on a side whose corners all share its state, so any will do.
+        segments.push_back(orient(ends[0], ends[1], corners[0]));
+    } else if (numCrossing == 4) {
+        // Two segments, each cutting off one corner: the outside corners when the inside ones are
+        // connected across the face centre, the inside corners otherwise.
+        for (int i = 0; i < 4; ++i) {
+            if (inside(corners[i]) == connectInside) continue;
+            segments.push_back(orient(sideEdge[(i + 3) % 4], sideEdge[i], corners[i]));
+        }
+    }
+    return segments;
+}
+
+bool isAmbiguousFace(int cs, int face)
+{
+    const std::array<int, 4> c = faceCorners(face);
+    auto inside = [cs](int corner) { return ((cs >> corner) & 1) != 0; };
+    return inside(c[0]) == inside(c[2]) && inside(c[1]) == inside(c[3]) && inside(c[0]) != inside(c[1]);
+}
+
+/// Checks that the triangles of an entry form a surface patch whose boundary is exactly the face
+/// segments (each once, in their direction) and whose interior edges pair up with opposite
+/// directions. This is what makes neighbouring cubes glue into a closed oriented manifold.
+void validateEntry(const CaseEntry& entry, const std::vector<Segment>& segments, int index)
+{
+    std::vector<std::pair<int, int>> directed;
+    for (int t = 0; t < entry.numTriangles; ++t) {
+        for (int k = 0; k < 3; ++k) directed.emplace_back(entry.triangles[t][k], entry.triangles[t][(k + 1) % 3]);
+    }
+    std::sort(directed.begin(), directed.end());
+    auto fail = [index](const char* what) {
+        throw std::logic_error("marching cubes table entry " + std::to_string(index) + ": " + what);
+    };
+    if (std::adjacent_find(directed.begin(), directed.end()) != directed.end()) fail("repeated half-edge");
+    for (const Segment& s : segments) {
+        if (!std::binary_search(directed.begin(), directed.end(), std::make_pair(s.from, s.to)))
+            fail("missing segment");
+        if (std::binary_search(directed.begin(), directed.end(), std::make_pair(s.to, s.from))) fail("doubled segment");
+    }
+    for (const auto& [a, b] : directed) {
+        const bool isSegment = std::any_of(segments.begin(), segments.end(),
+                                           [&, a = a, b = b](const Segment& s) { return s.from == a && s.to == b; });
+        if (!isSegment && !std::binary_search(directed.begin(), directed.end(), std::make_pair(b, a))) {
+            fail("unpaired interior edge");
+        }
+    }
+}
+
+std::unique_ptr<CaseTable> buildCaseTable()
+{
+    auto table = std::make_unique<CaseTable>();
+    MarchingCubesTableInfo& info = table->info;
+
+    for (int cs = 0; cs < 256; ++cs) {
+        std::uint16_t crossing = 0;
+        for (int e = 0; e < 12; ++e) {
+            if (((cs >> edgeLowerCorner(e)) & 1) != ((cs >> edgeUpperCorner(e)) & 1)) crossing |= 1u << e;
+        }
+        table->crossingEdges[cs] = crossing;
+        std::uint8_t ambiguous = 0;
+        for (int f = 0; f < 6; ++f) {
+            if (isAmbiguousFace(cs, f)) ambiguous |= 1u << f;
+        }
+        table->ambiguousFaces[cs] = ambiguous;
+
+        for (int decisions = 0; decisions < 64; ++decisions) {
+            // Decision bits of unambiguous faces are always 0 at run time.
+            if (decisions & ~ambiguous) continue;
+            const int index = (cs << 6) | decisions;
+            CaseEntry& entry = table->entries[index];
+            ++info.entries;
+
+            std::vector<Segment> segments;
+            for (int f = 0; f < 6; ++f) {
+                for (const Segment& s : faceSegments(cs, f, ((decisions >> f) & 1) != 0)) segments.push_back(s);
+            }
+            // Every edge vertex lies on exactly two faces, so it must start one segment and end one.
+            std::array<int, 12> next;
+            next.fill(-1);
+            std::array<int, 12> incoming{};
+            for (const Segment& s : segments) {
+                if (next[s.from] != -1) throw std::logic_error("marching cubes table: vertex starts two segments");
+                next[s.from] = s.to;
+                ++incoming[s.to];
+            }
+            for (int e = 0; e < 12; ++e) {
+                const bool crosses = (crossing >> e) & 1;
+                if (crosses != (next[e] != -1) || incoming[e] != (crosses ? 1 : 0)) {
+                    throw std::logic_error("marching cubes table: segments do not form loops");
+                }
+            }
+
+            std::array<bool, 12> visited{};
+            for (int start = 0; start < 12; ++start) {
+                if (next[start] == -1 || visited[start]) continue;
+                std::vector<int> loop;
+                for (int e = start; !visited[e]; e = next[e]) {
+                    visited[e] = true;
+                    loop.push_back(e);
+                }
+                ++info.loops;
+                const int n = int(loop.size());
+
+                // A fan diagonal between two vertices on one cube face could coincide with an edge
+                // the neighbour across that face also uses; any other diagonal is private to this
+                // cube. Take the first apex all of whose diagonals are private.
+                int apex = -1;
+                for (int i = 0; i < n && apex < 0; ++i) {
+                    bool ok = true;
+                    for (int j = 2; j + 1 < n && ok; ++j) ok = !edgesShareFace(loop[i], loop[(i + j) % n]);
+                    if (ok) apex = i;
+                }
+                auto addTriangle = [&](int a, int b, int c) {
+                    if (entry.numTriangles == kMaxTriangles)
+                        throw std::logic_error("marching cubes table: too many triangles");
+                    std::uint8_t* t = entry.triangles[entry.numTriangles++];
+                    t[0] = std::uint8_t(a), t[1] = std::uint8_t(b), t[2] = std::uint8_t(c);
+                };
+                if (apex >= 0) {
+                    for (int j = 1; j + 1 < n; ++j)
+                        addTriangle(loop[apex], loop[(apex + j) % n], loop[(apex + j + 1) % n]);
+                } else {
+                    if (entry.numCentroids == kMaxCentroids)
+                        throw std::logic_error("marching cubes table: too many centroids");
+                    const int centroid = kCentroidBase + entry.numCentroids;
+                    std::uint16_t mask = 0;
+                    for (int e : loop) mask |= 1u << e;
+                    entry.centroidLoop[entry.numCentroids++] = mask;
+                    for (int j = 0; j < n; ++j) addTriangle(centroid, loop[j], loop[(j + 1) % n]);
+                    ++info.centroidLoops;
+                }
+            }
+            info.maxTriangles = std::max<std::size_t>(info.maxTriangles, entry.numTriangles);
+            validateEntry(entry, segments, index);
+        }
+    }
+    return table;
+}
+
+const CaseTable& caseTable()
+{
+    // Function-local statics are initialised exactly once, even under concurrent first calls.
+    static const std::unique_ptr<CaseTable> table = buildCaseTable();
+    return *table;
+}
+
+////////////////////////////////////////////////////////////////////////////////////////////////////
+// Block bookkeeping
+//
+// Work is split into 8^3 blocks: every leaf node, plus every tile/background block directly below
+// a leaf in x, y or z ("tile blocks"). A block owns the cubes whose minimum corner it contains and
+// the edges (three per voxel, towards +x, +y, +z) whose lower voxel it contains; only leaves own
+// edges with vertices, since tile voxels never border the surface.
+
+using FloatTree = openvdb::FloatTree;
+using LeafType = FloatTree::LeafNodeType;
+using Coord = openvdb::Coord;
+
+constexpr int kDim = 9;         // a block plus one layer from the +x/+y/+z neighbours
+constexpr int kMaskWords = 24;  // 3 axes x 8 words of 64 bits; word = axis * 8 + x, bit = y * 8 + z
+
+/// Offset from a block's origin to the origin of its neighbour s (bit 0: +x, bit 1: +y, bit 2: +z).
+Coord neighbourOffset(int s)
+{
+    const int dim = int(LeafType::DIM);
+    return Coord((s & 1) * dim, ((s >> 1) & 1) * dim, (s >> 2) * dim);
+}
+
+/// Open-addressing map from block origin to block index. Written by one thread, then read-only.
+class BlockMap {
+public:
+    explicit BlockMap(std::size_t expected) { rehash(std::bit_ceil(std::max<std::size_t>(64, 2 * expected))); }
+
+    int32_t find(const Coord& origin) const
+    {
+        for (std::size_t i = slot(origin);; i = (i + 1) & mMask) {
+            if (mIndex[i] < 0) return -1;
+            if (mKeys[i] == origin) return mIndex[i];
+        }
+    }
+
+    /// Inserts @a origin -> @a index unless present; returns the index stored for @a origin.
+    int32_t insert(const Coord& origin, int32_t index)
+    {
+        if (2 * (mSize + 1) > mKeys.size()) rehash(2 * mKeys.size());
+        for (std::size_t i = slot(origin);; i = (i + 1) & mMask) {
+            if (mIndex[i] < 0) {
+                mKeys[i] = origin;
+                mIndex[i] = index;
+                ++mSize;
+                return index;
+            }
+            if (mKeys[i] == origin) return mIndex[i];
+        }
+    }
+
+private:
+    std::size_t slot(const Coord& c) const
+    {
+        const std::uint64_t h = std::uint64_t(std::uint32_t(c.x() >> 3)) * 0x9E3779B97F4A7C15ull ^
+                                std::uint64_t(std::uint32_t(c.y() >> 3)) * 0xC2B2AE3D27D4EB4Full ^
+                                std::uint64_t(std::uint32_t(c.z() >> 3)) * 0x165667B19E3779F9ull;
+        return std::size_t(h ^ (h >> 29)) & mMask;
+    }
+
+    void rehash(std::size_t capacity)
+    {
+        std::vector<Coord> keys(capacity);
+        std::vector<int32_t> index(capacity, -1);
+        keys.swap(mKeys);
+        index.swap(mIndex);
+        mMask = capacity - 1;
+        mSize = 0;
+        for (std::size_t i = 0; i < keys.size(); ++i) {
+            if (index[i] >= 0) insert(keys[i], index[i]);
+        }
+    }
+
+    std::vector<Coord> mKeys;
+    std::vector<int32_t> mIndex;
+    std::size_t mMask = 0, mSize = 0;
+};
+
+struct Block {
+    Coord origin;
+    const LeafType* leaf = nullptr;  // null for a tile block
+};
+
+/// Per-block results of the counting pass.
+struct BlockCounts {
+    uint32_t edgeVertices = 0;
+    uint32_t centroids = 0;
+    uint32_t triangles = 0;
+    uint32_t droppedCubes = 0;
+};
+
+/// A sign-changing edge without a vertex: lower voxel and axis.
+struct SkippedEdge {
+    Coord voxel;
+    int axis;
+    bool operator<(const SkippedEdge& o) const { return voxel < o.voxel || (voxel == o.voxel && axis < o.axis); }
+    bool operator==(const SkippedEdge& o) const { return voxel == o.voxel && axis == o.axis; }
+};
+
+/// Serialized, monotonic progress reporting in whole percents.
+class ProgressReporter {
+public:
+    ProgressReporter(ProgressFn fn, std::size_t total) : mFn(std::move(fn)), mTotal(std::max<std::size_t>(total, 1)) {}
+
+    void advance()
+    {
+        if (!mFn) return;
+        const std::size_t done = ++mDone;
+        const int percent = int(done * 100 / mTotal);
+        if (percent <= mReported.load(std::memory_order_relaxed) || percent >= 100) return;
+        std::lock_guard<std::mutex> lock(mMutex);
+        if (percent <= mReported.load(std::memory_order_relaxed)) return;
+        mReported.store(percent, std::memory_order_relaxed);
+        mFn(percent / 100.0);
+    }
+
+    void finish()
+    {
+        if (mFn) mFn(1.0);
+    }
+
+private:
+    ProgressFn mFn;
+    std::size_t mTotal;
+    std::atomic<std::size_t> mDone{0};
+    std::atomic<int> mReported{0};
+    std::mutex mMutex;
+};
+
+/// The values a block's cubes can see: the block itself and its +x/+y/+z neighbours, each either
+/// a leaf buffer or a constant (tile or background). Reading through it costs no copy of the
+/// 9x9x9 neighbourhood, which matters because most blocks only need their sign bits.
+struct Neighbourhood {
+    const float* data[8];  // sub-block s (bit 0: +x, bit 1: +y, bit 2: +z); null if constant
+    float constant[8];
+
+    /// Value at (x, y, z) relative to the block origin, each coordinate in [0, 8].
+    float value(int x, int y, int z) const
+    {
+        const int s = (x >> 3) | ((y >> 3) << 1) | ((z >> 3) << 2);
+        const float* d = data[s];
+        return d ? d[((x & 7) << 6) | ((y & 7) << 3) | (z & 7)] : constant[s];
+    }
+};
+
+/// Bit z set when v[z] < iso, for 8 consecutive values.
+inline unsigned insideByte(const float* v, float iso)
+{
+#if defined(__SSE2__)
+    const __m128 t = _mm_set1_ps(iso);
+    return unsigned(_mm_movemask_ps(_mm_cmplt_ps(_mm_loadu_ps(v), t))) |
+           (unsigned(_mm_movemask_ps(_mm_cmplt_ps(_mm_loadu_ps(v + 4), t))) << 4);
+#else
+    unsigned bits = 0;
+    for (int z = 0; z < 8; ++z) bits |= unsigned(v[z] < iso) << z;
+    return bits;
+#endif
+}
+
+/// std::popcount is a library call unless the target has POPCNT; this is the inline fallback.
+inline int popcount64(std::uint64_t x)
+{
+#if defined(__POPCNT__)
+    return std::popcount(x);
+#else
+    x -= (x >> 1) & 0x5555555555555555ull;
+    x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
+    x = (x + (x >> 4)) & 0x0F0F0F0F0F0F0F0Full;
+    return int((x * 0x0101010101010101ull) >> 56);
+#endif
+}
+
+class Mesher {
+public:
+    Mesher(const openvdb::FloatGrid& grid, float iso) : mGrid(grid), mTree(grid.tree()), mIso(iso), mTable(caseTable())
+    {
+        // Grids made by the engine map index to world by scale and translation: call that map
+        // directly (its applyMap is final, so the call inlines) instead of through the virtual
+        // MapBase for each of millions of vertices. Same function, same bits.
+        const auto map = grid.transform().baseMap();
+        if (map->isType<openvdb::math::ScaleTranslateMap>() || map->isType<openvdb::math::UniformScaleTranslateMap>())
+            mScaleTranslate = static_cast<const openvdb::math::ScaleTranslateMap*>(map.get());
+    }
+
+    TriangleMesh run(ProgressFn progressFn, MarchingCubesStats& stats);
+
+private:
+    using Accessor = openvdb::tree::ValueAccessor<const FloatTree, /*IsSafe=*/false>;
+
+    void collectBlocks();
+    Neighbourhood neighbourhood(std::size_t b, Accessor& acc) const;
+    void insideRows(const Neighbourhood& n, std::uint16_t* rows) const;
+    template <bool Emit>
+    void processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh);
+    static bool cubeHasVertices(int x, int y, int z, std::uint16_t crossing, std::uint8_t available);
+    int decisions(int cs, const Neighbourhood& n, int x, int y, int z) const;
+    uint32_t neighbourVertexIndex(std::size_t owner, int axis, int lx, int ly, int lz) const;
+    Vec3d edgePoint(const Neighbourhood& n, const Coord& origin, int x, int y, int z, int axis) const;
+
+    Vec3d indexToWorld(const Vec3d& p) const
+    {
+        return mScaleTranslate ? mScaleTranslate->applyMap(p) : mGrid.indexToWorld(p);
+    }
+
+    const openvdb::FloatGrid& mGrid;
+    const openvdb::math::ScaleTranslateMap* mScaleTranslate = nullptr;  ///< the grid's map, if of that type
+    const FloatTree& mTree;
+    const float mIso;
+    const CaseTable& mTable;
+
+    std::vector<Block> mBlocks;
+    std::size_t mNumLeaves = 0;
+    std::unique_ptr<BlockMap> mMap;
+
+    // Filled by the counting pass.
+    std::vector<std::array<int32_t, 8>> mNeighbours;                // [0]: self, [s]: block at +s; -1 unless a leaf
+    std::vector<std::array<std::uint64_t, kMaskWords>> mEdgeMasks;  // leaves only
+    std::vector<std::array<std::uint16_t, kMaskWords>> mEdgeRanks;  // set bits before each word
+    std::vector<BlockCounts> mCounts;
+    std::vector<SkippedEdge> mSkipped;
+    std::mutex mSkippedMutex;
+
+    // Prefix sums.
+    std::vector<std::uint64_t> mVertexOffsets, mTriangleOffsets;
+};
+
+void Mesher::collectBlocks()
+{
+    for (auto it = mTree.cbeginLeaf(); it; ++it) mBlocks.push_back({it->origin(), it.getLeaf()});
+    mNumLeaves = mBlocks.size();
+    mMap = std::make_unique<BlockMap>(mNumLeaves + mNumLeaves / 4);
+    for (std::size_t i = 0; i < mNumLeaves; ++i) mMap->insert(mBlocks[i].origin, int32_t(i));
+    // A cube whose minimum corner is a tile voxel can still reach into a leaf above it. Give the
+    // blocks below leaves an owner too, appended in leaf order so the result stays deterministic.
+    for (std::size_t i = 0; i < mNumLeaves; ++i) {
+        for (int s = 1; s < 8; ++s) {
+            const Coord origin = mBlocks[i].origin - neighbourOffset(s);
+            const int32_t next = int32_t(mBlocks.size());
+            if (mMap->insert(origin, next) == next) mBlocks.push_back({origin, nullptr});
+        }
+    }
+}
+
+Neighbourhood Mesher::neighbourhood(std::size_t b, Accessor& acc) const
+{
+    Neighbourhood n;
+    for (int s = 0; s < 8; ++s) {
+        const int32_t i = mNeighbours[b][s];
+        if (i >= 0) {
+            n.data[s] = mBlocks[i].leaf->buffer().data();
+            n.constant[s] = 0.0f;
+        } else {
+            // Not a leaf: a tile or the background, constant over the whole 8^3 block.
+            n.data[s] = nullptr;
+            n.constant[s] = acc.getValue(mBlocks[b].origin + neighbourOffset(s));
+        }
+    }
+    return n;
+}
+
+void Mesher::insideRows(const Neighbourhood& n, std::uint16_t* rows) const
+{
+    // rows[x * 9 + y] has bit z set when voxel (x, y, z) is inside. "< iso", never "<=": a value
+    // exactly at the threshold is outside, on both sides of every edge.
+    unsigned constantBits[8];
+    for (int s = 0; s < 8; ++s) constantBits[s] = n.constant[s] < mIso ? 0xFFu : 0u;
+    for (int x = 0; x < kDim; ++x) {
+        for (int y = 0; y < kDim; ++y) {
+            const int s = (x >> 3) | ((y >> 3) << 1);
+            const int offset = ((x & 7) << 6) | ((y & 7) << 3);
+            const unsigned low = n.data[s] ? insideByte(n.data[s] + offset, mIso) : constantBits[s];
+            const unsigned high = n.data[s | 4] ? unsigned(n.data[s | 4][offset] < mIso) : constantBits[s | 4] & 1u;
+            rows[x * kDim + y] = std::uint16_t(low | (high << 8));
+        }
+    }
+}
+
+bool Mesher::cubeHasVertices(int x, int y, int z, std::uint16_t crossing, std::uint8_t available)
+{
+    for (int e = 0; e < 12; ++e) {
+        if (!((crossing >> e) & 1)) continue;
+        const int c = edgeLowerCorner(e);
+        const int s =
+            ((x + cornerBit(c, 0)) >> 3) | (((y + cornerBit(c, 1)) >> 3) << 1) | (((z + cornerBit(c, 2)) >> 3) << 2);
+        if (!((available >> s) & 1)) return false;
+    }
+    return true;
+}
+
+int Mesher::decisions(int cs, const Neighbourhood& n, int x, int y, int z) const
+{
+    int bits = 0;
+    for (std::uint8_t amb = mTable.ambiguousFaces[cs]; amb; amb &= amb - 1) {
+        const int f = std::countr_zero(amb);
+        const std::array<int, 4> c = faceCorners(f);
+        double v[4];
+        for (int i = 0; i < 4; ++i) {
+            v[i] =
+                double(n.value(x + cornerBit(c[i], 0), y + cornerBit(c[i], 1), z + cornerBit(c[i], 2))) - double(mIso);
+        }
+        // Products of the diagonal pairs, exactly as the neighbour across the face computes them
+        // (IEEE multiplication commutes), so both cubes reach the same verdict bit for bit.
+        const double d02 = v[0] * v[2], d13 = v[1] * v[3];
+        const bool firstDiagonalInside = (cs >> c[0]) & 1;
+        const bool connectInside = firstDiagonalInside ? d02 > d13 : d13 > d02;
+        if (connectInside) bits |= 1 << f;
+    }
+    return bits;
+}
+
+uint32_t Mesher::neighbourVertexIndex(std::size_t owner, int axis, int lx, int ly, int lz) const
+{
+    // Rank of the edge among the owner's sign-changing edges: whole words before it, then the
+    // bits below it in its word.
+    const int word = axis * 8 + lx, bit = (ly << 3) | lz;
+    const std::uint64_t below = mEdgeMasks[owner][word] & ((std::uint64_t(1) << bit) - 1);
+    return uint32_t(mVertexOffsets[owner] + mEdgeRanks[owner][word] + popcount64(below));
+}
+
+Vec3d Mesher::edgePoint(const Neighbourhood& n, const Coord& origin, int x, int y, int z, int axis) const
+{
+    const double v0 = n.value(x, y, z);
+    const double v1 = n.value(x + (axis == 0), y + (axis == 1), z + (axis == 2));
+    // Keep vertices off the corners so no triangle can collapse onto a corner.
+    const double t = std::clamp((double(mIso) - v0) / (v1 - v0), 1e-3, 1.0 - 1e-3);
+    Vec3d p(origin.x() + x, origin.y() + y, origin.z() + z);
+    p[axis] += t;
+    return p;
+}
+
+template <bool Emit>
+void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh)
+{
+    const Block& block = mBlocks[b];
+    const bool isLeaf = b < mNumLeaves;
+
+    if constexpr (!Emit) {
+        std::array<int32_t, 8>& nb = mNeighbours[b];
+        nb[0] = isLeaf ? int32_t(b) : -1;
+        for (int s = 1; s < 8; ++s) {
+            const int32_t i = mMap->find(block.origin + neighbourOffset(s));
+            nb[s] = (i >= 0 && std::size_t(i) < mNumLeaves) ? i : -1;
+        }
+    }
+    std::uint8_t available = 0;  // sub-blocks (self + 7 upper neighbours) that own edge vertices
+    for (int s = 0; s < 8; ++s) available |= std::uint8_t(mNeighbours[b][s] >= 0) << s;
+
+    const Neighbourhood n = neighbourhood(b, acc);
+    std::uint16_t rows[kDim * kDim];
+    insideRows(n, rows);
+
+    BlockCounts counts;
+    // Pass 2: global index of each vertex this leaf owns, by mask bit (word * 64 + bit). Only
+    // written and read for set bits; a per-thread scratch, never a per-voxel array for the grid.
+    std::uint32_t ownIndex[kMaskWords * 64];
+    if (isLeaf) {
+        if constexpr (!Emit) {
+            std::array<std::uint64_t, kMaskWords>& mask = mEdgeMasks[b];
+            mask.fill(0);
+            for (int x = 0; x < 8; ++x) {
+                for (int y = 0; y < 8; ++y) {
+                    const std::uint16_t r = rows[x * kDim + y];
+                    const std::uint64_t alongX = (r ^ rows[(x + 1) * kDim + y]) & 0xFF;
+                    const std::uint64_t alongY = (r ^ rows[x * kDim + y + 1]) & 0xFF;
+                    const std::uint64_t alongZ = (r ^ (r >> 1)) & 0xFF;
+                    mask[0 * 8 + x] |= alongX << (8 * y);
+                    mask[1 * 8 + x] |= alongY << (8 * y);
+                    mask[2 * 8 + x] |= alongZ << (8 * y);
+                }
+            }
+            std::array<std::uint16_t, kMaskWords>& ranks = mEdgeRanks[b];
+            uint32_t total = 0;
+            for (int w = 0; w < kMaskWords; ++w) {
+                ranks[w] = std::uint16_t(total);
+                total += uint32_t(popcount64(mask[w]));
+            }
+            counts.edgeVertices = total;
+        } else {
+            // Owned vertices in mask bit order, the order neighbourVertexIndex() ranks them in.
+            const std::array<std::uint64_t, kMaskWords>& mask = mEdgeMasks[b];
+            std::uint64_t next = mVertexOffsets[b];
+            for (int w = 0; w < kMaskWords; ++w) {
+                const int axis = w >> 3, x = w & 7;
+                for (std::uint64_t bits = mask[w]; bits; bits &= bits - 1) {
+                    const int bit = std::countr_zero(bits);
+                    const Vec3d p = indexToWorld(edgePoint(n, block.origin, x, bit >> 3, bit & 7, axis));
+                    mesh->points[next] = openvdb::Vec3f(p);
+                    ownIndex[w * 64 + bit] = uint32_t(next++);
+                }
+            }
+        }
+    }
+    std::uint64_t nextCentroid = 0;
+    openvdb::Vec3I* outTriangles = nullptr;
+    if constexpr (Emit) {
+        nextCentroid = mVertexOffsets[b] + mCounts[b].edgeVertices;
+        outTriangles = mesh->triangles.data() + mTriangleOffsets[b];
+    }
+
+    for (int x = 0; x < 8; ++x) {
+        for (int y = 0; y < 8; ++y) {
+            const unsigned r00 = rows[x * kDim + y], r10 = rows[(x + 1) * kDim + y];
+            const unsigned r01 = rows[x * kDim + y + 1], r11 = rows[(x + 1) * kDim + y + 1];
+            const unsigned any = r00 | r10 | r01 | r11, all = r00 & r10 & r01 & r11;
+            unsigned mixed = ((any | (any >> 1)) & ~(all & (all >> 1))) & 0xFF;
+            for (; mixed; mixed &= mixed - 1) {
+                const int z = std::countr_zero(mixed);
+                const int cs = ((r00 >> z) & 1) | (((r10 >> z) & 1) << 1) | (((r01 >> z) & 1) << 2) |
+                               (((r11 >> z) & 1) << 3) | (((r00 >> (z + 1)) & 1) << 4) | (((r10 >> (z + 1)) & 1) << 5) |
+                               (((r01 >> (z + 1)) & 1) << 6) | (((r11 >> (z + 1)) & 1) << 7);
+                const std::uint16_t crossing = mTable.crossingEdges[cs];
+                // Only cubes on the block's upper shell (or in a tile block) have edges owned elsewhere.
+                if (available != 0xFF && (!isLeaf || x == 7 || y == 7 || z == 7) &&
+                    !cubeHasVertices(x, y, z, crossing, available)) {
+                    if constexpr (!Emit) {
+                        ++counts.droppedCubes;
+                        std::lock_guard<std::mutex> lock(mSkippedMutex);
+                        for (int e = 0; e < 12; ++e) {
+                            const int c = edgeLowerCorner(e);
+                            const int ox = x + cornerBit(c, 0), oy = y + cornerBit(c, 1), oz = z + cornerBit(c, 2);
+                            const int s = (ox >> 3) | ((oy >> 3) << 1) | ((oz >> 3) << 2);
+                            if (((crossing >> e) & 1) && !((available >> s) & 1)) {
+                                mSkipped.push_back({block.origin + Coord(ox, oy, oz), edgeAxis(e)});
+                            }
+                        }
+                    }
+                    continue;
+                }
+                const int ambiguous = mTable.ambiguousFaces[cs] ? decisions(cs, n, x, y, z) : 0;
+                const CaseEntry& entry = mTable.entries[(cs << 6) | ambiguous];
+                if constexpr (!Emit) {
+                    counts.triangles += entry.numTriangles;
+                    counts.centroids += entry.numCentroids;
+                } else {
+                    uint32_t index[kCentroidBase + kMaxCentroids];
+                    for (std::uint16_t bits = crossing; bits; bits &= bits - 1) {
+                        const int e = std::countr_zero(bits), c = edgeLowerCorner(e), axis = edgeAxis(e);
+                        const int ox = x + cornerBit(c, 0), oy = y + cornerBit(c, 1), oz = z + cornerBit(c, 2);
+                        const int s = (ox >> 3) | ((oy >> 3) << 1) | ((oz >> 3) << 2);
+                        index[e] =
+                            s == 0 ? ownIndex[(axis * 8 + ox) * 64 + ((oy << 3) | oz)]
+                                   : neighbourVertexIndex(std::size_t(mNeighbours[b][s]), axis, ox & 7, oy & 7, oz & 7);
+                    }
+                    for (int k = 0; k < entry.numCentroids; ++k) {
+                        // Rare: average the loop in index space, then map like any other vertex.
+                        Vec3d sum(0.0);
+                        int count = 0;
+                        for (std::uint16_t bits = entry.centroidLoop[k]; bits; bits &= bits - 1, ++count) {
+                            const int e = std::countr_zero(bits), c = edgeLowerCorner(e);
+                            sum += edgePoint(n, block.origin, x + cornerBit(c, 0), y + cornerBit(c, 1),
+                                             z + cornerBit(c, 2), edgeAxis(e));
+                        }
+                        mesh->points[nextCentroid] = openvdb::Vec3f(indexToWorld(sum / double(count)));
+                        index[kCentroidBase + k] = uint32_t(nextCentroid++);
+                    }
+                    for (int t = 0; t < entry.numTriangles; ++t) {
+                        const std::uint8_t* tri = entry.triangles[t];
+                        *outTriangles++ = openvdb::Vec3I(index[tri[0]], index[tri[1]], index[tri[2]]);
+                    }
+                }
+            }
+        }
+    }
+    if constexpr (!Emit) mCounts[b] = counts;
+}
+
+TriangleMesh Mesher::run(ProgressFn progressFn, MarchingCubesStats& stats)
+{
+    collectBlocks();
+    const std::size_t numBlocks = mBlocks.size();
+    mNeighbours.resize(numBlocks);
+    mEdgeMasks.resize(mNumLeaves);
+    mEdgeRanks.resize(mNumLeaves);
+    mCounts.resize(numBlocks);
+    ProgressReporter progress(std::move(progressFn), 2 * numBlocks);
+
+    // The grain keeps accessor set-up and scheduling overhead small; the result never depends
+    // on how ranges are split, since every block writes only its own slots.
+    constexpr std::size_t kGrain = 16;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, kGrain),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                          Accessor acc(mTree);
+                          for (std::size_t b = r.begin(); b != r.end(); ++b) {
+                              processBlock<false>(b, acc, nullptr);
+                              progress.advance();
+                          }
+                      });
+
+    mVertexOffsets.resize(numBlocks + 1);
+    mTriangleOffsets.resize(numBlocks + 1);
+    mVertexOffsets[0] = mTriangleOffsets[0] = 0;
+    for (std::size_t b = 0; b < numBlocks; ++b) {
+        mVertexOffsets[b + 1] = mVertexOffsets[b] + mCounts[b].edgeVertices + mCounts[b].centroids;
+        mTriangleOffsets[b + 1] = mTriangleOffsets[b] + mCounts[b].triangles;
+    }
+    if (mVertexOffsets[numBlocks] > std::uint64_t(UINT32_MAX)) {
+        throw std::length_error("marchingCubes: more than 2^32 vertices");
+    }
+
+    TriangleMesh mesh;
+    // Resizing zero-fills (and first touches) hundreds of MB for large meshes: both at once.
+    tbb::parallel_invoke([&] { mesh.points.resize(mVertexOffsets[numBlocks]); },
+                         [&] { mesh.triangles.resize(mTriangleOffsets[numBlocks]); });
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, kGrain),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                          Accessor acc(mTree);
+                          for (std::size_t b = r.begin(); b != r.end(); ++b) {
+                              processBlock<true>(b, acc, &mesh);
+                              progress.advance();
+                          }
+                      });
+
+    stats = MarchingCubesStats{};
+    stats.leafBlocks = mNumLeaves;
+    stats.tileBlocks = numBlocks - mNumLeaves;
+    for (std::size_t b = 0; b < numBlocks; ++b) {
+        stats.centroidVertices += mCounts[b].centroids;
+        stats.droppedCubes += mCounts[b].droppedCubes;
+        if (b >= mNumLeaves) stats.tileBlockTriangles += mCounts[b].triangles;
+    }
+    std::sort(mSkipped.begin(), mSkipped.end());
+    stats.skippedEdges = std::size_t(std::unique(mSkipped.begin(), mSkipped.end()) - mSkipped.begin());
+
+    progress.finish();
+    return mesh;
+}
+
+}  // namespace
+
+TriangleMesh marchingCubes(const openvdb::FloatGrid& grid, float isoValue, ProgressFn progress,
+                           MarchingCubesStats* stats)
+{
+    MarchingCubesStats local;
+    Mesher mesher(grid, isoValue);
+    TriangleMesh mesh = mesher.run(std::move(progress), local);
+    if (stats) *stats = local;
+    return mesh;
+}
+
+MarchingCubesTableInfo marchingCubesTableInfo()
+{
+    return caseTable().info;
+}
+
+}  // namespace voxlat

@@ -1,0 +1,65 @@
+/// @file MarchingCubes.h
+/// @brief Sparse, parallel, topologically safe marching cubes over an OpenVDB float grid.
+///
+/// The surface separates voxels with value < isoValue (inside) from voxels with value >= isoValue
+/// (outside). The mesh is watertight, manifold, outward oriented, free of degenerate triangles and
+/// byte-identical for any number of threads, provided every sign-changing pair of face-adjacent
+/// voxels lies inside leaf nodes (tiles and background never touch the surface).
+#pragma once
+
+#include "mesher/extract/TriangleMesh.h"
+
+#include <openvdb/Grid.h>
+#include <openvdb/openvdb.h>
+
+#include <cstddef>
+#include <functional>
+
+namespace voxlat {
+
+/// Progress callback: @a fraction grows from 0 to 1. It may be called from any thread (calls are
+/// serialized and strictly increasing) and at most about 100 times per meshing run.
+using ProgressFn = std::function<void(double fraction)>;
+
+/// What a marching cubes run did, for diagnostics and tests.
+struct MarchingCubesStats {
+    /// Leaf nodes of the grid, each of which owns the cubes whose minimum corner it contains.
+    std::size_t leafBlocks = 0;
+    /// 8^3 blocks of tiles or background just below a leaf: they own the cubes whose minimum
+    /// corner is a tile voxel but which reach into a leaf, so those cubes are not lost.
+    std::size_t tileBlocks = 0;
+    /// Triangles emitted by cubes owned by tile blocks (see @c tileBlocks).
+    std::size_t tileBlockTriangles = 0;
+    /// Loop centroid vertices added because no fan apex avoided a face diagonal.
+    std::size_t centroidVertices = 0;
+    /// Distinct sign-changing voxel edges whose lower voxel is not in a leaf, so they have no
+    /// vertex. Always 0 for grids that honour the contract above.
+    std::size_t skippedEdges = 0;
+    /// Cubes left untriangulated because they touch a skipped edge (the mesh then has holes).
+    std::size_t droppedCubes = 0;
+};
+
+/// Extract the isosurface of @a grid at @a isoValue as an indexed triangle mesh in world space.
+///
+/// Cube corners are voxel centres. Ambiguous cube faces are resolved with the asymptotic decider
+/// from the four face values alone, so neighbouring cubes always agree.
+///
+/// @param grid      sparse level-set-like grid: negative (below @a isoValue) inside
+/// @param isoValue  threshold; a voxel exactly at the threshold counts as outside
+/// @param progress  optional progress callback (see ProgressFn)
+/// @param stats     optional out-parameter receiving diagnostics
+TriangleMesh marchingCubes(const openvdb::FloatGrid& grid, float isoValue = 0.0f, ProgressFn progress = {},
+                           MarchingCubesStats* stats = nullptr);
+
+/// Facts about the precomputed case table, for tests and reports.
+struct MarchingCubesTableInfo {
+    std::size_t entries = 0;        ///< reachable (corner case, face decision) combinations
+    std::size_t loops = 0;          ///< surface loops over all reachable entries
+    std::size_t centroidLoops = 0;  ///< loops that needed an extra centroid vertex
+    std::size_t maxTriangles = 0;   ///< most triangles any single cube emits
+};
+
+/// Builds the case table on first use (thread-safe) and describes it.
+MarchingCubesTableInfo marchingCubesTableInfo();
+
+}  // namespace voxlat

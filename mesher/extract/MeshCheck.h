@@ -1,0 +1,39 @@
+/// @file MeshCheck.h
+/// @brief Topological validation of triangle meshes: watertightness, manifoldness, orientation.
+#pragma once
+
+#include "mesher/extract/TriangleMesh.h"
+
+#include <cstddef>
+
+namespace voxlat {
+
+/// Topological defects of a triangle mesh. Edges are undirected vertex-index pairs.
+struct MeshTopology {
+    /// Edges used by exactly one triangle (holes).
+    std::size_t boundaryEdges = 0;
+    /// Edges used by more than two triangles.
+    std::size_t nonManifoldEdges = 0;
+    /// Vertices whose incident triangles do not form a single fan, i.e. whose link (the edges
+    /// opposite the vertex) is not one simple path or cycle. Includes the ends of non-manifold edges.
+    std::size_t nonManifoldVertices = 0;
+    /// Edges shared by two triangles that traverse it in the same direction.
+    std::size_t inconsistentlyOrientedEdges = 0;
+    /// Triangles with a repeated (or out-of-range) vertex index or zero area in double precision.
+    std::size_t degenerateTriangles = 0;
+    /// V - E + F over the vertices and edges used by triangles with three distinct valid indices
+    /// (2 for each sphere-like closed component, 2 - 2g for genus g).
+    int eulerCharacteristic = 0;
+
+    /// True for a watertight, manifold, consistently oriented mesh without degenerate triangles.
+    bool closedManifold() const
+    {
+        return boundaryEdges == 0 && nonManifoldEdges == 0 && nonManifoldVertices == 0 &&
+               inconsistentlyOrientedEdges == 0 && degenerateTriangles == 0;
+    }
+};
+
+/// Analyse the topology of @a mesh (parallel; O(triangles)).
+MeshTopology checkTopology(const TriangleMesh& mesh);
+
+}  // namespace voxlat

@@ -1,0 +1,513 @@
+#include "mesher/slice/Slicer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include "mesher/slice/SliceTiles.h"
+#include "mesher/slice/SliceTilesAvx2.h"
+
+namespace voxlat {
+
+namespace {
+
+/// Transposes the 8 x 8 byte matrix held one row per word (little-endian: byte c of r[k] is column c).
+inline void transpose8x8(std::uint64_t r[8])
+{
+    auto swap = [](std::uint64_t& a, std::uint64_t& b, int shift, std::uint64_t mask) {
+        const std::uint64_t t = ((a >> shift) ^ b) & mask;
+        b ^= t;
+        a ^= t << shift;
+    };
+    for (int k : {0, 2, 4, 6}) swap(r[k], r[k + 1], 8, 0x00FF00FF00FF00FFull);
+    for (int k : {0, 1, 4, 5}) swap(r[k], r[k + 2], 16, 0x0000FFFF0000FFFFull);
+    for (int k : {0, 1, 2, 3}) swap(r[k], r[k + 4], 32, 0x00000000FFFFFFFFull);
+}
+
+/// True when this build has the eight-lane tile pass and the CPU running it has AVX2 (a check
+/// made here, outside the file built for AVX2, so it runs on any x86-64 CPU).
+bool avx2TilesAvailable()
+{
+#if defined(VOXLAT_AVX2_TILES)
+    return __builtin_cpu_supports("avx2");
+#else
+    return false;
+#endif
+}
+
+/// True when every value is finite (x * 0 is NaN for NaN and infinities, 0 otherwise).
+bool allFinite(const float* v, std::size_t n)
+{
+    Quad poison[2] = {};
+    std::size_t k = 0;
+    for (; k + 8 <= n; k += 8)
+        for (int q = 0; q < 2; ++q) poison[q] += QuadLanes::load(v + k + 4 * q) * 0.0f;
+    float rest = 0.0f;
+    for (; k < n; ++k) rest += v[k] * 0.0f;
+    const Quad sum = poison[0] + poison[1];
+    return sum[0] == 0.0f && sum[1] == 0.0f && sum[2] == 0.0f && sum[3] == 0.0f && rest == 0.0f;
+}
+
+}  // namespace
+
+double LayerImage::exposedPixels() const
+{
+    // 32-bit partial sums over chunks that cannot overflow them, so the inner loop vectorises.
+    constexpr std::size_t kChunk = std::size_t(1) << 16;
+    std::uint64_t sum = 0;
+    for (std::size_t start = 0; start < pixels.size(); start += kChunk) {
+        const std::uint8_t* p = pixels.data() + start;
+        const std::size_t n = std::min(kChunk, pixels.size() - start);
+        std::uint32_t part = 0;
+        for (std::size_t k = 0; k < n; ++k) part += p[k];
+        sum += part;
+    }
+    return double(sum) / 255.0;
+}
+
+void LayerImage::storedRow(const Display& display, int row, std::uint8_t* out) const
+{
+    const int width = display.storedWidth();
+    std::fill(out, out + width, std::uint8_t(0));
+    int i, j, i1, j1;
+    display.landscapeOf(0, row, i, j);
+    display.landscapeOf(width - 1, row, i1, j1);
+    if (display.portrait) {  // the row is a column of the landscape grid (fixed i)
+        if (i < i0 || i >= i0 + nx) return;
+        const int step = j1 >= j ? 1 : -1;
+        for (int c = 0; c < width; ++c) {
+            const int jj = j + step * c;
+            if (jj >= j0 && jj < j0 + ny) out[c] = pixels[std::size_t(jj - j0) * nx + (i - i0)];
+        }
+    } else {  // the row is a row of the landscape grid (fixed j)
+        if (j < j0 || j >= j0 + ny) return;
+        const int step = i1 >= i ? 1 : -1;
+        const std::uint8_t* src = &pixels[std::size_t(j - j0) * nx];
+        for (int c = 0; c < width; ++c) {
+            const int ii = i + step * c;
+            if (ii >= i0 && ii < i0 + nx) out[c] = src[ii - i0];
+        }
+    }
+}
+
+void LayerImage::storedWindow(const Display& display, std::vector<std::uint8_t>& out, int& col0, int& row0, int& w,
+                              int& h) const
+{
+    w = display.portrait ? ny : nx;
+    h = display.portrait ? nx : ny;
+    out.assign(std::size_t(w) * h, 0);
+    if (nx == 0 || ny == 0) return;
+    // Stored corners of the window's first and last pixels give its placement and directions.
+    const bool mx = display.portrait ? !display.mirrorX : display.mirrorX, my = !display.mirrorY;
+    const int W = display.storedWidth(), H = display.storedHeight();
+    auto colOf = [&](int i, int j) {
+        const int u = display.portrait ? j : i;
+        return mx ? W - 1 - u : u;
+    };
+    auto rowOf = [&](int i, int j) {
+        const int v = display.portrait ? i : j;
+        return my ? H - 1 - v : v;
+    };
+    col0 = std::min(colOf(i0, j0), colOf(i0 + nx - 1, j0 + ny - 1));
+    row0 = std::min(rowOf(i0, j0), rowOf(i0 + nx - 1, j0 + ny - 1));
+    // Stored row and column are each a function of one landscape axis: rows of the source map
+    // to a fixed stored column (portrait) or row (landscape) with a constant step along the other.
+    const std::ptrdiff_t di = display.portrait ? (my ? -1 : 1) * std::ptrdiff_t(w) : (mx ? -1 : 1);
+    const std::ptrdiff_t dj = display.portrait ? (mx ? -1 : 1) : (my ? -1 : 1) * std::ptrdiff_t(w);
+    const std::ptrdiff_t origin = std::ptrdiff_t(rowOf(i0, j0) - row0) * w + (colOf(i0, j0) - col0);
+    // Portrait: each source row becomes a stored column. Transpose 8 x 8 pixel blocks in 64-bit
+    // words (a byte reversal where the stored column runs backwards), so stores are whole words;
+    // the ragged right and bottom edges take the plain loop below.
+    int iDone = 0, jDone = 0;
+    if (display.portrait && (dj == 1 || dj == -1)) {
+        iDone = nx / 8 * 8;
+        jDone = ny / 8 * 8;
+        for (int jb = 0; jb < jDone; jb += 8)
+            for (int ib = 0; ib < iDone; ib += 8) {
+                std::uint64_t r[8];
+                for (int k = 0; k < 8; ++k) std::memcpy(&r[k], &pixels[std::size_t(jb + k) * nx + ib], 8);
+                transpose8x8(r);  // r[c] byte k: source row jb + k, column ib + c
+                for (int c = 0; c < 8; ++c) {
+                    std::uint8_t* dst = out.data() + origin + di * (ib + c) + dj * jb;
+                    if (dj == 1) {
+                        std::memcpy(dst, &r[c], 8);
+                    } else {
+                        const std::uint64_t reversed = __builtin_bswap64(r[c]);
+                        std::memcpy(dst - 7, &reversed, 8);
+                    }
+                }
+            }
+    }
+    auto copy = [&](int iBegin, int iEnd, int jBegin, int jEnd) {
+        for (int j = jBegin; j < jEnd; ++j) {
+            const std::uint8_t* src = &pixels[std::size_t(j) * nx];
+            std::uint8_t* dst = out.data() + origin + dj * j;
+            for (int i = iBegin; i < iEnd; ++i) dst[di * i] = src[i];
+        }
+    };
+    if (iDone > 0 || jDone > 0) {
+        copy(iDone, nx, 0, ny);     // right strip
+        copy(0, iDone, jDone, ny);  // bottom strip
+        return;
+    }
+    constexpr int kBlock = 64;
+    for (int jb0 = 0; jb0 < ny; jb0 += kBlock)
+        for (int ib0 = 0; ib0 < nx; ib0 += kBlock)
+            for (int j = jb0; j < std::min(ny, jb0 + kBlock); ++j) {
+                const std::uint8_t* src = &pixels[std::size_t(j) * nx];
+                std::uint8_t* dst = out.data() + origin + dj * j;
+                for (int i = ib0; i < std::min(nx, ib0 + kBlock); ++i) dst[di * i] = src[i];
+            }
+}
+
+Slicer::Slicer(const FieldNode& field, const Box3& part, double offsetX, double offsetY, const Display& display,
+               const RasterOptions& options)
+    : mField(field),
+      mPart(part),
+      mOffsetX(offsetX),
+      mOffsetY(offsetY),
+      mDisplay(display),
+      mOptions(options),
+      mWideTiles(options.wideTiles && avx2TilesAvailable())
+{
+    const double px = display.pitchX(), py = display.pitchY();
+    const double x0 = part.min.x() + offsetX, x1 = part.max.x() + offsetX;
+    const double y0 = part.min.y() + offsetY, y1 = part.max.y() + offsetY;
+    const double tolerance = 1e-6;
+    mFits =
+        x0 >= -tolerance && y0 >= -tolerance && x1 <= display.widthMm + tolerance && y1 <= display.heightMm + tolerance;
+    // Pixels whose footprint [i, i+1) px meets [x0, x1].
+    mI0 = std::clamp(int(std::floor(x0 / px + 1e-9)), 0, display.pixelsX);
+    const int i1 = std::clamp(int(std::ceil(x1 / px - 1e-9)), 0, display.pixelsX);
+    mJ0 = std::clamp(int(std::floor(y0 / py + 1e-9)), 0, display.pixelsY);
+    const int j1 = std::clamp(int(std::ceil(y1 / py - 1e-9)), 0, display.pixelsY);
+    mNx = std::max(0, i1 - mI0);
+    mNy = std::max(0, j1 - mJ0);
+    const int s = std::max(1, options.supersample);
+    mLevels.resize(std::size_t(s * s) + 1);
+    for (int k = 0; k <= s * s; ++k) {
+        const double coverage = double(k) / (s * s);
+        mLevels[k] = options.gamma <= 0.0 ? (coverage >= 0.5 ? 255 : 0)
+                                          : std::uint8_t(std::lround(255.0 * std::pow(coverage, options.gamma)));
+    }
+}
+
+void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
+{
+    out.i0 = mI0;
+    out.j0 = mJ0;
+    out.nx = mNx;
+    out.ny = mNy;
+    out.pixels.assign(std::size_t(mNx) * mNy, 0);
+    if (z < mPart.min.z() || z > mPart.max.z()) return;
+    const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
+    const int tile = std::max(2, mOptions.tile), block = 8 * tile;
+    std::vector<double> values, sub;
+    std::vector<float> single, cells;  // the values in single precision and their cells, for the tile tests
+    RasterCounts counts;
+    int quartersTried = 0, quartersCulled = 0;
+
+    // Classifies the pixel box [i, i + n) x [j, j + m) of the window: -1 inside, +1 outside, 0 both.
+    auto classify = [&](int i, int j, int n, int m) {
+        const double lx = (mI0 + i) * px - mOffsetX, hx = (mI0 + i + n) * px - mOffsetX;
+        const double ly = (mJ0 + j) * py - mOffsetY, hy = (mJ0 + j + m) * py - mOffsetY;
+        const Box3 box{{std::max(lx, mPart.min.x()), std::max(ly, mPart.min.y()), z},
+                       {std::min(hx, mPart.max.x()), std::min(hy, mPart.max.y()), z}};
+        if (box.min.x() > box.max.x() || box.min.y() > box.max.y()) return 1;
+        const Interval b = mField.bound(box);
+        if (b.lo > 0.0) return 1;
+        const bool whole = lx >= mPart.min.x() && hx <= mPart.max.x() && ly >= mPart.min.y() && hy <= mPart.max.y();
+        return b.hi < 0.0 && whole ? -1 : 0;
+    };
+    auto fill = [&](int i, int j, int n, int m) {
+        for (int b = 0; b < m; ++b) std::fill_n(&out.pixels[std::size_t(j + b) * mNx + i], n, std::uint8_t(255));
+    };
+    // Decides the pixel box of a block already classified as @a side: fills it, leaves it empty or
+    // evaluates it as one batch.
+    auto decideBlock = [&](int bi, int bj, int bnx, int bny, int side) {
+        const std::uint64_t tiles = std::uint64_t((bnx + tile - 1) / tile) * ((bny + tile - 1) / tile);
+        if (side != 0) {
+            if (side < 0) fill(bi, bj, bnx, bny);
+            (side < 0 ? counts.tilesInside : counts.tilesOutside) += tiles;
+            return;
+        }
+        // One batch for the block's pixel centres and a one-pixel halo: per-axis terms are shared
+        // by the whole block (the separable fast paths), and no per-tile bounds are needed, as
+        // the tiles' own centre values decide which pixels are sure (edgeTile's fast path).
+        GridBatch grid;
+        grid.origin = Vec3d(xOf(mI0 + bi - 1), yOf(mJ0 + bj - 1), z);
+        grid.spacing = Vec3d(px, py, 1.0);
+        grid.nx = bnx + 2;
+        grid.ny = bny + 2;
+        grid.nz = 1;
+        values.resize(grid.size());
+        mField.gridValues(grid, values);
+        counts.pixelsEvaluated += std::uint64_t(bnx) * bny;
+        // The largest difference between the four corners of each grid cell (both axes and both
+        // diagonals), for edgeTile's fast pass; written to vectorize.
+        const int cy = grid.ny - 1;
+        single.resize(values.size());
+        for (std::size_t k = 0; k < values.size(); ++k) single[k] = float(values[k]);
+        cells.resize(std::size_t(grid.nx - 1) * cy);
+        for (int a = 0; a + 1 < grid.nx; ++a) {
+            const float* c0 = &single[std::size_t(a) * grid.ny];
+            const float* c1 = c0 + grid.ny;
+            float* e = &cells[std::size_t(a) * cy];
+            for (int b = 0; b < cy; ++b) {
+                const float d0 = std::abs(c1[b] - c0[b]), d1 = std::abs(c0[b + 1] - c0[b]);
+                const float d2 = std::abs(c1[b + 1] - c0[b]), d3 = std::abs(c1[b] - c0[b + 1]);
+                e[b] = std::max(std::max(d0, d1), std::max(d2, d3));
+            }
+        }
+        const bool finite = allFinite(single.data(), single.size());
+        for (int tj = bj; tj < bj + bny; tj += tile)
+            for (int ti = bi; ti < bi + bnx; ti += tile) {
+                const int tnx = std::min(tile, bi + bnx - ti), tny = std::min(tile, bj + bny - tj);
+                const int tside =
+                    edgeTile(z, ti, tj, tnx, tny, out, &values[std::size_t(ti - bi) * grid.ny + (tj - bj)],
+                             &single[std::size_t(ti - bi) * grid.ny + (tj - bj)], grid.ny,
+                             &cells[std::size_t(ti - bi) * cy + (tj - bj)], finite, sub, counts);
+                ++(tside < 0 ? counts.tilesInside : tside > 0 ? counts.tilesOutside : counts.tilesEdge);
+            }
+    };
+    // Blocks of 8 x 8 tiles, culled by their quarters (4 x 4 tiles): a block whose quarters all
+    // straddle the surface is evaluated as one batch (per-axis terms shared by twice the pixels per
+    // side), otherwise quarter by quarter as the culling allows.
+    for (int bj = 0; bj < mNy; bj += block)
+        for (int bi = 0; bi < mNx; bi += block) {
+            const int bnx = std::min(block, mNx - bi), bny = std::min(block, mNy - bj);
+            const int side = classify(bi, bj, bnx, bny);
+            if (side != 0) {
+                decideBlock(bi, bj, bnx, bny, side);
+                continue;
+            }
+            // Quarters are culled separately only while that pays: in a lattice every quarter
+            // straddles the surface and its bounds are wasted work. Decided per layer, in the
+            // layer's own block order, so the bytes do not depend on the threads.
+            if (quartersTried >= 64 && 8 * quartersCulled < quartersTried) {
+                decideBlock(bi, bj, bnx, bny, 0);
+                continue;
+            }
+            const int half = block / 2;
+            int quarterSide[4], quarters = 0;
+            bool allStraddle = true;
+            for (int qj = bj; qj < bj + bny; qj += half)
+                for (int qi = bi; qi < bi + bnx; qi += half) {
+                    quarterSide[quarters] =
+                        classify(qi, qj, std::min(half, bi + bnx - qi), std::min(half, bj + bny - qj));
+                    allStraddle &= quarterSide[quarters++] == 0;
+                }
+            quartersTried += quarters;
+            for (int q = 0; q < quarters; ++q) quartersCulled += quarterSide[q] != 0;
+            if (allStraddle) {
+                decideBlock(bi, bj, bnx, bny, 0);
+                continue;
+            }
+            quarters = 0;
+            for (int qj = bj; qj < bj + bny; qj += half)
+                for (int qi = bi; qi < bi + bnx; qi += half)
+                    decideBlock(qi, qj, std::min(half, bi + bnx - qi), std::min(half, bj + bny - qj),
+                                quarterSide[quarters++]);
+        }
+    if (stats) {
+        stats->tilesInside += counts.tilesInside;
+        stats->tilesOutside += counts.tilesOutside;
+        stats->tilesEdge += counts.tilesEdge;
+        stats->pixelsEvaluated += counts.pixelsEvaluated;
+        stats->pixelsSupersampled += counts.pixelsSupersampled;
+    }
+}
+
+int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out, const double* values,
+                     const float* single, int stride, const float* cells, bool finite, std::vector<double>& sub,
+                     RasterCounts& counts) const
+{
+    const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
+    // values: the pixel centres of the tile plus a one-pixel halo (column a of the halo grid at
+    // values[a * stride]), for the neighbourhood tests and gradients; cells: the largest difference
+    // between the corners of each halo-grid cell (a, b) .. (a + 1, b + 1), at cells[a * (stride - 1) + b].
+    auto v = [&](int a, int b) { return values[std::size_t(a) * stride + b]; };
+    // xOf / yOf with the pitches hoisted (the same arithmetic, without a division per call).
+    auto centreX = [&](int i) { return (double(i) + 0.5) * px - mOffsetX; };
+    auto centreY = [&](int j) { return (double(j) + 0.5) * py - mOffsetY; };
+    // A pixel that overhangs the part's box by a rounding error only (pixel edges on the box's
+    // faces, as when a part is centred on the display) counts as whole: sub-sampling it would
+    // only quantise its coverage.
+    const double slackX = 1e-9 * px, slackY = 1e-9 * py;
+    const int s = std::max(1, mOptions.supersample);
+    std::uint64_t supersampled = 0;
+
+    // Fast pass: every difference between a pixel's centre and one of its eight neighbours lies in
+    // one of the four cells around it, so a pixel with |f| above their largest difference has no
+    // sign change in its 3x3 neighbourhood and |f| above every difference to a neighbour: it is
+    // surely inside or outside (the exact test below would say the same for a pixel wholly inside
+    // the part, tested per row and column with the slow path's own expressions). Most pixels end
+    // here; the rest are listed for the exact test.
+    constexpr int kMaxListed = 64 * 64;
+    const bool listSlow = tnx * tny <= kMaxListed;
+    std::uint16_t slowList[kMaxListed];
+    int slowCount = 0;
+    bool rowInPart[64];
+    const bool rowsListed = tny <= 64;
+    if (rowsListed)
+        for (int b = 0; b < tny; ++b) {
+            const double y = centreY(mJ0 + tj + b);
+            rowInPart[b] = y - 0.5 * py >= mPart.min.y() - slackY && y + 0.5 * py <= mPart.max.y() + slackY;
+        }
+    int sure = 0, sureInside = 0;
+    // Locals, not members: the byte stores below may alias any member, which would be reloaded.
+    const std::size_t rowStride = std::size_t(mNx);
+    std::uint8_t* const tilePixels = out.pixels.data() + std::size_t(tj) * rowStride + ti;
+    const double partMinX = mPart.min.x() - slackX, partMaxX = mPart.max.x() + slackX;
+    bool tileInPart = rowsListed && tnx == kLanes && tny == kLanes;
+    for (int b = 0; tileInPart && b < tny; ++b) tileInPart = rowInPart[b];
+    for (int a : {0, tnx - 1}) {
+        const double x = centreX(mI0 + ti + a);
+        tileInPart = tileInPart && x - 0.5 * px >= partMinX && x + 0.5 * px <= partMaxX;
+    }
+    const bool greyEdges = mOptions.supersample > 0 && mOptions.gamma == 1.0;
+    const float tolerance = float(mOptions.linearTolerance);
+    auto decideWholeTile = [&] {
+#if defined(VOXLAT_AVX2_TILES)
+        if (mWideTiles)
+            return decideFullTileAvx2(single, stride, cells, tolerance, greyEdges, tilePixels, rowStride, slowList,
+                                      slowCount);
+#endif
+        return decideFullTile<QuadLanes>(single, stride, cells, tolerance, greyEdges, tilePixels, rowStride, slowList,
+                                         slowCount);
+    };
+    const int decided = tileInPart && finite ? decideWholeTile() : -1;
+    if (decided >= 0) {
+        sure = decided & 0xffff;
+        sureInside = decided >> 16;
+    }
+    for (int a = 0; decided < 0 && a < tnx; ++a) {
+        const float* c0 = cells + std::size_t(a) * (stride - 1);
+        const float* c1 = c0 + (stride - 1);
+        const double* f = values + std::size_t(a + 1) * stride + 1;
+        std::uint8_t* pixel = tilePixels + a;
+        const double x = centreX(mI0 + ti + a);
+        const bool columnInPart = rowsListed && x - 0.5 * px >= partMinX && x + 0.5 * px <= partMaxX;
+        for (int b = 0; b < tny; ++b) {
+            const double bound = std::max(std::max(c0[b], c0[b + 1]), std::max(c1[b], c1[b + 1]));
+            const bool isSure = columnInPart & rowInPart[rowsListed ? b : 0] & (std::abs(f[b]) > bound);
+            const bool inside = f[b] < 0.0;
+            pixel[std::size_t(b) * rowStride] = std::uint8_t(-int(isSure & inside));
+            sure += isSure;
+            sureInside += isSure & inside;
+            if (listSlow) {
+                slowList[slowCount] = std::uint16_t(a * tny + b);
+                slowCount += !isSure;
+            }
+        }
+    }
+
+    const int toDecide = listSlow ? slowCount : tnx * tny;
+    for (int k = 0; k < toDecide; ++k) {
+        const int index = listSlow ? slowList[k] : k;
+        const int a = index / tny, b = index % tny;
+        const int i = mI0 + ti + a, j = mJ0 + tj + b;
+        const double x = centreX(i), y = centreY(j), f = v(a + 1, b + 1);
+        std::uint8_t& pixel = out.pixels[std::size_t(tj + b) * mNx + (ti + a)];
+        const bool centreInPart = x >= mPart.min.x() && x <= mPart.max.x() && y >= mPart.min.y() && y <= mPart.max.y();
+        if (mOptions.supersample <= 0) {
+            pixel = f < 0.0 && centreInPart ? 255 : 0;
+            continue;
+        }
+        const double lx = x - 0.5 * px, hx = x + 0.5 * px, ly = y - 0.5 * py, hy2 = y + 0.5 * py;
+        if (hx <= mPart.min.x() || lx >= mPart.max.x() || hy2 <= mPart.min.y() || ly >= mPart.max.y()) {
+            pixel = 0;
+            continue;
+        }
+        const bool partial = lx < mPart.min.x() - slackX || hx > mPart.max.x() + slackX ||
+                             ly < mPart.min.y() - slackY || hy2 > mPart.max.y() + slackY;
+        // Coverage of the linearised edge: f + gx u + gy v < 0 over the pixel (gradient by central
+        // differences, per pixel), exact for a straight edge. Where the field bends within the
+        // pixel (second differences not small against the gradient) or the part's box cuts the
+        // pixel, count s x s sub-samples instead.
+        const double gx = 0.5 * (v(a + 2, b + 1) - v(a, b + 1)), gy = 0.5 * (v(a + 1, b + 2) - v(a + 1, b));
+        const double dxx = v(a + 2, b + 1) + v(a, b + 1) - 2.0 * f, dyy = v(a + 1, b + 2) + v(a + 1, b) - 2.0 * f;
+        const double dxy = 0.25 * (v(a + 2, b + 2) - v(a + 2, b) - v(a, b + 2) + v(a, b));
+        const double gradient = std::abs(gx) + std::abs(gy);
+        const double bend = std::abs(dxx) + std::abs(dyy) + 2.0 * std::abs(dxy);
+        const bool linear = !partial && std::isfinite(f) && bend <= mOptions.linearTolerance * gradient;
+        // The linearised edge misses the pixel (|f| > (|gx| + |gy|) / 2, with a margin for rounding):
+        // the coverage below would be exactly 0 or 1 and no chord would bend it, so skip it.
+        if (linear && std::abs(f) > 0.5 * gradient * (1.0 + 1e-9)) {
+            pixel = f < 0.0 ? 255 : 0;
+            continue;
+        }
+        // May the boundary pass through this pixel? A sign change among the 3x3 centres, or |f| no
+        // larger than the largest difference to a neighbour (sure for a locally linear field).
+        double maxDiff = 0.0;
+        bool signChange = false;
+        for (int da = -1; da <= 1; ++da)
+            for (int db = -1; db <= 1; ++db) {
+                const double g = v(a + 1 + da, b + 1 + db);
+                maxDiff = std::max(maxDiff, std::abs(g - f));
+                signChange |= (g < 0.0) != (f < 0.0);
+            }
+        if (!partial && !signChange && !(std::abs(f) <= maxDiff)) {
+            pixel = f < 0.0 ? 255 : 0;
+            continue;
+        }
+        if (linear) {
+            // The tile passes' formula, one lane used.
+            auto lane = [](double v) { return Quad{} + float(v); };
+            const double coverage =
+                edgeCoverage<QuadLanes>(lane(f), lane(gx), lane(gy), lane(dxx), lane(dyy), lane(dxy))[0];
+            // coverage >= 0, so adding 1/2 rounds to nearest (as lround, without the call).
+            const auto linearGrey = std::uint8_t(255.0 * coverage + 0.5);  // NOLINT(bugprone-incorrect-roundings)
+            pixel = mOptions.gamma <= 0.0   ? (coverage >= 0.5 ? 255 : 0)
+                    : mOptions.gamma == 1.0 ? linearGrey
+                                            : std::uint8_t(std::lround(255.0 * std::pow(coverage, mOptions.gamma)));
+            continue;
+        }
+        ++supersampled;
+        GridBatch g;
+        g.origin = Vec3d(lx + 0.5 * px / s, ly + 0.5 * py / s, z);
+        g.spacing = Vec3d(px / s, py / s, 1.0);
+        g.nx = s;
+        g.ny = s;
+        g.nz = 1;
+        sub.resize(g.size());
+        mField.gridValues(g, sub);
+        int inside = 0;
+        for (int sa = 0; sa < s; ++sa) {
+            const double sx = g.origin.x() + sa * g.spacing.x();
+            const bool xIn = sx >= mPart.min.x() && sx <= mPart.max.x();
+            for (int sb = 0; sb < s; ++sb) {
+                const double sy = g.origin.y() + sb * g.spacing.y();
+                inside += xIn && sy >= mPart.min.y() && sy <= mPart.max.y() && sub[std::size_t(sa) * s + sb] < 0.0;
+            }
+        }
+        pixel = mLevels[inside];
+    }
+    counts.pixelsSupersampled += supersampled;
+    if (sure < tnx * tny) return 0;
+    return sureInside == sure ? -1 : sureInside == 0 ? 1 : 0;
+}
+
+void Slicer::fieldValues(double z, std::vector<float>& out) const
+{
+    out.assign(std::size_t(mNx) * mNy, 0.0f);
+    std::vector<double> values;
+    const int tile = 32;
+    for (int tj = 0; tj < mNy; tj += tile)
+        for (int ti = 0; ti < mNx; ti += tile) {
+            GridBatch g;
+            g.origin = Vec3d(xOf(mI0 + ti), yOf(mJ0 + tj), z);
+            g.spacing = Vec3d(mDisplay.pitchX(), mDisplay.pitchY(), 1.0);
+            g.nx = std::min(tile, mNx - ti);
+            g.ny = std::min(tile, mNy - tj);
+            g.nz = 1;
+            values.resize(g.size());
+            mField.gridValues(g, values);
+            for (int a = 0; a < g.nx; ++a)
+                for (int b = 0; b < g.ny; ++b)
+                    out[std::size_t(tj + b) * mNx + ti + a] = float(values[std::size_t(a) * g.ny + b]);
+        }
+}
+
+}  // namespace voxlat

@@ -1,0 +1,309 @@
+#include "mesher/writers/MeshWriters.h"
+
+#include "mesher/writers/AtomicFile.h"
+
+#include <tbb/parallel_pipeline.h>
+
+#include <OpenMesh/Core/IO/MeshIO.hh>
+#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cctype>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+#include <string_view>
+#include <unordered_map>
+#include <vector>
+
+namespace voxlat {
+
+namespace {
+
+constexpr std::size_t kStlHeaderSize = 80;
+constexpr std::size_t kStlFacetSize = 50;
+constexpr std::size_t kStlChunkFacets = 1 << 14;  // ~800 KB per write
+
+// Explicit little-endian encoding keeps the files identical on any host.
+void putU32(char* p, std::uint32_t v)
+{
+    for (int i = 0; i < 4; ++i) p[i] = char((v >> (8 * i)) & 0xFF);
+}
+void putF32(char* p, float f)
+{
+    putU32(p, std::bit_cast<std::uint32_t>(f));
+}
+/// Twelve floats, little-endian, as putF32 writes them one by one (one copy on little-endian hosts).
+void putF32s(char* p, const float (&f)[12])
+{
+    if constexpr (std::endian::native == std::endian::little)
+        std::memcpy(p, f, sizeof(f));
+    else
+        for (int k = 0; k < 12; ++k) putF32(p + 4 * k, f[k]);
+}
+std::uint32_t getU32(const char* p)
+{
+    std::uint32_t v = 0;
+    for (int i = 0; i < 4; ++i) v |= std::uint32_t(static_cast<unsigned char>(p[i])) << (8 * i);
+    return v;
+}
+float getF32(const char* p)
+{
+    return std::bit_cast<float>(getU32(p));
+}
+
+std::string lowerExtension(const std::string& path)
+{
+    std::string ext = std::filesystem::path(path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return ext;
+}
+
+void checkIndices(const TriangleMesh& mesh)
+{
+    const std::size_t n = mesh.points.size();
+    for (const openvdb::Vec3I& t : mesh.triangles) {
+        if (t[0] >= n || t[1] >= n || t[2] >= n) {
+            throw std::invalid_argument("mesh triangle refers to a vertex index out of range");
+        }
+    }
+}
+
+void writeOpenMesh(const TriangleMesh& mesh, const std::string& path, const std::string& ext)
+{
+    checkIndices(mesh);
+    using OMesh = OpenMesh::TriMesh_ArrayKernelT<>;
+    OMesh om;
+    om.reserve(mesh.points.size(), 3 * mesh.triangles.size() / 2, mesh.triangles.size());
+    std::vector<OMesh::VertexHandle> handles;
+    handles.reserve(mesh.points.size());
+    for (const openvdb::Vec3f& p : mesh.points) handles.push_back(om.add_vertex(OMesh::Point(p.x(), p.y(), p.z())));
+    for (const openvdb::Vec3I& t : mesh.triangles) {
+        if (!om.add_face(handles[t[0]], handles[t[1]], handles[t[2]]).is_valid()) {
+            throw std::runtime_error("cannot write '" + path +
+                                     "': OpenMesh rejected a non-manifold or degenerate face");
+        }
+    }
+    AtomicFile file(path);
+    // OpenMesh writes ASCII unless asked; OBJ is ASCII only, with enough digits to round-trip floats.
+    const OpenMesh::IO::Options options =
+        ext == ".ply" ? OpenMesh::IO::Options::Binary : OpenMesh::IO::Options::Default;
+    // OpenMesh chats on its log streams ("[OBJWriter] : write file"); our callers report instead.
+    ::omlog().disable();
+    ::omout().disable();
+    if (!OpenMesh::IO::write_mesh(om, file.stream(), ext, options, std::numeric_limits<float>::max_digits10)) {
+        throw std::runtime_error("OpenMesh failed to write '" + path + "'");
+    }
+    file.commit();
+}
+
+/// Exact welding key: the bit patterns, with -0 folded onto +0 so equal values weld.
+struct PointKey {
+    std::array<std::uint32_t, 3> bits;
+    bool operator==(const PointKey&) const = default;
+};
+struct PointKeyHash {
+    std::size_t operator()(const PointKey& k) const
+    {
+        std::uint64_t h = k.bits[0];
+        h = h * 0x9E3779B97F4A7C15ull ^ k.bits[1];
+        h = h * 0x9E3779B97F4A7C15ull ^ k.bits[2];
+        return std::size_t(h ^ (h >> 31));
+    }
+};
+
+class Welder {
+public:
+    /// @a expectedPoints sizes the table up front: a closed triangle mesh has about half as
+    /// many vertices as triangles.
+    Welder(TriangleMesh& mesh, std::size_t expectedPoints) : mMesh(mesh)
+    {
+        mIndex.reserve(expectedPoints);
+        mMesh.points.reserve(expectedPoints);
+    }
+
+    std::uint32_t add(const openvdb::Vec3f& p)
+    {
+        PointKey key;
+        for (int i = 0; i < 3; ++i) key.bits[i] = std::bit_cast<std::uint32_t>(p[i] == 0.0f ? 0.0f : p[i]);
+        const auto [it, inserted] = mIndex.try_emplace(key, std::uint32_t(mMesh.points.size()));
+        if (inserted) mMesh.points.push_back(p);
+        return it->second;
+    }
+
+private:
+    TriangleMesh& mMesh;
+    std::unordered_map<PointKey, std::uint32_t, PointKeyHash> mIndex;
+};
+
+void parseAsciiStl(const std::string& text, const std::string& path, TriangleMesh& mesh)
+{
+    Welder welder(mesh, 0);
+    std::vector<std::uint32_t> corners;
+    const char* p = text.c_str();
+    const char* end = p + text.size();
+    auto skipSpace = [&] {
+        while (p < end && std::isspace(static_cast<unsigned char>(*p))) ++p;
+    };
+    while (true) {
+        skipSpace();
+        if (p >= end) break;
+        const char* word = p;
+        while (p < end && !std::isspace(static_cast<unsigned char>(*p))) ++p;
+        if (std::string_view(word, std::size_t(p - word)) != "vertex") continue;
+        openvdb::Vec3f v;
+        for (int i = 0; i < 3; ++i) {
+            char* next = nullptr;
+            v[i] = std::strtof(p, &next);
+            if (next == p) throw std::runtime_error("malformed vertex in ASCII STL '" + path + "'");
+            p = next;
+        }
+        corners.push_back(welder.add(v));
+    }
+    if (corners.size() % 3 != 0) throw std::runtime_error("ASCII STL '" + path + "' has a partial facet");
+    for (std::size_t i = 0; i < corners.size(); i += 3)
+        mesh.triangles.emplace_back(corners[i], corners[i + 1], corners[i + 2]);
+}
+
+}  // namespace
+
+void writeStl(const TriangleMesh& mesh, const std::string& path, TriangleMesh::Measures* measures)
+{
+    if (mesh.triangles.size() > std::numeric_limits<std::uint32_t>::max()) {
+        throw std::invalid_argument("binary STL holds at most 2^32 - 1 triangles");
+    }
+    checkIndices(mesh);
+    AtomicFile file(path);
+    std::ostream& out = file.stream();
+
+    char header[kStlHeaderSize + 4];
+    std::memset(header, ' ', kStlHeaderSize);
+    const std::string_view title = "voxlat binary STL";
+    std::memcpy(header, title.data(), title.size());
+    putU32(header + kStlHeaderSize, std::uint32_t(mesh.triangles.size()));
+    out.write(header, sizeof(header));
+
+    // Facets are formatted in parallel, chunk by chunk, and written in order: the bytes are the
+    // same for any thread count, and formatting (normals) overlaps the writing. At most kTokens
+    // chunks are in flight and they leave the pipeline in order, so chunk i can reuse the buffer
+    // of chunk i - kTokens: the buffers are allocated (and their pages touched) once.
+    constexpr std::size_t kTokens = 8;
+    const std::size_t chunks = (mesh.triangles.size() + kStlChunkFacets - 1) / kStlChunkFacets;
+    std::vector<std::vector<char>> buffers(std::min(kTokens, chunks));
+    // Volume and area terms as TriangleMesh::measure() takes them, summed per chunk.
+    std::vector<TriangleMesh::Measures> sums(measures ? chunks : 0);
+    const openvdb::Vec3d ref =
+        mesh.triangles.empty() ? openvdb::Vec3d(0.0) : openvdb::Vec3d(mesh.points[mesh.triangles.front()[0]]);
+    auto formatChunk = [&](std::size_t index) {
+        const std::size_t begin = index * kStlChunkFacets;
+        const std::size_t count = std::min(kStlChunkFacets, mesh.triangles.size() - begin);
+        std::vector<char>& chunk = buffers[index % kTokens];
+        chunk.resize(count * kStlFacetSize);
+        char* p = chunk.data();
+        TriangleMesh::Measures sum;
+        for (std::size_t i = begin; i < begin + count; ++i, p += kStlFacetSize) {
+            const openvdb::Vec3I& t = mesh.triangles[i];
+            const openvdb::Vec3f& a = mesh.points[t[0]];
+            const openvdb::Vec3f& b = mesh.points[t[1]];
+            const openvdb::Vec3f& c = mesh.points[t[2]];
+            const openvdb::Vec3d da(a), db(b), dc(c);
+            openvdb::Vec3d n = (db - da).cross(dc - da);
+            const double length = n.length();
+            if (measures) {
+                sum.area += length;
+                sum.volume += (da - ref).dot((db - ref).cross(dc - ref));
+            }
+            n = length > 0.0 ? n / length : openvdb::Vec3d(0.0);
+            const float facet[12] = {float(n[0]), float(n[1]), float(n[2]), a[0], a[1], a[2],
+                                     b[0],        b[1],        b[2],        c[0], c[1], c[2]};
+            putF32s(p, facet);
+            p[48] = p[49] = 0;
+        }
+        if (measures) sums[index] = sum;
+        return index;
+    };
+    std::size_t next = 0;
+    auto nextChunk = [&](tbb::flow_control& fc) -> std::size_t {
+        if (next == chunks) fc.stop();
+        return next++;
+    };
+    auto writeChunk = [&](std::size_t index) {
+        const std::vector<char>& chunk = buffers[index % kTokens];
+        out.write(chunk.data(), std::streamsize(chunk.size()));
+    };
+    tbb::parallel_pipeline(kTokens,
+                           tbb::make_filter<void, std::size_t>(tbb::filter_mode::serial_in_order, nextChunk) &
+                               tbb::make_filter<std::size_t, std::size_t>(tbb::filter_mode::parallel, formatChunk) &
+                               tbb::make_filter<std::size_t, void>(tbb::filter_mode::serial_in_order, writeChunk));
+    file.commit();
+    if (measures) {
+        TriangleMesh::Measures total;
+        for (const TriangleMesh::Measures& m : sums) {
+            total.volume += m.volume;
+            total.area += m.area;
+        }
+        *measures = {total.volume / 6.0, 0.5 * total.area};
+    }
+}
+
+void writeMesh(const TriangleMesh& mesh, const std::string& path, std::optional<TriangleMesh::Measures>* measures)
+{
+    const std::string ext = lowerExtension(path);
+    if (ext == ".stl") {
+        TriangleMesh::Measures m;
+        writeStl(mesh, path, measures ? &m : nullptr);
+        if (measures) *measures = m;
+    } else if (ext == ".ply" || ext == ".obj") {
+        writeOpenMesh(mesh, path, ext);
+    } else {
+        throw std::invalid_argument("cannot write mesh '" + path + "': unsupported extension '" + ext +
+                                    "' (supported: .stl, .ply, .obj)");
+    }
+}
+
+TriangleMesh readStl(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw std::runtime_error("cannot open STL file '" + path + "'");
+    std::string data;
+    in.seekg(0, std::ios::end);
+    data.resize(std::size_t(std::max<std::streamoff>(in.tellg(), 0)));
+    in.seekg(0, std::ios::beg);
+    in.read(data.data(), std::streamsize(data.size()));
+    if (!in) throw std::runtime_error("cannot read STL file '" + path + "'");
+
+    TriangleMesh mesh;
+    // The size test comes first: binary files may also begin with "solid".
+    if (data.size() >= kStlHeaderSize + 4) {
+        const std::uint64_t count = getU32(data.data() + kStlHeaderSize);
+        if (data.size() == kStlHeaderSize + 4 + count * kStlFacetSize) {
+            Welder welder(mesh, count / 2 + 3);
+            mesh.triangles.reserve(count);
+            const char* p = data.data() + kStlHeaderSize + 4;
+            for (std::uint64_t i = 0; i < count; ++i, p += kStlFacetSize) {
+                std::uint32_t idx[3];
+                for (int k = 0; k < 3; ++k) {
+                    const char* q = p + 12 + 12 * k;
+                    idx[k] = welder.add(openvdb::Vec3f(getF32(q), getF32(q + 4), getF32(q + 8)));
+                }
+                mesh.triangles.emplace_back(idx[0], idx[1], idx[2]);
+            }
+            return mesh;
+        }
+    }
+    const std::size_t start = data.find_first_not_of(" \t\r\n");
+    if (start == std::string::npos || data.compare(start, 5, "solid") != 0) {
+        throw std::runtime_error("'" + path + "' is neither binary nor ASCII STL");
+    }
+    parseAsciiStl(data, path, mesh);
+    return mesh;
+}
+
+}  // namespace voxlat

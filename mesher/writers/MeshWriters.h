@@ -1,0 +1,34 @@
+/// @file MeshWriters.h
+/// @brief Mesh file output (STL, PLY, OBJ) through AtomicFile, and an STL reader for tests.
+#pragma once
+
+#include "mesher/extract/TriangleMesh.h"
+
+#include <optional>
+#include <string>
+
+namespace voxlat {
+
+/// Writes @a mesh as binary STL, streamed in chunks. The output is byte-deterministic: a fixed
+/// header ("voxlat binary STL" padded with spaces, no timestamp), facet normals computed from the
+/// vertices in double, attribute words 0. Throws std::invalid_argument for out-of-range indices
+/// or more than 2^32 - 1 triangles, std::runtime_error naming @a path on I/O failure.
+/// @a measures, when given, receives the mesh's volume and area, summed while the facets are
+/// formatted (the terms of TriangleMesh::measure() in chunk order: the same up to rounding, the
+/// same bits for any thread count).
+void writeStl(const TriangleMesh& mesh, const std::string& path, TriangleMesh::Measures* measures = nullptr);
+
+/// Writes @a mesh in the format named by the (case-insensitive) extension of @a path:
+/// .stl (binary, writeStl), .ply (binary, via OpenMesh) or .obj (ASCII, via OpenMesh).
+/// Throws std::invalid_argument listing the supported extensions for any other one. The PLY and
+/// OBJ paths need a manifold mesh (OpenMesh rejects other faces); they throw std::runtime_error
+/// rather than silently drop a face. No partial file is ever left at @a path. For STL,
+/// @a measures (when given) receives what writeStl() measures; other formats leave it alone.
+void writeMesh(const TriangleMesh& mesh, const std::string& path,
+               std::optional<TriangleMesh::Measures>* measures = nullptr);
+
+/// Reads a binary or ASCII STL file, welding vertices with bit-identical positions (-0 == +0) in
+/// order of first appearance. Throws std::runtime_error naming @a path if it cannot be read.
+TriangleMesh readStl(const std::string& path);
+
+}  // namespace voxlat
