@@ -12,6 +12,7 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 #include <tbb/parallel_for.h>
+#include <optional>
 
 namespace py = pybind11;
 using namespace voxlat;
@@ -97,6 +98,32 @@ py::object jsonToPython(const nlohmann::json& j)
     return py::module_::import("json").attr("loads")(j.dump());
 }
 
+/// A job and the context it reports through, alive together (the Job's shared_ptr aliases this).
+struct JobWithContext {
+    JobContext context;
+    std::optional<Job> job;
+};
+
+/// Makes a Job whose progress goes to @a progress (a Python callable `f(stage, done, total)`, or None).
+std::shared_ptr<Job> makeJob(const Recipe& recipe, py::object progress)
+{
+    auto owner = std::make_shared<JobWithContext>();
+    if (!progress.is_none()) {
+        // Called from worker threads while the job runs without the GIL: take it for the call.
+        auto callback = std::make_shared<py::object>(std::move(progress));
+        owner->context.setProgressCallback(
+            [callback](const std::string& stage, std::uint64_t done, std::uint64_t total) {
+                py::gil_scoped_acquire gil;
+                (*callback)(stage, done, total);
+            });
+    }
+    {
+        py::gil_scoped_release release;
+        owner->job.emplace(recipe, &owner->context);
+    }
+    return std::shared_ptr<Job>(owner, &*owner->job);
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_voxlat, m)
@@ -104,6 +131,7 @@ PYBIND11_MODULE(_voxlat, m)
     m.doc() = "voxlat engine core: recipes, jobs, fields (see the `voxlat` package for the graph builder)";
     static py::exception<InputError> inputError(m, "InputError", PyExc_ValueError);
     static py::exception<JobError> jobError(m, "JobError", PyExc_RuntimeError);
+    static py::exception<Cancelled> cancelled(m, "Cancelled", PyExc_RuntimeError);
     py::register_exception_translator([](std::exception_ptr p) {
         try {
             if (p) std::rethrow_exception(p);
@@ -111,6 +139,8 @@ PYBIND11_MODULE(_voxlat, m)
             inputError(e.what());
         } catch (const JobError& e) {
             jobError(e.what());
+        } catch (const Cancelled& e) {
+            cancelled(e.what());
         }
     });
     openvdb::initialize();
@@ -153,11 +183,24 @@ PYBIND11_MODULE(_voxlat, m)
         .def("directions", &Field::directions, py::arg("points"), "vectors (N, 3) of a vector field");
 
     py::class_<Job, std::shared_ptr<Job>>(m, "Job", "a recipe taken through the stages")
-        .def(py::init([](const Recipe& r) {
-                 py::gil_scoped_release release;
-                 return std::make_shared<Job>(r);
-             }),
-             py::arg("recipe"))
+        .def(py::init(&makeJob), py::arg("recipe"), py::arg("progress") = py::none(),
+             "a job; `progress(stage, done, total)` is called as stages advance (from worker threads)")
+        .def(
+            "warnings",
+            [](const Job& j) {
+                py::list out;
+                for (const Warning& w : j.context().warnings()) {
+                    nlohmann::json entry = w.details;
+                    entry["code"] = w.code;
+                    entry["message"] = w.message;
+                    out.append(jsonToPython(entry));
+                }
+                return out;
+            },
+            "the warnings so far: dicts with `code`, `message` and the numbers")
+        .def(
+            "cancel", [](Job& j) { j.context().cancel(); },
+            "ask a running stage (in another thread) to stop; it raises voxlat.Cancelled")
         .def(
             "solve",
             [](Job& j) {

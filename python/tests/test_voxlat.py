@@ -133,6 +133,25 @@ class VoxlatModule(unittest.TestCase):
             job.write_mesh(str(self.dir / f"m.{ext}"))
             self.assertGreater((self.dir / f"m.{ext}").stat().st_size, 1000)
 
+    def test_progress_callback_and_warnings_list(self):
+        # Walls of 1.2 mm in an 8 mm gyroid cell: 15 % of the cell, past the uniform-shift range.
+        recipe = voxlat.Recipe.parse("voxel: 0.5\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
+                                     "  s: {tpms: gyroid, cell: 8, solid: sheet, thickness: 1.2}\nresult: s\n")
+        calls = []
+        job = recipe.job(progress=lambda stage, done, total: calls.append((stage, done, total)))
+        job.mesh()
+        stages = {stage for stage, _, _ in calls}
+        self.assertIn("meshing", stages)
+        for stage, done, total in calls:
+            self.assertLessEqual(done, total)
+        # Each stage reports its completion last.
+        self.assertTrue(any(s == "meshing" and d == t for s, d, t in calls))
+        warnings = job.warnings()
+        self.assertEqual([w["code"] for w in warnings], ["thick_walls"])
+        self.assertAlmostEqual(warnings[0]["wall_mm"], 1.2)
+        self.assertIn("15 %", warnings[0]["message"])
+        self.assertEqual(job.report()["warnings"][0]["code"], "thick_walls")
+
     def test_params_and_sets(self):
         recipe = voxlat.Recipe(voxlat.Node({"tpms": "gyroid", "cell": "$cell", "solid": "sheet", "level": "$t"}),
                                domain=[[0, 0, 0], [8, 8, 8]], voxel=0.5, params={"cell": 4, "t": 0.3})

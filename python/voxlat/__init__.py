@@ -17,10 +17,10 @@ import os
 import numpy as np
 
 from . import _voxlat as _core
-from ._voxlat import InputError, JobError
+from ._voxlat import Cancelled, InputError, JobError
 
 __all__ = [
-    "Node", "Recipe", "InputError", "JobError", "schema", "tpms", "gyroid", "schwarz_p", "schwarz_d", "iwp",
+    "Node", "Recipe", "Cancelled", "InputError", "JobError", "schema", "tpms", "gyroid", "schwarz_p", "schwarz_d", "iwp",
     "neovius", "expr", "vector", "sphere", "box", "cylinder", "mesh", "union", "intersection", "difference", "load",
 ]
 
@@ -281,9 +281,10 @@ class Recipe:
     def sha256(self):
         return self.core().sha256()
 
-    def job(self, sets=()):
-        """A Job: .solve(), .field(name).values(points), .mesh(), .write_mesh(path), .report()."""
-        return _core.Job(self.core(sets))
+    def job(self, sets=(), progress=None):
+        """A Job: .solve(), .field(name).values(points), .mesh(), .write_mesh(path), .report(),
+        .warnings(). `progress(stage, done, total)` is called as its stages advance."""
+        return _core.Job(self.core(sets), progress)
 
     def field(self, name=""):
         return self.job().field(name)
@@ -292,9 +293,10 @@ class Recipe:
         """(points (V, 3) float32, triangles (T, 3) uint32) of the result."""
         return self.job().mesh()
 
-    def run(self, out_dir):
-        """Writes the recipe's outputs and report.json to out_dir; returns the report."""
-        job = self.job()
+    def run(self, out_dir, progress=None):
+        """Writes the recipe's outputs and report.json to out_dir; returns the report (its
+        `warnings` list holds every warning, as dicts with `code`, `message` and the numbers)."""
+        job = self.job(progress=progress)
         job.write_outputs(str(out_dir))
         return job.report()
 

@@ -1,0 +1,98 @@
+// The caller's job context: progress, warnings and cancellation reach the caller, never the terminal.
+#include "TestUtil.h"
+#include "engine/core/Errors.h"
+#include "engine/core/JobContext.h"
+#include "engine/jobs/Job.h"
+
+#include <gtest/gtest.h>
+
+#include <map>
+#include <thread>
+
+using namespace voxlat;
+
+namespace {
+
+const char* kGyroid =
+    "voxel: 0.5\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
+    "  s: {tpms: gyroid, cell: 8, solid: network, density: 0.3}\nresult: s\n"
+    "outputs: {mesh: part.stl}\n";
+
+Recipe parse(const std::string& text, const test::TempDir& dir)
+{
+    return parseRecipe(text, (dir.path / "r.yaml").string(), dir.path);
+}
+
+}  // namespace
+
+TEST(JobContext, StagesReportProgressUpToTheirTotal)
+{
+    test::TempDir dir;
+    JobContext context;
+    std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> last;  // stage -> (done, total)
+    context.setProgressCallback([&](const std::string& stage, std::uint64_t done, std::uint64_t total) {
+        EXPECT_LE(done, total) << stage;
+        if (last.count(stage)) EXPECT_GE(done, last[stage].first) << stage << " went backwards";
+        last[stage] = {done, total};
+    });
+    Job job(parse(kGyroid, dir), &context);
+    job.mesh();
+    for (const char* stage : {"solving density", "evaluating s", "meshing"}) {
+        ASSERT_TRUE(last.count(stage)) << stage;
+        EXPECT_EQ(last[stage].first, last[stage].second) << stage << " did not report completion";
+    }
+}
+
+TEST(JobContext, WarningsGoToTheSinkAndTheReportNotTheTerminal)
+{
+    test::TempDir dir;
+    JobContext context;
+    std::vector<std::string> seen;
+    context.setWarningSink([&](const Warning& w) { seen.push_back(w.code); });
+    Job job(parse("voxel: 0.5\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
+                  "  s: {tpms: gyroid, cell: 8, solid: sheet, thickness: 1.2}\nresult: s\n",
+                  dir),
+            &context);
+    ASSERT_EQ(seen, std::vector<std::string>{"thick_walls"});
+    const auto report = job.report();
+    ASSERT_EQ(report["warnings"].size(), 1u);
+    EXPECT_EQ(report["warnings"][0]["code"], "thick_walls");
+    EXPECT_DOUBLE_EQ(report["warnings"][0]["cell_mm"].get<double>(), 8.0);
+}
+
+TEST(JobContext, CancelStopsTheJobAndWritesNothing)
+{
+    test::TempDir dir;
+    JobContext context;
+    // Cancel as soon as the evaluation completes: the next stage must not start.
+    context.setProgressCallback([&](const std::string& stage, std::uint64_t done, std::uint64_t total) {
+        if (stage.rfind("evaluating", 0) == 0 && done == total) context.cancel();
+    });
+    Job job(parse(kGyroid, dir), &context);
+    const auto out = dir.path / "out";
+    EXPECT_THROW(job.writeOutputs(out), Cancelled);
+    std::size_t files = 0;
+    if (std::filesystem::exists(out))
+        for ([[maybe_unused]] const auto& f : std::filesystem::recursive_directory_iterator(out)) ++files;
+    EXPECT_EQ(files, 0u) << "a cancelled job left files behind";
+}
+
+TEST(JobContext, CancelFromAnotherThreadStopsTheJob)
+{
+    test::TempDir dir;
+    JobContext context;
+    std::atomic<bool> started{false};
+    // The first progress report hands over to another thread and waits until it has cancelled, so
+    // the cancellation lands while a stage is under way, whatever the machine's speed.
+    context.setProgressCallback([&](const std::string&, std::uint64_t, std::uint64_t) {
+        started = true;
+        while (!context.cancelled()) std::this_thread::yield();
+    });
+    Job job(parse(kGyroid, dir), &context);
+    std::thread canceller([&] {
+        while (!started) std::this_thread::yield();
+        context.cancel();
+    });
+    EXPECT_THROW(job.grid(), Cancelled);
+    canceller.join();
+}
