@@ -2,8 +2,10 @@
 /// @brief The one interface every field node implements.
 ///
 /// Sign convention everywhere: a value is negative inside the solid and positive outside
-/// (OpenVDB's level-set convention). Nodes are immutable once built and safe to evaluate from
-/// many threads at once.
+/// (OpenVDB's level-set convention). Nodes are immutable once they can be evaluated and safe to
+/// evaluate from many threads at once. The one node made before all its numbers are known, a
+/// LevelSolid whose level a density solve finds, refuses to be evaluated until its level is given,
+/// and takes it once (LevelSolid::unsolved, solve): build, solve, then evaluate.
 #pragma once
 
 #include "fields/Interval.h"

@@ -3,19 +3,46 @@
 #include "fields/Unary.h"
 
 #include <cmath>
+#include <stdexcept>
 
 namespace voxlat {
 
 LevelSolid::LevelSolid(FieldPtr raw, SolidSide side, double level) : mRaw(std::move(raw)), mSide(side), mLevel(level) {}
+
+std::shared_ptr<LevelSolid> LevelSolid::unsolved(FieldPtr raw, SolidSide side)
+{
+    auto solid = std::make_shared<LevelSolid>(std::move(raw), side, 0.0);
+    solid->mSolved = false;
+    return solid;
+}
+
+void LevelSolid::solve(double level)
+{
+    if (mSolved) throw std::logic_error("LevelSolid::solve: the level is already set (a solid is solved once)");
+    mLevel = level;
+    mSolved = true;
+}
+
+void LevelSolid::throwUnsolved()
+{
+    throw std::logic_error(
+        "LevelSolid: the level is used before the density solve gave it (build, solve, then evaluate)");
+}
 
 namespace {
 /// Maps raw values in place to the solid's value and derivative factor.
 inline double applySide(SolidSide side, double raw, double level, double& slope)
 {
     switch (side) {
-    case SolidSide::Below: slope = 1.0; return raw - level;
-    case SolidSide::Band: slope = raw < 0 ? -1.0 : 1.0; return std::abs(raw) - level;
-    case SolidSide::Above: slope = -1.0; return level - raw;
+        case SolidSide::Below:
+            slope = 1.0;
+            return raw - level;
+        case SolidSide::Band:
+            slope = raw < 0 ? -1.0 : 1.0;
+            return std::abs(raw) - level;
+        case SolidSide::Above:
+            slope = -1.0;
+            return level - raw;
     }
     slope = 1.0;
     return raw;
@@ -25,27 +52,29 @@ inline double applySide(SolidSide side, double raw, double level, double& slope)
 void applySideInPlace(SolidSide side, std::span<double> out, double level)
 {
     switch (side) {
-    case SolidSide::Below:
-        for (double& v : out) v -= level;
-        return;
-    case SolidSide::Band:
-        for (double& v : out) v = std::abs(v) - level;
-        return;
-    case SolidSide::Above:
-        for (double& v : out) v = level - v;
-        return;
+        case SolidSide::Below:
+            for (double& v : out) v -= level;
+            return;
+        case SolidSide::Band:
+            for (double& v : out) v = std::abs(v) - level;
+            return;
+        case SolidSide::Above:
+            for (double& v : out) v = level - v;
+            return;
     }
 }
 }  // namespace
 
 void LevelSolid::values(std::span<const Vec3d> points, std::span<double> out) const
 {
+    requireSolved();
     mRaw->values(points, out);
     applySideInPlace(mSide, out, mLevel);
 }
 
 void LevelSolid::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
 {
+    requireSolved();
     mRaw->gradients(points, out, grad);
     for (std::size_t n = 0; n < out.size(); ++n) {
         double slope;
@@ -56,17 +85,22 @@ void LevelSolid::gradients(std::span<const Vec3d> points, std::span<double> out,
 
 void LevelSolid::gridValues(const GridBatch& batch, std::span<double> out) const
 {
+    requireSolved();
     mRaw->gridValues(batch, out);
     applySideInPlace(mSide, out, mLevel);
 }
 
 Interval LevelSolid::bound(const Box3& box) const
 {
+    requireSolved();
     const Interval r = mRaw->bound(box);
     switch (mSide) {
-    case SolidSide::Below: return r - mLevel;
-    case SolidSide::Band: return abs(r) - mLevel;
-    case SolidSide::Above: return mLevel - r;
+        case SolidSide::Below:
+            return r - mLevel;
+        case SolidSide::Band:
+            return abs(r) - mLevel;
+        case SolidSide::Above:
+            return mLevel - r;
     }
     return r;
 }
@@ -74,9 +108,12 @@ Interval LevelSolid::bound(const Box3& box) const
 FieldPtr LevelSolid::indicator() const
 {
     switch (mSide) {
-    case SolidSide::Below: return mRaw;
-    case SolidSide::Band: return std::make_shared<UnaryField>(mRaw, UnaryOp::Abs);
-    case SolidSide::Above: return std::make_shared<UnaryField>(mRaw, UnaryOp::Negate);
+        case SolidSide::Below:
+            return mRaw;
+        case SolidSide::Band:
+            return std::make_shared<UnaryField>(mRaw, UnaryOp::Abs);
+        case SolidSide::Above:
+            return std::make_shared<UnaryField>(mRaw, UnaryOp::Negate);
     }
     return mRaw;
 }

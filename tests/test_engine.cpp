@@ -174,9 +174,9 @@ TEST(Density, SolveHitsTargetMeasuredIndependently)
         double target;
     };
     for (const Case c : {Case{SolidSide::Below, 0.30}, Case{SolidSide::Band, 0.20}, Case{SolidSide::Below, 0.12}}) {
-        auto solid = std::make_shared<LevelSolid>(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(10)), c.side, 0.0);
+        auto solid = LevelSolid::unsolved(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(10)), c.side);
         const DensitySolution s = solveDensity(*solid->indicator(), d, c.target);
-        solid->setLevel(solid->levelFromIndicator(s.level));
+        solid->solve(solid->levelFromIndicator(s.level));
         EXPECT_NEAR(s.achieved, c.target, 0.005 * c.target);
         // Independent 1: Monte Carlo over the analytic field (3 sigma ~ 0.25 % relative).
         const double mc = monteCarloShare(*solid, d, 2'000'000, 7);
@@ -194,11 +194,11 @@ TEST(Density, ValueTiesFallBackToSubVoxelCoverage)
     // Whole cells on a coarse symmetric grid: gyroid symmetries repeat every value many times,
     // so counting voxel centres cannot land near 30 %; the coverage measure must.
     const Domain d = Domain::fromBox(Box3{Vec3d(0), Vec3d(12)}, 0.25);
-    auto solid = std::make_shared<LevelSolid>(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(6)), SolidSide::Below, 0.0);
+    auto solid = LevelSolid::unsolved(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(6)), SolidSide::Below);
     const DensitySolution s = solveDensity(*solid->indicator(), d, 0.30);
     EXPECT_TRUE(s.coverage);
     EXPECT_NEAR(s.achieved, 0.30, 0.0015);
-    solid->setLevel(s.level);
+    solid->solve(s.level);
     // Independent: the volume of the part that is actually meshed (at 24 voxels a cell the
     // voxelised part differs from the analytic one by ~2 %, so Monte Carlo is not the reference).
     const TriangleMesh mesh = marchingCubes(*evaluateSparse(*clipped(solid, d), d, SparseOptions{}), 0.0f);
@@ -241,4 +241,25 @@ TEST(Mesh, InvariantsOnSeveralFieldsAndDomains)
         const double gridVolume = double(countBelow(*grid, d.indexBox(), 0.0f)) * std::pow(d.voxel, 3);
         EXPECT_NEAR(mesh.volume(), gridVolume, 0.01 * gridVolume);
     }
+}
+
+TEST(Density, ASolidIsSolvedOnceAndNeverUsedBefore)
+{
+    // Build -> solve -> evaluate: the order is enforced, so a node is immutable once it can be read.
+    auto solid = LevelSolid::unsolved(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(6)), SolidSide::Below);
+    std::vector<Vec3d> p{Vec3d(1, 2, 3)};
+    std::vector<double> v(1);
+    EXPECT_FALSE(solid->isSolved());
+    EXPECT_THROW(solid->values(p, v), std::logic_error);
+    EXPECT_THROW(solid->bound(Box3{Vec3d(0), Vec3d(1)}), std::logic_error);
+    EXPECT_THROW((void)solid->level(), std::logic_error);
+    solid->solve(0.25);
+    solid->values(p, v);
+    const TpmsField raw(TpmsType::Gyroid, Vec3d(6));
+    EXPECT_DOUBLE_EQ(v[0], raw.value(p[0]) - 0.25);
+    EXPECT_THROW(solid->solve(0.3), std::logic_error);
+    EXPECT_DOUBLE_EQ(solid->level(), 0.25);
+    // A solid made at a level is immutable from the start.
+    LevelSolid fixed(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(6)), SolidSide::Below, 0.1);
+    EXPECT_THROW(fixed.solve(0.2), std::logic_error);
 }

@@ -168,7 +168,7 @@ void Job::solveLevels()
                                     *node.density, node.densityMask.get(), node.subVoxelDensity, mContext);
             });
             if (node.densityMask) entry["density_of"] = node.densityOf;
-            node.solid->setLevel(node.solid->levelFromIndicator(s.level));
+            node.solid->solve(node.solid->levelFromIndicator(s.level));
             if (node.onSolved) node.onSolved(node.solid->level());
             entry["target_density"] = *node.density;
             entry["achieved_density"] = s.achieved;

@@ -70,9 +70,8 @@ FieldPtr buildExpr(FieldBuilder& builder, const RecipeNode& spec, const std::str
     FieldPtr raw = equationField(builder, spec["expr"]);
     if (!spec.has("solid") && !spec.has("level") && !spec.has("density")) return raw;
     const SolidSide side = readSolidSide(spec);
-    LevelNode node{name, side == SolidSide::Band ? "expr sheet" : "expr network",
-                   std::make_shared<LevelSolid>(raw, side, 0.0)};
-    readLevelKeys(spec, node, 0.0, side == SolidSide::Band);
+    LevelNode node{name, side == SolidSide::Band ? "expr sheet" : "expr network", nullptr};
+    readLevelKeys(spec, node, raw, side, 0.0, side == SolidSide::Band ? LevelRule::Required : LevelRule::Optional);
     FieldPtr result = node.solid;
     builder.addLevelNode(std::move(node));
     return result;

@@ -79,7 +79,8 @@ SolidSide readSolidSide(const RecipeNode& spec)
     spec["solid"].fail("solid is `network` (f <= level) or `sheet` (|f| <= level), got `" + solid + "`");
 }
 
-void readLevelKeys(const RecipeNode& spec, LevelNode& node, double defaultLevel, bool levelRequired)
+std::shared_ptr<LevelSolid> readLevelKeys(const RecipeNode& spec, LevelNode& node, FieldPtr raw, SolidSide side,
+                                          double defaultLevel, LevelRule rule)
 {
     if (spec.has("level") && spec.has("density"))
         spec.fail("give either `level:` or `density:`, not both (density solves the level)");
@@ -90,15 +91,20 @@ void readLevelKeys(const RecipeNode& spec, LevelNode& node, double defaultLevel,
             d.fail("density is a relative density between 0 and 1 (exclusive), got " + d.yaml().Scalar() +
                    "; for 30 % write 0.30");
         node.density = rho;
+        node.solid = LevelSolid::unsolved(std::move(raw), side);
+    } else if (rule == LevelRule::SolvedElsewhere) {
+        node.solid = LevelSolid::unsolved(std::move(raw), side);
     } else if (spec.has("level")) {
-        node.solid->setLevel(spec["level"].number());
-        if (node.solid->side() == SolidSide::Band && !(node.solid->level() > 0.0))
+        const double level = spec["level"].number();
+        if (side == SolidSide::Band && !(level > 0.0))
             spec["level"].fail("a sheet's level is its half-thickness t in |f| <= t and must be greater than zero");
-    } else if (levelRequired) {
+        node.solid = std::make_shared<LevelSolid>(std::move(raw), side, level);
+    } else if (rule == LevelRule::Required) {
         spec.fail("give `level:` (for a sheet, the half-thickness t in |f| <= t) or `density:`");
     } else {
-        node.solid->setLevel(defaultLevel);
+        node.solid = std::make_shared<LevelSolid>(std::move(raw), side, defaultLevel);
     }
+    return node.solid;
 }
 
 }  // namespace voxlat

@@ -136,9 +136,17 @@ private:
 
 /// Reads `solid:` of a lattice node: `network` (f <= level, the default) or `sheet` (|f| <= level).
 SolidSide readSolidSide(const RecipeNode& spec);
-/// Reads `level:` / `density:` of a lattice node into @a node (a density in (0, 1)); without
-/// either, the level is @a defaultLevel unless @a levelRequired. A sheet's level must be > 0.
-void readLevelKeys(const RecipeNode& spec, LevelNode& node, double defaultLevel, bool levelRequired);
+/// Whether a lattice node must state its level.
+enum class LevelRule {
+    Optional,         ///< `level:` or `density:` or else the default level
+    Required,         ///< `level:` or `density:` (a sheet has no natural level)
+    SolvedElsewhere,  ///< another node's density solves it (an infill's lattice)
+};
+/// Reads `level:` / `density:` of a lattice node and makes its solid from @a raw: at the stated
+/// level, unsolved for a density (node.density is set; the Job solves it), or at @a defaultLevel.
+/// A sheet's level must be > 0. Sets node.solid and returns it.
+std::shared_ptr<LevelSolid> readLevelKeys(const RecipeNode& spec, LevelNode& node, FieldPtr raw, SolidSide side,
+                                          double defaultLevel, LevelRule rule);
 
 /// Node types by family; each family lives in its own file.
 void addShapeNodeTypes(std::vector<NodeType>& types);    // ShapeNodes.cpp: primitives, booleans, transforms

@@ -194,16 +194,19 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
     if (spec.has("density") && !spec["density"].isNumber())
         return buildGraded(builder, spec, name, raw, side, cell, std::string(tpmsName(type)) + " " + solidName,
                            spec.has("axes") && !spec.has("frame") ? plain : nullptr);
-    LevelNode node{name, std::string(tpmsName(type)) + " " + solidName, std::make_shared<LevelSolid>(raw, side, 0.0), {}};
+    LevelNode node{name, std::string(tpmsName(type)) + " " + solidName, nullptr, {}};
     if (region) {
         node.region = node.densityMask = region;
         node.densityOf = "the cells of the skin frame";
     }
     // An infill's `density:` solves this lattice's level: then it needs none of its own.
     const bool solvedByInfill = levelSolvedByInfill(builder.recipe(), name);
-    readLevelKeys(spec, node, 0.0, side == SolidSide::Band && !solvedByInfill);
+    readLevelKeys(spec, node, raw, side, 0.0,
+                  solvedByInfill           ? LevelRule::SolvedElsewhere
+                  : side == SolidSide::Band ? LevelRule::Required
+                                            : LevelRule::Optional);
     const Interval range = tpmsLevelRange(type);
-    if (!node.density && side == SolidSide::Below && !range.contains(node.solid->level())) {
+    if (node.solid->isSolved() && side == SolidSide::Below && !range.contains(node.solid->level())) {
         std::ostringstream msg;
         msg << "level " << node.solid->level() << " is outside the range where " << tpmsName(type)
             << " has a surface [" << range.lo << ", " << range.hi << "]: the part would be empty or solid";

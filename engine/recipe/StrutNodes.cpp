@@ -408,8 +408,9 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
             const StrutCapsules cellField(capsuleStruts(cells, cellRadii), blend, cap);
             return buildGradedStruts(builder, spec, name, raw, cellField, cellBox, node.description);
         }
-        node.solid =
-            std::make_shared<LevelSolid>(raw, SolidSide::Below, spec.has("level") ? spec["level"].number() : 0.0);
+        node.solid = node.density ? LevelSolid::unsolved(raw, SolidSide::Below)
+                                  : std::make_shared<LevelSolid>(raw, SolidSide::Below,
+                                                                 spec.has("level") ? spec["level"].number() : 0.0);
         FieldPtr result = node.solid;
         builder.addLevelNode(std::move(node));
         return result;
@@ -512,7 +513,8 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
                          {{"field", name}, {"broken", broken}, {"struts", v.size()}});
         return result;
     }
-    node.solid = std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
+    node.solid = node.density ? LevelSolid::unsolved(evaluated, SolidSide::Below)
+                              : std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
     if (periodic && node.density) {
         node.densityPeriod = uniform->size;
         node.densityReach = rcMax;
