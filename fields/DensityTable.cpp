@@ -1,6 +1,6 @@
 #include "fields/DensityTable.h"
 
-#include <tbb/parallel_for.h>
+#include "fields/BlockLattice.h"
 
 #include <algorithm>
 #include <cmath>
@@ -12,20 +12,16 @@ DensityTable::DensityTable(const FieldNode& indicator, const Box3& cell, int sam
 {
     if (samplesPerAxis < 8 || entries < 2) throw std::invalid_argument("density table: too few samples or entries");
     const int n = (samplesPerAxis + 7) / 8 * 8;  // whole 8^3 blocks
-    const int blocks = n / 8;
-    const Vec3d step = cell.extent() / double(n);
+    BlockLattice lattice;                        // the cell's sample centres
+    lattice.base = cell.min;
+    lattice.step = cell.extent() / double(n);
+    lattice.offset = Vec3d(0.5);
+    lattice.count = {n, n, n};
     std::vector<double> samples(std::size_t(n) * n * n);
     // Each block writes its own slice, so the sample set (and after sorting the table) is the
     // same for any number of threads.
-    tbb::parallel_for(tbb::blocked_range<int>(0, blocks * blocks * blocks), [&](const auto& range) {
-        for (int b = range.begin(); b != range.end(); ++b) {
-            const int bx = b / (blocks * blocks), by = (b / blocks) % blocks, bz = b % blocks;
-            GridBatch batch;
-            batch.spacing = step;
-            batch.origin =
-                cell.min + Vec3d((8 * bx + 0.5) * step.x(), (8 * by + 0.5) * step.y(), (8 * bz + 0.5) * step.z());
-            indicator.gridValues(batch, std::span<double>(samples.data() + std::size_t(b) * 512, 512));
-        }
+    sampleBlocks(indicator, lattice, [&](std::size_t b, const GridBatch&, auto, std::span<const double> values) {
+        std::copy(values.begin(), values.end(), samples.begin() + std::ptrdiff_t(b * 512));
     });
     std::sort(samples.begin(), samples.end());
     mSamples = samples.size();

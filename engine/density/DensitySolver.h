@@ -14,12 +14,12 @@
 namespace voxlat {
 
 struct DensitySolution {
-    double level = 0.0;             ///< level of the indicator field: solid = {g < level}
-    double achieved = 0.0;          ///< share of domain voxel centres inside, measured on the grid
+    double level = 0.0;     ///< level of the indicator field: solid = {g < level}
+    double achieved = 0.0;  ///< share of domain voxel centres inside, measured on the grid
     std::uint64_t insideVoxels = 0;
     std::uint64_t domainVoxels = 0;  ///< the denominator: domain voxels (inside the mask, if any)
-    bool coverage = false;          ///< measured with sub-voxel coverage (value ties), not a count
-    int rounds = 0;                 ///< fine passes needed (1 unless the coarse bracket missed)
+    bool coverage = false;           ///< measured with sub-voxel coverage (value ties), not a count
+    int rounds = 0;                  ///< fine passes needed (1 unless the coarse bracket missed)
     std::uint64_t evaluatedLeaves = 0;
 };
 

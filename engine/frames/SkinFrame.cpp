@@ -1,5 +1,7 @@
 #include "engine/frames/SkinFrame.h"
 
+#include "fields/BlockLattice.h"
+
 #include "engine/core/Errors.h"
 
 #include <openvdb/tools/VolumeToMesh.h>
@@ -263,22 +265,17 @@ std::shared_ptr<const SkinCells> buildSkinCells(const FieldPtr& distance, const 
                          mm(region.extent()[2]) + " mm: cells of " + mm(h) +
                          " mm need too many samples; give a larger cell size");
     std::vector<float> values(static_cast<std::size_t>(samples));
-    const int blocks[3] = {(dims[0] + 7) / 8, (dims[1] + 7) / 8, (dims[2] + 7) / 8};
-    tbb::parallel_for(0, blocks[0] * blocks[1] * blocks[2], [&](int block) {
-        const int bi = block / (blocks[1] * blocks[2]), bj = (block / blocks[2]) % blocks[1], bk = block % blocks[2];
-        GridBatch batch;
-        batch.origin = Vec3d(lo[0] + 8 * bi, lo[1] + 8 * bj, lo[2] + 8 * bk) * h;
-        batch.spacing = Vec3d(h);
-        batch.nx = std::min(8, dims[0] - 8 * bi);
-        batch.ny = std::min(8, dims[1] - 8 * bj);
-        batch.nz = std::min(8, dims[2] - 8 * bk);
-        std::vector<double> v(batch.size());
-        distance->gridValues(batch, v);
+    BlockLattice lattice;  // the points (lo + ijk) h
+    lattice.step = Vec3d(h);
+    lattice.offset = Vec3d(lo[0], lo[1], lo[2]);
+    lattice.count = {dims[0], dims[1], dims[2]};
+    sampleBlocks(*distance, lattice, [&](std::size_t, const GridBatch& batch, auto first, std::span<const double> v) {
+        std::size_t n = 0;
         for (int i = 0; i < batch.nx; ++i)
             for (int j = 0; j < batch.ny; ++j)
                 for (int k = 0; k < batch.nz; ++k)
-                    values[(std::size_t(8 * bi + i) * dims[1] + 8 * bj + j) * dims[2] + 8 * bk + k] =
-                        float(v[(std::size_t(i) * batch.ny + j) * batch.nz + k] + a);
+                    values[(std::size_t(first[0] + i) * dims[1] + first[1] + j) * dims[2] + first[2] + k] =
+                        float(v[n++] + a);
     });
     float deepest = 0.0f;
     for (float v : values) deepest = std::min(deepest, v);

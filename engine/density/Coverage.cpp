@@ -1,0 +1,266 @@
+#include "engine/density/Coverage.h"
+
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <functional>
+
+namespace voxlat::coverage {
+
+/// Offset strides and shifts of the x, y, z coordinates in an 8^3 leaf's buffer.
+constexpr int kLeafStride[3] = {64, 8, 1};
+constexpr int kLeafShift[3] = {6, 3, 0};
+
+/// A sample's change along one axis: the central difference, one-sided where a neighbour is
+/// absent (not evaluated, or outside a density mask), 0 with neither.
+double axisChange(float value, float up, bool hasUp, float down, bool hasDown)
+{
+    if (hasUp && hasDown) return 0.5 * (up - down);
+    if (hasUp) return up - value;
+    if (hasDown) return value - down;
+    return 0.0;
+}
+
+/// Band voxels with their per-voxel change along each axis (make(value, d) builds a sample), for
+/// the sub-voxel coverage estimates. Neighbours that were not evaluated (tiles, background,
+/// outside @a around) fall back to one-sided differences.
+template <class Make>
+auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
+                 const openvdb::CoordBBox& around, Make make)
+{
+    using Sample = decltype(make(0.0f, std::array<double, 3>{}));
+    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    grid.tree().getNodes(leaves);
+    std::vector<std::vector<Sample>> perLeaf(leaves.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+        auto acc = grid.getConstAccessor();
+        for (std::size_t n = range.begin(); n != range.end(); ++n) {
+            const float* data = leaves[n]->buffer().data();
+            for (int i = 0; i < 512; ++i) {
+                const openvdb::Coord c = leaves[n]->offsetToGlobalCoord(i);
+                if (data[i] < lo || data[i] > hi || !region.isInside(c)) continue;
+                std::array<double, 3> change{};
+                for (int a = 0; a < 3; ++a) {
+                    openvdb::Coord up = c, down = c;
+                    up[a] += 1;
+                    down[a] -= 1;
+                    // Neighbours inside the leaf are read from its buffer; others through the
+                    // accessor. Neighbours outside a density mask hold kOutsideMask: not a neighbour.
+                    const int local = (i >> kLeafShift[a]) & 7;
+                    float upValue = 0.0f, downValue = 0.0f;
+                    bool hasUp = around.isInside(up), hasDown = around.isInside(down);
+                    if (hasUp) {
+                        if (local < 7)
+                            upValue = data[i + kLeafStride[a]];
+                        else if (acc.probeConstLeaf(up))
+                            upValue = acc.getValue(up);
+                        else
+                            hasUp = false;
+                        hasUp = hasUp && upValue < 1e30f;
+                    }
+                    if (hasDown) {
+                        if (local > 0)
+                            downValue = data[i - kLeafStride[a]];
+                        else if (acc.probeConstLeaf(down))
+                            downValue = acc.getValue(down);
+                        else
+                            hasDown = false;
+                        hasDown = hasDown && downValue < 1e30f;
+                    }
+                    change[a] = axisChange(data[i], upValue, hasUp, downValue, hasDown);
+                }
+                perLeaf[n].push_back(make(data[i], change));
+            }
+        }
+    });
+    std::vector<Sample> all;
+    for (const auto& v : perLeaf) all.insert(all.end(), v.begin(), v.end());
+    return all;
+}
+
+/// Band voxels with the length of their per-voxel change, for the linear coverage estimate.
+std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo,
+                                            float hi)
+{
+    return bandSamples(grid, region, lo, hi, region, [](float v, const std::array<double, 3>& d) {
+        return CoverageSample{v, float(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))};
+    });
+}
+
+/// Share of the unit cube with m . u < alpha (m >= 0 sorted ascending, m0 + m1 + m2 = 1,
+/// 0 <= alpha <= 1/2), the analytic relation of Scardovelli & Zaleski (2000), written so that
+/// no case divides by a component that may vanish without a bounded numerator.
+double cubeShareBelowPlane(const double m[3], double alpha)
+{
+    const double m0 = m[0], m1 = m[1], m2 = m[2], m01 = m0 + m1;
+    if (alpha < m0) return alpha * alpha * alpha / (6.0 * m0 * m1 * m2);
+    const double corner = (3.0 * alpha * alpha - 3.0 * alpha * m0 + m0 * m0) / (6.0 * m1 * m2);
+    if (alpha < m1) return corner;
+    if (alpha < m01 && alpha < m2) return corner - std::pow(alpha - m1, 3) / (6.0 * m0 * m1 * m2);
+    if (alpha < m01)  // m2 <= alpha: the plane has passed three corners
+        return corner - (std::pow(alpha - m1, 3) + std::pow(alpha - m2, 3)) / (6.0 * m0 * m1 * m2);
+    return (2.0 * alpha - m01) / (2.0 * m2);  // m01 <= alpha (and m01 <= m2 since alpha <= 1/2)
+}
+
+/// The share of a voxel below @a level, the voxel's field taken as the plane through its value
+/// with its per-axis changes (exact for planes at any orientation).
+double planeCoverage(const PlaneSample& s, double level)
+{
+    double m[3] = {s.change[0], s.change[1], s.change[2]};
+    const double sum = m[0] + m[1] + m[2];
+    if (!(sum > 0.0)) return s.value < level ? 1.0 : 0.0;
+    const double alpha = (level - double(s.value)) / sum + 0.5;
+    if (alpha <= 0.0) return 0.0;
+    if (alpha >= 1.0) return 1.0;
+    for (double& v : m) v /= sum;
+    std::sort(m, m + 3);
+    return alpha <= 0.5 ? cubeShareBelowPlane(m, alpha) : 1.0 - cubeShareBelowPlane(m, 1.0 - alpha);
+}
+
+/// Weighted voxels below @a level by planeCoverage().
+double planeCovered(const std::vector<PlaneSample>& samples, double level)
+{
+    double covered = 0.0;
+    for (const PlaneSample& s : samples) covered += s.weight * planeCoverage(s, level);
+    return covered;
+}
+
+/// Weighted coverage of @a samples at @a level (planeCovered()), summed in parallel over fixed
+/// blocks combined in a fixed tree, so the sum is the same for any thread count.
+double planeCoveredParallel(const std::vector<PlaneSample>& samples, double level)
+{
+    return tbb::parallel_deterministic_reduce(
+        tbb::blocked_range<std::size_t>(0, samples.size(), 1 << 13), 0.0,
+        [&](const tbb::blocked_range<std::size_t>& r, double sum) {
+            for (std::size_t i = r.begin(); i != r.end(); ++i)
+                sum += samples[i].weight * planeCoverage(samples[i], level);
+            return sum;
+        },
+        std::plus<>());
+}
+
+/// The level in [a, b] at which @a settled + planeCovered() reaches @a wanted, given that it is
+/// at most @a wanted at a and at least at b. The covered volume is continuous and increasing
+/// in the level (piecewise smooth), so regula falsi with the Illinois modification converges
+/// superlinearly: about ten passes instead of sixty halvings. Samples whose coverage no longer
+/// changes over what is left of the bracket are set aside as it narrows. @a covered, when
+/// given, receives the covered weight at the level returned.
+double solvePlaneCoverage(std::vector<PlaneSample> active, double settled, double wanted, double a, double b,
+                          double* covered)
+{
+    auto half = [](const PlaneSample& s) { return 0.5 * (double(s.change[0]) + s.change[1] + s.change[2]); };
+    auto excess = [&](double level) { return settled + planeCoveredParallel(active, level) - wanted; };
+    double fa = std::min(0.0, excess(a)), fb = std::max(0.0, excess(b));
+    double level = 0.5 * (a + b);
+    int lastSide = 0;
+    for (int iteration = 0; iteration < 200; ++iteration) {
+        // The secant through the bracket's ends; the midpoint where that makes no progress.
+        level = fb - fa > 0.0 ? a + (b - a) * (-fa / (fb - fa)) : 0.5 * (a + b);
+        if (!(level > a && level < b)) level = 0.5 * (a + b);
+        if (!(level > a && level < b)) break;  // a and b are neighbouring doubles
+        const double f = excess(level);
+        if (f == 0.0) break;
+        if (f < 0.0) {
+            a = level;
+            fa = f;
+            if (lastSide == -1) fb *= 0.5;  // Illinois: the end that stays has its value halved
+            lastSide = -1;
+        } else {
+            b = level;
+            fb = f;
+            if (lastSide == 1) fa *= 0.5;
+            lastSide = 1;
+        }
+        // The covered volume to 1e-13 of the target or the level to 1e-13 of its size: far
+        // below what the sampling resolves.
+        if (b - a <= 1e-13 * std::max(1.0, std::abs(a) + std::abs(b)) || std::abs(f) <= 1e-13 * wanted) break;
+        std::size_t kept = 0;
+        for (const PlaneSample& s : active) {
+            const double h = half(s);
+            if (a >= s.value + h)
+                settled += s.weight;
+            else if (b > s.value - h)
+                active[kept++] = s;
+        }
+        active.resize(kept);
+    }
+    if (covered) *covered = settled + planeCoveredParallel(active, level);
+    return level;
+}
+
+/// Voxels below @a level counted with sub-voxel coverage: a voxel whose value is within half a
+/// step of the level is partly inside, linearly in the distance (a plane cutting the voxel).
+double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
+{
+    double covered = 0.0;
+    for (const CoverageSample& s : samples) {
+        if (s.step > 0.0f)
+            covered += std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0);
+        else
+            covered += s.value < level;
+    }
+    return covered;
+}
+
+/// The level in [a, b] at which fullyBelow + coveredVoxels(samples, level) reaches @a wanted, by
+/// 60 bisection steps. Samples whose coverage is constant (0 or 1) over what is left of the
+/// bracket are set aside as it narrows, so later steps visit only the voxels the level still
+/// cuts; each kept sample contributes exactly what coveredVoxels() would give it.
+double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b)
+{
+    auto coverage = [](const CoverageSample& s, double level) {
+        return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
+    };
+    // Each sample's coverage at both ends of the bracket, carried along: the end that moves takes
+    // the coverage at the midpoint just summed, so each step computes one coverage per sample.
+    struct Active {
+        CoverageSample s;
+        double atA, atB;
+    };
+    std::vector<Active> active;
+    active.reserve(samples.size());
+    for (const CoverageSample& s : samples) active.push_back({s, coverage(s, a), coverage(s, b)});
+    std::vector<double> atMid(active.size());
+    double settled = fullyBelow;  // whole voxels below every level left in the bracket
+    // Once every sample left is partly covered across the whole bracket, the coverage is linear
+    // there: settled + constant + level * slope, and the remaining steps cost nothing.
+    bool linear = false;
+    double constant = 0.0, slope = 0.0;
+    for (int iteration = 0; iteration < 60; ++iteration) {
+        const double mid = 0.5 * (a + b);
+        double covered = settled;
+        if (linear)
+            covered += constant + mid * slope;
+        else
+            for (std::size_t i = 0; i < active.size(); ++i) covered += atMid[i] = coverage(active[i].s, mid);
+        const bool raiseA = covered < wanted;
+        (raiseA ? a : b) = mid;
+        if (linear) continue;
+        // Coverage is monotone in the level: full at a means full on [a, b], empty at b empty.
+        std::size_t kept = 0;
+        bool ramps = true;
+        for (std::size_t i = 0; i < active.size(); ++i) {
+            Active t = active[i];
+            (raiseA ? t.atA : t.atB) = atMid[i];
+            if (t.atA >= 1.0)
+                settled += 1.0;
+            else if (t.atB > 0.0) {
+                active[kept++] = t;
+                ramps = ramps && t.s.step > 0.0f && t.atA > 0.0 && t.atB < 1.0;
+            }
+        }
+        active.resize(kept);
+        if (ramps) {
+            linear = true;
+            for (const Active& t : active) {
+                constant += 0.5 - double(t.s.value) / t.s.step;
+                slope += 1.0 / t.s.step;
+            }
+        }
+    }
+    return 0.5 * (a + b);
+}
+
+}  // namespace voxlat::coverage

@@ -1,0 +1,62 @@
+/// @file Coverage.h
+/// @brief Sub-voxel coverage, the density measure shared by the quantile solve (when value ties
+/// defeat a count) and the periodic pieces: a voxel is covered in proportion to the share of it
+/// below the level, the field taken as linear across the voxel.
+#pragma once
+
+#include "engine/core/Domain.h"
+
+#include <openvdb/openvdb.h>
+
+#include <vector>
+
+namespace voxlat::coverage {
+
+/// The indicator's value outside the mask: above every level the solve can choose.
+constexpr double kOutsideMask = 1e36;
+
+/// A bracketed voxel value and its change across one voxel (central differences of the grid).
+struct CoverageSample {
+    float value;
+    float step;
+};
+
+/// A voxel cut by the plane of its value and per-axis changes, counted `weight` times.
+struct PlaneSample {
+    float value;
+    float change[3];  ///< |per-voxel change| along x, y, z
+    float weight;
+};
+
+/// A sample's change along one axis: the central difference, one-sided where a neighbour is
+/// absent (not evaluated, or outside a density mask), 0 with neither.
+double axisChange(float value, float up, bool hasUp, float down, bool hasDown);
+
+/// Band voxels (values in [@a lo, @a hi] inside @a region) with the length of their per-voxel
+/// change, for the linear coverage estimate.
+std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo,
+                                            float hi);
+
+/// Voxels below @a level counted with sub-voxel coverage: a voxel whose value is within half a
+/// step of the level is partly inside, linearly in the distance (a plane cutting the voxel).
+double coveredVoxels(const std::vector<CoverageSample>& samples, double level);
+
+/// The level in [a, b] at which fullyBelow + coveredVoxels(samples, level) reaches @a wanted
+/// (bisection; samples settled over what is left of the bracket are set aside).
+double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b);
+
+/// The share of a voxel below @a level, the voxel's field taken as the plane through its value
+/// with its per-axis changes (exact for planes at any orientation).
+double planeCoverage(const PlaneSample& s, double level);
+
+/// Weighted voxels below @a level by planeCoverage().
+double planeCovered(const std::vector<PlaneSample>& samples, double level);
+
+/// The level in [a, b] at which @a settled + planeCovered() reaches @a wanted, given that it is
+/// at most @a wanted at a and at least at b (regula falsi, Illinois). @a covered, when given,
+/// receives the covered weight at the level returned. Sums run over fixed blocks in a fixed
+/// order: the same level for any thread count.
+double solvePlaneCoverage(std::vector<PlaneSample> active, double settled, double wanted, double a, double b,
+                          double* covered = nullptr);
+
+}  // namespace voxlat::coverage

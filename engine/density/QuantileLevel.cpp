@@ -1,0 +1,294 @@
+#include "engine/density/DensitySolver.h"
+
+#include "engine/core/Errors.h"
+#include "engine/core/GridMeasure.h"
+#include "engine/core/SparseEvaluator.h"
+#include "engine/density/Coverage.h"
+#include "fields/BlockLattice.h"
+
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <vector>
+
+// The quantile solve over a domain: a count of voxel centres, with sub-voxel coverage when value
+// ties defeat the count (engine/density/Coverage.h).
+
+namespace voxlat {
+
+using namespace coverage;
+
+namespace {
+
+/// g where mask < 0, kOutsideMask elsewhere: a level below kOutsideMask then selects only voxels
+/// inside the mask, so the unmasked quantile machinery measures density relative to the mask.
+class MaskedIndicator final : public FieldNode {
+public:
+    MaskedIndicator(const FieldNode& g, const FieldNode& mask) : mG(g), mMask(mask) {}
+
+    void values(std::span<const Vec3d> points, std::span<double> out) const override
+    {
+        mG.values(points, out);
+        std::array<double, kBatchSize> m;
+        forEachChunk(points.size(), [&](std::size_t b, std::size_t n) {
+            mMask.values(points.subspan(b, n), std::span<double>(m.data(), n));
+            for (std::size_t i = 0; i < n; ++i) out[b + i] = apply(out[b + i], m[i]);
+        });
+    }
+    void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override
+    {
+        mG.gradients(points, out, grad);
+        std::array<double, kBatchSize> m;
+        forEachChunk(points.size(), [&](std::size_t b, std::size_t n) {
+            mMask.values(points.subspan(b, n), std::span<double>(m.data(), n));
+            for (std::size_t i = 0; i < n; ++i) out[b + i] = apply(out[b + i], m[i]);
+        });
+    }
+    void gridValues(const GridBatch& batch, std::span<double> out) const override
+    {
+        if (batch.size() > kBatchSize) {
+            FieldNode::gridValues(batch, out);
+            return;
+        }
+        // The mask first: a batch wholly outside it needs no g.
+        std::array<double, kBatchSize> m;
+        mMask.gridValues(batch, std::span<double>(m.data(), batch.size()));
+        if (std::none_of(m.begin(), m.begin() + batch.size(), [](double v) { return float(v) < 0.0f; })) {
+            std::fill(out.begin(), out.begin() + batch.size(), kOutsideMask);
+            return;
+        }
+        mG.gridValues(batch, out);
+        for (std::size_t i = 0; i < batch.size(); ++i) out[i] = apply(out[i], m[i]);
+    }
+    Interval bound(const Box3& box) const override
+    {
+        const Interval m = mMask.bound(box);
+        if (!(float(m.lo) < 0.0f)) return Interval(kOutsideMask);
+        const Interval g = mG.bound(box);
+        return float(m.hi) < 0.0f ? g : hull(g, Interval(kOutsideMask));
+    }
+
+private:
+    // The test is made in float, as the grid that counts the mask's voxels stores it.
+    static double apply(double g, double mask) { return float(mask) < 0.0f ? g : kOutsideMask; }
+
+    const FieldNode& mG;
+    const FieldNode& mMask;
+};
+
+/// Samples g at every stride-th voxel centre of the domain, in parallel and in a fixed order.
+/// @a maxStep, when given, receives the largest change of g per voxel seen between neighbouring
+/// samples that are both below 1e30 (inside a mask): an estimate of the widest voxel step.
+std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int stride, double* maxStep = nullptr)
+{
+    // Every stride-th voxel centre, from the middle of the first stride: min + (i stride + half + 1/2) voxel.
+    BlockLattice lattice;
+    lattice.base = domain.box.min;
+    lattice.step = Vec3d(domain.voxel);
+    lattice.offset = Vec3d(stride / 2 + 0.5);
+    lattice.stride = {stride, stride, stride};
+    for (int a = 0; a < 3; ++a) lattice.count[a] = (domain.dims[a] + stride - 1) / stride;
+    std::vector<std::vector<float>> perBlock(lattice.blockCount());
+    std::vector<double> blockStep(perBlock.size(), 0.0);
+    sampleBlocks(g, lattice, [&](std::size_t b, const GridBatch& batch, auto index, std::span<const double> values) {
+        const openvdb::Coord first(index[0] * stride + stride / 2, index[1] * stride + stride / 2,
+                                   index[2] * stride + stride / 2);
+        if (maxStep) {
+            // Forward differences within the block (x-major, z fastest, as gridValues fills).
+            const int sx = batch.ny * batch.nz, sy = batch.nz;
+            double step = 0.0;
+            for (int i = 0; i + 1 < batch.nx; ++i)
+                for (int j = 0; j + 1 < batch.ny; ++j)
+                    for (int k = 0; k + 1 < batch.nz; ++k) {
+                        const int v = i * sx + j * sy + k;
+                        const double c = values[v], dx = values[v + sx], dy = values[v + sy], dz = values[v + 1];
+                        if (c > 1e30 || dx > 1e30 || dy > 1e30 || dz > 1e30) continue;
+                        step = std::max(step, (dx - c) * (dx - c) + (dy - c) * (dy - c) + (dz - c) * (dz - c));
+                    }
+            blockStep[b] = std::sqrt(step) / stride;
+        }
+        // Drop samples past the domain (the last stride may overhang).
+        auto& out = perBlock[b];
+        std::size_t v = 0;
+        for (int i = 0; i < batch.nx; ++i)
+            for (int j = 0; j < batch.ny; ++j)
+                for (int k = 0; k < batch.nz; ++k, ++v) {
+                    const openvdb::Coord c = first + openvdb::Coord(i * stride, j * stride, k * stride);
+                    if (c.x() < domain.dims.x() && c.y() < domain.dims.y() && c.z() < domain.dims.z())
+                        out.push_back(float(values[v]));
+                }
+    });
+    std::vector<float> all;
+    for (const auto& block : perBlock) all.insert(all.end(), block.begin(), block.end());
+    if (maxStep) *maxStep = blockStep.empty() ? 0.0 : *std::max_element(blockStep.begin(), blockStep.end());
+    return all;
+}
+
+/// How far beyond the bracket a masked solve evaluates, in coarse estimates of the voxel step:
+/// the coverage pass needs the widest step either side of the level.
+constexpr double kStepReserve = 1.25;
+
+/// The sample quantile at share q (a selection, no full sort); -inf / +inf outside (0, 1).
+double quantile(std::vector<float>& samples, double q)
+{
+    if (q <= 0.0) return -std::numeric_limits<double>::infinity();
+    if (q >= 1.0) return std::numeric_limits<double>::infinity();
+    const std::size_t i = std::min(samples.size() - 1, std::size_t(q * double(samples.size())));
+    std::nth_element(samples.begin(), samples.begin() + i, samples.end());
+    return samples[i];
+}
+
+}  // namespace
+
+DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain, double target, const FieldNode* mask,
+                             bool subVoxel, const JobContext* context)
+{
+    DensitySolution sol;
+    sol.domainVoxels = domain.voxelCount();
+    std::unique_ptr<MaskedIndicator> masked;
+    if (mask) {
+        masked = std::make_unique<MaskedIndicator>(rawIndicator, *mask);
+        SparseOptions options;
+        options.context = context;
+        options.margin = 0;
+        options.stage = "measuring the density's space";
+        sol.domainVoxels = countBelow(*evaluateSparse(*mask, domain, options), domain.indexBox(), 0.0f);
+        if (sol.domainVoxels == 0)
+            throw JobError(
+                "the space the density is measured in has no voxel inside the domain: check the "
+                "part, the skin thickness and the domain");
+    }
+    const FieldNode& indicator = masked ? *masked : rawIndicator;
+    const auto wanted = std::uint64_t(std::llround(target * double(sol.domainVoxels)));
+
+    const int stride = std::max(1, int(std::ceil(std::cbrt(double(domain.voxelCount()) / 2.0e6))));
+    double coarseStep = 0.0;
+    std::vector<float> samples = coarseSamples(indicator, domain, stride, masked ? &coarseStep : nullptr);
+    // Share of the samples inside the mask: the quantiles of the target sit within that share.
+    const double share =
+        masked ? double(std::count_if(samples.begin(), samples.end(), [](float v) { return v < 1e30f; })) /
+                     double(std::max<std::size_t>(1, samples.size()))
+               : 1.0;
+
+    // Widen the bracket until the exact quantile falls inside it (usually the first round; the
+    // last round brackets every value).
+    for (const double margin : {0.01, 0.05, 1.0}) {
+        ++sol.rounds;
+        const double inf = std::numeric_limits<double>::infinity();
+        const double lo = margin >= 1.0 ? -inf : quantile(samples, (target - margin) * share);
+        const double hi = margin >= 1.0 ? inf : quantile(samples, (target + margin) * share);
+        SparseOptions options;
+        options.context = context;
+        options.band = Interval(std::max(lo, -1e30), std::min(hi, 1e30));
+        options.margin = 0;
+        options.insideValue = -std::numeric_limits<float>::max();
+        options.outsideValue = std::numeric_limits<float>::max();
+        options.stage = "solving density";
+        // A masked solve measures coverage in a band of the widest voxel step about the level
+        // (below). Evaluating the bracket grown by an estimate of that step up front lets the
+        // same grid serve both passes; splitting by the bracket ignores the extra values.
+        SparseOptions evaluated = options;
+        if (masked && margin < 1.0)
+            evaluated.band =
+                Interval(options.band.lo - kStepReserve * coarseStep, options.band.hi + kStepReserve * coarseStep);
+        const auto grid = evaluateSparse(indicator, domain, evaluated);
+        sol.evaluatedLeaves = grid->tree().leafCount();
+
+        BandSplit split = splitByBand(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi));
+        const std::uint64_t below = split.below;
+        std::vector<float>& band = split.band;
+        if (wanted < below || wanted > below + band.size()) continue;
+
+        // A level with exactly `wanted` values below it: between the m-th and (m+1)-th smallest
+        // bracketed values (all values below the bracket are below it, all above are above).
+        const std::size_t m = wanted - below;
+        if (m == 0) {
+            sol.level = options.band.lo;
+        } else if (m == band.size()) {
+            sol.level = std::nextafter(float(options.band.hi), std::numeric_limits<float>::max());
+        } else {
+            std::nth_element(band.begin(), band.begin() + m, band.end());
+            const double upper = band[m];
+            const double lower = *std::max_element(band.begin(), band.begin() + m);
+            sol.level = 0.5 * (lower + upper);
+        }
+        // Ties (symmetric fields sampled on a regular grid repeat values exactly) can make the
+        // count differ from `wanted`: count what the level really leaves below it.
+        sol.insideVoxels =
+            below + std::uint64_t(std::count_if(band.begin(), band.end(), [&](float v) { return v < sol.level; }));
+        sol.achieved = double(sol.insideVoxels) / double(sol.domainVoxels);
+
+        // Coarse or symmetric grids repeat values in large groups, so no level may leave exactly
+        // `wanted` voxels below it. Then measure with sub-voxel coverage, which is continuous in
+        // the level, and bisect on it.
+        if (subVoxel || std::abs(double(sol.insideVoxels) - double(wanted)) > 5e-4 * double(wanted)) {
+            // Every evaluated band voxel once (a voxel's step does not depend on the band); the
+            // bracket's and the wide band's samples are picked from them, in the same order.
+            const float evaluatedLo = float(evaluated.band.lo), evaluatedHi = float(evaluated.band.hi);
+            const std::vector<CoverageSample> evaluatedSamples =
+                coverageSamples(*grid, domain.indexBox(), evaluatedLo, evaluatedHi);
+            auto within = [&](float lo, float hi) {
+                std::vector<CoverageSample> picked;
+                for (const CoverageSample& c : evaluatedSamples)
+                    if (!(c.value < lo || c.value > hi)) picked.push_back(c);
+                return picked;
+            };
+            auto samples = within(float(options.band.lo), float(options.band.hi));
+            double a = options.band.lo, b = std::min(options.band.hi, 1e30);
+            std::uint64_t fullyBelow = below;
+            // Within a mask the bracket (a share of the mask's voxels) can be far narrower than a
+            // voxel's change, and the coverage of the voxels just outside it then never reaches
+            // the target. A voxel is partly inside while the level is within half its step of
+            // its value: widen the band to the largest step either side and measure again.
+            // (Unmasked solves keep the bracket, whose coverage tracks the meshed volume.)
+            float widest = 0.0f;
+            for (const CoverageSample& c : samples)
+                if (c.step < 1e29f) widest = std::max(widest, c.step);
+            if (masked && widest > 0.0f && widest < 1e29f) {
+                SparseOptions wide = options;
+                wide.band = Interval(sol.level - widest, sol.level + widest);
+                // Every voxel valued within the wide band lies in an evaluated leaf of a grid
+                // whose band contains it: reuse the first grid when it does.
+                const bool covered = evaluated.band.lo <= wide.band.lo && wide.band.hi <= evaluated.band.hi;
+                const float wideLo = float(wide.band.lo), wideHi = float(wide.band.hi);
+                if (covered && evaluatedLo <= wideLo && wideHi <= evaluatedHi) {
+                    // Below the wide band: those below the bracket, moved by the voxels between the
+                    // two low ends, which the evaluated band holds.
+                    const float bracketLo = float(options.band.lo);
+                    std::uint64_t belowWide = 0, belowBracket = 0;
+                    for (const CoverageSample& c : evaluatedSamples) {
+                        belowWide += c.value < wideLo;
+                        belowBracket += c.value < bracketLo;
+                    }
+                    fullyBelow = below + belowWide - belowBracket;
+                    samples = within(wideLo, wideHi);
+                } else {
+                    const auto wideGrid = covered ? grid : evaluateSparse(indicator, domain, wide);
+                    if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
+                    fullyBelow = splitByBand(*wideGrid, domain.indexBox(), wideLo, wideHi).below;
+                    samples = coverageSamples(*wideGrid, domain.indexBox(), wideLo, wideHi);
+                }
+                a = wide.band.lo;
+                b = wide.band.hi;
+            }
+            // An open bracket (a target within 1 % of 0 or 1): bisect over the values present.
+            for (const CoverageSample& c : samples) {
+                if (options.band.lo <= -1e30) a = std::min(a == options.band.lo ? 1e300 : a, double(c.value) - c.step);
+                if (options.band.hi >= 1e30) b = std::max(b == 1e30 ? -1e300 : b, double(c.value) + c.step);
+            }
+            sol.level = bisectCoverage(samples, double(fullyBelow), double(wanted), a, b);
+            sol.coverage = true;
+            sol.achieved = (double(fullyBelow) + coveredVoxels(samples, sol.level)) / double(sol.domainVoxels);
+        }
+        return sol;
+    }
+    return sol;  // unreachable: the last round brackets everything
+}
+
+}  // namespace voxlat
