@@ -302,7 +302,8 @@ TEST(RecipeLanguage, SchemaMatchesTheNodeTable)
     for (const NodeType& t : FieldBuilder::nodeTypes()) {
         types.insert(t.key);
         const auto& def = defs.at("node_" + t.key);
-        std::set<std::string> keys(t.keys.begin(), t.keys.end()), schemaKeys;
+        const auto names = keyNames(t.keys);
+        std::set<std::string> keys(names.begin(), names.end()), schemaKeys;
         for (const auto& [k, v] : def["properties"].items()) schemaKeys.insert(k);
         EXPECT_EQ(keys, schemaKeys) << t.key;
         EXPECT_EQ(def["required"], nlohmann::json::array({t.key}));
@@ -358,7 +359,7 @@ TEST(RecipeLanguage, EveryNodeKeyIsDocumentedAndEveryDocumentedKeyExists)
             return s.first.rfind("### ", 0) == 0 && s.first.find("`" + t.key + "`") != std::string::npos;
         });
         ASSERT_NE(it, sections.end()) << "docs/recipes.md has no ### section naming `" << t.key << "`";
-        for (const std::string& key : t.keys)
+        for (const std::string& key : keyNames(t.keys))
             EXPECT_TRUE(it->second.find("`" + key + "`") != std::string::npos ||
                         it->second.find(key + ":") != std::string::npos ||
                         it->first.find("`" + key + "`") != std::string::npos)
@@ -373,7 +374,7 @@ TEST(RecipeLanguage, EveryNodeKeyIsDocumentedAndEveryDocumentedKeyExists)
         for (const NodeType& t : FieldBuilder::nodeTypes())
             if (heading.find("`" + t.key + "`") != std::string::npos) {
                 isNodeSection = true;
-                known.insert(t.keys.begin(), t.keys.end());
+                for (const KeySpec& k : t.keys) known.insert(k.name);
                 propertyNames(schema["$defs"]["node_" + t.key], known);
             }
         if (!isNodeSection) continue;

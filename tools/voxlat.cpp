@@ -3,7 +3,9 @@
 #include "engine/core/Version.h"
 #include "engine/jobs/Job.h"
 #include "engine/recipe/RecipeParams.h"
+#include "engine/jobs/PrinterProfile.h"
 #include "engine/recipe/Schema.h"
+#include "engine/recipe/SliceSettings.h"
 #include "tools/TerminalProgress.h"
 
 #include <CLI/CLI.hpp>
@@ -106,6 +108,8 @@ int main(int argc, char** argv)
     sampleCmd->add_flag("--gradient", sampleGradient, "also print the gradient");
 
     auto* schemaCmd = app.add_subcommand("schema", "print the recipe language as a JSON Schema");
+    bool schemaMarkdown = false;
+    schemaCmd->add_flag("--markdown", schemaMarkdown, "print every key as Markdown tables instead (docs/recipes.md)");
     Common checkArgs;
     int checkRepeat = 1;
     auto* check = app.add_subcommand("check", "load and validate a recipe and build its fields, without evaluating");
@@ -116,15 +120,18 @@ int main(int argc, char** argv)
     std::string slicePrinter, sliceFile, sliceAa, sliceFormat, slicePreview;
     double sliceLayer = 0.0, sliceGamma = -1.0;
     std::vector<double> slicePosition;
-    auto* sliceCmd = app.add_subcommand("slice", "slice a recipe's result for a resin printer (.sl1, .sl1s, .zip, PNG or EXR folder)");
+    // The lists in the help come from the printer and archive tables.
+    const std::string formats = voxlat::joinWords(voxlat::sliceFormatNames());
+    const std::string printers = voxlat::joinWords(voxlat::printerNames());
+    auto* sliceCmd = app.add_subcommand("slice", "slice a recipe's result for a resin printer (" + formats + ")");
     addCommon(sliceCmd, sliceArgs);
-    sliceCmd->add_option("--printer", slicePrinter, "printer profile: sl1, sl1s, mono-4k, mono-8k, mono-12k or a profile file");
+    sliceCmd->add_option("--printer", slicePrinter, "printer profile: " + printers + " or a profile file");
     sliceCmd->add_option("-o,--output", sliceFile, "archive (.sl1, .sl1s, .zip) or folder (with --format png|exr)");
     sliceCmd->add_option("--layer", sliceLayer, "layer height in mm (default: the recipe's, else the printer's)");
     sliceCmd->add_option("--aa", sliceAa, "anti-aliasing: on (default), off (binary, pixel centre) or sub-samples per axis");
     sliceCmd->add_option("--gamma", sliceGamma, "grey = 255 * coverage^gamma; 0 = threshold at half coverage");
     sliceCmd->add_option("--position", slicePosition, "where the part's centre goes on the display, X Y in mm")->expected(2);
-    sliceCmd->add_option("--format", sliceFormat, "sl1, sl1s, zip, png (folder) or exr (folder)");
+    sliceCmd->add_option("--format", sliceFormat, "archive format: " + formats);
     sliceCmd->add_option("--preview", slicePreview, "contact-sheet PNG (default FILE.preview.png; `off` for none)");
 
     CLI11_PARSE(app, argc, argv);
@@ -152,7 +159,10 @@ int main(int argc, char** argv)
             job.grid();
             printSummary(job);
         } else if (*schemaCmd) {
-            std::cout << voxlat::recipeSchema().dump(2) << "\n";
+            if (schemaMarkdown)
+                std::cout << voxlat::recipeKeysMarkdown();
+            else
+                std::cout << voxlat::recipeSchema().dump(2) << "\n";
         } else if (*check) {
             // Times recipe load + validation in this process: reading, includes, parameters,
             // key checks and building every field node (no evaluation).

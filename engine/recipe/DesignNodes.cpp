@@ -245,9 +245,33 @@ FieldPtr applyFrame(const RecipeNode& frame, FieldPtr raw, const Vec3d& cell)
 
 void addDesignNodeTypes(std::vector<NodeType>& types)
 {
-    types.push_back({"mesh", {"mesh", "repair", "units"}, buildMesh});
-    types.push_back({"shell", {"shell"}, buildShell});
-    types.push_back({"infill", {"infill"}, buildInfill});
+    using namespace valueSchema;
+    types.push_back({"mesh",
+                     {{"mesh", string(), "mesh file (.stl, .obj, .ply, .3mf), relative to the recipe", "required"},
+                      {"repair", boolean(), "fill small holes", "false"},
+                      {"units", oneOfWords({"um", "mm", "cm", "m", "in", "ft"}), "the file's length unit",
+                       "the file's own (3MF), else mm"}},
+                     buildMesh});
+    types.push_back({"shell",
+                     {{"shell",
+                       object({{"part", field(), "the part", "required"},
+                               {"thickness", number(), "wall thickness inside the surface (mm)", "required"}},
+                              {"part", "thickness"}),
+                       "a solid wall inside a part's surface: {part, thickness}", "required"}},
+                     buildShell});
+    types.push_back(
+        {"infill",
+         {{"infill",
+           object({{"part", field(), "the part (a mesh or any closed field)", "required"},
+                   {"lattice", field(), "the lattice filling the core", "required"},
+                   {"skin", number(), "skin thickness inside the part's surface (mm)", "0"},
+                   {"density", density(), "the lattice's share of the space inside the skin", "—"},
+                   {"blend", number(), "smooth-union radius where lattice meets skin (mm)", "0"},
+                   {"material_density", number(), "material density (g/cm^3) for the part's mass", "—"}},
+                  {"part", "lattice"}),
+           "skin plus a lattice filling the rest: {part, lattice, skin, density, blend, material_density}",
+           "required"}},
+         buildInfill});
 }
 
 }  // namespace voxlat

@@ -176,9 +176,24 @@ FieldPtr orientedField(FieldBuilder& builder, const RecipeNode& spec, FieldPtr c
 
 void addExprNodeTypes(std::vector<NodeType>& types)
 {
-    types.push_back({"expr", {"expr", "solid", "level", "density"}, buildExpr});
-    types.push_back({"vector", {"vector"}, buildVector});
-    types.push_back({"orient", {"orient", "field"}, buildOrient});
+    using namespace valueSchema;
+    types.push_back({"expr",
+                     {{"expr", string(), "an equation in x, y, z, $params and field names", "required"},
+                      solidKey(), levelKey(), densityKey()},
+                     buildExpr});
+    types.push_back({"vector",
+                     {{"vector",
+                       {{"type", "array"},
+                        {"items", {{"anyOf", {{{"type", "number"}}, {{"type", "string"}}}}}},
+                        {"minItems", 3},
+                        {"maxItems", 3}},
+                       "three components: numbers or equations", "required"}},
+                     buildVector});
+    types.push_back({"orient",
+                     {{"orient", orientationSchema(), "a frame field: the field's axes follow it point by point",
+                       "required"},
+                      {"field", field(), "the field turned", "required"}},
+                     buildOrient});
 }
 
 }  // namespace voxlat

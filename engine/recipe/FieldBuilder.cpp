@@ -67,8 +67,41 @@ FieldPtr FieldBuilder::buildSpec(const RecipeNode& spec, const std::string& name
         }
         spec.fail(message + " (types: " + joinWords(typeKeys) + ")");
     }
-    spec.checkKeys(found->keys);
+    spec.checkKeys(keyNames(found->keys));
     return found->build(*this, spec, name);
+}
+
+KeySpec solidKey()
+{
+    return {"solid", valueSchema::oneOfWords({"network", "sheet"}), "network (f <= level) or sheet (|f| <= level)",
+            "network"};
+}
+
+KeySpec levelKey()
+{
+    return {"level", valueSchema::number(), "c for a network (f <= c), t for a sheet (|f| <= t), in f's units",
+            "network: 0"};
+}
+
+KeySpec densityKey()
+{
+    return {"density", valueSchema::density(), "target relative density in (0, 1); the level is solved", "—"};
+}
+
+nlohmann::json gradedDensitySchema()
+{
+    using namespace valueSchema;
+    return {{"anyOf", {density(), anyMap(), string()}}};
+}
+
+nlohmann::json orientationSchema()
+{
+    using namespace valueSchema;
+    const char* direction = "a direction: a vector field's name, {vector: [...]} or [x, y, z]";
+    return object({{"along", anything(), std::string("the cells' z axis; ") + direction, "[0, 0, 1]"},
+                   {"x", anything(), std::string("reference for the cells' x axis (made orthogonal to z); ") + direction,
+                    "[1, 0, 0]"},
+                   {"origin", vec3(), "the point the cells are rotated about (mm)", "[0, 0, 0]"}});
 }
 
 SolidSide readSolidSide(const RecipeNode& spec)

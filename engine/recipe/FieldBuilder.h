@@ -3,6 +3,7 @@
 #pragma once
 
 #include "engine/core/JobContext.h"
+#include "engine/recipe/KeySpec.h"
 #include "engine/recipe/Recipe.h"
 #include "fields/LevelSolid.h"
 
@@ -66,10 +67,11 @@ struct GradedNode {
 
 class FieldBuilder;
 
-/// One node type of the recipe language: the key that names it, its valid keys, its builder.
+/// One node type of the recipe language: the key that names it, its valid keys (with their value
+/// schemas, defaults and meanings: the one table schema, key checks and docs come from), its builder.
 struct NodeType {
     std::string key;
-    std::vector<std::string> keys;
+    std::vector<KeySpec> keys;
     std::function<FieldPtr(FieldBuilder&, const RecipeNode& spec, const std::string& name)> build;
 };
 
@@ -136,6 +138,15 @@ private:
 
 /// Reads `solid:` of a lattice node: `network` (f <= level, the default) or `sheet` (|f| <= level).
 SolidSide readSolidSide(const RecipeNode& spec);
+/// Keys several node types share, each written once.
+KeySpec solidKey();    ///< `solid:` network or sheet
+KeySpec levelKey();    ///< `level:` c or t
+KeySpec densityKey();  ///< `density:` a number in (0, 1)
+/// A density that may also be a map grading it point by point.
+nlohmann::json gradedDensitySchema();
+/// `{along, x, origin}`: a frame field (orient nodes and `axes:`).
+nlohmann::json orientationSchema();
+
 /// Whether a lattice node must state its level.
 enum class LevelRule {
     Optional,         ///< `level:` or `density:` or else the default level

@@ -5,6 +5,7 @@
 #include "engine/recipe/SkinNodes.h"
 #include "fields/GradedLevel.h"
 #include "fields/GradientShift.h"
+#include "fields/TpmsEquations.h"
 #include "fields/TpmsField.h"
 #include "fields/VectorField.h"
 
@@ -221,13 +222,31 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
 
 void addLatticeNodeTypes(std::vector<NodeType>& types)
 {
-    types.push_back({"tpms",
-                     {"tpms", "cell", "solid", "level", "density", "frame", "thickness", "wall", "layer", "build",
-                      "rotation", "axes"},
-                     buildTpms});
+    using namespace valueSchema;
+    const json gradedNumber = {{"anyOf", {number(), anyMap(), string()}}};
+    const std::vector<KeySpec> thicknessKeys{
+        // A thickness may vary in space: a number, or a map / field as for a graded density.
+        {"thickness", gradedNumber, "total wall thickness 2m (mm), the same in every direction", "—"},
+        {"wall", gradedNumber, "total wall thickness in the build plane (mm)", "—"},
+        {"layer", gradedNumber, "total wall thickness along the build direction (mm)", "—"},
+        {"build", anything(), "build direction: [x, y, z], a vector field or any field's unit gradient", "[0, 0, 1]"},
+        {"rotation", oneOfWords({"rodrigues", "tensor"}), "how wall / layer follow the build direction", "rodrigues"}};
+    std::vector<KeySpec> tpms{
+        {"tpms", oneOfWords(tpmsNames()), "the surface", "required"},
+        {"cell", numberOrVec3(), "cell size in mm, or [x, y, z]", "required"},
+        solidKey(),
+        levelKey(),
+        {"density", gradedDensitySchema(),
+         "target relative density in (0, 1) (the level is solved), or a map grading it point by point", "—"},
+        {"frame", anyMap(), "conformal cells: {cylinder: ...}, {sphere: ...} or {skin: ...}", "box cells"}};
+    tpms.insert(tpms.end(), thicknessKeys.begin(), thicknessKeys.end());
+    tpms.push_back({"axes", orientationSchema(), "the cells' axes follow a frame field (as the orient node)",
+                    "world axes"});
+    types.push_back({"tpms", tpms, buildTpms});
     addScalarMapNodeTypes(types);
-    types.push_back({"gradient-shift", {"gradient-shift", "thickness", "wall", "layer", "build", "rotation"},
-                     buildGradientShift});
+    std::vector<KeySpec> shift{{"gradient-shift", field(), "the raw field whose zero set is thickened", "required"}};
+    shift.insert(shift.end(), thicknessKeys.begin(), thicknessKeys.end());
+    types.push_back({"gradient-shift", shift, buildGradientShift});
 }
 
 }  // namespace voxlat

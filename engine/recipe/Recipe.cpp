@@ -10,8 +10,8 @@ namespace voxlat {
 
 namespace {
 
-const std::vector<std::string> kTopKeys{"voxel", "domain", "fields", "result", "outputs", "params", "include"};
-const std::vector<std::string> kOutputKeys{"mesh", "vdb", "slices"};
+const std::vector<std::string> kTopKeys = keyNames(topLevelKeys());
+const std::vector<std::string> kOutputKeys = keyNames(outputKinds());
 
 /// Records @a node and everything below it as set from the command line.
 void collectNodes(const YAML::Node& node, std::vector<YAML::Node>& out)
@@ -129,6 +129,34 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
 }
 
 }  // namespace
+
+const std::vector<KeySpec>& topLevelKeys()
+{
+    using namespace valueSchema;
+    static const std::vector<KeySpec> keys{
+        {"voxel", number(), "voxel size (mm); must be below the smallest domain side", "0.1"},
+        {"domain", object({{"box", box(), "[[x0, y0, z0], [x1, y1, z1]] (mm)", "required"}}, {"box"}),
+         "{box: [[x0, y0, z0], [x1, y1, z1]]}; snapped to a whole number of voxels",
+         "the result's bounding box plus 3 voxels"},
+        {"fields", {{"type", "object"}, {"additionalProperties", ref("node")}},
+         "map of name -> node; names are referred to by other nodes", "required"},
+        {"result", string(), "the name of the field that is meshed and measured", "required"},
+        {"outputs", object(outputKinds()), "what to write: mesh, vdb, slices", "none (report only)"},
+        {"params", ref("params"), "named parameters with defaults, used anywhere as $name", "none"},
+        {"include", stringOrList(), "recipe libraries whose params: and fields: are merged in", "none"}};
+    return keys;
+}
+
+const std::vector<KeySpec>& outputKinds()
+{
+    using namespace valueSchema;
+    static const std::vector<KeySpec> kinds{
+        {"mesh", stringOrList(), "mesh file(s): .stl, .ply or .obj, by extension", "—"},
+        {"vdb", string(), "the result's sparse grid as an OpenVDB file (.vdb)", "—"},
+        {"slices", {{"anyOf", {ref("slices"), {{"type", "array"}, {"items", ref("slices")}}}}},
+         "resin-printer slices: a map (or a list of maps) of slice settings", "—"}};
+    return kinds;
+}
 
 RecipeNode Recipe::node(const std::string& key) const
 {

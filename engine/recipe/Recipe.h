@@ -2,6 +2,7 @@
 /// @brief A YAML recipe, loaded and checked: domain, named fields, result, outputs.
 #pragma once
 
+#include "engine/recipe/KeySpec.h"
 #include "engine/recipe/RecipeNode.h"
 
 #include <filesystem>
@@ -40,6 +41,11 @@ struct Recipe {
     /// A path written in the recipe, resolved against the recipe's folder.
     std::filesystem::path resolve(const std::string& path) const;
 };
+
+/// The recipe's top-level keys, with their schemas, defaults and meanings.
+const std::vector<KeySpec>& topLevelKeys();
+/// The output kinds of `outputs:` (mesh, vdb, slices), each a key with its value's schema.
+const std::vector<KeySpec>& outputKinds();
 
 /// Reads and validates a recipe file. @a overrides are "key.path=value" strings from --set;
 /// values are parsed as YAML (numbers, words, [lists]).

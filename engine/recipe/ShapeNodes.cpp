@@ -34,7 +34,14 @@ FieldPtr buildCylinder(FieldBuilder&, const RecipeNode& spec, const std::string&
 
 NodeType booleanType(const std::string& key, BooleanOp op)
 {
-    return {key, {key, "blend"}, [key, op](FieldBuilder& b, const RecipeNode& spec, const std::string& name) -> FieldPtr {
+    using namespace valueSchema;
+    const std::string meaning = op == BooleanOp::Union          ? "fields joined (min)"
+                                : op == BooleanOp::Intersection ? "fields intersected (max)"
+                                                                : "the first field minus all the others";
+    return {key,
+            {{key, fieldList(), meaning, "required"},
+             {"blend", number(), "smooth blend radius (mm), 0 = sharp", "0"}},
+            [key, op](FieldBuilder& b, const RecipeNode& spec, const std::string& name) -> FieldPtr {
                 const RecipeNode list = spec[key];
                 const std::size_t minimum = op == BooleanOp::Difference ? 2 : 1;
                 if (!list.isSequence() || list.size() < minimum)
@@ -86,15 +93,37 @@ FieldPtr buildScale(FieldBuilder& b, const RecipeNode& spec, const std::string& 
 
 void addShapeNodeTypes(std::vector<NodeType>& types)
 {
-    types.push_back({"sphere", {"sphere"}, buildSphere});
-    types.push_back({"box", {"box"}, buildBox});
-    types.push_back({"cylinder", {"cylinder"}, buildCylinder});
+    using namespace valueSchema;
+    types.push_back({"sphere",
+                     {{"sphere",
+                       object({{"center", vec3(), "centre (mm)", "[0, 0, 0]"}, {"radius", number(), "radius (mm)", "required"}},
+                              {"radius"}),
+                       "a ball: {center, radius} (exact signed distance)", "required"}},
+                     buildSphere});
+    types.push_back({"box", {{"box", box(), "[[x0, y0, z0], [x1, y1, z1]] (mm)", "required"}}, buildBox});
+    types.push_back({"cylinder",
+                     {{"cylinder",
+                       object({{"center", vec3(), "centre (mm)", "[0, 0, 0]"},
+                               {"axis", vec3(), "axis direction", "[0, 0, 1]"},
+                               {"radius", number(), "radius (mm)", "required"},
+                               {"height", number(), "length along the axis (mm)", "required"}},
+                              {"radius", "height"}),
+                       "a capped cylinder: {center, axis, radius, height}", "required"}},
+                     buildCylinder});
     types.push_back(booleanType("union", BooleanOp::Union));
     types.push_back(booleanType("intersection", BooleanOp::Intersection));
     types.push_back(booleanType("difference", BooleanOp::Difference));
-    types.push_back({"translate", {"translate", "field"}, buildTranslate});
-    types.push_back({"rotate", {"rotate", "field"}, buildRotate});
-    types.push_back({"scale", {"scale", "field"}, buildScale});
+    const KeySpec transformed{"field", field(), "the field transformed", "required"};
+    types.push_back({"translate", {{"translate", vec3(), "offset (mm)", "required"}, transformed}, buildTranslate});
+    types.push_back({"rotate",
+                     {{"rotate",
+                       object({{"axis", vec3(), "rotation axis", "required"},
+                               {"degrees", number(), "angle (degrees)", "required"}},
+                              {"axis", "degrees"}),
+                       "{axis, degrees}: a rotation about the origin", "required"},
+                      transformed},
+                     buildRotate});
+    types.push_back({"scale", {{"scale", numberOrVec3(), "factor, or [x, y, z]", "required"}, transformed}, buildScale});
 }
 
 }  // namespace voxlat

@@ -1,21 +1,46 @@
 #include "engine/recipe/SliceSettings.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace voxlat {
 
-const std::vector<std::string>& sliceKeys()
+std::vector<std::string> sliceFormatNames()
 {
-    static const std::vector<std::string> keys{"printer",        "layer",   "file",      "format",
-                                               "position",       "aa",      "gamma",     "exposure",
-                                               "exposure_first", "preview", "timestamp", "reuse"};
+    return {"sl1", "sl1s", "zip", "png", "exr"};
+}
+
+const std::vector<KeySpec>& sliceKeys()
+{
+    using namespace valueSchema;
+    static const std::vector<KeySpec> keys{
+        {"printer", string(), "printer profile: a name in data/printers or a profile file", "required"},
+        {"layer", number(), "layer height (mm)", "the printer's"},
+        {"file", string(), "the archive (or folder for png / exr), inside the output folder", "required"},
+        {"format", oneOfWords(sliceFormatNames()), "archive format", "from the file name, else the printer's"},
+        {"position", json{{"type", "array"}, {"items", number()}, {"minItems", 2}, {"maxItems", 2}},
+         "where the part's xy centre goes on the display (mm)", "the display's centre"},
+        {"aa",
+         {{"anyOf", {{{"type", {"string", "boolean"}}}, number()}}},
+         "anti-aliasing: on, off or sub-samples per axis (1 to 16)",
+         "on (8)"},
+        {"gamma", number(), "grey = 255 coverage^gamma; 0 = threshold at half coverage", "1"},
+        {"exposure", number(), "exposure time (s)", "the printer's"},
+        {"exposure_first", number(), "first layers' exposure time (s)", "the printer's"},
+        {"preview", {{"type", {"string", "boolean"}}}, "contact-sheet PNG, or off", "FILE.preview.png"},
+        {"timestamp", string(), "the archive's timestamp (fixed, so archives are reproducible)",
+         "2020-01-01 at 00:00:00 UTC"},
+        {"reuse",
+         {{"type", {"string", "boolean"}}},
+         "copy layers one z-period apart (on) or compute every layer (off)",
+         "on"}};
     return keys;
 }
 
 SliceSettings parseSliceSettings(const RecipeNode& spec)
 {
     if (!spec.isMap()) spec.fail("expected a map like `{printer: sl1s, layer: 0.05, file: part.sl1s}`");
-    spec.checkKeys(sliceKeys());
+    spec.checkKeys(keyNames(sliceKeys()));
     SliceSettings s;
     s.printer = spec["printer"].string();
     s.printerWhere = spec["printer"].where();
@@ -23,8 +48,9 @@ SliceSettings parseSliceSettings(const RecipeNode& spec)
     s.file = spec["file"].string();
     if (spec.has("format")) {
         s.format = spec["format"].string();
-        if (s.format != "sl1" && s.format != "sl1s" && s.format != "zip" && s.format != "png" && s.format != "exr")
-            spec["format"].fail("unknown format `" + s.format + "` (valid: sl1, sl1s, zip, png, exr)");
+        const auto formats = sliceFormatNames();
+        if (std::find(formats.begin(), formats.end(), s.format) == formats.end())
+            spec["format"].fail("unknown format `" + s.format + "` (valid: " + joinWords(formats) + ")");
     }
     if (spec.has("position")) {
         const RecipeNode p = spec["position"];

@@ -2,6 +2,7 @@
 /// @brief A `slices:` output entry as the recipe states it, checked when the recipe is loaded.
 #pragma once
 
+#include "engine/recipe/KeySpec.h"
 #include "engine/recipe/RecipeNode.h"
 
 #include <array>
@@ -12,8 +13,10 @@
 
 namespace voxlat {
 
-/// The keys a `slices:` entry may have.
-const std::vector<std::string>& sliceKeys();
+/// The keys a `slices:` entry may have, with their schemas, defaults and meanings.
+const std::vector<KeySpec>& sliceKeys();
+/// The slice archive formats (`format:`), from the archive table.
+std::vector<std::string> sliceFormatNames();
 
 /// A `slices:` entry, checked.
 struct SliceSettings {

@@ -559,7 +559,33 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
 
 void addStrutNodeTypes(std::vector<NodeType>& types)
 {
-    types.push_back({"struts", {"struts", "kernel", "radius", "density", "level"}, buildStruts});
+    using namespace valueSchema;
+    const json frame = object(
+        {{"cell", anything(), "a preset name, {lines: [...]} or {obj: file}", "required"},
+         {"size", numberOrVec3(), "cell size in mm, or [x, y, z]", "required"},
+         {"count", anything(), "cells per axis: a number or [x, y, z]", "—"},
+         {"origin", vec3(), "the frame's corner (mm)", "[0, 0, 0]"},
+         {"cylinder", anyMap(), "{radius, inner, height, base, cells}: a cylinder frame", "—"},
+         {"sphere", anyMap(), "{radius, inner, center, cells}: a spherical frame", "—"},
+         {"within", field(), "a solid the uniform frame is trimmed to", "—"},
+         {"min_length", number(), "trimmed pieces shorter than this are dropped (mm)", "—"},
+         {"wireframe", string(), "OBJ or CSV file used directly as the frame", "—"},
+         {"skin",
+          object({{"part", field(), "the part whose skin the cells follow", "required"},
+                  {"depth", anything(), "[outer, inner] mm below the surface, or the outer alone", "required"},
+                  {"layers", number(), "cells across, from the outer to the inner depth", "1"}},
+                 {"part", "depth"}),
+          "cells between two offset surfaces of a part", "—"}});
+    types.push_back(
+        {"struts",
+         {{"struts", frame, "the frame: unit cell and how it is laid out", "required"},
+          {"kernel", anything(), "{gaussian: {sigma, cutoff}} (convolution joints), capsule or {capsule: {blend}}",
+           "required"},
+          {"radius", anything(), "strut radius (mm): a number, a list or {gradient, min, max, axis}", "—"},
+          {"density", gradedDensitySchema(),
+           "target relative density over the frame's bounding box, or a map grading it point by point", "—"},
+          levelKey()},
+         buildStruts});
 }
 
 }  // namespace voxlat
