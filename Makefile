@@ -15,7 +15,7 @@ BENCH_PACKAGES := python3 python3-numpy python3-openvdb python3-scipy python3-sk
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 CCACHE := $(shell command -v ccache 2>/dev/null)
 
-.PHONY: all deps bench-deps build run test bench format clean
+.PHONY: all deps bench-deps build run test bench format docs-keys clean
 
 all: build
 
@@ -50,6 +50,10 @@ bench: build bench-deps
 
 format:
 	clang-format -i $$(git ls-files '*.cpp' '*.h')
+
+# The key reference at the end of docs/recipes.md, from the node-type table.
+docs-keys: build
+	/usr/bin/python3 tests/scripts/update_key_reference.py $(BUILD)/voxlat .
 
 clean:
 	rm -rf $(BUILD) $(OUT)

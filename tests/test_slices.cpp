@@ -10,8 +10,8 @@
 #include "fields/Ramp.h"
 #include "fields/Sphere.h"
 #include "fields/TpmsField.h"
-#include "mesher/writers/SliceWriters.h"
 #include "mesher/slice/Slicer.h"
+#include "mesher/writers/SliceWriters.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -194,7 +194,7 @@ TEST(Slices, EightLaneTilesWriteTheSameBytesAsFourLane)
             }
         }
     EXPECT_GT(compared, 2'000'000u);  // 48 layers of a 220 x 200 pixel window
-    EXPECT_GT(greyPixels, 10'000u);  // the edge coverage ran, not just the sure pixels
+    EXPECT_GT(greyPixels, 10'000u);   // the edge coverage ran, not just the sure pixels
 }
 
 TEST(Slices, CullingSkipsInsideAndOutsideTiles)
@@ -541,4 +541,60 @@ TEST(Slices, BadInputNamesFileAndKeyAndWritesNothing)
                                    "name: mine\nmirror_x: false\nmirror_y: false\norientation: landscape\n"
                                    "max_height: 100\n");
     expectFails(base, "--printer " + profile.string(), {profile.string() + ":", "missing key `display`"});
+}
+
+TEST(Slices, TheFormatIsTheRecipesThenTheExtensionsThenTheProfiles)
+{
+    TempDir dir;
+    const auto recipe = dir.write("small.yaml", kSmallSlices);
+    auto slice = [&](const std::string& args, const std::filesystem::path& out) {
+        std::string text;
+        EXPECT_EQ(runCommand(voxlatBinary() + " -q slice " + recipe.string() + " --preview off " + args + " -o " +
+                                 out.string(),
+                             &text),
+                  0)
+            << text;
+    };
+    // No format and no known extension: the profile's `format:` decides (mono-4k: zip).
+    slice("--printer mono-4k", dir.path / "plate");
+    auto entries = readZip(dir.path / "plate");
+    EXPECT_TRUE(entries.count("slices.json")) << "mono-4k's format is zip";
+    EXPECT_FALSE(entries.count("config.ini"));
+    // A profile file of the user's with `format: sl1` decides the same way.
+    std::string profile = readFile(sourceDir() / "data/printers/mono-4k.yaml");
+    profile.replace(profile.find("format: zip"), 11, "format: sl1");
+    const auto mine = dir.write("mine.yaml", profile);
+    slice("--printer " + mine.string(), dir.path / "mine");
+    EXPECT_TRUE(readZip(dir.path / "mine").count("config.ini")) << "the user's profile says sl1";
+    // The file's extension beats the profile; the recipe's `format:` beats both.
+    slice("--printer mono-4k", dir.path / "part.sl1");
+    EXPECT_TRUE(readZip(dir.path / "part.sl1").count("config.ini"));
+    slice("--printer sl1s --format zip", dir.path / "part2.sl1s");
+    EXPECT_TRUE(readZip(dir.path / "part2.sl1s").count("slices.json"));
+}
+
+TEST(Slices, AFolderOutputNeverDeletesWhatItDidNotMake)
+{
+    TempDir dir;
+    const auto recipe = dir.write("small.yaml", kSmallSlices);
+    const auto folder = dir.path / "layers";
+    std::filesystem::create_directories(folder);
+    dir.write("layers/mine.txt", "the user's file");
+    std::string out;
+    EXPECT_EQ(runCommand(
+                  voxlatBinary() + " -q slice " + recipe.string() + " --format png --preview off -o " + folder.string(),
+                  &out),
+              2)
+        << out;
+    EXPECT_NE(out.find("not an empty folder"), std::string::npos) << out;
+    EXPECT_EQ(listFolder(folder), std::vector<std::string>{"mine.txt"});
+    EXPECT_EQ(readFile(folder / "mine.txt"), "the user's file");
+    // An empty folder is filled.
+    std::filesystem::remove(folder / "mine.txt");
+    ASSERT_EQ(runCommand(
+                  voxlatBinary() + " -q slice " + recipe.string() + " --format png --preview off -o " + folder.string(),
+                  &out),
+              0)
+        << out;
+    EXPECT_TRUE(std::filesystem::exists(folder / "slices.json"));
 }

@@ -1,6 +1,7 @@
 #include "engine/jobs/PrinterProfile.h"
 
 #include "engine/recipe/RecipeNode.h"
+#include "engine/recipe/SliceSettings.h"
 
 #include <algorithm>
 #include <cmath>
@@ -21,7 +22,6 @@ namespace {
 const std::vector<std::string> kProfileKeys{"name",           "model",       "format",     "display",   "mirror_x",
                                             "mirror_y",       "orientation", "max_height", "layer",     "exposure",
                                             "exposure_first", "fade_layers", "fast_tilt",  "slow_tilt", "area_fill"};
-const std::vector<std::string> kFormats{"sl1", "sl1s", "zip", "png", "exr"};
 
 bool looksLikePath(const std::string& s)
 {
@@ -91,8 +91,8 @@ PrinterProfile loadPrinterProfile(const std::string& nameOrPath, const std::stri
     p.name = top.has("name") ? top["name"].string() : p.key;
     p.model = top.has("model") ? top["model"].string() : p.key;
     p.format = top.has("format") ? top["format"].string() : "zip";
-    if (std::find(kFormats.begin(), kFormats.end(), p.format) == kFormats.end())
-        top["format"].fail("unknown format `" + p.format + "` (valid: sl1, sl1s, zip, png, exr)");
+    if (const auto formats = sliceFormatNames(); std::find(formats.begin(), formats.end(), p.format) == formats.end())
+        top["format"].fail("unknown format `" + p.format + "` (valid: " + joinWords(formats) + ")");
     const RecipeNode display = top["display"];
     display.checkKeys({"width", "height", "pixels_x", "pixels_y"});
     p.widthMm = display["width"].positiveNumber();

@@ -1,10 +1,12 @@
 #include "engine/jobs/SliceJob.h"
 
+#include "engine/jobs/SliceArchives.h"
+
 #include "engine/core/Errors.h"
 #include "engine/core/Version.h"
+#include "mesher/slice/Slicer.h"
 #include "mesher/writers/AtomicFile.h"
 #include "mesher/writers/SliceWriters.h"
-#include "mesher/slice/Slicer.h"
 
 #include <tbb/info.h>
 #include <tbb/parallel_pipeline.h>
@@ -29,13 +31,6 @@ std::string number(double v)
     char buf[64];
     std::snprintf(buf, sizeof buf, "%.10g", v);
     return buf;
-}
-
-std::string layerName(const std::string& prefix, int index, const char* ext)
-{
-    char buf[32];
-    std::snprintf(buf, sizeof buf, "%05d", index);
-    return prefix + buf + ext;
 }
 
 /// A small top view of the part: the highest exposed layer per cell, shaded, for thumbnails.
@@ -181,48 +176,6 @@ struct ContactSheet {
     }
 };
 
-/// Output folder that appears whole: written under a temporary name, renamed at commit.
-struct AtomicFolder {
-    fs::path path, temp;
-    bool committed = false;
-    explicit AtomicFolder(fs::path p) : path(std::move(p))
-    {
-        temp = path;
-        temp += ".tmp-" + std::to_string(::getpid());
-        fs::remove_all(temp);
-        fs::create_directories(temp);
-    }
-    ~AtomicFolder()
-    {
-        std::error_code ec;
-        if (!committed) fs::remove_all(temp, ec);
-    }
-    void commit()
-    {
-        fs::remove_all(path);
-        fs::rename(temp, path);
-        committed = true;
-    }
-};
-
-void writeWhole(const std::string& path, const std::string& bytes)
-{
-    AtomicFile file(path);
-    file.stream().write(bytes.data(), std::streamsize(bytes.size()));
-    file.commit();
-}
-
-std::string formatOf(const SliceSettings& s, const fs::path& path)
-{
-    if (!s.format.empty()) return s.format;
-    const std::string ext = path.extension().string();
-    if (ext == ".sl1") return "sl1";
-    if (ext == ".sl1s") return "sl1s";
-    if (ext == ".zip") return "zip";
-    throw InputError(s.printerWhere + ": cannot tell the slice format from the file name `" + path.string() +
-                     "`; name it .sl1, .sl1s or .zip, or set `format: png` or `format: exr` for a folder of layers");
-}
-
 /// The fewest layers, below @a count, whose height spans a whole number of @a field's z-periods
 /// (to 1e-9 relative): 8 mm cells at 0.05 mm give 160, at 0.03 mm 800 (three cells); 1 when
 /// the field does not change along z; 0 when it does not repeat within the part.
@@ -293,7 +246,7 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
                          " mm is larger than the part (" + number(height) +
                          " mm tall); set `layer:` below the part height");
     const int count = int(std::floor(height / layer - 0.5 + 1e-9)) + 1;
-    const std::string format = formatOf(settings, path);
+    const std::string format = sliceFormatOf(settings, printer, path);
     Display display;
     display.widthMm = printer.widthMm;
     display.heightMm = printer.heightMm;
@@ -315,18 +268,8 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
                          number(printer.widthMm) + " x " + number(printer.heightMm) + " mm display (`display`) of " +
                          printerRef + "; shrink the domain, move it with `position:` or pick a larger printer");
 
-    const bool archive = format == "sl1" || format == "sl1s" || format == "zip";
-    const std::string jobDir = format == "zip" ? "" : path.stem().string();
-    std::unique_ptr<AtomicFile> file;
-    std::unique_ptr<ZipStreamWriter> zip;
-    std::unique_ptr<AtomicFolder> folder;
-    if (archive) {
-        fs::create_directories(fs::absolute(path).parent_path());
-        file = std::make_unique<AtomicFile>(path.string());
-        zip = std::make_unique<ZipStreamWriter>(file->stream());
-    } else {
-        folder = std::make_unique<AtomicFolder>(path);
-    }
+    const std::unique_ptr<SliceArchive> archive = openSliceArchive(format, path, settings.printerWhere);
+    const bool fieldValues = archive->takesFieldValues();
 
     SliceResult result;
     result.layerAreas.resize(count);
@@ -339,7 +282,7 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
     RasterStats stats;
 
     LayerRepeats repeats;
-    if (format != "exr" && settings.reuseBytes > 0) repeats.period = layersPerPeriod(field, layer, count);
+    if (!fieldValues && settings.reuseBytes > 0) repeats.period = layersPerPeriod(field, layer, count);
     repeats.budget = settings.reuseBytes;
 
     struct Token {
@@ -362,7 +305,7 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
         const double z = part.min.z() + (t->image.index + 0.5) * layer;
         slicer.rasterize(z, t->image, &stats);
         t->exposedPixels = t->image.exposedPixels();
-        if (format == "exr") {
+        if (fieldValues) {
             slicer.fieldValues(z, t->values);
         } else {
             std::vector<std::uint8_t> window;
@@ -370,13 +313,6 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
             t->image.storedWindow(display, window, col0, row0, w, h);
             t->bytes = encodeWindowPng(storedW, storedH, window.data(), col0, row0, w, h);
         }
-    };
-
-    auto writePng = [&](int i, const std::string& png) {
-        if (zip)
-            zip->add(layerName(jobDir, i, ".png"), png);
-        else
-            writeWhole((folder->temp / layerName("", i, ".png")).string(), png);
     };
 
     tbb::parallel_pipeline(
@@ -403,7 +339,7 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
                         const int phase = i % repeats.period;
                         result.layerAreas[i] = repeats.exposed[phase] * pixelArea;
                         ++repeats.copied;
-                        writePng(i, repeats.images[phase]);
+                        archive->addLayer(i, repeats.images[phase]);
                         progress.add();
                         return;
                     }
@@ -414,11 +350,10 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
                     const std::string* kept = i < repeats.period ? repeats.keep(t->bytes, t->exposedPixels) : nullptr;
                     if (kept) heights.addPhase(t->image, repeats.period, count);
                     sheet.add(t->image, kept ? repeats.period : 0);
-                    if (format == "exr")
-                        writeExrFloat((folder->temp / layerName("", i, ".exr")).string(), slicer.nx(), slicer.ny(),
-                                      slicer.i0(), slicer.j0(), t->values);
+                    if (fieldValues)
+                        archive->addLayerValues(i, slicer.nx(), slicer.ny(), slicer.i0(), slicer.j0(), t->values);
                     else
-                        writePng(i, kept ? *kept : t->bytes);
+                        archive->addLayer(i, kept ? *kept : t->bytes);
                     progress.add();
                 }));
     if (repeats.kept.load() > 0) heights.addCopies(repeats.period, count);
@@ -455,70 +390,8 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
                            {"supersample", settings.supersample},
                            {"gamma", settings.gamma}};
 
-    if (archive) {
-        if (format != "zip") {
-            std::ostringstream config;
-            const std::vector<std::pair<std::string, std::string>> keys{{"action", "print"},
-                                                                        {"expTime", number(exposure)},
-                                                                        {"expTimeFirst", number(exposureFirst)},
-                                                                        {"expUserProfile", "0"},
-                                                                        {"fileCreationTimestamp", settings.timestamp},
-                                                                        {"hollow", "0"},
-                                                                        {"jobDir", jobDir},
-                                                                        {"layerHeight", number(layer)},
-                                                                        {"materialName", "voxlat"},
-                                                                        {"numFade", std::to_string(printer.fadeLayers)},
-                                                                        {"numFast", std::to_string(count - slow)},
-                                                                        {"numSlow", std::to_string(slow)},
-                                                                        {"printProfile", "voxlat"},
-                                                                        {"printTime", number(std::round(printTime))},
-                                                                        {"printerModel", printer.model},
-                                                                        {"printerProfile", printer.name},
-                                                                        {"printerVariant", "default"},
-                                                                        {"prusaSlicerVersion", "voxlat " + versionString()},
-                                                                        {"usedMaterial", number(volume / 1000.0)}};
-            for (const auto& [k, v] : keys) config << k << " = " << v << "\n";
-            zip->add("config.ini", config.str());
-            std::ostringstream ini;
-            ini << "# generated by voxlat " << versionString() << "\n"
-                << "area_fill = " << number(printer.areaFillPercent) << "\n"
-                << "bed_shape = 0x0," << number(printer.widthMm) << "x0," << number(printer.widthMm) << "x"
-                << number(printer.heightMm) << ",0x" << number(printer.heightMm) << "\n"
-                << "display_height = " << number(printer.heightMm) << "\n"
-                << "display_mirror_x = " << int(printer.mirrorX) << "\n"
-                << "display_mirror_y = " << int(printer.mirrorY) << "\n"
-                << "display_orientation = " << (printer.portrait ? "portrait" : "landscape") << "\n"
-                << "display_pixels_x = " << printer.pixelsX << "\n"
-                << "display_pixels_y = " << printer.pixelsY << "\n"
-                << "display_width = " << number(printer.widthMm) << "\n"
-                << "exposure_time = " << number(exposure) << "\n"
-                << "faded_layers = " << printer.fadeLayers << "\n"
-                << "fast_tilt_time = " << number(printer.fastTiltS) << "\n"
-                << "gamma_correction = " << number(settings.supersample > 0 ? settings.gamma : 0.0) << "\n"
-                << "initial_exposure_time = " << number(exposureFirst) << "\n"
-                << "initial_layer_height = " << number(layer) << "\n"
-                << "layer_height = " << number(layer) << "\n"
-                << "max_print_height = " << number(printer.maxHeightMm) << "\n"
-                << "pad_enable = 0\n"
-                << "printer_model = " << printer.model << "\n"
-                << "printer_settings_id = " << printer.name << "\n"
-                << "printer_technology = SLA\n"
-                << "printer_variant = default\n"
-                << "slow_tilt_time = " << number(printer.slowTiltS) << "\n"
-                << "supports_enable = 0\n"
-                << "thumbnails = 400x400,800x480\n";
-            zip->add("prusaslicer.ini", ini.str());
-            zip->add("thumbnail/thumbnail400x400.png", heights.render(400, 400, count));
-            zip->add("thumbnail/thumbnail800x480.png", heights.render(800, 480, count));
-        } else {
-            zip->add("slices.json", meta.dump(2) + "\n");
-        }
-        zip->finish();
-        file->commit();
-    } else {
-        writeWhole((folder->temp / "slices.json").string(), meta.dump(2) + "\n");
-        folder->commit();
-    }
+    archive->finish({printer, settings, meta, count, layer, exposure, exposureFirst, slow, volume, printTime,
+                     [&](int w, int h) { return heights.render(w, h, count); }});
 
     std::string previewPath;
     if (settings.preview != "off") {
@@ -526,7 +399,10 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
         previewPath = settings.preview.empty() ? (path.parent_path() / (path.stem().string() + ".preview.png")).string()
                       : fs::path(settings.preview).is_absolute() ? settings.preview
                                                                  : (path.parent_path() / settings.preview).string();
-        writeWhole(previewPath, sheet.render());
+        AtomicFile preview(previewPath);
+        const std::string png = sheet.render();
+        preview.stream().write(png.data(), std::streamsize(png.size()));
+        preview.commit();
     }
 
     double total = 0.0;

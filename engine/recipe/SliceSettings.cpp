@@ -5,9 +5,22 @@
 
 namespace voxlat {
 
+const std::vector<ArchiveFormatInfo>& archiveFormats()
+{
+    static const std::vector<ArchiveFormatInfo> formats{
+        {"sl1", ".sl1", "Prusa SL1 archive: PNG layers, config.ini, prusaslicer.ini, thumbnails"},
+        {"sl1s", ".sl1s", "Prusa SL1S archive (as sl1, for the SL1S Speed)"},
+        {"zip", ".zip", "a zip of PNG layers and slices.json, for DLP hosts that take PNG stacks"},
+        {"png", "", "a folder of PNG layers and slices.json"},
+        {"exr", "", "a folder of OpenEXR float layers (the field's values) and slices.json"}};
+    return formats;
+}
+
 std::vector<std::string> sliceFormatNames()
 {
-    return {"sl1", "sl1s", "zip", "png", "exr"};
+    std::vector<std::string> names;
+    for (const ArchiveFormatInfo& f : archiveFormats()) names.push_back(f.name);
+    return names;
 }
 
 const std::vector<KeySpec>& sliceKeys()
@@ -17,7 +30,7 @@ const std::vector<KeySpec>& sliceKeys()
         {"printer", string(), "printer profile: a name in data/printers or a profile file", "required"},
         {"layer", number(), "layer height (mm)", "the printer's"},
         {"file", string(), "the archive (or folder for png / exr), inside the output folder", "required"},
-        {"format", oneOfWords(sliceFormatNames()), "archive format", "from the file name, else the printer's"},
+        {"format", oneOfWords(sliceFormatNames()), "archive format", "from the file's extension, else the printer profile's `format:`"},
         {"position", json{{"type", "array"}, {"items", number()}, {"minItems", 2}, {"maxItems", 2}},
          "where the part's xy centre goes on the display (mm)", "the display's centre"},
         {"aa",

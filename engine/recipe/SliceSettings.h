@@ -15,7 +15,16 @@ namespace voxlat {
 
 /// The keys a `slices:` entry may have, with their schemas, defaults and meanings.
 const std::vector<KeySpec>& sliceKeys();
-/// The slice archive formats (`format:`), from the archive table.
+/// One slice archive format of the language (`format:` of a slices entry or a printer profile).
+/// Each has one writer class in engine/jobs/SliceArchives.cpp.
+struct ArchiveFormatInfo {
+    std::string name;       ///< `sl1`
+    std::string extension;  ///< a file name ending in it picks the format (empty: a folder format)
+    std::string meaning;
+};
+/// The archive table: every slice format, in the order the docs list them.
+const std::vector<ArchiveFormatInfo>& archiveFormats();
+/// The names of archiveFormats().
 std::vector<std::string> sliceFormatNames();
 
 /// A `slices:` entry, checked.

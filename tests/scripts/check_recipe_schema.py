@@ -71,7 +71,7 @@ def main() -> int:
     if begin not in doc or end not in doc:
         failures.append("docs/recipes.md has no generated key reference (between the markers)")
     elif doc[doc.index(begin) + len(begin): doc.index(end)].strip() != markdown.strip():
-        failures.append("docs/recipes.md's key reference is stale: paste `voxlat schema --markdown` between the markers")
+        failures.append("docs/recipes.md's key reference is stale: run `make docs-keys`")
     print("\n".join(failures) if failures else f"schema: {checked} recipes valid, {len(broken)} broken ones refused, "
           "key reference current")
     return 1 if failures else 0

@@ -1,0 +1,58 @@
+/// @file SliceArchives.h
+/// @brief Slice archive formats behind one interface: one class per format of the archive table
+/// (engine/recipe/SliceSettings.h `archiveFormats()`), chosen by name.
+#pragma once
+
+#include "engine/jobs/PrinterProfile.h"
+#include "engine/recipe/SliceSettings.h"
+
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace voxlat {
+
+/// What a slice job knows once every layer is written: what an archive adds after its layers.
+struct SliceSummary {
+    const PrinterProfile& printer;
+    const SliceSettings& settings;
+    const nlohmann::json& meta;  ///< the job's description (slices.json)
+    int layers = 0;
+    double layerMm = 0, exposureS = 0, exposureFirstS = 0;
+    int slowLayers = 0;
+    double volumeMm3 = 0, printTimeS = 0;
+    /// A top view of the part as a PNG of the given size (thumbnails).
+    std::function<std::string(int width, int height)> thumbnail;
+};
+
+/// One slice output being written. Layers arrive in order; nothing carries the final name until
+/// finish() (a file through AtomicFile, a folder under a temporary name renamed at the end), so a
+/// job that fails or is cancelled leaves nothing.
+class SliceArchive {
+public:
+    virtual ~SliceArchive() = default;
+    /// Whether layers are the field's values (float images) rather than PNG images.
+    virtual bool takesFieldValues() const { return false; }
+    /// Layer @a index as PNG bytes.
+    virtual void addLayer(int index, const std::string& png) = 0;
+    /// Layer @a index as field values over the window (@a i0, @a j0, @a nx x @a ny) of the display.
+    virtual void addLayerValues(int index, int nx, int ny, int i0, int j0, const std::vector<float>& values);
+    /// Writes what follows the layers and makes the output appear whole.
+    virtual void finish(const SliceSummary& summary) = 0;
+};
+
+/// The format of a slice output: `format:` if given, else the format whose extension @a path
+/// has, else the printer profile's `format:`.
+std::string sliceFormatOf(const SliceSettings& settings, const PrinterProfile& printer,
+                          const std::filesystem::path& path);
+
+/// Opens @a format at @a path. Checks before any layer is made: a folder format refuses an
+/// existing path that is not an empty folder (an output never deletes what it did not create).
+std::unique_ptr<SliceArchive> openSliceArchive(const std::string& format, const std::filesystem::path& path,
+                                               const std::string& where);
+
+}  // namespace voxlat
