@@ -1,8 +1,13 @@
 /// @file Interval.h
 /// @brief Conservative interval arithmetic used to bound a field over a box.
 ///
-/// Every operation returns an interval that contains the exact image of its arguments, so a
-/// bound computed from one of these expressions may be used to skip regions safely.
+/// What it guarantees: every operation returns the exact image of its arguments computed in
+/// ordinary round-to-nearest double arithmetic, without outward rounding. Each end is therefore
+/// within a few units in the last place (relative 1e-15 per operation, growing with the length of
+/// the expression) of the exact image's end, and may lie that little inside it. The engine only
+/// uses bounds to cull regions far from a level (boxes grown by a voxel, levels compared with
+/// margins of a voxel's change), where such an error cannot change a decision; code that needs a
+/// rigorous enclosure must widen the result (e.g. by std::nextafter on each end) itself.
 #pragma once
 
 #include <algorithm>
