@@ -45,7 +45,10 @@ void Cylinder::gradients(std::span<const Vec3d> points, std::span<double> out, s
     for (std::size_t n = 0; n < points.size(); ++n) out[n] = distance(points[n], &grad[n]);
 }
 
-Interval Cylinder::bound(const Box3& box) const { return lipschitzBound(*this, box, 1.0); }
+Interval Cylinder::bound(const Box3& box) const
+{
+    return lipschitzBound(*this, box, 1.0);
+}
 
 std::optional<Box3> Cylinder::support() const
 {

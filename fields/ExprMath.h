@@ -282,7 +282,10 @@ VOXLAT_EXPR_FORWARD1(abs)
 // Plain double versions under the same names, so the templated evaluation loop calls one name
 // for every number type.
 #define VOXLAT_EXPR_DOUBLE1(name) \
-    inline double name(double a) { return std::name(a); }
+    inline double name(double a)  \
+    {                             \
+        return std::name(a);      \
+    }
 VOXLAT_EXPR_DOUBLE1(tan)
 VOXLAT_EXPR_DOUBLE1(asin)
 VOXLAT_EXPR_DOUBLE1(acos)

@@ -77,8 +77,8 @@ private:
         const int i = int(s);
         const double t = s - i;
         const double t2 = t * t, t3 = t2 * t;
-        return {&mNodes[i], &mNodes[i + 1], 2 * t3 - 3 * t2 + 1, (t3 - 2 * t2 + t) * kDelta, -2 * t3 + 3 * t2,
-                (t3 - t2) * kDelta};
+        return {&mNodes[i],       &mNodes[i + 1],    2 * t3 - 3 * t2 + 1, (t3 - 2 * t2 + t) * kDelta,
+                -2 * t3 + 3 * t2, (t3 - t2) * kDelta};
     }
 
     GaussianTable()

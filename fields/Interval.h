@@ -29,40 +29,88 @@ struct Interval {
     constexpr bool contains(double v) const { return lo <= v && v <= hi; }
 };
 
-inline Interval operator+(Interval a, Interval b) { return {a.lo + b.lo, a.hi + b.hi}; }
-inline Interval operator-(Interval a, Interval b) { return {a.lo - b.hi, a.hi - b.lo}; }
-inline Interval operator-(Interval a) { return {-a.hi, -a.lo}; }
+inline Interval operator+(Interval a, Interval b)
+{
+    return {a.lo + b.lo, a.hi + b.hi};
+}
+inline Interval operator-(Interval a, Interval b)
+{
+    return {a.lo - b.hi, a.hi - b.lo};
+}
+inline Interval operator-(Interval a)
+{
+    return {-a.hi, -a.lo};
+}
 inline Interval operator*(Interval a, Interval b)
 {
     const double p1 = a.lo * b.lo, p2 = a.lo * b.hi, p3 = a.hi * b.lo, p4 = a.hi * b.hi;
     return {std::min(std::min(p1, p2), std::min(p3, p4)), std::max(std::max(p1, p2), std::max(p3, p4))};
 }
-inline Interval operator*(double s, Interval a) { return s >= 0 ? Interval{s * a.lo, s * a.hi} : Interval{s * a.hi, s * a.lo}; }
-inline Interval operator*(Interval a, double s) { return s * a; }
-inline Interval operator+(Interval a, double s) { return {a.lo + s, a.hi + s}; }
-inline Interval operator+(double s, Interval a) { return a + s; }
-inline Interval operator-(Interval a, double s) { return {a.lo - s, a.hi - s}; }
-inline Interval operator-(double s, Interval a) { return {s - a.hi, s - a.lo}; }
-inline Interval& operator+=(Interval& a, Interval b) { return a = a + b; }
+inline Interval operator*(double s, Interval a)
+{
+    return s >= 0 ? Interval{s * a.lo, s * a.hi} : Interval{s * a.hi, s * a.lo};
+}
+inline Interval operator*(Interval a, double s)
+{
+    return s * a;
+}
+inline Interval operator+(Interval a, double s)
+{
+    return {a.lo + s, a.hi + s};
+}
+inline Interval operator+(double s, Interval a)
+{
+    return a + s;
+}
+inline Interval operator-(Interval a, double s)
+{
+    return {a.lo - s, a.hi - s};
+}
+inline Interval operator-(double s, Interval a)
+{
+    return {s - a.hi, s - a.lo};
+}
+inline Interval& operator+=(Interval& a, Interval b)
+{
+    return a = a + b;
+}
 
-inline Interval min(Interval a, Interval b) { return {std::min(a.lo, b.lo), std::min(a.hi, b.hi)}; }
-inline Interval max(Interval a, Interval b) { return {std::max(a.lo, b.lo), std::max(a.hi, b.hi)}; }
+inline Interval min(Interval a, Interval b)
+{
+    return {std::min(a.lo, b.lo), std::min(a.hi, b.hi)};
+}
+inline Interval max(Interval a, Interval b)
+{
+    return {std::max(a.lo, b.lo), std::max(a.hi, b.hi)};
+}
 inline Interval abs(Interval a)
 {
     if (a.lo >= 0) return a;
     if (a.hi <= 0) return -a;
     return {0.0, std::max(-a.lo, a.hi)};
 }
-inline double sqr(double v) { return v * v; }
+inline double sqr(double v)
+{
+    return v * v;
+}
 inline Interval sqr(Interval a)
 {
     const Interval m = abs(a);
     return {m.lo * m.lo, m.hi * m.hi};
 }
-inline Interval sqrt(Interval a) { return {std::sqrt(std::max(0.0, a.lo)), std::sqrt(std::max(0.0, a.hi))}; }
-inline Interval exp(Interval a) { return {std::exp(a.lo), std::exp(a.hi)}; }
+inline Interval sqrt(Interval a)
+{
+    return {std::sqrt(std::max(0.0, a.lo)), std::sqrt(std::max(0.0, a.hi))};
+}
+inline Interval exp(Interval a)
+{
+    return {std::exp(a.lo), std::exp(a.hi)};
+}
 /// Union hull of two intervals.
-inline Interval hull(Interval a, Interval b) { return {std::min(a.lo, b.lo), std::max(a.hi, b.hi)}; }
+inline Interval hull(Interval a, Interval b)
+{
+    return {std::min(a.lo, b.lo), std::max(a.hi, b.hi)};
+}
 
 /// cos over an interval: the endpoint values, widened to +-1 where an extremum k*pi lies inside.
 inline Interval cos(Interval a)
@@ -78,6 +126,9 @@ inline Interval cos(Interval a)
     if (2 * pi * kMin + pi <= a.hi) r.lo = -1.0;
     return r;
 }
-inline Interval sin(Interval a) { return cos(a - std::numbers::pi / 2); }
+inline Interval sin(Interval a)
+{
+    return cos(a - std::numbers::pi / 2);
+}
 
 }  // namespace voxlat

@@ -21,17 +21,16 @@ public:
     {
         const auto& self = static_cast<const Derived&>(*this);
         for (std::size_t n = 0; n < points.size(); ++n) {
-            const Dual3 f = self.eval(Dual3(points[n][0], 1, 0, 0), Dual3(points[n][1], 0, 1, 0),
-                                      Dual3(points[n][2], 0, 0, 1));
+            const Dual3 f =
+                self.eval(Dual3(points[n][0], 1, 0, 0), Dual3(points[n][1], 0, 1, 0), Dual3(points[n][2], 0, 0, 1));
             out[n] = f.v;
             grad[n] = Vec3d(f.d[0], f.d[1], f.d[2]);
         }
     }
     Interval bound(const Box3& box) const override
     {
-        return static_cast<const Derived&>(*this).eval(Interval(box.min[0], box.max[0]),
-                                                        Interval(box.min[1], box.max[1]),
-                                                        Interval(box.min[2], box.max[2]));
+        return static_cast<const Derived&>(*this).eval(
+            Interval(box.min[0], box.max[0]), Interval(box.min[1], box.max[1]), Interval(box.min[2], box.max[2]));
     }
 };
 

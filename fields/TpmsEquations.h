@@ -42,21 +42,26 @@ template <typename T>
 T tpmsEquation(TpmsType type, const TrigTerms<T>& x, const TrigTerms<T>& y, const TrigTerms<T>& z)
 {
     switch (type) {
-    case TpmsType::Gyroid: return x.s * y.c + y.s * z.c + z.s * x.c;
-    case TpmsType::SchwarzP: return x.c + y.c + z.c;
-    case TpmsType::SchwarzD:
-        return x.s * y.s * z.s + x.s * y.c * z.c + x.c * y.s * z.c + x.c * y.c * z.s;
-    case TpmsType::IWP: return 2.0 * (x.c * y.c + y.c * z.c + z.c * x.c) - (x.c2 + y.c2 + z.c2);
-    case TpmsType::Neovius: return 3.0 * (x.c + y.c + z.c) + 4.0 * x.c * y.c * z.c;
-    case TpmsType::FischerKochS: return x.c2 * y.s * z.c + x.c * y.c2 * z.s + x.s * y.c * z.c2;
-    case TpmsType::Lidinoid:
-        return (x.s2 * y.c * z.s + y.s2 * z.c * x.s + z.s2 * x.c * y.s) -
-               (x.c2 * y.c2 + y.c2 * z.c2 + z.c2 * x.c2) + 0.3;
-    case TpmsType::SplitP:
-        return 1.1 * (x.s2 * y.c * z.s + y.s2 * z.c * x.s + z.s2 * x.c * y.s) -
-               0.2 * (x.c2 * y.c2 + y.c2 * z.c2 + z.c2 * x.c2) - 0.4 * (x.c2 + y.c2 + z.c2);
-    case TpmsType::FRD:
-        return 8.0 * x.c * y.c * z.c + x.c2 * y.c2 * z.c2 - (x.c2 * y.c2 + y.c2 * z.c2 + z.c2 * x.c2);
+        case TpmsType::Gyroid:
+            return x.s * y.c + y.s * z.c + z.s * x.c;
+        case TpmsType::SchwarzP:
+            return x.c + y.c + z.c;
+        case TpmsType::SchwarzD:
+            return x.s * y.s * z.s + x.s * y.c * z.c + x.c * y.s * z.c + x.c * y.c * z.s;
+        case TpmsType::IWP:
+            return 2.0 * (x.c * y.c + y.c * z.c + z.c * x.c) - (x.c2 + y.c2 + z.c2);
+        case TpmsType::Neovius:
+            return 3.0 * (x.c + y.c + z.c) + 4.0 * x.c * y.c * z.c;
+        case TpmsType::FischerKochS:
+            return x.c2 * y.s * z.c + x.c * y.c2 * z.s + x.s * y.c * z.c2;
+        case TpmsType::Lidinoid:
+            return (x.s2 * y.c * z.s + y.s2 * z.c * x.s + z.s2 * x.c * y.s) -
+                   (x.c2 * y.c2 + y.c2 * z.c2 + z.c2 * x.c2) + 0.3;
+        case TpmsType::SplitP:
+            return 1.1 * (x.s2 * y.c * z.s + y.s2 * z.c * x.s + z.s2 * x.c * y.s) -
+                   0.2 * (x.c2 * y.c2 + y.c2 * z.c2 + z.c2 * x.c2) - 0.4 * (x.c2 + y.c2 + z.c2);
+        case TpmsType::FRD:
+            return 8.0 * x.c * y.c * z.c + x.c2 * y.c2 * z.c2 - (x.c2 * y.c2 + y.c2 * z.c2 + z.c2 * x.c2);
     }
     return T(0.0);
 }

@@ -4,14 +4,22 @@
 
 namespace voxlat {
 
-UnaryField::UnaryField(FieldPtr child, UnaryOp op, double offset) : mChild(std::move(child)), mOp(op), mOffset(offset) {}
+UnaryField::UnaryField(FieldPtr child, UnaryOp op, double offset) : mChild(std::move(child)), mOp(op), mOffset(offset)
+{
+}
 
 double UnaryField::apply(double v, double& slope) const
 {
     switch (mOp) {
-    case UnaryOp::Negate: slope = -1.0; return -v;
-    case UnaryOp::Abs: slope = v < 0 ? -1.0 : 1.0; return std::abs(v);
-    case UnaryOp::Offset: slope = 1.0; return v + mOffset;
+        case UnaryOp::Negate:
+            slope = -1.0;
+            return -v;
+        case UnaryOp::Abs:
+            slope = v < 0 ? -1.0 : 1.0;
+            return std::abs(v);
+        case UnaryOp::Offset:
+            slope = 1.0;
+            return v + mOffset;
     }
     slope = 1.0;
     return v;
@@ -39,15 +47,15 @@ void UnaryField::gridValues(const GridBatch& batch, std::span<double> out) const
     mChild->gridValues(batch, out);
     // apply() with its case chosen once per batch.
     switch (mOp) {
-    case UnaryOp::Negate:
-        for (double& v : out) v = -v;
-        return;
-    case UnaryOp::Abs:
-        for (double& v : out) v = std::abs(v);
-        return;
-    case UnaryOp::Offset:
-        for (double& v : out) v += mOffset;
-        return;
+        case UnaryOp::Negate:
+            for (double& v : out) v = -v;
+            return;
+        case UnaryOp::Abs:
+            for (double& v : out) v = std::abs(v);
+            return;
+        case UnaryOp::Offset:
+            for (double& v : out) v += mOffset;
+            return;
     }
 }
 
@@ -55,9 +63,12 @@ Interval UnaryField::bound(const Box3& box) const
 {
     const Interval b = mChild->bound(box);
     switch (mOp) {
-    case UnaryOp::Negate: return -b;
-    case UnaryOp::Abs: return abs(b);
-    case UnaryOp::Offset: return b + mOffset;
+        case UnaryOp::Negate:
+            return -b;
+        case UnaryOp::Abs:
+            return abs(b);
+        case UnaryOp::Offset:
+            return b + mOffset;
     }
     return b;
 }

@@ -4,14 +4,14 @@
 #include "engine/recipe/Recipe.h"
 #include "mesher/extract/TriangleMesh.h"
 
+#include <sys/wait.h>
+#include <unistd.h>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <sstream>
 #include <string>
-#include <sys/wait.h>
-#include <unistd.h>
 #include <vector>
 
 namespace voxlat::test {
@@ -52,8 +52,14 @@ inline int runCommand(const std::string& command, std::string* output = nullptr)
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
-inline std::string voxlatBinary() { return VOXLAT_BINARY; }
-inline std::filesystem::path sourceDir() { return VOXLAT_SOURCE_DIR; }
+inline std::string voxlatBinary()
+{
+    return VOXLAT_BINARY;
+}
+inline std::filesystem::path sourceDir()
+{
+    return VOXLAT_SOURCE_DIR;
+}
 
 inline std::string readFile(const std::filesystem::path& p)
 {
@@ -71,8 +77,9 @@ inline std::vector<std::string> listFolder(const std::filesystem::path& p)
     return names;
 }
 
-inline /// A cube [lo, hi]^3 as 12 outward triangles.
-TriangleMesh cubeMesh(double lo, double hi)
+inline  /// A cube [lo, hi]^3 as 12 outward triangles.
+    TriangleMesh
+    cubeMesh(double lo, double hi)
 {
     TriangleMesh m;
     for (int i = 0; i < 8; ++i)

@@ -24,7 +24,8 @@ TEST(Cli, RunWritesOutputsAndReport)
     TempDir dir;
     const auto recipe = dir.write("small.yaml", kSmall);
     std::string out;
-    ASSERT_EQ(runCommand(voxlatBinary() + " run " + recipe.string() + " --out " + (dir.path / "out").string(), &out), 0) << out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " run " + recipe.string() + " --out " + (dir.path / "out").string(), &out), 0)
+        << out;
     for (const char* f : {"part.stl", "part.ply", "part.vdb", "report.json"})
         EXPECT_TRUE(std::filesystem::exists(dir.path / "out" / f)) << f;
     const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
@@ -64,14 +65,16 @@ TEST(Cli, BadInputExitsNonZeroAndWritesNothing)
     text.replace(text.find("density: 0.30"), 13, "density: 1.5");
     const auto recipe = dir.write("bad.yaml", text);
     std::string out;
-    EXPECT_NE(runCommand(voxlatBinary() + " run " + recipe.string() + " --out " + (dir.path / "out").string(), &out), 0);
+    EXPECT_NE(runCommand(voxlatBinary() + " run " + recipe.string() + " --out " + (dir.path / "out").string(), &out),
+              0);
     EXPECT_NE(out.find("bad.yaml:4:"), std::string::npos) << out;
     EXPECT_FALSE(std::filesystem::exists(dir.path / "out"));
     // Too much memory: refused before any output appears.
     std::string hugeText = kSmall;
     hugeText.replace(hugeText.find("voxel: 0.25"), 11, "voxel: 0.0005");
     const auto huge = dir.write("huge.yaml", hugeText);
-    EXPECT_EQ(runCommand(voxlatBinary() + " -q run " + huge.string() + " --out " + (dir.path / "out2").string(), &out), 3)
+    EXPECT_EQ(runCommand(voxlatBinary() + " -q run " + huge.string() + " --out " + (dir.path / "out2").string(), &out),
+              3)
         << out;
     EXPECT_NE(out.find("raise `voxel:`"), std::string::npos) << out;
     EXPECT_TRUE(!std::filesystem::exists(dir.path / "out2") || listFolder(dir.path / "out2").empty());
@@ -89,7 +92,8 @@ result: lattice
 )");
     const auto input = dir.write("points.txt", "1 2 3\n# comment\n-4.5 0.25 7\n");
     std::string out;
-    ASSERT_EQ(runCommand(voxlatBinary() + " sample " + recipe.string() + " --gradient < " + input.string(), &out), 0) << out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " sample " + recipe.string() + " --gradient < " + input.string(), &out), 0)
+        << out;
     std::istringstream lines(out);
     for (const auto& p : {std::array<double, 3>{1, 2, 3}, std::array<double, 3>{-4.5, 0.25, 7}}) {
         const double k = 2 * std::numbers::pi / 10, X = k * p[0], Y = k * p[1], Z = k * p[2];
@@ -107,7 +111,10 @@ TEST(Cli, AcceptanceRecipeRunsUnchanged)
     TempDir dir;
     std::string out;
     ASSERT_EQ(runCommand(voxlatBinary() + " -q run " + (sourceDir() / "data/recipes/gyroid.yaml").string() + " --out " +
-                             dir.path.string(), &out), 0) << out;
+                             dir.path.string(),
+                         &out),
+              0)
+        << out;
     const auto report = nlohmann::json::parse(readFile(dir.path / "report.json"));
     const double achieved = report["fields"]["lattice"]["achieved_density"].get<double>();
     EXPECT_NEAR(achieved, 0.30, 0.0015);

@@ -1,9 +1,10 @@
 // Engine core: sparse evaluation against brute force, determinism, density solve measured
 // independently (Monte Carlo on the analytic field and mesh volume).
-#include "engine/density/DensitySolver.h"
+#include "TestUtil.h"
 #include "engine/core/GridMeasure.h"
-#include "engine/jobs/Job.h"
 #include "engine/core/SparseEvaluator.h"
+#include "engine/density/DensitySolver.h"
+#include "engine/jobs/Job.h"
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
 #include "fields/LevelSolid.h"
@@ -12,7 +13,6 @@
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
 #include "mesher/writers/MeshWriters.h"
-#include "TestUtil.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -31,7 +31,8 @@ FieldPtr gyroidSolid(SolidSide side, double level, double cell = 10.0)
 
 FieldPtr clipped(FieldPtr f, const Domain& d)
 {
-    return std::make_shared<BooleanField>(BooleanOp::Intersection, std::vector<FieldPtr>{f, std::make_shared<BoxField>(d.box)});
+    return std::make_shared<BooleanField>(BooleanOp::Intersection,
+                                          std::vector<FieldPtr>{f, std::make_shared<BoxField>(d.box)});
 }
 
 /// Share of uniformly random points of the domain where the field is negative.

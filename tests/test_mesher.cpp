@@ -1,8 +1,8 @@
 // Tests of the mesher: marching cubes topology and determinism, mesh checks, writers.
 
-#include "mesher/writers/AtomicFile.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
+#include "mesher/writers/AtomicFile.h"
 #include "mesher/writers/MeshWriters.h"
 
 #include <gtest/gtest.h>

@@ -4,8 +4,8 @@
 // keys (`orient` node, `axes:` on tpms), bad input, and the acceptance recipe's mesh.
 #include "FieldChecks.h"
 #include "TestUtil.h"
-#include "engine/recipe/ExprNodes.h"
 #include "engine/jobs/Job.h"
+#include "engine/recipe/ExprNodes.h"
 #include "engine/recipe/Recipe.h"
 #include "fields/Constant.h"
 #include "fields/ExprField.h"

@@ -1,11 +1,11 @@
 // Periodic lattices: a box of identical cells tabled one period deep (PeriodicTiling) and its
 // density measured on one period of the interior (periodicPieces), each against the direct way.
 #include "TestUtil.h"
-#include "engine/density/DensitySolver.h"
-#include "engine/jobs/Job.h"
 #include "engine/core/SparseEvaluator.h"
+#include "engine/density/DensitySolver.h"
 #include "engine/frames/StrutFrames.h"
 #include "engine/frames/UnitCells.h"
+#include "engine/jobs/Job.h"
 #include "fields/IsoRadius.h"
 #include "fields/PeriodicTiling.h"
 #include "fields/PointField.h"

@@ -1,8 +1,8 @@
 // Recipe loading: every bad input gives one message naming the file, the line and the fix.
-#include "engine/recipe/FieldBuilder.h"
-#include "engine/jobs/Job.h"
-#include "engine/recipe/Recipe.h"
 #include "TestUtil.h"
+#include "engine/jobs/Job.h"
+#include "engine/recipe/FieldBuilder.h"
+#include "engine/recipe/Recipe.h"
 
 #include <gtest/gtest.h>
 
@@ -62,7 +62,8 @@ TEST(Recipe, UnknownKeySuggestsTheClosest)
 
 TEST(Recipe, WrongTypesAndRanges)
 {
-    EXPECT_NE(errorOf(replace(kGood, "cell: 5", "cell: five")).find("expected a number, got `five`"), std::string::npos);
+    EXPECT_NE(errorOf(replace(kGood, "cell: 5", "cell: five")).find("expected a number, got `five`"),
+              std::string::npos);
     const std::string density = errorOf(replace(kGood, "density: 0.30", "density: 30"));
     EXPECT_NE(density.find("between 0 and 1"), std::string::npos) << density;
     EXPECT_NE(density.find("bad.yaml:5:"), std::string::npos) << density;
@@ -80,7 +81,8 @@ TEST(Recipe, WrongTypesAndRanges)
 
 TEST(Recipe, FieldReferences)
 {
-    EXPECT_NE(errorOf(replace(kGood, "result: lattice", "result: latice")).find("did you mean `lattice`?"), std::string::npos);
+    EXPECT_NE(errorOf(replace(kGood, "result: lattice", "result: latice")).find("did you mean `lattice`?"),
+              std::string::npos);
     const std::string cyclic = R"(voxel: 0.5
 domain: {box: [[0, 0, 0], [10, 10, 10]]}
 fields:

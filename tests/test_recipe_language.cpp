@@ -3,9 +3,9 @@
 // every ```yaml example of the docs run as a recipe (blocks tagged ```yaml <kind>, such as
 // `printer-profile`, show other file formats and are left out).
 #include "TestUtil.h"
+#include "engine/jobs/Job.h"
 #include "engine/recipe/ExprNodes.h"
 #include "engine/recipe/FieldBuilder.h"
-#include "engine/jobs/Job.h"
 #include "engine/recipe/Recipe.h"
 #include "engine/recipe/RecipeParams.h"
 #include "engine/recipe/Schema.h"

@@ -3,9 +3,9 @@
 // continuity across cell faces, bad input, recipes end to end.
 #include "TestUtil.h"
 #include "engine/core/Errors.h"
+#include "engine/frames/SkinFrame.h"
 #include "engine/jobs/Job.h"
 #include "engine/parts/MeshSdf.h"
-#include "engine/frames/SkinFrame.h"
 #include "fields/BoxField.h"
 #include "fields/MeshDistance.h"
 #include "fields/SkinMap.h"

@@ -1,11 +1,11 @@
 // Strut lattices: the closed-form segment integral against quadrature, its cut-off bound, the
 // convolution and capsule nodes (gradients, bounds, fast path), unit cells, frames, recipes.
 #include "TestUtil.h"
-#include "engine/density/DensitySolver.h"
-#include "engine/jobs/Job.h"
 #include "engine/core/SparseEvaluator.h"
+#include "engine/density/DensitySolver.h"
 #include "engine/frames/StrutFrames.h"
 #include "engine/frames/UnitCells.h"
+#include "engine/jobs/Job.h"
 #include "fields/GaussianTable.h"
 #include "fields/Sphere.h"
 #include "fields/StrutCapsules.h"

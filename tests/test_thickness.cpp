@@ -526,9 +526,10 @@ fields:
   tx: {expr: "x - 4"}
 )";
     const auto build = [&](const std::string& direction) {
-        const Recipe r = parseRecipe(head + "  s: {tpms: gyroid, cell: 8, solid: sheet, wall: 0.4, layer: 0.2, build: " +
-                                         direction + "}\nresult: s\n",
-                                     "v.yaml", ".");
+        const Recipe r =
+            parseRecipe(head + "  s: {tpms: gyroid, cell: 8, solid: sheet, wall: 0.4, layer: 0.2, build: " + direction +
+                            "}\nresult: s\n",
+                        "v.yaml", ".");
         Job job(r);
         return job.field("s");
     };
@@ -541,4 +542,3 @@ fields:
         largest = std::max(largest, std::abs(byVector->value(p) - vertical->value(p)));
     EXPECT_GT(largest, 1e-3);
 }
-

@@ -2,14 +2,14 @@
 #include "engine/core/Errors.h"
 #include "engine/core/Version.h"
 #include "engine/jobs/Job.h"
-#include "engine/recipe/RecipeParams.h"
 #include "engine/jobs/PrinterProfile.h"
+#include "engine/recipe/RecipeParams.h"
 #include "engine/recipe/Schema.h"
 #include "engine/recipe/SliceSettings.h"
 #include "tools/TerminalProgress.h"
 
-#include <CLI/CLI.hpp>
 #include <tbb/global_control.h>
+#include <CLI/CLI.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -29,7 +29,8 @@ struct Common {
 void addCommon(CLI::App* cmd, Common& c)
 {
     cmd->add_option("recipe", c.recipe, "recipe file (YAML)")->required();
-    cmd->add_option("--set", c.sets, "override a recipe key, e.g. --set voxel=0.2 or --set fields.lattice.density=0.25");
+    cmd->add_option("--set", c.sets,
+                    "override a recipe key, e.g. --set voxel=0.2 or --set fields.lattice.density=0.25");
 }
 
 void printSummary(voxlat::Job& job)
@@ -128,9 +129,11 @@ int main(int argc, char** argv)
     sliceCmd->add_option("--printer", slicePrinter, "printer profile: " + printers + " or a profile file");
     sliceCmd->add_option("-o,--output", sliceFile, "archive (.sl1, .sl1s, .zip) or folder (with --format png|exr)");
     sliceCmd->add_option("--layer", sliceLayer, "layer height in mm (default: the recipe's, else the printer's)");
-    sliceCmd->add_option("--aa", sliceAa, "anti-aliasing: on (default), off (binary, pixel centre) or sub-samples per axis");
+    sliceCmd->add_option("--aa", sliceAa,
+                         "anti-aliasing: on (default), off (binary, pixel centre) or sub-samples per axis");
     sliceCmd->add_option("--gamma", sliceGamma, "grey = 255 * coverage^gamma; 0 = threshold at half coverage");
-    sliceCmd->add_option("--position", slicePosition, "where the part's centre goes on the display, X Y in mm")->expected(2);
+    sliceCmd->add_option("--position", slicePosition, "where the part's centre goes on the display, X Y in mm")
+        ->expected(2);
     sliceCmd->add_option("--format", sliceFormat, "archive format: " + formats);
     sliceCmd->add_option("--preview", slicePreview, "contact-sheet PNG (default FILE.preview.png; `off` for none)");
 
@@ -171,7 +174,8 @@ int main(int argc, char** argv)
             for (int i = 0; i < checkRepeat; ++i) {
                 const auto start = std::chrono::steady_clock::now();
                 job = std::make_unique<voxlat::Job>(voxlat::loadRecipe(checkArgs.recipe, checkArgs.sets), &context);
-                ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+                ms.push_back(
+                    std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
             }
             std::sort(ms.begin(), ms.end());
             std::cout << "ok: " << job->recipe().fieldNames.size() << " fields, result `" << job->recipe().result

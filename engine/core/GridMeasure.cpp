@@ -39,14 +39,18 @@ BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& 
             const float* data = leaf->buffer().data();
             if (region.isInside(box)) {
                 for (int i = 0; i < 512; ++i) {
-                    if (data[i] < lo) ++belowPerLeaf[n];
-                    else if (data[i] <= hi) perLeaf[n].push_back(data[i]);
+                    if (data[i] < lo)
+                        ++belowPerLeaf[n];
+                    else if (data[i] <= hi)
+                        perLeaf[n].push_back(data[i]);
                 }
             } else {
                 for (int i = 0; i < 512; ++i) {
                     if (!region.isInside(leaf->offsetToGlobalCoord(i))) continue;
-                    if (data[i] < lo) ++belowPerLeaf[n];
-                    else if (data[i] <= hi) perLeaf[n].push_back(data[i]);
+                    if (data[i] < lo)
+                        ++belowPerLeaf[n];
+                    else if (data[i] <= hi)
+                        perLeaf[n].push_back(data[i]);
                 }
             }
         }

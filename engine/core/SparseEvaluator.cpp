@@ -45,7 +45,10 @@ Side classify(const FieldNode& f, const BoxField* clip, const Domain& d, const C
     return Side::Straddle;
 }
 
-int floorTo(int v, int step) { return int(std::floor(double(v) / step)) * step; }
+int floorTo(int v, int step)
+{
+    return int(std::floor(double(v) / step)) * step;
+}
 
 struct BlockResult {
     bool insideTile = false;
@@ -96,9 +99,15 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                             const Coord lo(x, y, z);
                             if (!region.hasOverlap(CoordBBox(lo, lo + Coord(kLeafDim - 1)))) continue;
                             switch (classify(field, clip.get(), domain, lo, kLeafDim, options.band)) {
-                            case Side::Inside: r.insideLeafTiles.push_back(lo); break;
-                            case Side::Outside: ++r.culled; break;
-                            case Side::Straddle: r.leaves.push_back(lo); break;
+                                case Side::Inside:
+                                    r.insideLeafTiles.push_back(lo);
+                                    break;
+                                case Side::Outside:
+                                    ++r.culled;
+                                    break;
+                                case Side::Straddle:
+                                    r.leaves.push_back(lo);
+                                    break;
                             }
                         }
                 progress.add();

@@ -19,14 +19,14 @@ struct SparseOptions {
     /// each box grown by one voxel, so every grid edge that crosses a level inside the interval
     /// has both ends in evaluated leaves (what the mesher relies on).
     Interval band{0.0, 0.0};
-    float insideValue = -1.0f;   ///< value of inside tiles
-    float outsideValue = 1.0f;   ///< background
-    int margin = 1;              ///< voxels beyond the domain on every side (1 caps the mesh)
+    float insideValue = -1.0f;  ///< value of inside tiles
+    float outsideValue = 1.0f;  ///< background
+    int margin = 1;             ///< voxels beyond the domain on every side (1 caps the mesh)
     /// Intersect with the domain box (max with its signed distance) so the solid is capped where
     /// it meets the domain. Applied to leaves within a voxel of the boundary only: deeper inside
     /// the box's distance is below -1.5 voxels and never changes a sign.
     bool clipToDomain = false;
-    std::uint64_t maxLeaves = 0; ///< 0: as many as available memory allows
+    std::uint64_t maxLeaves = 0;  ///< 0: as many as available memory allows
     std::string stage = "evaluating field";
     const JobContext* context = nullptr;  ///< progress and cancellation (none: silent)
 };

@@ -17,7 +17,10 @@ std::uint64_t readKiloBytes(const char* path, const std::string& key)
 }
 }  // namespace
 
-std::uint64_t peakMemoryBytes() { return readKiloBytes("/proc/self/status", "VmHWM:"); }
+std::uint64_t peakMemoryBytes()
+{
+    return readKiloBytes("/proc/self/status", "VmHWM:");
+}
 
 std::uint64_t availableMemoryBytes()
 {

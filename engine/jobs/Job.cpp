@@ -1,16 +1,16 @@
 #include "engine/jobs/Job.h"
 
-#include "engine/density/DensitySolver.h"
 #include "engine/core/Format.h"
 #include "engine/core/GridMeasure.h"
-#include "engine/recipe/RecipeParams.h"
-#include "engine/jobs/SliceJob.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/core/SystemInfo.h"
 #include "engine/core/Version.h"
+#include "engine/density/DensitySolver.h"
+#include "engine/jobs/SliceJob.h"
+#include "engine/recipe/RecipeParams.h"
 #include "fields/GradedLevel.h"
-#include "mesher/writers/AtomicFile.h"
 #include "mesher/extract/MarchingCubes.h"
+#include "mesher/writers/AtomicFile.h"
 #include "mesher/writers/MeshPreview.h"
 #include "mesher/writers/MeshWriters.h"
 
@@ -52,7 +52,10 @@ Domain domainOf(const Recipe& recipe, const FieldNode& result)
     return Domain::fromBox(box, v);
 }
 
-nlohmann::json vec(const Vec3d& v) { return {v[0], v[1], v[2]}; }
+nlohmann::json vec(const Vec3d& v)
+{
+    return {v[0], v[1], v[2]};
+}
 
 /// Target (mean of the density field over the slab's voxel centres, sampled with a stride) and
 /// achieved (inside voxels of the grid) density per slab of @a slab mm along @a axis.
@@ -99,17 +102,16 @@ auto Job::timed(const std::string& stage, Fn&& fn)
         nlohmann::json& timings;
         const std::string& stage;
         std::chrono::steady_clock::time_point start;
-        ~Record()
-        {
-            timings[stage] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-        }
+        ~Record() { timings[stage] = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); }
     } record{mTimings, stage, start};
     return fn();
 }
 
 Job::Job(Recipe recipe, JobContext* context)
-    : mOwnContext(context ? nullptr : std::make_unique<JobContext>()), mContext(context ? context : mOwnContext.get()),
-      mRecipe(std::move(recipe)), mBuilder(mRecipe, *mContext)
+    : mOwnContext(context ? nullptr : std::make_unique<JobContext>()),
+      mContext(context ? context : mOwnContext.get()),
+      mRecipe(std::move(recipe)),
+      mBuilder(mRecipe, *mContext)
 {
     timed("build fields", [&] {
         // Build every field, so a mistake anywhere in the recipe is reported before any work.
@@ -118,7 +120,8 @@ Job::Job(Recipe recipe, JobContext* context)
         return 0;
     });
     mDomain = domainOf(mRecipe, *mResult);
-    for (const FieldBuilder::Preparation& p : mBuilder.preparations()) timed(p.stage, [&] {
+    for (const FieldBuilder::Preparation& p : mBuilder.preparations())
+        timed(p.stage, [&] {
             p.run();
             return 0;
         });
@@ -136,12 +139,16 @@ Job::Job(Recipe recipe, JobContext* context)
     if (mRecipe.domainBox) {
         for (int a = 0; a < 3; ++a)
             if (std::abs(mDomain.box.max[a] - mRecipe.domainBox->max[a]) > 1e-6 * mDomain.voxel)
-                mContext->warn("domain_snapped",
-                               "the domain is snapped to a whole number of voxels: " + formatNumber(mDomain.box.max[a]) +
-                                   " instead of " + formatNumber(mRecipe.domainBox->max[a]) + " on axis " + "xyz"[a],
-                               {{"axis", std::string(1, "xyz"[a])},
-                                {"snapped_mm", mDomain.box.max[a]},
-                                {"recipe_mm", mRecipe.domainBox->max[a]}});
+                mContext->warn(
+                    "domain_snapped",
+                    "the domain is snapped to a whole number of voxels: " + formatNumber(mDomain.box.max[a]) +
+                        " instead of " + formatNumber(mRecipe.domainBox->max[a]) + " on axis " + "xyz" [a],
+                    {
+                        {"axis", std::string(1, "xyz"[a])}, {"snapped_mm", mDomain.box.max[a]},
+                        {
+                            "recipe_mm", mRecipe.domainBox->max[a]
+                        }
+                    });
     }
 }
 
@@ -159,12 +166,13 @@ void Job::solveLevels()
                     : std::vector<DensityPiece>{};
             const DensitySolution s = timed("solve " + node.name, [&] {
                 if (!pieces.empty())
-                    return solveDensity(node.densityIndicator ? *node.densityIndicator : *node.solid->indicator(), pieces,
-                                        *node.density, mContext);
+                    return solveDensity(node.densityIndicator ? *node.densityIndicator : *node.solid->indicator(),
+                                        pieces, *node.density, mContext);
                 return solveDensity(*node.solid->indicator(),
-                                    node.densityBox && node.densityVoxel ? Domain::fromBox(*node.densityBox, *node.densityVoxel)
-                                    : node.densityBox                     ? mDomain.subDomain(*node.densityBox)
-                                                                          : mDomain,
+                                    node.densityBox && node.densityVoxel
+                                        ? Domain::fromBox(*node.densityBox, *node.densityVoxel)
+                                    : node.densityBox ? mDomain.subDomain(*node.densityBox)
+                                                      : mDomain,
                                     *node.density, node.densityMask.get(), node.subVoxelDensity, mContext);
             });
             if (node.densityMask) entry["density_of"] = node.densityOf;
@@ -175,7 +183,9 @@ void Job::solveLevels()
             entry["solve_rounds"] = s.rounds;
             entry["density_measure"] = s.coverage ? "sub-voxel coverage" : "voxel count";
             entry["evaluated_leaves"] = s.evaluatedLeaves;
-            if (!pieces.empty()) entry["density_measured_on"] = "one period of the interior (" + std::to_string(pieces.size()) + " weighted pieces)";
+            if (!pieces.empty())
+                entry["density_measured_on"] =
+                    "one period of the interior (" + std::to_string(pieces.size()) + " weighted pieces)";
         }
         entry["level"] = node.solid->level();
         fields[node.name] = entry;
@@ -184,10 +194,11 @@ void Job::solveLevels()
         const auto& table = static_cast<const GradedLevel&>(*node.node).table();
         fields[node.name] = {{"type", node.description + " (graded)"},
                              {"target_density", node.density},
-                             {"density_table", {{"samples", table.sampleCount()},
-                                                {"level_at_10_percent", table.levelAt(0.1)},
-                                                {"level_at_50_percent", table.levelAt(0.5)},
-                                                {"level_at_90_percent", table.levelAt(0.9)}}}};
+                             {"density_table",
+                              {{"samples", table.sampleCount()},
+                               {"level_at_10_percent", table.levelAt(0.1)},
+                               {"level_at_50_percent", table.levelAt(0.5)},
+                               {"level_at_90_percent", table.levelAt(0.9)}}}};
     }
     mReport["fields"] = fields;
     mSolved = true;
@@ -218,22 +229,24 @@ const openvdb::FloatGrid& Job::grid()
                          {"volume_mm3", double(inside) * std::pow(mDomain.voxel, 3)},
                          {"evaluated_leaves", stats.leaves},
                          {"inside_tiles", stats.insideTiles}};
-    if (!mBuilder.gradedNodes().empty()) timed("measure slabs", [&] {
-        for (const GradedNode& node : mBuilder.gradedNodes()) {
-            // Measure the graded node itself: on the result grid when it is the result, else on
-            // a grid of its own.
-            openvdb::FloatGrid::ConstPtr own = mGrid;
-            if (node.node != mResult) {
-                SparseOptions options;
-                options.clipToDomain = true;
-                options.stage = "measuring " + node.name;
-                options.context = mContext;
-                own = evaluateSparse(*node.node, mDomain, options);
+    if (!mBuilder.gradedNodes().empty())
+        timed("measure slabs", [&] {
+            for (const GradedNode& node : mBuilder.gradedNodes()) {
+                // Measure the graded node itself: on the result grid when it is the result, else on
+                // a grid of its own.
+                openvdb::FloatGrid::ConstPtr own = mGrid;
+                if (node.node != mResult) {
+                    SparseOptions options;
+                    options.clipToDomain = true;
+                    options.stage = "measuring " + node.name;
+                    options.context = mContext;
+                    own = evaluateSparse(*node.node, mDomain, options);
+                }
+                mReport["fields"][node.name]["slabs"] =
+                    densityBySlab(*own, mDomain, *node.densityField, node.axis, node.slab);
             }
-            mReport["fields"][node.name]["slabs"] = densityBySlab(*own, mDomain, *node.densityField, node.axis, node.slab);
-        }
-        return 0;
-    });
+            return 0;
+        });
     return *mGrid;
 }
 

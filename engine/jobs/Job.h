@@ -8,8 +8,8 @@
 #include "engine/recipe/Recipe.h"
 #include "mesher/extract/TriangleMesh.h"
 
-#include <nlohmann/json.hpp>
 #include <openvdb/openvdb.h>
+#include <nlohmann/json.hpp>
 
 #include <filesystem>
 

@@ -1,8 +1,8 @@
 #include "engine/parts/MeshDesignSpace.h"
 
 #include "engine/core/Errors.h"
-#include "engine/parts/MeshSdf.h"
 #include "engine/core/SystemInfo.h"
+#include "engine/parts/MeshSdf.h"
 #include "mesher/extract/MeshCheck.h"
 
 #include <openvdb/tools/MeshToVolume.h>

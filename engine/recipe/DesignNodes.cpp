@@ -1,7 +1,7 @@
 // Recipe node types for design spaces from meshes, shells, infill, and the conformal frames of
 // lattices (issue 6).
-#include "engine/recipe/FieldBuilder.h"
 #include "engine/parts/MeshDesignSpace.h"
+#include "engine/recipe/FieldBuilder.h"
 #include "fields/Boolean.h"
 #include "fields/CoordinateMap.h"
 #include "fields/Unary.h"
@@ -259,19 +259,18 @@ void addDesignNodeTypes(std::vector<NodeType>& types)
                               {"part", "thickness"}),
                        "a solid wall inside a part's surface: {part, thickness}", "required"}},
                      buildShell});
-    types.push_back(
-        {"infill",
-         {{"infill",
-           object({{"part", field(), "the part (a mesh or any closed field)", "required"},
-                   {"lattice", field(), "the lattice filling the core", "required"},
-                   {"skin", number(), "skin thickness inside the part's surface (mm)", "0"},
-                   {"density", density(), "the lattice's share of the space inside the skin", "—"},
-                   {"blend", number(), "smooth-union radius where lattice meets skin (mm)", "0"},
-                   {"material_density", number(), "material density (g/cm^3) for the part's mass", "—"}},
-                  {"part", "lattice"}),
-           "skin plus a lattice filling the rest: {part, lattice, skin, density, blend, material_density}",
-           "required"}},
-         buildInfill});
+    types.push_back({"infill",
+                     {{"infill",
+                       object({{"part", field(), "the part (a mesh or any closed field)", "required"},
+                               {"lattice", field(), "the lattice filling the core", "required"},
+                               {"skin", number(), "skin thickness inside the part's surface (mm)", "0"},
+                               {"density", density(), "the lattice's share of the space inside the skin", "—"},
+                               {"blend", number(), "smooth-union radius where lattice meets skin (mm)", "0"},
+                               {"material_density", number(), "material density (g/cm^3) for the part's mass", "—"}},
+                              {"part", "lattice"}),
+                       "skin plus a lattice filling the rest: {part, lattice, skin, density, blend, material_density}",
+                       "required"}},
+                     buildInfill});
 }
 
 }  // namespace voxlat

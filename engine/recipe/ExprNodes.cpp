@@ -90,8 +90,9 @@ FieldPtr buildVector(FieldBuilder& builder, const RecipeNode& spec, const std::s
 /// A direction field that is @a v everywhere.
 std::shared_ptr<const VectorField> constantDirection(const Vec3d& v)
 {
-    return std::make_shared<VectorField>(std::array<FieldPtr, 3>{
-        std::make_shared<ConstantField>(v[0]), std::make_shared<ConstantField>(v[1]), std::make_shared<ConstantField>(v[2])});
+    return std::make_shared<VectorField>(std::array<FieldPtr, 3>{std::make_shared<ConstantField>(v[0]),
+                                                                 std::make_shared<ConstantField>(v[1]),
+                                                                 std::make_shared<ConstantField>(v[2])});
 }
 
 FieldPtr buildOrient(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
@@ -118,7 +119,8 @@ FieldPtr equationField(FieldBuilder& builder, const RecipeNode& textNode)
             std::string known;
             if (e.unknownName()[0] == '$') {
                 for (const auto& [p, v] : recipe.params) candidates.push_back("$" + p);
-                known = candidates.empty() ? "the recipe declares no `params:`" : "parameters: " + joinWords(candidates);
+                known =
+                    candidates.empty() ? "the recipe declares no `params:`" : "parameters: " + joinWords(candidates);
             } else {
                 candidates = recipe.fieldNames;
                 for (const auto& c : exprConstantNames()) candidates.push_back(c);
@@ -142,8 +144,8 @@ std::shared_ptr<const VectorField> directionField(FieldBuilder& builder, const R
         const std::vector<std::string>& names = builder.recipe().fieldNames;
         if (std::find(names.begin(), names.end(), spec.string()) == names.end()) {
             const std::string guess = closestMatch(spec.string(), names);
-            spec.fail("no field named `" + spec.string() + "`" + (guess.empty() ? "" : "; did you mean `" + guess + "`?") +
-                      " (fields: " + joinWords(names) + ")");
+            spec.fail("no field named `" + spec.string() + "`" +
+                      (guess.empty() ? "" : "; did you mean `" + guess + "`?") + " (fields: " + joinWords(names) + ")");
         }
     }
     auto f = std::dynamic_pointer_cast<const VectorField>(builder.operand(spec, name));
@@ -155,9 +157,10 @@ FieldPtr orientedField(FieldBuilder& builder, const RecipeNode& spec, FieldPtr c
 {
     if (spec.isMap()) spec.checkKeys({"along", "x", "origin"});
     if (!spec.isMap() || !(spec.has("along") || spec.has("x")))
-        spec.fail("expected an orientation {along: DIRECTION, x: DIRECTION, origin: [x, y, z]} with `along` (the "
-                  "cells' z axis) or `x` (their x axis) or both; a direction is the name of a `vector` field, "
-                  "{vector: [...]} or [x, y, z]");
+        spec.fail(
+            "expected an orientation {along: DIRECTION, x: DIRECTION, origin: [x, y, z]} with `along` (the "
+            "cells' z axis) or `x` (their x axis) or both; a direction is the name of a `vector` field, "
+            "{vector: [...]} or [x, y, z]");
     // Constant directions are checked here, where the recipe line is known; fields at run time.
     for (const char* key : {"along", "x"})
         if (spec.has(key) && spec[key].isSequence() && spec[key].size() == 3 && spec[key].vec3().length() <= 0.0)
@@ -179,7 +182,9 @@ void addExprNodeTypes(std::vector<NodeType>& types)
     using namespace valueSchema;
     types.push_back({"expr",
                      {{"expr", string(), "an equation in x, y, z, $params and field names", "required"},
-                      solidKey(), levelKey(), densityKey()},
+                      solidKey(),
+                      levelKey(),
+                      densityKey()},
                      buildExpr});
     types.push_back({"vector",
                      {{"vector",
@@ -187,13 +192,14 @@ void addExprNodeTypes(std::vector<NodeType>& types)
                         {"items", {{"anyOf", {{{"type", "number"}}, {{"type", "string"}}}}}},
                         {"minItems", 3},
                         {"maxItems", 3}},
-                       "three components: numbers or equations", "required"}},
+                       "three components: numbers or equations",
+                       "required"}},
                      buildVector});
-    types.push_back({"orient",
-                     {{"orient", orientationSchema(), "a frame field: the field's axes follow it point by point",
-                       "required"},
-                      {"field", field(), "the field turned", "required"}},
-                     buildOrient});
+    types.push_back(
+        {"orient",
+         {{"orient", orientationSchema(), "a frame field: the field's axes follow it point by point", "required"},
+          {"field", field(), "the field turned", "required"}},
+         buildOrient});
 }
 
 }  // namespace voxlat

@@ -99,8 +99,8 @@ nlohmann::json orientationSchema()
     using namespace valueSchema;
     const char* direction = "a direction: a vector field's name, {vector: [...]} or [x, y, z]";
     return object({{"along", anything(), std::string("the cells' z axis; ") + direction, "[0, 0, 1]"},
-                   {"x", anything(), std::string("reference for the cells' x axis (made orthogonal to z); ") + direction,
-                    "[1, 0, 0]"},
+                   {"x", anything(),
+                    std::string("reference for the cells' x axis (made orthogonal to z); ") + direction, "[1, 0, 0]"},
                    {"origin", vec3(), "the point the cells are rotated about (mm)", "[0, 0, 0]"}});
 }
 

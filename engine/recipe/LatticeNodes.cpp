@@ -39,13 +39,17 @@ ShiftSpec readShiftSpec(FieldBuilder& builder, const RecipeNode& spec, const std
     shift.label = "field `" + name + "`";
     const bool uniform = spec.has("thickness");
     if (uniform && (spec.has("wall") || spec.has("layer")))
-        spec["thickness"].fail("give either `thickness:` (the same in every direction) or `wall:` and `layer:`, not both");
+        spec["thickness"].fail(
+            "give either `thickness:` (the same in every direction) or `wall:` and `layer:`, not both");
     if (!uniform && !(spec.has("wall") && spec.has("layer")))
-        spec[spec.has("wall") ? "wall" : spec.has("layer") ? "layer" : spec.has("build") ? "build" : "rotation"]
+        spec[spec.has("wall")    ? "wall"
+             : spec.has("layer") ? "layer"
+             : spec.has("build") ? "build"
+                                 : "rotation"]
             .fail("give `thickness:`, or both `wall:` (in the build plane) and `layer:` (along the build direction)");
     if (uniform && (spec.has("build") || spec.has("rotation")))
-        spec[spec.has("build") ? "build" : "rotation"]
-            .fail("a build direction only matters with `wall:` and `layer:`; `thickness:` is the same in every direction");
+        spec[spec.has("build") ? "build" : "rotation"].fail(
+            "a build direction only matters with `wall:` and `layer:`; `thickness:` is the same in every direction");
     double largest = 0.0;
     auto readThickness = [&](const std::string& key) {
         const RecipeNode node = spec[key];
@@ -80,7 +84,8 @@ ShiftSpec readShiftSpec(FieldBuilder& builder, const RecipeNode& spec, const std
                 for (std::size_t i = 0; i < 3; ++i)
                     shift.directionComponents[i] = readScalarMap(builder, b.at(i), name + "/build/" + "xyz"[i]).field;
                 description += ", build direction from three fields";
-            } else if (auto vector = std::dynamic_pointer_cast<const VectorField>(builder.operand(b, name + "/build"))) {
+            } else if (auto vector =
+                           std::dynamic_pointer_cast<const VectorField>(builder.operand(b, name + "/build"))) {
                 // A `vector:` direction field (by name or inline): its components are the direction.
                 for (int i = 0; i < 3; ++i) shift.directionComponents[i] = vector->component(i);
                 description += ", build direction from the vector field " +
@@ -93,10 +98,15 @@ ShiftSpec readShiftSpec(FieldBuilder& builder, const RecipeNode& spec, const std
         }
         if (spec.has("rotation")) {
             const std::string r = spec["rotation"].string();
-            if (r == "rodrigues") shift.rotation = ShiftRotation::Rodrigues;
-            else if (r == "tensor") shift.rotation = ShiftRotation::Tensor;
-            else spec["rotation"].fail("rotation is `rodrigues` (seed 004: the magnitude vector is rotated) or `tensor` "
-                                       "(the magnitude ellipsoid is rotated), got `" + r + "`");
+            if (r == "rodrigues")
+                shift.rotation = ShiftRotation::Rodrigues;
+            else if (r == "tensor")
+                shift.rotation = ShiftRotation::Tensor;
+            else
+                spec["rotation"].fail(
+                    "rotation is `rodrigues` (seed 004: the magnitude vector is rotated) or `tensor` "
+                    "(the magnitude ellipsoid is rotated), got `" +
+                    r + "`");
         }
     }
     // Seed 004: the shift stays uniform for gyroids while the wall is below ~10 % of the cell.
@@ -125,7 +135,8 @@ FieldPtr buildGraded(FieldBuilder& builder, const RecipeNode& spec, const std::s
                      SolidSide side, const Vec3d& cell, const std::string& description,
                      const FieldPtr& tableSource = nullptr)
 {
-    if (spec.has("level")) spec["level"].fail("give either `level:` or `density:`, not both (density solves the level)");
+    if (spec.has("level"))
+        spec["level"].fail("give either `level:` or `density:`, not both (density solves the level)");
     const RecipeNode d = spec["density"];
     ScalarMap rho = readScalarMap(builder, d, name + "/density");
     const FieldPtr indicator = LevelSolid(raw, side, 0.0).indicator();
@@ -151,8 +162,8 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
     if (!parseTpmsType(typeNode.string(), type)) {
         const auto names = tpmsNames();
         const std::string guess = closestMatch(typeNode.string(), names);
-        typeNode.fail("unknown TPMS `" + typeNode.string() + "`" + (guess.empty() ? "" : "; did you mean `" + guess + "`?") +
-                      " (known: " + joinWords(names) + ")");
+        typeNode.fail("unknown TPMS `" + typeNode.string() + "`" +
+                      (guess.empty() ? "" : "; did you mean `" + guess + "`?") + " (known: " + joinWords(names) + ")");
     }
     const RecipeNode cellNode = spec["cell"];
     const Vec3d cell = cellNode.scalarOrVec3();
@@ -169,8 +180,9 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
     // A skin frame's lattice exists only in its cells: its density is measured there.
     const FieldPtr region = skinRegionOf(raw);
     if (region && spec.has("density") && !spec["density"].isNumber())
-        spec["density"].fail("a graded density needs box cells (its table comes from one box cell); on a skin frame "
-                             "give one number");
+        spec["density"].fail(
+            "a graded density needs box cells (its table comes from one box cell); on a skin frame "
+            "give one number");
     if (spec.has("axes")) raw = orientedField(builder, spec["axes"], raw, name);
     if (hasShiftKeys(spec)) {
         const std::string key = spec.has("thickness") ? "thickness"
@@ -181,13 +193,16 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
         if (side != SolidSide::Band)
             spec[key].fail("a wall thickness makes a sheet: add `solid: sheet` (a network has no walls to thicken)");
         if (spec.has("level") || spec.has("density"))
-            spec[spec.has("level") ? "level" : "density"]
-                .fail("give either a thickness in millimetres or `level:`/`density:`, not both");
+            spec[spec.has("level") ? "level" : "density"].fail(
+                "give either a thickness in millimetres or `level:`/`density:`, not both");
         std::string walls;
         ShiftSpec shift = readShiftSpec(builder, spec, name, std::min({cell[0], cell[1], cell[2]}), walls);
         auto sheet = std::make_shared<GradientShift>(raw, std::move(shift));
-        LevelNode node{name, std::string(tpmsName(type)) + " sheet, " + walls + " (gradient shift)",
-                       std::make_shared<LevelSolid>(sheet, SolidSide::Below, 0.0), {}, {}};
+        LevelNode node{name,
+                       std::string(tpmsName(type)) + " sheet, " + walls + " (gradient shift)",
+                       std::make_shared<LevelSolid>(sheet, SolidSide::Below, 0.0),
+                       {},
+                       {}};
         FieldPtr result = node.solid;
         builder.addLevelNode(std::move(node));
         return result;
@@ -203,14 +218,14 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
     // An infill's `density:` solves this lattice's level: then it needs none of its own.
     const bool solvedByInfill = levelSolvedByInfill(builder.recipe(), name);
     readLevelKeys(spec, node, raw, side, 0.0,
-                  solvedByInfill           ? LevelRule::SolvedElsewhere
+                  solvedByInfill            ? LevelRule::SolvedElsewhere
                   : side == SolidSide::Band ? LevelRule::Required
                                             : LevelRule::Optional);
     const Interval range = tpmsLevelRange(type);
     if (node.solid->isSolved() && side == SolidSide::Below && !range.contains(node.solid->level())) {
         std::ostringstream msg;
-        msg << "level " << node.solid->level() << " is outside the range where " << tpmsName(type)
-            << " has a surface [" << range.lo << ", " << range.hi << "]: the part would be empty or solid";
+        msg << "level " << node.solid->level() << " is outside the range where " << tpmsName(type) << " has a surface ["
+            << range.lo << ", " << range.hi << "]: the part would be empty or solid";
         spec["level"].fail(msg.str());
     }
     FieldPtr result = node.solid;
@@ -240,8 +255,8 @@ void addLatticeNodeTypes(std::vector<NodeType>& types)
          "target relative density in (0, 1) (the level is solved), or a map grading it point by point", "—"},
         {"frame", anyMap(), "conformal cells: {cylinder: ...}, {sphere: ...} or {skin: ...}", "box cells"}};
     tpms.insert(tpms.end(), thicknessKeys.begin(), thicknessKeys.end());
-    tpms.push_back({"axes", orientationSchema(), "the cells' axes follow a frame field (as the orient node)",
-                    "world axes"});
+    tpms.push_back(
+        {"axes", orientationSchema(), "the cells' axes follow a frame field (as the orient node)", "world axes"});
     types.push_back({"tpms", tpms, buildTpms});
     addScalarMapNodeTypes(types);
     std::vector<KeySpec> shift{{"gradient-shift", field(), "the raw field whose zero set is thickened", "required"}};

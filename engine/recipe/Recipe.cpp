@@ -138,8 +138,10 @@ const std::vector<KeySpec>& topLevelKeys()
         {"domain", object({{"box", box(), "[[x0, y0, z0], [x1, y1, z1]] (mm)", "required"}}, {"box"}),
          "{box: [[x0, y0, z0], [x1, y1, z1]]}; snapped to a whole number of voxels",
          "the result's bounding box plus 3 voxels"},
-        {"fields", {{"type", "object"}, {"additionalProperties", ref("node")}},
-         "map of name -> node; names are referred to by other nodes", "required"},
+        {"fields",
+         {{"type", "object"}, {"additionalProperties", ref("node")}},
+         "map of name -> node; names are referred to by other nodes",
+         "required"},
         {"result", string(), "the name of the field that is meshed and measured", "required"},
         {"outputs", object(outputKinds()), "what to write: mesh, vdb, slices", "none (report only)"},
         {"params", ref("params"), "named parameters with defaults, used anywhere as $name", "none"},
@@ -153,8 +155,10 @@ const std::vector<KeySpec>& outputKinds()
     static const std::vector<KeySpec> kinds{
         {"mesh", stringOrList(), "mesh file(s): .stl, .ply or .obj, by extension", "—"},
         {"vdb", string(), "the result's sparse grid as an OpenVDB file (.vdb)", "—"},
-        {"slices", {{"anyOf", {ref("slices"), {{"type", "array"}, {"items", ref("slices")}}}}},
-         "resin-printer slices: a map (or a list of maps) of slice settings", "—"}};
+        {"slices",
+         {{"anyOf", {ref("slices"), {{"type", "array"}, {"items", ref("slices")}}}}},
+         "resin-printer slices: a map (or a list of maps) of slice settings",
+         "—"}};
     return kinds;
 }
 

@@ -125,28 +125,27 @@ SampledRange sampleRange(const FieldNode& field, const Box3& box, int n)
 void addScalarMapNodeTypes(std::vector<NodeType>& types)
 {
     using valueSchema::anyMap;
-    types.push_back({"ramp", {{"ramp", anyMap(), "{axis, from, to, range}: linear along x, y or z", "required"}}, [](FieldBuilder& b, const RecipeNode& spec, const std::string&) {
-                         return readRamp(b, spec["ramp"]).field;
+    types.push_back(
+        {"ramp",
+         {{"ramp", anyMap(), "{axis, from, to, range}: linear along x, y or z", "required"}},
+         [](FieldBuilder& b, const RecipeNode& spec, const std::string&) { return readRamp(b, spec["ramp"]).field; }});
+    types.push_back({"distance-ramp",
+                     {{"distance-ramp", anyMap(),
+                       "{field, from, to, over}: linear in the distance from a field's surface", "required"}},
+                     [](FieldBuilder& b, const RecipeNode& spec, const std::string& name) {
+                         return readDistanceRamp(b, spec["distance-ramp"], name).field;
                      }});
-    types.push_back(
-        {"distance-ramp",
-         {{"distance-ramp", anyMap(), "{field, from, to, over}: linear in the distance from a field's surface",
-           "required"}},
-         [](FieldBuilder& b, const RecipeNode& spec, const std::string& name) {
-             return readDistanceRamp(b, spec["distance-ramp"], name).field;
-         }});
-    types.push_back(
-        {"value-grid",
-         {{"value-grid", valueSchema::string(), "a text file of values on a regular grid, interpolated linearly",
-           "required"}},
-         [](FieldBuilder& b, const RecipeNode& spec, const std::string&) -> FieldPtr {
-             const RecipeNode file = spec["value-grid"];
-             try {
-                 return readValueGrid(b.recipe().resolve(file.string()), file.string());
-             } catch (const InputError& e) {
-                 file.fail(e.what());
-             }
-         }});
+    types.push_back({"value-grid",
+                     {{"value-grid", valueSchema::string(),
+                       "a text file of values on a regular grid, interpolated linearly", "required"}},
+                     [](FieldBuilder& b, const RecipeNode& spec, const std::string&) -> FieldPtr {
+                         const RecipeNode file = spec["value-grid"];
+                         try {
+                             return readValueGrid(b.recipe().resolve(file.string()), file.string());
+                         } catch (const InputError& e) {
+                             file.fail(e.what());
+                         }
+                     }});
 }
 
 void checkScalarRange(const FieldBuilder& builder, const ScalarMap& map, const RecipeNode& node, double lo, double hi,

@@ -39,8 +39,7 @@ NodeType booleanType(const std::string& key, BooleanOp op)
                                 : op == BooleanOp::Intersection ? "fields intersected (max)"
                                                                 : "the first field minus all the others";
     return {key,
-            {{key, fieldList(), meaning, "required"},
-             {"blend", number(), "smooth blend radius (mm), 0 = sharp", "0"}},
+            {{key, fieldList(), meaning, "required"}, {"blend", number(), "smooth blend radius (mm), 0 = sharp", "0"}},
             [key, op](FieldBuilder& b, const RecipeNode& spec, const std::string& name) -> FieldPtr {
                 const RecipeNode list = spec[key];
                 const std::size_t minimum = op == BooleanOp::Difference ? 2 : 1;
@@ -94,12 +93,13 @@ FieldPtr buildScale(FieldBuilder& b, const RecipeNode& spec, const std::string& 
 void addShapeNodeTypes(std::vector<NodeType>& types)
 {
     using namespace valueSchema;
-    types.push_back({"sphere",
-                     {{"sphere",
-                       object({{"center", vec3(), "centre (mm)", "[0, 0, 0]"}, {"radius", number(), "radius (mm)", "required"}},
-                              {"radius"}),
-                       "a ball: {center, radius} (exact signed distance)", "required"}},
-                     buildSphere});
+    types.push_back(
+        {"sphere",
+         {{"sphere",
+           object({{"center", vec3(), "centre (mm)", "[0, 0, 0]"}, {"radius", number(), "radius (mm)", "required"}},
+                  {"radius"}),
+           "a ball: {center, radius} (exact signed distance)", "required"}},
+         buildSphere});
     types.push_back({"box", {{"box", box(), "[[x0, y0, z0], [x1, y1, z1]] (mm)", "required"}}, buildBox});
     types.push_back({"cylinder",
                      {{"cylinder",
@@ -115,15 +115,16 @@ void addShapeNodeTypes(std::vector<NodeType>& types)
     types.push_back(booleanType("difference", BooleanOp::Difference));
     const KeySpec transformed{"field", field(), "the field transformed", "required"};
     types.push_back({"translate", {{"translate", vec3(), "offset (mm)", "required"}, transformed}, buildTranslate});
-    types.push_back({"rotate",
-                     {{"rotate",
-                       object({{"axis", vec3(), "rotation axis", "required"},
-                               {"degrees", number(), "angle (degrees)", "required"}},
-                              {"axis", "degrees"}),
-                       "{axis, degrees}: a rotation about the origin", "required"},
-                      transformed},
-                     buildRotate});
-    types.push_back({"scale", {{"scale", numberOrVec3(), "factor, or [x, y, z]", "required"}, transformed}, buildScale});
+    types.push_back(
+        {"rotate",
+         {{"rotate",
+           object({{"axis", vec3(), "rotation axis", "required"}, {"degrees", number(), "angle (degrees)", "required"}},
+                  {"axis", "degrees"}),
+           "{axis, degrees}: a rotation about the origin", "required"},
+          transformed},
+         buildRotate});
+    types.push_back(
+        {"scale", {{"scale", numberOrVec3(), "factor, or [x, y, z]", "required"}, transformed}, buildScale});
 }
 
 }  // namespace voxlat

@@ -3,9 +3,9 @@
 #include "engine/recipe/SkinNodes.h"
 
 #include "engine/core/Errors.h"
+#include "engine/frames/SkinFrame.h"
 #include "engine/parts/MeshDesignSpace.h"
 #include "engine/parts/MeshSdf.h"
-#include "engine/frames/SkinFrame.h"
 #include "fields/SkinMap.h"
 
 #include <cmath>

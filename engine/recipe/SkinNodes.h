@@ -3,8 +3,8 @@
 /// `frame:` (SkinNodes.cpp).
 #pragma once
 
-#include "engine/recipe/FieldBuilder.h"
 #include "engine/frames/StrutFrames.h"
+#include "engine/recipe/FieldBuilder.h"
 
 namespace voxlat {
 

@@ -1,10 +1,10 @@
 // Recipe node types for strut lattices (issue 3): `struts`, a frame of unit cells (or a
 // wireframe file) solidified by Gaussian convolution or by round capsules.
 #include "engine/core/Format.h"
+#include "engine/frames/StrutFrames.h"
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/ScalarMaps.h"
 #include "engine/recipe/SkinNodes.h"
-#include "engine/frames/StrutFrames.h"
 #include "fields/GradedLevel.h"
 #include "fields/IsoRadius.h"
 #include "fields/PeriodicTiling.h"
@@ -38,7 +38,8 @@ UnitCell readCell(const FieldBuilder& builder, const RecipeNode& c)
         if (std::find(names.begin(), names.end(), name) == names.end()) {
             const std::string guess = closestMatch(name, names);
             c.fail("unknown unit cell `" + name + "`" + (guess.empty() ? "" : "; did you mean `" + guess + "`?") +
-                   " (presets: " + joinWords(names) + "; or {lines: [[[x, y, z], [x, y, z]], ...]} or {obj: cell.obj})");
+                   " (presets: " + joinWords(names) +
+                   "; or {lines: [[[x, y, z], [x, y, z]], ...]} or {obj: cell.obj})");
         }
         return presetUnitCell(name);
     }
@@ -301,10 +302,10 @@ void warnIfDisconnected(JobContext& context, const std::string& name, const Stru
     }
     if (broken == 0) return;
     std::ostringstream msg;
-    msg << "field `" << name << "`: " << broken << " of " << v.size() << " struts are broken in the middle at level t = "
-        << level << " (lowest F = " << v[worst] << " at the middle of the strut from "
-        << fmtPoint(frame.nodes[frame.struts[worst][0]]) << " to " << fmtPoint(frame.nodes[frame.struts[worst][1]])
-        << "); with sigma = " << sigmaShown
+    msg << "field `" << name << "`: " << broken << " of " << v.size()
+        << " struts are broken in the middle at level t = " << level << " (lowest F = " << v[worst]
+        << " at the middle of the strut from " << fmtPoint(frame.nodes[frame.struts[worst][0]]) << " to "
+        << fmtPoint(frame.nodes[frame.struts[worst][1]]) << "); with sigma = " << sigmaShown
         << " the joints take the material and the lattice falls apart: lower sigma, raise the density or the radii";
     context.warn("struts_broken", msg.str(), {{"field", name}, {"broken", broken}, {"struts", v.size()}});
 }
@@ -560,22 +561,22 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
 void addStrutNodeTypes(std::vector<NodeType>& types)
 {
     using namespace valueSchema;
-    const json frame = object(
-        {{"cell", anything(), "a preset name, {lines: [...]} or {obj: file}", "required"},
-         {"size", numberOrVec3(), "cell size in mm, or [x, y, z]", "required"},
-         {"count", anything(), "cells per axis: a number or [x, y, z]", "—"},
-         {"origin", vec3(), "the frame's corner (mm)", "[0, 0, 0]"},
-         {"cylinder", anyMap(), "{radius, inner, height, base, cells}: a cylinder frame", "—"},
-         {"sphere", anyMap(), "{radius, inner, center, cells}: a spherical frame", "—"},
-         {"within", field(), "a solid the uniform frame is trimmed to", "—"},
-         {"min_length", number(), "trimmed pieces shorter than this are dropped (mm)", "—"},
-         {"wireframe", string(), "OBJ or CSV file used directly as the frame", "—"},
-         {"skin",
-          object({{"part", field(), "the part whose skin the cells follow", "required"},
-                  {"depth", anything(), "[outer, inner] mm below the surface, or the outer alone", "required"},
-                  {"layers", number(), "cells across, from the outer to the inner depth", "1"}},
-                 {"part", "depth"}),
-          "cells between two offset surfaces of a part", "—"}});
+    const json frame =
+        object({{"cell", anything(), "a preset name, {lines: [...]} or {obj: file}", "required"},
+                {"size", numberOrVec3(), "cell size in mm, or [x, y, z]", "required"},
+                {"count", anything(), "cells per axis: a number or [x, y, z]", "—"},
+                {"origin", vec3(), "the frame's corner (mm)", "[0, 0, 0]"},
+                {"cylinder", anyMap(), "{radius, inner, height, base, cells}: a cylinder frame", "—"},
+                {"sphere", anyMap(), "{radius, inner, center, cells}: a spherical frame", "—"},
+                {"within", field(), "a solid the uniform frame is trimmed to", "—"},
+                {"min_length", number(), "trimmed pieces shorter than this are dropped (mm)", "—"},
+                {"wireframe", string(), "OBJ or CSV file used directly as the frame", "—"},
+                {"skin",
+                 object({{"part", field(), "the part whose skin the cells follow", "required"},
+                         {"depth", anything(), "[outer, inner] mm below the surface, or the outer alone", "required"},
+                         {"layers", number(), "cells across, from the outer to the inner depth", "1"}},
+                        {"part", "depth"}),
+                 "cells between two offset surfaces of a part", "—"}});
     types.push_back(
         {"struts",
          {{"struts", frame, "the frame: unit cell and how it is laid out", "required"},

@@ -35,12 +35,13 @@ double TriangleMesh::volume() const
     // Measuring the tetrahedra from a point on the mesh instead of the world origin keeps the
     // terms small for a part far from the origin, so they do not cancel catastrophically.
     const openvdb::Vec3d ref = toDouble(points[triangles.front()[0]]);
-    return sumOverTriangles(triangles, [&](const openvdb::Vec3I& t) {
-               const openvdb::Vec3d a = toDouble(points[t[0]]) - ref;
-               const openvdb::Vec3d b = toDouble(points[t[1]]) - ref;
-               const openvdb::Vec3d c = toDouble(points[t[2]]) - ref;
-               return a.dot(b.cross(c));
-           }) /
+    return sumOverTriangles(triangles,
+                            [&](const openvdb::Vec3I& t) {
+                                const openvdb::Vec3d a = toDouble(points[t[0]]) - ref;
+                                const openvdb::Vec3d b = toDouble(points[t[1]]) - ref;
+                                const openvdb::Vec3d c = toDouble(points[t[2]]) - ref;
+                                return a.dot(b.cross(c));
+                            }) /
            6.0;
 }
 

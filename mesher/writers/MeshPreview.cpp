@@ -59,8 +59,8 @@ View makeView(const TriangleMesh& mesh, int size)
 }
 
 /// Rasterises triangles [begin, end) with projected vertices @a screen into @a buffer.
-void rasterise(const TriangleMesh& mesh, const std::vector<Vec3d>& screen, int size, std::size_t begin,
-               std::size_t end, std::vector<Sample>& buffer)
+void rasterise(const TriangleMesh& mesh, const std::vector<Vec3d>& screen, int size, std::size_t begin, std::size_t end,
+               std::vector<Sample>& buffer)
 {
     for (std::size_t t = begin; t < end; ++t) {
         const openvdb::Vec3I& tri = mesh.triangles[t];
@@ -126,7 +126,8 @@ std::string renderMeshPreview(const TriangleMesh& mesh, int size)
                 Vec3d normal = Vec3d(e1.x(), e1.y(), e1.z()).cross(Vec3d(e2.x(), e2.y(), e2.z()));
                 normal = normal.length() > 0 ? normal.unit() : view.toward;
                 // Outward normals face the viewer on visible faces; back faces are inner walls.
-                const double light = 0.25 + 0.6 * std::max(0.0, normal.dot(key)) + 0.2 * std::max(0.0, normal.dot(fill));
+                const double light =
+                    0.25 + 0.6 * std::max(0.0, normal.dot(key)) + 0.2 * std::max(0.0, normal.dot(fill));
                 rgb = {0.55 * light, 0.68 * light, 0.85 * light};
             }
             for (int ch = 0; ch < 3; ++ch) row[4 * x + ch] = std::uint8_t(std::clamp(rgb[ch], 0.0, 1.0) * 255.0 + 0.5);
