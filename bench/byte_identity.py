@@ -39,6 +39,8 @@ def run_recipe(voxlat: str, recipe: pathlib.Path) -> dict:
         report = json.loads((pathlib.Path(out) / "report.json").read_text())
         for key in VOLATILE:
             report.pop(key, None)
+        for entry in report.get("slices", []):
+            entry.pop("voxlat_version", None)  # slices.json and the report name the version
         # The temporary folder and the source tree (printer profiles) differ between checkouts.
         text = json.dumps(report, sort_keys=True).replace(out, "OUT").replace(str(ROOT), "ROOT")
         hashes["report.json (minus run-dependent keys)"] = sha(text.encode())

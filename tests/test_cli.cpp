@@ -5,7 +5,9 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <csignal>
 #include <numbers>
+#include <thread>
 
 using namespace voxlat::test;
 
@@ -159,4 +161,37 @@ TEST(Cli, GlobalOptionsAfterTheSubcommandAreTheSame)
                          (dir.path / "out").string()),
               0);
     EXPECT_EQ(nlohmann::json::parse(readFile(dir.path / "out" / "report.json"))["threads"], 1);
+}
+
+TEST(Cli, SigintAndSigtermCancelAndLeaveNoFiles)
+{
+    // A job of about a second (0.06 mm voxels over a 30 mm gyroid); the signal lands while it works.
+    TempDir dir;
+    const auto recipe = dir.write("slow.yaml", R"(voxel: 0.06
+domain: {box: [[0, 0, 0], [30, 30, 30]]}
+fields:
+  lattice: {tpms: gyroid, cell: 5, solid: network, level: 0.2}
+result: lattice
+outputs: {mesh: part.stl, vdb: part.vdb}
+)");
+    for (const int signal : {SIGINT, SIGTERM}) {
+        const auto out = dir.path / ("out" + std::to_string(signal));
+        const pid_t pid = ::fork();
+        ASSERT_GE(pid, 0);
+        if (pid == 0) {
+            const std::string binary = voxlatBinary(), r = recipe.string(), o = out.string();
+            ::execl(binary.c_str(), binary.c_str(), "-q", "run", r.c_str(), "--out", o.c_str(), "--no-preview",
+                    static_cast<char*>(nullptr));
+            ::_exit(127);
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(300));
+        ::kill(pid, signal);
+        int status = 0;
+        ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+        ASSERT_TRUE(WIFEXITED(status)) << "killed instead of cancelled";
+        EXPECT_EQ(WEXITSTATUS(status), 128 + signal) << "the job finished before the signal, or ignored it";
+        if (std::filesystem::exists(out)) EXPECT_EQ(listFolder(out), std::vector<std::string>{}) << "signal " << signal;
+        for (const auto& f : std::filesystem::recursive_directory_iterator(dir.path))
+            EXPECT_EQ(f.path().filename().string().find(".tmp-"), std::string::npos) << "left behind: " << f.path();
+    }
 }

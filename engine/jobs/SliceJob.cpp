@@ -373,7 +373,8 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
         printTime += e + (isSlow ? printer.slowTiltS : printer.fastTiltS);
     }
 
-    nlohmann::json meta = {{"printer", printer.key},
+    nlohmann::json meta = {{"voxlat_version", versionString()},
+                           {"printer", printer.key},
                            {"printer_profile", printer.file},
                            {"format", format},
                            {"layers", count},
