@@ -1,6 +1,7 @@
 # voxlat: two set-up commands on a fresh Debian machine.
 #   make run   installs missing Debian packages, builds Release, runs the default recipe
 #   make test  installs, builds, runs every test
+#   make sanitize  the whole test suite under ASan + UBSan (CI runs it after make test)
 #   make bench runs the benchmarks in bench/ (installs their reference tools too)
 
 BUILD ?= build
@@ -15,7 +16,7 @@ BENCH_PACKAGES := python3 python3-numpy python3-openvdb python3-scipy python3-sk
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 CCACHE := $(shell command -v ccache 2>/dev/null)
 
-.PHONY: all deps bench-deps build run test bench format docs-keys clean
+.PHONY: all deps bench-deps build run test sanitize bench format docs-keys clean
 
 all: build
 
@@ -44,6 +45,16 @@ run: build
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+
+# The whole test suite under AddressSanitizer + UndefinedBehaviorSanitizer (its own build folder).
+# The Python module is loaded by /usr/bin/python3, which is not built with ASan: its tests run with
+# the ASan runtime preloaded.
+SANITIZE_BUILD ?= build-sanitize
+sanitize: deps
+	cmake -S . -B $(SANITIZE_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=Debug -DVOXLAT_SANITIZE=ON $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+	cmake --build $(SANITIZE_BUILD) -j $(JOBS)
+	cd $(SANITIZE_BUILD) && ASAN_OPTIONS=detect_leaks=1:abort_on_error=0:strict_string_checks=1 \
+	  UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 ctest --output-on-failure -j $(JOBS)
 
 bench: build bench-deps
 	/usr/bin/python3 bench/run.py --voxlat $(BUILD)/voxlat

@@ -189,7 +189,8 @@ int main(int argc, char** argv)
                 sets.push_back("outputs.slices." + key + "=" + value);
             };
             if (!slicePrinter.empty()) set("printer", slicePrinter);
-            if (!sliceFile.empty()) set("file", sliceFile);
+            // -o is the user's own path (anywhere); the recipe's entry takes only its name.
+            if (!sliceFile.empty()) set("file", std::filesystem::path(sliceFile).filename().string());
             if (sliceLayer != 0.0 || sliceCmd->count("--layer")) set("layer", std::to_string(sliceLayer));
             if (!sliceAa.empty()) set("aa", sliceAa);
             if (sliceGamma >= 0.0 || sliceCmd->count("--gamma")) set("gamma", std::to_string(sliceGamma));
@@ -203,7 +204,7 @@ int main(int argc, char** argv)
             if (spec == recipe.outputs.end())
                 throw voxlat::InputError(sliceArgs.recipe + ": no printer given; use --printer NAME -o FILE");
             const YAML::Node sliceSpec = spec->spec;
-            const std::string file = spec->file;
+            const std::string file = sliceFile.empty() ? spec->file : sliceFile;
             voxlat::Job job(std::move(recipe), &context);
             job.writeSlices(sliceSpec, file);
             const auto r = job.report();

@@ -6,6 +6,7 @@
 #include "engine/core/SystemInfo.h"
 #include "engine/core/Version.h"
 #include "engine/density/DensitySolver.h"
+#include "engine/jobs/OutputPaths.h"
 #include "engine/jobs/SliceJob.h"
 #include "engine/recipe/RecipeParams.h"
 #include "fields/GradedLevel.h"
@@ -270,6 +271,7 @@ const TriangleMesh& Job::mesh()
 
 void Job::writeMesh(const std::filesystem::path& path)
 {
+    checkReplaceable(path, mRecipe.source->path + ": mesh output");
     const TriangleMesh& m = mesh();
     timed("write " + path.filename().string(), [&] {
         voxlat::writeMesh(m, path.string(), mMeshMeasures ? nullptr : &mMeshMeasures);
@@ -280,9 +282,15 @@ void Job::writeMesh(const std::filesystem::path& path)
 
 void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
 {
+    // Every output's place is checked before any work: inside outDir, onto nothing but files.
+    const std::string where = mRecipe.source->path + ": outputs";
     std::filesystem::create_directories(outDir);
-    for (const OutputSpec& out : mRecipe.outputs) {
-        const std::filesystem::path path = outDir / out.file;
+    std::vector<std::filesystem::path> paths;
+    for (const OutputSpec& out : mRecipe.outputs) paths.push_back(outputPathIn(outDir, out.file, where));
+    outputPathIn(outDir, "report.json", where);
+    for (std::size_t n = 0; n < mRecipe.outputs.size(); ++n) {
+        const OutputSpec& out = mRecipe.outputs[n];
+        const std::filesystem::path& path = paths[n];
         if (out.kind == "mesh") {
             writeMesh(path);
         } else if (out.kind == "vdb") {

@@ -2,6 +2,7 @@
 
 #include "engine/core/Errors.h"
 #include "engine/core/Version.h"
+#include "engine/jobs/OutputPaths.h"
 #include "mesher/writers/AtomicFile.h"
 #include "mesher/writers/SliceWriters.h"
 
@@ -42,8 +43,10 @@ void writeWhole(const fs::path& path, const std::string& bytes)
 /// A zip archive streamed to a temporary file, renamed at finish().
 class ZipArchive : public SliceArchive {
 public:
-    ZipArchive(const fs::path& path, std::string layerPrefix) : mPrefix(std::move(layerPrefix))
+    ZipArchive(const fs::path& path, std::string layerPrefix, const std::string& where)
+        : mPrefix(std::move(layerPrefix))
     {
+        checkReplaceable(path, where);
         fs::create_directories(fs::absolute(path).parent_path());
         mFile = std::make_unique<AtomicFile>(path.string());
         mZip = std::make_unique<ZipStreamWriter>(mFile->stream());
@@ -72,7 +75,7 @@ private:
 /// prusaslicer.ini (PrusaSlicer reads it back) and two thumbnails.
 class Sl1Archive final : public ZipArchive {
 public:
-    explicit Sl1Archive(const fs::path& path) : ZipArchive(path, path.stem().string()) {}
+    Sl1Archive(const fs::path& path, const std::string& where) : ZipArchive(path, path.stem().string(), where) {}
 
 private:
     void addTail(const SliceSummary& s) override
@@ -203,9 +206,9 @@ using ArchiveFactory = std::function<std::unique_ptr<SliceArchive>(const fs::pat
 const std::map<std::string, ArchiveFactory>& archiveFactories()
 {
     static const std::map<std::string, ArchiveFactory> factories{
-        {"sl1", [](const fs::path& p, const std::string&) { return std::make_unique<Sl1Archive>(p); }},
-        {"sl1s", [](const fs::path& p, const std::string&) { return std::make_unique<Sl1Archive>(p); }},
-        {"zip", [](const fs::path& p, const std::string&) { return std::make_unique<ZipArchive>(p, ""); }},
+        {"sl1", [](const fs::path& p, const std::string& w) { return std::make_unique<Sl1Archive>(p, w); }},
+        {"sl1s", [](const fs::path& p, const std::string& w) { return std::make_unique<Sl1Archive>(p, w); }},
+        {"zip", [](const fs::path& p, const std::string& w) { return std::make_unique<ZipArchive>(p, "", w); }},
         {"png", [](const fs::path& p, const std::string& w) { return std::make_unique<PngFolder>(p, w); }},
         {"exr", [](const fs::path& p, const std::string& w) { return std::make_unique<ExrFolder>(p, w); }}};
     return factories;

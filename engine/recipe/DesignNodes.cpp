@@ -205,7 +205,8 @@ bool levelSolvedByInfill(const Recipe& recipe, const std::string& name)
     if (!fields.IsMap()) return false;
     for (auto it = fields.begin(); it != fields.end(); ++it) {
         if (!it->second.IsMap()) continue;
-        const YAML::Node& spec = it->second;
+        // A copy, not a reference: the iterator's value is a temporary (ASan: stack-use-after-scope).
+        const YAML::Node spec = it->second;
         const YAML::Node infill = spec["infill"];
         if (!infill.IsDefined() || !infill.IsMap() || !infill["density"] || !infill["lattice"]) continue;
         const YAML::Node lattice = infill["lattice"];

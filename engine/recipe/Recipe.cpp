@@ -115,20 +115,37 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
                 for (std::size_t i = 0; i < (entry.isSequence() ? entry.size() : 1); ++i) {
                     const RecipeNode one = entry.isSequence() ? entry.at(i) : entry;
                     parseSliceSettings(one);  // checks keys and values now, before any work
+                    checkOutputName(one["file"], kind);
                     r.outputs.push_back({kind, one["file"].string(), one.yaml()});
                 }
                 continue;
             }
-            if (entry.isSequence())
-                for (std::size_t i = 0; i < entry.size(); ++i) r.outputs.push_back({kind, entry.at(i).string(), {}});
-            else
-                r.outputs.push_back({kind, entry.string(), {}});
+            for (std::size_t i = 0; i < (entry.isSequence() ? entry.size() : 1); ++i) {
+                const RecipeNode one = entry.isSequence() ? entry.at(i) : entry;
+                checkOutputName(one, kind);
+                r.outputs.push_back({kind, one.string(), {}});
+            }
         }
     }
     return r;
 }
 
 }  // namespace
+
+void checkOutputName(const RecipeNode& node, const std::string& kind)
+{
+    const std::string name = node.string();
+    const std::filesystem::path path(name);
+    if (name.empty() || path.is_absolute() || name.front() == '~')
+        node.fail("an output name is a path inside the output folder (--out), like `part.stl`; `" + name + "` is not");
+    for (const auto& part : path)
+        if (part == "..")
+            node.fail("an output stays inside the output folder (--out): `" + name + "` climbs out of it with `..`");
+    const std::string ext = path.extension().string();
+    if (kind == "mesh" && ext != ".stl" && ext != ".ply" && ext != ".obj")
+        node.fail("a mesh file ends in .stl, .ply or .obj; `" + name + "` does not");
+    if (kind == "vdb" && ext != ".vdb") node.fail("a vdb output ends in .vdb; `" + name + "` does not");
+}
 
 const std::vector<KeySpec>& topLevelKeys()
 {

@@ -47,6 +47,10 @@ const std::vector<KeySpec>& topLevelKeys();
 /// The output kinds of `outputs:` (mesh, vdb, slices), each a key with its value's schema.
 const std::vector<KeySpec>& outputKinds();
 
+/// Checks an output name of kind @a kind (`mesh`, `vdb`, `slices`): a relative path that stays
+/// inside the output folder (no `..`, not absolute) with the kind's extension. Fails at @a node.
+void checkOutputName(const RecipeNode& node, const std::string& kind);
+
 /// Reads and validates a recipe file. @a overrides are "key.path=value" strings from --set;
 /// values are parsed as YAML (numbers, words, [lists]).
 Recipe loadRecipe(const std::string& path, const std::vector<std::string>& overrides = {});
