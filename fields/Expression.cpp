@@ -329,8 +329,24 @@ private:
                 return left;
         }
     }
+    /// Each nesting (a sign, a power, a parenthesis) is one level of the parser's recursion: a
+    /// limit keeps a hostile equation (10,000 parentheses) from overflowing the stack.
+    static constexpr int kMaxNesting = 256;
+    struct Nesting {
+        Compiler& c;
+        explicit Nesting(Compiler& compiler) : c(compiler)
+        {
+            if (++c.mDepth > kMaxNesting)
+                throw ExprError("the equation nests deeper than " + std::to_string(kMaxNesting) +
+                                    " levels (parentheses, signs, powers); write it flatter or split it into fields",
+                                c.mPos);
+        }
+        ~Nesting() { --c.mDepth; }
+    };
+
     int parseUnary()
     {
+        const Nesting nesting(*this);
         if (accept("-")) return unary(Op::Neg, parseUnary());
         if (accept("+")) return parseUnary();
         return parsePower();
@@ -360,6 +376,7 @@ private:
             throw ExprError("the equation ends too early: expected a number, a name or `(`", mPos);
         const char ch = mText[mPos];
         if (ch == '(') {
+            const Nesting nesting(*this);
             const std::size_t open = mPos++;
             const int inner = parseAdditive();
             if (!accept(")"))
@@ -525,6 +542,7 @@ private:
         return emit(in);
     }
 
+    int mDepth = 0;
     const std::string& mText;
     const ExprResolver& mResolve;
     std::vector<Instr>& mCode;

@@ -256,3 +256,20 @@ TEST(Expr, SyntaxErrorsPointAtTheProblem)
     EXPECT_EQ(exprCaret("sin(x) +", 8), "    sin(x) +\n            ^");
     EXPECT_EQ(exprCaret("a +\n  b c", 8), "      b c\n        ^");
 }
+
+TEST(Expr, DeepNestingIsAnErrorNotAStackOverflow)
+{
+    // Minimal inputs from the adversarial run: 10,000 parentheses, 100,000 unary minus signs.
+    const std::string parens = std::string(10000, '(') + "x" + std::string(10000, ')');
+    EXPECT_NE(errorOf(parens).find("nests deeper than"), std::string::npos) << errorOf(parens);
+    const std::string minus = std::string(100000, '-') + "x";
+    EXPECT_NE(errorOf(minus).find("nests deeper than"), std::string::npos) << errorOf(minus);
+    std::string powers = "x";
+    for (int i = 0; i < 20000; ++i) powers += "^x";  // right-associative: nests
+    EXPECT_NE(errorOf(powers).find("nests deeper than"), std::string::npos) << errorOf(powers);
+    // Ordinary nesting still compiles and evaluates.
+    const std::string fifty = std::string(50, '(') + "x + 1" + std::string(50, ')');
+    EXPECT_EQ(errorOf(fifty), "");
+    const FieldPtr f = exprField(std::string(100, '-') + "x");  // an even number of signs
+    EXPECT_DOUBLE_EQ(f->value(Vec3d(2.5, 0, 0)), 2.5);
+}
