@@ -248,3 +248,53 @@ TEST(Cli, OutputsStayInsideTheOutputFolderAndReplaceOnlyFiles)
     EXPECT_NE(text.find("not a regular file"), std::string::npos) << text;
     EXPECT_TRUE(std::filesystem::is_fifo(fifo));
 }
+
+TEST(Cli, HostileInputFilesAreRefusedAtOnce)
+{
+    TempDir dir;
+    auto refused = [&](const std::string& recipe, const std::string& needle) {
+        std::string out;
+        const auto start = std::chrono::steady_clock::now();
+        // `timeout` turns a hang into a failure instead of a stuck test run.
+        EXPECT_EQ(runCommand("timeout -k 5 20 " + voxlatBinary() + " -q run " + recipe + " --out " +
+                                 (dir.path / "out").string(),
+                             &out),
+                  2)
+            << recipe << ": " << out;
+        EXPECT_NE(out.find(needle), std::string::npos) << recipe << ": " << out;
+        EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 5.0) << recipe;
+        EXPECT_FALSE(std::filesystem::exists(dir.path / "out")) << recipe;
+    };
+    // 543 bytes of nested aliases stand for 10^9 nodes (the adversarial run grew past 2.8 GB).
+    std::string laughs = "a: &a [x, x, x, x, x, x, x, x, x, x]\n";
+    for (char c = 'b'; c <= 'i'; ++c) {
+        const char p = char(c - 1);
+        laughs += std::string(1, c) + ": &" + c + " [*" + p + ", *" + p + ", *" + p + ", *" + p + ", *" + p + ", *" +
+                  p + ", *" + p + ", *" + p + ", *" + p + ", *" + p + "]\n";
+    }
+    laughs += "fields: {s: {sphere: {radius: 1}}}\nresult: s\n";
+    refused(dir.write("laughs.yaml", laughs).string(), "expands to more than");
+    // A recipe that is a pipe, and a part mesh that is a pipe or /dev/zero: refused, not read forever.
+    const auto fifo = dir.path / "pipe.yaml";
+    ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+    refused(fifo.string(), "not a regular file");
+    const auto meshFifo = dir.path / "part.stl";
+    ASSERT_EQ(::mkfifo(meshFifo.c_str(), 0600), 0);
+    const char* partRecipe = "voxel: 0.5\nfields:\n  p: {mesh: MESH}\nresult: p\noutputs: {mesh: o.stl}\n";
+    const auto zero = dir.path / "zero.stl";  // a `.stl` that is /dev/zero
+    std::filesystem::create_symlink("/dev/zero", zero);
+    for (const std::string mesh : {meshFifo.string(), zero.string()}) {
+        std::string text = partRecipe;
+        text.replace(text.find("MESH"), 4, mesh);
+        refused(dir.write("part.yaml", text).string(), "not a regular file");
+    }
+    // A 2 GB sparse binary STL whose header promises no triangle: refused from its first bytes.
+    const auto sparse = dir.path / "sparse.stl";
+    {
+        std::ofstream(sparse, std::ios::binary) << std::string(84, '\0');
+    }
+    std::filesystem::resize_file(sparse, std::uintmax_t(2000) << 20);
+    std::string text = partRecipe;
+    text.replace(text.find("MESH"), 4, sparse.string());
+    refused(dir.write("sparse.yaml", text).string(), "corrupted binary STL");
+}

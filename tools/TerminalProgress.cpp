@@ -18,6 +18,12 @@ volatile std::sig_atomic_t gSignal = 0;
 
 extern "C" void onSignal(int signal)
 {
+    if (gSignal != 0) {
+        // A second signal: the job did not stop (blocked in a system call?); end now, the default way.
+        std::signal(signal, SIG_DFL);
+        std::raise(signal);
+        return;
+    }
     gSignal = signal;
     // A lock-free atomic store: safe in a signal handler.
     if (JobContext* context = gCancelTarget.load()) context->cancel();

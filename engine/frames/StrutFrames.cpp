@@ -1,5 +1,7 @@
 #include "engine/frames/StrutFrames.h"
 
+#include "engine/core/InputFiles.h"
+
 #include "engine/core/Errors.h"
 
 #include <cmath>
@@ -158,6 +160,8 @@ Frame readWireframe(const std::string& path)
         }
         return builder.take();
     }
+    if (std::filesystem::exists(path))
+        checkInputFile(path, kMaxDataFileBytes, "wireframe file");  // before open: a FIFO blocks
     std::ifstream in(path);
     if (!in) throw InputError(path + ": cannot open the file (check the path; it is relative to the recipe's folder)");
     std::vector<Vec3d> nodes;

@@ -1,5 +1,7 @@
 #include "engine/frames/UnitCells.h"
 
+#include "engine/core/InputFiles.h"
+
 #include "engine/core/Errors.h"
 
 #include <algorithm>
@@ -304,6 +306,8 @@ UnitCell unitCellFromLines(const std::vector<CellLine>& lines, const std::string
 
 std::vector<CellLine> readObjLines(const std::string& path)
 {
+    if (std::filesystem::exists(path))
+        checkInputFile(path, kMaxDataFileBytes, "cell file");  // before open: a FIFO blocks
     std::ifstream in(path);
     if (!in) throw InputError(path + ": cannot open the file (check the path; it is relative to the recipe's folder)");
     std::vector<Vec3d> v;

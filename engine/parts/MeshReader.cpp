@@ -1,6 +1,7 @@
 #include "engine/parts/MeshReader.h"
 
 #include "engine/core/Errors.h"
+#include "engine/core/InputFiles.h"
 
 #include <Model/COM/NMR_DLLInterfaces.h>
 #include <OpenMesh/Core/IO/MeshIO.hh>
@@ -28,6 +29,9 @@ std::string lower(std::string s)
     return s;
 }
 
+/// The largest mesh file read (a binary STL of 40 M triangles).
+constexpr std::uintmax_t kMaxMeshBytes = std::uintmax_t(2) << 30;
+
 void checkReadable(const std::filesystem::path& path, const std::string& shown)
 {
     std::error_code ec;
@@ -35,8 +39,30 @@ void checkReadable(const std::filesystem::path& path, const std::string& shown)
         throw InputError(shown + ": no such file (looked for " + path.string() +
                          "; paths in a recipe are relative to the recipe's folder)");
     if (std::filesystem::is_directory(path, ec)) throw InputError(shown + ": is a folder, not a mesh file");
+    // A device (/dev/zero) or a FIFO would be read forever (opening a FIFO blocks): checked first.
+    checkInputFile(path, kMaxMeshBytes, "mesh file");
     if (!std::ifstream(path, std::ios::binary))
         throw InputError(shown + ": cannot open the file (check its permissions)");
+}
+
+/// A binary STL whose size disagrees with its header, or a file that is neither kind of STL,
+/// is refused from its first bytes, before gigabytes are read.
+void checkStlHeader(const std::filesystem::path& path, const std::string& shown)
+{
+    const std::uintmax_t size = std::filesystem::file_size(path);
+    std::ifstream in(path, std::ios::binary);
+    char head[84] = {};
+    in.read(head, sizeof head);
+    const std::string start(head, std::size_t(in.gcount()));
+    const std::size_t text = start.find_first_not_of(" \t\r\n");
+    if (text != std::string::npos && lower(start.substr(text, 5)) == "solid") return;  // ASCII: read line by line
+    if (size < 84) return;                                                             // readStl() says what is wrong
+    std::uint32_t count = 0;
+    for (int i = 0; i < 4; ++i) count |= std::uint32_t(std::uint8_t(head[80 + i])) << (8 * i);
+    if (size != 84 + 50 * std::uint64_t(count))
+        throw InputError(shown + ": corrupted binary STL: the header says " + std::to_string(count) +
+                         " triangles, which take " + std::to_string(84 + 50 * std::uint64_t(count)) +
+                         " bytes, but the file has " + std::to_string(size) + " (truncated or damaged)");
 }
 
 std::string readBytes(const std::filesystem::path& path, const std::string& shown)
@@ -338,6 +364,8 @@ PartMesh readPartMesh(const std::filesystem::path& path, const std::string& show
     const std::string ext = lower(path.extension().string());
     PartMesh part;
     if (ext == ".stl") {
+        checkReadable(path, shown);
+        checkStlHeader(path, shown);
         part.mesh = readStl(readBytes(path, shown), shown, part.format);
     } else if (ext == ".obj" || ext == ".ply") {
         checkReadable(path, shown);

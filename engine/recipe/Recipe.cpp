@@ -1,5 +1,7 @@
 #include "engine/recipe/Recipe.h"
 
+#include "engine/core/InputFiles.h"
+
 #include "engine/recipe/RecipeParams.h"
 #include "engine/recipe/SliceSettings.h"
 
@@ -9,6 +11,9 @@
 namespace voxlat {
 
 namespace {
+
+/// A recipe is text of a few kilobytes; 16 MB leaves room for long value lists.
+constexpr std::uintmax_t kMaxRecipeBytes = std::uintmax_t(16) << 20;
 
 const std::vector<std::string> kTopKeys = keyNames(topLevelKeys());
 const std::vector<std::string> kOutputKeys = keyNames(outputKinds());
@@ -214,17 +219,15 @@ Recipe parseRecipe(const std::string& text, const std::string& name, const std::
         throw InputError(name + ":" + std::to_string(e.mark.line + 1) + ":" + std::to_string(e.mark.column + 1) +
                          ": not valid YAML: " + e.msg);
     }
+    checkYamlSize(root, name);
     return build(root, name, folder, overrides);
 }
 
 Recipe loadRecipe(const std::string& path, const std::vector<std::string>& overrides)
 {
-    std::ifstream in(path);
-    if (!in) throw InputError(path + ": cannot open the recipe file (check the path)");
-    std::stringstream text;
-    text << in.rdbuf();
+    const std::string text = readInputFile(path, kMaxRecipeBytes, "recipe file");
     const std::filesystem::path folder = std::filesystem::absolute(path).parent_path();
-    return parseRecipe(text.str(), path, folder, overrides);
+    return parseRecipe(text, path, folder, overrides);
 }
 
 }  // namespace voxlat

@@ -150,4 +150,29 @@ std::string closestMatch(const std::string& word, const std::vector<std::string>
     return best;
 }
 
+namespace {
+/// Counts @a node's expanded nodes into @a count; false once past a limit.
+bool countYaml(const YAML::Node& node, int depth, std::size_t& count)
+{
+    if (++count > kMaxYamlNodes || depth > kMaxYamlDepth) return false;
+    if (node.IsMap()) {
+        for (auto it = node.begin(); it != node.end(); ++it)
+            if (!countYaml(it->first, depth + 1, count) || !countYaml(it->second, depth + 1, count)) return false;
+    } else if (node.IsSequence()) {
+        for (auto it = node.begin(); it != node.end(); ++it)
+            if (!countYaml(*it, depth + 1, count)) return false;
+    }
+    return true;
+}
+}  // namespace
+
+void checkYamlSize(const YAML::Node& root, const std::string& name)
+{
+    std::size_t count = 0;
+    if (!countYaml(root, 0, count))
+        throw InputError(name + ": the YAML expands to more than " + std::to_string(kMaxYamlNodes) +
+                         " nodes or nests deeper than " + std::to_string(kMaxYamlDepth) +
+                         " levels (nested aliases?); a recipe is a small map of fields");
+}
+
 }  // namespace voxlat

@@ -71,4 +71,11 @@ std::string joinWords(const std::vector<std::string>& words);
 /// The valid word closest to @a word by edit distance, or "" if none is close.
 std::string closestMatch(const std::string& word, const std::vector<std::string>& candidates);
 
+/// Refuses YAML that expands past kMaxYamlNodes nodes (aliases counted each time they are used: a
+/// few hundred bytes of nested aliases can stand for billions of nodes) or nests deeper than
+/// kMaxYamlDepth. Stops counting at the limit, so the check itself stays cheap.
+inline constexpr std::size_t kMaxYamlNodes = 1'000'000;
+inline constexpr int kMaxYamlDepth = 64;
+void checkYamlSize(const YAML::Node& root, const std::string& name);
+
 }  // namespace voxlat

@@ -1,5 +1,7 @@
 #include "engine/recipe/RecipeParams.h"
 
+#include "engine/core/InputFiles.h"
+
 #include "engine/recipe/Recipe.h"
 #include "engine/recipe/Sha256.h"
 
@@ -189,11 +191,12 @@ void mergeFile(YAML::Node root, const std::filesystem::path& file, RecipeSource&
     included->path = file.string();
     YAML::Node sub;
     try {
-        sub = YAML::LoadFile(file.string());
+        sub = YAML::Load(readInputFile(file, std::uintmax_t(16) << 20, "included file"));
     } catch (const YAML::ParserException& e) {
         throw InputError(file.string() + ":" + std::to_string(e.mark.line + 1) + ":" +
                          std::to_string(e.mark.column + 1) + ": not valid YAML: " + e.msg);
     }
+    checkYamlSize(sub, file.string());
     if (!sub.IsMap()) throw InputError(file.string() + ":1:1: an included file is a map with `params:` and `fields:`");
     const RecipeNode top(sub, included, "included file");
     top.checkKeys(kIncludeKeys);

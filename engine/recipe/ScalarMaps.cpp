@@ -1,5 +1,7 @@
 #include "engine/recipe/ScalarMaps.h"
 
+#include "engine/core/InputFiles.h"
+
 #include "fields/Constant.h"
 #include "fields/Ramp.h"
 #include "fields/SampledGrid.h"
@@ -178,6 +180,9 @@ void checkScalarRange(const FieldBuilder& builder, const ScalarMap& map, const R
 
 FieldPtr readValueGrid(const std::filesystem::path& path, const std::string& shown)
 {
+    if (!std::filesystem::exists(path))
+        throw InputError("cannot read `" + shown + "` (looked for " + path.string() + ")");
+    checkInputFile(path, kMaxDataFileBytes, "value file");
     std::ifstream in(path);
     if (!in) throw InputError("cannot read `" + shown + "` (looked for " + path.string() + ")");
     auto split = [](const std::string& line) {
