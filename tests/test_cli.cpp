@@ -2,6 +2,8 @@
 #include "TestUtil.h"
 
 #include <gtest/gtest.h>
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
 #include <nlohmann/json.hpp>
 
 #include <sys/stat.h>
@@ -297,4 +299,54 @@ TEST(Cli, HostileInputFilesAreRefusedAtOnce)
     std::string text = partRecipe;
     text.replace(text.find("MESH"), 4, sparse.string());
     refused(dir.write("sparse.yaml", text).string(), "corrupted binary STL");
+}
+
+TEST(Cli, VdbOutputIsTheSameBytesForTheSameRecipe)
+{
+    // OpenVDB stamps a random UUID in every file; voxlat derives it from the recipe instead.
+    TempDir dir;
+    const auto recipe = dir.write("small.yaml", kSmall);
+    for (const char* out : {"a", "b"})
+        ASSERT_EQ(runCommand(voxlatBinary() + " -q --threads " + (out[0] == 'a' ? "1" : "3") + " run " +
+                             recipe.string() + " --set voxel=0.5 --no-preview --out " + (dir.path / out).string()),
+                  0);
+    const std::string a = readFile(dir.path / "a" / "part.vdb"), b = readFile(dir.path / "b" / "part.vdb");
+    EXPECT_GT(a.size(), 1000u);
+    EXPECT_EQ(a, b);
+    // A different recipe gets a different UUID (the file still opens: OpenVDB reads it back).
+    ASSERT_EQ(
+        runCommand(voxlatBinary() + " -q run " + recipe.string() +
+                   " --set voxel=0.5 --set fields.lattice.density=0.4 --no-preview --out " + (dir.path / "c").string()),
+        0);
+    const std::string c = readFile(dir.path / "c" / "part.vdb");
+    EXPECT_NE(a.substr(21, 36), c.substr(21, 36));
+    openvdb::initialize();
+    openvdb::io::File file((dir.path / "c" / "part.vdb").string());
+    file.open();
+    EXPECT_EQ(file.getGrids()->size(), 1u);
+    file.close();
+}
+
+TEST(Cli, AbsurdVoxelsAreRefusedAtOnceWithTheLine)
+{
+    TempDir dir;
+    // Exit 2: a voxel no grid can index (bad input); exit 3: a domain this machine cannot cull.
+    for (const auto& [voxel, box, needle, code] :
+         {std::tuple<std::string, std::string, std::string, int>{"1e-9", "10", "a grid can index", 2},
+          {"0.01", "1000", "a job can cull", 3}}) {
+        std::string text = kSmall;
+        text.replace(text.find("0.25"), 4, voxel);
+        text.replace(text.find("[12, 12, 12]"), 12, "[" + box + ", " + box + ", " + box + "]");
+        const auto recipe = dir.write("r.yaml", text);
+        std::string out;
+        const auto start = std::chrono::steady_clock::now();
+        EXPECT_EQ(runCommand("timeout -k 5 30 " + voxlatBinary() + " -q run " + recipe.string() + " --out " +
+                                 (dir.path / "out").string(),
+                             &out),
+                  code)
+            << out;
+        EXPECT_NE(out.find("r.yaml:1:"), std::string::npos) << out;
+        EXPECT_NE(out.find(needle), std::string::npos) << out;
+        EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 5.0);
+    }
 }

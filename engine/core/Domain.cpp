@@ -1,5 +1,8 @@
 #include "engine/core/Domain.h"
 
+#include "engine/core/Errors.h"
+#include "engine/core/Format.h"
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -13,7 +16,13 @@ Domain Domain::fromBox(const Box3& box, double voxel)
     d.box.min = box.min;
     int n[3];
     for (int a = 0; a < 3; ++a) {
-        n[a] = std::max(1, int(std::llround((box.max[a] - box.min[a]) / voxel)));
+        // In double first: a tiny voxel would overflow the integer (and OpenVDB's coordinates).
+        const double count = std::round((box.max[a] - box.min[a]) / voxel);
+        if (!(voxel > 0.0) || !(count <= double(kMaxVoxelsPerAxis)))
+            throw InputError("a voxel of " + formatNumber(voxel) + " mm over " + formatNumber(box.max[a] - box.min[a]) +
+                             " mm makes " + formatNumber(count) + " voxels along " + "xyz"[a] + ", more than the " +
+                             std::to_string(kMaxVoxelsPerAxis) + " a grid can index: raise `voxel:`");
+        n[a] = std::max(1, int(count));
         d.box.max[a] = box.min[a] + n[a] * voxel;
     }
     d.dims = openvdb::Coord(n[0], n[1], n[2]);

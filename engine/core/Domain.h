@@ -13,6 +13,13 @@ namespace voxlat {
 
 /// A box sampled at voxel centres: voxel (i, j, k) has its centre at
 /// min + (i + 0.5, j + 0.5, k + 0.5) * voxel, for 0 <= i < dims.x and so on.
+/// The most voxels a domain may have along one axis (OpenVDB indexes with 32-bit integers, and
+/// the culling pass lists every 128^3 block).
+inline constexpr int kMaxVoxelsPerAxis = 1 << 24;
+/// The most voxels a job's domain may hold: past this even listing the 128^3 blocks to cull costs
+/// gigabytes (a 1 m cube at 0.01 mm is 10^15).
+inline constexpr double kMaxDomainVoxels = 1e13;
+
 struct Domain {
     Box3 box;
     double voxel = 0.1;

@@ -22,6 +22,7 @@
 #include <algorithm>
 #include <chrono>
 #include <iostream>
+#include <sstream>
 
 namespace voxlat {
 
@@ -29,6 +30,21 @@ namespace {
 /// Voxels of margin around the result's box when the recipe gives no domain (room for the
 /// mesher's cap and the blend of a smooth union).
 constexpr int kAutoDomainMargin = 3;
+
+/// OpenVDB stamps every file with a random UUID (36 characters after the 21-byte header start),
+/// so identical runs would differ. The UUID is replaced by one derived from @a recipeHash: the same
+/// recipe gives the same bytes.
+void setVdbUuid(std::string& data, const std::string& recipeHash)
+{
+    constexpr std::size_t kAt = 21, kLength = 36;
+    const bool looksLikeUuid = data.size() > kAt + kLength && data[kAt + 8] == '-' && data[kAt + 13] == '-' &&
+                               data[kAt + 18] == '-' && data[kAt + 23] == '-';
+    if (!looksLikeUuid) throw JobError("unexpected OpenVDB file header: cannot make the .vdb output reproducible");
+    const std::string h = recipeHash.substr(0, 32);
+    const std::string uuid =
+        h.substr(0, 8) + "-" + h.substr(8, 4) + "-" + h.substr(12, 4) + "-" + h.substr(16, 4) + "-" + h.substr(20, 12);
+    data.replace(kAt, kLength, uuid);
+}
 
 /// The recipe's domain, or without `domain:` the result's box plus a margin, with its voxel
 /// centres on the lattice (k + 1/2) * voxel, where a part's distance grid has its samples (and
@@ -120,7 +136,19 @@ Job::Job(Recipe recipe, JobContext* context)
         mResult = mBuilder.field(mRecipe.result);
         return 0;
     });
-    mDomain = domainOf(mRecipe, *mResult);
+    try {
+        mDomain = domainOf(mRecipe, *mResult);
+    } catch (const InputError& e) {
+        if (mRecipe.root["voxel"]) mRecipe.node("voxel").fail(e.what());
+        throw;
+    }
+    if (double(mDomain.voxelCount()) > kMaxDomainVoxels) {
+        const std::string message = "the domain holds " + formatNumber(double(mDomain.voxelCount())) +
+                                    " voxels, more than the " + formatNumber(kMaxDomainVoxels) +
+                                    " a job can cull in reasonable memory: raise `voxel:` or shrink the domain";
+        // A job this machine cannot run (exit 3), said before any allocation.
+        throw JobError((mRecipe.root["voxel"] ? mRecipe.node("voxel").where() : mRecipe.source->path) + ": " + message);
+    }
     for (const FieldBuilder::Preparation& p : mBuilder.preparations())
         timed(p.stage, [&] {
             p.run();
@@ -296,9 +324,13 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         } else if (out.kind == "vdb") {
             const openvdb::FloatGrid& g = grid();
             timed("write " + out.file, [&] {
-                AtomicFile file(path.string());
                 openvdb::GridCPtrVec grids{g.copyGrid()};
-                openvdb::io::Stream(file.stream()).write(grids);
+                std::ostringstream bytes;
+                openvdb::io::Stream(bytes).write(grids);
+                std::string data = bytes.str();
+                setVdbUuid(data, recipeHash(mRecipe));
+                AtomicFile file(path.string());
+                file.stream().write(data.data(), std::streamsize(data.size()));
                 file.commit();
                 return 0;
             });
