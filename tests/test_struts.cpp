@@ -16,6 +16,7 @@
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
+#include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <limits>
@@ -827,27 +828,37 @@ TEST(StrutRecipes, BadInputNamesFileAndLineAndWritesNothing)
     EXPECT_NE(out.find("flat.obj:3: the cell is flat along z"), std::string::npos) << out;
 }
 
-TEST(StrutRecipes, WarnsWhenTheLatticeFallsApart)
+TEST(StrutRecipes, ALatticeThatFallsApartIsCountedOnTheGrid)
 {
     TempDir dir;
     int status = 0;
-    // Large sigma at low density: the joints take the material (seed 002: sigma 1.6 at 10 %).
-    const std::string out =
-        runRecipe(dir,
-                  "voxel: 0.2\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
-                  "  lattice: {struts: {cell: x, size: 5}, kernel: {gaussian: {sigma: 1.6}}, density: 0.05}\n"
-                  "result: lattice\noutputs: {mesh: a.stl}\n",
-                  &status);
+    // The adversarial run's X cells (7.5 mm, sigma 0.8, density 0.10, 0.25 mm voxels): the joints
+    // take the material and the grid holds separate balls (211 pieces in a larger box), not a
+    // lattice, where the old midpoint check said nothing. It is counted on the grid and reported.
+    const std::string broken =
+        "voxel: 0.25\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\nfields:\n"
+        "  lattice: {struts: {cell: x, size: 7.5}, kernel: {gaussian: {sigma: 0.8}}, "
+        "density: 0.10}\nresult: lattice\noutputs: {mesh: a.stl}\n";
+    const std::string out = runRecipe(dir, broken, &status);
     EXPECT_EQ(status, 0) << out;
-    EXPECT_NE(out.find("warning: field `lattice`:"), std::string::npos) << out;
-    EXPECT_NE(out.find("struts are broken in the middle at level t = "), std::string::npos) << out;
-    // A sensible lattice gives no warning.
+    EXPECT_NE(out.find("warning: the result `lattice` falls apart into"), std::string::npos) << out;
+    EXPECT_NE(out.find("pieces (voxels sharing a face)"), std::string::npos) << out;
+    EXPECT_NE(out.find("lower sigma"), std::string::npos) << out;
+    const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
+    EXPECT_GT(report["pieces"]["count"].get<int>(), 1);
+    EXPECT_EQ(report["warnings"][0]["code"], "pieces");
+    // `allow: [pieces]` (a plate of separate parts) silences it; the count stays in report.json.
+    const std::string allowed = runRecipe(dir, broken + "allow: [pieces]\n", &status);
+    EXPECT_EQ(status, 0) << allowed;
+    EXPECT_EQ(allowed.find("warning"), std::string::npos) << allowed;
+    // A sensible lattice is one piece and gives no warning.
     const std::string fine =
         runRecipe(dir,
                   "voxel: 0.2\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
                   "  lattice: {struts: {cell: x, size: 5}, kernel: {gaussian: {sigma: 0.5}}, density: 0.2}\n"
                   "result: lattice\noutputs: {mesh: a.stl}\n",
                   &status);
+    EXPECT_EQ(status, 0) << fine;
     EXPECT_EQ(fine.find("warning"), std::string::npos) << fine;
 }
 

@@ -53,6 +53,10 @@ public:
     nlohmann::json report() const;
 
 private:
+    /// Counts the result's connected pieces into the report; more than one is a warning with the
+    /// numbers and the fix, unless the recipe says `allow: [pieces]` (a plate of separate parts).
+    void checkPieces();
+
     template <typename Fn>
     auto timed(const std::string& stage, Fn&& fn);
 

@@ -110,6 +110,17 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
     r.result = result.string();
     r.fieldSpec(r.result);  // must name a field
 
+    if (top.has("allow")) {
+        const RecipeNode allow = top["allow"];
+        if (!allow.isSequence()) allow.fail("expected a list of checks, like `allow: [pieces]`");
+        for (std::size_t i = 0; i < allow.size(); ++i) {
+            const std::string word = allow.at(i).string();
+            if (word != "pieces")
+                allow.at(i).fail("unknown check `" + word +
+                                 "` (pieces: a result in several pieces is a warning instead of an error)");
+            r.allow.push_back(word);
+        }
+    }
     if (top.has("outputs")) {
         const RecipeNode outputs = top["outputs"];
         outputs.checkKeys(kOutputKeys);
@@ -167,7 +178,11 @@ const std::vector<KeySpec>& topLevelKeys()
         {"result", string(), "the name of the field that is meshed and measured", "required"},
         {"outputs", object(outputKinds()), "what to write: mesh, vdb, slices", "none (report only)"},
         {"params", ref("params"), "named parameters with defaults, used anywhere as $name", "none"},
-        {"include", stringOrList(), "recipe libraries whose params: and fields: are merged in", "none"}};
+        {"include", stringOrList(), "recipe libraries whose params: and fields: are merged in", "none"},
+        {"allow",
+         {{"type", "array"}, {"items", oneOfWords({"pieces"})}},
+         "checks that only warn: pieces (a result in several pieces, e.g. a plate of separate parts)",
+         "none"}};
     return keys;
 }
 

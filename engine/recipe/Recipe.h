@@ -5,6 +5,7 @@
 #include "engine/recipe/KeySpec.h"
 #include "engine/recipe/RecipeNode.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <map>
 #include <optional>
@@ -30,6 +31,9 @@ struct Recipe {
     std::string result;
     std::vector<std::string> fieldNames;  ///< in file order
     std::vector<OutputSpec> outputs;
+    /// Checks the recipe turns from errors into warnings (`allow: [pieces]`).
+    std::vector<std::string> allow;
+    bool allows(const std::string& check) const { return std::find(allow.begin(), allow.end(), check) != allow.end(); }
     /// Effective parameter values (`params:` defaults after --set), by name.
     std::map<std::string, YAML::Node> params;
     /// The nodes of `fields:` by name (yaml-cpp looks map keys up linearly, converting each).

@@ -287,29 +287,6 @@ std::vector<std::array<double, 2>> readRadii(const RecipeNode& r, const Frame& f
     return radii;
 }
 
-/// Warns when struts fall apart: the field at a strut's middle below the level.
-void warnIfDisconnected(JobContext& context, const std::string& name, const StrutConvolution& f, const Frame& frame,
-                        double level, double sigmaShown)
-{
-    std::vector<Vec3d> mid;
-    for (const auto& s : frame.struts) mid.push_back(0.5 * (frame.nodes[s[0]] + frame.nodes[s[1]]));
-    std::vector<double> v(mid.size());
-    f.values(mid, v);
-    std::size_t broken = 0, worst = 0;
-    for (std::size_t j = 0; j < v.size(); ++j) {
-        broken += v[j] < level;
-        if (v[j] < v[worst]) worst = j;
-    }
-    if (broken == 0) return;
-    std::ostringstream msg;
-    msg << "field `" << name << "`: " << broken << " of " << v.size()
-        << " struts are broken in the middle at level t = " << level << " (lowest F = " << v[worst]
-        << " at the middle of the strut from " << fmtPoint(frame.nodes[frame.struts[worst][0]]) << " to "
-        << fmtPoint(frame.nodes[frame.struts[worst][1]]) << "); with sigma = " << sigmaShown
-        << " the joints take the material and the lattice falls apart: lower sigma, raise the density or the radii";
-    context.warn("struts_broken", msg.str(), {{"field", name}, {"broken", broken}, {"struts", v.size()}});
-}
-
 FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
 {
     std::optional<UniformCells> uniform;
@@ -499,20 +476,8 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         auto cellRaw = std::make_shared<StrutConvolution>(convolutionStruts(cells, cellRadii), eps);
         // The same peak and sigma as the frame's, so that both measure levels alike.
         const IsoRadius cellField(cellRaw, peak, sigmaMax, 2.0 * rcMax);
-        FieldPtr result = buildGradedStruts(builder, spec, name, iso, cellField, cellBox, node.description);
-        // Struts broken in the middle at their local density: the graded solid is outside there.
-        std::vector<Vec3d> mid;
-        for (const auto& s : frame.struts) mid.push_back(0.5 * (frame.nodes[s[0]] + frame.nodes[s[1]]));
-        std::vector<double> v(mid.size());
-        result->values(mid, v);
-        const auto broken = std::count_if(v.begin(), v.end(), [](double x) { return x > 0.0; });
-        if (broken > 0)
-            builder.warn("struts_broken",
-                         "field `" + name + "`: " + std::to_string(broken) + " of " + std::to_string(v.size()) +
-                             " struts are broken in the middle at their local density; with sigma = " +
-                             formatNumber(sigmaMax) + " the joints take the material: lower sigma or raise the density",
-                         {{"field", name}, {"broken", broken}, {"struts", v.size()}});
-        return result;
+        // Whether it holds together is checked on the grid (Job: pieces), not at strut middles.
+        return buildGradedStruts(builder, spec, name, iso, cellField, cellBox, node.description);
     }
     node.solid = node.density ? LevelSolid::unsolved(evaluated, SolidSide::Below)
                               : std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
@@ -534,22 +499,17 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     }
     const double sigmaShown = sigma.front();
     if (node.density) {
-        const bool withRadii = bool(radii);
         JobContext* context = &builder.context();
-        node.onSolved = [context, name, raw, iso, frame, sigmaShown, withRadii](double rho) {
-            const double t = iso->valueOf(rho);
-            warnIfDisconnected(*context, name, *raw, frame, t, sigmaShown);
-            if (withRadii) {
+        if (radii)
+            node.onSolved = [context, name, iso, sigmaShown](double rho) {
+                const double t = iso->valueOf(rho);
                 std::ostringstream msg;
                 msg << "field `" << name << "`: the density sets the iso-value to t = " << t
                     << ", so the radii R hold up to a common shift: r^2 = R^2 + 2 sigma^2 ln(1/t) = R^2 "
                     << (t < 1 ? "+ " : "- ") << std::abs(2 * sigmaShown * sigmaShown * std::log(1 / t))
                     << " mm^2 (for sigma = " << sigmaShown << ")";
                 context->warn("radii_shifted", msg.str(), {{"field", name}, {"iso_value", t}});
-            }
-        };
-    } else {
-        warnIfDisconnected(builder.context(), name, *raw, frame, t, sigmaShown);
+            };
     }
     FieldPtr result = node.solid;
     builder.addLevelNode(std::move(node));

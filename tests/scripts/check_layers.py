@@ -15,8 +15,8 @@ ALLOWED = {
     "engine/density": ["fields", "engine/core"],
     "engine/frames": ["fields", "engine/core"],
     "engine/parts": ["fields", "mesher/extract", "engine/core"],
-    "engine/properties": ["fields", "engine/core"],
-    "engine/checks": ["fields", "mesher/extract", "mesher/slice", "engine/core"],
+    "engine/properties": ["fields", "engine/core"],  # to come: homogenization (issue 15)
+    "engine/checks": ["fields", "mesher/extract", "mesher/slice", "engine/core"],  # pieces, printability
     "engine/recipe": ["fields", "mesher/extract", "engine/core", "engine/density", "engine/frames", "engine/parts"],
     "engine/jobs": ["fields", "mesher/extract", "mesher/slice", "mesher/writers", "engine/core", "engine/density",
                     "engine/frames", "engine/parts", "engine/properties", "engine/checks", "engine/recipe"],
