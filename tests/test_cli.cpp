@@ -198,7 +198,9 @@ outputs: {mesh: part.stl, vdb: part.vdb}
         ASSERT_EQ(::waitpid(pid, &status, 0), pid);
         ASSERT_TRUE(WIFEXITED(status)) << "killed instead of cancelled";
         EXPECT_EQ(WEXITSTATUS(status), 128 + signal) << "the job finished before the signal, or ignored it";
-        if (std::filesystem::exists(out)) EXPECT_EQ(listFolder(out), std::vector<std::string>{}) << "signal " << signal;
+        if (std::filesystem::exists(out)) {
+            EXPECT_EQ(listFolder(out), std::vector<std::string>{}) << "signal " << signal;
+        }
         for (const auto& f : std::filesystem::recursive_directory_iterator(dir.path))
             EXPECT_EQ(f.path().filename().string().find(".tmp-"), std::string::npos) << "left behind: " << f.path();
     }
@@ -285,7 +287,7 @@ TEST(Cli, HostileInputFilesAreRefusedAtOnce)
     const char* partRecipe = "voxel: 0.5\nfields:\n  p: {mesh: MESH}\nresult: p\noutputs: {mesh: o.stl}\n";
     const auto zero = dir.path / "zero.stl";  // a `.stl` that is /dev/zero
     std::filesystem::create_symlink("/dev/zero", zero);
-    for (const std::string mesh : {meshFifo.string(), zero.string()}) {
+    for (const std::string& mesh : {meshFifo.string(), zero.string()}) {
         std::string text = partRecipe;
         text.replace(text.find("MESH"), 4, mesh);
         refused(dir.write("part.yaml", text).string(), "not a regular file");

@@ -32,7 +32,9 @@ TEST(JobContext, StagesReportProgressUpToTheirTotal)
     std::map<std::string, std::pair<std::uint64_t, std::uint64_t>> last;  // stage -> (done, total)
     context.setProgressCallback([&](const std::string& stage, std::uint64_t done, std::uint64_t total) {
         EXPECT_LE(done, total) << stage;
-        if (last.count(stage)) EXPECT_GE(done, last[stage].first) << stage << " went backwards";
+        if (last.count(stage)) {
+            EXPECT_GE(done, last[stage].first) << stage << " went backwards";
+        }
         last[stage] = {done, total};
     });
     Job job(parse(kGyroid, dir), &context);

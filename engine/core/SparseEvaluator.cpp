@@ -9,6 +9,7 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <memory>
 #include <mutex>
 #include <sstream>
 #include <vector>
@@ -135,7 +136,8 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
     }
 
     // Stage 2: evaluate each straddling leaf as one batch.
-    std::vector<LeafT*> leaves(leafOrigins.size(), nullptr);
+    // Owned until the tree takes them: a cancelled or failed evaluation frees what it made.
+    std::vector<std::unique_ptr<LeafT>> leaves(leafOrigins.size());
     std::atomic<bool> nonFinite{false};
     std::mutex badMutex;
     Vec3d badPoint(0.0);
@@ -154,7 +156,7 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                         const Vec3d p = batch.point(i >> 6, (i >> 3) & 7, i & 7);
                         values[i] = std::max(values[i], clip->eval(p[0], p[1], p[2]));
                     }
-                auto* leaf = new LeafT(lo, options.outsideValue, true);
+                auto leaf = std::make_unique<LeafT>(lo, options.outsideValue, true);
                 float* data = leaf->buffer().data();
                 for (int i = 0; i < 512; ++i) {
                     if (!std::isfinite(values[i])) [[unlikely]] {
@@ -163,13 +165,12 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                     }
                     data[i] = float(values[i]);
                 }
-                leaves[n] = leaf;
+                leaves[n] = std::move(leaf);
             }
             progress.add(range.size());
         });
     }
     if (nonFinite) {
-        for (LeafT* leaf : leaves) delete leaf;
         std::ostringstream msg;
         msg << "the field is not finite (NaN or infinity) at (" << badPoint[0] << ", " << badPoint[1] << ", "
             << badPoint[2] << "): check divisions, logarithms and square roots in the recipe's fields";
@@ -183,7 +184,7 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
         if (results[b].insideTile) tree.addTile(2, blocks[b], options.insideValue, true);
         for (const Coord& lo : results[b].insideLeafTiles) tree.addTile(1, lo, options.insideValue, true);
     }
-    for (LeafT* leaf : leaves) tree.addLeaf(leaf);
+    for (auto& leaf : leaves) tree.addLeaf(leaf.release());
     if (stats) *stats = s;
     return grid;
 }

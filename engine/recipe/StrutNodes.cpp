@@ -21,13 +21,6 @@ namespace voxlat {
 
 namespace {
 
-std::string fmtPoint(const Vec3d& p)
-{
-    std::ostringstream s;
-    s << "(" << p[0] << ", " << p[1] << ", " << p[2] << ")";
-    return s.str();
-}
-
 /// The unit cell of `cell:` (a preset name, `{lines: [...]}` or `{obj: file}`), checked.
 UnitCell readCell(const FieldBuilder& builder, const RecipeNode& c)
 {
