@@ -1,6 +1,7 @@
 #include "engine/jobs/SliceArchives.h"
 
 #include "engine/core/Errors.h"
+#include "engine/core/Format.h"
 #include "engine/core/Version.h"
 #include "engine/jobs/OutputPaths.h"
 #include "mesher/writers/AtomicFile.h"
@@ -21,9 +22,7 @@ namespace {
 
 std::string number(double v)
 {
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "%.10g", v);
-    return buf;
+    return formatNumber10(v);
 }
 
 std::string layerName(const std::string& prefix, int index, const char* ext)

@@ -3,6 +3,7 @@
 #include "engine/jobs/SliceArchives.h"
 
 #include "engine/core/Errors.h"
+#include "engine/core/Format.h"
 #include "engine/core/Version.h"
 #include "mesher/slice/Slicer.h"
 #include "mesher/writers/AtomicFile.h"
@@ -28,9 +29,7 @@ namespace {
 
 std::string number(double v)
 {
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "%.10g", v);
-    return buf;
+    return formatNumber10(v);
 }
 
 /// A small top view of the part: the highest exposed layer per cell, shaded, for thumbnails.
