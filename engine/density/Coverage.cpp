@@ -9,9 +9,13 @@
 
 namespace voxlat::coverage {
 
+namespace {
+
 /// Offset strides and shifts of the x, y, z coordinates in an 8^3 leaf's buffer.
 constexpr int kLeafStride[3] = {64, 8, 1};
 constexpr int kLeafShift[3] = {6, 3, 0};
+
+}  // namespace
 
 /// A sample's change along one axis: the central difference, one-sided where a neighbour is
 /// absent (not evaluated, or outside a density mask), 0 with neither.
@@ -22,6 +26,8 @@ double axisChange(float value, float up, bool hasUp, float down, bool hasDown)
     if (hasDown) return value - down;
     return 0.0;
 }
+
+namespace {
 
 /// Band voxels with their per-voxel change along each axis (make(value, d) builds a sample), for
 /// the sub-voxel coverage estimates. Neighbours that were not evaluated (tiles, background,
@@ -80,6 +86,8 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
     return all;
 }
 
+}  // namespace
+
 /// Band voxels with the length of their per-voxel change, for the linear coverage estimate.
 std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo,
                                             float hi)
@@ -88,6 +96,8 @@ std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, cons
         return CoverageSample{v, float(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))};
     });
 }
+
+namespace {
 
 /// Share of the unit cube with m . u < alpha (m >= 0 sorted ascending, m0 + m1 + m2 = 1,
 /// 0 <= alpha <= 1/2), the analytic relation of Scardovelli & Zaleski (2000), written so that
@@ -103,6 +113,8 @@ double cubeShareBelowPlane(const double m[3], double alpha)
         return corner - (std::pow(alpha - m1, 3) + std::pow(alpha - m2, 3)) / (6.0 * m0 * m1 * m2);
     return (2.0 * alpha - m01) / (2.0 * m2);  // m01 <= alpha (and m01 <= m2 since alpha <= 1/2)
 }
+
+}  // namespace
 
 /// The share of a voxel below @a level, the voxel's field taken as the plane through its value
 /// with its per-axis changes (exact for planes at any orientation).
@@ -127,6 +139,8 @@ double planeCovered(const std::vector<PlaneSample>& samples, double level)
     return covered;
 }
 
+namespace {
+
 /// Weighted coverage of @a samples at @a level (planeCovered()), summed in parallel over fixed
 /// blocks combined in a fixed tree, so the sum is the same for any thread count.
 double planeCoveredParallel(const std::vector<PlaneSample>& samples, double level)
@@ -140,6 +154,8 @@ double planeCoveredParallel(const std::vector<PlaneSample>& samples, double leve
         },
         std::plus<>());
 }
+
+}  // namespace
 
 /// The level in [a, b] at which @a settled + planeCovered() reaches @a wanted, given that it is
 /// at most @a wanted at a and at least at b. The covered volume is continuous and increasing
