@@ -571,6 +571,112 @@ TEST(Slices, TheFormatIsTheRecipesThenTheExtensionsThenTheProfiles)
     EXPECT_TRUE(readZip(dir.path / "part.sl1").count("config.ini"));
     slice("--printer sl1s --format zip", dir.path / "part2.sl1s");
     EXPECT_TRUE(readZip(dir.path / "part2.sl1s").count("slices.json"));
+    // Every format of the table, by `format:` on a file name that says nothing, and each Elegoo
+    // profile's own `format: goo`.
+    auto startsWith = [](const std::filesystem::path& p, const std::string& bytes) {
+        return readFile(p).compare(0, bytes.size(), bytes) == 0;
+    };
+    for (const std::string format : {"sl1", "sl1s", "zip", "goo", "png", "exr"}) {
+        const auto out = dir.path / ("any-" + format);
+        slice("--printer mono-4k --format " + format, out);
+        if (format == "png" || format == "exr")
+            EXPECT_TRUE(std::filesystem::exists(out / ("00000." + format))) << format;
+        else if (format == "goo")
+            EXPECT_TRUE(startsWith(out, "V3.0")) << format;
+        else
+            EXPECT_TRUE(startsWith(out, "PK")) << format;
+    }
+    for (const char* printer : {"saturn3-ultra", "saturn4", "mars4-max"}) {
+        slice(std::string("--printer ") + printer, dir.path / printer);
+        EXPECT_TRUE(startsWith(dir.path / printer, "V3.0")) << printer;
+    }
+}
+
+namespace {
+// A 40 x 40 x 1 mm plate and a ball of radius 3 floating 4 mm above it, inside a 12 mm tall box.
+const char* kFloatingBall = R"(domain: {box: [[0, 0, 0], [40, 40, 12]]}
+fields:
+  plate: {box: [[0, 0, 0], [40, 40, 1]]}
+  ball: {sphere: {center: [25, 15, 8], radius: 3}}
+  part: {union: [plate, ball]}
+result: part
+outputs: {slices: {printer: mono-4k, layer: 0.1, file: part.zip, preview: off}}
+)";
+}  // namespace
+
+TEST(Slices, PrintabilityFindsTheFloatingBallAndStrictRefusesIt)
+{
+    TempDir dir;
+    const auto recipe = dir.write("ball.yaml", kFloatingBall);
+    std::string out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " run " + recipe.string() + " --out " + (dir.path / "a").string(), &out), 0)
+        << out;
+    EXPECT_NE(out.find("warning: part.zip: 1 island(s)"), std::string::npos) << out;
+    const auto report = nlohmann::json::parse(readFile(dir.path / "a" / "report.json"));
+    const auto& p = report["slices"][0]["printability"];
+    ASSERT_EQ(p["island_count"], 1);
+    // The ball's lowest layer: the first mid-layer z above 8 - 3 = 5 mm, at the ball's centre.
+    EXPECT_EQ(p["islands"][0]["layer"], 50);  // z = 5.05
+    EXPECT_NEAR(p["islands"][0]["z"].get<double>(), 5.05, 1e-9);
+    EXPECT_NEAR(p["islands"][0]["x"].get<double>(), 25.0, 0.05);
+    EXPECT_NEAR(p["islands"][0]["y"].get<double>(), 15.0, 0.05);
+    EXPECT_EQ(p["resin_trap_count"], 0);
+    EXPECT_EQ(report["warnings"][0]["code"], "islands");
+    // `checks: strict`: exit 3, no archive; `checks: off`: no printability at all.
+    EXPECT_EQ(runCommand(voxlatBinary() + " -q run " + recipe.string() + " --out " + (dir.path / "b").string() +
+                             " --set outputs.slices.checks=strict",
+                         &out),
+              3)
+        << out;
+    EXPECT_NE(out.find("checks: strict"), std::string::npos) << out;
+    EXPECT_FALSE(std::filesystem::exists(dir.path / "b" / "part.zip"));
+    ASSERT_EQ(runCommand(voxlatBinary() + " -q run " + recipe.string() + " --out " + (dir.path / "c").string() +
+                         " --set outputs.slices.checks=off"),
+              0);
+    EXPECT_FALSE(nlohmann::json::parse(readFile(dir.path / "c" / "report.json"))["slices"][0].contains("printability"));
+    // The ball standing on the plate: no island.
+    std::string standing = kFloatingBall;
+    standing.replace(standing.find("[25, 15, 8]"), 11, "[25, 15, 3.5]");
+    const auto onPlate = dir.write("standing.yaml", standing);
+    ASSERT_EQ(runCommand(voxlatBinary() + " -q run " + onPlate.string() + " --out " + (dir.path / "d").string()), 0);
+    EXPECT_EQ(
+        nlohmann::json::parse(readFile(dir.path / "d" / "report.json"))["slices"][0]["printability"]["island_count"],
+        0);
+}
+
+TEST(Slices, AClosedHollowSphereIsOneResinTrapOfItsVolume)
+{
+    TempDir dir;
+    const std::string hollow = R"(domain: {box: [[0, 0, 0], [16, 16, 16]]}
+fields:
+  block: {box: [[0, 0, 0], [16, 16, 16]]}
+  cavity: {sphere: {center: [8, 8, 8], radius: 4}}
+  part: {difference: [block, cavity]}
+result: part
+outputs: {slices: {printer: mono-4k, layer: 0.05, file: part.zip, preview: off}}
+)";
+    const auto recipe = dir.write("hollow.yaml", hollow);
+    std::string out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " run " + recipe.string() + " --out " + (dir.path / "a").string(), &out), 0)
+        << out;
+    EXPECT_NE(out.find("1 closed cavity"), std::string::npos) << out;
+    const auto p = nlohmann::json::parse(readFile(dir.path / "a" / "report.json"))["slices"][0]["printability"];
+    ASSERT_EQ(p["resin_trap_count"], 1);
+    const double exact = 4.0 / 3.0 * std::numbers::pi * 64.0;
+    EXPECT_NEAR(p["resin_traps"][0]["volume_mm3"].get<double>(), exact, 0.03 * exact);
+    EXPECT_NEAR(p["resin_traps"][0]["drain_mm"].get<double>(), 8.0 - 4.0, 0.1);
+    // A drain hole: a rod of radius 1 mm from the cavity out through the side (x = 16).
+    std::string drained = hollow;
+    drained.replace(drained.find("  part:"), 0,
+                    "  hole: {cylinder: {center: [13, 8, 8], axis: [1, 0, 0], radius: 1, height: 8}}\n");
+    drained.replace(drained.find("[block, cavity]"), 15, "[block, cavity, hole]");
+    const auto second = dir.write("drained.yaml", drained);
+    ASSERT_EQ(runCommand(voxlatBinary() + " -q run " + second.string() + " --out " + (dir.path / "b").string(), &out),
+              0)
+        << out;
+    EXPECT_EQ(nlohmann::json::parse(
+                  readFile(dir.path / "b" / "report.json"))["slices"][0]["printability"]["resin_trap_count"],
+              0);
 }
 
 TEST(Slices, AFolderOutputNeverDeletesWhatItDidNotMake)

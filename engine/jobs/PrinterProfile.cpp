@@ -4,6 +4,7 @@
 #include "engine/recipe/SliceSettings.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -19,13 +20,81 @@ namespace voxlat {
 namespace fs = std::filesystem;
 
 namespace {
-const std::vector<std::string> kProfileKeys{"name",           "model",       "format",     "display",   "mirror_x",
-                                            "mirror_y",       "orientation", "max_height", "layer",     "exposure",
-                                            "exposure_first", "fade_layers", "fast_tilt",  "slow_tilt", "area_fill"};
+const std::vector<std::string> kProfileKeys{"name",
+                                            "model",
+                                            "format",
+                                            "display",
+                                            "mirror_x",
+                                            "mirror_y",
+                                            "orientation",
+                                            "max_height",
+                                            "layer",
+                                            "exposure",
+                                            "exposure_first",
+                                            "fade_layers",
+                                            "fast_tilt",
+                                            "slow_tilt",
+                                            "area_fill",
+                                            "bottom_layers",
+                                            "transition_layers",
+                                            "lift_distance",
+                                            "lift_speed",
+                                            "retract_distance",
+                                            "retract_speed",
+                                            "bottom_lift_distance",
+                                            "bottom_lift_speed",
+                                            "bottom_retract_distance",
+                                            "bottom_retract_speed",
+                                            "wait_before_lift",
+                                            "wait_after_lift",
+                                            "wait_after_retract",
+                                            "bottom_wait_before_lift",
+                                            "bottom_wait_after_lift",
+                                            "bottom_wait_after_retract",
+                                            "light_pwm",
+                                            "bottom_light_pwm"};
 
 bool looksLikePath(const std::string& s)
 {
     return s.find('/') != std::string::npos || s.ends_with(".yaml") || s.ends_with(".yml");
+}
+
+/// A whole number from 0 to @a most.
+int wholeNumber(const RecipeNode& n, int most)
+{
+    const double v = n.number();
+    if (v < 0 || v > most || v != std::floor(v))
+        n.fail("expected a whole number from 0 to " + std::to_string(most) + ", got " + n.yaml().Scalar());
+    return int(v);
+}
+
+/// `[stage 1, stage 2]`, each >= 0.
+std::array<double, 2> twoStages(const RecipeNode& n, const char* unit)
+{
+    if (!n.isSequence() || n.size() != 2)
+        n.fail(std::string("expected [stage 1, stage 2] in ") + unit + ", e.g. [3, 4]");
+    std::array<double, 2> v{n.at(0).number(), n.at(1).number()};
+    if (v[0] < 0 || v[1] < 0) n.fail(std::string("expected values >= 0 (") + unit + ")");
+    return v;
+}
+
+/// The motion keys with @a prefix (`` or `bottom_`) into @a m (unset keys keep their defaults).
+void readMotion(const RecipeNode& top, const std::string& prefix, GooMotion& m)
+{
+    auto key = [&](const char* name) { return prefix + name; };
+    if (top.has(key("lift_distance"))) m.liftDistance = twoStages(top[key("lift_distance")], "mm");
+    if (top.has(key("lift_speed"))) m.liftSpeed = twoStages(top[key("lift_speed")], "mm/min");
+    if (top.has(key("retract_distance"))) m.retractDistance = twoStages(top[key("retract_distance")], "mm");
+    if (top.has(key("retract_speed"))) m.retractSpeed = twoStages(top[key("retract_speed")], "mm/min");
+    auto seconds = [&](const char* name, double& into) {
+        if (!top.has(key(name))) return;
+        into = top[key(name)].number();
+        if (into < 0) top[key(name)].fail("expected a time >= 0 (s)");
+    };
+    seconds("wait_before_lift", m.waitBeforeLift);
+    seconds("wait_after_lift", m.waitAfterLift);
+    seconds("wait_after_retract", m.waitAfterRetract);
+    if (top.has(key("light_pwm"))) m.lightPwm = wholeNumber(top[key("light_pwm")], 255);
 }
 
 int positiveInt(const RecipeNode& n)
@@ -94,6 +163,7 @@ PrinterProfile loadPrinterProfile(const std::string& nameOrPath, const std::stri
     if (const auto formats = sliceFormatNames(); std::find(formats.begin(), formats.end(), p.format) == formats.end())
         top["format"].fail("unknown format `" + p.format + "` (valid: " + joinWords(formats) + ")");
     const RecipeNode display = top["display"];
+    p.displayWhere = display.where();
     display.checkKeys({"width", "height", "pixels_x", "pixels_y"});
     p.widthMm = display["width"].positiveNumber();
     p.heightMm = display["height"].positiveNumber();
@@ -117,6 +187,10 @@ PrinterProfile loadPrinterProfile(const std::string& nameOrPath, const std::stri
     if (top.has("fast_tilt")) p.fastTiltS = top["fast_tilt"].number();
     if (top.has("slow_tilt")) p.slowTiltS = top["slow_tilt"].number();
     if (top.has("area_fill")) p.areaFillPercent = top["area_fill"].positiveNumber();
+    if (top.has("bottom_layers")) p.bottomLayers = wholeNumber(top["bottom_layers"], 1000);
+    if (top.has("transition_layers")) p.transitionLayers = wholeNumber(top["transition_layers"], 1000);
+    readMotion(top, "", p.motion);
+    readMotion(top, "bottom_", p.bottomMotion);
     return p;
 }
 

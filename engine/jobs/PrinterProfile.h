@@ -2,6 +2,8 @@
 /// @brief A resin printer's display and defaults, read from a small YAML file (data/printers/).
 #pragma once
 
+#include "mesher/writers/GooWriter.h"
+
 #include <string>
 #include <vector>
 
@@ -26,6 +28,11 @@ struct PrinterProfile {
     int fadeLayers = 0;
     double fastTiltS = 0, slowTiltS = 0;
     double areaFillPercent = 50;
+    /// Layer-by-layer moves for archives that carry them (.goo): the first `bottom_layers` layers
+    /// cure at exposure_first with `bottomMotion`, then `transition_layers` step down to exposure.
+    int bottomLayers = 4, transitionLayers = 0;
+    GooMotion bottomMotion, motion;
+    std::string displayWhere;  ///< file:line:col of `display` (for messages)
 
     double pitchX() const { return widthMm / pixelsX; }
     double pitchY() const { return heightMm / pixelsY; }

@@ -5,6 +5,7 @@
 #include "engine/core/Version.h"
 #include "engine/jobs/OutputPaths.h"
 #include "mesher/writers/AtomicFile.h"
+#include "mesher/writers/GooWriter.h"
 #include "mesher/writers/SliceWriters.h"
 
 #include <unistd.h>
@@ -188,7 +189,7 @@ public:
 class ExrFolder final : public FolderArchive {
 public:
     using FolderArchive::FolderArchive;
-    bool takesFieldValues() const override { return true; }
+    LayerEncoding encoding() const override { return LayerEncoding::fieldValues; }
     void addLayer(int, const std::string&) override
     {
         throw std::logic_error("an EXR folder takes field values, not PNG layers");
@@ -197,6 +198,102 @@ public:
     {
         writeExrFloat((temp() / layerName("", index, ".exr")).string(), nx, ny, i0, j0, values);
     }
+};
+
+/// Elegoo's .goo (V3): a placeholder header, the layers as they come, the ending, then the real
+/// header (which needs the previews and totals) written over the placeholder.
+class GooArchive final : public SliceArchive {
+public:
+    GooArchive(const fs::path& path, const std::string& where) : mPath(path)
+    {
+        checkReplaceable(path, where);
+        fs::create_directories(fs::absolute(path).parent_path());
+        mFile = std::make_unique<AtomicFile>(path.string());
+        mFile->stream().write(std::string(kGooHeaderBytes, '\0').data(), std::streamsize(kGooHeaderBytes));
+    }
+    LayerEncoding encoding() const override { return LayerEncoding::goo; }
+    void begin(const SliceStart& s) override
+    {
+        const PrinterProfile& p = s.printer;
+        if (s.storedWidth > 65535 || s.storedHeight > 65535)
+            throw InputError(p.displayWhere + ": the display has " + std::to_string(s.storedWidth) + " x " +
+                             std::to_string(s.storedHeight) +
+                             " pixels; a .goo file holds at most 65535 per side (check `pixels_x` / `pixels_y` of "
+                             "the printer profile, or choose another format)");
+        mHeader.softwareName = "voxlat";
+        mHeader.softwareVersion = versionString();
+        mHeader.created = s.settings.timestamp;
+        mHeader.printerName = p.name;
+        mHeader.printerType = p.name;
+        mHeader.resinName = "voxlat";
+        mHeader.antiAliasing = s.settings.supersample;
+        mHeader.layers = std::uint32_t(s.layers);
+        mHeader.resolutionX = s.storedWidth;
+        mHeader.resolutionY = s.storedHeight;
+        mHeader.mirrorX = p.mirrorX;
+        mHeader.mirrorY = p.mirrorY;
+        mHeader.displayWidthMm = p.portrait ? p.heightMm : p.widthMm;
+        mHeader.displayHeightMm = p.portrait ? p.widthMm : p.heightMm;
+        mHeader.machineZMm = p.maxHeightMm;
+        mHeader.layerMm = s.layerMm;
+        mHeader.exposureS = s.exposureS;
+        mHeader.bottomExposureS = s.exposureFirstS;
+        mHeader.bottomLayers = std::uint32_t(std::min(p.bottomLayers, s.layers));
+        mHeader.transitionLayers = std::uint32_t(std::min(p.transitionLayers, s.layers - int(mHeader.bottomLayers)));
+        mHeader.bottom = p.bottomMotion;
+        mHeader.normal = p.motion;
+    }
+    void addLayer(int index, const std::string& image) override
+    {
+        GooLayerDefinition d;
+        d.zMm = (index + 1) * mHeader.layerMm;
+        const int bottom = int(mHeader.bottomLayers), transition = int(mHeader.transitionLayers);
+        d.exposureS = index < bottom ? mHeader.bottomExposureS
+                      : index < bottom + transition
+                          ? mHeader.bottomExposureS -
+                                (index - bottom + 1) * (mHeader.bottomExposureS - mHeader.exposureS) / (transition + 1)
+                          : mHeader.exposureS;
+        d.motion = index < bottom ? mHeader.bottom : mHeader.normal;
+        const std::string block = gooLayerBytes(d, image);
+        mFile->stream().write(block.data(), std::streamsize(block.size()));
+        mPrintTime += d.exposureS + moveTime(d.motion);
+    }
+    void finish(const SliceSummary& s) override
+    {
+        const std::string ending = gooEnding();
+        mFile->stream().write(ending.data(), std::streamsize(ending.size()));
+        mHeader.smallPreview = preview(s, kGooSmallPreview);
+        mHeader.bigPreview = preview(s, kGooBigPreview);
+        mHeader.printTimeS = std::uint32_t(std::lround(mPrintTime));
+        mHeader.volumeMm3 = s.volumeMm3;
+        const std::string header = gooHeaderBytes(mHeader);
+        mFile->stream().seekp(0);
+        mFile->stream().write(header.data(), std::streamsize(header.size()));
+        mFile->commit();
+    }
+
+private:
+    static double moveTime(const GooMotion& m)
+    {
+        double t = m.waitBeforeLift + m.waitAfterLift + m.waitAfterRetract;
+        for (int k = 0; k < 2; ++k) {
+            if (m.liftSpeed[k] > 0) t += 60.0 * m.liftDistance[k] / m.liftSpeed[k];
+            if (m.retractSpeed[k] > 0) t += 60.0 * m.retractDistance[k] / m.retractSpeed[k];
+        }
+        return t;
+    }
+    static std::string preview(const SliceSummary& s, int side)
+    {
+        int w = 0, h = 0, channels = 0;
+        const std::vector<std::uint8_t> rgba = decodePng(s.thumbnail(side, side), w, h, channels);
+        if (channels != 4) throw std::logic_error("the thumbnail is not RGBA");
+        return gooPreview(rgba.data(), w, h, side);
+    }
+
+    fs::path mPath;
+    std::unique_ptr<AtomicFile> mFile;
+    GooHeader mHeader;
+    double mPrintTime = 0;
 };
 
 using ArchiveFactory = std::function<std::unique_ptr<SliceArchive>(const fs::path&, const std::string& where)>;
@@ -209,7 +306,8 @@ const std::map<std::string, ArchiveFactory>& archiveFactories()
         {"sl1s", [](const fs::path& p, const std::string& w) { return std::make_unique<Sl1Archive>(p, w); }},
         {"zip", [](const fs::path& p, const std::string& w) { return std::make_unique<ZipArchive>(p, "", w); }},
         {"png", [](const fs::path& p, const std::string& w) { return std::make_unique<PngFolder>(p, w); }},
-        {"exr", [](const fs::path& p, const std::string& w) { return std::make_unique<ExrFolder>(p, w); }}};
+        {"exr", [](const fs::path& p, const std::string& w) { return std::make_unique<ExrFolder>(p, w); }},
+        {"goo", [](const fs::path& p, const std::string& w) { return std::make_unique<GooArchive>(p, w); }}};
     return factories;
 }
 

@@ -29,16 +29,34 @@ struct SliceSummary {
     std::function<std::string(int width, int height)> thumbnail;
 };
 
+/// What a slice job knows before its first layer.
+struct SliceStart {
+    const PrinterProfile& printer;
+    const SliceSettings& settings;
+    int layers = 0;
+    double layerMm = 0, exposureS = 0, exposureFirstS = 0;
+    int storedWidth = 0, storedHeight = 0;  ///< the stored image's size (pixels)
+};
+
+/// How an archive wants its layers.
+enum class LayerEncoding {
+    png,         ///< PNG bytes of the stored image (encodeWindowPng)
+    goo,         ///< Elegoo .goo image data (encodeGooLayer)
+    fieldValues  ///< the field's float values over the window
+};
+
 /// One slice output being written. Layers arrive in order; nothing carries the final name until
 /// finish() (a file through AtomicFile, a folder under a temporary name renamed at the end), so a
 /// job that fails or is cancelled leaves nothing.
 class SliceArchive {
 public:
     virtual ~SliceArchive() = default;
-    /// Whether layers are the field's values (float images) rather than PNG images.
-    virtual bool takesFieldValues() const { return false; }
-    /// Layer @a index as PNG bytes.
-    virtual void addLayer(int index, const std::string& png) = 0;
+    /// The form addLayer() (or addLayerValues()) takes.
+    virtual LayerEncoding encoding() const { return LayerEncoding::png; }
+    /// Called once before the first layer; checks what the format cannot hold (throws InputError).
+    virtual void begin(const SliceStart&) {}
+    /// Layer @a index in the archive's encoding().
+    virtual void addLayer(int index, const std::string& bytes) = 0;
     /// Layer @a index as field values over the window (@a i0, @a j0, @a nx x @a ny) of the display.
     virtual void addLayerValues(int index, int nx, int ny, int i0, int j0, const std::vector<float>& values);
     /// Writes what follows the layers and makes the output appear whole.

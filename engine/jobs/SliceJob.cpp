@@ -2,11 +2,14 @@
 
 #include "engine/jobs/SliceArchives.h"
 
+#include "engine/checks/Printability.h"
+
 #include "engine/core/Errors.h"
 #include "engine/core/Format.h"
 #include "engine/core/Version.h"
 #include "mesher/slice/Slicer.h"
 #include "mesher/writers/AtomicFile.h"
+#include "mesher/writers/GooWriter.h"
 #include "mesher/writers/SliceWriters.h"
 
 #include <tbb/info.h>
@@ -226,6 +229,53 @@ struct LayerRepeats {
     }
 };
 
+/// Warns of what the printability checks found and, with `checks: strict`, fails the job on an
+/// island (before the archive is finished, so nothing is left).
+void reportPrintability(const PrintabilityCheck& check, const SliceSettings& settings, const fs::path& path,
+                        const JobContext* context)
+{
+    const nlohmann::json found = check.report(5);
+    const std::string name = path.filename().string();
+    if (check.islandCount() > 0) {
+        const std::string message =
+            name + ": " + std::to_string(check.islandCount()) + " island(s), " +
+            number(found["island_area_mm2"].get<double>()) + " mm^2 in all, the largest " +
+            number(found["largest_island_mm2"].get<double>()) +
+            " mm^2, cure onto nothing (first: " + check.describeFirstIsland() +
+            "); they will drop into the vat or print as loose debris: add supports there, turn the part so the "
+            "region grows from the layers below, or check that the lattice connects (report.json "
+            "`printability.islands`)";
+        if (settings.checks == "strict")
+            throw JobError(settings.printerWhere + ": " + message + "; `checks: strict` refuses the job");
+        if (context) context->warn("islands", message, {{"islands", check.islandCount()}});
+    }
+    if (check.trapCount() > 0 && context) {
+        const nlohmann::json& first = found["resin_traps"][0];
+        context->warn(
+            "resin_traps",
+            name + ": " + std::to_string(check.trapCount()) + " closed cavit" + (check.trapCount() == 1 ? "y" : "ies") +
+                " hold " + number(found["resin_trap_volume_mm3"].get<double>()) + " mm^3 of uncured resin (first: " +
+                number(first["volume_mm3"].get<double>()) + " mm^3, a drain hole at x " +
+                number(first["x"].get<double>()) + ", y " + number(first["y"].get<double>()) + ", z " +
+                number(first["z"].get<double>()) + " reaches it after " + number(first["drain_mm"].get<double>()) +
+                " mm); they cause suction (cupping) and leak later: add drain holes (report.json "
+                "`printability.resin_traps`)",
+            {{"resin_traps", check.trapCount()}});
+    }
+    if (check.thinPixelCount() > 0 && context) {
+        const nlohmann::json& first = found["thin"]["first"][0];
+        context->warn("thin_features",
+                      name + ": " + std::to_string(check.thinPixelCount()) + " exposed pixels in " +
+                          std::to_string(found["thin"]["layers"].get<std::int64_t>()) +
+                          " layers belong to features less than 2 pixels across (first: layer " +
+                          std::to_string(first["layer"].get<int>()) + " at x " + number(first["x"].get<double>()) +
+                          ", y " + number(first["y"].get<double>()) +
+                          "); the printer may not form them: thicken the walls or struts (report.json "
+                          "`printability.thin`)",
+                      {{"thin_pixels", check.thinPixelCount()}});
+    }
+}
+
 }  // namespace
 
 SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterProfile& printer,
@@ -268,7 +318,12 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
                          printerRef + "; shrink the domain, move it with `position:` or pick a larger printer");
 
     const std::unique_ptr<SliceArchive> archive = openSliceArchive(format, path, settings.printerWhere);
-    const bool fieldValues = archive->takesFieldValues();
+    const double exposure = settings.exposure.value_or(printer.exposureS);
+    const double exposureFirst = settings.exposureFirst.value_or(printer.exposureFirstS);
+    archive->begin(
+        {printer, settings, count, layer, exposure, exposureFirst, display.storedWidth(), display.storedHeight()});
+    const LayerEncoding encoding = archive->encoding();
+    const bool fieldValues = encoding == LayerEncoding::fieldValues;
 
     SliceResult result;
     result.layerAreas.resize(count);
@@ -280,13 +335,28 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
     sheet.init(count, slicer.nx(), slicer.ny());
     RasterStats stats;
 
+    const int period = layersPerPeriod(field, layer, count);
     LayerRepeats repeats;
-    if (!fieldValues && settings.reuseBytes > 0) repeats.period = layersPerPeriod(field, layer, count);
+    if (!fieldValues && settings.reuseBytes > 0) repeats.period = period;
     repeats.budget = settings.reuseBytes;
+
+    LayerGeometry geometry;
+    geometry.nx = slicer.nx();
+    geometry.ny = slicer.ny();
+    geometry.pitchX = display.pitchX();
+    geometry.pitchY = display.pitchY();
+    geometry.layer = layer;
+    geometry.z0 = part.min.z();
+    geometry.x = [&](double i) { return slicer.xOf(slicer.i0() + i); };
+    geometry.y = [&](double j) { return slicer.yOf(slicer.j0() + j); };
+    const bool checks = settings.checks != "off";
+    PrintabilityCheck printability(geometry, count, period);
 
     struct Token {
         LayerImage image;
-        bool copy = false;           ///< the layer's phase image is expected to be kept (LayerRepeats)
+        bool copy = false;     ///< the layer's phase image is expected to be kept (LayerRepeats)
+        bool analyse = false;  ///< the printability checks need this layer's image
+        LayerFeatures features;
         double exposedPixels = 0.0;  ///< summed in the parallel stage
         std::string bytes;
         std::vector<float> values;
@@ -310,7 +380,9 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
             std::vector<std::uint8_t> window;
             int col0, row0, w, h;
             t->image.storedWindow(display, window, col0, row0, w, h);
-            t->bytes = encodeWindowPng(storedW, storedH, window.data(), col0, row0, w, h);
+            t->bytes = encoding == LayerEncoding::goo
+                           ? encodeGooLayer(storedW, storedH, window.data(), col0, row0, w, h)
+                           : encodeWindowPng(storedW, storedH, window.data(), col0, row0, w, h);
         }
     };
 
@@ -327,13 +399,16 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
                     auto* t = new Token(&held);
                     t->image.index = next++;
                     t->copy = repeats.mayCopy(t->image.index);
+                    t->analyse = checks && printability.needsImage(t->image.index);
                     return t;
                 }) & tbb::make_filter<Token*, Token*>(tbb::filter_mode::parallel, [&](Token* t) {
                     if (!t->copy) render(t);
+                    if (t->analyse) t->features = analyseLayer(t->image);
                     return t;
                 }) & tbb::make_filter<Token*, void>(tbb::filter_mode::serial_in_order, [&](Token* raw) {
                     std::unique_ptr<Token> t(raw);
                     const int i = t->image.index;
+                    if (checks) printability.addLayer(i, std::move(t->features));
                     if (repeats.copies(i)) {
                         const int phase = i % repeats.period;
                         result.layerAreas[i] = repeats.exposed[phase] * pixelArea;
@@ -356,12 +431,11 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
                     progress.add();
                 }));
     if (repeats.kept.load() > 0) heights.addCopies(repeats.period, count);
+    if (checks) reportPrintability(printability, settings, path, context);
 
     // Statistics for config.ini: slow tilts where a layer covers more than area_fill of the display.
     int slow = 0;
     double volume = 0.0, printTime = 0.0;
-    const double exposure = settings.exposure.value_or(printer.exposureS);
-    const double exposureFirst = settings.exposureFirst.value_or(printer.exposureFirstS);
     for (int i = 0; i < count; ++i) {
         const bool isSlow = result.layerAreas[i] > printer.areaFillPercent / 100.0 * displayArea;
         slow += isSlow;
@@ -427,6 +501,7 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
     result.report["pixels_evaluated"] = stats.pixelsEvaluated.load();
     result.report["pixels_supersampled"] = stats.pixelsSupersampled.load();
     result.report["pixels_total"] = double(count) * slicer.nx() * slicer.ny();
+    if (checks) result.report["printability"] = printability.report();
     return result;
 }
 

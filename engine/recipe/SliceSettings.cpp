@@ -12,7 +12,8 @@ const std::vector<ArchiveFormatInfo>& archiveFormats()
         {"sl1s", ".sl1s", "Prusa SL1S archive (as sl1, for the SL1S Speed)"},
         {"zip", ".zip", "a zip of PNG layers and slices.json, for DLP hosts that take PNG stacks"},
         {"png", "", "a folder of PNG layers and slices.json"},
-        {"exr", "", "a folder of OpenEXR float layers (the field's values) and slices.json"}};
+        {"exr", "", "a folder of OpenEXR float layers (the field's values) and slices.json"},
+        {"goo", ".goo", "Elegoo .goo (V3) for Elegoo's Saturn and Mars printers: run-length layers, previews"}};
     return formats;
 }
 
@@ -47,6 +48,10 @@ const std::vector<KeySpec>& sliceKeys()
         {"reuse",
          {{"type", {"string", "boolean"}}},
          "copy layers one z-period apart (on) or compute every layer (off)",
+         "on"},
+        {"checks",
+         {{"type", {"string", "boolean"}}},
+         "printability checks (islands, resin traps, thin features): on, off, or strict (an island fails the job)",
          "on"}};
     return keys;
 }
@@ -104,6 +109,14 @@ SliceSettings parseSliceSettings(const RecipeNode& spec)
             s.reuseBytes = 0;
         else if (word != "on" && word != "true")
             spec["reuse"].fail("expected `on` (copy layers one z-period apart, the default) or `off`");
+    }
+    if (spec.has("checks")) {
+        const std::string word = spec["checks"].yaml().Scalar();
+        s.checks = word == "false" ? "off" : word == "true" ? "on" : word;
+        if (s.checks != "on" && s.checks != "off" && s.checks != "strict")
+            spec["checks"].fail(
+                "expected `on` (report islands, resin traps and thin features), `strict` (an island "
+                "fails the job) or `off`");
     }
     return s;
 }

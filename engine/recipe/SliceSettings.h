@@ -41,6 +41,9 @@ struct SliceSettings {
     std::string preview;  ///< contact sheet file; "" = FILE.preview.png; "off"
     std::string timestamp = "2020-01-01 at 00:00:00 UTC";
     int threads = 0;  ///< 0: all
+    /// Printability checks: `on` (islands, resin traps and thin features reported and warned),
+    /// `strict` (an island fails the job) or `off`.
+    std::string checks = "on";
     /// Where the field repeats along z over a whole number of layers, the encoded images of one
     /// period are kept up to this many bytes and copied to the layers a period above (`reuse:
     /// off` sets 0: every layer computed).
