@@ -76,7 +76,29 @@ def run(voxlat, tmp):
     same = (tmp / "w3" / "gyroid.sl1s").read_bytes() == (tmp / "w3-all" / "gyroid.sl1s").read_bytes()
     print(f"  archives with and without copied layers byte-identical: {same}")
 
+    # Printability checks (islands, resin traps, thin features) cost: the same two runs with
+    # `checks: off`, alternated with checks on, best of three each (the machine is noisy).
+    def best(extra):
+        times = []
+        for k in range(3):
+            shutil.rmtree(tmp / "w3-c", ignore_errors=True)
+            times.append(measure([voxlat, "-q", "run", ROOT / "data/recipes/gyroid-sl1s.yaml", "--out", tmp / "w3-c"]
+                                 + extra)[0])
+        return min(times)
+    checks = {}
+    for label, extra in (("copied", []), ("every layer", ["--set", "outputs.slices.reuse=off"])):
+        on = best(extra)
+        off = best(extra + ["--set", "outputs.slices.checks=off"])
+        checks[label] = (on, off)
+        print(f"  printability checks, {label}: {on:.2f} s with, {off:.2f} s without: +{100 * (on / off - 1):.0f} % "
+              f"(target <= 25 %: {verdict(on <= 1.25 * off)})")
+    p = slices.get("printability", {})
+    print(f"  printability: {p.get('island_count')} islands (largest {p.get('largest_island_mm2')} mm2), "
+          f"{p.get('resin_trap_count')} resin traps, {p.get('thin', {}).get('pixels')} thin pixels; "
+          f"{p.get('layers_analysed')} layers read, {p.get('layers_replayed')} replayed")
+
     result = {"voxlat_s": t_v, "voxlat_mb": m_v, "voxlat_layers": n_ours, "voxlat_all_layers_s": t_all,
+              "checks_overhead": {k: v[0] / v[1] - 1 for k, v in checks.items()},
               "voxlat_all_layers_mb": m_all, "layers_copied": slices["layers_copied"], "same_bytes": same}
     ref = ROOT / "bench/reference/w3_mesh_prusaslicer.py"
     ini, stl, out = tmp / "sl1s.ini", tmp / "part.stl", tmp / "ref.sl1s"

@@ -338,11 +338,18 @@ TEST(Slices, SameBytesForAnyThreadCount)
         ASSERT_EQ(runCommand(voxlatBinary() + " -q --threads " + std::to_string(threads) + " slice " + recipe.string() +
                              " -o " + file.string()),
                   0);
+        ASSERT_EQ(runCommand(voxlatBinary() + " -q --threads " + std::to_string(threads) + " slice " + recipe.string() +
+                             " --printer mars4-max --preview off -o " +
+                             (dir.path / ("t" + std::to_string(threads)) / "part.goo").string()),
+                  0);
     }
     const std::string one = readFile(dir.path / "t1" / "part.sl1s");
     EXPECT_GT(one.size(), 10000u);
     EXPECT_TRUE(one == readFile(dir.path / "t3" / "part.sl1s"));  // not EXPECT_EQ: binary
     EXPECT_TRUE(readFile(dir.path / "t1" / "part.preview.png") == readFile(dir.path / "t3" / "part.preview.png"));
+    const std::string goo = readFile(dir.path / "t1" / "part.goo");
+    EXPECT_GT(goo.size(), 195477u);
+    EXPECT_TRUE(goo == readFile(dir.path / "t3" / "part.goo"));
 }
 
 /// Pixels of two PNG images that differ at all, and by more than one grey level.

@@ -496,14 +496,18 @@ std::int64_t PrintabilityCheck::thinPixelCount() const
     return mState->thinPixels;
 }
 
-std::string PrintabilityCheck::describeFirstIsland() const
+std::string PrintabilityCheck::describeIslands(std::size_t count) const
 {
     const State& s = *mState;
-    if (s.islandList.empty()) return "";
-    const nlohmann::json& i = s.islandList[0];
-    return "layer " + std::to_string(i["layer"].get<int>()) + " (z " + formatNumber(i["z"].get<double>()) +
-           " mm) at x " + formatNumber(i["x"].get<double>()) + ", y " + formatNumber(i["y"].get<double>()) + ", " +
-           formatNumber(i["area_mm2"].get<double>()) + " mm^2";
+    std::string text;
+    for (std::size_t k = 0; k < std::min(count, s.islandList.size()); ++k) {
+        const nlohmann::json& i = s.islandList[k];
+        text += (k ? "; " : "") + std::string("layer ") + std::to_string(i["layer"].get<int>()) + " (z " +
+                formatNumber(i["z"].get<double>()) + " mm) at x " + formatNumber(i["x"].get<double>()) + ", y " +
+                formatNumber(i["y"].get<double>()) + ", " + formatNumber(i["area_mm2"].get<double>()) + " mm^2";
+    }
+    if (s.islands > std::int64_t(count)) text += "; ...";
+    return text;
 }
 
 }  // namespace voxlat

@@ -87,8 +87,8 @@ public:
     std::int64_t islandCount() const;
     std::int64_t trapCount() const;
     std::int64_t thinPixelCount() const;
-    /// The first island (report()["islands"][0]) as readable text, for messages.
-    std::string describeFirstIsland() const;
+    /// The first @a count islands as readable text, for messages.
+    std::string describeIslands(std::size_t count) const;
 
 private:
     struct State;

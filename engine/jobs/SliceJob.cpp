@@ -240,8 +240,8 @@ void reportPrintability(const PrintabilityCheck& check, const SliceSettings& set
         const std::string message =
             name + ": " + std::to_string(check.islandCount()) + " island(s), " +
             number(found["island_area_mm2"].get<double>()) + " mm^2 in all, the largest " +
-            number(found["largest_island_mm2"].get<double>()) +
-            " mm^2, cure onto nothing (first: " + check.describeFirstIsland() +
+            number(found["largest_island_mm2"].get<double>()) + " mm^2, cure onto nothing (" +
+            check.describeIslands(3) +
             "); they will drop into the vat or print as loose debris: add supports there, turn the part so the "
             "region grows from the layers below, or check that the lattice connects (report.json "
             "`printability.islands`)";
@@ -251,16 +251,17 @@ void reportPrintability(const PrintabilityCheck& check, const SliceSettings& set
     }
     if (check.trapCount() > 0 && context) {
         const nlohmann::json& first = found["resin_traps"][0];
-        context->warn(
-            "resin_traps",
-            name + ": " + std::to_string(check.trapCount()) + " closed cavit" + (check.trapCount() == 1 ? "y" : "ies") +
-                " hold " + number(found["resin_trap_volume_mm3"].get<double>()) + " mm^3 of uncured resin (first: " +
-                number(first["volume_mm3"].get<double>()) + " mm^3, a drain hole at x " +
-                number(first["x"].get<double>()) + ", y " + number(first["y"].get<double>()) + ", z " +
-                number(first["z"].get<double>()) + " reaches it after " + number(first["drain_mm"].get<double>()) +
-                " mm); they cause suction (cupping) and leak later: add drain holes (report.json "
-                "`printability.resin_traps`)",
-            {{"resin_traps", check.trapCount()}});
+        context->warn("resin_traps",
+                      name + ": " + std::to_string(check.trapCount()) + " closed cavit" +
+                          (check.trapCount() == 1 ? "y holds " : "ies hold ") +
+                          number(found["resin_trap_volume_mm3"].get<double>()) +
+                          " mm^3 of uncured resin (first: " + number(first["volume_mm3"].get<double>()) +
+                          " mm^3, a drain hole at x " + number(first["x"].get<double>()) + ", y " +
+                          number(first["y"].get<double>()) + ", z " + number(first["z"].get<double>()) +
+                          " reaches it after " + number(first["drain_mm"].get<double>()) +
+                          " mm); they cause suction (cupping) and leak later: add drain holes (report.json "
+                          "`printability.resin_traps`)",
+                      {{"resin_traps", check.trapCount()}});
     }
     if (check.thinPixelCount() > 0 && context) {
         const nlohmann::json& first = found["thin"]["first"][0];
