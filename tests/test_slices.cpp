@@ -629,6 +629,7 @@ TEST(Slices, PrintabilityFindsTheFloatingBallAndStrictRefusesIt)
     EXPECT_NEAR(p["islands"][0]["y"].get<double>(), 15.0, 0.05);
     EXPECT_EQ(p["resin_trap_count"], 0);
     EXPECT_EQ(report["warnings"][0]["code"], "islands");
+    EXPECT_EQ(report["printability"], p);  // also at the top level
     // `checks: strict`: exit 3, no archive; `checks: off`: no printability at all.
     EXPECT_EQ(runCommand(voxlatBinary() + " -q run " + recipe.string() + " --out " + (dir.path / "b").string() +
                              " --set outputs.slices.checks=strict",

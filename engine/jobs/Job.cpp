@@ -412,6 +412,9 @@ void Job::writeSlices(const YAML::Node& spec, const std::filesystem::path& path)
         return sliceToFile(*mResult, part, printer, settings, path, mRecipe.node("domain").where(), mContext);
     });
     mReport["slices"].push_back(result.report);
+    // The first slice job's findings also at the top (`printability.islands`, ...), where users look.
+    if (result.report.contains("printability") && !mReport.contains("printability"))
+        mReport["printability"] = result.report["printability"];
     mReport["outputs"].push_back(path.string());
 }
 
