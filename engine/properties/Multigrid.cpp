@@ -1,0 +1,690 @@
+#include "engine/properties/Multigrid.h"
+
+#include "engine/core/Errors.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <unordered_map>
+
+namespace voxlat::homogenization {
+
+namespace {
+
+constexpr int kColours = 27;
+constexpr std::size_t kGrain = 256;         // elements per task
+constexpr std::size_t kDotBlock = 1 << 14;  // fixed blocks: the sum order never depends on threads
+constexpr int kChebyshevDegree = 2;
+constexpr double kChebyshevRatio = 15.0;  // smoothed part of the spectrum: [hi / ratio, hi]
+constexpr int kPowerIterations = 15;
+constexpr std::size_t kCoarsestPoints = 64;
+
+/// Colour of a coordinate along an axis of n voxels: its parity, and a third colour for the last
+/// voxel of an odd axis (which shares nodes with voxel 0 through the periodic wrap).
+inline int axisColour(int x, int n)
+{
+    return (n % 2 == 1 && x == n - 1) ? 2 : (x & 1);
+}
+
+template <class F>
+void parallelRange(std::size_t begin, std::size_t end, std::size_t grain, const F& f)
+{
+    if (end <= begin) return;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(begin, end, grain),
+                      [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
+}
+
+/// Small dense symmetric D x D inverse (the nodal diagonal blocks are positive definite).
+template <int D>
+void invertBlock(const double* a, double* inv)
+{
+    if constexpr (D == 1) {
+        inv[0] = 1.0 / a[0];
+    } else {
+        const double c00 = a[4] * a[8] - a[5] * a[7], c01 = a[5] * a[6] - a[3] * a[8], c02 = a[3] * a[7] - a[4] * a[6];
+        const double det = a[0] * c00 + a[1] * c01 + a[2] * c02;
+        const double s = 1.0 / det;
+        inv[0] = c00 * s;
+        inv[1] = (a[2] * a[7] - a[1] * a[8]) * s;
+        inv[2] = (a[1] * a[5] - a[2] * a[4]) * s;
+        inv[3] = c01 * s;
+        inv[4] = (a[0] * a[8] - a[2] * a[6]) * s;
+        inv[5] = (a[2] * a[3] - a[0] * a[5]) * s;
+        inv[6] = c02 * s;
+        inv[7] = (a[1] * a[6] - a[0] * a[7]) * s;
+        inv[8] = (a[0] * a[4] - a[1] * a[3]) * s;
+    }
+}
+
+/// Pseudo-random in [-1, 1) from an index: a start vector that does not depend on threads.
+inline double hashUnit(std::uint64_t i)
+{
+    i += 0x9E3779B97F4A7C15ull;
+    i = (i ^ (i >> 30)) * 0xBF58476D1CE4E5B9ull;
+    i = (i ^ (i >> 27)) * 0x94D049BB133111EBull;
+    i ^= i >> 31;
+    return double(i >> 11) * (2.0 / 9007199254740992.0) - 1.0;
+}
+
+struct KeyHash {
+    std::size_t operator()(const std::array<std::int32_t, 11>& k) const
+    {
+        std::uint64_t h = 1469598103934665603ull;
+        for (std::int32_t v : k) h = (h ^ std::uint32_t(v)) * 1099511628211ull;
+        return std::size_t(h);
+    }
+};
+
+}  // namespace
+
+/// One grid of the hierarchy: its elements, nodes, element matrices and work vectors.
+template <int D>
+struct PeriodicSolver<D>::Level {
+    static constexpr int kE = 8 * D;
+    std::array<int, 3> n{};                 ///< voxels (= grid points) per axis
+    std::vector<std::int32_t> nodeOfPoint;  ///< grid point -> node, -1 if no element touches it
+    std::vector<std::int32_t> pointOfNode;
+    std::vector<std::int32_t> elemVoxel;  ///< sorted by colour, then voxel index
+    std::vector<std::int32_t> elemNodes;  ///< 8 per element
+    std::vector<std::int32_t> elemType;   ///< per element, index into matrices
+    std::vector<double> matrices;         ///< kE * kE per element type
+    std::array<std::size_t, kColours + 1> colourStart{};
+    std::vector<double> diag, diagInv;  ///< D x D nodal diagonal blocks and their inverses
+    double hi = 0.0, lo = 0.0;          ///< Chebyshev interval of diag^-1 A
+    /// Towards the next coarser level, per axis: fine coordinate -> (coarse coordinate, weight) x2,
+    /// coarse coordinate -> (fine coordinate, weight) x3 (count -1 means unused).
+    std::array<std::vector<std::array<std::pair<int, double>, 2>>, 3> prolong;
+    std::array<std::vector<std::array<std::pair<int, double>, 3>>, 3> restrict;
+    mutable Vector b, x, r, d, t;
+
+    std::size_t nodes() const { return pointOfNode.size(); }
+    std::size_t dofs() const { return pointOfNode.size() * D; }
+    std::size_t points() const { return std::size_t(n[0]) * n[1] * n[2]; }
+    std::int32_t pointIndex(int x, int y, int z) const
+    {
+        return std::int32_t(x + std::size_t(n[0]) * (y + std::size_t(n[1]) * z));
+    }
+    void coords(std::int32_t p, int c[3]) const
+    {
+        c[0] = int(p % n[0]);
+        c[1] = int((p / n[0]) % n[1]);
+        c[2] = int(p / (std::size_t(n[0]) * n[1]));
+    }
+
+    /// Elements from (voxel, type) pairs in voxel order: colour sort, node numbering, diagonal.
+    void build(const std::vector<std::pair<std::int32_t, std::int32_t>>& voxels)
+    {
+        std::array<std::size_t, kColours> count{};
+        std::vector<std::uint8_t> colour(voxels.size());
+        for (std::size_t i = 0; i < voxels.size(); ++i) {
+            int c[3];
+            coords(voxels[i].first, c);
+            colour[i] =
+                std::uint8_t(axisColour(c[0], n[0]) + 3 * (axisColour(c[1], n[1]) + 3 * axisColour(c[2], n[2])));
+            ++count[colour[i]];
+        }
+        colourStart[0] = 0;
+        for (int k = 0; k < kColours; ++k) colourStart[k + 1] = colourStart[k] + count[k];
+        std::array<std::size_t, kColours> fill{};
+        for (int k = 0; k < kColours; ++k) fill[k] = colourStart[k];
+        elemVoxel.resize(voxels.size());
+        elemType.resize(voxels.size());
+        for (std::size_t i = 0; i < voxels.size(); ++i) {
+            const std::size_t at = fill[colour[i]]++;
+            elemVoxel[at] = voxels[i].first;
+            elemType[at] = voxels[i].second;
+        }
+        nodeOfPoint.assign(points(), -1);
+        for (std::int32_t v : elemVoxel) {
+            int c[3];
+            coords(v, c);
+            for (int a = 0; a < 8; ++a) nodeOfPoint[corner(c, a)] = 0;
+        }
+        pointOfNode.clear();
+        for (std::size_t p = 0; p < nodeOfPoint.size(); ++p)
+            if (nodeOfPoint[p] == 0) {
+                nodeOfPoint[p] = std::int32_t(pointOfNode.size());
+                pointOfNode.push_back(std::int32_t(p));
+            }
+        elemNodes.resize(8 * elemVoxel.size());
+        for (std::size_t e = 0; e < elemVoxel.size(); ++e) {
+            int c[3];
+            coords(elemVoxel[e], c);
+            for (int a = 0; a < 8; ++a) elemNodes[8 * e + a] = nodeOfPoint[corner(c, a)];
+        }
+        for (Vector* v : {&b, &x, &r, &d, &t}) v->assign(dofs(), 0.0);
+    }
+
+    std::int32_t corner(const int c[3], int a) const
+    {
+        const int x = c[0] + (a & 1), y = c[1] + ((a >> 1) & 1), z = c[2] + ((a >> 2) & 1);
+        return pointIndex(x == n[0] ? 0 : x, y == n[1] ? 0 : y, z == n[2] ? 0 : z);
+    }
+
+    /// Nodal diagonal blocks: every element's blocks between local nodes that are the same node
+    /// (two local nodes coincide along an axis of one voxel).
+    void buildDiagonal()
+    {
+        diag.assign(nodes() * D * D, 0.0);
+        forEachColour([&](std::size_t e) {
+            const std::int32_t* nd = &elemNodes[8 * e];
+            const double* K = &matrices[std::size_t(elemType[e]) * kE * kE];
+            for (int a = 0; a < 8; ++a)
+                for (int a2 = 0; a2 < 8; ++a2) {
+                    if (nd[a] != nd[a2]) continue;
+                    double* blk = &diag[std::size_t(nd[a]) * D * D];
+                    for (int i = 0; i < D; ++i)
+                        for (int j = 0; j < D; ++j) blk[i * D + j] += K[(a * D + i) * kE + a2 * D + j];
+                }
+        });
+        diagInv.resize(diag.size());
+        parallelRange(0, nodes(), 4096, [&](std::size_t b0, std::size_t b1) {
+            for (std::size_t i = b0; i < b1; ++i) invertBlock<D>(&diag[i * D * D], &diagInv[i * D * D]);
+        });
+    }
+
+    /// Runs f(element) over all elements, colour after colour, each colour in parallel.
+    template <class F>
+    void forEachColour(const F& f) const
+    {
+        for (int c = 0; c < kColours; ++c)
+            parallelRange(colourStart[c], colourStart[c + 1], kGrain, [&](std::size_t e0, std::size_t e1) {
+                for (std::size_t e = e0; e < e1; ++e) f(e);
+            });
+    }
+
+    void apply(const double* xin, double* y) const
+    {
+        parallelRange(0, dofs(), 8192, [&](std::size_t i0, std::size_t i1) { std::fill(y + i0, y + i1, 0.0); });
+        const bool single = matrices.size() == std::size_t(kE * kE);
+        for (int c = 0; c < kColours; ++c)
+            parallelRange(colourStart[c], colourStart[c + 1], kGrain, [&](std::size_t e0, std::size_t e1) {
+                for (std::size_t e = e0; e < e1; ++e) {
+                    const std::int32_t* nd = &elemNodes[8 * e];
+                    const double* K = single ? matrices.data() : &matrices[std::size_t(elemType[e]) * kE * kE];
+                    double ue[kE], ye[kE];
+                    for (int a = 0; a < 8; ++a)
+                        for (int k = 0; k < D; ++k) ue[a * D + k] = xin[std::size_t(nd[a]) * D + k];
+                    for (int i = 0; i < kE; ++i) ye[i] = 0.0;
+                    // Column by column (K is symmetric): each step is a vectorizable axpy.
+                    for (int j = 0; j < kE; ++j) {
+                        const double uj = ue[j];
+                        const double* col = K + j * kE;
+                        for (int i = 0; i < kE; ++i) ye[i] += col[i] * uj;
+                    }
+                    for (int a = 0; a < 8; ++a)
+                        for (int k = 0; k < D; ++k) y[std::size_t(nd[a]) * D + k] += ye[a * D + k];
+                }
+            });
+    }
+
+    /// out = diag^-1 in, node by node.
+    void applyDiagInv(const double* in, double* out, std::size_t i) const
+    {
+        const double* m = &diagInv[i * D * D];
+        for (int r = 0; r < D; ++r) {
+            double s = 0.0;
+            for (int c = 0; c < D; ++c) s += m[r * D + c] * in[i * D + c];
+            out[i * D + r] = s;
+        }
+    }
+};
+
+template <int D>
+PeriodicSolver<D>::PeriodicSolver(const std::array<int, 3>& n, const std::vector<std::int32_t>& label, int components,
+                                  const std::vector<double>& elementMatrix)
+    : mComponents(components)
+{
+    auto L = std::make_unique<Level>();
+    L->n = n;
+    std::vector<std::pair<std::int32_t, std::int32_t>> voxels;
+    for (std::size_t v = 0; v < label.size(); ++v)
+        if (label[v] >= 0) voxels.push_back({std::int32_t(v), 0});
+    L->matrices = elementMatrix;
+    L->build(voxels);
+    // Nodes are shared only within a component (sharing a node is what connects voxels).
+    mNodeComponent.assign(L->nodes(), -1);
+    for (std::size_t e = 0; e < L->elemVoxel.size(); ++e)
+        for (int a = 0; a < 8; ++a) mNodeComponent[L->elemNodes[8 * e + a]] = label[L->elemVoxel[e]];
+    mLevels.push_back(std::move(L));
+    buildHierarchy();
+}
+
+template <int D>
+PeriodicSolver<D>::~PeriodicSolver() = default;
+
+template <int D>
+std::size_t PeriodicSolver<D>::dofs() const
+{
+    return mLevels[0]->dofs();
+}
+
+template <int D>
+std::size_t PeriodicSolver<D>::elements() const
+{
+    return mLevels[0]->elemVoxel.size();
+}
+
+template <int D>
+int PeriodicSolver<D>::levels() const
+{
+    return int(mLevels.size());
+}
+
+template <int D>
+void PeriodicSolver<D>::buildHierarchy()
+{
+    constexpr int kE = Level::kE;
+    while (mLevels.back()->points() > kCoarsestPoints && mLevels.back()->nodes() > 0) {
+        Level& F = *mLevels.back();
+        if (F.n[0] == 1 && F.n[1] == 1 && F.n[2] == 1) break;
+        auto C = std::make_unique<Level>();
+        for (int k = 0; k < 3; ++k) C->n[k] = (F.n[k] + 1) / 2;
+        // Transfer maps per axis (trilinear interpolation; see the class comment).
+        for (int k = 0; k < 3; ++k) {
+            const int nf = F.n[k], nc = C->n[k];
+            F.prolong[k].assign(nf, {std::pair<int, double>{-1, 0.0}, std::pair<int, double>{-1, 0.0}});
+            for (int i = 0; i < nf; ++i) {
+                if (i % 2 == 0)
+                    F.prolong[k][i][0] = {i / 2, 1.0};
+                else
+                    F.prolong[k][i] = {std::pair<int, double>{(i - 1) / 2, 0.5}, {((i + 1) / 2) % nc, 0.5}};
+            }
+            F.restrict[k].assign(nc, {std::pair<int, double>{-1, 0.0}, {-1, 0.0}, {-1, 0.0}});
+            for (int I = 0; I < nc; ++I) {
+                F.restrict[k][I][0] = {2 * I, 1.0};
+                if (2 * I + 1 < nf) F.restrict[k][I][1] = {2 * I + 1, 0.5};
+                const int J = (I - 1 + nc) % nc;
+                if (2 * J + 1 < nf) F.restrict[k][I][2] = {2 * J + 1, 0.5};
+            }
+        }
+        // Children of each coarse voxel: their element types (-1: empty) by position.
+        const std::size_t coarsePoints = C->points();
+        std::vector<std::int32_t> child(coarsePoints * 8, -1);
+        for (std::size_t e = 0; e < F.elemVoxel.size(); ++e) {
+            int c[3];
+            F.coords(F.elemVoxel[e], c);
+            const std::int32_t cv = C->pointIndex(c[0] / 2, c[1] / 2, c[2] / 2);
+            child[std::size_t(cv) * 8 + (c[0] & 1) + 2 * (c[1] & 1) + 4 * (c[2] & 1)] = F.elemType[e];
+        }
+        // One matrix per distinct (children, widths): numbered in voxel order, deterministic.
+        std::unordered_map<std::array<std::int32_t, 11>, std::int32_t, KeyHash> typeOf;
+        std::vector<std::array<std::int32_t, 11>> keys;
+        std::vector<std::pair<std::int32_t, std::int32_t>> voxels;
+        for (std::size_t cv = 0; cv < coarsePoints; ++cv) {
+            std::array<std::int32_t, 11> key;
+            bool any = false;
+            for (int p = 0; p < 8; ++p) {
+                key[p] = child[cv * 8 + p];
+                any = any || key[p] >= 0;
+            }
+            if (!any) continue;
+            int c[3];
+            C->coords(std::int32_t(cv), c);
+            for (int k = 0; k < 3; ++k) key[8 + k] = (2 * c[k] + 1 < F.n[k]) ? 2 : 1;
+            auto [it, inserted] = typeOf.try_emplace(key, std::int32_t(keys.size()));
+            if (inserted) keys.push_back(key);
+            voxels.push_back({std::int32_t(cv), it->second});
+        }
+        child.clear();
+        child.shrink_to_fit();
+        C->matrices.assign(keys.size() * kE * kE, 0.0);
+        tbb::parallel_for(std::size_t(0), keys.size(), [&](std::size_t t) {
+            const auto& key = keys[t];
+            double* G = &C->matrices[t * kE * kE];
+            for (int pos = 0; pos < 8; ++pos) {
+                if (key[pos] < 0) continue;
+                // 1D interpolation from the coarse voxel's two nodes to the child's two nodes.
+                double w1[3][2][2];
+                for (int k = 0; k < 3; ++k) {
+                    const int p = (pos >> k) & 1;
+                    if (key[8 + k] == 1) {
+                        w1[k][0][0] = 1, w1[k][0][1] = 0, w1[k][1][0] = 0, w1[k][1][1] = 1;
+                    } else if (p == 0) {
+                        w1[k][0][0] = 1, w1[k][0][1] = 0, w1[k][1][0] = 0.5, w1[k][1][1] = 0.5;
+                    } else {
+                        w1[k][0][0] = 0.5, w1[k][0][1] = 0.5, w1[k][1][0] = 0, w1[k][1][1] = 1;
+                    }
+                }
+                double P[8][8];  // [child node][coarse node]
+                for (int a = 0; a < 8; ++a)
+                    for (int bb = 0; bb < 8; ++bb)
+                        P[a][bb] = w1[0][a & 1][bb & 1] * w1[1][(a >> 1) & 1][(bb >> 1) & 1] *
+                                   w1[2][(a >> 2) & 1][(bb >> 2) & 1];
+                const double* K = &F.matrices[std::size_t(key[pos]) * kE * kE];
+                // T = K P (per unknown), then G += P^T T.
+                double T[kE][kE];
+                for (int i = 0; i < kE; ++i)
+                    for (int bb = 0; bb < 8; ++bb)
+                        for (int dj = 0; dj < D; ++dj) {
+                            double s = 0.0;
+                            for (int a = 0; a < 8; ++a)
+                                if (P[a][bb] != 0.0) s += K[i * kE + a * D + dj] * P[a][bb];
+                            T[i][bb * D + dj] = s;
+                        }
+                for (int bb = 0; bb < 8; ++bb)
+                    for (int di = 0; di < D; ++di)
+                        for (int j = 0; j < kE; ++j) {
+                            double s = 0.0;
+                            for (int a = 0; a < 8; ++a)
+                                if (P[a][bb] != 0.0) s += P[a][bb] * T[a * D + di][j];
+                            G[(bb * D + di) * kE + j] += s;
+                        }
+            }
+            for (int i = 0; i < kE; ++i)
+                for (int j = i + 1; j < kE; ++j) G[i * kE + j] = G[j * kE + i] = 0.5 * (G[i * kE + j] + G[j * kE + i]);
+        });
+        C->build(voxels);
+        mLevels.push_back(std::move(C));
+    }
+
+    // Smoother set-up: diagonal blocks and the top of the spectrum of diag^-1 A per level.
+    for (std::size_t l = 0; l + 1 < mLevels.size(); ++l) {
+        Level& L = *mLevels[l];
+        L.buildDiagonal();
+        const std::size_t n = L.dofs();
+        Vector& v = L.x;
+        Vector& w = L.t;
+        for (std::size_t i = 0; i < n; ++i) v[i] = hashUnit(i);
+        double lambda = 0.0;
+        for (int it = 0; it < kPowerIterations; ++it) {
+            L.apply(v.data(), w.data());
+            // Rayleigh quotient v.Av / v.Dv, then v = D^-1 A v normalised.
+            double vav = 0.0, vdv = 0.0;
+            for (std::size_t i = 0; i < L.nodes(); ++i)
+                for (int r = 0; r < D; ++r) {
+                    double dv = 0.0;
+                    for (int c = 0; c < D; ++c) dv += L.diag[i * D * D + r * D + c] * v[i * D + c];
+                    vdv += v[i * D + r] * dv;
+                    vav += v[i * D + r] * w[i * D + r];
+                }
+            lambda = vdv > 0.0 ? vav / vdv : 0.0;
+            double norm = 0.0;
+            for (std::size_t i = 0; i < L.nodes(); ++i) {
+                L.applyDiagInv(w.data(), v.data(), i);
+                for (int r = 0; r < D; ++r) norm += v[i * D + r] * v[i * D + r];
+            }
+            norm = std::sqrt(norm);
+            if (norm == 0.0) break;
+            for (double& x : v) x /= norm;
+        }
+        // The Rayleigh quotient approaches the top from below: a margin keeps Chebyshev stable.
+        L.hi = 1.1 * lambda;
+        L.lo = L.hi / kChebyshevRatio;
+        std::fill(v.begin(), v.end(), 0.0);
+    }
+
+    // Coarsest level: dense Cholesky, pivots below 1e-10 of their diagonal dropped (null space).
+    Level& L = *mLevels.back();
+    const std::size_t n = L.dofs();
+    std::vector<double> A(n * n, 0.0);
+    for (std::size_t e = 0; e < L.elemVoxel.size(); ++e) {
+        const double* K = &L.matrices[std::size_t(L.elemType[e]) * kE * kE];
+        for (int i = 0; i < kE; ++i)
+            for (int j = 0; j < kE; ++j) {
+                const std::size_t gi = std::size_t(L.elemNodes[8 * e + i / D]) * D + i % D;
+                const std::size_t gj = std::size_t(L.elemNodes[8 * e + j / D]) * D + j % D;
+                A[gi * n + gj] += K[i * kE + j];
+            }
+    }
+    std::vector<double> original(n);
+    for (std::size_t i = 0; i < n; ++i) original[i] = A[i * n + i];
+    mCoarseDropped.assign(n, 0);
+    for (std::size_t k = 0; k < n; ++k) {
+        const double pivot = A[k * n + k];
+        if (!(pivot > 1e-10 * original[k])) {
+            mCoarseDropped[k] = 1;
+            for (std::size_t i = k; i < n; ++i) A[i * n + k] = 0.0;
+            continue;
+        }
+        const double s = std::sqrt(pivot);
+        for (std::size_t i = k; i < n; ++i) A[i * n + k] /= s;
+        for (std::size_t j = k + 1; j < n; ++j) {
+            const double ljk = A[j * n + k];
+            if (ljk == 0.0) continue;
+            for (std::size_t i = j; i < n; ++i) A[i * n + j] -= A[i * n + k] * ljk;
+        }
+    }
+    mCoarseFactor = std::move(A);
+}
+
+template <int D>
+void PeriodicSolver<D>::coarseSolve(const Level& L, const double* b, double* x) const
+{
+    const std::size_t n = L.dofs();
+    const double* A = mCoarseFactor.data();
+    for (std::size_t i = 0; i < n; ++i) {  // L y = b
+        if (mCoarseDropped[i]) {
+            x[i] = 0.0;
+            continue;
+        }
+        double s = b[i];
+        for (std::size_t k = 0; k < i; ++k) s -= A[i * n + k] * x[k];
+        x[i] = s / A[i * n + i];
+    }
+    for (std::size_t i = n; i-- > 0;) {  // L^T x = y
+        if (mCoarseDropped[i]) continue;
+        double s = x[i];
+        for (std::size_t k = i + 1; k < n; ++k) s -= A[k * n + i] * x[k];
+        x[i] = s / A[i * n + i];
+    }
+}
+
+template <int D>
+void PeriodicSolver<D>::smooth(const Level& L, const double* b, double* x, bool zeroStart) const
+{
+    // Chebyshev iteration on diag^-1 A over [lo, hi] (Saad, Iterative Methods, alg. 12.1). With a
+    // zero start it is a fixed symmetric polynomial in diag^-1 A times diag^-1: the same operator
+    // before and after the coarse correction, so the V-cycle is symmetric, as CG needs.
+    const double theta = 0.5 * (L.hi + L.lo), delta = 0.5 * (L.hi - L.lo);
+    const double sigma = theta / delta;
+    double rho = 1.0 / sigma;
+    double* d = L.d.data();
+    double* t = L.t.data();
+    const std::size_t nodes = L.nodes();
+    if (!zeroStart) L.apply(x, t);
+    parallelRange(0, nodes, 2048, [&](std::size_t i0, std::size_t i1) {
+        for (std::size_t i = i0; i < i1; ++i) {
+            double r[D];
+            for (int k = 0; k < D; ++k) r[k] = zeroStart ? b[i * D + k] : b[i * D + k] - t[i * D + k];
+            for (int k = 0; k < D; ++k) {
+                double s = 0.0;
+                for (int c = 0; c < D; ++c) s += L.diagInv[i * D * D + k * D + c] * r[c];
+                d[i * D + k] = s / theta;
+                x[i * D + k] = zeroStart ? d[i * D + k] : x[i * D + k] + d[i * D + k];
+            }
+        }
+    });
+    for (int step = 1; step < kChebyshevDegree; ++step) {
+        L.apply(x, t);
+        const double rhoNew = 1.0 / (2.0 * sigma - rho);
+        const double c1 = rhoNew * rho, c2 = 2.0 * rhoNew / delta;
+        parallelRange(0, nodes, 2048, [&](std::size_t i0, std::size_t i1) {
+            for (std::size_t i = i0; i < i1; ++i) {
+                double r[D];
+                for (int k = 0; k < D; ++k) r[k] = b[i * D + k] - t[i * D + k];
+                for (int k = 0; k < D; ++k) {
+                    double s = 0.0;
+                    for (int c = 0; c < D; ++c) s += L.diagInv[i * D * D + k * D + c] * r[c];
+                    d[i * D + k] = c1 * d[i * D + k] + c2 * s;
+                    x[i * D + k] += d[i * D + k];
+                }
+            }
+        });
+        rho = rhoNew;
+    }
+}
+
+template <int D>
+void PeriodicSolver<D>::vcycle(std::size_t level, const double* b, double* x) const
+{
+    const Level& L = *mLevels[level];
+    if (level + 1 == mLevels.size()) {
+        coarseSolve(L, b, x);
+        return;
+    }
+    const Level& C = *mLevels[level + 1];
+    smooth(L, b, x, true);
+    // r = b - A x, then restricted to the coarse level (P^T, node by node on the coarse grid).
+    L.apply(x, L.t.data());
+    double* r = L.r.data();
+    parallelRange(0, L.dofs(), 8192, [&](std::size_t i0, std::size_t i1) {
+        for (std::size_t i = i0; i < i1; ++i) r[i] = b[i] - L.t[i];
+    });
+    double* bc = C.b.data();
+    parallelRange(0, C.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
+        for (std::size_t i = i0; i < i1; ++i) {
+            int c[3];
+            C.coords(C.pointOfNode[i], c);
+            double s[D] = {};
+            for (const auto& [fz, wz] : L.restrict[2][c[2]]) {
+                if (fz < 0) continue;
+                for (const auto& [fy, wy] : L.restrict[1][c[1]]) {
+                    if (fy < 0) continue;
+                    for (const auto& [fx, wx] : L.restrict[0][c[0]]) {
+                        if (fx < 0) continue;
+                        const std::int32_t node = L.nodeOfPoint[L.pointIndex(fx, fy, fz)];
+                        if (node < 0) continue;
+                        const double w = wx * wy * wz;
+                        for (int k = 0; k < D; ++k) s[k] += w * r[std::size_t(node) * D + k];
+                    }
+                }
+            }
+            for (int k = 0; k < D; ++k) bc[i * D + k] = s[k];
+        }
+    });
+    double* xc = C.x.data();
+    vcycle(level + 1, bc, xc);
+    // x += P xc, node by node on the fine grid.
+    parallelRange(0, L.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
+        for (std::size_t i = i0; i < i1; ++i) {
+            int c[3];
+            L.coords(L.pointOfNode[i], c);
+            double s[D] = {};
+            for (const auto& [cz, wz] : L.prolong[2][c[2]]) {
+                if (cz < 0) continue;
+                for (const auto& [cy, wy] : L.prolong[1][c[1]]) {
+                    if (cy < 0) continue;
+                    for (const auto& [cx, wx] : L.prolong[0][c[0]]) {
+                        if (cx < 0) continue;
+                        const std::int32_t node = C.nodeOfPoint[C.pointIndex(cx, cy, cz)];
+                        const double w = wx * wy * wz;
+                        for (int k = 0; k < D; ++k) s[k] += w * xc[std::size_t(node) * D + k];
+                    }
+                }
+            }
+            for (int k = 0; k < D; ++k) x[i * D + k] += s[k];
+        }
+    });
+    smooth(L, b, x, false);
+}
+
+template <int D>
+void PeriodicSolver<D>::apply(const Vector& x, Vector& y) const
+{
+    y.resize(dofs());
+    mLevels[0]->apply(x.data(), y.data());
+}
+
+template <int D>
+void PeriodicSolver<D>::assemble(const std::vector<double>& fe, Vector& f) const
+{
+    const Level& L = *mLevels[0];
+    f.assign(dofs(), 0.0);
+    L.forEachColour([&](std::size_t e) {
+        for (int a = 0; a < 8; ++a)
+            for (int k = 0; k < D; ++k) f[std::size_t(L.elemNodes[8 * e + a]) * D + k] += fe[a * D + k];
+    });
+}
+
+template <int D>
+double PeriodicSolver<D>::dot(const Vector& a, const Vector& b) const
+{
+    const std::size_t n = a.size();
+    const std::size_t blocks = (n + kDotBlock - 1) / kDotBlock;
+    std::vector<double> part(blocks, 0.0);
+    tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t k) {
+        const std::size_t i1 = std::min(n, (k + 1) * kDotBlock);
+        double s = 0.0;
+        for (std::size_t i = k * kDotBlock; i < i1; ++i) s += a[i] * b[i];
+        part[k] = s;
+    });
+    double s = 0.0;
+    for (double p : part) s += p;
+    return s;
+}
+
+template <int D>
+void PeriodicSolver<D>::removeTranslations(Vector& v) const
+{
+    std::vector<double> sum(std::size_t(mComponents) * D, 0.0);
+    std::vector<std::int64_t> count(mComponents, 0);
+    for (std::size_t i = 0; i < mNodeComponent.size(); ++i) {
+        const std::int32_t c = mNodeComponent[i];
+        ++count[c];
+        for (int k = 0; k < D; ++k) sum[std::size_t(c) * D + k] += v[i * D + k];
+    }
+    for (int c = 0; c < mComponents; ++c)
+        for (int k = 0; k < D; ++k)
+            if (count[c] > 0) sum[std::size_t(c) * D + k] /= double(count[c]);
+    for (std::size_t i = 0; i < mNodeComponent.size(); ++i)
+        for (int k = 0; k < D; ++k) v[i * D + k] -= sum[std::size_t(mNodeComponent[i]) * D + k];
+}
+
+template <int D>
+typename PeriodicSolver<D>::Stats PeriodicSolver<D>::solve(const Vector& f, Vector& x, double tolerance,
+                                                           int maxIterations,
+                                                           const std::function<bool(double)>& progress) const
+{
+    const std::size_t n = dofs();
+    Stats stats;
+    x.assign(n, 0.0);
+    const double fnorm = std::sqrt(dot(f, f));
+    if (fnorm == 0.0) return stats;
+    Vector r = f, z(n), p(n), q(n);
+    auto precondition = [&]() {
+        vcycle(0, r.data(), z.data());
+        removeTranslations(z);
+    };
+    precondition();
+    p = z;
+    double rz = dot(r, z);
+    double rnorm = fnorm;
+    const double logTarget = std::log(std::max(tolerance, 1e-300));
+    while (stats.iterations < maxIterations) {
+        apply(p, q);
+        const double pq = dot(p, q);
+        if (!(pq > 0.0)) break;  // breakdown: r is (numerically) in the null space
+        const double alpha = rz / pq;
+        parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
+            for (std::size_t i = i0; i < i1; ++i) {
+                x[i] += alpha * p[i];
+                r[i] -= alpha * q[i];
+            }
+        });
+        ++stats.iterations;
+        rnorm = std::sqrt(dot(r, r));
+        if (progress) {
+            const double fraction = std::clamp(std::log(std::max(rnorm / fnorm, 1e-300)) / logTarget, 0.0, 1.0);
+            if (!progress(fraction)) throw Cancelled("homogenization cancelled");
+        }
+        if (rnorm <= tolerance * fnorm) break;
+        precondition();
+        const double rzNew = dot(r, z);
+        const double beta = rzNew / rz;
+        rz = rzNew;
+        parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
+            for (std::size_t i = i0; i < i1; ++i) p[i] = z[i] + beta * p[i];
+        });
+    }
+    stats.relativeResidual = rnorm / fnorm;
+    return stats;
+}
+
+template class PeriodicSolver<1>;
+template class PeriodicSolver<3>;
+
+}  // namespace voxlat::homogenization

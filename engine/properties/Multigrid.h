@@ -1,0 +1,92 @@
+/// @file Multigrid.h
+/// @brief Matrix-free periodic voxel finite-element operator and its multigrid-preconditioned CG
+/// solver (internal to properties).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <vector>
+
+namespace voxlat::homogenization {
+
+/// The periodic finite-element system of a voxel cell with D unknowns per node (3: displacement,
+/// 1: temperature), one element per solid voxel, all elements sharing one element matrix.
+///
+/// Nodes are the grid points touched by a solid voxel, numbered in grid order; unknown d of node
+/// i is entry i*D + d of a vector. The operator is applied element by element (gather, multiply,
+/// scatter) in colour order: voxels are coloured by the parity of their coordinates (a third
+/// colour along an odd axis for the last layer, which touches the first one periodically), so
+/// voxels of one colour share no node and run in parallel without atomics, and every node sums
+/// its contributions in the same order for any thread count. Dot products sum fixed blocks in a
+/// fixed order. Every result is therefore bit-identical for any number of threads.
+///
+/// The preconditioner is a multigrid V-cycle. Coarse grids halve each axis (ceil(n/2): an odd axis
+/// ends with a one-voxel-wide coarse element); the coarse operators are Galerkin products P^T A P
+/// with trilinear interpolation P, formed element by element: a coarse voxel's matrix is the sum
+/// over its non-empty children of P_c^T K_child P_c. Coarse voxels with the same children share one
+/// matrix (at the first coarse level at most 2048 kinds), so memory stays proportional to the
+/// solid voxels. Smoothing is Chebyshev (degree 2) on the nodal block-Jacobi preconditioned
+/// operator, its upper eigenvalue found by a few power iterations; the coarsest grid (<= 64
+/// points) is solved by a dense Cholesky factorisation.
+///
+/// The system is singular: each connected component may translate rigidly (and a component that
+/// wraps along one axis only may also rotate about it; components touching only along a voxel
+/// edge or at a corner can hinge). Every such mode carries no strain, so a load built from a
+/// macroscopic strain is orthogonal to all of them: the system is consistent, and CG converges in
+/// the range of the operator. The coarsest factorisation drops pivots below 1e-10 of their
+/// diagonal (a generalized inverse, symmetric), and component translations are projected out of
+/// loads and solutions to keep rounding from accumulating there.
+template <int D>
+class PeriodicSolver {
+public:
+    using Vector = std::vector<double>;
+
+    /// @a n: voxels per axis; @a label: per voxel, its component (>= 0) if it is a solid element,
+    /// -1 otherwise; @a elementMatrix: the (8D)^2 row-major symmetric element matrix.
+    PeriodicSolver(const std::array<int, 3>& n, const std::vector<std::int32_t>& label, int components,
+                   const std::vector<double>& elementMatrix);
+    ~PeriodicSolver();
+
+    std::size_t dofs() const;
+    std::size_t elements() const;
+    int levels() const;
+
+    /// y = A x.
+    void apply(const Vector& x, Vector& y) const;
+    /// f = the sum over elements of the element vector @a fe (8D values) at the element's nodes.
+    void assemble(const std::vector<double>& fe, Vector& f) const;
+    /// Deterministic dot product.
+    double dot(const Vector& a, const Vector& b) const;
+    /// Removes from @a v, per component and per unknown, its mean over the component's nodes.
+    void removeTranslations(Vector& v) const;
+
+    struct Stats {
+        int iterations = 0;
+        double relativeResidual = 0.0;  ///< of the CG recurrence; the caller checks the true one
+    };
+    /// Solves A x = f (x starts at 0) until |r| <= tolerance |f|. @a progress receives the fraction
+    /// of the way to the tolerance (log scale) after each iteration; false cancels (throws
+    /// voxlat::Cancelled).
+    Stats solve(const Vector& f, Vector& x, double tolerance, int maxIterations,
+                const std::function<bool(double)>& progress) const;
+
+private:
+    struct Level;
+    void buildHierarchy();
+    void vcycle(std::size_t level, const double* b, double* x) const;
+    void smooth(const Level& L, const double* b, double* x, bool zeroStart) const;
+    void coarseSolve(const Level& L, const double* b, double* x) const;
+
+    std::vector<std::unique_ptr<Level>> mLevels;
+    std::vector<std::int32_t> mNodeComponent;
+    int mComponents = 0;
+    std::vector<double> mCoarseFactor;         ///< dense lower-triangular factor of the coarsest level
+    std::vector<std::uint8_t> mCoarseDropped;  ///< pivots treated as zero (null space)
+};
+
+extern template class PeriodicSolver<1>;
+extern template class PeriodicSolver<3>;
+
+}  // namespace voxlat::homogenization
