@@ -257,5 +257,16 @@ PYBIND11_MODULE(_voxlat, m)
             },
             py::arg("path"))
         .def(
+            "properties",
+            [](Job& j) {
+                nlohmann::json p;
+                {
+                    py::gil_scoped_release release;
+                    p = j.properties();
+                }
+                return jsonToPython(p);
+            },
+            "effective stiffness and conductivity of one periodic cell of the result (a dict; needs material:)")
+        .def(
             "report", [](const Job& j) { return jsonToPython(j.report()); }, "levels, densities, counts, timings");
 }

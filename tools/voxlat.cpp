@@ -3,9 +3,11 @@
 #include "engine/core/Version.h"
 #include "engine/jobs/Job.h"
 #include "engine/jobs/PrinterProfile.h"
+#include "engine/jobs/PropertiesJob.h"
 #include "engine/recipe/RecipeParams.h"
 #include "engine/recipe/Schema.h"
 #include "engine/recipe/SliceSettings.h"
+#include "mesher/writers/AtomicFile.h"
 #include "tools/TerminalProgress.h"
 
 #include <tbb/global_control.h>
@@ -75,6 +77,60 @@ int sample(voxlat::Job& job, const std::string& fieldName, bool gradient)
     return 0;
 }
 
+/// `voxlat properties`: one homogenization, or a sweep of one key.
+int properties(const Common& args, const std::string& jsonFile, const std::string& pngFile, const std::string& sweep,
+               voxlat::JobContext& context)
+{
+    auto writeFile = [](const std::string& path, const std::string& bytes) {
+        voxlat::AtomicFile file(path);
+        file.stream() << bytes;
+        file.commit();
+    };
+    if (sweep.empty()) {
+        voxlat::Job job(voxlat::loadRecipe(args.recipe, args.sets), &context);
+        const nlohmann::json p = job.properties();
+        std::cout << voxlat::propertiesTable(p);
+        if (!jsonFile.empty()) writeFile(jsonFile, p.dump(2) + "\n");
+        if (!pngFile.empty()) {
+            voxlat::Matrix6 C{};
+            for (int i = 0; i < 6; ++i)
+                for (int j = 0; j < 6; ++j) C[i][j] = p["C_MPa"][i][j].get<double>();
+            writeFile(pngFile, voxlat::directionalModulusPng(C));
+        }
+        return 0;
+    }
+    // KEY=FROM:TO:COUNT
+    const auto eq = sweep.find('=');
+    double from = 0, to = 0;
+    int count = 0;
+    char c1 = 0, c2 = 0;
+    std::istringstream range(eq == std::string::npos ? "" : sweep.substr(eq + 1));
+    if (eq == std::string::npos || !(range >> from >> c1 >> to >> c2 >> count) || c1 != ':' || c2 != ':' || count < 1 ||
+        count > 100)
+        throw voxlat::InputError("--sweep " + sweep +
+                                 ": expected KEY=FROM:TO:COUNT (COUNT from 1 to 100), e.g. "
+                                 "fields.lattice.kernel.gaussian.sigma=0.4:1.6:7");
+    const std::string key = sweep.substr(0, eq);
+    nlohmann::json rows = nlohmann::json::array();
+    std::printf("%-12s %9s %12s %12s %12s %10s\n", "value", "density", "E_x MPa", "E_y MPa", "E_z MPa", "E_z/E_s");
+    for (int k = 0; k < count; ++k) {
+        const double value = count == 1 ? from : from + (to - from) * k / (count - 1);
+        std::vector<std::string> sets = args.sets;
+        char text[64];
+        std::snprintf(text, sizeof text, "%.10g", value);
+        sets.push_back(key + "=" + text);
+        voxlat::Job job(voxlat::loadRecipe(args.recipe, sets), &context);
+        nlohmann::json p = job.properties();
+        std::printf("%-12s %9.4f %12.5g %12.5g %12.5g %10.5f\n", text, p["relative_density"].get<double>(),
+                    p["E_MPa"][0].get<double>(), p["E_MPa"][1].get<double>(), p["E_MPa"][2].get<double>(),
+                    p["E_ratio"][2].get<double>());
+        std::fflush(stdout);
+        rows.push_back({{"value", value}, {"properties", p}});
+    }
+    if (!jsonFile.empty()) writeFile(jsonFile, nlohmann::json{{"key", key}, {"sweep", rows}}.dump(2) + "\n");
+    return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv)
@@ -136,6 +192,17 @@ int main(int argc, char** argv)
         ->expected(2);
     sliceCmd->add_option("--format", sliceFormat, "archive format: " + formats);
     sliceCmd->add_option("--preview", slicePreview, "contact-sheet PNG (default FILE.preview.png; `off` for none)");
+
+    Common propertiesArgs;
+    std::string propertiesJson, propertiesPng, propertiesSweep;
+    auto* propertiesCmd = app.add_subcommand(
+        "properties", "effective stiffness and conductivity of one periodic cell of the result (homogenization)");
+    addCommon(propertiesCmd, propertiesArgs);
+    propertiesCmd->add_option("--json", propertiesJson, "write the numbers to this JSON file");
+    propertiesCmd->add_option("--png", propertiesPng, "write the directional Young's modulus picture to this PNG");
+    propertiesCmd->add_option("--sweep", propertiesSweep,
+                              "KEY=FROM:TO:COUNT: the moduli against any --set key, e.g. "
+                              "fields.lattice.kernel.gaussian.sigma=0.4:1.6:7");
 
     CLI11_PARSE(app, argc, argv);
     voxlat::JobContext context;
@@ -216,6 +283,8 @@ int main(int argc, char** argv)
                       << " slow layers, peak memory " << r["peak_memory_mb"] << " MB\n";
             if (!s["preview"].get<std::string>().empty())
                 std::cout << "preview " << s["preview"].get<std::string>() << "\n";
+        } else if (*propertiesCmd) {
+            return properties(propertiesArgs, propertiesJson, propertiesPng, propertiesSweep, context);
         } else if (*sampleCmd) {
             voxlat::Job job(voxlat::loadRecipe(sampleArgs.recipe, sampleArgs.sets), &context);
             return sample(job, sampleField, sampleGradient);

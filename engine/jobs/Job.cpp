@@ -8,6 +8,7 @@
 #include "engine/core/Version.h"
 #include "engine/density/DensitySolver.h"
 #include "engine/jobs/OutputPaths.h"
+#include "engine/jobs/PropertiesJob.h"
 #include "engine/jobs/SliceJob.h"
 #include "engine/recipe/RecipeParams.h"
 #include "fields/GradedLevel.h"
@@ -375,6 +376,8 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
             mReport["outputs"].push_back(path.string());
         } else if (out.kind == "slices") {
             writeSlices(out.spec, path);
+        } else if (out.kind == "properties") {
+            writeProperties(path);
         }
     }
     // A picture of what was meshed, next to the first mesh, so the part can be checked by eye.
@@ -386,6 +389,41 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         writePreview(picture);
     }
     writeReport(outDir / "report.json");
+}
+
+const nlohmann::json& Job::properties()
+{
+    if (!mReport.contains("properties")) {
+        // One period of the result, from the domain's minimum corner unless the recipe says otherwise.
+        const Vec3d corner = mRecipe.domainBox ? mRecipe.domainBox->min : mDomain.box.min;
+        PropertiesResult r = timed("homogenize", [&] {
+            return computeProperties(*field(mRecipe.result), mRecipe, corner, mDomain.voxel, mContext);
+        });
+        mReport["properties"] = std::move(r.report);
+        mPropertiesStiffness = r.stiffnessMPa;
+    }
+    return mReport["properties"];
+}
+
+void Job::writeProperties(const std::filesystem::path& path)
+{
+    checkReplaceable(path, mRecipe.source->path + ": properties output");
+    const nlohmann::json& p = properties();
+    std::filesystem::path picture = path;
+    picture.replace_extension(".png");
+    checkReplaceable(picture, mRecipe.source->path + ": properties output");
+    timed("write " + path.filename().string(), [&] {
+        AtomicFile file(path.string());
+        file.stream() << p.dump(2) << "\n";
+        AtomicFile png(picture.string());
+        png.stream() << directionalModulusPng(mPropertiesStiffness);
+        file.commit();
+        png.commit();
+        return 0;
+    });
+    mReport["properties_picture"] = picture.string();
+    mReport["outputs"].push_back(path.string());
+    mReport["outputs"].push_back(picture.string());
 }
 
 void Job::writePreview(const std::filesystem::path& path)

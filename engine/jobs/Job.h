@@ -11,6 +11,7 @@
 #include <openvdb/openvdb.h>
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <filesystem>
 
 namespace voxlat {
@@ -49,6 +50,12 @@ public:
     /// no grid and no mesh: every pixel is decided from the field (engine/SliceJob).
     void writeSlices(const YAML::Node& spec, const std::filesystem::path& path);
 
+    /// The effective stiffness and conductivity of one periodic cell of the result
+    /// (engine/jobs/PropertiesJob), computed once; also report.json's `properties`.
+    const nlohmann::json& properties();
+    /// Writes properties() to @a path (.json) and the directional Young's modulus picture next to it (.png).
+    void writeProperties(const std::filesystem::path& path);
+
     /// Levels, densities, counts, timings and peak memory so far.
     nlohmann::json report() const;
 
@@ -73,6 +80,7 @@ private:
     /// when the report is made.
     mutable std::optional<TriangleMesh::Measures> mMeshMeasures;
     nlohmann::json mReport;
+    std::array<std::array<double, 6>, 6> mPropertiesStiffness{};
     nlohmann::json mTimings = nlohmann::json::object();
 };
 

@@ -121,6 +121,13 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
             r.allow.push_back(word);
         }
     }
+    if (top.has("material")) r.material = parseMaterial(top["material"]);
+    if (top.has("properties")) {
+        const RecipeNode properties = top["properties"];
+        r.properties = parseProperties(&properties, name);
+    } else {
+        r.properties = parseProperties(nullptr, name);
+    }
     if (top.has("outputs")) {
         const RecipeNode outputs = top["outputs"];
         outputs.checkKeys(kOutputKeys);
@@ -161,6 +168,9 @@ void checkOutputName(const RecipeNode& node, const std::string& kind)
     if (kind == "mesh" && ext != ".stl" && ext != ".ply" && ext != ".obj")
         node.fail("a mesh file ends in .stl, .ply or .obj; `" + name + "` does not");
     if (kind == "vdb" && ext != ".vdb") node.fail("a vdb output ends in .vdb; `" + name + "` does not");
+    if (kind == "properties" && ext != ".json")
+        node.fail("a properties output ends in .json (the numbers; a picture NAME.png is written next to it); `" +
+                  name + "` does not");
 }
 
 const std::vector<KeySpec>& topLevelKeys()
@@ -176,9 +186,16 @@ const std::vector<KeySpec>& topLevelKeys()
          "map of name -> node; names are referred to by other nodes",
          "required"},
         {"result", string(), "the name of the field that is meshed and measured", "required"},
-        {"outputs", object(outputKinds()), "what to write: mesh, vdb, slices", "none (report only)"},
+        {"outputs", object(outputKinds()), "what to write: mesh, vdb, slices, properties", "none (report only)"},
         {"params", ref("params"), "named parameters with defaults, used anywhere as $name", "none"},
         {"include", stringOrList(), "recipe libraries whose params: and fields: are merged in", "none"},
+        {"material",
+         {{"anyOf", {oneOfWords({"form2", "ti6al4v", "316l", "17-4ph", "pa12"}), object(materialKeys())}}},
+         "what the part is made of: a named material or {E: 1.6 GPa, nu: 0.38, k: 0.2}; needed by properties",
+         "none"},
+        {"properties", object(propertiesKeys()),
+         "the periodic cell that `voxlat properties` and a `properties:` output homogenize",
+         "one period of the result"},
         {"allow",
          {{"type", "array"}, {"items", oneOfWords({"pieces"})}},
          "checks that only warn: pieces (a result in several pieces, e.g. a plate of separate parts)",
@@ -195,6 +212,10 @@ const std::vector<KeySpec>& outputKinds()
         {"slices",
          {{"anyOf", {ref("slices"), {{"type", "array"}, {"items", ref("slices")}}}}},
          "resin-printer slices: a map (or a list of maps) of slice settings",
+         "—"},
+        {"properties", string(),
+         "effective stiffness and conductivity of one periodic cell (.json, and a picture of the directional Young's "
+         "modulus next to it as .png); needs `material:`",
          "—"}};
     return kinds;
 }

@@ -3,6 +3,7 @@
 #pragma once
 
 #include "engine/recipe/KeySpec.h"
+#include "engine/recipe/Materials.h"
 #include "engine/recipe/RecipeNode.h"
 
 #include <algorithm>
@@ -31,6 +32,9 @@ struct Recipe {
     std::string result;
     std::vector<std::string> fieldNames;  ///< in file order
     std::vector<OutputSpec> outputs;
+    /// `material:` (needed by properties) and the `properties:` cell settings.
+    std::optional<Material> material;
+    PropertiesSettings properties;
     /// Checks the recipe turns from errors into warnings (`allow: [pieces]`).
     std::vector<std::string> allow;
     bool allows(const std::string& check) const { return std::find(allow.begin(), allow.end(), check) != allow.end(); }

@@ -241,6 +241,17 @@ class VoxlatModule(unittest.TestCase):
         self.assertGreater(len(points), 1000)
         self.assertTrue(np.all(points.min(axis=0) > -0.5) and np.all(points.max(axis=0) < [30.5, 24.5, 24.5]))
 
+    def test_properties_as_numpy_arrays(self):
+        # Square columns of side 1 mm along z in a 2 mm cell: E_z = E_s / 4, nothing across.
+        column = voxlat.box([0.5, 0.5, -1], [1.5, 1.5, 3])
+        recipe = voxlat.Recipe(column, voxel=0.125, material={"E": "2 GPa", "nu": 0.3},
+                               properties={"cell": [2, 2, 2], "origin": [0, 0, 0], "resolution": 16})
+        p = voxlat.properties(recipe)
+        self.assertEqual(p["C_MPa"].shape, (6, 6))
+        np.testing.assert_allclose(p["E_MPa"], [0.0, 0.0, 500.0], atol=1e-6 * 2000)
+        np.testing.assert_allclose(p["C_MPa"], p["C_MPa"].T, atol=1e-9 * 2000)
+        self.assertAlmostEqual(p["relative_density"], 0.25)
+
     def test_example_scripts_run(self):
         for script in sorted((ROOT / "data/scripts").glob("*.py")):
             with self.subTest(script=script.name):

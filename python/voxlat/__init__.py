@@ -22,6 +22,7 @@ from ._voxlat import Cancelled, InputError, JobError
 __all__ = [
     "Node", "Recipe", "Cancelled", "InputError", "JobError", "schema", "tpms", "gyroid", "schwarz_p", "schwarz_d", "iwp",
     "neovius", "expr", "vector", "sphere", "box", "cylinder", "mesh", "union", "intersection", "difference", "load",
+    "properties",
 ]
 
 
@@ -210,7 +211,7 @@ class Recipe:
     """
 
     def __init__(self, result=None, domain=None, voxel=0.1, fields=None, params=None, outputs=None, text=None,
-                 path=None, sets=()):
+                 path=None, sets=(), material=None, properties=None):
         self.sets = list(sets)
         self.path = path
         if text is not None:
@@ -224,6 +225,10 @@ class Recipe:
             doc["voxel"] = extent / 8.0  # a probe: no grid is evaluated
         if params:
             doc["params"] = {k: _spec(v) for k, v in params.items()}
+        if material is not None:
+            doc["material"] = _spec(material)
+        if properties is not None:
+            doc["properties"] = _spec(properties)
         if domain is not None:
             doc["domain"] = {"box": _spec(domain)}
         named = {k: _spec(v) for k, v in (fields or {}).items()}
@@ -304,6 +309,22 @@ class Recipe:
         job = self.job()
         job.write_mesh(str(path))
         return job.report()
+
+
+def properties(recipe, sets=(), progress=None):
+    """Effective stiffness and conductivity of one periodic cell of the recipe's result (a Recipe
+    or a recipe file; it needs `material:`), as `voxlat properties --json` gives them, with the
+    tensors as numpy arrays: C_MPa (6, 6), S_per_MPa (6, 6), E_MPa (3,), G_MPa (3,), nu (3, 3),
+    E_ratio (3,), conductivity["K_ratio"] (3, 3)."""
+    if not isinstance(recipe, Recipe):
+        recipe = Recipe.load(recipe)
+    p = recipe.job(sets, progress).properties()
+    for key in ("C_MPa", "S_per_MPa", "E_MPa", "G_MPa", "nu", "E_ratio", "residual", "iterations"):
+        p[key] = np.array(p[key])
+    for key in ("K_ratio", "K_W_per_mK"):
+        if key in p["conductivity"]:
+            p["conductivity"][key] = np.array(p["conductivity"][key])
+    return p
 
 
 def load(path, sets=()):

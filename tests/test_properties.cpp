@@ -1,0 +1,208 @@
+// Properties of a recipe's result (`voxlat properties`, the `properties:` output): the cell from
+// the result's periods or the recipe, materials with units, exact cases through the whole path
+// (a solid cell, square columns), symmetry, thread independence and the errors users meet.
+#include "TestUtil.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+
+using namespace voxlat;
+using namespace voxlat::test;
+
+namespace {
+
+nlohmann::json propertiesOf(const TempDir& dir, const std::string& name, const std::string& recipe,
+                            const std::string& extra = "", int* status = nullptr, std::string* output = nullptr)
+{
+    const auto path = dir.write(name + ".yaml", recipe);
+    const auto json = dir.path / (name + ".json");
+    std::string out;
+    const int code =
+        runCommand(voxlatBinary() + " -q properties " + path.string() + " --json " + json.string() + " " + extra, &out);
+    if (status) *status = code;
+    if (output) *output = out;
+    if (code != 0) return {};
+    return nlohmann::json::parse(readFile(json));
+}
+
+}  // namespace
+
+TEST(Properties, AWhollySolidCellIsTheIsotropicMaterial)
+{
+    TempDir dir;
+    const auto p = propertiesOf(dir, "solid", R"(material: {E: 1.6 GPa, nu: 0.38}
+properties: {cell: [2, 2, 2], origin: [0, 0, 0], resolution: 8}
+fields:
+  block: {box: [[-1, -1, -1], [3, 3, 3]]}
+result: block
+)");
+    ASSERT_FALSE(p.is_null());
+    const double E = 1600, nu = 0.38;
+    const double c11 = E * (1 - nu) / ((1 + nu) * (1 - 2 * nu)), c12 = E * nu / ((1 + nu) * (1 - 2 * nu)),
+                 c44 = E / (2 * (1 + nu));
+    EXPECT_NEAR(p["relative_density"].get<double>(), 1.0, 1e-12);
+    for (int i = 0; i < 3; ++i) {
+        EXPECT_NEAR(p["C_MPa"][i][i].get<double>(), c11, 1e-5 * c11);
+        EXPECT_NEAR(p["C_MPa"][i][(i + 1) % 3].get<double>(), c12, 1e-5 * c11);
+        EXPECT_NEAR(p["C_MPa"][i + 3][i + 3].get<double>(), c44, 1e-5 * c11);
+        EXPECT_NEAR(p["E_MPa"][i].get<double>(), E, 1e-5 * E);
+        EXPECT_NEAR(p["E_ratio"][i].get<double>(), 1.0, 1e-5);
+        EXPECT_NEAR(p["conductivity"]["K_ratio"][i][i].get<double>(), 1.0, 1e-6);
+    }
+    EXPECT_NEAR(p["nu"][0][1].get<double>(), nu, 1e-5);
+    EXPECT_EQ(p["material"]["name"], "custom");
+}
+
+TEST(Properties, SquareColumnsCarryTheirAreaFractionAlongTheirAxisOnly)
+{
+    TempDir dir;
+    // Columns of side 1 mm along x in a 2 mm cell: E_x = (1/2)^2 E_s, E_y = E_z = 0.
+    const auto p = propertiesOf(dir, "columns", R"(material: ti6al4v
+properties: {cell: [2, 2, 2], origin: [0, 0, 0], resolution: 16}
+fields:
+  column: {box: [[-1, 0.5, 0.5], [3, 1.5, 1.5]]}
+result: column
+)");
+    ASSERT_FALSE(p.is_null());
+    const double Es = 113800;
+    EXPECT_NEAR(p["relative_density"].get<double>(), 0.25, 1e-12);
+    EXPECT_NEAR(p["E_MPa"][0].get<double>(), 0.25 * Es, 1e-5 * Es);
+    EXPECT_NEAR(p["E_MPa"][1].get<double>(), 0.0, 1e-9 * Es);
+    EXPECT_NEAR(p["E_MPa"][2].get<double>(), 0.0, 1e-9 * Es);
+    EXPECT_EQ(p["percolates"], nlohmann::json({true, false, false}));
+    EXPECT_NEAR(p["conductivity"]["K_ratio"][0][0].get<double>(), 0.25, 1e-6);
+    EXPECT_NEAR(p["conductivity"]["K_W_per_mK"][0][0].get<double>(), 0.25 * 6.7, 1e-5);
+}
+
+TEST(Properties, AGyroidCellFromItsPeriodsIsCubicSymmetricAndThreadIndependent)
+{
+    TempDir dir;
+    const std::string recipe = R"(material: form2
+voxel: 0.25
+domain: {box: [[0, 0, 0], [20, 20, 20]]}
+fields:
+  lattice: {tpms: gyroid, cell: 5, solid: network, level: 0.3}
+result: lattice
+)";
+    const auto one = propertiesOf(dir, "g1", recipe, "--threads 1");
+    const auto three = propertiesOf(dir, "g3", recipe, "--threads 3");
+    ASSERT_FALSE(one.is_null());
+    EXPECT_EQ(one["cell"]["voxels"], nlohmann::json({20, 20, 20}));
+    EXPECT_EQ(one["cell"]["from"], "the result's periods");
+    const auto& C = one["C_MPa"];
+    for (int i = 0; i < 6; ++i)
+        for (int j = 0; j < 6; ++j)
+            EXPECT_NEAR(C[i][j].get<double>(), C[j][i].get<double>(), 1e-9 * C[0][0].get<double>());
+    EXPECT_NEAR(C[1][1].get<double>(), C[0][0].get<double>(), 1e-6 * C[0][0].get<double>());
+    EXPECT_NEAR(C[2][2].get<double>(), C[0][0].get<double>(), 1e-6 * C[0][0].get<double>());
+    EXPECT_GT(one["E_MPa"][0].get<double>(), 0.0);
+    EXPECT_LT(one["E_MPa"][0].get<double>(), 1600.0 * one["relative_density"].get<double>());  // below Voigt
+    EXPECT_TRUE(one.contains("zener_ratio"));
+    EXPECT_EQ(one.dump(), three.dump());  // byte-identical for any thread count
+}
+
+TEST(Properties, TheRunOutputWritesTheNumbersAndAPicture)
+{
+    TempDir dir;
+    const auto recipe = dir.write("run.yaml", R"(material: {preset: pa12, E: 1500 MPa}
+voxel: 0.25
+domain: {box: [[0, 0, 0], [10, 10, 10]]}
+fields:
+  lattice: {tpms: schwarz-p, cell: 5, solid: sheet, level: 0.4}
+result: lattice
+outputs: {properties: cell.json}
+)");
+    std::string out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " -q run " + recipe.string() + " --out " + (dir.path / "o").string(), &out),
+              0)
+        << out;
+    const auto p = nlohmann::json::parse(readFile(dir.path / "o" / "cell.json"));
+    EXPECT_NEAR(p["material"]["E_MPa"].get<double>(), 1500.0, 1e-9);
+    EXPECT_TRUE(std::filesystem::exists(dir.path / "o" / "cell.png"));
+    const auto report = nlohmann::json::parse(readFile(dir.path / "o" / "report.json"));
+    EXPECT_EQ(report["properties"], p);
+}
+
+TEST(Properties, BadInputNamesTheLineAndWritesNothing)
+{
+    TempDir dir;
+    int status = 0;
+    std::string out;
+    const std::string gyroid = R"(voxel: 0.25
+domain: {box: [[0, 0, 0], [10, 10, 10]]}
+fields:
+  lattice: {tpms: gyroid, cell: 5, solid: network, level: 0.3}
+result: lattice
+)";
+    // No material.
+    propertiesOf(dir, "nomaterial", gyroid, "", &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("material"), std::string::npos) << out;
+    EXPECT_FALSE(std::filesystem::exists(dir.path / "nomaterial.json"));
+    // A modulus without a unit.
+    propertiesOf(dir, "nounit", "material: {E: 1600, nu: 0.3}\n" + gyroid, "", &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("nounit.yaml:1:"), std::string::npos) << out;
+    EXPECT_NE(out.find("GPa"), std::string::npos) << out;
+    // A result with no period and no cell: the axis is named.
+    propertiesOf(dir, "noperiod", R"(material: form2
+fields:
+  ball: {sphere: {center: [0, 0, 0], radius: 3}}
+result: ball
+)",
+                 "", &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("does not repeat along x"), std::string::npos) << out;
+    EXPECT_NE(out.find("cell:"), std::string::npos) << out;
+    // A cell with no solid.
+    propertiesOf(dir, "empty", R"(material: form2
+properties: {cell: [2, 2, 2], origin: [10, 10, 10], resolution: 8}
+fields:
+  ball: {sphere: {center: [0, 0, 0], radius: 3}}
+result: ball
+)",
+                 "", &status, &out);
+    EXPECT_EQ(status, 3) << out;
+    EXPECT_NE(out.find("no solid"), std::string::npos) << out;
+    // A cell that falls apart: a ball inside it touches no neighbour.
+    propertiesOf(dir, "apart", R"(material: form2
+properties: {cell: [4, 4, 4], origin: [-2, -2, -2], resolution: 16}
+fields:
+  ball: {sphere: {center: [0, 0, 0], radius: 1}}
+result: ball
+)",
+                 "", &status, &out);
+    EXPECT_EQ(status, 3) << out;
+    EXPECT_NE(out.find("falls apart"), std::string::npos) << out;
+}
+
+TEST(Properties, ASweepPrintsTheModulusAgainstTheSweptValue)
+{
+    TempDir dir;
+    const auto recipe = dir.write("sweep.yaml", R"(material: form2
+voxel: 0.25
+domain: {box: [[0, 0, 0], [10, 10, 10]]}
+fields:
+  lattice: {tpms: gyroid, cell: 5, solid: network, level: 0.3}
+result: lattice
+)");
+    std::string out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " -q properties " + recipe.string() +
+                             " --sweep fields.lattice.level=0.0:0.6:3 --json " + (dir.path / "s.json").string(),
+                         &out),
+              0)
+        << out;
+    const auto s = nlohmann::json::parse(readFile(dir.path / "s.json"));
+    ASSERT_EQ(s["sweep"].size(), 3u);
+    // A higher level grows the network: density and modulus rise together.
+    double lastDensity = 0, lastModulus = 0;
+    for (const auto& row : s["sweep"]) {
+        EXPECT_GT(row["properties"]["relative_density"].get<double>(), lastDensity);
+        EXPECT_GT(row["properties"]["E_MPa"][2].get<double>(), lastModulus);
+        lastDensity = row["properties"]["relative_density"].get<double>();
+        lastModulus = row["properties"]["E_MPa"][2].get<double>();
+    }
+    EXPECT_NE(out.find("E_z/E_s"), std::string::npos);
+}
