@@ -100,8 +100,11 @@ TEST(Homogenization, SquareColumnsAlongX)
     const double expected = double(a * a) / (L * L) * E;
     EXPECT_LT(relDiff(r.C[0][0], expected), 1e-8);
     for (int i = 0; i < 6; ++i)
-        for (int j = 0; j < 6; ++j)
-            if (i != 0 || j != 0) EXPECT_EQ(r.C[i][j], 0.0) << i << "," << j;
+        for (int j = 0; j < 6; ++j) {
+            if (i != 0 || j != 0) {
+                EXPECT_EQ(r.C[i][j], 0.0) << i << "," << j;
+            }
+        }
     EXPECT_EQ(r.iterations[1], 0);  // not solved: y does not percolate
     const EngineeringConstants e = engineeringConstants(r.C);
     EXPECT_LT(relDiff(e.Ex, expected), 1e-8);
