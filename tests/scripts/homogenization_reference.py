@@ -213,6 +213,15 @@ def gyroid_cell(n, density, periods=1):
     return g > np.quantile(g, 1.0 - density)
 
 
+def grid_cell(n, r):
+    """Dong et al.'s "grid" cell: struts of radius r along the 12 edges of the unit cell, a voxel
+    solid when its centre is within r of an edge (periodic)."""
+    c = (np.arange(n) + 0.5) / n
+    d = np.minimum(c, 1 - c)
+    z, y, x = np.meshgrid(d, d, d, indexing="ij")
+    return (y * y + z * z < r * r) | (x * x + z * z < r * r) | (x * x + y * y < r * r)
+
+
 def write_cell(path, solid, h, E, nu):
     solid = np.asarray(solid, dtype=bool)
     nz, ny, nx = solid.shape
