@@ -22,6 +22,21 @@ constexpr double kChebyshevRatio = 15.0;  // smoothed part of the spectrum: [hi 
 constexpr int kPowerIterations = 15;
 constexpr std::size_t kCoarsestPoints = 64;
 
+/// Four lanes of float or double (GCC/Clang vector extensions; with SSE, double takes two
+/// registers). Lane d holds unknown d of a node; lane 3 is padding.
+typedef float Float4 __attribute__((vector_size(16)));
+typedef double Double4 __attribute__((vector_size(32)));
+template <class T>
+struct Lanes;
+template <>
+struct Lanes<float> {
+    using type = Float4;
+};
+template <>
+struct Lanes<double> {
+    using type = Double4;
+};
+
 /// Colour of a coordinate along an axis of n voxels: its parity, and a third colour for the last
 /// voxel of an odd axis (which shares nodes with voxel 0 through the periodic wrap).
 inline int axisColour(int x, int n)
@@ -90,15 +105,17 @@ struct PeriodicSolver<D>::Level {
     std::vector<std::int32_t> elemVoxel;  ///< sorted by colour, then voxel index
     std::vector<std::int32_t> elemNodes;  ///< 8 per element
     std::vector<std::int32_t> elemType;   ///< per element, index into matrices
-    std::vector<double> matrices;         ///< kE * kE per element type
+    std::vector<double> matrices;         ///< kE * kE per element type; dropped after set-up except on level 0
+    std::vector<Real> realMatrices;       ///< the same in the preconditioner's precision
     std::array<std::size_t, kColours + 1> colourStart{};
-    std::vector<double> diag, diagInv;  ///< D x D nodal diagonal blocks and their inverses
-    double hi = 0.0, lo = 0.0;          ///< Chebyshev interval of diag^-1 A
+    std::vector<double> diag;   ///< D x D nodal diagonal blocks (set-up only)
+    std::vector<Real> diagInv;  ///< their inverses
+    double hi = 0.0, lo = 0.0;  ///< Chebyshev interval of diag^-1 A
     /// Towards the next coarser level, per axis: fine coordinate -> (coarse coordinate, weight) x2,
     /// coarse coordinate -> (fine coordinate, weight) x3 (count -1 means unused).
     std::array<std::vector<std::array<std::pair<int, double>, 2>>, 3> prolong;
     std::array<std::vector<std::array<std::pair<int, double>, 3>>, 3> restrict;
-    mutable Vector b, x, r, d, t;
+    mutable std::vector<Real> b, x, r, d, t;
 
     std::size_t nodes() const { return pointOfNode.size(); }
     std::size_t dofs() const { return pointOfNode.size() * D; }
@@ -155,7 +172,7 @@ struct PeriodicSolver<D>::Level {
             coords(elemVoxel[e], c);
             for (int a = 0; a < 8; ++a) elemNodes[8 * e + a] = nodeOfPoint[corner(c, a)];
         }
-        for (Vector* v : {&b, &x, &r, &d, &t}) v->assign(dofs(), 0.0);
+        for (std::vector<Real>* v : {&b, &x, &r, &d, &t}) v->assign(dofs(), Real(0));
     }
 
     std::int32_t corner(const int c[3], int a) const
@@ -182,7 +199,11 @@ struct PeriodicSolver<D>::Level {
         });
         diagInv.resize(diag.size());
         parallelRange(0, nodes(), 4096, [&](std::size_t b0, std::size_t b1) {
-            for (std::size_t i = b0; i < b1; ++i) invertBlock<D>(&diag[i * D * D], &diagInv[i * D * D]);
+            for (std::size_t i = b0; i < b1; ++i) {
+                double inv[D * D];
+                invertBlock<D>(&diag[i * D * D], inv);
+                for (int k = 0; k < D * D; ++k) diagInv[i * D * D + k] = Real(inv[k]);
+            }
         });
     }
 
@@ -196,23 +217,174 @@ struct PeriodicSolver<D>::Level {
             });
     }
 
+    /// The element matrix of a level with one element type, in the basis that block-diagonalises
+    /// it, when it does (see setReflectionBlocks); empty otherwise.
+    std::vector<double> blocks;
+    std::vector<Real> realBlocks;
+    /// For D = 3: column j of block c as lanes, at c * 3 + j.
+    std::vector<Double4> blockColumns;
+    std::vector<Float4> realBlockColumns;
+
+    /// An element matrix invariant under the voxel's three mirror reflections (a box of an
+    /// isotropic or axis-aligned material) commutes with the group they generate, Z2^3, whose
+    /// characters are one-dimensional. A Walsh-Hadamard transform over the 8 nodes, per unknown,
+    /// takes node values to character components: value (k, d) has character k ^ e_d for
+    /// displacements (a reflection along d also flips the d component) and k for a scalar. The
+    /// matrix is then block diagonal: 8 blocks of D x D. The product K u = T M T u (T the
+    /// transform, T^2 = 8) costs two 8-point transforms and 8 D x D blocks: about a quarter of the
+    /// flops of the dense 24 x 24 product. Kept only if the matrix really is block diagonal.
+    void setReflectionBlocks()
+    {
+        if (matrices.size() != std::size_t(kE * kE)) return;
+        auto sign = [](int k, int a) { return (__builtin_popcount(unsigned(k & a)) & 1) ? -1.0 : 1.0; };
+        // M = T K T / 64, entry ((k, d), (k2, d2)).
+        std::vector<double> M(kE * kE, 0.0);
+        double top = 0.0;
+        for (double v : matrices) top = std::max(top, std::abs(v));
+        for (int k = 0; k < 8; ++k)
+            for (int d = 0; d < D; ++d)
+                for (int k2 = 0; k2 < 8; ++k2)
+                    for (int d2 = 0; d2 < D; ++d2) {
+                        double s = 0.0;
+                        for (int a = 0; a < 8; ++a)
+                            for (int a2 = 0; a2 < 8; ++a2)
+                                s += sign(k, a) * matrices[(a * D + d) * kE + a2 * D + d2] * sign(k2, a2);
+                        M[(k * D + d) * kE + k2 * D + d2] = s / 64.0;
+                    }
+        auto character = [](int k, int d) { return D == 1 ? k : (k ^ (1 << d)); };
+        blocks.assign(8 * D * D, 0.0);
+        for (int k = 0; k < 8; ++k)
+            for (int d = 0; d < D; ++d)
+                for (int k2 = 0; k2 < 8; ++k2)
+                    for (int d2 = 0; d2 < D; ++d2) {
+                        const double v = M[(k * D + d) * kE + k2 * D + d2];
+                        const int c = character(k, d);
+                        if (c != character(k2, d2)) {
+                            if (std::abs(v) > 1e-13 * top) {  // not symmetric: keep the dense product
+                                blocks.clear();
+                                return;
+                            }
+                            continue;
+                        }
+                        blocks[(c * D + d) * D + d2] = v;
+                    }
+        realBlocks.assign(blocks.begin(), blocks.end());
+        if constexpr (D == 3) {
+            for (int c = 0; c < 8; ++c)
+                for (int j = 0; j < 3; ++j) {
+                    const double* B = &blocks[c * 9];
+                    blockColumns.push_back(Double4{B[j], B[3 + j], B[6 + j], 0.0});
+                    realBlockColumns.push_back(Float4{Real(B[j]), Real(B[3 + j]), Real(B[6 + j]), 0.0f});
+                }
+        }
+    }
+
+    /// y = A x in double (the operator CG solves with; level 0 only).
     void apply(const double* xin, double* y) const
     {
-        parallelRange(0, dofs(), 8192, [&](std::size_t i0, std::size_t i1) { std::fill(y + i0, y + i1, 0.0); });
-        const bool single = matrices.size() == std::size_t(kE * kE);
+        applyWith(matrices.data(), matrices.size(), blocks, blockColumns, xin, y);
+    }
+    /// y = A x in the preconditioner's precision.
+    void apply(const Real* xin, Real* y) const
+    {
+        applyWith(realMatrices.data(), realMatrices.size(), realBlocks, realBlockColumns, xin, y);
+    }
+
+    /// In place: v[k] = sum_a (-1)^popcount(k & a) v[a], a fixed sequence of butterflies.
+    template <class V>
+    static inline void hadamard(V* v)
+    {
+#pragma GCC unroll 8
+        for (int bit = 1; bit < 8; bit <<= 1)
+#pragma GCC unroll 8
+            for (int a = 0; a < 8; ++a)
+                if (!(a & bit)) {
+                    const V p = v[a], q = v[a | bit];
+                    v[a] = p + q;
+                    v[a | bit] = p - q;
+                }
+    }
+
+    /// The element product through the reflection blocks (see setReflectionBlocks), for a range of
+    /// elements of one colour.
+    template <class T>
+    void applyBlocks(const std::vector<T>& scalarBlocks, const std::vector<typename Lanes<T>::type>& columns,
+                     const T* xin, T* y, std::size_t e0, std::size_t e1) const
+    {
+        using V = typename Lanes<T>::type;
+        if constexpr (D == 1) {
+            T B[8];
+            for (int c = 0; c < 8; ++c) B[c] = scalarBlocks[c];
+            for (std::size_t e = e0; e < e1; ++e) {
+                const std::int32_t* nd = &elemNodes[8 * e];
+                T v[8];
+#pragma GCC unroll 8
+                for (int a = 0; a < 8; ++a) v[a] = xin[nd[a]];
+                hadamard(v);
+#pragma GCC unroll 8
+                for (int c = 0; c < 8; ++c) v[c] *= B[c];
+                hadamard(v);
+#pragma GCC unroll 8
+                for (int a = 0; a < 8; ++a) y[nd[a]] += v[a];
+            }
+        } else {
+            // Component d of node a times (-1)^(bit d of a) before the transform gives, at index c,
+            // the component d of character c directly (the transform of u[a ^ e_d]); the same signs
+            // after the inverse transform undo it. So each character's block acts on one lane vector.
+            V sign[8];
+            for (int a = 0; a < 8; ++a)
+                sign[a] = V{T((a & 1) ? -1 : 1), T((a & 2) ? -1 : 1), T((a & 4) ? -1 : 1), T(0)};
+            const V* B = columns.data();
+            for (std::size_t e = e0; e < e1; ++e) {
+                const std::int32_t* nd = &elemNodes[8 * e];
+                V v[8];
+#pragma GCC unroll 8
+                for (int a = 0; a < 8; ++a) {
+                    const T* p = xin + std::size_t(nd[a]) * 3;
+                    v[a] = V{p[0], p[1], p[2], T(0)} * sign[a];
+                }
+                hadamard(v);
+#pragma GCC unroll 8
+                for (int c = 0; c < 8; ++c) {
+                    const V s = v[c];
+                    v[c] = B[3 * c] * s[0] + B[3 * c + 1] * s[1] + B[3 * c + 2] * s[2];
+                }
+                hadamard(v);
+#pragma GCC unroll 8
+                for (int a = 0; a < 8; ++a) {
+                    const V r = v[a] * sign[a];
+                    T* q = y + std::size_t(nd[a]) * 3;
+                    q[0] += r[0];
+                    q[1] += r[1];
+                    q[2] += r[2];
+                }
+            }
+        }
+    }
+
+    template <class T>
+    void applyWith(const T* matrixTable, std::size_t tableSize, const std::vector<T>& scalarBlocks,
+                   const std::vector<typename Lanes<T>::type>& columns, const T* xin, T* y) const
+    {
+        parallelRange(0, dofs(), 8192, [&](std::size_t i0, std::size_t i1) { std::fill(y + i0, y + i1, T(0)); });
+        const bool single = tableSize == std::size_t(kE * kE);
         for (int c = 0; c < kColours; ++c)
             parallelRange(colourStart[c], colourStart[c + 1], kGrain, [&](std::size_t e0, std::size_t e1) {
+                if (!scalarBlocks.empty()) {
+                    applyBlocks(scalarBlocks, columns, xin, y, e0, e1);
+                    return;
+                }
                 for (std::size_t e = e0; e < e1; ++e) {
                     const std::int32_t* nd = &elemNodes[8 * e];
-                    const double* K = single ? matrices.data() : &matrices[std::size_t(elemType[e]) * kE * kE];
-                    double ue[kE], ye[kE];
+                    const T* K = single ? matrixTable : matrixTable + std::size_t(elemType[e]) * kE * kE;
+                    T ue[kE], ye[kE];
                     for (int a = 0; a < 8; ++a)
                         for (int k = 0; k < D; ++k) ue[a * D + k] = xin[std::size_t(nd[a]) * D + k];
-                    for (int i = 0; i < kE; ++i) ye[i] = 0.0;
+                    for (int i = 0; i < kE; ++i) ye[i] = T(0);
                     // Column by column (K is symmetric): each step is a vectorizable axpy.
                     for (int j = 0; j < kE; ++j) {
-                        const double uj = ue[j];
-                        const double* col = K + j * kE;
+                        const T uj = ue[j];
+                        const T* col = K + j * kE;
                         for (int i = 0; i < kE; ++i) ye[i] += col[i] * uj;
                     }
                     for (int a = 0; a < 8; ++a)
@@ -222,11 +394,11 @@ struct PeriodicSolver<D>::Level {
     }
 
     /// out = diag^-1 in, node by node.
-    void applyDiagInv(const double* in, double* out, std::size_t i) const
+    void applyDiagInv(const Real* in, Real* out, std::size_t i) const
     {
-        const double* m = &diagInv[i * D * D];
+        const Real* m = &diagInv[i * D * D];
         for (int r = 0; r < D; ++r) {
-            double s = 0.0;
+            Real s = 0;
             for (int c = 0; c < D; ++c) s += m[r * D + c] * in[i * D + c];
             out[i * D + r] = s;
         }
@@ -244,6 +416,7 @@ PeriodicSolver<D>::PeriodicSolver(const std::array<int, 3>& n, const std::vector
     for (std::size_t v = 0; v < label.size(); ++v)
         if (label[v] >= 0) voxels.push_back({std::int32_t(v), 0});
     L->matrices = elementMatrix;
+    L->setReflectionBlocks();
     L->build(voxels);
     // Nodes are shared only within a component (sharing a node is what connects voxels).
     mNodeComponent.assign(L->nodes(), -1);
@@ -385,10 +558,11 @@ void PeriodicSolver<D>::buildHierarchy()
     for (std::size_t l = 0; l + 1 < mLevels.size(); ++l) {
         Level& L = *mLevels[l];
         L.buildDiagonal();
+        L.realMatrices.assign(L.matrices.begin(), L.matrices.end());
         const std::size_t n = L.dofs();
-        Vector& v = L.x;
-        Vector& w = L.t;
-        for (std::size_t i = 0; i < n; ++i) v[i] = hashUnit(i);
+        std::vector<Real>& v = L.x;
+        std::vector<Real>& w = L.t;
+        for (std::size_t i = 0; i < n; ++i) v[i] = Real(hashUnit(i));
         double lambda = 0.0;
         for (int it = 0; it < kPowerIterations; ++it) {
             L.apply(v.data(), w.data());
@@ -409,12 +583,14 @@ void PeriodicSolver<D>::buildHierarchy()
             }
             norm = std::sqrt(norm);
             if (norm == 0.0) break;
-            for (double& x : v) x /= norm;
+            for (Real& x : v) x = Real(x / norm);
         }
         // The Rayleigh quotient approaches the top from below: a margin keeps Chebyshev stable.
         L.hi = 1.1 * lambda;
         L.lo = L.hi / kChebyshevRatio;
-        std::fill(v.begin(), v.end(), 0.0);
+        std::fill(v.begin(), v.end(), Real(0));
+        L.diag.clear();
+        L.diag.shrink_to_fit();
     }
 
     // Coarsest level: dense Cholesky, pivots below 1e-10 of their diagonal dropped (null space).
@@ -449,13 +625,18 @@ void PeriodicSolver<D>::buildHierarchy()
         }
     }
     mCoarseFactor = std::move(A);
+    for (std::size_t l = 1; l < mLevels.size(); ++l) {
+        mLevels[l]->matrices.clear();
+        mLevels[l]->matrices.shrink_to_fit();
+    }
 }
 
 template <int D>
-void PeriodicSolver<D>::coarseSolve(const Level& L, const double* b, double* x) const
+void PeriodicSolver<D>::coarseSolve(const Level& L, const Real* b, Real* xOut) const
 {
     const std::size_t n = L.dofs();
     const double* A = mCoarseFactor.data();
+    std::vector<double> x(n);
     for (std::size_t i = 0; i < n; ++i) {  // L y = b
         if (mCoarseDropped[i]) {
             x[i] = 0.0;
@@ -471,10 +652,11 @@ void PeriodicSolver<D>::coarseSolve(const Level& L, const double* b, double* x) 
         for (std::size_t k = i + 1; k < n; ++k) s -= A[k * n + i] * x[k];
         x[i] = s / A[i * n + i];
     }
+    for (std::size_t i = 0; i < n; ++i) xOut[i] = Real(x[i]);
 }
 
 template <int D>
-void PeriodicSolver<D>::smooth(const Level& L, const double* b, double* x, bool zeroStart) const
+void PeriodicSolver<D>::smooth(const Level& L, const Real* b, Real* x, bool zeroStart) const
 {
     // Chebyshev iteration on diag^-1 A over [lo, hi] (Saad, Iterative Methods, alg. 12.1). With a
     // zero start it is a fixed symmetric polynomial in diag^-1 A times diag^-1: the same operator
@@ -482,18 +664,18 @@ void PeriodicSolver<D>::smooth(const Level& L, const double* b, double* x, bool 
     const double theta = 0.5 * (L.hi + L.lo), delta = 0.5 * (L.hi - L.lo);
     const double sigma = theta / delta;
     double rho = 1.0 / sigma;
-    double* d = L.d.data();
-    double* t = L.t.data();
+    Real* d = L.d.data();
+    Real* t = L.t.data();
     const std::size_t nodes = L.nodes();
     if (!zeroStart) L.apply(x, t);
     parallelRange(0, nodes, 2048, [&](std::size_t i0, std::size_t i1) {
         for (std::size_t i = i0; i < i1; ++i) {
-            double r[D];
+            Real r[D];
             for (int k = 0; k < D; ++k) r[k] = zeroStart ? b[i * D + k] : b[i * D + k] - t[i * D + k];
             for (int k = 0; k < D; ++k) {
-                double s = 0.0;
+                Real s = 0;
                 for (int c = 0; c < D; ++c) s += L.diagInv[i * D * D + k * D + c] * r[c];
-                d[i * D + k] = s / theta;
+                d[i * D + k] = Real(s / theta);
                 x[i * D + k] = zeroStart ? d[i * D + k] : x[i * D + k] + d[i * D + k];
             }
         }
@@ -501,13 +683,13 @@ void PeriodicSolver<D>::smooth(const Level& L, const double* b, double* x, bool 
     for (int step = 1; step < kChebyshevDegree; ++step) {
         L.apply(x, t);
         const double rhoNew = 1.0 / (2.0 * sigma - rho);
-        const double c1 = rhoNew * rho, c2 = 2.0 * rhoNew / delta;
+        const Real c1 = Real(rhoNew * rho), c2 = Real(2.0 * rhoNew / delta);
         parallelRange(0, nodes, 2048, [&](std::size_t i0, std::size_t i1) {
             for (std::size_t i = i0; i < i1; ++i) {
-                double r[D];
+                Real r[D];
                 for (int k = 0; k < D; ++k) r[k] = b[i * D + k] - t[i * D + k];
                 for (int k = 0; k < D; ++k) {
-                    double s = 0.0;
+                    Real s = 0;
                     for (int c = 0; c < D; ++c) s += L.diagInv[i * D * D + k * D + c] * r[c];
                     d[i * D + k] = c1 * d[i * D + k] + c2 * s;
                     x[i * D + k] += d[i * D + k];
@@ -519,7 +701,7 @@ void PeriodicSolver<D>::smooth(const Level& L, const double* b, double* x, bool 
 }
 
 template <int D>
-void PeriodicSolver<D>::vcycle(std::size_t level, const double* b, double* x) const
+void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
 {
     const Level& L = *mLevels[level];
     if (level + 1 == mLevels.size()) {
@@ -530,16 +712,16 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const double* b, double* x) co
     smooth(L, b, x, true);
     // r = b - A x, then restricted to the coarse level (P^T, node by node on the coarse grid).
     L.apply(x, L.t.data());
-    double* r = L.r.data();
+    Real* r = L.r.data();
     parallelRange(0, L.dofs(), 8192, [&](std::size_t i0, std::size_t i1) {
         for (std::size_t i = i0; i < i1; ++i) r[i] = b[i] - L.t[i];
     });
-    double* bc = C.b.data();
+    Real* bc = C.b.data();
     parallelRange(0, C.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
         for (std::size_t i = i0; i < i1; ++i) {
             int c[3];
             C.coords(C.pointOfNode[i], c);
-            double s[D] = {};
+            Real s[D] = {};
             for (const auto& [fz, wz] : L.restrict[2][c[2]]) {
                 if (fz < 0) continue;
                 for (const auto& [fy, wy] : L.restrict[1][c[1]]) {
@@ -548,7 +730,7 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const double* b, double* x) co
                         if (fx < 0) continue;
                         const std::int32_t node = L.nodeOfPoint[L.pointIndex(fx, fy, fz)];
                         if (node < 0) continue;
-                        const double w = wx * wy * wz;
+                        const Real w = Real(wx * wy * wz);
                         for (int k = 0; k < D; ++k) s[k] += w * r[std::size_t(node) * D + k];
                     }
                 }
@@ -556,14 +738,14 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const double* b, double* x) co
             for (int k = 0; k < D; ++k) bc[i * D + k] = s[k];
         }
     });
-    double* xc = C.x.data();
+    Real* xc = C.x.data();
     vcycle(level + 1, bc, xc);
     // x += P xc, node by node on the fine grid.
     parallelRange(0, L.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
         for (std::size_t i = i0; i < i1; ++i) {
             int c[3];
             L.coords(L.pointOfNode[i], c);
-            double s[D] = {};
+            Real s[D] = {};
             for (const auto& [cz, wz] : L.prolong[2][c[2]]) {
                 if (cz < 0) continue;
                 for (const auto& [cy, wy] : L.prolong[1][c[1]]) {
@@ -571,7 +753,7 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const double* b, double* x) co
                     for (const auto& [cx, wx] : L.prolong[0][c[0]]) {
                         if (cx < 0) continue;
                         const std::int32_t node = C.nodeOfPoint[C.pointIndex(cx, cy, cz)];
-                        const double w = wx * wy * wz;
+                        const Real w = Real(wx * wy * wz);
                         for (int k = 0; k < D; ++k) s[k] += w * xc[std::size_t(node) * D + k];
                     }
                 }
@@ -645,8 +827,15 @@ typename PeriodicSolver<D>::Stats PeriodicSolver<D>::solve(const Vector& f, Vect
     const double fnorm = std::sqrt(dot(f, f));
     if (fnorm == 0.0) return stats;
     Vector r = f, z(n), p(n), q(n);
+    const Level& L0 = *mLevels[0];
     auto precondition = [&]() {
-        vcycle(0, r.data(), z.data());
+        parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
+            for (std::size_t i = i0; i < i1; ++i) L0.b[i] = Real(r[i]);
+        });
+        vcycle(0, L0.b.data(), L0.x.data());
+        parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
+            for (std::size_t i = i0; i < i1; ++i) z[i] = double(L0.x[i]);
+        });
         removeTranslations(z);
     };
     precondition();
@@ -673,8 +862,10 @@ typename PeriodicSolver<D>::Stats PeriodicSolver<D>::solve(const Vector& f, Vect
         }
         if (rnorm <= tolerance * fnorm) break;
         precondition();
+        // Flexible (Polak-Ribiere) beta = z.(r_new - r_old) / rz_old, r_new - r_old = -alpha q:
+        // robust to a preconditioner that is not exactly linear (single precision rounding).
         const double rzNew = dot(r, z);
-        const double beta = rzNew / rz;
+        const double beta = std::max(0.0, -alpha * dot(z, q) / rz);
         rz = rzNew;
         parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
             for (std::size_t i = i0; i < i1; ++i) p[i] = z[i] + beta * p[i];
