@@ -4,6 +4,7 @@
 #include "engine/jobs/Job.h"
 #include "engine/jobs/PrinterProfile.h"
 #include "engine/jobs/PropertiesJob.h"
+#include "engine/recipe/MeshSettings.h"
 #include "engine/recipe/RecipeParams.h"
 #include "engine/recipe/Schema.h"
 #include "engine/recipe/SliceSettings.h"
@@ -51,8 +52,13 @@ void printSummary(voxlat::Job& job)
     if (r.contains("result"))
         std::cout << "result  " << r["result"]["field"].get<std::string>() << ": volume fraction "
                   << r["result"]["volume_fraction"] << " of the domain, " << r["result"]["volume_mm3"] << " mm3\n";
-    if (r.contains("mesh"))
-        std::cout << "mesh    " << r["mesh"]["triangles"] << " triangles, " << r["mesh"]["vertices"] << " vertices\n";
+    if (r.contains("mesh")) {
+        std::cout << "mesh    " << r["mesh"]["triangles"] << " triangles, " << r["mesh"]["vertices"] << " vertices";
+        if (r["mesh"].contains("deviation"))
+            std::cout << ", within " << r["mesh"]["deviation"]["max_mm"] << " mm of the surface (rms "
+                      << r["mesh"]["deviation"]["rms_mm"] << " mm)";
+        std::cout << "\n";
+    }
 }
 
 int sample(voxlat::Job& job, const std::string& fieldName, bool gradient)
@@ -154,9 +160,17 @@ int main(int argc, char** argv)
     run->add_option("--out", outDir, "output folder (default: current folder)");
     bool noPreview = false;
     run->add_flag("--no-preview", noPreview, "do not render NAME.preview.png next to the first mesh");
-    auto* mesh = app.add_subcommand("mesh", "mesh a recipe's result to one file (.stl, .ply, .obj)");
+    auto* mesh = app.add_subcommand("mesh", "mesh a recipe's result to one file (.stl, .3mf, .ply, .obj)");
     addCommon(mesh, meshArgs);
     mesh->add_option("-o,--output", meshFile, "mesh file")->required();
+    double meshTolerance = 0.0;
+    std::string meshProject;
+    mesh->add_option("--tolerance", meshTolerance,
+                     "decimate while every point of the mesh stays within this of the true surface (mm); "
+                     "default: the recipe's first mesh output's");
+    mesh->add_option("--project", meshProject,
+                     "on: vertices moved onto the true surface (the default with a tolerance); off: marching "
+                     "cubes' vertices");
     auto* info = app.add_subcommand("info", "print the domain, voxel count, solved levels and density");
     addCommon(info, infoArgs);
     auto* sampleCmd = app.add_subcommand("sample", "read `x y z` lines on stdin, print the field value per line");
@@ -221,8 +235,26 @@ int main(int argc, char** argv)
             std::cout << "outputs written to " << std::filesystem::absolute(outDir).lexically_normal().string()
                       << " (report.json has levels, densities and timings)\n";
         } else if (*mesh) {
-            voxlat::Job job(voxlat::loadRecipe(meshArgs.recipe, meshArgs.sets), &context);
-            job.writeMesh(meshFile);
+            voxlat::Recipe recipe = voxlat::loadRecipe(meshArgs.recipe, meshArgs.sets);
+            // The recipe's first mesh output says how to mesh; the options here override it.
+            voxlat::MeshOptions options;
+            for (const voxlat::OutputSpec& out : recipe.outputs)
+                if (out.kind == "mesh") {
+                    options = voxlat::parseMeshSettings(voxlat::RecipeNode(out.spec, recipe.source, "outputs `mesh`"))
+                                  .options;
+                    break;
+                }
+            if (mesh->count("--tolerance")) {
+                options.tolerance = voxlat::checkMeshTolerance(meshTolerance, "--tolerance");
+                options.project = true;
+            }
+            if (!meshProject.empty()) {
+                if (meshProject != "on" && meshProject != "off")
+                    throw voxlat::InputError("--project " + meshProject + ": expected on or off");
+                options.project = meshProject == "on";
+            }
+            voxlat::Job job(std::move(recipe), &context);
+            job.writeMesh(meshFile, options);
             printSummary(job);
         } else if (*info) {
             voxlat::Job job(voxlat::loadRecipe(infoArgs.recipe, infoArgs.sets), &context);

@@ -11,8 +11,13 @@
 #include "engine/jobs/PropertiesJob.h"
 #include "engine/jobs/SliceJob.h"
 #include "engine/recipe/RecipeParams.h"
+#include "fields/Boolean.h"
+#include "fields/BoxField.h"
 #include "fields/GradedLevel.h"
+#include "mesher/extract/Decimation.h"
 #include "mesher/extract/MarchingCubes.h"
+#include "mesher/extract/MeshCheck.h"
+#include "mesher/extract/SurfaceProjection.h"
 #include "mesher/writers/AtomicFile.h"
 #include "mesher/writers/MeshPreview.h"
 #include "mesher/writers/MeshWriters.h"
@@ -282,22 +287,124 @@ const openvdb::FloatGrid& Job::grid()
     return *mGrid;
 }
 
-const TriangleMesh& Job::mesh()
+namespace {
+/// A mesher's progress (a fraction, from any thread) fed into a stage of 1000 units.
+ProgressFn feed(StageProgress& progress, std::atomic<std::uint64_t>& last)
 {
-    if (mMesh) return *mMesh;
+    return [&progress, &last](double fraction) {
+        const auto now = std::uint64_t(fraction * 1000);
+        const std::uint64_t before = last.exchange(now);
+        if (now > before) progress.add(now - before);
+    };
+}
+
+/// The mesh settings of a `mesh:` output entry (checked when the recipe was loaded).
+MeshOptions meshOptions(const OutputSpec& out, const Recipe& recipe)
+{
+    return parseMeshSettings(RecipeNode(out.spec, recipe.source, "outputs `mesh`")).options;
+}
+
+nlohmann::json deviationJson(double max, double rms)
+{
+    return {{"max_mm", max}, {"rms_mm", rms}};
+}
+}  // namespace
+
+FieldPtr Job::surfaceField()
+{
+    solveLevels();
+    if (!mSurfaceField)
+        mSurfaceField = std::make_shared<BooleanField>(
+            BooleanOp::Intersection, std::vector<FieldPtr>{mResult, std::make_shared<BoxField>(mDomain.box)});
+    return mSurfaceField;
+}
+
+const TriangleMesh& Job::mesh(const MeshOptions& options)
+{
+    return *variant(options).mesh;
+}
+
+Job::MeshVariant& Job::variant(const MeshOptions& options)
+{
+    for (const auto& v : mMeshes)
+        if (v->options == options) return *v;
     const openvdb::FloatGrid& g = grid();
-    mMesh = timed("mesh", [&] {
-        StageProgress progress(mContext, "meshing", 1000);
-        std::atomic<std::uint64_t> last{0};
-        return std::make_unique<TriangleMesh>(marchingCubes(g, 0.0f, [&](double fraction) {
-            const auto now = std::uint64_t(fraction * 1000);
-            const std::uint64_t before = last.exchange(now);
-            if (now > before) progress.add(now - before);
-        }));
-    });
-    // volume_mm3 and area_mm2 are added by report(): the STL writer measures them on its way.
-    mReport["mesh"] = {{"triangles", mMesh->triangles.size()}, {"vertices", mMesh->points.size()}};
-    return *mMesh;
+    auto v = std::make_unique<MeshVariant>();
+    v->options = options;
+    const auto raw = std::find_if(mMeshes.begin(), mMeshes.end(), [](const auto& m) { return m->options.raw(); });
+    if (!options.raw() && raw != mMeshes.end()) {
+        v->mesh = std::make_unique<TriangleMesh>(*(*raw)->mesh);
+    } else {
+        v->mesh = timed("mesh", [&] {
+            StageProgress progress(mContext, "meshing", 1000);
+            std::atomic<std::uint64_t> last{0};
+            return std::make_unique<TriangleMesh>(marchingCubes(g, 0.0f, feed(progress, last)));
+        });
+    }
+    TriangleMesh& m = *v->mesh;
+    nlohmann::json& report = v->report;
+    if (options.project) {
+        const FieldPtr field = surfaceField();
+        ProjectionOptions po;
+        po.maxMove = 0.5 * mDomain.voxel;
+        po.tolerance = 1e-4 * mDomain.voxel;
+        const ProjectionStats s = timed("project vertices", [&] {
+            StageProgress progress(mContext, "projecting vertices onto the surface", 1000);
+            std::atomic<std::uint64_t> last{0};
+            return projectToSurface(m, *field, po, feed(progress, last));
+        });
+        report["projection"] = {{"vertices_moved", s.moved},
+                                {"vertices_held_back", s.heldBack},
+                                {"vertices_at_half_voxel_limit", s.limited},
+                                {"vertex_deviation_before", deviationJson(s.maxBefore, s.rmsBefore)},
+                                {"vertex_deviation_after", deviationJson(s.maxAfter, s.rmsAfter)}};
+    }
+    if (options.tolerance) {
+        const FieldPtr field = surfaceField();
+        DecimationOptions d;
+        d.tolerance = *options.tolerance;
+        d.voxel = mDomain.voxel;
+        const DecimationStats s = timed("decimate", [&] {
+            StageProgress progress(mContext, "decimating to " + formatNumber(d.tolerance) + " mm", 1000);
+            std::atomic<std::uint64_t> last{0};
+            return decimateToTolerance(m, *field, d, feed(progress, last));
+        });
+        report["decimation"] = {{"tolerance_mm", d.tolerance},
+                                {"triangles_before", s.trianglesBefore},
+                                {"collapses", s.collapses},
+                                {"refused_collapses", s.refused}};
+        if (!s.decimated)
+            mContext->warn("mesh_not_decimated",
+                           "the mesh could not be decimated (OpenMesh refused it as not manifold); it is written "
+                           "as marching cubes made it");
+    }
+    if (!options.raw()) {
+        // Measured on every triangle, so the numbers hold for the file as written.
+        const MeshDeviation dev =
+            timed("measure mesh", [&] { return measureDeviation(m, *surfaceField(), 0.0, mDomain.voxel); });
+        report["deviation"] = {{"max_mm", dev.max},
+                               {"rms_mm", dev.rms},
+                               {"samples", dev.samples},
+                               {"measure",
+                                "|f| / |grad f| of the result clipped to the domain, on every triangle "
+                                "sampled at most one voxel apart"}};
+        const MeshTopology t = checkTopology(m);
+        report["closed_manifold"] = t.closedManifold();
+        report["euler_characteristic"] = t.eulerCharacteristic;
+        if (options.tolerance && dev.max > *options.tolerance)
+            mContext->warn("mesh_tolerance",
+                           "the mesh strays up to " + formatNumber(dev.max) +
+                               " mm from the true surface, more than "
+                               "the tolerance " +
+                               formatNumber(*options.tolerance) +
+                               " mm: marching cubes' triangles already did there (creases where the solid meets "
+                               "the domain box are cut flat); use a smaller `voxel:` or a larger tolerance",
+                           {{"max_mm", dev.max}, {"tolerance_mm", *options.tolerance}});
+    }
+    report["triangles"] = m.triangles.size();
+    report["vertices"] = m.points.size();
+    mMeshes.push_back(std::move(v));
+    return *mMeshes.back();
 }
 
 void Job::checkPieces()
@@ -336,14 +443,23 @@ void Job::checkPieces()
     if (!mRecipe.allows("pieces")) mContext->warn("pieces", msg.str(), {{"count", count.pieces.size()}});
 }
 
-void Job::writeMesh(const std::filesystem::path& path)
+MeshMetadata Job::meshMetadata() const
+{
+    return {{"Application", "voxlat " + versionString()},
+            {"voxlat:version", versionString()},
+            {"voxlat:recipe_sha256", recipeHash(mRecipe)},
+            {"voxlat:recipe", canonicalRecipe(mRecipe).dump()}};
+}
+
+void Job::writeMesh(const std::filesystem::path& path, const MeshOptions& options)
 {
     checkReplaceable(path, mRecipe.source->path + ": mesh output");
-    const TriangleMesh& m = mesh();
+    MeshVariant& v = variant(options);
     timed("write " + path.filename().string(), [&] {
-        voxlat::writeMesh(m, path.string(), mMeshMeasures ? nullptr : &mMeshMeasures);
+        voxlat::writeMesh(*v.mesh, path.string(), v.measures ? nullptr : &v.measures, meshMetadata());
         return 0;
     });
+    v.files.push_back(path.string());
     mReport["outputs"].push_back(path.string());
 }
 
@@ -359,7 +475,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         const OutputSpec& out = mRecipe.outputs[n];
         const std::filesystem::path& path = paths[n];
         if (out.kind == "mesh") {
-            writeMesh(path);
+            writeMesh(path, meshOptions(out, mRecipe));
         } else if (out.kind == "vdb") {
             const openvdb::FloatGrid& g = grid();
             timed("write " + out.file, [&] {
@@ -386,7 +502,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
     if (preview && firstMesh != mRecipe.outputs.end()) {
         std::filesystem::path picture = outDir / firstMesh->file;
         picture.replace_extension(".preview.png");
-        writePreview(picture);
+        writePreview(picture, meshOptions(*firstMesh, mRecipe));
     }
     writeReport(outDir / "report.json");
 }
@@ -426,9 +542,9 @@ void Job::writeProperties(const std::filesystem::path& path)
     mReport["outputs"].push_back(picture.string());
 }
 
-void Job::writePreview(const std::filesystem::path& path)
+void Job::writePreview(const std::filesystem::path& path, const MeshOptions& options)
 {
-    const TriangleMesh& m = mesh();
+    const TriangleMesh& m = mesh(options);
     timed("preview", [&] {
         AtomicFile file(path.string());
         file.stream() << renderMeshPreview(m);
@@ -459,10 +575,21 @@ void Job::writeSlices(const YAML::Node& spec, const std::filesystem::path& path)
 nlohmann::json Job::report() const
 {
     nlohmann::json r = mReport;
-    if (mMesh) {
-        if (!mMeshMeasures) mMeshMeasures = mMesh->measure();
-        r["mesh"]["volume_mm3"] = mMeshMeasures->volume;
-        r["mesh"]["area_mm2"] = mMeshMeasures->area;
+    auto describe = [](const MeshVariant& v) {
+        if (!v.measures) v.measures = v.mesh->measure();
+        nlohmann::json entry = v.report;
+        entry["volume_mm3"] = v.measures->volume;
+        entry["area_mm2"] = v.measures->area;
+        return entry;
+    };
+    if (!mMeshes.empty()) r["mesh"] = describe(*mMeshes.front());
+    if (mMeshes.size() > 1) {
+        r["meshes"] = nlohmann::json::array();
+        for (const auto& v : mMeshes) {
+            nlohmann::json entry = describe(*v);
+            entry["files"] = v->files;
+            r["meshes"].push_back(entry);
+        }
     }
     for (const auto& reporter : mBuilder.reporters()) reporter(r);
     const std::vector<Warning> warnings = mContext->warnings();

@@ -5,8 +5,10 @@
 #include "engine/core/Domain.h"
 #include "engine/core/JobContext.h"
 #include "engine/recipe/FieldBuilder.h"
+#include "engine/recipe/MeshSettings.h"
 #include "engine/recipe/Recipe.h"
 #include "mesher/extract/TriangleMesh.h"
+#include "mesher/writers/MeshWriters.h"
 
 #include <openvdb/openvdb.h>
 #include <nlohmann/json.hpp>
@@ -35,17 +37,24 @@ public:
     FieldPtr field(const std::string& name);
     /// The sparse grid of the result clipped to the domain (negative inside), evaluated once.
     const openvdb::FloatGrid& grid();
-    /// The watertight mesh of the grid, built once.
-    const TriangleMesh& mesh();
+    /// The watertight mesh of the grid (marching cubes), built once.
+    const TriangleMesh& mesh() { return mesh(MeshOptions{}); }
+    /// The mesh made with @a options, built once per options: marching cubes on the grid, then
+    /// (options.project) every vertex moved onto the true surface, then (options.tolerance)
+    /// decimated while every point stays within the tolerance of it. The true surface is the
+    /// zero level of surfaceField().
+    const TriangleMesh& mesh(const MeshOptions& options);
+    /// The field the grid samples: the result clipped to the domain box (negative inside).
+    FieldPtr surfaceField();
 
     /// Writes the recipe's outputs (paths relative to @a outDir) and report.json.
     /// With @a preview, also a picture of the first mesh (NAME.preview.png).
     void writeOutputs(const std::filesystem::path& outDir, bool preview = true);
-    /// Writes only the mesh, to @a path.
-    void writeMesh(const std::filesystem::path& path);
+    /// Writes only the mesh made with @a options, to @a path.
+    void writeMesh(const std::filesystem::path& path, const MeshOptions& options = {});
     void writeReport(const std::filesystem::path& path);
-    /// Writes a shaded PNG picture of the mesh (front-right-top view).
-    void writePreview(const std::filesystem::path& path);
+    /// Writes a shaded PNG picture of the mesh made with @a options (front-right-top view).
+    void writePreview(const std::filesystem::path& path, const MeshOptions& options = {});
     /// Slices the result for a resin printer into @a path; @a spec is a `slices:` entry. Builds
     /// no grid and no mesh: every pixel is decided from the field (engine/SliceJob).
     void writeSlices(const YAML::Node& spec, const std::filesystem::path& path);
@@ -75,10 +84,25 @@ private:
     FieldPtr mResult;
     bool mSolved = false;
     openvdb::FloatGrid::Ptr mGrid;
-    std::unique_ptr<TriangleMesh> mMesh;
-    /// The mesh's volume and area: from the STL writer when it wrote the mesh, else measured
-    /// when the report is made.
-    mutable std::optional<TriangleMesh::Measures> mMeshMeasures;
+    FieldPtr mSurfaceField;
+
+    /// One mesh the job made, with what report.json says about it.
+    struct MeshVariant {
+        MeshOptions options;
+        std::unique_ptr<TriangleMesh> mesh;
+        nlohmann::json report;  ///< triangles, vertices, projection, decimation, deviation
+        /// Volume and area: from the STL writer when it wrote the mesh, else measured when the
+        /// report is made.
+        mutable std::optional<TriangleMesh::Measures> measures;
+        std::vector<std::string> files;
+    };
+    /// The mesh made with @a options, made on first use (marching cubes, projection, decimation).
+    MeshVariant& variant(const MeshOptions& options);
+    /// The metadata a 3MF output carries: the recipe's hash, the canonical recipe, the version.
+    MeshMetadata meshMetadata() const;
+    /// In the order first asked for: report.json's `mesh` describes the first, `meshes` lists
+    /// all when there are several.
+    std::vector<std::unique_ptr<MeshVariant>> mMeshes;
     nlohmann::json mReport;
     std::array<std::array<double, 6>, 6> mPropertiesStiffness{};
     nlohmann::json mTimings = nlohmann::json::object();

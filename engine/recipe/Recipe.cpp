@@ -2,6 +2,7 @@
 
 #include "engine/core/InputFiles.h"
 
+#include "engine/recipe/MeshSettings.h"
 #include "engine/recipe/RecipeParams.h"
 #include "engine/recipe/SliceSettings.h"
 
@@ -145,6 +146,11 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
             }
             for (std::size_t i = 0; i < (entry.isSequence() ? entry.size() : 1); ++i) {
                 const RecipeNode one = entry.isSequence() ? entry.at(i) : entry;
+                if (kind == "mesh") {                                      // a file name or a map of mesh settings
+                    const MeshSettings settings = parseMeshSettings(one);  // checks keys and values now
+                    r.outputs.push_back({kind, settings.file, one.yaml()});
+                    continue;
+                }
                 checkOutputName(one, kind);
                 r.outputs.push_back({kind, one.string(), {}});
             }
@@ -165,8 +171,8 @@ void checkOutputName(const RecipeNode& node, const std::string& kind)
         if (part == "..")
             node.fail("an output stays inside the output folder (--out): `" + name + "` climbs out of it with `..`");
     const std::string ext = path.extension().string();
-    if (kind == "mesh" && ext != ".stl" && ext != ".ply" && ext != ".obj")
-        node.fail("a mesh file ends in .stl, .ply or .obj; `" + name + "` does not");
+    if (kind == "mesh" && ext != ".stl" && ext != ".3mf" && ext != ".ply" && ext != ".obj")
+        node.fail("a mesh file ends in .stl, .3mf, .ply or .obj; `" + name + "` does not");
     if (kind == "vdb" && ext != ".vdb") node.fail("a vdb output ends in .vdb; `" + name + "` does not");
     if (kind == "properties" && ext != ".json")
         node.fail("a properties output ends in .json (the numbers; a picture NAME.png is written next to it); `" +
@@ -207,7 +213,11 @@ const std::vector<KeySpec>& outputKinds()
 {
     using namespace valueSchema;
     static const std::vector<KeySpec> kinds{
-        {"mesh", stringOrList(), "mesh file(s): .stl, .ply or .obj, by extension", "—"},
+        {"mesh",
+         {{"anyOf", {string(), ref("mesh"), {{"type", "array"}, {"items", {{"anyOf", {string(), ref("mesh")}}}}}}}},
+         "mesh file(s): .stl, .3mf, .ply or .obj, by extension; a map (or a list of names and maps) of mesh "
+         "settings for vertices on the true surface and error-bounded decimation",
+         "—"},
         {"vdb", string(), "the result's sparse grid as an OpenVDB file (.vdb)", "—"},
         {"slices",
          {{"anyOf", {ref("slices"), {{"type", "array"}, {"items", ref("slices")}}}}},

@@ -1,6 +1,7 @@
 #include "engine/recipe/Schema.h"
 
 #include "engine/recipe/FieldBuilder.h"
+#include "engine/recipe/MeshSettings.h"
 #include "engine/recipe/SliceSettings.h"
 
 #include <sstream>
@@ -70,6 +71,7 @@ nlohmann::json recipeSchema()
         {"anyOf", {{{"type", "number"}, {"exclusiveMinimum", 0}, {"exclusiveMaximum", 1}}, ref("param")}}};
     defs["field"] = {{"anyOf", {{{"type", "string"}, {"description", "the name of a field"}}, ref("node")}}};
     defs["slices"] = keysObject(sliceKeys(), requiredOf(sliceKeys()));
+    defs["mesh"] = keysObject(meshKeys(), requiredOf(meshKeys()));
     defs["params"] = {{"type", "object"},
                       {"propertyNames", {{"pattern", "^[A-Za-z_][A-Za-z0-9_]*$"}}},
                       {"additionalProperties",
@@ -107,6 +109,8 @@ std::string recipeKeysMarkdown()
     markdownTable(md, topLevelKeys());
     md << "\n### `outputs`\n\n";
     markdownTable(md, outputKinds());
+    md << "\n### `outputs: {mesh: {...}}`\n\n";
+    markdownTable(md, meshKeys());
     md << "\n### `outputs: {slices: ...}`\n\n";
     markdownTable(md, sliceKeys());
     for (const NodeType& type : FieldBuilder::nodeTypes()) {

@@ -4,6 +4,7 @@
 
 #include <tbb/parallel_pipeline.h>
 
+#include <Model/COM/NMR_DLLInterfaces.h>
 #include <OpenMesh/Core/IO/MeshIO.hh>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 
@@ -101,6 +102,73 @@ void writeOpenMesh(const TriangleMesh& mesh, const std::string& path, const std:
     if (!OpenMesh::IO::write_mesh(om, file.stream(), ext, options, std::numeric_limits<float>::max_digits10)) {
         throw std::runtime_error("OpenMesh failed to write '" + path + "'");
     }
+    file.commit();
+}
+
+/// Releases a lib3mf object when it goes out of scope.
+struct Lib3mfReleaser {
+    void operator()(NMR::PLib3MFBase* p) const
+    {
+        if (p) NMR::lib3mf_release(p);
+    }
+};
+using Lib3mfHandle = std::unique_ptr<NMR::PLib3MFBase, Lib3mfReleaser>;
+
+/// Writes @a mesh as a 3MF package through lib3mf: unit millimetre, one mesh object, one build
+/// item, @a metadata as the model's metadata. lib3mf packs the model into a buffer, which goes
+/// to the file through AtomicFile.
+void write3mf(const TriangleMesh& mesh, const std::string& path, const MeshMetadata& metadata)
+{
+    using namespace NMR;
+    checkIndices(mesh);
+    if (mesh.points.size() > std::numeric_limits<DWORD>::max() ||
+        mesh.triangles.size() > std::numeric_limits<DWORD>::max())
+        throw std::invalid_argument("cannot write '" + path +
+                                    "': a 3MF mesh holds at most 2^32 - 1 vertices and triangles");
+    auto check = [&](LIB3MFRESULT result, PLib3MFBase* object, const char* what) {
+        if (result == LIB3MF_OK) return;
+        DWORD code = 0;
+        LPCSTR message = nullptr;
+        if (object) lib3mf_getlasterror(object, &code, &message);
+        throw std::runtime_error("cannot write '" + path + "': lib3mf failed to " + what +
+                                 (message ? std::string(": ") + message : std::string()));
+    };
+    PLib3MFModel* modelRaw = nullptr;
+    check(lib3mf_createmodel(&modelRaw), nullptr, "create a model");
+    const Lib3mfHandle model(modelRaw);
+    check(lib3mf_model_setunit(modelRaw, MODELUNIT_MILLIMETER), modelRaw, "set the unit");
+    for (const auto& [key, value] : metadata)
+        check(lib3mf_model_addmetadatautf8(modelRaw, key.c_str(), value.c_str()), modelRaw,
+              ("add the metadata " + key).c_str());
+    PLib3MFModelMeshObject* objectRaw = nullptr;
+    check(lib3mf_model_addmeshobject(modelRaw, &objectRaw), modelRaw, "add a mesh object");
+    const Lib3mfHandle object(objectRaw);
+    const std::string name = std::filesystem::path(path).stem().string();
+    check(lib3mf_object_setnameutf8(objectRaw, name.c_str()), objectRaw, "name the object");
+    std::vector<MODELMESHVERTEX> vertices(mesh.points.size());
+    for (std::size_t i = 0; i < mesh.points.size(); ++i)
+        for (int k = 0; k < 3; ++k) vertices[i].m_fPosition[k] = mesh.points[i][k];
+    std::vector<MODELMESHTRIANGLE> triangles(mesh.triangles.size());
+    for (std::size_t i = 0; i < mesh.triangles.size(); ++i)
+        for (int k = 0; k < 3; ++k) triangles[i].m_nIndices[k] = DWORD(mesh.triangles[i][k]);
+    check(lib3mf_meshobject_setgeometry(objectRaw, vertices.data(), DWORD(vertices.size()), triangles.data(),
+                                        DWORD(triangles.size())),
+          objectRaw, "store the mesh");
+    vertices = {};
+    triangles = {};
+    PLib3MFModelBuildItem* itemRaw = nullptr;
+    check(lib3mf_model_addbuilditem(modelRaw, objectRaw, nullptr, &itemRaw), modelRaw, "add a build item");
+    const Lib3mfHandle item(itemRaw);
+    PLib3MFModelWriter* writerRaw = nullptr;
+    check(lib3mf_model_querywriter(modelRaw, "3mf", &writerRaw), modelRaw, "start the writer");
+    const Lib3mfHandle writer(writerRaw);
+    ULONG64 size = 0;
+    check(lib3mf_writer_getstreamsize(writerRaw, &size), writerRaw, "measure the package");
+    std::vector<char> bytes(size);
+    check(lib3mf_writer_writetobuffer(writerRaw, reinterpret_cast<BYTE*>(bytes.data()), size), writerRaw,
+          "pack the model");
+    AtomicFile file(path);
+    file.stream().write(bytes.data(), std::streamsize(bytes.size()));
     file.commit();
 }
 
@@ -253,18 +321,21 @@ void writeStl(const TriangleMesh& mesh, const std::string& path, TriangleMesh::M
     }
 }
 
-void writeMesh(const TriangleMesh& mesh, const std::string& path, std::optional<TriangleMesh::Measures>* measures)
+void writeMesh(const TriangleMesh& mesh, const std::string& path, std::optional<TriangleMesh::Measures>* measures,
+               const MeshMetadata& metadata)
 {
     const std::string ext = lowerExtension(path);
     if (ext == ".stl") {
         TriangleMesh::Measures m;
         writeStl(mesh, path, measures ? &m : nullptr);
         if (measures) *measures = m;
+    } else if (ext == ".3mf") {
+        write3mf(mesh, path, metadata);
     } else if (ext == ".ply" || ext == ".obj") {
         writeOpenMesh(mesh, path, ext);
     } else {
         throw std::invalid_argument("cannot write mesh '" + path + "': unsupported extension '" + ext +
-                                    "' (supported: .stl, .ply, .obj)");
+                                    "' (supported: .stl, .3mf, .ply, .obj)");
     }
 }
 

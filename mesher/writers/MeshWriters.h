@@ -1,11 +1,13 @@
 /// @file MeshWriters.h
-/// @brief Mesh file output (STL, PLY, OBJ) through AtomicFile, and an STL reader for tests.
+/// @brief Mesh file output (STL, 3MF, PLY, OBJ) through AtomicFile, and an STL reader for tests.
 #pragma once
 
 #include "mesher/extract/TriangleMesh.h"
 
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace voxlat {
 
@@ -18,14 +20,18 @@ namespace voxlat {
 /// same bits for any thread count).
 void writeStl(const TriangleMesh& mesh, const std::string& path, TriangleMesh::Measures* measures = nullptr);
 
+/// Name and value pairs a format that has metadata records (3MF) stores with the mesh.
+using MeshMetadata = std::vector<std::pair<std::string, std::string>>;
+
 /// Writes @a mesh in the format named by the (case-insensitive) extension of @a path:
-/// .stl (binary, writeStl), .ply (binary, via OpenMesh) or .obj (ASCII, via OpenMesh).
+/// .stl (binary, writeStl), .3mf (lib3mf: unit millimetre, one object named after the file,
+/// @a metadata as the model's metadata), .ply (binary, via OpenMesh) or .obj (ASCII, via OpenMesh).
 /// Throws std::invalid_argument listing the supported extensions for any other one. The PLY and
 /// OBJ paths need a manifold mesh (OpenMesh rejects other faces); they throw std::runtime_error
 /// rather than silently drop a face. No partial file is ever left at @a path. For STL,
 /// @a measures (when given) receives what writeStl() measures; other formats leave it alone.
 void writeMesh(const TriangleMesh& mesh, const std::string& path,
-               std::optional<TriangleMesh::Measures>* measures = nullptr);
+               std::optional<TriangleMesh::Measures>* measures = nullptr, const MeshMetadata& metadata = {});
 
 /// Reads a binary or ASCII STL file, welding vertices with bit-identical positions (-0 == +0) in
 /// order of first appearance. Throws std::runtime_error naming @a path if it cannot be read.

@@ -1,0 +1,72 @@
+#include "engine/recipe/MeshSettings.h"
+
+#include "engine/recipe/Recipe.h"
+
+#include <cmath>
+#include <sstream>
+
+namespace voxlat {
+
+const std::vector<KeySpec>& meshKeys()
+{
+    using namespace valueSchema;
+    static const std::vector<KeySpec> keys{
+        {"file", string(), "the mesh file inside the output folder: .stl, .3mf, .ply or .obj", "required"},
+        {"project",
+         {{"type", {"string", "boolean"}}},
+         "vertices moved onto the true surface by Newton steps along the field's gradient (on / off)",
+         "on with `tolerance`, else off"},
+        {"tolerance", number(),
+         "error-bounded decimation: every point of every triangle stays within this of the true surface (mm)",
+         "none (no decimation)"}};
+    return keys;
+}
+
+double checkMeshTolerance(double tolerance, const std::string& where)
+{
+    if (!(tolerance > 0.0) || !std::isfinite(tolerance)) {
+        std::ostringstream msg;
+        msg << where << ": the mesh tolerance must be a positive distance in mm, like 0.01; " << tolerance << " is not";
+        throw InputError(msg.str());
+    }
+    return tolerance;
+}
+
+MeshSettings parseMeshSettings(const RecipeNode& spec)
+{
+    MeshSettings s;
+    if (spec.isScalar()) {
+        checkOutputName(spec, "mesh");
+        s.file = spec.string();
+        return s;
+    }
+    if (!spec.isMap())
+        spec.fail("expected a file name like `part.stl` or a map like `{file: part.stl, tolerance: 0.01}`");
+    spec.checkKeys(keyNames(meshKeys()));
+    if (!spec.has("file")) spec.fail("missing key `file`: the mesh file, like `{file: part.stl, tolerance: 0.01}`");
+    checkOutputName(spec["file"], "mesh");
+    s.file = spec["file"].string();
+    if (spec.has("tolerance")) {
+        const RecipeNode t = spec["tolerance"];
+        const double value = t.number();
+        if (!(value > 0.0))
+            t.fail(
+                "the tolerance is how far (mm) any point of the mesh may stray from the true surface: a "
+                "positive number like 0.01; " +
+                t.yaml().Scalar() + " is not");
+        s.options.tolerance = value;
+        s.options.project = true;
+    }
+    if (spec.has("project")) {
+        const std::string word = spec["project"].yaml().Scalar();
+        if (word == "on" || word == "true")
+            s.options.project = true;
+        else if (word == "off" || word == "false")
+            s.options.project = false;
+        else
+            spec["project"].fail("expected `on` (vertices on the true surface) or `off` (marching cubes' vertices)");
+    }
+    return s;
+}
+
+}  // namespace voxlat

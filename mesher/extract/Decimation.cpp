@@ -1,0 +1,370 @@
+#include "mesher/extract/Decimation.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
+#include <OpenMesh/Tools/Decimater/BaseDecimaterT.hh>
+#include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <queue>
+#include <tuple>
+#include <vector>
+
+namespace voxlat {
+
+namespace {
+
+struct Traits : OpenMesh::DefaultTraits {
+    VertexAttributes(OpenMesh::Attributes::Status);
+    EdgeAttributes(OpenMesh::Attributes::Status);
+    FaceAttributes(OpenMesh::Attributes::Status);
+    HalfedgeAttributes(OpenMesh::Attributes::PrevHalfedge);
+};
+using Mesh = OpenMesh::TriMesh_ArrayKernelT<Traits>;
+
+Vec3d toDouble(const Mesh::Point& p)
+{
+    return {p[0], p[1], p[2]};
+}
+
+Vec3d toDouble(const openvdb::Vec3f& p)
+{
+    return {p.x(), p.y(), p.z()};
+}
+
+/// Signed first-order distance (f - level) / |grad f|; a flat spot away from the level is far.
+double signedDistance(double r, const Vec3d& g)
+{
+    const double length = g.length();
+    if (length > 0.0) return r / length;
+    return r == 0.0 ? 0.0 : std::copysign(1e30, r);
+}
+
+/// A triangle to check, with the signed distances at its corners when known (NaN: evaluate).
+struct CheckTriangle {
+    std::array<Vec3d, 3> p;
+    std::array<double, 3> s;
+};
+
+/// OpenMesh's decimater framework (modules, topology test) with a loop of its own: collapses
+/// are ordered by the quadric module, and the field check, which costs field evaluations, runs
+/// only on the collapse about to be made instead of on every candidate the heap holds.
+class FieldDecimater : public OpenMesh::Decimater::BaseDecimaterT<Mesh> {
+public:
+    using Base = OpenMesh::Decimater::BaseDecimaterT<Mesh>;
+
+    FieldDecimater(Mesh& mesh, const FieldNode& field, const DecimationOptions& options,
+                   std::vector<double> vertexDistance)
+        : Base(mesh), mMesh(mesh), mField(field), mOptions(options), mVertexDistance(std::move(vertexDistance))
+    {
+        add(mQuadric);
+        initialize();
+        mRefused.assign(mesh.n_halfedges(), 0);
+        mStamp.assign(mesh.n_vertices(), 0);
+        // Triangles longer than this are checked in quarters: a quadratic fits the distance over a
+        // few voxels of a surface the grid resolves.
+        mMaxPieceEdge = 6.0 * options.voxel;
+    }
+
+    void run(DecimationStats& stats, const ProgressFn& progress)
+    {
+        for (Mesh::VertexHandle v : mMesh.vertices()) queueVertex(v);
+        const std::size_t expected = std::max<std::size_t>(1, mMesh.n_vertices());
+        int percent = -1;
+        while (!mHeap.empty()) {
+            const Entry top = mHeap.top();
+            mHeap.pop();
+            const Mesh::VertexHandle v(int(std::get<1>(top)));
+            if (std::get<2>(top) != mStamp[v.idx()] || mMesh.status(v).deleted()) continue;
+            const Mesh::HalfedgeHandle h(int(std::get<3>(top)));
+            CollapseInfo ci(mMesh, h);
+            // OpenMesh's topology test is the costly part of a candidate (it tags the one-rings),
+            // so it too runs only on the collapse about to be made.
+            if (!is_collapse_legal(ci)) {
+                mRefused[h.idx()] = 1;
+                queueVertex(v);
+                continue;
+            }
+            if (!fieldAllows(ci)) {
+                ++stats.refused;
+                mRefused[h.idx()] = 1;
+                queueVertex(v);
+                continue;
+            }
+            mSupport.clear();
+            for (Mesh::VertexHandle w : mMesh.vv_range(ci.v0)) mSupport.push_back(w);
+            preprocess_collapse(ci);
+            mMesh.collapse(h);
+            ++stats.collapses;
+            postprocess_collapse(ci);
+            for (Mesh::VertexHandle w : mSupport) {
+                // Their neighbourhoods changed: collapses refused before may pass now.
+                for (Mesh::HalfedgeHandle out : mMesh.voh_range(w)) mRefused[out.idx()] = 0;
+                queueVertex(w);
+            }
+            if (progress) {
+                const int now = int(std::min<std::size_t>(99, 100 * stats.collapses / expected));
+                if (now > percent) {
+                    percent = now;
+                    progress(0.01 * now);
+                }
+            }
+        }
+    }
+
+private:
+    /// (priority, vertex, stamp, halfedge); the smallest priority first, ties by vertex index.
+    using Entry = std::tuple<float, unsigned, unsigned, unsigned>;
+
+    /// Queues @a v with its cheapest outgoing collapse not yet refused (legality is checked when
+    /// it comes up).
+    void queueVertex(Mesh::VertexHandle v)
+    {
+        ++mStamp[v.idx()];
+        float best = std::numeric_limits<float>::max();
+        Mesh::HalfedgeHandle bestHalfedge;
+        for (Mesh::HalfedgeHandle h : mMesh.voh_range(v)) {
+            if (mRefused[h.idx()]) continue;
+            CollapseInfo ci(mMesh, h);
+            const float priority = collapse_priority(ci);
+            if (priority >= 0.0f && priority < best) {
+                best = priority;
+                bestHalfedge = h;
+            }
+        }
+        if (bestHalfedge.is_valid())
+            mHeap.emplace(best, unsigned(v.idx()), mStamp[v.idx()], unsigned(bestHalfedge.idx()));
+    }
+
+    /// The triangles around ci.v0 that survive the collapse, with v0 moved onto v1: none may turn
+    /// over or vanish, and each must stay within the tolerance.
+    bool fieldAllows(const CollapseInfo& ci)
+    {
+        mTriangles.clear();
+        const Vec3d p1 = toDouble(ci.p1);
+        for (Mesh::FaceHandle f : mMesh.vf_range(ci.v0)) {
+            if (f == ci.fl || f == ci.fr) continue;
+            CheckTriangle t;
+            std::array<Vec3d, 3> before;
+            int i = 0;
+            for (Mesh::VertexHandle w : mMesh.fv_range(f)) {
+                before[i] = toDouble(mMesh.point(w));
+                t.p[i] = w == ci.v0 ? p1 : before[i];
+                t.s[i] = mVertexDistance[(w == ci.v0 ? ci.v1 : w).idx()];
+                ++i;
+            }
+            const Vec3d n0 = (before[1] - before[0]).cross(before[2] - before[0]);
+            const Vec3d n1 = (t.p[1] - t.p[0]).cross(t.p[2] - t.p[0]);
+            if (!(n1.dot(n0) > 0.0) || !(n1.lengthSqr() > 1e-12 * n0.lengthSqr())) return false;
+            split(t, 0);
+        }
+        return withinTolerance();
+    }
+
+    /// Adds @a t to the triangles to check, in quarters while it is longer than mMaxPieceEdge.
+    void split(const CheckTriangle& t, int depth)
+    {
+        const double longest =
+            std::max({(t.p[1] - t.p[0]).length(), (t.p[2] - t.p[1]).length(), (t.p[0] - t.p[2]).length()});
+        if (longest <= mMaxPieceEdge || depth >= 4) {
+            mTriangles.push_back(t);
+            return;
+        }
+        const double nan = std::numeric_limits<double>::quiet_NaN();
+        const Vec3d m01 = 0.5 * (t.p[0] + t.p[1]), m12 = 0.5 * (t.p[1] + t.p[2]), m20 = 0.5 * (t.p[2] + t.p[0]);
+        split({{t.p[0], m01, m20}, {t.s[0], nan, nan}}, depth + 1);
+        split({{m01, t.p[1], m12}, {nan, t.s[1], nan}}, depth + 1);
+        split({{m20, m12, t.p[2]}, {nan, nan, t.s[2]}}, depth + 1);
+        split({{m01, m12, m20}, {nan, nan, nan}}, depth + 1);
+    }
+
+    /// Evaluates every triangle's unknown corners, edge midpoints and centre in one batch and
+    /// bounds |distance| over each by its quadratic interpolant plus the centre's miss.
+    bool withinTolerance()
+    {
+        mPoints.clear();
+        for (const CheckTriangle& t : mTriangles) {
+            for (int i = 0; i < 3; ++i)
+                if (std::isnan(t.s[i])) mPoints.push_back(t.p[i]);
+            for (int i = 0; i < 3; ++i) mPoints.push_back(0.5 * (t.p[i] + t.p[(i + 1) % 3]));
+            mPoints.push_back((t.p[0] + t.p[1] + t.p[2]) / 3.0);
+        }
+        mValues.resize(mPoints.size());
+        mGradients.resize(mPoints.size());
+        forEachChunk(mPoints.size(), [&](std::size_t begin, std::size_t count) {
+            mField.gradients(std::span<const Vec3d>(mPoints.data() + begin, count),
+                             std::span<double>(mValues.data() + begin, count),
+                             std::span<Vec3d>(mGradients.data() + begin, count));
+        });
+        const double tolerance = mOptions.tolerance;
+        std::size_t next = 0;
+        auto take = [&] {
+            const double s = signedDistance(mValues[next] - mOptions.level, mGradients[next]);
+            ++next;
+            return s;
+        };
+        for (const CheckTriangle& t : mTriangles) {
+            std::array<double, 3> s = t.s, m;
+            for (int i = 0; i < 3; ++i)
+                if (std::isnan(s[i])) s[i] = take();
+            for (int i = 0; i < 3; ++i) m[i] = take();
+            const double centre = take();
+            // Quadratic through corners s_i and midpoints m_i (m_0 between corners 0 and 1).
+            auto quadratic = [&](double l0, double l1, double l2) {
+                return s[0] * l0 * (2 * l0 - 1) + s[1] * l1 * (2 * l1 - 1) + s[2] * l2 * (2 * l2 - 1) +
+                       4 * (m[0] * l0 * l1 + m[1] * l1 * l2 + m[2] * l2 * l0);
+            };
+            const double margin = std::abs(centre - quadratic(1.0 / 3, 1.0 / 3, 1.0 / 3));
+            if (std::abs(centre) > tolerance || margin > tolerance) return false;
+            constexpr int kSteps = 6;
+            double largest = 0.0;
+            for (int i = 0; i <= kSteps; ++i)
+                for (int j = 0; i + j <= kSteps; ++j) {
+                    const double l0 = double(i) / kSteps, l1 = double(j) / kSteps;
+                    largest = std::max(largest, std::abs(quadratic(l0, l1, 1.0 - l0 - l1)));
+                }
+            if (largest + margin > tolerance) return false;
+        }
+        return true;
+    }
+
+    Mesh& mMesh;
+    const FieldNode& mField;
+    DecimationOptions mOptions;
+    std::vector<double> mVertexDistance;
+    double mMaxPieceEdge = 0.6;
+    OpenMesh::Decimater::ModQuadricT<Mesh>::Handle mQuadric;
+    std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> mHeap;
+    std::vector<std::uint8_t> mRefused;
+    std::vector<unsigned> mStamp;
+    std::vector<Mesh::VertexHandle> mSupport;
+    std::vector<CheckTriangle> mTriangles;
+    std::vector<Vec3d> mPoints, mGradients;
+    std::vector<double> mValues;
+};
+
+}  // namespace
+
+DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, const DecimationOptions& options,
+                                    const ProgressFn& progress)
+{
+    DecimationStats stats;
+    stats.trianglesBefore = stats.trianglesAfter = mesh.triangles.size();
+    stats.verticesBefore = stats.verticesAfter = mesh.points.size();
+    if (mesh.triangles.empty()) return stats;
+
+    Mesh om;
+    om.reserve(mesh.points.size(), 3 * mesh.triangles.size() / 2, mesh.triangles.size());
+    for (const openvdb::Vec3f& p : mesh.points) om.add_vertex(Mesh::Point(p.x(), p.y(), p.z()));
+    for (const openvdb::Vec3I& t : mesh.triangles) {
+        const Mesh::FaceHandle f =
+            om.add_face(Mesh::VertexHandle(int(t[0])), Mesh::VertexHandle(int(t[1])), Mesh::VertexHandle(int(t[2])));
+        if (!f.is_valid()) return stats;  // not a manifold mesh OpenMesh can hold: left as it is
+    }
+    for (Mesh::VertexHandle v : om.vertices())
+        if (om.is_isolated(v)) om.status(v).set_locked(true);
+
+    // Signed distances at the original vertices, which halfedge collapses never move.
+    std::vector<double> vertexDistance(mesh.points.size());
+    const std::size_t chunks = (mesh.points.size() + kBatchSize - 1) / kBatchSize;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1), [&](const auto& range) {
+        std::array<Vec3d, kBatchSize> p, g;
+        std::array<double, kBatchSize> v;
+        for (std::size_t c = range.begin(); c != range.end(); ++c) {
+            const std::size_t begin = c * kBatchSize, count = std::min(kBatchSize, mesh.points.size() - begin);
+            for (std::size_t k = 0; k < count; ++k) p[k] = toDouble(mesh.points[begin + k]);
+            field.gradients(std::span<const Vec3d>(p.data(), count), std::span<double>(v.data(), count),
+                            std::span<Vec3d>(g.data(), count));
+            for (std::size_t k = 0; k < count; ++k)
+                vertexDistance[begin + k] = signedDistance(v[k] - options.level, g[k]);
+        }
+    });
+
+    FieldDecimater decimater(om, field, options, std::move(vertexDistance));
+    decimater.run(stats, progress);
+    om.garbage_collection();
+
+    TriangleMesh out;
+    out.points.reserve(om.n_vertices());
+    for (Mesh::VertexHandle v : om.vertices()) {
+        const Mesh::Point& p = om.point(v);
+        out.points.emplace_back(p[0], p[1], p[2]);
+    }
+    out.triangles.reserve(om.n_faces());
+    for (Mesh::FaceHandle f : om.faces()) {
+        openvdb::Vec3I t;
+        int i = 0;
+        for (Mesh::VertexHandle v : om.fv_range(f)) t[i++] = unsigned(v.idx());
+        out.triangles.push_back(t);
+    }
+    mesh = std::move(out);
+    stats.decimated = true;
+    stats.trianglesAfter = mesh.triangles.size();
+    stats.verticesAfter = mesh.points.size();
+    if (progress) progress(1.0);
+    return stats;
+}
+
+MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field, double level, double spacing)
+{
+    struct Partial {
+        double max = 0.0, sum = 0.0, weight = 0.0;
+        std::size_t samples = 0;
+    };
+    constexpr std::size_t kBlock = 4096;
+    const std::size_t blocks = (mesh.triangles.size() + kBlock - 1) / kBlock;
+    std::vector<Partial> partial(blocks);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 1), [&](const auto& range) {
+        std::vector<Vec3d> points, gradients;
+        std::vector<double> values, weights;
+        for (std::size_t b = range.begin(); b != range.end(); ++b) {
+            points.clear();
+            weights.clear();
+            const std::size_t end = std::min(mesh.triangles.size(), (b + 1) * kBlock);
+            for (std::size_t n = b * kBlock; n < end; ++n) {
+                const openvdb::Vec3I& t = mesh.triangles[n];
+                const Vec3d a = toDouble(mesh.points[t[0]]), e1 = toDouble(mesh.points[t[1]]) - a,
+                            e2 = toDouble(mesh.points[t[2]]) - a;
+                const double longest = std::max({e1.length(), e2.length(), (e2 - e1).length()});
+                const int steps = std::max(1, int(std::ceil(longest / spacing)));
+                const double area = 0.5 * e1.cross(e2).length();
+                const double w = area / double((steps + 1) * (steps + 2) / 2);
+                for (int i = 0; i <= steps; ++i)
+                    for (int j = 0; i + j <= steps; ++j) {
+                        points.push_back(a + (double(i) / steps) * e1 + (double(j) / steps) * e2);
+                        weights.push_back(w);
+                    }
+            }
+            values.resize(points.size());
+            gradients.resize(points.size());
+            forEachChunk(points.size(), [&](std::size_t begin, std::size_t count) {
+                field.gradients(std::span<const Vec3d>(points.data() + begin, count),
+                                std::span<double>(values.data() + begin, count),
+                                std::span<Vec3d>(gradients.data() + begin, count));
+            });
+            Partial& p = partial[b];
+            for (std::size_t k = 0; k < points.size(); ++k) {
+                const double d = std::abs(signedDistance(values[k] - level, gradients[k]));
+                p.max = std::max(p.max, d);
+                p.sum += weights[k] * d * d;
+                p.weight += weights[k];
+            }
+            p.samples = points.size();
+        }
+    });
+    MeshDeviation result;
+    double sum = 0.0, weight = 0.0;
+    for (const Partial& p : partial) {
+        result.max = std::max(result.max, p.max);
+        sum += p.sum;
+        weight += p.weight;
+        result.samples += p.samples;
+    }
+    result.rms = weight > 0.0 ? std::sqrt(sum / weight) : 0.0;
+    return result;
+}
+
+}  // namespace voxlat

@@ -1,0 +1,59 @@
+/// @file Decimation.h
+/// @brief Error-bounded decimation of a closed mesh against the field it came from, and the
+/// deviation of a mesh from a field's level set measured on samples over every triangle.
+#pragma once
+
+#include "fields/FieldNode.h"
+#include "mesher/extract/MarchingCubes.h"
+#include "mesher/extract/TriangleMesh.h"
+
+#include <cstddef>
+
+namespace voxlat {
+
+struct DecimationOptions {
+    /// Every point of every triangle stays within this of the level set (mm).
+    double tolerance = 0.01;
+    /// The level set (the solid is f < level).
+    double level = 0.0;
+    /// The grid's voxel (mm): triangles longer than a few voxels are checked in pieces.
+    double voxel = 0.1;
+};
+
+struct DecimationStats {
+    std::size_t trianglesBefore = 0, trianglesAfter = 0;
+    std::size_t verticesBefore = 0, verticesAfter = 0;
+    std::size_t collapses = 0;
+    /// Candidate collapses refused because a new triangle would stray beyond the tolerance,
+    /// turn over or degenerate.
+    std::size_t refused = 0;
+    /// False when the input is not a closed manifold mesh OpenMesh can hold (then it is kept as is).
+    bool decimated = false;
+};
+
+/// Collapses edges of @a mesh (halfedge collapses, so every kept vertex stays where it was:
+/// on the surface after projectToSurface) in the order of OpenMesh's quadric error metric
+/// (ModQuadricT), each collapse made only when OpenMesh's topology test passes (the mesh stays
+/// closed, manifold and oriented), no new triangle turns over by 90 degrees or more or loses its
+/// area, and every new triangle stays within options.tolerance of the level set of @a field.
+/// The last is checked on each new triangle (pieces of at most a few voxels) with the signed
+/// distance (f - level) / |grad f| at its corners, edge midpoints and centre: the quadratic
+/// through corners and midpoints is maximised over the triangle and the centre's miss of it is
+/// added as a margin. A refused collapse is retried once its neighbourhood changes. Serial and
+/// deterministic. @a progress (optional) runs from 0 to 1 and may throw to cancel.
+DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, const DecimationOptions& options,
+                                    const ProgressFn& progress = {});
+
+/// How far a mesh strays from a level set, sampled on every triangle.
+struct MeshDeviation {
+    double max = 0.0;  ///< largest |f - level| / |grad f| over the samples (mm)
+    double rms = 0.0;  ///< root mean square, each triangle weighted by its area
+    std::size_t samples = 0;
+};
+
+/// Samples every triangle of @a mesh on a barycentric grid of spacing at most @a spacing (mm;
+/// corners, edges and interior) and measures the first-order distance |f - level| / |grad f|.
+/// Parallel over fixed blocks of triangles: the same numbers for any thread count.
+MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field, double level, double spacing);
+
+}  // namespace voxlat
