@@ -27,7 +27,7 @@ namespace voxlat::homogenization {
 /// with trilinear interpolation P, formed element by element: a coarse voxel's matrix is the sum
 /// over its non-empty children of P_c^T K_child P_c. Coarse voxels with the same children share one
 /// matrix (at the first coarse level at most 2048 kinds), so memory stays proportional to the
-/// solid voxels. Smoothing is Chebyshev (degree 2) on the nodal block-Jacobi preconditioned
+/// solid voxels. Smoothing is Chebyshev (degree 2, 3 on coarse grids) on the nodal block-Jacobi preconditioned
 /// operator, its upper eigenvalue found by a few power iterations; the coarsest grid (<= 64
 /// points) is solved by a dense Cholesky factorisation.
 ///
@@ -82,6 +82,7 @@ private:
     void buildHierarchy();
     void vcycle(std::size_t level, const Real* b, Real* x) const;
     void smooth(const Level& L, const Real* b, Real* x, bool zeroStart) const;
+    void chebyshevStep(const Level& L, const Real* b, const Real* t, Real* x, Real c1, Real c2, bool keepX) const;
     void coarseSolve(const Level& L, const Real* b, Real* x) const;
 
     std::vector<std::unique_ptr<Level>> mLevels;
