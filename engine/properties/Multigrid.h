@@ -22,7 +22,11 @@ namespace voxlat::homogenization {
 /// its contributions in the same order for any thread count. Dot products sum fixed blocks in a
 /// fixed order. Every result is therefore bit-identical for any number of threads.
 ///
-/// The preconditioner is a multigrid V-cycle. Coarse grids halve each axis (ceil(n/2): an odd axis
+/// On the finest grid the element product goes through the voxel's mirror symmetry: an 8-point
+/// Walsh-Hadamard transform per unknown block-diagonalises the element matrix into 8 blocks of
+/// D x D (Level::setReflectionBlocks), a quarter of the dense product's flops.
+///
+/// The preconditioner is a multigrid V-cycle, in single precision. Coarse grids halve each axis (ceil(n/2): an odd axis
 /// ends with a one-voxel-wide coarse element); the coarse operators are Galerkin products P^T A P
 /// with trilinear interpolation P, formed element by element: a coarse voxel's matrix is the sum
 /// over its non-empty children of P_c^T K_child P_c. Coarse voxels with the same children share one
