@@ -22,12 +22,16 @@ namespace voxlat::homogenization {
 /// its contributions in the same order for any thread count. Dot products sum fixed blocks in a
 /// fixed order. Every result is therefore bit-identical for any number of threads.
 ///
-/// The preconditioner is a multigrid V-cycle. Coarse grids halve each axis (ceil(n/2): an odd axis
+/// On the finest grid the element product goes through the voxel's mirror symmetry: an 8-point
+/// Walsh-Hadamard transform per unknown block-diagonalises the element matrix into 8 blocks of
+/// D x D (Level::setReflectionBlocks), a quarter of the dense product's flops.
+///
+/// The preconditioner is a multigrid V-cycle, in single precision. Coarse grids halve each axis (ceil(n/2): an odd axis
 /// ends with a one-voxel-wide coarse element); the coarse operators are Galerkin products P^T A P
 /// with trilinear interpolation P, formed element by element: a coarse voxel's matrix is the sum
 /// over its non-empty children of P_c^T K_child P_c. Coarse voxels with the same children share one
 /// matrix (at the first coarse level at most 2048 kinds), so memory stays proportional to the
-/// solid voxels. Smoothing is Chebyshev (degree 2) on the nodal block-Jacobi preconditioned
+/// solid voxels. Smoothing is Chebyshev (degree 2, 3 on coarse grids) on the nodal block-Jacobi preconditioned
 /// operator, its upper eigenvalue found by a few power iterations; the coarsest grid (<= 64
 /// points) is solved by a dense Cholesky factorisation.
 ///
@@ -82,6 +86,7 @@ private:
     void buildHierarchy();
     void vcycle(std::size_t level, const Real* b, Real* x) const;
     void smooth(const Level& L, const Real* b, Real* x, bool zeroStart) const;
+    void chebyshevStep(const Level& L, const Real* b, const Real* t, Real* x, Real c1, Real c2, bool keepX) const;
     void coarseSolve(const Level& L, const Real* b, Real* x) const;
 
     std::vector<std::unique_ptr<Level>> mLevels;
