@@ -230,7 +230,7 @@ TEST(Cli, OutputsStayInsideTheOutputFolderAndReplaceOnlyFiles)
     refused("{mesh: " + (dir.path / "abs.stl").string() + "}", "inside the output folder");
     EXPECT_FALSE(std::filesystem::exists(dir.path / "abs.stl"));
     refused("{vdb: grid.txt}", "ends in .vdb");
-    refused("{mesh: part.step}", "ends in .stl, .ply or .obj");
+    refused("{mesh: part.step}", "ends in .stl, .3mf, .ply or .obj");
     // A symbolic link inside --out that points out of it.
     const auto outside = dir.path / "elsewhere";
     std::filesystem::create_directories(outside);

@@ -6,6 +6,7 @@
 #include "TestUtil.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/jobs/Job.h"
+#include "engine/parts/MeshReader.h"
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
 #include "fields/LevelSolid.h"
@@ -14,6 +15,7 @@
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
 #include "mesher/extract/SurfaceProjection.h"
+#include "mesher/writers/MeshWriters.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -69,6 +71,17 @@ double gyroidDistance(const Vec3d& p, double cell, double c)
     const double g = sx * cy + sy * cz + sz * cx;
     const Vec3d grad(k * (cx * cy - sz * sx), k * (cy * cz - sx * sy), k * (cz * cx - sy * sz));
     return (g - c) / grad.length();
+}
+
+/// The gyroid sheet |G| < t: its first-order signed distance (|G| - t) / |grad G|.
+double gyroidSheetDistance(const Vec3d& p, double cell, double t)
+{
+    const double k = 2.0 * std::numbers::pi / cell;
+    const double sx = std::sin(k * p.x()), cx = std::cos(k * p.x()), sy = std::sin(k * p.y()), cy = std::cos(k * p.y()),
+                 sz = std::sin(k * p.z()), cz = std::cos(k * p.z());
+    const double g = sx * cy + sy * cz + sz * cx;
+    const Vec3d grad(k * (cx * cy - sz * sx), k * (cy * cz - sx * sy), k * (cz * cx - sy * sz));
+    return (std::abs(g) - t) / grad.length();
 }
 
 /// Exact signed distance to an axis-aligned box (the test's own).
@@ -228,6 +241,197 @@ TEST(SurfaceProjection, NoTriangleTurnsOverWhenTheFieldPullsHard)
         EXPECT_LE((at(projected, v) - at(raw, v)).length(), 0.5 * voxel + 1e-5);  // + float rounding
     EXPECT_EQ(flippedTriangles(raw, projected), 0u);
     expectClosedManifold(projected);
+}
+
+/// Largest |distance| over the triangles whose corners all lie at least @a margin inside @a box
+/// (away from the crease where the solid meets the box, which marching cubes cuts flat).
+double maxAwayFromBox(const TriangleMesh& m, const std::function<double(const Vec3d&)>& distance, double h,
+                      const Box3& box, double margin)
+{
+    TriangleMesh inner;
+    inner.points = m.points;
+    for (const openvdb::Vec3I& t : m.triangles)
+        if (boxDistance(at(m, t[0]), box) < -margin && boxDistance(at(m, t[1]), box) < -margin &&
+            boxDistance(at(m, t[2]), box) < -margin)
+            inner.triangles.push_back(t);
+    return maxOverTriangles(inner, distance, h);
+}
+
+struct DecimationCase {
+    std::string name;
+    FieldPtr field;
+    std::function<double(const Vec3d&)> distance;
+    Box3 box;
+    double voxel, tolerance;
+};
+
+std::vector<DecimationCase> decimationCases()
+{
+    const GyroidCase network;
+    const Box3 box = network.box;
+    const FieldPtr sheet = clipped(
+        std::make_shared<LevelSolid>(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(5.0)), SolidSide::Band, 0.4),
+        box);
+    const Vec3d centre(5.03, 4.98, 5.01);
+    return {
+        {"sphere", std::make_shared<SquaredSphere>(centre, 3.7),
+         [centre](const Vec3d& p) { return (p - centre).length() - 3.7; }, Box3{Vec3d(0.0), Vec3d(10.0)}, 0.1, 0.005},
+        {"gyroid network", network.field(), [network](const Vec3d& p) { return network.distance(p); }, box, 0.1, 0.01},
+        {"gyroid sheet", sheet,
+         [box](const Vec3d& p) { return std::max(gyroidSheetDistance(p, 5.0, 0.4), boxDistance(p, box)); }, box, 0.1,
+         0.01},
+    };
+}
+
+TEST(Decimation, ClosedManifoldAndWithinToleranceOnSeveralShapes)
+{
+    for (const DecimationCase& c : decimationCases()) {
+        SCOPED_TRACE(c.name);
+        const Domain d = Domain::fromBox(c.box, c.voxel);
+        TriangleMesh mesh = marchingCubesOf(*c.field, d);
+        projectToSurface(mesh, *c.field, {0.0, 0.5 * c.voxel, 1e-6, 12});
+        const TriangleMesh projected = mesh;
+        const MeshTopology before = checkTopology(projected);
+        DecimationOptions o;
+        o.tolerance = c.tolerance;
+        o.voxel = c.voxel;
+        const DecimationStats stats = decimateToTolerance(mesh, *c.field, o);
+        ASSERT_TRUE(stats.decimated);
+        EXPECT_EQ(stats.trianglesAfter, mesh.triangles.size());
+        RecordProperty(c.name + "_triangles",
+                       std::to_string(projected.triangles.size()) + " -> " + std::to_string(mesh.triangles.size()));
+        // Far fewer triangles, the same closed, manifold, oriented surface of the same genus.
+        EXPECT_LT(mesh.triangles.size(), projected.triangles.size() / 3);
+        expectClosedManifold(mesh);
+        EXPECT_EQ(checkTopology(mesh).eulerCharacteristic, before.eulerCharacteristic);
+        EXPECT_NEAR(mesh.volume(), projected.volume(), 0.002 * projected.volume());
+        // Every point of every triangle within the tolerance, measured with the test's own
+        // distance on a fine grid of samples: everywhere for the sphere; away from the crease at
+        // the box (which marching cubes cut flat before) for the lattices.
+        const double worst = maxAwayFromBox(mesh, c.distance, 0.25 * c.voxel, c.box, 2.0 * c.voxel);
+        RecordProperty(c.name + "_max_deviation_mm", std::to_string(worst));
+        EXPECT_LE(worst, c.tolerance);
+        if (c.name == "sphere") {
+            EXPECT_LE(maxOverTriangles(mesh, c.distance, 0.25 * c.voxel), c.tolerance);
+            // The mesher's own measure (|f| / |grad f| of a field that is not a distance) is
+            // within a few percent of the exact distance this close to the surface.
+            const MeshDeviation own = measureDeviation(mesh, *c.field, 0.0, 0.25 * c.voxel);
+            EXPECT_NEAR(own.max, maxOverTriangles(mesh, c.distance, 0.25 * c.voxel), 0.05 * own.max);
+        }
+    }
+}
+
+TEST(Decimation, SameBytesForAnyThreadCount)
+{
+    const DecimationCase c = decimationCases()[1];
+    TriangleMesh raw = marchingCubesOf(*c.field, Domain::fromBox(c.box, c.voxel));
+    auto decimate = [&](int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        TriangleMesh m = raw;
+        projectToSurface(m, *c.field, {0.0, 0.5 * c.voxel, 1e-6, 12});
+        DecimationOptions o;
+        o.tolerance = c.tolerance;
+        o.voxel = c.voxel;
+        decimateToTolerance(m, *c.field, o);
+        return m;
+    };
+    const TriangleMesh one = decimate(1), two = decimate(2);
+    EXPECT_TRUE(one.points == two.points);
+    EXPECT_TRUE(one.triangles == two.triangles);
+}
+
+TEST(MeshOutputs, ThreeMfRoundTripsThroughLib3mfWithTheSameTriangles)
+{
+    test::TempDir dir;
+    const DecimationCase c = decimationCases()[0];
+    const TriangleMesh mesh = marchingCubesOf(*c.field, Domain::fromBox(c.box, 0.4));
+    const auto path = dir.path / "sphere.3mf";
+    writeMesh(mesh, path.string(), nullptr, {{"voxlat_recipe_sha256", "abc"}, {"Title", "a sphere"}});
+    const PartMesh back = readPartMesh(path, "sphere.3mf");
+    EXPECT_EQ(back.fileUnitMm, std::optional<double>(1.0));
+    ASSERT_EQ(back.mesh.triangles.size(), mesh.triangles.size());
+    ASSERT_EQ(back.mesh.points.size(), mesh.points.size());
+    double worst = 0.0;
+    for (std::size_t n = 0; n < mesh.triangles.size(); ++n)
+        for (int k = 0; k < 3; ++k)
+            worst =
+                std::max(worst, (at(back.mesh, back.mesh.triangles[n][k]) - at(mesh, mesh.triangles[n][k])).length());
+    EXPECT_LT(worst, 1e-5);  // lib3mf writes six decimals
+    const std::string model = test::readFile(path);
+    EXPECT_EQ(model.substr(0, 2), "PK");
+    // The same mesh gives the same bytes (lib3mf's random UUIDs are replaced).
+    test::TempDir other;
+    writeMesh(mesh, (other.path / "sphere.3mf").string(), nullptr,
+              {{"voxlat_recipe_sha256", "abc"}, {"Title", "a sphere"}});
+    EXPECT_TRUE(test::readFile(other.path / "sphere.3mf") == model);
+}
+
+constexpr const char* kSmallGyroid = R"(voxel: 0.2
+domain: {box: [[0, 0, 0], [6, 6, 6]]}
+fields:
+  lattice: {tpms: gyroid, cell: 5, solid: network, density: 0.3}
+result: lattice
+)";
+
+TEST(MeshOutputs, TheReportDescribesTheMeshAsWritten)
+{
+    test::TempDir dir;
+    const std::string text =
+        std::string(kSmallGyroid) + "outputs: {mesh: [{file: a.3mf, tolerance: 0.02}, plain.stl]}\n";
+    Job job(parseRecipe(text, "r.yaml", dir.path));
+    job.writeOutputs(dir.path / "out", false);
+    const nlohmann::json r = job.report();
+    const PartMesh written = readPartMesh(dir.path / "out/a.3mf", "a.3mf");
+    EXPECT_EQ(r["mesh"]["triangles"].get<std::size_t>(), written.mesh.triangles.size());
+    EXPECT_NEAR(r["mesh"]["volume_mm3"].get<double>(), written.mesh.volume(), 1e-4 * written.mesh.volume());
+    EXPECT_TRUE(r["mesh"]["closed_manifold"].get<bool>());
+    EXPECT_LE(r["mesh"]["deviation"]["rms_mm"].get<double>(), 0.02);
+    EXPECT_EQ(r["mesh"]["decimation"]["tolerance_mm"].get<double>(), 0.02);
+    ASSERT_EQ(r["meshes"].size(), 2u);
+    const TriangleMesh plain = readStl((dir.path / "out/plain.stl").string());
+    EXPECT_EQ(r["meshes"][1]["triangles"].get<std::size_t>(), plain.triangles.size());
+    EXPECT_GT(plain.triangles.size(), 2 * written.mesh.triangles.size());
+    const std::string model = test::readFile(dir.path / "out/a.3mf");
+    EXPECT_GT(model.size(), 100u);
+}
+
+TEST(MeshOutputs, BadTolerancesAndNamesAreRefusedWithTheLine)
+{
+    test::TempDir dir;
+    for (const std::string bad :
+         {"{file: a.stl, tolerance: 0}", "{file: a.stl, tolerance: -0.1}", "{file: a.stl, project: maybe}",
+          "{file: a.step}", "{tolerance: 0.1}", "{file: a.stl, tolerence: 0.1}"}) {
+        SCOPED_TRACE(bad);
+        const auto path = dir.write("bad.yaml", std::string(kSmallGyroid) + "outputs: {mesh: " + bad + "}\n");
+        std::string out;
+        EXPECT_EQ(
+            test::runCommand(
+                test::voxlatBinary() + " -q run " + path.string() + " --out " + (dir.path / "out").string(), &out),
+            2)
+            << out;
+        EXPECT_NE(out.find("bad.yaml:6:"), std::string::npos) << out;
+    }
+    const auto good = dir.write("good.yaml", kSmallGyroid);
+    for (const std::string bad : {"0", "-1", "nan"}) {
+        std::string out;
+        const auto file = dir.path / "m.stl";
+        EXPECT_EQ(test::runCommand(test::voxlatBinary() + " -q mesh " + good.string() + " -o " + file.string() +
+                                       " --tolerance " + bad,
+                                   &out),
+                  2)
+            << out;
+        EXPECT_NE(out.find("tolerance"), std::string::npos) << out;
+        EXPECT_FALSE(std::filesystem::exists(file));
+    }
+    std::string out;
+    const auto file = dir.path / "m.3mf";
+    ASSERT_EQ(
+        test::runCommand(
+            test::voxlatBinary() + " -q mesh " + good.string() + " -o " + file.string() + " --tolerance 0.02", &out),
+        0)
+        << out;
+    EXPECT_TRUE(std::filesystem::exists(file));
+    EXPECT_NE(out.find("of the surface"), std::string::npos) << out;
 }
 
 }  // namespace

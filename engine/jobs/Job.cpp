@@ -446,9 +446,9 @@ void Job::checkPieces()
 MeshMetadata Job::meshMetadata() const
 {
     return {{"Application", "voxlat " + versionString()},
-            {"voxlat:version", versionString()},
-            {"voxlat:recipe_sha256", recipeHash(mRecipe)},
-            {"voxlat:recipe", canonicalRecipe(mRecipe).dump()}};
+            {"voxlat_version", versionString()},
+            {"voxlat_recipe_sha256", recipeHash(mRecipe)},
+            {"voxlat_recipe", canonicalRecipe(mRecipe).dump()}};
 }
 
 void Job::writeMesh(const std::filesystem::path& path, const MeshOptions& options)

@@ -199,7 +199,8 @@ private:
                              std::span<double>(mValues.data() + begin, count),
                              std::span<Vec3d>(mGradients.data() + begin, count));
         });
-        const double tolerance = mOptions.tolerance;
+        // A tenth of the tolerance is kept back for what the quadratic misses.
+        const double tolerance = 0.9 * mOptions.tolerance;
         std::size_t next = 0;
         auto take = [&] {
             const double s = signedDistance(mValues[next] - mOptions.level, mGradients[next]);

@@ -13,6 +13,7 @@
 #include <bit>
 #include <cctype>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -114,6 +115,31 @@ struct Lib3mfReleaser {
 };
 using Lib3mfHandle = std::unique_ptr<NMR::PLib3MFBase, Lib3mfReleaser>;
 
+/// A UUID made from the mesh and its metadata (and @a role, so the object, build and item differ):
+/// lib3mf stamps random ones, and the same mesh should give the same bytes.
+std::string contentUuid(const TriangleMesh& mesh, const MeshMetadata& metadata, std::uint64_t role)
+{
+    std::uint64_t h[2] = {0xcbf29ce484222325ull ^ role, 0x84222325cbf29ce4ull + role};
+    auto mix = [&](std::uint64_t word) {
+        h[0] = (h[0] ^ word) * 0x100000001b3ull;
+        h[1] = (h[1] ^ (word + 0x9E3779B97F4A7C15ull)) * 0x100000001b3ull;
+        h[1] ^= h[1] >> 29;
+    };
+    for (const auto& [key, value] : metadata)
+        for (const std::string* text : {&key, &value})
+            for (unsigned char c : *text) mix(c);
+    for (const openvdb::Vec3f& p : mesh.points)
+        mix(std::uint64_t(std::bit_cast<std::uint32_t>(p[0])) << 32 ^ std::bit_cast<std::uint32_t>(p[1]) ^
+            std::uint64_t(std::bit_cast<std::uint32_t>(p[2])) << 16);
+    for (const openvdb::Vec3I& t : mesh.triangles) mix(std::uint64_t(t[0]) << 32 ^ t[1] ^ std::uint64_t(t[2]) << 16);
+    char text[37];
+    // Version 4 and variant bits set, so it reads as any other UUID.
+    std::snprintf(text, sizeof text, "%08x-%04x-4%03x-8%03x-%012llx", unsigned(h[0] >> 32),
+                  unsigned(h[0] >> 16 & 0xFFFF), unsigned(h[0] & 0xFFF), unsigned(h[1] >> 52 & 0xFFF),
+                  static_cast<unsigned long long>(h[1] & 0xFFFFFFFFFFFFull));
+    return text;
+}
+
 /// Writes @a mesh as a 3MF package through lib3mf: unit millimetre, one mesh object, one build
 /// item, @a metadata as the model's metadata. lib3mf packs the model into a buffer, which goes
 /// to the file through AtomicFile.
@@ -159,6 +185,9 @@ void write3mf(const TriangleMesh& mesh, const std::string& path, const MeshMetad
     PLib3MFModelBuildItem* itemRaw = nullptr;
     check(lib3mf_model_addbuilditem(modelRaw, objectRaw, nullptr, &itemRaw), modelRaw, "add a build item");
     const Lib3mfHandle item(itemRaw);
+    check(lib3mf_object_setuuidutf8(objectRaw, contentUuid(mesh, metadata, 1).c_str()), objectRaw, "set a UUID");
+    check(lib3mf_model_setbuilduuidutf8(modelRaw, contentUuid(mesh, metadata, 2).c_str()), modelRaw, "set a UUID");
+    check(lib3mf_builditem_setuuidutf8(itemRaw, contentUuid(mesh, metadata, 3).c_str()), itemRaw, "set a UUID");
     PLib3MFModelWriter* writerRaw = nullptr;
     check(lib3mf_model_querywriter(modelRaw, "3mf", &writerRaw), modelRaw, "start the writer");
     const Lib3mfHandle writer(writerRaw);
