@@ -312,8 +312,8 @@ TEST(RecipeLanguage, SchemaMatchesTheNodeTable)
     EXPECT_EQ(defs["node"]["oneOf"].size(), types.size());
     std::set<std::string> top;
     for (const auto& [k, v] : schema["properties"].items()) top.insert(k);
-    EXPECT_EQ(top,
-              (std::set<std::string>{"voxel", "domain", "fields", "result", "outputs", "params", "include", "allow"}));
+    EXPECT_EQ(top, (std::set<std::string>{"voxel", "domain", "fields", "result", "outputs", "params", "include",
+                                          "allow", "material", "properties"}));
     // The command prints the same schema.
     std::string out;
     ASSERT_EQ(runCommand(voxlatBinary() + " schema", &out), 0) << out;

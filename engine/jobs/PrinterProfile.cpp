@@ -176,6 +176,7 @@ PrinterProfile loadPrinterProfile(const std::string& nameOrPath, const std::stri
         top["orientation"].fail("expected `portrait` or `landscape`, got `" + orientation + "`");
     p.portrait = orientation == "portrait";
     p.maxHeightMm = top["max_height"].positiveNumber();
+    p.maxHeightWhere = top["max_height"].where();
     if (top.has("layer")) p.layerMm = top["layer"].positiveNumber();
     if (top.has("exposure")) p.exposureS = top["exposure"].positiveNumber();
     if (top.has("exposure_first")) p.exposureFirstS = top["exposure_first"].positiveNumber();

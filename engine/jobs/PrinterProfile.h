@@ -32,7 +32,8 @@ struct PrinterProfile {
     /// cure at exposure_first with `bottomMotion`, then `transition_layers` step down to exposure.
     int bottomLayers = 4, transitionLayers = 0;
     GooMotion bottomMotion, motion;
-    std::string displayWhere;  ///< file:line:col of `display` (for messages)
+    std::string displayWhere;    ///< file:line:col of `display` (for messages)
+    std::string maxHeightWhere;  ///< file:line:col of `max_height`
 
     double pitchX() const { return widthMm / pixelsX; }
     double pitchY() const { return heightMm / pixelsY; }

@@ -289,8 +289,8 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
     const std::string printerRef = "printer `" + printer.key + "` (" + printer.file + ")";
     if (height > printer.maxHeightMm + 1e-9)
         throw InputError(partWhere + ": the part is " + number(height) + " mm tall, taller than the " +
-                         number(printer.maxHeightMm) + " mm build height (`max_height`) of " + printerRef +
-                         "; lower the domain or split the part");
+                         number(printer.maxHeightMm) + " mm build height (`max_height` at " + printer.maxHeightWhere +
+                         ") of " + printerRef + "; lower the domain or split the part");
     if (layer > height)
         throw InputError(settings.printerWhere + ": the layer height " + number(layer) +
                          " mm is larger than the part (" + number(height) +
