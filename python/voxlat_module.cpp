@@ -248,7 +248,7 @@ PYBIND11_MODULE(_voxlat, m)
                 py::gil_scoped_release release;
                 j.writeMesh(path);
             },
-            py::arg("path"), "write the mesh (.stl, .ply, .obj)")
+            py::arg("path"), "write the mesh (.stl, .3mf, .ply, .obj)")
         .def(
             "write_report",
             [](Job& j, const std::string& path) {

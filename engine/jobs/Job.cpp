@@ -353,6 +353,15 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
             std::atomic<std::uint64_t> last{0};
             return projectToSurface(m, *field, po, feed(progress, last));
         });
+        // Where the solid meets the domain box, a vertex of each edge across the crease goes onto both.
+        ProjectionOptions co = po;
+        co.maxMove = mDomain.voxel;
+        const CreaseStats c =
+            timed("sharpen creases", [&] { return sharpenCreases(m, *mResult, BoxField(mDomain.box), co); });
+        report["creases"] = {{"surfaces", "the result and the domain box"},
+                             {"edges_across", c.creaseEdges},
+                             {"vertices_moved_onto_both", c.moved},
+                             {"edges_left_flat", c.leftFlat}};
         report["projection"] = {{"vertices_moved", s.moved},
                                 {"vertices_held_back", s.heldBack},
                                 {"vertices_at_half_voxel_limit", s.limited},

@@ -126,7 +126,148 @@ void newtonChunk(const TriangleMesh& mesh, const FieldNode& field, const Project
     for (std::size_t k = 0; k < count; ++k) target[begin + k] = best[k];
 }
 
+/// Values and gradients of @a field at @a points, in fixed batches, in parallel.
+void evaluateAll(const FieldNode& field, const std::vector<Vec3d>& points, std::vector<double>& values,
+                 std::vector<Vec3d>& gradients)
+{
+    values.resize(points.size());
+    gradients.resize(points.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunkCount(points.size()), 1), [&](const auto& range) {
+        for (std::size_t c = range.begin(); c != range.end(); ++c) {
+            const std::size_t begin = c * kBatchSize, count = std::min(kBatchSize, points.size() - begin);
+            field.gradients(std::span<const Vec3d>(points.data() + begin, count),
+                            std::span<double>(values.data() + begin, count),
+                            std::span<Vec3d>(gradients.data() + begin, count));
+        }
+    });
+}
+
+/// Whether triangle @a t of @a mesh, at its current points, turned over or vanished against
+/// @a original.
+bool turnedOver(const TriangleMesh& mesh, const std::vector<openvdb::Vec3f>& original, const openvdb::Vec3I& t)
+{
+    const Vec3d a0 = toDouble(original[t[0]]), b0 = toDouble(original[t[1]]), c0 = toDouble(original[t[2]]);
+    const Vec3d n0 = (b0 - a0).cross(c0 - a0);
+    const Vec3d a1 = toDouble(mesh.points[t[0]]), b1 = toDouble(mesh.points[t[1]]), c1 = toDouble(mesh.points[t[2]]);
+    const Vec3d n1 = (b1 - a1).cross(c1 - a1);
+    return n0 != Vec3d(0.0) && (n1.dot(n0) <= 0.0 || n1 == Vec3d(0.0));
+}
+
 }  // namespace
+
+CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNode& b, const ProjectionOptions& options)
+{
+    CreaseStats stats;
+    const std::size_t n = mesh.points.size();
+    if (n == 0) return stats;
+    std::vector<Vec3d> points(n);
+    for (std::size_t v = 0; v < n; ++v) points[v] = toDouble(mesh.points[v]);
+    // Which surface each vertex is on (1: a, 2: b, 3: both), within a thousandth of the move limit.
+    // Only vertices near b = level can end a crease edge, so a is evaluated only there.
+    const double near = 1e-3 * options.maxMove;
+    std::vector<double> va, vb;
+    std::vector<Vec3d> ga, gb;
+    evaluateAll(b, points, vb, gb);
+    std::vector<std::uint32_t> close;
+    std::vector<Vec3d> closePoints;
+    std::vector<std::uint8_t> side(n, 0);
+    for (std::size_t v = 0; v < n; ++v) {
+        const double db = distanceEstimate(vb[v] - options.level, gb[v]);
+        if (db <= near) side[v] = 2;
+        if (db <= 4.0 * options.maxMove) {
+            close.push_back(std::uint32_t(v));
+            closePoints.push_back(points[v]);
+        }
+    }
+    evaluateAll(a, closePoints, va, ga);
+    for (std::size_t k = 0; k < close.size(); ++k)
+        if (distanceEstimate(va[k] - options.level, ga[k]) <= near) side[close[k]] |= 1;
+    // Crease edges, each once (the lower index first).
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> edges;
+    for (const openvdb::Vec3I& t : mesh.triangles)
+        for (int i = 0; i < 3; ++i) {
+            const std::uint32_t p = t[i], q = t[(i + 1) % 3];
+            if ((side[p] == 1 && side[q] == 2) || (side[p] == 2 && side[q] == 1))
+                edges.emplace_back(std::min(p, q), std::max(p, q));
+        }
+    std::sort(edges.begin(), edges.end());
+    edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
+    stats.creaseEdges = edges.size();
+    if (edges.empty()) return stats;
+
+    // The crease point nearest each end: Newton on (a, b) = (level, level), least-norm steps.
+    std::vector<std::uint32_t> ends;
+    for (const auto& [p, q] : edges) {
+        ends.push_back(p);
+        ends.push_back(q);
+    }
+    std::sort(ends.begin(), ends.end());
+    ends.erase(std::unique(ends.begin(), ends.end()), ends.end());
+    std::vector<Vec3d> crease(ends.size());
+    std::vector<std::uint8_t> found(ends.size(), 0);
+    for (std::size_t k = 0; k < ends.size(); ++k) crease[k] = points[ends[k]];
+    std::vector<double> ca, cb;
+    std::vector<Vec3d> cga, cgb;
+    for (int iteration = 0; iteration <= options.maxIterations; ++iteration) {
+        evaluateAll(a, crease, ca, cga);
+        evaluateAll(b, crease, cb, cgb);
+        for (std::size_t k = 0; k < ends.size(); ++k) {
+            const double ra = ca[k] - options.level, rb = cb[k] - options.level;
+            found[k] = distanceEstimate(ra, cga[k]) <= options.tolerance &&
+                       distanceEstimate(rb, cgb[k]) <= options.tolerance &&
+                       (crease[k] - points[ends[k]]).length() <= options.maxMove;
+            if (found[k] || iteration == options.maxIterations) continue;
+            const double aa = cga[k].dot(cga[k]), ab = cga[k].dot(cgb[k]), bb = cgb[k].dot(cgb[k]);
+            const double det = aa * bb - ab * ab;
+            if (!(det > 1e-12 * aa * bb)) continue;  // the surfaces touch without crossing
+            const double ya = (bb * ra - ab * rb) / det, yb = (aa * rb - ab * ra) / det;
+            crease[k] -= ya * cga[k] + yb * cgb[k];
+        }
+    }
+
+    // Each crease edge moves its end nearer the crease (the lower index on a tie), unless an end
+    // already moves.
+    auto endIndex = [&](std::uint32_t v) {
+        return std::size_t(std::lower_bound(ends.begin(), ends.end(), v) - ends.begin());
+    };
+    std::vector<std::uint8_t> move(n, 0);
+    for (const auto& [p, q] : edges) {
+        if (move[p] || move[q]) continue;
+        const std::size_t kp = endIndex(p), kq = endIndex(q);
+        const double far = std::numeric_limits<double>::infinity();
+        const double dp = found[kp] ? (crease[kp] - points[p]).length() : far;
+        const double dq = found[kq] ? (crease[kq] - points[q]).length() : far;
+        if (dp == far && dq == far) continue;
+        move[dp <= dq ? p : q] = 1;
+    }
+    const std::vector<openvdb::Vec3f> original = mesh.points;
+    for (std::size_t k = 0; k < ends.size(); ++k)
+        if (move[ends[k]]) mesh.points[ends[k]] = toFloat(crease[k]);
+
+    // Undo moves that turn a triangle over, in rounds (each undoes at least one; with none left it
+    // is the original mesh).
+    std::vector<std::uint8_t> flipped(mesh.triangles.size());
+    for (;;) {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.triangles.size(), 1 << 14), [&](const auto& r) {
+            for (std::size_t t = r.begin(); t != r.end(); ++t)
+                flipped[t] = turnedOver(mesh, original, mesh.triangles[t]);
+        });
+        bool undone = false;
+        for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
+            if (flipped[t])
+                for (int i = 0; i < 3; ++i) {
+                    const std::uint32_t v = mesh.triangles[t][i];
+                    if (mesh.points[v] != original[v]) {
+                        mesh.points[v] = original[v];
+                        undone = true;
+                    }
+                }
+        if (!undone) break;
+    }
+    for (std::size_t v = 0; v < n; ++v) stats.moved += mesh.points[v] != original[v];
+    for (const auto& [p, q] : edges) stats.leftFlat += mesh.points[p] == original[p] && mesh.points[q] == original[q];
+    return stats;
+}
 
 std::vector<double> levelDistances(std::span<const openvdb::Vec3f> points, const FieldNode& field, double level)
 {

@@ -54,6 +54,28 @@ struct ProjectionStats {
 ProjectionStats projectToSurface(TriangleMesh& mesh, const FieldNode& field, const ProjectionOptions& options,
                                  const ProgressFn& progress = {});
 
+/// What sharpenCreases() did.
+struct CreaseStats {
+    /// Edges that ran from a vertex on one surface to a vertex on the other (a flat chamfer).
+    std::size_t creaseEdges = 0;
+    /// Vertices moved onto the crease (both surfaces at once).
+    std::size_t moved = 0;
+    /// Crease edges left as they were: no crease point near either end, or moving one would turn
+    /// a triangle over.
+    std::size_t leftFlat = 0;
+};
+
+/// Makes the creases of an intersection max(a, b) sharp. Marching cubes (and projection onto
+/// max(a, b)) puts every vertex on one surface or the other, so where they meet, triangles span
+/// from one to the other and cut the edge flat. For each edge from a vertex on a = level (b below)
+/// to one on b = level (a below), the end nearer the crease moves onto it: Newton steps on both
+/// equations at once (the least-norm step), at most options.maxMove. A move that turns a triangle
+/// over is undone, in rounds. Vertices are evaluated in fixed batches: the same bytes for any
+/// thread count. @a b is evaluated at every vertex, @a a only near b = level (pass the cheap one
+/// as @a b).
+CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNode& b,
+                           const ProjectionOptions& options);
+
 /// |f - level| / |grad f| at @a points (mm), the first-order distance to the level set, in
 /// batches (parallel, same result for any thread count). A zero gradient gives infinity unless
 /// f = level.
