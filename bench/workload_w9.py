@@ -17,7 +17,6 @@ from common import ROOT, measure, row, verdict
 TITLE = "W9  gyroid network 30 %, 50 mm cube: 0.01 mm tolerance mesh vs raw marching cubes (W1)"
 RECIPE = ROOT / "data/recipes/gyroid.yaml"
 CELL = 10.0
-BOX = (np.zeros(3), np.full(3, 50.0))
 SPACING = 0.05
 
 
@@ -28,8 +27,9 @@ def read_stl(path):
     return records[:, 12:48].copy().view(np.float32).reshape(count, 3, 3).astype(np.float64)
 
 
-def distance(points, level):
-    """Signed distance estimate to the solid: max of the gyroid network's and the box's."""
+def distance(points, level, box, parts=False):
+    """Signed distance estimate to the solid: max of the gyroid network's and the domain box's
+    (with parts, both as well)."""
     k = 2.0 * math.pi / CELL
     s = np.sin(k * points)
     c = np.cos(k * points)
@@ -38,22 +38,28 @@ def distance(points, level):
     g = sx * cy + sy * cz + sz * cx
     grad = k * np.stack([cx * cy - sz * sx, cy * cz - sx * sy, cz * cx - sy * sz], axis=1)
     d_gyroid = (g - level) / np.linalg.norm(grad, axis=1)
-    centre = 0.5 * (BOX[0] + BOX[1])
-    half = 0.5 * (BOX[1] - BOX[0])
+    centre = 0.5 * (box[0] + box[1])
+    half = 0.5 * (box[1] - box[0])
     q = np.abs(points - centre) - half
     d_box = np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
+    if parts:
+        return np.maximum(d_gyroid, d_box), d_box
     return np.maximum(d_gyroid, d_box)
 
 
-def deviation(tris, level):
-    """Max and area-weighted RMS |distance| over samples of every triangle; sample count."""
+def deviation(tris, report):
+    """Max and area-weighted RMS |distance| over samples of every triangle; sample count. The level and
+    the domain box (snapped to whole voxels) come from the run's report."""
+    level = report["fields"]["lattice"]["level"]
+    box = (np.array(report["domain"]["min"], dtype=np.float64), np.array(report["domain"]["max"], dtype=np.float64))
     e1 = tris[:, 1] - tris[:, 0]
     e2 = tris[:, 2] - tris[:, 0]
     longest = np.maximum(np.maximum(np.linalg.norm(e1, axis=1), np.linalg.norm(e2, axis=1)),
                          np.linalg.norm(e2 - e1, axis=1))
     steps = np.maximum(1, np.ceil(longest / SPACING)).astype(int)
     area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
-    worst, sum_sq, weight, samples = 0.0, 0.0, 0.0, 0
+    voxel = report["domain"]["voxel"]
+    worst, worst_inner, sum_sq, weight, samples = 0.0, 0.0, 0.0, 0.0, 0
     for n in np.unique(steps):
         sel = np.nonzero(steps == n)[0]
         ij = np.array([(i, j) for i in range(n + 1) for j in range(n + 1 - i)], dtype=np.float64) / n
@@ -61,13 +67,18 @@ def deviation(tris, level):
             idx = sel[start:start + max(1, 4_000_000 // len(ij))]
             pts = (tris[idx, 0][:, None, :] + ij[None, :, 0, None] * e1[idx][:, None, :]
                    + ij[None, :, 1, None] * e2[idx][:, None, :]).reshape(-1, 3)
-            d = np.abs(distance(pts, level)).reshape(len(idx), len(ij))
+            d, d_box = distance(pts, level, box, parts=True)
+            d = np.abs(d).reshape(len(idx), len(ij))
             worst = max(worst, float(d.max()))
+            # Away from the box (creases where the lattice meets it, and its own edges).
+            inner = d[(d_box < -2.0 * voxel).reshape(d.shape)]
+            if inner.size:
+                worst_inner = max(worst_inner, float(inner.max()))
             w = (area[idx] / len(ij))[:, None]
             sum_sq += float((w * d * d).sum())
             weight += float(w.sum()) * len(ij)
             samples += d.size
-    return worst, math.sqrt(sum_sq / weight), samples
+    return worst, math.sqrt(sum_sq / weight), samples, worst_inner
 
 
 def run_recipe(voxlat, out, *sets):
@@ -87,25 +98,24 @@ def run(voxlat, tmp):
     row("raw marching cubes 0.1 mm (W1)", t_raw, m_raw)
     row("0.01 mm tolerance (projected, decimated)", t_tol, m_tol)
     row("0.3 mm voxels, projected", t_p3, m_p3)
-    level_raw = r_raw["fields"]["lattice"]["level"]
-    level_tol = r_tol["fields"]["lattice"]["level"]
-    level_p3 = r_p3["fields"]["lattice"]["level"]
     raw_tris = read_stl(tmp / "raw" / "gyroid.stl")
     n_raw = len(raw_tris)
-    dev_raw = deviation(raw_tris, level_raw)
+    dev_raw = deviation(raw_tris, r_raw)
     del raw_tris
     tol_tris = read_stl(tmp / "tol" / "gyroid.stl")
     n_tol = len(tol_tris)
-    dev_tol = deviation(tol_tris, level_tol)
+    dev_tol = deviation(tol_tris, r_tol)
     p3_tris = read_stl(tmp / "p03" / "gyroid.stl")
     n_p3 = len(p3_tris)
-    dev_p3 = deviation(p3_tris, level_p3)
+    dev_p3 = deviation(p3_tris, r_p3)
     share = n_tol / n_raw
     print(f"  triangles: raw {n_raw}, tolerance {n_tol} ({share:.3f} of raw; target <= 0.2: {verdict(share <= 0.2)}),"
           f" 0.3 mm projected {n_p3}")
     print(f"  deviation (max / rms, mm, {dev_tol[2]} samples): raw {dev_raw[0]:.5f} / {dev_raw[1]:.5f}, "
           f"tolerance {dev_tol[0]:.5f} / {dev_tol[1]:.5f} (target <= 0.01: {verdict(dev_tol[0] <= 0.01)}), "
           f"0.3 mm projected {dev_p3[0]:.5f} / {dev_p3[1]:.5f}")
+    print(f"  max deviation more than 2 voxels inside the box (mm): raw {dev_raw[3]:.5f}, tolerance {dev_tol[3]:.5f}, "
+          f"0.3 mm projected {dev_p3[3]:.5f}")
     print(f"  time: tolerance {t_tol:.2f} s vs raw {t_raw:.2f} s (target no slower: {verdict(t_tol <= t_raw)})")
     print(f"  volume mm3: raw {r_raw['mesh']['volume_mm3']:.1f}, tolerance {r_tol['mesh']['volume_mm3']:.1f}, "
           f"0.3 mm projected {r_p3['mesh']['volume_mm3']:.1f}")
@@ -116,4 +126,5 @@ def run(voxlat, tmp):
             "raw_triangles": n_raw, "tolerance_triangles": n_tol, "coarse_projected_triangles": n_p3,
             "raw_max_mm": dev_raw[0], "raw_rms_mm": dev_raw[1], "tolerance_max_mm": dev_tol[0],
             "tolerance_rms_mm": dev_tol[1], "coarse_projected_max_mm": dev_p3[0],
-            "coarse_projected_rms_mm": dev_p3[1]}
+            "coarse_projected_rms_mm": dev_p3[1], "raw_inner_max_mm": dev_raw[3], "tolerance_inner_max_mm": dev_tol[3],
+            "coarse_projected_inner_max_mm": dev_p3[3]}
