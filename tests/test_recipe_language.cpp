@@ -36,6 +36,7 @@ fields:
   shaped: {expr: "max(lattice, ball) + 0 * $cell"}
 result: shaped
 outputs: {mesh: "${name}_${cell}.stl"}
+allow: [pieces]
 )";
 
 /// The InputError message of loading and building @a text ("" if it works).
@@ -428,7 +429,10 @@ TEST(RecipeLanguage, EveryDocExampleRuns)
                     for (int a = 0; a < 3; ++a) extent = std::max(extent, probe.domainBox->extent()[a]);
                 const double voxel = std::max(probe.voxel, extent / 40.0);
                 try {
-                    Job job(parseRecipe(text, name, sourceDir() / "data/recipes", {"voxel=" + std::to_string(voxel)}));
+                    // At the coarse voxel thin walls break into pieces the example's own voxel keeps
+                    // whole: pieces are allowed (warned) here, as they are not what this test checks.
+                    Job job(parseRecipe(text, name, sourceDir() / "data/recipes",
+                                        {"voxel=" + std::to_string(voxel), "allow=[pieces]"}));
                     job.mesh();
                 } catch (const std::exception& e) {
                     ADD_FAILURE() << name << ": " << e.what() << "\n" << text;

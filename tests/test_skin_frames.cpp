@@ -341,6 +341,7 @@ fields:
   gyroid: {tpms: gyroid, cell: 2, solid: sheet, frame: {skin: {part: ball, depth: 0.6, layers: 2}}}
   lat: {infill: {part: ball, lattice: gyroid, skin: 0.6, density: 0.3}}
 result: lat
+allow: [pieces]
 )";
     TempDir dir;
     Job job(parseRecipe(text, "skin.yaml", dir.path));

@@ -15,7 +15,9 @@
 #include "mesher/extract/MeshCheck.h"
 
 #include <gtest/gtest.h>
+
 #include <tbb/global_control.h>
+#include <chrono>
 #include <nlohmann/json.hpp>
 
 #include <cmath>
@@ -899,6 +901,26 @@ TEST(StrutRecipes, StrutsThinnerThanTwoVoxelsWarnBeforeEvaluation)
     const std::string quiet = runRecipe(dir, fine, &status);
     EXPECT_EQ(status, 0) << quiet;
     EXPECT_EQ(quiet.find("less than two voxels"), std::string::npos) << quiet;
+}
+
+TEST(StrutRecipes, FramesPastTheMemoryAreRefusedAtOnce)
+{
+    // 99999^3 BCC cells (8 * 10^15 struts) ran with no estimate; now refused from the count alone.
+    TempDir dir;
+    int status = 0;
+    const auto start = std::chrono::steady_clock::now();
+    const std::string out =
+        runRecipe(dir,
+                  "voxel: 0.5\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
+                  "  lattice: {struts: {cell: bcc, size: 0.001, count: 99999}, kernel: capsule, radius: 0.1}\n"
+                  "result: lattice\noutputs: {mesh: a.stl}\n",
+                  &status);
+    EXPECT_EQ(status, 3) << out;
+    EXPECT_NE(out.find("recipe.yaml:4:"), std::string::npos) << out;
+    EXPECT_NE(out.find("the frame would hold 7999760002399992 struts"), std::string::npos) << out;
+    EXPECT_NE(out.find("use larger cells or a smaller part"), std::string::npos) << out;
+    EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(20)) << "refused only after the work";
+    EXPECT_TRUE(!std::filesystem::exists(dir.path / "out") || listFolder(dir.path / "out").empty());
 }
 
 TEST(StrutLattice, SparseGridMatchesBruteForce)

@@ -332,6 +332,10 @@ int main(int argc, char** argv)
     } catch (const voxlat::JobError& e) {
         std::cerr << "error: " << e.what() << "\n";
         return 3;
+    } catch (const voxlat::OutputError& e) {
+        // The disk, not the recipe: full, read-only or not ours to write.
+        std::cerr << "error: " << e.what() << "\n";
+        return 3;
     } catch (const std::exception& e) {
         std::cerr << "error: " << e.what() << "\n";
         return 1;

@@ -332,7 +332,8 @@ std::vector<CellLine> readObjLines(const std::string& path)
                     std::size_t used = 0;
                     idx.push_back(std::stol(tok.substr(0, tok.find('/')), &used));
                 } catch (const std::exception&) {
-                    throw InputError(path + ":" + std::to_string(lineNo) + ": `" + tok + "` is not a vertex index");
+                    throw InputError(path + ":" + std::to_string(lineNo) +
+                                     ": an `l` element holds something other than vertex numbers");
                 }
             }
             if (idx.size() < 2)

@@ -458,38 +458,21 @@ void Job::checkPieces()
     mReport["pieces"] = {
         {"count", count.pieces.size()}, {"connectivity", "voxels sharing a face (6-connected)"}, {"largest", largest}};
     if (count.pieces.size() <= 1) return;
-    // A piece other than the largest that touches the domain box and holds under 2 % of the
-    // largest is a crumb the box cut off a cell (a gyroid cut mid-cell leaves such corners): a
-    // warning. Any other piece floats free inside the part and would fall off the print: an error.
-    const openvdb::CoordBBox box = mDomain.indexBox();
-    auto isCrumb = [&](const Piece& p) {
-        bool touches = false;
-        for (int a = 0; a < 3; ++a)
-            touches = touches || p.bounds.min()[a] <= box.min()[a] || p.bounds.max()[a] >= box.max()[a];
-        return touches && double(p.voxels) < 0.02 * double(count.pieces[0].voxels);
-    };
-    std::size_t crumbs = 0;
-    std::uint64_t crumbVoxels = 0;
-    const Piece* firstFree = nullptr;
-    for (std::size_t i = 1; i < count.pieces.size(); ++i) {
-        if (isCrumb(count.pieces[i])) {
-            ++crumbs;
-            crumbVoxels += count.pieces[i].voxels;
-        } else if (!firstFree) {
-            firstFree = &count.pieces[i];
-        }
-    }
-    // Pieces holding together under 0.01 % of the solid are crumbs a trimming shape cut off (a
-    // `within:` rod across a gyroid leaves corners of a few voxels), wherever they lie.
-    const std::uint64_t freeVoxels = count.solidVoxels - count.pieces[0].voxels - crumbVoxels;
-    if (firstFree && double(freeVoxels) < 1e-4 * double(count.solidVoxels)) {
-        crumbs = count.pieces.size() - 1;
-        crumbVoxels += freeVoxels;
-        firstFree = nullptr;
-    }
+    // Crumbs: when every other piece is under 1 % of the largest and all together are under 1 %
+    // of the solid, they are corners a cut left (the domain box or a trimming shape across a
+    // gyroid, a skin layer's inner surface across a sheet): a warning with their count and volume.
+    // Otherwise pieces float free (struts lost to their joints, walls below the voxel, separate
+    // parts): the job fails unless `allow: [pieces]`.
+    const Piece& second = count.pieces[1];
+    const std::uint64_t restVoxels = count.solidVoxels - count.pieces[0].voxels;
+    const bool onlyCrumbs = double(second.voxels) < 0.01 * double(count.pieces[0].voxels) &&
+                            double(restVoxels) < 0.01 * double(count.solidVoxels);
+    const std::size_t crumbs = onlyCrumbs ? count.pieces.size() - 1 : 0;
+    const std::uint64_t crumbVoxels = onlyCrumbs ? restVoxels : 0;
+    const Piece* firstFree = onlyCrumbs ? nullptr : &second;
     const std::size_t free = count.pieces.size() - 1 - crumbs;
     mReport["pieces"]["free"] = free;
-    mReport["pieces"]["box_crumbs"] = {{"count", crumbs}, {"volume_mm3", double(crumbVoxels) * voxelVolume}};
+    mReport["pieces"]["crumbs"] = {{"count", crumbs}, {"volume_mm3", double(crumbVoxels) * voxelVolume}};
     const Piece& main = count.pieces[0];
     auto centre = [&](const Piece& p) {
         return vec(0.5 * (mDomain.worldOf(p.bounds.min()) + mDomain.worldOf(p.bounds.max()))).dump();
@@ -499,18 +482,15 @@ void Job::checkPieces()
         << " pieces (voxels sharing a face): the largest holds "
         << formatNumber(100.0 * double(main.voxels) / double(count.solidVoxels)) << " % of the solid";
     if (free == 0) {
-        msg << "; the other " << crumbs << " are crumbs the domain box or a trimming shape cuts off cells ("
+        msg << "; the other " << crumbs << " are crumbs a cut leaves (the domain box or a trimming shape across cells: "
             << formatNumber(double(crumbVoxels) * voxelVolume)
             << " mm3 in all), loose in print: move or resize `domain:` (or the trimming shape) to cut the cells "
                "elsewhere";
-        if (!mRecipe.allows("pieces"))
-            mContext->warn("box_crumbs", msg.str(),
-                           {{"count", crumbs}, {"volume_mm3", double(crumbVoxels) * voxelVolume}});
+        mContext->warn("crumbs", msg.str(), {{"count", crumbs}, {"volume_mm3", double(crumbVoxels) * voxelVolume}});
         return;
     }
     msg << "; " << free << " float free inside the domain, the largest of them "
         << formatNumber(double(firstFree->voxels) * voxelVolume) << " mm3 around " << centre(*firstFree);
-    if (crumbs > 0) msg << " (and " << crumbs << " crumbs where the domain box cuts cells)";
     msg << ". Struts or walls thinner than two voxels (" << formatNumber(2 * mDomain.voxel)
         << " mm) break apart on the grid: use `voxel: " << formatNumber(mDomain.voxel / 2)
         << "` or less, or raise the density, radius or thickness; a convolution lattice at low density "
@@ -547,7 +527,11 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
 {
     // Every output's place is checked before any work: inside outDir, onto nothing but files.
     const std::string where = mRecipe.source->path + ": outputs";
-    std::filesystem::create_directories(outDir);
+    std::error_code made;
+    std::filesystem::create_directories(outDir, made);
+    if (made)
+        throw OutputError("cannot create the output folder `" + outDir.string() + "`: " + made.message() +
+                          " (choose another --out)");
     std::vector<std::filesystem::path> paths;
     for (const OutputSpec& out : mRecipe.outputs) paths.push_back(outputPathIn(outDir, out.file, where));
     outputPathIn(outDir, "report.json", where);

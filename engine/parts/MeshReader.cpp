@@ -124,7 +124,7 @@ TriangleMesh readAsciiStl(const std::string& text, const std::string& shown)
             openvdb::Vec3f p;
             if (!(words >> p[0] >> p[1] >> p[2]))
                 throw InputError(shown + ":" + std::to_string(lineNo) +
-                                 ": corrupted ASCII STL: expected `vertex x y z`, got `" + line + "`");
+                                 ": corrupted ASCII STL: expected `vertex x y z` (three numbers)");
             checkFinite(p, shown, "line " + std::to_string(lineNo));
             m.points.push_back(p);
             ++corners;
@@ -136,8 +136,9 @@ TriangleMesh readAsciiStl(const std::string& text, const std::string& shown)
             m.triangles.emplace_back(n - 3, n - 2, n - 1);
             corners = 0;
         } else if (word != "solid" && word != "facet" && word != "outer" && word != "endfacet" && word != "endsolid") {
-            throw InputError(shown + ":" + std::to_string(lineNo) + ": corrupted ASCII STL: unexpected `" + word +
-                             "` (expected solid, facet, outer loop, vertex, endloop, endfacet or endsolid)");
+            throw InputError(shown + ":" + std::to_string(lineNo) +
+                             ": corrupted ASCII STL: an unexpected word (expected solid, facet, outer loop, vertex, "
+                             "endloop, endfacet or endsolid)");
         }
     }
     if (corners != 0) throw InputError(shown + ": corrupted ASCII STL: the file ends inside a facet (truncated?)");

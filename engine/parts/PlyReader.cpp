@@ -91,9 +91,8 @@ private:
         double value = 0;
         const auto [ptr, ec] = std::from_chars(mBytes.data() + mPos, mBytes.data() + end, value);
         if (ec != std::errc() || ptr != mBytes.data() + end)
-            throw InputError(mShown + ": corrupted PLY: `" +
-                             mBytes.substr(mPos, std::min<std::size_t>(end - mPos, 20)) +
-                             "` in the body is not a number");
+            throw InputError(mShown + ": corrupted PLY: a value in the body (byte " + std::to_string(mPos) +
+                             ") is not a number");
         mPos = end;
         return value;
     }
@@ -197,7 +196,7 @@ TriangleMesh readPly(const std::string& bytes, const std::string& shown)
             else if (kind == "binary_big_endian")
                 format = Format::BinaryBig;
             else
-                throw bad("unknown format `" + kind + "`" + at);
+                throw bad("unknown format (ascii, binary_little_endian or binary_big_endian)" + at);
         } else if (word == "element") {
             Element e;
             std::string count;
@@ -228,7 +227,7 @@ TriangleMesh readPly(const std::string& bytes, const std::string& shown)
             }
             elements.back().properties.push_back(p);
         } else if (word != "end_header") {
-            throw bad("unexpected header keyword `" + word.substr(0, 20) + "`" + at);
+            throw bad("unexpected header keyword" + at);
         }
     }
     if (!format) throw bad("no `format` line in the header");

@@ -215,11 +215,13 @@ FieldPtr readValueGrid(const std::filesystem::path& path, const std::string& sho
             throw InputError(where + "expected " + std::to_string(header.size()) + " values (one per column), got " +
                              std::to_string(cells.size()));
         std::vector<double> row;
-        for (const auto& c : cells) {
+        for (std::size_t column = 0; column < cells.size(); ++column) {
+            const std::string& c = cells[column];
             char* end = nullptr;
             const double v = std::strtod(c.c_str(), &end);
+            // The value is not quoted: messages show the recipe's text only, never another file's.
             if (end == c.c_str() || *end != '\0' || !std::isfinite(v))
-                throw InputError(where + "`" + c + "` is not a number");
+                throw InputError(where + "column " + std::to_string(column + 1) + " is not a finite number");
             row.push_back(v);
         }
         rows.push_back(std::move(row));

@@ -25,7 +25,7 @@ AtomicFile::AtomicFile(std::string path)
 {
     errno = 0;
     mStream.open(mTempPath, std::ios::out | std::ios::binary | std::ios::trunc);
-    if (!mStream) throw std::runtime_error("cannot open '" + mTempPath + "' to write '" + mPath + "'" + reason());
+    if (!mStream) throw OutputError("cannot open '" + mTempPath + "' to write '" + mPath + "'" + reason());
 }
 
 AtomicFile::~AtomicFile()
@@ -51,7 +51,7 @@ void AtomicFile::commit()
     if (!written || mStream.fail()) {
         const std::string why = reason();
         discard();
-        throw std::runtime_error("failed to write '" + mPath + "'" + why);
+        throw OutputError("failed to write '" + mPath + "'" + why);
     }
     if (OutputTransaction* transaction = OutputTransaction::current()) {
         transaction->add(mTempPath, mPath, false);
@@ -62,7 +62,7 @@ void AtomicFile::commit()
     if (std::rename(mTempPath.c_str(), mPath.c_str()) != 0) {
         const std::string why = reason();
         discard();
-        throw std::runtime_error("failed to rename '" + mTempPath + "' onto '" + mPath + "'" + why);
+        throw OutputError("failed to rename '" + mTempPath + "' onto '" + mPath + "'" + why);
     }
     mCommitted = true;
 }
@@ -112,7 +112,7 @@ void OutputTransaction::commit()
             const std::string message = "failed to rename '" + r.temp + "' onto '" + r.path + "'" + reason();
             // The renamed ones stay; the destructor removes the temporaries still held.
             mRenames.erase(mRenames.begin(), mRenames.begin() + std::ptrdiff_t(i));
-            throw std::runtime_error(message);
+            throw OutputError(message);
         }
     }
     mCommitted = true;

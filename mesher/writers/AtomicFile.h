@@ -4,10 +4,18 @@
 
 #include <fstream>
 #include <ostream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 namespace voxlat {
+
+/// Writing an output failed: the message names the file and the system's reason (disk full,
+/// read-only, no permission). The command line exits 3 on it (a job that cannot run).
+class OutputError : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
 
 /// A binary output file that appears at its final path only once it is complete.
 ///
@@ -17,7 +25,7 @@ namespace voxlat {
 /// and @a path is left untouched.
 class AtomicFile {
 public:
-    /// Opens the temporary file. Throws std::runtime_error naming @a path if it cannot.
+    /// Opens the temporary file. Throws OutputError naming @a path and the reason if it cannot.
     explicit AtomicFile(std::string path);
     ~AtomicFile();
 
@@ -33,8 +41,8 @@ public:
     const std::string& tempPath() const { return mTempPath; }
     bool committed() const { return mCommitted; }
 
-    /// Flushes, closes and renames the temporary file onto path(). Throws std::runtime_error
-    /// naming path() if any step fails (the temporary file is then removed).
+    /// Flushes, closes and renames the temporary file onto path(). Throws OutputError
+    /// naming path() and the reason if any step fails (the temporary file is then removed).
     void commit();
 
 private:
@@ -67,7 +75,7 @@ public:
     /// empty folder at @a path is replaced).
     void add(std::string temp, std::string path, bool folder);
 
-    /// Performs every held-back rename. Throws std::runtime_error naming the path if one fails.
+    /// Performs every held-back rename. Throws OutputError naming the path if one fails.
     void commit();
 
 private:
