@@ -2,6 +2,7 @@
 // wireframe file) solidified by Gaussian convolution or by round capsules.
 #include "engine/core/Format.h"
 #include "engine/frames/StrutFrames.h"
+#include "engine/recipe/DesignTargets.h"
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/ScalarMaps.h"
 #include "engine/recipe/SkinNodes.h"
@@ -284,6 +285,8 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
 {
     std::optional<UniformCells> uniform;
     FieldPtr region;
+    for (const char* key : {"stiffness", "optimize"})
+        if (spec.has(key)) refuseUnresolvedDesign(spec[key]);
     const Frame frame = buildFrame(builder, spec["struts"], name, uniform, region);
     if (frame.struts.empty()) spec["struts"].fail("the frame has no struts (is the design space empty?)");
     if (spec.has("level") && spec.has("density"))
@@ -538,6 +541,14 @@ void addStrutNodeTypes(std::vector<NodeType>& types)
           {"radius", anything(), "strut radius (mm): a number, a list or {gradient, min, max, axis}", "—"},
           {"density", gradedDensitySchema(),
            "target relative density over the frame's bounding box, or a map grading it point by point", "—"},
+          {"stiffness", object(stiffnessKeys()),
+           "instead of `density:`: {E: 40 MPa, axis: z} or {E_ratio: 0.05}, the density whose homogenized "
+           "modulus meets it is solved (needs `material:`)",
+           "—"},
+          {"optimize", object(optimizeKeys(), {"sigma"}),
+           "{sigma: [lo, hi], axis: z}: the Gaussian sigma with the highest modulus at the node's `density:` is "
+           "chosen, the capsule kernel at that density reported next to it (needs `material:`)",
+           "—"},
           levelKey()},
          buildStruts});
 }
