@@ -164,7 +164,7 @@ nlohmann::json solveStiffness(Recipe& recipe, const std::string& name, const Rec
             if (side == 1 && std::isfinite(fa)) fa *= 0.5;
             side = 1;
         }
-        done = within(fx) || b - a < 1e-5;
+        done = within(fx) || b - a < 2e-4;
     }
     progress.finish();
     // The trial closest to the target: its density is written in, so the job (and any later
@@ -180,11 +180,22 @@ nlohmann::json solveStiffness(Recipe& recipe, const std::string& name, const Rec
     nlohmann::json rows = nlohmann::json::array();
     for (const Trial& t : trials) rows.push_back({{"density", t.rho}, {"E_MPa", t.modulus}});
     const double error = best.modulus / goal - 1.0;
-    if (context && std::abs(error) > target.tolerance)
+    if (context && std::abs(error) > target.tolerance) {
+        // The voxel model changes in steps (voxels flip, necks join) as the density rises: the
+        // bracket closed on a step that jumps over the target.
+        double below = 0.0, above = std::numeric_limits<double>::infinity();
+        for (const Trial& t : trials) {
+            if (t.modulus < goal) below = std::max(below, t.modulus);
+            if (t.modulus >= goal) above = std::min(above, t.modulus);
+        }
         context->warn("stiffness_tolerance",
                       "field `" + name + "`: the closest density found gives " + formatNumber(best.modulus) + " MPa, " +
-                          formatNumber(100.0 * error) + " % from the target " + goalText,
-                      {{"field", name}});
+                          formatNumber(100.0 * error) + " % from the target " + goalText + ": at " +
+                          std::to_string(resolution) + " voxels the modulus steps from " + formatNumber(below) +
+                          " to " + formatNumber(above) + " MPa within a density change of " + formatNumber(b - a) +
+                          " (voxels flip together); a finer `resolution:` makes the steps smaller",
+                      {{"field", name}, {"steps_MPa", {below, above}}});
+    }
     return {{"target_E_MPa", goal},
             {"axis", kAxisName[target.axis]},
             {"density", best.rho},
