@@ -312,6 +312,9 @@ nlohmann::json resolvePropertyTargets(Recipe& recipe, JobContext* context)
             if (!spec.has("tpms") && !spec.has("struts"))
                 spec["stiffness"].fail("`stiffness:` is a key of `tpms` and `struts` nodes");
             report[name]["stiffness"] = solveStiffness(recipe, name, spec, context);
+        } else if (spec.has("optimize") && spec["optimize"].isScalar() && spec["optimize"].string() == "off") {
+            // `--set fields.NAME.optimize=off`: the sigma as written (a sweep of it, say).
+            recipe.fieldIndex[name] = mapWithout(spec.yaml(), {"optimize"});
         } else if (spec.has("optimize")) {
             if (!spec.has("struts")) spec["optimize"].fail("`optimize:` is a key of `struts` nodes");
             report[name]["optimize"] = optimizeSigma(recipe, name, spec, context);

@@ -545,9 +545,11 @@ void addStrutNodeTypes(std::vector<NodeType>& types)
            "instead of `density:`: {E: 40 MPa, axis: z} or {E_ratio: 0.05}, the density whose homogenized "
            "modulus meets it is solved (needs `material:`)",
            "—"},
-          {"optimize", object(optimizeKeys(), {"sigma"}),
+          {"optimize",
+           {{"anyOf", {object(optimizeKeys(), {"sigma"}), oneOfWords({"off"})}}},
            "{sigma: [lo, hi], axis: z}: the Gaussian sigma with the highest modulus at the node's `density:` is "
-           "chosen, the capsule kernel at that density reported next to it (needs `material:`)",
+           "chosen, the capsule kernel at that density reported next to it (needs `material:`); `off`: the sigma "
+           "as written",
            "—"},
           levelKey()},
          buildStruts});
