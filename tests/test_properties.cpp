@@ -358,6 +358,14 @@ fields:
     const double capsule = modulus("capsule", "capsule");
     EXPECT_NEAR(o["capsule_E_MPa"].get<double>(), capsule, 1e-9 * capsule);
     EXPECT_NEAR(o["ratio_to_capsule"].get<double>(), E / capsule, 1e-9);
+    // `optimize: off` (from --set) keeps the sigma as written.
+    const auto off = propertiesOf(dir, "off",
+                                  head +
+                                      "    kernel: {gaussian: {sigma: 0.3}}\n"
+                                      "    optimize: {sigma: [0.2, 0.8]}\nresult: lattice\n",
+                                  "--set fields.lattice.optimize=off");
+    ASSERT_FALSE(off.is_null());
+    EXPECT_EQ(off["E_MPa"][2].get<double>(), modulus("written", "{gaussian: {sigma: 0.3}}"));
 }
 
 TEST(PropertyDesign, GyroidModulusConvergesWithResolution)
