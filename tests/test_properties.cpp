@@ -206,3 +206,194 @@ result: lattice
     }
     EXPECT_NE(out.find("E_z/E_s"), std::string::npos);
 }
+
+namespace {
+
+/// `voxlat run` of @a recipe into dir/name/; its report.json (empty on failure).
+nlohmann::json runReport(const TempDir& dir, const std::string& name, const std::string& recipe, int* status = nullptr,
+                         std::string* output = nullptr)
+{
+    const auto path = dir.write(name + ".yaml", recipe);
+    std::string out;
+    const int code =
+        runCommand(voxlatBinary() + " -q run " + path.string() + " --out " + (dir.path / name).string(), &out);
+    if (status) *status = code;
+    if (output) *output = out;
+    if (code != 0) return {};
+    return nlohmann::json::parse(readFile(dir.path / name / "report.json"));
+}
+
+const char* kGyroidHead = R"(material: form2
+voxel: 0.25
+domain: {box: [[0, 0, 0], [10, 10, 10]]}
+properties: {resolution: 32}
+fields:
+)";
+
+}  // namespace
+
+TEST(PropertyDesign, StiffnessSolvesTheDensityAndAnIndependentHomogenizationMeetsTheTarget)
+{
+    TempDir dir;
+    for (const std::string target : {"{E: 40 MPa, axis: z}", "{E_ratio: 0.025}"}) {
+        const std::string name = target[1] == 'E' && target[2] == ':' ? "absolute" : "ratio";
+        const auto report = runReport(dir, name,
+                                      std::string(kGyroidHead) +
+                                          "  lattice: {tpms: gyroid, cell: 5, solid: network, stiffness: " + target +
+                                          "}\nresult: lattice\noutputs: {properties: p.json}\n");
+        ASSERT_FALSE(report.is_null()) << target;
+        const auto& s = report["design"]["lattice"]["stiffness"];
+        EXPECT_EQ(s["axis"], "z");
+        EXPECT_NEAR(s["target_E_MPa"].get<double>(), 40.0, 1e-9);
+        EXPECT_EQ(report["fields"]["lattice"]["stiffness"], s);  // also next to the solved level
+        const double rho = s["density"].get<double>();
+        EXPECT_GT(rho, 0.1);
+        EXPECT_LT(rho, 0.3);
+        // The job's own homogenization of its result is the search's last word.
+        const auto p = nlohmann::json::parse(readFile(dir.path / name / "p.json"));
+        EXPECT_NEAR(p["E_MPa"][2].get<double>(), s["achieved_E_MPa"].get<double>(), 1e-9 * 40.0);
+        // Re-measured independently: the solved density written in, no stiffness key at all.
+        char density[40];
+        std::snprintf(density, sizeof density, "%.17g", rho);
+        const auto again = propertiesOf(dir, name + "_again",
+                                        std::string(kGyroidHead) +
+                                            "  lattice: {tpms: gyroid, cell: 5, solid: network, density: " + density +
+                                            "}\nresult: lattice\n");
+        ASSERT_FALSE(again.is_null());
+        EXPECT_NEAR(again["E_MPa"][2].get<double>(), 40.0, 0.01 * 40.0) << target;
+    }
+}
+
+TEST(PropertyDesign, BadStiffnessAndOptimizeKeysNameTheLine)
+{
+    TempDir dir;
+    int status = 0;
+    std::string out;
+    // Both density and stiffness.
+    runReport(dir, "both",
+              std::string(kGyroidHead) +
+                  "  lattice: {tpms: gyroid, cell: 5, density: 0.2, stiffness: {E: 40 MPa}}\nresult: lattice\n",
+              &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("both.yaml:6:"), std::string::npos) << out;
+    EXPECT_NE(out.find("not both"), std::string::npos) << out;
+    EXPECT_FALSE(std::filesystem::exists(dir.path / "both" / "report.json"));
+    // Above the solid's modulus (form2: 1.6 GPa).
+    runReport(dir, "stiff",
+              std::string(kGyroidHead) + "  lattice: {tpms: gyroid, cell: 5, stiffness: {E: 2 GPa}}\nresult: lattice\n",
+              &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("stiff.yaml:6:"), std::string::npos) << out;
+    EXPECT_NE(out.find("not below the solid"), std::string::npos) << out;
+    // No material.
+    runReport(dir, "nomaterial",
+              "voxel: 0.25\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
+              "  lattice: {tpms: gyroid, cell: 5, stiffness: {E: 40 MPa}}\nresult: lattice\n",
+              &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("nomaterial.yaml:4:"), std::string::npos) << out;
+    EXPECT_NE(out.find("material"), std::string::npos) << out;
+    // Neither or both of E and E_ratio; an unknown axis.
+    runReport(dir, "neither",
+              std::string(kGyroidHead) + "  lattice: {tpms: gyroid, cell: 5, stiffness: {axis: z}}\nresult: lattice\n",
+              &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("E_ratio"), std::string::npos) << out;
+    runReport(dir, "axis",
+              std::string(kGyroidHead) +
+                  "  lattice: {tpms: gyroid, cell: 5, stiffness: {E: 40 MPa, axis: w}}\nresult: lattice\n",
+              &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    // optimize: without a density.
+    runReport(dir, "nodensity", std::string(kGyroidHead) + R"(  lattice:
+    struts: {cell: x, size: 5}
+    kernel: {gaussian: {sigma: 0.5}}
+    radius: 0.5
+    optimize: {sigma: [0.4, 1.2]}
+result: lattice
+)",
+              &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("nodensity.yaml:10:"), std::string::npos) << out;
+    EXPECT_NE(out.find("density"), std::string::npos) << out;
+}
+
+TEST(PropertyDesign, OptimizePicksTheStiffestSigmaAndReportsTheCapsuleBaseline)
+{
+    TempDir dir;
+    // X cells of 5 mm, 3 x 3 x 3; the middle cell is homogenized (it sees all its neighbours).
+    const std::string head = R"(material: form2
+voxel: 0.25
+domain: {box: [[0, 0, 0], [15, 15, 15]]}
+properties: {cell: [5, 5, 5], origin: [5, 5, 5], resolution: 20}
+fields:
+  lattice:
+    struts: {cell: x, size: 5}
+    density: 0.2
+)";
+    const auto report =
+        runReport(dir, "opt",
+                  head +
+                      "    kernel: {gaussian: {sigma: 0.3}}\n"
+                      "    optimize: {sigma: [0.2, 0.8], axis: z, samples: 4, tolerance: 0.05}\nresult: lattice\n");
+    ASSERT_FALSE(report.is_null());
+    const auto& o = report["design"]["lattice"]["optimize"];
+    const double sigma = o["sigma"].get<double>(), E = o["E_MPa"].get<double>();
+    EXPECT_GE(sigma, 0.2);
+    EXPECT_LE(sigma, 0.8);
+    for (const auto& t : o["trials"]) EXPECT_LE(t["E_MPa"].get<double>(), E);
+    EXPECT_GE(o["trials"].size(), 6u);  // the sweep and the refinement
+    // Independently: the chosen sigma, the ends of the range and the capsule lattice.
+    auto modulus = [&](const std::string& name, const std::string& kernel) {
+        int status = 0;
+        const auto p = propertiesOf(dir, name, head + "    kernel: " + kernel + "\nresult: lattice\n", "", &status);
+        EXPECT_TRUE(status == 0 || status == 3) << kernel;  // 3: the cell falls apart, no stiffness
+        return p.is_null() ? 0.0 : p["E_MPa"][2].get<double>();
+    };
+    char chosen[80];
+    std::snprintf(chosen, sizeof chosen, "{gaussian: {sigma: %.17g}}", sigma);
+    EXPECT_NEAR(modulus("chosen", chosen), E, 1e-9 * E);
+    EXPECT_GE(E, modulus("low", "{gaussian: {sigma: 0.2}}"));
+    EXPECT_GE(E, modulus("high", "{gaussian: {sigma: 0.8}}"));
+    const double capsule = modulus("capsule", "capsule");
+    EXPECT_NEAR(o["capsule_E_MPa"].get<double>(), capsule, 1e-9 * capsule);
+    EXPECT_NEAR(o["ratio_to_capsule"].get<double>(), E / capsule, 1e-9);
+    // `optimize: off` (from --set) keeps the sigma as written.
+    const auto off = propertiesOf(dir, "off",
+                                  head +
+                                      "    kernel: {gaussian: {sigma: 0.3}}\n"
+                                      "    optimize: {sigma: [0.2, 0.8]}\nresult: lattice\n",
+                                  "--set fields.lattice.optimize=off");
+    ASSERT_FALSE(off.is_null());
+    EXPECT_EQ(off["E_MPa"][2].get<double>(), modulus("written", "{gaussian: {sigma: 0.3}}"));
+}
+
+TEST(PropertyDesign, GyroidModulusConvergesWithResolution)
+{
+    // The gyroid network at level 0 holds exactly half the voxels at every resolution (it is its
+    // own complement shifted by half a cell), so what changes with resolution is the voxel
+    // model's shape alone. E_z at 16, 24, 32, 48, 64 voxels a cell: each change smaller than the
+    // one before, the last below 0.1 %.
+    TempDir dir;
+    const std::string recipe = R"(material: form2
+voxel: 0.25
+domain: {box: [[0, 0, 0], [5, 5, 5]]}
+fields:
+  lattice: {tpms: gyroid, cell: 5, solid: network, level: 0}
+result: lattice
+)";
+    std::vector<double> E;
+    std::string sequence;
+    for (int n : {16, 24, 32, 48, 64}) {
+        const auto p =
+            propertiesOf(dir, "g" + std::to_string(n), recipe, "--set properties.resolution=" + std::to_string(n));
+        ASSERT_FALSE(p.is_null());
+        EXPECT_NEAR(p["relative_density"].get<double>(), 0.5, 1e-12);
+        E.push_back(p["E_MPa"][2].get<double>());
+        sequence += std::to_string(n) + ": " + std::to_string(E.back()) + " MPa  ";
+    }
+    for (std::size_t k = 2; k < E.size(); ++k)
+        EXPECT_LT(std::abs(E[k] - E[k - 1]), std::abs(E[k - 1] - E[k - 2])) << sequence;
+    EXPECT_LT(std::abs(E[4] - E[3]), 1e-3 * E[4]) << sequence;
+    std::printf("E_z by resolution: %s\n", sequence.c_str());
+}

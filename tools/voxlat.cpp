@@ -126,7 +126,17 @@ int properties(const Common& args, const std::string& jsonFile, const std::strin
         std::snprintf(text, sizeof text, "%.10g", value);
         sets.push_back(key + "=" + text);
         voxlat::Job job(voxlat::loadRecipe(args.recipe, sets), &context);
-        nlohmann::json p = job.properties();
+        nlohmann::json p;
+        try {
+            p = job.properties();
+        } catch (const voxlat::JobError& e) {
+            // A point where the cell falls apart (or is empty) has no stiffness: a row of zeros,
+            // not the end of the sweep (the seed's Table 2 has such a point).
+            std::printf("%-12s %9s %12g %12g %12g %10g   (falls apart)\n", text, "-", 0.0, 0.0, 0.0, 0.0);
+            std::fflush(stdout);
+            rows.push_back({{"value", value}, {"E_MPa", {0.0, 0.0, 0.0}}, {"error", e.what()}});
+            continue;
+        }
         std::printf("%-12s %9.4f %12.5g %12.5g %12.5g %10.5f\n", text, p["relative_density"].get<double>(),
                     p["E_MPa"][0].get<double>(), p["E_MPa"][1].get<double>(), p["E_MPa"][2].get<double>(),
                     p["E_ratio"][2].get<double>());

@@ -9,6 +9,7 @@
 #include "engine/density/DensitySolver.h"
 #include "engine/jobs/OutputPaths.h"
 #include "engine/jobs/PropertiesJob.h"
+#include "engine/jobs/PropertyDesign.h"
 #include "engine/jobs/SliceJob.h"
 #include "engine/recipe/RecipeParams.h"
 #include "fields/Boolean.h"
@@ -137,6 +138,15 @@ Job::Job(Recipe recipe, JobContext* context)
       mRecipe(std::move(recipe)),
       mBuilder(mRecipe, *mContext)
 {
+    // `stiffness:` and `optimize:` become a `density:` and a `sigma:` before anything is built.
+    {
+        const auto start = std::chrono::steady_clock::now();
+        mDesign = resolvePropertyTargets(mRecipe, mContext);
+        if (!mDesign.empty()) mReport["design"] = mDesign;
+        if (!mDesign.empty())
+            mTimings["design from properties"] =
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    }
     timed("build fields", [&] {
         // Build every field, so a mistake anywhere in the recipe is reported before any work.
         for (const std::string& name : mRecipe.fieldNames) mBuilder.field(name);
@@ -223,6 +233,7 @@ void Job::solveLevels()
                 entry["density_measured_on"] =
                     "one period of the interior (" + std::to_string(pieces.size()) + " weighted pieces)";
         }
+        if (mDesign.contains(node.name)) entry.update(mDesign[node.name]);
         entry["level"] = node.solid->level();
         if (node.thinnest) {
             // Known before any evaluation of the result: a strut thinner than two voxels breaks up

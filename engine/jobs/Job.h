@@ -104,6 +104,8 @@ private:
     /// all when there are several.
     std::vector<std::unique_ptr<MeshVariant>> mMeshes;
     nlohmann::json mReport;
+    /// What `stiffness:` and `optimize:` found, by field name (merged into report.json `fields`).
+    nlohmann::json mDesign = nlohmann::json::object();
     std::array<std::array<double, 6>, 6> mPropertiesStiffness{};
     nlohmann::json mTimings = nlohmann::json::object();
 };

@@ -116,7 +116,8 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
                        formatNumber(100.0 * double(elastic.islandVoxelsRemoved) / double(solid)) +
                        " % of the solid), so it carries no load: raise the density or the strut radius, or use a "
                        "finer voxel (`properties: {resolution: N}`)");
-    const ConductivityResult thermal = homogenizeConductivity(cell, 1.0, solver);
+    const ConductivityResult thermal =
+        settings.conductivity ? homogenizeConductivity(cell, 1.0, solver) : ConductivityResult{};
     const EngineeringConstants c = engineeringConstants(elastic.C);
 
     PropertiesResult result;
@@ -140,9 +141,11 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
     r["islands_removed"] = elastic.islandsRemoved;
     r["island_voxels_removed"] = elastic.islandVoxelsRemoved;
     r["percolates"] = {elastic.percolates[0], elastic.percolates[1], elastic.percolates[2]};
-    r["conductivity"] = {
-        {"K_ratio", matrixJson(thermal.K)}, {"iterations", thermal.iterations}, {"residual", thermal.residual}};
-    if (material.conductivity) r["conductivity"]["K_W_per_mK"] = matrixJson(thermal.K, *material.conductivity);
+    if (settings.conductivity) {
+        r["conductivity"] = {
+            {"K_ratio", matrixJson(thermal.K)}, {"iterations", thermal.iterations}, {"residual", thermal.residual}};
+        if (material.conductivity) r["conductivity"]["K_W_per_mK"] = matrixJson(thermal.K, *material.conductivity);
+    }
     r["material"] = {{"name", material.name}, {"E_MPa", Es}, {"nu", material.poisson}, {"source", material.source}};
     if (material.conductivity) r["material"]["k_W_per_mK"] = *material.conductivity;
     r["cell"] = {{"origin", {origin[0], origin[1], origin[2]}},

@@ -140,4 +140,11 @@ std::shared_ptr<LevelSolid> readLevelKeys(const RecipeNode& spec, LevelNode& nod
     return node.solid;
 }
 
+void refuseUnresolvedDesign(const RecipeNode& key)
+{
+    key.fail(
+        "this key asks for a property (a homogenized modulus), which a job resolves before it builds the "
+        "fields (voxlat run / properties, Python voxlat.Job); this builder cannot");
+}
+
 }  // namespace voxlat

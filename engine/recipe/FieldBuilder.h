@@ -162,6 +162,10 @@ enum class LevelRule {
 std::shared_ptr<LevelSolid> readLevelKeys(const RecipeNode& spec, LevelNode& node, FieldPtr raw, SolidSide side,
                                           double defaultLevel, LevelRule rule);
 
+/// Fails at a `stiffness:` or `optimize:` key that reached a node builder: the job resolves them
+/// (engine/jobs/PropertyDesign) into `density:` and `sigma:` before it builds fields.
+[[noreturn]] void refuseUnresolvedDesign(const RecipeNode& key);
+
 /// Node types by family; each family lives in its own file.
 void addShapeNodeTypes(std::vector<NodeType>& types);    // ShapeNodes.cpp: primitives, booleans, transforms
 void addLatticeNodeTypes(std::vector<NodeType>& types);  // LatticeNodes.cpp: tpms

@@ -1,4 +1,5 @@
 // Recipe node types for lattices: `tpms`.
+#include "engine/recipe/DesignTargets.h"
 #include "engine/recipe/ExprNodes.h"
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/ScalarMaps.h"
@@ -165,6 +166,7 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
         typeNode.fail("unknown TPMS `" + typeNode.string() + "`" +
                       (guess.empty() ? "" : "; did you mean `" + guess + "`?") + " (known: " + joinWords(names) + ")");
     }
+    if (spec.has("stiffness")) refuseUnresolvedDesign(spec["stiffness"]);
     const RecipeNode cellNode = spec["cell"];
     const Vec3d cell = cellNode.scalarOrVec3();
     for (int a = 0; a < 3; ++a)
@@ -253,6 +255,10 @@ void addLatticeNodeTypes(std::vector<NodeType>& types)
         levelKey(),
         {"density", gradedDensitySchema(),
          "target relative density in (0, 1) (the level is solved), or a map grading it point by point", "—"},
+        {"stiffness", object(stiffnessKeys()),
+         "instead of `density:`: {E: 40 MPa, axis: z} or {E_ratio: 0.05}, the density whose homogenized modulus "
+         "meets it is solved (needs `material:`)",
+         "—"},
         {"frame", anyMap(), "conformal cells: {cylinder: ...}, {sphere: ...} or {skin: ...}", "box cells"}};
     tpms.insert(tpms.end(), thicknessKeys.begin(), thicknessKeys.end());
     tpms.push_back(

@@ -44,10 +44,7 @@ const std::vector<KeySpec>& materialKeys()
     return keys;
 }
 
-namespace {
-
-/// `1.6 GPa` -> 1600 (MPa).
-double modulusMPa(const RecipeNode& node)
+double parseModulusMPa(const RecipeNode& node)
 {
     const std::string text = node.yaml().Scalar();
     std::istringstream in(text);
@@ -68,6 +65,8 @@ double modulusMPa(const RecipeNode& node)
     if (!(value > 0.0) || !std::isfinite(value)) node.fail("expected a positive modulus, got `" + text + "`");
     return value * scale;
 }
+
+namespace {
 
 std::vector<std::string> presetNames()
 {
@@ -115,7 +114,7 @@ Material parseMaterial(const RecipeNode& node)
         m.name = "custom";
         m.source = "given in the recipe";
     }
-    if (node.has("E")) m.modulusMPa = modulusMPa(node["E"]);
+    if (node.has("E")) m.modulusMPa = parseModulusMPa(node["E"]);
     if (node.has("nu")) {
         m.poisson = node["nu"].number();
         if (!(m.poisson > -1.0 && m.poisson < 0.5)) node["nu"].fail("Poisson's ratio must lie between -1 and 0.5");

@@ -30,6 +30,10 @@ const std::vector<Material>& materialPresets();
 /// MPa or GPa), or a preset with some values replaced (`{preset: pa12, E: 1.5 GPa}`).
 Material parseMaterial(const RecipeNode& node);
 
+/// A modulus with its unit (`1.6 GPa`, `1600 MPa`, `1.6e9 Pa`, `40 kPa`) in MPa; fails at @a node
+/// without a unit or for a value that is not positive.
+double parseModulusMPa(const RecipeNode& node);
+
 /// The keys of a `material:` map.
 const std::vector<KeySpec>& materialKeys();
 
@@ -39,7 +43,9 @@ struct PropertiesSettings {
     std::optional<std::array<double, 3>> origin;  ///< cell's minimum corner; default: the domain's
     std::optional<int> resolution;                ///< voxels along the cell's longest side; default: side / voxel
     double tolerance = 1e-6;                      ///< relative residual of each load case
-    std::string where;                            ///< file:line:col of `properties:` (or the recipe)
+    /// Also solve the conductivity (not a key: property searches, which need only the stiffness, turn it off).
+    bool conductivity = true;
+    std::string where;  ///< file:line:col of `properties:` (or the recipe)
 };
 
 /// The keys of a `properties:` map.

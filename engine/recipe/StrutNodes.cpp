@@ -3,6 +3,7 @@
 #include "engine/core/Errors.h"
 #include "engine/core/Format.h"
 #include "engine/frames/StrutFrames.h"
+#include "engine/recipe/DesignTargets.h"
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/ScalarMaps.h"
 #include "engine/recipe/SkinNodes.h"
@@ -286,6 +287,8 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
 {
     std::optional<UniformCells> uniform;
     FieldPtr region;
+    for (const char* key : {"stiffness", "optimize"})
+        if (spec.has(key)) refuseUnresolvedDesign(spec[key]);
     const Frame frame = [&] {
         try {
             return buildFrame(builder, spec["struts"], name, uniform, region);
@@ -561,6 +564,16 @@ void addStrutNodeTypes(std::vector<NodeType>& types)
           {"radius", anything(), "strut radius (mm): a number, a list or {gradient, min, max, axis}", "—"},
           {"density", gradedDensitySchema(),
            "target relative density over the frame's bounding box, or a map grading it point by point", "—"},
+          {"stiffness", object(stiffnessKeys()),
+           "instead of `density:`: {E: 40 MPa, axis: z} or {E_ratio: 0.05}, the density whose homogenized "
+           "modulus meets it is solved (needs `material:`)",
+           "—"},
+          {"optimize",
+           {{"anyOf", {object(optimizeKeys(), {"sigma"}), oneOfWords({"off"})}}},
+           "{sigma: [lo, hi], axis: z}: the Gaussian sigma with the highest modulus at the node's `density:` is "
+           "chosen, the capsule kernel at that density reported next to it (needs `material:`); `off`: the sigma "
+           "as written",
+           "—"},
           levelKey()},
          buildStruts});
 }

@@ -1,0 +1,326 @@
+#include "engine/jobs/PropertyDesign.h"
+
+#include "engine/core/Errors.h"
+#include "engine/core/Format.h"
+#include "engine/jobs/Job.h"
+#include "engine/recipe/DesignTargets.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+namespace voxlat {
+
+namespace {
+
+const char* kAxisName[3] = {"x", "y", "z"};
+
+/// A copy of the map @a map without @a drop. Children are shared, not copied (they keep their
+/// recipe lines); only the maps on a path that is edited are new, so the recipe is never changed.
+YAML::Node mapWithout(const YAML::Node& map, const std::vector<std::string>& drop)
+{
+    YAML::Node out(YAML::NodeType::Map);
+    for (auto it = map.begin(); it != map.end(); ++it) {
+        const std::string key = it->first.Scalar();
+        if (std::find(drop.begin(), drop.end(), key) == drop.end()) out[key] = it->second;
+    }
+    return out;
+}
+
+/// A number as YAML text that reads back to the same double.
+YAML::Node exactNumber(double v)
+{
+    char text[40];
+    std::snprintf(text, sizeof text, "%.17g", v);
+    return YAML::Node(std::string(text));
+}
+
+/// One trial: a job on a copy of @a base whose only field (with its inputs) is @a name, given
+/// @a spec, homogenized at @a resolution voxels along the cell's longest side.
+struct Measured {
+    double modulus = 0.0;  ///< along the axis asked for; 0 when the cell falls apart or is empty
+    double density = 0.0;  ///< the voxel model's relative density
+    std::string failure;   ///< why the modulus is 0, if it is
+};
+
+Measured measure(const Recipe& base, const std::string& name, const YAML::Node& spec, int axis, int resolution,
+                 JobContext* parent)
+{
+    if (parent) parent->checkCancelled();
+    Recipe r = base;
+    r.fieldIndex[name] = spec;
+    r.fieldNames = {name};
+    r.result = name;
+    r.outputs.clear();
+    r.properties.resolution = resolution;
+    r.properties.conductivity = false;
+    // The trials' own warnings (loose pieces, a cell with no load path) are about candidates the
+    // search leaves behind, not about the result.
+    JobContext quiet;
+    Measured m;
+    try {
+        Job job(std::move(r), &quiet);
+        const nlohmann::json& p = job.properties();
+        m.modulus = p["E_MPa"][axis].get<double>();
+        m.density = p["relative_density"].get<double>();
+    } catch (const JobError& e) {
+        m.failure = e.what();  // no solid, or no load path along any axis: no stiffness
+    }
+    return m;
+}
+
+int trialResolution(const std::optional<int>& own, const Recipe& recipe)
+{
+    if (own) return *own;
+    if (recipe.properties.resolution) return *recipe.properties.resolution;
+    return 32;
+}
+
+void requireMaterial(const Recipe& recipe, const RecipeNode& key, const std::string& what)
+{
+    if (!recipe.material)
+        key.fail(what +
+                 " needs the material the lattice is made of: add `material: form2` (or ti6al4v, 316l, 17-4ph, "
+                 "pa12) or `material: {E: 1.6 GPa, nu: 0.38}` at the top of the recipe");
+}
+
+/// `stiffness:`: Illinois (regula falsi with the stale end halved) on log E against density,
+/// bracketed first by steps of 1.6x from the Gibson-Ashby guess rho = sqrt(E / E_s).
+nlohmann::json solveStiffness(Recipe& recipe, const std::string& name, const RecipeNode& spec, JobContext* context)
+{
+    const RecipeNode key = spec["stiffness"];
+    const StiffnessTarget target = parseStiffness(key);
+    for (const char* other : {"density", "level", "radius", "thickness", "wall", "layer"})
+        if (spec.has(other))
+            key.fail(std::string("give either `stiffness:` or `") + other +
+                     ":`, not both (the stiffness solves the density, which sets the " +
+                     (std::string(other) == "density" ? "level" : "size") + ")");
+    if (spec.has("optimize")) key.fail("`optimize:` needs a fixed `density:`; give it instead of `stiffness:`");
+    requireMaterial(recipe, key, "a stiffness target");
+    const double Es = recipe.material->modulusMPa;
+    const double goal = target.modulusMPa ? *target.modulusMPa : *target.ratio * Es;
+    const std::string goalText = formatNumber(goal) + " MPa along " + kAxisName[target.axis];
+    if (goal >= Es)
+        key.fail("the target modulus " + goalText + " is not below the solid's own (" + formatNumber(Es) + " MPa, " +
+                 recipe.material->name + "): no lattice of it reaches that");
+    const int resolution = trialResolution(target.resolution, recipe);
+    const YAML::Node base = mapWithout(spec.yaml(), {"stiffness"});
+
+    struct Trial {
+        double rho, modulus, cellDensity;
+    };
+    std::vector<Trial> trials;
+    StageProgress progress(context, "stiffness of " + name, 16);
+    auto f = [&](double rho) {
+        YAML::Node s = mapWithout(base, {});
+        s["density"] = exactNumber(rho);
+        const Measured m = measure(recipe, name, s, target.axis, resolution, context);
+        trials.push_back({rho, m.modulus, m.density});
+        progress.add();
+        return m.modulus > 0.0 ? std::log(m.modulus / goal) : -std::numeric_limits<double>::infinity();
+    };
+    const double logTolerance = std::log1p(target.tolerance);
+    constexpr double kLow = 0.02, kHigh = 0.9;
+    double a = std::clamp(std::sqrt(goal / Es), 0.03, 0.8);
+    double fa = f(a);
+    double b = a, fb = fa;
+    // Bracket: a below the target, b above.
+    if (fa < 0.0) {
+        while (fb < 0.0) {
+            if (b >= kHigh)
+                key.fail("the target modulus " + goalText + " is out of reach: at density " + formatNumber(kHigh) +
+                         " this lattice has " + formatNumber(trials.back().modulus) + " MPa (" + recipe.material->name +
+                         ", E_s " + formatNumber(Es) + " MPa)");
+            a = b, fa = fb;
+            b = std::min(kHigh, b * 1.6);
+            fb = f(b);
+        }
+    } else {
+        while (fa > 0.0) {
+            if (a <= kLow)
+                key.fail("the target modulus " + goalText + " is below this lattice's reach: already at density " +
+                         formatNumber(kLow) + " it has " + formatNumber(trials.back().modulus) +
+                         " MPa; choose a more compliant cell or a lower target");
+            b = a, fb = fa;
+            a = std::max(kLow, a / 1.6);
+            fa = f(a);
+        }
+    }
+    int side = 0;  // which end moved last time (Illinois halves the other end's value on a repeat)
+    auto within = [&](double fx) { return std::abs(fx) <= logTolerance; };
+    bool done = within(fa) || within(fb);
+    for (int k = 0; k < 14 && !done; ++k) {
+        // Regula falsi on log E; bisection while the low end carries no load (log E = -inf).
+        double x = std::isfinite(fa) ? b - fb * (b - a) / (fb - fa) : 0.5 * (a + b);
+        if (!(x > a && x < b)) x = 0.5 * (a + b);
+        const double fx = f(x);
+        if (fx < 0.0) {
+            a = x, fa = fx;
+            if (side == -1) fb *= 0.5;
+            side = -1;
+        } else {
+            b = x, fb = fx;
+            if (side == 1 && std::isfinite(fa)) fa *= 0.5;
+            side = 1;
+        }
+        done = within(fx) || b - a < 2e-4;
+    }
+    progress.finish();
+    // The trial closest to the target: its density is written in, so the job (and any later
+    // homogenization at the same resolution) reproduces its modulus exactly.
+    const Trial best = *std::min_element(trials.begin(), trials.end(), [&](const Trial& p, const Trial& q) {
+        auto err = [&](const Trial& t) { return t.modulus > 0 ? std::abs(std::log(t.modulus / goal)) : 1e300; };
+        return err(p) < err(q);
+    });
+    YAML::Node solved = mapWithout(base, {});
+    solved["density"] = exactNumber(best.rho);
+    recipe.fieldIndex[name] = solved;
+
+    nlohmann::json rows = nlohmann::json::array();
+    for (const Trial& t : trials) rows.push_back({{"density", t.rho}, {"E_MPa", t.modulus}});
+    const double error = best.modulus / goal - 1.0;
+    if (context && std::abs(error) > target.tolerance) {
+        // The voxel model changes in steps (voxels flip, necks join) as the density rises: the
+        // bracket closed on a step that jumps over the target.
+        double below = 0.0, above = std::numeric_limits<double>::infinity();
+        for (const Trial& t : trials) {
+            if (t.modulus < goal) below = std::max(below, t.modulus);
+            if (t.modulus >= goal) above = std::min(above, t.modulus);
+        }
+        context->warn("stiffness_tolerance",
+                      "field `" + name + "`: the closest density found gives " + formatNumber(best.modulus) + " MPa, " +
+                          formatNumber(100.0 * error) + " % from the target " + goalText + ": at " +
+                          std::to_string(resolution) + " voxels the modulus steps from " + formatNumber(below) +
+                          " to " + formatNumber(above) + " MPa within a density change of " + formatNumber(b - a) +
+                          " (voxels flip together); a finer `resolution:` makes the steps smaller",
+                      {{"field", name}, {"steps_MPa", {below, above}}});
+    }
+    return {{"target_E_MPa", goal},
+            {"axis", kAxisName[target.axis]},
+            {"density", best.rho},
+            {"achieved_E_MPa", best.modulus},
+            {"achieved_E_ratio", best.modulus / Es},
+            {"relative_error", error},
+            {"cell_relative_density", best.cellDensity},
+            {"resolution", resolution},
+            {"tolerance", target.tolerance},
+            {"method", "Illinois on log E vs density, bracketed from sqrt(E/E_s)"},
+            {"trials", rows}};
+}
+
+/// `optimize:`: a coarse sweep of sigma, then golden-section refinement around its best point.
+nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const RecipeNode& spec, JobContext* context)
+{
+    const RecipeNode key = spec["optimize"];
+    const SigmaOptimization o = parseOptimize(key);
+    if (!spec.has("density") || !spec["density"].isNumber())
+        key.fail("`optimize:` compares joints at a fixed density: give the node `density:` (one number)");
+    if (!spec.has("kernel") || !spec["kernel"].has("gaussian"))
+        key.fail("`optimize:` picks the Gaussian kernel's sigma: give `kernel: {gaussian: {sigma: S}}`");
+    requireMaterial(recipe, key, "`optimize:`");
+    const int resolution = trialResolution(o.resolution, recipe);
+    const YAML::Node base = mapWithout(spec.yaml(), {"optimize"});
+    auto withSigma = [&](double sigma) {
+        YAML::Node s = mapWithout(base, {});
+        YAML::Node kernel = mapWithout(base["kernel"], {});
+        YAML::Node gaussian = mapWithout(base["kernel"]["gaussian"], {});
+        gaussian["sigma"] = exactNumber(sigma);
+        kernel["gaussian"] = gaussian;
+        s["kernel"] = kernel;
+        return s;
+    };
+
+    struct Trial {
+        double sigma, modulus, cellDensity;
+    };
+    std::vector<Trial> trials;
+    const int golden = int(std::ceil(std::log(2.0 * (o.hi - o.lo) / (o.samples - 1) / o.tolerance) / std::log(1.618)));
+    StageProgress progress(context, "optimizing sigma of " + name, std::uint64_t(o.samples + std::max(0, golden) + 1));
+    auto f = [&](double sigma) {
+        const Measured m = measure(recipe, name, withSigma(sigma), o.axis, resolution, context);
+        trials.push_back({sigma, m.modulus, m.density});
+        progress.add();
+        return m.modulus;
+    };
+    std::vector<double> xs(o.samples), ys(o.samples);
+    for (int k = 0; k < o.samples; ++k) {
+        xs[k] = o.lo + (o.hi - o.lo) * k / (o.samples - 1);
+        ys[k] = f(xs[k]);
+    }
+    const int k = int(std::max_element(ys.begin(), ys.end()) - ys.begin());
+    if (ys[k] <= 0.0)
+        key.fail("no sigma in [" + formatNumber(o.lo) + ", " + formatNumber(o.hi) + "] gives a lattice that carries " +
+                 "load along " + kAxisName[o.axis] + " at this density: raise the density or lower sigma");
+    // Golden section on [x_{k-1}, x_{k+1}] (the maximum of a unimodal curve lies there).
+    double lo = xs[std::max(0, k - 1)], hi = xs[std::min(o.samples - 1, k + 1)];
+    const double g = (std::sqrt(5.0) - 1.0) / 2.0;
+    double x1 = hi - g * (hi - lo), x2 = lo + g * (hi - lo);
+    double y1 = f(x1), y2 = f(x2);
+    while (hi - lo > o.tolerance) {
+        if (y1 >= y2) {
+            hi = x2, x2 = x1, y2 = y1;
+            x1 = hi - g * (hi - lo);
+            y1 = f(x1);
+        } else {
+            lo = x1, x1 = x2, y1 = y2;
+            x2 = lo + g * (hi - lo);
+            y2 = f(x2);
+        }
+    }
+    const Trial best = *std::max_element(trials.begin(), trials.end(),
+                                         [](const Trial& p, const Trial& q) { return p.modulus < q.modulus; });
+    std::sort(trials.begin(), trials.end(), [](const Trial& p, const Trial& q) { return p.sigma < q.sigma; });
+    nlohmann::json rows = nlohmann::json::array();
+    for (const Trial& t : trials) rows.push_back({{"sigma", t.sigma}, {"E_MPa", t.modulus}});
+    nlohmann::json entry{{"sigma", best.sigma},
+                         {"axis", kAxisName[o.axis]},
+                         {"density", spec["density"].number()},
+                         {"E_MPa", best.modulus},
+                         {"E_ratio", best.modulus / recipe.material->modulusMPa},
+                         {"cell_relative_density", best.cellDensity},
+                         {"range", {o.lo, o.hi}},
+                         {"tolerance", o.tolerance},
+                         {"resolution", resolution},
+                         {"method", "coarse sweep of " + std::to_string(o.samples) +
+                                        " points, golden-section refinement around the best"},
+                         {"trials", rows}};
+    if (o.baseline) {
+        // The Boolean-joint lattice: hard capsules of one radius, solved for the same density.
+        YAML::Node capsule = mapWithout(base, {"radius", "kernel"});
+        capsule["kernel"] = YAML::Node(std::string("capsule"));
+        const Measured m = measure(recipe, name, capsule, o.axis, resolution, context);
+        progress.add();
+        entry["capsule_E_MPa"] = m.modulus;
+        entry["capsule_cell_relative_density"] = m.density;
+        entry["ratio_to_capsule"] = m.modulus > 0.0 ? nlohmann::json(best.modulus / m.modulus) : nlohmann::json();
+    }
+    progress.finish();
+    recipe.fieldIndex[name] = withSigma(best.sigma);
+    return entry;
+}
+
+}  // namespace
+
+nlohmann::json resolvePropertyTargets(Recipe& recipe, JobContext* context)
+{
+    nlohmann::json report = nlohmann::json::object();
+    for (const std::string& name : recipe.fieldNames) {
+        const RecipeNode spec = recipe.fieldSpec(name);
+        if (!spec.isMap()) continue;
+        if (spec.has("stiffness")) {
+            if (!spec.has("tpms") && !spec.has("struts"))
+                spec["stiffness"].fail("`stiffness:` is a key of `tpms` and `struts` nodes");
+            report[name]["stiffness"] = solveStiffness(recipe, name, spec, context);
+        } else if (spec.has("optimize") && spec["optimize"].isScalar() && spec["optimize"].string() == "off") {
+            // `--set fields.NAME.optimize=off`: the sigma as written (a sweep of it, say).
+            recipe.fieldIndex[name] = mapWithout(spec.yaml(), {"optimize"});
+        } else if (spec.has("optimize")) {
+            if (!spec.has("struts")) spec["optimize"].fail("`optimize:` is a key of `struts` nodes");
+            report[name]["optimize"] = optimizeSigma(recipe, name, spec, context);
+        }
+    }
+    return report;
+}
+
+}  // namespace voxlat
