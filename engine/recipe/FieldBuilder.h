@@ -65,6 +65,15 @@ struct GradedNode {
     double slab = 0.0;        ///< slab thickness (mm): one cell along the axis
 };
 
+/// A strut lattice's frame, for `outputs: {frame: F}`: nodes, struts and the radius at each
+/// strut end at the solved level (radii() is called after the levels are solved).
+struct StrutFrameRecord {
+    std::string name;
+    std::vector<Vec3d> nodes;
+    std::vector<std::array<int, 2>> struts;
+    std::function<std::vector<std::array<double, 2>>()> radii;
+};
+
 class FieldBuilder;
 
 /// One node type of the recipe language: the key that names it, its valid keys (with their value
@@ -112,6 +121,9 @@ public:
     /// Graded-density lattices, in build order.
     const std::vector<GradedNode>& gradedNodes() const { return mGradedNodes; }
     void addGradedNode(GradedNode node) { mGradedNodes.push_back(std::move(node)); }
+    /// Strut frames, in build order (the fields the result uses).
+    const std::vector<StrutFrameRecord>& strutFrames() const { return mStrutFrames; }
+    void addStrutFrame(StrutFrameRecord frame) { mStrutFrames.push_back(std::move(frame)); }
     /// Passes a warning to the job's context (it lands in report.json too).
     void warn(const std::string& code, const std::string& message, nlohmann::json details = nlohmann::json::object())
     {
@@ -134,6 +146,7 @@ private:
     std::vector<Preparation> mPreparations;
     std::vector<std::function<void(nlohmann::json&)>> mReporters;
     std::vector<GradedNode> mGradedNodes;
+    std::vector<StrutFrameRecord> mStrutFrames;
 };
 
 /// Reads `solid:` of a lattice node: `network` (f <= level, the default) or `sheet` (|f| <= level).
@@ -165,6 +178,7 @@ void addLatticeNodeTypes(std::vector<NodeType>& types);  // LatticeNodes.cpp: tp
 void addStrutNodeTypes(std::vector<NodeType>& types);    // StrutNodes.cpp: strut lattices
 void addDesignNodeTypes(std::vector<NodeType>& types);   // DesignNodes.cpp: meshes, shells, infill
 void addExprNodeTypes(std::vector<NodeType>& types);     // ExprNodes.cpp: user equations
+void addFalloffNodeTypes(std::vector<NodeType>& types);  // FalloffNodes.cpp: point and curve fields
 
 /// DesignNodes.cpp: true when an `infill` node solves the level of the lattice field @a name (its
 /// `density:` counts for that lattice, which then needs no level of its own).
