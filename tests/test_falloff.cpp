@@ -177,7 +177,7 @@ TEST(PointField, RecipeSolidIsLevelMinusTheSum)
     curveJob.solveLevels();
     const FieldPtr c = curveJob.field("tube");
     // The solid is a tube around the L: its radius r solves exp(-r^2 / 2 sigma^2) = level.
-    const double level = -c->value(Vec3d(2, 0, 0)) + 1.0;  // value = level - 1 on the curve
+    const double level = c->value(Vec3d(2, 0, 0)) + 1.0;  // value = level - 1 on the curve
     const double r = 0.5 * std::sqrt(2 * std::log(1 / level));
     EXPECT_NEAR(c->value(Vec3d(2, r, 0)), 0.0, 1e-9);
     EXPECT_NEAR(c->value(Vec3d(4, 2, r)), 0.0, 1e-9);

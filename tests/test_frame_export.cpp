@@ -143,7 +143,7 @@ TEST(FrameExport, WithoutStrutsIsAnErrorNamingTheLine)
                              "  g: {tpms: gyroid, cell: 5}\nresult: g\noutputs:\n  mesh: g.stl\n  frame: g.csv\n",
                              "out", &out);
     EXPECT_EQ(status, 2) << out;
-    EXPECT_NE(out.find("r.yaml:7:"), std::string::npos) << out;
+    EXPECT_NE(out.find("r.yaml:8:"), std::string::npos) << out;
     EXPECT_NE(out.find("has none"), std::string::npos) << out;
     EXPECT_FALSE(std::filesystem::exists(dir.path / "out" / "g.stl"));
     EXPECT_FALSE(std::filesystem::exists(dir.path / "out" / "g.csv"));

@@ -5,6 +5,7 @@
 #include "engine/core/Errors.h"
 
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <numbers>
 #include <sstream>
@@ -193,6 +194,13 @@ Frame readWireframe(const std::string& path)
                 throw InputError(where + ": column " + std::to_string(i + 1) + " is not a number");
             }
         };
+        // A header row (`x1,y1,z1,x2,y2,z2,r1,r2` as a frame output writes it, or any other
+        // words): first line, first cell neither a number nor a row kind.
+        if (lineNo == 1 && !cells.empty() && cells[0] != "node" && cells[0] != "strut") {
+            char* end = nullptr;
+            std::strtod(cells[0].c_str(), &end);
+            if (cells[0].empty() || *end != '\0') continue;
+        }
         if (!cells.empty() && cells[0] == "node" && cells.size() == 4) {
             nodes.emplace_back(num(1), num(2), num(3));
         } else if (!cells.empty() && cells[0] == "strut" && cells.size() == 3) {

@@ -5,6 +5,7 @@
 #include "engine/recipe/FieldBuilder.h"
 #include "fields/DistanceFalloff.h"
 
+#include <cmath>
 #include <sstream>
 
 namespace voxlat {

@@ -70,11 +70,12 @@ void write3mfBeams(const BeamFrame& frame, const std::string& path,
     const Lib3mfHandle object(objectRaw);
     const std::string name = std::filesystem::path(path).stem().string();
     check(lib3mf_object_setnameutf8(objectRaw, name.c_str()), objectRaw, "name the object");
-    std::vector<MODELMESHVERTEX> vertices(frame.nodes.size());
-    for (std::size_t i = 0; i < frame.nodes.size(); ++i)
-        for (int k = 0; k < 3; ++k) vertices[i].m_fPosition[k] = float(frame.nodes[i][k]);
-    check(lib3mf_meshobject_setgeometry(objectRaw, vertices.data(), DWORD(vertices.size()), nullptr, 0), objectRaw,
-          "store the nodes");
+    // One vertex at a time: lib3mf's setgeometry refuses a mesh without triangles.
+    for (const Vec3d& p : frame.nodes) {
+        MODELMESHVERTEX vertex;
+        for (int k = 0; k < 3; ++k) vertex.m_fPosition[k] = float(p[k]);
+        check(lib3mf_meshobject_addvertex(objectRaw, &vertex, nullptr), objectRaw, "store a node");
+    }
     std::vector<MODELMESHBEAM> beams(frame.struts.size());
     double smallest = std::numeric_limits<double>::infinity(), shortest = smallest;
     for (std::size_t j = 0; j < frame.struts.size(); ++j) {
