@@ -244,7 +244,8 @@ void GradientShift::gradients(std::span<const Vec3d> points, std::span<double> o
 
 double GradientShift::maxShift(const Box3& box) const
 {
-    if (mSpec.uniform) return mConstantMagnitudes ? std::abs(mConstantUniform) : upperMagnitude(mSpec.uniform, box, mSpec.scale);
+    if (mSpec.uniform)
+        return mConstantMagnitudes ? std::abs(mConstantUniform) : upperMagnitude(mSpec.uniform, box, mSpec.scale);
     if (mConstantMagnitudes) {
         if (mSpec.rotation == ShiftRotation::Tensor) return std::max(mConstantD, mConstantL);
         return std::max({mConstantM.x(), mConstantM.y(), mConstantM.z()});
