@@ -167,8 +167,18 @@ TEST(PointField, RecipeSolidIsLevelMinusTheSum)
     const TriangleMesh& mesh = job.mesh();
     EXPECT_TRUE(checkTopology(mesh).closedManifold());
 
-    // Gaussian curves from an OBJ file and a density solve.
+    // Points from a CSV with a weight column (and a header row): the same sum.
     TempDir dir;
+    dir.write("pts.csv", "x,y,z,w\n0,0,0,2\n20,0,0,1\n");
+    Job fromFile(
+        parseRecipe("voxel: 0.5\ndomain: {box: [[-3, -3, -3], [3, 3, 3]]}\nfields:\n"
+                    "  blob: {points: {file: pts.csv}, level: 1.25}\nresult: blob\n",
+                    "file.yaml", dir.path));
+    const Vec3d q(0.7, -0.4, 1.1);
+    EXPECT_NEAR(fromFile.field("blob")->value(q), 1.25 - 2.0 / q.length() - 1.0 / (q - Vec3d(20, 0, 0)).length(),
+                1e-12);
+
+    // Gaussian curves from an OBJ file and a density solve.
     dir.write("c.obj", "v 0 0 0\nv 4 0 0\nv 4 4 0\nl 1 2 3\n");
     const std::string curves =
         "voxel: 0.2\ndomain: {box: [[-2, -2, -2], [6, 6, 2]]}\nfields:\n"

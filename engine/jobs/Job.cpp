@@ -550,7 +550,9 @@ void Job::writeFrameFile(const std::filesystem::path& path)
             rMin = std::min(rMin, v);
             rMax = std::max(rMax, v);
         }
-    mReport["frame"] = {{"file", path.string()},
+    nlohmann::json files = mReport.contains("frame") ? mReport["frame"]["files"] : nlohmann::json::array();
+    files.push_back(path.string());
+    mReport["frame"] = {{"files", files},
                         {"nodes", f.nodes.size()},
                         {"struts", f.struts.size()},
                         {"radius_min_mm", rMin},
