@@ -172,6 +172,12 @@ enum class LevelRule {
 std::shared_ptr<LevelSolid> readLevelKeys(const RecipeNode& spec, LevelNode& node, FieldPtr raw, SolidSide side,
                                           double defaultLevel, LevelRule rule);
 
+/// LatticeNodes.cpp: `offset: m` of a network (@a side must be Below): @a raw moved m mm along its
+/// unit gradient (a one-sided GradientShift); @a cell (0: none) for the large-offset warning.
+/// @a description receives ", offset m mm (gradient shift)".
+FieldPtr networkOffset(FieldBuilder& builder, const RecipeNode& spec, FieldPtr raw, SolidSide side,
+                       const std::string& name, double cell, std::string& description);
+
 /// Node types by family; each family lives in its own file.
 void addShapeNodeTypes(std::vector<NodeType>& types);    // ShapeNodes.cpp: primitives, booleans, transforms
 void addLatticeNodeTypes(std::vector<NodeType>& types);  // LatticeNodes.cpp: tpms

@@ -11,6 +11,7 @@
 #include "fields/VectorField.h"
 
 #include <algorithm>
+#include <cmath>
 #include <sstream>
 
 namespace voxlat {
@@ -211,31 +212,8 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
         return result;
     }
     std::string offsetText;
-    if (spec.has("offset")) {
-        // The network's surface moved m mm along its unit gradient: f(x - m n(x)) <= c, the
-        // one-sided form of the sheet's gradient shift.
-        const RecipeNode o = spec["offset"];
-        if (side != SolidSide::Below)
-            o.fail("`offset` moves a network's surface; a sheet takes `thickness:` (its walls in mm)");
-        if (spec.has("density"))
-            o.fail("give either `offset:` or `density:`, not both: the density solve would move the surface back");
-        const double m = o.number();
-        if (!std::isfinite(m)) o.fail("the offset is a number of millimetres");
-        if (std::abs(m) > 0.1 * std::min({cell[0], cell[1], cell[2]})) {
-            std::ostringstream msg;
-            msg << "field `" << name << "`: an offset of " << m << " mm is more than 10 % of the "
-                << std::min({cell[0], cell[1], cell[2]})
-                << " mm cell; the gradient shift moves the surface by the offset only while it is small against "
-                   "the surface's curvature radius";
-            builder.warn("large_offset", msg.str(), {{"field", name}, {"offset_mm", m}});
-        }
-        ShiftSpec shift;
-        shift.uniform = std::make_shared<ConstantField>(m);
-        shift.oneSided = true;
-        shift.label = "field `" + name + "`";
-        raw = std::make_shared<GradientShift>(raw, std::move(shift));
-        offsetText = ", offset " + mm(m) + " mm (gradient shift)";
-    }
+    if (spec.has("offset"))
+        raw = networkOffset(builder, spec, raw, side, name, std::min({cell[0], cell[1], cell[2]}), offsetText);
     if (spec.has("density") && !spec["density"].isNumber())
         return buildGraded(builder, spec, name, raw, side, cell, std::string(tpmsName(type)) + " " + solidName,
                            spec.has("axes") && !spec.has("frame") ? plain : nullptr);
@@ -263,6 +241,33 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
 }
 
 }  // namespace
+
+FieldPtr networkOffset(FieldBuilder& builder, const RecipeNode& spec, FieldPtr raw, SolidSide side,
+                       const std::string& name, double cell, std::string& description)
+{
+    // The network's surface moved m mm along its unit gradient: f(x - m n(x)) <= c, the
+    // one-sided form of the sheet's gradient shift.
+    const RecipeNode o = spec["offset"];
+    if (side != SolidSide::Below)
+        o.fail("`offset` moves a network's surface; a sheet takes `thickness:` (its walls in mm)");
+    if (spec.has("density"))
+        o.fail("give either `offset:` or `density:`, not both: the density solve would move the surface back");
+    const double m = o.number();
+    if (!std::isfinite(m)) o.fail("the offset is a number of millimetres");
+    if (cell > 0.0 && std::abs(m) > 0.1 * cell) {
+        std::ostringstream msg;
+        msg << "field `" << name << "`: an offset of " << m << " mm is more than 10 % of the " << cell
+            << " mm cell; the gradient shift moves the surface by the offset only while it is small against "
+               "the surface's curvature radius";
+        builder.warn("large_offset", msg.str(), {{"field", name}, {"offset_mm", m}});
+    }
+    ShiftSpec shift;
+    shift.uniform = std::make_shared<ConstantField>(m);
+    shift.oneSided = true;
+    shift.label = "field `" + name + "`";
+    description = ", offset " + mm(m) + " mm (gradient shift)";
+    return std::make_shared<GradientShift>(std::move(raw), std::move(shift));
+}
 
 void addLatticeNodeTypes(std::vector<NodeType>& types)
 {
