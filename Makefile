@@ -2,6 +2,7 @@
 #   make run   installs missing Debian packages, builds Release, runs the default recipe
 #   make test  installs, builds, runs every test
 #   make sanitize  the whole test suite under ASan + UBSan (CI runs it after make test)
+#   make fuzz  builds the libFuzzer harnesses with clang and runs each for FUZZ_SECONDS (default 60)
 #   make bench runs the benchmarks in bench/ (installs their reference tools too)
 
 BUILD ?= build
@@ -16,7 +17,7 @@ BENCH_PACKAGES := python3 python3-numpy python3-openvdb python3-scipy python3-sk
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 CCACHE := $(shell command -v ccache 2>/dev/null)
 
-.PHONY: all deps bench-deps build run test sanitize bench format docs-keys clean
+.PHONY: all deps bench-deps build run test sanitize fuzz bench format docs-keys clean
 
 all: build
 
@@ -56,6 +57,16 @@ sanitize: deps
 	cd $(SANITIZE_BUILD) && ASAN_OPTIONS=detect_leaks=1:strict_string_checks=1 \
 	  LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  ctest --output-on-failure -j $(JOBS)
+
+# libFuzzer harnesses (tests/fuzz/), clang with ASan + UBSan, seeded from data/.
+FUZZ_BUILD ?= build-fuzz
+FUZZ_SECONDS ?= 60
+fuzz: deps
+	$(call install_missing,clang)
+	cmake -S . -B $(FUZZ_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ -DVOXLAT_FUZZ=ON \
+	  $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+	cmake --build $(FUZZ_BUILD) -j $(JOBS) --target fuzz_recipe fuzz_equation fuzz_mesh fuzz_wireframe fuzz_values
+	FUZZ_SECONDS=$(FUZZ_SECONDS) tests/fuzz/run_fuzz.sh $(CURDIR) $(FUZZ_BUILD)
 
 bench: build bench-deps
 	/usr/bin/python3 bench/run.py --voxlat $(BUILD)/voxlat

@@ -7,8 +7,11 @@
 #include <nlohmann/json.hpp>
 
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <algorithm>
 #include <cmath>
 #include <csignal>
+#include <fstream>
 #include <numbers>
 #include <thread>
 
@@ -171,6 +174,25 @@ TEST(Cli, GlobalOptionsAfterTheSubcommandAreTheSame)
     EXPECT_EQ(nlohmann::json::parse(readFile(dir.path / "out" / "report.json"))["threads"], 1);
 }
 
+/// True once process @a pid catches @a signal (its SigCgt mask in /proc/PID/status has the bit);
+/// false if it exits or 30 s pass first.
+static bool waitForSignalHandler(pid_t pid, int signal)
+{
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (std::chrono::steady_clock::now() < deadline) {
+        std::ifstream status("/proc/" + std::to_string(pid) + "/status");
+        std::string line;
+        while (std::getline(status, line)) {
+            if (line.rfind("SigCgt:", 0) != 0) continue;
+            const unsigned long long mask = std::stoull(line.substr(7), nullptr, 16);
+            if (mask & (1ULL << (signal - 1))) return true;
+        }
+        if (::waitpid(pid, nullptr, WNOHANG) == pid) return false;
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return false;
+}
+
 TEST(Cli, SigintAndSigtermCancelAndLeaveNoFiles)
 {
     // A job of about a second (0.06 mm voxels over a 30 mm gyroid); the signal lands while it works.
@@ -192,7 +214,10 @@ outputs: {mesh: part.stl, vdb: part.vdb}
                     static_cast<char*>(nullptr));
             ::_exit(127);
         }
-        std::this_thread::sleep_for(std::chrono::milliseconds(300));
+        // Signal only once the child has installed its handler (SigCgt in /proc): a fixed sleep
+        // raced with a slow start (sanitizer build, loaded machine) and killed the child instead.
+        ASSERT_TRUE(waitForSignalHandler(pid, signal)) << "the child never installed its handler";
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
         ::kill(pid, signal);
         int status = 0;
         ASSERT_EQ(::waitpid(pid, &status, 0), pid);
@@ -204,6 +229,85 @@ outputs: {mesh: part.stl, vdb: part.vdb}
         for (const auto& f : std::filesystem::recursive_directory_iterator(dir.path))
             EXPECT_EQ(f.path().filename().string().find(".tmp-"), std::string::npos) << "left behind: " << f.path();
     }
+}
+
+TEST(Cli, OutputsAppearAllTogetherOrNotAtAll)
+{
+    // The mesh is written first, then the properties output fails (a sphere has no periodic cell):
+    // the mesh, written under a temporary name, must not appear either.
+    TempDir dir;
+    const auto recipe = dir.write("r.yaml", R"(voxel: 0.25
+domain: {box: [[-6, -6, -6], [6, 6, 6]]}
+material: form2
+fields:
+  ball: {sphere: {radius: 5}}
+result: ball
+outputs: {mesh: ball.stl, vdb: ball.vdb, properties: ball.json}
+)");
+    std::string out;
+    const int status =
+        runCommand(voxlatBinary() + " -q run " + recipe.string() + " --out " + (dir.path / "out").string(), &out);
+    EXPECT_NE(status, 0) << out;
+    EXPECT_NE(out.find("no period is known"), std::string::npos) << out;
+    ASSERT_TRUE(std::filesystem::exists(dir.path / "out"));
+    EXPECT_EQ(listFolder(dir.path / "out"), std::vector<std::string>{}) << out;
+    // Without the failing output both files and the report appear.
+    const auto good =
+        dir.write("good.yaml", readFile(recipe).replace(readFile(recipe).find(", properties: ball.json"), 23, ""));
+    ASSERT_EQ(
+        runCommand(voxlatBinary() + " -q run " + good.string() + " --no-preview --out " + (dir.path / "out").string(),
+                   &out),
+        0)
+        << out;
+    auto names = listFolder(dir.path / "out");
+    std::sort(names.begin(), names.end());
+    EXPECT_EQ(names, (std::vector<std::string>{"ball.stl", "ball.vdb", "report.json"}));
+    // The report's volume is the mesh's (the voxel count's is kept apart, named).
+    const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
+    EXPECT_EQ(report["result"]["volume_mm3"], report["mesh"]["volume_mm3"]);
+    EXPECT_NEAR(report["result"]["volume_mm3"].get<double>(), 4.0 / 3.0 * M_PI * 125, 0.01 * 523.6);
+    EXPECT_TRUE(report["result"].contains("voxel_count_volume_mm3"));
+}
+
+TEST(Cli, CrumbsTheDomainBoxCutsOffWarnFreePiecesFail)
+{
+    TempDir dir;
+    // A gyroid network cut by a box that does not fall on its cells leaves corner crumbs.
+    const auto recipe = dir.write("r.yaml", R"(voxel: 0.1
+domain: {box: [[0.9, 2.4, 1.3], [12.9, 12.7, 12.6]]}
+fields:
+  lattice: {tpms: gyroid, cell: 5, solid: network, density: 0.15}
+result: lattice
+outputs: {mesh: part.stl}
+)");
+    std::string out;
+    ASSERT_EQ(
+        runCommand(voxlatBinary() + " -q run " + recipe.string() + " --no-preview --out " + (dir.path / "out").string(),
+                   &out),
+        0)
+        << out;
+    const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
+    ASSERT_GT(report["pieces"]["count"].get<int>(), 1) << "the box no longer cuts crumbs: choose another";
+    EXPECT_EQ(report["pieces"]["free"], 0);
+    EXPECT_EQ(report["pieces"]["box_crumbs"]["count"].get<int>(), report["pieces"]["count"].get<int>() - 1);
+    EXPECT_NE(out.find("crumbs the domain box or a trimming shape cuts off"), std::string::npos) << out;
+    // Two balls apart: a free piece, the job fails with exit 3 and writes nothing.
+    const auto two = dir.write("two.yaml", R"(voxel: 0.25
+domain: {box: [[-8, -8, -8], [8, 8, 8]]}
+fields:
+  a: {sphere: {radius: 3, center: [-4, 0, 0]}}
+  b: {sphere: {radius: 2, center: [4, 0, 0]}}
+  both: {union: [a, b]}
+result: both
+outputs: {mesh: two.stl}
+)");
+    std::filesystem::remove_all(dir.path / "out2");
+    EXPECT_EQ(runCommand(voxlatBinary() + " -q run " + two.string() + " --out " + (dir.path / "out2").string(), &out),
+              3)
+        << out;
+    EXPECT_NE(out.find("two.yaml: the result `both` falls apart into 2 pieces"), std::string::npos) << out;
+    EXPECT_NE(out.find("1 float free inside the domain"), std::string::npos) << out;
+    EXPECT_TRUE(!std::filesystem::exists(dir.path / "out2") || listFolder(dir.path / "out2").empty());
 }
 
 TEST(Cli, OutputsStayInsideTheOutputFolderAndReplaceOnlyFiles)

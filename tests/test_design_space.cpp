@@ -14,9 +14,12 @@
 #include "mesher/writers/MeshWriters.h"
 
 #include <gtest/gtest.h>
+
 #include <openvdb/math/Proximity.h>
 #include <openvdb/tools/Interpolation.h>
 #include <tbb/global_control.h>
+#include <algorithm>
+#include <cstring>
 #include <nlohmann/json.hpp>
 
 #include <cmath>
@@ -231,6 +234,86 @@ TEST(MeshDesignSpace, UnitsAndSizeChecks)
         << message;
 }
 
+TEST(MeshReader, PlyInAnyEncodingAndHostileHeadersRefused)
+{
+    TempDir dir;
+    const TriangleMesh cube = cubeMesh(0, 10);
+    // The same cube in ASCII, binary little- and big-endian PLY (quads in the ASCII one, split
+    // into fans), with an extra element and properties to skip.
+    std::string ascii =
+        "ply\nformat ascii 1.0\ncomment a cube\nelement vertex 8\nproperty float x\n"
+        "property float y\nproperty float z\nproperty uchar red\nelement face 6\n"
+        "property list uchar int vertex_indices\nelement edge 1\nproperty int a\nproperty int b\n"
+        "end_header\n";
+    // A 10 mm cube in outward quads (split into fans by the reader).
+    const int corners[8][3] = {{0, 0, 0},  {10, 0, 0},  {10, 10, 0},  {0, 10, 0},
+                               {0, 0, 10}, {10, 0, 10}, {10, 10, 10}, {0, 10, 10}};
+    for (const auto& c : corners)
+        ascii += std::to_string(c[0]) + " " + std::to_string(c[1]) + " " + std::to_string(c[2]) + " 7\n";
+    ascii += "4 0 3 2 1\n4 4 5 6 7\n4 0 1 5 4\n4 2 3 7 6\n4 0 4 7 3\n4 1 2 6 5\n";
+    ascii += "0 1\n";
+    dir.write("ascii.ply", ascii);
+    auto binary = [&](bool big) {
+        std::string b = std::string("ply\nformat ") + (big ? "binary_big_endian" : "binary_little_endian") +
+                        " 1.0\nelement vertex 8\nproperty double x\nproperty double y\nproperty double z\n"
+                        "element face 12\nproperty list uchar uint vertex_indices\nend_header\n";
+        auto put = [&](const auto value) {
+            char bytes[sizeof value];
+            std::memcpy(bytes, &value, sizeof value);
+            if (big) std::reverse(bytes, bytes + sizeof value);
+            b.append(bytes, sizeof value);
+        };
+        for (const auto& p : cube.points)
+            for (int a = 0; a < 3; ++a) put(double(p[a]));
+        for (const auto& t : cube.triangles) {
+            b.push_back(char(3));
+            for (int c = 0; c < 3; ++c) put(std::uint32_t(t[c]));
+        }
+        return b;
+    };
+    dir.write("little.ply", binary(false));
+    dir.write("big.ply", binary(true));
+    for (const char* name : {"ascii.ply", "little.ply", "big.ply"}) {
+        const PartMesh p = readPartMesh(dir.path / name, name);
+        EXPECT_EQ(p.format, "PLY");
+        EXPECT_EQ(p.mesh.triangles.size(), 12u) << name;
+        EXPECT_EQ(p.mesh.points.size(), 8u) << name;
+        EXPECT_NEAR(p.mesh.volume(), 1000.0, 1e-3) << name;
+    }
+    // Hostile files: each refused with its reason, never a crash or a hang (OpenMesh crashed on
+    // the first and looped forever on the second).
+    const std::vector<std::pair<std::string, std::string>> hostile = {
+        {"ply\nformat ascii 1.0\nelement vertex 3\n", "no `end_header`"},
+        {"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n" + std::string(1000, 'a'),
+         "no `end_header`"},
+        {"ply\nformat ascii 1.0\nelement vertex 4000000000\nproperty float x\nproperty float y\nproperty float "
+         "z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n",
+         "announces elements"},
+        {"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement "
+         "face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n",
+         "names vertex 7 of 3"},
+        {"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement "
+         "face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 nan\n1 0 0\n0 1 0\n3 0 1 2\n",
+         "not a number"},
+        {"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+         "0 0 0\n1 0 0\n0 1 0\n",
+         "no `face` element"},
+        {"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty "
+         "float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n" +
+             std::string(36, '\0') + "\xff",
+         "list longer than the file"},
+        {"solid\nnot a ply\n", "does not start with the line `ply`"},
+        {"ply\nformat utf8 1.0\nend_header\n", "unknown format"},
+    };
+    for (std::size_t i = 0; i < hostile.size(); ++i) {
+        const std::string name = "hostile" + std::to_string(i) + ".ply";
+        dir.write(name, hostile[i].first);
+        const std::string error = errorOf([&] { readPartMesh(dir.path / name, name); });
+        EXPECT_NE(error.find(name + ": corrupted PLY"), std::string::npos) << error;
+        EXPECT_NE(error.find(hostile[i].second), std::string::npos) << i << ": " << error;
+    }
+}
+
 TEST(MeshReader, CorruptedAndMissingFilesNameTheFile)
 {
     TempDir dir;
@@ -270,7 +353,7 @@ TEST(MeshReader, CorruptedAndMissingFilesNameTheFile)
     EXPECT_NE(errorOf([&] { readPartMesh(dir.path / "junk.3mf", "junk.3mf"); }).find("junk.3mf: corrupted 3MF"),
               std::string::npos);
     dir.write("junk.ply", "ply\nformat nonsense\n");
-    EXPECT_NE(errorOf([&] { readPartMesh(dir.path / "junk.ply", "junk.ply"); }).find("junk.ply: cannot read"),
+    EXPECT_NE(errorOf([&] { readPartMesh(dir.path / "junk.ply", "junk.ply"); }).find("junk.ply: corrupted PLY"),
               std::string::npos);
 }
 

@@ -838,19 +838,29 @@ TEST(StrutRecipes, ALatticeThatFallsApartIsCountedOnTheGrid)
     const std::string broken =
         "voxel: 0.25\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\nfields:\n"
         "  lattice: {struts: {cell: x, size: 7.5}, kernel: {gaussian: {sigma: 0.8}}, "
-        "density: 0.10}\nresult: lattice\noutputs: {mesh: a.stl}\n";
-    const std::string out = runRecipe(dir, broken, &status);
-    EXPECT_EQ(status, 0) << out;
-    EXPECT_NE(out.find("warning: the result `lattice` falls apart into"), std::string::npos) << out;
+        "density: 0.10}\nresult: lattice\n";
+    // It fails the job (exit 3) and writes nothing: the pieces float free inside the domain.
+    const std::string out = runRecipe(dir, broken + "outputs: {mesh: a.stl, vdb: a.vdb}\n", &status);
+    EXPECT_EQ(status, 3) << out;
+    EXPECT_NE(out.find("the result `lattice` falls apart into"), std::string::npos) << out;
+    EXPECT_NE(out.find("float free inside the domain"), std::string::npos) << out;
     EXPECT_NE(out.find("pieces (voxels sharing a face)"), std::string::npos) << out;
     EXPECT_NE(out.find("lower sigma"), std::string::npos) << out;
+    EXPECT_NE(out.find("allow: [pieces]"), std::string::npos) << out;
+    EXPECT_TRUE(!std::filesystem::exists(dir.path / "out") || listFolder(dir.path / "out").empty());
+    // `allow: [pieces]` (a plate of separate parts) turns it into a warning; counts in report.json.
+    const std::string allowed = runRecipe(dir, broken + "outputs: {mesh: a.stl}\nallow: [pieces]\n", &status);
+    EXPECT_EQ(status, 0) << allowed;
+    EXPECT_NE(allowed.find("warning: the result `lattice` falls apart into"), std::string::npos) << allowed;
     const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
     EXPECT_GT(report["pieces"]["count"].get<int>(), 1);
-    EXPECT_EQ(report["warnings"][0]["code"], "pieces");
-    // `allow: [pieces]` (a plate of separate parts) silences it; the count stays in report.json.
-    const std::string allowed = runRecipe(dir, broken + "allow: [pieces]\n", &status);
-    EXPECT_EQ(status, 0) << allowed;
-    EXPECT_EQ(allowed.find("warning"), std::string::npos) << allowed;
+    EXPECT_GT(report["pieces"]["free"].get<int>(), 0);
+    // Before any evaluation the struts were known to be too thin for the grid: warned with numbers.
+    std::vector<std::string> codes;
+    for (const auto& w : report["warnings"]) codes.push_back(w["code"]);
+    EXPECT_EQ(codes, (std::vector<std::string>{"sub_voxel_features", "pieces"}));
+    EXPECT_EQ(report["fields"]["lattice"]["thinnest_strut_mm"].get<double>(), 0.0);
+    EXPECT_NE(out.find("some struts vanish between their joints"), std::string::npos) << out;
     // A sensible lattice is one piece and gives no warning.
     const std::string fine =
         runRecipe(dir,
@@ -860,6 +870,35 @@ TEST(StrutRecipes, ALatticeThatFallsApartIsCountedOnTheGrid)
                   &status);
     EXPECT_EQ(status, 0) << fine;
     EXPECT_EQ(fine.find("warning"), std::string::npos) << fine;
+}
+
+TEST(StrutRecipes, StrutsThinnerThanTwoVoxelsWarnBeforeEvaluation)
+{
+    TempDir dir;
+    int status = 0;
+    // The adversarial run's capsules: radius 0.1 on 0.25 mm voxels (547 fragments before).
+    const std::string thin =
+        "voxel: 0.25\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
+        "  lattice: {struts: {cell: bcc, size: 5}, kernel: capsule, radius: 0.1}\n"
+        "result: lattice\noutputs: {mesh: a.stl}\nallow: [pieces]\n";
+    const std::string out = runRecipe(dir, thin, &status);
+    EXPECT_EQ(status, 0) << out;
+    EXPECT_NE(out.find("its thinnest struts are 0.2 mm across, less than two voxels (0.5 mm)"), std::string::npos)
+        << out;
+    EXPECT_NE(out.find("use `voxel: 0.1`"), std::string::npos) << out;
+    const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
+    EXPECT_NEAR(report["fields"]["lattice"]["thinnest_strut_mm"].get<double>(), 0.2, 1e-12);
+    EXPECT_EQ(report["warnings"][0]["code"], "sub_voxel_features");
+    EXPECT_NEAR(report["warnings"][0]["voxel_needed_mm"].get<double>(), 0.1, 1e-12);
+    // A convolution lattice's thinnest strut is sigma sqrt(2 ln(P / t)) across its middle: at
+    // level (isolated radius) 0.6 mm, 1.2 mm across, fine at 0.25 mm voxels, no warning.
+    const std::string fine =
+        "voxel: 0.25\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
+        "  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, "
+        "level: 0.6}\nresult: lattice\noutputs: {mesh: a.stl}\n";
+    const std::string quiet = runRecipe(dir, fine, &status);
+    EXPECT_EQ(status, 0) << quiet;
+    EXPECT_EQ(quiet.find("less than two voxels"), std::string::npos) << quiet;
 }
 
 TEST(StrutLattice, SparseGridMatchesBruteForce)

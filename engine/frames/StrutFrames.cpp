@@ -3,7 +3,9 @@
 #include "engine/core/InputFiles.h"
 
 #include "engine/core/Errors.h"
+#include "engine/core/SystemInfo.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -52,9 +54,28 @@ bool FrameBuilder::strut(const Vec3d& a, const Vec3d& b)
 }
 
 namespace {
+/// Refuses, before anything is allocated, a frame whose struts would not fit in memory: each
+/// strut costs about kBytesPerStrut across the frame, its convolution data and the strut index.
+/// 10^9 struts otherwise ran for minutes with no estimate and then ran out of memory.
+constexpr double kBytesPerStrut = 400.0;
+void checkStrutCount(const UnitCell& cell, const std::array<int, 3>& counts)
+{
+    const double cells = double(counts[0]) * double(counts[1]) * double(counts[2]);
+    const double struts = cells * double(cell.struts.size());
+    const double bytes = struts * kBytesPerStrut;
+    const double budget = 0.5 * double(availableMemoryBytes());
+    if (bytes > budget || struts > 2e9)
+        throw JobError("the frame would hold " + std::to_string(std::uint64_t(struts)) + " struts (" +
+                       std::to_string(std::uint64_t(cells)) + " cells of " + std::to_string(cell.struts.size()) +
+                       "), about " + std::to_string(std::uint64_t(bytes / 1e9 + 0.5)) +
+                       " GB, more than half the memory this machine has free (" +
+                       std::to_string(std::uint64_t(budget / 1e9 + 0.5)) + " GB): use larger cells or a smaller part");
+}
+
 template <typename Map>
 Frame mapCells(const UnitCell& cell, const std::array<int, 3>& counts, double tol, Map&& map)
 {
+    checkStrutCount(cell, counts);
     FrameBuilder builder(tol);
     for (int i = 0; i < counts[0]; ++i)
         for (int j = 0; j < counts[1]; ++j)
@@ -111,7 +132,11 @@ Frame clippedFrame(const UnitCell& cell, const Box3& region, const Vec3d& cellSi
                    const std::function<double(const Vec3d&)>& inside, double minLength)
 {
     std::array<int, 3> counts;
-    for (int a = 0; a < 3; ++a) counts[a] = std::max(1, int(std::ceil(region.extent()[a] / cellSize[a] - 1e-9)));
+    for (int a = 0; a < 3; ++a) {
+        const double n = std::ceil(region.extent()[a] / cellSize[a] - 1e-9);
+        counts[a] = int(std::clamp(n, 1.0, 2e9));
+    }
+    checkStrutCount(cell, counts);
     const double tol = 1e-6 * std::min({cellSize[0], cellSize[1], cellSize[2]});
     FrameBuilder builder(tol);
     auto map = [&](const Vec3d& u) {

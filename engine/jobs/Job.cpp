@@ -228,6 +228,30 @@ void Job::solveLevels()
                     "one period of the interior (" + std::to_string(pieces.size()) + " weighted pieces)";
         }
         entry["level"] = node.solid->level();
+        if (node.thinnest) {
+            // Known before any evaluation of the result: a strut thinner than two voxels breaks up
+            // or vanishes on the grid (and in the mesh and slices made from it).
+            const double thinnest = node.thinnest(node.solid->level());
+            entry["thinnest_strut_mm"] = thinnest;
+            if (thinnest <= 0.0)
+                mContext->warn("sub_voxel_features",
+                               "field `" + node.name +
+                                   "`: at its level some struts vanish between their joints (the iso-value is "
+                                   "above their peak): only the joints remain there; lower sigma or raise the "
+                                   "density or radius",
+                               {{"field", node.name}, {"thinnest_mm", 0.0}, {"voxel_mm", mDomain.voxel}});
+            else if (thinnest < 2.0 * mDomain.voxel)
+                mContext->warn("sub_voxel_features",
+                               "field `" + node.name + "`: its thinnest struts are " + formatNumber(thinnest) +
+                                   " mm across, less than two voxels (" + formatNumber(2.0 * mDomain.voxel) +
+                                   " mm): on the grid they break apart or vanish; use `voxel: " +
+                                   formatNumber(std::max(thinnest, 1e-3) / 2.0) +
+                                   "` or less, or thicken them (radius, density)",
+                               {{"field", node.name},
+                                {"thinnest_mm", thinnest},
+                                {"voxel_mm", mDomain.voxel},
+                                {"voxel_needed_mm", thinnest / 2.0}});
+        }
         fields[node.name] = entry;
     }
     for (const GradedNode& node : mBuilder.gradedNodes()) {
@@ -438,22 +462,69 @@ void Job::checkPieces()
     mReport["pieces"] = {
         {"count", count.pieces.size()}, {"connectivity", "voxels sharing a face (6-connected)"}, {"largest", largest}};
     if (count.pieces.size() <= 1) return;
+    // A piece other than the largest that touches the domain box and holds under 2 % of the
+    // largest is a crumb the box cut off a cell (a gyroid cut mid-cell leaves such corners): a
+    // warning. Any other piece floats free inside the part and would fall off the print: an error.
+    const openvdb::CoordBBox box = mDomain.indexBox();
+    auto isCrumb = [&](const Piece& p) {
+        bool touches = false;
+        for (int a = 0; a < 3; ++a)
+            touches = touches || p.bounds.min()[a] <= box.min()[a] || p.bounds.max()[a] >= box.max()[a];
+        return touches && double(p.voxels) < 0.02 * double(count.pieces[0].voxels);
+    };
+    std::size_t crumbs = 0;
+    std::uint64_t crumbVoxels = 0;
+    const Piece* firstFree = nullptr;
+    for (std::size_t i = 1; i < count.pieces.size(); ++i) {
+        if (isCrumb(count.pieces[i])) {
+            ++crumbs;
+            crumbVoxels += count.pieces[i].voxels;
+        } else if (!firstFree) {
+            firstFree = &count.pieces[i];
+        }
+    }
+    // Pieces holding together under 0.01 % of the solid are crumbs a trimming shape cut off (a
+    // `within:` rod across a gyroid leaves corners of a few voxels), wherever they lie.
+    const std::uint64_t freeVoxels = count.solidVoxels - count.pieces[0].voxels - crumbVoxels;
+    if (firstFree && double(freeVoxels) < 1e-4 * double(count.solidVoxels)) {
+        crumbs = count.pieces.size() - 1;
+        crumbVoxels += freeVoxels;
+        firstFree = nullptr;
+    }
+    const std::size_t free = count.pieces.size() - 1 - crumbs;
+    mReport["pieces"]["free"] = free;
+    mReport["pieces"]["box_crumbs"] = {{"count", crumbs}, {"volume_mm3", double(crumbVoxels) * voxelVolume}};
     const Piece& main = count.pieces[0];
-    const Piece& second = count.pieces[1];
+    auto centre = [&](const Piece& p) {
+        return vec(0.5 * (mDomain.worldOf(p.bounds.min()) + mDomain.worldOf(p.bounds.max()))).dump();
+    };
     std::ostringstream msg;
     msg << "the result `" << mRecipe.result << "` falls apart into " << count.pieces.size()
         << " pieces (voxels sharing a face): the largest holds "
-        << formatNumber(100.0 * double(main.voxels) / double(count.solidVoxels)) << " % of the solid, the next "
-        << formatNumber(double(second.voxels) * voxelVolume) << " mm3 around "
-        << vec(0.5 * (mDomain.worldOf(second.bounds.min()) + mDomain.worldOf(second.bounds.max()))).dump()
-        << ". Struts or walls thinner than two voxels (" << formatNumber(2 * mDomain.voxel)
+        << formatNumber(100.0 * double(main.voxels) / double(count.solidVoxels)) << " % of the solid";
+    if (free == 0) {
+        msg << "; the other " << crumbs << " are crumbs the domain box or a trimming shape cuts off cells ("
+            << formatNumber(double(crumbVoxels) * voxelVolume)
+            << " mm3 in all), loose in print: move or resize `domain:` (or the trimming shape) to cut the cells "
+               "elsewhere";
+        if (!mRecipe.allows("pieces"))
+            mContext->warn("box_crumbs", msg.str(),
+                           {{"count", crumbs}, {"volume_mm3", double(crumbVoxels) * voxelVolume}});
+        return;
+    }
+    msg << "; " << free << " float free inside the domain, the largest of them "
+        << formatNumber(double(firstFree->voxels) * voxelVolume) << " mm3 around " << centre(*firstFree);
+    if (crumbs > 0) msg << " (and " << crumbs << " crumbs where the domain box cuts cells)";
+    msg << ". Struts or walls thinner than two voxels (" << formatNumber(2 * mDomain.voxel)
         << " mm) break apart on the grid: use `voxel: " << formatNumber(mDomain.voxel / 2)
         << "` or less, or raise the density, radius or thickness; a convolution lattice at low density "
            "loses its struts to its joints when sigma is large: lower sigma. A plate of separate parts: "
            "add `allow: [pieces]`";
-    // Not yet an error: a box-cut lattice at a coarse voxel often leaves small cut-off fragments at
-    // the domain's faces, and which of those to fail on is still to be decided (issue 20).
-    if (!mRecipe.allows("pieces")) mContext->warn("pieces", msg.str(), {{"count", count.pieces.size()}});
+    if (mRecipe.allows("pieces")) {
+        mContext->warn("pieces", msg.str(), {{"count", count.pieces.size()}, {"free", free}});
+        return;
+    }
+    throw JobError(mRecipe.source->path + ": " + msg.str());
 }
 
 MeshMetadata Job::meshMetadata() const
@@ -484,6 +555,9 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
     std::vector<std::filesystem::path> paths;
     for (const OutputSpec& out : mRecipe.outputs) paths.push_back(outputPathIn(outDir, out.file, where));
     outputPathIn(outDir, "report.json", where);
+    // All or none: every file is written under a temporary name and the renames wait for the
+    // report; an output that fails (or a cancel) half-way leaves the folder as it was.
+    OutputTransaction transaction;
     for (std::size_t n = 0; n < mRecipe.outputs.size(); ++n) {
         const OutputSpec& out = mRecipe.outputs[n];
         const std::filesystem::path& path = paths[n];
@@ -520,6 +594,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         writePreview(picture, meshOptions(*firstMesh, mRecipe));
     }
     writeReport(outDir / "report.json");
+    transaction.commit();
 }
 
 BeamFrame Job::frame()
@@ -635,7 +710,16 @@ nlohmann::json Job::report() const
         entry["area_mm2"] = v.measures->area;
         return entry;
     };
-    if (!mMeshes.empty()) r["mesh"] = describe(*mMeshes.front());
+    if (!mMeshes.empty()) {
+        r["mesh"] = describe(*mMeshes.front());
+        // The volume a user gets is the mesh's: the voxel count differs from it by the surface's
+        // sub-voxel placement (and by projection or decimation), so it is kept apart, named.
+        if (!mMeshes.front()->files.empty() && r.contains("result") && r["result"].contains("volume_mm3")) {
+            r["result"]["voxel_count_volume_mm3"] = r["result"]["volume_mm3"];
+            r["result"]["volume_mm3"] = r["mesh"]["volume_mm3"];
+            r["result"]["volume_from"] = "the mesh " + mMeshes.front()->files.front();
+        }
+    }
     if (mMeshes.size() > 1) {
         r["meshes"] = nlohmann::json::array();
         for (const auto& v : mMeshes) {

@@ -163,6 +163,11 @@ public:
     void finish(const SliceSummary& s) override
     {
         writeWhole(mTemp / "slices.json", s.meta.dump(2) + "\n");
+        if (OutputTransaction* transaction = OutputTransaction::current()) {
+            transaction->add(mTemp.string(), mPath.string(), true);
+            mCommitted = true;
+            return;
+        }
         std::error_code ec;
         fs::remove(mPath, ec);  // an empty folder only (checked when opened; remove() fails on a full one)
         fs::rename(mTemp, mPath);

@@ -2,6 +2,7 @@
 
 #include "engine/core/Errors.h"
 #include "engine/core/InputFiles.h"
+#include "engine/parts/PlyReader.h"
 
 #include <Model/COM/NMR_DLLInterfaces.h>
 #include <OpenMesh/Core/IO/MeshIO.hh>
@@ -367,9 +368,12 @@ PartMesh readPartMesh(const std::filesystem::path& path, const std::string& show
         checkReadable(path, shown);
         checkStlHeader(path, shown);
         part.mesh = readStl(readBytes(path, shown), shown, part.format);
-    } else if (ext == ".obj" || ext == ".ply") {
+    } else if (ext == ".ply") {
+        part.format = "PLY";
+        part.mesh = readPly(readBytes(path, shown), shown);
+    } else if (ext == ".obj") {
         checkReadable(path, shown);
-        part.format = ext == ".obj" ? "OBJ" : "PLY";
+        part.format = "OBJ";
         part.mesh = readWithOpenMesh(path, shown, part.format);
     } else if (ext == ".3mf") {
         checkReadable(path, shown);

@@ -35,6 +35,9 @@ struct LevelNode {
     FieldPtr region{};
     /// Called with the solved level after a density solve (checks and notes that need it).
     std::function<void(double level)> onSolved{};
+    /// The diameter (mm) of the thinnest strut (or wall) the solid has at a level, where the node
+    /// knows it: the job warns before evaluating when it is below two voxels.
+    std::function<double(double level)> thinnest{};
     /// Measure the density with sub-voxel coverage rather than by counting voxel centres.
     bool subVoxelDensity = false;
     /// Measure the density on its own voxel lattice over densityBox (a spacing incommensurate

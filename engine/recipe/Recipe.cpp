@@ -208,7 +208,8 @@ const std::vector<KeySpec>& topLevelKeys()
          "one period of the result"},
         {"allow",
          {{"type", "array"}, {"items", oneOfWords({"pieces"})}},
-         "checks that only warn: pieces (a result in several pieces, e.g. a plate of separate parts)",
+         "checks that warn instead of failing: pieces (a result with pieces floating free, e.g. a plate of "
+         "separate parts)",
          "none"}};
     return keys;
 }

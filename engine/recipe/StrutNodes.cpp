@@ -1,5 +1,6 @@
 // Recipe node types for strut lattices (issue 3): `struts`, a frame of unit cells (or a
 // wireframe file) solidified by Gaussian convolution or by round capsules.
+#include "engine/core/Errors.h"
 #include "engine/core/Format.h"
 #include "engine/frames/StrutFrames.h"
 #include "engine/recipe/FieldBuilder.h"
@@ -14,6 +15,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iostream>
+#include <limits>
 #include <numbers>
 #include <sstream>
 
@@ -182,7 +184,7 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
     } else {
         if (!domainBox) s.fail("give `count:` or a `domain:` to fill");
         for (int a = 0; a < 3; ++a) {
-            counts[a] = int(std::floor((domainBox->max[a] - origin[a]) / size[a] + 1e-9));
+            counts[a] = int(std::min(std::floor((domainBox->max[a] - origin[a]) / size[a] + 1e-9), 2e9));
             if (counts[a] < 1)
                 s["size"].fail("a cell of " + std::to_string(size[a]) + " mm does not fit in the domain along " +
                                std::string(1, "xyz"[a]) + "; give a smaller size or `count:`");
@@ -307,7 +309,13 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
 {
     std::optional<UniformCells> uniform;
     FieldPtr region;
-    const Frame frame = buildFrame(builder, spec["struts"], name, uniform, region);
+    const Frame frame = [&] {
+        try {
+            return buildFrame(builder, spec["struts"], name, uniform, region);
+        } catch (const JobError& e) {
+            throw JobError(spec["struts"].where() + ": " + e.what());  // the line of the frame
+        }
+    }();
     if (frame.struts.empty()) spec["struts"].fail("the frame has no struts (is the design space empty?)");
     if (spec.has("level") && spec.has("density"))
         spec.fail("give either `level:` or `density:`, not both (density solves the level)");
@@ -414,6 +422,10 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         node.solid = node.density ? LevelSolid::unsolved(raw, SolidSide::Below)
                                   : std::make_shared<LevelSolid>(raw, SolidSide::Below,
                                                                  spec.has("level") ? spec["level"].number() : 0.0);
+        // A capsule's level is an offset of every radius.
+        double rMin = std::numeric_limits<double>::infinity();
+        for (const CapsuleStrut& c : struts) rMin = std::min({rMin, c.ra, c.rb});
+        node.thinnest = [rMin](double level) { return std::max(0.0, 2.0 * (rMin + level)); };
         recordFrame(builder, name, frame, capsuleRadius, [solid = node.solid](const Vec3d&) { return solid->level(); });
         FieldPtr result = node.solid;
         builder.addLevelNode(std::move(node));
@@ -517,6 +529,17 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     }
     node.solid = node.density ? LevelSolid::unsolved(evaluated, SolidSide::Below)
                               : std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
+    // Mid-strut, away from joints, a strut of peak p is a cylinder of radius sigma sqrt(2 ln(p / t))
+    // at iso-value t (none where p <= t: the strut vanishes).
+    node.thinnest = [raw, iso, n, sigma](double level) {
+        const double value = iso->valueOf(level);
+        double thinnest = std::numeric_limits<double>::infinity();
+        for (std::size_t j = 0; j < n; ++j) {
+            const double p = raw->peak(j);
+            thinnest = std::min(thinnest, p > value ? 2.0 * sigma[j] * std::sqrt(2.0 * std::log(p / value)) : 0.0);
+        }
+        return thinnest;
+    };
     recordFrame(builder, name, frame, convolutionRadius, [solid = node.solid](const Vec3d&) { return solid->level(); });
     if (periodic && node.density) {
         node.densityPeriod = uniform->size;

@@ -5,6 +5,7 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <stdexcept>
 #include <utility>
 
@@ -52,11 +53,67 @@ void AtomicFile::commit()
         discard();
         throw std::runtime_error("failed to write '" + mPath + "'" + why);
     }
+    if (OutputTransaction* transaction = OutputTransaction::current()) {
+        transaction->add(mTempPath, mPath, false);
+        mCommitted = true;
+        return;
+    }
     errno = 0;
     if (std::rename(mTempPath.c_str(), mPath.c_str()) != 0) {
         const std::string why = reason();
         discard();
         throw std::runtime_error("failed to rename '" + mTempPath + "' onto '" + mPath + "'" + why);
+    }
+    mCommitted = true;
+}
+
+namespace {
+thread_local OutputTransaction* tCurrentTransaction = nullptr;
+}
+
+OutputTransaction::OutputTransaction() : mOuter(tCurrentTransaction)
+{
+    tCurrentTransaction = this;
+}
+
+OutputTransaction::~OutputTransaction()
+{
+    tCurrentTransaction = mOuter;
+    if (mCommitted) return;
+    for (const Rename& r : mRenames) {
+        std::error_code ec;
+        if (r.folder)
+            std::filesystem::remove_all(r.temp, ec);
+        else
+            std::filesystem::remove(r.temp, ec);
+    }
+}
+
+OutputTransaction* OutputTransaction::current()
+{
+    return tCurrentTransaction;
+}
+
+void OutputTransaction::add(std::string temp, std::string path, bool folder)
+{
+    mRenames.push_back({std::move(temp), std::move(path), folder});
+}
+
+void OutputTransaction::commit()
+{
+    // Leave the thread first: a rename that throws must not leave a finished transaction current.
+    tCurrentTransaction = mOuter;
+    for (std::size_t i = 0; i < mRenames.size(); ++i) {
+        const Rename& r = mRenames[i];
+        std::error_code ec;
+        if (r.folder) std::filesystem::remove(r.path, ec);  // an empty folder only (checked when opened)
+        errno = 0;
+        if (std::rename(r.temp.c_str(), r.path.c_str()) != 0) {
+            const std::string message = "failed to rename '" + r.temp + "' onto '" + r.path + "'" + reason();
+            // The renamed ones stay; the destructor removes the temporaries still held.
+            mRenames.erase(mRenames.begin(), mRenames.begin() + std::ptrdiff_t(i));
+            throw std::runtime_error(message);
+        }
     }
     mCommitted = true;
 }

@@ -5,6 +5,7 @@
 #include <fstream>
 #include <ostream>
 #include <string>
+#include <vector>
 
 namespace voxlat {
 
@@ -42,6 +43,40 @@ private:
     std::string mPath;
     std::string mTempPath;
     std::ofstream mStream;
+    bool mCommitted = false;
+};
+
+/// Makes a job's outputs appear all together or not at all.
+///
+/// While an OutputTransaction is open on a thread, AtomicFile::commit() (and the slice folders'
+/// finish()) on that thread complete and close their temporary files but leave the renames to
+/// commit(), which performs them in order once every output is written. Destroyed without
+/// commit() (a later output failed, a cancel), it removes every temporary it holds, so a job that
+/// fails half-way leaves the output folder as it was.
+class OutputTransaction {
+public:
+    OutputTransaction();
+    ~OutputTransaction();
+    OutputTransaction(const OutputTransaction&) = delete;
+    OutputTransaction& operator=(const OutputTransaction&) = delete;
+
+    /// The transaction open on this thread, or nullptr.
+    static OutputTransaction* current();
+
+    /// Holds back the rename of @a temp onto @a path (a file, or a folder when @a folder: an
+    /// empty folder at @a path is replaced).
+    void add(std::string temp, std::string path, bool folder);
+
+    /// Performs every held-back rename. Throws std::runtime_error naming the path if one fails.
+    void commit();
+
+private:
+    struct Rename {
+        std::string temp, path;
+        bool folder;
+    };
+    std::vector<Rename> mRenames;
+    OutputTransaction* mOuter;
     bool mCommitted = false;
 };
 
