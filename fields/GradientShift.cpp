@@ -39,9 +39,12 @@ GradientShift::GradientShift(FieldPtr field, ShiftSpec spec) : mField(std::move(
         if (!(len > 0.0)) throw std::invalid_argument(mSpec.label + ": the build direction has zero length");
         mDirection = mSpec.direction / len;
     }
+    if (mSpec.oneSided && !mSpec.uniform)
+        throw std::invalid_argument("a one-sided gradient shift (an offset) takes a uniform magnitude");
     if (mSpec.uniform) {
         mConstantMagnitudes = constantOf(mSpec.uniform, mConstantUniform);
-        mConstantUniform = std::max(0.0, mConstantUniform * mSpec.scale);
+        mConstantUniform =
+            mSpec.oneSided ? mConstantUniform * mSpec.scale : std::max(0.0, mConstantUniform * mSpec.scale);
     } else {
         mConstantMagnitudes =
             directionConstant && constantOf(mSpec.wall, mConstantD) && constantOf(mSpec.layer, mConstantL);
@@ -101,7 +104,8 @@ void GradientShift::shiftsFromGradients(std::span<const Vec3d> points, const Vec
     std::vector<double> a(n), b(n);
     if (mSpec.uniform) {
         mSpec.uniform->values(points, a);
-        for (std::size_t i = 0; i < n; ++i) out[i] = std::max(0.0, mSpec.scale * a[i]) * unit(grad[i]);
+        for (std::size_t i = 0; i < n; ++i)
+            out[i] = (mSpec.oneSided ? mSpec.scale * a[i] : std::max(0.0, mSpec.scale * a[i])) * unit(grad[i]);
         return;
     }
     mSpec.wall->values(points, a);
@@ -143,7 +147,7 @@ void GradientShift::sheetValues(std::span<const Vec3d> points, const Vec3d* shif
     std::vector<double> f(2 * n);
     mField->values(shifted, f);
     for (std::size_t i = 0; i < n; ++i) {
-        out[i] = std::max(f[n + i], -f[i]);
+        out[i] = mSpec.oneSided ? f[n + i] : std::max(f[n + i], -f[i]);
         if (fPlus) fPlus[i] = f[i];
         if (fMinus) fMinus[i] = f[n + i];
     }
@@ -187,7 +191,7 @@ void GradientShift::gridValues(const GridBatch& batch, std::span<double> out) co
     shiftsFromGradients(points, g.data(), s.data(), n);
     // f is no longer needed: it receives f+.
     mField->gridValuesShifted(batch, s, f, minus);
-    for (std::size_t i = 0; i < n; ++i) out[i] = std::max(minus[i], -f[i]);
+    for (std::size_t i = 0; i < n; ++i) out[i] = mSpec.oneSided ? minus[i] : std::max(minus[i], -f[i]);
 }
 
 void GradientShift::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
@@ -219,7 +223,7 @@ void GradientShift::gradients(std::span<const Vec3d> points, std::span<double> o
         std::vector<Vec3d> decisive(count);
         std::vector<bool> minusSide(count);
         for (std::size_t i = 0; i < count; ++i) {
-            minusSide[i] = fMinus[i] >= -fPlus[i];
+            minusSide[i] = mSpec.oneSided || fMinus[i] >= -fPlus[i];
             decisive[i] = minusSide[i] ? p[i] - s[i] : p[i] + s[i];
         }
         std::vector<double> unused(count);
@@ -240,7 +244,8 @@ void GradientShift::gradients(std::span<const Vec3d> points, std::span<double> o
 
 double GradientShift::maxShift(const Box3& box) const
 {
-    if (mSpec.uniform) return mConstantMagnitudes ? mConstantUniform : upperMagnitude(mSpec.uniform, box, mSpec.scale);
+    if (mSpec.uniform)
+        return mConstantMagnitudes ? std::abs(mConstantUniform) : upperMagnitude(mSpec.uniform, box, mSpec.scale);
     if (mConstantMagnitudes) {
         if (mSpec.rotation == ShiftRotation::Tensor) return std::max(mConstantD, mConstantL);
         return std::max({mConstantM.x(), mConstantM.y(), mConstantM.z()});
@@ -265,6 +270,7 @@ Interval GradientShift::bound(const Box3& box) const
     const double grow = maxShift(box);
     const Box3 grown{box.min - Vec3d(grow), box.max + Vec3d(grow)};
     const Interval b = mField->bound(grown);
+    if (mSpec.oneSided) return b;  // F = f- lies in b
     // f+ and f- both lie in b; F = max(f-, -f+).
     return {std::max(b.lo, -b.hi), std::max(b.hi, -b.lo)};
 }

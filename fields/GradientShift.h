@@ -33,6 +33,9 @@ struct ShiftSpec {
     std::array<FieldPtr, 3> directionComponents;  ///< or: (bx, by, bz) from three fields
     ShiftRotation rotation = ShiftRotation::Rodrigues;
     double scale = 1.0;  ///< multiplies every magnitude (0.5 turns total wall thicknesses into shifts)
+    /// One side only (an offset): F(x) = f(x - s(x)), f's zero set moved by s along the unit
+    /// gradient. The magnitude keeps its sign (m < 0 moves the set against the gradient).
+    bool oneSided = false;
     std::string label = "gradient shift";  ///< names the node in error messages
 };
 
@@ -41,6 +44,9 @@ struct ShiftSpec {
 /// negative inside (f- <= 0 <= f+), where s(x) is the shift vector built from the unit gradient
 /// n(x) = grad f / |grad f| and the magnitudes: s = m n (uniform) or the anisotropic forms of
 /// ShiftRotation. Where grad f vanishes the shift is zero. Values are in f's units.
+///
+/// With ShiftSpec::oneSided, F(x) = f-(x) = f(x - m n(x)) (uniform magnitude m of either sign):
+/// the zero set moved m along the unit gradient, to first order in m times the curvature.
 ///
 /// Evaluation works in batches: one gradients() call for n, one values() call on the 2N shifted
 /// points. Gradients are exact up to the central difference used for the Jacobian of s:

@@ -267,7 +267,7 @@ TEST(RecipeLanguage, BrokenRecipesGiveTheExpectedMessages)
         {recipeWith("  f: {expt: \"x\"}\n"),
          {"bad.yaml:4:6: field `f`: unknown node type `expt`; did you mean `expr`?"}},
         {recipeWith("  f: {expr: \"x\", levle: 1}\n"),
-         {"unknown key `levle`; did you mean `level`?", "(valid keys: expr, solid, level, density)"}},
+         {"unknown key `levle`; did you mean `level`?", "(valid keys: expr, solid, level, density, offset)"}},
         {recipeWith("  f: {vector: [1, 0, 0], normalize: true}\n"),
          {"unknown key `normalize`", "(valid keys: vector)"}},
         {"parms: {a: 1}\n" + recipeWith("  f: {sphere: {radius: 1}}\n"),

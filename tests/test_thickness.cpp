@@ -19,6 +19,7 @@
 #include <gtest/gtest.h>
 #include <openvdb/tools/Interpolation.h>
 
+#include <iostream>
 #include <numbers>
 #include <random>
 
@@ -541,4 +542,83 @@ fields:
     for (const Vec3d& p : randomPoints(200, 0.5, 7.5, 22))
         largest = std::max(largest, std::abs(byVector->value(p) - vertical->value(p)));
     EXPECT_GT(largest, 1e-3);
+}
+
+namespace {
+
+/// The distance from @a x to the zero set of @a f near it: Newton onto the surface, then the
+/// foot point slid until x - y is along the normal (a few rounds; exact for small distances).
+double distanceToSurface(const FieldNode& f, const Vec3d& x)
+{
+    Vec3d y = x;
+    for (int round = 0; round < 30; ++round) {
+        for (int k = 0; k < 20; ++k) {
+            const auto [v, g] = f.valueAndGradient(y);
+            y -= (v / g.lengthSqr()) * g;
+        }
+        const Vec3d n = f.valueAndGradient(y).second.unit();
+        const Vec3d d = x - y;
+        y += d - d.dot(n) * n;  // the tangential part: towards the foot point
+    }
+    for (int k = 0; k < 20; ++k) {
+        const auto [v, g] = f.valueAndGradient(y);
+        y -= (v / g.lengthSqr()) * g;
+    }
+    return (x - y).length();
+}
+
+}  // namespace
+
+TEST(Offset, GyroidNetworkMovesByTheOffsetInMillimetres)
+{
+    // The offset network's surface (mesh vertices moved onto it) lies m from the original
+    // surface, along its normal, within a small fraction of the 0.1 mm voxel.
+    const FieldPtr original = gyroid(10.0);
+    for (const double m : {0.3, -0.3}) {
+        const std::string text =
+            "voxel: 0.1\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
+            "  g: {tpms: gyroid, cell: 10, offset: " +
+            std::to_string(m) + "}\nresult: g\n";
+        Job job(parseRecipe(text, "offset.yaml", "."));
+        const TriangleMesh& mesh = job.mesh(MeshOptions{true, std::nullopt});
+        double worst = 0.0, sum = 0.0;
+        int n = 0;
+        for (std::size_t i = 0; i < mesh.points.size(); i += 7) {
+            const Vec3d p(mesh.points[i][0], mesh.points[i][1], mesh.points[i][2]);
+            if (std::min({p[0], p[1], p[2]}) < 0.5 || std::max({p[0], p[1], p[2]}) > 9.5) continue;
+            // The solid grows for m > 0: the vertex is outside the original (f > 0) by m.
+            EXPECT_EQ(original->value(p) > 0.0, m > 0.0);
+            const double err = std::abs(distanceToSurface(*original, p) - std::abs(m));
+            worst = std::max(worst, err);
+            sum += err;
+            ++n;
+        }
+        ASSERT_GT(n, 1000);
+        EXPECT_LT(worst, 0.002) << "m = " << m;  // a fiftieth of a voxel (measured: 0.0002 mm)
+        EXPECT_LT(sum / n, 0.0005) << "m = " << m;
+        std::cout << "offset " << m << " mm: |distance - m| max " << worst << " mm, mean " << sum / n << " mm over "
+                  << n << " vertices\n";
+    }
+}
+
+TEST(Offset, RecipeErrorsNameTheKey)
+{
+    const std::string head = "voxel: 0.5\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n";
+    struct Case {
+        std::string field, expect;
+    };
+    const std::vector<Case> cases{
+        {"  g: {tpms: gyroid, cell: 10, solid: sheet, level: 0.3, offset: 0.2}\n", "a sheet takes `thickness:`"},
+        {"  g: {tpms: gyroid, cell: 10, solid: sheet, thickness: 0.5, offset: 0.2}\n", "a sheet takes `thickness:`"},
+        {"  g: {tpms: gyroid, cell: 10, density: 0.3, offset: 0.2}\n", "not both"},
+    };
+    for (const Case& c : cases) {
+        try {
+            Job job(parseRecipe(head + c.field + "result: g\n", "bad.yaml", "."));
+            ADD_FAILURE() << "no error for " << c.field;
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find("bad.yaml:4:"), std::string::npos) << e.what();
+            EXPECT_NE(std::string(e.what()).find(c.expect), std::string::npos) << e.what();
+        }
+    }
 }

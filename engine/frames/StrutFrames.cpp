@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <numbers>
 #include <sstream>
@@ -191,6 +192,8 @@ Frame readWireframe(const std::string& path)
     if (!in) throw InputError(path + ": cannot open the file (check the path; it is relative to the recipe's folder)");
     std::vector<Vec3d> nodes;
     std::vector<std::tuple<Vec3d, Vec3d, int>> struts;
+    std::vector<std::array<double, 2>> rowRadii;  // per 8-column row
+    int sixColumns = 0, eightColumns = 0;
     std::vector<std::tuple<long, long, int>> indexed;
     std::string text;
     int lineNo = 0;
@@ -216,6 +219,13 @@ Frame readWireframe(const std::string& path)
                 throw InputError(where + ": column " + std::to_string(i + 1) + " is not a number");
             }
         };
+        // A header row (`x1,y1,z1,x2,y2,z2,r1,r2` as a frame output writes it, or any other
+        // words): first line, first cell neither a number nor a row kind.
+        if (lineNo == 1 && !cells.empty() && cells[0] != "node" && cells[0] != "strut") {
+            char* end = nullptr;
+            std::strtod(cells[0].c_str(), &end);
+            if (cells[0].empty() || *end != '\0') continue;
+        }
         if (!cells.empty() && cells[0] == "node" && cells.size() == 4) {
             nodes.emplace_back(num(1), num(2), num(3));
         } else if (!cells.empty() && cells[0] == "strut" && cells.size() == 3) {
@@ -223,14 +233,29 @@ Frame readWireframe(const std::string& path)
             if (i != std::floor(i) || j != std::floor(j))
                 throw InputError(where + ": node indices are whole numbers (0-based)");
             indexed.emplace_back(long(i), long(j), lineNo);
-        } else if (cells.size() == 6) {
+        } else if (cells.size() == 6 || cells.size() == 8) {
             struts.emplace_back(Vec3d(num(0), num(1), num(2)), Vec3d(num(3), num(4), num(5)), lineNo);
+            if (cells.size() == 8) {
+                const double r1 = num(6), r2 = num(7);
+                if (!(r1 > 0.0 && r2 > 0.0)) throw InputError(where + ": radii are greater than zero (mm)");
+                rowRadii.push_back({r1, r2});
+                ++eightColumns;
+            } else {
+                ++sixColumns;
+            }
+            if (sixColumns && eightColumns)
+                throw InputError(where +
+                                 ": every strut row has radii (x1,y1,z1,x2,y2,z2,r1,r2) or none (x1,y1,z1,x2,y2,z2)");
         } else if (lineNo == 1) {
             continue;  // a header row
         } else {
-            throw InputError(where + ": expected `node,x,y,z`, `strut,i,j` or six numbers `x1,y1,z1,x2,y2,z2`");
+            throw InputError(where +
+                             ": expected `node,x,y,z`, `strut,i,j`, six numbers `x1,y1,z1,x2,y2,z2` or eight "
+                             "`x1,y1,z1,x2,y2,z2,r1,r2`");
         }
     }
+    if (eightColumns && !indexed.empty())
+        throw InputError(path + ": give struts either as `strut,i,j` rows or as rows with radii, not both");
     for (const auto& [i, j, no] : indexed) {
         for (long k : {i, j})
             if (k < 0 || k >= long(nodes.size()))
@@ -243,13 +268,26 @@ Frame readWireframe(const std::string& path)
     double size = 0.0;
     for (const auto& [a, b, no] : struts) size = std::max(size, (b - a).length());
     FrameBuilder builder(1e-9 * size);
-    for (const auto& [a, b, no] : struts) {
+    std::vector<std::array<double, 2>> radii;
+    std::vector<int> forward;  // per strut with radii: the node its row starts at
+    for (std::size_t k = 0; k < struts.size(); ++k) {
+        const auto& [a, b, no] = struts[k];
         if ((b - a).length() <= 1e-9 * size)
             throw InputError(path + ":" + std::to_string(no) +
                              ": zero-length strut (both ends at the same point); remove it");
-        builder.strut(a, b);
+        const int first = builder.node(a);
+        if (builder.strut(a, b) && !rowRadii.empty()) {
+            radii.push_back(rowRadii[k]);
+            forward.push_back(first);
+        }
     }
-    return builder.take();
+    Frame frame = builder.take();
+    // Rows with radii keep their direction (the builder stores struts low index first): a frame
+    // output read back gives the very struts it was written from, so the same field bits.
+    for (std::size_t k = 0; k < forward.size(); ++k)
+        if (frame.struts[k][0] != forward[k]) std::swap(frame.struts[k][0], frame.struts[k][1]);
+    frame.radii = std::move(radii);
+    return frame;
 }
 
 }  // namespace voxlat

@@ -17,6 +17,9 @@ namespace voxlat {
 struct Frame {
     std::vector<Vec3d> nodes;
     std::vector<std::array<int, 2>> struts;
+    /// Radii at the two ends of each strut (mm) when the frame came with them (a wireframe CSV
+    /// with `r1,r2` columns); empty otherwise.
+    std::vector<std::array<double, 2>> radii;
 
     /// The box holding every node.
     Box3 bounds() const;
@@ -63,8 +66,10 @@ Frame clippedFrame(const UnitCell& cell, const Box3& region, const Vec3d& cellSi
                    const std::function<double(const Vec3d&)>& inside, double minLength);
 
 /// A wireframe file: OBJ (`v` and `l` elements) or CSV (rows `node,x,y,z` and `strut,i,j` with
-/// 0-based node indices, or six numbers `x1,y1,z1,x2,y2,z2` per strut). Throws InputError naming
-/// file and line for dangling indices, zero-length struts and unreadable rows.
+/// 0-based node indices, or six numbers `x1,y1,z1,x2,y2,z2` per strut, or eight
+/// `x1,y1,z1,x2,y2,z2,r1,r2` with the radii at its ends, as a frame output writes them; a header
+/// row first is skipped). Radii, when every strut row has them, land in Frame::radii. Throws
+/// InputError naming file and line for dangling indices, zero-length struts and unreadable rows.
 Frame readWireframe(const std::string& path);
 
 }  // namespace voxlat

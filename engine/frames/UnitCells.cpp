@@ -304,7 +304,7 @@ UnitCell unitCellFromLines(const std::vector<CellLine>& lines, const std::string
     return buildCell(unit, name, 1e-6);
 }
 
-std::vector<CellLine> readObjLines(const std::string& path)
+std::vector<ObjPolyline> readObjPolylines(const std::string& path)
 {
     if (std::filesystem::exists(path))
         checkInputFile(path, kMaxDataFileBytes, "cell file");  // before open: a FIFO blocks
@@ -351,11 +351,21 @@ std::vector<CellLine> readObjLines(const std::string& path)
             polylines.emplace_back(idx, lineNo);
         }
     }
+    if (polylines.empty()) throw InputError(path + ": no `l` elements (lines) in the file");
+    std::vector<ObjPolyline> out;
+    for (const auto& [idx, no] : polylines) {
+        ObjPolyline p{{}, path + ":" + std::to_string(no)};
+        for (const long i : idx) p.points.push_back(v[i]);
+        out.push_back(std::move(p));
+    }
+    return out;
+}
+
+std::vector<CellLine> readObjLines(const std::string& path)
+{
     std::vector<CellLine> lines;
-    for (const auto& [idx, no] : polylines)
-        for (std::size_t k = 0; k + 1 < idx.size(); ++k)
-            lines.push_back({v[idx[k]], v[idx[k + 1]], path + ":" + std::to_string(no)});
-    if (lines.empty()) throw InputError(path + ": no `l` elements (lines) in the file");
+    for (const ObjPolyline& p : readObjPolylines(path))
+        for (std::size_t k = 0; k + 1 < p.points.size(); ++k) lines.push_back({p.points[k], p.points[k + 1], p.where});
     return lines;
 }
 

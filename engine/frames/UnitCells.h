@@ -40,6 +40,15 @@ UnitCell unitCellFromLines(const std::vector<CellLine>& lines, const std::string
 /// consecutive lines. Throws InputError with "file:line: ..." for bad or dangling indices.
 std::vector<CellLine> readObjLines(const std::string& path);
 
+/// One OBJ `l` element: its vertices in order and "file:line".
+struct ObjPolyline {
+    std::vector<Vec3d> points;
+    std::string where;
+};
+/// The `l` elements of an OBJ file as polylines (at least two vertices each), in file order.
+/// Throws InputError naming file and line for bad vertices and indices, or when there is none.
+std::vector<ObjPolyline> readObjPolylines(const std::string& path);
+
 /// The problems that make a cell invalid for tiling: a face without nodes, a node on a face
 /// without its mirror node on the opposite face. Empty for a valid cell.
 std::vector<std::string> unitCellProblems(const UnitCell& cell);

@@ -166,6 +166,10 @@ Job::Job(Recipe recipe, JobContext* context)
         // A job this machine cannot run (exit 3), said before any allocation.
         throw JobError((mRecipe.root["voxel"] ? mRecipe.node("voxel").where() : mRecipe.source->path) + ": " + message);
     }
+    for (const OutputSpec& out : mRecipe.outputs)
+        if (out.kind == "frame" && mBuilder.strutFrames().empty())
+            RecipeNode(out.spec, mRecipe.source, "outputs")
+                .fail("a frame output writes the struts of a `struts:` field, and this recipe has none");
     for (const FieldBuilder::Preparation& p : mBuilder.preparations())
         timed(p.stage, [&] {
             p.run();
@@ -572,6 +576,8 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
             writeSlices(out.spec, path);
         } else if (out.kind == "properties") {
             writeProperties(path);
+        } else if (out.kind == "frame") {
+            writeFrameFile(path);
         }
     }
     // A picture of what was meshed, next to the first mesh, so the part can be checked by eye.
@@ -584,6 +590,44 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
     }
     writeReport(outDir / "report.json");
     transaction.commit();
+}
+
+BeamFrame Job::frame()
+{
+    solveLevels();
+    BeamFrame all;
+    for (const StrutFrameRecord& f : mBuilder.strutFrames()) {
+        const int offset = int(all.nodes.size());
+        all.nodes.insert(all.nodes.end(), f.nodes.begin(), f.nodes.end());
+        for (const auto& s : f.struts) all.struts.push_back({s[0] + offset, s[1] + offset});
+        const auto radii = f.radii();
+        all.radii.insert(all.radii.end(), radii.begin(), radii.end());
+    }
+    return all;
+}
+
+void Job::writeFrameFile(const std::filesystem::path& path)
+{
+    checkReplaceable(path, mRecipe.source->path + ": frame output");
+    const BeamFrame f = frame();
+    timed("write " + path.filename().string(), [&] {
+        writeFrame(f, path.string(), meshMetadata());
+        return 0;
+    });
+    double rMin = f.radii.empty() ? 0.0 : std::numeric_limits<double>::infinity(), rMax = 0.0;
+    for (const auto& r : f.radii)
+        for (const double v : r) {
+            rMin = std::min(rMin, v);
+            rMax = std::max(rMax, v);
+        }
+    nlohmann::json files = mReport.contains("frame") ? mReport["frame"]["files"] : nlohmann::json::array();
+    files.push_back(path.string());
+    mReport["frame"] = {{"files", files},
+                        {"nodes", f.nodes.size()},
+                        {"struts", f.struts.size()},
+                        {"radius_min_mm", rMin},
+                        {"radius_max_mm", rMax}};
+    mReport["outputs"].push_back(path.string());
 }
 
 const nlohmann::json& Job::properties()

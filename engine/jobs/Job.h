@@ -8,6 +8,7 @@
 #include "engine/recipe/MeshSettings.h"
 #include "engine/recipe/Recipe.h"
 #include "mesher/extract/TriangleMesh.h"
+#include "mesher/writers/FrameWriters.h"
 #include "mesher/writers/MeshWriters.h"
 
 #include <openvdb/openvdb.h>
@@ -64,6 +65,12 @@ public:
     const nlohmann::json& properties();
     /// Writes properties() to @a path (.json) and the directional Young's modulus picture next to it (.png).
     void writeProperties(const std::filesystem::path& path);
+
+    /// Every strut frame of the recipe (in build order, one node list): nodes, struts and the
+    /// radius at each strut end at the solved level (solves the levels first).
+    BeamFrame frame();
+    /// Writes frame() to @a path (.csv, .obj or .3mf, mesher/writers/FrameWriters).
+    void writeFrameFile(const std::filesystem::path& path);
 
     /// Levels, densities, counts, timings and peak memory so far.
     nlohmann::json report() const;

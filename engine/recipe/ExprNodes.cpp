@@ -68,9 +68,11 @@ private:
 FieldPtr buildExpr(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
 {
     FieldPtr raw = equationField(builder, spec["expr"]);
-    if (!spec.has("solid") && !spec.has("level") && !spec.has("density")) return raw;
+    if (!spec.has("solid") && !spec.has("level") && !spec.has("density") && !spec.has("offset")) return raw;
     const SolidSide side = readSolidSide(spec);
-    LevelNode node{name, side == SolidSide::Band ? "expr sheet" : "expr network", nullptr};
+    std::string offset;
+    if (spec.has("offset")) raw = networkOffset(builder, spec, raw, side, name, 0.0, offset);
+    LevelNode node{name, (side == SolidSide::Band ? "expr sheet" : "expr network") + offset, nullptr};
     readLevelKeys(spec, node, raw, side, 0.0, side == SolidSide::Band ? LevelRule::Required : LevelRule::Optional);
     FieldPtr result = node.solid;
     builder.addLevelNode(std::move(node));
@@ -180,12 +182,14 @@ FieldPtr orientedField(FieldBuilder& builder, const RecipeNode& spec, FieldPtr c
 void addExprNodeTypes(std::vector<NodeType>& types)
 {
     using namespace valueSchema;
-    types.push_back({"expr",
-                     {{"expr", string(), "an equation in x, y, z, $params and field names", "required"},
-                      solidKey(),
-                      levelKey(),
-                      densityKey()},
-                     buildExpr});
+    types.push_back(
+        {"expr",
+         {{"expr", string(), "an equation in x, y, z, $params and field names", "required"},
+          solidKey(),
+          levelKey(),
+          densityKey(),
+          {"offset", number(), "moves a network's surface m mm along its unit gradient (outwards for m > 0)", "—"}},
+         buildExpr});
     types.push_back({"vector",
                      {{"vector",
                        {{"type", "array"},

@@ -15,6 +15,7 @@ const std::vector<NodeType>& FieldBuilder::nodeTypes()
         addStrutNodeTypes(t);
         addDesignNodeTypes(t);
         addExprNodeTypes(t);
+        addFalloffNodeTypes(t);
         addShapeNodeTypes(t);
         return t;
     }();

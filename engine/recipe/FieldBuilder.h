@@ -68,6 +68,15 @@ struct GradedNode {
     double slab = 0.0;        ///< slab thickness (mm): one cell along the axis
 };
 
+/// A strut lattice's frame, for `outputs: {frame: F}`: nodes, struts and the radius at each
+/// strut end at the solved level (radii() is called after the levels are solved).
+struct StrutFrameRecord {
+    std::string name;
+    std::vector<Vec3d> nodes;
+    std::vector<std::array<int, 2>> struts;
+    std::function<std::vector<std::array<double, 2>>()> radii;
+};
+
 class FieldBuilder;
 
 /// One node type of the recipe language: the key that names it, its valid keys (with their value
@@ -115,6 +124,9 @@ public:
     /// Graded-density lattices, in build order.
     const std::vector<GradedNode>& gradedNodes() const { return mGradedNodes; }
     void addGradedNode(GradedNode node) { mGradedNodes.push_back(std::move(node)); }
+    /// Strut frames, in build order (the fields the result uses).
+    const std::vector<StrutFrameRecord>& strutFrames() const { return mStrutFrames; }
+    void addStrutFrame(StrutFrameRecord frame) { mStrutFrames.push_back(std::move(frame)); }
     /// Passes a warning to the job's context (it lands in report.json too).
     void warn(const std::string& code, const std::string& message, nlohmann::json details = nlohmann::json::object())
     {
@@ -137,6 +149,7 @@ private:
     std::vector<Preparation> mPreparations;
     std::vector<std::function<void(nlohmann::json&)>> mReporters;
     std::vector<GradedNode> mGradedNodes;
+    std::vector<StrutFrameRecord> mStrutFrames;
 };
 
 /// Reads `solid:` of a lattice node: `network` (f <= level, the default) or `sheet` (|f| <= level).
@@ -166,12 +179,19 @@ std::shared_ptr<LevelSolid> readLevelKeys(const RecipeNode& spec, LevelNode& nod
 /// (engine/jobs/PropertyDesign) into `density:` and `sigma:` before it builds fields.
 [[noreturn]] void refuseUnresolvedDesign(const RecipeNode& key);
 
+/// LatticeNodes.cpp: `offset: m` of a network (@a side must be Below): @a raw moved m mm along its
+/// unit gradient (a one-sided GradientShift); @a cell (0: none) for the large-offset warning.
+/// @a description receives ", offset m mm (gradient shift)".
+FieldPtr networkOffset(FieldBuilder& builder, const RecipeNode& spec, FieldPtr raw, SolidSide side,
+                       const std::string& name, double cell, std::string& description);
+
 /// Node types by family; each family lives in its own file.
 void addShapeNodeTypes(std::vector<NodeType>& types);    // ShapeNodes.cpp: primitives, booleans, transforms
 void addLatticeNodeTypes(std::vector<NodeType>& types);  // LatticeNodes.cpp: tpms
 void addStrutNodeTypes(std::vector<NodeType>& types);    // StrutNodes.cpp: strut lattices
 void addDesignNodeTypes(std::vector<NodeType>& types);   // DesignNodes.cpp: meshes, shells, infill
 void addExprNodeTypes(std::vector<NodeType>& types);     // ExprNodes.cpp: user equations
+void addFalloffNodeTypes(std::vector<NodeType>& types);  // FalloffNodes.cpp: point and curve fields
 
 /// DesignNodes.cpp: true when an `infill` node solves the level of the lattice field @a name (its
 /// `density:` counts for that lattice, which then needs no level of its own).

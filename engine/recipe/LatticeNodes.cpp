@@ -4,6 +4,7 @@
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/ScalarMaps.h"
 #include "engine/recipe/SkinNodes.h"
+#include "fields/Constant.h"
 #include "fields/GradedLevel.h"
 #include "fields/GradientShift.h"
 #include "fields/TpmsEquations.h"
@@ -11,6 +12,7 @@
 #include "fields/VectorField.h"
 
 #include <algorithm>
+#include <cmath>
 #include <sstream>
 
 namespace voxlat {
@@ -194,6 +196,8 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
                                                       : "rotation";
         if (side != SolidSide::Band)
             spec[key].fail("a wall thickness makes a sheet: add `solid: sheet` (a network has no walls to thicken)");
+        if (spec.has("offset"))
+            spec["offset"].fail("`offset` moves a network's surface; a sheet takes `thickness:` (its walls in mm)");
         if (spec.has("level") || spec.has("density"))
             spec[spec.has("level") ? "level" : "density"].fail(
                 "give either a thickness in millimetres or `level:`/`density:`, not both");
@@ -209,10 +213,13 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
         builder.addLevelNode(std::move(node));
         return result;
     }
+    std::string offsetText;
+    if (spec.has("offset"))
+        raw = networkOffset(builder, spec, raw, side, name, std::min({cell[0], cell[1], cell[2]}), offsetText);
     if (spec.has("density") && !spec["density"].isNumber())
         return buildGraded(builder, spec, name, raw, side, cell, std::string(tpmsName(type)) + " " + solidName,
                            spec.has("axes") && !spec.has("frame") ? plain : nullptr);
-    LevelNode node{name, std::string(tpmsName(type)) + " " + solidName, nullptr, {}};
+    LevelNode node{name, std::string(tpmsName(type)) + " " + solidName + offsetText, nullptr, {}};
     if (region) {
         node.region = node.densityMask = region;
         node.densityOf = "the cells of the skin frame";
@@ -236,6 +243,33 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
 }
 
 }  // namespace
+
+FieldPtr networkOffset(FieldBuilder& builder, const RecipeNode& spec, FieldPtr raw, SolidSide side,
+                       const std::string& name, double cell, std::string& description)
+{
+    // The network's surface moved m mm along its unit gradient: f(x - m n(x)) <= c, the
+    // one-sided form of the sheet's gradient shift.
+    const RecipeNode o = spec["offset"];
+    if (side != SolidSide::Below)
+        o.fail("`offset` moves a network's surface; a sheet takes `thickness:` (its walls in mm)");
+    if (spec.has("density"))
+        o.fail("give either `offset:` or `density:`, not both: the density solve would move the surface back");
+    const double m = o.number();
+    if (!std::isfinite(m)) o.fail("the offset is a number of millimetres");
+    if (cell > 0.0 && std::abs(m) > 0.1 * cell) {
+        std::ostringstream msg;
+        msg << "field `" << name << "`: an offset of " << m << " mm is more than 10 % of the " << cell
+            << " mm cell; the gradient shift moves the surface by the offset only while it is small against "
+               "the surface's curvature radius";
+        builder.warn("large_offset", msg.str(), {{"field", name}, {"offset_mm", m}});
+    }
+    ShiftSpec shift;
+    shift.uniform = std::make_shared<ConstantField>(m);
+    shift.oneSided = true;
+    shift.label = "field `" + name + "`";
+    description = ", offset " + mm(m) + " mm (gradient shift)";
+    return std::make_shared<GradientShift>(std::move(raw), std::move(shift));
+}
 
 void addLatticeNodeTypes(std::vector<NodeType>& types)
 {
@@ -261,6 +295,8 @@ void addLatticeNodeTypes(std::vector<NodeType>& types)
          "—"},
         {"frame", anyMap(), "conformal cells: {cylinder: ...}, {sphere: ...} or {skin: ...}", "box cells"}};
     tpms.insert(tpms.end(), thicknessKeys.begin(), thicknessKeys.end());
+    tpms.push_back(
+        {"offset", number(), "moves a network's surface m mm along its unit gradient (outwards for m > 0)", "—"});
     tpms.push_back(
         {"axes", orientationSchema(), "the cells' axes follow a frame field (as the orient node)", "world axes"});
     types.push_back({"tpms", tpms, buildTpms});

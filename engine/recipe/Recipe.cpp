@@ -152,7 +152,8 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
                     continue;
                 }
                 checkOutputName(one, kind);
-                r.outputs.push_back({kind, one.string(), {}});
+                // A frame output keeps its node: without struts the job names its line.
+                r.outputs.push_back({kind, one.string(), kind == "frame" ? one.yaml() : YAML::Node()});
             }
         }
     }
@@ -174,6 +175,9 @@ void checkOutputName(const RecipeNode& node, const std::string& kind)
     if (kind == "mesh" && ext != ".stl" && ext != ".3mf" && ext != ".ply" && ext != ".obj")
         node.fail("a mesh file ends in .stl, .3mf, .ply or .obj; `" + name + "` does not");
     if (kind == "vdb" && ext != ".vdb") node.fail("a vdb output ends in .vdb; `" + name + "` does not");
+    if (kind == "frame" && ext != ".csv" && ext != ".obj" && ext != ".3mf")
+        node.fail("a frame file ends in .csv (x1,y1,z1,x2,y2,z2,r1,r2), .obj (v / l) or .3mf (beam lattice); `" + name +
+                  "` does not");
     if (kind == "properties" && ext != ".json")
         node.fail("a properties output ends in .json (the numbers; a picture NAME.png is written next to it); `" +
                   name + "` does not");
@@ -223,6 +227,11 @@ const std::vector<KeySpec>& outputKinds()
         {"slices",
          {{"anyOf", {ref("slices"), {{"type", "array"}, {"items", ref("slices")}}}}},
          "resin-printer slices: a map (or a list of maps) of slice settings",
+         "—"},
+        {"frame",
+         {{"anyOf", {string(), {{"type", "array"}, {"items", string()}}}}},
+         "the strut frame (nodes, struts, radii at the solved level): .csv (x1,y1,z1,x2,y2,z2,r1,r2 per strut), "
+         ".obj (v / l) or .3mf (Beam Lattice extension)",
          "—"},
         {"properties", string(),
          "effective stiffness and conductivity of one periodic cell (.json, and a picture of the directional Young's "

@@ -283,6 +283,29 @@ std::vector<std::array<double, 2>> readRadii(const RecipeNode& r, const Frame& f
     return radii;
 }
 
+/// Records @a frame for frame outputs (`outputs: {frame: F}`): @a endRadius(j, e, level) is
+/// strut j's radius at end e for the level there, @a levelAt(p) the solved level at a point.
+void recordFrame(FieldBuilder& builder, const std::string& name, const Frame& frame,
+                 std::function<double(std::size_t, int, double)> endRadius, std::function<double(const Vec3d&)> levelAt)
+{
+    StrutFrameRecord record{name, frame.nodes, frame.struts, {}};
+    record.radii = [frame, endRadius = std::move(endRadius), levelAt = std::move(levelAt)] {
+        std::vector<std::array<double, 2>> r(frame.struts.size());
+        for (std::size_t j = 0; j < frame.struts.size(); ++j)
+            for (int e = 0; e < 2; ++e) r[j][e] = endRadius(j, e, levelAt(frame.nodes[frame.struts[j][e]]));
+        return r;
+    };
+    builder.addStrutFrame(std::move(record));
+}
+
+/// The level of a graded lattice at a point: value = indicator - level.
+std::function<double(const Vec3d&)> gradedLevelAt(const FieldPtr& graded)
+{
+    return [graded](const Vec3d& p) {
+        return static_cast<const GradedLevel&>(*graded).indicator()->value(p) - graded->value(p);
+    };
+}
+
 FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
 {
     std::optional<UniformCells> uniform;
@@ -321,7 +344,10 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     if (kernel.isMap()) kernel.checkKeys({"gaussian", "capsule"});
     const std::size_t n = frame.struts.size();
     std::optional<std::vector<std::array<double, 2>>> radii;
-    if (spec.has("radius")) radii = readRadii(spec["radius"], frame);
+    if (spec.has("radius"))
+        radii = readRadii(spec["radius"], frame);
+    else if (!frame.radii.empty())
+        radii = frame.radii;  // a wireframe CSV with r1,r2 columns (a frame output read back)
     const Box3 box = frame.bounds();
     LevelNode node;
     node.name = name;
@@ -381,6 +407,10 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         // The cap must exceed any level the density solve can reach (a radius offset).
         const double cap = rMax + blend + longest;
         auto raw = std::make_shared<StrutCapsules>(struts, blend, cap);
+        // A capsule's radius at the level c (the distance offset): its own radius plus c.
+        auto capsuleRadius = [struts](std::size_t j, int e, double level) {
+            return std::max(0.0, (e == 0 ? struts[j].ra : struts[j].rb) + level);
+        };
         node.description = std::string("strut capsules") + (blend > 0 ? " (blended)" : "");
         if (graded) {
             // Struts reach into the next cell only by their radius and blend: one cell of margin.
@@ -388,7 +418,9 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
             std::optional<std::vector<std::array<double, 2>>> cellRadii;
             if (radii) cellRadii = readRadii(spec["radius"], cells);
             const StrutCapsules cellField(capsuleStruts(cells, cellRadii), blend, cap);
-            return buildGradedStruts(builder, spec, name, raw, cellField, cellBox, node.description);
+            FieldPtr result = buildGradedStruts(builder, spec, name, raw, cellField, cellBox, node.description);
+            recordFrame(builder, name, frame, capsuleRadius, gradedLevelAt(result));
+            return result;
         }
         node.solid = node.density ? LevelSolid::unsolved(raw, SolidSide::Below)
                                   : std::make_shared<LevelSolid>(raw, SolidSide::Below,
@@ -397,6 +429,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         double rMin = std::numeric_limits<double>::infinity();
         for (const CapsuleStrut& c : struts) rMin = std::min({rMin, c.ra, c.rb});
         node.thinnest = [rMin](double level) { return std::max(0.0, 2.0 * (rMin + level)); };
+        recordFrame(builder, name, frame, capsuleRadius, [solid = node.solid](const Vec3d&) { return solid->level(); });
         FieldPtr result = node.solid;
         builder.addLevelNode(std::move(node));
         return result;
@@ -460,6 +493,14 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         rcMax = std::max(rcMax, raw->cutoffRadius(j));
     }
     auto iso = std::make_shared<IsoRadius>(raw, peak, sigmaMax, 2.0 * rcMax);
+    // The radius of an isolated strut end of weight w at the iso-value t the level stands for:
+    // w sigma sqrt(2 pi) exp(-r^2 / 2 sigma^2) = t.
+    auto convolutionRadius = [iso, weights = convolutionStruts(frame, radii)](std::size_t j, int e, double level) {
+        const ConvolutionStrut& s = weights[j];
+        const double t = iso->valueOf(level);
+        const double ratio = (e == 0 ? s.w0 : s.w1) * s.sigma * kSqrtTwoPi / t;
+        return ratio > 1.0 ? s.sigma * std::sqrt(2.0 * std::log(ratio)) : 0.0;
+    };
     // A box of identical cells with identical struts repeats cell by cell wherever the box's
     // faces are beyond the cut-off: evaluate one cell of the interior and tile it.
     const bool sameStruts = (!radii || spec["radius"].isScalar()) && !g["sigma"].isSequence();
@@ -485,7 +526,9 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         // The same peak and sigma as the frame's, so that both measure levels alike.
         const IsoRadius cellField(cellRaw, peak, sigmaMax, 2.0 * rcMax);
         // Whether it holds together is checked on the grid (Job: pieces), not at strut middles.
-        return buildGradedStruts(builder, spec, name, iso, cellField, cellBox, node.description);
+        FieldPtr result = buildGradedStruts(builder, spec, name, iso, cellField, cellBox, node.description);
+        recordFrame(builder, name, frame, convolutionRadius, gradedLevelAt(result));
+        return result;
     }
     node.solid = node.density ? LevelSolid::unsolved(evaluated, SolidSide::Below)
                               : std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
@@ -500,6 +543,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         }
         return thinnest;
     };
+    recordFrame(builder, name, frame, convolutionRadius, [solid = node.solid](const Vec3d&) { return solid->level(); });
     if (periodic && node.density) {
         node.densityPeriod = uniform->size;
         node.densityReach = rcMax;
