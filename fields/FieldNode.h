@@ -79,12 +79,6 @@ public:
     /// A conservative bound of the value over @a box: every value inside lies in the interval.
     virtual Interval bound(const Box3& box) const = 0;
 
-    /// True when bounding the eight 4^3 blocks of an 8^3 leaf costs less than evaluating them
-    /// (fields with many terms per point, like a strut convolution): evaluateSparse() then
-    /// evaluates only the blocks whose bound (grown by a voxel) meets its band and fills the
-    /// others as it fills tiles. Nodes of one operand that keep its bounds' tightness forward it.
-    virtual bool cullWithinLeaves() const { return false; }
-
     /// A box outside which the field is positive (the solid lies inside it), or none when the
     /// solid is unbounded (a bare lattice). The engine uses it for the domain when none is given.
     virtual std::optional<Box3> support() const { return std::nullopt; }

@@ -24,7 +24,6 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
-    bool cullWithinLeaves() const override { return mF->cullWithinLeaves(); }
 
     /// rho(F) (capped) and its inverse, F(rho) = P exp(-sign(rho) rho^2 / (2 sigma^2)).
     double radiusOf(double f) const;

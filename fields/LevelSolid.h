@@ -32,7 +32,6 @@ public:
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
     double period(int axis) const override { return mRaw->period(axis); }
-    bool cullWithinLeaves() const override { return mRaw->cullWithinLeaves(); }
 
     /// The level in the node's own units (c for a network, t for a sheet or a convolution).
     double level() const

@@ -33,8 +33,6 @@ public:
     /// [sum of per-strut minima, sum of per-strut maxima] over the box, using the box's
     /// distances to each segment; struts whose cut-off does not reach the box add nothing.
     Interval bound(const Box3& box) const override;
-    /// Several struts reach most points: bounding a quarter leaf is cheaper than evaluating it.
-    bool cullWithinLeaves() const override { return true; }
 
     std::size_t strutCount() const { return mSegments.size(); }
     const GaussianSegment& segment(std::size_t j) const { return mSegments[j]; }

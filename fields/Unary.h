@@ -18,7 +18,6 @@ public:
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
     double period(int axis) const override { return mChild->period(axis); }
-    bool cullWithinLeaves() const override { return mChild->cullWithinLeaves(); }
     /// A positive offset only shrinks the solid: the child's box. Other maps: unbounded.
     std::optional<Box3> support() const override;
 

@@ -135,11 +135,7 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
         throw JobError(msg.str());
     }
 
-    // Stage 2: evaluate each straddling leaf as one batch; or, for fields whose bounds cost less
-    // than their values, each of its 4^3 quarters whose bound (grown by a voxel, as the leaves')
-    // meets the band, the others filled like tiles. Every grid edge crossing a level in the band
-    // still has both ends evaluated, and the count of values below or above the band is the same.
-    const bool quarters = field.cullWithinLeaves() && !(options.band.lo <= -1e30 && options.band.hi >= 1e30);
+    // Stage 2: evaluate each straddling leaf as one batch.
     // Owned until the tree takes them: a cancelled or failed evaluation frees what it made.
     std::vector<std::unique_ptr<LeafT>> leaves(leafOrigins.size());
     std::atomic<bool> nonFinite{false};
@@ -154,42 +150,9 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                 GridBatch batch;
                 batch.origin = domain.worldOf(lo);
                 batch.spacing = Vec3d(domain.voxel);
-                std::array<bool, 512> exact;
-                exact.fill(true);
-                Side sides[8];
-                int straddling = 8;
-                if (quarters) {
-                    straddling = 0;
-                    for (int q = 0; q < 8; ++q) {
-                        const Coord qlo = lo + Coord((q >> 2) * 4, ((q >> 1) & 1) * 4, (q & 1) * 4);
-                        sides[q] = classify(field, clip.get(), domain, qlo, 4, options.band);
-                        straddling += sides[q] == Side::Straddle;
-                    }
-                }
-                if (straddling == 8) {
-                    field.gridValues(batch, values);
-                } else {
-                    std::array<double, 64> part;
-                    for (int q = 0; q < 8; ++q) {
-                        const int qx = (q >> 2) * 4, qy = ((q >> 1) & 1) * 4, qz = (q & 1) * 4;
-                        if (sides[q] == Side::Straddle) {
-                            GridBatch quarter;
-                            quarter.origin = domain.worldOf(lo + Coord(qx, qy, qz));
-                            quarter.spacing = batch.spacing;
-                            quarter.nx = quarter.ny = quarter.nz = 4;
-                            field.gridValues(quarter, part);
-                        }
-                        const double fill = sides[q] == Side::Inside ? options.insideValue : options.outsideValue;
-                        for (int n = 0; n < 64; ++n) {
-                            const int i = ((qx + (n >> 4)) << 6) | ((qy + ((n >> 2) & 3)) << 3) | (qz + (n & 3));
-                            values[i] = sides[q] == Side::Straddle ? part[n] : fill;
-                            exact[i] = sides[q] == Side::Straddle;
-                        }
-                    }
-                }
+                field.gridValues(batch, values);
                 if (clip && !deepInside.isInside(CoordBBox(lo, lo + Coord(kLeafDim - 1))))
                     for (int i = 0; i < 512; ++i) {
-                        if (!exact[i]) continue;  // the quarter's class already holds the clip's bound
                         const Vec3d p = batch.point(i >> 6, (i >> 3) & 7, i & 7);
                         values[i] = std::max(values[i], clip->eval(p[0], p[1], p[2]));
                     }
