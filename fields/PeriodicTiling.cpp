@@ -51,6 +51,7 @@ AxisMap makeAxis(double h, double x0, double lo, double hi, double period, doubl
     m.x0 = x0;
     m.n0 = long(std::floor((lo - x0) / h)) - kPad;
     m.n1 = long(std::ceil((hi - x0) / h)) + kPad;
+    if (!(period > 0.0)) return m;  // no repeat along this axis: every position is its own
     const double steps = period / h;
     const long whole = std::lround(steps);
     if (whole < 1 || std::abs(steps - double(whole)) > 1e-9 * steps) return m;  // not commensurate
@@ -93,8 +94,10 @@ PeriodicTiling::PeriodicTiling(FieldPtr child, const Box3& box, const Vec3d& per
     : mChild(std::move(child)), mBox(box), mPeriod(period), mReach(reach), mBounds(std::make_unique<BoundCache>())
 {
     for (int a = 0; a < 3; ++a)
-        if (!(period[a] > 0.0) || !(box.max[a] >= box.min[a]))
-            throw std::invalid_argument("a periodic tiling needs a positive period and a box");
+        if (!(period[a] >= 0.0) || !(box.max[a] >= box.min[a]))
+            throw std::invalid_argument("a periodic tiling needs periods >= 0 and a box");
+    if (!(period[0] > 0.0 || period[1] > 0.0 || period[2] > 0.0))
+        throw std::invalid_argument("a periodic tiling needs a positive period along some axis");
 }
 
 PeriodicTiling::~PeriodicTiling() = default;
@@ -116,7 +119,7 @@ Interval PeriodicTiling::bound(const Box3& box) const
     for (int a = 0; a < 3; ++a) {
         double lo = box.min[a], hi = box.max[a];
         const double inner = mBox.min[a] + mReach, outer = mBox.max[a] - mReach;
-        if (lo >= inner && hi <= outer && outer - inner >= mPeriod[a]) {
+        if (mPeriod[a] > 0.0 && lo >= inner && hi <= outer && outer - inner >= mPeriod[a]) {
             const double shift = std::floor((lo - inner) / mPeriod[a]) * mPeriod[a];
             lo = std::max(inner, lo - shift);
             hi = std::min(outer, hi - shift);
