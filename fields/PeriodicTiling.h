@@ -50,6 +50,8 @@ private:
     const Table* table(const GridBatch& batch) const;
 
     struct BoundCache;
+    /// Evaluates one block of a table (its runs bx, by, bz).
+    void fillBlock(Table& t, std::size_t bx, std::size_t by, std::size_t bz) const;
 
     FieldPtr mChild;
     Box3 mBox;
