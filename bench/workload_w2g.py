@@ -13,6 +13,19 @@ the method's cost depends on the struts, not on their weights):
 The frames are built here the way engine/frames/StrutFrames.cpp builds them and handed to the
 reference as arrays; the strut counts of both sides are printed. VOXLAT_W2G_SIZE=25 runs the
 graded and trimmed cases on a 25 mm cube (and the cylinder at half size) for a quick look.
+
+Profile (perf, graded frame, before issue 17's work): StrutConvolution::gridValues 60-64 % of the
+run, segmentBoxDistance 3 %, IsoRadius 2-3 %, the index's gather/sort 3 %; the density solve (a
+sparse pass on a lattice 1.16x finer than the voxels) cost twice the final evaluation; bounds
+cull well already (about 75 % of the evaluated leaves hold the surface). Tried and dropped:
+culling 4^3 quarters of straddling leaves by their bounds (only a third of the quarters cull, no
+net gain) and a tighter bound using I0 near joints (leaves 5721 -> 5715). Kept: rows take only
+the points inside a strut's capsule (same bits, about 10 %); radii graded linearly along one axis
+fold the other two axes (PeriodicTiling and periodicPieces with period 0 along the graded axis;
+CPU time of the graded frame about 60 s -> 10 s); table blocks evaluated on first use.
+Measured (side by side, 2 shared cores at load average 10-11, so both sides ran ~8x slow): graded
+66.3 s vs 1043 s (15.7x, target 50x missed), peak 943 MB; trimmed and cylinder frames not
+measured in time (their reference needs ~17 min each at that load).
 """
 import json
 import math
