@@ -24,8 +24,10 @@ the points inside a strut's capsule (same bits, about 10 %); radii graded linear
 fold the other two axes (PeriodicTiling and periodicPieces with period 0 along the graded axis;
 CPU time of the graded frame about 60 s -> 10 s); table blocks evaluated on first use.
 Measured (side by side, 2 shared cores at load average 10-11, so both sides ran ~8x slow): graded
-66.3 s vs 1043 s (15.7x, target 50x missed), peak 943 MB; trimmed and cylinder frames not
-measured in time (their reference needs ~17 min each at that load).
+66.3 s vs 1043 s (15.7x, target 50x missed), peak 943 MB; trimmed 84.7 s vs 556 s (6.6x);
+cylinder 70.0 s vs 250 s (3.6x). Quiet machine (load 0.6): graded 7.21 s vs 274 s (38.0x),
+peak 943 MB (evaluate 2.17 s, solve 1.99 s, mesh 1.58 s, pieces 0.91 s, STL 0.30 s).
+W1 in the same quiet run: 3.62 s vs 17.55 s (4.9x; target 10x missed).
 """
 import json
 import math
