@@ -28,7 +28,7 @@ Measured (side by side, 2 shared cores at load average 10-11, so both sides ran 
 cylinder 70.0 s vs 250 s (3.6x). Quiet machine (load 0.6): graded 7.21 s vs 274 s (38.0x),
 peak 943 MB (evaluate 2.17 s, solve 1.99 s, mesh 1.58 s, pieces 0.91 s, STL 0.30 s).
 Trimmed (quiet): 29.3 s vs 225 s (7.7x; evaluate 9.2 s, solve 17.1 s); cylinder 25.2 s vs 189 s
-(7.5x; evaluate 8.1 s, solve 14.8 s). W2 at 0.2 mm in that run: 1.85 s vs 39.1 s. W1 in the same quiet run:
+(7.5x; evaluate 8.1 s, solve 14.8 s). W2 in that run: 52.3x at 0.1 mm (peak 905 MB), 21.2x at 0.2 mm. W1 in the same quiet run:
 3.62 s vs 17.55 s (4.9x; target 10x missed).
 """
 import json
