@@ -6,6 +6,8 @@
 
 #include <array>
 #include <cmath>
+#include <cstdint>
+#include <mutex>
 #include <stdexcept>
 #include <unordered_map>
 
@@ -51,6 +53,7 @@ AxisMap makeAxis(double h, double x0, double lo, double hi, double period, doubl
     m.x0 = x0;
     m.n0 = long(std::floor((lo - x0) / h)) - kPad;
     m.n1 = long(std::ceil((hi - x0) / h)) + kPad;
+    if (!(period > 0.0)) return m;  // no repeat along this axis: every position is its own
     const double steps = period / h;
     const long whole = std::lround(steps);
     if (whole < 1 || std::abs(steps - double(whole)) > 1e-9 * steps) return m;  // not commensurate
@@ -87,14 +90,24 @@ struct PeriodicTiling::Table {
     bool useful = false;
     std::vector<double> values;
     tbb::collaborative_once_flag once;
+    /// Per axis, blocks of up to 8 slots whose positions are consecutive (start, length), and
+    /// the block of each slot.
+    std::array<std::vector<std::pair<long, int>>, 3> runs;
+    std::array<std::vector<std::uint32_t>, 3> runOf;
+    /// One flag per block: a block is evaluated the first time a batch needs it (only blocks
+    /// near the surface are), by one gridValues() call on positions fixed by the grid, so its
+    /// values do not depend on which thread comes first.
+    std::unique_ptr<std::once_flag[]> blockDone;
 };
 
 PeriodicTiling::PeriodicTiling(FieldPtr child, const Box3& box, const Vec3d& period, double reach)
     : mChild(std::move(child)), mBox(box), mPeriod(period), mReach(reach), mBounds(std::make_unique<BoundCache>())
 {
     for (int a = 0; a < 3; ++a)
-        if (!(period[a] > 0.0) || !(box.max[a] >= box.min[a]))
-            throw std::invalid_argument("a periodic tiling needs a positive period and a box");
+        if (!(period[a] >= 0.0) || !(box.max[a] >= box.min[a]))
+            throw std::invalid_argument("a periodic tiling needs periods >= 0 and a box");
+    if (!(period[0] > 0.0 || period[1] > 0.0 || period[2] > 0.0))
+        throw std::invalid_argument("a periodic tiling needs a positive period along some axis");
 }
 
 PeriodicTiling::~PeriodicTiling() = default;
@@ -116,7 +129,7 @@ Interval PeriodicTiling::bound(const Box3& box) const
     for (int a = 0; a < 3; ++a) {
         double lo = box.min[a], hi = box.max[a];
         const double inner = mBox.min[a] + mReach, outer = mBox.max[a] - mReach;
-        if (lo >= inner && hi <= outer && outer - inner >= mPeriod[a]) {
+        if (mPeriod[a] > 0.0 && lo >= inner && hi <= outer && outer - inner >= mPeriod[a]) {
             const double shift = std::floor((lo - inner) / mPeriod[a]) * mPeriod[a];
             lo = std::max(inner, lo - shift);
             hi = std::min(outer, hi - shift);
@@ -196,42 +209,42 @@ const PeriodicTiling::Table* PeriodicTiling::table(const GridBatch& batch) const
         Table& t = *found;
         const long sx = t.axis[0].size(), sy = t.axis[1].size(), sz = t.axis[2].size();
         t.values.assign(std::size_t(sx * sy * sz), 0.0);
-        // Blocks of up to 8 slots per axis whose positions are consecutive.
-        std::array<std::vector<std::pair<long, int>>, 3> runs;
         for (int a = 0; a < 3; ++a) {
             const AxisMap& m = t.axis[a];
+            t.runOf[a].resize(std::size_t(m.size()));
             for (long s = 0; s < m.size();) {
                 int len = 1;
                 while (len < 8 && s + len < m.size() && m.position(s + len) == m.position(s) + len) ++len;
-                runs[a].push_back({s, len});
+                for (int i = 0; i < len; ++i) t.runOf[a][std::size_t(s + i)] = std::uint32_t(t.runs[a].size());
+                t.runs[a].push_back({s, len});
                 s += len;
             }
         }
-        const std::size_t ny = runs[1].size(), nz = runs[2].size();
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, runs[0].size() * ny * nz), [&](const auto& range) {
-            std::vector<double> block(512);
-            for (std::size_t b = range.begin(); b != range.end(); ++b) {
-                const auto [s0, l0] = runs[0][b / (ny * nz)];
-                const auto [s1, l1] = runs[1][(b / nz) % ny];
-                const auto [s2, l2] = runs[2][b % nz];
-                GridBatch g;
-                g.spacing = Vec3d(t.axis[0].h, t.axis[1].h, t.axis[2].h);
-                g.origin = Vec3d(t.axis[0].x0 + double(t.axis[0].position(s0)) * t.axis[0].h,
-                                 t.axis[1].x0 + double(t.axis[1].position(s1)) * t.axis[1].h,
-                                 t.axis[2].x0 + double(t.axis[2].position(s2)) * t.axis[2].h);
-                g.nx = l0;
-                g.ny = l1;
-                g.nz = l2;
-                mChild->gridValues(g, block);
-                std::size_t n = 0;
-                for (int i = 0; i < l0; ++i)
-                    for (int j = 0; j < l1; ++j)
-                        for (int k = 0; k < l2; ++k)
-                            t.values[std::size_t(((s0 + i) * sy + s1 + j) * sz + s2 + k)] = block[n++];
-            }
-        });
+        t.blockDone = std::make_unique<std::once_flag[]>(t.runs[0].size() * t.runs[1].size() * t.runs[2].size());
     });
     return found;
+}
+
+void PeriodicTiling::fillBlock(Table& t, std::size_t bx, std::size_t by, std::size_t bz) const
+{
+    const auto [s0, l0] = t.runs[0][bx];
+    const auto [s1, l1] = t.runs[1][by];
+    const auto [s2, l2] = t.runs[2][bz];
+    const long sy = t.axis[1].size(), sz = t.axis[2].size();
+    GridBatch g;
+    g.spacing = Vec3d(t.axis[0].h, t.axis[1].h, t.axis[2].h);
+    g.origin = Vec3d(t.axis[0].x0 + double(t.axis[0].position(s0)) * t.axis[0].h,
+                     t.axis[1].x0 + double(t.axis[1].position(s1)) * t.axis[1].h,
+                     t.axis[2].x0 + double(t.axis[2].position(s2)) * t.axis[2].h);
+    g.nx = l0;
+    g.ny = l1;
+    g.nz = l2;
+    std::array<double, 512> block;
+    mChild->gridValues(g, block);
+    std::size_t n = 0;
+    for (int i = 0; i < l0; ++i)
+        for (int j = 0; j < l1; ++j)
+            for (int k = 0; k < l2; ++k) t.values[std::size_t(((s0 + i) * sy + s1 + j) * sz + s2 + k)] = block[n++];
 }
 
 void PeriodicTiling::gridValues(const GridBatch& batch, std::span<double> out) const
@@ -252,6 +265,23 @@ void PeriodicTiling::gridValues(const GridBatch& batch, std::span<double> out) c
             if (slots[a][i] < 0) return mChild->gridValues(batch, out);
         }
     }
+    // Evaluate the blocks this batch reads that no batch has read before.
+    Table& table = const_cast<Table&>(*t);
+    const std::size_t ny = table.runs[1].size(), nz = table.runs[2].size();
+    std::array<std::uint32_t, 64> rx, ry, rz;
+    int cx = 0, cy = 0, cz = 0;
+    for (int i = 0; i < batch.nx; ++i)
+        if (cx == 0 || rx[cx - 1] != table.runOf[0][slots[0][i]]) rx[cx++] = table.runOf[0][slots[0][i]];
+    for (int i = 0; i < batch.ny; ++i)
+        if (cy == 0 || ry[cy - 1] != table.runOf[1][slots[1][i]]) ry[cy++] = table.runOf[1][slots[1][i]];
+    for (int i = 0; i < batch.nz; ++i)
+        if (cz == 0 || rz[cz - 1] != table.runOf[2][slots[2][i]]) rz[cz++] = table.runOf[2][slots[2][i]];
+    for (int i = 0; i < cx; ++i)
+        for (int j = 0; j < cy; ++j)
+            for (int k = 0; k < cz; ++k) {
+                const std::size_t b = (rx[i] * ny + ry[j]) * nz + rz[k];
+                std::call_once(table.blockDone[b], [&] { fillBlock(table, rx[i], ry[j], rz[k]); });
+            }
     const long sy = t->axis[1].size(), sz = t->axis[2].size();
     std::size_t n = 0;
     for (int i = 0; i < batch.nx; ++i)

@@ -16,7 +16,8 @@ namespace voxlat {
 /// whenever, along every axis where m is non-zero, both points lie at least @a reach inside
 /// @a box. A box frame of identical cells with identical struts does: every strut within the
 /// kernel's cut-off radius (@a reach) of such a point belongs to the infinite periodic lattice,
-/// so the box's faces are out of sight.
+/// so the box's faces are out of sight. A period of 0 along an axis means the child does not
+/// repeat along it (m is 0 there): a box frame whose radii are graded along that axis only.
 ///
 /// Per axis, grid positions closer than @a reach to a face (the faces' zones, up to a leaf
 /// beyond the box) are tabled as they are, and the positions between the zones map onto one
@@ -49,6 +50,8 @@ private:
     const Table* table(const GridBatch& batch) const;
 
     struct BoundCache;
+    /// Evaluates one block of a table (its runs bx, by, bz).
+    void fillBlock(Table& t, std::size_t bx, std::size_t by, std::size_t bz) const;
 
     FieldPtr mChild;
     Box3 mBox;

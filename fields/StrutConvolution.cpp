@@ -3,6 +3,7 @@
 #include "fields/GaussianTable.h"
 
 #include <algorithm>
+#include <limits>
 #include <stdexcept>
 
 namespace voxlat {
@@ -70,6 +71,72 @@ void StrutConvolution::gradients(std::span<const Vec3d> points, std::span<double
     }
 }
 
+namespace {
+
+/// Adds to [lo, hi] the t with q(t) = a t^2 + b t + c < 0 (a >= 0); false if none.
+bool quadraticBelowZero(double a, double b, double c, double& lo, double& hi)
+{
+    if (a <= 0.0) {
+        // Linear or constant: a row parallel to the strut (the callers guard the degenerate case).
+        if (b == 0.0) {
+            if (c >= 0.0) return false;
+            lo = -std::numeric_limits<double>::infinity();
+            hi = std::numeric_limits<double>::infinity();
+            return true;
+        }
+        const double t = -c / b;
+        lo = b > 0.0 ? -std::numeric_limits<double>::infinity() : t;
+        hi = b > 0.0 ? t : std::numeric_limits<double>::infinity();
+        return true;
+    }
+    const double disc = b * b - 4.0 * a * c;
+    if (disc <= 0.0) return false;
+    const double root = std::sqrt(disc);
+    // The stable pair of roots (no cancellation between -b and the root).
+    const double qq = -0.5 * (b + std::copysign(root, b));
+    double t1 = qq / a, t2 = qq != 0.0 ? c / qq : t1;
+    if (t1 > t2) std::swap(t1, t2);
+    lo = t1;
+    hi = t2;
+    return true;
+}
+
+/// The range of k (a real interval, possibly empty: lo > hi) where the row D + k e, e = (0, 0,
+/// dz), comes within @a rc of the segment from the origin along @a u of @a length: the union of
+/// the cylinder's part inside the slab 0 <= h <= length and the two end balls (a capsule is
+/// convex, so the union is one interval).
+void capsuleRowRange(const Vec3d& D, double dz, const Vec3d& u, double length, double rc2, double& lo, double& hi)
+{
+    lo = std::numeric_limits<double>::infinity();
+    hi = -std::numeric_limits<double>::infinity();
+    auto merge = [&](double a, double b) {
+        if (a > b) return;
+        lo = std::min(lo, a);
+        hi = std::max(hi, b);
+    };
+    // End balls: |D + k e - C|^2 < rc^2.
+    for (const double h : {0.0, length}) {
+        const Vec3d d = D - h * u;
+        double a, b;
+        if (quadraticBelowZero(dz * dz, 2.0 * d.z() * dz, d.lengthSqr() - rc2, a, b)) merge(a, b);
+    }
+    // Cylinder: r^2(k) = |D + k e|^2 - h(k)^2, h(k) = D.u + k dz u_z.
+    const double h0 = D.dot(u), hz = dz * u.z();
+    const double c = dz * dz - hz * hz;
+    double a, b;
+    if (quadraticBelowZero(c, 2.0 * (D.z() * dz - h0 * hz), D.lengthSqr() - h0 * h0 - rc2, a, b)) {
+        if (hz != 0.0) {
+            double s0 = -h0 / hz, s1 = (length - h0) / hz;
+            if (s0 > s1) std::swap(s0, s1);
+            merge(std::max(a, s0), std::min(b, s1));
+        } else if (h0 >= 0.0 && h0 <= length) {
+            merge(a, b);
+        }
+    }
+}
+
+}  // namespace
+
 void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out) const
 {
     thread_local std::vector<std::uint32_t> cand;
@@ -77,14 +144,14 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
     std::fill(out.begin(), out.begin() + batch.size(), 0.0);
     const GaussianTable& table = GaussianTable::instance();
     const double dx = batch.spacing.x(), dy = batch.spacing.y(), dz = batch.spacing.z();
-    const double rowHalf = 0.5 * (batch.nz - 1) * dz;
+    const int nz = batch.nz;
     // Strut-outer, point-inner: each point still sums its struts in ascending index order. Along
     // a row (k) h is linear and r^2 quadratic in k, so exp(-r^2 / 2 sigma^2) follows from two
     // exponentials per row by the recurrence E(k+1) = E(k) R(k), R(k+1) = R(k) Q (a few ulps of
     // drift over a row); the erf sum comes from GaussianTable (error below 1e-10 of a peak).
     for (const std::uint32_t j : cand) {
         const GaussianSegment& s = mSegments[j];
-        const double rc2 = mCutoffSqr[j], rc = std::sqrt(rc2);
+        const double rc2 = mCutoffSqr[j];
         const double sigma = s.sigma, invSigma = 1.0 / sigma, inv2s2 = 0.5 / (sigma * sigma);
         const double length = s.length, w0 = s.w0, slope = s.slope, s2 = sigma * sigma;
         const Vec3d& u = s.u;
@@ -93,25 +160,46 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
         // r^2(k) = r0 + b k + c k^2 along a row; Q = exp(-2 c / 2 sigma^2).
         const double c = dz * dz - hz * hz;
         const double q = std::exp(-2.0 * c * inv2s2);
+        // Rows nearly parallel to the strut get no analytic range (r^2 barely changes along them).
+        const bool ranged = c > 1e-9 * dz * dz;
+        // The analytic range is only a filter: points within a step of its ends, and all points
+        // between, still take the exact cut-off test, so the same points count as before.
+        const double rcWide2 = rc2 * (1.0 + 1e-9) + 1e-300;
         std::size_t n = 0;
         for (int i = 0; i < batch.nx; ++i) {
             const double px = d0.x() + i * dx;
-            for (int jj = 0; jj < batch.ny; ++jj, n += batch.nz) {
+            for (int jj = 0; jj < batch.ny; ++jj, n += nz) {
                 const double py = d0.y() + jj * dy;
-                // Skip rows whose every point is beyond the cut-off (centre distance test).
-                const Vec3d mid(px, py, d0.z() + rowHalf);
-                const double hm = std::clamp(mid.dot(u), 0.0, length);
-                if ((mid - hm * u).length() - rowHalf >= rc) continue;
+                int kLo = 0, kHi = nz - 1;
+                if (ranged) {
+                    double tLo, tHi;
+                    capsuleRowRange(Vec3d(px, py, d0.z()), dz, u, length, rcWide2, tLo, tHi);
+                    if (!(tLo <= tHi)) continue;
+                    kLo = int(std::clamp(std::floor(std::max(tLo, -1.0)) - 1.0, 0.0, double(nz)));
+                    kHi = int(std::min(double(nz - 1), std::ceil(std::min(tHi, double(nz))) + 1.0));
+                    if (kLo > kHi) continue;
+                } else {
+                    // Skip rows whose every point is beyond the cut-off (centre distance test).
+                    const double rowHalf = 0.5 * (nz - 1) * dz;
+                    const Vec3d mid(px, py, d0.z() + rowHalf);
+                    const double hm = std::clamp(mid.dot(u), 0.0, length);
+                    if ((mid - hm * u).length() - rowHalf >= std::sqrt(rc2)) continue;
+                }
                 const double hRow = px * u.x() + py * u.y() + d0.z() * u.z();
                 const double qRow = px * px + py * py;
                 const double r0 = qRow + d0.z() * d0.z() - hRow * hRow;
                 const double b = 2.0 * (d0.z() * dz - hRow * hz) + c;  // r^2(1) - r^2(0)
                 // The recurrence's factors stay well inside double range for ordinary batches;
                 // otherwise every point takes its own exponential.
-                const bool recur = std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * batch.nz < 200.0;
+                const bool recur = std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0;
                 double e = recur ? std::exp(-r0 * inv2s2) : 0.0;
                 double ratio = recur ? std::exp(-b * inv2s2) : 0.0;
-                for (int k = 0; k < batch.nz; ++k) {
+                // Points before the range: advance the recurrence the same way (same bits).
+                for (int k = 0; k < kLo; ++k) {
+                    e *= ratio;
+                    ratio *= q;
+                }
+                for (int k = kLo; k <= kHi; ++k) {
                     // The cut-off test exactly as values() makes it (same h and r^2 bits).
                     double h, r2;
                     const double dist2 = s.distanceSqr(batch.point(i, jj, k), h, r2);

@@ -298,3 +298,82 @@ TEST(DensityPieces, SameLevelForAnyThreadCount)
     EXPECT_EQ(one.achieved, three.achieved);
     EXPECT_NEAR(one.achieved, 0.2, 1e-9);
 }
+
+namespace {
+
+/// The BCC box of bccBox() with weights growing along z (1 at z = 0 to 1.5 at the top): the
+/// field repeats along x and y only.
+BccBox gradedBccBox(int cells, double size, double sigma)
+{
+    const Frame f = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(size), {cells, cells, cells});
+    const double top = cells * size;
+    std::vector<ConvolutionStrut> struts;
+    for (const auto& e : f.struts) {
+        const Vec3d a = f.nodes[e[0]], b = f.nodes[e[1]];
+        struts.push_back({a, b, sigma, 1.0 + 0.5 * a.z() / top, 1.0 + 0.5 * b.z() / top});
+    }
+    auto raw = std::make_shared<StrutConvolution>(struts);
+    BccBox g;
+    g.box = f.bounds();
+    g.reach = raw->cutoffRadius(0);
+    double peak = 0.0;
+    for (std::size_t j = 0; j < raw->strutCount(); ++j) peak = std::max(peak, raw->peak(j));
+    g.iso = std::make_shared<IsoRadius>(raw, peak, sigma, 2.0 * g.reach);
+    return g;
+}
+
+}  // namespace
+
+TEST(PeriodicTiling, PeriodZeroAlongAnAxisTablesItAsItIs)
+{
+    // Weights graded along z: folding along x and y only (period 0 along z) gives the field's
+    // own values everywhere, from a table far smaller than the domain.
+    const BccBox b = gradedBccBox(6, 2.0, 0.25);
+    const PeriodicTiling tiled(b.iso, b.box, Vec3d(2.0, 2.0, 0.0), b.reach);
+    const Domain d = Domain::fromBox(Box3{Vec3d(-1.0), Vec3d(13.0)}, 0.1);
+    EXPECT_LT(largestLeafDifference(tiled, *b.iso, d), 1e-9);
+    EXPECT_GT(tiled.tabledValues(), 0u);
+    EXPECT_LT(tiled.tabledValues(), d.voxelCount() / 2);
+    // Folding z as well would be wrong for this field: the check above can fail.
+    const PeriodicTiling wrong(b.iso, b.box, Vec3d(2.0), b.reach);
+    EXPECT_GT(largestLeafDifference(wrong, *b.iso, d), 1e-3);
+    EXPECT_THROW(PeriodicTiling(b.iso, b.box, Vec3d(0.0), b.reach), std::invalid_argument);
+}
+
+TEST(DensityPieces, AxisThatDoesNotRepeatIsOneSegment)
+{
+    const BccBox b = gradedBccBox(4, 4.0, 0.5);
+    // x and y: zone, two partial periods, zone (four segments); z: the whole axis.
+    const std::vector<DensityPiece> pieces = periodicPieces(b.box, Vec3d(4.0, 4.0, 0.0), b.reach, 0.2);
+    ASSERT_EQ(pieces.size(), 16u);
+    const DensityPiece whole{Domain::fromBox(b.box, pieces.front().domain.voxel), 1.0};
+    double voxels = 0.0;
+    for (const DensityPiece& p : pieces) {
+        voxels += p.weight * double(p.domain.voxelCount());
+        EXPECT_EQ(p.domain.dims.z(), whole.domain.dims.z());
+    }
+    EXPECT_EQ(voxels, double(whole.domain.voxelCount()));
+    const DensitySolution fromBox = solveDensity(*b.iso, std::span(&whole, 1), 0.25);
+    const DensitySolution fromPieces = solveDensity(*b.iso, pieces, 0.25);
+    EXPECT_NEAR(fromPieces.level, fromBox.level, 1e-5);
+    // Periods that differ between the axes that fold: no pieces.
+    EXPECT_TRUE(periodicPieces(b.box, Vec3d(4.0, 2.0, 0.0), b.reach, 0.2).empty());
+}
+
+TEST(DensityPieces, RadiiGradedAlongAnAxisHitTheTargetOnTheMesh)
+{
+    // Radii graded linearly along z: tabled and measured one period deep across x and y.
+    Job job(
+        parseRecipe("voxel: 0.1\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\nfields:\n"
+                    "  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, "
+                    "radius: {gradient: linear, min: 0.4, max: 0.6, axis: z}, density: 0.20}\n"
+                    "result: lattice\n",
+                    "graded.yaml", "."));
+    job.solveLevels();
+    // BCC mirrors along x and y (the radii depend on z only): three segments each, one along z.
+    EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
+              "one period of the interior (9 weighted pieces)");
+    const TriangleMesh& mesh = job.mesh();
+    EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.01 * 0.20);
+    EXPECT_TRUE(checkTopology(mesh).closedManifold());
+}

@@ -51,31 +51,38 @@ def main():
                     help="sample points at (index + offset) * voxel; 0.5 = voxel centres (the method as written)")
     ap.add_argument("--jitter", type=int, metavar="SEED",
                     help="each grid plane at a random position within its voxel layer (overrides --offset)")
+    ap.add_argument("--frame", help="struts as an N x 2 x 3 .npy array of their ends (default: the BCC cube)")
+    ap.add_argument("--weights", help="one weight per strut, .npy (default 1)")
+    ap.add_argument("--box", type=float, nargs=6, help="the grid's box: min corner, max corner (default [0, size]^3)")
     ap.add_argument("--out", required=True)
     a = ap.parse_args()
     t0 = time.perf_counter()
 
-    n = int(round(a.size / a.voxel))
     v, s = a.voxel, a.sigma
+    lo_box = np.array(a.box[:3]) if a.box else np.zeros(3)
+    hi_box = np.array(a.box[3:]) if a.box else np.full(3, a.size)
+    dims = [int(round(e / v)) for e in hi_box - lo_box]
     rc = s * np.sqrt(2 * np.log(1e4))
     if a.jitter is None:
-        axes = [(np.arange(n) + o) * v for o in a.offset]
+        axes = [m + (np.arange(n) + o) * v for m, n, o in zip(lo_box, dims, a.offset)]
     else:
         rng = np.random.default_rng(a.jitter)
-        axes = [(np.arange(n) + rng.random(n)) * v for _ in range(3)]
-    F = np.zeros((n, n, n), dtype=np.float32)
-    for A, B in bcc_frame(a.size, a.cell):
+        axes = [m + (np.arange(n) + rng.random(n)) * v for m, n in zip(lo_box, dims)]
+    F = np.zeros(dims, dtype=np.float32)
+    frame = bcc_frame(a.size, a.cell) if a.frame is None else [(e[0], e[1]) for e in np.load(a.frame)]
+    weights = np.ones(len(frame)) if a.weights is None else np.load(a.weights).astype(float)
+    for (A, B), w in zip(frame, weights):
         L = np.linalg.norm(B - A)
         u = (B - A) / L
         # The sub-domain: the strut's box grown by r_c, from the last grid plane at or below its
         # low side to the first at or above its high side.
         lo = [max(np.searchsorted(c, m - rc, side="right") - 1, 0) for c, m in zip(axes, np.minimum(A, B))]
-        hi = [min(np.searchsorted(c, m + rc) + 1, n) for c, m in zip(axes, np.maximum(A, B))]
+        hi = [min(np.searchsorted(c, m + rc) + 1, n) for c, m, n in zip(axes, np.maximum(A, B), dims)]
         x, y, z = (c[l:h] - a0 for c, l, h, a0 in zip(axes, lo, hi, A))
         X, Y, Z = x[:, None, None], y[None, :, None], z[None, None, :]
         h = X * u[0] + Y * u[1] + Z * u[2]
         r2 = X * X + Y * Y + Z * Z - h * h
-        Fj = np.exp(-r2 / (2 * s * s)) * (s * np.sqrt(np.pi / 2)) * (
+        Fj = np.exp(-r2 / (2 * s * s)) * (w * s * np.sqrt(np.pi / 2)) * (
             erf((L - h) / (s * np.sqrt(2))) + erf(h / (s * np.sqrt(2))))
         F[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] += Fj.astype(np.float32)
     t_field = time.perf_counter()
@@ -85,7 +92,7 @@ def main():
     t_level = time.perf_counter()
 
     # Cap the solid at the domain: pad with an outside layer (F = 0).
-    padded = np.zeros((n + 2, n + 2, n + 2), dtype=np.float32)
+    padded = np.zeros([n + 2 for n in dims], dtype=np.float32)
     padded[1:-1, 1:-1, 1:-1] = F
     del F
     verts, faces, _, _ = marching_cubes(padded, level=level, spacing=(v, v, v))

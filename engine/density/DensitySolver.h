@@ -59,7 +59,9 @@ struct DensityPiece {
 /// zone is the low zone's mirror image: the low zone is counted twice instead. The 3D pieces are
 /// the products; their weighted voxels are exactly the box's. Empty when that does not apply
 /// (the box is not a whole number of periods, fewer than two periods fold, or the period
-/// differs between axes).
+/// differs between axes). A period of 0 along an axis: the field does not repeat along it, and
+/// one segment spans the whole axis there (the box must still be a whole number of the other
+/// axes' period along it).
 std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, double reach, double voxel,
                                          std::array<bool, 3> mirror = {});
 

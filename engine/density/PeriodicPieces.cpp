@@ -27,10 +27,11 @@ using namespace coverage;
 std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, double reach, double voxel,
                                          std::array<bool, 3> mirror)
 {
-    if (!(voxel > 0.0) || std::abs(period[1] - period[0]) > 1e-12 * period[0] ||
-        std::abs(period[2] - period[0]) > 1e-12 * period[0])
-        return {};
-    const double p = period[0];
+    // Axes of period 0 do not fold (one piece spans them); the others share one period.
+    const double p = std::max({period[0], period[1], period[2]});
+    if (!(voxel > 0.0) || !(p > 0.0)) return {};
+    for (int a = 0; a < 3; ++a)
+        if (period[a] != 0.0 && std::abs(period[a] - p) > 1e-12 * p) return {};
     const long perPeriod = std::max(1L, long(std::ceil(p / voxel - 1e-9)));
     const double step = p / double(perPeriod);
     struct Segment {
@@ -43,6 +44,10 @@ std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, d
         const double cells = box.extent()[a] / p;
         const long whole = std::lround(cells);
         if (whole < 1 || std::abs(cells - double(whole)) > 1e-9 * cells) return {};
+        if (period[a] == 0.0) {
+            segments[a].push_back({0, whole * perPeriod, 1.0});
+            continue;
+        }
         const long zone = long(std::ceil(reach / step - 1e-9)) + 1;  // a step of safety
         const long total = whole * perPeriod;
         const long folds = (total - 2 * zone) / perPeriod;

@@ -306,6 +306,16 @@ std::function<double(const Vec3d&)> gradedLevelAt(const FieldPtr& graded)
     };
 }
 
+/// The axis of a `radius: {gradient: linear, axis: A}` (the radii depend on that coordinate
+/// only), or -1 for any other radius.
+int radiusGradientAxis(const RecipeNode& spec)
+{
+    if (!spec.has("radius") || !spec["radius"].isMap()) return -1;
+    const RecipeNode r = spec["radius"];
+    if (!r.has("gradient") || r["gradient"].string() != "linear") return -1;
+    return r.has("axis") ? r["axis"].string()[0] - 'x' : 0;
+}
+
 FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
 {
     std::optional<UniformCells> uniform;
@@ -505,8 +515,16 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     // faces are beyond the cut-off: evaluate one cell of the interior and tile it.
     const bool sameStruts = (!radii || spec["radius"].isScalar()) && !g["sigma"].isSequence();
     const bool periodic = uniform && !spec["struts"].has("within") && sameStruts && !graded;
+    // Radii graded linearly along one axis depend on that coordinate only: the box's cells still
+    // repeat along the other two axes, so the field is tabled one period deep across them and
+    // as it is along the graded axis (period 0 there).
+    const int gradedAxis = radiusGradientAxis(spec);
+    const bool partlyPeriodic = uniform && !spec["struts"].has("within") && !graded && !sameStruts &&
+                                !g["sigma"].isSequence() && gradedAxis >= 0;
+    Vec3d period = uniform ? uniform->size : Vec3d(0.0);
+    if (partlyPeriodic) period[gradedAxis] = 0.0;
     FieldPtr evaluated = iso;
-    if (periodic) evaluated = std::make_shared<PeriodicTiling>(iso, box, uniform->size, rcMax);
+    if (periodic || partlyPeriodic) evaluated = std::make_shared<PeriodicTiling>(iso, box, period, rcMax);
     const double t = spec.has("level") ? spec["level"].positiveNumber() : 1.0;
     {
         std::ostringstream d;
@@ -544,12 +562,13 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         return thinnest;
     };
     recordFrame(builder, name, frame, convolutionRadius, [solid = node.solid](const Vec3d&) { return solid->level(); });
-    if (periodic && node.density) {
-        node.densityPeriod = uniform->size;
+    if ((periodic || partlyPeriodic) && node.density) {
+        node.densityPeriod = period;
         node.densityReach = rcMax;
         // Identical struts (same sigma and radius) whose frame is its own mirror image: the
         // field is too, and the density pieces measure one face zone for both.
-        for (int a = 0; a < 3; ++a) node.densityMirror[a] = mirrorSymmetric(frame, box, a);
+        // (Radii graded along an axis: mirror images across the other axes keep their radii.)
+        for (int a = 0; a < 3; ++a) node.densityMirror[a] = a != gradedAxis && mirrorSymmetric(frame, box, a);
         node.densityIndicator = iso;
         // One period is sampled at a fixed phase, so its lattice does not average over phases
         // as the whole box's incommensurate one does: sample it 1.5 times finer (level within
