@@ -180,7 +180,7 @@ class VoxlatModule(unittest.TestCase):
     def test_schema(self):
         s = voxlat.schema()
         self.assertIn("node_expr", s["$defs"])
-        self.assertEqual(set(s["$defs"]["node_expr"]["properties"]), {"expr", "solid", "level", "density"})
+        self.assertEqual(set(s["$defs"]["node_expr"]["properties"]), {"expr", "solid", "level", "density", "offset"})
 
     def test_gil_is_released_while_the_engine_works(self):
         recipe = voxlat.Recipe(voxlat.gyroid(cell=5).network(density=0.3), domain=[[0, 0, 0], [30, 30, 30]], voxel=0.1)
