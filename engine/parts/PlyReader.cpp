@@ -275,7 +275,7 @@ TriangleMesh readPly(const std::string& bytes, const std::string& shown)
                         values[i] = in.read(p.type);
                     }
                 }
-                const openvdb::Vec3f point(float(values[axis[0]]), float(values[axis[1]]), float(values[axis[2]]));
+                const openvdb::Vec3f point{float(values[axis[0]]), float(values[axis[1]]), float(values[axis[2]])};
                 if (!std::isfinite(point.x()) || !std::isfinite(point.y()) || !std::isfinite(point.z()))
                     throw bad("vertex " + std::to_string(v + 1) + " has a coordinate that is not a number");
                 mesh.points.push_back(point);
