@@ -314,6 +314,45 @@ TEST(MeshReader, PlyInAnyEncodingAndHostileHeadersRefused)
     }
 }
 
+TEST(MeshReader, ObjFilesAreReadByACheckedParser)
+{
+    TempDir dir;
+    // A unit cube written as quads, with texture/normal corners, negative (relative) indices,
+    // comments and statements that do not change the solid.
+    const std::string cube =
+        "# cube\nmtllib x.mtl\no cube\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+        "v 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1 1.0\nvt 0 0\nvn 0 0 1\ns off\n"
+        "f 1/1 4/1 3/1 2/1\nf 5//1 6//1 7//1 8//1\nf 1/1/1 2/1/1 6/1/1 5/1/1\n"
+        "f -6 -5 -1 -2\nf 2 3 7 6\nf 4 1 5 8 # last\n";
+    dir.write("cube.obj", cube);
+    const PartMesh p = readPartMesh(dir.path / "cube.obj", "cube.obj");
+    EXPECT_EQ(p.mesh.triangles.size(), 12u);
+    EXPECT_NEAR(std::abs(p.mesh.volume()), 1.0, 1e-6);
+    // Hostile files: refused with the line and the reason, never a crash. The first is what
+    // fuzz_mesh found making OpenMesh's reader abort on an assertion.
+    const std::vector<std::pair<std::string, std::string>> hostile = {
+        {"v 1 0 0\nv 0 1 0\nv 0 0 0\nf 1 3 2\nf /2 3 7\n", "5: corrupted OBJ: a face corner must start"},
+        {"v 1 0 0\nv 0 1 0\nf 1 2 3\n", "3: corrupted OBJ: a face refers to vertex 3, but 2"},
+        {"v 1 0 0\nv 0 1 0\nv 0 0 0\nf 1 2 0\n", "4: corrupted OBJ: a face refers to vertex 0"},
+        {"v 1 0 0\nv 0 1 0\nv 0 0 0\nf 1 2 -4\n", "4: corrupted OBJ: a face refers to vertex -4"},
+        {"v 1 0\n", "1: corrupted OBJ: a vertex (`v`) needs three numbers x y z; coordinate z is missing"},
+        {"v 1 0 nan\n", "1: corrupted OBJ: vertex coordinate z is not a finite number"},
+        {"v 1 0 1e300\n", "1: corrupted OBJ: vertex coordinate z is not a finite number"},
+        {"v 1 0 0\nv 0 1 0\nf 1 2\n", "3: corrupted OBJ: a face (`f`) needs at least three corners, got 2"},
+        {std::string("v 1 0 0\n\0\x02", 10), "corrupted OBJ: OBJ is text"},
+        {"# nothing\nvt 0 0\n", "the file holds no triangles"},
+    };
+    for (std::size_t i = 0; i < hostile.size(); ++i) {
+        const std::string name = "hostile" + std::to_string(i) + ".obj";
+        dir.write(name, hostile[i].first);
+        const std::string error = errorOf([&] { readPartMesh(dir.path / name, name); });
+        EXPECT_NE(error.find(name + ":" + (hostile[i].second[0] == 'c' || hostile[i].second[0] == 't' ? " " : "") +
+                             hostile[i].second),
+                  std::string::npos)
+            << i << ": " << error;
+    }
+}
+
 TEST(MeshReader, CorruptedAndMissingFilesNameTheFile)
 {
     TempDir dir;

@@ -850,6 +850,22 @@ TEST(StrutRecipes, ALatticeThatFallsApartIsCountedOnTheGrid)
     EXPECT_NE(out.find("lower sigma"), std::string::npos) << out;
     EXPECT_NE(out.find("allow: [pieces]"), std::string::npos) << out;
     EXPECT_TRUE(!std::filesystem::exists(dir.path / "out") || listFolder(dir.path / "out").empty());
+    // With the sigma in numbers: found by trials, and checked here by running it (and a little above).
+    const std::string key = "stays in one piece for sigma <= ";
+    const std::size_t at = out.find(key);
+    ASSERT_NE(at, std::string::npos) << out;
+    const double sigma = std::stod(out.substr(at + key.size()));
+    EXPECT_GT(sigma, 0.2);
+    EXPECT_LT(sigma, 0.8);
+    auto withSigma = [&](double s) {
+        std::string r = broken;
+        r.replace(r.find("sigma: 0.8"), 10, "sigma: " + std::to_string(s));
+        return r;
+    };
+    const std::string whole = runRecipe(dir, withSigma(sigma) + "outputs: {mesh: a.stl}\n", &status);
+    EXPECT_EQ(status, 0) << whole;
+    runRecipe(dir, withSigma(sigma + 0.05) + "outputs: {mesh: a.stl}\n", &status);
+    EXPECT_EQ(status, 3) << "sigma " << sigma + 0.05 << " should fall apart";
     // `allow: [pieces]` (a plate of separate parts) turns it into a warning; counts in report.json.
     const std::string allowed = runRecipe(dir, broken + "outputs: {mesh: a.stl}\nallow: [pieces]\n", &status);
     EXPECT_EQ(status, 0) << allowed;

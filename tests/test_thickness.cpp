@@ -20,6 +20,7 @@
 #include <openvdb/tools/Interpolation.h>
 
 #include <iostream>
+#include <limits>
 #include <numbers>
 #include <random>
 
@@ -621,4 +622,87 @@ TEST(Offset, RecipeErrorsNameTheKey)
             EXPECT_NE(std::string(e.what()).find(c.expect), std::string::npos) << e.what();
         }
     }
+}
+
+TEST(ThicknessRecipes, WallsThinnerThanTwoVoxelsWarnBeforeEvaluation)
+{
+    test::TempDir dir;
+    auto warningsOf = [](const nlohmann::json& report) {
+        std::vector<std::string> codes;
+        if (report.contains("warnings"))
+            for (const auto& w : report["warnings"]) codes.push_back(w["code"]);
+        return codes;
+    };
+    // Walls in millimetres: 0.15 mm on 0.1 mm voxels is less than two voxels.
+    Job thin(
+        recipe("voxel: 0.1\ndomain: {box: [[0, 0, 0], [4, 4, 4]]}\nfields:\n  s: {tpms: gyroid, cell: 4, "
+               "solid: sheet, thickness: 0.15}\nresult: s\n",
+               dir));
+    thin.solveLevels();
+    const auto report = thin.report();
+    EXPECT_EQ(report["fields"]["s"]["thinnest_wall_mm"].get<double>(), 0.15);
+    ASSERT_EQ(warningsOf(report), std::vector<std::string>{"sub_voxel_features"});
+    const std::string w = report["warnings"][0]["message"];
+    EXPECT_NE(w.find("its thinnest walls are 0.15 mm across, less than two voxels (0.2 mm)"), std::string::npos) << w;
+    EXPECT_NE(w.find("use `voxel: 0.075`"), std::string::npos) << w;
+    // 0.3 mm walls are fine there.
+    Job fine(
+        recipe("voxel: 0.1\ndomain: {box: [[0, 0, 0], [4, 4, 4]]}\nfields:\n  s: {tpms: gyroid, cell: 4, "
+               "solid: sheet, thickness: 0.3}\nresult: s\n",
+               dir));
+    fine.solveLevels();
+    EXPECT_TRUE(warningsOf(fine.report()).empty());
+}
+
+TEST(ThicknessRecipes, ALevelSheetsThinnestWallMatchesRaysAcrossIt)
+{
+    // A sheet |f| <= t: the job's thinnest wall (from the steepest gradient on the mid-surface)
+    // against walls measured independently: from points on f = 0, march along the normal both
+    // ways to |f| = t and take the distance between the two crossings.
+    test::TempDir dir;
+    const double cell = 5.0, t = 0.15;
+    Job job(
+        recipe("voxel: 0.2\ndomain: {box: [[0, 0, 0], [5, 5, 5]]}\nfields:\n  s: {tpms: schwarz-p, cell: 5, "
+               "solid: sheet, level: 0.15}\nresult: s\n",
+               dir));
+    job.solveLevels();
+    const double reported = job.report()["fields"]["s"]["thinnest_wall_mm"].get<double>();
+    const TpmsField f(TpmsType::SchwarzP, Vec3d(cell));
+    auto value = [&](const Vec3d& p) {
+        double v = 0.0;
+        f.values(std::span<const Vec3d>(&p, 1), std::span<double>(&v, 1));
+        return v;
+    };
+    auto crossing = [&](Vec3d p, const Vec3d& dir, double target) {
+        // |f| grows from 0 along dir: step out, then bisect.
+        double lo = 0.0, hi = 0.0;
+        while (std::abs(value(p + dir * hi)) < target) lo = hi, hi += 0.01;
+        for (int i = 0; i < 50; ++i) {
+            const double mid = 0.5 * (lo + hi);
+            (std::abs(value(p + dir * mid)) < target ? lo : hi) = mid;
+        }
+        return 0.5 * (lo + hi);
+    };
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u(0.0, cell);
+    double measured = std::numeric_limits<double>::infinity();
+    int samples = 0;
+    while (samples < 4000) {
+        // A point on the mid-surface: bisect f along x between a sign change.
+        Vec3d a(u(rng), u(rng), u(rng)), b = a + Vec3d(0.5, 0.0, 0.0);
+        if (value(a) * value(b) > 0.0) continue;
+        for (int i = 0; i < 60; ++i) {
+            const Vec3d m = 0.5 * (a + b);
+            (value(m) * value(a) > 0.0 ? a : b) = m;
+        }
+        const Vec3d p = 0.5 * (a + b);
+        double v = 0.0;
+        Vec3d g;
+        f.gradients(std::span<const Vec3d>(&p, 1), std::span<double>(&v, 1), std::span<Vec3d>(&g, 1));
+        if (g.length() < 1e-6) continue;
+        const Vec3d n = g / g.length();
+        measured = std::min(measured, crossing(p, n, t) + crossing(p, -n, t));
+        ++samples;
+    }
+    EXPECT_NEAR(reported, measured, 0.03 * measured) << "reported " << reported << ", measured " << measured;
 }

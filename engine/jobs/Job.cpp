@@ -8,6 +8,7 @@
 #include "engine/core/Version.h"
 #include "engine/density/DensitySolver.h"
 #include "engine/jobs/OutputPaths.h"
+#include "engine/jobs/PiecesAdvice.h"
 #include "engine/jobs/PropertiesJob.h"
 #include "engine/jobs/PropertyDesign.h"
 #include "engine/jobs/SliceJob.h"
@@ -240,10 +241,12 @@ void Job::solveLevels()
         if (mDesign.contains(node.name)) entry.update(mDesign[node.name]);
         entry["level"] = node.solid->level();
         if (node.thinnest) {
-            // Known before any evaluation of the result: a strut thinner than two voxels breaks up
-            // or vanishes on the grid (and in the mesh and slices made from it).
+            // Known before any evaluation of the result: a strut or wall thinner than two voxels
+            // breaks up or vanishes on the grid (and in the mesh and slices made from it).
+            const bool wall = node.thinnestKind == "wall";
+            const std::string features = wall ? "walls" : "struts";
             const double thinnest = node.thinnest(node.solid->level());
-            entry["thinnest_strut_mm"] = thinnest;
+            entry[wall ? "thinnest_wall_mm" : "thinnest_strut_mm"] = thinnest;
             if (thinnest <= 0.0)
                 mContext->warn("sub_voxel_features",
                                "field `" + node.name +
@@ -253,11 +256,12 @@ void Job::solveLevels()
                                {{"field", node.name}, {"thinnest_mm", 0.0}, {"voxel_mm", mDomain.voxel}});
             else if (thinnest < 2.0 * mDomain.voxel)
                 mContext->warn("sub_voxel_features",
-                               "field `" + node.name + "`: its thinnest struts are " + formatNumber(thinnest) +
-                                   " mm across, less than two voxels (" + formatNumber(2.0 * mDomain.voxel) +
+                               "field `" + node.name + "`: its thinnest " + features + " are " +
+                                   formatNumber(thinnest) + " mm across, less than two voxels (" +
+                                   formatNumber(2.0 * mDomain.voxel) +
                                    " mm): on the grid they break apart or vanish; use `voxel: " +
-                                   formatNumber(std::max(thinnest, 1e-3) / 2.0) +
-                                   "` or less, or thicken them (radius, density)",
+                                   formatNumber(std::max(thinnest, 1e-3) / 2.0) + "` or less, or thicken them (" +
+                                   (wall ? "thickness, level, density" : "radius, density") + ")",
                                {{"field", node.name},
                                 {"thinnest_mm", thinnest},
                                 {"voxel_mm", mDomain.voxel},
@@ -515,6 +519,12 @@ void Job::checkPieces()
         mContext->warn("pieces", msg.str(), {{"count", count.pieces.size()}, {"free", free}});
         return;
     }
+    // A convolution lattice at a fixed density: the sigma that keeps it whole, in numbers.
+    const std::optional<double> sigma =
+        timed("find a sigma that holds", [&] { return sigmaKeepingOnePiece(mRecipe, mRecipe.result, mContext); });
+    if (sigma)
+        msg << ". At its density this lattice stays in one piece for sigma <= " << formatNumber(*sigma)
+            << " mm (trials over 2 x 2 x 2 of its cells at this voxel)";
     throw JobError(mRecipe.source->path + ": " + msg.str());
 }
 

@@ -2,12 +2,10 @@
 
 #include "engine/core/Errors.h"
 #include "engine/core/InputFiles.h"
+#include "engine/parts/ObjReader.h"
 #include "engine/parts/PlyReader.h"
 
 #include <Model/COM/NMR_DLLInterfaces.h>
-#include <OpenMesh/Core/IO/MeshIO.hh>
-#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
-#include <OpenMesh/Core/System/omstream.hh>
 
 #include <algorithm>
 #include <array>
@@ -171,34 +169,6 @@ TriangleMesh readStl(const std::string& bytes, const std::string& shown, std::st
     throw InputError(shown + ": corrupted binary STL: the header says " + std::to_string(count) +
                      " triangles, which take " + std::to_string(84 + 50 * std::uint64_t(count)) +
                      " bytes, but the file has " + std::to_string(bytes.size()) + " (truncated or damaged)");
-}
-
-TriangleMesh readWithOpenMesh(const std::filesystem::path& path, const std::string& shown, const std::string& kind)
-{
-    using Mesh = OpenMesh::TriMesh_ArrayKernelT<>;
-    Mesh om;
-    OpenMesh::IO::Options options;
-    // OpenMesh reports its own complaints on stderr; ours name the file and the fix.
-    omerr().disable();
-    omlog().disable();
-    const bool ok = OpenMesh::IO::read_mesh(om, path.string(), options);
-    omerr().enable();
-    if (!ok) throw InputError(shown + ": cannot read the file as " + kind + " (corrupted or an unsupported variant)");
-    TriangleMesh m;
-    m.points.reserve(om.n_vertices());
-    for (const auto& v : om.vertices()) {
-        const auto& p = om.point(v);
-        m.points.emplace_back(float(p[0]), float(p[1]), float(p[2]));
-        checkFinite(m.points.back(), shown, "vertex " + std::to_string(v.idx() + 1));
-    }
-    for (const auto& f : om.faces()) {
-        std::array<std::uint32_t, 3> idx{};
-        int n = 0;
-        for (const auto& v : om.fv_range(f))
-            if (n < 3) idx[n++] = std::uint32_t(v.idx());
-        if (n == 3) m.triangles.emplace_back(idx[0], idx[1], idx[2]);
-    }
-    return m;
 }
 
 /// Reads every mesh object of a 3MF's build items (components one level down), in the build's
@@ -373,9 +343,8 @@ PartMesh readPartMesh(const std::filesystem::path& path, const std::string& show
         part.format = "PLY";
         part.mesh = readPly(readBytes(path, shown), shown);
     } else if (ext == ".obj") {
-        checkReadable(path, shown);
         part.format = "OBJ";
-        part.mesh = readWithOpenMesh(path, shown, part.format);
+        part.mesh = readObj(readBytes(path, shown), shown);
     } else if (ext == ".3mf") {
         checkReadable(path, shown);
         part.format = "3MF";

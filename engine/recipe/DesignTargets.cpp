@@ -8,15 +8,6 @@ namespace voxlat {
 
 namespace {
 
-int readAxis(const RecipeNode& node)
-{
-    const std::string a = node.string();
-    if (a == "x") return 0;
-    if (a == "y") return 1;
-    if (a == "z") return 2;
-    node.fail("expected an axis: x, y or z, got `" + a + "`");
-}
-
 std::optional<int> readResolution(const RecipeNode& node)
 {
     const double v = node.number();
@@ -72,7 +63,7 @@ StiffnessTarget parseStiffness(const RecipeNode& node)
             node["E_ratio"].fail("E_ratio is the lattice's modulus over the solid's, between 0 and 1 (exclusive)");
         t.ratio = r;
     }
-    if (node.has("axis")) t.axis = readAxis(node["axis"]);
+    if (node.has("axis")) t.axis = node["axis"].axis();
     if (node.has("resolution")) t.resolution = readResolution(node["resolution"]);
     if (node.has("tolerance")) {
         t.tolerance = node["tolerance"].positiveNumber();
@@ -94,7 +85,7 @@ SigmaOptimization parseOptimize(const RecipeNode& node)
     o.hi = s.at(1).number();
     if (!(o.lo > 0.0 && o.hi > o.lo)) s.fail("expected 0 < lo < hi (mm)");
     o.tolerance = (o.hi - o.lo) / 100.0;
-    if (node.has("axis")) o.axis = readAxis(node["axis"]);
+    if (node.has("axis")) o.axis = node["axis"].axis();
     if (node.has("resolution")) o.resolution = readResolution(node["resolution"]);
     if (node.has("tolerance")) {
         o.tolerance = node["tolerance"].positiveNumber();

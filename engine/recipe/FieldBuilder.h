@@ -38,6 +38,8 @@ struct LevelNode {
     /// The diameter (mm) of the thinnest strut (or wall) the solid has at a level, where the node
     /// knows it: the job warns before evaluating when it is below two voxels.
     std::function<double(double level)> thinnest{};
+    /// What thinnest() measures: "strut" (a diameter) or "wall" (a sheet's thickness).
+    std::string thinnestKind = "strut";
     /// Measure the density with sub-voxel coverage rather than by counting voxel centres.
     bool subVoxelDensity = false;
     /// Measure the density on its own voxel lattice over densityBox (a spacing incommensurate

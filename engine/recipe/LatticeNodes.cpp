@@ -13,7 +13,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
+#include <vector>
 
 namespace voxlat {
 
@@ -26,6 +28,30 @@ std::string mm(double v)
     return s.str();
 }
 
+/// The largest |grad f| over one cell of @a tpms where f is near zero (its mid-surface), from a
+/// 32^3 lattice of points: a sheet |f| <= t is thinnest, about 2t / |grad f| across, there.
+double steepestMidSurfaceGradient(const FieldNode& tpms, const Vec3d& cell)
+{
+    constexpr int n = 32;
+    std::vector<Vec3d> points;
+    points.reserve(n * n * n);
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j)
+            for (int k = 0; k < n; ++k)
+                points.push_back({(i + 0.5) * cell[0] / n, (j + 0.5) * cell[1] / n, (k + 0.5) * cell[2] / n});
+    std::vector<double> values(points.size());
+    std::vector<Vec3d> grads(points.size());
+    tpms.gradients(points, values, grads);
+    // Near the mid-surface: |f| within the distance a sample spacing spans along the gradient.
+    const double spacing = std::max({cell[0], cell[1], cell[2]}) / n;
+    double steepest = 0.0;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+        const double g = grads[i].length();
+        if (std::abs(values[i]) <= 0.5 * spacing * g) steepest = std::max(steepest, g);
+    }
+    return steepest > 0.0 ? steepest : 1.0;
+}
+
 /// True when the node has one of the gradient-shift keys.
 bool hasShiftKeys(const RecipeNode& spec)
 {
@@ -34,9 +60,12 @@ bool hasShiftKeys(const RecipeNode& spec)
 
 /// Reads `thickness:` or `wall:` + `layer:` (+ `build:`, `rotation:`): total wall thicknesses in
 /// millimetres, each a number or a scalar map. @a cell (may be zero) is used for the warning.
+/// @a thinnest gets the thinnest wall asked for (mm; a map's lowest value over the domain, or
+/// infinity when that is not known before evaluation).
 ShiftSpec readShiftSpec(FieldBuilder& builder, const RecipeNode& spec, const std::string& name, double cell,
-                        std::string& description)
+                        std::string& description, double& thinnest)
 {
+    thinnest = std::numeric_limits<double>::infinity();
     ShiftSpec shift;
     shift.scale = 0.5;  // recipes give total thicknesses; the shift on each side is half
     shift.label = "field `" + name + "`";
@@ -64,6 +93,10 @@ ShiftSpec readShiftSpec(FieldBuilder& builder, const RecipeNode& spec, const std
         double top = map.constant ? *map.constant : 0.0;
         if (!map.constant && builder.recipe().domainBox) top = sampleRange(*map.field, *builder.recipe().domainBox).hi;
         largest = std::max(largest, top);
+        if (map.constant)
+            thinnest = std::min(thinnest, *map.constant);
+        else if (builder.recipe().domainBox)
+            thinnest = std::min(thinnest, sampleRange(*map.field, *builder.recipe().domainBox).lo);
         description += (description.empty() ? "" : ", ") + key + " " + map.description + (map.constant ? " mm" : "");
         return map.field;
     };
@@ -127,7 +160,8 @@ FieldPtr buildGradientShift(FieldBuilder& builder, const RecipeNode& spec, const
 {
     FieldPtr f = builder.operand(spec["gradient-shift"], name + "/field");
     std::string description;
-    ShiftSpec shift = readShiftSpec(builder, spec, name, 0.0, description);
+    double thinnest = 0.0;  // a gradient-shift node is no LevelNode: the walls are not checked here
+    ShiftSpec shift = readShiftSpec(builder, spec, name, 0.0, description, thinnest);
     return std::make_shared<GradientShift>(std::move(f), std::move(shift));
 }
 
@@ -202,13 +236,20 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
             spec[spec.has("level") ? "level" : "density"].fail(
                 "give either a thickness in millimetres or `level:`/`density:`, not both");
         std::string walls;
-        ShiftSpec shift = readShiftSpec(builder, spec, name, std::min({cell[0], cell[1], cell[2]}), walls);
+        double thinnestWall = 0.0;
+        ShiftSpec shift =
+            readShiftSpec(builder, spec, name, std::min({cell[0], cell[1], cell[2]}), walls, thinnestWall);
         auto sheet = std::make_shared<GradientShift>(raw, std::move(shift));
         LevelNode node{name,
                        std::string(tpmsName(type)) + " sheet, " + walls + " (gradient shift)",
                        std::make_shared<LevelSolid>(sheet, SolidSide::Below, 0.0),
                        {},
                        {}};
+        // The walls are as thick as asked (the shift is exact to first order in the curvature).
+        if (std::isfinite(thinnestWall)) {
+            node.thinnest = [thinnestWall](double) { return thinnestWall; };
+            node.thinnestKind = "wall";
+        }
         FieldPtr result = node.solid;
         builder.addLevelNode(std::move(node));
         return result;
@@ -230,6 +271,12 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
                   solvedByInfill            ? LevelRule::SolvedElsewhere
                   : side == SolidSide::Band ? LevelRule::Required
                                             : LevelRule::Optional);
+    if (side == SolidSide::Band && !spec.has("frame") && !spec.has("offset")) {
+        // A sheet |f| <= t is about 2t / |grad f| thick; thinnest where f is steepest on its mid-surface.
+        const double steepest = steepestMidSurfaceGradient(*plain, cell);
+        node.thinnest = [steepest](double level) { return 2.0 * level / steepest; };
+        node.thinnestKind = "wall";
+    }
     const Interval range = tpmsLevelRange(type);
     if (node.solid->isSolved() && side == SolidSide::Below && !range.contains(node.solid->level())) {
         std::ostringstream msg;

@@ -79,6 +79,13 @@ double RecipeNode::positiveNumber() const
     return v;
 }
 
+int RecipeNode::axis() const
+{
+    const std::string a = string();
+    if (a == "x" || a == "y" || a == "z") return a[0] - 'x';
+    fail("the axis is x, y or z, got `" + a + "`");
+}
+
 std::string RecipeNode::string() const
 {
     if (!mNode.IsScalar()) fail("expected a word or a file name");

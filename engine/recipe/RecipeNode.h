@@ -46,6 +46,8 @@ public:
 
     double number() const;
     double positiveNumber() const;
+    /// `x`, `y` or `z` as 0, 1 or 2.
+    int axis() const;
     std::string string() const;
     bool boolean() const;
     Vec3d vec3() const;

@@ -16,15 +16,6 @@ namespace voxlat {
 
 namespace {
 
-int readAxis(const RecipeNode& node)
-{
-    const std::string a = node.string();
-    if (a == "x") return 0;
-    if (a == "y") return 1;
-    if (a == "z") return 2;
-    node.fail("the axis is x, y or z, got `" + a + "`");
-}
-
 std::string number(double v)
 {
     std::ostringstream s;
@@ -38,7 +29,7 @@ ScalarMap readRamp(FieldBuilder& builder, const RecipeNode& r)
 {
     ScalarMap map;
     r.checkKeys({"axis", "from", "to", "range"});
-    const int axis = readAxis(r["axis"]);
+    const int axis = r["axis"].axis();
     const double from = r["from"].number(), to = r["to"].number();
     double start = 0.0, end = 0.0;
     if (r.has("range")) {

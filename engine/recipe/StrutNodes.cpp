@@ -261,11 +261,7 @@ std::vector<std::array<double, 2>> readRadii(const RecipeNode& r, const Frame& f
         r["gradient"].fail("unknown gradient `" + preset + "` (presets: " + joinWords(presets) + ")");
     const double lo = positive(r["min"]), hi = positive(r["max"]);
     int axis = 0;
-    if (r.has("axis")) {
-        const std::string a = r["axis"].string();
-        if (a != "x" && a != "y" && a != "z") r["axis"].fail("axis is x, y or z");
-        axis = a[0] - 'x';
-    }
+    if (r.has("axis")) axis = r["axis"].axis();
     const Box3 box = frame.bounds();
     auto g = [&](const Vec3d& p) {
         Vec3d u;

@@ -1,8 +1,7 @@
 #include "mesher/writers/FrameWriters.h"
 
 #include "mesher/writers/AtomicFile.h"
-
-#include <Model/COM/NMR_DLLInterfaces.h>
+#include "mesher/writers/Lib3mfPackage.h"
 
 #include <algorithm>
 #include <cctype>
@@ -35,14 +34,6 @@ std::string number(double v)
     return text;
 }
 
-struct Lib3mfReleaser {
-    void operator()(NMR::PLib3MFBase* p) const
-    {
-        if (p) NMR::lib3mf_release(p);
-    }
-};
-using Lib3mfHandle = std::unique_ptr<NMR::PLib3MFBase, Lib3mfReleaser>;
-
 void write3mfBeams(const BeamFrame& frame, const std::string& path,
                    const std::vector<std::pair<std::string, std::string>>& metadata)
 {
@@ -50,26 +41,9 @@ void write3mfBeams(const BeamFrame& frame, const std::string& path,
     if (frame.nodes.size() > std::numeric_limits<DWORD>::max() ||
         frame.struts.size() > std::numeric_limits<DWORD>::max())
         throw std::invalid_argument("cannot write '" + path + "': a 3MF beam lattice holds at most 2^32 - 1 beams");
-    auto check = [&](LIB3MFRESULT result, PLib3MFBase* object, const char* what) {
-        if (result == LIB3MF_OK) return;
-        DWORD code = 0;
-        LPCSTR message = nullptr;
-        if (object) lib3mf_getlasterror(object, &code, &message);
-        throw std::runtime_error("cannot write '" + path + "': lib3mf failed to " + what +
-                                 (message ? std::string(": ") + message : std::string()));
-    };
-    PLib3MFModel* modelRaw = nullptr;
-    check(lib3mf_createmodel(&modelRaw), nullptr, "create a model");
-    const Lib3mfHandle model(modelRaw);
-    check(lib3mf_model_setunit(modelRaw, MODELUNIT_MILLIMETER), modelRaw, "set the unit");
-    for (const auto& [key, value] : metadata)
-        check(lib3mf_model_addmetadatautf8(modelRaw, key.c_str(), value.c_str()), modelRaw,
-              ("add the metadata " + key).c_str());
-    PLib3MFModelMeshObject* objectRaw = nullptr;
-    check(lib3mf_model_addmeshobject(modelRaw, &objectRaw), modelRaw, "add a mesh object");
-    const Lib3mfHandle object(objectRaw);
-    const std::string name = std::filesystem::path(path).stem().string();
-    check(lib3mf_object_setnameutf8(objectRaw, name.c_str()), objectRaw, "name the object");
+    const Lib3mfPackage package(path, metadata);
+    PLib3MFModelMeshObject* objectRaw = package.object();
+    auto check = [&](LIB3MFRESULT result, PLib3MFBase* owner, const char* what) { package.check(result, owner, what); };
     // One vertex at a time: lib3mf's setgeometry refuses a mesh without triangles.
     for (const Vec3d& p : frame.nodes) {
         MODELMESHVERTEX vertex;
@@ -98,24 +72,9 @@ void write3mfBeams(const BeamFrame& frame, const std::string& path,
         check(lib3mf_meshobject_setbeamindices(objectRaw, beams.data(), DWORD(beams.size())), objectRaw,
               "store the beams");
     }
-    PLib3MFModelBuildItem* itemRaw = nullptr;
-    check(lib3mf_model_addbuilditem(modelRaw, objectRaw, nullptr, &itemRaw), modelRaw, "add a build item");
-    const Lib3mfHandle item(itemRaw);
-    // Fixed UUIDs (lib3mf stamps random ones): the same frame gives the same bytes.
-    check(lib3mf_object_setuuidutf8(objectRaw, "6f0b1c2e-5a1d-4c3b-8e2f-000000000001"), objectRaw, "set a UUID");
-    check(lib3mf_model_setbuilduuidutf8(modelRaw, "6f0b1c2e-5a1d-4c3b-8e2f-000000000002"), modelRaw, "set a UUID");
-    check(lib3mf_builditem_setuuidutf8(itemRaw, "6f0b1c2e-5a1d-4c3b-8e2f-000000000003"), itemRaw, "set a UUID");
-    PLib3MFModelWriter* writerRaw = nullptr;
-    check(lib3mf_model_querywriter(modelRaw, "3mf", &writerRaw), modelRaw, "start the writer");
-    const Lib3mfHandle writer(writerRaw);
-    ULONG64 size = 0;
-    check(lib3mf_writer_getstreamsize(writerRaw, &size), writerRaw, "measure the package");
-    std::vector<char> bytes(size);
-    check(lib3mf_writer_writetobuffer(writerRaw, reinterpret_cast<BYTE*>(bytes.data()), size), writerRaw,
-          "pack the model");
-    AtomicFile file(path);
-    file.stream().write(bytes.data(), std::streamsize(bytes.size()));
-    file.commit();
+    // Fixed UUIDs: the same frame gives the same bytes.
+    package.write({"6f0b1c2e-5a1d-4c3b-8e2f-000000000001", "6f0b1c2e-5a1d-4c3b-8e2f-000000000002",
+                   "6f0b1c2e-5a1d-4c3b-8e2f-000000000003"});
 }
 
 }  // namespace

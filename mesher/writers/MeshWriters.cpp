@@ -1,6 +1,7 @@
 #include "mesher/writers/MeshWriters.h"
 
 #include "mesher/writers/AtomicFile.h"
+#include "mesher/writers/Lib3mfPackage.h"
 
 #include <tbb/parallel_pipeline.h>
 
@@ -106,15 +107,6 @@ void writeOpenMesh(const TriangleMesh& mesh, const std::string& path, const std:
     file.commit();
 }
 
-/// Releases a lib3mf object when it goes out of scope.
-struct Lib3mfReleaser {
-    void operator()(NMR::PLib3MFBase* p) const
-    {
-        if (p) NMR::lib3mf_release(p);
-    }
-};
-using Lib3mfHandle = std::unique_ptr<NMR::PLib3MFBase, Lib3mfReleaser>;
-
 /// A UUID made from the mesh and its metadata (and @a role, so the object, build and item differ):
 /// lib3mf stamps random ones, and the same mesh should give the same bytes.
 std::string contentUuid(const TriangleMesh& mesh, const MeshMetadata& metadata, std::uint64_t role)
@@ -151,54 +143,20 @@ void write3mf(const TriangleMesh& mesh, const std::string& path, const MeshMetad
         mesh.triangles.size() > std::numeric_limits<DWORD>::max())
         throw std::invalid_argument("cannot write '" + path +
                                     "': a 3MF mesh holds at most 2^32 - 1 vertices and triangles");
-    auto check = [&](LIB3MFRESULT result, PLib3MFBase* object, const char* what) {
-        if (result == LIB3MF_OK) return;
-        DWORD code = 0;
-        LPCSTR message = nullptr;
-        if (object) lib3mf_getlasterror(object, &code, &message);
-        throw std::runtime_error("cannot write '" + path + "': lib3mf failed to " + what +
-                                 (message ? std::string(": ") + message : std::string()));
-    };
-    PLib3MFModel* modelRaw = nullptr;
-    check(lib3mf_createmodel(&modelRaw), nullptr, "create a model");
-    const Lib3mfHandle model(modelRaw);
-    check(lib3mf_model_setunit(modelRaw, MODELUNIT_MILLIMETER), modelRaw, "set the unit");
-    for (const auto& [key, value] : metadata)
-        check(lib3mf_model_addmetadatautf8(modelRaw, key.c_str(), value.c_str()), modelRaw,
-              ("add the metadata " + key).c_str());
-    PLib3MFModelMeshObject* objectRaw = nullptr;
-    check(lib3mf_model_addmeshobject(modelRaw, &objectRaw), modelRaw, "add a mesh object");
-    const Lib3mfHandle object(objectRaw);
-    const std::string name = std::filesystem::path(path).stem().string();
-    check(lib3mf_object_setnameutf8(objectRaw, name.c_str()), objectRaw, "name the object");
+    const Lib3mfPackage package(path, metadata);
+    PLib3MFModelMeshObject* objectRaw = package.object();
     std::vector<MODELMESHVERTEX> vertices(mesh.points.size());
     for (std::size_t i = 0; i < mesh.points.size(); ++i)
         for (int k = 0; k < 3; ++k) vertices[i].m_fPosition[k] = mesh.points[i][k];
     std::vector<MODELMESHTRIANGLE> triangles(mesh.triangles.size());
     for (std::size_t i = 0; i < mesh.triangles.size(); ++i)
         for (int k = 0; k < 3; ++k) triangles[i].m_nIndices[k] = DWORD(mesh.triangles[i][k]);
-    check(lib3mf_meshobject_setgeometry(objectRaw, vertices.data(), DWORD(vertices.size()), triangles.data(),
-                                        DWORD(triangles.size())),
-          objectRaw, "store the mesh");
+    package.check(lib3mf_meshobject_setgeometry(objectRaw, vertices.data(), DWORD(vertices.size()), triangles.data(),
+                                                DWORD(triangles.size())),
+                  objectRaw, "store the mesh");
     vertices = {};
     triangles = {};
-    PLib3MFModelBuildItem* itemRaw = nullptr;
-    check(lib3mf_model_addbuilditem(modelRaw, objectRaw, nullptr, &itemRaw), modelRaw, "add a build item");
-    const Lib3mfHandle item(itemRaw);
-    check(lib3mf_object_setuuidutf8(objectRaw, contentUuid(mesh, metadata, 1).c_str()), objectRaw, "set a UUID");
-    check(lib3mf_model_setbuilduuidutf8(modelRaw, contentUuid(mesh, metadata, 2).c_str()), modelRaw, "set a UUID");
-    check(lib3mf_builditem_setuuidutf8(itemRaw, contentUuid(mesh, metadata, 3).c_str()), itemRaw, "set a UUID");
-    PLib3MFModelWriter* writerRaw = nullptr;
-    check(lib3mf_model_querywriter(modelRaw, "3mf", &writerRaw), modelRaw, "start the writer");
-    const Lib3mfHandle writer(writerRaw);
-    ULONG64 size = 0;
-    check(lib3mf_writer_getstreamsize(writerRaw, &size), writerRaw, "measure the package");
-    std::vector<char> bytes(size);
-    check(lib3mf_writer_writetobuffer(writerRaw, reinterpret_cast<BYTE*>(bytes.data()), size), writerRaw,
-          "pack the model");
-    AtomicFile file(path);
-    file.stream().write(bytes.data(), std::streamsize(bytes.size()));
-    file.commit();
+    package.write({contentUuid(mesh, metadata, 1), contentUuid(mesh, metadata, 2), contentUuid(mesh, metadata, 3)});
 }
 
 /// Exact welding key: the bit patterns, with -0 folded onto +0 so equal values weld.
