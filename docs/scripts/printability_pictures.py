@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Makes the pictures of docs/recipes.md's printability section from real runs of voxlat: the
 floating-ball recipe's island layer with the island marked, and a layer through the hollow
-sphere's resin trap with the drain point marked. Each picture is the layer as the printer shows
+sphere's resin trap with the drain point marked, and a layer of a BCC lattice of 0.06 mm struts
+(under two 35 um pixels) on a plate with the first thin feature of that layer marked. Each picture is the layer as the printer shows
 it (PNG folder output, landscape, y up) in grey, the finding in red.
 
 usage: printability_pictures.py VOXLAT_BINARY OUT_FOLDER
@@ -32,6 +33,20 @@ fields:
 result: part
 outputs: {slices: {printer: mono-4k, layer: 0.1, file: layers, format: png, preview: off}}
 """
+THIN = """domain: {box: [[0, 0, 0], [6, 6, 3]]}
+fields:
+  plate: {box: [[0, 0, 0], [6, 6, 0.5]]}
+  lattice: {struts: {cell: bcc, size: 3}, kernel: capsule, radius: 0.03}
+  part: {union: [plate, lattice]}
+result: part
+outputs: {slices: {printer: mono-4k, layer: 0.05, file: layers, format: png, preview: off}}
+"""
+
+
+def first_thin_from(p, layer):
+    """The first thin feature listed at or above @a layer: (layer, x, y)."""
+    e = next(e for e in p["thin"]["first"] if e["layer"] >= layer)
+    return e["layer"], e["x"], e["y"]
 
 
 def read_png(path):
@@ -97,6 +112,8 @@ def main():
                 lambda p: (int(round(p["resin_traps"][0]["z"] / 0.1 - 0.5)), p["resin_traps"][0]["x"],
                            p["resin_traps"][0]["y"]),
                 os.path.join(folder, "printability-trap.png"))
+        picture(voxlat, THIN, tmp, "thin", lambda p: first_thin_from(p, 40),
+                os.path.join(folder, "printability-thin.png"))
 
 
 if __name__ == "__main__":
