@@ -58,6 +58,15 @@ Frame cylinderFrame(const UnitCell& cell, const Vec3d& base, double innerRadius,
 Frame sphereFrame(const UnitCell& cell, const Vec3d& centre, double innerRadius, double outerRadius,
                   const std::array<int, 3>& counts);
 
+/// Cells mapped into a structured grid of hexahedra (IntraLattice's conformal frames between
+/// two surfaces): @a gridNodes holds the (counts[0] + 1)(counts[1] + 1)(counts[2] + 1) corners,
+/// node (i, j, k) at index (i (counts[1] + 1) + j)(counts[2] + 1) + k. Cell (i, j, k) is the
+/// hexahedron of corners (i..i+1, j..j+1, k..k+1); a unit cell's node (a, b, c) goes to the
+/// trilinear blend of its corners, so cell corners land exactly on grid nodes. Struts are straight
+/// between mapped nodes. Nodes closer than 1e-9 of the grid's size merge (closed or collapsed
+/// surfaces: a seam, an axis, a point) and struts that shrink to a point are dropped.
+Frame hexGridFrame(const UnitCell& cell, const std::vector<Vec3d>& gridNodes, const std::array<int, 3>& counts);
+
 /// Uniform cells filling @a region, kept where @a inside says a point is in the design space
 /// (value <= 0): struts with both ends inside are kept whole, struts with one end inside are
 /// trimmed at the boundary (found by bisection) unless the piece is shorter than
