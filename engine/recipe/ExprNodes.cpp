@@ -216,8 +216,7 @@ FieldPtr equationField(FieldBuilder& builder, const RecipeNode& textNode)
             } else {
                 candidates = recipe.fieldNames;
                 for (const auto& c : exprConstantNames()) candidates.push_back(c);
-                known = "fields: " + joinWords(recipe.fieldNames) +
-                        "; coordinates x, y, z (and u, v, w in a strut `radius:`); constants pi, tau, e";
+                known = "fields: " + joinWords(recipe.fieldNames) + "; coordinates x, y, z; constants pi, tau, e";
             }
             const std::string guess = closestMatch(e.unknownName(), candidates);
             if (!guess.empty()) message += "; did you mean `" + guess + "`?";
