@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -101,6 +102,23 @@ TEST(RadiusFromField, WithDensityTheFieldIsShiftedByTheSolvedLevel)
     // The density is met on the grid.
     const nlohmann::json density = job.report()["fields"]["l"];
     EXPECT_NEAR(density["achieved_density"].get<double>(), 0.15, 0.01) << density.dump();
+    // Gaussian convolution: the solved iso-value t shifts every squared radius by the same
+    // 2 sigma^2 ln(1/t), so r^2 - R^2 is one number over all strut ends.
+    Job gauss(
+        parseRecipe("voxel: 0.1\nfields:\n"
+                    "  l: {struts: {cell: bcc, size: 3, count: 2}, kernel: {gaussian: {sigma: 0.3}}, "
+                    "density: 0.35, radius: {expr: \"0.3 + 0.1*u\"}}\nresult: l\n",
+                    "g.yaml", "."));
+    const BeamFrame g = gauss.frame();
+    std::vector<double> shifts;
+    forEachEnd(g, [&](const Vec3d& p, double r) {
+        const double R = 0.3 + 0.1 * p[0] / 6;
+        shifts.push_back(r * r - R * R);
+    });
+    const auto [lo, hi] = std::minmax_element(shifts.begin(), shifts.end());
+    EXPECT_GT(std::abs(*lo), 1e-3);
+    EXPECT_NEAR(*lo, *hi, 1e-9);
+    EXPECT_NEAR(gauss.report()["fields"]["l"]["achieved_density"].get<double>(), 0.35, 0.01);
 }
 
 TEST(RadiusFromField, ErrorsNameTheRadius)
