@@ -234,6 +234,12 @@ TEST(FrameKeys, RefusedKeysNameThemselves)
         EXPECT_NE(e.find("remove `" + c.key + "`"), std::string::npos) << c.frame << ": " << e;
         EXPECT_NE(e.find("`" + c.key + "` has no use in"), std::string::npos) << c.frame << ": " << e;
     }
+    // Two kernels at once.
+    const std::string k = buildError(head +
+                                     "  l: {struts: {cell: grid, size: 2, count: 2}, kernel: {capsule: {blend: "
+                                     "0.2}, gaussian: {sigma: 0.3}}, radius: 0.3}\nresult: l\n");
+    EXPECT_NE(k.find("r.yaml:5:"), std::string::npos) << k;
+    EXPECT_NE(k.find("not both"), std::string::npos) << k;
     // Two layouts at once: the second one's key has no use in the first.
     const std::string e = buildError(head +
                                      "  l: {struts: {cell: grid, sphere: {radius: 4, cells: [2, 4, 1]}, "

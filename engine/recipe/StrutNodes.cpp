@@ -481,7 +481,13 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     const bool capsule = (kernel.isScalar() && kernel.string() == "capsule") || kernel.has("capsule");
     if (!capsule && !kernel.has("gaussian"))
         kernel.fail("the kernel is {gaussian: {sigma: S}} or capsule / {capsule: {blend: B}}");
-    if (kernel.isMap()) kernel.checkKeys({"gaussian", "capsule"});
+    if (kernel.isMap()) {
+        kernel.checkKeys({"gaussian", "capsule"});
+        if (kernel.has("gaussian") && kernel.has("capsule"))
+            kernel["gaussian"].fail("a lattice has one kernel: give `gaussian` or `capsule`, not both; remove one");
+        if (kernel.has("capsule") && !kernel["capsule"].isMap() && !kernel["capsule"].yaml().IsNull())
+            kernel["capsule"].fail("capsule takes {blend: B} or nothing (`kernel: capsule`)");
+    }
     const std::size_t n = frame.struts.size();
     std::optional<std::vector<std::array<double, 2>>> radii;
     if (spec.has("radius"))
