@@ -120,14 +120,14 @@ struct UniformCells {
 
 /// The ways a frame is laid out: the key that selects each and the keys it uses. Any other key
 /// of `struts:` is refused, naming itself.
-struct FrameKind {
+struct FrameLayout {
     const char* key;   ///< the key that selects it ("" for the box of uniform cells)
     const char* what;  ///< for messages
     std::vector<std::string> keys;
 };
-const std::vector<FrameKind>& frameKinds()
+const std::vector<FrameLayout>& frameLayouts()
 {
-    static const std::vector<FrameKind> kinds = {
+    static const std::vector<FrameLayout> kinds = {
         {"wireframe", "a wireframe (used as the frame as it is)", {"wireframe"}},
         {"between", "a frame between two surfaces", {"cell", "between", "cells"}},
         {"skin", "a skin frame (cells along the part's surface)", {"cell", "size", "skin"}},
@@ -145,16 +145,16 @@ const std::vector<FrameKind>& frameKinds()
 
 /// The kind of frame @a s lays out, its keys checked: no key the kind does not use (another
 /// kind's key included).
-const FrameKind& readFrameKind(const RecipeNode& s)
+const FrameLayout& readFrameLayout(const RecipeNode& s)
 {
     std::vector<std::string> all;
-    for (const FrameKind& k : frameKinds())
+    for (const FrameLayout& k : frameLayouts())
         for (const std::string& key : k.keys)
             if (std::find(all.begin(), all.end(), key) == all.end()) all.push_back(key);
     s.checkKeys(all);
     // The first kind named decides; another kind's key then has no use in it.
-    const FrameKind* kind = &frameKinds().back();
-    for (const FrameKind& k : frameKinds())
+    const FrameLayout* kind = &frameLayouts().back();
+    for (const FrameLayout& k : frameLayouts())
         if (*k.key != '\0' && s.has(k.key)) {
             kind = &k;
             break;
@@ -232,7 +232,7 @@ Frame buildBetweenFrame(FieldBuilder& builder, const RecipeNode& s, const UnitCe
 Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& name,
                  std::optional<UniformCells>& uniform, FieldPtr& region)
 {
-    const std::string kind = readFrameKind(s).key;
+    const std::string kind = readFrameLayout(s).key;
     if (kind == "wireframe") return readWireframe(builder.recipe().resolve(s["wireframe"].string()).string());
     if (!s.has("cell")) s.fail("give `cell:` (a preset such as bcc, or custom lines) or `wireframe:` (a file)");
     const UnitCell cell = readCell(builder, s["cell"]);
