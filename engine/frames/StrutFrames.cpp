@@ -55,10 +55,11 @@ bool FrameBuilder::strut(const Vec3d& a, const Vec3d& b)
 }
 
 namespace {
-/// Refuses, before anything is allocated, a frame whose struts would not fit in memory: each
-/// strut costs about kBytesPerStrut across the frame, its convolution data and the strut index.
-/// 10^9 struts otherwise ran for minutes with no estimate and then ran out of memory.
+/// Each strut costs about this across the frame, its convolution data and the strut index.
 constexpr double kBytesPerStrut = 400.0;
+}  // namespace
+
+// 10^9 struts otherwise ran for minutes with no estimate and then ran out of memory.
 void checkStrutCount(const UnitCell& cell, const std::array<int, 3>& counts)
 {
     const double cells = double(counts[0]) * double(counts[1]) * double(counts[2]);
@@ -73,6 +74,7 @@ void checkStrutCount(const UnitCell& cell, const std::array<int, 3>& counts)
                        std::to_string(std::uint64_t(budget / 1e9 + 0.5)) + " GB): use larger cells or a smaller part");
 }
 
+namespace {
 template <typename Map>
 Frame mapCells(const UnitCell& cell, const std::array<int, 3>& counts, double tol, Map&& map)
 {

@@ -42,6 +42,10 @@ private:
     std::map<std::pair<int, int>, int> mStruts;
 };
 
+/// Refuses (JobError), before anything is allocated, a frame of @a counts cells of @a cell whose
+/// struts would not fit in half the free memory.
+void checkStrutCount(const UnitCell& cell, const std::array<int, 3>& counts);
+
 /// Cells of size @a cellSize from @a origin, @a counts per axis.
 Frame boxFrame(const UnitCell& cell, const Vec3d& origin, const Vec3d& cellSize, const std::array<int, 3>& counts);
 

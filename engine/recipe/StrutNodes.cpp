@@ -209,6 +209,7 @@ Frame buildBetweenFrame(FieldBuilder& builder, const RecipeNode& s, const UnitCe
     const std::array<int, 3> counts = readCounts(s["cells"]);
     const auto first = builder.surface(between.at(0), name + "/between/0");
     const SecondSurface second = readSecondSurface(builder, between.at(1), name + "/between/1");
+    checkStrutCount(cell, counts);  // before the grid's nodes are allocated
     const int nu = counts[0], nv = counts[1], nw = counts[2];
     std::vector<Vec3d> grid(std::size_t(nu + 1) * (nv + 1) * (nw + 1));
     for (int i = 0; i <= nu; ++i)
