@@ -11,6 +11,7 @@
 #include <fstream>
 #include <numbers>
 #include <sstream>
+#include <stdexcept>
 
 namespace voxlat {
 
@@ -54,10 +55,11 @@ bool FrameBuilder::strut(const Vec3d& a, const Vec3d& b)
 }
 
 namespace {
-/// Refuses, before anything is allocated, a frame whose struts would not fit in memory: each
-/// strut costs about kBytesPerStrut across the frame, its convolution data and the strut index.
-/// 10^9 struts otherwise ran for minutes with no estimate and then ran out of memory.
+/// Each strut costs about this across the frame, its convolution data and the strut index.
 constexpr double kBytesPerStrut = 400.0;
+}  // namespace
+
+// 10^9 struts otherwise ran for minutes with no estimate and then ran out of memory.
 void checkStrutCount(const UnitCell& cell, const std::array<int, 3>& counts)
 {
     const double cells = double(counts[0]) * double(counts[1]) * double(counts[2]);
@@ -72,6 +74,7 @@ void checkStrutCount(const UnitCell& cell, const std::array<int, 3>& counts)
                        std::to_string(std::uint64_t(budget / 1e9 + 0.5)) + " GB): use larger cells or a smaller part");
 }
 
+namespace {
 template <typename Map>
 Frame mapCells(const UnitCell& cell, const std::array<int, 3>& counts, double tol, Map&& map)
 {
@@ -125,6 +128,39 @@ Frame sphereFrame(const UnitCell& cell, const Vec3d& centre, double innerRadius,
         const double phi = u[1] / azimuthal * 2.0 * std::numbers::pi;
         const double theta = u[2] / polar * std::numbers::pi;
         return centre + r * Vec3d(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta));
+    });
+}
+
+Frame hexGridFrame(const UnitCell& cell, const std::vector<Vec3d>& gridNodes, const std::array<int, 3>& counts)
+{
+    const int n0 = counts[0], n1 = counts[1], n2 = counts[2];
+    if (gridNodes.size() != std::size_t(n0 + 1) * std::size_t(n1 + 1) * std::size_t(n2 + 1))
+        throw std::invalid_argument("hexGridFrame: the grid has the wrong number of nodes for its counts");
+    Box3 box{gridNodes.front(), gridNodes.front()};
+    for (const Vec3d& p : gridNodes)
+        for (int a = 0; a < 3; ++a) {
+            box.min[a] = std::min(box.min[a], p[a]);
+            box.max[a] = std::max(box.max[a], p[a]);
+        }
+    const double tol = std::max(1e-9 * box.extent().length(), 1e-300);
+    auto corner = [&](int i, int j, int k) -> const Vec3d& {
+        return gridNodes[(std::size_t(i) * (n1 + 1) + j) * (n2 + 1) + k];
+    };
+    return mapCells(cell, counts, tol, [&](const Vec3d& u) {
+        // The hexahedron holding u (the last one for a node on the far faces) and u within it.
+        const int i = std::clamp(int(std::floor(u[0])), 0, n0 - 1);
+        const int j = std::clamp(int(std::floor(u[1])), 0, n1 - 1);
+        const int k = std::clamp(int(std::floor(u[2])), 0, n2 - 1);
+        const double a = u[0] - i, b = u[1] - j, c = u[2] - k;
+        Vec3d p(0.0);
+        for (int di = 0; di < 2; ++di)
+            for (int dj = 0; dj < 2; ++dj)
+                for (int dk = 0; dk < 2; ++dk) {
+                    const double weight = (di ? a : 1.0 - a) * (dj ? b : 1.0 - b) * (dk ? c : 1.0 - c);
+                    // Zero weights are skipped, so a cell corner is its grid node exactly.
+                    if (weight != 0.0) p += weight * corner(i + di, j + dj, k + dk);
+                }
+        return p;
     });
 }
 

@@ -42,6 +42,10 @@ private:
     std::map<std::pair<int, int>, int> mStruts;
 };
 
+/// Refuses (JobError), before anything is allocated, a frame of @a counts cells of @a cell whose
+/// struts would not fit in half the free memory.
+void checkStrutCount(const UnitCell& cell, const std::array<int, 3>& counts);
+
 /// Cells of size @a cellSize from @a origin, @a counts per axis.
 Frame boxFrame(const UnitCell& cell, const Vec3d& origin, const Vec3d& cellSize, const std::array<int, 3>& counts);
 
@@ -57,6 +61,15 @@ Frame cylinderFrame(const UnitCell& cell, const Vec3d& base, double innerRadius,
 /// at the centre (inner radius 0) merge, and struts that shrink to a point there are dropped.
 Frame sphereFrame(const UnitCell& cell, const Vec3d& centre, double innerRadius, double outerRadius,
                   const std::array<int, 3>& counts);
+
+/// Cells mapped into a structured grid of hexahedra (IntraLattice's conformal frames between
+/// two surfaces): @a gridNodes holds the (counts[0] + 1)(counts[1] + 1)(counts[2] + 1) corners,
+/// node (i, j, k) at index (i (counts[1] + 1) + j)(counts[2] + 1) + k. Cell (i, j, k) is the
+/// hexahedron of corners (i..i+1, j..j+1, k..k+1); a unit cell's node (a, b, c) goes to the
+/// trilinear blend of its corners, so cell corners land exactly on grid nodes. Struts are straight
+/// between mapped nodes. Nodes closer than 1e-9 of the grid's size merge (closed or collapsed
+/// surfaces: a seam, an axis, a point) and struts that shrink to a point are dropped.
+Frame hexGridFrame(const UnitCell& cell, const std::vector<Vec3d>& gridNodes, const std::array<int, 3>& counts);
 
 /// Uniform cells filling @a region, kept where @a inside says a point is in the design space
 /// (value <= 0): struts with both ends inside are kept whole, struts with one end inside are

@@ -150,8 +150,7 @@ Job::Job(Recipe recipe, JobContext* context)
     }
     timed("build fields", [&] {
         // Build every field, so a mistake anywhere in the recipe is reported before any work.
-        for (const std::string& name : mRecipe.fieldNames) mBuilder.field(name);
-        mResult = mBuilder.field(mRecipe.result);
+        mResult = mBuilder.buildAll();
         return 0;
     });
     try {

@@ -4,8 +4,11 @@
 #include "fields/Constant.h"
 #include "fields/ExprField.h"
 #include "fields/LevelSolid.h"
+#include "fields/ParametricSurface.h"
+#include "fields/Ramp.h"
 
 #include <algorithm>
+#include <cctype>
 #include <map>
 
 namespace voxlat {
@@ -36,6 +39,7 @@ public:
         if (std::find(recipe.fieldNames.begin(), recipe.fieldNames.end(), base) == recipe.fieldNames.end()) {
             if (recipe.params.count(name))
                 throw ExprError("`" + name + "` is a parameter: write `$" + name + "`", std::string::npos);
+            if (name == "u" || name == "v" || name == "w") return unitCoordinate(name);
             return {};
         }
         FieldPtr f = mBuilder.field(base);  // detects cycles through equations too
@@ -58,8 +62,35 @@ public:
     }
 
     std::vector<FieldPtr> inputs() const { return mInputs; }
+    /// Whether compiling failed at u, v or w with no frame's box to give them.
+    bool neededUnitBox() const { return mNeededUnitBox; }
 
 private:
+    /// IntraLattice's unit-box coordinate @a name (u, v or w): x, y or z scaled to [0, 1] over
+    /// the box of the strut frame whose `radius:` is being built (0 along a flat axis).
+    ExprSymbol unitCoordinate(const std::string& name)
+    {
+        const auto& box = mBuilder.unitBox();
+        if (!box) {
+            mNeededUnitBox = true;
+            throw ExprError("`" + name +
+                                "` is IntraLattice's unit-box coordinate (u, v, w from 0 to 1 over a strut frame's "
+                                "box): it can be used in a field that is a strut `radius:`, and this one is not",
+                            std::string::npos);
+        }
+        mBuilder.noteUnitBoxUse();
+        if (auto it = mIndex.find(name); it != mIndex.end()) return {ExprSymbol::Kind::Input, 0.0, it->second};
+        const int axis = name[0] - 'u';
+        const double lo = box->min[axis], hi = box->max[axis];
+        if (hi > lo)
+            mInputs.push_back(std::make_shared<RampField>(axis, lo, hi, 0.0, 1.0));
+        else
+            mInputs.push_back(std::make_shared<ConstantField>(0.0));
+        mIndex[name] = int(mInputs.size()) - 1;
+        return {ExprSymbol::Kind::Input, 0.0, mIndex[name]};
+    }
+
+    bool mNeededUnitBox = false;
     FieldBuilder& mBuilder;
     std::vector<FieldPtr> mInputs;
     std::map<std::string, int> mIndex;
@@ -102,6 +133,62 @@ FieldPtr buildOrient(FieldBuilder& builder, const RecipeNode& spec, const std::s
     return orientedField(builder, spec["orient"], builder.operand(spec["field"], name + "/field"), name);
 }
 
+/// One coordinate of a `surface` node: an equation in u, v (0 to 1) and $params.
+std::shared_ptr<const ExprProgram> surfaceCoordinate(FieldBuilder& builder, const RecipeNode& textNode)
+{
+    if (!textNode.isScalar()) textNode.fail("expected an equation in u and v, like \"10*u\" or \"5*cos(tau*u)\"");
+    const std::string text = textNode.string();
+    // x, y and z are built into equations as the point's coordinates, which a surface has none of.
+    for (std::size_t i = 0; i < text.size(); ++i) {
+        const auto word = [](char c) { return std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '.'; };
+        if (!word(text[i]) || (i > 0 && (word(text[i - 1]) || text[i - 1] == '$'))) continue;
+        std::size_t end = i;
+        while (end < text.size() && word(text[end])) ++end;
+        const std::string name = text.substr(i, end - i);
+        if (name == "x" || name == "y" || name == "z")
+            textNode.fail("equation: a surface's coordinates are equations in u and v (0 to 1), not in `" + name +
+                          "` (character " + std::to_string(i + 1) + ")\n" + exprCaret(text, i));
+    }
+    const Recipe& recipe = builder.recipe();
+    auto resolve = [&](const std::string& name, bool isParam) -> ExprSymbol {
+        if (isParam) {
+            const auto it = recipe.params.find(name);
+            if (it == recipe.params.end()) return {};
+            try {
+                return {ExprSymbol::Kind::Constant, it->second.as<double>(), -1};
+            } catch (const YAML::Exception&) {
+                throw ExprError("parameter `$" + name + "` is not a number", std::string::npos);
+            }
+        }
+        if (name == "u") return {ExprSymbol::Kind::Input, 0.0, 0};
+        if (name == "v") return {ExprSymbol::Kind::Input, 0.0, 1};
+        throw ExprError("a surface's coordinates are equations in u and v (0 to 1), constants and $params; `" + name +
+                            "` is none of them",
+                        std::string::npos);
+    };
+    try {
+        return std::make_shared<const ExprProgram>(ExprProgram::compile(text, resolve));
+    } catch (const ExprError& e) {
+        textNode.fail("equation: " + std::string(e.what()) + " (character " + std::to_string(e.position() + 1) + ")\n" +
+                      exprCaret(text, e.position()));
+    }
+}
+
+FieldPtr buildSurface(FieldBuilder& builder, const RecipeNode& spec, const std::string&)
+{
+    const RecipeNode s = spec["surface"];
+    if (!s.isMap())
+        s.fail("a surface is {x: \"...\", y: \"...\", z: \"...\"}: its coordinates as equations in u and v");
+    s.checkKeys({"x", "y", "z"});
+    std::array<std::shared_ptr<const ExprProgram>, 3> coordinates;
+    for (int a = 0; a < 3; ++a) {
+        const std::string key(1, "xyz"[a]);
+        if (!s.has(key)) s.fail("give `" + key + ":` (the " + key + " coordinate as an equation in u and v)");
+        coordinates[a] = surfaceCoordinate(builder, s[key]);
+    }
+    return std::make_shared<ParametricSurface>(coordinates);
+}
+
 }  // namespace
 
 FieldPtr equationField(FieldBuilder& builder, const RecipeNode& textNode)
@@ -115,6 +202,9 @@ FieldPtr equationField(FieldBuilder& builder, const RecipeNode& textNode)
         return std::make_shared<ExprField>(program, names.inputs());
     } catch (const ExprError& e) {
         std::string message = e.what();
+        if (names.neededUnitBox())
+            throw UnitBoxNeeded(textNode.where() + ": equation: " + message + " (character " +
+                                std::to_string(e.position() + 1) + ")\n" + exprCaret(text, e.position()));
         if (!e.unknownName().empty()) {
             const Recipe& recipe = builder.recipe();
             std::vector<std::string> candidates;
@@ -199,6 +289,15 @@ void addExprNodeTypes(std::vector<NodeType>& types)
                        "three components: numbers or equations",
                        "required"}},
                      buildVector});
+    types.push_back(
+        {"surface",
+         {{"surface",
+           object({{"x", string(), "x (mm) as an equation in u and v (each 0 to 1) and $params", "required"},
+                   {"y", string(), "y (mm), likewise", "required"},
+                   {"z", string(), "z (mm), likewise", "required"}},
+                  {"x", "y", "z"}),
+           "a parametric surface for a strut frame's `between:` (not a field)", "required"}},
+         buildSurface});
     types.push_back(
         {"orient",
          {{"orient", orientationSchema(), "a frame field: the field's axes follow it point by point", "required"},

@@ -1,5 +1,7 @@
 #include "engine/recipe/FieldBuilder.h"
 
+#include "fields/ParametricSurface.h"
+
 #include <algorithm>
 #include <iostream>
 
@@ -24,7 +26,25 @@ const std::vector<NodeType>& FieldBuilder::nodeTypes()
 
 FieldPtr FieldBuilder::field(const std::string& name)
 {
-    if (auto it = mBuilt.find(name); it != mBuilt.end()) return it->second;
+    FieldPtr f = anyField(name);
+    if (dynamic_cast<const ParametricSurface*>(f.get()))
+        mRecipe.fieldSpec(name).fail("`" + name +
+                                     "` is a surface (x, y, z as equations in u and v): it serves in a strut "
+                                     "frame's `between:`, not as a field");
+    return f;
+}
+
+FieldPtr FieldBuilder::anyField(const std::string& name)
+{
+    if (auto it = mBuilt.find(name); it != mBuilt.end()) {
+        const auto box = mUnitBoxOf.find(name);
+        if (box == mUnitBoxOf.end()) return it->second;
+        // Built with u, v, w over a frame's box: the same box reuses it, another builds it again.
+        if (mUnitBox && mUnitBox->min == box->second.min && mUnitBox->max == box->second.max) {
+            noteUnitBoxUse();
+            return it->second;
+        }
+    }
     const RecipeNode spec = mRecipe.fieldSpec(name);
     if (std::find(mInProgress.begin(), mInProgress.end(), name) != mInProgress.end()) {
         std::string cycle;
@@ -32,17 +52,67 @@ FieldPtr FieldBuilder::field(const std::string& name)
             cycle += *it + " -> ";
         spec.fail("fields refer to each other in a cycle: " + cycle + name);
     }
+    // Popped on errors too: buildAll() goes on after a field that waits for a frame's box.
+    struct InProgress {
+        std::vector<std::string>& names;
+        ~InProgress() { names.pop_back(); }
+    } inProgress{mInProgress};
     mInProgress.push_back(name);
+    const std::size_t usesBefore = mUnitBoxUses;
     FieldPtr f = buildSpec(spec, name);
-    mInProgress.pop_back();
     mBuilt[name] = f;
+    if (mUnitBoxUses != usesBefore)
+        mUnitBoxOf[name] = *mUnitBox;
+    else
+        mUnitBoxOf.erase(name);
     return f;
+}
+
+FieldPtr FieldBuilder::buildAll()
+{
+    std::vector<std::pair<std::string, std::string>> waiting;  // field, its error without a box
+    for (const std::string& name : mRecipe.fieldNames) {
+        try {
+            anyField(name);
+        } catch (const UnitBoxNeeded& e) {
+            waiting.emplace_back(name, e.what());
+        }
+    }
+    FieldPtr result = field(mRecipe.result);
+    for (const auto& [name, message] : waiting)
+        if (!mUnitBoxOf.count(name)) throw InputError(message);
+    return result;
+}
+
+std::shared_ptr<const ParametricSurface> FieldBuilder::surface(const RecipeNode& spec, const std::string& name)
+{
+    const FieldPtr f = spec.isScalar() ? anyField(spec.string()) : buildSpec(spec, name);
+    auto s = std::dynamic_pointer_cast<const ParametricSurface>(f);
+    if (!s)
+        spec.fail(
+            "expected a surface: the name of a `surface` node or {surface: {x: \"...\", y: \"...\", z: \"...\"}} "
+            "(equations in u and v from 0 to 1)");
+    return s;
+}
+
+FieldBuilder::UnitBoxScope::UnitBoxScope(FieldBuilder& builder, const Box3& box)
+    : mBuilder(builder), mPrevious(builder.mUnitBox)
+{
+    builder.mUnitBox = box;
+}
+
+FieldBuilder::UnitBoxScope::~UnitBoxScope()
+{
+    mBuilder.mUnitBox = mPrevious;
 }
 
 FieldPtr FieldBuilder::operand(const RecipeNode& spec, const std::string& name)
 {
     if (spec.isScalar()) return field(spec.string());
-    return buildSpec(spec, name);
+    FieldPtr f = buildSpec(spec, name);
+    if (dynamic_cast<const ParametricSurface*>(f.get()))
+        spec.fail("a surface (x, y, z as equations in u and v) serves in a strut frame's `between:`, not as a field");
+    return f;
 }
 
 FieldPtr FieldBuilder::buildSpec(const RecipeNode& spec, const std::string& name)

@@ -2,6 +2,7 @@
 /// @brief Turns a recipe's `fields:` map into a graph of field nodes.
 #pragma once
 
+#include "engine/core/Errors.h"
 #include "engine/core/JobContext.h"
 #include "engine/recipe/KeySpec.h"
 #include "engine/recipe/Recipe.h"
@@ -80,6 +81,15 @@ struct StrutFrameRecord {
 };
 
 class FieldBuilder;
+class ParametricSurface;
+
+/// An equation used IntraLattice's unit-box coordinates u, v, w where no frame gives the box (a
+/// field built for itself, not as a strut `radius:`). FieldBuilder::buildAll() lets a field with
+/// it wait for a strut frame to build it with that frame's box.
+class UnitBoxNeeded : public InputError {
+public:
+    using InputError::InputError;
+};
 
 /// One node type of the recipe language: the key that names it, its valid keys (with their value
 /// schemas, defaults and meanings: the one table schema, key checks and docs come from), its builder.
@@ -95,8 +105,15 @@ public:
     /// Warnings of the nodes go to @a context (it must outlive the builder).
     FieldBuilder(const Recipe& recipe, JobContext& context);
 
-    /// The field called @a name in the recipe.
+    /// The field called @a name in the recipe. A `surface` node is refused here (it is not a
+    /// field); surface() takes one.
     FieldPtr field(const std::string& name);
+    /// Builds every field of `fields:` (so a mistake anywhere is reported before any work) and
+    /// returns the result. A field whose equations use u, v, w is left to the strut frame that
+    /// takes it as its `radius:`; one that no frame took is an error.
+    FieldPtr buildAll();
+    /// A parametric surface: the name of a `surface` node or an inline `{surface: ...}`.
+    std::shared_ptr<const ParametricSurface> surface(const RecipeNode& spec, const std::string& name);
     /// A field given either by name (a string) or inline (a map); @a name labels inline ones.
     FieldPtr operand(const RecipeNode& spec, const std::string& name);
 
@@ -137,11 +154,32 @@ public:
     JobContext& context() const { return mContext; }
     const Recipe& recipe() const { return mRecipe; }
 
+    /// While alive, equations may use IntraLattice's unit-box coordinates u, v, w: x, y, z scaled
+    /// to [0, 1] over @a box (a strut frame's bounding box, for its `radius:`). Named fields that
+    /// use them are built once per box.
+    class UnitBoxScope {
+    public:
+        UnitBoxScope(FieldBuilder& builder, const Box3& box);
+        ~UnitBoxScope();
+        UnitBoxScope(const UnitBoxScope&) = delete;
+        UnitBoxScope& operator=(const UnitBoxScope&) = delete;
+
+    private:
+        FieldBuilder& mBuilder;
+        std::optional<Box3> mPrevious;
+    };
+    /// The box u, v, w refer to, if a UnitBoxScope is open.
+    const std::optional<Box3>& unitBox() const { return mUnitBox; }
+    /// Called by equations that read u, v or w (so the field being built is marked as depending
+    /// on the box).
+    void noteUnitBoxUse() { ++mUnitBoxUses; }
     /// Every node type the recipe language knows.
     static const std::vector<NodeType>& nodeTypes();
 
 private:
     FieldPtr buildSpec(const RecipeNode& spec, const std::string& name);
+    /// field() without the check that refuses surfaces.
+    FieldPtr anyField(const std::string& name);
 
     const Recipe& mRecipe;
     JobContext& mContext;
@@ -152,6 +190,10 @@ private:
     std::vector<std::function<void(nlohmann::json&)>> mReporters;
     std::vector<GradedNode> mGradedNodes;
     std::vector<StrutFrameRecord> mStrutFrames;
+    std::optional<Box3> mUnitBox;
+    std::size_t mUnitBoxUses = 0;
+    /// Named fields whose equations use u, v, w, with the box they were built for.
+    std::map<std::string, Box3> mUnitBoxOf;
 };
 
 /// Reads `solid:` of a lattice node: `network` (f <= level, the default) or `sheet` (|f| <= level).

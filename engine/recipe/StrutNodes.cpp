@@ -9,9 +9,11 @@
 #include "engine/recipe/SkinNodes.h"
 #include "fields/GradedLevel.h"
 #include "fields/IsoRadius.h"
+#include "fields/ParametricSurface.h"
 #include "fields/PeriodicTiling.h"
 #include "fields/StrutCapsules.h"
 #include "fields/StrutConvolution.h"
+#include "fields/Supported.h"
 
 #include <algorithm>
 #include <cmath>
@@ -116,22 +118,129 @@ struct UniformCells {
     Vec3d size{0.0};
 };
 
+/// The ways a frame is laid out: the key that selects each and the keys it uses. Any other key
+/// of `struts:` is refused, naming itself.
+struct FrameLayout {
+    const char* key;   ///< the key that selects it ("" for the box of uniform cells)
+    const char* what;  ///< for messages
+    std::vector<std::string> keys;
+};
+const std::vector<FrameLayout>& frameLayouts()
+{
+    static const std::vector<FrameLayout> kinds = {
+        {"wireframe", "a wireframe (used as the frame as it is)", {"wireframe"}},
+        {"between", "a frame between two surfaces", {"cell", "between", "cells"}},
+        {"skin", "a skin frame (cells along the part's surface)", {"cell", "size", "skin"}},
+        {"cylinder",
+         "a cylinder frame (cells from `cylinder: {radius, inner, height, base, cells}`)",
+         {"cell", "cylinder"}},
+        {"sphere", "a sphere frame (cells from `sphere: {radius, inner, center, cells}`)", {"cell", "sphere"}},
+        {"within",
+         "a frame `within:` a solid (uniform cells over the domain, trimmed)",
+         {"cell", "size", "within", "min_length"}},
+        {"", "a box frame", {"cell", "size", "count", "origin"}},
+    };
+    return kinds;
+}
+
+/// The kind of frame @a s lays out, its keys checked: no key the kind does not use (another
+/// kind's key included).
+const FrameLayout& readFrameLayout(const RecipeNode& s)
+{
+    std::vector<std::string> all;
+    for (const FrameLayout& k : frameLayouts())
+        for (const std::string& key : k.keys)
+            if (std::find(all.begin(), all.end(), key) == all.end()) all.push_back(key);
+    s.checkKeys(all);
+    // The first kind named decides; another kind's key then has no use in it.
+    const FrameLayout* kind = &frameLayouts().back();
+    for (const FrameLayout& k : frameLayouts())
+        if (*k.key != '\0' && s.has(k.key)) {
+            kind = &k;
+            break;
+        }
+    for (const std::string& key : all)
+        if (s.has(key) && std::find(kind->keys.begin(), kind->keys.end(), key) == kind->keys.end()) {
+            std::string hint;
+            if (key == "min_length") hint = " (`min_length` applies to frames trimmed `within:` a solid)";
+            if (*kind->key == '\0' && key == "cells")
+                hint = " (`cells:` counts the cells of a frame `between:` two surfaces; a box frame takes `count:`)";
+            s[key].fail("`" + key + "` has no use in " + kind->what + ", which takes " + joinWords(kind->keys) + hint +
+                        "; remove `" + key + "`");
+        }
+    return *kind;
+}
+
+/// A point on the second surface of a `between:` frame for the point @a p of the first one.
+using SecondSurface = std::function<Vec3d(double u, double v, const Vec3d& p)>;
+
+/// The second entry of `between:`: a surface, `{axis: [[x, y, z], [x, y, z]]}` (the nearest point
+/// of the line through the two points) or `{point: [x, y, z]}`.
+SecondSurface readSecondSurface(FieldBuilder& builder, const RecipeNode& n, const std::string& name)
+{
+    if (n.isMap() && (n.has("axis") || n.has("point"))) {
+        n.checkKeys({"axis", "point"});
+        if (n.has("axis") && n.has("point")) n.fail("the second surface is an `axis:` or a `point:`, not both");
+        if (n.has("point")) {
+            const Vec3d q = n["point"].vec3();
+            return [q](double, double, const Vec3d&) { return q; };
+        }
+        const RecipeNode axis = n["axis"];
+        if (!axis.isSequence() || axis.size() != 2) axis.fail("an axis is two points on it: [[x, y, z], [x, y, z]]");
+        const Vec3d a = axis.at(0).vec3(), b = axis.at(1).vec3();
+        const Vec3d d = b - a;
+        if (!(d.lengthSqr() > 0.0)) axis.fail("the axis' two points are the same point: it has no direction");
+        return [a, d](double, double, const Vec3d& p) { return a + ((p - a).dot(d) / d.lengthSqr()) * d; };
+    }
+    auto surface = builder.surface(n, name);
+    return [surface](double u, double v, const Vec3d&) { return surface->point(u, v); };
+}
+
+/// `struts: {cell, between: [S1, S2], cells: [nu, nv, nw]}`: node (i, j, k) of the grid at
+/// (1 - w) S1(u, v) + w S2(u, v), u = i / nu, v = j / nv, w = k / nw; cells mapped trilinearly.
+Frame buildBetweenFrame(FieldBuilder& builder, const RecipeNode& s, const UnitCell& cell, const std::string& name)
+{
+    const RecipeNode between = s["between"];
+    if (!between.isSequence() || between.size() != 2)
+        between.fail(
+            "`between:` is two surfaces [S1, S2]: S1 a `surface` node (its name or {surface: {x, y, z}}), S2 one "
+            "too, or {axis: [[x, y, z], [x, y, z]]} or {point: [x, y, z]}");
+    if (!s.has("cells")) s.fail("give `cells: [nu, nv, nw]` (cells along u and v, and from S1 to S2)");
+    const std::array<int, 3> counts = readCounts(s["cells"]);
+    const auto first = builder.surface(between.at(0), name + "/between/0");
+    const SecondSurface second = readSecondSurface(builder, between.at(1), name + "/between/1");
+    checkStrutCount(cell, counts);  // before the grid's nodes are allocated
+    const int nu = counts[0], nv = counts[1], nw = counts[2];
+    std::vector<Vec3d> grid(std::size_t(nu + 1) * (nv + 1) * (nw + 1));
+    for (int i = 0; i <= nu; ++i)
+        for (int j = 0; j <= nv; ++j) {
+            const double u = double(i) / nu, v = double(j) / nv;
+            const Vec3d p = first->point(u, v), q = second(u, v, p);
+            for (int a = 0; a < 3; ++a)
+                if (!std::isfinite(p[a]) || !std::isfinite(q[a]))
+                    between.fail("a surface has no finite point at u = " + formatNumber(u) +
+                                 ", v = " + formatNumber(v) + " (check its equations)");
+            for (int k = 0; k <= nw; ++k) {
+                const double w = double(k) / nw;
+                grid[(std::size_t(i) * (nv + 1) + j) * (nw + 1) + k] = (1.0 - w) * p + w * q;
+            }
+        }
+    return hexGridFrame(cell, grid, counts);
+}
+
 /// @a uniform receives the cell and its size when the frame is made of uniform cells.
 /// @a region receives the cells' space for a skin frame (its density is measured there).
 Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& name,
                  std::optional<UniformCells>& uniform, FieldPtr& region)
 {
-    s.checkKeys({"cell", "size", "count", "origin", "cylinder", "sphere", "within", "min_length", "wireframe", "skin"});
-    if (s.has("wireframe")) {
-        for (const char* k : {"cell", "size", "count", "origin", "cylinder", "sphere", "within", "skin"})
-            if (s.has(k)) s[k].fail("a wireframe is used as the frame as it is; remove `" + std::string(k) + "`");
-        return readWireframe(builder.recipe().resolve(s["wireframe"].string()).string());
-    }
+    const std::string kind = readFrameLayout(s).key;
+    if (kind == "wireframe") return readWireframe(builder.recipe().resolve(s["wireframe"].string()).string());
     if (!s.has("cell")) s.fail("give `cell:` (a preset such as bcc, or custom lines) or `wireframe:` (a file)");
     const UnitCell cell = readCell(builder, s["cell"]);
-    if (s.has("skin")) return buildSkinStrutFrame(builder, s, cell, name, region);
+    if (kind == "skin") return buildSkinStrutFrame(builder, s, cell, name, region);
+    if (kind == "between") return buildBetweenFrame(builder, s, cell, name);
     const auto& domainBox = builder.recipe().domainBox;
-    if (s.has("cylinder")) {
+    if (kind == "cylinder") {
         const RecipeNode c = s["cylinder"];
         c.checkKeys({"radius", "inner", "height", "base", "cells"});
         const double outer = c["radius"].positiveNumber(), height = c["height"].positiveNumber();
@@ -145,13 +254,9 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
         if (!c.has("cells")) c.fail("give `cells: [axial, angular, radial]` (cell counts)");
         return cylinderFrame(cell, base, inner, outer, height, readCounts(c["cells"]));
     }
-    if (s.has("sphere")) {
+    if (kind == "sphere") {
         const RecipeNode c = s["sphere"];
         c.checkKeys({"radius", "inner", "center", "cells"});
-        for (const char* k : {"size", "count", "origin", "within"})
-            if (s.has(k))
-                s[k].fail("a sphere frame sets its cells from `sphere: {radius, inner, cells}`; remove `" +
-                          std::string(k) + "`");
         const double outer = c["radius"].positiveNumber();
         const double inner = c.has("inner") ? c["inner"].number() : 0.0;
         if (!(inner >= 0.0 && inner < outer)) c["inner"].fail("the inner radius is at least 0 and below the radius");
@@ -168,16 +273,20 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
     const Vec3d size = s["size"].scalarOrVec3();
     for (int a = 0; a < 3; ++a)
         if (!(size[a] > 0.0)) s["size"].fail("cell sizes must be greater than zero (millimetres)");
-    if (s.has("within")) {
-        if (!domainBox) s.fail("a frame `within:` a solid fills the domain box; give `domain:`");
+    if (kind == "within") {
         const FieldPtr solid = builder.operand(s["within"], name + "/within");
+        // The cells fill the domain, or without one the solid's own box (a bounded part).
+        const std::optional<Box3> fill = domainBox ? domainBox : solid->support();
+        if (!fill)
+            s["within"].fail(
+                "a frame `within:` a solid fills the domain box, and this solid is unbounded: give `domain:` or a "
+                "bounded solid (a part or a shape)");
         const double minLength =
             s.has("min_length") ? s["min_length"].number() : 0.1 * std::min({size[0], size[1], size[2]});
         uniform = UniformCells{cell, size};
         return clippedFrame(
-            cell, *domainBox, size, [&](const Vec3d& p) { return solid->value(p); }, minLength);
+            cell, *fill, size, [&](const Vec3d& p) { return solid->value(p); }, minLength);
     }
-    if (s.has("min_length")) s["min_length"].fail("`min_length` applies to frames trimmed `within:` a solid");
     Vec3d origin = s.has("origin") ? s["origin"].vec3() : (domainBox ? domainBox->min : Vec3d(0.0));
     std::array<int, 3> counts;
     if (s.has("count")) {
@@ -224,8 +333,10 @@ FieldPtr buildGradedStruts(FieldBuilder& builder, const RecipeNode& spec, const 
     return graded;
 }
 
-/// Radius at each end of each strut from `radius:` (a number, a list, or a gradient preset).
-std::vector<std::array<double, 2>> readRadii(const RecipeNode& r, const Frame& frame)
+/// Radius at each end of each strut from `radius:` (a number, a list, a gradient preset, or any
+/// field: a name or an inline node, evaluated at the strut ends with u, v, w over the frame's box).
+std::vector<std::array<double, 2>> readRadii(FieldBuilder& builder, const RecipeNode& r, const Frame& frame,
+                                             const std::string& name)
 {
     const std::size_t n = frame.struts.size();
     std::vector<std::array<double, 2>> radii(n);
@@ -234,9 +345,29 @@ std::vector<std::array<double, 2>> readRadii(const RecipeNode& r, const Frame& f
         if (!(v > 0.0)) node.fail("a radius must be greater than zero (millimetres)");
         return v;
     };
-    if (r.isScalar()) {
+    if (r.isNumber()) {
         const double v = positive(r);
         for (auto& e : radii) e = {v, v};
+        return radii;
+    }
+    if (r.isScalar() || (r.isMap() && !r.has("gradient"))) {
+        FieldPtr field;
+        {
+            FieldBuilder::UnitBoxScope unitBox(builder, frame.bounds());
+            field = builder.operand(r, name + "/radius");
+        }
+        std::vector<Vec3d> ends(2 * n);
+        for (std::size_t j = 0; j < n; ++j)
+            for (int e = 0; e < 2; ++e) ends[2 * j + e] = frame.nodes[frame.struts[j][e]];
+        std::vector<double> values(ends.size());
+        field->values(ends, values);
+        for (std::size_t i = 0; i < ends.size(); ++i) {
+            if (!(values[i] > 0.0) || !std::isfinite(values[i]))
+                r.fail("the radius field is " + formatNumber(values[i]) + " mm at the strut end (" +
+                       formatNumber(ends[i][0]) + ", " + formatNumber(ends[i][1]) + ", " + formatNumber(ends[i][2]) +
+                       "): a radius must be greater than zero (millimetres)");
+            radii[i / 2][i % 2] = values[i];
+        }
         return radii;
     }
     if (r.isSequence()) {
@@ -336,7 +467,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
                 "a graded density needs uniform cells (`cell:` with `size:`, in a box or `within:` a "
                 "solid): the level comes from one cell's density table; a cylinder frame or a "
                 "wireframe takes a single density (a number)");
-        if (spec.has("radius") && !spec["radius"].isScalar())
+        if (spec.has("radius") && !spec["radius"].isNumber())
             spec["radius"].fail(
                 "with a graded density the radius is one number: the density sets the strut "
                 "thickness point by point");
@@ -347,14 +478,25 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     const bool capsule = (kernel.isScalar() && kernel.string() == "capsule") || kernel.has("capsule");
     if (!capsule && !kernel.has("gaussian"))
         kernel.fail("the kernel is {gaussian: {sigma: S}} or capsule / {capsule: {blend: B}}");
-    if (kernel.isMap()) kernel.checkKeys({"gaussian", "capsule"});
+    if (kernel.isMap()) {
+        kernel.checkKeys({"gaussian", "capsule"});
+        if (kernel.has("gaussian") && kernel.has("capsule"))
+            kernel["gaussian"].fail("a lattice has one kernel: give `gaussian` or `capsule`, not both; remove one");
+        if (kernel.has("capsule") && !kernel["capsule"].isMap() && !kernel["capsule"].yaml().IsNull())
+            kernel["capsule"].fail("capsule takes {blend: B} or nothing (`kernel: capsule`)");
+    }
     const std::size_t n = frame.struts.size();
     std::optional<std::vector<std::array<double, 2>>> radii;
     if (spec.has("radius"))
-        radii = readRadii(spec["radius"], frame);
+        radii = readRadii(builder, spec["radius"], frame, name);
     else if (!frame.radii.empty())
         radii = frame.radii;  // a wireframe CSV with r1,r2 columns (a frame output read back)
     const Box3 box = frame.bounds();
+    // A frame is finite: its solid lies within its box grown by the struts' reach, which gives
+    // the domain when the recipe has none (as a shape's box does).
+    auto withinReach = [&box](FieldPtr solid, double reach) -> FieldPtr {
+        return std::make_shared<SupportedField>(std::move(solid), Box3{box.min - Vec3d(reach), box.max + Vec3d(reach)});
+    };
     LevelNode node;
     node.name = name;
     node.region = region;
@@ -422,11 +564,12 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
             // Struts reach into the next cell only by their radius and blend: one cell of margin.
             const auto [cells, cellBox] = tableFrame(*uniform, 1);
             std::optional<std::vector<std::array<double, 2>>> cellRadii;
-            if (radii) cellRadii = readRadii(spec["radius"], cells);
+            if (radii) cellRadii = readRadii(builder, spec["radius"], cells, name);
             const StrutCapsules cellField(capsuleStruts(cells, cellRadii), blend, cap);
             FieldPtr result = buildGradedStruts(builder, spec, name, raw, cellField, cellBox, node.description);
             recordFrame(builder, name, frame, capsuleRadius, gradedLevelAt(result));
-            return result;
+            // The table's levels stay below the cap, so the solid is within rMax + blend + cap.
+            return withinReach(result, rMax + blend + cap);
         }
         node.solid = node.density ? LevelSolid::unsolved(raw, SolidSide::Below)
                                   : std::make_shared<LevelSolid>(raw, SolidSide::Below,
@@ -436,7 +579,10 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         for (const CapsuleStrut& c : struts) rMin = std::min({rMin, c.ra, c.rb});
         node.thinnest = [rMin](double level) { return std::max(0.0, 2.0 * (rMin + level)); };
         recordFrame(builder, name, frame, capsuleRadius, [solid = node.solid](const Vec3d&) { return solid->level(); });
-        FieldPtr result = node.solid;
+        // A capsule reaches its radius plus the level (an offset) plus the blend; a solved level
+        // stays below the cap.
+        const double reach = rMax + blend + (node.density ? cap : std::max(0.0, node.solid->level()));
+        FieldPtr result = withinReach(node.solid, reach);
         builder.addLevelNode(std::move(node));
         return result;
     }
@@ -509,7 +655,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     };
     // A box of identical cells with identical struts repeats cell by cell wherever the box's
     // faces are beyond the cut-off: evaluate one cell of the interior and tile it.
-    const bool sameStruts = (!radii || spec["radius"].isScalar()) && !g["sigma"].isSequence();
+    const bool sameStruts = (!radii || spec["radius"].isNumber()) && !g["sigma"].isSequence();
     const bool periodic = uniform && !spec["struts"].has("within") && sameStruts && !graded;
     // Radii graded linearly along one axis depend on that coordinate only: the box's cells still
     // repeat along the other two axes, so the field is tabled one period deep across them and
@@ -535,14 +681,15 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         const int margin = std::max(1, int(std::ceil(rcMax / smallest)));
         const auto [cells, cellBox] = tableFrame(*uniform, margin);
         std::optional<std::vector<std::array<double, 2>>> cellRadii;
-        if (radii) cellRadii = readRadii(spec["radius"], cells);
+        if (radii) cellRadii = readRadii(builder, spec["radius"], cells, name);
         auto cellRaw = std::make_shared<StrutConvolution>(convolutionStruts(cells, cellRadii), eps);
         // The same peak and sigma as the frame's, so that both measure levels alike.
         const IsoRadius cellField(cellRaw, peak, sigmaMax, 2.0 * rcMax);
         // Whether it holds together is checked on the grid (Job: pieces), not at strut middles.
         FieldPtr result = buildGradedStruts(builder, spec, name, iso, cellField, cellBox, node.description);
         recordFrame(builder, name, frame, convolutionRadius, gradedLevelAt(result));
-        return result;
+        // Beyond the cut-off radius F = 0, below every iso-value.
+        return withinReach(result, rcMax);
     }
     node.solid = node.density ? LevelSolid::unsolved(evaluated, SolidSide::Below)
                               : std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
@@ -589,7 +736,10 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
                 context->warn("radii_shifted", msg.str(), {{"field", name}, {"iso_value", t}});
             };
     }
+    // Beyond the cut-off radius F = 0, below every iso-value (the value there is the cap 2 rcMax,
+    // above any level a density solve or a positive iso-value gives).
     FieldPtr result = node.solid;
+    if (node.density || iso->radiusOf(t) < 2.0 * rcMax) result = withinReach(node.solid, rcMax);
     builder.addLevelNode(std::move(node));
     return result;
 }
@@ -609,6 +759,11 @@ void addStrutNodeTypes(std::vector<NodeType>& types)
                 {"within", field(), "a solid the uniform frame is trimmed to", "—"},
                 {"min_length", number(), "trimmed pieces shorter than this are dropped (mm)", "—"},
                 {"wireframe", string(), "OBJ or CSV file used directly as the frame", "—"},
+                {"between", anything(),
+                 "[S1, S2]: cells between two surfaces (S1 a `surface` node; S2 one too, {axis: [[x, y, z], [x, y, "
+                 "z]]} or {point: [x, y, z]})",
+                 "—"},
+                {"cells", anything(), "cells of a `between:` frame: [nu, nv, nw] (along u, v, and S1 to S2)", "—"},
                 {"skin",
                  object({{"part", field(), "the part whose skin the cells follow", "required"},
                          {"depth", anything(), "[outer, inner] mm below the surface, or the outer alone", "required"},
@@ -620,7 +775,10 @@ void addStrutNodeTypes(std::vector<NodeType>& types)
          {{"struts", frame, "the frame: unit cell and how it is laid out", "required"},
           {"kernel", anything(), "{gaussian: {sigma, cutoff}} (convolution joints), capsule or {capsule: {blend}}",
            "required"},
-          {"radius", anything(), "strut radius (mm): a number, a list or {gradient, min, max, axis}", "—"},
+          {"radius", anything(),
+           "strut radius (mm): a number, a list, {gradient, min, max, axis}, or a field (a name or an inline node, "
+           "e.g. {expr: \"0.3 + 0.01*z\"}; u, v, w run 0 to 1 over the frame's box) evaluated at each strut end",
+           "—"},
           {"density", gradedDensitySchema(),
            "target relative density over the frame's bounding box, or a map grading it point by point", "—"},
           {"stiffness", object(stiffnessKeys()),
