@@ -159,6 +159,9 @@ int properties(const Common& args, const std::string& jsonFile, const std::strin
 /// on as it is. `VOXLAT_NO_HUGEPAGES=1` opts out.
 void useHugePages(char** argv)
 {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+    return;  // the sanitizer's allocator replaces glibc's: nothing to ask for
+#endif
     constexpr const char* kTunable = "glibc.malloc.hugetlb=1";
     const char* tunables = std::getenv("GLIBC_TUNABLES");
     if (std::getenv("VOXLAT_NO_HUGEPAGES") || (tunables && std::strstr(tunables, "glibc.malloc.hugetlb"))) return;
