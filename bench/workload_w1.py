@@ -1,5 +1,11 @@
 """W1: the acceptance gyroid (network, 30 %, 50 mm cube, 0.1 mm voxels) from recipe to STL,
-side by side with OpenVDB's own tools on a dense grid (bench/reference/w1_openvdb_dense.py)."""
+side by side with OpenVDB's own tools on a dense grid (bench/reference/w1_openvdb_dense.py).
+
+Target 10x (issue 17). Quiet machine before issue 17's second pass: 3.62 s vs 17.55 s (4.9x).
+After the pieces count on leaf bit masks, huge pages, the streamed density count and the mesher
+skipping empty blocks, side by side at load average 5 on the 2 shared cores: 5.17 s vs 42.30 s
+(8.2x; solve 0.85 s, evaluate 0.76 s, mesh 2.31 s, STL 0.55 s, pieces 0.19 s), peak 583 MB;
+at load 4.5: 3.69 s vs 25.95 s (7.0x; mesh 1.67 s, evaluate 0.56 s, solve 0.52 s, STL 0.39 s)."""
 import json
 
 from common import PYTHON, ROOT, measure, row, verdict
@@ -15,7 +21,7 @@ def run(voxlat, tmp):
     row("voxlat", t_v, m_v)
     row("OpenVDB python, dense grid", t_r, m_r)
     ratio = t_r / t_v
-    print(f"  speed-up {ratio:.1f}x (target >= 5x: {verdict(ratio >= 5)}); "
+    print(f"  speed-up {ratio:.1f}x (target >= 10x: {verdict(ratio >= 10)}); "
           f"voxlat peak {m_v:.0f} MB (target <= 1024 MB: {verdict(m_v <= 1024)})")
     print(f"  voxlat: density {report['fields']['lattice']['achieved_density']:.5f}, "
           f"{report['mesh']['triangles']} triangles; reference: {out_r.strip().splitlines()[-1]}")

@@ -30,6 +30,9 @@ peak 943 MB (evaluate 2.17 s, solve 1.99 s, mesh 1.58 s, pieces 0.91 s, STL 0.30
 Trimmed (quiet): 29.3 s vs 225 s (7.7x; evaluate 9.2 s, solve 17.1 s); cylinder 25.2 s vs 189 s
 (7.5x; evaluate 8.1 s, solve 14.8 s). W2 in that run: 52.3x at 0.1 mm (peak 905 MB), 21.2x at 0.2 mm. W1 in the same quiet run:
 3.62 s vs 17.55 s (4.9x; target 10x missed).
+After the pieces count on leaf bit masks, huge pages and the streamed density count (graded case
+only, side by side at load 7 falling to 4.5): 19.38 s vs 667.1 s (34.4x, target 50x missed),
+peak 952 MB (evaluate 5.89 s, solve 5.49 s, mesh 3.62 s, STL 2.93 s, pieces 0.69 s).
 """
 import json
 import math

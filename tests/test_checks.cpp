@@ -8,6 +8,9 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
+#include <random>
+
 using namespace voxlat;
 
 namespace {
@@ -72,6 +75,94 @@ TEST(Pieces, PiecesAcrossLeavesAndTilesMatchTheirVolumes)
         for (std::size_t i = 0; i < all.pieces.size(); ++i) {
             EXPECT_EQ(again.pieces[i].voxels, all.pieces[i].voxels);
             EXPECT_EQ(again.pieces[i].bounds, all.pieces[i].bounds);
+        }
+    }
+}
+
+TEST(Pieces, RandomVoxelsMatchABruteForceFloodFill)
+{
+    // Random solids near the percolation threshold of face-connected voxels (about 31 %), so that
+    // pieces wind through and across many leaves, with negative coordinates and a tile: every
+    // piece's size and bounds against a flood fill over a dense array.
+    const int n = 44, lo = -13;  // voxels lo .. lo + n - 1 on every axis, leaves cut at odd places
+    for (const double share : {0.2, 0.31, 0.45}) {
+        std::mt19937 random(unsigned(share * 1000));
+        std::bernoulli_distribution solid(share);
+        std::vector<char> dense(std::size_t(n * n * n));
+        for (char& c : dense) c = solid(random);
+        // An inside tile of 8^3 (a leaf-sized tile at level 1): its voxels are solid in the array too.
+        const openvdb::Coord tile(8, 8, 8);
+        auto grid = openvdb::FloatGrid::create(1.0f);
+        auto acc = grid->getAccessor();
+        auto at = [&](int i, int j, int k) -> char& {
+            return dense[std::size_t(((i - lo) * n + (j - lo)) * n + (k - lo))];
+        };
+        for (int i = lo; i < lo + n; ++i)
+            for (int j = lo; j < lo + n; ++j)
+                for (int k = lo; k < lo + n; ++k) {
+                    const bool inTile = i >= 8 && i < 16 && j >= 8 && j < 16 && k >= 8 && k < 16;
+                    if (inTile)
+                        at(i, j, k) = 1;
+                    else if (at(i, j, k))
+                        acc.setValue(openvdb::Coord(i, j, k), -0.5f);
+                    else if (solid(random))
+                        acc.setValue(openvdb::Coord(i, j, k), 0.5f);  // outside voxels in leaves
+                }
+        grid->tree().addTile(1, tile, -1.0f, true);
+
+        // The brute force: a flood fill over the dense array.
+        std::vector<std::pair<std::uint64_t, openvdb::CoordBBox>> expected;
+        std::vector<char> seen(dense.size(), 0);
+        std::uint64_t solidVoxels = 0;
+        for (int i = lo; i < lo + n; ++i)
+            for (int j = lo; j < lo + n; ++j)
+                for (int k = lo; k < lo + n; ++k) {
+                    const std::size_t s = std::size_t(((i - lo) * n + (j - lo)) * n + (k - lo));
+                    if (!dense[s] || seen[s]) continue;
+                    std::vector<openvdb::Coord> stack{openvdb::Coord(i, j, k)};
+                    seen[s] = 1;
+                    std::uint64_t voxels = 0;
+                    openvdb::CoordBBox box;
+                    while (!stack.empty()) {
+                        const openvdb::Coord c = stack.back();
+                        stack.pop_back();
+                        ++voxels;
+                        box.expand(c);
+                        for (int axis = 0; axis < 3; ++axis)
+                            for (int d : {-1, 1}) {
+                                openvdb::Coord m = c;
+                                m[axis] += d;
+                                if (m[axis] < lo || m[axis] >= lo + n) continue;
+                                const std::size_t t = std::size_t(((m.x() - lo) * n + (m.y() - lo)) * n + (m.z() - lo));
+                                if (dense[t] && !seen[t]) {
+                                    seen[t] = 1;
+                                    stack.push_back(m);
+                                }
+                            }
+                    }
+                    solidVoxels += voxels;
+                    expected.emplace_back(voxels, box);
+                }
+        auto order = [](const auto& a, const auto& b) {
+            if (a.first != b.first) return a.first > b.first;
+            return a.second.min() < b.second.min() ||
+                   (a.second.min() == b.second.min() && a.second.max() < b.second.max());
+        };
+        std::sort(expected.begin(), expected.end(), order);
+        for (int threads : {1, 2, 3}) {
+            tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+            const PieceCount count = countPieces(*grid);
+            EXPECT_EQ(count.solidVoxels, solidVoxels);
+            std::vector<std::pair<std::uint64_t, openvdb::CoordBBox>> got;
+            for (const Piece& p : count.pieces) got.emplace_back(p.voxels, p.bounds);
+            for (std::size_t i = 1; i < got.size(); ++i) EXPECT_GE(got[i - 1].first, got[i].first);  // largest first
+            std::sort(got.begin(), got.end(), order);
+            ASSERT_EQ(got.size(), expected.size()) << "share " << share;
+            EXPECT_GT(expected.size(), 5u);
+            for (std::size_t i = 0; i < got.size(); ++i) {
+                EXPECT_EQ(got[i].first, expected[i].first);
+                EXPECT_EQ(got[i].second, expected[i].second);
+            }
         }
     }
 }

@@ -1,9 +1,11 @@
 #include "engine/checks/Pieces.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <numeric>
 
 namespace voxlat {
@@ -11,15 +13,49 @@ namespace voxlat {
 namespace {
 
 using openvdb::Coord;
-using Mask = openvdb::util::NodeMask<3>;
+
+/// The voxels of an 8^3 block as 512 bits: word x (the voxel's x offset), bit 8 y + z, the order
+/// of a leaf's voxel offsets (x << 6 | y << 3 | z). Flood fills run on whole words: one step grows
+/// a set by a voxel along every axis in about thirty word operations.
+using Bits = std::array<std::uint64_t, 8>;
+
+constexpr std::uint64_t kZ0 = 0x0101010101010101ull;  // the bits with z = 0
+constexpr std::uint64_t kZ7 = kZ0 << 7;               // ... with z = 7
+constexpr std::uint64_t kY0 = 0xFFull;                // ... with y = 0
+constexpr std::uint64_t kY7 = kY0 << 56;              // ... with y = 7
+
+bool isEmpty(const Bits& b)
+{
+    std::uint64_t any = 0;
+    for (std::uint64_t w : b) any |= w;
+    return any == 0;
+}
+
+bool isFull(const Bits& b)
+{
+    std::uint64_t all = ~0ull;
+    for (std::uint64_t w : b) all &= w;
+    return all == ~0ull;
+}
+
+/// @a set grown by one voxel across every face, within @a within.
+Bits grow(const Bits& set, const Bits& within)
+{
+    Bits out;
+    for (int x = 0; x < 8; ++x) {
+        const std::uint64_t w = set[std::size_t(x)];
+        std::uint64_t g = w | ((w << 1) & ~kZ0) | ((w >> 1) & ~kZ7) | (w << 8) | (w >> 8);
+        if (x > 0) g |= set[std::size_t(x - 1)];
+        if (x < 7) g |= set[std::size_t(x + 1)];
+        out[std::size_t(x)] = g & within[std::size_t(x)];
+    }
+    return out;
+}
 
 /// An 8^3 block of the solid: a leaf's voxels below zero, or all of a block inside a tile.
 struct Block {
     Coord origin;
-    Mask mask;
-    bool isValueMaskOn() const { return mask.isOn(); }
-    bool isValueOn(int v) const { return mask.isOn(openvdb::Index32(v)); }
-    Coord offsetToGlobalCoord(int v) const { return origin + Coord(v >> 6, (v >> 3) & 7, v & 7); }
+    Bits bits;
 };
 
 /// The solid's blocks, sorted by origin: a leaf's voxels with value < 0, and every 8^3 block of an
@@ -27,15 +63,19 @@ struct Block {
 std::vector<Block> solidBlocks(const openvdb::FloatGrid& grid)
 {
     std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    leaves.reserve(grid.tree().leafCount());
     for (auto it = grid.tree().cbeginLeaf(); it; ++it) leaves.push_back(&*it);
     std::vector<Block> blocks(leaves.size());
     tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t n) {
         blocks[n].origin = leaves[n]->origin();
         const float* v = leaves[n]->buffer().data();
-        for (int i = 0; i < 512; ++i)
-            if (v[i] < 0.0f) blocks[n].mask.setOn(openvdb::Index32(i));
+        for (int x = 0; x < 8; ++x) {
+            std::uint64_t w = 0;
+            for (int i = 0; i < 64; ++i) w |= std::uint64_t(v[64 * x + i] < 0.0f) << i;
+            blocks[n].bits[std::size_t(x)] = w;
+        }
     });
-    blocks.erase(std::remove_if(blocks.begin(), blocks.end(), [](const Block& b) { return b.mask.isOff(); }),
+    blocks.erase(std::remove_if(blocks.begin(), blocks.end(), [](const Block& b) { return isEmpty(b.bits); }),
                  blocks.end());
     auto it = grid.tree().cbeginValueAll();
     it.setMaxDepth(openvdb::FloatTree::ValueAllCIter::LEAF_DEPTH - 1);  // tiles only, not leaf voxels
@@ -47,59 +87,83 @@ std::vector<Block> solidBlocks(const openvdb::FloatGrid& grid)
                 for (int z = box.min().z(); z <= box.max().z(); z += 8) {
                     Block b;
                     b.origin = Coord(x, y, z);
-                    b.mask.setOn();
+                    b.bits.fill(~0ull);
                     blocks.push_back(b);
                 }
     }
-    std::sort(blocks.begin(), blocks.end(), [](const Block& a, const Block& b) { return a.origin < b.origin; });
+    tbb::parallel_sort(blocks.begin(), blocks.end(),
+                       [](const Block& a, const Block& b) { return a.origin < b.origin; });
     return blocks;
 }
 
-/// Per leaf: a label (0-based, local) for each active voxel, -1 elsewhere, by flood fill; and
-/// each label's voxel count and index bounds.
-struct LeafLabels {
-    std::array<std::int16_t, 512> label;
-    int count = 0;
-    std::vector<std::uint32_t> voxels;
-    std::vector<openvdb::CoordBBox> bounds;
+/// One connected set of a block's voxels (6-connected within the block).
+struct Part {
+    Bits bits;
+    std::uint32_t voxels = 0;
+    openvdb::CoordBBox bounds;  ///< index bounds of its voxels
 };
 
-void labelLeaf(const Block& leaf, LeafLabels& out)
+/// The index bounds of the voxels of @a b, a block at @a origin.
+openvdb::CoordBBox boundsOf(const Bits& b, const Coord& origin)
 {
-    if (leaf.isValueMaskOn()) {  // a whole leaf (inside tiles end up so): one label, no search
-        out.label.fill(0);
-        out.count = 1;
-        out.voxels = {512};
-        out.bounds = {openvdb::CoordBBox(leaf.origin, leaf.origin + Coord(7))};
+    int x0 = 8, x1 = -1;
+    std::uint64_t yz = 0;
+    for (int x = 0; x < 8; ++x)
+        if (b[std::size_t(x)]) {
+            x0 = std::min(x0, x);
+            x1 = x;
+            yz |= b[std::size_t(x)];
+        }
+    std::uint64_t z = yz;  // the OR of the eight rows of z bits
+    z |= z >> 32;
+    z |= z >> 16;
+    z |= z >> 8;
+    z &= 0xFF;
+    int y0 = 8, y1 = -1;
+    for (int y = 0; y < 8; ++y)
+        if ((yz >> (8 * y)) & 0xFF) {
+            y0 = std::min(y0, y);
+            y1 = y;
+        }
+    const int z0 = std::countr_zero(z), z1 = 63 - std::countl_zero(z);
+    return {origin + Coord(x0, y0, z0), origin + Coord(x1, y1, z1)};
+}
+
+/// The parts of @a block appended to @a out, in the order of their first voxel (the lowest offset).
+void splitBlock(const Block& block, std::vector<Part>& out)
+{
+    if (isFull(block.bits)) {  // a whole block (inside tiles end up so): one part, no search
+        out.push_back({block.bits, 512u, openvdb::CoordBBox(block.origin, block.origin + Coord(7))});
         return;
     }
-    out.label.fill(-1);
-    std::array<std::int16_t, 512> stack;
-    for (int start = 0; start < 512; ++start) {
-        if (!leaf.isValueOn(start) || out.label[start] >= 0) continue;
-        const auto id = std::int16_t(out.count++);
-        int top = 0;
-        stack[top++] = std::int16_t(start);
-        out.label[start] = id;
-        while (top > 0) {
-            const int v = stack[--top];
-            const int x = v >> 6, y = (v >> 3) & 7, z = v & 7;
-            const int next[6][2] = {{x > 0, v - 64}, {x < 7, v + 64}, {y > 0, v - 8},
-                                    {y < 7, v + 8},  {z > 0, v - 1},  {z < 7, v + 1}};
-            for (const auto& [ok, n] : next)
-                if (ok && leaf.isValueOn(n) && out.label[n] < 0) {
-                    out.label[n] = id;
-                    stack[top++] = std::int16_t(n);
-                }
+    Bits left = block.bits;
+    for (int x = 0; x < 8; ++x)
+        while (left[std::size_t(x)]) {
+            Bits set{};
+            set[std::size_t(x)] = left[std::size_t(x)] & (~left[std::size_t(x)] + 1);  // the lowest voxel left
+            for (;;) {
+                const Bits next = grow(set, left);
+                if (next == set) break;
+                set = next;
+            }
+            std::uint32_t voxels = 0;
+            for (int i = 0; i < 8; ++i) {
+                left[std::size_t(i)] &= ~set[std::size_t(i)];
+                voxels += std::uint32_t(std::popcount(set[std::size_t(i)]));
+            }
+            out.push_back({set, voxels, boundsOf(set, block.origin)});
         }
-    }
-    out.voxels.assign(std::size_t(out.count), 0);
-    out.bounds.assign(std::size_t(out.count), openvdb::CoordBBox());
-    for (int v = 0; v < 512; ++v)
-        if (out.label[v] >= 0) {
-            ++out.voxels[std::size_t(out.label[v])];
-            out.bounds[std::size_t(out.label[v])].expand(leaf.offsetToGlobalCoord(v));
-        }
+}
+
+/// Whether part @a a of a block touches part @a b of the next block along @a axis across their face.
+bool touches(const Bits& a, const Bits& b, int axis)
+{
+    if (axis == 0) return (a[7] & b[0]) != 0;
+    std::uint64_t any = 0;
+    for (int x = 0; x < 8; ++x)
+        any |= axis == 1 ? ((a[std::size_t(x)] & kY7) >> 56) & b[std::size_t(x)] & kY0
+                         : ((a[std::size_t(x)] & kZ7) >> 7) & b[std::size_t(x)] & kZ0;
+    return any != 0;
 }
 
 int findRoot(std::vector<int>& parent, int i)
@@ -120,60 +184,65 @@ void unite(std::vector<int>& parent, int a, int b)
 PieceCount countPieces(const openvdb::FloatGrid& grid)
 {
     const std::vector<Block> blocks = solidBlocks(grid);
-    std::vector<const Block*> leaves;
-    for (const Block& b : blocks) leaves.push_back(&b);
 
-    std::vector<LeafLabels> labels(leaves.size());
-    tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t n) { labelLeaf(*leaves[n], labels[n]); });
-    std::vector<int> first(leaves.size() + 1, 0);  // the global id of each leaf's label 0
-    for (std::size_t n = 0; n < leaves.size(); ++n) first[n + 1] = first[n] + labels[n].count;
-    std::vector<int> parent(first.back());
+    // Each block's parts, found in parallel over fixed runs of blocks and laid out in block order:
+    // part ids do not depend on the thread count.
+    constexpr std::size_t kRun = 256;
+    const std::size_t runs = (blocks.size() + kRun - 1) / kRun;
+    std::vector<std::vector<Part>> runParts(runs);
+    std::vector<std::vector<int>> runFirst(runs);
+    tbb::parallel_for(std::size_t(0), runs, [&](std::size_t r) {
+        const std::size_t end = std::min(blocks.size(), (r + 1) * kRun);
+        for (std::size_t n = r * kRun; n < end; ++n) {
+            runFirst[r].push_back(int(runParts[r].size()));
+            splitBlock(blocks[n], runParts[r]);
+        }
+    });
+    std::vector<Part> parts;
+    std::vector<int> first(blocks.size() + 1, 0);  // the id of each block's first part
+    for (std::size_t r = 0; r < runs; ++r) {
+        for (std::size_t i = 0; i < runFirst[r].size(); ++i) first[r * kRun + i] = int(parts.size()) + runFirst[r][i];
+        parts.insert(parts.end(), runParts[r].begin(), runParts[r].end());
+        std::vector<Part>().swap(runParts[r]);
+    }
+    first[blocks.size()] = int(parts.size());
+    std::vector<int> parent(parts.size());
     std::iota(parent.begin(), parent.end(), 0);
 
-    // Join labels across the +x, +y and +z faces of every leaf.
-    auto leafIndex = [&](const Coord& origin) -> long {
-        const auto it = std::lower_bound(leaves.begin(), leaves.end(), origin,
-                                         [](const Block* l, const Coord& c) { return l->origin < c; });
-        return it != leaves.end() && (*it)->origin == origin ? long(it - leaves.begin()) : -1;
+    // Join parts across the +x, +y and +z faces of every block. The next block along z is usually
+    // the next in the sorted list; along x and y, a search that starts at the last one found.
+    auto blockAt = [&](const Coord& origin, std::size_t from) -> long {
+        const auto it = std::lower_bound(blocks.begin() + long(from), blocks.end(), origin,
+                                         [](const Block& l, const Coord& c) { return l.origin < c; });
+        return it != blocks.end() && it->origin == origin ? long(it - blocks.begin()) : -1;
     };
-    for (std::size_t n = 0; n < leaves.size(); ++n) {
+    for (std::size_t n = 0; n < blocks.size(); ++n) {
         for (int axis = 0; axis < 3; ++axis) {
-            Coord next = leaves[n]->origin;
+            Coord next = blocks[n].origin;
             next[axis] += 8;
-            const long m = leafIndex(next);
+            const long m = axis == 2 && n + 1 < blocks.size() ? (blocks[n + 1].origin == next ? long(n + 1) : -1)
+                                                              : blockAt(next, n + 1);
             if (m < 0) continue;
-            if (labels[n].count == 1 && labels[m].count == 1 && leaves[n]->isValueMaskOn() &&
-                leaves[m]->isValueMaskOn()) {
-                unite(parent, first[n], first[m]);  // two whole leaves
-                continue;
-            }
-            // The 64 voxels of the far face (offset 7 along the axis) against the neighbour's near face.
-            const int stride = axis == 0 ? 64 : axis == 1 ? 8 : 1;
-            const int s1 = axis == 0 ? 8 : 64, s2 = axis == 2 ? 8 : 1;
-            for (int i = 0; i < 8; ++i)
-                for (int j = 0; j < 8; ++j) {
-                    const int near = i * s1 + j * s2;
-                    const int a = labels[n].label[near + 7 * stride], b = labels[m].label[near];
-                    if (a >= 0 && b >= 0) unite(parent, first[n] + a, first[m] + b);
-                }
+            for (int a = first[n]; a < first[n + 1]; ++a)
+                for (int b = first[std::size_t(m)]; b < first[std::size_t(m) + 1]; ++b)
+                    if (touches(parts[std::size_t(a)].bits, parts[std::size_t(b)].bits, axis)) unite(parent, a, b);
         }
     }
 
-    // Sizes and bounds per root, summed over the leaves' labels in leaf order.
+    // Sizes and bounds per root, summed over the parts in block order.
     std::vector<int> pieceOf(parent.size(), -1);
     PieceCount result;
-    for (std::size_t n = 0; n < leaves.size(); ++n)
-        for (int l = 0; l < labels[n].count; ++l) {
-            const int root = findRoot(parent, first[n] + l);
-            if (pieceOf[root] < 0) {
-                pieceOf[root] = int(result.pieces.size());
-                result.pieces.push_back({0, openvdb::CoordBBox()});
-            }
-            Piece& p = result.pieces[std::size_t(pieceOf[root])];
-            p.voxels += labels[n].voxels[std::size_t(l)];
-            p.bounds.expand(labels[n].bounds[std::size_t(l)]);
-            result.solidVoxels += labels[n].voxels[std::size_t(l)];
+    for (std::size_t p = 0; p < parts.size(); ++p) {
+        const int root = findRoot(parent, int(p));
+        if (pieceOf[root] < 0) {
+            pieceOf[root] = int(result.pieces.size());
+            result.pieces.push_back({0, openvdb::CoordBBox()});
         }
+        Piece& piece = result.pieces[std::size_t(pieceOf[root])];
+        piece.voxels += parts[p].voxels;
+        piece.bounds.expand(parts[p].bounds);
+        result.solidVoxels += parts[p].voxels;
+    }
     std::stable_sort(result.pieces.begin(), result.pieces.end(),
                      [](const Piece& a, const Piece& b) { return a.voxels > b.voxels; });
     return result;

@@ -25,9 +25,9 @@ struct PieceCount {
 
 /// The connected components of the voxels of @a grid below zero (inside tiles included), two voxels
 /// being connected when they share a face (6-connectivity: a piece touching another only along an
-/// edge or at a corner is separate, as it would be in print). Labels each leaf's voxels by a flood
-/// fill within the leaf, in parallel, then joins labels across leaf faces with a union-find; the
-/// result does not depend on the thread count.
+/// edge or at a corner is separate, as it would be in print). Splits each leaf's voxels into their
+/// connected parts by flood fills on the leaf's 512 bits held in eight words, in parallel, then
+/// joins parts across leaf faces with a union-find; the result does not depend on the thread count.
 PieceCount countPieces(const openvdb::FloatGrid& grid);
 
 }  // namespace voxlat

@@ -137,7 +137,7 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
 
     // Stage 2: evaluate each straddling leaf as one batch.
     // Owned until the tree takes them: a cancelled or failed evaluation frees what it made.
-    std::vector<std::unique_ptr<LeafT>> leaves(leafOrigins.size());
+    std::vector<std::unique_ptr<LeafT>> leaves(options.leafVisitor ? 0 : leafOrigins.size());
     std::atomic<bool> nonFinite{false};
     std::mutex badMutex;
     Vec3d badPoint(0.0);
@@ -145,6 +145,7 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
         StageProgress progress(options.context, options.stage, leafOrigins.size());
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leafOrigins.size(), 16), [&](const auto& range) {
             std::array<double, 512> values;
+            std::array<float, 512> visited;
             for (std::size_t n = range.begin(); n != range.end(); ++n) {
                 const Coord& lo = leafOrigins[n];
                 GridBatch batch;
@@ -156,8 +157,12 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                         const Vec3d p = batch.point(i >> 6, (i >> 3) & 7, i & 7);
                         values[i] = std::max(values[i], clip->eval(p[0], p[1], p[2]));
                     }
-                auto leaf = std::make_unique<LeafT>(lo, options.outsideValue, true);
-                float* data = leaf->buffer().data();
+                std::unique_ptr<LeafT> leaf;
+                float* data = visited.data();
+                if (!options.leafVisitor) {
+                    leaf = std::make_unique<LeafT>(lo, options.outsideValue, true);
+                    data = leaf->buffer().data();
+                }
                 for (int i = 0; i < 512; ++i) {
                     if (!std::isfinite(values[i])) [[unlikely]] {
                         std::lock_guard<std::mutex> lock(badMutex);
@@ -165,7 +170,10 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                     }
                     data[i] = float(values[i]);
                 }
-                leaves[n] = std::move(leaf);
+                if (options.leafVisitor)
+                    options.leafVisitor(lo, data);
+                else
+                    leaves[n] = std::move(leaf);
             }
             progress.add(range.size());
         });

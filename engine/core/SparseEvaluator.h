@@ -8,6 +8,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <functional>
 #include <string>
 
 namespace voxlat {
@@ -27,6 +28,11 @@ struct SparseOptions {
     /// the box's distance is below -1.5 voxels and never changes a sign.
     bool clipToDomain = false;
     std::uint64_t maxLeaves = 0;  ///< 0: as many as available memory allows
+    /// When set, evaluated leaves are not kept: each is handed to this function (from any thread,
+    /// once, in no fixed order) with its origin and its 512 values as the grid would hold them,
+    /// and the grid returned holds the tiles only. For measures that need the values once (the
+    /// density solve's count): no leaf is allocated, nothing is walked twice.
+    std::function<void(const openvdb::Coord& origin, const float* values)> leafVisitor = nullptr;
     std::string stage = "evaluating field";
     const JobContext* context = nullptr;  ///< progress and cancellation (none: silent)
 };

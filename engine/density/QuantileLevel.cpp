@@ -6,6 +6,7 @@
 #include "engine/density/Coverage.h"
 #include "fields/BlockLattice.h"
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
@@ -144,6 +145,48 @@ double quantile(std::vector<float>& samples, double q)
     return samples[i];
 }
 
+/// splitByBand of the grid evaluateSparse(@a g, @a domain, @a options) would give, measured on
+/// each leaf as it is evaluated instead of on a grid. The count and the band's values (a multiset:
+/// the level taken from it does not depend on their order) are those of splitByBand.
+BandSplit streamedSplit(const FieldNode& g, const Domain& domain, const SparseOptions& options,
+                        std::uint64_t& evaluatedLeaves)
+{
+    const openvdb::CoordBBox region = domain.indexBox();
+    const float lo = float(options.band.lo), hi = float(options.band.hi);
+    struct Local {
+        std::uint64_t below = 0;
+        std::vector<float> band;
+    };
+    tbb::enumerable_thread_specific<Local> locals;
+    SparseOptions streamed = options;
+    streamed.leafVisitor = [&](const openvdb::Coord& origin, const float* v) {
+        Local& local = locals.local();
+        const openvdb::CoordBBox box(origin, origin + openvdb::Coord(7));
+        const bool whole = region.isInside(box);
+        for (int i = 0; i < 512; ++i) {
+            if (!whole && !region.isInside(origin + openvdb::Coord(i >> 6, (i >> 3) & 7, i & 7))) continue;
+            if (v[i] < lo)
+                ++local.below;
+            else if (v[i] <= hi)
+                local.band.push_back(v[i]);
+        }
+    };
+    SparseStats stats;
+    const auto tiles = evaluateSparse(g, domain, streamed, &stats);
+    evaluatedLeaves = stats.leaves;
+    BandSplit split;
+    split.below = countBelow(*tiles, region, lo);  // the tiles: the grid holds no leaf
+    std::size_t total = 0;
+    for (const Local& l : locals) total += l.band.size();
+    split.band.reserve(total);
+    for (Local& l : locals) {
+        split.below += l.below;
+        split.band.insert(split.band.end(), l.band.begin(), l.band.end());
+        std::vector<float>().swap(l.band);
+    }
+    return split;
+}
+
 }  // namespace
 
 DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain, double target, const FieldNode* mask,
@@ -197,10 +240,18 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         if (masked && margin < 1.0)
             evaluated.band =
                 Interval(options.band.lo - kStepReserve * coarseStep, options.band.hi + kStepReserve * coarseStep);
-        const auto grid = evaluateSparse(indicator, domain, evaluated);
-        sol.evaluatedLeaves = grid->tree().leafCount();
-
-        BandSplit split = splitByBand(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi));
+        // A count needs each value once: the leaves are measured as they are evaluated and never
+        // kept (no grid of the bracket's leaves, no second walk). Only a coverage measure (asked
+        // for, masked, or value ties below) needs the grid, and evaluates it then.
+        openvdb::FloatGrid::Ptr grid;
+        BandSplit split;
+        if (!masked && !subVoxel) {
+            split = streamedSplit(indicator, domain, options, sol.evaluatedLeaves);
+        } else {
+            grid = evaluateSparse(indicator, domain, evaluated);
+            sol.evaluatedLeaves = grid->tree().leafCount();
+            split = splitByBand(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi));
+        }
         const std::uint64_t below = split.below;
         std::vector<float>& band = split.band;
         if (wanted < below || wanted > below + band.size()) continue;
@@ -228,6 +279,10 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         // `wanted` voxels below it. Then measure with sub-voxel coverage, which is continuous in
         // the level, and bisect on it.
         if (subVoxel || std::abs(double(sol.insideVoxels) - double(wanted)) > 5e-4 * double(wanted)) {
+            if (!grid) {
+                grid = evaluateSparse(indicator, domain, evaluated);
+                sol.evaluatedLeaves = grid->tree().leafCount();
+            }
             // Every evaluated band voxel once (a voxel's step does not depend on the band); the
             // bracket's and the wide band's samples are picked from them, in the same order.
             const float evaluatedLo = float(evaluated.band.lo), evaluatedHi = float(evaluated.band.hi);

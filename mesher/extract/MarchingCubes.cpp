@@ -819,7 +819,9 @@ TriangleMesh Mesher::run(ProgressFn progressFn, MarchingCubesStats& stats)
                       [&](const tbb::blocked_range<std::size_t>& r) {
                           Accessor acc(mTree);
                           for (std::size_t b = r.begin(); b != r.end(); ++b) {
-                              processBlock<true>(b, acc, &mesh);
+                              // A block that owns no vertex and makes no triangle writes nothing.
+                              if (mCounts[b].edgeVertices != 0 || mCounts[b].triangles != 0)
+                                  processBlock<true>(b, acc, &mesh);
                               progress.advance();
                           }
                       });
