@@ -142,6 +142,12 @@ TEST(RadiusFromField, ErrorsNameTheRadius)
     // An unknown field name.
     e = buildError(head + "  l: {struts: {cell: grid, size: 2, count: 2}, kernel: capsule, radius: rr}\nresult: l\n");
     EXPECT_NE(e.find("rr"), std::string::npos) << e;
+    // IntraLattice's habit, an equation as the gradient: pointed to the form that takes one.
+    e = buildError(head +
+                   "  l: {struts: {cell: grid, size: 2, count: 2}, kernel: capsule, "
+                   "radius: {gradient: \"x*y\", min: 0.2, max: 0.5}}\nresult: l\n");
+    EXPECT_NE(e.find("unknown gradient `x*y`"), std::string::npos) << e;
+    EXPECT_NE(e.find("give `radius: {expr: \"x*y\"}`"), std::string::npos) << e;
 }
 
 TEST(FiniteFrameDomain, CountWireframeWithinAndBetweenGiveTheDomain)

@@ -389,7 +389,9 @@ std::vector<std::array<double, 2>> readRadii(FieldBuilder& builder, const Recipe
     const std::string preset = r["gradient"].string();
     const std::vector<std::string> presets = {"linear", "centred", "cylindrical", "spherical"};
     if (std::find(presets.begin(), presets.end(), preset) == presets.end())
-        r["gradient"].fail("unknown gradient `" + preset + "` (presets: " + joinWords(presets) + ")");
+        r["gradient"].fail("unknown gradient `" + preset + "` (presets: " + joinWords(presets) +
+                           "); for radii from an equation give `radius: {expr: \"" + preset +
+                           "\"}` in mm, with u, v, w in [0, 1] over the frame's box as IntraLattice has them");
     const double lo = positive(r["min"]), hi = positive(r["max"]);
     int axis = 0;
     if (r.has("axis")) axis = r["axis"].axis();
