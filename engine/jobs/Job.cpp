@@ -367,6 +367,7 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
 {
     for (const auto& v : mMeshes)
         if (v->options == options) return *v;
+    if (options.tolerance) checkTolerance(options);
     const openvdb::FloatGrid& g = grid();
     auto v = std::make_unique<MeshVariant>();
     v->options = options;
@@ -439,6 +440,19 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         const MeshTopology t = checkTopology(m);
         report["closed_manifold"] = t.closedManifold();
         report["euler_characteristic"] = t.eulerCharacteristic;
+        report["pieces"] = t.pieces;
+        report["closed_pieces"] = t.closedPieces;
+        report["genus"] = t.genus;
+        // Projection and decimation move vertices and join triangles: check that no two cross.
+        const std::size_t crossing = timed("check self-intersections", [&] { return countSelfIntersections(m); });
+        report["self_intersections"] = crossing;
+        if (crossing > 0)
+            mContext->warn("mesh_self_intersections",
+                           std::to_string(crossing) +
+                               " pairs of triangles of the mesh cross each other; slicers may fill or drop the "
+                               "region there: mesh without `tolerance:` (or with `project: off`) or use a smaller "
+                               "`voxel:`",
+                           {{"pairs", crossing}});
         if (options.tolerance && dev.max > *options.tolerance)
             mContext->warn("mesh_tolerance",
                            "the mesh strays up to " + formatNumber(dev.max) +
@@ -453,6 +467,35 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
     report["vertices"] = m.points.size();
     mMeshes.push_back(std::move(v));
     return *mMeshes.back();
+}
+
+void Job::checkTolerance(const MeshOptions& options)
+{
+    solveLevels();
+    const double tolerance = *options.tolerance;
+    const std::string where = options.toleranceWhere.empty() ? mRecipe.source->path : options.toleranceWhere;
+    // A tolerance of half the thinnest strut lets decimation lay the strut's two sides onto one
+    // another: refused. The struts' diameters are known from their nodes before any evaluation.
+    for (const LevelNode& node : mBuilder.levelNodes()) {
+        if (!node.thinnest) continue;
+        const double thinnest = node.thinnest(node.solid->level());
+        if (thinnest > 0.0 && tolerance >= 0.5 * thinnest)
+            throw InputError(where + ": the mesh tolerance " + formatNumber(tolerance) +
+                             " mm is not below half the thinnest strut of `" + node.name + "` (" +
+                             formatNumber(thinnest) +
+                             " mm across): decimation could flatten it; use a tolerance "
+                             "below " +
+                             formatNumber(0.5 * thinnest) + " mm");
+    }
+    // The grid resolves features down to about two voxels; a tolerance above half of that (one
+    // voxel) may flatten features the grid kept.
+    if (tolerance > mDomain.voxel)
+        mContext->warn("mesh_tolerance_coarse",
+                       where + ": the mesh tolerance " + formatNumber(tolerance) + " mm is larger than the voxel (" +
+                           formatNumber(mDomain.voxel) +
+                           " mm, half the thinnest feature the grid resolves): walls and struts down to " +
+                           formatNumber(2.0 * tolerance) + " mm across may be flattened",
+                       {{"tolerance_mm", tolerance}, {"voxel_mm", mDomain.voxel}});
 }
 
 void Job::checkPieces()
