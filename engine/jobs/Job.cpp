@@ -15,6 +15,8 @@
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
 #include "fields/GradedLevel.h"
+#include "fields/Unary.h"
+#include "mesher/extract/CreaseSplit.h"
 #include "mesher/extract/Decimation.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
@@ -349,6 +351,29 @@ nlohmann::json deviationJson(double max, double rms)
 }
 }  // namespace
 
+namespace {
+/// The surfaces whose intersection is @a f, for sharp creases: the operands of a sharp
+/// intersection (nested ones flattened) or difference (the cut-away operands negated), else
+/// @a f itself.
+void collectCreaseOperands(const FieldPtr& f, std::vector<FieldPtr>& out)
+{
+    const auto* b = dynamic_cast<const BooleanField*>(f.get());
+    if (b && b->blendRadius() == 0.0 && out.size() < 24) {
+        if (b->op() == BooleanOp::Intersection) {
+            for (const FieldPtr& o : b->operands()) collectCreaseOperands(o, out);
+            return;
+        }
+        if (b->op() == BooleanOp::Difference) {
+            collectCreaseOperands(b->operands().front(), out);
+            for (std::size_t i = 1; i < b->operands().size(); ++i)
+                out.push_back(std::make_shared<UnaryField>(b->operands()[i], UnaryOp::Negate));
+            return;
+        }
+    }
+    out.push_back(f);
+}
+}  // namespace
+
 FieldPtr Job::surfaceField()
 {
     solveLevels();
@@ -398,10 +423,21 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         co.maxMove = mDomain.voxel;
         const CreaseStats c =
             timed("sharpen creases", [&] { return sharpenCreases(m, *mResult, BoxField(mDomain.box), co); });
-        report["creases"] = {{"surfaces", "the result and the domain box"},
+        // The edges still across a crease (and the box's own edges and corners) are split at
+        // the point on both surfaces (on all three at a corner).
+        std::vector<FieldPtr> operands;
+        collectCreaseOperands(mResult, operands);
+        CreaseSurfaces surfaces;
+        for (const FieldPtr& f : operands) surfaces.fields.push_back(f.get());
+        surfaces.box = mDomain.box;
+        const CreaseSplitStats split = timed("split crease edges", [&] { return splitCreaseEdges(m, surfaces, co); });
+        report["creases"] = {{"surfaces", std::to_string(operands.size()) +
+                                              (operands.size() == 1 ? " field" : " operands of the result") +
+                                              " and the six faces of the domain box"},
                              {"edges_across", c.creaseEdges},
                              {"vertices_moved_onto_both", c.moved},
-                             {"edges_left_flat", c.leftFlat}};
+                             {"edges_split", split.split},
+                             {"edges_left_flat", split.leftFlat}};
         report["projection"] = {{"vertices_moved", s.moved},
                                 {"vertices_held_back", s.heldBack},
                                 {"vertices_at_half_voxel_limit", s.limited},

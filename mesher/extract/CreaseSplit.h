@@ -39,10 +39,9 @@ struct CreaseSplitStats {
 /// The triangles around a split edge are divided (one, two or three split edges per triangle);
 /// when a new triangle would turn over against its parent, that parent's splits are dropped, in
 /// rounds. The result stays closed, manifold and oriented. A vertex is on a surface when its
-/// first-order distance is within a thousandth of options.maxMove. New vertices are appended in
+/// first-order distance is within a hundredth of options.maxMove. New vertices are appended in
 /// the order of their edges (sorted vertex pairs); evaluation is in fixed batches, so the same
 /// bytes for any thread count.
-CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surfaces,
-                                  const ProjectionOptions& options);
+CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surfaces, const ProjectionOptions& options);
 
 }  // namespace voxlat
