@@ -13,6 +13,7 @@
 #include "fields/LevelSolid.h"
 #include "fields/Sphere.h"
 #include "fields/TpmsField.h"
+#include "mesher/extract/CreaseSplit.h"
 #include "mesher/extract/Decimation.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
@@ -698,6 +699,107 @@ TEST(MeshOutputs, AToleranceAboveHalfTheThinnestStrutIsRefused)
     bool warned = false;
     for (const auto& w : r["warnings"]) warned = warned || w["code"] == "mesh_tolerance_coarse";
     EXPECT_TRUE(warned);
+}
+
+TEST(CreaseSplit, ABooleanAndTheBoxKeepTheirCreases)
+{
+    // A gyroid network intersected with a ball that the domain box also cuts: creases where the
+    // lattice meets the ball, where either meets the box, the box's own edges and its corners.
+    const double voxel = 0.1, cell = 5.0, level = 0.3;
+    const Box3 box{Vec3d(0.0), Vec3d(6.0, 5.5, 5.0)};
+    const Vec3d centre(3.0, 2.7, 2.6);
+    const double radius = 2.9;
+    const FieldPtr lattice = std::make_shared<LevelSolid>(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(cell)),
+                                                          SolidSide::Below, level);
+    const FieldPtr ball = std::make_shared<Sphere>(centre, radius);
+    const FieldPtr field =
+        clipped(std::make_shared<BooleanField>(BooleanOp::Intersection, std::vector<FieldPtr>{lattice, ball}), box);
+    auto gyroid = [&](const Vec3d& p) { return gyroidDistance(p, cell, level); };
+    auto sphere = [&](const Vec3d& p) { return (p - centre).length() - radius; };
+    auto distance = [&](const Vec3d& p) { return std::max({gyroid(p), sphere(p), boxDistance(p, box)}); };
+    TriangleMesh mesh = marchingCubesOf(*field, Domain::fromBox(box, voxel));
+    const ProjectionOptions o{0.0, 0.5 * voxel, 1e-6, 12};
+    projectToSurface(mesh, *field, o);
+    const TriangleMesh projected = mesh;
+    ProjectionOptions co = o;
+    co.maxMove = voxel;
+    const std::size_t before = mesh.points.size();
+    const CreaseSplitStats stats = splitCreaseEdges(mesh, {{lattice.get(), ball.get()}, box}, co);
+    RecordProperty("crease_edges", std::to_string(stats.creaseEdges));
+    RecordProperty("split", std::to_string(stats.split));
+    EXPECT_GT(stats.creaseEdges, 500u);
+    EXPECT_GT(stats.split, stats.creaseEdges * 3 / 4);
+    EXPECT_EQ(stats.split + stats.leftFlat, stats.creaseEdges);
+    ASSERT_EQ(mesh.points.size(), before + stats.split);
+    // Every point the split adds is on the cut: within 1e-4 mm of two (or three) of the
+    // surfaces, by the test's own distances, and on the solid's surface.
+    std::size_t onThree = 0;
+    for (std::size_t v = before; v < mesh.points.size(); ++v) {
+        const Vec3d p = at(mesh, unsigned(v));
+        int on = 0;
+        for (double d : {gyroid(p), sphere(p), p.x() - box.max.x(), box.min.x() - p.x(), p.y() - box.max.y(),
+                         box.min.y() - p.y(), p.z() - box.max.z(), box.min.z() - p.z()})
+            on += std::abs(d) < 1e-4;
+        EXPECT_GE(on, 2) << p;
+        onThree += on >= 3;
+        EXPECT_LT(std::abs(distance(p)), 1e-4) << p;
+    }
+    RecordProperty("split_points_on_three_surfaces", std::to_string(onThree));
+    // The chamfers are gone: far fewer triangles stray by 5 % of the voxel, the worst is lower.
+    auto straying = [&](const TriangleMesh& m) {
+        std::size_t count = 0;
+        for (const openvdb::Vec3I& t : m.triangles) {
+            TriangleMesh one;
+            one.points = {m.points[t[0]], m.points[t[1]], m.points[t[2]]};
+            one.triangles = {openvdb::Vec3I(0, 1, 2)};
+            count += maxOverTriangles(one, distance, 0.1 * voxel) > 0.05 * voxel;
+        }
+        return count;
+    };
+    const std::size_t flat = straying(projected), sharp = straying(mesh);
+    RecordProperty("straying_before", std::to_string(flat));
+    RecordProperty("straying_after", std::to_string(sharp));
+    EXPECT_LT(sharp, flat / 3);
+    expectClosedManifold(mesh);
+    EXPECT_EQ(checkTopology(mesh).genus, checkTopology(projected).genus);
+    // The split adds no crossing (projection may have made a few where the lattice grazes the
+    // ball; they stay as they were).
+    EXPECT_LE(countSelfIntersections(mesh), countSelfIntersections(projected));
+    EXPECT_NEAR(mesh.volume(), projected.volume(), 0.01 * projected.volume());
+    // The same bytes for any thread count.
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    TriangleMesh serial = projected;
+    splitCreaseEdges(serial, {{lattice.get(), ball.get()}, box}, co);
+    EXPECT_TRUE(serial.points == mesh.points);
+    EXPECT_TRUE(serial.triangles == mesh.triangles);
+}
+
+TEST(MeshOutputs, ACutByAShapeIsSplitInTheJob)
+{
+    test::TempDir dir;
+    const std::string text =
+        "voxel: 0.1\n"
+        "domain: {box: [[0, 0, 0], [6, 6, 6]]}\n"
+        "fields:\n"
+        "  lattice: {tpms: gyroid, cell: 5, solid: network, level: 0.3}\n"
+        "  part: {intersection: [lattice, {sphere: {center: [3, 3, 3], radius: 2.6}}]}\n"
+        "result: part\n"
+        "outputs: {mesh: {file: a.stl, project: on}}\n";
+    Job job(parseRecipe(text, "r.yaml", dir.path));
+    job.writeOutputs(dir.path / "out", false);
+    const nlohmann::json r = job.report();
+    EXPECT_GT(r["mesh"]["creases"]["edges_split"].get<std::size_t>(), 100u);
+    EXPECT_NE(r["mesh"]["creases"]["surfaces"].get<std::string>().find("2 operands"), std::string::npos);
+    EXPECT_TRUE(r["mesh"]["closed_manifold"].get<bool>());
+    // The count is the written mesh's (projection can make a few crossings where the lattice
+    // grazes the ball; they are reported and warned about).
+    const TriangleMesh written = readStl((dir.path / "out/a.stl").string());
+    const std::size_t crossing = countSelfIntersections(written);
+    EXPECT_EQ(r["mesh"]["self_intersections"].get<std::size_t>(), crossing);
+    bool warned = false;
+    if (r.contains("warnings"))
+        for (const auto& w : r["warnings"]) warned = warned || w["code"] == "mesh_self_intersections";
+    EXPECT_EQ(warned, crossing > 0);
 }
 
 }  // namespace

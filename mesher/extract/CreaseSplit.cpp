@@ -1,5 +1,7 @@
 #include "mesher/extract/CreaseSplit.h"
 
+#include "mesher/extract/MeshCheck.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -129,7 +131,8 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
 
     // 2. Crease edges: the ends lie on different surfaces and neither on all of them.
     std::vector<CreaseEdge> edges;
-    for (const openvdb::Vec3I& t : mesh.triangles)
+    for (const openvdb::Vec3I& t : mesh.triangles) {
+        if (mask[t[0]] == mask[t[1]] && mask[t[1]] == mask[t[2]]) continue;
         for (int i = 0; i < 3; ++i) {
             const std::uint32_t p = std::min(t[i], t[(i + 1) % 3]), q = std::max(t[i], t[(i + 1) % 3]);
             const std::uint32_t both = mask[p] | mask[q];
@@ -138,6 +141,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
             if (count < 2 || count > 3) continue;
             edges.push_back({p, q, both});
         }
+    }
     std::sort(edges.begin(), edges.end(),
               [](const CreaseEdge& a, const CreaseEdge& b) { return a.p < b.p || (a.p == b.p && a.q < b.q); });
     edges.erase(std::unique(edges.begin(), edges.end(),
@@ -166,8 +170,8 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
                 // needlessly; the batch stays one call per surface).
                 std::array<std::vector<double>, 32> values;
                 std::array<std::vector<Vec3d>, 32> grads;
-                std::uint32_t used = 0;
-                for (std::size_t k = 0; k < count; ++k) used |= edges[begin + k].surfaces;
+                // All surfaces: the point must lie inside the ones it is not on.
+                const std::uint32_t used = numSurfaces == 32 ? ~0u : (1u << numSurfaces) - 1u;
                 for (int s = 0; s < numSurfaces; ++s) {
                     if (!(used >> s & 1u)) continue;
                     values[s].resize(count);
@@ -192,7 +196,11 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
                     const Vec3d mid = 0.5 * (points[e.p] + points[e.q]);
                     if (close) {
                         done[k] = 1;
-                        found[begin + k] = (x[k] - mid).length() <= options.maxMove;
+                        bool inside = true;
+                        for (int t = 0; t < numSurfaces; ++t)
+                            if (!(e.surfaces >> t & 1u))
+                                inside = inside && values[t][k] <= options.tolerance * grads[t][k].length();
+                        found[begin + k] = inside && (x[k] - mid).length() <= options.maxMove;
                         target[begin + k] = x[k];
                         continue;
                     }
@@ -233,6 +241,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
     std::vector<std::array<std::ptrdiff_t, 3>> touchedEdges;
     for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
         const openvdb::Vec3I& tri = mesh.triangles[t];
+        if (mask[tri[0]] == mask[tri[1]] && mask[tri[1]] == mask[tri[2]]) continue;
         std::array<std::ptrdiff_t, 3> e;
         bool any = false;
         for (int i = 0; i < 3; ++i) {
@@ -315,7 +324,64 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
         if (!dropped) break;
     }
 
-    // 5. New vertices in edge order, then the triangles: untouched ones as they were, the others
+    // 5. No piece may cross another triangle: the pieces of the split parents and the triangles
+    // around them are checked, and a parent whose pieces cross drops its splits, in rounds.
+    {
+        std::vector<std::uint8_t> nearSplit(n, 0);
+        for (std::uint32_t t : touched)
+            for (int i = 0; i < 3; ++i) nearSplit[mesh.triangles[t][i]] = 1;
+        std::vector<std::uint32_t> around;
+        for (std::size_t t = 0, k = 0; t < mesh.triangles.size(); ++t) {
+            if (k < touched.size() && touched[k] == t) {
+                ++k;
+                continue;
+            }
+            const openvdb::Vec3I& tri = mesh.triangles[t];
+            if (nearSplit[tri[0]] || nearSplit[tri[1]] || nearSplit[tri[2]]) around.push_back(std::uint32_t(t));
+        }
+        for (;;) {
+            TriangleMesh local;
+            local.points = mesh.points;
+            std::vector<std::uint32_t> newIndex(m, 0);
+            for (std::size_t e = 0; e < m; ++e)
+                if (active[e]) {
+                    newIndex[e] = std::uint32_t(local.points.size());
+                    local.points.emplace_back(float(target[e].x()), float(target[e].y()), float(target[e].z()));
+                }
+            std::vector<std::int64_t> parent;
+            for (std::size_t k = 0; k < touched.size(); ++k) {
+                const std::array<bool, 3> s = splits(k);
+                if (!s[0] && !s[1] && !s[2]) continue;
+                const openvdb::Vec3I& tri = mesh.triangles[touched[k]];
+                std::array<std::uint32_t, 6> index{tri[0], tri[1], tri[2], 0, 0, 0};
+                for (int i = 0; i < 3; ++i)
+                    if (s[i]) index[3 + i] = newIndex[touchedEdges[k][i]];
+                for (const Piece& piece : piecesOf(positions(k), s)) {
+                    local.triangles.emplace_back(index[piece.corner[0]], index[piece.corner[1]],
+                                                 index[piece.corner[2]]);
+                    parent.push_back(std::int64_t(k));
+                }
+            }
+            if (local.triangles.empty()) break;
+            for (std::uint32_t t : around) {
+                local.triangles.push_back(mesh.triangles[t]);
+                parent.push_back(-1);
+            }
+            bool dropped = false;
+            for (const auto& [x, y] : selfIntersections(local))
+                for (const std::int64_t k : {parent[x], parent[y]}) {
+                    if (k < 0) continue;
+                    for (int i = 0; i < 3; ++i)
+                        if (touchedEdges[k][i] >= 0 && active[touchedEdges[k][i]]) {
+                            active[touchedEdges[k][i]] = 0;
+                            dropped = true;
+                        }
+                }
+            if (!dropped) break;
+        }
+    }
+
+    // 6. New vertices in edge order, then the triangles: untouched ones as they were, the others
     // replaced by their pieces in place of the parent (so the order stays deterministic).
     std::vector<std::uint32_t> newVertex(m, 0);
     for (std::size_t e = 0; e < m; ++e) {

@@ -241,10 +241,10 @@ bool trianglesCross(const TriangleMesh& mesh, const openvdb::Vec3I& s, const ope
 
 }  // namespace
 
-std::size_t countSelfIntersections(const TriangleMesh& mesh)
+std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh& mesh)
 {
     const std::size_t n = mesh.triangles.size();
-    if (n < 2) return 0;
+    if (n < 2) return {};
     const openvdb::BBoxd box = mesh.bounds();
     double edgeSum = 0.0;
     for (std::size_t t = 0; t < n; ++t) {
@@ -294,10 +294,14 @@ std::size_t countSelfIntersections(const TriangleMesh& mesh)
                     for (int k = r.lo[2]; k <= r.hi[2]; ++k) members[fill[cellIndex(i, j, k)]++] = uint32_t(t);
         }
     }
-    return tbb::parallel_reduce(
-        tbb::blocked_range<std::size_t>(0, numCells, 256), std::size_t(0),
-        [&](const tbb::blocked_range<std::size_t>& r, std::size_t count) {
-            for (std::size_t c = r.begin(); c != r.end(); ++c) {
+    // Per block of cells its own list; blocks joined in order, so the list is the same for any
+    // thread count.
+    constexpr std::size_t kCellsPerBlock = 256;
+    const std::size_t numBlocks = (numCells + kCellsPerBlock - 1) / kCellsPerBlock;
+    std::vector<std::vector<std::pair<uint32_t, uint32_t>>> found(numBlocks);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, 1), [&](const auto& r) {
+        for (std::size_t block = r.begin(); block != r.end(); ++block)
+            for (std::size_t c = block * kCellsPerBlock; c < std::min(numCells, (block + 1) * kCellsPerBlock); ++c) {
                 const int ci = int(c / (std::size_t(dims[1]) * dims[2])), cj = int((c / dims[2]) % dims[1]),
                           ck = int(c % dims[2]);
                 for (std::size_t x = first[c]; x < first[c + 1]; ++x)
@@ -310,12 +314,20 @@ std::size_t countSelfIntersections(const TriangleMesh& mesh)
                         if (a.hi[0] < b.lo[0] || b.hi[0] < a.lo[0] || a.hi[1] < b.lo[1] || b.hi[1] < a.lo[1] ||
                             a.hi[2] < b.lo[2] || b.hi[2] < a.lo[2])
                             continue;
-                        count += trianglesCross(mesh, mesh.triangles[members[x]], mesh.triangles[members[y]]);
+                        if (trianglesCross(mesh, mesh.triangles[members[x]], mesh.triangles[members[y]]))
+                            found[block].emplace_back(std::min(members[x], members[y]),
+                                                      std::max(members[x], members[y]));
                     }
             }
-            return count;
-        },
-        std::plus<>());
+    });
+    std::vector<std::pair<uint32_t, uint32_t>> pairs;
+    for (const auto& f : found) pairs.insert(pairs.end(), f.begin(), f.end());
+    return pairs;
+}
+
+std::size_t countSelfIntersections(const TriangleMesh& mesh)
+{
+    return selfIntersections(mesh).size();
 }
 
 }  // namespace voxlat

@@ -5,6 +5,9 @@
 #include "mesher/extract/TriangleMesh.h"
 
 #include <cstddef>
+#include <cstdint>
+#include <utility>
+#include <vector>
 
 namespace voxlat {
 
@@ -50,5 +53,9 @@ MeshTopology checkTopology(const TriangleMesh& mesh);
 /// tested, each pair once (in the lowest cell both boxes cover); parallel over fixed cell
 /// blocks, integer counts, so the same result for any thread count.
 std::size_t countSelfIntersections(const TriangleMesh& mesh);
+
+/// The crossing pairs countSelfIntersections() counts, as triangle indices (lower first), in a
+/// fixed order.
+std::vector<std::pair<std::uint32_t, std::uint32_t>> selfIntersections(const TriangleMesh& mesh);
 
 }  // namespace voxlat
