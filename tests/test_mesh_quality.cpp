@@ -403,6 +403,36 @@ TEST(Decimation, SameBytesForAnyThreadCount)
     EXPECT_TRUE(one.triangles == two.triangles);
 }
 
+TEST(Decimation, BlocksInParallelSameBytesForAnyThreadCountAndWithinTolerance)
+{
+    // The blocked path forced on a small gyroid: blocks of 10 voxels, two passes.
+    const DecimationCase c = decimationCases()[1];
+    TriangleMesh raw = marchingCubesOf(*c.field, Domain::fromBox(c.box, c.voxel));
+    projectToSurface(raw, *c.field, {0.0, 0.5 * c.voxel, 1e-6, 12});
+    DecimationOptions o;
+    o.tolerance = c.tolerance;
+    o.voxel = c.voxel;
+    o.blockedFrom = 0;
+    o.blockVoxels = 10.0;
+    auto decimate = [&](int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        TriangleMesh m = raw;
+        decimateToTolerance(m, *c.field, o);
+        return m;
+    };
+    const TriangleMesh one = decimate(1), two = decimate(2), three = decimate(3);
+    EXPECT_TRUE(one.points == two.points && one.points == three.points);
+    EXPECT_TRUE(one.triangles == two.triangles && one.triangles == three.triangles);
+    RecordProperty("blocked_triangles",
+                   std::to_string(raw.triangles.size()) + " -> " + std::to_string(one.triangles.size()));
+    EXPECT_LT(one.triangles.size(), raw.triangles.size() / 3);
+    expectClosedManifold(one);
+    EXPECT_EQ(checkTopology(one).eulerCharacteristic, checkTopology(raw).eulerCharacteristic);
+    EXPECT_EQ(countSelfIntersections(one), 0u);
+    EXPECT_NEAR(one.volume(), raw.volume(), 0.002 * raw.volume());
+    EXPECT_LE(maxAwayFromBox(one, c.distance, 0.25 * c.voxel, c.box, 2.0 * c.voxel), c.tolerance);
+}
+
 TEST(MeshOutputs, ThreeMfRoundTripsThroughLib3mfWithTheSameTriangles)
 {
     test::TempDir dir;

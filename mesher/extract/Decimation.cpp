@@ -23,10 +23,6 @@ namespace {
 
 /// The quadric error bound, in squared tolerances (see FieldDecimater).
 constexpr double kQuadricShare = 1.0;
-/// Meshes from this many triangles are decimated in blocks in parallel; blocks are at least
-/// this many voxels wide.
-constexpr std::size_t kBlockedFrom = 200000;
-constexpr double kBlockVoxels = 64.0;
 
 struct Traits : OpenMesh::DefaultTraits {
     VertexAttributes(OpenMesh::Attributes::Status);
@@ -212,34 +208,37 @@ private:
     /// bounds |distance| over each by its quadratic interpolant plus the centre's miss.
     bool withinTolerance()
     {
+        // A tenth of the tolerance is kept back for what the quadratic misses.
+        const double tolerance = 0.9 * mOptions.tolerance;
+        // The centres first: most refused collapses fail there, at a fifth of the evaluations.
+        mPoints.clear();
+        for (const CheckTriangle& t : mTriangles) mPoints.push_back((t.p[0] + t.p[1] + t.p[2]) / 3.0);
+        evaluate();
+        mCentres.resize(mTriangles.size());
+        for (std::size_t k = 0; k < mTriangles.size(); ++k) {
+            mCentres[k] = signedDistance(mValues[k] - mOptions.level, mGradients[k]);
+            if (std::abs(mCentres[k]) > tolerance) return false;
+        }
         mPoints.clear();
         for (const CheckTriangle& t : mTriangles) {
             for (int i = 0; i < 3; ++i)
                 if (std::isnan(t.s[i])) mPoints.push_back(t.p[i]);
             for (int i = 0; i < 3; ++i) mPoints.push_back(0.5 * (t.p[i] + t.p[(i + 1) % 3]));
-            mPoints.push_back((t.p[0] + t.p[1] + t.p[2]) / 3.0);
         }
-        mValues.resize(mPoints.size());
-        mGradients.resize(mPoints.size());
-        forEachChunk(mPoints.size(), [&](std::size_t begin, std::size_t count) {
-            mField.gradients(std::span<const Vec3d>(mPoints.data() + begin, count),
-                             std::span<double>(mValues.data() + begin, count),
-                             std::span<Vec3d>(mGradients.data() + begin, count));
-        });
-        // A tenth of the tolerance is kept back for what the quadratic misses.
-        const double tolerance = 0.9 * mOptions.tolerance;
+        evaluate();
         std::size_t next = 0;
         auto take = [&] {
             const double s = signedDistance(mValues[next] - mOptions.level, mGradients[next]);
             ++next;
             return s;
         };
-        for (const CheckTriangle& t : mTriangles) {
+        for (std::size_t k = 0; k < mTriangles.size(); ++k) {
+            const CheckTriangle& t = mTriangles[k];
             std::array<double, 3> s = t.s, m;
             for (int i = 0; i < 3; ++i)
                 if (std::isnan(s[i])) s[i] = take();
             for (int i = 0; i < 3; ++i) m[i] = take();
-            const double centre = take();
+            const double centre = mCentres[k];
             // Quadratic through corners s_i and midpoints m_i (m_0 between corners 0 and 1).
             auto quadratic = [&](double l0, double l1, double l2) {
                 return s[0] * l0 * (2 * l0 - 1) + s[1] * l1 * (2 * l1 - 1) + s[2] * l2 * (2 * l2 - 1) +
@@ -259,8 +258,21 @@ private:
         return true;
     }
 
+    /// Values and gradients of the field at mPoints.
+    void evaluate()
+    {
+        mValues.resize(mPoints.size());
+        mGradients.resize(mPoints.size());
+        forEachChunk(mPoints.size(), [&](std::size_t begin, std::size_t count) {
+            mField.gradients(std::span<const Vec3d>(mPoints.data() + begin, count),
+                             std::span<double>(mValues.data() + begin, count),
+                             std::span<Vec3d>(mGradients.data() + begin, count));
+        });
+    }
+
     Mesh& mMesh;
     const FieldNode& mField;
+    std::vector<double> mCentres;
     DecimationOptions mOptions;
     std::vector<double> mVertexDistance;
     double mMaxPieceEdge = 0.6;
@@ -461,9 +473,9 @@ DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, 
 
     const openvdb::BBoxd box = mesh.bounds();
     const double extent = std::max({box.extents().x(), box.extents().y(), box.extents().z()});
-    const double size = std::max(kBlockVoxels * options.voxel, extent / 16.0);
+    const double size = std::max(options.blockVoxels * options.voxel, extent / 16.0);
     BlockProgress report(progress);
-    if (mesh.triangles.size() < kBlockedFrom || extent <= size) {
+    if (mesh.triangles.size() < options.blockedFrom || extent <= size) {
         // One block: the whole mesh at once, serial.
         report.total = mesh.triangles.size();
         stats.decimated = decimatePass(mesh, vertexDistance, field, options, box.min() - Vec3d(1.0), 2.0 * extent + 4.0,
