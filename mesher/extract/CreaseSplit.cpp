@@ -201,7 +201,10 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
                             if (!(e.surfaces >> t & 1u))
                                 inside = inside && values[t][k] <= options.tolerance * grads[t][k].length();
                         found[begin + k] = inside && (x[k] - mid).length() <= options.maxMove;
-                        target[begin + k] = x[k];
+                        // Rounded as it will be stored, so the checks below see the triangles
+                        // as written (two edges' corner points may round to one position).
+                        const openvdb::Vec3f stored(float(x[k].x()), float(x[k].y()), float(x[k].z()));
+                        target[begin + k] = toDouble(stored);
                         continue;
                     }
                     if (iteration == options.maxIterations) continue;
@@ -296,33 +299,36 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
         return s;
     };
     std::vector<std::uint8_t> bad(touched.size());
-    for (;;) {
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, touched.size(), 1024), [&](const auto& r) {
-            for (std::size_t k = r.begin(); k != r.end(); ++k) {
-                const std::array<Vec3d, 6> p = positions(k);
-                const Vec3d n0 = (p[1] - p[0]).cross(p[2] - p[0]);
-                bad[k] = 0;
-                for (const Piece& piece : piecesOf(p, splits(k))) {
-                    const Vec3d& a = p[piece.corner[0]];
-                    const Vec3d n1 = (p[piece.corner[1]] - a).cross(p[piece.corner[2]] - a);
-                    // A piece on one of the two surfaces may face up to half the crease's
-                    // dihedral angle away from the chamfer it replaces (more than 90 degrees at a
-                    // sharp wedge); one turned over faces the other way (near 180).
-                    const double l0 = n0.length(), l1 = n1.length();
-                    if (!(n1.dot(n0) > -0.5 * l0 * l1) || !(l1 > 1e-6 * l0)) bad[k] = 1;
-                }
-            }
-        });
-        bool dropped = false;
-        for (std::size_t k = 0; k < touched.size(); ++k)
-            if (bad[k])
-                for (int i = 0; i < 3; ++i)
-                    if (touchedEdges[k][i] >= 0 && active[touchedEdges[k][i]]) {
-                        active[touchedEdges[k][i]] = 0;
-                        dropped = true;
+    auto dropTurned = [&] {
+        for (;;) {
+            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, touched.size(), 1024), [&](const auto& r) {
+                for (std::size_t k = r.begin(); k != r.end(); ++k) {
+                    const std::array<Vec3d, 6> p = positions(k);
+                    const Vec3d n0 = (p[1] - p[0]).cross(p[2] - p[0]);
+                    bad[k] = 0;
+                    for (const Piece& piece : piecesOf(p, splits(k))) {
+                        const Vec3d& a = p[piece.corner[0]];
+                        const Vec3d n1 = (p[piece.corner[1]] - a).cross(p[piece.corner[2]] - a);
+                        // A piece on one of the two surfaces may face up to half the crease's
+                        // dihedral angle away from the chamfer it replaces (more than 90 degrees at a
+                        // sharp wedge); one turned over faces the other way (near 180).
+                        const double l0 = n0.length(), l1 = n1.length();
+                        if (!(n1.dot(n0) > -0.5 * l0 * l1) || !(l1 > 1e-6 * l0)) bad[k] = 1;
                     }
-        if (!dropped) break;
-    }
+                }
+            });
+            bool dropped = false;
+            for (std::size_t k = 0; k < touched.size(); ++k)
+                if (bad[k])
+                    for (int i = 0; i < 3; ++i)
+                        if (touchedEdges[k][i] >= 0 && active[touchedEdges[k][i]]) {
+                            active[touchedEdges[k][i]] = 0;
+                            dropped = true;
+                        }
+            if (!dropped) break;
+        }
+    };
+    dropTurned();
 
     // 5. No piece may cross another triangle: the pieces of the split parents and the triangles
     // around them are checked, and a parent whose pieces cross drops its splits, in rounds.
@@ -340,6 +346,8 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
             if (nearSplit[tri[0]] || nearSplit[tri[1]] || nearSplit[tri[2]]) around.push_back(std::uint32_t(t));
         }
         for (;;) {
+            // Dropped splits change their neighbours' pieces: those are checked again first.
+            dropTurned();
             TriangleMesh local;
             local.points = mesh.points;
             std::vector<std::uint32_t> newIndex(m, 0);
@@ -368,6 +376,21 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
                 parent.push_back(-1);
             }
             bool dropped = false;
+            auto drop = [&](std::int64_t k) {
+                for (int i = 0; i < 3; ++i)
+                    if (touchedEdges[k][i] >= 0 && active[touchedEdges[k][i]]) {
+                        active[touchedEdges[k][i]] = 0;
+                        dropped = true;
+                    }
+            };
+            // Pieces without area as written (two split points stored at one position).
+            for (std::size_t t = 0; t < local.triangles.size(); ++t) {
+                if (parent[t] < 0) continue;
+                const openvdb::Vec3I& tri = local.triangles[t];
+                const Vec3d a = toDouble(local.points[tri[0]]);
+                if ((toDouble(local.points[tri[1]]) - a).cross(toDouble(local.points[tri[2]]) - a) == Vec3d(0.0))
+                    drop(parent[t]);
+            }
             for (const auto& [x, y] : selfIntersections(local))
                 for (const std::int64_t k : {parent[x], parent[y]}) {
                     if (k < 0) continue;
