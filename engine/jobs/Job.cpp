@@ -495,8 +495,9 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
                                " mm from the true surface, more than "
                                "the tolerance " +
                                formatNumber(*options.tolerance) +
-                               " mm: marching cubes' triangles already did there (crease edges left flat, the "
-                               "domain box's own edges); use a smaller `voxel:` or a larger tolerance",
+                               " mm: marching cubes' triangles already did there (crease edges left flat "
+                               "where a vertex could not be moved onto the surface, see `creases`); use a "
+                               "smaller `voxel:` or a larger tolerance",
                            {{"max_mm", dev.max}, {"tolerance_mm", *options.tolerance}});
     }
     report["triangles"] = m.triangles.size();
