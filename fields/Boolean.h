@@ -27,6 +27,11 @@ public:
     /// A period every operand shares (commonPeriod()).
     double period(int axis) const override;
 
+    BooleanOp op() const { return mOp; }
+    const std::vector<FieldPtr>& operands() const { return mOperands; }
+    /// The smooth blend radius (0: a sharp min / max).
+    double blendRadius() const { return mBlend; }
+
 private:
     /// Combines accumulated value a (gradient ga) with operand b (gradient gb) in place.
     void combine(double& a, Vec3d* ga, double b, const Vec3d* gb) const;

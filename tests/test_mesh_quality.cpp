@@ -9,8 +9,11 @@
 #include "engine/parts/MeshReader.h"
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
+#include "fields/Cylinder.h"
 #include "fields/LevelSolid.h"
+#include "fields/Sphere.h"
 #include "fields/TpmsField.h"
+#include "mesher/extract/CreaseSplit.h"
 #include "mesher/extract/Decimation.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
@@ -400,6 +403,36 @@ TEST(Decimation, SameBytesForAnyThreadCount)
     EXPECT_TRUE(one.triangles == two.triangles);
 }
 
+TEST(Decimation, BlocksInParallelSameBytesForAnyThreadCountAndWithinTolerance)
+{
+    // The blocked path forced on a small gyroid: blocks of 10 voxels, two passes.
+    const DecimationCase c = decimationCases()[1];
+    TriangleMesh raw = marchingCubesOf(*c.field, Domain::fromBox(c.box, c.voxel));
+    projectToSurface(raw, *c.field, {0.0, 0.5 * c.voxel, 1e-6, 12});
+    DecimationOptions o;
+    o.tolerance = c.tolerance;
+    o.voxel = c.voxel;
+    o.blockedFrom = 0;
+    o.blockVoxels = 10.0;
+    auto decimate = [&](int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        TriangleMesh m = raw;
+        decimateToTolerance(m, *c.field, o);
+        return m;
+    };
+    const TriangleMesh one = decimate(1), two = decimate(2), three = decimate(3);
+    EXPECT_TRUE(one.points == two.points && one.points == three.points);
+    EXPECT_TRUE(one.triangles == two.triangles && one.triangles == three.triangles);
+    RecordProperty("blocked_triangles",
+                   std::to_string(raw.triangles.size()) + " -> " + std::to_string(one.triangles.size()));
+    EXPECT_LT(one.triangles.size(), raw.triangles.size() / 3);
+    expectClosedManifold(one);
+    EXPECT_EQ(checkTopology(one).eulerCharacteristic, checkTopology(raw).eulerCharacteristic);
+    EXPECT_EQ(countSelfIntersections(one), 0u);
+    EXPECT_NEAR(one.volume(), raw.volume(), 0.002 * raw.volume());
+    EXPECT_LE(maxAwayFromBox(one, c.distance, 0.25 * c.voxel, c.box, 2.0 * c.voxel), c.tolerance);
+}
+
 TEST(MeshOutputs, ThreeMfRoundTripsThroughLib3mfWithTheSameTriangles)
 {
     test::TempDir dir;
@@ -492,6 +525,311 @@ TEST(MeshOutputs, BadTolerancesAndNamesAreRefusedWithTheLine)
         << out;
     EXPECT_TRUE(std::filesystem::exists(file));
     EXPECT_NE(out.find("of the surface"), std::string::npos) << out;
+}
+
+/// Exact signed distance to a torus about the z axis through @a c (radii R, r).
+class Torus final : public FieldNode {
+public:
+    Torus(const Vec3d& c, double big, double small) : mC(c), mR(big), mr(small) {}
+    void values(std::span<const Vec3d> p, std::span<double> out) const override
+    {
+        for (std::size_t i = 0; i < p.size(); ++i) {
+            const Vec3d q = p[i] - mC;
+            out[i] = std::hypot(std::hypot(q.x(), q.y()) - mR, q.z()) - mr;
+        }
+    }
+    void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
+    {
+        values(p, out);
+        for (std::size_t i = 0; i < p.size(); ++i) {
+            const Vec3d q = p[i] - mC;
+            const double rho = std::max(std::hypot(q.x(), q.y()), 1e-12);
+            const Vec3d ring(mR * q.x() / rho, mR * q.y() / rho, 0.0);
+            g[i] = (q - ring).unit();
+        }
+    }
+    Interval bound(const Box3& b) const override
+    {
+        // A distance: it changes by at most the half diagonal from the box's centre.
+        const Vec3d middle = b.center();
+        double centre;
+        values(std::span<const Vec3d>(&middle, 1), std::span<double>(&centre, 1));
+        const double reach = 0.5 * b.extent().length();
+        return {centre - reach, centre + reach};
+    }
+
+private:
+    Vec3d mC;
+    double mR, mr;
+};
+
+TEST(MeshCheck, PiecesAndGenusOfKnownSolids)
+{
+    struct Case {
+        std::string name;
+        FieldPtr field;
+        std::size_t pieces;
+        int genus;
+    };
+    const Box3 space{Vec3d(0.0), Vec3d(10.0)};
+    const FieldPtr twoBalls = std::make_shared<BooleanField>(
+        BooleanOp::Union, std::vector<FieldPtr>{std::make_shared<Sphere>(Vec3d(3.0, 3.0, 3.0), 2.0),
+                                                std::make_shared<Sphere>(Vec3d(7.0, 7.0, 7.0), 2.0)});
+    // A cube pierced by three orthogonal round tunnels meeting at its centre: the removed cross
+    // reaches the surface at six ends, so the surface has genus 6 - 1 = 5.
+    std::vector<FieldPtr> cross{std::make_shared<BoxField>(Box3{Vec3d(2.0), Vec3d(8.0)})};
+    for (int axis = 0; axis < 3; ++axis) {
+        Vec3d dir(0.0);
+        dir[axis] = 1.0;
+        cross.push_back(std::make_shared<Cylinder>(Vec3d(5.0), dir, 1.2, 9.0));
+    }
+    const FieldPtr tunnels = std::make_shared<BooleanField>(BooleanOp::Difference, cross);
+    // Two tori side by side and a ball: three pieces, genus 1 + 1 + 0.
+    const FieldPtr toriAndBall = std::make_shared<BooleanField>(
+        BooleanOp::Union, std::vector<FieldPtr>{std::make_shared<Torus>(Vec3d(3.0, 3.0, 5.0), 2.0, 0.6),
+                                                std::make_shared<Torus>(Vec3d(7.5, 6.5, 5.0), 1.6, 0.5),
+                                                std::make_shared<Sphere>(Vec3d(3.0, 8.0, 5.0), 1.2)});
+    for (const Case& c :
+         {Case{"torus", std::make_shared<Torus>(Vec3d(5.0), 3.0, 1.0), 1, 1}, Case{"two balls", twoBalls, 2, 0},
+          Case{"cube with three tunnels", tunnels, 1, 5}, Case{"two tori and a ball", toriAndBall, 3, 2}}) {
+        SCOPED_TRACE(c.name);
+        TriangleMesh mesh = marchingCubesOf(*c.field, Domain::fromBox(space, 0.2));
+        const MeshTopology t = checkTopology(mesh);
+        EXPECT_TRUE(t.closedManifold());
+        EXPECT_EQ(t.pieces, c.pieces);
+        EXPECT_EQ(t.closedPieces, c.pieces);
+        EXPECT_EQ(t.genus, c.genus);
+        // chi = sum over pieces of 2 - 2 g.
+        EXPECT_EQ(t.eulerCharacteristic, int(2 * c.pieces) - 2 * c.genus);
+        // Projected and decimated, the same pieces and genus.
+        projectToSurface(mesh, *c.field, {0.0, 0.1, 1e-6, 12});
+        DecimationOptions o;
+        o.tolerance = 0.01;
+        o.voxel = 0.2;
+        decimateToTolerance(mesh, *c.field, o);
+        const MeshTopology after = checkTopology(mesh);
+        EXPECT_EQ(after.pieces, c.pieces);
+        EXPECT_EQ(after.genus, c.genus);
+        EXPECT_EQ(countSelfIntersections(mesh), 0u);
+    }
+    // An open piece (one triangle of the torus removed) is a piece but not a closed one.
+    TriangleMesh open = marchingCubesOf(Torus(Vec3d(5.0), 3.0, 1.0), Domain::fromBox(space, 0.4));
+    open.triangles.pop_back();
+    const MeshTopology t = checkTopology(open);
+    EXPECT_EQ(t.pieces, 1u);
+    EXPECT_EQ(t.closedPieces, 0u);
+    EXPECT_EQ(t.genus, 0);
+}
+
+/// The test's own crossing test: segment pq passes through triangle abc when p and q lie on
+/// opposite sides of its plane and the line pq on the inner side of its three edges (signed
+/// volumes).
+bool crossesByVolumes(const Vec3d& p, const Vec3d& q, const Vec3d& a, const Vec3d& b, const Vec3d& c)
+{
+    auto vol = [](const Vec3d& u, const Vec3d& v, const Vec3d& w, const Vec3d& x) {
+        return (v - u).cross(w - u).dot(x - u);
+    };
+    const double sp = vol(a, b, c, p), sq = vol(a, b, c, q);
+    if (!(sp * sq < 0.0)) return false;
+    const double e0 = vol(p, q, a, b), e1 = vol(p, q, b, c), e2 = vol(p, q, c, a);
+    return (e0 > 0.0 && e1 > 0.0 && e2 > 0.0) || (e0 < 0.0 && e1 < 0.0 && e2 < 0.0);
+}
+
+TEST(MeshCheck, SelfIntersectionsMatchABruteForceCount)
+{
+    // Two overlapping balls meshed apart and put into one mesh: their surfaces cross along a
+    // circle. Every pair of triangles is tested by brute force with the test's own predicate.
+    const double voxel = 0.5;
+    const TriangleMesh a =
+        marchingCubesOf(Sphere(Vec3d(4.0), 2.5), Domain::fromBox(Box3{Vec3d(0.0), Vec3d(10.0)}, voxel));
+    TriangleMesh both = a;
+    const TriangleMesh b =
+        marchingCubesOf(Sphere(Vec3d(6.1, 5.2, 4.3), 2.2), Domain::fromBox(Box3{Vec3d(0.0), Vec3d(10.0)}, voxel));
+    const unsigned offset = unsigned(both.points.size());
+    both.points.insert(both.points.end(), b.points.begin(), b.points.end());
+    for (openvdb::Vec3I t : b.triangles) both.triangles.push_back(t + openvdb::Vec3I(offset));
+    std::size_t brute = 0;
+    for (std::size_t i = 0; i < both.triangles.size(); ++i)
+        for (std::size_t j = i + 1; j < both.triangles.size(); ++j) {
+            const openvdb::Vec3I s = both.triangles[i], t = both.triangles[j];
+            bool shares = false;
+            for (int x = 0; x < 3; ++x)
+                for (int y = 0; y < 3; ++y) shares = shares || s[x] == t[y];
+            if (shares) continue;  // the balls' own meshes do not cross themselves
+            bool cross = false;
+            for (int e = 0; e < 3 && !cross; ++e)
+                cross = crossesByVolumes(at(both, s[e]), at(both, s[(e + 1) % 3]), at(both, t[0]), at(both, t[1]),
+                                         at(both, t[2])) ||
+                        crossesByVolumes(at(both, t[e]), at(both, t[(e + 1) % 3]), at(both, s[0]), at(both, s[1]),
+                                         at(both, s[2]));
+            brute += cross;
+        }
+    EXPECT_GT(brute, 20u);
+    EXPECT_EQ(countSelfIntersections(both), brute);
+    EXPECT_EQ(countSelfIntersections(a), 0u);
+    EXPECT_EQ(countSelfIntersections(b), 0u);
+    // The same count for any thread count.
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    EXPECT_EQ(countSelfIntersections(both), brute);
+}
+
+TEST(MeshOutputs, TheReportCountsPiecesGenusAndCrossings)
+{
+    test::TempDir dir;
+    // One gyroid network cell cut by a box around it, and a ball apart from it.
+    const std::string text =
+        "voxel: 0.1\n"
+        "domain: {box: [[0, 0, 0], [9, 5, 5]]}\n"
+        "fields:\n"
+        "  lattice: {tpms: gyroid, cell: 5, solid: network, level: 0}\n"
+        "  cut: {intersection: [lattice, {box: [[0.2, 0.2, 0.2], [4.8, 4.8, 4.8]]}]}\n"
+        "  ball: {sphere: {center: [7, 2.5, 2.5], radius: 1.5}}\n"
+        "  both: {union: [cut, ball]}\n"
+        "result: both\n"
+        "allow: [pieces]\n"
+        "outputs: {mesh: {file: a.stl, tolerance: 0.01}}\n";
+    Job job(parseRecipe(text, "r.yaml", dir.path));
+    job.writeOutputs(dir.path / "out", false);
+    const nlohmann::json r = job.report();
+    const TriangleMesh written = readStl((dir.path / "out/a.stl").string());
+    const MeshTopology t = checkTopology(written);
+    EXPECT_EQ(r["mesh"]["pieces"].get<std::size_t>(), t.pieces);
+    EXPECT_GE(t.pieces, 2u);
+    EXPECT_EQ(r["mesh"]["genus"].get<int>(), t.genus);
+    EXPECT_EQ(r["mesh"]["closed_pieces"].get<std::size_t>(), t.pieces);
+    // chi = 2 pieces - 2 genus for closed pieces.
+    EXPECT_EQ(r["mesh"]["euler_characteristic"].get<int>(), int(2 * t.pieces) - 2 * t.genus);
+    EXPECT_GT(t.genus, 0);
+    EXPECT_EQ(r["mesh"]["self_intersections"].get<std::size_t>(), 0u);
+}
+
+TEST(MeshOutputs, AToleranceAboveHalfTheThinnestStrutIsRefused)
+{
+    test::TempDir dir;
+    const std::string recipe =
+        "voxel: 0.2\n"
+        "domain: {box: [[0, 0, 0], [8, 8, 8]]}\n"
+        "fields:\n"
+        "  lattice: {struts: {cell: octet, size: 4, count: 2}, kernel: capsule, density: 0.25}\n"
+        "result: lattice\n";
+    const auto path = dir.write("struts.yaml", recipe + "outputs: {mesh: {file: a.stl, tolerance: 0.5}}\n");
+    std::string out;
+    EXPECT_EQ(test::runCommand(
+                  test::voxlatBinary() + " -q run " + path.string() + " --out " + (dir.path / "out").string(), &out),
+              2)
+        << out;
+    EXPECT_NE(out.find("struts.yaml:6:"), std::string::npos) << out;
+    EXPECT_NE(out.find("thinnest strut"), std::string::npos) << out;
+    EXPECT_FALSE(std::filesystem::exists(dir.path / "out/a.stl"));
+    // Above the voxel but below half the strut: written, with a warning that says so.
+    Job job(parseRecipe(recipe + "outputs: {mesh: {file: a.stl, tolerance: 0.25}}\n", "r.yaml", dir.path));
+    job.writeOutputs(dir.path / "ok", false);
+    const nlohmann::json r = job.report();
+    ASSERT_GT(r["fields"]["lattice"]["thinnest_strut_mm"].get<double>(), 0.5);
+    bool warned = false;
+    for (const auto& w : r["warnings"]) warned = warned || w["code"] == "mesh_tolerance_coarse";
+    EXPECT_TRUE(warned);
+}
+
+TEST(CreaseSplit, ABooleanAndTheBoxKeepTheirCreases)
+{
+    // A gyroid network intersected with a ball that the domain box also cuts: creases where the
+    // lattice meets the ball, where either meets the box, the box's own edges and its corners.
+    const double voxel = 0.1, cell = 5.0, level = 0.3;
+    const Box3 box{Vec3d(0.0), Vec3d(6.0, 5.5, 5.0)};
+    const Vec3d centre(3.0, 2.7, 2.6);
+    const double radius = 2.9;
+    const FieldPtr lattice = std::make_shared<LevelSolid>(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(cell)),
+                                                          SolidSide::Below, level);
+    const FieldPtr ball = std::make_shared<Sphere>(centre, radius);
+    const FieldPtr field =
+        clipped(std::make_shared<BooleanField>(BooleanOp::Intersection, std::vector<FieldPtr>{lattice, ball}), box);
+    auto gyroid = [&](const Vec3d& p) { return gyroidDistance(p, cell, level); };
+    auto sphere = [&](const Vec3d& p) { return (p - centre).length() - radius; };
+    auto distance = [&](const Vec3d& p) { return std::max({gyroid(p), sphere(p), boxDistance(p, box)}); };
+    TriangleMesh mesh = marchingCubesOf(*field, Domain::fromBox(box, voxel));
+    const ProjectionOptions o{0.0, 0.5 * voxel, 1e-6, 12};
+    projectToSurface(mesh, *field, o);
+    const TriangleMesh projected = mesh;
+    ProjectionOptions co = o;
+    co.maxMove = voxel;
+    const std::size_t before = mesh.points.size();
+    const CreaseSplitStats stats = splitCreaseEdges(mesh, {{lattice.get(), ball.get()}, box}, co);
+    RecordProperty("crease_edges", std::to_string(stats.creaseEdges));
+    RecordProperty("split", std::to_string(stats.split));
+    EXPECT_GT(stats.creaseEdges, 500u);
+    EXPECT_GT(stats.split, stats.creaseEdges * 3 / 4);
+    EXPECT_EQ(stats.split + stats.leftFlat, stats.creaseEdges);
+    ASSERT_EQ(mesh.points.size(), before + stats.split);
+    // Every point the split adds is on the cut: within 1e-4 mm of two (or three) of the
+    // surfaces, by the test's own distances, and on the solid's surface.
+    std::size_t onThree = 0;
+    for (std::size_t v = before; v < mesh.points.size(); ++v) {
+        const Vec3d p = at(mesh, unsigned(v));
+        int on = 0;
+        for (double d : {gyroid(p), sphere(p), p.x() - box.max.x(), box.min.x() - p.x(), p.y() - box.max.y(),
+                         box.min.y() - p.y(), p.z() - box.max.z(), box.min.z() - p.z()})
+            on += std::abs(d) < 1e-4;
+        EXPECT_GE(on, 2) << p;
+        onThree += on >= 3;
+        EXPECT_LT(std::abs(distance(p)), 1e-4) << p;
+    }
+    RecordProperty("split_points_on_three_surfaces", std::to_string(onThree));
+    // The chamfers are gone: far fewer triangles stray by 5 % of the voxel, the worst is lower.
+    auto straying = [&](const TriangleMesh& m) {
+        std::size_t count = 0;
+        for (const openvdb::Vec3I& t : m.triangles) {
+            TriangleMesh one;
+            one.points = {m.points[t[0]], m.points[t[1]], m.points[t[2]]};
+            one.triangles = {openvdb::Vec3I(0, 1, 2)};
+            count += maxOverTriangles(one, distance, 0.1 * voxel) > 0.05 * voxel;
+        }
+        return count;
+    };
+    const std::size_t flat = straying(projected), sharp = straying(mesh);
+    RecordProperty("straying_before", std::to_string(flat));
+    RecordProperty("straying_after", std::to_string(sharp));
+    EXPECT_LT(sharp, flat / 3);
+    expectClosedManifold(mesh);
+    EXPECT_EQ(checkTopology(mesh).genus, checkTopology(projected).genus);
+    // The split adds no crossing (projection may have made a few where the lattice grazes the
+    // ball; they stay as they were).
+    EXPECT_LE(countSelfIntersections(mesh), countSelfIntersections(projected));
+    EXPECT_NEAR(mesh.volume(), projected.volume(), 0.01 * projected.volume());
+    // The same bytes for any thread count.
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    TriangleMesh serial = projected;
+    splitCreaseEdges(serial, {{lattice.get(), ball.get()}, box}, co);
+    EXPECT_TRUE(serial.points == mesh.points);
+    EXPECT_TRUE(serial.triangles == mesh.triangles);
+}
+
+TEST(MeshOutputs, ACutByAShapeIsSplitInTheJob)
+{
+    test::TempDir dir;
+    const std::string text =
+        "voxel: 0.1\n"
+        "domain: {box: [[0, 0, 0], [6, 6, 6]]}\n"
+        "fields:\n"
+        "  lattice: {tpms: gyroid, cell: 5, solid: network, level: 0.3}\n"
+        "  part: {intersection: [lattice, {sphere: {center: [3, 3, 3], radius: 2.6}}]}\n"
+        "result: part\n"
+        "outputs: {mesh: {file: a.stl, project: on}}\n";
+    Job job(parseRecipe(text, "r.yaml", dir.path));
+    job.writeOutputs(dir.path / "out", false);
+    const nlohmann::json r = job.report();
+    EXPECT_GT(r["mesh"]["creases"]["edges_split"].get<std::size_t>(), 100u);
+    EXPECT_NE(r["mesh"]["creases"]["surfaces"].get<std::string>().find("2 operands"), std::string::npos);
+    EXPECT_TRUE(r["mesh"]["closed_manifold"].get<bool>());
+    // The count is the written mesh's (projection can make a few crossings where the lattice
+    // grazes the ball; they are reported and warned about).
+    const TriangleMesh written = readStl((dir.path / "out/a.stl").string());
+    const std::size_t crossing = countSelfIntersections(written);
+    EXPECT_EQ(r["mesh"]["self_intersections"].get<std::size_t>(), crossing);
+    bool warned = false;
+    if (r.contains("warnings"))
+        for (const auto& w : r["warnings"]) warned = warned || w["code"] == "mesh_self_intersections";
+    EXPECT_EQ(warned, crossing > 0);
 }
 
 }  // namespace

@@ -581,7 +581,7 @@ TEST(Offset, GyroidNetworkMovesByTheOffsetInMillimetres)
             "  g: {tpms: gyroid, cell: 10, offset: " +
             std::to_string(m) + "}\nresult: g\n";
         Job job(parseRecipe(text, "offset.yaml", "."));
-        const TriangleMesh& mesh = job.mesh(MeshOptions{true, std::nullopt});
+        const TriangleMesh& mesh = job.mesh(MeshOptions{true, std::nullopt, {}});
         double worst = 0.0, sum = 0.0;
         int n = 0;
         for (std::size_t i = 0; i < mesh.points.size(); i += 7) {

@@ -285,6 +285,7 @@ int main(int argc, char** argv)
                 }
             if (mesh->count("--tolerance")) {
                 options.tolerance = voxlat::checkMeshTolerance(meshTolerance, "--tolerance");
+                options.toleranceWhere = "--tolerance";
                 options.project = true;
             }
             if (!meshProject.empty()) {

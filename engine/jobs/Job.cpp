@@ -16,6 +16,8 @@
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
 #include "fields/GradedLevel.h"
+#include "fields/Unary.h"
+#include "mesher/extract/CreaseSplit.h"
 #include "mesher/extract/Decimation.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
@@ -352,6 +354,29 @@ nlohmann::json deviationJson(double max, double rms)
 }
 }  // namespace
 
+namespace {
+/// The surfaces whose intersection is @a f, for sharp creases: the operands of a sharp
+/// intersection (nested ones flattened) or difference (the cut-away operands negated), else
+/// @a f itself.
+void collectCreaseOperands(const FieldPtr& f, std::vector<FieldPtr>& out)
+{
+    const auto* b = dynamic_cast<const BooleanField*>(f.get());
+    if (b && b->blendRadius() == 0.0 && out.size() < 24) {
+        if (b->op() == BooleanOp::Intersection) {
+            for (const FieldPtr& o : b->operands()) collectCreaseOperands(o, out);
+            return;
+        }
+        if (b->op() == BooleanOp::Difference) {
+            collectCreaseOperands(b->operands().front(), out);
+            for (std::size_t i = 1; i < b->operands().size(); ++i)
+                out.push_back(std::make_shared<UnaryField>(b->operands()[i], UnaryOp::Negate));
+            return;
+        }
+    }
+    out.push_back(f);
+}
+}  // namespace
+
 FieldPtr Job::surfaceField()
 {
     solveLevels();
@@ -370,6 +395,7 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
 {
     for (const auto& v : mMeshes)
         if (v->options == options) return *v;
+    if (options.tolerance) checkTolerance(options);
     const openvdb::FloatGrid& g = grid();
     auto v = std::make_unique<MeshVariant>();
     v->options = options;
@@ -400,10 +426,21 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         co.maxMove = mDomain.voxel;
         const CreaseStats c =
             timed("sharpen creases", [&] { return sharpenCreases(m, *mResult, BoxField(mDomain.box), co); });
-        report["creases"] = {{"surfaces", "the result and the domain box"},
+        // The edges still across a crease (and the box's own edges and corners) are split at
+        // the point on both surfaces (on all three at a corner).
+        std::vector<FieldPtr> operands;
+        collectCreaseOperands(mResult, operands);
+        CreaseSurfaces surfaces;
+        for (const FieldPtr& f : operands) surfaces.fields.push_back(f.get());
+        surfaces.box = mDomain.box;
+        const CreaseSplitStats split = timed("split crease edges", [&] { return splitCreaseEdges(m, surfaces, co); });
+        report["creases"] = {{"surfaces", std::to_string(operands.size()) +
+                                              (operands.size() == 1 ? " field" : " operands of the result") +
+                                              " and the six faces of the domain box"},
                              {"edges_across", c.creaseEdges},
                              {"vertices_moved_onto_both", c.moved},
-                             {"edges_left_flat", c.leftFlat}};
+                             {"edges_split", split.split},
+                             {"edges_left_flat", split.leftFlat}};
         report["projection"] = {{"vertices_moved", s.moved},
                                 {"vertices_held_back", s.heldBack},
                                 {"vertices_at_half_voxel_limit", s.limited},
@@ -442,20 +479,63 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         const MeshTopology t = checkTopology(m);
         report["closed_manifold"] = t.closedManifold();
         report["euler_characteristic"] = t.eulerCharacteristic;
+        report["pieces"] = t.pieces;
+        report["closed_pieces"] = t.closedPieces;
+        report["genus"] = t.genus;
+        // Projection and decimation move vertices and join triangles: check that no two cross.
+        const std::size_t crossing = timed("check self-intersections", [&] { return countSelfIntersections(m); });
+        report["self_intersections"] = crossing;
+        if (crossing > 0)
+            mContext->warn("mesh_self_intersections",
+                           std::to_string(crossing) +
+                               " pairs of triangles of the mesh cross each other; slicers may fill or drop the "
+                               "region there: mesh without `tolerance:` (or with `project: off`) or use a smaller "
+                               "`voxel:`",
+                           {{"pairs", crossing}});
         if (options.tolerance && dev.max > *options.tolerance)
             mContext->warn("mesh_tolerance",
                            "the mesh strays up to " + formatNumber(dev.max) +
                                " mm from the true surface, more than "
                                "the tolerance " +
                                formatNumber(*options.tolerance) +
-                               " mm: marching cubes' triangles already did there (crease edges left flat, the "
-                               "domain box's own edges); use a smaller `voxel:` or a larger tolerance",
+                               " mm: marching cubes' triangles already did there (crease edges left flat "
+                               "where a vertex could not be moved onto the surface, see `creases`); use a "
+                               "smaller `voxel:` or a larger tolerance",
                            {{"max_mm", dev.max}, {"tolerance_mm", *options.tolerance}});
     }
     report["triangles"] = m.triangles.size();
     report["vertices"] = m.points.size();
     mMeshes.push_back(std::move(v));
     return *mMeshes.back();
+}
+
+void Job::checkTolerance(const MeshOptions& options)
+{
+    solveLevels();
+    const double tolerance = *options.tolerance;
+    const std::string where = options.toleranceWhere.empty() ? mRecipe.source->path : options.toleranceWhere;
+    // A tolerance of half the thinnest strut lets decimation lay the strut's two sides onto one
+    // another: refused. The struts' diameters are known from their nodes before any evaluation.
+    for (const LevelNode& node : mBuilder.levelNodes()) {
+        if (!node.thinnest) continue;
+        const double thinnest = node.thinnest(node.solid->level());
+        if (thinnest > 0.0 && tolerance >= 0.5 * thinnest)
+            throw InputError(where + ": the mesh tolerance " + formatNumber(tolerance) +
+                             " mm is not below half the thinnest strut of `" + node.name + "` (" +
+                             formatNumber(thinnest) +
+                             " mm across): decimation could flatten it; use a tolerance "
+                             "below " +
+                             formatNumber(0.5 * thinnest) + " mm");
+    }
+    // The grid resolves features down to about two voxels; a tolerance above half of that (one
+    // voxel) may flatten features the grid kept.
+    if (tolerance > mDomain.voxel)
+        mContext->warn("mesh_tolerance_coarse",
+                       where + ": the mesh tolerance " + formatNumber(tolerance) + " mm is larger than the voxel (" +
+                           formatNumber(mDomain.voxel) +
+                           " mm, half the thinnest feature the grid resolves): walls and struts down to " +
+                           formatNumber(2.0 * tolerance) + " mm across may be flattened",
+                       {{"tolerance_mm", tolerance}, {"voxel_mm", mDomain.voxel}});
 }
 
 void Job::checkPieces()

@@ -105,6 +105,9 @@ private:
     };
     /// The mesh made with @a options, made on first use (marching cubes, projection, decimation).
     MeshVariant& variant(const MeshOptions& options);
+    /// Refuses (InputError, naming where the tolerance was given) a mesh tolerance of half the
+    /// thinnest strut a node knows or more; warns when it exceeds the voxel.
+    void checkTolerance(const MeshOptions& options);
     /// The metadata a 3MF output carries: the recipe's hash, the canonical recipe, the version.
     MeshMetadata meshMetadata() const;
     /// In the order first asked for: report.json's `mesh` describes the first, `meshes` lists

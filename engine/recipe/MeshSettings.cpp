@@ -55,6 +55,7 @@ MeshSettings parseMeshSettings(const RecipeNode& spec)
                 "positive number like 0.01; " +
                 t.yaml().Scalar() + " is not");
         s.options.tolerance = value;
+        s.options.toleranceWhere = t.where();
         s.options.project = true;
     }
     if (spec.has("project")) {

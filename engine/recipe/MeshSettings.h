@@ -21,6 +21,9 @@ struct MeshOptions {
     /// Error-bounded decimation: every point of every triangle within this of the true surface
     /// (mm); none: no decimation.
     std::optional<double> tolerance;
+    /// Where the tolerance was given ("file:line:col" or "--tolerance"), for messages; not part
+    /// of what makes two meshes the same.
+    std::string toleranceWhere;
 
     bool operator==(const MeshOptions& o) const { return project == o.project && tolerance == o.tolerance; }
     /// True for plain marching cubes (what a bare file name asks for).

@@ -9,6 +9,10 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
+#include <limits>
+#include <mutex>
+#include <numeric>
 #include <queue>
 #include <tuple>
 #include <vector>
@@ -16,6 +20,9 @@
 namespace voxlat {
 
 namespace {
+
+/// The quadric error bound, in squared tolerances (see FieldDecimater).
+constexpr double kQuadricShare = 1.0;
 
 struct Traits : OpenMesh::DefaultTraits {
     VertexAttributes(OpenMesh::Attributes::Status);
@@ -61,6 +68,11 @@ public:
         : Base(mesh), mMesh(mesh), mField(field), mOptions(options), mVertexDistance(std::move(vertexDistance))
     {
         add(mQuadric);
+        // A collapse whose quadric error (the sum of squared distances to the planes of the
+        // triangles merged into it) exceeds the squared tolerance puts the point at least
+        // tolerance / sqrt(planes) off one of them: such candidates are mostly refused by the
+        // field check anyway, so they are not tried (the field check still decides the rest).
+        module(mQuadric).set_max_err(kQuadricShare * options.tolerance * options.tolerance, false);
         initialize();
         mRefused.assign(mesh.n_halfedges(), 0);
         mStamp.assign(mesh.n_vertices(), 0);
@@ -88,7 +100,7 @@ public:
                 queueVertex(v);
                 continue;
             }
-            if (!fieldAllows(ci)) {
+            if (!seamAllows(ci) || !fieldAllows(ci)) {
                 ++stats.refused;
                 mRefused[h.idx()] = 1;
                 queueVertex(v);
@@ -139,6 +151,17 @@ private:
             mHeap.emplace(best, unsigned(v.idx()), mStamp[v.idx()], unsigned(bestHalfedge.idx()));
     }
 
+    /// In a block of a larger mesh, locked vertices are shared with other blocks, which may hold
+    /// an edge between two of them or make one at the same time: a collapse onto a locked vertex
+    /// may not join it to another locked vertex it is not joined to here already.
+    bool seamAllows(const CollapseInfo& ci)
+    {
+        if (!mMesh.status(ci.v1).locked()) return true;
+        for (Mesh::VertexHandle w : mMesh.vv_range(ci.v0))
+            if (w != ci.v1 && mMesh.status(w).locked() && !mMesh.find_halfedge(ci.v1, w).is_valid()) return false;
+        return true;
+    }
+
     /// The triangles around ci.v0 that survive the collapse, with v0 moved onto v1: none may turn
     /// over or vanish, and each must stay within the tolerance.
     bool fieldAllows(const CollapseInfo& ci)
@@ -185,34 +208,37 @@ private:
     /// bounds |distance| over each by its quadratic interpolant plus the centre's miss.
     bool withinTolerance()
     {
+        // A tenth of the tolerance is kept back for what the quadratic misses.
+        const double tolerance = 0.9 * mOptions.tolerance;
+        // The centres first: most refused collapses fail there, at a fifth of the evaluations.
+        mPoints.clear();
+        for (const CheckTriangle& t : mTriangles) mPoints.push_back((t.p[0] + t.p[1] + t.p[2]) / 3.0);
+        evaluate();
+        mCentres.resize(mTriangles.size());
+        for (std::size_t k = 0; k < mTriangles.size(); ++k) {
+            mCentres[k] = signedDistance(mValues[k] - mOptions.level, mGradients[k]);
+            if (std::abs(mCentres[k]) > tolerance) return false;
+        }
         mPoints.clear();
         for (const CheckTriangle& t : mTriangles) {
             for (int i = 0; i < 3; ++i)
                 if (std::isnan(t.s[i])) mPoints.push_back(t.p[i]);
             for (int i = 0; i < 3; ++i) mPoints.push_back(0.5 * (t.p[i] + t.p[(i + 1) % 3]));
-            mPoints.push_back((t.p[0] + t.p[1] + t.p[2]) / 3.0);
         }
-        mValues.resize(mPoints.size());
-        mGradients.resize(mPoints.size());
-        forEachChunk(mPoints.size(), [&](std::size_t begin, std::size_t count) {
-            mField.gradients(std::span<const Vec3d>(mPoints.data() + begin, count),
-                             std::span<double>(mValues.data() + begin, count),
-                             std::span<Vec3d>(mGradients.data() + begin, count));
-        });
-        // A tenth of the tolerance is kept back for what the quadratic misses.
-        const double tolerance = 0.9 * mOptions.tolerance;
+        evaluate();
         std::size_t next = 0;
         auto take = [&] {
             const double s = signedDistance(mValues[next] - mOptions.level, mGradients[next]);
             ++next;
             return s;
         };
-        for (const CheckTriangle& t : mTriangles) {
+        for (std::size_t k = 0; k < mTriangles.size(); ++k) {
+            const CheckTriangle& t = mTriangles[k];
             std::array<double, 3> s = t.s, m;
             for (int i = 0; i < 3; ++i)
                 if (std::isnan(s[i])) s[i] = take();
             for (int i = 0; i < 3; ++i) m[i] = take();
-            const double centre = take();
+            const double centre = mCentres[k];
             // Quadratic through corners s_i and midpoints m_i (m_0 between corners 0 and 1).
             auto quadratic = [&](double l0, double l1, double l2) {
                 return s[0] * l0 * (2 * l0 - 1) + s[1] * l1 * (2 * l1 - 1) + s[2] * l2 * (2 * l2 - 1) +
@@ -232,8 +258,21 @@ private:
         return true;
     }
 
+    /// Values and gradients of the field at mPoints.
+    void evaluate()
+    {
+        mValues.resize(mPoints.size());
+        mGradients.resize(mPoints.size());
+        forEachChunk(mPoints.size(), [&](std::size_t begin, std::size_t count) {
+            mField.gradients(std::span<const Vec3d>(mPoints.data() + begin, count),
+                             std::span<double>(mValues.data() + begin, count),
+                             std::span<Vec3d>(mGradients.data() + begin, count));
+        });
+    }
+
     Mesh& mMesh;
     const FieldNode& mField;
+    std::vector<double> mCentres;
     DecimationOptions mOptions;
     std::vector<double> mVertexDistance;
     double mMaxPieceEdge = 0.6;
@@ -249,6 +288,165 @@ private:
 
 }  // namespace
 
+namespace {
+
+/// Counts collapses and reports progress from the blocks (serialised).
+struct BlockProgress {
+    explicit BlockProgress(const ProgressFn& f) : fn(f) {}
+    const ProgressFn& fn;
+    std::size_t total = 1, done = 0;
+    int percent = -1;
+    std::mutex mutex;
+    void add(std::size_t units)
+    {
+        if (!fn) return;
+        std::lock_guard<std::mutex> lock(mutex);
+        done += units;
+        const int now = int(std::min<std::size_t>(99, 100 * done / std::max<std::size_t>(1, total)));
+        if (now > percent) {
+            percent = now;
+            fn(0.01 * now);
+        }
+    }
+};
+
+/// What one block gave: its triangles (global vertex indices) and counts.
+struct BlockResult {
+    std::vector<openvdb::Vec3I> triangles;
+    std::size_t collapses = 0, refused = 0;
+    bool decimated = true;
+};
+
+/// Decimates the triangles @a ids of @a mesh (one block) with the vertices flagged in @a locked
+/// kept; returns what is left.
+BlockResult decimateBlock(const TriangleMesh& mesh, const std::vector<std::uint32_t>& ids,
+                          const std::vector<std::uint8_t>& locked, const std::vector<double>& vertexDistance,
+                          const FieldNode& field, const DecimationOptions& options, const ProgressFn& progress)
+{
+    BlockResult result;
+    std::vector<std::uint32_t> vertices;
+    vertices.reserve(3 * ids.size());
+    for (std::uint32_t t : ids)
+        for (int k = 0; k < 3; ++k) vertices.push_back(mesh.triangles[t][k]);
+    std::sort(vertices.begin(), vertices.end());
+    vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
+    auto local = [&](std::uint32_t v) {
+        return int(std::lower_bound(vertices.begin(), vertices.end(), v) - vertices.begin());
+    };
+    Mesh om;
+    om.reserve(vertices.size(), 3 * ids.size() / 2 + 3, ids.size());
+    std::vector<double> distance(vertices.size());
+    for (std::size_t i = 0; i < vertices.size(); ++i) {
+        const openvdb::Vec3f& p = mesh.points[vertices[i]];
+        om.add_vertex(Mesh::Point(p.x(), p.y(), p.z()));
+        distance[i] = vertexDistance[vertices[i]];
+    }
+    for (std::uint32_t t : ids) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
+        const Mesh::FaceHandle f = om.add_face(Mesh::VertexHandle(local(tri[0])), Mesh::VertexHandle(local(tri[1])),
+                                               Mesh::VertexHandle(local(tri[2])));
+        if (!f.is_valid()) {
+            // Not a manifold piece OpenMesh can hold: left as it is.
+            result.decimated = false;
+            for (std::uint32_t u : ids) result.triangles.push_back(mesh.triangles[u]);
+            return result;
+        }
+    }
+    for (Mesh::VertexHandle v : om.vertices())
+        if (locked[vertices[v.idx()]] || om.is_isolated(v)) om.status(v).set_locked(true);
+    DecimationStats stats;
+    FieldDecimater decimater(om, field, options, std::move(distance));
+    decimater.run(stats, progress);
+    result.collapses = stats.collapses;
+    result.refused = stats.refused;
+    for (Mesh::FaceHandle f : om.all_faces()) {
+        if (om.status(f).deleted()) continue;
+        openvdb::Vec3I t;
+        int i = 0;
+        for (Mesh::VertexHandle v : om.fv_range(f)) t[i++] = vertices[v.idx()];
+        result.triangles.push_back(t);
+    }
+    return result;
+}
+
+/// One pass over blocks of edge @a size whose corners sit at @a origin + k size: each triangle
+/// goes to the block of its centroid, vertices used by triangles of two blocks are kept, the
+/// blocks are decimated in parallel and put together in block order (vertices renumbered in
+/// their old order), so the result does not depend on the thread count.
+bool decimatePass(TriangleMesh& mesh, std::vector<double>& vertexDistance, const FieldNode& field,
+                  const DecimationOptions& options, const Vec3d& origin, double size, DecimationStats& stats,
+                  BlockProgress& progress)
+{
+    const std::size_t numTriangles = mesh.triangles.size();
+    std::vector<std::uint64_t> blockOf(numTriangles);
+    for (std::size_t t = 0; t < numTriangles; ++t) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
+        const Vec3d c =
+            (toDouble(mesh.points[tri[0]]) + toDouble(mesh.points[tri[1]]) + toDouble(mesh.points[tri[2]])) / 3.0;
+        std::uint64_t key = 0;
+        for (int a = 0; a < 3; ++a)
+            key = (key << 21) | std::uint64_t(std::clamp<std::int64_t>(
+                                    std::int64_t(std::floor((c[a] - origin[a]) / size)), 0, (1 << 21) - 1));
+        blockOf[t] = key;
+    }
+    // Blocks in key order, their triangles in index order.
+    std::vector<std::uint32_t> order(numTriangles);
+    std::iota(order.begin(), order.end(), 0u);
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::uint32_t a, std::uint32_t b) { return blockOf[a] < blockOf[b]; });
+    std::vector<std::vector<std::uint32_t>> blocks;
+    for (std::size_t i = 0; i < numTriangles; ++i) {
+        if (i == 0 || blockOf[order[i]] != blockOf[order[i - 1]]) blocks.emplace_back();
+        blocks.back().push_back(order[i]);
+    }
+    std::vector<std::uint8_t> locked(mesh.points.size(), 0);
+    {
+        std::vector<std::int64_t> owner(mesh.points.size(), -1);
+        for (std::size_t b = 0; b < blocks.size(); ++b)
+            for (std::uint32_t t : blocks[b])
+                for (int k = 0; k < 3; ++k) {
+                    const std::uint32_t v = mesh.triangles[t][k];
+                    if (owner[v] < 0)
+                        owner[v] = std::int64_t(b);
+                    else if (owner[v] != std::int64_t(b))
+                        locked[v] = 1;
+                }
+    }
+    std::vector<BlockResult> results(blocks.size());
+    const ProgressFn perBlock = {};
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1), [&](const auto& range) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b) {
+            results[b] = decimateBlock(mesh, blocks[b], locked, vertexDistance, field, options, perBlock);
+            progress.add(blocks[b].size());
+        }
+    });
+    bool all = true;
+    TriangleMesh out;
+    std::vector<std::uint32_t> newIndex(mesh.points.size(), std::numeric_limits<std::uint32_t>::max());
+    for (const BlockResult& r : results) {
+        all = all && r.decimated;
+        stats.collapses += r.collapses;
+        stats.refused += r.refused;
+        for (const openvdb::Vec3I& t : r.triangles)
+            for (int k = 0; k < 3; ++k) newIndex[t[k]] = 0;
+    }
+    std::vector<double> distance;
+    for (std::size_t v = 0; v < mesh.points.size(); ++v) {
+        if (newIndex[v] != 0) continue;
+        newIndex[v] = std::uint32_t(out.points.size());
+        out.points.push_back(mesh.points[v]);
+        distance.push_back(vertexDistance[v]);
+    }
+    for (const BlockResult& r : results)
+        for (const openvdb::Vec3I& t : r.triangles)
+            out.triangles.emplace_back(newIndex[t[0]], newIndex[t[1]], newIndex[t[2]]);
+    mesh = std::move(out);
+    vertexDistance = std::move(distance);
+    return all;
+}
+
+}  // namespace
+
 DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, const DecimationOptions& options,
                                     const ProgressFn& progress)
 {
@@ -256,17 +454,6 @@ DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, 
     stats.trianglesBefore = stats.trianglesAfter = mesh.triangles.size();
     stats.verticesBefore = stats.verticesAfter = mesh.points.size();
     if (mesh.triangles.empty()) return stats;
-
-    Mesh om;
-    om.reserve(mesh.points.size(), 3 * mesh.triangles.size() / 2, mesh.triangles.size());
-    for (const openvdb::Vec3f& p : mesh.points) om.add_vertex(Mesh::Point(p.x(), p.y(), p.z()));
-    for (const openvdb::Vec3I& t : mesh.triangles) {
-        const Mesh::FaceHandle f =
-            om.add_face(Mesh::VertexHandle(int(t[0])), Mesh::VertexHandle(int(t[1])), Mesh::VertexHandle(int(t[2])));
-        if (!f.is_valid()) return stats;  // not a manifold mesh OpenMesh can hold: left as it is
-    }
-    for (Mesh::VertexHandle v : om.vertices())
-        if (om.is_isolated(v)) om.status(v).set_locked(true);
 
     // Signed distances at the original vertices, which halfedge collapses never move.
     std::vector<double> vertexDistance(mesh.points.size());
@@ -284,25 +471,26 @@ DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, 
         }
     });
 
-    FieldDecimater decimater(om, field, options, std::move(vertexDistance));
-    decimater.run(stats, progress);
-    om.garbage_collection();
-
-    TriangleMesh out;
-    out.points.reserve(om.n_vertices());
-    for (Mesh::VertexHandle v : om.vertices()) {
-        const Mesh::Point& p = om.point(v);
-        out.points.emplace_back(p[0], p[1], p[2]);
+    const openvdb::BBoxd box = mesh.bounds();
+    const double extent = std::max({box.extents().x(), box.extents().y(), box.extents().z()});
+    const double size = std::max(options.blockVoxels * options.voxel, extent / 16.0);
+    BlockProgress report(progress);
+    if (mesh.triangles.size() < options.blockedFrom || extent <= size) {
+        // One block: the whole mesh at once, serial.
+        report.total = mesh.triangles.size();
+        stats.decimated = decimatePass(mesh, vertexDistance, field, options, box.min() - Vec3d(1.0), 2.0 * extent + 4.0,
+                                       stats, report);
+    } else {
+        // Blocks in parallel; then blocks shifted by half their size, so the first pass's seams
+        // (kept) lie inside the second pass's blocks.
+        report.total = 2 * mesh.triangles.size();
+        const Vec3d origin = box.min() - Vec3d(1e-3 * size);
+        stats.decimated = decimatePass(mesh, vertexDistance, field, options, origin, size, stats, report);
+        report.total = report.done + mesh.triangles.size();
+        stats.decimated =
+            decimatePass(mesh, vertexDistance, field, options, origin - Vec3d(0.5 * size), size, stats, report) &&
+            stats.decimated;
     }
-    out.triangles.reserve(om.n_faces());
-    for (Mesh::FaceHandle f : om.faces()) {
-        openvdb::Vec3I t;
-        int i = 0;
-        for (Mesh::VertexHandle v : om.fv_range(f)) t[i++] = unsigned(v.idx());
-        out.triangles.push_back(t);
-    }
-    mesh = std::move(out);
-    stats.decimated = true;
     stats.trianglesAfter = mesh.triangles.size();
     stats.verticesAfter = mesh.points.size();
     if (progress) progress(1.0);

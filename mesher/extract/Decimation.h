@@ -18,6 +18,10 @@ struct DecimationOptions {
     double level = 0.0;
     /// The grid's voxel (mm): triangles longer than a few voxels are checked in pieces.
     double voxel = 0.1;
+    /// Meshes of at least this many triangles are decimated in parallel blocks of at least
+    /// blockVoxels voxels (and 1/16 of the mesh's extent), then again on blocks shifted by half.
+    std::size_t blockedFrom = 200000;
+    double blockVoxels = 64.0;
 };
 
 struct DecimationStats {
@@ -39,8 +43,9 @@ struct DecimationStats {
 /// The last is checked on each new triangle (pieces of at most a few voxels) with the signed
 /// distance (f - level) / |grad f| at its corners, edge midpoints and centre: the quadratic
 /// through corners and midpoints is maximised over the triangle and the centre's miss of it is
-/// added as a margin. A refused collapse is retried once its neighbourhood changes. Serial and
-/// deterministic. @a progress (optional) runs from 0 to 1 and may throw to cancel.
+/// added as a margin. A refused collapse is retried once its neighbourhood changes. Large meshes
+/// go in fixed spatial blocks in parallel (see DecimationOptions::blockedFrom): the same bytes
+/// for any thread count. @a progress (optional) runs from 0 to 1 and may throw to cancel.
 DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, const DecimationOptions& options,
                                     const ProgressFn& progress = {});
 

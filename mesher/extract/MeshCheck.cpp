@@ -1,10 +1,13 @@
 #include "mesher/extract/MeshCheck.h"
 
 #include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
+#include <functional>
 #include <numeric>
 #include <utility>
 #include <vector>
@@ -79,6 +82,20 @@ MeshTopology checkTopology(const TriangleMesh& mesh)
         }
     }
 
+    // Pieces: vertices joined by the triangles (union-find, serial: a pass over the triangles).
+    std::vector<uint32_t> piece(numPoints);
+    std::iota(piece.begin(), piece.end(), 0u);
+    for (uint32_t t : valid) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
+        for (int k = 1; k < 3; ++k) {
+            const uint32_t a = findRoot(piece, tri[0]), b = findRoot(piece, tri[k]);
+            if (b != a) piece[std::max(a, b)] = std::min(a, b);
+        }
+    }
+    // Edges each vertex owns (those to higher neighbours), and how many of them are open or
+    // non-manifold, for the per-piece Euler characteristic.
+    std::vector<uint32_t> ownedEdges(numPoints, 0), ownedBad(numPoints, 0);
+
     const Tally tally = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, numPoints, 1024), Tally{},
         [&](const tbb::blocked_range<std::size_t>& range, Tally acc) {
@@ -108,8 +125,10 @@ MeshTopology checkTopology(const TriangleMesh& mesh)
                     if (faces > 2) fan = false;
                     if (spokes[i].w > v) {
                         ++acc.edges;
+                        ++ownedEdges[v];
                         if (faces == 1) ++acc.boundary;
                         if (faces > 2) ++acc.nonManifoldEdges;
+                        if (faces != 2) ++ownedBad[v];
                         // Sorted with outgoing last: two equal flags mean the same direction twice.
                         if (faces == 2 && spokes[i].outgoing == spokes[i + 1].outgoing) ++acc.inconsistent;
                     }
@@ -146,7 +165,169 @@ MeshTopology checkTopology(const TriangleMesh& mesh)
     result.nonManifoldVertices = tally.nonManifoldVertices;
     result.inconsistentlyOrientedEdges = tally.inconsistent;
     result.eulerCharacteristic = int(int64_t(tally.vertices) - int64_t(tally.edges) + int64_t(valid.size()));
+
+    // Per piece (indexed by its root, the piece's lowest vertex): V - E + F and open edges.
+    std::vector<int64_t> chi(numPoints, 0);
+    std::vector<uint32_t> bad(numPoints, 0);
+    std::vector<uint8_t> used(numPoints, 0);
+    for (uint32_t t : valid) {
+        const uint32_t root = findRoot(piece, mesh.triangles[t][0]);
+        ++chi[root];
+        for (int k = 0; k < 3; ++k) used[mesh.triangles[t][k]] = 1;
+    }
+    for (std::size_t v = 0; v < numPoints; ++v) {
+        if (!used[v]) continue;
+        const uint32_t root = findRoot(piece, uint32_t(v));
+        chi[root] += 1 - int64_t(ownedEdges[v]);
+        bad[root] += ownedBad[v];
+        if (root == v) ++result.pieces;
+    }
+    for (std::size_t v = 0; v < numPoints; ++v) {
+        if (!used[v] || piece[v] != v || bad[v] != 0) continue;
+        ++result.closedPieces;
+        result.genus += int(1 - chi[v] / 2);
+    }
     return result;
+}
+
+namespace {
+
+/// Whether the segment p-q passes through the interior of triangle abc (not merely touching
+/// its edges or ends, with a relative margin), in double precision. Coplanar: no.
+bool segmentCrossesTriangle(const openvdb::Vec3d& p, const openvdb::Vec3d& q, const openvdb::Vec3d& a,
+                            const openvdb::Vec3d& b, const openvdb::Vec3d& c)
+{
+    constexpr double eps = 1e-9;
+    const openvdb::Vec3d e1 = b - a, e2 = c - a, d = q - p;
+    const openvdb::Vec3d h = d.cross(e2);
+    const double det = e1.dot(h);
+    const double scale = e1.length() * e2.length() * d.length();
+    if (!(std::abs(det) > 1e-12 * scale)) return false;
+    const double inv = 1.0 / det;
+    const openvdb::Vec3d s = p - a;
+    const double u = s.dot(h) * inv;
+    if (u <= eps || u >= 1.0 - eps) return false;
+    const openvdb::Vec3d r = s.cross(e1);
+    const double w = d.dot(r) * inv;
+    if (w <= eps || u + w >= 1.0 - eps) return false;
+    const double t = e2.dot(r) * inv;
+    return t > eps && t < 1.0 - eps;
+}
+
+bool trianglesCross(const TriangleMesh& mesh, const openvdb::Vec3I& s, const openvdb::Vec3I& t)
+{
+    int shared = 0;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) shared += s[i] == t[j];
+    if (shared >= 2) return false;
+    auto point = [&](uint32_t v) { return openvdb::Vec3d(mesh.points[v]); };
+    const openvdb::Vec3d sa = point(s[0]), sb = point(s[1]), sc = point(s[2]);
+    const openvdb::Vec3d ta = point(t[0]), tb = point(t[1]), tc = point(t[2]);
+    auto has = [](const openvdb::Vec3I& tri, uint32_t v) { return tri[0] == v || tri[1] == v || tri[2] == v; };
+    // Edges of one through the other; an edge ending at a shared vertex cannot cross the interior
+    // without the other edges doing so too, except in the coplanar case, which is not counted.
+    for (int i = 0; i < 3; ++i) {
+        const uint32_t p = s[i], q = s[(i + 1) % 3];
+        if (has(t, p) || has(t, q)) continue;
+        if (segmentCrossesTriangle(point(p), point(q), ta, tb, tc)) return true;
+    }
+    for (int i = 0; i < 3; ++i) {
+        const uint32_t p = t[i], q = t[(i + 1) % 3];
+        if (has(s, p) || has(s, q)) continue;
+        if (segmentCrossesTriangle(point(p), point(q), sa, sb, sc)) return true;
+    }
+    return false;
+}
+
+}  // namespace
+
+std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh& mesh)
+{
+    const std::size_t n = mesh.triangles.size();
+    if (n < 2) return {};
+    const openvdb::BBoxd box = mesh.bounds();
+    double edgeSum = 0.0;
+    for (std::size_t t = 0; t < n; ++t) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
+        edgeSum += (openvdb::Vec3d(mesh.points[tri[0]]) - openvdb::Vec3d(mesh.points[tri[1]])).length();
+    }
+    const openvdb::Vec3d extent = box.extents();
+    // Cells about twice the mean edge, at most 256 per axis (so the cell count stays bounded).
+    double cell = std::max(2.0 * edgeSum / double(n), 1e-9);
+    for (int a = 0; a < 3; ++a) cell = std::max(cell, extent[a] / 256.0);
+    int dims[3];
+    for (int a = 0; a < 3; ++a) dims[a] = std::max(1, int(std::ceil(extent[a] / cell)) + 1);
+    auto cellOf = [&](const openvdb::Vec3d& p, int a) {
+        return std::clamp(int(std::floor((p[a] - box.min()[a]) / cell)), 0, dims[a] - 1);
+    };
+    struct Range {
+        int lo[3], hi[3];
+    };
+    std::vector<Range> ranges(n);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 14), [&](const auto& r) {
+        for (std::size_t t = r.begin(); t != r.end(); ++t) {
+            const openvdb::Vec3I& tri = mesh.triangles[t];
+            openvdb::BBoxd b;
+            for (int k = 0; k < 3; ++k) b.expand(openvdb::Vec3d(mesh.points[tri[k]]));
+            for (int a = 0; a < 3; ++a) {
+                ranges[t].lo[a] = cellOf(b.min(), a);
+                ranges[t].hi[a] = cellOf(b.max(), a);
+            }
+        }
+    });
+    // Cell -> triangles, compressed rows (triangles in index order within a cell).
+    const std::size_t numCells = std::size_t(dims[0]) * dims[1] * dims[2];
+    auto cellIndex = [&](int i, int j, int k) { return (std::size_t(i) * dims[1] + j) * dims[2] + k; };
+    std::vector<std::size_t> first(numCells + 1, 0);
+    for (const Range& r : ranges)
+        for (int i = r.lo[0]; i <= r.hi[0]; ++i)
+            for (int j = r.lo[1]; j <= r.hi[1]; ++j)
+                for (int k = r.lo[2]; k <= r.hi[2]; ++k) ++first[cellIndex(i, j, k) + 1];
+    std::partial_sum(first.begin(), first.end(), first.begin());
+    std::vector<uint32_t> members(first.back());
+    {
+        std::vector<std::size_t> fill(first.begin(), first.end() - 1);
+        for (std::size_t t = 0; t < n; ++t) {
+            const Range& r = ranges[t];
+            for (int i = r.lo[0]; i <= r.hi[0]; ++i)
+                for (int j = r.lo[1]; j <= r.hi[1]; ++j)
+                    for (int k = r.lo[2]; k <= r.hi[2]; ++k) members[fill[cellIndex(i, j, k)]++] = uint32_t(t);
+        }
+    }
+    // Per block of cells its own list; blocks joined in order, so the list is the same for any
+    // thread count.
+    constexpr std::size_t kCellsPerBlock = 256;
+    const std::size_t numBlocks = (numCells + kCellsPerBlock - 1) / kCellsPerBlock;
+    std::vector<std::vector<std::pair<uint32_t, uint32_t>>> found(numBlocks);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, 1), [&](const auto& r) {
+        for (std::size_t block = r.begin(); block != r.end(); ++block)
+            for (std::size_t c = block * kCellsPerBlock; c < std::min(numCells, (block + 1) * kCellsPerBlock); ++c) {
+                const int ci = int(c / (std::size_t(dims[1]) * dims[2])), cj = int((c / dims[2]) % dims[1]),
+                          ck = int(c % dims[2]);
+                for (std::size_t x = first[c]; x < first[c + 1]; ++x)
+                    for (std::size_t y = x + 1; y < first[c + 1]; ++y) {
+                        const Range &a = ranges[members[x]], &b = ranges[members[y]];
+                        // Tested only in the lowest cell both cover.
+                        if (std::max(a.lo[0], b.lo[0]) != ci || std::max(a.lo[1], b.lo[1]) != cj ||
+                            std::max(a.lo[2], b.lo[2]) != ck)
+                            continue;
+                        if (a.hi[0] < b.lo[0] || b.hi[0] < a.lo[0] || a.hi[1] < b.lo[1] || b.hi[1] < a.lo[1] ||
+                            a.hi[2] < b.lo[2] || b.hi[2] < a.lo[2])
+                            continue;
+                        if (trianglesCross(mesh, mesh.triangles[members[x]], mesh.triangles[members[y]]))
+                            found[block].emplace_back(std::min(members[x], members[y]),
+                                                      std::max(members[x], members[y]));
+                    }
+            }
+    });
+    std::vector<std::pair<uint32_t, uint32_t>> pairs;
+    for (const auto& f : found) pairs.insert(pairs.end(), f.begin(), f.end());
+    return pairs;
+}
+
+std::size_t countSelfIntersections(const TriangleMesh& mesh)
+{
+    return selfIntersections(mesh).size();
 }
 
 }  // namespace voxlat

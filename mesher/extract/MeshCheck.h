@@ -5,6 +5,9 @@
 #include "mesher/extract/TriangleMesh.h"
 
 #include <cstddef>
+#include <cstdint>
+#include <utility>
+#include <vector>
 
 namespace voxlat {
 
@@ -24,6 +27,13 @@ struct MeshTopology {
     /// V - E + F over the vertices and edges used by triangles with three distinct valid indices
     /// (2 for each sphere-like closed component, 2 - 2g for genus g).
     int eulerCharacteristic = 0;
+    /// Connected pieces: triangles joined through shared vertices.
+    std::size_t pieces = 0;
+    /// Pieces without boundary or non-manifold edges (closed surfaces).
+    std::size_t closedPieces = 0;
+    /// The sum over the closed pieces of their genus g = 1 - chi/2 (chi: each piece's own
+    /// V - E + F); 0 for a set of balls, 1 for a torus, 3 for a gyroid network's unit cell.
+    int genus = 0;
 
     /// True for a watertight, manifold, consistently oriented mesh without degenerate triangles.
     bool closedManifold() const
@@ -35,5 +45,17 @@ struct MeshTopology {
 
 /// Analyse the topology of @a mesh (parallel; O(triangles)).
 MeshTopology checkTopology(const TriangleMesh& mesh);
+
+/// Pairs of triangles of @a mesh that cross each other: an edge of one passes through the
+/// interior of the other. Pairs that share an edge are not tested; pairs that share one vertex
+/// are tested with the edges away from it. Coplanar overlaps are not counted. Triangles are
+/// binned in a uniform grid (cells about twice the mean edge) and only pairs sharing a cell are
+/// tested, each pair once (in the lowest cell both boxes cover); parallel over fixed cell
+/// blocks, integer counts, so the same result for any thread count.
+std::size_t countSelfIntersections(const TriangleMesh& mesh);
+
+/// The crossing pairs countSelfIntersections() counts, as triangle indices (lower first), in a
+/// fixed order.
+std::vector<std::pair<std::uint32_t, std::uint32_t>> selfIntersections(const TriangleMesh& mesh);
 
 }  // namespace voxlat
