@@ -15,6 +15,20 @@ namespace voxlat {
 
 namespace {
 
+/// `$name` in an equation: the recipe's parameter as a constant, or no symbol when there is none.
+ExprSymbol parameterSymbol(const Recipe& recipe, const std::string& name)
+{
+    const auto it = recipe.params.find(name);
+    if (it == recipe.params.end()) return {};
+    try {
+        return {ExprSymbol::Kind::Constant, it->second.as<double>(), -1};
+    } catch (const YAML::Exception&) {
+        throw ExprError("parameter `$" + name + "` is `" + (it->second.IsScalar() ? it->second.Scalar() : "a list") +
+                            "`, not a number",
+                        std::string::npos);
+    }
+}
+
 /// Answers the names in one equation: parameters become constants, fields become inputs.
 class EquationNames {
 public:
@@ -23,17 +37,7 @@ public:
     ExprSymbol operator()(const std::string& name, bool isParam)
     {
         const Recipe& recipe = mBuilder.recipe();
-        if (isParam) {
-            const auto it = recipe.params.find(name);
-            if (it == recipe.params.end()) return {};
-            try {
-                return {ExprSymbol::Kind::Constant, it->second.as<double>(), -1};
-            } catch (const YAML::Exception&) {
-                throw ExprError("parameter `$" + name + "` is `" +
-                                    (it->second.IsScalar() ? it->second.Scalar() : "a list") + "`, not a number",
-                                std::string::npos);
-            }
-        }
+        if (isParam) return parameterSymbol(recipe, name);
         const auto dot = name.find('.');
         const std::string base = name.substr(0, dot);
         if (std::find(recipe.fieldNames.begin(), recipe.fieldNames.end(), base) == recipe.fieldNames.end()) {
@@ -151,15 +155,7 @@ std::shared_ptr<const ExprProgram> surfaceCoordinate(FieldBuilder& builder, cons
     }
     const Recipe& recipe = builder.recipe();
     auto resolve = [&](const std::string& name, bool isParam) -> ExprSymbol {
-        if (isParam) {
-            const auto it = recipe.params.find(name);
-            if (it == recipe.params.end()) return {};
-            try {
-                return {ExprSymbol::Kind::Constant, it->second.as<double>(), -1};
-            } catch (const YAML::Exception&) {
-                throw ExprError("parameter `$" + name + "` is not a number", std::string::npos);
-            }
-        }
+        if (isParam) return parameterSymbol(recipe, name);
         if (name == "u") return {ExprSymbol::Kind::Input, 0.0, 0};
         if (name == "v") return {ExprSymbol::Kind::Input, 0.0, 1};
         throw ExprError("a surface's coordinates are equations in u and v (0 to 1), constants and $params; `" + name +
