@@ -2,21 +2,13 @@
 
 #include "engine/core/Errors.h"
 #include "engine/jobs/Job.h"
+#include "engine/jobs/TrialRecipe.h"
 
 #include <cmath>
-#include <cstdio>
 
 namespace voxlat {
 
 namespace {
-
-/// A number as YAML text that reads back to the same double.
-YAML::Node exactNumber(double v)
-{
-    char text[40];
-    std::snprintf(text, sizeof text, "%.17g", v);
-    return YAML::Node(std::string(text));
-}
 
 /// The node's box cell (mm), or nullopt when its frame is not a plain box of cells.
 std::optional<Vec3d> boxCell(const YAML::Node& struts)
@@ -68,13 +60,9 @@ std::optional<double> sigmaKeepingOnePiece(const Recipe& recipe, const std::stri
     }
     auto whole = [&](double s) {
         if (context) context->checkCancelled();
-        Recipe r = recipe;
         YAML::Node trial = YAML::Clone(spec);
         trial["kernel"]["gaussian"]["sigma"] = exactNumber(s);
-        r.fieldIndex[name] = trial;
-        r.fieldNames = {name};
-        r.result = name;
-        r.outputs.clear();
+        Recipe r = trialRecipe(recipe, name, trial);
         r.domainBox = Box3{origin, origin + 2.0 * *cell};
         r.allow = {"pieces"};  // counted, not thrown: the trial reads the count
         JobContext quiet;

@@ -3,6 +3,7 @@
 #include "engine/core/Errors.h"
 #include "engine/core/Format.h"
 #include "engine/jobs/Job.h"
+#include "engine/jobs/TrialRecipe.h"
 #include "engine/recipe/DesignTargets.h"
 
 #include <algorithm>
@@ -28,14 +29,6 @@ YAML::Node mapWithout(const YAML::Node& map, const std::vector<std::string>& dro
     return out;
 }
 
-/// A number as YAML text that reads back to the same double.
-YAML::Node exactNumber(double v)
-{
-    char text[40];
-    std::snprintf(text, sizeof text, "%.17g", v);
-    return YAML::Node(std::string(text));
-}
-
 /// One trial: a job on a copy of @a base whose only field (with its inputs) is @a name, given
 /// @a spec, homogenized at @a resolution voxels along the cell's longest side.
 struct Measured {
@@ -48,11 +41,7 @@ Measured measure(const Recipe& base, const std::string& name, const YAML::Node& 
                  JobContext* parent)
 {
     if (parent) parent->checkCancelled();
-    Recipe r = base;
-    r.fieldIndex[name] = spec;
-    r.fieldNames = {name};
-    r.result = name;
-    r.outputs.clear();
+    Recipe r = trialRecipe(base, name, spec);
     r.properties.resolution = resolution;
     r.properties.conductivity = false;
     // The trials' own warnings (loose pieces, a cell with no load path) are about candidates the
