@@ -34,6 +34,15 @@ struct Box3 {
     double radius() const { return 0.5 * extent().length(); }
 };
 
+/// Where a field that does not repeat everywhere still does: inside @a box its solid (value <= 0)
+/// repeats with @a period, cells aligned with @a phase. A finite frame of identical cells is such
+/// a field: deeper inside its box than the struts' reach, the box's faces are out of sight.
+struct RepeatZone {
+    Vec3d period{0.0};
+    Box3 box;
+    Vec3d phase{0.0};  ///< a corner of one cell (the frame's origin)
+};
+
 /// A regular block of sample points origin + (i*spacing.x, j*spacing.y, k*spacing.z) for
 /// i < nx, j < ny, k < nz. Values are laid out with k fastest: offset = (i*ny + j)*nz + k, which
 /// is the linear voxel order of an OpenVDB leaf when the block is one 8x8x8 leaf.
@@ -93,6 +102,10 @@ public:
         return kNoPeriod;
     }
     static constexpr double kNoPeriod = 0.0;
+
+    /// Where the solid repeats though the field has no period (RepeatZone); none by default.
+    /// Lattice properties take their cell from it when period() gives none.
+    virtual std::optional<RepeatZone> repeatZone() const { return std::nullopt; }
     static constexpr double kInvariant = std::numeric_limits<double>::infinity();
 
     /// Convenience single-point queries (slow path; batches are the fast path).

@@ -397,3 +397,41 @@ result: lattice
     EXPECT_LT(std::abs(E[4] - E[3]), 1e-3 * E[4]) << sequence;
     std::printf("E_z by resolution: %s\n", sequence.c_str());
 }
+
+TEST(Properties, AFrameOfIdenticalCellsTakesItsCellFromTheRepeatingInterior)
+{
+    // A finite frame has no period, yet deeper inside its box than the struts reach every cell is
+    // the same: with no `properties: cell`, the cell comes from there, and it must be exactly the
+    // cell a user would name (the middle one of 3 x 3 x 3), for both kernels.
+    TempDir dir;
+    const std::string head = "material: form2\nvoxel: 0.5\ndomain: {box: [[0, 0, 0], [30, 30, 30]]}\n";
+    const std::string given = "properties: {cell: [10, 10, 10], origin: [10, 10, 10], resolution: 16}\n";
+    const std::string implicit = "properties: {resolution: 16}\n";
+    for (const std::string lattice :
+         {"  lattice: {struts: {cell: x, size: 10}, kernel: {gaussian: {sigma: 0.8}}, density: 0.1}\n",
+          "  lattice: {struts: {cell: x, size: 10}, kernel: capsule, radius: 1.2}\n"}) {
+        const std::string body = "fields:\n" + lattice + "result: lattice\n";
+        int status = 0;
+        std::string out;
+        const auto a = propertiesOf(dir, "given", head + given + body, "", &status, &out);
+        ASSERT_EQ(status, 0) << out;
+        const auto b = propertiesOf(dir, "interior", head + implicit + body, "", &status, &out);
+        ASSERT_EQ(status, 0) << out;
+        EXPECT_EQ(b["cell"]["from"], "the frame's repeating interior");
+        EXPECT_EQ(a["cell"]["origin"], b["cell"]["origin"]);
+        EXPECT_EQ(a["cell"]["size"], b["cell"]["size"]);
+        EXPECT_EQ(a["C_MPa"], b["C_MPa"]);
+        EXPECT_GT(b["E_MPa"][2].get<double>(), 0.0);
+    }
+    // Two cells along z: no whole cell lies deeper than the struts reach; the axis is named.
+    int status = 0;
+    std::string out;
+    propertiesOf(dir, "short",
+                 "material: form2\nvoxel: 0.5\nproperties: {resolution: 16}\nfields:\n  lattice: {struts: {cell: x, "
+                 "size: 10, count: [3, 3, 2]}, kernel: {gaussian: {sigma: 0.8}}, density: 0.1}\nresult: lattice\n",
+                 "", &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("along z"), std::string::npos) << out;
+    EXPECT_NE(out.find("cell:"), std::string::npos) << out;
+    EXPECT_FALSE(std::filesystem::exists(dir.path / "short.json"));
+}

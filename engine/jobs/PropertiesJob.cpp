@@ -47,10 +47,38 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
                          "316l, 17-4ph, pa12) or `material: {E: 1.6 GPa, nu: 0.38}` at the top of the recipe");
     const Material& material = *recipe.material;
 
-    // The cell: given, or one period of the result along each axis.
+    // The cell: given, one period of the result along each axis, or a cell of a frame's
+    // repeating interior (a finite frame of identical cells has no period, yet repeats there).
     Vec3d size;
+    std::optional<Vec3d> zoneOrigin;
+    const auto periodless = [&] {
+        for (int a = 0; a < 3; ++a)
+            if (field.period(a) == FieldNode::kNoPeriod) return a;
+        return -1;
+    };
     if (settings.cell) {
         size = Vec3d((*settings.cell)[0], (*settings.cell)[1], (*settings.cell)[2]);
+    } else if (const std::optional<RepeatZone> zone = periodless() >= 0 ? field.repeatZone() : std::nullopt) {
+        size = zone->period;
+        Vec3d o;
+        for (int a = 0; a < 3; ++a) {
+            // The first whole cell (aligned with the frame's cells) inside the zone.
+            const double p = zone->period[a];
+            o[a] = zone->phase[a] + p * std::ceil((zone->box.min[a] - zone->phase[a]) / p - 1e-9);
+            if (o[a] + p > zone->box.max[a] + 1e-9 * p)
+                throw InputError(
+                    settings.where + ": the result `" + recipe.result +
+                    "` is a frame of identical cells, which repeat "
+                    "only deeper inside its box than the struts reach (" +
+                    formatNumber(zone->box.min[a] - zone->phase[a]) + " mm), and along " + kAxis[a] +
+                    " no whole cell of " + formatNumber(p) + " mm lies that deep: make the frame longer along " +
+                    kAxis[a] +
+                    " (a frame of 3 cells has a middle cell that sees all its neighbours when the reach is below "
+                    "a cell), or give the cell, e.g. `properties: {cell: [" +
+                    formatNumber(size[0]) + ", " + formatNumber(size[1]) + ", " + formatNumber(size[2]) +
+                    "], origin: [x, y, z]}`");
+        }
+        zoneOrigin = o;
     } else {
         double longest = 0.0;
         for (int a = 0; a < 3; ++a) {
@@ -70,8 +98,8 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
         for (int a = 0; a < 3; ++a)
             if (!std::isfinite(size[a])) size[a] = longest;
     }
-    const Vec3d origin =
-        settings.origin ? Vec3d((*settings.origin)[0], (*settings.origin)[1], (*settings.origin)[2]) : domainMin;
+    const Vec3d origin = settings.origin ? Vec3d((*settings.origin)[0], (*settings.origin)[1], (*settings.origin)[2])
+                                         : zoneOrigin.value_or(domainMin);
     const double longest = std::max({size[0], size[1], size[2]});
     const int resolution = settings.resolution ? *settings.resolution : int(std::lround(longest / voxel));
     if (resolution < 4 || resolution > 512)
@@ -152,7 +180,9 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
                  {"size", {size[0], size[1], size[2]}},
                  {"voxels", counts},
                  {"voxel_mm", h},
-                 {"from", settings.cell ? "properties: cell" : "the result's periods"}};
+                 {"from", settings.cell ? "properties: cell"
+                          : zoneOrigin  ? "the frame's repeating interior"
+                                        : "the result's periods"}};
     r["solver"] = {{"method", "voxel FE homogenization (8-node hexahedra, periodic), multigrid-preconditioned CG"},
                    {"tolerance", settings.tolerance}};
     if (context) {

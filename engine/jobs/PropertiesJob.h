@@ -23,10 +23,11 @@ struct PropertiesResult {
 };
 
 /// Homogenizes one periodic cell of @a field (the recipe's result, levels solved): the cell is
-/// `properties: {cell, origin, resolution}` or one period of the field along each axis, starting
-/// at @a domainMin; voxels of about @a voxel. Needs `material:`. Throws InputError for a missing
-/// material or period (naming the recipe line), JobError for a cell with no solid or one that
-/// carries no load along any axis.
+/// `properties: {cell, origin, resolution}`, or one period of the field along each axis starting
+/// at @a domainMin, or (a finite frame of identical cells, FieldNode::repeatZone()) the first
+/// whole cell of the frame's repeating interior; voxels of about @a voxel. Needs `material:`. Throws InputError for a
+/// missing material or period (naming the recipe line), JobError for a cell with no solid or one that carries no load
+/// along any axis.
 PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe, const Vec3d& domainMin, double voxel,
                                    const JobContext* context);
 

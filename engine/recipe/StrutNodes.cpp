@@ -496,8 +496,22 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     const Box3 box = frame.bounds();
     // A frame is finite: its solid lies within its box grown by the struts' reach, which gives
     // the domain when the recipe has none (as a shape's box does).
-    auto withinReach = [&box](FieldPtr solid, double reach) -> FieldPtr {
-        return std::make_shared<SupportedField>(std::move(solid), Box3{box.min - Vec3d(reach), box.max + Vec3d(reach)});
+    // A box of identical cells with identical struts repeats cell by cell deeper inside its box
+    // than the struts' reach: lattice properties take their cell from there (RepeatZone).
+    const bool identicalBoxCells =
+        uniform && !spec["struts"].has("within") && (!radii || spec["radius"].isNumber()) && !graded;
+    // @a solidReach (when given) is how far the solid reaches from the struts once its level is
+    // known: deeper inside the box than that, a box of identical cells repeats (RepeatZone).
+    auto withinReach = [&box, &uniform](FieldPtr solid, double reach,
+                                        std::function<double()> solidReach = {}) -> FieldPtr {
+        std::function<std::optional<RepeatZone>()> zone;
+        if (solidReach)
+            zone = [box, size = uniform->size, solidReach]() -> std::optional<RepeatZone> {
+                const double r = solidReach();
+                return RepeatZone{size, Box3{box.min + Vec3d(r), box.max - Vec3d(r)}, box.min};
+            };
+        return std::make_shared<SupportedField>(std::move(solid), Box3{box.min - Vec3d(reach), box.max + Vec3d(reach)},
+                                                std::move(zone));
     };
     LevelNode node;
     node.name = name;
@@ -584,7 +598,10 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         // A capsule reaches its radius plus the level (an offset) plus the blend; a solved level
         // stays below the cap.
         const double reach = rMax + blend + (node.density ? cap : std::max(0.0, node.solid->level()));
-        FieldPtr result = withinReach(node.solid, reach);
+        std::function<double()> solidReach;
+        if (identicalBoxCells)
+            solidReach = [solid = node.solid, rMax, blend] { return rMax + blend + std::max(0.0, solid->level()); };
+        FieldPtr result = withinReach(node.solid, reach, solidReach);
         builder.addLevelNode(std::move(node));
         return result;
     }
@@ -741,7 +758,11 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     // Beyond the cut-off radius F = 0, below every iso-value (the value there is the cap 2 rcMax,
     // above any level a density solve or a positive iso-value gives).
     FieldPtr result = node.solid;
-    if (node.density || iso->radiusOf(t) < 2.0 * rcMax) result = withinReach(node.solid, rcMax);
+    if (node.density || iso->radiusOf(t) < 2.0 * rcMax) {
+        std::function<double()> solidReach;
+        if (identicalBoxCells && !g["sigma"].isSequence()) solidReach = [rcMax] { return rcMax; };
+        result = withinReach(node.solid, rcMax, solidReach);
+    }
     builder.addLevelNode(std::move(node));
     return result;
 }
