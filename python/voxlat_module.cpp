@@ -105,6 +105,20 @@ struct JobWithContext {
 };
 
 /// Makes a Job whose progress goes to @a progress (a Python callable `f(stage, done, total)`, or None).
+/// The mesh options of `mesh()` and `write_mesh()`: as `voxlat mesh --tolerance T --project on|off`
+/// (a tolerance turns projection on unless `project=False` is given).
+MeshOptions meshOptions(std::optional<double> tolerance, std::optional<bool> project)
+{
+    MeshOptions options;
+    if (tolerance) {
+        options.tolerance = checkMeshTolerance(*tolerance, "tolerance=");
+        options.toleranceWhere = "tolerance=";
+        options.project = true;
+    }
+    if (project) options.project = *project;
+    return options;
+}
+
 std::shared_ptr<Job> makeJob(const Recipe& recipe, py::object progress)
 {
     auto owner = std::make_shared<JobWithContext>();
@@ -221,11 +235,12 @@ PYBIND11_MODULE(_voxlat, m)
             py::arg("name") = "", "a named field (levels solved); the result by default")
         .def(
             "mesh",
-            [](Job& j) {
+            [](Job& j, std::optional<double> tolerance, std::optional<bool> project) {
+                const MeshOptions options = meshOptions(tolerance, project);
                 const TriangleMesh* mesh;
                 {
                     py::gil_scoped_release release;
-                    mesh = &j.mesh();
+                    mesh = &j.mesh(options);
                 }
                 py::array_t<float> points({py::ssize_t(mesh->points.size()), py::ssize_t(3)});
                 py::array_t<std::uint32_t> tris({py::ssize_t(mesh->triangles.size()), py::ssize_t(3)});
@@ -234,7 +249,9 @@ PYBIND11_MODULE(_voxlat, m)
                             mesh->triangles.size() * 3 * sizeof(std::uint32_t));
                 return py::make_tuple(points, tris);
             },
-            "the mesh of the result: points (V, 3) float32 and triangles (T, 3) uint32")
+            py::arg("tolerance") = py::none(), py::arg("project") = py::none(),
+            "the mesh of the result: points (V, 3) float32 and triangles (T, 3) uint32; tolerance (mm): "
+            "decimated to that distance from the true surface; project: vertices on the true surface")
         .def(
             "write_outputs",
             [](Job& j, const std::string& dir) {
@@ -244,11 +261,13 @@ PYBIND11_MODULE(_voxlat, m)
             py::arg("out_dir"), "write the recipe's outputs and report.json")
         .def(
             "write_mesh",
-            [](Job& j, const std::string& path) {
+            [](Job& j, const std::string& path, std::optional<double> tolerance, std::optional<bool> project) {
+                const MeshOptions options = meshOptions(tolerance, project);
                 py::gil_scoped_release release;
-                j.writeMesh(path);
+                j.writeMesh(path, options);
             },
-            py::arg("path"), "write the mesh (.stl, .3mf, .ply, .obj)")
+            py::arg("path"), py::arg("tolerance") = py::none(), py::arg("project") = py::none(),
+            "write the mesh (.stl, .3mf, .ply, .obj), with the options of mesh()")
         .def(
             "write_report",
             [](Job& j, const std::string& path) {

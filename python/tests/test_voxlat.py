@@ -133,6 +133,34 @@ class VoxlatModule(unittest.TestCase):
             job.write_mesh(str(self.dir / f"m.{ext}"))
             self.assertGreater((self.dir / f"m.{ext}").stat().st_size, 1000)
 
+    def test_mesh_options_tolerance_and_projection(self):
+        # A ball of radius 5: the decimated mesh keeps every point within the tolerance of the
+        # true sphere (measured here from |p| - 5, not by the engine), is closed (every edge in
+        # exactly two triangles) and has far fewer triangles than marching cubes' mesh.
+        recipe = voxlat.Recipe(voxlat.sphere(5), domain=[[-8, -8, -8], [8, 8, 8]], voxel=0.25)
+        raw_points, raw_triangles = recipe.mesh()
+        projected, _ = recipe.mesh(project=True)
+        raw_off = np.abs(np.linalg.norm(raw_points.astype(np.float64), axis=1) - 5).max()
+        on_off = np.abs(np.linalg.norm(projected.astype(np.float64), axis=1) - 5).max()
+        self.assertLess(on_off, 0.01 * 0.25)
+        self.assertLess(on_off, raw_off)
+        tolerance = 0.02
+        points, triangles = recipe.mesh(tolerance=tolerance)
+        self.assertLess(len(triangles), len(raw_triangles) / 3)
+        p = points.astype(np.float64)[triangles]
+        w = np.array([[a, b, 1 - a - b] for a in np.linspace(0, 1, 7) for b in np.linspace(0, 1, 7) if a + b <= 1])
+        samples = np.einsum("sk,tkd->tsd", w, p).reshape(-1, 3)
+        self.assertLess(np.abs(np.linalg.norm(samples, axis=1) - 5).max(), tolerance)
+        edges = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)
+        _, counts = np.unique(edges, axis=0, return_counts=True)
+        self.assertTrue((counts == 2).all())
+        report = recipe.write_mesh(self.dir / "ball.stl", tolerance=tolerance)
+        self.assertEqual(report["mesh"]["triangles"], len(triangles))
+        self.assertLessEqual(report["mesh"]["deviation"]["max_mm"], tolerance)
+        with self.assertRaises(ValueError) as e:
+            recipe.mesh(tolerance=0)
+        self.assertIn("tolerance=", str(e.exception))
+
     def test_progress_callback_and_warnings_list(self):
         # Walls of 1.2 mm in an 8 mm gyroid cell: 15 % of the cell, past the uniform-shift range.
         recipe = voxlat.Recipe.parse("voxel: 0.5\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"

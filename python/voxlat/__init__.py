@@ -294,9 +294,11 @@ class Recipe:
     def field(self, name=""):
         return self.job().field(name)
 
-    def mesh(self):
-        """(points (V, 3) float32, triangles (T, 3) uint32) of the result."""
-        return self.job().mesh()
+    def mesh(self, tolerance=None, project=None):
+        """(points (V, 3) float32, triangles (T, 3) uint32) of the result. tolerance (mm):
+        decimated so every point stays within it of the true surface (projection on);
+        project=True: vertices moved onto the true surface (as `voxlat mesh --tolerance --project`)."""
+        return self.job().mesh(tolerance=tolerance, project=project)
 
     def run(self, out_dir, progress=None):
         """Writes the recipe's outputs and report.json to out_dir; returns the report (its
@@ -305,9 +307,11 @@ class Recipe:
         job.write_outputs(str(out_dir))
         return job.report()
 
-    def write_mesh(self, path):
+    def write_mesh(self, path, tolerance=None, project=None):
+        """Writes the mesh (.stl, .3mf, .ply, .obj; options as mesh()); returns the report, whose
+        `mesh` has the deviation, decimation and topology figures."""
         job = self.job()
-        job.write_mesh(str(path))
+        job.write_mesh(str(path), tolerance=tolerance, project=project)
         return job.report()
 
 
