@@ -1,5 +1,7 @@
 #include "fields/TpmsField.h"
 
+#include "fields/LevelSolid.h"
+
 #include <array>
 #include <cmath>
 #include <numbers>
@@ -104,11 +106,22 @@ void axisTerms(double wave, double origin, double spacing, int n, TrigTerms<doub
         for (int i = 0; i < n; ++i) out[i] = trigTerms(wave * (origin + i * spacing));
         return;
     }
-    double so[kStride], co[kStride];
-    for (int k = 0; k < kStride; ++k) {
-        so[k] = std::sin(wave * (k * spacing));
-        co[k] = std::cos(wave * (k * spacing));
+    // The offsets' sines and cosines depend on the spacing only: kept per thread for the next
+    // call (a slicer asks for the same spacing block after block).
+    struct Offsets {
+        double wave = 0.0, spacing = 0.0, so[kStride] = {}, co[kStride] = {};
+    };
+    thread_local Offsets offsets;
+    if (offsets.wave != wave || offsets.spacing != spacing || offsets.co[0] != 1.0) {
+        for (int k = 0; k < kStride; ++k) {
+            offsets.so[k] = std::sin(wave * (k * spacing));
+            offsets.co[k] = std::cos(wave * (k * spacing));
+        }
+        offsets.wave = wave;
+        offsets.spacing = spacing;
     }
+    const double* so = offsets.so;
+    const double* co = offsets.co;
     for (int i = 0; i < n; i += kStride) {
         const double angle = wave * (origin + i * spacing), sb = std::sin(angle), cb = std::cos(angle);
         out[i] = termsFrom(sb, cb);
@@ -116,25 +129,94 @@ void axisTerms(double wave, double origin, double spacing, int n, TrigTerms<doub
             out[i + k] = termsFrom(sb * co[k] + cb * so[k], cb * co[k] - sb * so[k]);
     }
 }
+
+/// axisTerms for one axis slot of a thread's last call (0 x, 1 y, 2 z): a slicer's blocks along a
+/// row share their y terms and a whole layer its z term, so most calls find them here. The terms
+/// depend on the arguments only, so the values do not depend on which thread computes them.
+const TrigTerms<double>* cachedAxisTerms(int slot, double wave, double origin, double spacing, int n,
+                                         TrigTerms<double>* scratch)
+{
+    struct Last {
+        double wave = 0.0, origin = 0.0, spacing = 0.0;
+        int n = -1;
+        TrigTerms<double> terms[128];
+    };
+    thread_local Last last[3];
+    Last& l = last[slot];
+    if (n > 128) {
+        axisTerms(wave, origin, spacing, n, scratch);
+        return scratch;
+    }
+    if (l.n != n || l.wave != wave || l.origin != origin || l.spacing != spacing) {
+        axisTerms(wave, origin, spacing, n, l.terms);
+        l.wave = wave;
+        l.origin = origin;
+        l.spacing = spacing;
+        l.n = n;
+    }
+    return l.terms;
+}
+
+/// A solid's level (LevelSolid::gridValues's expressions, per value).
+struct NoLevel {
+    double operator()(double v) const { return v; }
+};
+struct BelowLevel {
+    double level;
+    double operator()(double v) const { return v - level; }
+};
+struct BandLevel {
+    double level;
+    double operator()(double v) const { return std::abs(v) - level; }
+};
+struct AboveLevel {
+    double level;
+    double operator()(double v) const { return level - v; }
+};
 }  // namespace
 
 void TpmsField::gridValues(const GridBatch& batch, std::span<double> out) const
 {
+    gridValuesMapped(batch, out, NoLevel{});
+}
+
+void TpmsField::gridValuesAtLevel(const GridBatch& batch, std::span<double> out, SolidSide side, double level) const
+{
+    switch (side) {
+        case SolidSide::Below:
+            gridValuesMapped(batch, out, BelowLevel{level});
+            return;
+        case SolidSide::Band:
+            gridValuesMapped(batch, out, BandLevel{level});
+            return;
+        case SolidSide::Above:
+            gridValuesMapped(batch, out, AboveLevel{level});
+            return;
+    }
+}
+
+template <class Map>
+void TpmsField::gridValuesMapped(const GridBatch& batch, std::span<double> out, const Map& map) const
+{
     constexpr int kMax = 128;  // a slicer block with its halo is 66 wide
     if (batch.nx > kMax || batch.ny > kMax || batch.nz > kMax) {
         FieldNode::gridValues(batch, out);
+        for (double& v : out) v = map(v);
         return;
     }
-    std::array<TrigTerms<double>, kMax> tx, ty, tz;
-    axisTerms(mWave[0], batch.origin[0], batch.spacing[0], batch.nx, tx.data());
-    axisTerms(mWave[1], batch.origin[1], batch.spacing[1], batch.ny, ty.data());
-    axisTerms(mWave[2], batch.origin[2], batch.spacing[2], batch.nz, tz.data());
+    std::array<TrigTerms<double>, kMax> scratch;
+    const TrigTerms<double>* tx =
+        cachedAxisTerms(0, mWave[0], batch.origin[0], batch.spacing[0], batch.nx, scratch.data());
+    const TrigTerms<double>* ty =
+        cachedAxisTerms(1, mWave[1], batch.origin[1], batch.spacing[1], batch.ny, scratch.data());
+    const TrigTerms<double>* tz =
+        cachedAxisTerms(2, mWave[2], batch.origin[2], batch.spacing[2], batch.nz, scratch.data());
     // The surface type is fixed per call: one loop nest per type lets the compiler inline the
     // equation (no switch per point); a single z (slices) drops the innermost loop.
     // The innermost axis's terms as four arrays (structure of arrays), so the inner loop reads
     // each term contiguously and vectorises.
     const bool slices = batch.nz == 1;
-    const TrigTerms<double>* inner = slices ? ty.data() : tz.data();
+    const TrigTerms<double>* inner = slices ? ty : tz;
     const int innerCount = slices ? batch.ny : batch.nz;
     std::array<double, kMax> is, ic, is2, ic2;
     for (int k = 0; k < innerCount; ++k)
@@ -144,26 +226,26 @@ void TpmsField::gridValues(const GridBatch& batch, std::span<double> out) const
         if (slices) {
             for (int i = 0; i < batch.nx; ++i, o += innerCount)
                 for (int j = 0; j < innerCount; ++j)
-                    o[j] = tpmsEquation(kType, tx[i], TrigTerms<double>{is[j], ic[j], is2[j], ic2[j]}, tz[0]);
+                    o[j] = map(tpmsEquation(kType, tx[i], TrigTerms<double>{is[j], ic[j], is2[j], ic2[j]}, tz[0]));
             return;
         }
         for (int i = 0; i < batch.nx; ++i)
             for (int j = 0; j < batch.ny; ++j, o += innerCount)
                 for (int k = 0; k < innerCount; ++k)
-                    o[k] = tpmsEquation(kType, tx[i], ty[j], TrigTerms<double>{is[k], ic[k], is2[k], ic2[k]});
+                    o[k] = map(tpmsEquation(kType, tx[i], ty[j], TrigTerms<double>{is[k], ic[k], is2[k], ic2[k]}));
     };
     // clang-format misreads this switch after the template lambda and would spread it over 27 lines.
     // clang-format off
     switch (mType) {
-    case TpmsType::Gyroid: fill.operator()<TpmsType::Gyroid>(); break;
-    case TpmsType::SchwarzP: fill.operator()<TpmsType::SchwarzP>(); break;
-    case TpmsType::SchwarzD: fill.operator()<TpmsType::SchwarzD>(); break;
-    case TpmsType::IWP: fill.operator()<TpmsType::IWP>(); break;
-    case TpmsType::Neovius: fill.operator()<TpmsType::Neovius>(); break;
-    case TpmsType::FischerKochS: fill.operator()<TpmsType::FischerKochS>(); break;
-    case TpmsType::Lidinoid: fill.operator()<TpmsType::Lidinoid>(); break;
-    case TpmsType::SplitP: fill.operator()<TpmsType::SplitP>(); break;
-    case TpmsType::FRD: fill.operator()<TpmsType::FRD>(); break;
+    case TpmsType::Gyroid: fill.template operator()<TpmsType::Gyroid>(); break;
+    case TpmsType::SchwarzP: fill.template operator()<TpmsType::SchwarzP>(); break;
+    case TpmsType::SchwarzD: fill.template operator()<TpmsType::SchwarzD>(); break;
+    case TpmsType::IWP: fill.template operator()<TpmsType::IWP>(); break;
+    case TpmsType::Neovius: fill.template operator()<TpmsType::Neovius>(); break;
+    case TpmsType::FischerKochS: fill.template operator()<TpmsType::FischerKochS>(); break;
+    case TpmsType::Lidinoid: fill.template operator()<TpmsType::Lidinoid>(); break;
+    case TpmsType::SplitP: fill.template operator()<TpmsType::SplitP>(); break;
+    case TpmsType::FRD: fill.template operator()<TpmsType::FRD>(); break;
     }
     // clang-format on
 }

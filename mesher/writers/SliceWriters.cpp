@@ -96,12 +96,15 @@ public:
             const std::uint64_t m = e - k;
             b += m * a + mRunByte * (m * (m + 1) / 2);
             a += m * mRunByte;
+            mSum += m * mRunByte;
             mRun += m;
             k = e;
         }
         mA = std::uint32_t(a % kBase);
         mB = std::uint32_t(b % kBase);
     }
+    /// The sum of every byte coded.
+    std::uint64_t byteSum() const { return mSum; }
     /// Ends the block and returns the Adler-32 of everything coded.
     std::uint32_t finish()
     {
@@ -184,6 +187,7 @@ private:
     std::uint8_t mRunByte = 0;
     std::uint64_t mRun = 0;
     std::uint32_t mA = 1, mB = 0;
+    std::uint64_t mSum = 0;
 };
 
 void putBig32(std::string& s, std::uint32_t v)
@@ -204,7 +208,8 @@ void pngChunk(std::string& out, const char* type, const std::string& data)
 
 }  // namespace
 
-std::string encodeWindowPng(int width, int height, const std::uint8_t* window, int col0, int row0, int w, int h)
+std::string encodeWindowPng(int width, int height, const std::uint8_t* window, int col0, int row0, int w, int h,
+                            std::uint64_t* byteSum)
 {
     if (w <= 0 || h <= 0) col0 = row0 = w = h = 0;
     if (col0 < 0 || row0 < 0 || col0 + w > width || row0 + h > height)
@@ -221,6 +226,7 @@ std::string encodeWindowPng(int width, int height, const std::uint8_t* window, i
     }
     deflater.zeros(std::uint64_t(height - row0 - h) * rowBytes);
     putBig32(idat, deflater.finish());
+    if (byteSum) *byteSum = deflater.byteSum();
 
     std::string out("\x89PNG\r\n\x1a\n", 8);
     out.reserve(8 + 3 * 12 + 13 + idat.size());  // exactly: a layer kept for copies holds no slack
