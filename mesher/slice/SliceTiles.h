@@ -171,10 +171,11 @@ inline typename L::V edgeCoverage(typename L::V f, typename L::V gx, typename L:
 /// The slicer's pass over a block's grid of values (@a nx columns of @a ny, column-major) before
 /// its tiles are decided: @a single gets the values in single precision, @a cells ((nx - 1)
 /// columns of ny - 1) the largest difference between the four corners of each grid cell (both
-/// axes and both diagonals). Returns whether every value is finite (x * 0 is NaN for NaN and
-/// infinities, 0 otherwise). Plain loops: each file's compiler vectorises them at its width.
+/// axes and both diagonals), @a cellMax the largest of them (meaningful when every value is finite). Returns whether
+/// every value is finite (x * 0 is NaN for NaN and infinities, 0 otherwise). Plain loops: each file's compiler
+/// vectorises them at its width.
 template <class L>
-inline bool prepareTileBlock(const double* values, int nx, int ny, float* single, float* cells)
+inline bool prepareTileBlock(const double* values, int nx, int ny, float* single, float* cells, float& cellMax)
 {
     using V = typename L::V;
     const std::size_t n = std::size_t(nx) * ny;
@@ -190,6 +191,13 @@ inline bool prepareTileBlock(const double* values, int nx, int ny, float* single
             e[b] = std::max(std::max(d0, d1), std::max(d2, d3));
         }
     }
+    const std::size_t m = std::size_t(nx - 1) * cy;
+    V largest{};
+    std::size_t c = 0;
+    for (; c + L::kWidth <= m; c += L::kWidth) largest = maxLanes(largest, L::load(cells + c));
+    cellMax = 0.0f;
+    for (; c < m; ++c) cellMax = std::max(cellMax, cells[c]);
+    for (int l = 0; l < L::kWidth; ++l) cellMax = std::max(cellMax, largest[l]);
     V poison[2] = {};
     std::size_t k = 0;
     for (; k + 2 * L::kWidth <= n; k += 2 * L::kWidth)
@@ -213,10 +221,12 @@ inline bool prepareTileBlock(const double* values, int nx, int ny, float* single
 /// the coverage of the linearised edge with its curvature correction (edgeCoverage); only pixels
 /// where the field bends too much for that (sub-sampled) are listed. @a values and @a cells as in
 /// edgeTile, in single precision; every value must be finite (NaN and infinities take the general
-/// path). Returns the number of pixels decided as sure plus 65536 times the sure inside ones.
+/// path). @a blockCell is at least every cell of the tile (the largest of its block; infinity
+/// when not known). Returns the number of pixels decided as sure plus 65536 times the sure inside ones.
 template <class L>
-inline int decideFullTile(const float* values, int stride, const float* cells, float linearTolerance, bool greyEdges,
-                          std::uint8_t* pixels, std::size_t rowStride, std::uint16_t* slowList, int& slowCount)
+inline int decideFullTile(const float* values, int stride, const float* cells, float blockCell, float linearTolerance,
+                          bool greyEdges, std::uint8_t* pixels, std::size_t rowStride, std::uint16_t* slowList,
+                          int& slowCount)
 {
     using V = typename L::V;
     using M = typename L::M;
@@ -229,6 +239,19 @@ inline int decideFullTile(const float* values, int stride, const float* cells, f
         for (int q = 0; q < kVectors; ++q) {
             lo[q] = minLanes(lo[q], L::load(f + L::kWidth * q));
             hi[q] = maxLanes(hi[q], L::load(f + L::kWidth * q));
+        }
+    }
+    // Against @a blockCell first, lane by lane (no reductions across lanes): a tile whose values
+    // all clear it clears its own cells, which are no larger, and is decided as below.
+    {
+        V lowest = lo[0], highest = hi[0];
+        for (int q = 1; q < kVectors; ++q) lowest = minLanes(lowest, lo[q]), highest = maxLanes(highest, hi[q]);
+        constexpr unsigned kAll = (1u << L::kWidth) - 1;
+        const bool outside = L::bits(lowest > blockCell) == kAll;
+        if (outside || L::bits(highest < -blockCell) == kAll) {
+            const std::uint8_t grey = outside ? 0 : 255;
+            for (int b = 0; b < kLanes; ++b) std::memset(pixels + std::size_t(b) * rowStride, grey, kLanes);
+            return kLanes * kLanes * (grey ? 65537 : 1);
         }
     }
     float cell = 0.0f;

@@ -46,16 +46,17 @@ struct OctLanes : LanesBase<Oct, OctMask> {
 
 }  // namespace
 
-int decideFullTileAvx2(const float* values, int stride, const float* cells, float linearTolerance, bool greyEdges,
-                       std::uint8_t* pixels, std::size_t rowStride, std::uint16_t* slowList, int& slowCount)
+int decideFullTileAvx2(const float* values, int stride, const float* cells, float blockCell, float linearTolerance,
+                       bool greyEdges, std::uint8_t* pixels, std::size_t rowStride, std::uint16_t* slowList,
+                       int& slowCount)
 {
-    return decideFullTile<OctLanes>(values, stride, cells, linearTolerance, greyEdges, pixels, rowStride, slowList,
-                                    slowCount);
+    return decideFullTile<OctLanes>(values, stride, cells, blockCell, linearTolerance, greyEdges, pixels, rowStride,
+                                    slowList, slowCount);
 }
 
-bool prepareBlockAvx2(const double* values, int nx, int ny, float* single, float* cells)
+bool prepareBlockAvx2(const double* values, int nx, int ny, float* single, float* cells, float& cellMax)
 {
-    return prepareTileBlock<OctLanes>(values, nx, ny, single, cells);
+    return prepareTileBlock<OctLanes>(values, nx, ny, single, cells, cellMax);
 }
 
 }  // namespace voxlat

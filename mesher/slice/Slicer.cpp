@@ -198,22 +198,22 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     const double slackX = 1e-9 * px, slackY = 1e-9 * py;
     const bool greyEdges = mOptions.supersample > 0 && mOptions.gamma == 1.0;
     const float tolerance = float(mOptions.linearTolerance);
-    auto decideWholeTile = [&](const float* single, int stride, const float* cells, std::uint8_t* pixels,
-                               std::uint16_t* slowList, int& slowCount) {
+    auto decideWholeTile = [&](const float* single, int stride, const float* cells, float blockCell,
+                               std::uint8_t* pixels, std::uint16_t* slowList, int& slowCount) {
 #if defined(VOXLAT_AVX2_TILES)
         if (mWideTiles)
-            return decideFullTileAvx2(single, stride, cells, tolerance, greyEdges, pixels, std::size_t(mNx), slowList,
-                                      slowCount);
+            return decideFullTileAvx2(single, stride, cells, blockCell, tolerance, greyEdges, pixels, std::size_t(mNx),
+                                      slowList, slowCount);
 #endif
-        return decideFullTile<QuadLanes>(single, stride, cells, tolerance, greyEdges, pixels, std::size_t(mNx),
-                                         slowList, slowCount);
+        return decideFullTile<QuadLanes>(single, stride, cells, blockCell, tolerance, greyEdges, pixels,
+                                         std::size_t(mNx), slowList, slowCount);
     };
     // The block pass before the tile tests: single precision, cell differences, finiteness.
-    auto prepareBlock = [&](const double* values, int gx, int gy, float* single, float* cells) {
+    auto prepareBlock = [&](const double* values, int gx, int gy, float* single, float* cells, float& cellMax) {
 #if defined(VOXLAT_AVX2_TILES)
-        if (mWideTiles) return prepareBlockAvx2(values, gx, gy, single, cells);
+        if (mWideTiles) return prepareBlockAvx2(values, gx, gy, single, cells, cellMax);
 #endif
-        return prepareTileBlock<QuadLanes>(values, gx, gy, single, cells);
+        return prepareTileBlock<QuadLanes>(values, gx, gy, single, cells, cellMax);
     };
 
     // Classifies the pixel box [i, i + n) x [j, j + m) of the window: -1 inside, +1 outside, 0 both.
@@ -257,7 +257,8 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         const int cy = grid.ny - 1;
         single.resize(values.size());
         cells.resize(std::size_t(grid.nx - 1) * cy);
-        const bool finite = prepareBlock(values.data(), grid.nx, grid.ny, single.data(), cells.data());
+        float blockCell = 0.0f;
+        const bool finite = prepareBlock(values.data(), grid.nx, grid.ny, single.data(), cells.data(), blockCell);
         // Whole 8 x 8 tiles within the part's box go straight to the tile pass; edgeTile (which
         // repeats it) only takes the others and those with pixels to sub-sample. The same tests
         // as edgeTile's, per row and column of the block instead of per tile.
@@ -283,7 +284,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
                     std::uint16_t slowList[kLanes * kLanes];
                     int slowCount = 0;
                     const int decided =
-                        decideWholeTile(&single[at], grid.ny, &cells[cellAt],
+                        decideWholeTile(&single[at], grid.ny, &cells[cellAt], blockCell,
                                         out.pixels.data() + std::size_t(tj) * mNx + ti, slowList, slowCount);
                     if (slowCount == 0) {
                         const int sure = decided & 0xffff, sureInside = decided >> 16;
@@ -396,14 +397,16 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
     }
     const bool greyEdges = mOptions.supersample > 0 && mOptions.gamma == 1.0;
     const float tolerance = float(mOptions.linearTolerance);
+    // No block's largest cell here: the tile's own cells decide.
+    constexpr float kNoBlockCell = std::numeric_limits<float>::infinity();
     auto decideWholeTile = [&] {
 #if defined(VOXLAT_AVX2_TILES)
         if (mWideTiles)
-            return decideFullTileAvx2(single, stride, cells, tolerance, greyEdges, tilePixels, rowStride, slowList,
-                                      slowCount);
+            return decideFullTileAvx2(single, stride, cells, kNoBlockCell, tolerance, greyEdges, tilePixels, rowStride,
+                                      slowList, slowCount);
 #endif
-        return decideFullTile<QuadLanes>(single, stride, cells, tolerance, greyEdges, tilePixels, rowStride, slowList,
-                                         slowCount);
+        return decideFullTile<QuadLanes>(single, stride, cells, kNoBlockCell, tolerance, greyEdges, tilePixels,
+                                         rowStride, slowList, slowCount);
     };
     const int decided = tileInPart && finite ? decideWholeTile() : -1;
     if (decided >= 0) {
