@@ -4,6 +4,8 @@
 
 #include <array>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <numbers>
 #include <stdexcept>
 
@@ -130,31 +132,39 @@ void axisTerms(double wave, double origin, double spacing, int n, TrigTerms<doub
     }
 }
 
-/// axisTerms for one axis slot of a thread's last call (0 x, 1 y, 2 z): a slicer's blocks along a
-/// row share their y terms and a whole layer its z term, so most calls find them here. The terms
-/// depend on the arguments only, so the values do not depend on which thread computes them.
-const TrigTerms<double>* cachedAxisTerms(int slot, double wave, double origin, double spacing, int n,
+/// axisTerms through a per-thread cache, by axis (0 x, 1 y, 2 z): a slicer's blocks along a row
+/// share their y terms, a whole layer its z term, and every layer the x terms of the same few
+/// block columns, so most calls find them here (x keeps 32 runs by their origin, y and z the
+/// last one). The terms depend on the arguments only, never on which thread made them.
+const TrigTerms<double>* cachedAxisTerms(int axis, double wave, double origin, double spacing, int n,
                                          TrigTerms<double>* scratch)
 {
-    struct Last {
+    constexpr int kMaxTerms = 128, kXRuns = 32;
+    struct Run {
         double wave = 0.0, origin = 0.0, spacing = 0.0;
         int n = -1;
-        TrigTerms<double> terms[128];
+        TrigTerms<double> terms[kMaxTerms];
     };
-    thread_local Last last[3];
-    Last& l = last[slot];
-    if (n > 128) {
+    thread_local std::array<Run, kXRuns + 2> runs;
+    if (n > kMaxTerms) {
         axisTerms(wave, origin, spacing, n, scratch);
         return scratch;
     }
-    if (l.n != n || l.wave != wave || l.origin != origin || l.spacing != spacing) {
-        axisTerms(wave, origin, spacing, n, l.terms);
-        l.wave = wave;
-        l.origin = origin;
-        l.spacing = spacing;
-        l.n = n;
+    std::size_t slot = std::size_t(kXRuns + axis - 1);
+    if (axis == 0) {
+        std::uint64_t bits;
+        std::memcpy(&bits, &origin, sizeof bits);
+        slot = std::size_t((bits * 0x9E3779B97F4A7C15ull) >> 59);  // 5 bits: one of kXRuns
     }
-    return l.terms;
+    Run& run = runs[slot];
+    if (run.n != n || run.wave != wave || run.origin != origin || run.spacing != spacing) {
+        axisTerms(wave, origin, spacing, n, run.terms);
+        run.wave = wave;
+        run.origin = origin;
+        run.spacing = spacing;
+        run.n = n;
+    }
+    return run.terms;
 }
 
 /// A solid's level (LevelSolid::gridValues's expressions, per value).

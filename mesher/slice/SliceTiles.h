@@ -171,9 +171,9 @@ inline typename L::V edgeCoverage(typename L::V f, typename L::V gx, typename L:
 /// The slicer's pass over a block's grid of values (@a nx columns of @a ny, column-major) before
 /// its tiles are decided: @a single gets the values in single precision, @a cells ((nx - 1)
 /// columns of ny - 1) the largest difference between the four corners of each grid cell (both
-/// axes and both diagonals), @a cellMax the largest of them (meaningful when every value is finite). Returns whether
-/// every value is finite (x * 0 is NaN for NaN and infinities, 0 otherwise). Plain loops: each file's compiler
-/// vectorises them at its width.
+/// axes and both diagonals) and @a cellMax the largest of those (meaningful when every value is
+/// finite). Returns whether every value is finite (x * 0 is NaN for NaN and infinities, 0
+/// otherwise). The same floats at any vector width.
 template <class L>
 inline bool prepareTileBlock(const double* values, int nx, int ny, float* single, float* cells, float& cellMax)
 {
@@ -181,22 +181,27 @@ inline bool prepareTileBlock(const double* values, int nx, int ny, float* single
     const std::size_t n = std::size_t(nx) * ny;
     for (std::size_t k = 0; k < n; ++k) single[k] = float(values[k]);
     const int cy = ny - 1;
+    V largest{};
+    cellMax = 0.0f;
     for (int a = 0; a + 1 < nx; ++a) {
         const float* c0 = single + std::size_t(a) * ny;
         const float* c1 = c0 + ny;
         float* e = cells + std::size_t(a) * cy;
-        for (int b = 0; b < cy; ++b) {
+        int b = 0;
+        for (; b + L::kWidth <= cy; b += L::kWidth) {
+            const V p00 = L::load(c0 + b), p01 = L::load(c0 + b + 1), p10 = L::load(c1 + b), p11 = L::load(c1 + b + 1);
+            const V d = maxLanes(maxLanes(absLanes(p10 - p00), absLanes(p01 - p00)),
+                                 maxLanes(absLanes(p11 - p00), absLanes(p10 - p01)));
+            std::memcpy(e + b, &d, sizeof d);
+            largest = maxLanes(largest, d);
+        }
+        for (; b < cy; ++b) {
             const float d0 = std::abs(c1[b] - c0[b]), d1 = std::abs(c0[b + 1] - c0[b]);
             const float d2 = std::abs(c1[b + 1] - c0[b]), d3 = std::abs(c1[b] - c0[b + 1]);
             e[b] = std::max(std::max(d0, d1), std::max(d2, d3));
+            cellMax = std::max(cellMax, e[b]);
         }
     }
-    const std::size_t m = std::size_t(nx - 1) * cy;
-    V largest{};
-    std::size_t c = 0;
-    for (; c + L::kWidth <= m; c += L::kWidth) largest = maxLanes(largest, L::load(cells + c));
-    cellMax = 0.0f;
-    for (; c < m; ++c) cellMax = std::max(cellMax, cells[c]);
     for (int l = 0; l < L::kWidth; ++l) cellMax = std::max(cellMax, largest[l]);
     V poison[2] = {};
     std::size_t k = 0;
