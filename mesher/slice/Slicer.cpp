@@ -5,6 +5,10 @@
 #include <cstring>
 #include <limits>
 
+#if defined(__SSSE3__)
+#include <tmmintrin.h>
+#endif
+
 #include "mesher/slice/SliceTiles.h"
 #include "mesher/slice/SliceTilesAvx2.h"
 
@@ -107,6 +111,39 @@ void LayerImage::storedWindow(const Display& display, std::vector<std::uint8_t>&
     // words (a byte reversal where the stored column runs backwards), so stores are whole words;
     // the ragged right and bottom edges take the plain loop below.
     int iDone = 0, jDone = 0;
+#if defined(__SSSE3__)
+    // 16 x 16 blocks in SSE registers where available: four rounds of interleaving rows k and
+    // k + 8 rotate the bits (row, column) of each byte's place by one, so four transpose it.
+    if (display.portrait && (dj == 1 || dj == -1)) {
+        iDone = nx / 16 * 16;
+        jDone = ny / 16 * 16;
+        const __m128i reverse = _mm_setr_epi8(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
+        for (int jb = 0; jb < jDone; jb += 16)
+            for (int ib = 0; ib < iDone; ib += 16) {
+                __m128i x[16], t[16];
+                for (int k = 0; k < 16; ++k)
+                    x[k] = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&pixels[std::size_t(jb + k) * nx + ib]));
+                for (int round = 0; round < 2; ++round) {
+                    for (int k = 0; k < 8; ++k) {
+                        t[2 * k] = _mm_unpacklo_epi8(x[k], x[k + 8]);
+                        t[2 * k + 1] = _mm_unpackhi_epi8(x[k], x[k + 8]);
+                    }
+                    for (int k = 0; k < 8; ++k) {
+                        x[2 * k] = _mm_unpacklo_epi8(t[k], t[k + 8]);
+                        x[2 * k + 1] = _mm_unpackhi_epi8(t[k], t[k + 8]);
+                    }
+                }
+                // x[c] byte k: source row jb + k, column ib + c.
+                for (int c = 0; c < 16; ++c) {
+                    std::uint8_t* dst = out.data() + origin + di * (ib + c) + dj * jb;
+                    if (dj == 1)
+                        _mm_storeu_si128(reinterpret_cast<__m128i*>(dst), x[c]);
+                    else
+                        _mm_storeu_si128(reinterpret_cast<__m128i*>(dst - 15), _mm_shuffle_epi8(x[c], reverse));
+                }
+            }
+    }
+#else
     if (display.portrait && (dj == 1 || dj == -1)) {
         iDone = nx / 8 * 8;
         jDone = ny / 8 * 8;
@@ -126,6 +163,7 @@ void LayerImage::storedWindow(const Display& display, std::vector<std::uint8_t>&
                 }
             }
     }
+#endif
     auto copy = [&](int iBegin, int iEnd, int jBegin, int jEnd) {
         for (int j = jBegin; j < jEnd; ++j) {
             const std::uint8_t* src = &pixels[std::size_t(j) * nx];
