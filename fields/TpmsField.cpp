@@ -167,22 +167,57 @@ const TrigTerms<double>* cachedAxisTerms(int axis, double wave, double origin, d
     return run.terms;
 }
 
-/// A solid's level (LevelSolid::gridValues's expressions, per value).
+/// A solid's level (LevelSolid::gridValues's expressions, per value), with its kind for
+/// gyroidSlice.
 struct NoLevel {
+    static constexpr int kKind = 0;
+    double level = 0.0;
     double operator()(double v) const { return v; }
 };
 struct BelowLevel {
+    static constexpr int kKind = 1;
     double level;
     double operator()(double v) const { return v - level; }
 };
 struct BandLevel {
+    static constexpr int kKind = 2;
     double level;
     double operator()(double v) const { return std::abs(v) - level; }
 };
 struct AboveLevel {
+    static constexpr int kKind = 3;
     double level;
     double operator()(double v) const { return level - v; }
 };
+
+/// The gyroid on one slice (tpmsEquation's x.s y.c + y.s z.c + z.s x.c, the same operations in
+/// the same order) with a level of kind @a kind (0 none, then BelowLevel, BandLevel, AboveLevel),
+/// @a nx columns of @a ny values. The slicer's hot loop: built for AVX2 too (four doubles a
+/// vector) and picked at load time where the CPU has it; no FMA either way, so the same doubles.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void gyroidSlice(const TrigTerms<double>* tx, int nx, const double* ys, const double* yc, int ny, double zs,
+                 double zc, int kind, double level, double* out)
+{
+    for (int i = 0; i < nx; ++i, out += ny) {
+        const double xs = tx[i].s, xc = tx[i].c;
+        switch (kind) {
+            case 0:
+                for (int j = 0; j < ny; ++j) out[j] = xs * yc[j] + ys[j] * zc + zs * xc;
+                break;
+            case 1:
+                for (int j = 0; j < ny; ++j) out[j] = (xs * yc[j] + ys[j] * zc + zs * xc) - level;
+                break;
+            case 2:
+                for (int j = 0; j < ny; ++j) out[j] = std::abs(xs * yc[j] + ys[j] * zc + zs * xc) - level;
+                break;
+            default:
+                for (int j = 0; j < ny; ++j) out[j] = level - (xs * yc[j] + ys[j] * zc + zs * xc);
+                break;
+        }
+    }
+}
 }  // namespace
 
 void TpmsField::gridValues(const GridBatch& batch, std::span<double> out) const
@@ -231,6 +266,11 @@ void TpmsField::gridValuesMapped(const GridBatch& batch, std::span<double> out, 
     std::array<double, kMax> is, ic, is2, ic2;
     for (int k = 0; k < innerCount; ++k)
         is[k] = inner[k].s, ic[k] = inner[k].c, is2[k] = inner[k].s2, ic2[k] = inner[k].c2;
+    if (slices && mType == TpmsType::Gyroid) {
+        gyroidSlice(tx, batch.nx, is.data(), ic.data(), innerCount, tz[0].s, tz[0].c, Map::kKind, map.level,
+                    out.data());
+        return;
+    }
     auto fill = [&]<TpmsType kType>() {
         double* o = out.data();
         if (slices) {

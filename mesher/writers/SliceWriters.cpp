@@ -82,7 +82,7 @@ public:
         for (; n > kPart; p += kPart, n -= kPart) bytes(p, kPart);
         // Adler-32 run by run, reduced once at the end: m bytes c add m c to A and, to B, m A
         // plus c m (m + 1) / 2 (A < 2^33 and B < 2^57 for at most 2^24 bytes).
-        std::uint64_t a = mA, b = mB;
+        std::uint64_t a = mA, b = mB, sum = mSum;  // locals: the byte stores may alias members
         std::size_t k = 0;
         while (k < n) {
             if (p[k] != mRunByte) flushRun(), mRunByte = p[k];
@@ -111,10 +111,11 @@ public:
             const std::uint64_t m = e - k;
             b += m * a + mRunByte * (m * (m + 1) / 2);
             a += m * mRunByte;
-            mSum += m * mRunByte;
+            sum += m * mRunByte;
             mRun += m;
             k = e;
         }
+        mSum = sum;
         mA = std::uint32_t(a % kBase);
         mB = std::uint32_t(b % kBase);
     }
