@@ -17,7 +17,21 @@ peak 82 MB (28 MB of it the kept period); every layer computed (`reuse: off`) in
 2.16 s (36x), 132 MB there, 53-58 MB run alone. Whole tiles eight lanes at a time where the CPU
 has AVX2 (same bytes): single-thread CPU with every layer computed 4.44 -> 3.97 s (best of six
 alternating runs each); side by side in a busier run (reference 89.5 s): 0.90 s (99x), every
-layer computed 2.63 s (34x), peak 82 MB."""
+layer computed 2.63 s (34x), peak 82 MB.
+Every layer computed (`reuse: off`, issue 17), profiled: whole tiles 26 %, the tiles' per-tile
+overhead 13 %, the block pass (floats, cells) 13 %, PNG 9 %, TPMS and its level 10 %, libm 5 %,
+the portrait transpose 5 %. Whole tiles straight to the tile pass and first against the block's
+largest cell lane by lane, edge coverage on packed lanes, the block pass in AVX2, the sheet's
+level in the TPMS pass with per-thread axis terms, the gyroid slice loop also built for AVX2, the
+PNG run end from a word's first differing byte (and the exposed sum from the encoder), 16 x 16
+SSE transposes: the same bytes (bench/compare_slices.py, bench/byte_identity.py). Alternating
+old/new at load average 9-11 on 2 cores (other workers building): single-thread CPU 6.37 -> 3.96 s
+(best of 7; median pairwise ratio 0.63), both cores 9.78 -> 6.99 s wall (best of 9; median
+pairwise ratio 0.68), peak 57-60 -> 62-66 MB. Projected on a quiet machine (2.16 s before):
+about 1.5 s (1.47-1.53 s), 49-61x against the reference's 75-90 s; not yet measured quiet.
+The whole workload right after, load average 9.6 falling to 6.1 (PrusaSlicer alone 343.7 s, peak
+5.9 GB): reference 384.3 s; voxlat 3.71 s (104x), every layer computed 9.69 s (40x; 7.77 s best
+of three with checks, 8.06 s without), peak 85 MB and 132 MB; area errors as before."""
 import json
 import os
 import shutil

@@ -1,7 +1,11 @@
 #include "fields/TpmsField.h"
 
+#include "fields/LevelSolid.h"
+
 #include <array>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <numbers>
 #include <stdexcept>
 
@@ -104,11 +108,22 @@ void axisTerms(double wave, double origin, double spacing, int n, TrigTerms<doub
         for (int i = 0; i < n; ++i) out[i] = trigTerms(wave * (origin + i * spacing));
         return;
     }
-    double so[kStride], co[kStride];
-    for (int k = 0; k < kStride; ++k) {
-        so[k] = std::sin(wave * (k * spacing));
-        co[k] = std::cos(wave * (k * spacing));
+    // The offsets' sines and cosines depend on the spacing only: kept per thread for the next
+    // call (a slicer asks for the same spacing block after block).
+    struct Offsets {
+        double wave = 0.0, spacing = 0.0, so[kStride] = {}, co[kStride] = {};
+    };
+    thread_local Offsets offsets;
+    if (offsets.wave != wave || offsets.spacing != spacing || offsets.co[0] != 1.0) {
+        for (int k = 0; k < kStride; ++k) {
+            offsets.so[k] = std::sin(wave * (k * spacing));
+            offsets.co[k] = std::cos(wave * (k * spacing));
+        }
+        offsets.wave = wave;
+        offsets.spacing = spacing;
     }
+    const double* so = offsets.so;
+    const double* co = offsets.co;
     for (int i = 0; i < n; i += kStride) {
         const double angle = wave * (origin + i * spacing), sb = std::sin(angle), cb = std::cos(angle);
         out[i] = termsFrom(sb, cb);
@@ -116,54 +131,171 @@ void axisTerms(double wave, double origin, double spacing, int n, TrigTerms<doub
             out[i + k] = termsFrom(sb * co[k] + cb * so[k], cb * co[k] - sb * so[k]);
     }
 }
+
+/// axisTerms through a per-thread cache, by axis (0 x, 1 y, 2 z): a slicer's blocks along a row
+/// share their y terms, a whole layer its z term, and every layer the x terms of the same few
+/// block columns, so most calls find them here (x keeps 32 runs by their origin, y and z the
+/// last one). The terms depend on the arguments only, never on which thread made them.
+const TrigTerms<double>* cachedAxisTerms(int axis, double wave, double origin, double spacing, int n,
+                                         TrigTerms<double>* scratch)
+{
+    constexpr int kMaxTerms = 128, kXRuns = 32;
+    struct Run {
+        double wave = 0.0, origin = 0.0, spacing = 0.0;
+        int n = -1;
+        TrigTerms<double> terms[kMaxTerms];
+    };
+    thread_local std::array<Run, kXRuns + 2> runs;
+    if (n > kMaxTerms) {
+        axisTerms(wave, origin, spacing, n, scratch);
+        return scratch;
+    }
+    std::size_t slot = std::size_t(kXRuns + axis - 1);
+    if (axis == 0) {
+        std::uint64_t bits;
+        std::memcpy(&bits, &origin, sizeof bits);
+        slot = std::size_t((bits * 0x9E3779B97F4A7C15ull) >> 59);  // 5 bits: one of kXRuns
+    }
+    Run& run = runs[slot];
+    if (run.n != n || run.wave != wave || run.origin != origin || run.spacing != spacing) {
+        axisTerms(wave, origin, spacing, n, run.terms);
+        run.wave = wave;
+        run.origin = origin;
+        run.spacing = spacing;
+        run.n = n;
+    }
+    return run.terms;
+}
+
+/// A solid's level (LevelSolid::gridValues's expressions, per value), with its kind for
+/// gyroidSlice.
+struct NoLevel {
+    static constexpr int kKind = 0;
+    double level = 0.0;
+    double operator()(double v) const { return v; }
+};
+struct BelowLevel {
+    static constexpr int kKind = 1;
+    double level;
+    double operator()(double v) const { return v - level; }
+};
+struct BandLevel {
+    static constexpr int kKind = 2;
+    double level;
+    double operator()(double v) const { return std::abs(v) - level; }
+};
+struct AboveLevel {
+    static constexpr int kKind = 3;
+    double level;
+    double operator()(double v) const { return level - v; }
+};
+
+/// The gyroid on one slice (tpmsEquation's x.s y.c + y.s z.c + z.s x.c, the same operations in
+/// the same order) with a level of kind @a kind (0 none, then BelowLevel, BandLevel, AboveLevel),
+/// @a nx columns of @a ny values. The slicer's hot loop: built for AVX2 too (four doubles a
+/// vector) and picked at load time where the CPU has it; no FMA either way, so the same doubles.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void gyroidSlice(const TrigTerms<double>* tx, int nx, const double* ys, const double* yc, int ny, double zs,
+                 double zc, int kind, double level, double* out)
+{
+    for (int i = 0; i < nx; ++i, out += ny) {
+        const double xs = tx[i].s, xc = tx[i].c;
+        switch (kind) {
+            case 0:
+                for (int j = 0; j < ny; ++j) out[j] = xs * yc[j] + ys[j] * zc + zs * xc;
+                break;
+            case 1:
+                for (int j = 0; j < ny; ++j) out[j] = (xs * yc[j] + ys[j] * zc + zs * xc) - level;
+                break;
+            case 2:
+                for (int j = 0; j < ny; ++j) out[j] = std::abs(xs * yc[j] + ys[j] * zc + zs * xc) - level;
+                break;
+            default:
+                for (int j = 0; j < ny; ++j) out[j] = level - (xs * yc[j] + ys[j] * zc + zs * xc);
+                break;
+        }
+    }
+}
 }  // namespace
 
 void TpmsField::gridValues(const GridBatch& batch, std::span<double> out) const
 {
+    gridValuesMapped(batch, out, NoLevel{});
+}
+
+void TpmsField::gridValuesAtLevel(const GridBatch& batch, std::span<double> out, SolidSide side, double level) const
+{
+    switch (side) {
+        case SolidSide::Below:
+            gridValuesMapped(batch, out, BelowLevel{level});
+            return;
+        case SolidSide::Band:
+            gridValuesMapped(batch, out, BandLevel{level});
+            return;
+        case SolidSide::Above:
+            gridValuesMapped(batch, out, AboveLevel{level});
+            return;
+    }
+}
+
+template <class Map>
+void TpmsField::gridValuesMapped(const GridBatch& batch, std::span<double> out, const Map& map) const
+{
     constexpr int kMax = 128;  // a slicer block with its halo is 66 wide
     if (batch.nx > kMax || batch.ny > kMax || batch.nz > kMax) {
         FieldNode::gridValues(batch, out);
+        for (double& v : out) v = map(v);
         return;
     }
-    std::array<TrigTerms<double>, kMax> tx, ty, tz;
-    axisTerms(mWave[0], batch.origin[0], batch.spacing[0], batch.nx, tx.data());
-    axisTerms(mWave[1], batch.origin[1], batch.spacing[1], batch.ny, ty.data());
-    axisTerms(mWave[2], batch.origin[2], batch.spacing[2], batch.nz, tz.data());
+    std::array<TrigTerms<double>, kMax> scratch;
+    const TrigTerms<double>* tx =
+        cachedAxisTerms(0, mWave[0], batch.origin[0], batch.spacing[0], batch.nx, scratch.data());
+    const TrigTerms<double>* ty =
+        cachedAxisTerms(1, mWave[1], batch.origin[1], batch.spacing[1], batch.ny, scratch.data());
+    const TrigTerms<double>* tz =
+        cachedAxisTerms(2, mWave[2], batch.origin[2], batch.spacing[2], batch.nz, scratch.data());
     // The surface type is fixed per call: one loop nest per type lets the compiler inline the
     // equation (no switch per point); a single z (slices) drops the innermost loop.
     // The innermost axis's terms as four arrays (structure of arrays), so the inner loop reads
     // each term contiguously and vectorises.
     const bool slices = batch.nz == 1;
-    const TrigTerms<double>* inner = slices ? ty.data() : tz.data();
+    const TrigTerms<double>* inner = slices ? ty : tz;
     const int innerCount = slices ? batch.ny : batch.nz;
     std::array<double, kMax> is, ic, is2, ic2;
     for (int k = 0; k < innerCount; ++k)
         is[k] = inner[k].s, ic[k] = inner[k].c, is2[k] = inner[k].s2, ic2[k] = inner[k].c2;
+    if (slices && mType == TpmsType::Gyroid) {
+        gyroidSlice(tx, batch.nx, is.data(), ic.data(), innerCount, tz[0].s, tz[0].c, Map::kKind, map.level,
+                    out.data());
+        return;
+    }
     auto fill = [&]<TpmsType kType>() {
         double* o = out.data();
         if (slices) {
             for (int i = 0; i < batch.nx; ++i, o += innerCount)
                 for (int j = 0; j < innerCount; ++j)
-                    o[j] = tpmsEquation(kType, tx[i], TrigTerms<double>{is[j], ic[j], is2[j], ic2[j]}, tz[0]);
+                    o[j] = map(tpmsEquation(kType, tx[i], TrigTerms<double>{is[j], ic[j], is2[j], ic2[j]}, tz[0]));
             return;
         }
         for (int i = 0; i < batch.nx; ++i)
             for (int j = 0; j < batch.ny; ++j, o += innerCount)
                 for (int k = 0; k < innerCount; ++k)
-                    o[k] = tpmsEquation(kType, tx[i], ty[j], TrigTerms<double>{is[k], ic[k], is2[k], ic2[k]});
+                    o[k] = map(tpmsEquation(kType, tx[i], ty[j], TrigTerms<double>{is[k], ic[k], is2[k], ic2[k]}));
     };
     // clang-format misreads this switch after the template lambda and would spread it over 27 lines.
     // clang-format off
     switch (mType) {
-    case TpmsType::Gyroid: fill.operator()<TpmsType::Gyroid>(); break;
-    case TpmsType::SchwarzP: fill.operator()<TpmsType::SchwarzP>(); break;
-    case TpmsType::SchwarzD: fill.operator()<TpmsType::SchwarzD>(); break;
-    case TpmsType::IWP: fill.operator()<TpmsType::IWP>(); break;
-    case TpmsType::Neovius: fill.operator()<TpmsType::Neovius>(); break;
-    case TpmsType::FischerKochS: fill.operator()<TpmsType::FischerKochS>(); break;
-    case TpmsType::Lidinoid: fill.operator()<TpmsType::Lidinoid>(); break;
-    case TpmsType::SplitP: fill.operator()<TpmsType::SplitP>(); break;
-    case TpmsType::FRD: fill.operator()<TpmsType::FRD>(); break;
+    case TpmsType::Gyroid: fill.template operator()<TpmsType::Gyroid>(); break;
+    case TpmsType::SchwarzP: fill.template operator()<TpmsType::SchwarzP>(); break;
+    case TpmsType::SchwarzD: fill.template operator()<TpmsType::SchwarzD>(); break;
+    case TpmsType::IWP: fill.template operator()<TpmsType::IWP>(); break;
+    case TpmsType::Neovius: fill.template operator()<TpmsType::Neovius>(); break;
+    case TpmsType::FischerKochS: fill.template operator()<TpmsType::FischerKochS>(); break;
+    case TpmsType::Lidinoid: fill.template operator()<TpmsType::Lidinoid>(); break;
+    case TpmsType::SplitP: fill.template operator()<TpmsType::SplitP>(); break;
+    case TpmsType::FRD: fill.template operator()<TpmsType::FRD>(); break;
     }
     // clang-format on
 }

@@ -18,6 +18,7 @@
 #include <cmath>
 #include <numbers>
 #include <random>
+#include <thread>
 
 using namespace voxlat;
 using namespace voxlat::test;
@@ -171,6 +172,61 @@ TEST(Tpms, GridBatchFastPathEqualsPointPath)
         f.gridValues(batch, fast);
         f.FieldNode::gridValues(batch, slow);
         for (std::size_t n = 0; n < fast.size(); ++n) ASSERT_EQ(fast[n], slow[n]);
+    }
+}
+
+TEST(Tpms, LevelInOnePassAndCachedAxisTermsGiveTheSameDoubles)
+{
+    // A sheet or network of a TPMS applies its level as the TPMS makes its values, and the TPMS
+    // keeps the last axis terms per thread; both must give exactly the doubles of the plain
+    // two-pass evaluation on a fresh thread, for slices (the slicer's 66 x 66 batches, the
+    // gyroid's own loop) and for volumes, whatever was evaluated before.
+    auto evaluate = [](const FieldNode& f, const GridBatch& batch) {
+        std::vector<double> out(batch.size());
+        f.gridValues(batch, out);
+        return out;
+    };
+    auto onFreshThread = [&](const FieldNode& f, const GridBatch& batch) {
+        std::vector<double> out;
+        std::thread([&] { out = evaluate(f, batch); }).join();
+        return out;
+    };
+    auto apply = [](std::vector<double> v, SolidSide side, double level) {
+        for (double& x : v)
+            x = side == SolidSide::Below ? x - level : side == SolidSide::Band ? std::abs(x) - level : level - x;
+        return v;
+    };
+    std::vector<GridBatch> batches;
+    for (int k = 0; k < 4; ++k) {
+        GridBatch slice;
+        slice.origin = Vec3d(-3.05 + 3.2 * (k % 2), 1.15 + 3.2 * (k / 2), 7.25);
+        slice.spacing = Vec3d(0.05, 0.05, 1.0);
+        slice.nx = 66;
+        slice.ny = 66;
+        slice.nz = 1;
+        batches.push_back(slice);
+    }
+    GridBatch volume;
+    volume.origin = Vec3d(0.3, -0.7, 1.1);
+    volume.spacing = Vec3d(0.1, 0.2, 0.15);
+    volume.nx = 20;
+    volume.ny = 17;
+    volume.nz = 18;
+    batches.push_back(volume);
+    for (TpmsType type : kAllTpms) {
+        auto tpms = std::make_shared<TpmsField>(type, Vec3d(5, 7, 9));
+        for (SolidSide side : {SolidSide::Below, SolidSide::Band, SolidSide::Above}) {
+            const LevelSolid solid(tpms, side, 0.3);
+            // Twice over the batches, so the second round finds the first round's terms.
+            for (int round = 0; round < 2; ++round)
+                for (const GridBatch& batch : batches) {
+                    SCOPED_TRACE(std::string(tpmsName(type)) + " side " + std::to_string(int(side)) + " round " +
+                                 std::to_string(round));
+                    const std::vector<double> raw = onFreshThread(*tpms, batch);
+                    ASSERT_TRUE(evaluate(*tpms, batch) == raw);
+                    ASSERT_TRUE(evaluate(solid, batch) == apply(raw, side, 0.3));
+                }
+        }
     }
 }
 

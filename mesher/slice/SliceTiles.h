@@ -60,6 +60,14 @@ struct QuadLanes : LanesBase<Quad, QuadMask> {
         return unsigned(m[0] & 1) | unsigned(m[1] & 1) << 1 | unsigned(m[2] & 1) << 2 | unsigned(m[3] & 1) << 3;
 #endif
     }
+    /// Writes the lanes of @a v whose bit is set in @a mask to @a out, in order (whole vector stored).
+    static void compress(V v, unsigned mask, float* out)
+    {
+        for (int k = 0; k < kWidth; ++k) {
+            *out = v[k];
+            out += (mask >> k) & 1u;
+        }
+    }
     static V sqrt(V v)
     {
 #if defined(__SSE2__)
@@ -160,6 +168,52 @@ inline typename L::V edgeCoverage(typename L::V f, typename L::V gx, typename L:
     return minLanes(maxLanes(coverage, zero), one);
 }
 
+/// The slicer's pass over a block's grid of values (@a nx columns of @a ny, column-major) before
+/// its tiles are decided: @a single gets the values in single precision, @a cells ((nx - 1)
+/// columns of ny - 1) the largest difference between the four corners of each grid cell (both
+/// axes and both diagonals) and @a cellMax the largest of those (meaningful when every value is
+/// finite). Returns whether every value is finite (x * 0 is NaN for NaN and infinities, 0
+/// otherwise). The same floats at any vector width.
+template <class L>
+inline bool prepareTileBlock(const double* values, int nx, int ny, float* single, float* cells, float& cellMax)
+{
+    using V = typename L::V;
+    const std::size_t n = std::size_t(nx) * ny;
+    for (std::size_t k = 0; k < n; ++k) single[k] = float(values[k]);
+    const int cy = ny - 1;
+    V largest{};
+    cellMax = 0.0f;
+    for (int a = 0; a + 1 < nx; ++a) {
+        const float* c0 = single + std::size_t(a) * ny;
+        const float* c1 = c0 + ny;
+        float* e = cells + std::size_t(a) * cy;
+        int b = 0;
+        for (; b + L::kWidth <= cy; b += L::kWidth) {
+            const V p00 = L::load(c0 + b), p01 = L::load(c0 + b + 1), p10 = L::load(c1 + b), p11 = L::load(c1 + b + 1);
+            const V d = maxLanes(maxLanes(absLanes(p10 - p00), absLanes(p01 - p00)),
+                                 maxLanes(absLanes(p11 - p00), absLanes(p10 - p01)));
+            std::memcpy(e + b, &d, sizeof d);
+            largest = maxLanes(largest, d);
+        }
+        for (; b < cy; ++b) {
+            const float d0 = std::abs(c1[b] - c0[b]), d1 = std::abs(c0[b + 1] - c0[b]);
+            const float d2 = std::abs(c1[b + 1] - c0[b]), d3 = std::abs(c1[b] - c0[b + 1]);
+            e[b] = std::max(std::max(d0, d1), std::max(d2, d3));
+            cellMax = std::max(cellMax, e[b]);
+        }
+    }
+    for (int l = 0; l < L::kWidth; ++l) cellMax = std::max(cellMax, largest[l]);
+    V poison[2] = {};
+    std::size_t k = 0;
+    for (; k + 2 * L::kWidth <= n; k += 2 * L::kWidth)
+        for (int q = 0; q < 2; ++q) poison[q] += L::load(single + k + L::kWidth * q) * 0.0f;
+    float rest = 0.0f;
+    for (; k < n; ++k) rest += single[k] * 0.0f;
+    const V sum = poison[0] + poison[1];
+    for (int l = 0; l < L::kWidth; ++l) rest += sum[l];
+    return rest == 0.0f;
+}
+
 /// Decides the pixels of a kLanes x kLanes tile that lies wholly inside the part's box as
 /// Slicer::edgeTile's per-pixel tests would, L::kWidth lanes at a time. A pixel is decided when it
 /// is sure (|f| above the largest corner difference of its four cells: no sign change and no
@@ -172,10 +226,12 @@ inline typename L::V edgeCoverage(typename L::V f, typename L::V gx, typename L:
 /// the coverage of the linearised edge with its curvature correction (edgeCoverage); only pixels
 /// where the field bends too much for that (sub-sampled) are listed. @a values and @a cells as in
 /// edgeTile, in single precision; every value must be finite (NaN and infinities take the general
-/// path). Returns the number of pixels decided as sure plus 65536 times the sure inside ones.
+/// path). @a blockCell is at least every cell of the tile (the largest of its block; infinity
+/// when not known). Returns the number of pixels decided as sure plus 65536 times the sure inside ones.
 template <class L>
-inline int decideFullTile(const float* values, int stride, const float* cells, float linearTolerance, bool greyEdges,
-                          std::uint8_t* pixels, std::size_t rowStride, std::uint16_t* slowList, int& slowCount)
+inline int decideFullTile(const float* values, int stride, const float* cells, float blockCell, float linearTolerance,
+                          bool greyEdges, std::uint8_t* pixels, std::size_t rowStride, std::uint16_t* slowList,
+                          int& slowCount)
 {
     using V = typename L::V;
     using M = typename L::M;
@@ -188,6 +244,19 @@ inline int decideFullTile(const float* values, int stride, const float* cells, f
         for (int q = 0; q < kVectors; ++q) {
             lo[q] = minLanes(lo[q], L::load(f + L::kWidth * q));
             hi[q] = maxLanes(hi[q], L::load(f + L::kWidth * q));
+        }
+    }
+    // Against @a blockCell first, lane by lane (no reductions across lanes): a tile whose values
+    // all clear it clears its own cells, which are no larger, and is decided as below.
+    {
+        V lowest = lo[0], highest = hi[0];
+        for (int q = 1; q < kVectors; ++q) lowest = minLanes(lowest, lo[q]), highest = maxLanes(highest, hi[q]);
+        constexpr unsigned kAll = (1u << L::kWidth) - 1;
+        const bool outside = L::bits(lowest > blockCell) == kAll;
+        if (outside || L::bits(highest < -blockCell) == kAll) {
+            const std::uint8_t grey = outside ? 0 : 255;
+            for (int b = 0; b < kLanes; ++b) std::memset(pixels + std::size_t(b) * rowStride, grey, kLanes);
+            return kLanes * kLanes * (grey ? 65537 : 1);
         }
     }
     float cell = 0.0f;
@@ -211,9 +280,14 @@ inline int decideFullTile(const float* values, int stride, const float* cells, f
 
     // The slow path's margin of 1e-9 is below float's resolution: 1e-6 keeps its intent.
     const float margin = 0.5f * (1.0f + 1e-6f);
+    constexpr unsigned kAllLanes = (1u << L::kWidth) - 1;
     std::uint64_t insideBits = 0;  // byte a, bit b: pixel (a, b) decided inside
     int decided = 0, inside = 0, edgeCount = 0;
-    std::uint8_t edgeIndex[kLanes * kLanes], edgeGrey[kLanes * kLanes];  // grey edge pixels, a * kLanes + b
+    std::uint8_t edgeIndex[kLanes * kLanes];  // grey edge pixels, a * kLanes + b
+    // Their edgeCoverage inputs, packed (a vector's worth of slack: compress writes whole vectors).
+    constexpr int kEdgeRoom = kLanes * kLanes + L::kWidth;
+    float edgeF[kEdgeRoom], edgeGx[kEdgeRoom], edgeGy[kEdgeRoom], edgeDxx[kEdgeRoom], edgeDyy[kEdgeRoom],
+        edgeDxy[kEdgeRoom];
     for (int a = 0; a < kLanes; ++a) {
         const float* left = values + std::size_t(a) * stride + 1;  // left[b] = v(a, b + 1)
         const float* centre = left + stride;
@@ -223,10 +297,16 @@ inline int decideFullTile(const float* values, int stride, const float* cells, f
         unsigned open = 0, in = 0, covered = 0;
         for (int q = 0; q < kVectors; ++q) {
             const int b = L::kWidth * q;
-            const V f = L::load(centre + b), up = L::load(centre + b + 1), down = L::load(centre + b - 1);
-            const V l = L::load(left + b), r = L::load(right + b);
+            const V f = L::load(centre + b);
             const V bound = maxLanes(maxLanes(L::load(c0 + b), L::load(c0 + b + 1)),
                                      maxLanes(L::load(c1 + b), L::load(c1 + b + 1)));
+            const M boundSure = absLanes(f) > bound;
+            if (L::bits(boundSure) == kAllLanes) {  // every pixel sure: no derivatives needed
+                in |= L::bits(f < 0.0f) << b;
+                continue;
+            }
+            const V up = L::load(centre + b + 1), down = L::load(centre + b - 1);
+            const V l = L::load(left + b), r = L::load(right + b);
             const V gx = 0.5f * (r - l), gy = 0.5f * (up - down);
             const V dxx = r + l - 2.0f * f, dyy = up + down - 2.0f * f;
             const V dxy = 0.25f * (L::load(right + b + 1) - L::load(right + b - 1) - L::load(left + b + 1) +
@@ -235,7 +315,7 @@ inline int decideFullTile(const float* values, int stride, const float* cells, f
             const V bend = absLanes(dxx) + absLanes(dyy) + 2.0f * absLanes(dxy);
             const M linear = bend <= linearTolerance * gradient;
             const M far = linear & (absLanes(f) > margin * gradient);
-            M sure = (absLanes(f) > bound) | far;
+            M sure = boundSure | far;
             if (greyEdges && L::bits(~sure) != 0) {
                 // The 3x3 test: no sign change and |f| above every difference to a neighbour.
                 const V lu = L::load(left + b + 1), ld = L::load(left + b - 1);
@@ -251,14 +331,15 @@ inline int decideFullTile(const float* values, int stride, const float* cells, f
                 sure |= sameSign & (absLanes(f) > maxDiff);
                 const unsigned grey = L::bits(~sure & linear);
                 if (grey != 0) {
-                    const V coverage = edgeCoverage<L>(f, gx, gy, dxx, dyy, dxy);
-                    for (unsigned m = grey; m != 0; m &= m - 1) {
-                        const int k = __builtin_ctz(m);
-                        edgeIndex[edgeCount] = std::uint8_t(a * kLanes + b + k);
-                        // coverage >= 0, so adding 1/2 rounds to nearest.
-                        edgeGrey[edgeCount++] =
-                            std::uint8_t(255.0f * coverage[k] + 0.5f);  // NOLINT(bugprone-incorrect-roundings)
-                    }
+                    // Packed for edgeCoverage below, so its vectors are full (a row holds a few).
+                    L::compress(f, grey, edgeF + edgeCount);
+                    L::compress(gx, grey, edgeGx + edgeCount);
+                    L::compress(gy, grey, edgeGy + edgeCount);
+                    L::compress(dxx, grey, edgeDxx + edgeCount);
+                    L::compress(dyy, grey, edgeDyy + edgeCount);
+                    L::compress(dxy, grey, edgeDxy + edgeCount);
+                    for (unsigned m = grey; m != 0; m &= m - 1)
+                        edgeIndex[edgeCount++] = std::uint8_t(a * kLanes + b + __builtin_ctz(m));
                 }
                 covered |= grey << b;
             }
@@ -276,8 +357,18 @@ inline int decideFullTile(const float* values, int stride, const float* cells, f
         const std::uint64_t row = bytesOfBits(unsigned(rowBits >> (8 * b)) & 0xFF);
         std::memcpy(pixels + std::size_t(b) * rowStride, &row, kLanes);
     }
-    for (int e = 0; e < edgeCount; ++e)
-        pixels[std::size_t(edgeIndex[e] % kLanes) * rowStride + edgeIndex[e] / kLanes] = edgeGrey[e];
+    constexpr float zeros[L::kWidth] = {};
+    // Zeros past the last one, so the last vector's spare lanes compute a harmless coverage (dropped).
+    for (float* packed : {edgeF, edgeGx, edgeGy, edgeDxx, edgeDyy, edgeDxy})
+        std::memcpy(packed + edgeCount, zeros, sizeof zeros);
+    for (int e = 0; e < edgeCount; e += L::kWidth) {
+        const V coverage = edgeCoverage<L>(L::load(edgeF + e), L::load(edgeGx + e), L::load(edgeGy + e),
+                                           L::load(edgeDxx + e), L::load(edgeDyy + e), L::load(edgeDxy + e));
+        for (int k = 0; k < L::kWidth && e + k < edgeCount; ++k)
+            // coverage >= 0, so adding 1/2 rounds to nearest.
+            pixels[std::size_t(edgeIndex[e + k] % kLanes) * rowStride + edgeIndex[e + k] / kLanes] =
+                std::uint8_t(255.0f * coverage[k] + 0.5f);  // NOLINT(bugprone-incorrect-roundings)
+    }
     return decided + 65536 * inside;
 }
 

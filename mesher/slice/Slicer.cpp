@@ -5,6 +5,10 @@
 #include <cstring>
 #include <limits>
 
+#if defined(__SSSE3__)
+#include <tmmintrin.h>
+#endif
+
 #include "mesher/slice/SliceTiles.h"
 #include "mesher/slice/SliceTilesAvx2.h"
 
@@ -34,19 +38,6 @@ bool avx2TilesAvailable()
 #else
     return false;
 #endif
-}
-
-/// True when every value is finite (x * 0 is NaN for NaN and infinities, 0 otherwise).
-bool allFinite(const float* v, std::size_t n)
-{
-    Quad poison[2] = {};
-    std::size_t k = 0;
-    for (; k + 8 <= n; k += 8)
-        for (int q = 0; q < 2; ++q) poison[q] += QuadLanes::load(v + k + 4 * q) * 0.0f;
-    float rest = 0.0f;
-    for (; k < n; ++k) rest += v[k] * 0.0f;
-    const Quad sum = poison[0] + poison[1];
-    return sum[0] == 0.0f && sum[1] == 0.0f && sum[2] == 0.0f && sum[3] == 0.0f && rest == 0.0f;
 }
 
 }  // namespace
@@ -96,7 +87,7 @@ void LayerImage::storedWindow(const Display& display, std::vector<std::uint8_t>&
 {
     w = display.portrait ? ny : nx;
     h = display.portrait ? nx : ny;
-    out.assign(std::size_t(w) * h, 0);
+    out.resize(std::size_t(w) * h);  // every byte is written below (no clearing)
     if (nx == 0 || ny == 0) return;
     // Stored corners of the window's first and last pixels give its placement and directions.
     const bool mx = display.portrait ? !display.mirrorX : display.mirrorX, my = !display.mirrorY;
@@ -120,6 +111,39 @@ void LayerImage::storedWindow(const Display& display, std::vector<std::uint8_t>&
     // words (a byte reversal where the stored column runs backwards), so stores are whole words;
     // the ragged right and bottom edges take the plain loop below.
     int iDone = 0, jDone = 0;
+#if defined(__SSSE3__)
+    // 16 x 16 blocks in SSE registers where available: four rounds of interleaving rows k and
+    // k + 8 rotate the bits (row, column) of each byte's place by one, so four transpose it.
+    if (display.portrait && (dj == 1 || dj == -1)) {
+        iDone = nx / 16 * 16;
+        jDone = ny / 16 * 16;
+        const __m128i reverse = _mm_setr_epi8(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
+        for (int jb = 0; jb < jDone; jb += 16)
+            for (int ib = 0; ib < iDone; ib += 16) {
+                __m128i x[16], t[16];
+                for (int k = 0; k < 16; ++k)
+                    x[k] = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&pixels[std::size_t(jb + k) * nx + ib]));
+                for (int round = 0; round < 2; ++round) {
+                    for (int k = 0; k < 8; ++k) {
+                        t[2 * k] = _mm_unpacklo_epi8(x[k], x[k + 8]);
+                        t[2 * k + 1] = _mm_unpackhi_epi8(x[k], x[k + 8]);
+                    }
+                    for (int k = 0; k < 8; ++k) {
+                        x[2 * k] = _mm_unpacklo_epi8(t[k], t[k + 8]);
+                        x[2 * k + 1] = _mm_unpackhi_epi8(t[k], t[k + 8]);
+                    }
+                }
+                // x[c] byte k: source row jb + k, column ib + c.
+                for (int c = 0; c < 16; ++c) {
+                    std::uint8_t* dst = out.data() + origin + di * (ib + c) + dj * jb;
+                    if (dj == 1)
+                        _mm_storeu_si128(reinterpret_cast<__m128i*>(dst), x[c]);
+                    else
+                        _mm_storeu_si128(reinterpret_cast<__m128i*>(dst - 15), _mm_shuffle_epi8(x[c], reverse));
+                }
+            }
+    }
+#else
     if (display.portrait && (dj == 1 || dj == -1)) {
         iDone = nx / 8 * 8;
         jDone = ny / 8 * 8;
@@ -139,6 +163,7 @@ void LayerImage::storedWindow(const Display& display, std::vector<std::uint8_t>&
                 }
             }
     }
+#endif
     auto copy = [&](int iBegin, int iEnd, int jBegin, int jEnd) {
         for (int j = jBegin; j < jEnd; ++j) {
             const std::uint8_t* src = &pixels[std::size_t(j) * nx];
@@ -207,6 +232,27 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     std::vector<float> single, cells;  // the values in single precision and their cells, for the tile tests
     RasterCounts counts;
     int quartersTried = 0, quartersCulled = 0;
+    // edgeTile's slack: a pixel that overhangs the part's box by a rounding error counts as whole.
+    const double slackX = 1e-9 * px, slackY = 1e-9 * py;
+    const bool greyEdges = mOptions.supersample > 0 && mOptions.gamma == 1.0;
+    const float tolerance = float(mOptions.linearTolerance);
+    auto decideWholeTile = [&](const float* single, int stride, const float* cells, float blockCell,
+                               std::uint8_t* pixels, std::uint16_t* slowList, int& slowCount) {
+#if defined(VOXLAT_AVX2_TILES)
+        if (mWideTiles)
+            return decideFullTileAvx2(single, stride, cells, blockCell, tolerance, greyEdges, pixels, std::size_t(mNx),
+                                      slowList, slowCount);
+#endif
+        return decideFullTile<QuadLanes>(single, stride, cells, blockCell, tolerance, greyEdges, pixels,
+                                         std::size_t(mNx), slowList, slowCount);
+    };
+    // The block pass before the tile tests: single precision, cell differences, finiteness.
+    auto prepareBlock = [&](const double* values, int gx, int gy, float* single, float* cells, float& cellMax) {
+#if defined(VOXLAT_AVX2_TILES)
+        if (mWideTiles) return prepareBlockAvx2(values, gx, gy, single, cells, cellMax);
+#endif
+        return prepareTileBlock<QuadLanes>(values, gx, gy, single, cells, cellMax);
+    };
 
     // Classifies the pixel box [i, i + n) x [j, j + m) of the window: -1 inside, +1 outside, 0 both.
     auto classify = [&](int i, int j, int n, int m) {
@@ -244,30 +290,51 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         values.resize(grid.size());
         mField.gridValues(grid, values);
         counts.pixelsEvaluated += std::uint64_t(bnx) * bny;
-        // The largest difference between the four corners of each grid cell (both axes and both
-        // diagonals), for edgeTile's fast pass; written to vectorize.
+        // Single precision and the largest difference between the four corners of each grid cell
+        // (both axes and both diagonals), for the tile passes.
         const int cy = grid.ny - 1;
         single.resize(values.size());
-        for (std::size_t k = 0; k < values.size(); ++k) single[k] = float(values[k]);
         cells.resize(std::size_t(grid.nx - 1) * cy);
-        for (int a = 0; a + 1 < grid.nx; ++a) {
-            const float* c0 = &single[std::size_t(a) * grid.ny];
-            const float* c1 = c0 + grid.ny;
-            float* e = &cells[std::size_t(a) * cy];
-            for (int b = 0; b < cy; ++b) {
-                const float d0 = std::abs(c1[b] - c0[b]), d1 = std::abs(c0[b + 1] - c0[b]);
-                const float d2 = std::abs(c1[b + 1] - c0[b]), d3 = std::abs(c1[b] - c0[b + 1]);
-                e[b] = std::max(std::max(d0, d1), std::max(d2, d3));
-            }
+        float blockCell = 0.0f;
+        const bool finite = prepareBlock(values.data(), grid.nx, grid.ny, single.data(), cells.data(), blockCell);
+        // Whole 8 x 8 tiles within the part's box go straight to the tile pass; edgeTile (which
+        // repeats it) only takes the others and those with pixels to sub-sample. The same tests
+        // as edgeTile's, per row and column of the block instead of per tile.
+        bool rowIn[64], columnIn[64];
+        const bool listed = bnx <= 64 && bny <= 64;
+        for (int b = 0; listed && b < bny; ++b) {
+            const double y = (double(mJ0 + bj + b) + 0.5) * py - mOffsetY;
+            rowIn[b] = y - 0.5 * py >= mPart.min.y() - slackY && y + 0.5 * py <= mPart.max.y() + slackY;
         }
-        const bool finite = allFinite(single.data(), single.size());
+        for (int a = 0; listed && a < bnx; ++a) {
+            const double x = (double(mI0 + bi + a) + 0.5) * px - mOffsetX;
+            columnIn[a] = x - 0.5 * px >= mPart.min.x() - slackX && x + 0.5 * px <= mPart.max.x() + slackX;
+        }
         for (int tj = bj; tj < bj + bny; tj += tile)
             for (int ti = bi; ti < bi + bnx; ti += tile) {
                 const int tnx = std::min(tile, bi + bnx - ti), tny = std::min(tile, bj + bny - tj);
-                const int tside =
-                    edgeTile(z, ti, tj, tnx, tny, out, &values[std::size_t(ti - bi) * grid.ny + (tj - bj)],
-                             &single[std::size_t(ti - bi) * grid.ny + (tj - bj)], grid.ny,
-                             &cells[std::size_t(ti - bi) * cy + (tj - bj)], finite, sub, counts);
+                const std::size_t at = std::size_t(ti - bi) * grid.ny + (tj - bj);
+                const std::size_t cellAt = std::size_t(ti - bi) * cy + (tj - bj);
+                bool whole = listed && finite && tnx == kLanes && tny == kLanes && columnIn[ti - bi] &&
+                             columnIn[ti - bi + kLanes - 1];
+                for (int b = 0; whole && b < kLanes; ++b) whole = rowIn[tj - bj + b];
+                if (whole) {
+                    std::uint16_t slowList[kLanes * kLanes];
+                    int slowCount = 0;
+                    const int decided =
+                        decideWholeTile(&single[at], grid.ny, &cells[cellAt], blockCell,
+                                        out.pixels.data() + std::size_t(tj) * mNx + ti, slowList, slowCount);
+                    if (slowCount == 0) {
+                        const int sure = decided & 0xffff, sureInside = decided >> 16;
+                        ++(sure < kLanes * kLanes ? counts.tilesEdge
+                           : sureInside == sure   ? counts.tilesInside
+                           : sureInside == 0      ? counts.tilesOutside
+                                                  : counts.tilesEdge);
+                        continue;
+                    }
+                }
+                const int tside = edgeTile(z, ti, tj, tnx, tny, out, &values[at], &single[at], grid.ny, &cells[cellAt],
+                                           finite, sub, counts);
                 ++(tside < 0 ? counts.tilesInside : tside > 0 ? counts.tilesOutside : counts.tilesEdge);
             }
     };
@@ -368,14 +435,16 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
     }
     const bool greyEdges = mOptions.supersample > 0 && mOptions.gamma == 1.0;
     const float tolerance = float(mOptions.linearTolerance);
+    // No block's largest cell here: the tile's own cells decide.
+    constexpr float kNoBlockCell = std::numeric_limits<float>::infinity();
     auto decideWholeTile = [&] {
 #if defined(VOXLAT_AVX2_TILES)
         if (mWideTiles)
-            return decideFullTileAvx2(single, stride, cells, tolerance, greyEdges, tilePixels, rowStride, slowList,
-                                      slowCount);
+            return decideFullTileAvx2(single, stride, cells, kNoBlockCell, tolerance, greyEdges, tilePixels, rowStride,
+                                      slowList, slowCount);
 #endif
-        return decideFullTile<QuadLanes>(single, stride, cells, tolerance, greyEdges, tilePixels, rowStride, slowList,
-                                         slowCount);
+        return decideFullTile<QuadLanes>(single, stride, cells, kNoBlockCell, tolerance, greyEdges, tilePixels,
+                                         rowStride, slowList, slowCount);
     };
     const int decided = tileInPart && finite ? decideWholeTile() : -1;
     if (decided >= 0) {

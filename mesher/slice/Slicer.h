@@ -17,9 +17,11 @@
 ///
 /// Cost: blocks of 64 x 64 pixels (and their 32 x 32 quarters, while that culls anything) are
 /// culled by bound(); the rest is evaluated as one grid batch per block, and each whole 8 x 8 tile
-/// is decided by four-lane single-precision passes (the whole tile at once where it is surely on
-/// one side, else per pixel: sure, far from the linearised edge, or its coverage), so the scalar
-/// code only sees the pixels that need sub-samples and the tiles the part's box cuts.
+/// is decided by four- or eight-lane single-precision passes (the whole tile at once where it is
+/// surely on one side, first against the block's largest cell difference, lane by lane, then its
+/// own; else per pixel: sure, far from the linearised edge, or its coverage, computed for the
+/// grey pixels packed into full vectors), so the scalar code only sees the pixels that need
+/// sub-samples and the tiles the part's box cuts.
 #pragma once
 
 #include "fields/FieldNode.h"

@@ -22,8 +22,10 @@ std::string encodePng(int width, int height, int channels, const std::function<v
 /// bytes (row-major) placed at column @a col0, row @a row0. A dedicated run-length deflate (one
 /// fixed-Huffman block, matches at distance 1, filter NONE) made for layer images, which are long
 /// runs of 0 and 255 with a grey pixel at each edge: the black margins cost almost nothing and the
-/// window is scanned once. Deterministic; any PNG reader decodes it.
-std::string encodeWindowPng(int width, int height, const std::uint8_t* window, int col0, int row0, int w, int h);
+/// window is scanned once. Deterministic; any PNG reader decodes it. With @a byteSum, also the sum
+/// of the window's bytes (gathered run by run on the way).
+std::string encodeWindowPng(int width, int height, const std::uint8_t* window, int col0, int row0, int w, int h,
+                            std::uint64_t* byteSum = nullptr);
 
 /// Decodes an 8-bit grey or RGBA PNG (for tests and previews); throws std::runtime_error if it cannot.
 std::vector<std::uint8_t> decodePng(const std::string& bytes, int& width, int& height, int& channels);
