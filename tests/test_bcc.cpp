@@ -224,15 +224,26 @@ TEST(Bcc, GyroidCutByItsBoxIsClosedOutwardAndAccurate)
     RecordProperty("volume_error_percent", std::to_string(100.0 * (m.mesh.volume() - volume) / volume));
     EXPECT_NEAR(m.mesh.volume(), volume, 0.005 * volume);
 
+    // Vertex deviation more than two voxels inside the box: where the lattice meets the box, the
+    // grid samples max(G - c, box distance), whose straight-line interpolation misses the crease by
+    // up to a quarter of a voxel for either extractor (the Job's crease steps handle it).
     auto distance = [&](const Vec3d& p) { return g.distance(p); };
-    const double raw = maxOverVertices(m.mesh, distance);
+    auto inside = [&](const Vec3d& p) { return boxDistance(p, g.box) < -2.0 * g.voxel ? g.distance(p) : 0.0; };
+    const double raw = maxOverVertices(m.mesh, inside);
     RecordProperty("raw_max_vertex_deviation_voxels", std::to_string(raw / g.voxel));
-    EXPECT_LT(raw, 0.05 * g.voxel);
+    RecordProperty("raw_max_vertex_deviation_voxels_at_the_box",
+                   std::to_string(maxOverVertices(m.mesh, distance) / g.voxel));
+    EXPECT_LT(raw, 0.04 * g.voxel);
+    EXPECT_GT(raw, 0.001 * g.voxel);  // not on the surface by accident: the field bends
     TriangleMesh projected = m.mesh;
-    projectToSurface(projected, *field, {0.0, 0.5 * g.voxel, 1e-6, 12});
-    const double after = maxOverVertices(projected, distance);
+    const ProjectionStats ps = projectToSurface(projected, *field, {0.0, 0.5 * g.voxel, 1e-6, 12});
+    const double after = maxOverVertices(projected, inside);
     RecordProperty("projected_max_vertex_deviation_voxels", std::to_string(after / g.voxel));
+    RecordProperty("projected_max_vertex_deviation_voxels_at_the_box",
+                   std::to_string(maxOverVertices(projected, distance) / g.voxel));
+    RecordProperty("projected_vertices_held_back", std::to_string(ps.heldBack));
     EXPECT_LT(after, 0.01 * g.voxel);
+    EXPECT_LT(maxOverVertices(projected, distance), 0.05 * g.voxel);
     expectClosedManifold(projected);
 }
 
@@ -305,15 +316,19 @@ TEST(Bcc, TheJobMeshesWithEitherExtractor)
     EXPECT_EQ(r["meshes"][0]["extractor"], "bcc");
     EXPECT_EQ(r["meshes"][1]["extractor"], "marching-cubes");
     EXPECT_EQ(r["meshes"][2]["extractor"], "bcc");
-    for (int i = 0; i < 3; ++i) EXPECT_TRUE(r["meshes"][i]["closed_manifold"].get<bool>()) << i;
+    EXPECT_TRUE(r["meshes"][2]["closed_manifold"].get<bool>());
     const TriangleMesh bcc = readStl((dir.path / "out/b.stl").string());
     const TriangleMesh cubes = readStl((dir.path / "out/m.stl").string());
+    expectClosedManifold(bcc);
+    expectClosedManifold(cubes);
     EXPECT_EQ(r["meshes"][0]["triangles"].get<std::size_t>(), bcc.triangles.size());
     EXPECT_GT(bcc.triangles.size(), cubes.triangles.size());
     // Same solid (both within a few tenths of a percent of it).
     EXPECT_NEAR(bcc.volume(), cubes.volume(), 0.01 * cubes.volume());
     // The projected bcc mesh went through the same projection path as marching cubes'.
-    EXPECT_EQ(r["meshes"][2]["triangles"].get<std::size_t>(), bcc.triangles.size());
+    // (Crease splits at the domain box add a few triangles.)
+    EXPECT_GE(r["meshes"][2]["triangles"].get<std::size_t>(), bcc.triangles.size());
+    EXPECT_LT(r["meshes"][2]["triangles"].get<std::size_t>(), bcc.triangles.size() * 102 / 100);
     EXPECT_TRUE(r["meshes"][2].contains("projection"));
     EXPECT_LT(r["meshes"][2]["projection"]["vertex_deviation_after"]["max_mm"].get<double>(), 0.01 * 0.2);
 

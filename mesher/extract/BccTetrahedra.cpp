@@ -289,6 +289,8 @@ private:
     /// Global index of the vertex on edge @a slot of voxel (x, y, z) relative to block @a b (each in
     /// [-1, 8]); UINT32_MAX when the edge's owner is no leaf.
     uint32_t vertexIndex(std::size_t b, int slot, int x, int y, int z) const;
+    /// The leaf owning voxel (x, y, z) relative to block @a b (each in [-1, 8]), or -1.
+    int32_t ownerLeaf(std::size_t b, int x, int y, int z) const;
     template <bool Emit>
     void processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh);
 
@@ -451,10 +453,15 @@ Vec3d BccMesher::edgePoint(const View& v, int slot, int x, int y, int z, uint32_
     return p0 + t * (p1 - p0) + Vec3d(v.origin.x(), v.origin.y(), v.origin.z());
 }
 
-uint32_t BccMesher::vertexIndex(std::size_t b, int slot, int x, int y, int z) const
+int32_t BccMesher::ownerLeaf(std::size_t b, int x, int y, int z) const
 {
     const int dx = x < 0 ? -1 : x >> 3, dy = y < 0 ? -1 : y >> 3, dz = z < 0 ? -1 : z >> 3;
-    const int32_t owner = mNeighbours[b][neighbourSlot(dx, dy, dz)];
+    return mNeighbours[b][neighbourSlot(dx, dy, dz)];
+}
+
+uint32_t BccMesher::vertexIndex(std::size_t b, int slot, int x, int y, int z) const
+{
+    const int32_t owner = ownerLeaf(b, x, y, z);
     if (owner < 0) return UINT32_MAX;
     const int lx = x & 7, ly = y & 7, lz = z & 7;
     const int word = slot * 8 + lx, bit = (ly << 3) | lz;
@@ -544,8 +551,14 @@ void BccMesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh)
                     bool complete = true;
                     for (int i = 0; i < tc.size; ++i) {
                         const TetEdge& e = tet.edges[tc.edges[i]];
-                        index[i] = vertexIndex(b, e.slot, x + e.offset[0], y + e.offset[1], z + e.offset[2]);
-                        complete = complete && index[i] != UINT32_MAX;
+                        const int ex = x + e.offset[0], ey = y + e.offset[1], ez = z + e.offset[2];
+                        if constexpr (Emit) {
+                            index[i] = vertexIndex(b, e.slot, ex, ey, ez);
+                            complete = complete && index[i] != UINT32_MAX;
+                        } else {
+                            // Masks and offsets are not known yet: only whether the owner is a leaf.
+                            complete = complete && ownerLeaf(b, ex, ey, ez) >= 0;
+                        }
                     }
                     if constexpr (!Emit) {
                         ++counts.crossingTets;
