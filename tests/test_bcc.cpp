@@ -288,6 +288,7 @@ TEST(Bcc, TileCubesNextToLeavesAreMeshed)
     ASSERT_GT(sparse.insideTiles, 0u);
     BccStats stats;
     const TriangleMesh m = bccTetrahedra(*grid, *field, 0.0f, {}, &stats);
+    RecordProperty("tile_centre_values", std::to_string(stats.tileCentreValues));
     EXPECT_EQ(stats.droppedTetrahedra, 0u);
     expectClosedManifold(m);
     EXPECT_EQ(checkTopology(m).eulerCharacteristic, 2);
