@@ -96,10 +96,13 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--voxlat", default=str(ROOT / "build/voxlat"))
     ap.add_argument("--threads", type=int, default=0)
+    ap.add_argument("--only", default="", help="run only the recipes whose name contains this")
     args = ap.parse_args()
     print(f"load average before: {os.getloadavg()}", flush=True)
     rows = []
     for name, recipe in RECIPES:
+        if args.only not in name:
+            continue
         for extractor in EXTRACTORS:
             for project in (False, True):
                 with tempfile.TemporaryDirectory() as tmp:
