@@ -581,7 +581,9 @@ TEST(Offset, GyroidNetworkMovesByTheOffsetInMillimetres)
             "  g: {tpms: gyroid, cell: 10, offset: " +
             std::to_string(m) + "}\nresult: g\n";
         Job job(parseRecipe(text, "offset.yaml", "."));
-        const TriangleMesh& mesh = job.mesh(MeshOptions{true, std::nullopt, {}});
+        MeshOptions projected;
+        projected.project = true;
+        const TriangleMesh& mesh = job.mesh(projected);
         double worst = 0.0, sum = 0.0;
         int n = 0;
         for (std::size_t i = 0; i < mesh.points.size(); i += 7) {

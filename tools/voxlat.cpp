@@ -210,6 +210,10 @@ int main(int argc, char** argv)
     mesh->add_option("--project", meshProject,
                      "on: vertices moved onto the true surface (the default with a tolerance); off: marching "
                      "cubes' vertices");
+    std::string meshExtractor;
+    mesh->add_option("--extractor", meshExtractor,
+                     "how the grid becomes triangles: " + voxlat::joinWords(voxlat::meshExtractorNames()) +
+                         " (default: the recipe's first mesh output's, else marching-cubes)");
     auto* info = app.add_subcommand("info", "print the domain, voxel count, solved levels and density");
     addCommon(info, infoArgs);
     auto* sampleCmd = app.add_subcommand("sample", "read `x y z` lines on stdin, print the field value per line");
@@ -292,6 +296,13 @@ int main(int argc, char** argv)
                 if (meshProject != "on" && meshProject != "off")
                     throw voxlat::InputError("--project " + meshProject + ": expected on or off");
                 options.project = meshProject == "on";
+            }
+            if (!meshExtractor.empty()) {
+                const auto extractor = voxlat::meshExtractorFromName(meshExtractor);
+                if (!extractor)
+                    throw voxlat::InputError("--extractor " + meshExtractor + ": expected one of " +
+                                             voxlat::joinWords(voxlat::meshExtractorNames()));
+                options.extractor = *extractor;
             }
             voxlat::Job job(std::move(recipe), &context);
             job.writeMesh(meshFile, options);

@@ -17,6 +17,7 @@
 #include "fields/BoxField.h"
 #include "fields/GradedLevel.h"
 #include "fields/Unary.h"
+#include "mesher/extract/BccTetrahedra.h"
 #include "mesher/extract/CreaseSplit.h"
 #include "mesher/extract/Decimation.h"
 #include "mesher/extract/MarchingCubes.h"
@@ -399,9 +400,19 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
     const openvdb::FloatGrid& g = grid();
     auto v = std::make_unique<MeshVariant>();
     v->options = options;
-    const auto raw = std::find_if(mMeshes.begin(), mMeshes.end(), [](const auto& m) { return m->options.raw(); });
+    const auto raw = std::find_if(mMeshes.begin(), mMeshes.end(), [&](const auto& m) {
+        return m->options.raw() && m->options.extractor == options.extractor;
+    });
     if (!options.raw() && raw != mMeshes.end()) {
         v->mesh = std::make_unique<TriangleMesh>(*(*raw)->mesh);
+    } else if (options.extractor == MeshExtractor::Bcc) {
+        // The grid's voxels plus the cube centres of the field the grid samples (clipped alike).
+        const FieldPtr field = surfaceField();
+        v->mesh = timed("mesh", [&] {
+            StageProgress progress(mContext, "meshing (bcc)", 1000);
+            std::atomic<std::uint64_t> last{0};
+            return std::make_unique<TriangleMesh>(bccTetrahedra(g, *field, 0.0f, feed(progress, last)));
+        });
     } else {
         v->mesh = timed("mesh", [&] {
             StageProgress progress(mContext, "meshing", 1000);
@@ -497,12 +508,14 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
                            "the mesh strays up to " + formatNumber(dev.max) +
                                " mm from the true surface, more than "
                                "the tolerance " +
-                               formatNumber(*options.tolerance) +
-                               " mm: marching cubes' triangles already did there (crease edges left flat "
+                               formatNumber(*options.tolerance) + " mm: " +
+                               (options.extractor == MeshExtractor::Bcc ? "the bcc extractor's" : "marching cubes'") +
+                               " triangles already did there (crease edges left flat "
                                "where a vertex could not be moved onto the surface, see `creases`); use a "
                                "smaller `voxel:` or a larger tolerance",
                            {{"max_mm", dev.max}, {"tolerance_mm", *options.tolerance}});
     }
+    report["extractor"] = meshExtractorName(options.extractor);
     report["triangles"] = m.triangles.size();
     report["vertices"] = m.points.size();
     mMeshes.push_back(std::move(v));

@@ -18,8 +18,31 @@ const std::vector<KeySpec>& meshKeys()
          "on with `tolerance`, else off"},
         {"tolerance", number(),
          "error-bounded decimation: every point of every triangle stays within this of the true surface (mm)",
-         "none (no decimation)"}};
+         "none (no decimation)"},
+        {"extractor", oneOfWords(meshExtractorNames()),
+         "how the grid becomes triangles: marching-cubes (the grid's voxels) or bcc (marching tetrahedra on the "
+         "body-centred-cubic lattice: the voxels plus the field at the cube centres; more, less regular triangles)",
+         "marching-cubes"}};
     return keys;
+}
+
+const std::vector<std::string>& meshExtractorNames()
+{
+    static const std::vector<std::string> names{"marching-cubes", "bcc"};
+    return names;
+}
+
+const std::string& meshExtractorName(MeshExtractor extractor)
+{
+    return meshExtractorNames()[std::size_t(extractor)];
+}
+
+std::optional<MeshExtractor> meshExtractorFromName(const std::string& word)
+{
+    const std::vector<std::string>& names = meshExtractorNames();
+    for (std::size_t i = 0; i < names.size(); ++i)
+        if (names[i] == word) return MeshExtractor(i);
+    return std::nullopt;
 }
 
 double checkMeshTolerance(double tolerance, const std::string& where)
@@ -57,6 +80,17 @@ MeshSettings parseMeshSettings(const RecipeNode& spec)
         s.options.tolerance = value;
         s.options.toleranceWhere = t.where();
         s.options.project = true;
+    }
+    if (spec.has("extractor")) {
+        const RecipeNode e = spec["extractor"];
+        const std::string word = e.isScalar() ? e.yaml().Scalar() : "";
+        const std::optional<MeshExtractor> extractor = meshExtractorFromName(word);
+        if (!extractor) {
+            const std::string close = closestMatch(word, meshExtractorNames());
+            e.fail("unknown extractor `" + word + "`: expected one of " + joinWords(meshExtractorNames()) +
+                   (close.empty() ? "" : "; did you mean `" + close + "`?"));
+        }
+        s.options.extractor = *extractor;
     }
     if (spec.has("project")) {
         const std::string word = spec["project"].yaml().Scalar();

@@ -14,8 +14,24 @@ namespace voxlat {
 /// The keys of a `mesh:` output written as a map, with their schemas, defaults and meanings.
 const std::vector<KeySpec>& meshKeys();
 
-/// How a mesh is made from the result, beyond marching cubes on the recipe's grid.
+/// The algorithm that turns the result's grid into triangles (`extractor:`).
+enum class MeshExtractor {
+    MarchingCubes,  ///< marching cubes on the grid's voxels (mesher/extract/MarchingCubes)
+    Bcc,            ///< marching tetrahedra on the grid's voxels plus cube centres (BccTetrahedra)
+};
+
+/// The words of `extractor:`, in the order of MeshExtractor.
+const std::vector<std::string>& meshExtractorNames();
+/// The word of @a extractor (`marching-cubes`, `bcc`).
+const std::string& meshExtractorName(MeshExtractor extractor);
+/// The extractor a word names, or none.
+std::optional<MeshExtractor> meshExtractorFromName(const std::string& word);
+
+/// How a mesh is made from the result: the extractor on the recipe's grid, then projection and
+/// decimation.
 struct MeshOptions {
+    /// Marching cubes (the default) or marching tetrahedra on the BCC lattice.
+    MeshExtractor extractor = MeshExtractor::MarchingCubes;
     /// Vertices moved onto the true surface (Newton along the field's gradient).
     bool project = false;
     /// Error-bounded decimation: every point of every triangle within this of the true surface
@@ -25,8 +41,11 @@ struct MeshOptions {
     /// of what makes two meshes the same.
     std::string toleranceWhere;
 
-    bool operator==(const MeshOptions& o) const { return project == o.project && tolerance == o.tolerance; }
-    /// True for plain marching cubes (what a bare file name asks for).
+    bool operator==(const MeshOptions& o) const
+    {
+        return extractor == o.extractor && project == o.project && tolerance == o.tolerance;
+    }
+    /// True for the extractor's mesh as it made it (what a bare file name asks for).
     bool raw() const { return !project && !tolerance; }
 };
 
