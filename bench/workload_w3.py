@@ -31,7 +31,10 @@ pairwise ratio 0.68), peak 57-60 -> 62-66 MB. Projected on a quiet machine (2.16
 about 1.5 s (1.47-1.53 s), 49-61x against the reference's 75-90 s; not yet measured quiet.
 The whole workload right after, load average 9.6 falling to 6.1 (PrusaSlicer alone 343.7 s, peak
 5.9 GB): reference 384.3 s; voxlat 3.71 s (104x), every layer computed 9.69 s (40x; 7.77 s best
-of three with checks, 8.06 s without), peak 85 MB and 132 MB; area errors as before."""
+of three with checks, 8.06 s without), peak 85 MB and 132 MB; area errors as before.
+Merged on main, the other workers stopped (2026-11-26): every layer computed 2.34 s against 172.0 s
+(74x, load 2.7-3.7) and 2.94 s against 163.3 s (56x, load 3.3 -> 1.6); copied 0.99 s (173x) and
+1.21 s (135x); PrusaSlicer alone 134-142 s on this machine; checks +4 to +17 %."""
 import json
 import os
 import shutil

@@ -105,11 +105,15 @@ struct JobWithContext {
 };
 
 /// Makes a Job whose progress goes to @a progress (a Python callable `f(stage, done, total)`, or None).
-/// The mesh options of `mesh()` and `write_mesh()`: as `voxlat mesh --tolerance T --project on|off`
+/// The mesh options of `mesh()` and `write_mesh()`: as `voxlat mesh --tolerance T --project on|off
+/// --extractor E`
 /// (a tolerance turns projection on unless `project=False` is given).
-MeshOptions meshOptions(std::optional<double> tolerance, std::optional<bool> project)
+MeshOptions meshOptions(std::optional<double> tolerance, std::optional<bool> project, const std::string& extractor)
 {
     MeshOptions options;
+    const std::optional<MeshExtractor> e = meshExtractorFromName(extractor);
+    if (!e) throw InputError("extractor=" + extractor + ": expected one of " + joinWords(meshExtractorNames()));
+    options.extractor = *e;
     if (tolerance) {
         options.tolerance = checkMeshTolerance(*tolerance, "tolerance=");
         options.toleranceWhere = "tolerance=";
@@ -235,8 +239,8 @@ PYBIND11_MODULE(_voxlat, m)
             py::arg("name") = "", "a named field (levels solved); the result by default")
         .def(
             "mesh",
-            [](Job& j, std::optional<double> tolerance, std::optional<bool> project) {
-                const MeshOptions options = meshOptions(tolerance, project);
+            [](Job& j, std::optional<double> tolerance, std::optional<bool> project, const std::string& extractor) {
+                const MeshOptions options = meshOptions(tolerance, project, extractor);
                 const TriangleMesh* mesh;
                 {
                     py::gil_scoped_release release;
@@ -249,9 +253,10 @@ PYBIND11_MODULE(_voxlat, m)
                             mesh->triangles.size() * 3 * sizeof(std::uint32_t));
                 return py::make_tuple(points, tris);
             },
-            py::arg("tolerance") = py::none(), py::arg("project") = py::none(),
+            py::arg("tolerance") = py::none(), py::arg("project") = py::none(), py::arg("extractor") = "marching-cubes",
             "the mesh of the result: points (V, 3) float32 and triangles (T, 3) uint32; tolerance (mm): "
-            "decimated to that distance from the true surface; project: vertices on the true surface")
+            "decimated to that distance from the true surface; project: vertices on the true surface; extractor: "
+            "marching-cubes or bcc")
         .def(
             "write_outputs",
             [](Job& j, const std::string& dir) {
@@ -261,12 +266,14 @@ PYBIND11_MODULE(_voxlat, m)
             py::arg("out_dir"), "write the recipe's outputs and report.json")
         .def(
             "write_mesh",
-            [](Job& j, const std::string& path, std::optional<double> tolerance, std::optional<bool> project) {
-                const MeshOptions options = meshOptions(tolerance, project);
+            [](Job& j, const std::string& path, std::optional<double> tolerance, std::optional<bool> project,
+               const std::string& extractor) {
+                const MeshOptions options = meshOptions(tolerance, project, extractor);
                 py::gil_scoped_release release;
                 j.writeMesh(path, options);
             },
             py::arg("path"), py::arg("tolerance") = py::none(), py::arg("project") = py::none(),
+            py::arg("extractor") = "marching-cubes",
             "write the mesh (.stl, .3mf, .ply, .obj), with the options of mesh()")
         .def(
             "write_report",

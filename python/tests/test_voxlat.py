@@ -160,6 +160,17 @@ class VoxlatModule(unittest.TestCase):
         with self.assertRaises(ValueError) as e:
             recipe.mesh(tolerance=0)
         self.assertIn("tolerance=", str(e.exception))
+        # The BCC extractor: a closed mesh of the same ball, its vertices on the sphere when projected.
+        bcc_points, bcc_triangles = recipe.mesh(project=True, extractor="bcc")
+        self.assertGreater(len(bcc_triangles), len(raw_triangles))
+        self.assertLess(np.abs(np.linalg.norm(bcc_points.astype(np.float64), axis=1) - 5).max(), 0.01 * 0.25)
+        edges = np.sort(np.concatenate([bcc_triangles[:, [0, 1]], bcc_triangles[:, [1, 2]],
+                                        bcc_triangles[:, [2, 0]]]), axis=1)
+        _, counts = np.unique(edges, axis=0, return_counts=True)
+        self.assertTrue((counts == 2).all())
+        with self.assertRaises(ValueError) as e:
+            recipe.mesh(extractor="dual-contouring")
+        self.assertIn("bcc", str(e.exception))
 
     def test_progress_callback_and_warnings_list(self):
         # Walls of 1.2 mm in an 8 mm gyroid cell: 15 % of the cell, past the uniform-shift range.

@@ -294,11 +294,12 @@ class Recipe:
     def field(self, name=""):
         return self.job().field(name)
 
-    def mesh(self, tolerance=None, project=None):
+    def mesh(self, tolerance=None, project=None, extractor="marching-cubes"):
         """(points (V, 3) float32, triangles (T, 3) uint32) of the result. tolerance (mm):
         decimated so every point stays within it of the true surface (projection on);
-        project=True: vertices moved onto the true surface (as `voxlat mesh --tolerance --project`)."""
-        return self.job().mesh(tolerance=tolerance, project=project)
+        project=True: vertices moved onto the true surface; extractor: "marching-cubes" or "bcc" (as
+        `voxlat mesh --tolerance --project --extractor`)."""
+        return self.job().mesh(tolerance=tolerance, project=project, extractor=extractor)
 
     def run(self, out_dir, progress=None):
         """Writes the recipe's outputs and report.json to out_dir; returns the report (its
@@ -307,11 +308,11 @@ class Recipe:
         job.write_outputs(str(out_dir))
         return job.report()
 
-    def write_mesh(self, path, tolerance=None, project=None):
+    def write_mesh(self, path, tolerance=None, project=None, extractor="marching-cubes"):
         """Writes the mesh (.stl, .3mf, .ply, .obj; options as mesh()); returns the report, whose
         `mesh` has the deviation, decimation and topology figures."""
         job = self.job()
-        job.write_mesh(str(path), tolerance=tolerance, project=project)
+        job.write_mesh(str(path), tolerance=tolerance, project=project, extractor=extractor)
         return job.report()
 
 
