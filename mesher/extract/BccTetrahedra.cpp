@@ -1,5 +1,7 @@
 #include "mesher/extract/BccTetrahedra.h"
 
+#include "mesher/extract/ExtractProgress.h"
+
 #include <openvdb/tree/ValueAccessor.h>
 
 #include <tbb/blocked_range.h>
@@ -202,35 +204,6 @@ const Tables& tables()
 // Blocks
 
 /// Serialized, monotonic progress reporting in whole percents (as marching cubes reports).
-class ProgressReporter {
-public:
-    ProgressReporter(ProgressFn fn, std::size_t total) : mFn(std::move(fn)), mTotal(std::max<std::size_t>(total, 1)) {}
-
-    void advance(std::size_t n = 1)
-    {
-        if (!mFn) return;
-        const std::size_t done = mDone += n;
-        const int percent = int(done * 100 / mTotal);
-        if (percent <= mReported.load(std::memory_order_relaxed) || percent >= 100) return;
-        std::lock_guard<std::mutex> lock(mMutex);
-        if (percent <= mReported.load(std::memory_order_relaxed)) return;
-        mReported.store(percent, std::memory_order_relaxed);
-        mFn(percent / 100.0);
-    }
-
-    void finish()
-    {
-        if (mFn) mFn(1.0);
-    }
-
-private:
-    ProgressFn mFn;
-    std::size_t mTotal;
-    std::atomic<std::size_t> mDone{0};
-    std::atomic<int> mReported{0};
-    std::mutex mMutex;
-};
-
 /// Neighbour index of the block at offset (dx, dy, dz) in {-1, 0, 1}^3.
 constexpr int neighbourSlot(int dx, int dy, int dz)
 {
@@ -606,7 +579,7 @@ TriangleMesh BccMesher::run(ProgressFn progressFn, BccStats& stats)
     mEdgeRanks.resize(numLeaves);
     mCounts.resize(numLeaves);
     // Evaluating the centres costs about as much as the other two passes together.
-    ProgressReporter progress(std::move(progressFn), 4 * numLeaves);
+    ExtractProgress progress(std::move(progressFn), 4 * numLeaves);
 
     // The result never depends on how ranges are split: every leaf writes only its own slots.
     constexpr std::size_t kGrain = 16;

@@ -1,5 +1,7 @@
 #include "mesher/extract/MarchingCubes.h"
 
+#include "mesher/extract/ExtractProgress.h"
+
 #include <openvdb/tree/ValueAccessor.h>
 
 #if defined(__SSE2__)
@@ -412,35 +414,6 @@ struct SkippedEdge {
 };
 
 /// Serialized, monotonic progress reporting in whole percents.
-class ProgressReporter {
-public:
-    ProgressReporter(ProgressFn fn, std::size_t total) : mFn(std::move(fn)), mTotal(std::max<std::size_t>(total, 1)) {}
-
-    void advance()
-    {
-        if (!mFn) return;
-        const std::size_t done = ++mDone;
-        const int percent = int(done * 100 / mTotal);
-        if (percent <= mReported.load(std::memory_order_relaxed) || percent >= 100) return;
-        std::lock_guard<std::mutex> lock(mMutex);
-        if (percent <= mReported.load(std::memory_order_relaxed)) return;
-        mReported.store(percent, std::memory_order_relaxed);
-        mFn(percent / 100.0);
-    }
-
-    void finish()
-    {
-        if (mFn) mFn(1.0);
-    }
-
-private:
-    ProgressFn mFn;
-    std::size_t mTotal;
-    std::atomic<std::size_t> mDone{0};
-    std::atomic<int> mReported{0};
-    std::mutex mMutex;
-};
-
 /// The values a block's cubes can see: the block itself and its +x/+y/+z neighbours, each either
 /// a leaf buffer or a constant (tile or background). Reading through it costs no copy of the
 /// 9x9x9 neighbourhood, which matters because most blocks only need their sign bits.
@@ -786,7 +759,7 @@ TriangleMesh Mesher::run(ProgressFn progressFn, MarchingCubesStats& stats)
     mEdgeMasks.resize(mNumLeaves);
     mEdgeRanks.resize(mNumLeaves);
     mCounts.resize(numBlocks);
-    ProgressReporter progress(std::move(progressFn), 2 * numBlocks);
+    ExtractProgress progress(std::move(progressFn), 2 * numBlocks);
 
     // The grain keeps accessor set-up and scheduling overhead small; the result never depends
     // on how ranges are split, since every block writes only its own slots.
