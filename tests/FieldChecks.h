@@ -2,15 +2,35 @@
 // node's own values, bounds that contain every sampled value.
 #pragma once
 
+#include "fields/Boolean.h"
+#include "fields/BoxField.h"
 #include "fields/FieldNode.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <memory>
 #include <random>
 #include <vector>
 
 namespace voxlat::test {
+
+/// Exact signed distance to an axis-aligned box (the test's own).
+inline double boxDistance(const Vec3d& p, const Box3& b)
+{
+    Vec3d q;
+    for (int a = 0; a < 3; ++a) q[a] = std::abs(p[a] - b.center()[a]) - 0.5 * b.extent()[a];
+    const Vec3d outside(std::max(q.x(), 0.0), std::max(q.y(), 0.0), std::max(q.z(), 0.0));
+    return outside.length() + std::min(std::max({q.x(), q.y(), q.z()}), 0.0);
+}
+
+/// @a f clipped to @a box (what a Job meshes: the result intersected with its domain).
+inline FieldPtr clipped(FieldPtr f, const Box3& box)
+{
+    return std::make_shared<BooleanField>(BooleanOp::Intersection,
+                                          std::vector<FieldPtr>{f, std::make_shared<BoxField>(box)});
+}
 
 inline std::vector<Vec3d> randomPoints(std::size_t n, double lo, double hi, unsigned seed)
 {

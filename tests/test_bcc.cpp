@@ -2,6 +2,7 @@
 // voxels plus the cube centres. Distances are measured with the test's own formulas (a sphere's
 // exact distance, the gyroid's equation and gradient written out), not with the code under test.
 
+#include "FieldChecks.h"
 #include "TestUtil.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/jobs/Job.h"
@@ -40,20 +41,8 @@ double gyroidDistance(const Vec3d& p, double cell, double c)
     return (g - c) / grad.length();
 }
 
-/// Exact signed distance to an axis-aligned box (the test's own).
-double boxDistance(const Vec3d& p, const Box3& b)
-{
-    Vec3d q;
-    for (int a = 0; a < 3; ++a) q[a] = std::abs(p[a] - b.center()[a]) - 0.5 * b.extent()[a];
-    const Vec3d outside(std::max(q.x(), 0.0), std::max(q.y(), 0.0), std::max(q.z(), 0.0));
-    return outside.length() + std::min(std::max({q.x(), q.y(), q.z()}), 0.0);
-}
-
-FieldPtr clipped(FieldPtr f, const Box3& box)
-{
-    return std::make_shared<BooleanField>(BooleanOp::Intersection,
-                                          std::vector<FieldPtr>{f, std::make_shared<BoxField>(box)});
-}
+using test::boxDistance;
+using test::clipped;
 
 /// The grid the Job evaluates (clipped to the domain) and the BCC mesh of it.
 struct Meshed {
