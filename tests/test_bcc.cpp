@@ -3,6 +3,7 @@
 // exact distance, the gyroid's equation and gradient written out), not with the code under test.
 
 #include "FieldChecks.h"
+#include "MeshChecks.h"
 #include "TestUtil.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/jobs/Job.h"
@@ -61,10 +62,7 @@ Meshed bccOf(const FieldNode& f, const Domain& d)
     return m;
 }
 
-Vec3d at(const TriangleMesh& m, unsigned v)
-{
-    return {m.points[v].x(), m.points[v].y(), m.points[v].z()};
-}
+using test::at;
 
 double maxOverVertices(const TriangleMesh& m, const std::function<double(const Vec3d&)>& distance)
 {
@@ -73,14 +71,11 @@ double maxOverVertices(const TriangleMesh& m, const std::function<double(const V
     return worst;
 }
 
-void expectClosedManifold(const TriangleMesh& m)
+/// Closed and manifold, and a closed surface (even Euler characteristic).
+void expectClosedSurface(const TriangleMesh& m)
 {
+    test::expectClosedManifold(m);
     const MeshTopology t = checkTopology(m);
-    EXPECT_EQ(t.boundaryEdges, 0u);
-    EXPECT_EQ(t.nonManifoldEdges, 0u);
-    EXPECT_EQ(t.nonManifoldVertices, 0u);
-    EXPECT_EQ(t.inconsistentlyOrientedEdges, 0u);
-    EXPECT_EQ(t.degenerateTriangles, 0u);
     EXPECT_TRUE(t.closedManifold());
     EXPECT_EQ(t.eulerCharacteristic % 2, 0);
 }
@@ -138,7 +133,7 @@ TEST(Bcc, SphereIsClosedOutwardAndAccurate)
     const Meshed m = bccOf(*field, Domain::fromBox(box, voxel));
     EXPECT_EQ(m.stats.droppedTetrahedra, 0u);
     EXPECT_GT(m.stats.crossingTetrahedra, 0u);
-    expectClosedManifold(m.mesh);
+    expectClosedSurface(m.mesh);
     EXPECT_EQ(checkTopology(m.mesh).eulerCharacteristic, 2);
     EXPECT_EQ(unusedPoints(m.mesh), 0u);
     EXPECT_EQ(inwardTriangles(m.mesh, [&](const Vec3d& p) { return p - centre; }), 0u);
@@ -159,7 +154,7 @@ TEST(Bcc, SphereIsClosedOutwardAndAccurate)
     const double after = maxOverVertices(projected, distance);
     RecordProperty("projected_max_vertex_deviation_voxels", std::to_string(after / voxel));
     EXPECT_LT(after, 0.01 * voxel);
-    expectClosedManifold(projected);
+    expectClosedSurface(projected);
 
     // Marching cubes on the same grid: the same solid.
     SparseOptions options;
@@ -175,7 +170,7 @@ TEST(Bcc, GyroidCutByItsBoxIsClosedOutwardAndAccurate)
     const Meshed m = bccOf(*field, Domain::fromBox(g.box, g.voxel));
     EXPECT_EQ(m.stats.droppedTetrahedra, 0u);
     ASSERT_GT(m.mesh.triangles.size(), 100000u);
-    expectClosedManifold(m.mesh);
+    expectClosedSurface(m.mesh);
     EXPECT_EQ(unusedPoints(m.mesh), 0u);
     // Outward: along the gradient of the solid's (test-written) distance, away from the box's
     // edges where two surfaces meet and the direction is not defined.
@@ -233,7 +228,7 @@ TEST(Bcc, GyroidCutByItsBoxIsClosedOutwardAndAccurate)
     RecordProperty("projected_vertices_held_back", std::to_string(ps.heldBack));
     EXPECT_LT(after, 0.01 * g.voxel);
     EXPECT_LT(maxOverVertices(projected, distance), 0.05 * g.voxel);
-    expectClosedManifold(projected);
+    expectClosedSurface(projected);
 }
 
 TEST(Bcc, SameBytesForAnyThreadCount)
@@ -279,7 +274,7 @@ TEST(Bcc, TileCubesNextToLeavesAreMeshed)
     const TriangleMesh m = bccTetrahedra(*grid, *field, 0.0f, {}, &stats);
     RecordProperty("tile_centre_values", std::to_string(stats.tileCentreValues));
     EXPECT_EQ(stats.droppedTetrahedra, 0u);
-    expectClosedManifold(m);
+    expectClosedSurface(m);
     EXPECT_EQ(checkTopology(m).eulerCharacteristic, 2);
     const double exact = 4.0 / 3.0 * std::numbers::pi * std::pow(radius, 3);
     EXPECT_NEAR(m.volume(), exact, 0.002 * exact);
@@ -309,8 +304,8 @@ TEST(Bcc, TheJobMeshesWithEitherExtractor)
     EXPECT_TRUE(r["meshes"][2]["closed_manifold"].get<bool>());
     const TriangleMesh bcc = readStl((dir.path / "out/b.stl").string());
     const TriangleMesh cubes = readStl((dir.path / "out/m.stl").string());
-    expectClosedManifold(bcc);
-    expectClosedManifold(cubes);
+    expectClosedSurface(bcc);
+    expectClosedSurface(cubes);
     EXPECT_EQ(r["meshes"][0]["triangles"].get<std::size_t>(), bcc.triangles.size());
     EXPECT_GT(bcc.triangles.size(), cubes.triangles.size());
     // Same solid (both within a few tenths of a percent of it).
@@ -358,7 +353,7 @@ TEST(Bcc, AWrongExtractorIsRefusedWithTheLineAndTheChoices)
         0)
         << out;
     const TriangleMesh m = readStl(file.string());
-    expectClosedManifold(m);
+    expectClosedSurface(m);
 }
 
 }  // namespace

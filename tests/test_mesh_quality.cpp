@@ -4,6 +4,7 @@
 // under test.
 
 #include "FieldChecks.h"
+#include "MeshChecks.h"
 #include "TestUtil.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/jobs/Job.h"
@@ -98,10 +99,7 @@ TriangleMesh marchingCubesOf(const FieldNode& f, const Domain& d)
     return marchingCubes(*evaluateSparse(f, d, options), 0.0f);
 }
 
-Vec3d at(const TriangleMesh& m, unsigned v)
-{
-    return {m.points[v].x(), m.points[v].y(), m.points[v].z()};
-}
+using test::at;
 
 double maxOverVertices(const TriangleMesh& m, const std::function<double(const Vec3d&)>& distance)
 {
@@ -136,15 +134,7 @@ std::size_t flippedTriangles(const TriangleMesh& before, const TriangleMesh& aft
     return flipped;
 }
 
-void expectClosedManifold(const TriangleMesh& m)
-{
-    const MeshTopology t = checkTopology(m);
-    EXPECT_EQ(t.boundaryEdges, 0u);
-    EXPECT_EQ(t.nonManifoldEdges, 0u);
-    EXPECT_EQ(t.nonManifoldVertices, 0u);
-    EXPECT_EQ(t.inconsistentlyOrientedEdges, 0u);
-    EXPECT_EQ(t.degenerateTriangles, 0u);
-}
+using test::expectClosedManifold;
 
 struct GyroidCase {
     double cell = 5.0, level = 0.3, voxel = 0.1;
