@@ -95,6 +95,33 @@ TEST(SparseEvaluator, SignsMatchBruteForceEverywhere)
     EXPECT_EQ(checked, std::uint64_t(d.dims.x() + 2) * (d.dims.y() + 2) * (d.dims.z() + 2));
 }
 
+TEST(SparseEvaluator, CountsTheDomainsInsideVoxelsAsItEvaluates)
+{
+    // The count made while leaves are evaluated equals a brute-force count of the domain's voxel
+    // centres below zero, with leaves cut by the domain's faces, inside leaf tiles and 128^3
+    // inside tiles (a sphere large enough to hold one) all present.
+    const Domain d = Domain::fromBox(Box3{Vec3d(-1), Vec3d(12.3, 11.1, 9.7)}, 0.2);
+    const Domain big = Domain::fromBox(Box3{Vec3d(-40.0), Vec3d(40.1)}, 0.2);  // a 128^3 tile inside
+    const std::vector<std::pair<FieldPtr, Domain>> cases{
+        {clipped(gyroidSolid(SolidSide::Band, 0.4, 6.0), d), d},
+        {clipped(gyroidSolid(SolidSide::Below, 0.3, 6.0), d), d},
+        {clipped(std::make_shared<Sphere>(Vec3d(0.31), 38.03), big), big}};  // no centre exactly on it
+    for (const auto& [f, dom] : cases) {
+        SparseStats stats;
+        const auto grid = evaluateSparse(*f, dom, SparseOptions{}, &stats);
+        std::uint64_t brute = 0;
+        for (int i = 0; i < dom.dims.x(); ++i)
+            for (int j = 0; j < dom.dims.y(); ++j)
+                for (int k = 0; k < dom.dims.z(); ++k) brute += f->value(dom.worldOf(openvdb::Coord(i, j, k))) < 0;
+        EXPECT_EQ(stats.domainVoxelsBelowZero, brute);
+        EXPECT_EQ(stats.domainVoxelsBelowZero, countBelow(*grid, dom.indexBox(), 0.0f));
+    }
+    bool blockTile = false;  // the sphere's grid holds a whole 128^3 inside tile
+    const auto sphereGrid = evaluateSparse(*cases[2].first, big, SparseOptions{});
+    for (auto it = sphereGrid->cbeginValueOn(); it; ++it) blockTile |= it.getLevel() == 2;
+    EXPECT_TRUE(blockTile);
+}
+
 TEST(SparseEvaluator, WorkFollowsTheSurface)
 {
     // A sphere in a large domain: evaluated leaves scale with the surface, inside becomes tiles.

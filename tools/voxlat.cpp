@@ -9,6 +9,7 @@
 #include "engine/recipe/Schema.h"
 #include "engine/recipe/SliceSettings.h"
 #include "mesher/writers/AtomicFile.h"
+#include "tools/HugePages.h"
 #include "tools/TerminalProgress.h"
 
 #include <tbb/global_control.h>
@@ -150,29 +151,19 @@ int properties(const Common& args, const std::string& jsonFile, const std::strin
     return 0;
 }
 
-/// Runs this program again with glibc's malloc asked to back its large blocks with transparent
-/// huge pages, unless it already is. Why: a job touches gigabytes of freshly allocated memory
-/// (grid leaves, the density solve's values, the mesh), and where THP is `madvise` (Debian's
-/// default) each 4 KiB page is a fault of its own: a fifth of the acceptance gyroid's CPU time went
-/// to page faults, and asking for huge pages cut its CPU time by a quarter. Nothing computed
-/// changes. The tunable can only be read at start-up, hence the exec; if exec fails the run goes
-/// on as it is. `VOXLAT_NO_HUGEPAGES=1` opts out.
+/// Runs this program again with huge pages asked for (voxlat::requestHugePages()), unless it
+/// already is: the `voxlat` launcher asks before it starts this program, so this is for the
+/// engine run directly. If exec fails the run goes on as it is, the environment as it was.
 void useHugePages(char** argv)
 {
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
     return;  // the sanitizer's allocator replaces glibc's: nothing to ask for
 #endif
-    constexpr const char* kTunable = "glibc.malloc.hugetlb=1";
-    const char* tunables = std::getenv("GLIBC_TUNABLES");
-    if (std::getenv("VOXLAT_NO_HUGEPAGES") || (tunables && std::strstr(tunables, "glibc.malloc.hugetlb"))) return;
-    const std::string value = tunables && *tunables ? std::string(tunables) + ":" + kTunable : std::string(kTunable);
-    if (::setenv("GLIBC_TUNABLES", value.c_str(), 1) != 0) return;
+    std::string previous;
+    bool hadPrevious = false;
+    if (!voxlat::requestHugePages(previous, hadPrevious)) return;
     ::execv("/proc/self/exe", argv);
-    // Not re-run (no /proc, ...): carry on without huge pages, the environment as it was.
-    if (tunables)
-        ::setenv("GLIBC_TUNABLES", tunables, 1);
-    else
-        ::unsetenv("GLIBC_TUNABLES");
+    voxlat::restoreTunables(previous, hadPrevious);
 }
 
 }  // namespace

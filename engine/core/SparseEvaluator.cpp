@@ -138,6 +138,9 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
     // Stage 2: evaluate each straddling leaf as one batch.
     // Owned until the tree takes them: a cancelled or failed evaluation frees what it made.
     std::vector<std::unique_ptr<LeafT>> leaves(options.leafVisitor ? 0 : leafOrigins.size());
+    // Per leaf, so the total is an integer sum in leaf order whatever the thread count.
+    std::vector<std::uint32_t> belowPerLeaf(leafOrigins.size(), 0);
+    const CoordBBox domainIndex = domain.indexBox();
     std::atomic<bool> nonFinite{false};
     std::mutex badMutex;
     Vec3d badPoint(0.0);
@@ -163,13 +166,27 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                     leaf = std::make_unique<LeafT>(lo, options.outsideValue, true);
                     data = leaf->buffer().data();
                 }
+                // Branch-free, so it vectorises; the rare non-finite leaf is searched afterwards.
+                bool finite = true;
                 for (int i = 0; i < 512; ++i) {
-                    if (!std::isfinite(values[i])) [[unlikely]] {
-                        std::lock_guard<std::mutex> lock(badMutex);
-                        if (!nonFinite.exchange(true)) badPoint = batch.point(i >> 6, (i >> 3) & 7, i & 7);
-                    }
+                    finite &= std::isfinite(values[i]);
                     data[i] = float(values[i]);
                 }
+                if (!finite) [[unlikely]] {
+                    std::lock_guard<std::mutex> lock(badMutex);
+                    for (int i = 0; i < 512; ++i)
+                        if (!std::isfinite(values[i]) && !nonFinite.exchange(true))
+                            badPoint = batch.point(i >> 6, (i >> 3) & 7, i & 7);
+                }
+                const CoordBBox leafBox(lo, lo + Coord(kLeafDim - 1));
+                std::uint32_t below = 0;
+                if (domainIndex.isInside(leafBox)) {
+                    for (int i = 0; i < 512; ++i) below += data[i] < 0.0f;
+                } else if (domainIndex.hasOverlap(leafBox)) {
+                    for (int i = 0; i < 512; ++i)
+                        below += data[i] < 0.0f && domainIndex.isInside(lo + Coord(i >> 6, (i >> 3) & 7, i & 7));
+                }
+                belowPerLeaf[n] = below;
                 if (options.leafVisitor)
                     options.leafVisitor(lo, data);
                 else
@@ -193,7 +210,20 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
         for (const Coord& lo : results[b].insideLeafTiles) tree.addTile(1, lo, options.insideValue, true);
     }
     for (auto& leaf : leaves) tree.addLeaf(leaf.release());
-    if (stats) *stats = s;
+    if (stats) {
+        // Inside tiles hold insideValue: below zero when it is negative.
+        auto tileVoxels = [&](const Coord& lo, int size) {
+            CoordBBox box(lo, lo + Coord(size - 1));
+            box.intersect(domainIndex);
+            return box.empty() ? std::uint64_t(0) : std::uint64_t(box.volume());
+        };
+        for (std::size_t b = 0; b < blocks.size() && options.insideValue < 0.0f; ++b) {
+            if (results[b].insideTile) s.domainVoxelsBelowZero += tileVoxels(blocks[b], kBlockDim);
+            for (const Coord& lo : results[b].insideLeafTiles) s.domainVoxelsBelowZero += tileVoxels(lo, kLeafDim);
+        }
+        for (const std::uint32_t below : belowPerLeaf) s.domainVoxelsBelowZero += below;
+        *stats = s;
+    }
     return grid;
 }
 

@@ -41,6 +41,10 @@ struct SparseStats {
     std::uint64_t leaves = 0;       ///< evaluated 8^3 leaves
     std::uint64_t insideTiles = 0;  ///< inside tiles (any level)
     std::uint64_t culledBoxes = 0;  ///< boxes skipped as outside
+    /// Voxels of the domain (index box [0, dims)) whose value is below 0, in leaves and inside
+    /// tiles: countBelow(grid, domain.indexBox(), 0) counted as the leaves are made, while
+    /// their values are in cache, instead of in a second pass over the grid.
+    std::uint64_t domainVoxelsBelowZero = 0;
 };
 
 /// Evaluates @a field over the domain (plus the margin) in parallel: hierarchical culling by

@@ -304,7 +304,7 @@ const openvdb::FloatGrid& Job::grid()
         return evaluateSparse(*mResult, mDomain, options, &stats);
     });
     mGrid->setName(mRecipe.result);
-    const std::uint64_t inside = countBelow(*mGrid, mDomain.indexBox(), 0.0f);
+    const std::uint64_t inside = stats.domainVoxelsBelowZero;
     mReport["result"] = {{"field", mRecipe.result},
                          {"volume_fraction", double(inside) / double(mDomain.voxelCount())},
                          {"volume_mm3", double(inside) * std::pow(mDomain.voxel, 3)},

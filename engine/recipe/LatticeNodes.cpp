@@ -277,6 +277,18 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
         node.thinnest = [steepest](double level) { return 2.0 * level / steepest; };
         node.thinnestKind = "wall";
     }
+    // A TPMS of cubic cells repeats exactly, everywhere: over a domain box of whole cells the
+    // density of the box is that of one period, so the solve samples one period (and a face
+    // zone per side), weighted, instead of every voxel of the box: a 50 mm cube of 10 mm cells
+    // at 0.1 mm measures 101^3 samples instead of 500^3. periodicPieces() declines (and the
+    // solve counts the whole box) when the box is not a whole number of cells.
+    const Recipe& recipe = builder.recipe();
+    if (node.density && raw == plain && !region && recipe.domainBox && cell[0] == cell[1] && cell[1] == cell[2]) {
+        node.densityPeriod = cell;
+        node.densityReach = 0.0;
+        node.densityBox = *recipe.domainBox;
+        node.densityVoxel = recipe.voxel;
+    }
     const Interval range = tpmsLevelRange(type);
     if (node.solid->isSolved() && side == SolidSide::Below && !range.contains(node.solid->level())) {
         std::ostringstream msg;
