@@ -154,6 +154,37 @@ TEST(Cli, VersionComesFromTheBuildAndLandsInTheReport)
     EXPECT_EQ(report["voxlat_version"], version);
 }
 
+TEST(Cli, AnStlWrittenWhileMeshingIsTheFileTheHeldMeshGives)
+{
+    // Without a preview, an STL that is the mesh's only use is written as marching cubes makes
+    // it (the `mesh into` stage); with one, the mesh is held for the picture and written after.
+    // Both give the same file and the same report numbers.
+    TempDir dir;
+    const auto recipe = dir.write("only-stl.yaml", R"(voxel: 0.25
+domain: {box: [[0, 0, 0], [12, 12, 12]]}
+fields:
+  lattice: {tpms: gyroid, cell: 6, solid: network, density: 0.30}
+result: lattice
+outputs: {mesh: part.stl}
+)");
+    ASSERT_EQ(runCommand(voxlatBinary() + " -q run " + recipe.string() + " --no-preview --out " +
+                         (dir.path / "streamed").string()),
+              0);
+    ASSERT_EQ(runCommand(voxlatBinary() + " -q run " + recipe.string() + " --out " + (dir.path / "held").string()), 0);
+    const auto streamed = nlohmann::json::parse(readFile(dir.path / "streamed" / "report.json"));
+    const auto held = nlohmann::json::parse(readFile(dir.path / "held" / "report.json"));
+    EXPECT_TRUE(streamed["timings_s"].contains("mesh into part.stl")) << streamed["timings_s"];
+    EXPECT_FALSE(held["timings_s"].contains("mesh into part.stl")) << held["timings_s"];
+    const std::string bytes = readFile(dir.path / "streamed" / "part.stl");
+    EXPECT_GT(bytes.size(), 84u + 50u * 1000u);
+    EXPECT_TRUE(bytes == readFile(dir.path / "held" / "part.stl"));
+    EXPECT_EQ(streamed["mesh"]["triangles"], held["mesh"]["triangles"]);
+    EXPECT_EQ(streamed["mesh"]["vertices"], held["mesh"]["vertices"]);
+    EXPECT_NEAR(double(streamed["mesh"]["volume_mm3"]), double(held["mesh"]["volume_mm3"]), 1e-9 * 1728.0);
+    EXPECT_NEAR(double(streamed["mesh"]["area_mm2"]), double(held["mesh"]["area_mm2"]), 1e-9 * 1e4);
+    EXPECT_EQ(streamed["result"]["volume_from"], "the mesh " + (dir.path / "streamed" / "part.stl").string());
+}
+
 TEST(Cli, GlobalOptionsAfterTheSubcommandAreTheSame)
 {
     TempDir dir;

@@ -394,14 +394,15 @@ const TriangleMesh& Job::mesh(const MeshOptions& options)
 
 Job::MeshVariant& Job::variant(const MeshOptions& options)
 {
+    // A mesh streamed into its file (writeStlWhileMeshing()) was never kept: made again if asked.
     for (const auto& v : mMeshes)
-        if (v->options == options) return *v;
+        if (v->options == options && v->mesh) return *v;
     if (options.tolerance) checkTolerance(options);
     const openvdb::FloatGrid& g = grid();
     auto v = std::make_unique<MeshVariant>();
     v->options = options;
     const auto raw = std::find_if(mMeshes.begin(), mMeshes.end(), [&](const auto& m) {
-        return m->options.raw() && m->options.extractor == options.extractor;
+        return m->mesh && m->options.raw() && m->options.extractor == options.extractor;
     });
     if (!options.raw() && raw != mMeshes.end()) {
         v->mesh = std::make_unique<TriangleMesh>(*(*raw)->mesh);
@@ -640,6 +641,41 @@ void Job::writeMesh(const std::filesystem::path& path, const MeshOptions& option
     mReport["outputs"].push_back(path.string());
 }
 
+void Job::writeStlWhileMeshing(const std::filesystem::path& path)
+{
+    checkReplaceable(path, mRecipe.source->path + ": mesh output");
+    const openvdb::FloatGrid& g = grid();
+    auto v = std::make_unique<MeshVariant>();
+    const std::string name = path.filename().string();
+    const StreamedMeshCounts counts = timed("mesh into " + name, [&] {
+        StageProgress progress(mContext, "meshing into " + name, 1000);
+        std::atomic<std::uint64_t> last{0};
+        std::unique_ptr<StlStreamWriter> writer;
+        TriangleStream stream;
+        std::vector<std::vector<char>> bytes(stream.slots);
+        std::vector<TriangleMesh::Measures> terms(stream.slots);
+        stream.format = [&](std::size_t, std::size_t slot, std::span<const TriangleCorners> triangles) {
+            terms[slot] = writer->format(triangles, bytes[slot]);
+        };
+        stream.write = [&](std::size_t, std::size_t slot) { writer->write(bytes[slot], terms[slot]); };
+        const StreamedMeshCounts c = marchingCubesStreamed(
+            g, 0.0f, stream,
+            [&](const StreamedMeshCounts& made) {
+                // Volume terms about the domain's centre: near every triangle, so the sums keep their digits.
+                writer = std::make_unique<StlStreamWriter>(path.string(), made.triangles, mDomain.box.center());
+            },
+            feed(progress, last));
+        v->measures = writer->commit();
+        return c;
+    });
+    v->report["extractor"] = meshExtractorName(MeshExtractor::MarchingCubes);
+    v->report["triangles"] = counts.triangles;
+    v->report["vertices"] = counts.vertices;
+    v->files.push_back(path.string());
+    mMeshes.push_back(std::move(v));
+    mReport["outputs"].push_back(path.string());
+}
+
 void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
 {
     // Every output's place is checked before any work: inside outDir, onto nothing but files.
@@ -655,11 +691,30 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
     // All or none: every file is written under a temporary name and the renames wait for the
     // report; an output that fails (or a cancel) half-way leaves the folder as it was.
     OutputTransaction transaction;
+    const auto firstMesh = std::find_if(mRecipe.outputs.begin(), mRecipe.outputs.end(),
+                                        [](const OutputSpec& o) { return o.kind == "mesh"; });
+    // A raw marching-cubes STL whose mesh nothing else uses (no other output with the same mesh
+    // settings, not the preview's) is written as it is made: the mesh is never held.
+    auto onlyUse = [&](std::size_t n) {
+        const MeshOptions options = meshOptions(mRecipe.outputs[n], mRecipe);
+        if (!options.raw() || options.extractor != MeshExtractor::MarchingCubes) return false;
+        std::string extension = paths[n].extension().string();
+        for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
+        if (extension != ".stl") return false;
+        if (preview && n == std::size_t(firstMesh - mRecipe.outputs.begin())) return false;
+        for (std::size_t m = 0; m < mRecipe.outputs.size(); ++m)
+            if (m != n && mRecipe.outputs[m].kind == "mesh" && meshOptions(mRecipe.outputs[m], mRecipe) == options)
+                return false;
+        return std::none_of(mMeshes.begin(), mMeshes.end(), [&](const auto& v) { return v->options == options; });
+    };
     for (std::size_t n = 0; n < mRecipe.outputs.size(); ++n) {
         const OutputSpec& out = mRecipe.outputs[n];
         const std::filesystem::path& path = paths[n];
         if (out.kind == "mesh") {
-            writeMesh(path, meshOptions(out, mRecipe));
+            if (onlyUse(n))
+                writeStlWhileMeshing(path);
+            else
+                writeMesh(path, meshOptions(out, mRecipe));
         } else if (out.kind == "vdb") {
             const openvdb::FloatGrid& g = grid();
             timed("write " + out.file, [&] {
@@ -683,8 +738,6 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         }
     }
     // A picture of what was meshed, next to the first mesh, so the part can be checked by eye.
-    const auto firstMesh = std::find_if(mRecipe.outputs.begin(), mRecipe.outputs.end(),
-                                        [](const OutputSpec& o) { return o.kind == "mesh"; });
     if (preview && firstMesh != mRecipe.outputs.end()) {
         std::filesystem::path picture = outDir / firstMesh->file;
         picture.replace_extension(".preview.png");

@@ -53,6 +53,10 @@ public:
     void writeOutputs(const std::filesystem::path& outDir, bool preview = true);
     /// Writes only the mesh made with @a options, to @a path.
     void writeMesh(const std::filesystem::path& path, const MeshOptions& options = {});
+    /// Writes the raw marching-cubes mesh to the binary STL @a path as it is made, without ever
+    /// holding it (marchingCubesStreamed()): for an output that is the mesh's only use. The same
+    /// bytes as writeMesh(path) with default options; the report gets the same `mesh` entry.
+    void writeStlWhileMeshing(const std::filesystem::path& path);
     void writeReport(const std::filesystem::path& path);
     /// Writes a shaded PNG picture of the mesh made with @a options (front-right-top view).
     void writePreview(const std::filesystem::path& path, const MeshOptions& options = {});

@@ -11,6 +11,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
+#include <tbb/parallel_pipeline.h>
 
 #include <algorithm>
 #include <array>
@@ -457,6 +458,10 @@ inline int popcount64(std::uint64_t x)
 #endif
 }
 
+/// What processBlock() does: count (and record neighbours and edge masks), emit into an indexed
+/// mesh, or emit triangles as corner positions (no indices).
+enum class Pass { Count, Emit, Stream };
+
 class Mesher {
 public:
     Mesher(const openvdb::FloatGrid& grid, float iso) : mGrid(grid), mTree(grid.tree()), mIso(iso), mTable(caseTable())
@@ -470,19 +475,28 @@ public:
     }
 
     TriangleMesh run(ProgressFn progressFn, MarchingCubesStats& stats);
+    StreamedMeshCounts runStreamed(const TriangleStream& stream,
+                                   const std::function<void(const StreamedMeshCounts&)>& onCounts,
+                                   ProgressFn progressFn, MarchingCubesStats& stats);
 
 private:
     using Accessor = openvdb::tree::ValueAccessor<const FloatTree, /*IsSafe=*/false>;
 
     void collectBlocks();
+    void computeSigns(std::size_t leaf);
     Neighbourhood neighbourhood(std::size_t b, Accessor& acc) const;
-    void insideRows(const Neighbourhood& n, std::uint16_t* rows) const;
-    template <bool Emit>
-    void processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh);
+    void insideRows(std::size_t b, const Neighbourhood& n, std::uint16_t* rows) const;
+    template <Pass P>
+    void processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh,
+                      std::vector<TriangleCorners>* corners = nullptr);
+    /// After collectBlocks(): makes the sign words, runs the counting pass, then the prefix sums.
+    void countAll(ExtractProgress& progress);
+    void fillStats(MarchingCubesStats& stats);
     static bool cubeHasVertices(int x, int y, int z, std::uint16_t crossing, std::uint8_t available);
     int decisions(int cs, const Neighbourhood& n, int x, int y, int z) const;
     uint32_t neighbourVertexIndex(std::size_t owner, int axis, int lx, int ly, int lz) const;
-    Vec3d edgePoint(const Neighbourhood& n, const Coord& origin, int x, int y, int z, int axis) const;
+    [[gnu::always_inline]] Vec3d edgePoint(const Neighbourhood& n, const Coord& origin, int x, int y, int z,
+                                           int axis) const;
 
     Vec3d indexToWorld(const Vec3d& p) const
     {
@@ -498,6 +512,12 @@ private:
     std::vector<Block> mBlocks;
     std::size_t mNumLeaves = 0;
     std::unique_ptr<BlockMap> mMap;
+
+    /// Per leaf, the voxels below the iso-value: word x, bit (y << 3) | z. Made once from the
+    /// leaf's values read in order; both passes build their cube rows from these 64 bytes per
+    /// leaf instead of reading scattered values of four leaves each time (the +z neighbour's
+    /// z = 0 plane alone touches every cache line of its leaf).
+    std::vector<std::array<std::uint64_t, 8>> mSigns;
 
     // Filled by the counting pass.
     std::vector<std::array<int32_t, 8>> mNeighbours;                // [0]: self, [s]: block at +s; -1 unless a leaf
@@ -545,20 +565,37 @@ Neighbourhood Mesher::neighbourhood(std::size_t b, Accessor& acc) const
     return n;
 }
 
-void Mesher::insideRows(const Neighbourhood& n, std::uint16_t* rows) const
+void Mesher::computeSigns(std::size_t leaf)
 {
-    // rows[x * 9 + y] has bit z set when voxel (x, y, z) is inside. "< iso", never "<=": a value
-    // exactly at the threshold is outside, on both sides of every edge.
-    unsigned constantBits[8];
-    for (int s = 0; s < 8; ++s) constantBits[s] = n.constant[s] < mIso ? 0xFFu : 0u;
+    // "< iso", never "<=": a value exactly at the threshold is outside, on both sides of every edge.
+    const float* data = mBlocks[leaf].leaf->buffer().data();
+    std::array<std::uint64_t, 8>& words = mSigns[leaf];
+    for (int x = 0; x < 8; ++x) {
+        std::uint64_t word = 0;
+        for (int y = 0; y < 8; ++y) word |= std::uint64_t(insideByte(data + (x << 6) + (y << 3), mIso)) << (8 * y);
+        words[x] = word;
+    }
+}
+
+void Mesher::insideRows(std::size_t b, const Neighbourhood& n, std::uint16_t* rows) const
+{
+    // rows[x * 9 + y] has bit z set when voxel (x, y, z) is inside, from the sign words of the
+    // block and its +x/+y/+z neighbours (constant sub-blocks: all or none).
+    const std::uint64_t* words[8];
+    std::uint64_t constant[8];
+    for (int s = 0; s < 8; ++s) {
+        const int32_t i = mNeighbours[b][s];
+        words[s] = i >= 0 ? mSigns[std::size_t(i)].data() : nullptr;
+        constant[s] = n.constant[s] < mIso ? ~std::uint64_t(0) : 0;
+    }
+    auto row = [&](int s, int x) { return words[s] ? words[s][x] : constant[s]; };
     for (int x = 0; x < kDim; ++x) {
-        for (int y = 0; y < kDim; ++y) {
-            const int s = (x >> 3) | ((y >> 3) << 1);
-            const int offset = ((x & 7) << 6) | ((y & 7) << 3);
-            const unsigned low = n.data[s] ? insideByte(n.data[s] + offset, mIso) : constantBits[s];
-            const unsigned high = n.data[s | 4] ? unsigned(n.data[s | 4][offset] < mIso) : constantBits[s | 4] & 1u;
-            rows[x * kDim + y] = std::uint16_t(low | (high << 8));
-        }
+        const int sx = x >> 3, lx = x & 7;
+        const std::uint64_t low = row(sx, lx), lowY = row(sx | 2, lx);
+        const std::uint64_t high = row(sx | 4, lx), highY = row(sx | 6, lx);
+        for (int y = 0; y < 8; ++y)
+            rows[x * kDim + y] = std::uint16_t(((low >> (8 * y)) & 0xFF) | (((high >> (8 * y)) & 1) << 8));
+        rows[x * kDim + 8] = std::uint16_t((lowY & 0xFF) | ((highY & 1) << 8));
     }
 }
 
@@ -604,7 +641,7 @@ uint32_t Mesher::neighbourVertexIndex(std::size_t owner, int axis, int lx, int l
     return uint32_t(mVertexOffsets[owner] + mEdgeRanks[owner][word] + popcount64(below));
 }
 
-Vec3d Mesher::edgePoint(const Neighbourhood& n, const Coord& origin, int x, int y, int z, int axis) const
+inline Vec3d Mesher::edgePoint(const Neighbourhood& n, const Coord& origin, int x, int y, int z, int axis) const
 {
     const double v0 = n.value(x, y, z);
     const double v1 = n.value(x + (axis == 0), y + (axis == 1), z + (axis == 2));
@@ -615,9 +652,10 @@ Vec3d Mesher::edgePoint(const Neighbourhood& n, const Coord& origin, int x, int 
     return p;
 }
 
-template <bool Emit>
-void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh)
+template <Pass P>
+void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std::vector<TriangleCorners>* corners)
 {
+    constexpr bool Emit = P != Pass::Count;
     const Block& block = mBlocks[b];
     const bool isLeaf = b < mNumLeaves;
 
@@ -634,12 +672,13 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh)
 
     const Neighbourhood n = neighbourhood(b, acc);
     std::uint16_t rows[kDim * kDim];
-    insideRows(n, rows);
+    insideRows(b, n, rows);
 
     BlockCounts counts;
     // Pass 2: global index of each vertex this leaf owns, by mask bit (word * 64 + bit). Only
     // written and read for set bits; a per-thread scratch, never a per-voxel array for the grid.
-    std::uint32_t ownIndex[kMaskWords * 64];
+    std::uint32_t ownIndex[P == Pass::Emit ? kMaskWords * 64 : 1];
+    openvdb::Vec3f ownPosition[P == Pass::Stream ? kMaskWords * 64 : 1];
     if (isLeaf) {
         if constexpr (!Emit) {
             std::array<std::uint64_t, kMaskWords>& mask = mEdgeMasks[b];
@@ -662,6 +701,17 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh)
                 total += uint32_t(popcount64(mask[w]));
             }
             counts.edgeVertices = total;
+        } else if constexpr (P == Pass::Stream) {
+            // Each owned vertex's position once; cubes read them by mask bit.
+            const std::array<std::uint64_t, kMaskWords>& mask = mEdgeMasks[b];
+            for (int w = 0; w < kMaskWords; ++w) {
+                const int axis = w >> 3, x = w & 7;
+                for (std::uint64_t bits = mask[w]; bits; bits &= bits - 1) {
+                    const int bit = std::countr_zero(bits);
+                    ownPosition[w * 64 + bit] =
+                        openvdb::Vec3f(indexToWorld(edgePoint(n, block.origin, x, bit >> 3, bit & 7, axis)));
+                }
+            }
         } else {
             // Owned vertices in mask bit order, the order neighbourVertexIndex() ranks them in.
             const std::array<std::uint64_t, kMaskWords>& mask = mEdgeMasks[b];
@@ -679,7 +729,7 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh)
     }
     std::uint64_t nextCentroid = 0;
     openvdb::Vec3I* outTriangles = nullptr;
-    if constexpr (Emit) {
+    if constexpr (P == Pass::Emit) {
         nextCentroid = mVertexOffsets[b] + mCounts[b].edgeVertices;
         outTriangles = mesh->triangles.data() + mTriangleOffsets[b];
     }
@@ -715,9 +765,35 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh)
                 }
                 const int ambiguous = mTable.ambiguousFaces[cs] ? decisions(cs, n, x, y, z) : 0;
                 const CaseEntry& entry = mTable.entries[(cs << 6) | ambiguous];
-                if constexpr (!Emit) {
+                if constexpr (P == Pass::Count) {
                     counts.triangles += entry.numTriangles;
                     counts.centroids += entry.numCentroids;
+                } else if constexpr (P == Pass::Stream) {
+                    // Each position from the same two values and integer offsets as its owner
+                    // computes it in the Emit pass: the same bits.
+                    openvdb::Vec3f position[kCentroidBase + kMaxCentroids];
+                    for (std::uint16_t bits = crossing; bits; bits &= bits - 1) {
+                        const int e = std::countr_zero(bits), c = edgeLowerCorner(e), axis = edgeAxis(e);
+                        const int ox = x + cornerBit(c, 0), oy = y + cornerBit(c, 1), oz = z + cornerBit(c, 2);
+                        if (isLeaf && (ox | oy | oz) < 8)
+                            position[e] = ownPosition[(axis * 8 + ox) * 64 + ((oy << 3) | oz)];
+                        else
+                            position[e] = openvdb::Vec3f(indexToWorld(edgePoint(n, block.origin, ox, oy, oz, axis)));
+                    }
+                    for (int k = 0; k < entry.numCentroids; ++k) {
+                        Vec3d sum(0.0);
+                        int count = 0;
+                        for (std::uint16_t bits = entry.centroidLoop[k]; bits; bits &= bits - 1, ++count) {
+                            const int e = std::countr_zero(bits), c = edgeLowerCorner(e);
+                            sum += edgePoint(n, block.origin, x + cornerBit(c, 0), y + cornerBit(c, 1),
+                                             z + cornerBit(c, 2), edgeAxis(e));
+                        }
+                        position[kCentroidBase + k] = openvdb::Vec3f(indexToWorld(sum / double(count)));
+                    }
+                    for (int t = 0; t < entry.numTriangles; ++t) {
+                        const std::uint8_t* tri = entry.triangles[t];
+                        corners->push_back({position[tri[0]], position[tri[1]], position[tri[2]]});
+                    }
                 } else {
                     uint32_t index[kCentroidBase + kMaxCentroids];
                     for (std::uint16_t bits = crossing; bits; bits &= bits - 1) {
@@ -751,28 +827,30 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh)
     if constexpr (!Emit) mCounts[b] = counts;
 }
 
-TriangleMesh Mesher::run(ProgressFn progressFn, MarchingCubesStats& stats)
+// The grain keeps accessor set-up and scheduling overhead small; the result never depends on how
+// ranges are split, since every block writes only its own slots.
+constexpr std::size_t kGrain = 16;
+
+void Mesher::countAll(ExtractProgress& progress)
 {
-    collectBlocks();
     const std::size_t numBlocks = mBlocks.size();
     mNeighbours.resize(numBlocks);
     mEdgeMasks.resize(mNumLeaves);
     mEdgeRanks.resize(mNumLeaves);
     mCounts.resize(numBlocks);
-    ExtractProgress progress(std::move(progressFn), 2 * numBlocks);
-
-    // The grain keeps accessor set-up and scheduling overhead small; the result never depends
-    // on how ranges are split, since every block writes only its own slots.
-    constexpr std::size_t kGrain = 16;
+    mSigns.resize(mNumLeaves);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mNumLeaves, 64),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t b = r.begin(); b != r.end(); ++b) computeSigns(b);
+                      });
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, kGrain),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                           Accessor acc(mTree);
                           for (std::size_t b = r.begin(); b != r.end(); ++b) {
-                              processBlock<false>(b, acc, nullptr);
+                              processBlock<Pass::Count>(b, acc, nullptr);
                               progress.advance();
                           }
                       });
-
     mVertexOffsets.resize(numBlocks + 1);
     mTriangleOffsets.resize(numBlocks + 1);
     mVertexOffsets[0] = mTriangleOffsets[0] = 0;
@@ -780,6 +858,28 @@ TriangleMesh Mesher::run(ProgressFn progressFn, MarchingCubesStats& stats)
         mVertexOffsets[b + 1] = mVertexOffsets[b] + mCounts[b].edgeVertices + mCounts[b].centroids;
         mTriangleOffsets[b + 1] = mTriangleOffsets[b] + mCounts[b].triangles;
     }
+}
+
+void Mesher::fillStats(MarchingCubesStats& stats)
+{
+    stats = MarchingCubesStats{};
+    stats.leafBlocks = mNumLeaves;
+    stats.tileBlocks = mBlocks.size() - mNumLeaves;
+    for (std::size_t b = 0; b < mBlocks.size(); ++b) {
+        stats.centroidVertices += mCounts[b].centroids;
+        stats.droppedCubes += mCounts[b].droppedCubes;
+        if (b >= mNumLeaves) stats.tileBlockTriangles += mCounts[b].triangles;
+    }
+    std::sort(mSkipped.begin(), mSkipped.end());
+    stats.skippedEdges = std::size_t(std::unique(mSkipped.begin(), mSkipped.end()) - mSkipped.begin());
+}
+
+TriangleMesh Mesher::run(ProgressFn progressFn, MarchingCubesStats& stats)
+{
+    collectBlocks();
+    ExtractProgress progress(std::move(progressFn), 2 * mBlocks.size());
+    countAll(progress);
+    const std::size_t numBlocks = mBlocks.size();
     if (mVertexOffsets[numBlocks] > std::uint64_t(UINT32_MAX)) {
         throw std::length_error("marchingCubes: more than 2^32 vertices");
     }
@@ -794,24 +894,63 @@ TriangleMesh Mesher::run(ProgressFn progressFn, MarchingCubesStats& stats)
                           for (std::size_t b = r.begin(); b != r.end(); ++b) {
                               // A block that owns no vertex and makes no triangle writes nothing.
                               if (mCounts[b].edgeVertices != 0 || mCounts[b].triangles != 0)
-                                  processBlock<true>(b, acc, &mesh);
+                                  processBlock<Pass::Emit>(b, acc, &mesh);
                               progress.advance();
                           }
                       });
-
-    stats = MarchingCubesStats{};
-    stats.leafBlocks = mNumLeaves;
-    stats.tileBlocks = numBlocks - mNumLeaves;
-    for (std::size_t b = 0; b < numBlocks; ++b) {
-        stats.centroidVertices += mCounts[b].centroids;
-        stats.droppedCubes += mCounts[b].droppedCubes;
-        if (b >= mNumLeaves) stats.tileBlockTriangles += mCounts[b].triangles;
-    }
-    std::sort(mSkipped.begin(), mSkipped.end());
-    stats.skippedEdges = std::size_t(std::unique(mSkipped.begin(), mSkipped.end()) - mSkipped.begin());
-
+    fillStats(stats);
     progress.finish();
     return mesh;
+}
+
+StreamedMeshCounts Mesher::runStreamed(const TriangleStream& stream,
+                                       const std::function<void(const StreamedMeshCounts&)>& onCounts,
+                                       ProgressFn progressFn, MarchingCubesStats& stats)
+{
+    collectBlocks();
+    ExtractProgress progress(std::move(progressFn), 2 * mBlocks.size());
+    countAll(progress);
+    const std::size_t numBlocks = mBlocks.size();
+    const StreamedMeshCounts counts{mTriangleOffsets[numBlocks], mVertexOffsets[numBlocks]};
+    if (onCounts) onCounts(counts);
+
+    // Chunks of consecutive blocks with about kChunkTriangles triangles each, cut by the counts
+    // (so the chunks, and what each consumer call sees, do not depend on threads).
+    constexpr std::uint64_t kChunkTriangles = 1 << 14;
+    std::vector<std::size_t> chunkStart{0};
+    for (std::size_t b = 0; b < numBlocks; ++b)
+        if (mTriangleOffsets[b + 1] - mTriangleOffsets[chunkStart.back()] >= kChunkTriangles)
+            chunkStart.push_back(b + 1);
+    if (chunkStart.back() != numBlocks) chunkStart.push_back(numBlocks);
+    const std::size_t chunks = chunkStart.size() - 1;
+    const std::size_t slots = std::max<std::size_t>(1, stream.slots);
+    std::vector<std::vector<TriangleCorners>> buffers(slots);
+
+    std::size_t next = 0;
+    tbb::parallel_pipeline(
+        slots,
+        tbb::make_filter<void,
+                         std::size_t>(tbb::filter_mode::serial_in_order, [&](tbb::flow_control& fc) -> std::size_t {
+            if (next == chunks) fc.stop();
+            return next++;
+        }) & tbb::make_filter<std::size_t, std::size_t>(tbb::filter_mode::parallel, [&](std::size_t chunk) {
+            if (chunk >= chunks) return chunk;
+            std::vector<TriangleCorners>& corners = buffers[chunk % slots];
+            corners.clear();
+            corners.reserve(mTriangleOffsets[chunkStart[chunk + 1]] - mTriangleOffsets[chunkStart[chunk]]);
+            Accessor acc(mTree);
+            for (std::size_t b = chunkStart[chunk]; b != chunkStart[chunk + 1]; ++b) {
+                if (mCounts[b].triangles != 0) processBlock<Pass::Stream>(b, acc, nullptr, &corners);
+                progress.advance();
+            }
+            stream.format(chunk, chunk % slots, corners);
+            return chunk;
+        }) & tbb::make_filter<std::size_t, void>(tbb::filter_mode::serial_in_order, [&](std::size_t chunk) {
+            if (chunk < chunks) stream.write(chunk, chunk % slots);
+        }));
+    fillStats(stats);
+    progress.finish();
+    return counts;
 }
 
 }  // namespace
@@ -824,6 +963,17 @@ TriangleMesh marchingCubes(const openvdb::FloatGrid& grid, float isoValue, Progr
     TriangleMesh mesh = mesher.run(std::move(progress), local);
     if (stats) *stats = local;
     return mesh;
+}
+
+StreamedMeshCounts marchingCubesStreamed(const openvdb::FloatGrid& grid, float isoValue, const TriangleStream& stream,
+                                         const std::function<void(const StreamedMeshCounts&)>& onCounts,
+                                         ProgressFn progress, MarchingCubesStats* stats)
+{
+    MarchingCubesStats local;
+    Mesher mesher(grid, isoValue);
+    const StreamedMeshCounts counts = mesher.runStreamed(stream, onCounts, std::move(progress), local);
+    if (stats) *stats = local;
+    return counts;
 }
 
 MarchingCubesTableInfo marchingCubesTableInfo()

@@ -12,8 +12,11 @@
 #include <openvdb/Grid.h>
 #include <openvdb/openvdb.h>
 
+#include <array>
 #include <cstddef>
+#include <cstdint>
 #include <functional>
+#include <span>
 
 namespace voxlat {
 
@@ -50,6 +53,36 @@ struct MarchingCubesStats {
 /// @param stats     optional out-parameter receiving diagnostics
 TriangleMesh marchingCubes(const openvdb::FloatGrid& grid, float isoValue = 0.0f, ProgressFn progress = {},
                            MarchingCubesStats* stats = nullptr);
+
+/// One triangle as its three corners in world space, in its winding order.
+using TriangleCorners = std::array<openvdb::Vec3f, 3>;
+
+/// Where marchingCubesStreamed() delivers its triangles. The run splits the cubes into
+/// consecutive chunks; each chunk's triangles go to @c format (called in parallel, for any
+/// chunks at once, each with its own slot in [0, slots)), then to @c write (one call at a time,
+/// chunks in order) with the same slot. A slot is reused by a later chunk only after its
+/// @c write returned, so a consumer keeps one buffer per slot.
+struct TriangleStream {
+    std::size_t slots = 8;
+    std::function<void(std::size_t chunk, std::size_t slot, std::span<const TriangleCorners> triangles)> format;
+    std::function<void(std::size_t chunk, std::size_t slot)> write;
+};
+
+/// Counts of a streamed run (the mesh marchingCubes() would return has these sizes).
+struct StreamedMeshCounts {
+    std::uint64_t triangles = 0;
+    std::uint64_t vertices = 0;
+};
+
+/// marchingCubes() without holding the mesh: the same triangles, in the same order, with
+/// corners of the same bits (each position is computed from the same two grid values wherever
+/// the vertex is used), delivered chunk by chunk to @a stream. @a counts is known before the
+/// first triangle is delivered (a format whose header needs the count gets it from
+/// @a onCounts). For an output that is the mesh's only use: a binary STL is written without
+/// the vertex and triangle arrays (220 MB for the acceptance gyroid) or a second pass over them.
+StreamedMeshCounts marchingCubesStreamed(const openvdb::FloatGrid& grid, float isoValue, const TriangleStream& stream,
+                                         const std::function<void(const StreamedMeshCounts&)>& onCounts = {},
+                                         ProgressFn progress = {}, MarchingCubesStats* stats = nullptr);
 
 /// Facts about the precomputed case table, for tests and reports.
 struct MarchingCubesTableInfo {

@@ -229,27 +229,91 @@ void parseAsciiStl(const std::string& text, const std::string& path, TriangleMes
 
 }  // namespace
 
-void writeStl(const TriangleMesh& mesh, const std::string& path, TriangleMesh::Measures* measures)
+namespace {
+
+/// One binary STL facet of the triangle (a, b, c) at @a p (kStlFacetSize bytes): the unit normal
+/// in double, then the corners. With @a sum, adds its area and volume terms (about @a ref), as
+/// TriangleMesh::measure() takes them. writeStl() and StlStreamWriter share it: one set of bytes.
+inline void formatFacet(const openvdb::Vec3f& a, const openvdb::Vec3f& b, const openvdb::Vec3f& c, char* p,
+                        const openvdb::Vec3d& ref, TriangleMesh::Measures* sum)
 {
-    if (mesh.triangles.size() > std::numeric_limits<std::uint32_t>::max()) {
+    const openvdb::Vec3d da(a), db(b), dc(c);
+    openvdb::Vec3d n = (db - da).cross(dc - da);
+    const double length = n.length();
+    if (sum) {
+        sum->area += length;
+        sum->volume += (da - ref).dot((db - ref).cross(dc - ref));
+    }
+    n = length > 0.0 ? n / length : openvdb::Vec3d(0.0);
+    const float facet[12] = {float(n[0]), float(n[1]), float(n[2]), a[0], a[1], a[2],
+                             b[0],        b[1],        b[2],        c[0], c[1], c[2]};
+    putF32s(p, facet);
+    p[48] = p[49] = 0;
+}
+
+/// The 84 bytes before the facets: title, then the triangle count.
+void writeStlHeader(std::ostream& out, std::uint64_t triangles)
+{
+    if (triangles > std::numeric_limits<std::uint32_t>::max()) {
         throw std::invalid_argument("binary STL holds at most 2^32 - 1 triangles");
     }
-    checkIndices(mesh);
-    AtomicFile file(path);
-    std::ostream& out = file.stream();
-
     char header[kStlHeaderSize + 4];
     std::memset(header, ' ', kStlHeaderSize);
     const std::string_view title = "voxlat binary STL";
     std::memcpy(header, title.data(), title.size());
-    putU32(header + kStlHeaderSize, std::uint32_t(mesh.triangles.size()));
+    putU32(header + kStlHeaderSize, std::uint32_t(triangles));
     out.write(header, sizeof(header));
+}
+
+}  // namespace
+
+StlStreamWriter::StlStreamWriter(const std::string& path, std::uint64_t triangles, const openvdb::Vec3d& reference)
+    : mFile(std::make_unique<AtomicFile>(path)), mReference(reference)
+{
+    writeStlHeader(mFile->stream(), triangles);
+}
+
+StlStreamWriter::~StlStreamWriter() = default;
+
+TriangleMesh::Measures StlStreamWriter::format(std::span<const std::array<openvdb::Vec3f, 3>> triangles,
+                                               std::vector<char>& bytes) const
+{
+    bytes.resize(triangles.size() * kStlFacetSize);
+    TriangleMesh::Measures sum;
+    char* p = bytes.data();
+    for (const auto& t : triangles) {
+        formatFacet(t[0], t[1], t[2], p, mReference, &sum);
+        p += kStlFacetSize;
+    }
+    return sum;
+}
+
+void StlStreamWriter::write(const std::vector<char>& bytes, const TriangleMesh::Measures& terms)
+{
+    mFile->stream().write(bytes.data(), std::streamsize(bytes.size()));
+    mTerms.volume += terms.volume;
+    mTerms.area += terms.area;
+}
+
+TriangleMesh::Measures StlStreamWriter::commit()
+{
+    mFile->commit();
+    return {mTerms.volume / 6.0, 0.5 * mTerms.area};
+}
+
+void writeStl(const TriangleMesh& mesh, const std::string& path, TriangleMesh::Measures* measures)
+{
+    checkIndices(mesh);
+    AtomicFile file(path);
+    std::ostream& out = file.stream();
+    writeStlHeader(out, mesh.triangles.size());
 
     // Facets are formatted in parallel, chunk by chunk, and written in order: the bytes are the
     // same for any thread count, and formatting (normals) overlaps the writing. At most kTokens
     // chunks are in flight and they leave the pipeline in order, so chunk i can reuse the buffer
     // of chunk i - kTokens: the buffers are allocated (and their pages touched) once.
     constexpr std::size_t kTokens = 8;
+    constexpr std::size_t kPrefetchAhead = 16;
     const std::size_t chunks = (mesh.triangles.size() + kStlChunkFacets - 1) / kStlChunkFacets;
     std::vector<std::vector<char>> buffers(std::min(kTokens, chunks));
     // Volume and area terms as TriangleMesh::measure() takes them, summed per chunk.
@@ -264,22 +328,14 @@ void writeStl(const TriangleMesh& mesh, const std::string& path, TriangleMesh::M
         char* p = chunk.data();
         TriangleMesh::Measures sum;
         for (std::size_t i = begin; i < begin + count; ++i, p += kStlFacetSize) {
-            const openvdb::Vec3I& t = mesh.triangles[i];
-            const openvdb::Vec3f& a = mesh.points[t[0]];
-            const openvdb::Vec3f& b = mesh.points[t[1]];
-            const openvdb::Vec3f& c = mesh.points[t[2]];
-            const openvdb::Vec3d da(a), db(b), dc(c);
-            openvdb::Vec3d n = (db - da).cross(dc - da);
-            const double length = n.length();
-            if (measures) {
-                sum.area += length;
-                sum.volume += (da - ref).dot((db - ref).cross(dc - ref));
+            // A triangle's corners can be vertices of a neighbouring block, far off in the
+            // array: ask for those of a later triangle now so their loads do not stall this one.
+            if (i + kPrefetchAhead < begin + count) {
+                const openvdb::Vec3I& ahead = mesh.triangles[i + kPrefetchAhead];
+                for (int k = 0; k < 3; ++k) __builtin_prefetch(&mesh.points[ahead[k]]);
             }
-            n = length > 0.0 ? n / length : openvdb::Vec3d(0.0);
-            const float facet[12] = {float(n[0]), float(n[1]), float(n[2]), a[0], a[1], a[2],
-                                     b[0],        b[1],        b[2],        c[0], c[1], c[2]};
-            putF32s(p, facet);
-            p[48] = p[49] = 0;
+            const openvdb::Vec3I& t = mesh.triangles[i];
+            formatFacet(mesh.points[t[0]], mesh.points[t[1]], mesh.points[t[2]], p, ref, measures ? &sum : nullptr);
         }
         if (measures) sums[index] = sum;
         return index;

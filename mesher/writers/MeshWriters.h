@@ -3,8 +3,13 @@
 #pragma once
 
 #include "mesher/extract/TriangleMesh.h"
+#include "mesher/writers/AtomicFile.h"
 
+#include <array>
+#include <cstdint>
+#include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -19,6 +24,34 @@ namespace voxlat {
 /// formatted (the terms of TriangleMesh::measure() in chunk order: the same up to rounding, the
 /// same bits for any thread count).
 void writeStl(const TriangleMesh& mesh, const std::string& path, TriangleMesh::Measures* measures = nullptr);
+
+/// A binary STL written chunk by chunk, for a mesh that is never held whole (marching cubes
+/// streamed into the file: marchingCubesStreamed()). The facets have the bytes writeStl() gives
+/// the same triangles. Written under a temporary name; commit() puts it in place, and a writer
+/// destroyed before that removes it (nothing half-written is left).
+class StlStreamWriter {
+public:
+    /// Opens the file and writes the header for @a triangles facets. The volume is summed about
+    /// @a reference (any point near the mesh keeps the sums accurate).
+    StlStreamWriter(const std::string& path, std::uint64_t triangles, const openvdb::Vec3d& reference);
+    ~StlStreamWriter();
+    StlStreamWriter(const StlStreamWriter&) = delete;
+    StlStreamWriter& operator=(const StlStreamWriter&) = delete;
+
+    /// Formats @a triangles into @a bytes and returns their volume and area terms. Touches no
+    /// state of the writer: call it from any thread, for any chunks at once.
+    TriangleMesh::Measures format(std::span<const std::array<openvdb::Vec3f, 3>> triangles,
+                                  std::vector<char>& bytes) const;
+    /// Appends a formatted chunk and its terms. One call at a time, chunks in file order.
+    void write(const std::vector<char>& bytes, const TriangleMesh::Measures& terms);
+    /// Puts the file in place; returns the mesh's volume and area (as TriangleMesh::measure()).
+    TriangleMesh::Measures commit();
+
+private:
+    std::unique_ptr<AtomicFile> mFile;
+    openvdb::Vec3d mReference;
+    TriangleMesh::Measures mTerms;  ///< sums of the chunks' terms, in file order
+};
 
 /// Name and value pairs a format that has metadata records (3MF) stores with the mesh.
 using MeshMetadata = std::vector<std::pair<std::string, std::string>>;
