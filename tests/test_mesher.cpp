@@ -729,21 +729,16 @@ StreamedMeshCounts streamStl(const FloatGrid& grid, const std::string& path, int
     tbb::task_arena arena(threads);
     StreamedMeshCounts counts;
     arena.execute([&] {
-        std::unique_ptr<StlStreamWriter> writer;
+        StlStreamWriter writer(path, grid.indexToWorld(Vec3d(0.0)));
         TriangleStream stream;
         std::vector<std::vector<char>> bytes(stream.slots);
         std::vector<TriangleMesh::Measures> terms(stream.slots);
         stream.format = [&](std::size_t, std::size_t slot, std::span<const TriangleCorners> triangles) {
-            terms[slot] = writer->format(triangles, bytes[slot]);
+            terms[slot] = writer.format(triangles, bytes[slot]);
         };
-        stream.write = [&](std::size_t, std::size_t slot) { writer->write(bytes[slot], terms[slot]); };
-        counts = marchingCubesStreamed(
-            grid, 0.0f, stream,
-            [&](const StreamedMeshCounts& c) {
-                writer = std::make_unique<StlStreamWriter>(path, c.triangles, grid.indexToWorld(Vec3d(0.0)));
-            },
-            {}, stats);
-        const TriangleMesh::Measures m = writer->commit();
+        stream.write = [&](std::size_t, std::size_t slot) { writer.write(bytes[slot], terms[slot]); };
+        counts = marchingCubesStreamed(grid, 0.0f, stream, {}, stats);
+        const TriangleMesh::Measures m = writer.commit(counts.triangles);
         if (measures) *measures = m;
     });
     return counts;
@@ -802,24 +797,19 @@ TEST_F(Mesher, StreamedStlLeavesNothingWhenInterrupted)
     // A consumer that fails half-way (a full disk, a cancel): the writer never committed, so the
     // folder holds no file, not even a temporary one.
     TempDir dir;
-    const auto grid = makeSphere(40.3, 0.1).grid;  // three chunks
+    const auto grid = makeSphere(40.3, 0.1).grid;  // several chunks
     {
-        std::unique_ptr<StlStreamWriter> writer;
+        StlStreamWriter writer(dir.file("s.stl"), Vec3d(0.0));
         TriangleStream stream;
         std::vector<std::vector<char>> bytes(stream.slots);
         stream.format = [&](std::size_t, std::size_t slot, std::span<const TriangleCorners> triangles) {
-            writer->format(triangles, bytes[slot]);
+            writer.format(triangles, bytes[slot]);
         };
         stream.write = [&](std::size_t chunk, std::size_t slot) {
             if (chunk == 1) throw std::runtime_error("disk full");
-            writer->write(bytes[slot], {});
+            writer.write(bytes[slot], {});
         };
-        EXPECT_THROW(marchingCubesStreamed(*grid, 0.0f, stream,
-                                           [&](const StreamedMeshCounts& c) {
-                                               writer = std::make_unique<StlStreamWriter>(dir.file("s.stl"),
-                                                                                          c.triangles, Vec3d(0.0));
-                                           }),
-                     std::runtime_error);
+        EXPECT_THROW(marchingCubesStreamed(*grid, 0.0f, stream), std::runtime_error);
     }
     EXPECT_EQ(dir.entries(), 0u);
 }

@@ -650,22 +650,17 @@ void Job::writeStlWhileMeshing(const std::filesystem::path& path)
     const StreamedMeshCounts counts = timed("mesh into " + name, [&] {
         StageProgress progress(mContext, "meshing into " + name, 1000);
         std::atomic<std::uint64_t> last{0};
-        std::unique_ptr<StlStreamWriter> writer;
+        // Volume terms about the domain's centre: near every triangle, so the sums keep their digits.
+        StlStreamWriter writer(path.string(), mDomain.box.center());
         TriangleStream stream;
         std::vector<std::vector<char>> bytes(stream.slots);
         std::vector<TriangleMesh::Measures> terms(stream.slots);
         stream.format = [&](std::size_t, std::size_t slot, std::span<const TriangleCorners> triangles) {
-            terms[slot] = writer->format(triangles, bytes[slot]);
+            terms[slot] = writer.format(triangles, bytes[slot]);
         };
-        stream.write = [&](std::size_t, std::size_t slot) { writer->write(bytes[slot], terms[slot]); };
-        const StreamedMeshCounts c = marchingCubesStreamed(
-            g, 0.0f, stream,
-            [&](const StreamedMeshCounts& made) {
-                // Volume terms about the domain's centre: near every triangle, so the sums keep their digits.
-                writer = std::make_unique<StlStreamWriter>(path.string(), made.triangles, mDomain.box.center());
-            },
-            feed(progress, last));
-        v->measures = writer->commit();
+        stream.write = [&](std::size_t, std::size_t slot) { writer.write(bytes[slot], terms[slot]); };
+        const StreamedMeshCounts c = marchingCubesStreamed(g, 0.0f, stream, feed(progress, last));
+        v->measures = writer.commit(c.triangles);
         return c;
     });
     v->report["extractor"] = meshExtractorName(MeshExtractor::MarchingCubes);

@@ -475,9 +475,7 @@ public:
     }
 
     TriangleMesh run(ProgressFn progressFn, MarchingCubesStats& stats);
-    StreamedMeshCounts runStreamed(const TriangleStream& stream,
-                                   const std::function<void(const StreamedMeshCounts&)>& onCounts,
-                                   ProgressFn progressFn, MarchingCubesStats& stats);
+    StreamedMeshCounts runStreamed(const TriangleStream& stream, ProgressFn progressFn, MarchingCubesStats& stats);
 
 private:
     using Accessor = openvdb::tree::ValueAccessor<const FloatTree, /*IsSafe=*/false>;
@@ -655,11 +653,11 @@ inline Vec3d Mesher::edgePoint(const Neighbourhood& n, const Coord& origin, int 
 template <Pass P>
 void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std::vector<TriangleCorners>* corners)
 {
-    constexpr bool Emit = P != Pass::Count;
+    constexpr bool Counts = P != Pass::Emit;  // the Stream pass counts as it goes: no pass before it
     const Block& block = mBlocks[b];
     const bool isLeaf = b < mNumLeaves;
 
-    if constexpr (!Emit) {
+    if constexpr (Counts) {
         std::array<int32_t, 8>& nb = mNeighbours[b];
         nb[0] = isLeaf ? int32_t(b) : -1;
         for (int s = 1; s < 8; ++s) {
@@ -680,7 +678,7 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
     std::uint32_t ownIndex[P == Pass::Emit ? kMaskWords * 64 : 1];
     openvdb::Vec3f ownPosition[P == Pass::Stream ? kMaskWords * 64 : 1];
     if (isLeaf) {
-        if constexpr (!Emit) {
+        if constexpr (Counts) {
             std::array<std::uint64_t, kMaskWords>& mask = mEdgeMasks[b];
             mask.fill(0);
             for (int x = 0; x < 8; ++x) {
@@ -701,7 +699,8 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
                 total += uint32_t(popcount64(mask[w]));
             }
             counts.edgeVertices = total;
-        } else if constexpr (P == Pass::Stream) {
+        }
+        if constexpr (P == Pass::Stream) {
             // Each owned vertex's position once; cubes read them by mask bit.
             const std::array<std::uint64_t, kMaskWords>& mask = mEdgeMasks[b];
             for (int w = 0; w < kMaskWords; ++w) {
@@ -712,7 +711,8 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
                         openvdb::Vec3f(indexToWorld(edgePoint(n, block.origin, x, bit >> 3, bit & 7, axis)));
                 }
             }
-        } else {
+        }
+        if constexpr (P == Pass::Emit) {
             // Owned vertices in mask bit order, the order neighbourVertexIndex() ranks them in.
             const std::array<std::uint64_t, kMaskWords>& mask = mEdgeMasks[b];
             std::uint64_t next = mVertexOffsets[b];
@@ -749,7 +749,7 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
                 // Only cubes on the block's upper shell (or in a tile block) have edges owned elsewhere.
                 if (available != 0xFF && (!isLeaf || x == 7 || y == 7 || z == 7) &&
                     !cubeHasVertices(x, y, z, crossing, available)) {
-                    if constexpr (!Emit) {
+                    if constexpr (Counts) {
                         ++counts.droppedCubes;
                         std::lock_guard<std::mutex> lock(mSkippedMutex);
                         for (int e = 0; e < 12; ++e) {
@@ -765,10 +765,11 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
                 }
                 const int ambiguous = mTable.ambiguousFaces[cs] ? decisions(cs, n, x, y, z) : 0;
                 const CaseEntry& entry = mTable.entries[(cs << 6) | ambiguous];
-                if constexpr (P == Pass::Count) {
+                if constexpr (Counts) {
                     counts.triangles += entry.numTriangles;
                     counts.centroids += entry.numCentroids;
-                } else if constexpr (P == Pass::Stream) {
+                }
+                if constexpr (P == Pass::Stream) {
                     // Each position from the same two values and integer offsets as its owner
                     // computes it in the Emit pass: the same bits.
                     openvdb::Vec3f position[kCentroidBase + kMaxCentroids];
@@ -794,7 +795,7 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
                         const std::uint8_t* tri = entry.triangles[t];
                         corners->push_back({position[tri[0]], position[tri[1]], position[tri[2]]});
                     }
-                } else {
+                } else if constexpr (P == Pass::Emit) {
                     uint32_t index[kCentroidBase + kMaxCentroids];
                     for (std::uint16_t bits = crossing; bits; bits &= bits - 1) {
                         const int e = std::countr_zero(bits), c = edgeLowerCorner(e), axis = edgeAxis(e);
@@ -824,7 +825,7 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
             }
         }
     }
-    if constexpr (!Emit) mCounts[b] = counts;
+    if constexpr (Counts) mCounts[b] = counts;
 }
 
 // The grain keeps accessor set-up and scheduling overhead small; the result never depends on how
@@ -903,51 +904,57 @@ TriangleMesh Mesher::run(ProgressFn progressFn, MarchingCubesStats& stats)
     return mesh;
 }
 
-StreamedMeshCounts Mesher::runStreamed(const TriangleStream& stream,
-                                       const std::function<void(const StreamedMeshCounts&)>& onCounts,
-                                       ProgressFn progressFn, MarchingCubesStats& stats)
+StreamedMeshCounts Mesher::runStreamed(const TriangleStream& stream, ProgressFn progressFn, MarchingCubesStats& stats)
 {
     collectBlocks();
-    ExtractProgress progress(std::move(progressFn), 2 * mBlocks.size());
-    countAll(progress);
     const std::size_t numBlocks = mBlocks.size();
-    const StreamedMeshCounts counts{mTriangleOffsets[numBlocks], mVertexOffsets[numBlocks]};
-    if (onCounts) onCounts(counts);
+    ExtractProgress progress(std::move(progressFn), numBlocks);
+    mNeighbours.resize(numBlocks);
+    mEdgeMasks.resize(mNumLeaves);
+    mEdgeRanks.resize(mNumLeaves);
+    mCounts.resize(numBlocks);
+    mSigns.resize(mNumLeaves);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mNumLeaves, 64),
+                      [&](const tbb::blocked_range<std::size_t>& r) {
+                          for (std::size_t b = r.begin(); b != r.end(); ++b) computeSigns(b);
+                      });
 
-    // Chunks of consecutive blocks with about kChunkTriangles triangles each, cut by the counts
-    // (so the chunks, and what each consumer call sees, do not depend on threads).
-    constexpr std::uint64_t kChunkTriangles = 1 << 14;
-    std::vector<std::size_t> chunkStart{0};
-    for (std::size_t b = 0; b < numBlocks; ++b)
-        if (mTriangleOffsets[b + 1] - mTriangleOffsets[chunkStart.back()] >= kChunkTriangles)
-            chunkStart.push_back(b + 1);
-    if (chunkStart.back() != numBlocks) chunkStart.push_back(numBlocks);
-    const std::size_t chunks = chunkStart.size() - 1;
+    // One pass: chunks of a fixed number of consecutive blocks (so what each consumer call sees
+    // does not depend on threads), counted and emitted as they go.
+    constexpr std::size_t kChunkBlocks = 256;
+    const std::size_t chunks = (numBlocks + kChunkBlocks - 1) / kChunkBlocks;
     const std::size_t slots = std::max<std::size_t>(1, stream.slots);
     std::vector<std::vector<TriangleCorners>> buffers(slots);
-
     std::size_t next = 0;
     tbb::parallel_pipeline(
-        slots,
-        tbb::make_filter<void,
-                         std::size_t>(tbb::filter_mode::serial_in_order, [&](tbb::flow_control& fc) -> std::size_t {
-            if (next == chunks) fc.stop();
-            return next++;
-        }) & tbb::make_filter<std::size_t, std::size_t>(tbb::filter_mode::parallel, [&](std::size_t chunk) {
-            if (chunk >= chunks) return chunk;
-            std::vector<TriangleCorners>& corners = buffers[chunk % slots];
-            corners.clear();
-            corners.reserve(mTriangleOffsets[chunkStart[chunk + 1]] - mTriangleOffsets[chunkStart[chunk]]);
-            Accessor acc(mTree);
-            for (std::size_t b = chunkStart[chunk]; b != chunkStart[chunk + 1]; ++b) {
-                if (mCounts[b].triangles != 0) processBlock<Pass::Stream>(b, acc, nullptr, &corners);
-                progress.advance();
-            }
-            stream.format(chunk, chunk % slots, corners);
-            return chunk;
-        }) & tbb::make_filter<std::size_t, void>(tbb::filter_mode::serial_in_order, [&](std::size_t chunk) {
-            if (chunk < chunks) stream.write(chunk, chunk % slots);
-        }));
+        slots, tbb::make_filter<void, std::size_t>(tbb::filter_mode::serial_in_order,
+                                                   [&](tbb::flow_control& fc) -> std::size_t {
+                                                       if (next == chunks) fc.stop();
+                                                       return next++;
+                                                   }) &
+                   tbb::make_filter<std::size_t, std::size_t>(
+                       tbb::filter_mode::parallel,
+                       [&](std::size_t chunk) {
+                           if (chunk >= chunks) return chunk;
+                           std::vector<TriangleCorners>& corners = buffers[chunk % slots];
+                           corners.clear();
+                           Accessor acc(mTree);
+                           const std::size_t end = std::min(numBlocks, (chunk + 1) * kChunkBlocks);
+                           for (std::size_t b = chunk * kChunkBlocks; b != end; ++b) {
+                               processBlock<Pass::Stream>(b, acc, nullptr, &corners);
+                               progress.advance();
+                           }
+                           stream.format(chunk, chunk % slots, corners);
+                           return chunk;
+                       }) &
+                   tbb::make_filter<std::size_t, void>(tbb::filter_mode::serial_in_order, [&](std::size_t chunk) {
+                       if (chunk < chunks) stream.write(chunk, chunk % slots);
+                   }));
+    StreamedMeshCounts counts;
+    for (const BlockCounts& c : mCounts) {
+        counts.triangles += c.triangles;
+        counts.vertices += c.edgeVertices + c.centroids;
+    }
     fillStats(stats);
     progress.finish();
     return counts;
@@ -966,12 +973,11 @@ TriangleMesh marchingCubes(const openvdb::FloatGrid& grid, float isoValue, Progr
 }
 
 StreamedMeshCounts marchingCubesStreamed(const openvdb::FloatGrid& grid, float isoValue, const TriangleStream& stream,
-                                         const std::function<void(const StreamedMeshCounts&)>& onCounts,
                                          ProgressFn progress, MarchingCubesStats* stats)
 {
     MarchingCubesStats local;
     Mesher mesher(grid, isoValue);
-    const StreamedMeshCounts counts = mesher.runStreamed(stream, onCounts, std::move(progress), local);
+    const StreamedMeshCounts counts = mesher.runStreamed(stream, std::move(progress), local);
     if (stats) *stats = local;
     return counts;
 }

@@ -76,12 +76,11 @@ struct StreamedMeshCounts {
 
 /// marchingCubes() without holding the mesh: the same triangles, in the same order, with
 /// corners of the same bits (each position is computed from the same two grid values wherever
-/// the vertex is used), delivered chunk by chunk to @a stream. @a counts is known before the
-/// first triangle is delivered (a format whose header needs the count gets it from
-/// @a onCounts). For an output that is the mesh's only use: a binary STL is written without
-/// the vertex and triangle arrays (220 MB for the acceptance gyroid) or a second pass over them.
+/// the vertex is used), delivered chunk by chunk to @a stream in one pass over the grid; the
+/// counts are known when it returns. For an output that is the mesh's only use: a binary STL
+/// is written without the vertex and triangle arrays (220 MB for the acceptance gyroid), a
+/// counting pass, or a second pass over the mesh.
 StreamedMeshCounts marchingCubesStreamed(const openvdb::FloatGrid& grid, float isoValue, const TriangleStream& stream,
-                                         const std::function<void(const StreamedMeshCounts&)>& onCounts = {},
                                          ProgressFn progress = {}, MarchingCubesStats* stats = nullptr);
 
 /// Facts about the precomputed case table, for tests and reports.

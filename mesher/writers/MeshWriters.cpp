@@ -267,10 +267,10 @@ void writeStlHeader(std::ostream& out, std::uint64_t triangles)
 
 }  // namespace
 
-StlStreamWriter::StlStreamWriter(const std::string& path, std::uint64_t triangles, const openvdb::Vec3d& reference)
+StlStreamWriter::StlStreamWriter(const std::string& path, const openvdb::Vec3d& reference)
     : mFile(std::make_unique<AtomicFile>(path)), mReference(reference)
 {
-    writeStlHeader(mFile->stream(), triangles);
+    writeStlHeader(mFile->stream(), 0);
 }
 
 StlStreamWriter::~StlStreamWriter() = default;
@@ -295,8 +295,13 @@ void StlStreamWriter::write(const std::vector<char>& bytes, const TriangleMesh::
     mTerms.area += terms.area;
 }
 
-TriangleMesh::Measures StlStreamWriter::commit()
+TriangleMesh::Measures StlStreamWriter::commit(std::uint64_t triangles)
 {
+    std::ostream& out = mFile->stream();
+    const std::streampos end = out.tellp();
+    out.seekp(0);
+    writeStlHeader(out, triangles);
+    out.seekp(end);
     mFile->commit();
     return {mTerms.volume / 6.0, 0.5 * mTerms.area};
 }

@@ -31,9 +31,9 @@ void writeStl(const TriangleMesh& mesh, const std::string& path, TriangleMesh::M
 /// destroyed before that removes it (nothing half-written is left).
 class StlStreamWriter {
 public:
-    /// Opens the file and writes the header for @a triangles facets. The volume is summed about
-    /// @a reference (any point near the mesh keeps the sums accurate).
-    StlStreamWriter(const std::string& path, std::uint64_t triangles, const openvdb::Vec3d& reference);
+    /// Opens the file and writes the header (its count is filled in by commit()). The volume is
+    /// summed about @a reference (any point near the mesh keeps the sums accurate).
+    StlStreamWriter(const std::string& path, const openvdb::Vec3d& reference);
     ~StlStreamWriter();
     StlStreamWriter(const StlStreamWriter&) = delete;
     StlStreamWriter& operator=(const StlStreamWriter&) = delete;
@@ -44,8 +44,9 @@ public:
                                   std::vector<char>& bytes) const;
     /// Appends a formatted chunk and its terms. One call at a time, chunks in file order.
     void write(const std::vector<char>& bytes, const TriangleMesh::Measures& terms);
-    /// Puts the file in place; returns the mesh's volume and area (as TriangleMesh::measure()).
-    TriangleMesh::Measures commit();
+    /// Writes the count of @a triangles into the header and puts the file in place; returns the
+    /// mesh's volume and area (as TriangleMesh::measure()).
+    TriangleMesh::Measures commit(std::uint64_t triangles);
 
 private:
     std::unique_ptr<AtomicFile> mFile;
