@@ -2,6 +2,7 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
 #include <OpenMesh/Tools/Decimater/CollapseInfoT.hh>
 // QuadricT.hh needs the vector traits the mesh headers bring.
@@ -494,27 +495,28 @@ bool decimatePass(TriangleMesh& mesh, std::vector<double>& vertexDistance, const
                   BlockProgress& progress)
 {
     const std::size_t numTriangles = mesh.triangles.size();
-    std::vector<std::uint64_t> blockOf(numTriangles);
-    for (std::size_t t = 0; t < numTriangles; ++t) {
-        const openvdb::Vec3I& tri = mesh.triangles[t];
-        const Vec3d c =
-            (toDouble(mesh.points[tri[0]]) + toDouble(mesh.points[tri[1]]) + toDouble(mesh.points[tri[2]])) / 3.0;
-        std::uint64_t key = 0;
-        for (int a = 0; a < 3; ++a)
-            key = (key << 21) | std::uint64_t(std::clamp<std::int64_t>(
-                                    std::int64_t(std::floor((c[a] - origin[a]) / size)), 0, (1 << 21) - 1));
-        blockOf[t] = key;
-    }
-    // Blocks in key order, their triangles in index order.
-    std::vector<std::uint32_t> order(numTriangles);
-    std::iota(order.begin(), order.end(), 0u);
-    std::stable_sort(order.begin(), order.end(),
-                     [&](std::uint32_t a, std::uint32_t b) { return blockOf[a] < blockOf[b]; });
+    // (block key, triangle), sorted: blocks in key order, their triangles in index order (a
+    // total order, so the parallel sort gives the same for any thread count).
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> keyed(numTriangles);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numTriangles), [&](const auto& range) {
+        for (std::size_t t = range.begin(); t != range.end(); ++t) {
+            const openvdb::Vec3I& tri = mesh.triangles[t];
+            const Vec3d c =
+                (toDouble(mesh.points[tri[0]]) + toDouble(mesh.points[tri[1]]) + toDouble(mesh.points[tri[2]])) / 3.0;
+            std::uint64_t key = 0;
+            for (int a = 0; a < 3; ++a)
+                key = (key << 21) | std::uint64_t(std::clamp<std::int64_t>(
+                                        std::int64_t(std::floor((c[a] - origin[a]) / size)), 0, (1 << 21) - 1));
+            keyed[t] = {key, std::uint32_t(t)};
+        }
+    });
+    tbb::parallel_sort(keyed.begin(), keyed.end());
     std::vector<std::vector<std::uint32_t>> blocks;
     for (std::size_t i = 0; i < numTriangles; ++i) {
-        if (i == 0 || blockOf[order[i]] != blockOf[order[i - 1]]) blocks.emplace_back();
-        blocks.back().push_back(order[i]);
+        if (i == 0 || keyed[i].first != keyed[i - 1].first) blocks.emplace_back();
+        blocks.back().push_back(keyed[i].second);
     }
+    keyed = {};
     std::vector<std::uint8_t> locked(mesh.points.size(), 0);
     {
         std::vector<std::int64_t> owner(mesh.points.size(), -1);
