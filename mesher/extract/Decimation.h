@@ -21,7 +21,7 @@ struct DecimationOptions {
     /// Meshes of at least this many triangles are decimated in parallel blocks of at least
     /// blockVoxels voxels (and 1/16 of the mesh's extent), then again on blocks shifted by half.
     std::size_t blockedFrom = 200000;
-    double blockVoxels = 32.0;
+    double blockVoxels = 64.0;
 };
 
 struct DecimationStats {
