@@ -412,6 +412,62 @@ TEST(Decimation, BlocksInParallelSameBytesForAnyThreadCountAndWithinTolerance)
     EXPECT_LE(maxAwayFromBox(one, c.distance, 0.25 * c.voxel, c.box, 2.0 * c.voxel), c.tolerance);
 }
 
+TEST(Decimation, FlatFacesGoInTrianglesOfAtMostSixVoxels)
+{
+    // A box inside its domain: flat faces the field check passes at any size, so only the edge
+    // limit (no new edge longer than 6 voxels, which keeps the check to one quadratic per
+    // triangle) stops the collapses there.
+    const double voxel = 0.1, tolerance = 0.01;
+    const Box3 box{Vec3d(1.03, 1.98, 2.51), Vec3d(8.96, 7.02, 6.47)};
+    const FieldPtr field = std::make_shared<BoxField>(box);
+    TriangleMesh mesh = marchingCubesOf(*field, Domain::fromBox(Box3{Vec3d(0.0), Vec3d(10.0)}, voxel));
+    projectToSurface(mesh, *field, {0.0, 0.5 * voxel, 1e-6, 12});
+    const TriangleMesh projected = mesh;
+    DecimationOptions o;
+    o.tolerance = tolerance;
+    o.voxel = voxel;
+    o.blockedFrom = 0;
+    o.blockVoxels = 20.0;
+    auto decimate = [&](int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        TriangleMesh m = projected;
+        EXPECT_TRUE(decimateToTolerance(m, *field, o).decimated);
+        return m;
+    };
+    mesh = decimate(2);
+    const TriangleMesh one = decimate(1);
+    EXPECT_TRUE(one.points == mesh.points && one.triangles == mesh.triangles);
+    RecordProperty("box_triangles",
+                   std::to_string(projected.triangles.size()) + " -> " + std::to_string(mesh.triangles.size()));
+    // The faces' area in triangles of a few voxels: far fewer than marching cubes made.
+    EXPECT_LT(mesh.triangles.size(), projected.triangles.size() / 5);
+    double longest = 0.0;
+    for (const openvdb::Vec3I& t : mesh.triangles)
+        for (int k = 0; k < 3; ++k) longest = std::max(longest, (at(mesh, t[k]) - at(mesh, t[(k + 1) % 3])).length());
+    EXPECT_LE(longest, 6.0 * voxel * (1.0 + 1e-6));
+    expectClosedManifold(mesh);
+    EXPECT_EQ(checkTopology(mesh).eulerCharacteristic, 2);
+    EXPECT_EQ(countSelfIntersections(mesh), 0u);
+    EXPECT_NEAR(mesh.volume(), projected.volume(), 0.002 * projected.volume());
+    // Within the tolerance of the box (its exact distance) away from its edges, which marching
+    // cubes cut flat before.
+    TriangleMesh faces;
+    faces.points = mesh.points;
+    auto nearEdge = [&](const Vec3d& p) {
+        int planes = 0;
+        for (int a = 0; a < 3; ++a)
+            planes += std::min(std::abs(p[a] - box.min[a]), std::abs(p[a] - box.max[a])) < 2.0 * voxel;
+        return planes >= 2;
+    };
+    for (const openvdb::Vec3I& t : mesh.triangles)
+        if (!nearEdge(at(mesh, t[0])) && !nearEdge(at(mesh, t[1])) && !nearEdge(at(mesh, t[2])))
+            faces.triangles.push_back(t);
+    EXPECT_GT(faces.triangles.size(), mesh.triangles.size() / 4);
+    EXPECT_LE(maxOverTriangles(
+                  faces, [&](const Vec3d& p) { return boxDistance(p, box); }, 0.25 * voxel),
+              tolerance);
+}
+
 TEST(MeshOutputs, ThreeMfRoundTripsThroughLib3mfWithTheSameTriangles)
 {
     test::TempDir dir;

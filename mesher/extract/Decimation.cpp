@@ -2,12 +2,15 @@
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 #include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
-#include <OpenMesh/Tools/Decimater/BaseDecimaterT.hh>
-#include <OpenMesh/Tools/Decimater/ModQuadricT.hh>
+#include <OpenMesh/Tools/Decimater/CollapseInfoT.hh>
+// QuadricT.hh needs the vector traits the mesh headers bring.
+#include <OpenMesh/Core/Geometry/QuadricT.hh>
 
 #include <algorithm>
 #include <array>
+#include <cfloat>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -23,6 +26,9 @@ namespace {
 
 /// The quadric error bound, in squared tolerances (see FieldDecimater).
 constexpr double kQuadricShare = 1.0;
+
+/// No collapse makes an edge longer than this many voxels (see FieldDecimater::fieldAllows).
+constexpr double kMaxEdgeVoxels = 6.0;
 
 struct Traits : OpenMesh::DefaultTraits {
     VertexAttributes(OpenMesh::Attributes::Status);
@@ -50,35 +56,66 @@ double signedDistance(double r, const Vec3d& g)
     return r == 0.0 ? 0.0 : std::copysign(1e30, r);
 }
 
-/// A triangle to check, with the signed distances at its corners when known (NaN: evaluate).
+/// A triangle to check: corners, the signed distances there, and its edge midpoints (indices
+/// into FieldDecimater::mMid; edge i runs from corner i to corner i + 1).
 struct CheckTriangle {
     std::array<Vec3d, 3> p;
     std::array<double, 3> s;
+    std::array<int, 3> mid;
 };
 
-/// OpenMesh's decimater framework (modules, topology test) with a loop of its own: collapses
-/// are ordered by the quadric module, and the field check, which costs field evaluations, runs
-/// only on the collapse about to be made instead of on every candidate the heap holds.
-class FieldDecimater : public OpenMesh::Decimater::BaseDecimaterT<Mesh> {
+/// An edge midpoint of a check and its signed distance (kUnknown until evaluated).
+struct Midpoint {
+    Vec3d p;
+    double distance;
+};
+
+/// Marks a distance not evaluated yet (no field reaches it: signedDistance caps at 1e30).
+constexpr double kUnknown = std::numeric_limits<double>::max();
+
+/// Halfedge collapses on an OpenMesh mesh in the order of the quadric error metric (Garland and
+/// Heckbert's area-weighted plane quadrics, as OpenMesh's ModQuadricT), with OpenMesh's topology
+/// test (as its BaseDecimaterT::is_collapse_legal). The field check, which costs field
+/// evaluations, runs only on the collapse about to be made; candidates that cannot pass for
+/// reasons known without the field (quadric error, edge length, seams) are never queued.
+class FieldDecimater {
 public:
-    using Base = OpenMesh::Decimater::BaseDecimaterT<Mesh>;
+    using CollapseInfo = OpenMesh::Decimater::CollapseInfoT<Mesh>;
+    using Quadric = OpenMesh::Geometry::Quadricd;
 
     FieldDecimater(Mesh& mesh, const FieldNode& field, const DecimationOptions& options,
                    std::vector<double> vertexDistance)
-        : Base(mesh), mMesh(mesh), mField(field), mOptions(options), mVertexDistance(std::move(vertexDistance))
+        : mMesh(mesh), mField(field), mOptions(options), mVertexDistance(std::move(vertexDistance))
     {
-        add(mQuadric);
-        // A collapse whose quadric error (the sum of squared distances to the planes of the
-        // triangles merged into it) exceeds the squared tolerance puts the point at least
-        // tolerance / sqrt(planes) off one of them: such candidates are mostly refused by the
-        // field check anyway, so they are not tried (the field check still decides the rest).
-        module(mQuadric).set_max_err(kQuadricShare * options.tolerance * options.tolerance, false);
-        initialize();
+        // A collapse whose quadric error (the area-weighted sum of squared distances to the planes
+        // of the triangles merged into it) exceeds the squared tolerance puts the point far off
+        // one of them: such candidates are mostly refused by the field check anyway, so they are
+        // not tried (the field check still decides the rest).
+        mMaxError = kQuadricShare * options.tolerance * options.tolerance;
+        mQuadrics.assign(mesh.n_vertices(), Quadric());
+        for (Mesh::FaceHandle f : mesh.faces()) {
+            std::array<Mesh::VertexHandle, 3> v;
+            int i = 0;
+            for (Mesh::VertexHandle w : mesh.fv_range(f)) v[i++] = w;
+            const OpenMesh::Vec3d p0 = OpenMesh::vector_cast<OpenMesh::Vec3d>(mesh.point(v[0]));
+            const OpenMesh::Vec3d p1 = OpenMesh::vector_cast<OpenMesh::Vec3d>(mesh.point(v[1]));
+            const OpenMesh::Vec3d p2 = OpenMesh::vector_cast<OpenMesh::Vec3d>(mesh.point(v[2]));
+            OpenMesh::Vec3d n = (p1 - p0) % (p2 - p0);
+            double area = n.norm();
+            if (area > FLT_MIN) {
+                n /= area;
+                area *= 0.5;
+            }
+            Quadric q(n[0], n[1], n[2], -(p0 | n));
+            q *= area;
+            for (Mesh::VertexHandle w : v) mQuadrics[w.idx()] += q;
+        }
         mRefused.assign(mesh.n_halfedges(), 0);
         mStamp.assign(mesh.n_vertices(), 0);
-        // Triangles longer than this are checked in quarters: a quadratic fits the distance over a
-        // few voxels of a surface the grid resolves.
-        mMaxPieceEdge = 6.0 * options.voxel;
+        mDirty.assign(mesh.n_vertices(), 0);
+        mEdgeMid.assign(mesh.n_edges(), kUnknown);
+        mQueued.assign(mesh.n_vertices(), 0);
+        mMaxEdgeSqr = (kMaxEdgeVoxels * options.voxel) * (kMaxEdgeVoxels * options.voxel);
     }
 
     void run(DecimationStats& stats, const ProgressFn& progress)
@@ -91,16 +128,22 @@ public:
             mHeap.pop();
             const Mesh::VertexHandle v(int(std::get<1>(top)));
             if (std::get<2>(top) != mStamp[v.idx()] || mMesh.status(v).deleted()) continue;
+            if (mDirty[v.idx()]) {
+                // Its one-ring changed since it was queued: its candidate is chosen again now,
+                // once, rather than after every collapse next to it.
+                queueVertex(v);
+                continue;
+            }
             const Mesh::HalfedgeHandle h(int(std::get<3>(top)));
             CollapseInfo ci(mMesh, h);
             // OpenMesh's topology test is the costly part of a candidate (it tags the one-rings),
             // so it too runs only on the collapse about to be made.
-            if (!is_collapse_legal(ci)) {
+            if (!collapseLegal(ci)) {
                 mRefused[h.idx()] = 1;
                 queueVertex(v);
                 continue;
             }
-            if (!seamAllows(ci) || !fieldAllows(ci)) {
+            if (!fieldAllows(ci)) {
                 ++stats.refused;
                 mRefused[h.idx()] = 1;
                 queueVertex(v);
@@ -108,14 +151,17 @@ public:
             }
             mSupport.clear();
             for (Mesh::VertexHandle w : mMesh.vv_range(ci.v0)) mSupport.push_back(w);
-            preprocess_collapse(ci);
             mMesh.collapse(h);
             ++stats.collapses;
-            postprocess_collapse(ci);
+            mQuadrics[ci.v1.idx()] += mQuadrics[ci.v0.idx()];
+            keepSpokes(ci.v1);
             for (Mesh::VertexHandle w : mSupport) {
                 // Their neighbourhoods changed: collapses refused before may pass now.
                 for (Mesh::HalfedgeHandle out : mMesh.voh_range(w)) mRefused[out.idx()] = 0;
-                queueVertex(w);
+                if (mQueued[w.idx()])
+                    mDirty[w.idx()] = 1;
+                else
+                    queueVertex(w);
             }
             if (progress) {
                 const int now = int(std::min<std::size_t>(99, 100 * stats.collapses / expected));
@@ -131,34 +177,72 @@ private:
     /// (priority, vertex, stamp, halfedge); the smallest priority first, ties by vertex index.
     using Entry = std::tuple<float, unsigned, unsigned, unsigned>;
 
-    /// Queues @a v with its cheapest outgoing collapse not yet refused (legality is checked when
-    /// it comes up).
+    /// Queues @a v with its cheapest outgoing collapse not yet refused whose quadric error is
+    /// below the bound, that makes no edge longer than the limit and that a seam allows
+    /// (topology and the field are checked when it comes up).
     void queueVertex(Mesh::VertexHandle v)
     {
         ++mStamp[v.idx()];
-        float best = std::numeric_limits<float>::max();
+        mDirty[v.idx()] = 0;
+        mQueued[v.idx()] = 0;
+        // A locked vertex stays.
+        if (mMesh.status(v).locked()) return;
+        mRing.clear();
+        for (Mesh::VertexHandle w : mMesh.vv_range(v)) mRing.push_back(w);
+        double best = mMaxError;
         Mesh::HalfedgeHandle bestHalfedge;
         for (Mesh::HalfedgeHandle h : mMesh.voh_range(v)) {
             if (mRefused[h.idx()]) continue;
-            CollapseInfo ci(mMesh, h);
-            const float priority = collapse_priority(ci);
-            if (priority >= 0.0f && priority < best) {
-                best = priority;
-                bestHalfedge = h;
-            }
+            const Mesh::VertexHandle v1 = mMesh.to_vertex_handle(h);
+            const Mesh::Point& p1 = mMesh.point(v1);
+            Quadric q = mQuadrics[v.idx()];
+            q += mQuadrics[v1.idx()];
+            const double error = q(OpenMesh::vector_cast<OpenMesh::Vec3d>(p1));
+            // Ties go to the first halfedge around v, as OpenMesh's decimater did.
+            if (!(error < best)) continue;
+            if (!shortEnough(v1) || !seamAllows(v, v1)) continue;
+            best = error;
+            bestHalfedge = h;
         }
-        if (bestHalfedge.is_valid())
-            mHeap.emplace(best, unsigned(v.idx()), mStamp[v.idx()], unsigned(bestHalfedge.idx()));
+        if (bestHalfedge.is_valid()) {
+            mHeap.emplace(float(best), unsigned(v.idx()), mStamp[v.idx()], unsigned(bestHalfedge.idx()));
+            mQueued[v.idx()] = 1;
+        }
+    }
+
+    /// Whether moving the vertex whose one-ring is mRing onto @a v1 keeps every edge within the
+    /// length limit (see fieldAllows).
+    bool shortEnough(Mesh::VertexHandle v1) const
+    {
+        const Mesh::Point& p1 = mMesh.point(v1);
+        for (Mesh::VertexHandle w : mRing)
+            if ((mMesh.point(w) - p1).sqrnorm() > mMaxEdgeSqr) return false;
+        return true;
+    }
+
+    /// OpenMesh's BaseDecimaterT::is_collapse_legal without the feature test (no features here).
+    bool collapseLegal(const CollapseInfo& ci)
+    {
+        if (mMesh.status(ci.v0).locked() || !mMesh.is_collapse_ok(ci.v0v1)) return false;
+        if (ci.vl.is_valid() && ci.vr.is_valid() && mMesh.find_halfedge(ci.vl, ci.vr).is_valid() &&
+            mMesh.valence(ci.vl) == 3 && mMesh.valence(ci.vr) == 3)
+            return false;
+        if (mMesh.is_boundary(ci.v0)) {
+            if (!mMesh.is_boundary(ci.v1)) return false;
+            if (ci.vl.is_valid() && ci.vr.is_valid()) return false;
+        }
+        // At least two faces at v0.
+        return mMesh.cw_rotated_halfedge_handle(mMesh.cw_rotated_halfedge_handle(ci.v0v1)) != ci.v0v1;
     }
 
     /// In a block of a larger mesh, locked vertices are shared with other blocks, which may hold
     /// an edge between two of them or make one at the same time: a collapse onto a locked vertex
     /// may not join it to another locked vertex it is not joined to here already.
-    bool seamAllows(const CollapseInfo& ci)
+    bool seamAllows(Mesh::VertexHandle v0, Mesh::VertexHandle v1)
     {
-        if (!mMesh.status(ci.v1).locked()) return true;
-        for (Mesh::VertexHandle w : mMesh.vv_range(ci.v0))
-            if (w != ci.v1 && mMesh.status(w).locked() && !mMesh.find_halfedge(ci.v1, w).is_valid()) return false;
+        if (!mMesh.status(v1).locked()) return true;
+        for (Mesh::VertexHandle w : mMesh.vv_range(v0))
+            if (w != v1 && mMesh.status(w).locked() && !mMesh.find_halfedge(v1, w).is_valid()) return false;
         return true;
     }
 
@@ -167,50 +251,77 @@ private:
     bool fieldAllows(const CollapseInfo& ci)
     {
         mTriangles.clear();
+        mMid.clear();
+        mSpokes.clear();
+        mMidEdge.clear();
         const Vec3d p1 = toDouble(ci.p1);
+        // The midpoint of the new edge from v1 to @a w (shared by the two triangles beside it).
+        auto spoke = [&](Mesh::VertexHandle w) {
+            for (const auto& [vertex, index] : mSpokes)
+                if (vertex == w) return index;
+            const int index = int(mMid.size());
+            mMid.push_back({0.5 * (p1 + toDouble(mMesh.point(w))), kUnknown});
+            mSpokes.emplace_back(w, index);
+            return index;
+        };
         for (Mesh::FaceHandle f : mMesh.vf_range(ci.v0)) {
             if (f == ci.fl || f == ci.fr) continue;
             CheckTriangle t;
             std::array<Vec3d, 3> before;
             int i = 0;
-            for (Mesh::VertexHandle w : mMesh.fv_range(f)) {
-                before[i] = toDouble(mMesh.point(w));
-                t.p[i] = w == ci.v0 ? p1 : before[i];
-                t.s[i] = mVertexDistance[(w == ci.v0 ? ci.v1 : w).idx()];
+            for (Mesh::HalfedgeHandle h : mMesh.fh_range(f)) {
+                const Mesh::VertexHandle a = mMesh.from_vertex_handle(h), b = mMesh.to_vertex_handle(h);
+                before[i] = toDouble(mMesh.point(a));
+                t.p[i] = a == ci.v0 ? p1 : before[i];
+                t.s[i] = mVertexDistance[(a == ci.v0 ? ci.v1 : a).idx()];
+                if (a == ci.v0 || b == ci.v0) {
+                    t.mid[i] = spoke(a == ci.v0 ? b : a);
+                } else {
+                    // An edge of the one-ring, which the collapse keeps as it is: its midpoint's
+                    // distance is kept from one check to the next.
+                    const int e = mMesh.edge_handle(h).idx();
+                    t.mid[i] = int(mMid.size());
+                    mMid.push_back({0.5 * (before[i] + toDouble(mMesh.point(b))), mEdgeMid[e]});
+                    if (mEdgeMid[e] == kUnknown) mMidEdge.emplace_back(t.mid[i], e);
+                }
                 ++i;
             }
             const Vec3d n0 = (before[1] - before[0]).cross(before[2] - before[0]);
             const Vec3d n1 = (t.p[1] - t.p[0]).cross(t.p[2] - t.p[0]);
             if (!(n1.dot(n0) > 0.0) || !(n1.lengthSqr() > 1e-12 * n0.lengthSqr())) return false;
-            split(t, 0);
+            // A quadratic fits the distance over a few voxels of a surface the grid resolves;
+            // longer triangles would have to be checked in many pieces (most of the field
+            // evaluations went there, mostly on flat faces where they then passed), so they
+            // are not made: a flat region ends up in triangles of a few voxels.
+            if ((t.p[1] - t.p[0]).lengthSqr() > mMaxEdgeSqr || (t.p[2] - t.p[1]).lengthSqr() > mMaxEdgeSqr ||
+                (t.p[0] - t.p[2]).lengthSqr() > mMaxEdgeSqr)
+                return false;
+            mTriangles.push_back(t);
         }
         return withinTolerance();
     }
 
-    /// Adds @a t to the triangles to check, in quarters while it is longer than mMaxPieceEdge.
-    void split(const CheckTriangle& t, int depth)
+    /// After the collapse of v0 onto @a v1 the spokes checked are @a v1's edges: their midpoints'
+    /// distances are kept; an edge that was v0's now runs from v1, so none of v1's may keep an old
+    /// value.
+    void keepSpokes(Mesh::VertexHandle v1)
     {
-        const double longest =
-            std::max({(t.p[1] - t.p[0]).length(), (t.p[2] - t.p[1]).length(), (t.p[0] - t.p[2]).length()});
-        if (longest <= mMaxPieceEdge || depth >= 4) {
-            mTriangles.push_back(t);
-            return;
+        for (Mesh::HalfedgeHandle h : mMesh.voh_range(v1)) {
+            double value = kUnknown;
+            const Mesh::VertexHandle w = mMesh.to_vertex_handle(h);
+            for (const auto& [vertex, index] : mSpokes)
+                if (vertex == w) value = mMid[index].distance;
+            mEdgeMid[mMesh.edge_handle(h).idx()] = value;
         }
-        const double nan = std::numeric_limits<double>::quiet_NaN();
-        const Vec3d m01 = 0.5 * (t.p[0] + t.p[1]), m12 = 0.5 * (t.p[1] + t.p[2]), m20 = 0.5 * (t.p[2] + t.p[0]);
-        split({{t.p[0], m01, m20}, {t.s[0], nan, nan}}, depth + 1);
-        split({{m01, t.p[1], m12}, {nan, t.s[1], nan}}, depth + 1);
-        split({{m20, m12, t.p[2]}, {nan, nan, t.s[2]}}, depth + 1);
-        split({{m01, m12, m20}, {nan, nan, nan}}, depth + 1);
     }
 
-    /// Evaluates every triangle's unknown corners, edge midpoints and centre in one batch and
-    /// bounds |distance| over each by its quadratic interpolant plus the centre's miss.
+    /// Evaluates every triangle's centre and the unknown edge midpoints in a batch and bounds
+    /// |distance| over each triangle by its quadratic interpolant plus the centre's miss.
     bool withinTolerance()
     {
         // A tenth of the tolerance is kept back for what the quadratic misses.
         const double tolerance = 0.9 * mOptions.tolerance;
-        // The centres first: most refused collapses fail there, at a fifth of the evaluations.
+        // The centres first: most refused collapses fail there.
         mPoints.clear();
         for (const CheckTriangle& t : mTriangles) mPoints.push_back((t.p[0] + t.p[1] + t.p[2]) / 3.0);
         evaluate();
@@ -220,24 +331,20 @@ private:
             if (std::abs(mCentres[k]) > tolerance) return false;
         }
         mPoints.clear();
-        for (const CheckTriangle& t : mTriangles) {
-            for (int i = 0; i < 3; ++i)
-                if (std::isnan(t.s[i])) mPoints.push_back(t.p[i]);
-            for (int i = 0; i < 3; ++i) mPoints.push_back(0.5 * (t.p[i] + t.p[(i + 1) % 3]));
-        }
+        for (const Midpoint& m : mMid)
+            if (m.distance == kUnknown) mPoints.push_back(m.p);
         evaluate();
         std::size_t next = 0;
-        auto take = [&] {
-            const double s = signedDistance(mValues[next] - mOptions.level, mGradients[next]);
-            ++next;
-            return s;
-        };
+        for (Midpoint& m : mMid)
+            if (m.distance == kUnknown) {
+                m.distance = signedDistance(mValues[next] - mOptions.level, mGradients[next]);
+                ++next;
+            }
+        for (const auto& [index, e] : mMidEdge) mEdgeMid[e] = mMid[index].distance;
         for (std::size_t k = 0; k < mTriangles.size(); ++k) {
             const CheckTriangle& t = mTriangles[k];
-            std::array<double, 3> s = t.s, m;
-            for (int i = 0; i < 3; ++i)
-                if (std::isnan(s[i])) s[i] = take();
-            for (int i = 0; i < 3; ++i) m[i] = take();
+            const std::array<double, 3>& s = t.s;
+            const std::array<double, 3> m = {mMid[t.mid[0]].distance, mMid[t.mid[1]].distance, mMid[t.mid[2]].distance};
             const double centre = mCentres[k];
             // Quadratic through corners s_i and midpoints m_i (m_0 between corners 0 and 1).
             auto quadratic = [&](double l0, double l1, double l2) {
@@ -245,7 +352,7 @@ private:
                        4 * (m[0] * l0 * l1 + m[1] * l1 * l2 + m[2] * l2 * l0);
             };
             const double margin = std::abs(centre - quadratic(1.0 / 3, 1.0 / 3, 1.0 / 3));
-            if (std::abs(centre) > tolerance || margin > tolerance) return false;
+            if (margin > tolerance) return false;
             constexpr int kSteps = 6;
             double largest = 0.0;
             for (int i = 0; i <= kSteps; ++i)
@@ -275,13 +382,23 @@ private:
     std::vector<double> mCentres;
     DecimationOptions mOptions;
     std::vector<double> mVertexDistance;
-    double mMaxPieceEdge = 0.6;
-    OpenMesh::Decimater::ModQuadricT<Mesh>::Handle mQuadric;
+    double mMaxEdgeSqr = 0.36;
+    double mMaxError = 0.0;
+    std::vector<Quadric> mQuadrics;
+    std::vector<Mesh::VertexHandle> mRing;
     std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> mHeap;
     std::vector<std::uint8_t> mRefused;
     std::vector<unsigned> mStamp;
+    /// Whether a vertex has an entry in the heap, and whether its one-ring changed since.
+    std::vector<std::uint8_t> mQueued, mDirty;
     std::vector<Mesh::VertexHandle> mSupport;
     std::vector<CheckTriangle> mTriangles;
+    std::vector<Midpoint> mMid;
+    /// The check's new edges from v1 (by the vertex at their other end) and one-ring edges whose
+    /// midpoint it evaluates (index into mMid, edge), and every edge's midpoint distance if known.
+    std::vector<std::pair<Mesh::VertexHandle, int>> mSpokes;
+    std::vector<std::pair<int, int>> mMidEdge;
+    std::vector<double> mEdgeMid;
     std::vector<Vec3d> mPoints, mGradients;
     std::vector<double> mValues;
 };
@@ -378,27 +495,28 @@ bool decimatePass(TriangleMesh& mesh, std::vector<double>& vertexDistance, const
                   BlockProgress& progress)
 {
     const std::size_t numTriangles = mesh.triangles.size();
-    std::vector<std::uint64_t> blockOf(numTriangles);
-    for (std::size_t t = 0; t < numTriangles; ++t) {
-        const openvdb::Vec3I& tri = mesh.triangles[t];
-        const Vec3d c =
-            (toDouble(mesh.points[tri[0]]) + toDouble(mesh.points[tri[1]]) + toDouble(mesh.points[tri[2]])) / 3.0;
-        std::uint64_t key = 0;
-        for (int a = 0; a < 3; ++a)
-            key = (key << 21) | std::uint64_t(std::clamp<std::int64_t>(
-                                    std::int64_t(std::floor((c[a] - origin[a]) / size)), 0, (1 << 21) - 1));
-        blockOf[t] = key;
-    }
-    // Blocks in key order, their triangles in index order.
-    std::vector<std::uint32_t> order(numTriangles);
-    std::iota(order.begin(), order.end(), 0u);
-    std::stable_sort(order.begin(), order.end(),
-                     [&](std::uint32_t a, std::uint32_t b) { return blockOf[a] < blockOf[b]; });
+    // (block key, triangle), sorted: blocks in key order, their triangles in index order (a
+    // total order, so the parallel sort gives the same for any thread count).
+    std::vector<std::pair<std::uint64_t, std::uint32_t>> keyed(numTriangles);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numTriangles), [&](const auto& range) {
+        for (std::size_t t = range.begin(); t != range.end(); ++t) {
+            const openvdb::Vec3I& tri = mesh.triangles[t];
+            const Vec3d c =
+                (toDouble(mesh.points[tri[0]]) + toDouble(mesh.points[tri[1]]) + toDouble(mesh.points[tri[2]])) / 3.0;
+            std::uint64_t key = 0;
+            for (int a = 0; a < 3; ++a)
+                key = (key << 21) | std::uint64_t(std::clamp<std::int64_t>(
+                                        std::int64_t(std::floor((c[a] - origin[a]) / size)), 0, (1 << 21) - 1));
+            keyed[t] = {key, std::uint32_t(t)};
+        }
+    });
+    tbb::parallel_sort(keyed.begin(), keyed.end());
     std::vector<std::vector<std::uint32_t>> blocks;
     for (std::size_t i = 0; i < numTriangles; ++i) {
-        if (i == 0 || blockOf[order[i]] != blockOf[order[i - 1]]) blocks.emplace_back();
-        blocks.back().push_back(order[i]);
+        if (i == 0 || keyed[i].first != keyed[i - 1].first) blocks.emplace_back();
+        blocks.back().push_back(keyed[i].second);
     }
+    keyed = {};
     std::vector<std::uint8_t> locked(mesh.points.size(), 0);
     {
         std::vector<std::int64_t> owner(mesh.points.size(), -1);

@@ -36,16 +36,18 @@ struct DecimationStats {
 };
 
 /// Collapses edges of @a mesh (halfedge collapses, so every kept vertex stays where it was:
-/// on the surface after projectToSurface) in the order of OpenMesh's quadric error metric
-/// (ModQuadricT), each collapse made only when OpenMesh's topology test passes (the mesh stays
-/// closed, manifold and oriented), no new triangle turns over by 90 degrees or more or loses its
-/// area, and every new triangle stays within options.tolerance of the level set of @a field.
-/// The last is checked on each new triangle (pieces of at most a few voxels) with the signed
-/// distance (f - level) / |grad f| at its corners, edge midpoints and centre: the quadratic
-/// through corners and midpoints is maximised over the triangle and the centre's miss of it is
-/// added as a margin. A refused collapse is retried once its neighbourhood changes. Large meshes
-/// go in fixed spatial blocks in parallel (see DecimationOptions::blockedFrom): the same bytes
-/// for any thread count. @a progress (optional) runs from 0 to 1 and may throw to cancel.
+/// on the surface after projectToSurface) in the order of the quadric error metric (as OpenMesh's
+/// ModQuadricT; candidates whose error exceeds the squared tolerance are not tried), each collapse
+/// made only when OpenMesh's topology test passes (the mesh stays closed, manifold and oriented),
+/// no new triangle turns over by 90 degrees or more or loses its area, no new edge is longer than
+/// 6 voxels, and every new triangle stays within options.tolerance of the level set of @a field.
+/// The last is checked on each new triangle with the signed distance (f - level) / |grad f| at
+/// its corners, edge midpoints and centre: the quadratic through corners and midpoints is
+/// maximised over the triangle and the centre's miss of it is added as a margin (the edge limit
+/// keeps triangles within the few voxels a quadratic fits on a surface the grid resolves). A
+/// refused collapse is retried once its neighbourhood changes. Large meshes go in fixed spatial
+/// blocks in parallel (see DecimationOptions::blockedFrom): the same bytes for any thread count.
+/// @a progress (optional) runs from 0 to 1 and may throw to cancel.
 DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, const DecimationOptions& options,
                                     const ProgressFn& progress = {});
 
