@@ -5,7 +5,9 @@ Target 10x (issue 17). Quiet machine before issue 17's second pass: 3.62 s vs 17
 After the pieces count on leaf bit masks, huge pages, the streamed density count and the mesher
 skipping empty blocks, side by side at load average 5 on the 2 shared cores: 5.17 s vs 42.30 s
 (8.2x; solve 0.85 s, evaluate 0.76 s, mesh 2.31 s, STL 0.55 s, pieces 0.19 s), peak 583 MB;
-at load 4.5: 3.69 s vs 25.95 s (7.0x; mesh 1.67 s, evaluate 0.56 s, solve 0.52 s, STL 0.39 s)."""
+at load 4.5: 3.69 s vs 25.95 s (7.0x; mesh 1.67 s, evaluate 0.56 s, solve 0.52 s, STL 0.39 s).
+2026-11-27, after the launcher, the one-period density solve and the STL written while meshing:
+1.6-1.9 s vs 13.4-14.4 s at load 1.7 (7.6-8.3x), peak 408 MB."""
 import json
 
 from common import PYTHON, ROOT, measure, row, verdict

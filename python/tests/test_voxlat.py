@@ -222,7 +222,9 @@ class VoxlatModule(unittest.TestCase):
         self.assertEqual(set(s["$defs"]["node_expr"]["properties"]), {"expr", "solid", "level", "density", "offset"})
 
     def test_gil_is_released_while_the_engine_works(self):
-        recipe = voxlat.Recipe(voxlat.gyroid(cell=5).network(density=0.3), domain=[[0, 0, 0], [30, 30, 30]], voxel=0.1)
+        # A box of whole cells would solve on one period in milliseconds: 31 mm makes the solve
+        # count the whole box, long enough to see the ticker run beside it.
+        recipe = voxlat.Recipe(voxlat.gyroid(cell=5).network(density=0.3), domain=[[0, 0, 0], [31, 31, 31]], voxel=0.1)
         ticks = []
         done = threading.Event()
 
