@@ -339,6 +339,7 @@ Coord neighbourOffset(int s)
 }
 
 /// Open-addressing map from block origin to block index. Written by one thread, then read-only.
+/// Key and index share a 16-byte slot, so a probe costs one cache line, not two.
 class BlockMap {
 public:
     explicit BlockMap(std::size_t expected) { rehash(std::bit_ceil(std::max<std::size_t>(64, 2 * expected))); }
@@ -346,27 +347,33 @@ public:
     int32_t find(const Coord& origin) const
     {
         for (std::size_t i = slot(origin);; i = (i + 1) & mMask) {
-            if (mIndex[i] < 0) return -1;
-            if (mKeys[i] == origin) return mIndex[i];
+            const Entry& e = mEntries[i];
+            if (e.index < 0) return -1;
+            if (e.key == origin) return e.index;
         }
     }
 
     /// Inserts @a origin -> @a index unless present; returns the index stored for @a origin.
     int32_t insert(const Coord& origin, int32_t index)
     {
-        if (2 * (mSize + 1) > mKeys.size()) rehash(2 * mKeys.size());
+        if (2 * (mSize + 1) > mEntries.size()) rehash(2 * mEntries.size());
         for (std::size_t i = slot(origin);; i = (i + 1) & mMask) {
-            if (mIndex[i] < 0) {
-                mKeys[i] = origin;
-                mIndex[i] = index;
+            Entry& e = mEntries[i];
+            if (e.index < 0) {
+                e = {origin, index};
                 ++mSize;
                 return index;
             }
-            if (mKeys[i] == origin) return mIndex[i];
+            if (e.key == origin) return e.index;
         }
     }
 
 private:
+    struct Entry {
+        Coord key;
+        int32_t index = -1;
+    };
+
     std::size_t slot(const Coord& c) const
     {
         const std::uint64_t h = std::uint64_t(std::uint32_t(c.x() >> 3)) * 0x9E3779B97F4A7C15ull ^
@@ -377,19 +384,15 @@ private:
 
     void rehash(std::size_t capacity)
     {
-        std::vector<Coord> keys(capacity);
-        std::vector<int32_t> index(capacity, -1);
-        keys.swap(mKeys);
-        index.swap(mIndex);
+        std::vector<Entry> entries(capacity);
+        entries.swap(mEntries);
         mMask = capacity - 1;
         mSize = 0;
-        for (std::size_t i = 0; i < keys.size(); ++i) {
-            if (index[i] >= 0) insert(keys[i], index[i]);
-        }
+        for (const Entry& e : entries)
+            if (e.index >= 0) insert(e.key, e.index);
     }
 
-    std::vector<Coord> mKeys;
-    std::vector<int32_t> mIndex;
+    std::vector<Entry> mEntries;
     std::size_t mMask = 0, mSize = 0;
 };
 
