@@ -721,27 +721,16 @@ TEST_F(Mesher, MeasureMatchesVolumeAndArea)
 
 namespace {
 
-/// marchingCubesStreamed() into an StlStreamWriter at @a path, on @a threads threads.
+/// writeMarchingCubesStl() at @a path, on @a threads threads.
 StreamedMeshCounts streamStl(const FloatGrid& grid, const std::string& path, int threads,
                              TriangleMesh::Measures* measures = nullptr, MarchingCubesStats* stats = nullptr)
 {
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
     tbb::task_arena arena(threads);
-    StreamedMeshCounts counts;
-    arena.execute([&] {
-        StlStreamWriter writer(path, grid.indexToWorld(Vec3d(0.0)));
-        TriangleStream stream;
-        std::vector<std::vector<char>> bytes(stream.slots);
-        std::vector<TriangleMesh::Measures> terms(stream.slots);
-        stream.format = [&](std::size_t, std::size_t slot, std::span<const TriangleCorners> triangles) {
-            terms[slot] = writer.format(triangles, bytes[slot]);
-        };
-        stream.write = [&](std::size_t, std::size_t slot) { writer.write(bytes[slot], terms[slot]); };
-        counts = marchingCubesStreamed(grid, 0.0f, stream, {}, stats);
-        const TriangleMesh::Measures m = writer.commit(counts.triangles);
-        if (measures) *measures = m;
-    });
-    return counts;
+    StreamedStl made;
+    arena.execute([&] { made = writeMarchingCubesStl(grid, 0.0f, path, grid.indexToWorld(Vec3d(0.0)), {}, stats); });
+    if (measures) *measures = made.measures;
+    return made.counts;
 }
 
 }  // namespace

@@ -647,22 +647,14 @@ void Job::writeStlWhileMeshing(const std::filesystem::path& path)
     const openvdb::FloatGrid& g = grid();
     auto v = std::make_unique<MeshVariant>();
     const std::string name = path.filename().string();
-    const StreamedMeshCounts counts = timed("mesh into " + name, [&] {
+    const StreamedStl made = timed("mesh into " + name, [&] {
         StageProgress progress(mContext, "meshing into " + name, 1000);
         std::atomic<std::uint64_t> last{0};
         // Volume terms about the domain's centre: near every triangle, so the sums keep their digits.
-        StlStreamWriter writer(path.string(), mDomain.box.center());
-        TriangleStream stream;
-        std::vector<std::vector<char>> bytes(stream.slots);
-        std::vector<TriangleMesh::Measures> terms(stream.slots);
-        stream.format = [&](std::size_t, std::size_t slot, std::span<const TriangleCorners> triangles) {
-            terms[slot] = writer.format(triangles, bytes[slot]);
-        };
-        stream.write = [&](std::size_t, std::size_t slot) { writer.write(bytes[slot], terms[slot]); };
-        const StreamedMeshCounts c = marchingCubesStreamed(g, 0.0f, stream, feed(progress, last));
-        v->measures = writer.commit(c.triangles);
-        return c;
+        return writeMarchingCubesStl(g, 0.0f, path.string(), mDomain.box.center(), feed(progress, last));
     });
+    v->measures = made.measures;
+    const StreamedMeshCounts& counts = made.counts;
     v->report["extractor"] = meshExtractorName(MeshExtractor::MarchingCubes);
     v->report["triangles"] = counts.triangles;
     v->report["vertices"] = counts.vertices;

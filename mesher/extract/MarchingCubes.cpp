@@ -490,7 +490,9 @@ private:
     template <Pass P>
     void processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh,
                       std::vector<TriangleCorners>* corners = nullptr);
-    /// After collectBlocks(): makes the sign words, runs the counting pass, then the prefix sums.
+    /// After collectBlocks(): sizes the per-block arrays and makes every leaf's sign words.
+    void prepare();
+    /// After collectBlocks(): prepare(), the counting pass, then the prefix sums.
     void countAll(ExtractProgress& progress);
     void fillStats(MarchingCubesStats& stats);
     static bool cubeHasVertices(int x, int y, int z, std::uint16_t crossing, std::uint8_t available);
@@ -835,7 +837,7 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
 // ranges are split, since every block writes only its own slots.
 constexpr std::size_t kGrain = 16;
 
-void Mesher::countAll(ExtractProgress& progress)
+void Mesher::prepare()
 {
     const std::size_t numBlocks = mBlocks.size();
     mNeighbours.resize(numBlocks);
@@ -847,6 +849,12 @@ void Mesher::countAll(ExtractProgress& progress)
                       [&](const tbb::blocked_range<std::size_t>& r) {
                           for (std::size_t b = r.begin(); b != r.end(); ++b) computeSigns(b);
                       });
+}
+
+void Mesher::countAll(ExtractProgress& progress)
+{
+    const std::size_t numBlocks = mBlocks.size();
+    prepare();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, kGrain),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                           Accessor acc(mTree);
@@ -912,15 +920,7 @@ StreamedMeshCounts Mesher::runStreamed(const TriangleStream& stream, ProgressFn 
     collectBlocks();
     const std::size_t numBlocks = mBlocks.size();
     ExtractProgress progress(std::move(progressFn), numBlocks);
-    mNeighbours.resize(numBlocks);
-    mEdgeMasks.resize(mNumLeaves);
-    mEdgeRanks.resize(mNumLeaves);
-    mCounts.resize(numBlocks);
-    mSigns.resize(mNumLeaves);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mNumLeaves, 64),
-                      [&](const tbb::blocked_range<std::size_t>& r) {
-                          for (std::size_t b = r.begin(); b != r.end(); ++b) computeSigns(b);
-                      });
+    prepare();
 
     // One pass: chunks of a fixed number of consecutive blocks (so what each consumer call sees
     // does not depend on threads), counted and emitted as they go.

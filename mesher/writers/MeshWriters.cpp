@@ -306,6 +306,23 @@ TriangleMesh::Measures StlStreamWriter::commit(std::uint64_t triangles)
     return {mTerms.volume / 6.0, 0.5 * mTerms.area};
 }
 
+StreamedStl writeMarchingCubesStl(const openvdb::FloatGrid& grid, float isoValue, const std::string& path,
+                                  const openvdb::Vec3d& reference, ProgressFn progress, MarchingCubesStats* stats)
+{
+    StlStreamWriter writer(path, reference);
+    TriangleStream stream;
+    std::vector<std::vector<char>> bytes(stream.slots);
+    std::vector<TriangleMesh::Measures> terms(stream.slots);
+    stream.format = [&](std::size_t, std::size_t slot, std::span<const TriangleCorners> triangles) {
+        terms[slot] = writer.format(triangles, bytes[slot]);
+    };
+    stream.write = [&](std::size_t, std::size_t slot) { writer.write(bytes[slot], terms[slot]); };
+    StreamedStl made;
+    made.counts = marchingCubesStreamed(grid, isoValue, stream, std::move(progress), stats);
+    made.measures = writer.commit(made.counts.triangles);
+    return made;
+}
+
 void writeStl(const TriangleMesh& mesh, const std::string& path, TriangleMesh::Measures* measures)
 {
     checkIndices(mesh);

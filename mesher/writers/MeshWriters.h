@@ -2,6 +2,7 @@
 /// @brief Mesh file output (STL, 3MF, PLY, OBJ) through AtomicFile, and an STL reader for tests.
 #pragma once
 
+#include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/TriangleMesh.h"
 #include "mesher/writers/AtomicFile.h"
 
@@ -24,6 +25,20 @@ namespace voxlat {
 /// formatted (the terms of TriangleMesh::measure() in chunk order: the same up to rounding, the
 /// same bits for any thread count).
 void writeStl(const TriangleMesh& mesh, const std::string& path, TriangleMesh::Measures* measures = nullptr);
+
+/// What writeMarchingCubesStl() made: the mesh's sizes, volume and area.
+struct StreamedStl {
+    StreamedMeshCounts counts;
+    TriangleMesh::Measures measures;
+};
+
+/// The marching-cubes mesh of @a grid at @a isoValue written to the binary STL @a path as it is
+/// made (marchingCubesStreamed() into an StlStreamWriter), never held whole: the bytes
+/// writeStl(marchingCubes(grid, isoValue), path) gives. Volume terms are summed about
+/// @a reference (a point near the mesh).
+StreamedStl writeMarchingCubesStl(const openvdb::FloatGrid& grid, float isoValue, const std::string& path,
+                                  const openvdb::Vec3d& reference, ProgressFn progress = {},
+                                  MarchingCubesStats* stats = nullptr);
 
 /// A binary STL written chunk by chunk, for a mesh that is never held whole (marching cubes
 /// streamed into the file: marchingCubesStreamed()). The facets have the bytes writeStl() gives
