@@ -498,6 +498,18 @@ private:
     static bool cubeHasVertices(int x, int y, int z, std::uint16_t crossing, std::uint8_t available);
     int decisions(int cs, const Neighbourhood& n, int x, int y, int z) const;
     uint32_t neighbourVertexIndex(std::size_t owner, int axis, int lx, int ly, int lz) const;
+    /// World position of the centroid of a cube's loop (edge bits @a loop): the loop's edge points
+    /// averaged in index space, then mapped like any other vertex. Rare.
+    openvdb::Vec3f centroid(const Neighbourhood& n, const Coord& origin, int x, int y, int z, std::uint16_t loop) const
+    {
+        Vec3d sum(0.0);
+        int count = 0;
+        for (std::uint16_t bits = loop; bits; bits &= bits - 1, ++count) {
+            const int e = std::countr_zero(bits), c = edgeLowerCorner(e);
+            sum += edgePoint(n, origin, x + cornerBit(c, 0), y + cornerBit(c, 1), z + cornerBit(c, 2), edgeAxis(e));
+        }
+        return openvdb::Vec3f(indexToWorld(sum / double(count)));
+    }
     [[gnu::always_inline]] Vec3d edgePoint(const Neighbourhood& n, const Coord& origin, int x, int y, int z,
                                            int axis) const;
 
@@ -787,14 +799,7 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
                             position[e] = openvdb::Vec3f(indexToWorld(edgePoint(n, block.origin, ox, oy, oz, axis)));
                     }
                     for (int k = 0; k < entry.numCentroids; ++k) {
-                        Vec3d sum(0.0);
-                        int count = 0;
-                        for (std::uint16_t bits = entry.centroidLoop[k]; bits; bits &= bits - 1, ++count) {
-                            const int e = std::countr_zero(bits), c = edgeLowerCorner(e);
-                            sum += edgePoint(n, block.origin, x + cornerBit(c, 0), y + cornerBit(c, 1),
-                                             z + cornerBit(c, 2), edgeAxis(e));
-                        }
-                        position[kCentroidBase + k] = openvdb::Vec3f(indexToWorld(sum / double(count)));
+                        position[kCentroidBase + k] = centroid(n, block.origin, x, y, z, entry.centroidLoop[k]);
                     }
                     for (int t = 0; t < entry.numTriangles; ++t) {
                         const std::uint8_t* tri = entry.triangles[t];
@@ -812,14 +817,7 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
                     }
                     for (int k = 0; k < entry.numCentroids; ++k) {
                         // Rare: average the loop in index space, then map like any other vertex.
-                        Vec3d sum(0.0);
-                        int count = 0;
-                        for (std::uint16_t bits = entry.centroidLoop[k]; bits; bits &= bits - 1, ++count) {
-                            const int e = std::countr_zero(bits), c = edgeLowerCorner(e);
-                            sum += edgePoint(n, block.origin, x + cornerBit(c, 0), y + cornerBit(c, 1),
-                                             z + cornerBit(c, 2), edgeAxis(e));
-                        }
-                        mesh->points[nextCentroid] = openvdb::Vec3f(indexToWorld(sum / double(count)));
+                        mesh->points[nextCentroid] = centroid(n, block.origin, x, y, z, entry.centroidLoop[k]);
                         index[kCentroidBase + k] = uint32_t(nextCentroid++);
                     }
                     for (int t = 0; t < entry.numTriangles; ++t) {
