@@ -134,27 +134,30 @@ void axisTerms(double wave, double origin, double spacing, int n, TrigTerms<doub
 
 /// axisTerms through a per-thread cache, by axis (0 x, 1 y, 2 z): a slicer's blocks along a row
 /// share their y terms, a whole layer its z term, and every layer the x terms of the same few
-/// block columns, so most calls find them here (x keeps 32 runs by their origin, y and z the
-/// last one). The terms depend on the arguments only, never on which thread made them.
+/// block columns, so most calls find them here (x keeps 32 runs by their origin, y the last one,
+/// z 16 by their origin: the sparse evaluator's leaves run through the 16 z columns of a 128^3
+/// block for each y). The terms depend on the arguments only, never on which thread made them.
 const TrigTerms<double>* cachedAxisTerms(int axis, double wave, double origin, double spacing, int n,
                                          TrigTerms<double>* scratch)
 {
-    constexpr int kMaxTerms = 128, kXRuns = 32;
+    constexpr int kMaxTerms = 128, kXRuns = 32, kZRuns = 16;
     struct Run {
         double wave = 0.0, origin = 0.0, spacing = 0.0;
         int n = -1;
         TrigTerms<double> terms[kMaxTerms];
     };
-    thread_local std::array<Run, kXRuns + 2> runs;
+    thread_local std::array<Run, kXRuns + 1 + kZRuns> runs;
     if (n > kMaxTerms) {
         axisTerms(wave, origin, spacing, n, scratch);
         return scratch;
     }
-    std::size_t slot = std::size_t(kXRuns + axis - 1);
-    if (axis == 0) {
+    std::size_t slot = kXRuns;  // y
+    if (axis != 1) {
         std::uint64_t bits;
         std::memcpy(&bits, &origin, sizeof bits);
-        slot = std::size_t((bits * 0x9E3779B97F4A7C15ull) >> 59);  // 5 bits: one of kXRuns
+        const std::uint64_t hash = bits * 0x9E3779B97F4A7C15ull;
+        slot = axis == 0 ? std::size_t(hash >> 59)                // 5 bits: one of kXRuns
+                         : kXRuns + 1 + std::size_t(hash >> 60);  // 4 bits: one of kZRuns
     }
     Run& run = runs[slot];
     if (run.n != n || run.wave != wave || run.origin != origin || run.spacing != spacing) {
@@ -410,7 +413,28 @@ Interval TpmsField::bound(const Box3& box) const
         const Interval unused(0.0, 0.0);
         return TrigTerms<Interval>{sin(a), cos(a), unused, unused};
     };
-    return tpmsEquation(mType, terms(x), terms(y), terms(z));
+    // The sparse evaluator bounds every leaf of a 128^3 block: 16 distinct intervals per axis,
+    // each asked for 256 times. A small per-thread cache by interval (the terms depend on it
+    // alone) leaves about one libm call in ten.
+    struct Entry {
+        Interval key{1.0, 0.0};  // empty: matches nothing
+        bool doubleAngles = false;
+        TrigTerms<Interval> terms;
+    };
+    thread_local std::array<Entry, 64> cache;
+    auto cachedTerms = [&](Interval a) -> TrigTerms<Interval> {
+        std::uint64_t lo, hi;
+        std::memcpy(&lo, &a.lo, sizeof lo);
+        std::memcpy(&hi, &a.hi, sizeof hi);
+        Entry& e = cache[std::size_t(((lo ^ (hi * 0xC2B2AE3D27D4EB4Full)) * 0x9E3779B97F4A7C15ull) >> 58)];
+        if (e.key.lo != a.lo || e.key.hi != a.hi || e.doubleAngles != doubleAngles) {
+            e.key = a;
+            e.doubleAngles = doubleAngles;
+            e.terms = terms(a);
+        }
+        return e.terms;
+    };
+    return tpmsEquation(mType, cachedTerms(x), cachedTerms(y), cachedTerms(z));
 }
 
 }  // namespace voxlat

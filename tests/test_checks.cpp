@@ -46,6 +46,29 @@ TEST(Pieces, FaceNeighboursJoinEdgesAndCornersDoNot)
     EXPECT_EQ(count.solidVoxels, 81u);
 }
 
+TEST(Pieces, FarApartBlocksAreFoundWithoutTheDenseIndex)
+{
+    // Solids thousands of voxels apart, each across several leaves: the blocks' bounding box is
+    // nearly all empty, so neighbours are found by search instead of the dense index the other
+    // tests use. A bar crossing four leaves stays one piece; two cubes far from it and from each
+    // other are two more.
+    auto grid = openvdb::FloatGrid::create(1.0f);
+    auto acc = grid->getAccessor();
+    auto fill = [&](const openvdb::Coord& lo, const openvdb::Coord& hi) {
+        for (auto it = openvdb::CoordBBox(lo, hi).begin(); it; ++it) acc.setValue(*it, -1.0f);
+    };
+    fill(openvdb::Coord(-5, 3, 3), openvdb::Coord(20, 5, 6));        // 26 x 3 x 4, four leaves along x
+    fill(openvdb::Coord(6000, 4, 4), openvdb::Coord(6009, 13, 13));  // 10^3
+    fill(openvdb::Coord(-3000, 4, 4), openvdb::Coord(-2995, 9, 9));  // 6^3
+    const PieceCount count = countPieces(*grid);
+    ASSERT_EQ(count.pieces.size(), 3u);
+    EXPECT_EQ(count.pieces[0].voxels, 1000u);
+    EXPECT_EQ(count.pieces[1].voxels, 312u);
+    EXPECT_EQ(count.pieces[1].bounds, openvdb::CoordBBox(openvdb::Coord(-5, 3, 3), openvdb::Coord(20, 5, 6)));
+    EXPECT_EQ(count.pieces[2].voxels, 216u);
+    EXPECT_EQ(count.solidVoxels, 1528u);
+}
+
 TEST(Pieces, PiecesAcrossLeavesAndTilesMatchTheirVolumes)
 {
     // Two balls (one large enough to hold inside tiles) and a bar joining nothing: three pieces

@@ -781,6 +781,50 @@ TEST_F(Mesher, StreamedStlHasTheBytesOfTheIndexedMesh)
     EXPECT_EQ(dir.entries(), 3 * grids.size());  // no temporary left behind
 }
 
+namespace {
+
+/// @a grid with a copy of its leaves and tiles added @a offset voxels away.
+FloatGrid::Ptr withCopy(const FloatGrid& grid, const Coord& offset)
+{
+    FloatGrid::Ptr both = grid.deepCopy();
+    for (auto leaf = grid.tree().cbeginLeaf(); leaf; ++leaf) {
+        auto* copy = new FloatGrid::TreeType::LeafNodeType(*leaf);
+        copy->setOrigin(leaf->origin() + offset);
+        both->tree().addLeaf(copy);
+    }
+    auto tile = grid.tree().cbeginValueAll();
+    tile.setMaxDepth(FloatGrid::TreeType::ValueAllCIter::LEAF_DEPTH - 1);  // tiles, not voxels
+    for (; tile; ++tile)
+        if (*tile != grid.background())
+            both->tree().addTile(FloatGrid::TreeType::RootNodeType::LEVEL - tile.getDepth(), tile.getCoord() + offset,
+                                 *tile, tile.isValueOn());
+    return both;
+}
+
+}  // namespace
+
+TEST_F(Mesher, FarApartBlocksMeshAsEachDoesAlone)
+{
+    // Two copies of a sphere 8192 voxels apart: the blocks' bounding box is nearly all empty, so
+    // the mesher finds neighbours by hashing instead of through its dense array (which the other
+    // tests use). The mesh is two copies of the sphere's, closed and manifold, and the streamed
+    // STL has its bytes.
+    TempDir dir;
+    const BandGrid sphere = makeSphere(20.3, 0.1);
+    ASSERT_GT(sphere.tiles, 0u);
+    const FloatGrid::Ptr pair = withCopy(*sphere.grid, Coord(8192, 0, 0));
+    const TriangleMesh one = marchingCubes(*sphere.grid, 0.0f);
+    const TriangleMesh two = marchingCubes(*pair, 0.0f);
+    ASSERT_GT(one.triangles.size(), 1000u);
+    EXPECT_EQ(two.triangles.size(), 2 * one.triangles.size());
+    EXPECT_EQ(two.points.size(), 2 * one.points.size());
+    expectClosedManifold(two, "two spheres");
+    EXPECT_NEAR(two.volume(), 2.0 * one.volume(), 1e-6 * one.volume());
+    writeStl(two, dir.file("two.stl"));
+    streamStl(*pair, dir.file("two-streamed.stl"), 2);
+    EXPECT_TRUE(readBytes(dir.file("two-streamed.stl")) == readBytes(dir.file("two.stl")));
+}
+
 TEST_F(Mesher, StreamedStlLeavesNothingWhenInterrupted)
 {
     // A consumer that fails half-way (a full disk, a cancel): the writer never committed, so the

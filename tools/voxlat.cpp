@@ -166,6 +166,22 @@ void useHugePages(char** argv)
     voxlat::restoreTunables(previous, hadPrevious);
 }
 
+/// Ends a run whose outputs are all written and committed without destroying the job: freeing
+/// a grid of a hundred thousand leaves and the rest piece by piece took ~40 ms of the acceptance
+/// gyroid's 1.4 s, and the system takes the whole address space back at once anyway. Under a
+/// sanitizer it returns, so leak checks still see the teardown.
+void exitSkippingTeardown(int code)
+{
+#if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)
+    std::cout.flush();
+    std::cerr.flush();
+    std::fflush(nullptr);
+    std::_Exit(code);
+#else
+    (void)code;
+#endif
+}
+
 }  // namespace
 
 int main(int argc, char** argv)
@@ -268,6 +284,7 @@ int main(int argc, char** argv)
             printSummary(job);
             std::cout << "outputs written to " << std::filesystem::absolute(outDir).lexically_normal().string()
                       << " (report.json has levels, densities and timings)\n";
+            exitSkippingTeardown(0);
         } else if (*mesh) {
             voxlat::Recipe recipe = voxlat::loadRecipe(meshArgs.recipe, meshArgs.sets);
             // The recipe's first mesh output says how to mesh; the options here override it.

@@ -7,6 +7,8 @@
 #include <array>
 #include <bit>
 #include <numeric>
+#include <utility>
+#include <vector>
 
 namespace voxlat {
 
@@ -179,6 +181,56 @@ void unite(std::vector<int>& parent, int a, int b)
     if (a != b) parent[std::max(a, b)] = std::min(a, b);  // the lower id is the root: deterministic
 }
 
+/// Position of the block at an origin in a list of blocks sorted by origin. A plain array over
+/// the blocks' bounding box when it holds at most 16 M slots and at most 16 per block (the usual
+/// case: O(1), neighbouring blocks close together in memory); otherwise a binary search.
+class SortedBlockIndex {
+public:
+    explicit SortedBlockIndex(const std::vector<Block>& blocks) : mBlocks(blocks)
+    {
+        if (blocks.empty()) return;
+        Coord lo = blocks.front().origin, hi = lo;
+        for (const Block& b : blocks) {
+            lo.minComponent(b.origin);
+            hi.maxComponent(b.origin);
+        }
+        const Coord dims = ((hi - lo) >> 3) + Coord(1);
+        const std::uint64_t volume = std::uint64_t(dims.x()) * std::uint64_t(dims.y()) * std::uint64_t(dims.z());
+        if (volume > (std::uint64_t(1) << 24) || volume > 16 * std::uint64_t(blocks.size())) return;
+        mOrigin = lo;
+        mDims = dims;
+        mDense.assign(volume, -1);
+        for (std::size_t n = 0; n < blocks.size(); ++n) mDense[slot(blocks[n].origin)] = std::int32_t(n);
+    }
+
+    /// The block at @a origin, or -1.
+    long find(const Coord& origin) const
+    {
+        if (!mDense.empty()) {
+            const Coord d = (origin - mOrigin) >> 3;
+            if (std::uint32_t(d.x()) >= std::uint32_t(mDims.x()) || std::uint32_t(d.y()) >= std::uint32_t(mDims.y()) ||
+                std::uint32_t(d.z()) >= std::uint32_t(mDims.z()))
+                return -1;
+            return mDense[slot(origin)];
+        }
+        const auto it = std::lower_bound(mBlocks.begin(), mBlocks.end(), origin,
+                                         [](const Block& l, const Coord& c) { return l.origin < c; });
+        return it != mBlocks.end() && it->origin == origin ? long(it - mBlocks.begin()) : -1;
+    }
+
+private:
+    std::size_t slot(const Coord& origin) const
+    {
+        const Coord d = (origin - mOrigin) >> 3;
+        return (std::size_t(d.x()) * std::size_t(mDims.y()) + std::size_t(d.y())) * std::size_t(mDims.z()) +
+               std::size_t(d.z());
+    }
+
+    const std::vector<Block>& mBlocks;
+    std::vector<std::int32_t> mDense;
+    Coord mOrigin, mDims;
+};
+
 }  // namespace
 
 PieceCount countPieces(const openvdb::FloatGrid& grid)
@@ -209,25 +261,28 @@ PieceCount countPieces(const openvdb::FloatGrid& grid)
     std::vector<int> parent(parts.size());
     std::iota(parent.begin(), parent.end(), 0);
 
-    // Join parts across the +x, +y and +z faces of every block. The next block along z is usually
-    // the next in the sorted list; along x and y, a search that starts at the last one found.
-    auto blockAt = [&](const Coord& origin, std::size_t from) -> long {
-        const auto it = std::lower_bound(blocks.begin() + long(from), blocks.end(), origin,
-                                         [](const Block& l, const Coord& c) { return l.origin < c; });
-        return it != blocks.end() && it->origin == origin ? long(it - blocks.begin()) : -1;
-    };
-    for (std::size_t n = 0; n < blocks.size(); ++n) {
-        for (int axis = 0; axis < 3; ++axis) {
-            Coord next = blocks[n].origin;
-            next[axis] += 8;
-            const long m = axis == 2 && n + 1 < blocks.size() ? (blocks[n + 1].origin == next ? long(n + 1) : -1)
-                                                              : blockAt(next, n + 1);
-            if (m < 0) continue;
-            for (int a = first[n]; a < first[n + 1]; ++a)
-                for (int b = first[std::size_t(m)]; b < first[std::size_t(m) + 1]; ++b)
-                    if (touches(parts[std::size_t(a)].bits, parts[std::size_t(b)].bits, axis)) unite(parent, a, b);
+    // Join parts across the +x, +y and +z faces of every block: the touching pairs are found in
+    // parallel over the same runs of blocks, then united in run order (the pieces do not depend
+    // on the order of unions, and neither do their ids: see below).
+    const SortedBlockIndex index(blocks);
+    std::vector<std::vector<std::pair<int, int>>> runPairs(runs);
+    tbb::parallel_for(std::size_t(0), runs, [&](std::size_t r) {
+        const std::size_t end = std::min(blocks.size(), (r + 1) * kRun);
+        for (std::size_t n = r * kRun; n < end; ++n) {
+            for (int axis = 0; axis < 3; ++axis) {
+                Coord next = blocks[n].origin;
+                next[axis] += 8;
+                const long m = index.find(next);
+                if (m < 0) continue;
+                for (int a = first[n]; a < first[n + 1]; ++a)
+                    for (int b = first[std::size_t(m)]; b < first[std::size_t(m) + 1]; ++b)
+                        if (touches(parts[std::size_t(a)].bits, parts[std::size_t(b)].bits, axis))
+                            runPairs[r].emplace_back(a, b);
+            }
         }
-    }
+    });
+    for (const auto& pairs : runPairs)
+        for (const auto& [a, b] : pairs) unite(parent, a, b);
 
     // Sizes and bounds per root, summed over the parts in block order.
     std::vector<int> pieceOf(parent.size(), -1);

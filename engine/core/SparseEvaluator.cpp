@@ -163,7 +163,10 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                 std::unique_ptr<LeafT> leaf;
                 float* data = visited.data();
                 if (!options.leafVisitor) {
-                    leaf = std::make_unique<LeafT>(lo, options.outsideValue, true);
+                    // Allocated, not filled: every value is written just below (a fill would
+                    // write the 2 KB twice).
+                    leaf = std::make_unique<LeafT>(openvdb::PartialCreate(), lo, options.outsideValue, true);
+                    leaf->buffer().allocate();
                     data = leaf->buffer().data();
                 }
                 // Branch-free, so it vectorises; the rare non-finite leaf is searched afterwards.

@@ -18,6 +18,7 @@
 #include <atomic>
 #include <bit>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <stdexcept>
@@ -340,12 +341,45 @@ Coord neighbourOffset(int s)
 
 /// Open-addressing map from block origin to block index. Written by one thread, then read-only.
 /// Key and index share a 16-byte slot, so a probe costs one cache line, not two.
+/// When the blocks' bounding box holds few enough blocks (dense(): at most 16 M, and at most 16
+/// per block present), find() reads a plain array indexed by position instead: 4 bytes a slot,
+/// neighbours of consecutive blocks close together, where hashed slots were a cache miss each
+/// (a twelfth of the mesher's time on the acceptance gyroid).
 class BlockMap {
 public:
     explicit BlockMap(std::size_t expected) { rehash(std::bit_ceil(std::max<std::size_t>(64, 2 * expected))); }
 
+    /// Switches find() to a dense array over the blocks inserted so far, if their box is small
+    /// enough. Nothing may be inserted afterwards.
+    void densify()
+    {
+        if (mSize == 0) return;
+        Coord lo(std::numeric_limits<int>::max()), hi(std::numeric_limits<int>::min());
+        for (const Entry& e : mEntries) {
+            if (e.index < 0) continue;
+            lo.minComponent(e.key);
+            hi.maxComponent(e.key);
+        }
+        const Coord dims = ((hi - lo) >> 3) + Coord(1);
+        const std::uint64_t volume = std::uint64_t(dims.x()) * std::uint64_t(dims.y()) * std::uint64_t(dims.z());
+        if (volume > (std::uint64_t(1) << 24) || volume > 16 * std::uint64_t(mSize)) return;
+        mDenseOrigin = lo;
+        mDenseDims = dims;
+        mDense.assign(volume, -1);
+        for (const Entry& e : mEntries)
+            if (e.index >= 0) mDense[denseSlot(e.key)] = e.index;
+    }
+
     int32_t find(const Coord& origin) const
     {
+        if (!mDense.empty()) {
+            const Coord d = (origin - mDenseOrigin) >> 3;
+            if (std::uint32_t(d.x()) >= std::uint32_t(mDenseDims.x()) ||
+                std::uint32_t(d.y()) >= std::uint32_t(mDenseDims.y()) ||
+                std::uint32_t(d.z()) >= std::uint32_t(mDenseDims.z()))
+                return -1;
+            return mDense[denseSlot(origin)];
+        }
         for (std::size_t i = slot(origin);; i = (i + 1) & mMask) {
             const Entry& e = mEntries[i];
             if (e.index < 0) return -1;
@@ -392,8 +426,17 @@ private:
             if (e.index >= 0) insert(e.key, e.index);
     }
 
+    std::size_t denseSlot(const Coord& origin) const
+    {
+        const Coord d = (origin - mDenseOrigin) >> 3;
+        return (std::size_t(d.x()) * std::size_t(mDenseDims.y()) + std::size_t(d.y())) * std::size_t(mDenseDims.z()) +
+               std::size_t(d.z());
+    }
+
     std::vector<Entry> mEntries;
     std::size_t mMask = 0, mSize = 0;
+    std::vector<int32_t> mDense;  ///< by position in the blocks' box, when dense enough
+    Coord mDenseOrigin, mDenseDims;
 };
 
 struct Block {
@@ -485,13 +528,15 @@ private:
 
     void collectBlocks();
     void computeSigns(std::size_t leaf);
-    Neighbourhood neighbourhood(std::size_t b, Accessor& acc) const;
-    void insideRows(std::size_t b, const Neighbourhood& n, std::uint16_t* rows) const;
+    using Neighbours = std::array<int32_t, 8>;  ///< [0]: self, [s]: block at +s; -1 unless a leaf
+    Neighbourhood neighbourhood(std::size_t b, const Neighbours& nb, Accessor& acc) const;
+    void insideRows(const Neighbours& nb, const Neighbourhood& n, std::uint16_t* rows) const;
     template <Pass P>
     void processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh,
                       std::vector<TriangleCorners>* corners = nullptr);
-    /// After collectBlocks(): sizes the per-block arrays and makes every leaf's sign words.
-    void prepare();
+    /// After collectBlocks(): sizes the per-block arrays (with @a indexed, also those the Emit
+    /// pass reads: neighbours, edge masks and ranks) and makes every leaf's sign words.
+    void prepare(bool indexed);
     /// After collectBlocks(): prepare(), the counting pass, then the prefix sums.
     void countAll(ExtractProgress& progress);
     void fillStats(MarchingCubesStats& stats);
@@ -534,8 +579,8 @@ private:
     /// z = 0 plane alone touches every cache line of its leaf).
     std::vector<std::array<std::uint64_t, 8>> mSigns;
 
-    // Filled by the counting pass.
-    std::vector<std::array<int32_t, 8>> mNeighbours;                // [0]: self, [s]: block at +s; -1 unless a leaf
+    // Filled by the counting pass for the Emit pass (the Stream pass keeps them on its stack).
+    std::vector<Neighbours> mNeighbours;
     std::vector<std::array<std::uint64_t, kMaskWords>> mEdgeMasks;  // leaves only
     std::vector<std::array<std::uint16_t, kMaskWords>> mEdgeRanks;  // set bits before each word
     std::vector<BlockCounts> mCounts;
@@ -561,13 +606,14 @@ void Mesher::collectBlocks()
             if (mMap->insert(origin, next) == next) mBlocks.push_back({origin, nullptr});
         }
     }
+    mMap->densify();
 }
 
-Neighbourhood Mesher::neighbourhood(std::size_t b, Accessor& acc) const
+Neighbourhood Mesher::neighbourhood(std::size_t b, const Neighbours& nb, Accessor& acc) const
 {
     Neighbourhood n;
     for (int s = 0; s < 8; ++s) {
-        const int32_t i = mNeighbours[b][s];
+        const int32_t i = nb[s];
         if (i >= 0) {
             n.data[s] = mBlocks[i].leaf->buffer().data();
             n.constant[s] = 0.0f;
@@ -592,14 +638,14 @@ void Mesher::computeSigns(std::size_t leaf)
     }
 }
 
-void Mesher::insideRows(std::size_t b, const Neighbourhood& n, std::uint16_t* rows) const
+void Mesher::insideRows(const Neighbours& nb, const Neighbourhood& n, std::uint16_t* rows) const
 {
     // rows[x * 9 + y] has bit z set when voxel (x, y, z) is inside, from the sign words of the
     // block and its +x/+y/+z neighbours (constant sub-blocks: all or none).
     const std::uint64_t* words[8];
     std::uint64_t constant[8];
     for (int s = 0; s < 8; ++s) {
-        const int32_t i = mNeighbours[b][s];
+        const int32_t i = nb[s];
         words[s] = i >= 0 ? mSigns[std::size_t(i)].data() : nullptr;
         constant[s] = n.constant[s] < mIso ? ~std::uint64_t(0) : 0;
     }
@@ -674,8 +720,13 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
     const Block& block = mBlocks[b];
     const bool isLeaf = b < mNumLeaves;
 
+    // The Stream pass needs a block's neighbours and edge mask only while it works on the block:
+    // on the stack, not in arrays over all blocks (tens of MB to allocate and zero).
+    Neighbours localNeighbours;
+    std::array<std::uint64_t, kMaskWords> localMask;
+    Neighbours& nb = P == Pass::Stream ? localNeighbours : mNeighbours[b];
+    std::array<std::uint64_t, kMaskWords>& mask = P == Pass::Stream ? localMask : mEdgeMasks[std::min(b, mNumLeaves)];
     if constexpr (Counts) {
-        std::array<int32_t, 8>& nb = mNeighbours[b];
         nb[0] = isLeaf ? int32_t(b) : -1;
         for (int s = 1; s < 8; ++s) {
             const int32_t i = mMap->find(block.origin + neighbourOffset(s));
@@ -683,11 +734,11 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
         }
     }
     std::uint8_t available = 0;  // sub-blocks (self + 7 upper neighbours) that own edge vertices
-    for (int s = 0; s < 8; ++s) available |= std::uint8_t(mNeighbours[b][s] >= 0) << s;
+    for (int s = 0; s < 8; ++s) available |= std::uint8_t(nb[s] >= 0) << s;
 
-    const Neighbourhood n = neighbourhood(b, acc);
+    const Neighbourhood n = neighbourhood(b, nb, acc);
     std::uint16_t rows[kDim * kDim];
-    insideRows(b, n, rows);
+    insideRows(nb, n, rows);
 
     BlockCounts counts;
     // Pass 2: global index of each vertex this leaf owns, by mask bit (word * 64 + bit). Only
@@ -696,7 +747,6 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
     openvdb::Vec3f ownPosition[P == Pass::Stream ? kMaskWords * 64 : 1];
     if (isLeaf) {
         if constexpr (Counts) {
-            std::array<std::uint64_t, kMaskWords>& mask = mEdgeMasks[b];
             mask.fill(0);
             for (int x = 0; x < 8; ++x) {
                 for (int y = 0; y < 8; ++y) {
@@ -709,17 +759,15 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
                     mask[2 * 8 + x] |= alongZ << (8 * y);
                 }
             }
-            std::array<std::uint16_t, kMaskWords>& ranks = mEdgeRanks[b];
             uint32_t total = 0;
             for (int w = 0; w < kMaskWords; ++w) {
-                ranks[w] = std::uint16_t(total);
+                if constexpr (P == Pass::Count) mEdgeRanks[b][w] = std::uint16_t(total);
                 total += uint32_t(popcount64(mask[w]));
             }
             counts.edgeVertices = total;
         }
         if constexpr (P == Pass::Stream) {
             // Each owned vertex's position once; cubes read them by mask bit.
-            const std::array<std::uint64_t, kMaskWords>& mask = mEdgeMasks[b];
             for (int w = 0; w < kMaskWords; ++w) {
                 const int axis = w >> 3, x = w & 7;
                 for (std::uint64_t bits = mask[w]; bits; bits &= bits - 1) {
@@ -731,7 +779,6 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
         }
         if constexpr (P == Pass::Emit) {
             // Owned vertices in mask bit order, the order neighbourVertexIndex() ranks them in.
-            const std::array<std::uint64_t, kMaskWords>& mask = mEdgeMasks[b];
             std::uint64_t next = mVertexOffsets[b];
             for (int w = 0; w < kMaskWords; ++w) {
                 const int axis = w >> 3, x = w & 7;
@@ -811,9 +858,8 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
                         const int e = std::countr_zero(bits), c = edgeLowerCorner(e), axis = edgeAxis(e);
                         const int ox = x + cornerBit(c, 0), oy = y + cornerBit(c, 1), oz = z + cornerBit(c, 2);
                         const int s = (ox >> 3) | ((oy >> 3) << 1) | ((oz >> 3) << 2);
-                        index[e] =
-                            s == 0 ? ownIndex[(axis * 8 + ox) * 64 + ((oy << 3) | oz)]
-                                   : neighbourVertexIndex(std::size_t(mNeighbours[b][s]), axis, ox & 7, oy & 7, oz & 7);
+                        index[e] = s == 0 ? ownIndex[(axis * 8 + ox) * 64 + ((oy << 3) | oz)]
+                                          : neighbourVertexIndex(std::size_t(nb[s]), axis, ox & 7, oy & 7, oz & 7);
                     }
                     for (int k = 0; k < entry.numCentroids; ++k) {
                         // Rare: average the loop in index space, then map like any other vertex.
@@ -835,12 +881,14 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
 // ranges are split, since every block writes only its own slots.
 constexpr std::size_t kGrain = 16;
 
-void Mesher::prepare()
+void Mesher::prepare(bool indexed)
 {
     const std::size_t numBlocks = mBlocks.size();
-    mNeighbours.resize(numBlocks);
-    mEdgeMasks.resize(mNumLeaves);
-    mEdgeRanks.resize(mNumLeaves);
+    if (indexed) {
+        mNeighbours.resize(numBlocks);
+        mEdgeMasks.resize(mNumLeaves + 1);  // + 1: a tile block's (unused) reference
+        mEdgeRanks.resize(mNumLeaves);
+    }
     mCounts.resize(numBlocks);
     mSigns.resize(mNumLeaves);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mNumLeaves, 64),
@@ -852,7 +900,7 @@ void Mesher::prepare()
 void Mesher::countAll(ExtractProgress& progress)
 {
     const std::size_t numBlocks = mBlocks.size();
-    prepare();
+    prepare(true);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, kGrain),
                       [&](const tbb::blocked_range<std::size_t>& r) {
                           Accessor acc(mTree);
@@ -918,7 +966,7 @@ StreamedMeshCounts Mesher::runStreamed(const TriangleStream& stream, ProgressFn 
     collectBlocks();
     const std::size_t numBlocks = mBlocks.size();
     ExtractProgress progress(std::move(progressFn), numBlocks);
-    prepare();
+    prepare(false);
 
     // One pass: chunks of a fixed number of consecutive blocks (so what each consumer call sees
     // does not depend on threads), counted and emitted as they go.
