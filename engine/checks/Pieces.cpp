@@ -1,5 +1,7 @@
 #include "engine/checks/Pieces.h"
 
+#include "mesher/extract/SignWords.h"
+
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
@@ -70,12 +72,7 @@ std::vector<Block> solidBlocks(const openvdb::FloatGrid& grid)
     std::vector<Block> blocks(leaves.size());
     tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t n) {
         blocks[n].origin = leaves[n]->origin();
-        const float* v = leaves[n]->buffer().data();
-        for (int x = 0; x < 8; ++x) {
-            std::uint64_t w = 0;
-            for (int i = 0; i < 64; ++i) w |= std::uint64_t(v[64 * x + i] < 0.0f) << i;
-            blocks[n].bits[std::size_t(x)] = w;
-        }
+        belowWords(leaves[n]->buffer().data(), 0.0f, blocks[n].bits.data());
     });
     blocks.erase(std::remove_if(blocks.begin(), blocks.end(), [](const Block& b) { return isEmpty(b.bits); }),
                  blocks.end());

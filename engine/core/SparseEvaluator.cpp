@@ -9,6 +9,8 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <memory>
 #include <mutex>
 #include <sstream>
@@ -147,7 +149,7 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
     {
         StageProgress progress(options.context, options.stage, leafOrigins.size());
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leafOrigins.size(), 16), [&](const auto& range) {
-            std::array<double, 512> values;
+            std::array<double, 512> values, clipped;
             std::array<float, 512> visited;
             for (std::size_t n = range.begin(); n != range.end(); ++n) {
                 const Coord& lo = leafOrigins[n];
@@ -155,11 +157,10 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                 batch.origin = domain.worldOf(lo);
                 batch.spacing = Vec3d(domain.voxel);
                 field.gridValues(batch, values);
-                if (clip && !deepInside.isInside(CoordBBox(lo, lo + Coord(kLeafDim - 1))))
-                    for (int i = 0; i < 512; ++i) {
-                        const Vec3d p = batch.point(i >> 6, (i >> 3) & 7, i & 7);
-                        values[i] = std::max(values[i], clip->eval(p[0], p[1], p[2]));
-                    }
+                if (clip && !deepInside.isInside(CoordBBox(lo, lo + Coord(kLeafDim - 1)))) {
+                    clip->gridValues(batch, clipped);
+                    for (int i = 0; i < 512; ++i) values[i] = std::max(values[i], clipped[i]);
+                }
                 std::unique_ptr<LeafT> leaf;
                 float* data = visited.data();
                 if (!options.leafVisitor) {
@@ -169,13 +170,17 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                     leaf->buffer().allocate();
                     data = leaf->buffer().data();
                 }
-                // Branch-free, so it vectorises; the rare non-finite leaf is searched afterwards.
-                bool finite = true;
+                // Branch-free integer tests (an exponent of all ones: infinity or NaN), so the
+                // loop vectorises; the rare non-finite leaf is searched afterwards.
+                constexpr std::uint64_t kExponent = 0x7FF0000000000000ull;
+                std::uint64_t nonFiniteSeen = 0;
                 for (int i = 0; i < 512; ++i) {
-                    finite &= std::isfinite(values[i]);
+                    std::uint64_t bits;
+                    std::memcpy(&bits, &values[i], sizeof bits);
+                    nonFiniteSeen |= std::uint64_t((bits & kExponent) == kExponent);
                     data[i] = float(values[i]);
                 }
-                if (!finite) [[unlikely]] {
+                if (nonFiniteSeen) [[unlikely]] {
                     std::lock_guard<std::mutex> lock(badMutex);
                     for (int i = 0; i < 512; ++i)
                         if (!std::isfinite(values[i]) && !nonFinite.exchange(true))

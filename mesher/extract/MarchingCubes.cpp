@@ -1,12 +1,9 @@
 #include "mesher/extract/MarchingCubes.h"
 
 #include "mesher/extract/ExtractProgress.h"
+#include "mesher/extract/SignWords.h"
 
 #include <openvdb/tree/ValueAccessor.h>
-
-#if defined(__SSE2__)
-#include <immintrin.h>
-#endif
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -66,6 +63,32 @@ constexpr int edgeUpperCorner(int edge)
 {
     return edgeLowerCorner(edge) | (1 << edgeAxis(edge));
 }
+
+/// Edge @a e's lower corner offsets and axis as one table entry {dx, dy, dz, axis}: the mesher's
+/// inner loops read this instead of decoding the edge number each time.
+struct EdgeStep {
+    int dx, dy, dz, axis;
+};
+constexpr std::array<EdgeStep, 12> kEdgeSteps = [] {
+    std::array<EdgeStep, 12> steps{};
+    for (int e = 0; e < 12; ++e) {
+        const int c = edgeLowerCorner(e);
+        steps[std::size_t(e)] = {cornerBit(c, 0), cornerBit(c, 1), cornerBit(c, 2), edgeAxis(e)};
+    }
+    return steps;
+}();
+
+/// Per edge, where a leaf's owned vertex of that edge sits in its mask-bit numbering
+/// ((axis * 8 + x) * 64 + (y << 3 | z)) relative to the cube's minimum voxel (x << 6 | y << 3 | z),
+/// for cubes whose edges all lie in the leaf.
+constexpr std::array<int, 12> kEdgeOwnOffset = [] {
+    std::array<int, 12> offsets{};
+    for (int e = 0; e < 12; ++e) {
+        const EdgeStep& s = kEdgeSteps[std::size_t(e)];
+        offsets[std::size_t(e)] = s.axis * 512 + (s.dx << 6) + (s.dy << 3) + s.dz;
+    }
+    return offsets;
+}();
 
 /// The four corners of face @a face in cyclic order around it.
 constexpr std::array<int, 4> faceCorners(int face)
@@ -477,20 +500,6 @@ struct Neighbourhood {
     }
 };
 
-/// Bit z set when v[z] < iso, for 8 consecutive values.
-inline unsigned insideByte(const float* v, float iso)
-{
-#if defined(__SSE2__)
-    const __m128 t = _mm_set1_ps(iso);
-    return unsigned(_mm_movemask_ps(_mm_cmplt_ps(_mm_loadu_ps(v), t))) |
-           (unsigned(_mm_movemask_ps(_mm_cmplt_ps(_mm_loadu_ps(v + 4), t))) << 4);
-#else
-    unsigned bits = 0;
-    for (int z = 0; z < 8; ++z) bits |= unsigned(v[z] < iso) << z;
-    return bits;
-#endif
-}
-
 /// std::popcount is a library call unless the target has POPCNT; this is the inline fallback.
 inline int popcount64(std::uint64_t x)
 {
@@ -503,6 +512,35 @@ inline int popcount64(std::uint64_t x)
     return int((x * 0x0101010101010101ull) >> 56);
 #endif
 }
+
+/// One chunk's triangles for the Stream pass. Appending has no capacity test per triangle:
+/// processBlock() makes room for a block's most triangles before the block.
+class CornerBuffer {
+public:
+    void clear() { mSize = 0; }
+    void reserveMore(std::size_t n)
+    {
+        if (mSize + n <= mCapacity) return;
+        const std::size_t capacity = std::max(2 * mCapacity, mSize + n);
+        auto data = std::make_unique_for_overwrite<TriangleCorners[]>(capacity);
+        std::copy(mData.get(), mData.get() + mSize, data.get());
+        mData = std::move(data);
+        mCapacity = capacity;
+    }
+    /// After reserveMore(): room is there.
+    void push(const openvdb::Vec3f& a, const openvdb::Vec3f& b, const openvdb::Vec3f& c)
+    {
+        TriangleCorners& t = mData[mSize++];
+        t[0] = a;
+        t[1] = b;
+        t[2] = c;
+    }
+    std::span<const TriangleCorners> triangles() const { return {mData.get(), mSize}; }
+
+private:
+    std::unique_ptr<TriangleCorners[]> mData;
+    std::size_t mSize = 0, mCapacity = 0;
+};
 
 /// What processBlock() does: count (and record neighbours and edge masks), emit into an indexed
 /// mesh, or emit triangles as corner positions (no indices).
@@ -532,8 +570,7 @@ private:
     Neighbourhood neighbourhood(std::size_t b, const Neighbours& nb, Accessor& acc) const;
     void insideRows(const Neighbours& nb, const Neighbourhood& n, std::uint16_t* rows) const;
     template <Pass P>
-    void processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh,
-                      std::vector<TriangleCorners>* corners = nullptr);
+    void processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, CornerBuffer* corners = nullptr);
     /// After collectBlocks(): sizes the per-block arrays (with @a indexed, also those the Emit
     /// pass reads: neighbours, edge masks and ranks) and makes every leaf's sign words.
     void prepare(bool indexed);
@@ -629,13 +666,7 @@ Neighbourhood Mesher::neighbourhood(std::size_t b, const Neighbours& nb, Accesso
 void Mesher::computeSigns(std::size_t leaf)
 {
     // "< iso", never "<=": a value exactly at the threshold is outside, on both sides of every edge.
-    const float* data = mBlocks[leaf].leaf->buffer().data();
-    std::array<std::uint64_t, 8>& words = mSigns[leaf];
-    for (int x = 0; x < 8; ++x) {
-        std::uint64_t word = 0;
-        for (int y = 0; y < 8; ++y) word |= std::uint64_t(insideByte(data + (x << 6) + (y << 3), mIso)) << (8 * y);
-        words[x] = word;
-    }
+    belowWords(mBlocks[leaf].leaf->buffer().data(), mIso, mSigns[leaf].data());
 }
 
 void Mesher::insideRows(const Neighbours& nb, const Neighbourhood& n, std::uint16_t* rows) const
@@ -714,7 +745,7 @@ inline Vec3d Mesher::edgePoint(const Neighbourhood& n, const Coord& origin, int 
 }
 
 template <Pass P>
-void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std::vector<TriangleCorners>* corners)
+void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, CornerBuffer* corners)
 {
     constexpr bool Counts = P != Pass::Emit;  // the Stream pass counts as it goes: no pass before it
     const Block& block = mBlocks[b];
@@ -791,6 +822,7 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
             }
         }
     }
+    if constexpr (P == Pass::Stream) corners->reserveMore(std::size_t(kMaxTriangles) * 512);
     std::uint64_t nextCentroid = 0;
     openvdb::Vec3I* outTriangles = nullptr;
     if constexpr (P == Pass::Emit) {
@@ -834,12 +866,24 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
                     counts.centroids += entry.numCentroids;
                 }
                 if constexpr (P == Pass::Stream) {
+                    // Most cubes (all but the block's upper shell) have every edge in the leaf
+                    // and no loop centroid: their corners come straight from the owned positions.
+                    if (isLeaf && x < 7 && y < 7 && z < 7 && entry.numCentroids == 0) {
+                        const openvdb::Vec3f* own = ownPosition + ((x << 6) | (y << 3) | z);
+                        for (int t = 0; t < entry.numTriangles; ++t) {
+                            const std::uint8_t* tri = entry.triangles[t];
+                            corners->push(own[kEdgeOwnOffset[tri[0]]], own[kEdgeOwnOffset[tri[1]]],
+                                          own[kEdgeOwnOffset[tri[2]]]);
+                        }
+                        continue;
+                    }
                     // Each position from the same two values and integer offsets as its owner
                     // computes it in the Emit pass: the same bits.
                     openvdb::Vec3f position[kCentroidBase + kMaxCentroids];
                     for (std::uint16_t bits = crossing; bits; bits &= bits - 1) {
-                        const int e = std::countr_zero(bits), c = edgeLowerCorner(e), axis = edgeAxis(e);
-                        const int ox = x + cornerBit(c, 0), oy = y + cornerBit(c, 1), oz = z + cornerBit(c, 2);
+                        const int e = std::countr_zero(bits);
+                        const EdgeStep& step = kEdgeSteps[std::size_t(e)];
+                        const int axis = step.axis, ox = x + step.dx, oy = y + step.dy, oz = z + step.dz;
                         if (isLeaf && (ox | oy | oz) < 8)
                             position[e] = ownPosition[(axis * 8 + ox) * 64 + ((oy << 3) | oz)];
                         else
@@ -850,13 +894,14 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, std:
                     }
                     for (int t = 0; t < entry.numTriangles; ++t) {
                         const std::uint8_t* tri = entry.triangles[t];
-                        corners->push_back({position[tri[0]], position[tri[1]], position[tri[2]]});
+                        corners->push(position[tri[0]], position[tri[1]], position[tri[2]]);
                     }
                 } else if constexpr (P == Pass::Emit) {
                     uint32_t index[kCentroidBase + kMaxCentroids];
                     for (std::uint16_t bits = crossing; bits; bits &= bits - 1) {
-                        const int e = std::countr_zero(bits), c = edgeLowerCorner(e), axis = edgeAxis(e);
-                        const int ox = x + cornerBit(c, 0), oy = y + cornerBit(c, 1), oz = z + cornerBit(c, 2);
+                        const int e = std::countr_zero(bits);
+                        const EdgeStep& step = kEdgeSteps[std::size_t(e)];
+                        const int axis = step.axis, ox = x + step.dx, oy = y + step.dy, oz = z + step.dz;
                         const int s = (ox >> 3) | ((oy >> 3) << 1) | ((oz >> 3) << 2);
                         index[e] = s == 0 ? ownIndex[(axis * 8 + ox) * 64 + ((oy << 3) | oz)]
                                           : neighbourVertexIndex(std::size_t(nb[s]), axis, ox & 7, oy & 7, oz & 7);
@@ -973,7 +1018,7 @@ StreamedMeshCounts Mesher::runStreamed(const TriangleStream& stream, ProgressFn 
     constexpr std::size_t kChunkBlocks = 256;
     const std::size_t chunks = (numBlocks + kChunkBlocks - 1) / kChunkBlocks;
     const std::size_t slots = std::max<std::size_t>(1, stream.slots);
-    std::vector<std::vector<TriangleCorners>> buffers(slots);
+    std::vector<CornerBuffer> buffers(slots);
     std::size_t next = 0;
     tbb::parallel_pipeline(
         slots, tbb::make_filter<void, std::size_t>(tbb::filter_mode::serial_in_order,
@@ -985,7 +1030,7 @@ StreamedMeshCounts Mesher::runStreamed(const TriangleStream& stream, ProgressFn 
                        tbb::filter_mode::parallel,
                        [&](std::size_t chunk) {
                            if (chunk >= chunks) return chunk;
-                           std::vector<TriangleCorners>& corners = buffers[chunk % slots];
+                           CornerBuffer& corners = buffers[chunk % slots];
                            corners.clear();
                            Accessor acc(mTree);
                            const std::size_t end = std::min(numBlocks, (chunk + 1) * kChunkBlocks);
@@ -993,7 +1038,7 @@ StreamedMeshCounts Mesher::runStreamed(const TriangleStream& stream, ProgressFn 
                                processBlock<Pass::Stream>(b, acc, nullptr, &corners);
                                progress.advance();
                            }
-                           stream.format(chunk, chunk % slots, corners);
+                           stream.format(chunk, chunk % slots, corners.triangles());
                            return chunk;
                        }) &
                    tbb::make_filter<std::size_t, void>(tbb::filter_mode::serial_in_order, [&](std::size_t chunk) {
