@@ -8,7 +8,10 @@ skipping empty blocks, side by side at load average 5 on the 2 shared cores: 5.1
 at load 4.5: 3.69 s vs 25.95 s (7.0x; mesh 1.67 s, evaluate 0.56 s, solve 0.52 s, STL 0.39 s).
 2026-11-27, after the launcher, the one-period density solve and the STL written while meshing:
 1.6-1.9 s vs 13.4-14.4 s at load 1.7 (7.6-8.3x), peak 408 MB; with the packed block map, at
-load 1: 8.8x, 8.9x, 10.1x (1.45 s vs 14.59 s)."""
+load 1: 8.8x, 8.9x, 10.1x (1.45 s vs 14.59 s). Since then three pairs, run alternately, and
+their median ratio decide the verdict (every pair is printed). After the second pass of
+2026-11-27 (instruction count of the run -24 %), at load 1.7-1.9: 11.1x, 10.4x, 11.4x (1.21 s vs
+13.50 s), peak 379 MB."""
 import json
 
 from common import PYTHON, ROOT, measure, row, verdict
