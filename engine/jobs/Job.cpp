@@ -468,11 +468,18 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         ro.maxMove = 2.0 * mDomain.voxel;
         ro.tolerance = po.tolerance;
         const RefinementStats refined = timed("refine creases", [&] { return refineCreases(m, surfaces, ro); });
-        report["refinement"] = {{"threshold_mm", ro.threshold},      {"triangles_checked", refined.checked},
-                                {"triangles_over", refined.over},    {"edges_split", refined.split},
-                                {"splits_dropped", refined.dropped}, {"triangles_still_over", refined.remaining},
-                                {"rounds", refined.rounds},          {"max_before_mm", refined.maxBefore},
-                                {"max_after_mm", refined.maxAfter}};
+        report["refinement"] = {
+            {"threshold_mm", ro.threshold},
+            {"triangles_checked", refined.checked},
+            {"triangles_over", refined.over},
+            {"vertices_moved_onto_surface", refined.moved},
+            {"edges_split", refined.split},
+            {"splits_dropped", refined.dropped},
+            {"triangles_still_over", refined.remaining},
+            {"rounds", refined.rounds},
+            {"max_before_mm", refined.maxBefore},
+            {"max_after_mm", refined.maxAfter},
+        };
         report["creases"] = {{"surfaces", std::to_string(operands.size()) +
                                               (operands.size() == 1 ? " field" : " operands of the result") +
                                               " and the six faces of the domain box"},

@@ -307,6 +307,149 @@ std::vector<Piece> piecesOf(const std::array<Vec3d, 6>& p, const std::array<bool
     return {};
 }
 
+/// Triangles of @a mesh (not flagged in @a skip) with a corner within two cells of @a cell of a
+/// cell holding one of @a seeds.
+std::vector<std::uint32_t> trianglesNear(const TriangleMesh& mesh, const std::vector<Vec3d>& points,
+                                         const std::vector<Vec3d>& seeds, double cell,
+                                         const std::vector<std::uint8_t>& skip)
+{
+    auto key = [&](const Vec3d& p, int dx, int dy, int dz) {
+        const auto c = [&](double v, int d) {
+            return std::uint64_t(std::int64_t(std::floor(v / cell)) + d + (1 << 20)) & 0x1fffff;
+        };
+        return c(p.x(), dx) << 42 | c(p.y(), dy) << 21 | c(p.z(), dz);
+    };
+    std::vector<std::uint64_t> cells;
+    for (const Vec3d& p : seeds)
+        for (int dx = -2; dx <= 2; ++dx)
+            for (int dy = -2; dy <= 2; ++dy)
+                for (int dz = -2; dz <= 2; ++dz) cells.push_back(key(p, dx, dy, dz));
+    std::sort(cells.begin(), cells.end());
+    cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+    auto marked = [&](std::uint32_t v) {
+        return std::binary_search(cells.begin(), cells.end(), key(points[v], 0, 0, 0));
+    };
+    std::vector<std::uint32_t> out;
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+        if (skip[t]) continue;
+        const openvdb::Vec3I& tri = mesh.triangles[t];
+        if (marked(tri[0]) || marked(tri[1]) || marked(tri[2])) out.push_back(std::uint32_t(t));
+    }
+    return out;
+}
+
+/// Moves the corners of the flagged triangles that lie on no surface (the projection held them
+/// back) onto the solid's surface (onto a crease when they lie outside a second surface), where
+/// every triangle around them keeps its area, faces out along a surface at each corner, and
+/// crosses no triangle near it; moves that fail are undone, in rounds.
+void moveOntoSurface(const SurfaceList& list, TriangleMesh& mesh, std::vector<Vec3d>& points,
+                     std::vector<std::uint32_t>& mask, const std::vector<std::uint8_t>& flagged,
+                     const RefinementOptions& o, double near, RefinementStats& stats)
+{
+    std::vector<std::int64_t> slot(points.size(), -1);
+    std::vector<std::uint32_t> movers;
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
+        if (flagged[t])
+            for (int i = 0; i < 3; ++i) {
+                const std::uint32_t v = mesh.triangles[t][i];
+                if (mask[v] == 0 && slot[v] < 0) {
+                    slot[v] = std::int64_t(movers.size());
+                    movers.push_back(v);
+                }
+            }
+    if (movers.empty()) return;
+    std::vector<Start> starts;
+    for (std::uint32_t v : movers) starts.push_back({points[v], 0u});
+    std::vector<Vec3d> placed;
+    std::vector<std::uint8_t> moved;
+    std::vector<Normals> placedNormals;
+    RefinementOptions within = o;
+    within.maxMove = 0.5 * o.maxMove;
+    placeOnSurface(list, starts, within, placed, moved, placedNormals);
+    // The triangles around the movers, and the surfaces' normals at their corners.
+    std::vector<std::uint32_t> around;
+    std::vector<std::uint8_t> isAround(mesh.triangles.size(), 0);
+    std::vector<std::int64_t> cornerSlot(points.size(), -1);
+    std::vector<Vec3d> corners;
+    std::vector<std::uint32_t> cornerMask;
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
+        if (slot[tri[0]] < 0 && slot[tri[1]] < 0 && slot[tri[2]] < 0) continue;
+        around.push_back(std::uint32_t(t));
+        isAround[t] = 1;
+        for (int i = 0; i < 3; ++i)
+            if (cornerSlot[tri[i]] < 0) {
+                cornerSlot[tri[i]] = std::int64_t(corners.size());
+                corners.push_back(points[tri[i]]);
+                cornerMask.push_back(mask[tri[i]]);
+            }
+    }
+    const std::vector<Normals> cornerNormals = normalsAt(list, corners, cornerMask);
+    auto position = [&](std::uint32_t v) {
+        return slot[v] >= 0 && moved[std::size_t(slot[v])] ? placed[std::size_t(slot[v])] : points[v];
+    };
+    auto normalsOf = [&](std::uint32_t v) -> const Normals& {
+        return slot[v] >= 0 && moved[std::size_t(slot[v])] ? placedNormals[std::size_t(slot[v])]
+                                                           : cornerNormals[std::size_t(cornerSlot[v])];
+    };
+    auto undo = [&](const openvdb::Vec3I& tri) {
+        bool any = false;
+        for (int i = 0; i < 3; ++i)
+            if (slot[tri[i]] >= 0 && moved[std::size_t(slot[tri[i]])]) {
+                moved[std::size_t(slot[tri[i]])] = 0;
+                any = true;
+            }
+        return any;
+    };
+    std::vector<Vec3d> seeds;
+    for (std::size_t k = 0; k < movers.size(); ++k) seeds.push_back(placed[k]);
+    for (const Vec3d& c : corners) seeds.push_back(c);
+    const std::vector<std::uint32_t> others = trianglesNear(mesh, points, seeds, std::max(o.maxMove, 1e-6), isAround);
+    for (;;) {
+        bool undone = false;
+        for (std::uint32_t t : around) {
+            const openvdb::Vec3I& tri = mesh.triangles[t];
+            const Vec3d a0 = points[tri[0]], b0 = points[tri[1]], c0 = points[tri[2]];
+            const Vec3d a = position(tri[0]), b = position(tri[1]), c = position(tri[2]);
+            const Vec3d n0 = (b0 - a0).cross(c0 - a0), n1 = (b - a).cross(c - a);
+            bool good = n1.length() > 1e-6 * n0.length() && toFloat(a) != toFloat(b) && toFloat(b) != toFloat(c) &&
+                        toFloat(c) != toFloat(a);
+            // A triangle that faced in at a corner already (a chamfer) need only not turn over.
+            bool wasGood = true;
+            for (int i = 0; i < 3; ++i)
+                wasGood = wasGood && facesOut(n0, cornerNormals[std::size_t(cornerSlot[tri[i]])]);
+            if (wasGood)
+                for (int i = 0; i < 3 && good; ++i) good = facesOut(n1, normalsOf(tri[i]));
+            else
+                good = good && n1.dot(n0) > 0.0;
+            if (!good) undone = undo(tri) || undone;
+        }
+        if (undone) continue;
+        TriangleMesh local;
+        local.points = mesh.points;
+        for (std::size_t k = 0; k < movers.size(); ++k)
+            if (moved[k]) local.points[movers[k]] = toFloat(placed[k]);
+        for (std::uint32_t t : around) local.triangles.push_back(mesh.triangles[t]);
+        for (std::uint32_t t : others) local.triangles.push_back(mesh.triangles[t]);
+        for (const auto& [x, y] : selfIntersections(local))
+            for (const std::uint32_t t : {x, y})
+                if (t < around.size()) undone = undo(local.triangles[t]) || undone;
+        if (!undone) break;
+    }
+    std::vector<std::uint32_t> done;
+    for (std::size_t k = 0; k < movers.size(); ++k)
+        if (moved[k]) {
+            points[movers[k]] = placed[k];
+            mesh.points[movers[k]] = toFloat(placed[k]);
+            done.push_back(movers[k]);
+            ++stats.moved;
+        }
+    std::vector<Vec3d> at;
+    for (std::uint32_t v : done) at.push_back(points[v]);
+    const std::vector<std::uint32_t> newMask = surfaceMasks(list, at, near);
+    for (std::size_t k = 0; k < done.size(); ++k) mask[done[k]] = newMask[k];
+}
+
 }  // namespace
 
 RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces, const RefinementOptions& options)
@@ -329,6 +472,19 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
         candidate[t] = !(m == mask[tri[1]] && m == mask[tri[2]] && std::popcount(m) == 1);
     }
 
+    {
+        std::vector<std::uint32_t> check;
+        for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
+            if (candidate[t]) check.push_back(std::uint32_t(t));
+        const std::vector<double> sampled = sampleTriangles(list, mesh, check, options.spacing);
+        stats.checked = check.size();
+        for (double w : sampled) {
+            stats.over += w > options.threshold;
+            stats.maxBefore = std::max(stats.maxBefore, w);
+        }
+    }
+    moveOntoSurface(list, mesh, points, mask, candidate, options, near, stats);
+
     for (int round = 0;; ++round) {
         std::vector<std::uint32_t> check;
         for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
@@ -338,11 +494,6 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
         for (std::size_t k = 0; k < check.size(); ++k) {
             worst[check[k]] = sampled[k];
             if (sampled[k] > options.threshold) bad.push_back(check[k]);
-        }
-        if (round == 0) {
-            stats.checked = check.size();
-            stats.over = bad.size();
-            for (double w : sampled) stats.maxBefore = std::max(stats.maxBefore, w);
         }
         // Bad triangles that tried all three edges are left as they are.
         std::vector<Edge> edges;

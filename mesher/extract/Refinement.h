@@ -46,6 +46,9 @@ struct RefinementStats {
     /// Edge splits dropped: no point on the surface near the edge, a piece would have turned
     /// over or lost its area, or crossed another triangle.
     std::size_t dropped = 0;
+    /// Corners of those triangles that lay on no surface (held back by the projection) moved
+    /// onto it.
+    std::size_t moved = 0;
     /// Triangles still above the threshold at the end.
     std::size_t remaining = 0;
     int rounds = 0;
