@@ -462,8 +462,7 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         // Triangles that still cut into the solid or stray out of it (a chamfer across a sharp
         // wedge whose crease runs outside the triangle) are bisected at points on the surface.
         RefinementOptions ro;
-        ro.threshold = options.tolerance ? 0.5 * *options.tolerance : 0.01 * mDomain.voxel;
-        if (getenv("VOXLAT_REFINE_THRESHOLD")) ro.threshold = atof(getenv("VOXLAT_REFINE_THRESHOLD"));
+        ro.threshold = options.tolerance ? 0.5 * *options.tolerance : 0.05 * mDomain.voxel;
         ro.spacing = 0.25 * mDomain.voxel;
         ro.maxMove = 2.0 * mDomain.voxel;
         ro.tolerance = po.tolerance;
@@ -531,17 +530,6 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         // Projection and decimation move vertices and join triangles: check that no two cross.
         const std::size_t crossing = timed("check self-intersections", [&] { return countSelfIntersections(m); });
         report["self_intersections"] = crossing;
-        if (getenv("VOXLAT_DEBUG_CROSS"))
-            for (const auto& [x, y] : selfIntersections(m)) {
-                for (auto t : {x, y}) {
-                    for (int i = 0; i < 3; ++i) {
-                        const auto& p = m.points[m.triangles[t][i]];
-                        fprintf(stderr, "(%.4f %.4f %.4f) ", p.x(), p.y(), p.z());
-                    }
-                    fprintf(stderr, " | ");
-                }
-                fprintf(stderr, "\n");
-            }
         if (crossing > 0)
             mContext->warn("mesh_self_intersections",
                            std::to_string(crossing) +

@@ -11,8 +11,6 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 #include <limits>
 #include <vector>
 
@@ -385,18 +383,22 @@ void moveOntoSurface(const SurfaceList& list, TriangleMesh& mesh, std::vector<Ve
             }
     }
     const std::vector<Normals> cornerNormals = normalsAt(list, corners, cornerMask);
+    // moved: 2 all the way, 1 half way (as the projection holds back), 0 not at all.
+    for (std::uint8_t& level : moved) level = level ? 2 : 0;
     auto position = [&](std::uint32_t v) {
-        return slot[v] >= 0 && moved[std::size_t(slot[v])] ? placed[std::size_t(slot[v])] : points[v];
+        if (slot[v] < 0) return points[v];
+        const std::size_t k = std::size_t(slot[v]);
+        return moved[k] == 2 ? placed[k] : moved[k] == 1 ? 0.5 * (points[v] + placed[k]) : points[v];
     };
     auto normalsOf = [&](std::uint32_t v) -> const Normals& {
-        return slot[v] >= 0 && moved[std::size_t(slot[v])] ? placedNormals[std::size_t(slot[v])]
-                                                           : cornerNormals[std::size_t(cornerSlot[v])];
+        return slot[v] >= 0 && moved[std::size_t(slot[v])] == 2 ? placedNormals[std::size_t(slot[v])]
+                                                                : cornerNormals[std::size_t(cornerSlot[v])];
     };
     auto undo = [&](const openvdb::Vec3I& tri) {
         bool any = false;
         for (int i = 0; i < 3; ++i)
             if (slot[tri[i]] >= 0 && moved[std::size_t(slot[tri[i]])]) {
-                moved[std::size_t(slot[tri[i]])] = 0;
+                --moved[std::size_t(slot[tri[i]])];
                 any = true;
             }
         return any;
@@ -428,7 +430,7 @@ void moveOntoSurface(const SurfaceList& list, TriangleMesh& mesh, std::vector<Ve
         TriangleMesh local;
         local.points = mesh.points;
         for (std::size_t k = 0; k < movers.size(); ++k)
-            if (moved[k]) local.points[movers[k]] = toFloat(placed[k]);
+            if (moved[k]) local.points[movers[k]] = toFloat(position(movers[k]));
         for (std::uint32_t t : around) local.triangles.push_back(mesh.triangles[t]);
         for (std::uint32_t t : others) local.triangles.push_back(mesh.triangles[t]);
         for (const auto& [x, y] : selfIntersections(local))
@@ -439,8 +441,9 @@ void moveOntoSurface(const SurfaceList& list, TriangleMesh& mesh, std::vector<Ve
     std::vector<std::uint32_t> done;
     for (std::size_t k = 0; k < movers.size(); ++k)
         if (moved[k]) {
-            points[movers[k]] = placed[k];
-            mesh.points[movers[k]] = toFloat(placed[k]);
+            const Vec3d p = toDouble(toFloat(position(movers[k])));
+            points[movers[k]] = p;
+            mesh.points[movers[k]] = toFloat(p);
             done.push_back(movers[k]);
             ++stats.moved;
         }
@@ -782,33 +785,6 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
             if (!dropped) break;
         }
 
-        if (const char* env = std::getenv("VOXLAT_REFINE_DEBUG")) {
-            double x, y, z, r;
-            std::sscanf(env, "%lf %lf %lf %lf", &x, &y, &z, &r);
-            const Vec3d c(x, y, z);
-            for (std::size_t e = 0; e < m; ++e) {
-                const Vec3d a = points[edges[e].p], b = points[edges[e].q];
-                if ((0.5 * (a + b) - c).length() > r) continue;
-                std::fprintf(
-                    stderr, "round %d edge %zu (%.4f %.4f %.4f m%u)-(%.4f %.4f %.4f m%u) active %d at %.4f %.4f %.4f\n",
-                    round, e, a.x(), a.y(), a.z(), mask[edges[e].p], b.x(), b.y(), b.z(), mask[edges[e].q],
-                    int(active[e]), target[e].x(), target[e].y(), target[e].z());
-                for (std::size_t j = firstStart[e]; j < firstStart[e + 1]; ++j)
-                    std::fprintf(stderr, "   start %zu found %d at %.4f %.4f %.4f\n", j - firstStart[e], int(found[j]),
-                                 placed[j].x(), placed[j].y(), placed[j].z());
-            }
-            for (std::size_t k = 0; k < touched.size(); ++k) {
-                const openvdb::Vec3I& tri = mesh.triangles[touched[k]];
-                const Vec3d cc = (points[tri[0]] + points[tri[1]] + points[tri[2]]) / 3.0;
-                if ((cc - c).length() > r) continue;
-                const auto sp = splits(k);
-                std::fprintf(stderr,
-                             "  tri %u (%.4f %.4f %.4f)(%.4f %.4f %.4f)(%.4f %.4f %.4f) splits %d%d%d good %d\n",
-                             touched[k], points[tri[0]].x(), points[tri[0]].y(), points[tri[0]].z(), points[tri[1]].x(),
-                             points[tri[1]].y(), points[tri[1]].z(), points[tri[2]].x(), points[tri[2]].y(),
-                             points[tri[2]].z(), sp[0], sp[1], sp[2], int(piecesGood(k, sp)));
-            }
-        }
         // New vertices in edge order; each split parent replaced in place by its pieces.
         std::vector<std::uint32_t> newVertex(m, 0);
         std::size_t madeHere = 0;
