@@ -305,7 +305,7 @@ std::vector<Piece> piecesOf(const std::array<Vec3d, 6>& p, const std::array<bool
     return {};
 }
 
-/// Triangles of @a mesh (not flagged in @a skip) with a corner within two cells of @a cell of a
+/// Triangles of @a mesh (not flagged in @a skip) with a corner in a cell (of edge @a cell) next to a
 /// cell holding one of @a seeds.
 std::vector<std::uint32_t> trianglesNear(const TriangleMesh& mesh, const std::vector<Vec3d>& points,
                                          const std::vector<Vec3d>& seeds, double cell,
@@ -319,9 +319,9 @@ std::vector<std::uint32_t> trianglesNear(const TriangleMesh& mesh, const std::ve
     };
     std::vector<std::uint64_t> cells;
     for (const Vec3d& p : seeds)
-        for (int dx = -2; dx <= 2; ++dx)
-            for (int dy = -2; dy <= 2; ++dy)
-                for (int dz = -2; dz <= 2; ++dz) cells.push_back(key(p, dx, dy, dz));
+        for (int dx = -1; dx <= 1; ++dx)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dz = -1; dz <= 1; ++dz) cells.push_back(key(p, dx, dy, dz));
     std::sort(cells.begin(), cells.end());
     cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
     auto marked = [&](std::uint32_t v) {
@@ -701,41 +701,20 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
 
         // No piece may cross a triangle around it (the pieces of the split parents and the
         // triangles sharing a corner with them); a parent whose pieces cross drops its splits.
-        // Around: every triangle with a corner within two cells (of the move limit) of a cell
-        // holding a corner or new point of the split triangles.
+        // Around: every triangle with a corner in a cell (of the move limit) next to one holding a
+        // corner or new point of the split triangles.
         std::vector<std::uint32_t> around;
         {
-            const double cell = std::max(options.maxMove, 1e-6);
-            auto key = [&](const Vec3d& p, int dx, int dy, int dz) {
-                const auto c = [&](double v, int d) {
-                    return std::uint64_t(std::int64_t(std::floor(v / cell)) + d + (1 << 20)) & 0x1fffff;
-                };
-                return c(p.x(), dx) << 42 | c(p.y(), dy) << 21 | c(p.z(), dz);
-            };
-            std::vector<std::uint64_t> cells;
-            auto mark = [&](const Vec3d& p) {
-                for (int dx = -2; dx <= 2; ++dx)
-                    for (int dy = -2; dy <= 2; ++dy)
-                        for (int dz = -2; dz <= 2; ++dz) cells.push_back(key(p, dx, dy, dz));
-            };
-            for (std::uint32_t t : touched)
-                for (int i = 0; i < 3; ++i) mark(points[mesh.triangles[t][i]]);
+            std::vector<Vec3d> seeds;
+            std::vector<std::uint8_t> skip(mesh.triangles.size(), 0);
+            for (std::uint32_t t : touched) {
+                skip[t] = 1;
+                for (int i = 0; i < 3; ++i) seeds.push_back(points[mesh.triangles[t][i]]);
+            }
             for (std::size_t e = 0; e < m; ++e)
                 for (std::size_t j = firstStart[e]; j < firstStart[e + 1]; ++j)
-                    if (found[j]) mark(placed[j]);
-            std::sort(cells.begin(), cells.end());
-            cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
-            auto marked = [&](std::uint32_t v) {
-                return std::binary_search(cells.begin(), cells.end(), key(points[v], 0, 0, 0));
-            };
-            for (std::size_t t = 0, k = 0; t < mesh.triangles.size(); ++t) {
-                if (k < touched.size() && touched[k] == t) {
-                    ++k;
-                    continue;
-                }
-                const openvdb::Vec3I& tri = mesh.triangles[t];
-                if (marked(tri[0]) || marked(tri[1]) || marked(tri[2])) around.push_back(std::uint32_t(t));
-            }
+                    if (found[j]) seeds.push_back(placed[j]);
+            around = trianglesNear(mesh, points, seeds, std::max(options.maxMove, 1e-6), skip);
         }
         for (;;) {
             dropTurned();
