@@ -14,11 +14,13 @@
 #include "fields/Cylinder.h"
 #include "fields/LevelSolid.h"
 #include "fields/Sphere.h"
+#include "fields/SurfaceDistance.h"
 #include "fields/TpmsField.h"
 #include "mesher/extract/CreaseSplit.h"
 #include "mesher/extract/Decimation.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
+#include "mesher/extract/Refinement.h"
 #include "mesher/extract/SurfaceProjection.h"
 #include "mesher/writers/MeshWriters.h"
 
@@ -868,3 +870,81 @@ TEST(MeshOutputs, ACutByAShapeIsSplitInTheJob)
 }
 
 }  // namespace
+
+namespace {
+
+/// The Job's chain on a box-cut gyroid network: marching cubes, projection, crease moves and
+/// splits, then (refine) the refinement of straying crease triangles.
+struct RefinedGyroid {
+    GyroidCase g;
+    FieldPtr lattice = std::make_shared<LevelSolid>(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(g.cell)),
+                                                    SolidSide::Below, g.level);
+    TriangleMesh before, after;
+    RefinementStats stats;
+
+    explicit RefinedGyroid(double threshold)
+    {
+        const FieldPtr field = g.field();
+        before = marchingCubesOf(*field, Domain::fromBox(g.box, g.voxel));
+        const ProjectionOptions o{0.0, 0.5 * g.voxel, 1e-5, 12};
+        projectToSurface(before, *field, o);
+        ProjectionOptions co = o;
+        co.maxMove = g.voxel;
+        sharpenCreases(before, *lattice, BoxField(g.box), co);
+        splitCreaseEdges(before, {{lattice.get()}, g.box}, co);
+        after = before;
+        RefinementOptions ro;
+        ro.threshold = threshold;
+        ro.spacing = 0.25 * g.voxel;
+        ro.maxMove = 2.0 * g.voxel;
+        ro.tolerance = 1e-5;
+        stats = refineCreases(after, {{lattice.get()}, g.box}, ro);
+    }
+};
+
+/// Triangles of @a m with a sampled point farther than @a limit from the solid (the test's own
+/// distance), and the largest distance.
+std::pair<std::size_t, double> straying(const TriangleMesh& m, const GyroidCase& g, double limit)
+{
+    std::size_t count = 0;
+    double worst = 0.0;
+    for (const openvdb::Vec3I& t : m.triangles) {
+        TriangleMesh one;
+        one.points = {m.points[t[0]], m.points[t[1]], m.points[t[2]]};
+        one.triangles = {openvdb::Vec3I(0, 1, 2)};
+        const double d = maxOverTriangles(
+            one, [&](const Vec3d& p) { return g.distance(p); }, 0.01);
+        count += d > limit;
+        worst = std::max(worst, d);
+    }
+    return {count, worst};
+}
+
+}  // namespace
+
+TEST(Refinement, BoxCutGyroidStraysLessClosedAndSameBytes)
+{
+    const RefinedGyroid r(0.005);
+    const auto [overBefore, maxBefore] = straying(r.before, r.g, 0.01);
+    const auto [overAfter, maxAfter] = straying(r.after, r.g, 0.01);
+    RecordProperty("over_tolerance_before", std::to_string(overBefore));
+    RecordProperty("over_tolerance_after", std::to_string(overAfter));
+    RecordProperty("max_before_mm", std::to_string(maxBefore));
+    RecordProperty("max_after_mm", std::to_string(maxAfter));
+    RecordProperty("edges_split", std::to_string(r.stats.split));
+    RecordProperty("splits_dropped", std::to_string(r.stats.dropped));
+    // Fewer triangles stray beyond the tolerance, none further than before.
+    EXPECT_GT(overBefore, 0u);
+    EXPECT_LT(overAfter, overBefore);
+    EXPECT_LE(maxAfter, maxBefore + 1e-6);
+    EXPECT_GT(r.stats.split, 0u);
+    expectClosedManifold(r.after);
+    EXPECT_EQ(checkTopology(r.after).genus, checkTopology(r.before).genus);
+    EXPECT_LE(countSelfIntersections(r.after), countSelfIntersections(r.before));
+    EXPECT_NEAR(r.after.volume(), r.before.volume(), 0.01 * r.before.volume());
+    // The same bytes for any thread count.
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    const RefinedGyroid serial(0.005);
+    EXPECT_TRUE(serial.after.points == r.after.points);
+    EXPECT_TRUE(serial.after.triangles == r.after.triangles);
+}

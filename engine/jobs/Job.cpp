@@ -16,12 +16,14 @@
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
 #include "fields/GradedLevel.h"
+#include "fields/SurfaceDistance.h"
 #include "fields/Unary.h"
 #include "mesher/extract/BccTetrahedra.h"
 #include "mesher/extract/CreaseSplit.h"
 #include "mesher/extract/Decimation.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
+#include "mesher/extract/Refinement.h"
 #include "mesher/extract/SurfaceProjection.h"
 #include "mesher/writers/AtomicFile.h"
 #include "mesher/writers/MeshPreview.h"
@@ -387,6 +389,18 @@ FieldPtr Job::surfaceField()
     return mSurfaceField;
 }
 
+FieldPtr Job::distanceField()
+{
+    solveLevels();
+    if (!mDistanceField) {
+        std::vector<FieldPtr> operands;
+        collectCreaseOperands(mResult, operands);
+        operands.push_back(std::make_shared<BoxField>(mDomain.box));
+        mDistanceField = std::make_shared<SurfaceDistance>(std::move(operands));
+    }
+    return mDistanceField;
+}
+
 const TriangleMesh& Job::mesh(const MeshOptions& options)
 {
     return *variant(options).mesh;
@@ -446,6 +460,26 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         for (const FieldPtr& f : operands) surfaces.fields.push_back(f.get());
         surfaces.box = mDomain.box;
         const CreaseSplitStats split = timed("split crease edges", [&] { return splitCreaseEdges(m, surfaces, co); });
+        // Triangles that still cut into the solid or stray out of it (a chamfer across a sharp
+        // wedge whose crease runs outside the triangle) are bisected at points on the surface.
+        RefinementOptions ro;
+        ro.threshold = options.tolerance ? 0.5 * *options.tolerance : 0.05 * mDomain.voxel;
+        ro.spacing = 0.25 * mDomain.voxel;
+        ro.maxMove = 2.0 * mDomain.voxel;
+        ro.tolerance = po.tolerance;
+        const RefinementStats refined = timed("refine creases", [&] { return refineCreases(m, surfaces, ro); });
+        report["refinement"] = {
+            {"threshold_mm", ro.threshold},
+            {"triangles_checked", refined.checked},
+            {"triangles_over", refined.over},
+            {"vertices_moved_onto_surface", refined.moved},
+            {"edges_split", refined.split},
+            {"splits_dropped", refined.dropped},
+            {"triangles_still_over", refined.remaining},
+            {"rounds", refined.rounds},
+            {"max_before_mm", refined.maxBefore},
+            {"max_after_mm", refined.maxAfter},
+        };
         report["creases"] = {{"surfaces", std::to_string(operands.size()) +
                                               (operands.size() == 1 ? " field" : " operands of the result") +
                                               " and the six faces of the domain box"},
@@ -460,7 +494,7 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
                                 {"vertex_deviation_after", deviationJson(s.maxAfter, s.rmsAfter)}};
     }
     if (options.tolerance) {
-        const FieldPtr field = surfaceField();
+        const FieldPtr field = distanceField();
         DecimationOptions d;
         d.tolerance = *options.tolerance;
         d.voxel = mDomain.voxel;
@@ -481,13 +515,13 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
     if (!options.raw()) {
         // Measured on every triangle, so the numbers hold for the file as written.
         const MeshDeviation dev =
-            timed("measure mesh", [&] { return measureDeviation(m, *surfaceField(), 0.0, mDomain.voxel); });
+            timed("measure mesh", [&] { return measureDeviation(m, *distanceField(), 0.0, mDomain.voxel); });
         report["deviation"] = {{"max_mm", dev.max},
                                {"rms_mm", dev.rms},
                                {"samples", dev.samples},
                                {"measure",
-                                "|f| / |grad f| of the result clipped to the domain, on every triangle "
-                                "sampled at most one voxel apart"}};
+                                "|max f / |grad f|| over the result's operands and the domain box, on "
+                                "every triangle sampled at most one voxel apart"}};
         const MeshTopology t = checkTopology(m);
         report["closed_manifold"] = t.closedManifold();
         report["euler_characteristic"] = t.eulerCharacteristic;

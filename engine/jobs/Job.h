@@ -47,6 +47,11 @@ public:
     const TriangleMesh& mesh(const MeshOptions& options);
     /// The field the grid samples: the result clipped to the domain box (negative inside).
     FieldPtr surfaceField();
+    /// The first-order signed distance to the surface of surfaceField()'s solid in mm: the largest
+    /// of f / |grad f| over the operands of the result's outermost sharp intersection (or the
+    /// result) and the domain box (fields/SurfaceDistance). Decimation and the mesh report
+    /// measure with it.
+    FieldPtr distanceField();
 
     /// Writes the recipe's outputs (paths relative to @a outDir) and report.json.
     /// With @a preview, also a picture of the first mesh (NAME.preview.png).
@@ -95,7 +100,7 @@ private:
     FieldPtr mResult;
     bool mSolved = false;
     openvdb::FloatGrid::Ptr mGrid;
-    FieldPtr mSurfaceField;
+    FieldPtr mSurfaceField, mDistanceField;
 
     /// One mesh the job made, with what report.json says about it.
     struct MeshVariant {
