@@ -7,6 +7,7 @@
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/MeshSettings.h"
 #include "engine/recipe/Recipe.h"
+#include "mesher/extract/SurfaceProjection.h"
 #include "mesher/extract/TriangleMesh.h"
 #include "mesher/writers/FrameWriters.h"
 #include "mesher/writers/MeshWriters.h"
@@ -114,6 +115,13 @@ private:
     };
     /// The mesh made with @a options, made on first use (marching cubes, projection, decimation).
     MeshVariant& variant(const MeshOptions& options);
+    /// For a tolerance mesh (marching cubes, projected): the mesh extracted from a grid k times
+    /// coarser than the recipe's, evaluated from surfaceField(), with its vertices projected
+    /// (@a projection), when a k > 1 keeps the pieces, the smallest known feature (at least three
+    /// coarse voxels) and a chord error within the tolerance; else null. What was chosen and why
+    /// goes into @a extraction; @a voxel is set to the voxel the mesh was extracted at.
+    std::unique_ptr<TriangleMesh> coarseMesh(const MeshOptions& options, nlohmann::json& extraction, double& voxel,
+                                             ProjectionStats& projection);
     /// Refuses (InputError, naming where the tolerance was given) a mesh tolerance of half the
     /// thinnest strut a node knows or more; warns when it exceeds the voxel.
     void checkTolerance(const MeshOptions& options);
