@@ -30,6 +30,7 @@
 #include <cmath>
 #include <functional>
 #include <numbers>
+#include <optional>
 
 namespace {
 
@@ -766,6 +767,9 @@ TEST(MeshOutputs, AToleranceAboveHalfTheThinnestStrutIsRefused)
     bool warned = false;
     for (const auto& w : r["warnings"]) warned = warned || w["code"] == "mesh_tolerance_coarse";
     EXPECT_TRUE(warned);
+    // Struts under three coarse voxels across keep the recipe's voxel for extraction.
+    EXPECT_EQ(r["mesh"]["extraction"]["factor"].get<int>(), 1);
+    EXPECT_NE(r["mesh"]["extraction"]["why"].get<std::string>().find("thinnest strut"), std::string::npos);
 }
 
 TEST(CreaseSplit, ABooleanAndTheBoxKeepTheirCreases)
@@ -947,4 +951,126 @@ TEST(Refinement, BoxCutGyroidStraysLessClosedAndSameBytes)
     const RefinedGyroid serial(0.005);
     EXPECT_TRUE(serial.after.points == r.after.points);
     EXPECT_TRUE(serial.after.triangles == r.after.triangles);
+}
+
+// Tolerance meshes extracted from a coarser grid than the recipe's (Job::coarseMesh): the voxel is
+// chosen from the measured chord error; the result must still be closed, manifold, outward and
+// within the tolerance by the test's own distance, and the recipe's voxel is used when a coarser
+// grid would change the pieces.
+namespace {
+
+/// Runs @a text (a recipe whose only output is a.stl) with at most @a threads threads.
+std::pair<nlohmann::json, std::string> runTolerance(const std::string& text, const std::filesystem::path& dir,
+                                                    int threads = 0)
+{
+    std::optional<tbb::global_control> limit;
+    if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, threads);
+    Job job(parseRecipe(text, "r.yaml", dir));
+    job.writeOutputs(dir / "out", false);
+    return {job.report(), test::readFile(dir / "out/a.stl")};
+}
+
+}  // namespace
+
+TEST(CoarseExtraction, SphereIsClosedOutwardAndWithinTheTolerance)
+{
+    test::TempDir dir;
+    const std::string text =
+        "voxel: 0.1\n"
+        "domain: {box: [[-5, -5, -5], [5, 5, 5]]}\n"
+        "fields: {ball: {sphere: {center: [0.03, -0.02, 0.01], radius: 3.7}}}\n"
+        "result: ball\n"
+        "outputs: {mesh: {file: a.stl, tolerance: 0.01}}\n";
+    const auto [r, bytes] = runTolerance(text, dir.path);
+    const nlohmann::json& x = r["mesh"]["extraction"];
+    EXPECT_GT(x["factor"].get<int>(), 1) << x.dump();
+    EXPECT_NEAR(x["voxel_mm"].get<double>(), x["factor"].get<int>() * 0.1, 1e-12);
+    const TriangleMesh m = readStl((dir.path / "out/a.stl").string());
+    expectClosedManifold(m);
+    EXPECT_NEAR(m.volume(), 4.0 / 3.0 * std::numbers::pi * std::pow(3.7, 3), 0.01 * 4.0 * std::numbers::pi * 3.7 * 3.7);
+    const Vec3d c(0.03, -0.02, 0.01);
+    const double worst = maxOverTriangles(
+        m, [&](const Vec3d& p) { return (p - c).length() - 3.7; }, 0.02);
+    EXPECT_LE(worst, 0.01);
+    // Fewer triangles than marching cubes at the recipe's voxel (about 4 pi R^2 / (0.1^2 / 2)... a
+    // few hundred thousand), and no crossing pairs.
+    EXPECT_LT(m.triangles.size(), 40000u);
+    EXPECT_EQ(r["mesh"]["self_intersections"].get<std::size_t>(), 0u);
+}
+
+TEST(CoarseExtraction, BoxCutGyroidWithinTheToleranceInsideAndSameBytesForAnyThreadCount)
+{
+    test::TempDir dir;
+    const std::string text =
+        "voxel: 0.1\n"
+        "domain: {box: [[0, 0, 0], [12, 12, 11]]}\n"
+        "fields:\n"
+        "  lattice: {tpms: gyroid, cell: 10, solid: network, density: 0.3}\n"
+        "result: lattice\n"
+        "outputs: {mesh: {file: a.stl, tolerance: 0.02}}\n";
+    const auto [r, bytes] = runTolerance(text, dir.path, 1);
+    const nlohmann::json& x = r["mesh"]["extraction"];
+    ASSERT_GT(x["factor"].get<int>(), 1) << x.dump();
+    const double h = x["voxel_mm"].get<double>();
+    const TriangleMesh m = readStl((dir.path / "out/a.stl").string());
+    expectClosedManifold(m);
+    EXPECT_GT(m.volume(), 0.0);
+    // Crossing pairs (projection leaves some where the lattice meets the box's edges, at any
+    // voxel: 47 pairs at the recipe's 0.1 mm on this part, 9 from the coarse grid) are reported.
+    EXPECT_EQ(r["mesh"]["self_intersections"].get<std::size_t>(), countSelfIntersections(m));
+    const MeshTopology t = checkTopology(m);
+    EXPECT_EQ(t.closedPieces, r["pieces"]["count"].get<std::size_t>());
+    const double level = r["fields"]["lattice"]["level"].get<double>();
+    const Box3 box{Vec3d(0.0), Vec3d(12.0, 12.0, 11.0)};
+    // Away from the box (two coarse voxels), only the chord error and decimation act: within T.
+    double inner = 0.0, all = 0.0;
+    for (const openvdb::Vec3I& tri : m.triangles) {
+        TriangleMesh one;
+        one.points = {m.points[tri[0]], m.points[tri[1]], m.points[tri[2]]};
+        one.triangles = {openvdb::Vec3I(0, 1, 2)};
+        const double d = maxOverTriangles(
+            one, [&](const Vec3d& p) { return std::max(gyroidDistance(p, 10.0, level), boxDistance(p, box)); }, 0.05);
+        all = std::max(all, d);
+        bool deep = true;
+        for (int v = 0; v < 3; ++v) deep = deep && boxDistance(at(m, tri[v]), box) < -2.0 * h;
+        if (deep) inner = std::max(inner, d);
+    }
+    EXPECT_LE(inner, 0.02);
+    // At the box's creases the steps after extraction act as at the recipe's voxel; what is left
+    // there is reported, not hidden.
+    EXPECT_LE(all, r["mesh"]["deviation"]["max_mm"].get<double>() + 0.005);
+    // Same bytes with two threads.
+    test::TempDir dir2;
+    const auto [r2, bytes2] = runTolerance(text, dir2.path, 2);
+    EXPECT_EQ(bytes, bytes2);
+    EXPECT_EQ(r2["mesh"]["extraction"], x);
+}
+
+TEST(CoarseExtraction, PiecesACoarseGridJoinsFallBackToTheRecipesVoxel)
+{
+    test::TempDir dir;
+    // A 0.06 mm gap between two balls, across x = 2.02 .. 2.08: the recipe's samples at
+    // x = 2.05 fall in it; every coarser grid from the domain's corner (2.0 and 2.4 at 0.4 mm,
+    // 1.95 and 2.25 at 0.3 mm, 1.9 and 2.1 at 0.2 mm) has neighbours inside one ball each.
+    const std::string text =
+        "voxel: 0.1\n"
+        "domain: {box: [[-3, -3, -3], [7, 3, 3]]}\n"
+        "fields:\n"
+        "  a: {sphere: {center: [0, 0, 0], radius: 2.02}}\n"
+        "  b: {sphere: {center: [4.08, 0, 0], radius: 2}}\n"
+        "  both: {union: [a, b]}\n"
+        "result: both\n"
+        "allow: [pieces]\n"
+        "outputs: {mesh: {file: a.stl, tolerance: 0.01}}\n";
+    const auto [r, bytes] = runTolerance(text, dir.path);
+    ASSERT_EQ(r["pieces"]["count"].get<std::size_t>(), 2u);
+    const nlohmann::json& x = r["mesh"]["extraction"];
+    EXPECT_EQ(x["factor"].get<int>(), 1) << x.dump();
+    EXPECT_NEAR(x["voxel_mm"].get<double>(), 0.1, 1e-12);
+    EXPECT_NE(x["why"].get<std::string>().find("closed pieces"), std::string::npos) << x.dump();
+    ASSERT_FALSE(x["trials"].empty());
+    EXPECT_TRUE(x["trials"][0].contains("rejected"));
+    const TriangleMesh m = readStl((dir.path / "out/a.stl").string());
+    expectClosedManifold(m);
+    EXPECT_EQ(checkTopology(m).closedPieces, 2u);
 }
