@@ -433,7 +433,9 @@ void moveOntoSurface(const SurfaceList& list, TriangleMesh& mesh, std::vector<Ve
             if (moved[k]) local.points[movers[k]] = toFloat(position(movers[k]));
         for (std::uint32_t t : around) local.triangles.push_back(mesh.triangles[t]);
         for (std::uint32_t t : others) local.triangles.push_back(mesh.triangles[t]);
-        for (const auto& [x, y] : selfIntersections(local))
+        std::vector<std::uint8_t> tested(local.triangles.size(), 0);
+        std::fill(tested.begin(), tested.begin() + std::ptrdiff_t(around.size()), 1);
+        for (const auto& [x, y] : selfIntersections(local, tested))
             for (const std::uint32_t t : {x, y})
                 if (t < around.size()) undone = undo(local.triangles[t]) || undone;
         if (!undone) break;
@@ -758,7 +760,9 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
                 if ((toDouble(local.points[tri[1]]) - a).cross(toDouble(local.points[tri[2]]) - a) == Vec3d(0.0))
                     dropped = drop(std::size_t(parent[t])) || dropped;
             }
-            for (const auto& [x, y] : selfIntersections(local))
+            std::vector<std::uint8_t> tested(parent.size(), 0);
+            for (std::size_t t = 0; t < parent.size(); ++t) tested[t] = parent[t] >= 0;
+            for (const auto& [x, y] : selfIntersections(local, tested))
                 for (const std::int64_t k : {parent[x], parent[y]})
                     if (k >= 0) dropped = drop(std::size_t(k)) || dropped;
             if (!dropped) break;
