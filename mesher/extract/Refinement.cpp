@@ -324,14 +324,18 @@ std::vector<std::uint32_t> trianglesNear(const TriangleMesh& mesh, const std::ve
                 for (int dz = -1; dz <= 1; ++dz) cells.push_back(key(p, dx, dy, dz));
     std::sort(cells.begin(), cells.end());
     cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
-    auto marked = [&](std::uint32_t v) {
-        return std::binary_search(cells.begin(), cells.end(), key(points[v], 0, 0, 0));
-    };
+    // Each vertex looked up once (in parallel; flags only, so the same for any thread count),
+    // not once per triangle around it.
+    std::vector<std::uint8_t> marked(points.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 1 << 14), [&](const auto& r) {
+        for (std::size_t v = r.begin(); v != r.end(); ++v)
+            marked[v] = std::binary_search(cells.begin(), cells.end(), key(points[v], 0, 0, 0));
+    });
     std::vector<std::uint32_t> out;
     for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
         if (skip[t]) continue;
         const openvdb::Vec3I& tri = mesh.triangles[t];
-        if (marked(tri[0]) || marked(tri[1]) || marked(tri[2])) out.push_back(std::uint32_t(t));
+        if (marked[tri[0]] || marked[tri[1]] || marked[tri[2]]) out.push_back(std::uint32_t(t));
     }
     return out;
 }
