@@ -510,6 +510,10 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         DecimationOptions d;
         d.tolerance = *options.tolerance;
         d.voxel = meshVoxel;
+        // Only candidates within a quarter of T² by the quadric are tried: on W9 the share 1 spent
+        // most of its field checks on 1.7 M refused collapses (21 s of decimation on one thread),
+        // a quarter refuses 0.4 M (14 s) for 4 % more triangles; a tenth keeps 30 % more.
+        d.quadricShare = 0.25;
         const DecimationStats s = timed("decimate", [&] {
             StageProgress progress(mContext, "decimating to " + formatNumber(d.tolerance) + " mm", 1000);
             std::atomic<std::uint64_t> last{0};
