@@ -14,11 +14,13 @@
 #include "fields/Cylinder.h"
 #include "fields/LevelSolid.h"
 #include "fields/Sphere.h"
+#include "fields/SurfaceDistance.h"
 #include "fields/TpmsField.h"
 #include "mesher/extract/CreaseSplit.h"
 #include "mesher/extract/Decimation.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
+#include "mesher/extract/Refinement.h"
 #include "mesher/extract/SurfaceProjection.h"
 #include "mesher/writers/MeshWriters.h"
 
@@ -28,6 +30,7 @@
 #include <cmath>
 #include <functional>
 #include <numbers>
+#include <optional>
 
 namespace {
 
@@ -764,6 +767,9 @@ TEST(MeshOutputs, AToleranceAboveHalfTheThinnestStrutIsRefused)
     bool warned = false;
     for (const auto& w : r["warnings"]) warned = warned || w["code"] == "mesh_tolerance_coarse";
     EXPECT_TRUE(warned);
+    // Struts under three coarse voxels across keep the recipe's voxel for extraction.
+    EXPECT_EQ(r["mesh"]["extraction"]["factor"].get<int>(), 1);
+    EXPECT_NE(r["mesh"]["extraction"]["why"].get<std::string>().find("thinnest strut"), std::string::npos);
 }
 
 TEST(CreaseSplit, ABooleanAndTheBoxKeepTheirCreases)
@@ -868,3 +874,234 @@ TEST(MeshOutputs, ACutByAShapeIsSplitInTheJob)
 }
 
 }  // namespace
+
+namespace {
+
+/// The Job's chain on a box-cut gyroid network: marching cubes, projection, crease moves and
+/// splits, then (refine) the refinement of straying crease triangles.
+struct RefinedGyroid {
+    GyroidCase g;
+    FieldPtr lattice = std::make_shared<LevelSolid>(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(g.cell)),
+                                                    SolidSide::Below, g.level);
+    TriangleMesh before, after;
+    RefinementStats stats;
+
+    explicit RefinedGyroid(double threshold)
+    {
+        const FieldPtr field = g.field();
+        before = marchingCubesOf(*field, Domain::fromBox(g.box, g.voxel));
+        const ProjectionOptions o{0.0, 0.5 * g.voxel, 1e-5, 12};
+        projectToSurface(before, *field, o);
+        ProjectionOptions co = o;
+        co.maxMove = g.voxel;
+        sharpenCreases(before, *lattice, BoxField(g.box), co);
+        splitCreaseEdges(before, {{lattice.get()}, g.box}, co);
+        after = before;
+        RefinementOptions ro;
+        ro.threshold = threshold;
+        ro.spacing = 0.25 * g.voxel;
+        ro.maxMove = 2.0 * g.voxel;
+        ro.tolerance = 1e-5;
+        stats = refineCreases(after, {{lattice.get()}, g.box}, ro);
+    }
+};
+
+/// Triangles of @a m with a sampled point farther than @a limit from the solid (the test's own
+/// distance), and the largest distance.
+std::pair<std::size_t, double> straying(const TriangleMesh& m, const GyroidCase& g, double limit)
+{
+    std::size_t count = 0;
+    double worst = 0.0;
+    for (const openvdb::Vec3I& t : m.triangles) {
+        TriangleMesh one;
+        one.points = {m.points[t[0]], m.points[t[1]], m.points[t[2]]};
+        one.triangles = {openvdb::Vec3I(0, 1, 2)};
+        const double d = maxOverTriangles(
+            one, [&](const Vec3d& p) { return g.distance(p); }, 0.01);
+        count += d > limit;
+        worst = std::max(worst, d);
+    }
+    return {count, worst};
+}
+
+}  // namespace
+
+TEST(Refinement, BoxCutGyroidStraysLessClosedAndSameBytes)
+{
+    const RefinedGyroid r(0.005);
+    const auto [overBefore, maxBefore] = straying(r.before, r.g, 0.01);
+    const auto [overAfter, maxAfter] = straying(r.after, r.g, 0.01);
+    RecordProperty("over_tolerance_before", std::to_string(overBefore));
+    RecordProperty("over_tolerance_after", std::to_string(overAfter));
+    RecordProperty("max_before_mm", std::to_string(maxBefore));
+    RecordProperty("max_after_mm", std::to_string(maxAfter));
+    RecordProperty("edges_split", std::to_string(r.stats.split));
+    RecordProperty("splits_dropped", std::to_string(r.stats.dropped));
+    // Fewer triangles stray beyond the tolerance, none further than before.
+    EXPECT_GT(overBefore, 0u);
+    EXPECT_LT(overAfter, overBefore);
+    EXPECT_LE(maxAfter, maxBefore + 1e-6);
+    EXPECT_GT(r.stats.split, 0u);
+    expectClosedManifold(r.after);
+    EXPECT_EQ(checkTopology(r.after).genus, checkTopology(r.before).genus);
+    EXPECT_LE(countSelfIntersections(r.after), countSelfIntersections(r.before));
+    EXPECT_NEAR(r.after.volume(), r.before.volume(), 0.01 * r.before.volume());
+    // The same bytes for any thread count.
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    const RefinedGyroid serial(0.005);
+    EXPECT_TRUE(serial.after.points == r.after.points);
+    EXPECT_TRUE(serial.after.triangles == r.after.triangles);
+}
+
+// Tolerance meshes extracted from a coarser grid than the recipe's (Job::coarseMesh): the voxel is
+// chosen from the measured chord error; the result must still be closed, manifold, outward and
+// within the tolerance by the test's own distance, and the recipe's voxel is used when a coarser
+// grid would change the pieces.
+namespace {
+
+/// Runs @a text (a recipe whose only output is a.stl) with at most @a threads threads.
+std::pair<nlohmann::json, std::string> runTolerance(const std::string& text, const std::filesystem::path& dir,
+                                                    int threads = 0)
+{
+    std::optional<tbb::global_control> limit;
+    if (threads > 0) limit.emplace(tbb::global_control::max_allowed_parallelism, threads);
+    Job job(parseRecipe(text, "r.yaml", dir));
+    job.writeOutputs(dir / "out", false);
+    return {job.report(), test::readFile(dir / "out/a.stl")};
+}
+
+}  // namespace
+
+TEST(CoarseExtraction, SphereIsClosedOutwardAndWithinTheTolerance)
+{
+    test::TempDir dir;
+    const std::string text =
+        "voxel: 0.1\n"
+        "domain: {box: [[-5, -5, -5], [5, 5, 5]]}\n"
+        "fields: {ball: {sphere: {center: [0.03, -0.02, 0.01], radius: 3.7}}}\n"
+        "result: ball\n"
+        "outputs: {mesh: {file: a.stl, tolerance: 0.01}}\n";
+    const auto [r, bytes] = runTolerance(text, dir.path);
+    const nlohmann::json& x = r["mesh"]["extraction"];
+    EXPECT_GT(x["factor"].get<int>(), 1) << x.dump();
+    EXPECT_NEAR(x["voxel_mm"].get<double>(), x["factor"].get<int>() * 0.1, 1e-12);
+    const TriangleMesh m = readStl((dir.path / "out/a.stl").string());
+    expectClosedManifold(m);
+    EXPECT_NEAR(m.volume(), 4.0 / 3.0 * std::numbers::pi * std::pow(3.7, 3), 0.01 * 4.0 * std::numbers::pi * 3.7 * 3.7);
+    const Vec3d c(0.03, -0.02, 0.01);
+    const double worst = maxOverTriangles(
+        m, [&](const Vec3d& p) { return (p - c).length() - 3.7; }, 0.02);
+    EXPECT_LE(worst, 0.01);
+    // Fewer triangles than marching cubes at the recipe's voxel (about 4 pi R^2 / (0.1^2 / 2)... a
+    // few hundred thousand), and no crossing pairs.
+    EXPECT_LT(m.triangles.size(), 40000u);
+    EXPECT_EQ(r["mesh"]["self_intersections"].get<std::size_t>(), 0u);
+}
+
+TEST(CoarseExtraction, ABoxCutGyroidKeepsTheRecipesVoxelWithinTheToleranceInsideAndSameBytesForAnyThreadCount)
+{
+    test::TempDir dir;
+    const std::string text =
+        "voxel: 0.1\n"
+        "domain: {box: [[0, 0, 0], [12, 12, 11]]}\n"
+        "fields:\n"
+        "  lattice: {tpms: gyroid, cell: 10, solid: network, density: 0.3}\n"
+        "result: lattice\n"
+        "outputs: {mesh: {file: a.stl, tolerance: 0.02}}\n";
+    const auto [r, bytes] = runTolerance(text, dir.path, 1);
+    // The lattice meets the domain box: its creases there would chamfer twice as deep from a grid
+    // twice as coarse, so the first coarse trial is rejected and the recipe's voxel is used.
+    const nlohmann::json& x = r["mesh"]["extraction"];
+    ASSERT_EQ(x["factor"].get<int>(), 1) << x.dump();
+    EXPECT_NE(x["why"].get<std::string>().find("meets the domain box"), std::string::npos) << x.dump();
+    ASSERT_EQ(x["trials"].size(), 1u) << x.dump();
+    EXPECT_EQ(x["trials"][0]["rejected"].get<std::string>(), "the solid meets the domain box");
+    const double h = x["voxel_mm"].get<double>();
+    const TriangleMesh m = readStl((dir.path / "out/a.stl").string());
+    expectClosedManifold(m);
+    EXPECT_GT(m.volume(), 0.0);
+    // Crossing pairs (projection leaves some where the lattice meets the box's edges, at any
+    // voxel: 47 pairs at the recipe's 0.1 mm on this part, 9 from the coarse grid) are reported.
+    EXPECT_EQ(r["mesh"]["self_intersections"].get<std::size_t>(), countSelfIntersections(m));
+    const MeshTopology t = checkTopology(m);
+    EXPECT_EQ(t.closedPieces, r["pieces"]["count"].get<std::size_t>());
+    const double level = r["fields"]["lattice"]["level"].get<double>();
+    const Box3 box{Vec3d(0.0), Vec3d(12.0, 12.0, 11.0)};
+    // Away from the box (two coarse voxels), only the chord error and decimation act: within T.
+    double inner = 0.0, all = 0.0;
+    for (const openvdb::Vec3I& tri : m.triangles) {
+        TriangleMesh one;
+        one.points = {m.points[tri[0]], m.points[tri[1]], m.points[tri[2]]};
+        one.triangles = {openvdb::Vec3I(0, 1, 2)};
+        const double d = maxOverTriangles(
+            one, [&](const Vec3d& p) { return std::max(gyroidDistance(p, 10.0, level), boxDistance(p, box)); }, 0.05);
+        all = std::max(all, d);
+        bool deep = true;
+        for (int v = 0; v < 3; ++v) deep = deep && boxDistance(at(m, tri[v]), box) < -2.0 * h;
+        if (deep) inner = std::max(inner, d);
+    }
+    EXPECT_LE(inner, 0.02);
+    // At the box's creases the steps after extraction act as at the recipe's voxel; what is left
+    // there is reported, not hidden.
+    EXPECT_LE(all, r["mesh"]["deviation"]["max_mm"].get<double>() + 0.005);
+    // Same bytes with two threads.
+    test::TempDir dir2;
+    const auto [r2, bytes2] = runTolerance(text, dir2.path, 2);
+    EXPECT_EQ(bytes, bytes2);
+    EXPECT_EQ(r2["mesh"]["extraction"], x);
+}
+
+TEST(CoarseExtraction, AResultCutByAnotherSurfaceKeepsTheRecipesVoxel)
+{
+    // A ball cut flat by a box, inside the domain: an intersection has creases, which need the
+    // recipe's voxel, so no coarse grid is tried; the cut is still sharp to the tolerance.
+    test::TempDir dir;
+    const std::string text =
+        "voxel: 0.1\n"
+        "domain: {box: [[-5, -5, -5], [5, 5, 5]]}\n"
+        "fields:\n"
+        "  ball: {sphere: {center: [0, 0, 0], radius: 3.2}}\n"
+        "  block: {box: [[-4, -4, -4], [4, 4, 1.53]]}\n"
+        "  part: {intersection: [ball, block]}\n"
+        "result: part\n"
+        "outputs: {mesh: {file: a.stl, tolerance: 0.01}}\n";
+    const auto [r, bytes] = runTolerance(text, dir.path);
+    const nlohmann::json& x = r["mesh"]["extraction"];
+    EXPECT_EQ(x["factor"].get<int>(), 1) << x.dump();
+    EXPECT_NE(x["why"].get<std::string>().find("cut by 1 other surface"), std::string::npos) << x.dump();
+    EXPECT_TRUE(x["trials"].empty()) << x.dump();
+    const TriangleMesh m = readStl((dir.path / "out/a.stl").string());
+    expectClosedManifold(m);
+    const double worst = maxOverTriangles(
+        m, [](const Vec3d& p) { return std::max(p.length() - 3.2, p.z() - 1.53); }, 0.02);
+    EXPECT_LE(worst, r["mesh"]["deviation"]["max_mm"].get<double>() + 0.005);
+}
+
+TEST(CoarseExtraction, PiecesACoarseGridJoinsFallBackToTheRecipesVoxel)
+{
+    test::TempDir dir;
+    // A 0.06 mm gap between two balls, across x = 2.02 .. 2.08: the recipe's samples at
+    // x = 2.05 fall in it; every coarser grid from the domain's corner (2.0 and 2.4 at 0.4 mm,
+    // 1.95 and 2.25 at 0.3 mm, 1.9 and 2.1 at 0.2 mm) has neighbours inside one ball each.
+    const std::string text =
+        "voxel: 0.1\n"
+        "domain: {box: [[-3, -3, -3], [7, 3, 3]]}\n"
+        "fields:\n"
+        "  a: {sphere: {center: [0, 0, 0], radius: 2.02}}\n"
+        "  b: {sphere: {center: [4.08, 0, 0], radius: 2}}\n"
+        "  both: {union: [a, b]}\n"
+        "result: both\n"
+        "allow: [pieces]\n"
+        "outputs: {mesh: {file: a.stl, tolerance: 0.01}}\n";
+    const auto [r, bytes] = runTolerance(text, dir.path);
+    ASSERT_EQ(r["pieces"]["count"].get<std::size_t>(), 2u);
+    const nlohmann::json& x = r["mesh"]["extraction"];
+    EXPECT_EQ(x["factor"].get<int>(), 1) << x.dump();
+    EXPECT_NEAR(x["voxel_mm"].get<double>(), 0.1, 1e-12);
+    EXPECT_NE(x["why"].get<std::string>().find("closed pieces"), std::string::npos) << x.dump();
+    ASSERT_FALSE(x["trials"].empty());
+    EXPECT_TRUE(x["trials"][0].contains("rejected"));
+    const TriangleMesh m = readStl((dir.path / "out/a.stl").string());
+    expectClosedManifold(m);
+    EXPECT_EQ(checkTopology(m).closedPieces, 2u);
+}

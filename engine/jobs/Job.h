@@ -7,6 +7,7 @@
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/MeshSettings.h"
 #include "engine/recipe/Recipe.h"
+#include "mesher/extract/SurfaceProjection.h"
 #include "mesher/extract/TriangleMesh.h"
 #include "mesher/writers/FrameWriters.h"
 #include "mesher/writers/MeshWriters.h"
@@ -47,6 +48,11 @@ public:
     const TriangleMesh& mesh(const MeshOptions& options);
     /// The field the grid samples: the result clipped to the domain box (negative inside).
     FieldPtr surfaceField();
+    /// The first-order signed distance to the surface of surfaceField()'s solid in mm: the largest
+    /// of f / |grad f| over the operands of the result's outermost sharp intersection (or the
+    /// result) and the domain box (fields/SurfaceDistance). Decimation and the mesh report
+    /// measure with it.
+    FieldPtr distanceField();
 
     /// Writes the recipe's outputs (paths relative to @a outDir) and report.json.
     /// With @a preview, also a picture of the first mesh (NAME.preview.png).
@@ -95,7 +101,7 @@ private:
     FieldPtr mResult;
     bool mSolved = false;
     openvdb::FloatGrid::Ptr mGrid;
-    FieldPtr mSurfaceField;
+    FieldPtr mSurfaceField, mDistanceField;
 
     /// One mesh the job made, with what report.json says about it.
     struct MeshVariant {
@@ -109,6 +115,13 @@ private:
     };
     /// The mesh made with @a options, made on first use (marching cubes, projection, decimation).
     MeshVariant& variant(const MeshOptions& options);
+    /// For a tolerance mesh (marching cubes, projected): the mesh extracted from a grid k times
+    /// coarser than the recipe's, evaluated from surfaceField(), with its vertices projected
+    /// (@a projection), when a k > 1 keeps the pieces, the smallest known feature (at least three
+    /// coarse voxels) and a chord error within the tolerance; else null. What was chosen and why
+    /// goes into @a extraction; @a voxel is set to the voxel the mesh was extracted at.
+    std::unique_ptr<TriangleMesh> coarseMesh(const MeshOptions& options, nlohmann::json& extraction, double& voxel,
+                                             ProjectionStats& projection);
     /// Refuses (InputError, naming where the tolerance was given) a mesh tolerance of half the
     /// thinnest strut a node knows or more; warns when it exceeds the voxel.
     void checkTolerance(const MeshOptions& options);

@@ -24,9 +24,6 @@ namespace voxlat {
 
 namespace {
 
-/// The quadric error bound, in squared tolerances (see FieldDecimater).
-constexpr double kQuadricShare = 1.0;
-
 /// No collapse makes an edge longer than this many voxels (see FieldDecimater::fieldAllows).
 constexpr double kMaxEdgeVoxels = 6.0;
 
@@ -91,7 +88,7 @@ public:
         // of the triangles merged into it) exceeds the squared tolerance puts the point far off
         // one of them: such candidates are mostly refused by the field check anyway, so they are
         // not tried (the field check still decides the rest).
-        mMaxError = kQuadricShare * options.tolerance * options.tolerance;
+        mMaxError = options.quadricShare * options.tolerance * options.tolerance;
         mQuadrics.assign(mesh.n_vertices(), Quadric());
         for (Mesh::FaceHandle f : mesh.faces()) {
             std::array<Mesh::VertexHandle, 3> v;

@@ -20,6 +20,10 @@ struct DecimationOptions {
     double voxel = 0.1;
     /// Meshes of at least this many triangles are decimated in parallel blocks of at least
     /// blockVoxels voxels (and 1/16 of the mesh's extent), then again on blocks shifted by half.
+    /// Candidates whose quadric error exceeds this share of the squared tolerance are not tried
+    /// (such collapses put the point far off a plane merged into it, and the field check refuses
+    /// most of them; below 1, fewer field checks for a few more triangles).
+    double quadricShare = 1.0;
     std::size_t blockedFrom = 200000;
     double blockVoxels = 64.0;
 };

@@ -243,12 +243,20 @@ bool trianglesCross(const TriangleMesh& mesh, const openvdb::Vec3I& s, const ope
 
 std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh& mesh)
 {
+    return selfIntersections(mesh, {});
+}
+
+std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh& mesh,
+                                                             const std::vector<std::uint8_t>& tested)
+{
     const std::size_t n = mesh.triangles.size();
     if (n < 2) return {};
-    const openvdb::BBoxd box = mesh.bounds();
+    // Bounds of the triangles' corners only: callers pass a few triangles of a large mesh's points.
+    openvdb::BBoxd box;
     double edgeSum = 0.0;
     for (std::size_t t = 0; t < n; ++t) {
         const openvdb::Vec3I& tri = mesh.triangles[t];
+        for (int k = 0; k < 3; ++k) box.expand(openvdb::Vec3d(mesh.points[tri[k]]));
         edgeSum += (openvdb::Vec3d(mesh.points[tri[0]]) - openvdb::Vec3d(mesh.points[tri[1]])).length();
     }
     const openvdb::Vec3d extent = box.extents();
@@ -275,37 +283,76 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
             }
         }
     });
-    // Cell -> triangles, compressed rows (triangles in index order within a cell).
     const std::size_t numCells = std::size_t(dims[0]) * dims[1] * dims[2];
     auto cellIndex = [&](int i, int j, int k) { return (std::size_t(i) * dims[1] + j) * dims[2] + k; };
-    std::vector<std::size_t> first(numCells + 1, 0);
+    // Occupied cells in ascending order, each with its triangles in index order (compressed
+    // rows). A few triangles spread over a large box (the refinement's local checks) would make
+    // a dense table of mostly empty cells: then (cell, triangle) entries are sorted instead.
+    std::vector<std::size_t> cells;  // occupied cell indices, ascending
+    std::vector<std::size_t> first;  // rows into members, one more than cells
+    std::vector<uint32_t> members;
+    std::size_t entries = 0;
     for (const Range& r : ranges)
-        for (int i = r.lo[0]; i <= r.hi[0]; ++i)
-            for (int j = r.lo[1]; j <= r.hi[1]; ++j)
-                for (int k = r.lo[2]; k <= r.hi[2]; ++k) ++first[cellIndex(i, j, k) + 1];
-    std::partial_sum(first.begin(), first.end(), first.begin());
-    std::vector<uint32_t> members(first.back());
-    {
-        std::vector<std::size_t> fill(first.begin(), first.end() - 1);
+        entries += std::size_t(r.hi[0] - r.lo[0] + 1) * (r.hi[1] - r.lo[1] + 1) * (r.hi[2] - r.lo[2] + 1);
+    if (numCells <= 4 * entries) {
+        std::vector<std::size_t> count(numCells + 1, 0);
+        for (const Range& r : ranges)
+            for (int i = r.lo[0]; i <= r.hi[0]; ++i)
+                for (int j = r.lo[1]; j <= r.hi[1]; ++j)
+                    for (int k = r.lo[2]; k <= r.hi[2]; ++k) ++count[cellIndex(i, j, k) + 1];
+        std::partial_sum(count.begin(), count.end(), count.begin());
+        members.resize(count.back());
+        std::vector<std::size_t> fill(count.begin(), count.end() - 1);
         for (std::size_t t = 0; t < n; ++t) {
             const Range& r = ranges[t];
             for (int i = r.lo[0]; i <= r.hi[0]; ++i)
                 for (int j = r.lo[1]; j <= r.hi[1]; ++j)
                     for (int k = r.lo[2]; k <= r.hi[2]; ++k) members[fill[cellIndex(i, j, k)]++] = uint32_t(t);
         }
+        for (std::size_t c = 0; c < numCells; ++c)
+            if (count[c + 1] - count[c] >= 2) {
+                cells.push_back(c);
+                first.push_back(count[c]);
+                first.push_back(count[c + 1]);
+            }
+    } else {
+        std::vector<std::pair<std::size_t, uint32_t>> list;
+        list.reserve(entries);
+        for (std::size_t t = 0; t < n; ++t) {
+            const Range& r = ranges[t];
+            for (int i = r.lo[0]; i <= r.hi[0]; ++i)
+                for (int j = r.lo[1]; j <= r.hi[1]; ++j)
+                    for (int k = r.lo[2]; k <= r.hi[2]; ++k) list.emplace_back(cellIndex(i, j, k), uint32_t(t));
+        }
+        std::sort(list.begin(), list.end());
+        members.resize(list.size());
+        for (std::size_t e = 0; e < list.size(); ++e) members[e] = list[e].second;
+        for (std::size_t e = 0; e < list.size();) {
+            std::size_t end = e + 1;
+            while (end < list.size() && list[end].first == list[e].first) ++end;
+            if (end - e >= 2) {
+                cells.push_back(list[e].first);
+                first.push_back(e);
+                first.push_back(end);
+            }
+            e = end;
+        }
     }
-    // Per block of cells its own list; blocks joined in order, so the list is the same for any
-    // thread count.
+    // Per block of occupied cells its own list; blocks joined in order, so the list is the same
+    // for any thread count (and pairs come in ascending lowest shared cell, then index order).
     constexpr std::size_t kCellsPerBlock = 256;
-    const std::size_t numBlocks = (numCells + kCellsPerBlock - 1) / kCellsPerBlock;
+    const std::size_t numBlocks = (cells.size() + kCellsPerBlock - 1) / kCellsPerBlock;
     std::vector<std::vector<std::pair<uint32_t, uint32_t>>> found(numBlocks);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, 1), [&](const auto& r) {
         for (std::size_t block = r.begin(); block != r.end(); ++block)
-            for (std::size_t c = block * kCellsPerBlock; c < std::min(numCells, (block + 1) * kCellsPerBlock); ++c) {
+            for (std::size_t o = block * kCellsPerBlock; o < std::min(cells.size(), (block + 1) * kCellsPerBlock);
+                 ++o) {
+                const std::size_t c = cells[o];
                 const int ci = int(c / (std::size_t(dims[1]) * dims[2])), cj = int((c / dims[2]) % dims[1]),
                           ck = int(c % dims[2]);
-                for (std::size_t x = first[c]; x < first[c + 1]; ++x)
-                    for (std::size_t y = x + 1; y < first[c + 1]; ++y) {
+                for (std::size_t x = first[2 * o]; x < first[2 * o + 1]; ++x)
+                    for (std::size_t y = x + 1; y < first[2 * o + 1]; ++y) {
+                        if (!tested.empty() && !tested[members[x]] && !tested[members[y]]) continue;
                         const Range &a = ranges[members[x]], &b = ranges[members[y]];
                         // Tested only in the lowest cell both cover.
                         if (std::max(a.lo[0], b.lo[0]) != ci || std::max(a.lo[1], b.lo[1]) != cj ||

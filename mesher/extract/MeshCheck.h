@@ -57,5 +57,9 @@ std::size_t countSelfIntersections(const TriangleMesh& mesh);
 /// The crossing pairs countSelfIntersections() counts, as triangle indices (lower first), in a
 /// fixed order.
 std::vector<std::pair<std::uint32_t, std::uint32_t>> selfIntersections(const TriangleMesh& mesh);
+/// The same, only for pairs with at least one triangle flagged in @a tested (one flag per
+/// triangle; empty: all pairs): a local check of changed triangles among fixed ones.
+std::vector<std::pair<std::uint32_t, std::uint32_t>> selfIntersections(const TriangleMesh& mesh,
+                                                                       const std::vector<std::uint8_t>& tested);
 
 }  // namespace voxlat
