@@ -34,7 +34,8 @@ The whole workload right after, load average 9.6 falling to 6.1 (PrusaSlicer alo
 of three with checks, 8.06 s without), peak 85 MB and 132 MB; area errors as before.
 Merged on main, the other workers stopped (2026-11-26): every layer computed 2.34 s against 172.0 s
 (74x, load 2.7-3.7) and 2.94 s against 163.3 s (56x, load 3.3 -> 1.6); copied 0.99 s (173x) and
-1.21 s (135x); PrusaSlicer alone 134-142 s on this machine; checks +4 to +17 %."""
+1.21 s (135x); PrusaSlicer alone 134-142 s on this machine; checks +4 to +17 %.
+2026-11-27, quiet machine: every layer computed 2.68 s against 136.7 s (51x), copied 1.14 s (120x)."""
 import json
 import os
 import shutil
