@@ -18,11 +18,6 @@ namespace voxlat {
 
 namespace {
 
-Vec3d toDouble(const openvdb::Vec3f& p)
-{
-    return {p.x(), p.y(), p.z()};
-}
-
 struct CreaseEdge {
     std::uint32_t p, q;
     std::uint32_t surfaces;  ///< bit mask of the surfaces the split point lies on

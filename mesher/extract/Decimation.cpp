@@ -39,11 +39,7 @@ Vec3d toDouble(const Mesh::Point& p)
 {
     return {p[0], p[1], p[2]};
 }
-
-Vec3d toDouble(const openvdb::Vec3f& p)
-{
-    return {p.x(), p.y(), p.z()};
-}
+using voxlat::toDouble;  // the mesh-point overload (TriangleMesh.h) next to OpenMesh's
 
 /// Signed first-order distance (f - level) / |grad f|; a flat spot away from the level is far.
 double signedDistance(double r, const Vec3d& g)

@@ -18,16 +18,6 @@ namespace voxlat {
 
 namespace {
 
-Vec3d toDouble(const openvdb::Vec3f& p)
-{
-    return {p.x(), p.y(), p.z()};
-}
-
-openvdb::Vec3f toFloat(const Vec3d& p)
-{
-    return {float(p.x()), float(p.y()), float(p.z())};
-}
-
 std::size_t chunkCount(std::size_t n)
 {
     return (n + kBatchSize - 1) / kBatchSize;

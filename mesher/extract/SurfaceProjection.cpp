@@ -15,16 +15,6 @@ namespace voxlat {
 
 namespace {
 
-Vec3d toDouble(const openvdb::Vec3f& p)
-{
-    return {p.x(), p.y(), p.z()};
-}
-
-openvdb::Vec3f toFloat(const Vec3d& p)
-{
-    return {float(p.x()), float(p.y()), float(p.z())};
-}
-
 /// First-order distance to the level set from a value offset @a r and gradient @a g.
 double distanceEstimate(double r, const Vec3d& g)
 {

@@ -8,11 +8,6 @@ namespace voxlat {
 
 namespace {
 
-openvdb::Vec3d toDouble(const openvdb::Vec3f& p)
-{
-    return {p.x(), p.y(), p.z()};
-}
-
 /// Sums term(triangle) over all triangles in parallel. The deterministic reduce splits the range
 /// the same way for any thread count, so the floating-point sum is reproducible bit for bit.
 template <typename Term>

@@ -36,4 +36,16 @@ struct TriangleMesh {
     bool empty() const { return triangles.empty(); }
 };
 
+/// A mesh point in double, for the stages that compute with it (projection, creases, decimation).
+inline openvdb::Vec3d toDouble(const openvdb::Vec3f& p)
+{
+    return {p.x(), p.y(), p.z()};
+}
+
+/// A point computed in double, stored back as a mesh point.
+inline openvdb::Vec3f toFloat(const openvdb::Vec3d& p)
+{
+    return {float(p.x()), float(p.y()), float(p.z())};
+}
+
 }  // namespace voxlat
