@@ -1,6 +1,7 @@
 #include "mesher/extract/CreaseSplit.h"
 
 #include "mesher/extract/MeshCheck.h"
+#include "mesher/extract/SplitTriangle.h"
 #include "mesher/extract/SurfaceList.h"
 
 #include <tbb/blocked_range.h>
@@ -184,48 +185,10 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
             touchedEdges.push_back(e);
         }
     }
-    // The pieces of triangle (v0, v1, v2) with midpoints mi on edge (vi, vi+1) where split (as
-    // positions; -1 in the index list stands for "no split").
-    struct Piece {
-        std::array<int, 3> corner;  ///< 0..2: the triangle's corners, 3..5: the split points
-    };
-    auto piecesOf = [&](const std::array<Vec3d, 6>& p, const std::array<bool, 3>& split) {
-        std::vector<Piece> out;
-        const int count = int(split[0]) + int(split[1]) + int(split[2]);
-        if (count == 3) {
-            out = {{{0, 3, 5}}, {{3, 1, 4}}, {{5, 4, 2}}, {{3, 4, 5}}};
-        } else if (count == 1) {
-            const int i = split[0] ? 0 : split[1] ? 1 : 2;
-            out = {{{i, 3 + i, (i + 2) % 3}}, {{3 + i, (i + 1) % 3, (i + 2) % 3}}};
-        } else if (count == 2) {
-            // The unsplit edge is (vj, vj+1); the corner between the two split edges is vj+2.
-            const int j = !split[0] ? 0 : !split[1] ? 1 : 2;
-            const int a = j, b = (j + 1) % 3, c = (j + 2) % 3;
-            const int mb = 3 + b, mc = 3 + c;  // split points on edges (b, c) and (c, a)
-            out = {{{mb, c, mc}}};
-            // The quad a, b, mb, mc by its shorter diagonal.
-            if ((p[a] - p[mb]).lengthSqr() <= (p[b] - p[mc]).lengthSqr())
-                out.insert(out.end(), {{{a, b, mb}}, {{a, mb, mc}}});
-            else
-                out.insert(out.end(), {{{a, b, mc}}, {{b, mb, mc}}});
-        }
-        return out;
-    };
     auto positions = [&](std::size_t k) {
-        const openvdb::Vec3I& tri = mesh.triangles[touched[k]];
-        std::array<Vec3d, 6> p;
-        for (int i = 0; i < 3; ++i) {
-            p[i] = points[tri[i]];
-            const std::ptrdiff_t e = touchedEdges[k][i];
-            p[3 + i] = e >= 0 && active[e] ? target[e] : Vec3d(0.0);
-        }
-        return p;
+        return splitPositions(mesh.triangles[touched[k]], touchedEdges[k], points, active, target);
     };
-    auto splits = [&](std::size_t k) {
-        std::array<bool, 3> s;
-        for (int i = 0; i < 3; ++i) s[i] = touchedEdges[k][i] >= 0 && active[touchedEdges[k][i]];
-        return s;
-    };
+    auto splits = [&](std::size_t k) { return splitEdges(touchedEdges[k], active); };
     std::vector<std::uint8_t> bad(touched.size());
     auto dropTurned = [&] {
         for (;;) {
@@ -234,9 +197,9 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
                     const std::array<Vec3d, 6> p = positions(k);
                     const Vec3d n0 = (p[1] - p[0]).cross(p[2] - p[0]);
                     bad[k] = 0;
-                    for (const Piece& piece : piecesOf(p, splits(k))) {
-                        const Vec3d& a = p[piece.corner[0]];
-                        const Vec3d n1 = (p[piece.corner[1]] - a).cross(p[piece.corner[2]] - a);
+                    for (const SplitPiece& piece : splitPieces(p, splits(k))) {
+                        const Vec3d& a = p[piece[0]];
+                        const Vec3d n1 = (p[piece[1]] - a).cross(p[piece[2]] - a);
                         // A piece on one of the two surfaces may face up to half the crease's
                         // dihedral angle away from the chamfer it replaces (more than 90 degrees at a
                         // sharp wedge); one turned over faces the other way (near 180).
@@ -292,9 +255,8 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
                 std::array<std::uint32_t, 6> index{tri[0], tri[1], tri[2], 0, 0, 0};
                 for (int i = 0; i < 3; ++i)
                     if (s[i]) index[3 + i] = newIndex[touchedEdges[k][i]];
-                for (const Piece& piece : piecesOf(positions(k), s)) {
-                    local.triangles.emplace_back(index[piece.corner[0]], index[piece.corner[1]],
-                                                 index[piece.corner[2]]);
+                for (const SplitPiece& piece : splitPieces(positions(k), s)) {
+                    local.triangles.emplace_back(index[piece[0]], index[piece[1]], index[piece[2]]);
                     parent.push_back(std::int64_t(k));
                 }
             }
@@ -353,10 +315,10 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
             std::array<std::uint32_t, 6> index{tri[0], tri[1], tri[2], 0, 0, 0};
             for (int i = 0; i < 3; ++i)
                 if (s[i]) index[3 + i] = newVertex[touchedEdges[next][i]];
-            const std::vector<Piece> pieces = piecesOf(positions(next), s);
+            const std::vector<SplitPiece> pieces = splitPieces(positions(next), s);
             if (pieces.empty()) triangles.push_back(tri);
-            for (const Piece& piece : pieces)
-                triangles.emplace_back(index[piece.corner[0]], index[piece.corner[1]], index[piece.corner[2]]);
+            for (const SplitPiece& piece : pieces)
+                triangles.emplace_back(index[piece[0]], index[piece[1]], index[piece[2]]);
             ++next;
             continue;
         }

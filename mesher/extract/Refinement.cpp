@@ -1,6 +1,7 @@
 #include "mesher/extract/Refinement.h"
 
 #include "mesher/extract/MeshCheck.h"
+#include "mesher/extract/SplitTriangle.h"
 #include "mesher/extract/SurfaceList.h"
 
 #include <tbb/blocked_range.h>
@@ -265,35 +266,7 @@ std::vector<Normals> normalsAt(const SurfaceList& list, const std::vector<Vec3d>
     return out;
 }
 
-/// A piece of a split triangle: corners 0..2 are the parent's, 3..5 the split points of its
-/// edges (i, i + 1).
-using Piece = std::array<int, 3>;
-
-/// The pieces of a triangle with positions @a p (corners, then split points) split on the edges
-/// flagged in @a split.
-std::vector<Piece> piecesOf(const std::array<Vec3d, 6>& p, const std::array<bool, 3>& split)
-{
-    const int count = int(split[0]) + int(split[1]) + int(split[2]);
-    if (count == 3) return {{0, 3, 5}, {3, 1, 4}, {5, 4, 2}, {3, 4, 5}};
-    if (count == 1) {
-        const int i = split[0] ? 0 : split[1] ? 1 : 2;
-        return {{i, 3 + i, (i + 2) % 3}, {3 + i, (i + 1) % 3, (i + 2) % 3}};
-    }
-    if (count == 2) {
-        // The unsplit edge is (a, b); c lies between the two split edges.
-        const int j = !split[0] ? 0 : !split[1] ? 1 : 2;
-        const int a = j, b = (j + 1) % 3, c = (j + 2) % 3;
-        const int mb = 3 + b, mc = 3 + c;
-        std::vector<Piece> out = {{mb, c, mc}};
-        // The quad a, b, mb, mc by its shorter diagonal.
-        if ((p[a] - p[mb]).lengthSqr() <= (p[b] - p[mc]).lengthSqr())
-            out.insert(out.end(), {{a, b, mb}, {a, mb, mc}});
-        else
-            out.insert(out.end(), {{a, b, mc}, {b, mb, mc}});
-        return out;
-    }
-    return {};
-}
+using Piece = SplitPiece;
 
 /// Triangles of @a mesh (not flagged in @a skip) with a corner in a cell (of edge @a cell) next to a
 /// cell holding one of @a seeds.
@@ -600,20 +573,9 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
         std::vector<Vec3d> target(m, Vec3d(0.0));
         std::vector<Normals> targetNormals(m);
         std::vector<std::uint8_t> active(m, 0);
-        auto splits = [&](std::size_t k) {
-            std::array<bool, 3> s;
-            for (int i = 0; i < 3; ++i) s[i] = touchedEdges[k][i] >= 0 && active[touchedEdges[k][i]];
-            return s;
-        };
+        auto splits = [&](std::size_t k) { return splitEdges(touchedEdges[k], active); };
         auto positions = [&](std::size_t k) {
-            const openvdb::Vec3I& tri = mesh.triangles[touched[k]];
-            std::array<Vec3d, 6> p;
-            for (int i = 0; i < 3; ++i) {
-                p[i] = points[tri[i]];
-                const std::ptrdiff_t e = touchedEdges[k][i];
-                p[3 + i] = e >= 0 && active[e] ? target[e] : Vec3d(0.0);
-            }
-            return p;
+            return splitPositions(mesh.triangles[touched[k]], touchedEdges[k], points, active, target);
         };
         // Whether triangle k split on @a s (points as in positions(k)) gives good pieces.
         auto piecesGood = [&](std::size_t k, const std::array<bool, 3>& s) {
@@ -625,7 +587,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
                 normal[3 + i] = s[i] ? &targetNormals[std::size_t(touchedEdges[k][i])] : nullptr;
             }
             const Vec3d n0 = (p[1] - p[0]).cross(p[2] - p[0]);
-            for (const Piece& piece : piecesOf(p, s)) {
+            for (const Piece& piece : splitPieces(p, s)) {
                 const Vec3d n1 = (p[piece[1]] - p[piece[0]]).cross(p[piece[2]] - p[piece[0]]);
                 if (!(n1.length() > 1e-6 * n0.length())) return false;
                 for (int c : piece)
@@ -735,7 +697,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
                 std::array<std::uint32_t, 6> index{tri[0], tri[1], tri[2], 0, 0, 0};
                 for (int i = 0; i < 3; ++i)
                     if (s[i]) index[3 + i] = newIndex[touchedEdges[k][i]];
-                for (const Piece& piece : piecesOf(positions(k), s)) {
+                for (const Piece& piece : splitPieces(positions(k), s)) {
                     local.triangles.emplace_back(index[piece[0]], index[piece[1]], index[piece[2]]);
                     parent.push_back(std::int64_t(k));
                 }
@@ -799,7 +761,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
                 s = splits(next);
                 for (int i = 0; i < 3; ++i)
                     if (s[i]) index[3 + i] = newVertex[touchedEdges[next][i]];
-                pieces = piecesOf(positions(next), s);
+                pieces = splitPieces(positions(next), s);
                 ++next;
             }
             if (pieces.empty()) {

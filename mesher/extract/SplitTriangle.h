@@ -1,0 +1,71 @@
+/// @file SplitTriangle.h
+/// @brief A triangle split at points on some of its edges: the pieces, shared by the crease split
+/// and the refinement so both cut a triangle the same way.
+#pragma once
+
+#include <openvdb/Types.h>
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace voxlat {
+
+/// A piece of a split triangle: corners 0..2 are the parent's, 3..5 the split points of its
+/// edges (i, i + 1).
+using SplitPiece = std::array<int, 3>;
+
+/// The pieces of a triangle with positions @a p (corners, then split points) split on the edges
+/// flagged in @a split; with two splits, the quad left over by its shorter diagonal.
+inline std::vector<SplitPiece> splitPieces(const std::array<openvdb::Vec3d, 6>& p, const std::array<bool, 3>& split)
+{
+    const int count = int(split[0]) + int(split[1]) + int(split[2]);
+    if (count == 3) return {{0, 3, 5}, {3, 1, 4}, {5, 4, 2}, {3, 4, 5}};
+    if (count == 1) {
+        const int i = split[0] ? 0 : split[1] ? 1 : 2;
+        return {{i, 3 + i, (i + 2) % 3}, {3 + i, (i + 1) % 3, (i + 2) % 3}};
+    }
+    if (count == 2) {
+        // The unsplit edge is (a, b); c lies between the two split edges.
+        const int j = !split[0] ? 0 : !split[1] ? 1 : 2;
+        const int a = j, b = (j + 1) % 3, c = (j + 2) % 3;
+        const int mb = 3 + b, mc = 3 + c;
+        std::vector<SplitPiece> out = {{mb, c, mc}};
+        if ((p[a] - p[mb]).lengthSqr() <= (p[b] - p[mc]).lengthSqr())
+            out.insert(out.end(), {{a, b, mb}, {a, mb, mc}});
+        else
+            out.insert(out.end(), {{a, b, mc}, {b, mb, mc}});
+        return out;
+    }
+    return {};
+}
+
+/// Which edges of a triangle split: those with an edge slot (>= 0) that is @a active.
+inline std::array<bool, 3> splitEdges(const std::array<std::ptrdiff_t, 3>& edges,
+                                      const std::vector<std::uint8_t>& active)
+{
+    std::array<bool, 3> s;
+    for (int i = 0; i < 3; ++i)
+        s[std::size_t(i)] = edges[std::size_t(i)] >= 0 && active[std::size_t(edges[std::size_t(i)])];
+    return s;
+}
+
+/// The positions splitPieces() takes: the corners of @a tri in @a points, then each edge's split
+/// point (@a target by edge slot where the edge splits, else the origin, unused).
+inline std::array<openvdb::Vec3d, 6> splitPositions(const openvdb::Vec3I& tri,
+                                                    const std::array<std::ptrdiff_t, 3>& edges,
+                                                    const std::vector<openvdb::Vec3d>& points,
+                                                    const std::vector<std::uint8_t>& active,
+                                                    const std::vector<openvdb::Vec3d>& target)
+{
+    std::array<openvdb::Vec3d, 6> p;
+    for (int i = 0; i < 3; ++i) {
+        p[std::size_t(i)] = points[tri[i]];
+        const std::ptrdiff_t e = edges[std::size_t(i)];
+        p[std::size_t(3 + i)] = e >= 0 && active[std::size_t(e)] ? target[std::size_t(e)] : openvdb::Vec3d(0.0);
+    }
+    return p;
+}
+
+}  // namespace voxlat
