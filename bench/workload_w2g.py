@@ -154,25 +154,30 @@ def case(voxlat, tmp, name, struts_yaml, box, struts, target):
 
 def run(voxlat, tmp):
     size = float(os.environ.get("VOXLAT_W2G_SIZE", "50"))
+    # VOXLAT_W2G_CASES=graded (a comma list) runs only those cases.
+    only = set(os.environ.get("VOXLAT_W2G_CASES", "graded,trimmed,cylinder").split(","))
     n = int(round(size / CELL))
     print(f"  load average before: {os.getloadavg()[0]:.2f}")
     out = {}
     box = ((0.0, 0.0, 0.0), (size, size, size))
-    out["graded"] = case(voxlat, tmp, "graded", f"{{cell: bcc, size: {CELL:g}}}", box,
-                         bcc_struts(box[0], (n, n, n), CELL), 50)
+    if "graded" in only:
+        out["graded"] = case(voxlat, tmp, "graded", f"{{cell: bcc, size: {CELL:g}}}", box,
+                             bcc_struts(box[0], (n, n, n), CELL), 50)
     c, rad = (0.5 * size, 0.5 * size, 0.5 * size), 0.5 * size
     bcc = bcc_struts(box[0], (n, n, n), CELL)
-    out["trimmed"] = case(voxlat, tmp, "trimmed",
-                          f"{{cell: bcc, size: {CELL:g}, within: {{cylinder: {{center: {list(c)}, radius: {rad:g}, "
-                          f"height: {size:g}}}}}}}", box,
-                          trimmed(bcc, lambda p: cylinder_sdf(p, c, rad, size), 0.1 * CELL), None)
+    if "trimmed" in only:
+        out["trimmed"] = case(voxlat, tmp, "trimmed",
+                              f"{{cell: bcc, size: {CELL:g}, within: {{cylinder: {{center: {list(c)}, radius: {rad:g}, "
+                              f"height: {size:g}}}}}}}", box,
+                              trimmed(bcc, lambda p: cylinder_sdf(p, c, rad, size), 0.1 * CELL), None)
     s = size / 50.0
     cyl = dict(radius=25 * s, inner=10 * s, height=50 * s, cells=(max(1, n), 24, 3))
     cbox = ((-26 * s, -26 * s, 0.0), (26 * s, 26 * s, 50 * s))
-    out["cylinder"] = case(voxlat, tmp, "cylinder",
-                           f"{{cell: bcc, cylinder: {{radius: {cyl['radius']:g}, inner: {cyl['inner']:g}, "
-                           f"height: {cyl['height']:g}, cells: {list(cyl['cells'])}}}}}", cbox,
-                           cylinder_bcc(cyl["radius"], cyl["inner"], cyl["height"], cyl["cells"], (0.0, 0.0, 0.0)),
-                           None)
+    if "cylinder" in only:
+        out["cylinder"] = case(voxlat, tmp, "cylinder",
+                               f"{{cell: bcc, cylinder: {{radius: {cyl['radius']:g}, inner: {cyl['inner']:g}, "
+                               f"height: {cyl['height']:g}, cells: {list(cyl['cells'])}}}}}", cbox,
+                               cylinder_bcc(cyl["radius"], cyl["inner"], cyl["height"], cyl["cells"], (0.0, 0.0, 0.0)),
+                               None)
     print(f"  load average after: {os.getloadavg()[0]:.2f}")
     return out

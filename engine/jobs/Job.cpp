@@ -424,8 +424,16 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
     nlohmann::json extraction;
     double meshVoxel = mDomain.voxel;
     ProjectionStats projected;
-    if (options.tolerance && options.project && options.extractor == MeshExtractor::MarchingCubes)
-        v->mesh = coarseMesh(options, extraction, meshVoxel, projected);
+    // A smooth result meets only the domain box: meshed past it and cut by its faces, its creases
+    // there are exact (no chamfers), at any voxel.
+    std::optional<BoxClipStats> boxCut;
+    if (options.project && options.extractor == MeshExtractor::MarchingCubes) {
+        if (options.tolerance) v->mesh = coarseMesh(options, extraction, meshVoxel, projected, boxCut);
+        if (!v->mesh && smoothResult()) {
+            meshVoxel = mDomain.voxel;
+            v->mesh = clippedMesh(mDomain.voxel, projected, boxCut);
+        }
+    }
     const bool isProjected = bool(v->mesh);
     if (isProjected) {
         // Extracted and projected already.
@@ -449,16 +457,31 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
     TriangleMesh& m = *v->mesh;
     nlohmann::json& report = v->report;
     if (!extraction.is_null()) report["extraction"] = extraction;
+    ProjectionOptions po;
+    po.maxMove = 0.5 * meshVoxel;
+    po.tolerance = 1e-4 * mDomain.voxel;
     if (options.project) {
         const FieldPtr field = surfaceField();
-        ProjectionOptions po;
-        po.maxMove = 0.5 * meshVoxel;
-        po.tolerance = 1e-4 * mDomain.voxel;
         const ProjectionStats s = isProjected ? projected : timed("project vertices", [&] {
             StageProgress progress(mContext, "projecting vertices onto the surface", 1000);
             std::atomic<std::uint64_t> last{0};
             return projectToSurface(m, *field, po, feed(progress, last));
         });
+        report["projection"] = {{"vertices_moved", s.moved},
+                                {"vertices_held_back", s.heldBack},
+                                {"vertices_at_half_voxel_limit", s.limited},
+                                {"vertex_deviation_before", deviationJson(s.maxBefore, s.rmsBefore)},
+                                {"vertex_deviation_after", deviationJson(s.maxAfter, s.rmsAfter)}};
+    }
+    if (options.project && boxCut && boxCut->ok) {
+        report["creases"] = {{"surfaces", "the result's field and the six faces of the domain box"},
+                             {"method", "meshed past the box, cut by its faces and capped"},
+                             {"triangles_cut", boxCut->cutTriangles},
+                             {"crease_vertices", boxCut->creaseVertices},
+                             {"crease_vertices_left_on_edge", boxCut->leftOnEdge},
+                             {"box_corners", boxCut->corners},
+                             {"cap_triangles", boxCut->capTriangles}};
+    } else if (options.project) {
         // Where the solid meets the domain box, a vertex of each edge across the crease goes onto both.
         ProjectionOptions co = po;
         co.maxMove = meshVoxel;
@@ -499,11 +522,7 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
                              {"vertices_moved_onto_both", c.moved},
                              {"edges_split", split.split},
                              {"edges_left_flat", split.leftFlat}};
-        report["projection"] = {{"vertices_moved", s.moved},
-                                {"vertices_held_back", s.heldBack},
-                                {"vertices_at_half_voxel_limit", s.limited},
-                                {"vertex_deviation_before", deviationJson(s.maxBefore, s.rmsBefore)},
-                                {"vertex_deviation_after", deviationJson(s.maxAfter, s.rmsAfter)}};
+        if (boxCut) report["creases"]["box_cut_failed"] = boxCut->failure;
     }
     if (options.tolerance) {
         const FieldPtr field = distanceField();
@@ -607,8 +626,59 @@ double interiorChordError(TriangleMesh& mesh, const FieldNode& field, const Box3
 }
 }  // namespace
 
+bool Job::smoothResult()
+{
+    solveLevels();
+    std::vector<FieldPtr> operands;
+    collectCreaseOperands(mResult, operands);
+    return operands.size() == 1;
+}
+
+std::unique_ptr<TriangleMesh> Job::clippedMesh(double h, ProjectionStats& projection,
+                                               std::optional<BoxClipStats>& boxCut)
+{
+    solveLevels();
+    // A grid of voxel h from the domain box's corner, covering the box and two voxels past it
+    // (unclipped: the surface runs on past the faces, where the cut below meets it).
+    Domain d;
+    d.voxel = h;
+    d.box.min = mDomain.box.min;
+    for (int a = 0; a < 3; ++a) {
+        d.dims[a] = int(std::ceil(mDomain.box.extent()[a] / h - 1e-9));
+        d.box.max[a] = d.box.min[a] + d.dims[a] * h;
+    }
+    auto mesh = timed(h == mDomain.voxel ? "mesh" : "mesh (coarse)", [&] {
+        SparseOptions so;
+        so.margin = 2;
+        so.stage = "evaluating " + mRecipe.result + (h == mDomain.voxel ? "" : " at " + formatNumber(h) + " mm") +
+                   " past the domain box";
+        so.context = mContext;
+        const openvdb::FloatGrid::Ptr g = evaluateSparse(*mResult, d, so);
+        StageProgress progress(mContext, "meshing at " + formatNumber(h) + " mm", 1000);
+        std::atomic<std::uint64_t> last{0};
+        auto m = std::make_unique<TriangleMesh>(marchingCubes(*g, 0.0f, feed(progress, last)));
+        // Beyond a voxel past the box: where the grid's samples end, not the surface (cut off below).
+        dropTrianglesOutside(*m, mDomain.box, h);
+        return m;
+    });
+    ProjectionOptions po;
+    po.maxMove = 0.5 * h;
+    po.tolerance = 1e-4 * mDomain.voxel;
+    projection = timed("project vertices", [&] {
+        StageProgress progress(mContext, "projecting vertices onto the surface", 1000);
+        std::atomic<std::uint64_t> last{0};
+        return projectToSurface(*mesh, *mResult, po, feed(progress, last));
+    });
+    BoxClipOptions co;
+    co.maxMove = 0.5 * h;
+    co.tolerance = po.tolerance;
+    boxCut = timed("cut by the domain box", [&] { return clipToBox(*mesh, *mResult, mDomain.box, co); });
+    if (!boxCut->ok) return nullptr;
+    return mesh;
+}
+
 std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohmann::json& extraction, double& voxel,
-                                              ProjectionStats& projection)
+                                              ProjectionStats& projection, std::optional<BoxClipStats>& boxCut)
 {
     const double tolerance = *options.tolerance;
     voxel = mDomain.voxel;
@@ -630,11 +700,10 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
     }
     // A domain of fewer than 16 coarse voxels along an axis is too small to gain anything.
     for (int a = 0; a < 3; ++a) k = std::max(1, std::min(k, mDomain.dims[a] / 16));
-    // Creases need the recipe's voxel: the crease steps leave chamfers that grow with the voxel
-    // (W9 at 0.2 mm: 0.071 mm where the lattice meets the box, against 0.036 mm from 0.1 mm), while
-    // the rest of the surface is as accurate from the coarse grid. So a result cut by another
-    // surface (an intersection or difference) is meshed at the recipe's voxel, and so is one that
-    // meets the domain box (found on the first coarse mesh, below).
+    // A result cut by another surface (an intersection or difference) has creases the crease
+    // steps handle, leaving chamfers that grow with the voxel (W9 at 0.2 mm: 0.071 mm against
+    // 0.036 mm from 0.1 mm): meshed at the recipe's voxel. Where a smooth result meets the domain
+    // box, the mesh is cut by the box's faces (clippedMesh()), exact at any voxel.
     std::vector<FieldPtr> creaseOperands;
     collectCreaseOperands(mResult, creaseOperands);
     if (k > 1 && creaseOperands.size() > 1) {
@@ -644,46 +713,21 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
     }
     nlohmann::json trials = nlohmann::json::array();
     std::string why = k > 1 ? "" : limit;
-    const FieldPtr field = surfaceField();
     while (k > 1) {
         const double h = k * mDomain.voxel;
-        // A grid of voxel h from the domain box's corner, covering the box (the field is clipped
-        // to the box itself, so the mesh is capped on the box's faces wherever they fall).
-        Domain coarse;
-        coarse.voxel = h;
-        coarse.box.min = mDomain.box.min;
-        for (int a = 0; a < 3; ++a) {
-            coarse.dims[a] = int(std::ceil(mDomain.box.extent()[a] / h - 1e-9));
-            coarse.box.max[a] = coarse.box.min[a] + coarse.dims[a] * h;
-        }
-        auto mesh = timed("mesh (coarse)", [&] {
-            SparseOptions so;
-            so.stage = "evaluating " + mRecipe.result + " at " + formatNumber(h) + " mm";
-            so.context = mContext;
-            const openvdb::FloatGrid::Ptr cg = evaluateSparse(*field, coarse, so);
-            StageProgress progress(mContext, "meshing at " + formatNumber(h) + " mm", 1000);
-            std::atomic<std::uint64_t> last{0};
-            return std::make_unique<TriangleMesh>(marchingCubes(*cg, 0.0f, feed(progress, last)));
-        });
-        const MeshTopology t = timed("check coarse pieces", [&] { return checkTopology(*mesh); });
-        nlohmann::json trial{{"voxel_mm", h}, {"triangles", mesh->triangles.size()}, {"closed_pieces", t.closedPieces}};
-        // A solid that meets the domain box is capped on its faces: vertices within half a
-        // coarse voxel of a face. Its creases there need the recipe's voxel, whatever k.
-        const bool meetsBox = std::any_of(mesh->points.begin(), mesh->points.end(), [&](const openvdb::Vec3f& p) {
-            for (int a = 0; a < 3; ++a)
-                if (p[a] < mDomain.box.min[a] + 0.5 * h || p[a] > mDomain.box.max[a] - 0.5 * h) return true;
-            return false;
-        });
-        if (meetsBox) {
-            trial["rejected"] = "the solid meets the domain box";
+        auto mesh = clippedMesh(h, projection, boxCut);
+        nlohmann::json trial{{"voxel_mm", h}};
+        if (!mesh) {
+            trial["rejected"] = "the cut by the domain box could not be closed: " + boxCut->failure;
             trials.push_back(trial);
-            why =
-                "the solid meets the domain box: its creases there need the recipe's voxel (their chamfers grow "
-                "with the voxel)";
-            break;
+            why = "at " + formatNumber(h) + " mm " + trial["rejected"].get<std::string>();
+            k /= 2;
+            continue;
         }
-        if (!t.closedManifold() || t.closedPieces != finePieces) {
-            // Pieces joined or lost between the coarse samples: halve the step and try again.
+        const MeshTopology t = timed("check coarse pieces", [&] { return checkTopology(*mesh); });
+        trial["triangles"] = mesh->triangles.size();
+        trial["closed_pieces"] = t.closedPieces;
+        if (t.closedPieces != finePieces) {
             trial["rejected"] = "closed pieces " + std::to_string(t.closedPieces) + ", the recipe's grid has " +
                                 std::to_string(finePieces);
             trials.push_back(trial);
@@ -692,16 +736,6 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
             k /= 2;
             continue;
         }
-        ProjectionOptions po;
-        po.maxMove = 0.5 * h;
-        po.tolerance = 1e-4 * mDomain.voxel;
-        projection = timed("project vertices", [&] {
-            StageProgress progress(mContext, "projecting vertices onto the surface", 1000);
-            std::atomic<std::uint64_t> last{0};
-            return projectToSurface(*mesh, *field, po, feed(progress, last));
-        });
-        // The chord error of projected triangles grows as h^2 (L^2 kappa / 8): measured here, the
-        // step that should bring it within the tolerance follows.
         const double chord = timed("measure chord error", [&] {
             return interiorChordError(*mesh, *distanceField(), mDomain.box, 2.0 * h, 0.5 * h);
         });
@@ -713,16 +747,16 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
                           {"recipe_voxel_mm", mDomain.voxel},
                           {"factor", k},
                           {"why", "the coarsest grid (" + limit +
-                                      ") whose projected triangles stay within the "
-                                      "tolerance away from the domain box (chord error " +
-                                      formatNumber(chord) + " mm) and whose mesh has the recipe's " +
+                                      ") whose projected triangles stay within the tolerance away from the "
+                                      "domain box (chord error " +
+                                      formatNumber(chord) +
+                                      " mm; where the solid meets the box the mesh is cut by its faces, exact "
+                                      "at any voxel) and whose mesh has the recipe's " +
                                       std::to_string(finePieces) + " closed pieces"},
                           {"trials", trials}};
             return mesh;
         }
         why = "the chord error at " + formatNumber(h) + " mm is " + formatNumber(chord) + " mm, above the tolerance";
-        // Rounded, not floored: the h^2 law is a model (measured 0.25 and 0.23 mm^-1 on the gyroid at
-        // 0.4 and 0.2 mm), and a step that still misses is followed by the next one down.
         const int next = int(std::lround(k * std::sqrt(tolerance / chord)));
         k = std::max(1, std::min(k - 1, next));
     }

@@ -7,6 +7,7 @@
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/MeshSettings.h"
 #include "engine/recipe/Recipe.h"
+#include "mesher/extract/BoxClip.h"
 #include "mesher/extract/SurfaceProjection.h"
 #include "mesher/extract/TriangleMesh.h"
 #include "mesher/writers/FrameWriters.h"
@@ -17,6 +18,7 @@
 
 #include <array>
 #include <filesystem>
+#include <optional>
 
 namespace voxlat {
 
@@ -121,7 +123,15 @@ private:
     /// coarse voxels) and a chord error within the tolerance; else null. What was chosen and why
     /// goes into @a extraction; @a voxel is set to the voxel the mesh was extracted at.
     std::unique_ptr<TriangleMesh> coarseMesh(const MeshOptions& options, nlohmann::json& extraction, double& voxel,
-                                             ProjectionStats& projection);
+                                             ProjectionStats& projection, std::optional<BoxClipStats>& boxCut);
+    /// Whether the result's surface is one smooth field (no sharp boolean operands): its only
+    /// creases are where it meets the domain box, which clippedMesh() makes exact.
+    bool smoothResult();
+    /// The result meshed unclipped on a grid of voxel @a h (two voxels past the domain box),
+    /// projected onto its surface (@a projection), then cut by the domain box's faces and capped
+    /// (@a boxCut); null when the cut could not be closed (boxCut->failure says why).
+    std::unique_ptr<TriangleMesh> clippedMesh(double h, ProjectionStats& projection,
+                                              std::optional<BoxClipStats>& boxCut);
     /// Refuses (InputError, naming where the tolerance was given) a mesh tolerance of half the
     /// thinnest strut a node knows or more; warns when it exceeds the voxel.
     void checkTolerance(const MeshOptions& options);
