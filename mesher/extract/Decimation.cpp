@@ -625,18 +625,34 @@ MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field,
             weights.clear();
             const std::size_t end = std::min(mesh.triangles.size(), (b + 1) * kBlock);
             for (std::size_t n = b * kBlock; n < end; ++n) {
+                // Rows parallel to the longest edge, at most spacing apart, each sampled at most
+                // spacing apart: a long sliver (a cap where a box cut the mesh) takes samples in
+                // proportion to its length, not to its length squared.
                 const openvdb::Vec3I& t = mesh.triangles[n];
-                const Vec3d a = toDouble(mesh.points[t[0]]), e1 = toDouble(mesh.points[t[1]]) - a,
-                            e2 = toDouble(mesh.points[t[2]]) - a;
-                const double longest = std::max({e1.length(), e2.length(), (e2 - e1).length()});
-                const int steps = std::max(1, int(std::ceil(longest / spacing)));
-                const double area = 0.5 * e1.cross(e2).length();
-                const double w = area / double((steps + 1) * (steps + 2) / 2);
-                for (int i = 0; i <= steps; ++i)
-                    for (int j = 0; i + j <= steps; ++j) {
-                        points.push_back(a + (double(i) / steps) * e1 + (double(j) / steps) * e2);
-                        weights.push_back(w);
+                std::array<Vec3d, 3> c = {toDouble(mesh.points[t[0]]), toDouble(mesh.points[t[1]]),
+                                          toDouble(mesh.points[t[2]])};
+                int far = 0;  // the corner opposite the longest edge
+                double longest = -1.0;
+                for (int k = 0; k < 3; ++k) {
+                    const double length = (c[(k + 2) % 3] - c[(k + 1) % 3]).length();
+                    if (length > longest) {
+                        longest = length;
+                        far = k;
                     }
+                }
+                const Vec3d apex = c[far], p0 = c[(far + 1) % 3], p1 = c[(far + 2) % 3];
+                const double area = 0.5 * (p0 - apex).cross(p1 - apex).length();
+                const double height = longest > 0.0 ? 2.0 * area / longest : 0.0;
+                const int rows = std::max(1, int(std::ceil(height / spacing)));
+                const std::size_t before = points.size();
+                for (int r = 0; r <= rows; ++r) {
+                    const double f = double(r) / rows;  // 0 on the longest edge, 1 at the apex
+                    const Vec3d q0 = p0 + f * (apex - p0), q1 = p1 + f * (apex - p1);
+                    const int steps = r == rows ? 0 : std::max(1, int(std::ceil((q1 - q0).length() / spacing)));
+                    for (int i = 0; i <= steps; ++i)
+                        points.push_back(steps ? q0 + (double(i) / steps) * (q1 - q0) : q0);
+                }
+                weights.resize(points.size(), area / double(points.size() - before));
             }
             values.resize(points.size());
             gradients.resize(points.size());

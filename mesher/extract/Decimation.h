@@ -62,8 +62,8 @@ struct MeshDeviation {
     std::size_t samples = 0;
 };
 
-/// Samples every triangle of @a mesh on a barycentric grid of spacing at most @a spacing (mm;
-/// corners, edges and interior) and measures the first-order distance |f - level| / |grad f|.
+/// Samples every triangle of @a mesh in rows parallel to its longest edge, rows and samples at
+/// most @a spacing apart (mm; corners, edges and interior), and measures the first-order distance |f - level| / |grad f|.
 /// Parallel over fixed blocks of triangles: the same numbers for any thread count.
 MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field, double level, double spacing);
 

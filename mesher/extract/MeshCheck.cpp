@@ -277,9 +277,17 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
             const openvdb::Vec3I& tri = mesh.triangles[t];
             openvdb::BBoxd b;
             for (int k = 0; k < 3; ++k) b.expand(openvdb::Vec3d(mesh.points[tri[k]]));
+            // A triangle in a face plane of the bounds (a cap where a mesh was cut by a box) has
+            // every other triangle on one side: none can pass an edge through its interior, and
+            // its edges, in that plane, meet another triangle only on that one's boundary
+            // (coplanar overlaps are not counted). Left out, as its cells are often many.
+            bool onBounds = false;
+            for (int a = 0; a < 3; ++a)
+                onBounds = onBounds ||
+                           (b.min()[a] == b.max()[a] && (b.min()[a] == box.min()[a] || b.max()[a] == box.max()[a]));
             for (int a = 0; a < 3; ++a) {
-                ranges[t].lo[a] = cellOf(b.min(), a);
-                ranges[t].hi[a] = cellOf(b.max(), a);
+                ranges[t].lo[a] = onBounds ? 1 : cellOf(b.min(), a);
+                ranges[t].hi[a] = onBounds ? 0 : cellOf(b.max(), a);
             }
         }
     });
