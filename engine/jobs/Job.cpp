@@ -525,8 +525,13 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         if (boxCut) report["creases"]["box_cut_failed"] = boxCut->failure;
     }
     if (options.tolerance) {
-        const FieldPtr field = distanceField();
+        // The distance to the result's operands, with the domain box taken exactly at every point
+        // the check looks at (the kink where a triangle meets the box along a crease).
+        std::vector<FieldPtr> operands;
+        collectCreaseOperands(mResult, operands);
+        const FieldPtr field = std::make_shared<SurfaceDistance>(std::move(operands));
         DecimationOptions d;
+        d.box = mDomain.box;
         d.tolerance = *options.tolerance;
         d.voxel = meshVoxel;
         // Only candidates within a quarter of T² by the quadric are tried: on W9 the share 1 spent

@@ -49,6 +49,18 @@ double signedDistance(double r, const Vec3d& g)
     return r == 0.0 ? 0.0 : std::copysign(1e30, r);
 }
 
+/// Exact signed distance to @a box (negative inside).
+double boxDistance(const Vec3d& p, const Box3& box)
+{
+    double outside = 0.0, inside = -std::numeric_limits<double>::infinity();
+    for (int a = 0; a < 3; ++a) {
+        const double q = std::max(box.min[a] - p[a], p[a] - box.max[a]);
+        outside += q > 0.0 ? q * q : 0.0;
+        inside = std::max(inside, q);
+    }
+    return outside > 0.0 ? std::sqrt(outside) : std::min(inside, 0.0);
+}
+
 /// A triangle to check: corners, the signed distances there, and its edge midpoints (indices
 /// into FieldDecimater::mMid; edge i runs from corner i to corner i + 1).
 struct CheckTriangle {
@@ -321,7 +333,9 @@ private:
         mCentres.resize(mTriangles.size());
         for (std::size_t k = 0; k < mTriangles.size(); ++k) {
             mCentres[k] = signedDistance(mValues[k] - mOptions.level, mGradients[k]);
-            if (std::abs(mCentres[k]) > tolerance) return false;
+            const double centre =
+                mOptions.box ? std::max(mCentres[k], boxDistance(mPoints[k], *mOptions.box)) : mCentres[k];
+            if (std::abs(centre) > tolerance) return false;
         }
         mPoints.clear();
         for (const Midpoint& m : mMid)
@@ -350,8 +364,12 @@ private:
             double largest = 0.0;
             for (int i = 0; i <= kSteps; ++i)
                 for (int j = 0; i + j <= kSteps; ++j) {
-                    const double l0 = double(i) / kSteps, l1 = double(j) / kSteps;
-                    largest = std::max(largest, std::abs(quadratic(l0, l1, 1.0 - l0 - l1)));
+                    const double l0 = double(i) / kSteps, l1 = double(j) / kSteps, l2 = 1.0 - l0 - l1;
+                    double d = quadratic(l0, l1, l2);
+                    // The box's side of a crease exactly: the larger of the two is the solid's.
+                    if (mOptions.box)
+                        d = std::max(d, boxDistance(l0 * t.p[0] + l1 * t.p[1] + l2 * t.p[2], *mOptions.box));
+                    largest = std::max(largest, std::abs(d));
                 }
             if (largest + margin > tolerance) return false;
         }

@@ -8,6 +8,7 @@
 #include "mesher/extract/TriangleMesh.h"
 
 #include <cstddef>
+#include <optional>
 
 namespace voxlat {
 
@@ -26,6 +27,10 @@ struct DecimationOptions {
     double quadricShare = 1.0;
     std::size_t blockedFrom = 200000;
     double blockVoxels = 64.0;
+    /// When set, the solid is also cut by this box: the field is the distance to the rest, and
+    /// the box's own signed distance is taken exactly at every point the check looks at, so the
+    /// kink where the two meet (a crease) is not smoothed over by the check's quadratic.
+    std::optional<Box3> box;
 };
 
 struct DecimationStats {
@@ -63,8 +68,8 @@ struct MeshDeviation {
 };
 
 /// Samples every triangle of @a mesh in rows parallel to its longest edge, rows and samples at
-/// most @a spacing apart (mm; corners, edges and interior), and measures the first-order distance |f - level| / |grad f|.
-/// Parallel over fixed blocks of triangles: the same numbers for any thread count.
+/// most @a spacing apart (mm; corners, edges and interior), and measures the first-order distance |f - level| / |grad
+/// f|. Parallel over fixed blocks of triangles: the same numbers for any thread count.
 MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field, double level, double spacing);
 
 }  // namespace voxlat
