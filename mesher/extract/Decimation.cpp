@@ -362,13 +362,17 @@ private:
             if (margin > tolerance) return false;
             constexpr int kSteps = 6;
             double largest = 0.0;
+            // The box's distance is convex: over the triangle it is largest at a corner. Where
+            // that is below -tolerance, max(quadratic, box) passes or fails as the quadratic does.
+            bool nearBox = false;
+            if (mOptions.box)
+                for (int c = 0; c < 3 && !nearBox; ++c) nearBox = boxDistance(t.p[c], *mOptions.box) > -tolerance;
             for (int i = 0; i <= kSteps; ++i)
                 for (int j = 0; i + j <= kSteps; ++j) {
                     const double l0 = double(i) / kSteps, l1 = double(j) / kSteps, l2 = 1.0 - l0 - l1;
                     double d = quadratic(l0, l1, l2);
                     // The box's side of a crease exactly: the larger of the two is the solid's.
-                    if (mOptions.box)
-                        d = std::max(d, boxDistance(l0 * t.p[0] + l1 * t.p[1] + l2 * t.p[2], *mOptions.box));
+                    if (nearBox) d = std::max(d, boxDistance(l0 * t.p[0] + l1 * t.p[1] + l2 * t.p[2], *mOptions.box));
                     largest = std::max(largest, std::abs(d));
                 }
             if (largest + margin > tolerance) return false;
