@@ -674,9 +674,7 @@ std::unique_ptr<TriangleMesh> Job::clippedMesh(double h, ProjectionStats& projec
         std::atomic<std::uint64_t> last{0};
         return projectToSurface(*mesh, *mResult, po, feed(progress, last));
     });
-    BoxClipOptions co;
-    co.maxMove = 0.5 * h;
-    co.tolerance = po.tolerance;
+    const BoxClipOptions co{po};  // the crease points' Newton steps as the projection's
     boxCut = timed("cut by the domain box", [&] { return clipToBox(*mesh, *mResult, mDomain.box, co); });
     if (!boxCut->ok) return nullptr;
     return mesh;

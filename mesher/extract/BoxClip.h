@@ -12,6 +12,7 @@
 #pragma once
 
 #include "fields/FieldNode.h"
+#include "mesher/extract/SurfaceProjection.h"
 #include "mesher/extract/TriangleMesh.h"
 
 #include <cstddef>
@@ -19,15 +20,9 @@
 
 namespace voxlat {
 
-struct BoxClipOptions {
-    /// The level set of the field that bounds the solid (the solid is f < level).
-    double level = 0.0;
-    /// Farthest a crease point may move from where the straight edge crosses the face (mm).
-    double maxMove = 0.05;
-    /// Newton stops once the first-order distance to the level set is below this (mm).
-    double tolerance = 1e-6;
-    /// Newton steps per crease point at most.
-    int maxIterations = 12;
+/// The crease points' Newton steps as the projection's (level, maxMove from where the straight
+/// edge crosses the face, tolerance, maxIterations), and how close to a face a vertex is put onto it.
+struct BoxClipOptions : ProjectionOptions {
     /// Vertices closer than this to a face are put onto it before cutting (mm).
     double snap = 1e-5;
 };
