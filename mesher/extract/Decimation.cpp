@@ -1,5 +1,7 @@
 #include "mesher/extract/Decimation.h"
 
+#include "fields/BoxField.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
@@ -49,18 +51,6 @@ double signedDistance(double r, const Vec3d& g)
     return r == 0.0 ? 0.0 : std::copysign(1e30, r);
 }
 
-/// Exact signed distance to @a box (negative inside).
-double boxDistance(const Vec3d& p, const Box3& box)
-{
-    double outside = 0.0, inside = -std::numeric_limits<double>::infinity();
-    for (int a = 0; a < 3; ++a) {
-        const double q = std::max(box.min[a] - p[a], p[a] - box.max[a]);
-        outside += q > 0.0 ? q * q : 0.0;
-        inside = std::max(inside, q);
-    }
-    return outside > 0.0 ? std::sqrt(outside) : std::min(inside, 0.0);
-}
-
 /// A triangle to check: corners, the signed distances there, and its edge midpoints (indices
 /// into FieldDecimater::mMid; edge i runs from corner i to corner i + 1).
 struct CheckTriangle {
@@ -92,6 +82,7 @@ public:
                    std::vector<double> vertexDistance)
         : mMesh(mesh), mField(field), mOptions(options), mVertexDistance(std::move(vertexDistance))
     {
+        if (options.box) mBox.emplace(*options.box);
         // A collapse whose quadric error (the area-weighted sum of squared distances to the planes
         // of the triangles merged into it) exceeds the squared tolerance puts the point far off
         // one of them: such candidates are mostly refused by the field check anyway, so they are
@@ -333,8 +324,7 @@ private:
         mCentres.resize(mTriangles.size());
         for (std::size_t k = 0; k < mTriangles.size(); ++k) {
             mCentres[k] = signedDistance(mValues[k] - mOptions.level, mGradients[k]);
-            const double centre =
-                mOptions.box ? std::max(mCentres[k], boxDistance(mPoints[k], *mOptions.box)) : mCentres[k];
+            const double centre = mBox ? std::max(mCentres[k], boxDistance(mPoints[k])) : mCentres[k];
             if (std::abs(centre) > tolerance) return false;
         }
         mPoints.clear();
@@ -365,14 +355,14 @@ private:
             // The box's distance is convex: over the triangle it is largest at a corner. Where
             // that is below -tolerance, max(quadratic, box) passes or fails as the quadratic does.
             bool nearBox = false;
-            if (mOptions.box)
-                for (int c = 0; c < 3 && !nearBox; ++c) nearBox = boxDistance(t.p[c], *mOptions.box) > -tolerance;
+            if (mBox)
+                for (int c = 0; c < 3 && !nearBox; ++c) nearBox = boxDistance(t.p[c]) > -tolerance;
             for (int i = 0; i <= kSteps; ++i)
                 for (int j = 0; i + j <= kSteps; ++j) {
                     const double l0 = double(i) / kSteps, l1 = double(j) / kSteps, l2 = 1.0 - l0 - l1;
                     double d = quadratic(l0, l1, l2);
                     // The box's side of a crease exactly: the larger of the two is the solid's.
-                    if (nearBox) d = std::max(d, boxDistance(l0 * t.p[0] + l1 * t.p[1] + l2 * t.p[2], *mOptions.box));
+                    if (nearBox) d = std::max(d, boxDistance(l0 * t.p[0] + l1 * t.p[1] + l2 * t.p[2]));
                     largest = std::max(largest, std::abs(d));
                 }
             if (largest + margin > tolerance) return false;
@@ -393,7 +383,11 @@ private:
     }
 
     Mesh& mMesh;
+    /// The box's exact signed distance (options.box).
+    double boxDistance(const Vec3d& p) const { return mBox->eval(p.x(), p.y(), p.z()); }
+
     const FieldNode& mField;
+    std::optional<BoxField> mBox;
     std::vector<double> mCentres;
     DecimationOptions mOptions;
     std::vector<double> mVertexDistance;
