@@ -26,6 +26,8 @@ public:
     /// The documented interpolation error bounds (see the file).
     static constexpr double kErfIntegralError = 1.4e-11;
     static constexpr double kGaussianError = 2.92e-11;
+    static constexpr double kDelta = 1.0 / kPerUnit;
+    static constexpr double kHalfRootTwoPi = 1.2533141373155003;  // sqrt(pi / 2)
 
     static const GaussianTable& instance()
     {
@@ -56,13 +58,15 @@ public:
         return std::copysign(h.h00 * h.p->u + h.h10 * h.p->g + h.h01 * h.q->u + h.h11 * h.q->g, y);
     }
 
-private:
-    static constexpr double kDelta = 1.0 / kPerUnit;
-    static constexpr double kHalfRootTwoPi = 1.2533141373155003;  // sqrt(pi / 2)
+    /// The nodes as kNodes triples (U, g, g') at y = i kDelta: for vector code that gathers them
+    /// (StrutRows.h), which must interpolate exactly as span() and evaluate() do.
+    const double* nodeData() const { return &mNodes[0].u; }
 
+private:
     struct Node {
         double u, g, dg;
     };
+    static_assert(sizeof(Node) == 3 * sizeof(double), "nodeData() reads the nodes as packed triples");
 
     /// The two nodes around a (0 <= a < kEnd) and the cubic Hermite weights of their values and
     /// slopes (slopes per node spacing).

@@ -1,6 +1,7 @@
 #include "fields/StrutConvolution.h"
 
 #include "fields/GaussianTable.h"
+#include "fields/StrutRows.h"
 
 #include <algorithm>
 #include <limits>
@@ -142,7 +143,9 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
     thread_local std::vector<std::uint32_t> cand;
     mIndex.gather(batch.bounds(), cand);
     std::fill(out.begin(), out.begin() + batch.size(), 0.0);
-    const GaussianTable& table = GaussianTable::instance();
+    thread_local std::vector<double> gauss;
+    gauss.resize(std::size_t(batch.nz));
+    const bool avx2 = hasAvx2Rows();
     const double dx = batch.spacing.x(), dy = batch.spacing.y(), dz = batch.spacing.z();
     const int nz = batch.nz;
     // Strut-outer, point-inner: each point still sums its struts in ascending index order. Along
@@ -162,6 +165,8 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
         const double q = std::exp(-2.0 * c * inv2s2);
         // Rows nearly parallel to the strut get no analytic range (r^2 barely changes along them).
         const bool ranged = c > 1e-9 * dz * dz;
+        const StrutRowConstants constants{s.a.x(), s.a.y(),  s.a.z(), u.x(), u.y(), u.z(), length,
+                                          sigma,   invSigma, s2,      w0,    slope, rc2};
         // The analytic range is only a filter: points within a step of its ends, and all points
         // between, still take the exact cut-off test, so the same points count as before.
         const double rcWide2 = rc2 * (1.0 + 1e-9) + 1e-300;
@@ -189,37 +194,34 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                 const double qRow = px * px + py * py;
                 const double r0 = qRow + d0.z() * d0.z() - hRow * hRow;
                 const double b = 2.0 * (d0.z() * dz - hRow * hz) + c;  // r^2(1) - r^2(0)
+                const Vec3d rowStart = batch.point(i, jj, 0);
+                const StrutRow row{rowStart.x(), rowStart.y(), rowStart.z(), dz, kLo, kHi};
                 // The recurrence's factors stay well inside double range for ordinary batches;
                 // otherwise every point takes its own exponential.
-                const bool recur = std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0;
-                double e = recur ? std::exp(-r0 * inv2s2) : 0.0;
-                double ratio = recur ? std::exp(-b * inv2s2) : 0.0;
-                // Points before the range: advance the recurrence the same way (same bits).
-                for (int k = 0; k < kLo; ++k) {
-                    e *= ratio;
-                    ratio *= q;
-                }
-                for (int k = kLo; k <= kHi; ++k) {
-                    // The cut-off test exactly as values() makes it (same h and r^2 bits).
-                    double h, r2;
-                    const double dist2 = s.distanceSqr(batch.point(i, jj, k), h, r2);
-                    const double gauss = recur ? e : std::exp(-r2 * inv2s2);
-                    e *= ratio;
-                    ratio *= q;
-                    if (dist2 >= rc2) continue;
-                    double j0;
-                    if (slope == 0.0) {
-                        j0 =
-                            w0 * sigma * (table.erfIntegral((length - h) * invSigma) + table.erfIntegral(h * invSigma));
-                    } else {
-                        double uL, gL, uA, gA;
-                        table.evaluate((length - h) * invSigma, uL, gL);
-                        table.evaluate(h * invSigma, uA, gA);
-                        const double i0 = sigma * (uL + uA);
-                        j0 = (w0 + slope * h) * i0 + slope * s2 * (gA - gL);
+                if (std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0) {
+                    double e = std::exp(-r0 * inv2s2);
+                    double ratio = std::exp(-b * inv2s2);
+                    // Points before the range advance the recurrence the same way (same bits).
+                    for (int k = 0; k < kLo; ++k) {
+                        e *= ratio;
+                        ratio *= q;
                     }
-                    out[n + k] += gauss * j0;
+                    for (int k = kLo; k <= kHi; ++k) {
+                        gauss[k] = e;
+                        e *= ratio;
+                        ratio *= q;
+                    }
+                } else {
+                    for (int k = kLo; k <= kHi; ++k) {
+                        double h, r2;
+                        s.distanceSqr(batch.point(i, jj, k), h, r2);
+                        gauss[k] = std::exp(-r2 * inv2s2);
+                    }
                 }
+                if (avx2)
+                    addStrutRowAvx2(constants, row, gauss.data(), out.data() + n);
+                else
+                    addStrutRowScalar(constants, row, gauss.data(), out.data() + n);
             }
         }
     }

@@ -11,6 +11,7 @@
 #include "fields/StrutCapsules.h"
 #include "fields/StrutConvolution.h"
 #include "fields/StrutIndex.h"
+#include "fields/StrutRows.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
 
@@ -21,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numbers>
 #include <random>
@@ -207,6 +209,46 @@ TEST(StrutConvolution, GridValuesMatchValuesWithinTheTableBound)
         }
     }
     EXPECT_GT(worst, 0.0);  // the fast path really is a different computation
+}
+
+TEST(StrutRows, FourLanesAddTheSameDoublesAsTheScalarLoop)
+{
+    // gridValues picks the AVX2 row loop where the CPU has it: the same recipe must give the same
+    // bytes on any x86-64 machine, so both loops must add the same doubles (bit for bit). Random
+    // struts (uniform and graded weights, ends inside and outside the row, rows ending at every
+    // lane, points past the table's end) and random partial sums in out.
+    if (!hasAvx2Rows()) GTEST_SKIP() << "this CPU (or build) has no AVX2 row loop to compare";
+    std::mt19937_64 rng(20261127);
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    std::uint64_t lanesCompared = 0, lanesAdded = 0;
+    for (int trial = 0; trial < 20000; ++trial) {
+        const Vec3d a(unit(rng), unit(rng), unit(rng));
+        Vec3d dir(unit(rng), unit(rng), unit(rng));
+        if (trial % 7 == 0) dir = Vec3d(0.0, 0.0, 1.0);  // parallel to the rows
+        dir.normalize();
+        const double sigma = 0.05 + 0.5 * std::abs(unit(rng)), length = 0.1 + 3.0 * std::abs(unit(rng));
+        const double w0 = 0.5 + std::abs(unit(rng));
+        const double slope = trial % 3 == 0 ? 0.0 : unit(rng);
+        const double rc = gaussianCutoffRadius(sigma, 1e-4) * (trial % 5 == 0 ? 50.0 : 1.0);  // 50: past the table
+        const StrutRowConstants c{a.x(), a.y(),       a.z(),         dir.x(), dir.y(), dir.z(), length,
+                                  sigma, 1.0 / sigma, sigma * sigma, w0,      slope,   rc * rc};
+        const int nz = 1 + int(rng() % 12);
+        const int kLo = int(rng() % nz), kHi = kLo + int(rng() % (nz - kLo));
+        const StrutRow row{
+            0.5 * unit(rng), 0.5 * unit(rng), unit(rng) - 1.0, 0.05 + 0.2 * std::abs(unit(rng)), kLo, kHi};
+        std::vector<double> gauss(nz), scalar(nz + 4), lanes;
+        for (double& g : gauss) g = std::abs(unit(rng));
+        for (double& v : scalar) v = trial % 2 ? std::abs(unit(rng)) : 0.0;
+        lanes = scalar;
+        const std::vector<double> before = scalar;
+        addStrutRowScalar(c, row, gauss.data(), scalar.data());
+        addStrutRowAvx2(c, row, gauss.data(), lanes.data());
+        ASSERT_EQ(std::memcmp(scalar.data(), lanes.data(), scalar.size() * sizeof(double)), 0) << "trial " << trial;
+        lanesCompared += std::uint64_t(kHi - kLo + 1);
+        for (int k = kLo; k <= kHi; ++k) lanesAdded += scalar[k] != before[k] ? 1 : 0;
+    }
+    // The comparison covered points within the cut-off (not only skipped ones).
+    EXPECT_GT(lanesAdded, lanesCompared / 4);
 }
 
 TEST(GaussianTable, InterpolationErrorWithinItsDocumentedBound)

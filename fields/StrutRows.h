@@ -1,0 +1,63 @@
+#pragma once
+/// @file StrutRows.h
+/// @brief One strut's Gaussian convolution added along one row of a grid batch: the inner loop of
+/// StrutConvolution::gridValues, with a scalar form and a four-lane AVX2 form that gives the same
+/// doubles (the same IEEE operations in the same order, no FMA, no contraction).
+
+#include "fields/GaussianTable.h"
+
+#include <cstdint>
+
+namespace voxlat {
+
+/// The constants of one strut the row loop needs (see GaussianSegment).
+struct StrutRowConstants {
+    double ax, ay, az;  ///< start A
+    double ux, uy, uz;  ///< unit direction
+    double length, sigma, invSigma, s2, w0, slope;
+    double cutoffSqr;  ///< the cut-off radius squared: points at or beyond it add nothing
+};
+
+/// The points of one row: (x, y, z0 + k dz) for k = kLo..kHi (each coordinate computed as
+/// GridBatch::point does, so the same bits).
+struct StrutRow {
+    double x, y, z0, dz;
+    int kLo, kHi;
+};
+
+/// Adds gauss[k] * J(h_k) to out[k] for every point of @a row within the strut's cut-off, where
+/// h_k is the point's coordinate along the strut and J the weighted erf integral (GaussianTable).
+inline void addStrutRowScalar(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
+{
+    const GaussianTable& table = GaussianTable::instance();
+    const double dx = row.x - s.ax, dy = row.y - s.ay;
+    for (int k = row.kLo; k <= row.kHi; ++k) {
+        // GaussianSegment::distanceSqr's operations in its order.
+        const double dz = (row.z0 + k * row.dz) - s.az;
+        const double h = dx * s.ux + dy * s.uy + dz * s.uz;
+        const double lengthSqr = dx * dx + dy * dy + dz * dz;
+        const double r2 = std::max(0.0, lengthSqr - h * h);
+        const double beyond = h < 0.0 ? h : (h > s.length ? h - s.length : 0.0);
+        if (r2 + beyond * beyond >= s.cutoffSqr) continue;
+        double j0;
+        if (s.slope == 0.0) {
+            j0 = s.w0 * s.sigma * (table.erfIntegral((s.length - h) * s.invSigma) + table.erfIntegral(h * s.invSigma));
+        } else {
+            double uL, gL, uA, gA;
+            table.evaluate((s.length - h) * s.invSigma, uL, gL);
+            table.evaluate(h * s.invSigma, uA, gA);
+            const double i0 = s.sigma * (uL + uA);
+            j0 = (s.w0 + s.slope * h) * i0 + s.slope * s.s2 * (gA - gL);
+        }
+        out[k] += gauss[k] * j0;
+    }
+}
+
+/// addStrutRowScalar with four lanes; the same doubles. Defined only where VOXLAT_AVX2_ROWS is
+/// (x86-64 builds); call it only when hasAvx2Rows() says the CPU has AVX2.
+void addStrutRowAvx2(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out);
+
+/// Whether addStrutRowAvx2 exists in this build and the CPU can run it.
+bool hasAvx2Rows();
+
+}  // namespace voxlat
