@@ -168,11 +168,19 @@ TEST(DensityPieces, TileTheBoxAndMatchTheWholeBoxOnTheSameLattice)
     const BccBox b = bccBox(4, 4.0, 0.5);
     // 80 samples per axis: zones of 12, 2 periods of 20 and 16 more samples between them, so
     // four segments per axis (zone, 16 samples x 3, 4 samples x 2, zone); with the mirror
-    // (a BCC box is symmetric) the high zone is the low one counted twice: three.
+    // (a BCC box is symmetric) the high zone is the low one counted twice, and each part of the
+    // period is its own mirror image, so its first half is counted twice: three segments
+    // (zone, 8 samples x 6, 2 samples x 4) of 22 samples instead of 40 per axis.
     const std::vector<DensityPiece> pieces = periodicPieces(b.box, Vec3d(4.0), b.reach, 0.2);
     const std::vector<DensityPiece> mirrored = periodicPieces(b.box, Vec3d(4.0), b.reach, 0.2, {true, true, true});
     ASSERT_EQ(pieces.size(), 64u);
     ASSERT_EQ(mirrored.size(), 27u);
+    auto samples = [](const std::vector<DensityPiece>& set) {
+        std::uint64_t n = 0;
+        for (const DensityPiece& p : set) n += p.domain.voxelCount();
+        return n;
+    };
+    EXPECT_EQ(samples(mirrored), 22u * 22u * 22u);
     const DensityPiece whole{Domain::fromBox(b.box, pieces.front().domain.voxel), 1.0};
     for (const auto* set : {&pieces, &mirrored}) {
         double voxels = 0.0;
@@ -220,9 +228,10 @@ TEST(DensityPieces, BoxOfCellsHitsTheTargetOnTheMesh)
     Job job(parseRecipe(bccBoxRecipe(0.1), "bcc.yaml", "."));
     job.solveLevels();
     ASSERT_TRUE(job.report()["fields"]["lattice"].contains("density_measured_on"));
-    // BCC is its own mirror image along every axis: one face zone per axis, three segments.
+    // BCC is its own mirror image along every axis: one face zone per axis, and each part of the
+    // period measured by its half (twice) and its middle sample: four segments.
     EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
-              "one period of the interior (27 weighted pieces)");
+              "one period of the interior (64 weighted pieces)");
     expectMeshHoldsTheTarget(job);
 }
 
@@ -370,9 +379,10 @@ TEST(DensityPieces, RadiiGradedAlongAnAxisHitTheTargetOnTheMesh)
                     "result: lattice\n",
                     "graded.yaml", "."));
     job.solveLevels();
-    // BCC mirrors along x and y (the radii depend on z only): three segments each, one along z.
+    // BCC mirrors along x and y (the radii depend on z only): four segments each (the face zone,
+    // halves and middles of the period), one along z.
     EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
-              "one period of the interior (9 weighted pieces)");
+              "one period of the interior (16 weighted pieces)");
     const TriangleMesh& mesh = job.mesh();
     EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.01 * 0.20);
     EXPECT_TRUE(checkTopology(mesh).closedManifold());

@@ -56,7 +56,10 @@ struct DensityPiece {
 /// rest k times, where k whole periods and e more samples fit between the zones (the e samples
 /// past the last whole period repeat the period's first e); and the high zone. Where the field
 /// is @a mirror symmetric about the box's middle along an axis (and so is the lattice) the high
-/// zone is the low zone's mirror image: the low zone is counted twice instead. The 3D pieces are
+/// zone is the low zone's mirror image: the low zone is counted twice instead; and, periodic between
+/// the zones, the field is then symmetric within the period as well (sample m's image is sample
+/// -m - 1 modulo the period, and each of the period's two parts is its own image), so each part
+/// is measured by its first half counted twice (an odd part's middle sample once). The 3D pieces are
 /// the products; their weighted voxels are exactly the box's. Empty when that does not apply
 /// (the box is not a whole number of periods, fewer than two periods fold, or the period
 /// differs between axes). A period of 0 along an axis: the field does not repeat along it, and

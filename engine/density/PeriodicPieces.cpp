@@ -56,8 +56,30 @@ std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, d
         // `extra` samples (all lie at least a zone inside the box).
         const long extra = total - 2 * zone - folds * perPeriod;
         segments[a].push_back({0, zone, mirror[a] ? 2.0 : 1.0});
-        if (extra > 0) segments[a].push_back({zone, extra, double(folds + 1)});
-        segments[a].push_back({zone + extra, perPeriod - extra, double(folds)});
+        std::vector<Segment> period;
+        if (extra > 0) period.push_back({zone, extra, double(folds + 1)});
+        period.push_back({zone + extra, perPeriod - extra, double(folds)});
+        for (const Segment& s : period) {
+            if (!mirror[a]) {
+                segments[a].push_back(s);
+                continue;
+            }
+            // Mirror symmetric about the box's middle and periodic between the zones, the field
+            // is symmetric about box.min within a period too: sample m (centre at m + 1/2 steps)
+            // has sample -m - 1 (mod the period) for its image, and each segment above is its
+            // own image. Half of it counts twice (an odd segment's middle sample, once).
+            const auto image = [&](long m) {
+                const long r = ((-m - 1 - zone) % perPeriod + perPeriod) % perPeriod;
+                return zone + r;
+            };
+            const long half = s.voxels / 2;
+            if (image(s.start) != s.start + s.voxels - 1) {
+                segments[a].push_back(s);  // not its own image (cannot happen; kept whole then)
+                continue;
+            }
+            if (half > 0) segments[a].push_back({s.start, half, 2.0 * s.weight});
+            if (s.voxels % 2 == 1) segments[a].push_back({s.start + half, 1, s.weight});
+        }
         if (!mirror[a]) segments[a].push_back({total - zone, zone, 1.0});
     }
     std::vector<DensityPiece> pieces;
