@@ -4,6 +4,7 @@
 #include <oneapi/tbb/collaborative_call_once.h>
 #include <oneapi/tbb/parallel_for.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -17,27 +18,20 @@ namespace {
 
 /// Grid positions x0 + n h along one axis and the table slot of each: the zone below the box's
 /// inner margin and one period kept as they are, positions deeper inside folded onto that
-/// period, the zone above kept as it is.
+/// period, the zone above kept as it is. Where the child is mirror symmetric about the box's
+/// middle, positions above the middle take their images' slots (the high zone is the low zone's
+/// image), and within the period each pair of images shares one slot.
 struct AxisMap {
     double h = 0.0, x0 = 0.0;
-    long n0 = 0, n1 = -1;  ///< covered positions (inclusive)
-    long nA = 0, nB = -1;  ///< positions at least `reach` (plus a voxel) inside both faces
-    long period = 0;       ///< in positions; 0: nothing folds
-    long size() const { return period > 0 ? (nA + period - n0) + (n1 - nB) : n1 - n0 + 1; }
+    long n0 = 0, n1 = -1;         ///< covered positions (inclusive)
+    std::vector<long> slotOf;     ///< per covered position n (index n - n0)
+    std::vector<long> positions;  ///< per slot: the position it holds (ascending)
+    long size() const { return long(positions.size()); }
 
     /// The table slot of position n, or -1 outside the covered range.
-    long slot(long n) const
-    {
-        if (n < n0 || n > n1) return -1;
-        if (period == 0 || n < nA + period) return n - n0;
-        if (n > nB) return (nA + period - n0) + (n - nB - 1);
-        return nA + (n - nA) % period - n0;
-    }
-    /// The position a slot holds (the inverse of slot() on the canonical positions).
-    long position(long t) const
-    {
-        return (period == 0 || t < nA + period - n0) ? n0 + t : nB + 1 + (t - (nA + period - n0));
-    }
+    long slot(long n) const { return n < n0 || n > n1 ? -1 : slotOf[std::size_t(n - n0)]; }
+    /// The position a slot holds.
+    long position(long t) const { return positions[std::size_t(t)]; }
 };
 
 /// Grids a tiling keeps tables for.
@@ -46,21 +40,50 @@ constexpr std::size_t kMaxTables = 4;
 /// A leaf of padding beyond the box, so that leaves straddling the box's faces are covered.
 constexpr long kPad = 8;
 
-AxisMap makeAxis(double h, double x0, double lo, double hi, double period, double reach)
+/// Values a table block's brick holds (blocks are up to 8 slots per axis).
+constexpr std::size_t kBrick = 512;
+
+AxisMap makeAxis(double h, double x0, double lo, double hi, double period, double reach, bool mirror)
 {
     AxisMap m;
     m.h = h;
     m.x0 = x0;
     m.n0 = long(std::floor((lo - x0) / h)) - kPad;
     m.n1 = long(std::ceil((hi - x0) / h)) + kPad;
-    if (!(period > 0.0)) return m;  // no repeat along this axis: every position is its own
-    const double steps = period / h;
-    const long whole = std::lround(steps);
-    if (whole < 1 || std::abs(steps - double(whole)) > 1e-9 * steps) return m;  // not commensurate
-    // One voxel of safety on each side, so rounding of positions never crosses the margin.
-    m.nA = long(std::ceil((lo + reach - x0) / h)) + 1;
-    m.nB = long(std::floor((hi - reach - x0) / h)) - 1;
-    if (m.nB - m.nA + 1 > whole) m.period = whole;
+    // Folding: positions nA..nB lie at least `reach` (plus a voxel of safety on each side, so
+    // rounding never crosses the margin) inside both faces.
+    long nA = 0, nB = -1, folds = 0;
+    if (period > 0.0) {
+        const double steps = period / h;
+        const long whole = std::lround(steps);
+        if (whole >= 1 && std::abs(steps - double(whole)) <= 1e-9 * steps) {
+            nA = long(std::ceil((lo + reach - x0) / h)) + 1;
+            nB = long(std::floor((hi - reach - x0) / h)) - 1;
+            if (nB - nA + 1 > whole) folds = whole;
+        }
+    }
+    // Mirror: position n's image about the middle is M - n, when that is a grid position.
+    const double images = (lo + hi - 2.0 * x0) / h;
+    const long M = std::lround(images);
+    const bool mirrored = mirror && std::abs(images - double(M)) <= 1e-6;
+    auto fold = [&](long n) { return folds > 0 && n >= nA + folds && n <= nB ? nA + (n - nA) % folds : n; };
+    auto canonical = [&](long n) {
+        if (mirrored && M - n >= m.n0 && M - n < n) n = M - n;
+        n = fold(n);
+        // Within the period, the field is symmetric about the middle's images too (periodic
+        // between the zones and mirror symmetric): a pair of images shares the smaller's slot.
+        if (mirrored && folds > 0 && n >= nA && n < nA + folds && M - n >= nA && M - n <= nB)
+            n = std::min(n, nA + (M - n - nA) % folds);
+        return n;
+    };
+    std::vector<long> of(std::size_t(m.n1 - m.n0 + 1));
+    for (long n = m.n0; n <= m.n1; ++n) {
+        of[std::size_t(n - m.n0)] = canonical(n);
+        if (of[std::size_t(n - m.n0)] == n) m.positions.push_back(n);
+    }
+    m.slotOf.resize(of.size());
+    for (std::size_t i = 0; i < of.size(); ++i)
+        m.slotOf[i] = long(std::lower_bound(m.positions.begin(), m.positions.end(), of[i]) - m.positions.begin());
     return m;
 }
 
@@ -88,6 +111,8 @@ struct PeriodicTiling::BoundCache {
 struct PeriodicTiling::Table {
     std::array<AxisMap, 3> axis;
     bool useful = false;
+    /// Block by block (x, y, z block order), each block's values in 8^3 slots (x, y, z order):
+    /// a batch reads a few contiguous bricks instead of 64 rows strided across the table.
     std::vector<double> values;
     tbb::collaborative_once_flag once;
     /// Per axis, blocks of up to 8 slots whose positions are consecutive (start, length), and
@@ -100,8 +125,14 @@ struct PeriodicTiling::Table {
     std::unique_ptr<std::once_flag[]> blockDone;
 };
 
-PeriodicTiling::PeriodicTiling(FieldPtr child, const Box3& box, const Vec3d& period, double reach)
-    : mChild(std::move(child)), mBox(box), mPeriod(period), mReach(reach), mBounds(std::make_unique<BoundCache>())
+PeriodicTiling::PeriodicTiling(FieldPtr child, const Box3& box, const Vec3d& period, double reach,
+                               std::array<bool, 3> mirror)
+    : mChild(std::move(child)),
+      mBox(box),
+      mPeriod(period),
+      mReach(reach),
+      mMirror(mirror),
+      mBounds(std::make_unique<BoundCache>())
 {
     for (int a = 0; a < 3; ++a)
         if (!(period[a] >= 0.0) || !(box.max[a] >= box.min[a]))
@@ -159,7 +190,8 @@ std::size_t PeriodicTiling::tabledValues() const
 {
     std::lock_guard<std::mutex> lock(mMutex);
     std::size_t n = 0;
-    for (const auto& t : mTables) n += t->values.size();
+    for (const auto& t : mTables)
+        if (!t->values.empty()) n += std::size_t(t->axis[0].size() * t->axis[1].size() * t->axis[2].size());
     return n;
 }
 
@@ -194,7 +226,7 @@ const PeriodicTiling::Table* PeriodicTiling::table(const GridBatch& batch) const
                 double q = (batch.origin[a] - lo) / h;
                 q -= std::floor(q);
                 q = std::round(q * 1048576.0) / 1048576.0;
-                t->axis[a] = makeAxis(h, lo + q * h, lo, mBox.max[a], mPeriod[a], mReach);
+                t->axis[a] = makeAxis(h, lo + q * h, lo, mBox.max[a], mPeriod[a], mReach, mMirror[a]);
                 total *= double(t->axis[a].n1 - t->axis[a].n0 + 1);
                 folded *= double(t->axis[a].size());
             }
@@ -207,8 +239,6 @@ const PeriodicTiling::Table* PeriodicTiling::table(const GridBatch& batch) const
     if (!found->useful) return nullptr;
     tbb::collaborative_call_once(found->once, [&] {
         Table& t = *found;
-        const long sx = t.axis[0].size(), sy = t.axis[1].size(), sz = t.axis[2].size();
-        t.values.assign(std::size_t(sx * sy * sz), 0.0);
         for (int a = 0; a < 3; ++a) {
             const AxisMap& m = t.axis[a];
             t.runOf[a].resize(std::size_t(m.size()));
@@ -220,7 +250,9 @@ const PeriodicTiling::Table* PeriodicTiling::table(const GridBatch& batch) const
                 s += len;
             }
         }
-        t.blockDone = std::make_unique<std::once_flag[]>(t.runs[0].size() * t.runs[1].size() * t.runs[2].size());
+        const std::size_t blocks = t.runs[0].size() * t.runs[1].size() * t.runs[2].size();
+        t.values.assign(blocks * kBrick, 0.0);
+        t.blockDone = std::make_unique<std::once_flag[]>(blocks);
     });
     return found;
 }
@@ -230,7 +262,6 @@ void PeriodicTiling::fillBlock(Table& t, std::size_t bx, std::size_t by, std::si
     const auto [s0, l0] = t.runs[0][bx];
     const auto [s1, l1] = t.runs[1][by];
     const auto [s2, l2] = t.runs[2][bz];
-    const long sy = t.axis[1].size(), sz = t.axis[2].size();
     GridBatch g;
     g.spacing = Vec3d(t.axis[0].h, t.axis[1].h, t.axis[2].h);
     g.origin = Vec3d(t.axis[0].x0 + double(t.axis[0].position(s0)) * t.axis[0].h,
@@ -241,10 +272,11 @@ void PeriodicTiling::fillBlock(Table& t, std::size_t bx, std::size_t by, std::si
     g.nz = l2;
     std::array<double, 512> block;
     mChild->gridValues(g, block);
+    double* brick = t.values.data() + ((bx * t.runs[1].size() + by) * t.runs[2].size() + bz) * kBrick;
     std::size_t n = 0;
     for (int i = 0; i < l0; ++i)
         for (int j = 0; j < l1; ++j)
-            for (int k = 0; k < l2; ++k) t.values[std::size_t(((s0 + i) * sy + s1 + j) * sz + s2 + k)] = block[n++];
+            for (int k = 0; k < l2; ++k) brick[(i * 8 + j) * 8 + k] = block[n++];
 }
 
 void PeriodicTiling::gridValues(const GridBatch& batch, std::span<double> out) const
@@ -282,12 +314,22 @@ void PeriodicTiling::gridValues(const GridBatch& batch, std::span<double> out) c
                 const std::size_t b = (rx[i] * ny + ry[j]) * nz + rz[k];
                 std::call_once(table.blockDone[b], [&] { fillBlock(table, rx[i], ry[j], rz[k]); });
             }
-    const long sy = t->axis[1].size(), sz = t->axis[2].size();
+    // Each slot's place: its block's brick and its offset in the block's run.
+    std::array<std::array<std::size_t, 64>, 3> part;
+    for (int a = 0; a < 3; ++a)
+        for (int i = 0; i < counts[a]; ++i) {
+            const std::uint32_t run = table.runOf[a][slots[a][i]];
+            part[a][i] = std::size_t(slots[a][i] - table.runs[a][run].first);
+            if (a == 0) part[a][i] = run * ny * nz * kBrick + part[a][i] * 64;
+            if (a == 1) part[a][i] = run * nz * kBrick + part[a][i] * 8;
+            if (a == 2) part[a][i] = run * kBrick + part[a][i];
+        }
+    const double* values = t->values.data();
     std::size_t n = 0;
     for (int i = 0; i < batch.nx; ++i)
         for (int j = 0; j < batch.ny; ++j) {
-            const double* row = t->values.data() + (slots[0][i] * sy + slots[1][j]) * sz;
-            for (int k = 0; k < batch.nz; ++k) out[n++] = row[slots[2][k]];
+            const double* row = values + part[0][i] + part[1][j];
+            for (int k = 0; k < batch.nz; ++k) out[n++] = row[part[2][k]];
         }
 }
 

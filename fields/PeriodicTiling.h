@@ -4,6 +4,7 @@
 
 #include "fields/FieldNode.h"
 
+#include <array>
 #include <memory>
 #include <mutex>
 #include <vector>
@@ -22,7 +23,12 @@ namespace voxlat {
 /// Per axis, grid positions closer than @a reach to a face (the faces' zones, up to a leaf
 /// beyond the box) are tabled as they are, and the positions between the zones map onto one
 /// period, so a W x W x W domain needs (2 zones + 1 period)^3 evaluations of the child instead
-/// of W^3. The table is built the first time a grid (spacing and phase) is seen, by all threads
+/// of W^3. Along an axis where @a mirror says the child is its own mirror image about the box's
+/// middle (child(p) = child(p') for p' p's image), positions above the middle read their images'
+/// values, and so do the period's positions paired by the mirror (periodic and mirror symmetric,
+/// the child is symmetric within the period too): about a quarter of the table per axis. The
+/// values an image reads equal the child's there up to rounding (the child evaluated at the
+/// image instead). The table is built the first time a grid (spacing and phase) is seen, by all threads
 /// that need it, from sample positions that depend only on the grid: results are identical for
 /// any thread count. Batches the table does not cover, batches one sample thick (slices), grids
 /// whose spacing does not divide the period and grids beyond the first four are evaluated by the
@@ -32,7 +38,7 @@ namespace voxlat {
 /// only on the box and not on which thread asked first.
 class PeriodicTiling final : public FieldNode {
 public:
-    PeriodicTiling(FieldPtr child, const Box3& box, const Vec3d& period, double reach);
+    PeriodicTiling(FieldPtr child, const Box3& box, const Vec3d& period, double reach, std::array<bool, 3> mirror = {});
     ~PeriodicTiling() override;
 
     void values(std::span<const Vec3d> points, std::span<double> out) const override;
@@ -57,6 +63,7 @@ private:
     Box3 mBox;
     Vec3d mPeriod;
     double mReach;
+    std::array<bool, 3> mMirror;
     mutable std::mutex mMutex;
     mutable std::vector<std::unique_ptr<Table>> mTables;
     std::unique_ptr<BoundCache> mBounds;

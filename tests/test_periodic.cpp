@@ -92,6 +92,14 @@ TEST(PeriodicTiling, GridValuesMatchTheFieldEverywhere)
     // The values did come from a table, and one much smaller than the domain.
     EXPECT_GT(tiled.tabledValues(), 0u);
     EXPECT_LT(tiled.tabledValues(), d.voxelCount() / 4);
+    // A BCC box is its own mirror image along every axis: the high zone reads the low zone's
+    // images and the period's pairs of images share a slot, the values still the field's (up to
+    // the rounding of evaluating at the image), in a table half the size per axis (zones of 21 positions, periods of
+    // 20: 62 -> 31).
+    const PeriodicTiling mirrored(b.iso, b.box, Vec3d(2.0), b.reach, {true, true, true});
+    EXPECT_LT(largestLeafDifference(mirrored, *b.iso, d), 1e-9);
+    EXPECT_GT(mirrored.tabledValues(), 0u);
+    EXPECT_LE(double(mirrored.tabledValues()), std::pow(0.5, 3) * double(tiled.tabledValues()));
 }
 
 TEST(PeriodicTiling, SpacingThatDoesNotDivideThePeriodEvaluatesTheField)
@@ -347,6 +355,19 @@ TEST(PeriodicTiling, PeriodZeroAlongAnAxisTablesItAsItIs)
     const PeriodicTiling wrong(b.iso, b.box, Vec3d(2.0), b.reach);
     EXPECT_GT(largestLeafDifference(wrong, *b.iso, d), 1e-3);
     EXPECT_THROW(PeriodicTiling(b.iso, b.box, Vec3d(0.0), b.reach), std::invalid_argument);
+}
+
+TEST(PeriodicTiling, MirrorsOnlyWhereTheFieldIsSymmetric)
+{
+    // Radii graded along z: mirror images across x and y only (z is tabled as it is).
+    const BccBox b = gradedBccBox(4, 4.0, 0.5);
+    const PeriodicTiling tiled(b.iso, b.box, Vec3d(4.0, 4.0, 0.0), b.reach, {true, true, false});
+    const Domain d = Domain::fromBox(Box3{b.box.min - Vec3d(0.5), b.box.max + Vec3d(0.5)}, 0.1);
+    EXPECT_LT(largestLeafDifference(tiled, *b.iso, d), 1e-9);
+    EXPECT_GT(tiled.tabledValues(), 0u);
+    // Claiming a mirror along z, where the radii differ, is visible: the check above has teeth.
+    const PeriodicTiling wrong(b.iso, b.box, Vec3d(4.0, 4.0, 0.0), b.reach, {true, true, true});
+    EXPECT_GT(largestLeafDifference(wrong, *b.iso, d), 1e-3);
 }
 
 TEST(DensityPieces, AxisThatDoesNotRepeatIsOneSegment)

@@ -684,8 +684,13 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
                                 !g["sigma"].isSequence() && gradedAxis >= 0;
     Vec3d period = uniform ? uniform->size : Vec3d(0.0);
     if (partlyPeriodic) period[gradedAxis] = 0.0;
+    // Identical struts (same sigma and radius) whose frame is its own mirror image: the field is
+    // too (radii graded along an axis: mirror images across the other axes keep their radii).
+    std::array<bool, 3> mirror{};
+    if (periodic || partlyPeriodic)
+        for (int a = 0; a < 3; ++a) mirror[a] = a != gradedAxis && mirrorSymmetric(frame, box, a);
     FieldPtr evaluated = iso;
-    if (periodic || partlyPeriodic) evaluated = std::make_shared<PeriodicTiling>(iso, box, period, rcMax);
+    if (periodic || partlyPeriodic) evaluated = std::make_shared<PeriodicTiling>(iso, box, period, rcMax, mirror);
     const double t = spec.has("level") ? spec["level"].positiveNumber() : 1.0;
     {
         std::ostringstream d;
@@ -727,10 +732,8 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     if ((periodic || partlyPeriodic) && node.density) {
         node.densityPeriod = period;
         node.densityReach = rcMax;
-        // Identical struts (same sigma and radius) whose frame is its own mirror image: the
-        // field is too, and the density pieces measure one face zone for both.
-        // (Radii graded along an axis: mirror images across the other axes keep their radii.)
-        for (int a = 0; a < 3; ++a) node.densityMirror[a] = a != gradedAxis && mirrorSymmetric(frame, box, a);
+        // The density pieces measure one face zone for both faces of a mirror axis.
+        node.densityMirror = mirror;
         node.densityIndicator = iso;
         // One period is sampled at a fixed phase, so its lattice does not average over phases
         // as the whole box's incommensurate one does: sample it 1.5 times finer (level within
