@@ -31,7 +31,10 @@ Latest side-by-side run: 2.05 s vs 123.0 s (60.1x), peak 901 MB, levels 1.148 % 
 0.79 s vs 16.3 s (20.6x), 1.308 % apart.
 2026-11-27 (after W1's second pass: the domain clip by box grid values, sign words, the mesher's
 dense block index), quiet machine: 2.73 s vs 226.6 s (83.0x), peak 575 MB, level 0.062 % from the
-Monte Carlo estimate; at 0.2 mm 1.07 s vs 27.5 s (25.8x)."""
+Monte Carlo estimate; at 0.2 mm 1.07 s vs 27.5 s (25.8x).
+2026-11-27 (quiet, load 1.0), after the density pieces' and the tiling table's in-period mirror
+and the AVX2 row loop: 2.34 s vs 230.0 s (98.2x), peak 561 MB, level 0.913285 (0.062 % from the
+Monte Carlo estimate; the same STL bytes as before); at 0.2 mm 0.83 s vs 33.3 s (40.3x)."""
 import json
 import math
 import re
