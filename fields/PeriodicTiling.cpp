@@ -314,15 +314,13 @@ void PeriodicTiling::gridValues(const GridBatch& batch, std::span<double> out) c
                 const std::size_t b = (rx[i] * ny + ry[j]) * nz + rz[k];
                 std::call_once(table.blockDone[b], [&] { fillBlock(table, rx[i], ry[j], rz[k]); });
             }
-    // Each slot's place: its block's brick and its offset in the block's run.
+    // Each slot's part of its value's index: its block's brick and its offset in the block's run.
+    const std::size_t brickStride[3] = {ny * nz * kBrick, nz * kBrick, kBrick}, offsetStride[3] = {64, 8, 1};
     std::array<std::array<std::size_t, 64>, 3> part;
     for (int a = 0; a < 3; ++a)
         for (int i = 0; i < counts[a]; ++i) {
             const std::uint32_t run = table.runOf[a][slots[a][i]];
-            part[a][i] = std::size_t(slots[a][i] - table.runs[a][run].first);
-            if (a == 0) part[a][i] = run * ny * nz * kBrick + part[a][i] * 64;
-            if (a == 1) part[a][i] = run * nz * kBrick + part[a][i] * 8;
-            if (a == 2) part[a][i] = run * kBrick + part[a][i];
+            part[a][i] = run * brickStride[a] + std::size_t(slots[a][i] - table.runs[a][run].first) * offsetStride[a];
         }
     const double* values = t->values.data();
     std::size_t n = 0;

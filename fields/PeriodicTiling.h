@@ -26,7 +26,7 @@ namespace voxlat {
 /// of W^3. Along an axis where @a mirror says the child is its own mirror image about the box's
 /// middle (child(p) = child(p') for p' p's image), positions above the middle read their images'
 /// values, and so do the period's positions paired by the mirror (periodic and mirror symmetric,
-/// the child is symmetric within the period too): about a quarter of the table per axis. The
+/// the child is symmetric within the period too): about half the positions per axis. The
 /// values an image reads equal the child's there up to rounding (the child evaluated at the
 /// image instead). The table is built the first time a grid (spacing and phase) is seen, by all threads
 /// that need it, from sample positions that depend only on the grid: results are identical for
