@@ -189,8 +189,12 @@ TEST(DensityPieces, TileTheBoxAndMatchTheWholeBoxOnTheSameLattice)
         return n;
     };
     EXPECT_EQ(samples(mirrored), 22u * 22u * 22u);
+    // A BCC box is also its own image when x and y are swapped: one of each piece and its
+    // transpose, counted twice (6 of the 9 x-y pairs).
+    const std::vector<DensityPiece> swapped = periodicPieces(b.box, Vec3d(4.0), b.reach, 0.2, {true, true, true}, true);
+    ASSERT_EQ(swapped.size(), 18u);
     const DensityPiece whole{Domain::fromBox(b.box, pieces.front().domain.voxel), 1.0};
-    for (const auto* set : {&pieces, &mirrored}) {
+    for (const auto* set : {&pieces, &mirrored, &swapped}) {
         double voxels = 0.0;
         for (const DensityPiece& p : *set) voxels += p.weight * double(p.domain.voxelCount());
         EXPECT_EQ(voxels, double(whole.domain.voxelCount()));
@@ -198,7 +202,7 @@ TEST(DensityPieces, TileTheBoxAndMatchTheWholeBoxOnTheSameLattice)
     // The same lattice over the whole box: the pieces are translates (and mirror images) of its
     // parts, so the same measure gives the same level.
     const DensitySolution fromBox = solveDensity(*b.iso, std::span(&whole, 1), 0.25);
-    for (const auto* set : {&pieces, &mirrored}) {
+    for (const auto* set : {&pieces, &mirrored, &swapped}) {
         const DensitySolution fromPieces = solveDensity(*b.iso, *set, 0.25);
         EXPECT_NEAR(fromPieces.level, fromBox.level, 1e-5);
         EXPECT_NEAR(fromPieces.achieved, 0.25, 1e-6);
@@ -237,9 +241,10 @@ TEST(DensityPieces, BoxOfCellsHitsTheTargetOnTheMesh)
     job.solveLevels();
     ASSERT_TRUE(job.report()["fields"]["lattice"].contains("density_measured_on"));
     // BCC is its own mirror image along every axis: one face zone per axis, and each part of the
-    // period measured by its half (twice) and its middle sample: four segments.
+    // period measured by its half (twice) and its middle sample: four segments; and its own image
+    // with x and y swapped: 10 of the 16 x-y pairs.
     EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
-              "one period of the interior (64 weighted pieces)");
+              "one period of the interior (40 weighted pieces)");
     expectMeshHoldsTheTarget(job);
 }
 
@@ -259,7 +264,8 @@ TEST(DensityPieces, CoarseJobVoxelKeepsTheLevel)
 TEST(DensityPieces, AsymmetricCellMeasuresBothFaceZones)
 {
     // A grid cell with one body diagonal: valid (its faces carry the corners), periodic, but no
-    // mirror maps the diagonal onto a strut, so both face zones of every axis are measured.
+    // mirror maps the diagonal onto a strut, so both face zones of every axis are measured
+    // (four segments per axis); swapping x and y keeps it: 10 of the 16 x-y pairs.
     const std::string text =
         "voxel: 0.1\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\n"
         "fields:\n  lattice: {struts: {cell: {lines: [[[0, 0, 0], [1, 0, 0]], [[0, 1, 0], [1, 1, 0]], "
@@ -271,7 +277,7 @@ TEST(DensityPieces, AsymmetricCellMeasuresBothFaceZones)
     Job job(parseRecipe(text, "diagonal.yaml", "."));
     job.solveLevels();
     EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
-              "one period of the interior (64 weighted pieces)");
+              "one period of the interior (40 weighted pieces)");
     expectMeshHoldsTheTarget(job);
 }
 
@@ -401,9 +407,9 @@ TEST(DensityPieces, RadiiGradedAlongAnAxisHitTheTargetOnTheMesh)
                     "graded.yaml", "."));
     job.solveLevels();
     // BCC mirrors along x and y (the radii depend on z only): four segments each (the face zone,
-    // halves and middles of the period), one along z.
+    // halves and middles of the period), one along z; x and y swapped: 10 of the 16 pairs.
     EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
-              "one period of the interior (16 weighted pieces)");
+              "one period of the interior (10 weighted pieces)");
     const TriangleMesh& mesh = job.mesh();
     EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.01 * 0.20);
     EXPECT_TRUE(checkTopology(mesh).closedManifold());

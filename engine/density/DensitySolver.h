@@ -64,9 +64,11 @@ struct DensityPiece {
 /// (the box is not a whole number of periods, fewer than two periods fold, or the period
 /// differs between axes). A period of 0 along an axis: the field does not repeat along it, and
 /// one segment spans the whole axis there (the box must still be a whole number of the other
-/// axes' period along it).
+/// axes' period along it). With @a swapXY (the field is its own image when x and y are swapped
+/// about the box's corner) and x and y cut into the same segments, a piece and its transpose
+/// are the same samples: only one of each pair is kept, counted twice.
 std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, double reach, double voxel,
-                                         std::array<bool, 3> mirror = {});
+                                         std::array<bool, 3> mirror = {}, bool swapXY = false);
 
 /// solveDensity() over weighted @a pieces: the level at which the weighted share of {g < level}
 /// is @a target of the pieces' weighted voxels, each voxel's share being the exact volume below

@@ -25,7 +25,7 @@ namespace voxlat {
 using namespace coverage;
 
 std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, double reach, double voxel,
-                                         std::array<bool, 3> mirror)
+                                         std::array<bool, 3> mirror, bool swapXY)
 {
     // Axes of period 0 do not fold (one piece spans them); the others share one period.
     const double p = std::max({period[0], period[1], period[2]});
@@ -38,6 +38,7 @@ std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, d
         long start;  ///< in lattice steps from box.min
         long voxels;
         double weight;
+        bool operator==(const Segment&) const = default;
     };
     std::array<std::vector<Segment>, 3> segments;
     for (int a = 0; a < 3; ++a) {
@@ -82,17 +83,22 @@ std::vector<DensityPiece> periodicPieces(const Box3& box, const Vec3d& period, d
         }
         if (!mirror[a]) segments[a].push_back({total - zone, zone, 1.0});
     }
+    // The field its own image under swapping x and y (about the box's corner) and both axes cut
+    // alike: the piece (x, y) is the transpose of (y, x), so one of each pair counts twice.
+    const bool transposed = swapXY && segments[0] == segments[1];
     std::vector<DensityPiece> pieces;
-    for (const Segment& x : segments[0])
-        for (const Segment& y : segments[1])
+    for (std::size_t i = 0; i < segments[0].size(); ++i)
+        for (std::size_t j = transposed ? i : 0; j < segments[1].size(); ++j)
             for (const Segment& z : segments[2]) {
+                const Segment& x = segments[0][i];
+                const Segment& y = segments[1][j];
                 DensityPiece piece;
                 piece.domain.voxel = step;
                 piece.domain.box.min = box.min + step * Vec3d(double(x.start), double(y.start), double(z.start));
                 piece.domain.dims = openvdb::Coord(int(x.voxels), int(y.voxels), int(z.voxels));
                 piece.domain.box.max =
                     piece.domain.box.min + step * Vec3d(double(x.voxels), double(y.voxels), double(z.voxels));
-                piece.weight = x.weight * y.weight * z.weight;
+                piece.weight = x.weight * y.weight * z.weight * (transposed && j > i ? 2.0 : 1.0);
                 piece.within = box;
                 pieces.push_back(piece);
             }

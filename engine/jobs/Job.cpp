@@ -217,7 +217,7 @@ void Job::solveLevels()
             const std::vector<DensityPiece> pieces =
                 node.densityPeriod && node.densityBox && node.densityVoxel
                     ? periodicPieces(*node.densityBox, *node.densityPeriod, node.densityReach, *node.densityVoxel,
-                                     node.densityMirror)
+                                     node.densityMirror, node.densitySwapXY)
                     : std::vector<DensityPiece>{};
             const DensitySolution s = timed("solve " + node.name, [&] {
                 if (!pieces.empty())

@@ -54,6 +54,9 @@ struct LevelNode {
     /// Along these axes the solid is its own mirror image about the middle of densityBox, so
     /// periodicPieces() measures one face zone for both.
     std::array<bool, 3> densityMirror{};
+    /// The solid is its own image when x and y are swapped about densityBox's corner, so
+    /// periodicPieces() measures one of each piece and its transpose.
+    bool densitySwapXY = false;
     /// The field the density solve measures when it is not the solid's indicator (the same
     /// values; e.g. without a tiling whose tables would not pay off on the measuring pieces).
     FieldPtr densityIndicator{};

@@ -69,11 +69,11 @@ UnitCell readCell(const FieldBuilder& builder, const RecipeNode& c)
     return cell;
 }
 
-/// Whether every strut of @a f has a strut of @a f as its mirror image about the middle of
-/// @a box along @a axis (end points equal within 1e-9 of the box's size). A point near the
-/// rounding boundary of the comparison can only make a symmetric frame look asymmetric, which
-/// costs time, never accuracy.
-bool mirrorSymmetric(const Frame& f, const Box3& box, int axis)
+/// Whether every strut of @a f has a strut of @a f as its @a image (end points equal within 1e-9
+/// of the box's size). A point near the rounding boundary of the comparison can only make a
+/// symmetric frame look asymmetric, which costs time, never accuracy.
+template <class Image>
+bool mapsOntoItself(const Frame& f, const Box3& box, Image&& image)
 {
     const double quantum = 1e-9 * std::max(1.0, box.extent().length());
     using Key = std::array<long long, 6>;
@@ -90,14 +90,28 @@ bool mirrorSymmetric(const Frame& f, const Box3& box, int axis)
     std::vector<Key> keys;
     for (const auto& s : f.struts) keys.push_back(key(f.nodes[s[0]], f.nodes[s[1]]));
     std::sort(keys.begin(), keys.end());
-    const double mid = box.min[axis] + box.max[axis];
-    for (const auto& s : f.struts) {
-        Vec3d p = f.nodes[s[0]], q = f.nodes[s[1]];
-        p[axis] = mid - p[axis];
-        q[axis] = mid - q[axis];
-        if (!std::binary_search(keys.begin(), keys.end(), key(p, q))) return false;
-    }
+    for (const auto& s : f.struts)
+        if (!std::binary_search(keys.begin(), keys.end(), key(image(f.nodes[s[0]]), image(f.nodes[s[1]]))))
+            return false;
     return true;
+}
+
+/// Whether @a f is its own mirror image about the middle of @a box along @a axis.
+bool mirrorSymmetric(const Frame& f, const Box3& box, int axis)
+{
+    const double mid = box.min[axis] + box.max[axis];
+    return mapsOntoItself(f, box, [&](Vec3d p) {
+        p[axis] = mid - p[axis];
+        return p;
+    });
+}
+
+/// Whether @a f is its own image when x and y are swapped about the corner of @a box.
+bool swapSymmetric(const Frame& f, const Box3& box)
+{
+    const Vec3d& o = box.min;
+    return mapsOntoItself(f, box,
+                          [&](const Vec3d& p) { return Vec3d(o.x() + p.y() - o.y(), o.y() + p.x() - o.x(), p.z()); });
 }
 
 std::array<int, 3> readCounts(const RecipeNode& n)
@@ -732,8 +746,11 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     if ((periodic || partlyPeriodic) && node.density) {
         node.densityPeriod = period;
         node.densityReach = rcMax;
-        // The density pieces measure one face zone for both faces of a mirror axis.
+        // The density pieces measure one face zone for both faces of a mirror axis, and one of
+        // each piece and its transpose where swapping x and y keeps the frame (and the radii:
+        // graded along z or not at all).
         node.densityMirror = mirror;
+        node.densitySwapXY = (gradedAxis < 0 || gradedAxis == 2) && swapSymmetric(frame, box);
         node.densityIndicator = iso;
         // One period is sampled at a fixed phase, so its lattice does not average over phases
         // as the whole box's incommensurate one does: sample it 1.5 times finer (level within
