@@ -11,7 +11,12 @@ PYTHON = "/usr/bin/python3" if Path("/usr/bin/python3").exists() else sys.execut
 
 
 def measure(cmd, env=None, cwd=None):
-    """Runs cmd; returns (seconds, peak MB of the process, stdout+stderr). Exits on failure."""
+    """Runs cmd; returns (seconds, peak MB of the process, stdout+stderr). Exits on failure.
+
+    The dirty pages earlier runs left (a side's 1 GB STL) are written out first, so neither side
+    of a comparison pays for the other's writeback (W2g's voxlat STL stage took 1.9 s instead of
+    1.1 s right after the reference's STL)."""
+    os.sync()
     start = time.perf_counter()
     proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, cwd=cwd)
     out = proc.stdout.read().decode(errors="replace")

@@ -40,6 +40,9 @@ graded 4.01 s vs 232.7 s (58.0x, target met), peak 581 MB (solve 1.16 s, evaluat
 STL 1.09 s, pieces 0.20 s); trimmed 31.2 s vs 201.2 s (6.4x; evaluate 11.6 s, solve 18.2 s);
 cylinder 28.4 s vs 158.3 s (5.6x; evaluate 10.5 s, solve 16.0 s). Earlier the same day, before
 these: graded 4.94 s vs 249.5 s (50.5x) with only the solve's mirror, 5.29-6.75 s (31-46x) before.
+With the density pieces' x-y swap too (18 421 -> 12 644 leaves): graded 4.09 s vs 177.3 s (43.4x:
+the STL stage 1.88 s, stalled behind the reference's writeback; bench/common.py now syncs before
+every timed run) and 3.16 s vs 198.7 s (62.9x; solve 0.60 s, evaluate 1.00 s, mesh + STL 1.26 s).
 """
 import json
 import math
