@@ -1,6 +1,5 @@
 #include "fields/StrutConvolution.h"
 
-#include "fields/GaussianTable.h"
 #include "fields/StrutRows.h"
 
 #include <algorithm>

@@ -6,7 +6,7 @@
 
 #include "fields/GaussianTable.h"
 
-#include <cstdint>
+#include <algorithm>
 
 namespace voxlat {
 
