@@ -34,6 +34,21 @@ inline TrigTerms<double> trigTerms(double x)
     const double s = std::sin(x), c = std::cos(x);
     return {s, c, 2.0 * s * c, c * c - s * s};
 }
+/// Dual numbers by the same identities: one sine and one cosine per coordinate instead of a sine
+/// and a cosine for each of the four terms (gradients at points are dominated by those calls).
+/// The same from @a s = sin(x.v) and @a c = cos(x.v) already known.
+inline TrigTerms<Dual3> trigTermsFrom(double s, double c, const Dual3& x)
+{
+    const double s2 = 2.0 * s * c, c2 = c * c - s * s;
+    auto withSlope = [&](double value, double slope) {
+        return Dual3(value, slope * x.d[0], slope * x.d[1], slope * x.d[2]);
+    };
+    return {withSlope(s, c), withSlope(c, -s), withSlope(s2, 2.0 * c2), withSlope(c2, -2.0 * s2)};
+}
+inline TrigTerms<Dual3> trigTerms(const Dual3& x)
+{
+    return trigTermsFrom(std::sin(x.v), std::cos(x.v), x);
+}
 
 enum class TpmsType { Gyroid, SchwarzP, SchwarzD, IWP, Neovius, FischerKochS, Lidinoid, SplitP, FRD };
 

@@ -1,7 +1,9 @@
 #include "fields/TpmsField.h"
 
 #include "fields/LevelSolid.h"
+#include "fields/SinCos.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -69,25 +71,52 @@ TpmsField::TpmsField(TpmsType type, const Vec3d& cellSize) : mType(type), mCell(
     }
 }
 
+namespace {
+/// Points per batch of sines and cosines in values() and gradients().
+constexpr std::size_t kTrigChunk = 128;
+/// The scaled coordinates of up to kTrigChunk points and their sines and cosines, per axis.
+struct PointTrig {
+    double angle[3][kTrigChunk], s[3][kTrigChunk], c[3][kTrigChunk];
+    void compute(std::span<const Vec3d> points, std::size_t begin, std::size_t n, const double* wave)
+    {
+        for (int a = 0; a < 3; ++a) {
+            for (std::size_t k = 0; k < n; ++k) angle[a][k] = wave[a] * points[begin + k][a];
+            sinCosBatch(angle[a], s[a], c[a], n);
+        }
+    }
+};
+}  // namespace
+
 void TpmsField::values(std::span<const Vec3d> points, std::span<double> out) const
 {
-    for (std::size_t n = 0; n < points.size(); ++n) {
-        const Vec3d& p = points[n];
-        out[n] =
-            tpmsEquation(mType, trigTerms(mWave[0] * p[0]), trigTerms(mWave[1] * p[1]), trigTerms(mWave[2] * p[2]));
+    PointTrig t;
+    for (std::size_t begin = 0; begin < points.size(); begin += kTrigChunk) {
+        const std::size_t n = std::min(kTrigChunk, points.size() - begin);
+        t.compute(points, begin, n, mWave.asPointer());
+        for (std::size_t k = 0; k < n; ++k) {
+            const double sx = t.s[0][k], cx = t.c[0][k], sy = t.s[1][k], cy = t.c[1][k], sz = t.s[2][k], cz = t.c[2][k];
+            out[begin + k] = tpmsEquation(mType, TrigTerms<double>{sx, cx, 2.0 * sx * cx, cx * cx - sx * sx},
+                                          TrigTerms<double>{sy, cy, 2.0 * sy * cy, cy * cy - sy * sy},
+                                          TrigTerms<double>{sz, cz, 2.0 * sz * cz, cz * cz - sz * sz});
+        }
     }
 }
 
 void TpmsField::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
 {
-    for (std::size_t n = 0; n < points.size(); ++n) {
-        const Vec3d& p = points[n];
-        const Dual3 x(mWave[0] * p[0], mWave[0], 0, 0);
-        const Dual3 y(mWave[1] * p[1], 0, mWave[1], 0);
-        const Dual3 z(mWave[2] * p[2], 0, 0, mWave[2]);
-        const Dual3 f = tpmsEquation(mType, trigTerms(x), trigTerms(y), trigTerms(z));
-        out[n] = f.v;
-        grad[n] = Vec3d(f.d[0], f.d[1], f.d[2]);
+    PointTrig t;
+    for (std::size_t begin = 0; begin < points.size(); begin += kTrigChunk) {
+        const std::size_t n = std::min(kTrigChunk, points.size() - begin);
+        t.compute(points, begin, n, mWave.asPointer());
+        for (std::size_t k = 0; k < n; ++k) {
+            const Dual3 x(t.angle[0][k], mWave[0], 0, 0), y(t.angle[1][k], 0, mWave[1], 0),
+                z(t.angle[2][k], 0, 0, mWave[2]);
+            const Dual3 f =
+                tpmsEquation(mType, trigTermsFrom(t.s[0][k], t.c[0][k], x), trigTermsFrom(t.s[1][k], t.c[1][k], y),
+                             trigTermsFrom(t.s[2][k], t.c[2][k], z));
+            out[begin + k] = f.v;
+            grad[begin + k] = Vec3d(f.d[0], f.d[1], f.d[2]);
+        }
     }
 }
 
@@ -98,14 +127,18 @@ inline TrigTerms<double> termsFrom(double s, double c)
     return {s, c, 2.0 * s * c, c * c - s * s};
 }
 
-/// trigTerms of wave * (origin + i * spacing), i < n: sin and cos from libm at every eighth angle
-/// and rotated from it by exact offsets in between (angle addition, within a few ulp of libm), so
-/// a slicer block's 66 angles per axis cost 9 + 7 libm calls instead of 66.
+/// trigTerms of wave * (origin + i * spacing), i < n: sin and cos (sinCosBatch) at every eighth
+/// angle and rotated from it by exact offsets in between (angle addition, within a few ulp), so a
+/// slicer block's 66 angles per axis cost 9 + 7 sines and cosines instead of 66.
 void axisTerms(double wave, double origin, double spacing, int n, TrigTerms<double>* out)
 {
     constexpr int kStride = 8;
     if (n < 2 * kStride) {
-        for (int i = 0; i < n; ++i) out[i] = trigTerms(wave * (origin + i * spacing));
+        // As the point path computes them (sinCosBatch of the same angles): the same doubles.
+        double angle[2 * kStride], s[2 * kStride], c[2 * kStride];
+        for (int i = 0; i < n; ++i) angle[i] = wave * (origin + i * spacing);
+        sinCosBatch(angle, s, c, std::size_t(n));
+        for (int i = 0; i < n; ++i) out[i] = termsFrom(s[i], c[i]);
         return;
     }
     // The offsets' sines and cosines depend on the spacing only: kept per thread for the next
@@ -115,20 +148,28 @@ void axisTerms(double wave, double origin, double spacing, int n, TrigTerms<doub
     };
     thread_local Offsets offsets;
     if (offsets.wave != wave || offsets.spacing != spacing || offsets.co[0] != 1.0) {
-        for (int k = 0; k < kStride; ++k) {
-            offsets.so[k] = std::sin(wave * (k * spacing));
-            offsets.co[k] = std::cos(wave * (k * spacing));
-        }
+        double angle[kStride];
+        for (int k = 0; k < kStride; ++k) angle[k] = wave * (k * spacing);
+        sinCosBatch(angle, offsets.so, offsets.co, kStride);
         offsets.wave = wave;
         offsets.spacing = spacing;
     }
     const double* so = offsets.so;
     const double* co = offsets.co;
-    for (int i = 0; i < n; i += kStride) {
-        const double angle = wave * (origin + i * spacing), sb = std::sin(angle), cb = std::cos(angle);
-        out[i] = termsFrom(sb, cb);
-        for (int k = 1; k < kStride && i + k < n; ++k)
-            out[i + k] = termsFrom(sb * co[k] + cb * so[k], cb * co[k] - sb * so[k]);
+    // Every eighth angle's sine and cosine in batches, then the rotations between them.
+    constexpr int kBases = 32;
+    for (int first = 0; first < n; first += kBases * kStride) {
+        const int bases = std::min(kBases, (n - first + kStride - 1) / kStride);
+        double angle[kBases], sines[kBases], cosines[kBases];
+        for (int b = 0; b < bases; ++b) angle[b] = wave * (origin + (first + b * kStride) * spacing);
+        sinCosBatch(angle, sines, cosines, std::size_t(bases));
+        for (int b = 0; b < bases; ++b) {
+            const int i = first + b * kStride;
+            const double sb = sines[b], cb = cosines[b];
+            out[i] = termsFrom(sb, cb);
+            for (int k = 1; k < kStride && i + k < n; ++k)
+                out[i + k] = termsFrom(sb * co[k] + cb * so[k], cb * co[k] - sb * so[k]);
+        }
     }
 }
 
@@ -310,13 +351,19 @@ void TpmsField::gridGradients(const GridBatch& batch, std::span<double> out, std
         FieldNode::gridGradients(batch, out, grad);
         return;
     }
-    std::array<TrigTerms<Dual3>, kMax> tx, ty, tz;
-    for (int i = 0; i < batch.nx; ++i)
-        tx[i] = trigTerms(Dual3(mWave[0] * (batch.origin[0] + i * batch.spacing[0]), mWave[0], 0, 0));
-    for (int j = 0; j < batch.ny; ++j)
-        ty[j] = trigTerms(Dual3(mWave[1] * (batch.origin[1] + j * batch.spacing[1]), 0, mWave[1], 0));
-    for (int k = 0; k < batch.nz; ++k)
-        tz[k] = trigTerms(Dual3(mWave[2] * (batch.origin[2] + k * batch.spacing[2]), 0, 0, mWave[2]));
+    std::array<TrigTerms<Dual3>, kMax> terms[3];
+    const int count[3] = {batch.nx, batch.ny, batch.nz};
+    for (int a = 0; a < 3; ++a) {
+        double angle[kMax], s[kMax], c[kMax];
+        for (int i = 0; i < count[a]; ++i) angle[i] = mWave[a] * (batch.origin[a] + i * batch.spacing[a]);
+        sinCosBatch(angle, s, c, std::size_t(count[a]));
+        for (int i = 0; i < count[a]; ++i) {
+            Dual3 x(angle[i]);
+            x.d[a] = mWave[a];
+            terms[a][i] = trigTermsFrom(s[i], c[i], x);
+        }
+    }
+    const auto &tx = terms[0], &ty = terms[1], &tz = terms[2];
     std::size_t n = 0;
     for (int i = 0; i < batch.nx; ++i)
         for (int j = 0; j < batch.ny; ++j)
@@ -358,12 +405,11 @@ void TpmsField::gridValuesShifted(const GridBatch& batch, std::span<const Vec3d>
     }
     std::array<double, kMax> base[3][2];  // sin, cos of the unshifted angle per axis coordinate
     const int count[3] = {batch.nx, batch.ny, batch.nz};
-    for (int a = 0; a < 3; ++a)
-        for (int i = 0; i < count[a]; ++i) {
-            const double angle = mWave[a] * (batch.origin[a] + i * batch.spacing[a]);
-            base[a][0][i] = std::sin(angle);
-            base[a][1][i] = std::cos(angle);
-        }
+    for (int a = 0; a < 3; ++a) {
+        double angle[kMax];
+        for (int i = 0; i < count[a]; ++i) angle[i] = mWave[a] * (batch.origin[a] + i * batch.spacing[a]);
+        sinCosBatch(angle, base[a][0].data(), base[a][1].data(), std::size_t(count[a]));
+    }
     // Shift angles, their sines and cosines, axis by axis (structure of arrays).
     const std::size_t n = batch.size();
     std::vector<double> angle(3 * n), sinA(3 * n), cosA(3 * n);

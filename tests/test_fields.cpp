@@ -6,6 +6,7 @@
 #include "fields/Cylinder.h"
 #include "fields/LevelSolid.h"
 #include "fields/Ramp.h"
+#include "fields/SinCos.h"
 #include "fields/Sphere.h"
 #include "fields/TpmsField.h"
 #include "fields/Transform.h"
@@ -159,6 +160,38 @@ TEST(Periods, ReportedPeriodsRepeatTheField)
     expectRepeats(BooleanField(BooleanOp::Intersection, {gyroid, std::make_shared<RampField>(0, 0, 1, 0.1, 0.3)}),
                   {none, 6, 9}, "clipped along x");
     expectRepeats(Sphere(Vec3d(0), 1), {none, none, none}, "sphere");
+}
+
+TEST(SinCos, WithinOneUlpAndTheSameWhereverAnAngleFallsInABatch)
+{
+    // Against long double sin and cos: at most one unit in the last place (plus the rounding of
+    // the reference), over the angles TPMS coordinates reach and a few exact ones.
+    std::mt19937_64 random(17);
+    std::uniform_real_distribution<double> uniform(-3000.0, 3000.0);
+    std::vector<double> x = {0.0, -0.0, std::numbers::pi / 2, std::numbers::pi, 1e-300, 1e-8, -2.5, 700.125};
+    for (int i = 0; i < 20000; ++i) x.push_back(uniform(random));
+    std::vector<double> s(x.size()), c(x.size());
+    sinCosBatch(x.data(), s.data(), c.data(), x.size());
+    for (std::size_t i = 0; i < x.size(); ++i) {
+        const long double rs = std::sin((long double)x[i]), rc = std::cos((long double)x[i]);
+        // One ulp of the exact value, and the absolute rounding floor near zero.
+        auto ulp = [](long double v) { return std::max(std::abs(std::nextafter(double(v), 2.0) - double(v)), 1e-300); };
+        ASSERT_LE(std::abs((long double)s[i] - rs), 1.01L * ulp(rs)) << x[i];
+        ASSERT_LE(std::abs((long double)c[i] - rc), 1.01L * ulp(rc)) << x[i];
+    }
+    EXPECT_EQ(s[0], 0.0);
+    EXPECT_EQ(c[0], 1.0);
+    // Every angle gets the same doubles at any position and in any batch length (the tails of a
+    // batch go through the same vector function).
+    for (std::size_t offset = 0; offset < 5; ++offset)
+        for (std::size_t n = 1; n <= 9; ++n) {
+            double ps[9], pc[9];
+            sinCosBatch(x.data() + 8 + offset, ps, pc, n);
+            for (std::size_t k = 0; k < n; ++k) {
+                ASSERT_EQ(ps[k], s[8 + offset + k]);
+                ASSERT_EQ(pc[k], c[8 + offset + k]);
+            }
+        }
 }
 
 TEST(Tpms, GridBatchFastPathEqualsPointPath)

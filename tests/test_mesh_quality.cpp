@@ -712,6 +712,25 @@ TEST(MeshCheck, SelfIntersectionsMatchABruteForceCount)
     EXPECT_EQ(countSelfIntersections(both), brute);
 }
 
+TEST(MeshCheck, SelfIntersectionsWithASharedCorner)
+{
+    // Triangles sharing one corner cross when the edge of one away from it passes through the
+    // other; both ends of that edge on one side of the other's plane (or the shared corner alone
+    // on it) is no crossing.
+    auto pair = [](const openvdb::Vec3f& p, const openvdb::Vec3f& q) {
+        TriangleMesh m;
+        m.points = {openvdb::Vec3f(0.0f), openvdb::Vec3f(2.0f, 0.0f, 0.0f), openvdb::Vec3f(0.0f, 2.0f, 0.0f), p, q};
+        m.triangles = {openvdb::Vec3I(0, 1, 2), openvdb::Vec3I(0, 3, 4)};
+        return m;
+    };
+    EXPECT_EQ(countSelfIntersections(pair({0.5f, 0.5f, -1.0f}, {0.5f, 0.5f, 1.0f})), 1u);
+    EXPECT_EQ(countSelfIntersections(pair({0.5f, 0.5f, -1.0f}, {0.5f, 0.5f, -0.5f})), 0u);
+    EXPECT_EQ(countSelfIntersections(pair({0.5f, 0.5f, 1.0f}, {0.7f, 0.2f, 2.0f})), 0u);
+    // The far edge passes the plane outside the first triangle, but that one's long edge goes
+    // through the second: one crossing either way round.
+    EXPECT_EQ(countSelfIntersections(pair({1.5f, 1.5f, -1.0f}, {1.5f, 1.5f, 1.0f})), 1u);
+}
+
 TEST(MeshOutputs, TheReportCountsPiecesGenusAndCrossings)
 {
     test::TempDir dir;

@@ -494,6 +494,7 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
         return stats;
     }
     mesh = std::move(result);
+    stats.topology = topology;
     stats.ok = true;
     return stats;
 }

@@ -12,6 +12,7 @@
 #pragma once
 
 #include "fields/FieldNode.h"
+#include "mesher/extract/MeshCheck.h"
 #include "mesher/extract/SurfaceProjection.h"
 #include "mesher/extract/TriangleMesh.h"
 
@@ -44,6 +45,8 @@ struct BoxClipStats {
     std::size_t corners = 0;
     /// Triangles of the caps on the box's faces.
     std::size_t capTriangles = 0;
+    /// The capped mesh's topology as checked (when ok): callers need not check it again.
+    MeshTopology topology;
 };
 
 /// Drops the triangles of @a mesh with a corner more than @a margin outside @a box (and the

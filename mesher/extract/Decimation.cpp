@@ -5,10 +5,6 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
-#include <OpenMesh/Core/Mesh/TriMesh_ArrayKernelT.hh>
-#include <OpenMesh/Tools/Decimater/CollapseInfoT.hh>
-// QuadricT.hh needs the vector traits the mesh headers bring.
-#include <OpenMesh/Core/Geometry/QuadricT.hh>
 
 #include <algorithm>
 #include <array>
@@ -28,20 +24,6 @@ namespace {
 
 /// No collapse makes an edge longer than this many voxels (see FieldDecimater::fieldAllows).
 constexpr double kMaxEdgeVoxels = 6.0;
-
-struct Traits : OpenMesh::DefaultTraits {
-    VertexAttributes(OpenMesh::Attributes::Status);
-    EdgeAttributes(OpenMesh::Attributes::Status);
-    FaceAttributes(OpenMesh::Attributes::Status);
-    HalfedgeAttributes(OpenMesh::Attributes::PrevHalfedge);
-};
-using Mesh = OpenMesh::TriMesh_ArrayKernelT<Traits>;
-
-Vec3d toDouble(const Mesh::Point& p)
-{
-    return {p[0], p[1], p[2]};
-}
-using voxlat::toDouble;  // the mesh-point overload (TriangleMesh.h) next to OpenMesh's
 
 /// Signed first-order distance (f - level) / |grad f|; a flat spot away from the level is far.
 double signedDistance(double r, const Vec3d& g)
@@ -68,219 +50,345 @@ struct Midpoint {
 /// Marks a distance not evaluated yet (no field reaches it: signedDistance caps at 1e30).
 constexpr double kUnknown = std::numeric_limits<double>::max();
 
-/// Halfedge collapses on an OpenMesh mesh in the order of the quadric error metric (Garland and
-/// Heckbert's area-weighted plane quadrics, as OpenMesh's ModQuadricT), with OpenMesh's topology
-/// test (as its BaseDecimaterT::is_collapse_legal). The field check, which costs field
-/// evaluations, runs only on the collapse about to be made; candidates that cannot pass for
-/// reasons known without the field (quadric error, edge length, seams) are never queued.
+/// Garland and Heckbert's plane quadric: the symmetric 4 x 4 matrix of (a, b, c, d) for the plane
+/// ax + by + cz + d = 0, kept as its ten distinct entries.
+struct Quadric {
+    double a2 = 0, ab = 0, ac = 0, ad = 0, b2 = 0, bc = 0, bd = 0, c2 = 0, cd = 0, d2 = 0;
+    Quadric() = default;
+    Quadric(double a, double b, double c, double d, double weight)
+        : a2(weight * a * a),
+          ab(weight * a * b),
+          ac(weight * a * c),
+          ad(weight * a * d),
+          b2(weight * b * b),
+          bc(weight * b * c),
+          bd(weight * b * d),
+          c2(weight * c * c),
+          cd(weight * c * d),
+          d2(weight * d * d)
+    {
+    }
+    Quadric& operator+=(const Quadric& q)
+    {
+        a2 += q.a2, ab += q.ab, ac += q.ac, ad += q.ad, b2 += q.b2, bc += q.bc, bd += q.bd, c2 += q.c2, cd += q.cd,
+            d2 += q.d2;
+        return *this;
+    }
+    /// The weighted sum of squared distances of @a p to the planes.
+    double operator()(const Vec3d& p) const
+    {
+        const double x = p.x(), y = p.y(), z = p.z();
+        return x * (a2 * x + 2.0 * (ab * y + ac * z + ad)) + y * (b2 * y + 2.0 * (bc * z + bd)) +
+               z * (c2 * z + 2.0 * cd) + d2;
+    }
+};
+
+/// Halfedge collapses on a block's triangles in flat arrays (corner lists and, per vertex, its
+/// triangles in a fixed number of slots), in the order of the quadric error metric (area-weighted
+/// plane quadrics), each checked by the link condition (the mesh stays closed, manifold and
+/// oriented) and then against the field. The field check, which costs field evaluations, runs only
+/// on the collapse about to be made; candidates that cannot pass for reasons known without the
+/// field (quadric error, edge length, seams) are never queued.
 class FieldDecimater {
 public:
-    using CollapseInfo = OpenMesh::Decimater::CollapseInfoT<Mesh>;
-    using Quadric = OpenMesh::Geometry::Quadricd;
+    /// Triangles per vertex at most: a collapse that would give a vertex more is not made.
+    static constexpr int kSlots = 24;
 
-    FieldDecimater(Mesh& mesh, const FieldNode& field, const DecimationOptions& options,
-                   std::vector<double> vertexDistance)
-        : mMesh(mesh), mField(field), mOptions(options), mVertexDistance(std::move(vertexDistance))
+    /// @a points, @a triangles (indices into points), which vertices stay (@a locked) and the
+    /// signed distance at each vertex; vertices whose triangles do not close a single fan are
+    /// kept as they are.
+    FieldDecimater(std::vector<Vec3d> points, std::vector<std::array<std::uint32_t, 3>> triangles,
+                   std::vector<std::uint8_t> locked, std::vector<double> vertexDistance, const FieldNode& field,
+                   const DecimationOptions& options)
+        : mPoints(std::move(points)),
+          mTriangles(std::move(triangles)),
+          mLocked(std::move(locked)),
+          mField(field),
+          mOptions(options),
+          mVertexDistance(std::move(vertexDistance))
     {
         if (options.box) mBox.emplace(*options.box);
-        // A collapse whose quadric error (the area-weighted sum of squared distances to the planes
-        // of the triangles merged into it) exceeds the squared tolerance puts the point far off
-        // one of them: such candidates are mostly refused by the field check anyway, so they are
-        // not tried (the field check still decides the rest).
+        // A collapse whose quadric error exceeds the squared tolerance puts the point far off one
+        // of the planes merged into it: such candidates are mostly refused by the field check
+        // anyway, so they are not tried (the field check still decides the rest).
         mMaxError = options.quadricShare * options.tolerance * options.tolerance;
-        mQuadrics.assign(mesh.n_vertices(), Quadric());
-        for (Mesh::FaceHandle f : mesh.faces()) {
-            std::array<Mesh::VertexHandle, 3> v;
-            int i = 0;
-            for (Mesh::VertexHandle w : mesh.fv_range(f)) v[i++] = w;
-            const OpenMesh::Vec3d p0 = OpenMesh::vector_cast<OpenMesh::Vec3d>(mesh.point(v[0]));
-            const OpenMesh::Vec3d p1 = OpenMesh::vector_cast<OpenMesh::Vec3d>(mesh.point(v[1]));
-            const OpenMesh::Vec3d p2 = OpenMesh::vector_cast<OpenMesh::Vec3d>(mesh.point(v[2]));
-            OpenMesh::Vec3d n = (p1 - p0) % (p2 - p0);
-            double area = n.norm();
+        mMaxEdgeSqr = (kMaxEdgeVoxels * options.voxel) * (kMaxEdgeVoxels * options.voxel);
+        const std::size_t nv = mPoints.size(), nt = mTriangles.size();
+        mQuadrics.assign(nv, Quadric());
+        mSlots.assign(nv * kSlots, 0);
+        mCount.assign(nv, 0);
+        mOverflow.assign(nv, 0);
+        mAlive.assign(nt, 1);
+        mEdgeMid.assign(nt, {kUnknown, kUnknown, kUnknown});
+        for (std::uint32_t t = 0; t < nt; ++t) {
+            const auto& c = mTriangles[t];
+            const Vec3d &p0 = mPoints[c[0]], &p1 = mPoints[c[1]], &p2 = mPoints[c[2]];
+            Vec3d n = (p1 - p0).cross(p2 - p0);
+            double area = n.length();
             if (area > FLT_MIN) {
                 n /= area;
                 area *= 0.5;
             }
-            Quadric q(n[0], n[1], n[2], -(p0 | n));
-            q *= area;
-            for (Mesh::VertexHandle w : v) mQuadrics[w.idx()] += q;
+            const Quadric q(n.x(), n.y(), n.z(), -p0.dot(n), area);
+            for (std::uint32_t v : c) {
+                mQuadrics[v] += q;
+                if (mCount[v] < kSlots)
+                    mSlots[std::size_t(v) * kSlots + mCount[v]] = t;
+                else
+                    mLocked[v] = mOverflow[v] = 1;  // more triangles than slots: kept, and not joined
+                mCount[v] = std::uint8_t(std::min(kSlots, mCount[v] + 1));
+            }
         }
-        mRefused.assign(mesh.n_halfedges(), 0);
-        mStamp.assign(mesh.n_vertices(), 0);
-        mDirty.assign(mesh.n_vertices(), 0);
-        mEdgeMid.assign(mesh.n_edges(), kUnknown);
-        mQueued.assign(mesh.n_vertices(), 0);
-        mMaxEdgeSqr = (kMaxEdgeVoxels * options.voxel) * (kMaxEdgeVoxels * options.voxel);
+        mStamp.assign(nv, 0);
+        mQueued.assign(nv, 0);
+        mDirty.assign(nv, 0);
+        mDead.assign(nv, 0);
+        mRefused.assign(nv * kSlots, 0);
+        mRefusedCount.assign(nv, 0);
     }
 
-    void run(DecimationStats& stats, const ProgressFn& progress)
+    void run(DecimationStats& stats)
     {
-        for (Mesh::VertexHandle v : mMesh.vertices()) queueVertex(v);
-        const std::size_t expected = std::max<std::size_t>(1, mMesh.n_vertices());
-        int percent = -1;
+        for (std::uint32_t v = 0; v < mPoints.size(); ++v) queueVertex(v);
         while (!mHeap.empty()) {
             const Entry top = mHeap.top();
             mHeap.pop();
-            const Mesh::VertexHandle v(int(std::get<1>(top)));
-            if (std::get<2>(top) != mStamp[v.idx()] || mMesh.status(v).deleted()) continue;
-            if (mDirty[v.idx()]) {
+            const std::uint32_t v = std::get<1>(top), w = std::get<3>(top);
+            if (std::get<2>(top) != mStamp[v] || mDead[v]) continue;
+            if (mDirty[v]) {
                 // Its one-ring changed since it was queued: its candidate is chosen again now,
                 // once, rather than after every collapse next to it.
                 queueVertex(v);
                 continue;
             }
-            const Mesh::HalfedgeHandle h(int(std::get<3>(top)));
-            CollapseInfo ci(mMesh, h);
-            // OpenMesh's topology test is the costly part of a candidate (it tags the one-rings),
-            // so it too runs only on the collapse about to be made.
-            if (!collapseLegal(ci)) {
-                mRefused[h.idx()] = 1;
+            Collapse c;
+            // The topology test first: it needs no field evaluations.
+            if (!collapseLegal(v, w, c)) {
+                refuse(v, w);
                 queueVertex(v);
                 continue;
             }
-            if (!fieldAllows(ci)) {
+            if (!fieldAllows(c)) {
                 ++stats.refused;
-                mRefused[h.idx()] = 1;
+                refuse(v, w);
                 queueVertex(v);
                 continue;
             }
-            mSupport.clear();
-            for (Mesh::VertexHandle w : mMesh.vv_range(ci.v0)) mSupport.push_back(w);
-            mMesh.collapse(h);
+            collapse(c);
             ++stats.collapses;
-            mQuadrics[ci.v1.idx()] += mQuadrics[ci.v0.idx()];
-            keepSpokes(ci.v1);
-            for (Mesh::VertexHandle w : mSupport) {
-                // Their neighbourhoods changed: collapses refused before may pass now.
-                for (Mesh::HalfedgeHandle out : mMesh.voh_range(w)) mRefused[out.idx()] = 0;
-                if (mQueued[w.idx()])
-                    mDirty[w.idx()] = 1;
-                else
-                    queueVertex(w);
-            }
-            if (progress) {
-                const int now = int(std::min<std::size_t>(99, 100 * stats.collapses / expected));
-                if (now > percent) {
-                    percent = now;
-                    progress(0.01 * now);
-                }
-            }
         }
     }
 
-private:
-    /// (priority, vertex, stamp, halfedge); the smallest priority first, ties by vertex index.
-    using Entry = std::tuple<float, unsigned, unsigned, unsigned>;
-
-    /// Queues @a v with its cheapest outgoing collapse not yet refused whose quadric error is
-    /// below the bound, that makes no edge longer than the limit and that a seam allows
-    /// (topology and the field are checked when it comes up).
-    void queueVertex(Mesh::VertexHandle v)
+    /// The triangles left, as corner lists into the block's points.
+    std::vector<std::array<std::uint32_t, 3>> triangles() const
     {
-        ++mStamp[v.idx()];
-        mDirty[v.idx()] = 0;
-        mQueued[v.idx()] = 0;
-        // A locked vertex stays.
-        if (mMesh.status(v).locked()) return;
-        mRing.clear();
-        for (Mesh::VertexHandle w : mMesh.vv_range(v)) mRing.push_back(w);
-        double best = mMaxError;
-        Mesh::HalfedgeHandle bestHalfedge;
-        for (Mesh::HalfedgeHandle h : mMesh.voh_range(v)) {
-            if (mRefused[h.idx()]) continue;
-            const Mesh::VertexHandle v1 = mMesh.to_vertex_handle(h);
-            const Mesh::Point& p1 = mMesh.point(v1);
-            Quadric q = mQuadrics[v.idx()];
-            q += mQuadrics[v1.idx()];
-            const double error = q(OpenMesh::vector_cast<OpenMesh::Vec3d>(p1));
-            // Ties go to the first halfedge around v, as OpenMesh's decimater did.
-            if (!(error < best)) continue;
-            if (!shortEnough(v1) || !seamAllows(v, v1)) continue;
-            best = error;
-            bestHalfedge = h;
+        std::vector<std::array<std::uint32_t, 3>> out;
+        for (std::size_t t = 0; t < mTriangles.size(); ++t)
+            if (mAlive[t]) out.push_back(mTriangles[t]);
+        return out;
+    }
+
+private:
+    /// (priority, vertex, stamp, target vertex); the smallest priority first, ties by vertex index.
+    using Entry = std::tuple<float, std::uint32_t, unsigned, std::uint32_t>;
+
+    /// A collapse of v0 onto v1 across the edge whose triangles are fl (v0 -> v1 in its corner
+    /// order, third corner vl) and fr (v1 -> v0, third corner vr).
+    struct Collapse {
+        std::uint32_t v0, v1, fl, fr, vl, vr;
+    };
+
+    const std::uint32_t* slots(std::uint32_t v) const { return &mSlots[std::size_t(v) * kSlots]; }
+    std::uint32_t* slots(std::uint32_t v) { return &mSlots[std::size_t(v) * kSlots]; }
+
+    /// The vertices joined to @a v by an edge (in the order of its triangles when they close a
+    /// fan); false when they do not (a seam vertex's open part of a fan in this block).
+    bool ring(std::uint32_t v, std::vector<std::uint32_t>& out) const
+    {
+        // In an oriented fan each neighbour follows v in one triangle and precedes it in the
+        // next: the ring is the followers, closed when they are distinct and are the precedents.
+        out.clear();
+        mPrecedents.clear();
+        const std::uint32_t* s = slots(v);
+        for (int k = 0; k < mCount[v]; ++k) {
+            const auto& c = mTriangles[s[k]];
+            const int i = c[0] == v ? 0 : c[1] == v ? 1 : 2;
+            out.push_back(c[(i + 1) % 3]);
+            mPrecedents.push_back(c[(i + 2) % 3]);
         }
-        if (bestHalfedge.is_valid()) {
-            mHeap.emplace(float(best), unsigned(v.idx()), mStamp[v.idx()], unsigned(bestHalfedge.idx()));
-            mQueued[v.idx()] = 1;
+        bool closed = true;
+        for (std::size_t a = 0; a < out.size() && closed; ++a) {
+            closed = std::find(mPrecedents.begin(), mPrecedents.end(), out[a]) != mPrecedents.end();
+            for (std::size_t b = a + 1; b < out.size() && closed; ++b) closed = out[a] != out[b];
+        }
+        if (!closed) {
+            // An open fan (a seam vertex's part in this block): its neighbours, each once.
+            for (std::uint32_t x : mPrecedents)
+                if (std::find(out.begin(), out.end(), x) == out.end()) out.push_back(x);
+            std::sort(out.begin(), out.end());
+            out.erase(std::unique(out.begin(), out.end()), out.end());
+        }
+        return closed;
+    }
+
+    bool isRefused(std::uint32_t v, std::uint32_t w) const
+    {
+        const std::uint32_t* r = &mRefused[std::size_t(v) * kSlots];
+        return std::find(r, r + mRefusedCount[v], w) != r + mRefusedCount[v];
+    }
+    void refuse(std::uint32_t v, std::uint32_t w)
+    {
+        if (mRefusedCount[v] < kSlots) mRefused[std::size_t(v) * kSlots + mRefusedCount[v]++] = w;
+    }
+
+    /// Queues @a v with its cheapest collapse onto a neighbour not yet refused whose quadric error
+    /// is below the bound, that makes no edge longer than the limit and that a seam allows
+    /// (topology and the field are checked when it comes up).
+    void queueVertex(std::uint32_t v)
+    {
+        ++mStamp[v];
+        mDirty[v] = 0;
+        mQueued[v] = 0;
+        // A locked vertex stays, and so does one whose triangles do not close one fan.
+        if (mLocked[v] || mDead[v] || !ring(v, mRing)) return;
+        double best = mMaxError;
+        std::uint32_t bestTarget = 0;
+        bool found = false;
+        for (std::uint32_t w : mRing) {
+            if (isRefused(v, w)) continue;
+            Quadric q = mQuadrics[v];
+            q += mQuadrics[w];
+            const double error = q(mPoints[w]);
+            // Ties go to the first neighbour.
+            if (!(error < best)) continue;
+            if (!shortEnough(w) || !seamAllows(v, w)) continue;
+            best = error;
+            bestTarget = w;
+            found = true;
+        }
+        if (found) {
+            mHeap.emplace(float(best), v, mStamp[v], bestTarget);
+            mQueued[v] = 1;
         }
     }
 
     /// Whether moving the vertex whose one-ring is mRing onto @a v1 keeps every edge within the
     /// length limit (see fieldAllows).
-    bool shortEnough(Mesh::VertexHandle v1) const
+    bool shortEnough(std::uint32_t v1) const
     {
-        const Mesh::Point& p1 = mMesh.point(v1);
-        for (Mesh::VertexHandle w : mRing)
-            if ((mMesh.point(w) - p1).sqrnorm() > mMaxEdgeSqr) return false;
+        const Vec3d& p1 = mPoints[v1];
+        for (std::uint32_t w : mRing)
+            if ((mPoints[w] - p1).lengthSqr() > mMaxEdgeSqr) return false;
         return true;
     }
 
-    /// OpenMesh's BaseDecimaterT::is_collapse_legal without the feature test (no features here).
-    bool collapseLegal(const CollapseInfo& ci)
+    /// Whether @a a and @a b share a triangle.
+    bool joined(std::uint32_t a, std::uint32_t b) const
     {
-        if (mMesh.status(ci.v0).locked() || !mMesh.is_collapse_ok(ci.v0v1)) return false;
-        if (ci.vl.is_valid() && ci.vr.is_valid() && mMesh.find_halfedge(ci.vl, ci.vr).is_valid() &&
-            mMesh.valence(ci.vl) == 3 && mMesh.valence(ci.vr) == 3)
-            return false;
-        if (mMesh.is_boundary(ci.v0)) {
-            if (!mMesh.is_boundary(ci.v1)) return false;
-            if (ci.vl.is_valid() && ci.vr.is_valid()) return false;
+        const std::uint32_t* s = slots(a);
+        for (int k = 0; k < mCount[a]; ++k) {
+            const auto& c = mTriangles[s[k]];
+            if (c[0] == b || c[1] == b || c[2] == b) return true;
         }
-        // At least two faces at v0.
-        return mMesh.cw_rotated_halfedge_handle(mMesh.cw_rotated_halfedge_handle(ci.v0v1)) != ci.v0v1;
+        return false;
     }
 
     /// In a block of a larger mesh, locked vertices are shared with other blocks, which may hold
     /// an edge between two of them or make one at the same time: a collapse onto a locked vertex
-    /// may not join it to another locked vertex it is not joined to here already.
-    bool seamAllows(Mesh::VertexHandle v0, Mesh::VertexHandle v1)
+    /// may not join it to another locked vertex it is not joined to here already (mRing: v0's).
+    bool seamAllows(std::uint32_t v0, std::uint32_t v1) const
     {
-        if (!mMesh.status(v1).locked()) return true;
-        for (Mesh::VertexHandle w : mMesh.vv_range(v0))
-            if (w != v1 && mMesh.status(w).locked() && !mMesh.find_halfedge(v1, w).is_valid()) return false;
+        if (!mLocked[v1]) return true;
+        for (std::uint32_t w : mRing)
+            if (w != v1 && w != v0 && mLocked[w] && !joined(v1, w)) return false;
         return true;
     }
 
-    /// The triangles around ci.v0 that survive the collapse, with v0 moved onto v1: none may turn
-    /// over or vanish, and each must stay within the tolerance.
-    bool fieldAllows(const CollapseInfo& ci)
+    /// The link condition: v0 and v1 share exactly the two neighbours across their edge and no
+    /// triangle with both (so the collapse leaves a manifold; OpenMesh's is_collapse_ok and the
+    /// decimater's tetrahedron test), and v1's triangles fit its slots afterwards.
+    bool collapseLegal(std::uint32_t v0, std::uint32_t v1, Collapse& c)
     {
-        mTriangles.clear();
+        c.v0 = v0;
+        c.v1 = v1;
+        int shared = 0;
+        const std::uint32_t* s = slots(v0);
+        for (int k = 0; k < mCount[v0]; ++k) {
+            const auto& t = mTriangles[s[k]];
+            for (int i = 0; i < 3; ++i)
+                if (t[i] == v0) {
+                    if (t[(i + 1) % 3] == v1) c.fl = s[k], c.vl = t[(i + 2) % 3], ++shared;
+                    if (t[(i + 2) % 3] == v1) c.fr = s[k], c.vr = t[(i + 1) % 3], ++shared;
+                }
+        }
+        if (shared != 2 || c.vl == c.vr) return false;
+        if (mCount[v0] + mCount[v1] - 4 > kSlots) return false;
+        if (mOverflow[v1] || mOverflow[c.vl] || mOverflow[c.vr] || !ring(v0, mRing)) return false;
+        // A seam vertex's fan in this block may be open.
+        if (!ring(v1, mRing1) && !mLocked[v1]) return false;
+        int common = 0;
+        for (std::uint32_t x : mRing)
+            if (x != v1 && std::find(mRing1.begin(), mRing1.end(), x) != mRing1.end()) {
+                if (x != c.vl && x != c.vr) return false;
+                ++common;
+            }
+        if (common != 2) return false;
+        // The edge's link too: triangles v0 vl vr and v1 vl vr both there would fold onto each
+        // other; and vl, vr joined with three neighbours each would leave a flat tetrahedron.
+        if (hasTriangle(v0, c.vl, c.vr) && hasTriangle(v1, c.vl, c.vr)) return false;
+        return !(mCount[c.vl] == 3 && mCount[c.vr] == 3 && joined(c.vl, c.vr));
+    }
+
+    /// Whether one of @a a's triangles has corners @a b and @a c too.
+    bool hasTriangle(std::uint32_t a, std::uint32_t b, std::uint32_t c) const
+    {
+        const std::uint32_t* s = slots(a);
+        for (int k = 0; k < mCount[a]; ++k) {
+            const auto& t = mTriangles[s[k]];
+            if ((t[0] == b || t[1] == b || t[2] == b) && (t[0] == c || t[1] == c || t[2] == c)) return true;
+        }
+        return false;
+    }
+
+    /// The triangles around v0 that survive the collapse, with v0 moved onto v1: none may turn
+    /// over or vanish, and each must stay within the tolerance.
+    bool fieldAllows(const Collapse& c)
+    {
+        mChecks.clear();
         mMid.clear();
         mSpokes.clear();
         mMidEdge.clear();
-        const Vec3d p1 = toDouble(ci.p1);
+        const Vec3d& p1 = mPoints[c.v1];
         // The midpoint of the new edge from v1 to @a w (shared by the two triangles beside it).
-        auto spoke = [&](Mesh::VertexHandle w) {
+        auto spoke = [&](std::uint32_t w) {
             for (const auto& [vertex, index] : mSpokes)
                 if (vertex == w) return index;
             const int index = int(mMid.size());
-            mMid.push_back({0.5 * (p1 + toDouble(mMesh.point(w))), kUnknown});
+            mMid.push_back({0.5 * (p1 + mPoints[w]), kUnknown});
             mSpokes.emplace_back(w, index);
             return index;
         };
-        for (Mesh::FaceHandle f : mMesh.vf_range(ci.v0)) {
-            if (f == ci.fl || f == ci.fr) continue;
+        const std::uint32_t* s = slots(c.v0);
+        for (int k = 0; k < mCount[c.v0]; ++k) {
+            const std::uint32_t f = s[k];
+            if (f == c.fl || f == c.fr) continue;
+            const auto& corners = mTriangles[f];
             CheckTriangle t;
             std::array<Vec3d, 3> before;
-            int i = 0;
-            for (Mesh::HalfedgeHandle h : mMesh.fh_range(f)) {
-                const Mesh::VertexHandle a = mMesh.from_vertex_handle(h), b = mMesh.to_vertex_handle(h);
-                before[i] = toDouble(mMesh.point(a));
-                t.p[i] = a == ci.v0 ? p1 : before[i];
-                t.s[i] = mVertexDistance[(a == ci.v0 ? ci.v1 : a).idx()];
-                if (a == ci.v0 || b == ci.v0) {
-                    t.mid[i] = spoke(a == ci.v0 ? b : a);
+            for (int i = 0; i < 3; ++i) {
+                const std::uint32_t a = corners[i], b = corners[(i + 1) % 3];
+                before[i] = mPoints[a];
+                t.p[i] = a == c.v0 ? p1 : before[i];
+                t.s[i] = mVertexDistance[a == c.v0 ? c.v1 : a];
+                if (a == c.v0 || b == c.v0) {
+                    t.mid[i] = spoke(a == c.v0 ? b : a);
                 } else {
                     // An edge of the one-ring, which the collapse keeps as it is: its midpoint's
                     // distance is kept from one check to the next.
-                    const int e = mMesh.edge_handle(h).idx();
                     t.mid[i] = int(mMid.size());
-                    mMid.push_back({0.5 * (before[i] + toDouble(mMesh.point(b))), mEdgeMid[e]});
-                    if (mEdgeMid[e] == kUnknown) mMidEdge.emplace_back(t.mid[i], e);
+                    mMid.push_back({0.5 * (before[i] + mPoints[b]), mEdgeMid[f][i]});
+                    if (mEdgeMid[f][i] == kUnknown) mMidEdge.emplace_back(t.mid[i], f, i);
                 }
-                ++i;
             }
             const Vec3d n0 = (before[1] - before[0]).cross(before[2] - before[0]);
             const Vec3d n1 = (t.p[1] - t.p[0]).cross(t.p[2] - t.p[0]);
@@ -292,22 +400,59 @@ private:
             if ((t.p[1] - t.p[0]).lengthSqr() > mMaxEdgeSqr || (t.p[2] - t.p[1]).lengthSqr() > mMaxEdgeSqr ||
                 (t.p[0] - t.p[2]).lengthSqr() > mMaxEdgeSqr)
                 return false;
-            mTriangles.push_back(t);
+            mChecks.push_back(t);
         }
         return withinTolerance();
     }
 
-    /// After the collapse of v0 onto @a v1 the spokes checked are @a v1's edges: their midpoints'
-    /// distances are kept; an edge that was v0's now runs from v1, so none of v1's may keep an old
-    /// value.
-    void keepSpokes(Mesh::VertexHandle v1)
+    /// Makes the collapse @a c: fl and fr go, v0's other triangles take v1 (their new edges keep
+    /// the midpoint distances the check found), v1's quadric takes v0's, and the vertices around
+    /// v0 are queued again (their collapses refused before may pass now).
+    void collapse(const Collapse& c)
     {
-        for (Mesh::HalfedgeHandle h : mMesh.voh_range(v1)) {
-            double value = kUnknown;
-            const Mesh::VertexHandle w = mMesh.to_vertex_handle(h);
-            for (const auto& [vertex, index] : mSpokes)
-                if (vertex == w) value = mMid[index].distance;
-            mEdgeMid[mMesh.edge_handle(h).idx()] = value;
+        mSupport.swap(mRing);  // v0's one-ring, as collapseLegal found it
+        auto drop = [&](std::uint32_t v, std::uint32_t f) {
+            std::uint32_t* s = slots(v);
+            std::uint8_t& n = mCount[v];
+            const auto at = std::find(s, s + n, f);
+            if (at != s + n) {
+                std::copy(at + 1, s + n, at);
+                --n;
+            }
+        };
+        for (std::uint32_t f : {c.fl, c.fr}) {
+            mAlive[f] = 0;
+            for (std::uint32_t x : mTriangles[f])
+                if (x != c.v0) drop(x, f);
+        }
+        const std::uint32_t* s = slots(c.v0);
+        for (int k = 0; k < mCount[c.v0]; ++k) {
+            const std::uint32_t f = s[k];
+            if (!mAlive[f]) continue;
+            auto& corners = mTriangles[f];
+            for (int i = 0; i < 3; ++i)
+                if (corners[i] == c.v0) {
+                    corners[i] = c.v1;
+                    // Edges i (to corner i + 1) and i + 2 (from corner i + 2) now run from v1.
+                    for (int e : {i, (i + 2) % 3}) {
+                        const std::uint32_t other = corners[e == i ? (i + 1) % 3 : e];
+                        double value = kUnknown;
+                        for (const auto& [vertex, index] : mSpokes)
+                            if (vertex == other) value = mMid[index].distance;
+                        mEdgeMid[f][e] = value;
+                    }
+                }
+            slots(c.v1)[mCount[c.v1]++] = f;
+        }
+        mCount[c.v0] = 0;
+        mDead[c.v0] = 1;
+        mQuadrics[c.v1] += mQuadrics[c.v0];
+        for (std::uint32_t w : mSupport) {
+            mRefusedCount[w] = 0;
+            if (mQueued[w])
+                mDirty[w] = 1;
+            else
+                queueVertex(w);
         }
     }
 
@@ -318,18 +463,18 @@ private:
         // A tenth of the tolerance is kept back for what the quadratic misses.
         const double tolerance = 0.9 * mOptions.tolerance;
         // The centres first: most refused collapses fail there.
-        mPoints.clear();
-        for (const CheckTriangle& t : mTriangles) mPoints.push_back((t.p[0] + t.p[1] + t.p[2]) / 3.0);
+        mEval.clear();
+        for (const CheckTriangle& t : mChecks) mEval.push_back((t.p[0] + t.p[1] + t.p[2]) / 3.0);
         evaluate();
-        mCentres.resize(mTriangles.size());
-        for (std::size_t k = 0; k < mTriangles.size(); ++k) {
+        mCentres.resize(mChecks.size());
+        for (std::size_t k = 0; k < mChecks.size(); ++k) {
             mCentres[k] = signedDistance(mValues[k] - mOptions.level, mGradients[k]);
-            const double centre = mBox ? std::max(mCentres[k], boxDistance(mPoints[k])) : mCentres[k];
+            const double centre = mBox ? std::max(mCentres[k], boxDistance(mEval[k])) : mCentres[k];
             if (std::abs(centre) > tolerance) return false;
         }
-        mPoints.clear();
+        mEval.clear();
         for (const Midpoint& m : mMid)
-            if (m.distance == kUnknown) mPoints.push_back(m.p);
+            if (m.distance == kUnknown) mEval.push_back(m.p);
         evaluate();
         std::size_t next = 0;
         for (Midpoint& m : mMid)
@@ -337,9 +482,9 @@ private:
                 m.distance = signedDistance(mValues[next] - mOptions.level, mGradients[next]);
                 ++next;
             }
-        for (const auto& [index, e] : mMidEdge) mEdgeMid[e] = mMid[index].distance;
-        for (std::size_t k = 0; k < mTriangles.size(); ++k) {
-            const CheckTriangle& t = mTriangles[k];
+        for (const auto& [index, f, e] : mMidEdge) mEdgeMid[f][e] = mMid[index].distance;
+        for (std::size_t k = 0; k < mChecks.size(); ++k) {
+            const CheckTriangle& t = mChecks[k];
             const std::array<double, 3>& s = t.s;
             const std::array<double, 3> m = {mMid[t.mid[0]].distance, mMid[t.mid[1]].distance, mMid[t.mid[2]].distance};
             const double centre = mCentres[k];
@@ -356,7 +501,7 @@ private:
             // that is below -tolerance, max(quadratic, box) passes or fails as the quadratic does.
             bool nearBox = false;
             if (mBox)
-                for (int c = 0; c < 3 && !nearBox; ++c) nearBox = boxDistance(t.p[c]) > -tolerance;
+                for (int corner = 0; corner < 3 && !nearBox; ++corner) nearBox = boxDistance(t.p[corner]) > -tolerance;
             for (int i = 0; i <= kSteps; ++i)
                 for (int j = 0; i + j <= kSteps; ++j) {
                     const double l0 = double(i) / kSteps, l1 = double(j) / kSteps, l2 = 1.0 - l0 - l1;
@@ -370,45 +515,56 @@ private:
         return true;
     }
 
-    /// Values and gradients of the field at mPoints.
+    /// Values and gradients of the field at mEval.
     void evaluate()
     {
-        mValues.resize(mPoints.size());
-        mGradients.resize(mPoints.size());
-        forEachChunk(mPoints.size(), [&](std::size_t begin, std::size_t count) {
-            mField.gradients(std::span<const Vec3d>(mPoints.data() + begin, count),
+        mValues.resize(mEval.size());
+        mGradients.resize(mEval.size());
+        forEachChunk(mEval.size(), [&](std::size_t begin, std::size_t count) {
+            mField.gradients(std::span<const Vec3d>(mEval.data() + begin, count),
                              std::span<double>(mValues.data() + begin, count),
                              std::span<Vec3d>(mGradients.data() + begin, count));
         });
     }
 
-    Mesh& mMesh;
     /// The box's exact signed distance (options.box).
     double boxDistance(const Vec3d& p) const { return mBox->eval(p.x(), p.y(), p.z()); }
 
+    std::vector<Vec3d> mPoints;
+    std::vector<std::array<std::uint32_t, 3>> mTriangles;
+    std::vector<std::uint8_t> mLocked;
     const FieldNode& mField;
     std::optional<BoxField> mBox;
-    std::vector<double> mCentres;
     DecimationOptions mOptions;
     std::vector<double> mVertexDistance;
     double mMaxEdgeSqr = 0.36;
     double mMaxError = 0.0;
     std::vector<Quadric> mQuadrics;
-    std::vector<Mesh::VertexHandle> mRing;
+    /// Each vertex's triangles (kSlots per vertex, mCount used), each triangle's liveness and
+    /// the known midpoint distances of its edges (edge i from corner i to corner i + 1).
+    std::vector<std::uint32_t> mSlots;
+    std::vector<std::uint8_t> mCount, mAlive, mDead;
+    /// Vertices with more triangles than slots (their lists are incomplete): nothing collapses
+    /// onto them or next to them.
+    std::vector<std::uint8_t> mOverflow;
+    std::vector<std::array<double, 3>> mEdgeMid;
     std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> mHeap;
-    std::vector<std::uint8_t> mRefused;
+    /// Per vertex the neighbours its collapse onto was refused (until its one-ring changes).
+    std::vector<std::uint32_t> mRefused;
+    std::vector<std::uint8_t> mRefusedCount;
     std::vector<unsigned> mStamp;
     /// Whether a vertex has an entry in the heap, and whether its one-ring changed since.
     std::vector<std::uint8_t> mQueued, mDirty;
-    std::vector<Mesh::VertexHandle> mSupport;
-    std::vector<CheckTriangle> mTriangles;
+    std::vector<std::uint32_t> mRing, mRing1, mSupport;
+    mutable std::vector<std::uint32_t> mPrecedents;
+    std::vector<CheckTriangle> mChecks;
     std::vector<Midpoint> mMid;
     /// The check's new edges from v1 (by the vertex at their other end) and one-ring edges whose
-    /// midpoint it evaluates (index into mMid, edge), and every edge's midpoint distance if known.
-    std::vector<std::pair<Mesh::VertexHandle, int>> mSpokes;
-    std::vector<std::pair<int, int>> mMidEdge;
-    std::vector<double> mEdgeMid;
-    std::vector<Vec3d> mPoints, mGradients;
+    /// midpoint it evaluates (index into mMid, triangle, edge).
+    std::vector<std::pair<std::uint32_t, int>> mSpokes;
+    std::vector<std::tuple<int, std::uint32_t, int>> mMidEdge;
+    std::vector<double> mCentres;
+    std::vector<Vec3d> mEval, mGradients;
     std::vector<double> mValues;
 };
 
@@ -447,7 +603,7 @@ struct BlockResult {
 /// kept; returns what is left.
 BlockResult decimateBlock(const TriangleMesh& mesh, const std::vector<std::uint32_t>& ids,
                           const std::vector<std::uint8_t>& locked, const std::vector<double>& vertexDistance,
-                          const FieldNode& field, const DecimationOptions& options, const ProgressFn& progress)
+                          const FieldNode& field, const DecimationOptions& options)
 {
     BlockResult result;
     std::vector<std::uint32_t> vertices;
@@ -456,42 +612,40 @@ BlockResult decimateBlock(const TriangleMesh& mesh, const std::vector<std::uint3
         for (int k = 0; k < 3; ++k) vertices.push_back(mesh.triangles[t][k]);
     std::sort(vertices.begin(), vertices.end());
     vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
-    auto local = [&](std::uint32_t v) {
-        return int(std::lower_bound(vertices.begin(), vertices.end(), v) - vertices.begin());
-    };
-    Mesh om;
-    om.reserve(vertices.size(), 3 * ids.size() / 2 + 3, ids.size());
+    // Global to local indices through a table of the whole mesh's size, kept per thread: only
+    // this block's entries are written before they are read, so it is never cleared.
+    thread_local std::vector<std::uint32_t> localOf;
+    if (localOf.size() < mesh.points.size()) localOf.resize(mesh.points.size());
+    for (std::size_t i = 0; i < vertices.size(); ++i) localOf[vertices[i]] = std::uint32_t(i);
+    auto local = [&](std::uint32_t v) { return localOf[v]; };
+    std::vector<Vec3d> points(vertices.size());
     std::vector<double> distance(vertices.size());
+    std::vector<std::uint8_t> keep(vertices.size());
     for (std::size_t i = 0; i < vertices.size(); ++i) {
-        const openvdb::Vec3f& p = mesh.points[vertices[i]];
-        om.add_vertex(Mesh::Point(p.x(), p.y(), p.z()));
+        points[i] = toDouble(mesh.points[vertices[i]]);
         distance[i] = vertexDistance[vertices[i]];
+        keep[i] = locked[vertices[i]];
     }
-    for (std::uint32_t t : ids) {
-        const openvdb::Vec3I& tri = mesh.triangles[t];
-        const Mesh::FaceHandle f = om.add_face(Mesh::VertexHandle(local(tri[0])), Mesh::VertexHandle(local(tri[1])),
-                                               Mesh::VertexHandle(local(tri[2])));
-        if (!f.is_valid()) {
-            // Not a manifold piece OpenMesh can hold: left as it is.
+    std::vector<std::array<std::uint32_t, 3>> triangles(ids.size());
+    for (std::size_t k = 0; k < ids.size(); ++k) {
+        const openvdb::Vec3I& tri = mesh.triangles[ids[k]];
+        triangles[k] = {local(tri[0]), local(tri[1]), local(tri[2])};
+        if (triangles[k][0] == triangles[k][1] || triangles[k][1] == triangles[k][2] ||
+            triangles[k][2] == triangles[k][0]) {
+            // Not a mesh of proper triangles: left as it is.
             result.decimated = false;
             for (std::uint32_t u : ids) result.triangles.push_back(mesh.triangles[u]);
             return result;
         }
     }
-    for (Mesh::VertexHandle v : om.vertices())
-        if (locked[vertices[v.idx()]] || om.is_isolated(v)) om.status(v).set_locked(true);
     DecimationStats stats;
-    FieldDecimater decimater(om, field, options, std::move(distance));
-    decimater.run(stats, progress);
+    FieldDecimater decimater(std::move(points), std::move(triangles), std::move(keep), std::move(distance), field,
+                             options);
+    decimater.run(stats);
     result.collapses = stats.collapses;
     result.refused = stats.refused;
-    for (Mesh::FaceHandle f : om.all_faces()) {
-        if (om.status(f).deleted()) continue;
-        openvdb::Vec3I t;
-        int i = 0;
-        for (Mesh::VertexHandle v : om.fv_range(f)) t[i++] = vertices[v.idx()];
-        result.triangles.push_back(t);
-    }
+    for (const auto& t : decimater.triangles())
+        result.triangles.emplace_back(vertices[t[0]], vertices[t[1]], vertices[t[2]]);
     return result;
 }
 
@@ -540,10 +694,9 @@ bool decimatePass(TriangleMesh& mesh, std::vector<double>& vertexDistance, const
                 }
     }
     std::vector<BlockResult> results(blocks.size());
-    const ProgressFn perBlock = {};
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1), [&](const auto& range) {
         for (std::size_t b = range.begin(); b != range.end(); ++b) {
-            results[b] = decimateBlock(mesh, blocks[b], locked, vertexDistance, field, options, perBlock);
+            results[b] = decimateBlock(mesh, blocks[b], locked, vertexDistance, field, options);
             progress.add(blocks[b].size());
         }
     });

@@ -40,14 +40,14 @@ struct DecimationStats {
     /// Candidate collapses refused because a new triangle would stray beyond the tolerance,
     /// turn over or degenerate.
     std::size_t refused = 0;
-    /// False when the input is not a closed manifold mesh OpenMesh can hold (then it is kept as is).
+    /// False when a block holds a triangle with a repeated corner (then it is kept as is).
     bool decimated = false;
 };
 
 /// Collapses edges of @a mesh (halfedge collapses, so every kept vertex stays where it was:
-/// on the surface after projectToSurface) in the order of the quadric error metric (as OpenMesh's
-/// ModQuadricT; candidates whose error exceeds the squared tolerance are not tried), each collapse
-/// made only when OpenMesh's topology test passes (the mesh stays closed, manifold and oriented),
+/// on the surface after projectToSurface) in the order of the quadric error metric (area-weighted
+/// plane quadrics; candidates whose error exceeds the squared tolerance are not tried), each
+/// collapse made only when the link condition holds (the mesh stays closed, manifold and oriented),
 /// no new triangle turns over by 90 degrees or more or loses its area, no new edge is longer than
 /// 6 voxels, and every new triangle stays within options.tolerance of the level set of @a field.
 /// The last is checked on each new triangle with the signed distance (f - level) / |grad f| at

@@ -224,6 +224,27 @@ bool trianglesCross(const TriangleMesh& mesh, const openvdb::Vec3I& s, const ope
     const openvdb::Vec3d sa = point(s[0]), sb = point(s[1]), sc = point(s[2]);
     const openvdb::Vec3d ta = point(t[0]), tb = point(t[1]), tc = point(t[2]);
     auto has = [](const openvdb::Vec3I& tri, uint32_t v) { return tri[0] == v || tri[1] == v || tri[2] == v; };
+    // Most pairs that share a cell lie apart: the corners of one (those it does not share) all
+    // strictly on one side of the other's plane leave no edge of either through the other.
+    // "Strictly" is a margin far below what segmentCrossesTriangle resolves (its ends and
+    // parameters within 1e-9 of an edge do not count), so only the work changes.
+    auto oneSide = [&](const openvdb::Vec3I& plane, const openvdb::Vec3d& a, const openvdb::Vec3d& b,
+                       const openvdb::Vec3d& c, const openvdb::Vec3I& other, const openvdb::Vec3d* corners) {
+        const openvdb::Vec3d n = (b - a).cross(c - a);
+        const double span =
+            std::max({std::abs(a.x()), std::abs(a.y()), std::abs(a.z()), (b - a).length(), (c - a).length()});
+        const double margin = 1e-12 * n.length() * (span + (corners[0] - a).length());
+        bool above = true, below = true;
+        for (int k = 0; k < 3; ++k) {
+            if (has(plane, other[k])) continue;
+            const double d = n.dot(corners[k] - a);
+            above = above && d > margin;
+            below = below && d < -margin;
+        }
+        return above || below;
+    };
+    const openvdb::Vec3d sCorners[3] = {sa, sb, sc}, tCorners[3] = {ta, tb, tc};
+    if (oneSide(s, sa, sb, sc, t, tCorners) || oneSide(t, ta, tb, tc, s, sCorners)) return false;
     // Edges of one through the other; an edge ending at a shared vertex cannot cross the interior
     // without the other edges doing so too, except in the coplanar case, which is not counted.
     for (int i = 0; i < 3; ++i) {
