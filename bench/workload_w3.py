@@ -35,7 +35,20 @@ of three with checks, 8.06 s without), peak 85 MB and 132 MB; area errors as bef
 Merged on main, the other workers stopped (2026-11-26): every layer computed 2.34 s against 172.0 s
 (74x, load 2.7-3.7) and 2.94 s against 163.3 s (56x, load 3.3 -> 1.6); copied 0.99 s (173x) and
 1.21 s (135x); PrusaSlicer alone 134-142 s on this machine; checks +4 to +17 %.
-2026-11-27, quiet machine: every layer computed 2.68 s against 136.7 s (51x), copied 1.14 s (120x)."""
+2026-11-27, quiet machine: every layer computed 2.68 s against 136.7 s (51x), copied 1.14 s (120x).
+2026-11-27, helper (branch w3-speed), every layer computed, the same bytes: the PNG encoder finds
+run ends 64 bytes at a time (SSE compares to a bit mask), writes whole words at a pointer into a
+string reused from layer to layer (no per-word append, no IDAT copy) and gives the zip its CRC
+from the IDAT chunk's (crc32_combine: every byte CRC'd once); the portrait transpose feeds the
+encoder 64-row strips that stay in cache instead of a whole stored copy; pipeline tokens are
+reused (no 1.4 MB allocation, memset and page faults per layer: rasterize writes every pixel);
+the height map is marked in the parallel stage into per-thread 16-bit maps merged by max; the
+block pass converts, sums finiteness and takes cells in one pass; whole-tile row and column tests
+made once per job. Alternating old/new on the shared machine (another engineer's builds and
+tests, load 2.5-3.8): single-thread CPU best 3.45 -> 3.09 s (8 pairs, median pairwise ratio
+0.89); both cores wall best 2.18 -> 1.72 s (7 pairs at load 2.5-2.7, median pairwise 0.91; CPU
+best 3.71 -> 3.31 s) and 3.79 -> 3.46 s (5 pairs at load 3.5, median pairwise 0.86). Peak 63 ->
+60 MB (copied: 92 -> 87 MB). Not yet measured on a quiet machine."""
 import json
 import os
 import shutil

@@ -284,8 +284,9 @@ TEST(Slices, OrientationAndMirroringFollowPrusaSlicer)
     };
     // Expected stored pixel of bed point (x, y), from PrusaSlicer 2.5's SL1S output (portrait, mirror_x):
     // column = y / pitch, row = H - x / pitch; landscape flips y only (row 0 at the top).
-    for (const Case& c : {Case{true, true, false}, Case{false, false, false}, Case{false, true, false},
-                          Case{false, false, true}, Case{true, false, false}}) {
+    for (const Case& c :
+         {Case{true, true, false}, Case{false, false, false}, Case{false, true, false}, Case{false, false, true},
+          Case{true, false, false}, Case{true, true, true}, Case{true, false, true}}) {
         Display d = testDisplay(0.1, 400, 300);
         d.portrait = c.portrait;
         d.mirrorX = c.mirrorX;
@@ -302,6 +303,21 @@ TEST(Slices, OrientationAndMirroringFollowPrusaSlicer)
         for (int r = 0; r < h; ++r)
             std::copy_n(&window[std::size_t(r) * w], w, &fromWindow[std::size_t(row0 + r) * d.storedWidth() + col0]);
         EXPECT_TRUE(fromWindow == stored);
+        // So do the rows the PNG writer reads (a strip at a time in portrait), in any order.
+        std::vector<std::uint8_t> strip;
+        StoredRows rows(image, d, strip);
+        EXPECT_EQ(rows.col0(), col0);
+        EXPECT_EQ(rows.row0(), row0);
+        ASSERT_EQ(rows.width(), w);
+        ASSERT_EQ(rows.height(), h);
+        std::size_t wrongRows = 0;
+        for (int pass = 0; pass < 2; ++pass)
+            for (int k = 0; k < h; ++k) {
+                const int r = pass == 0 ? k : h - 1 - k;
+                wrongRows += !std::equal(window.begin() + std::ptrdiff_t(r) * w,
+                                         window.begin() + std::ptrdiff_t(r + 1) * w, rows.row(r));
+            }
+        EXPECT_EQ(wrongRows, 0u);
         auto pixelAt = [&](double x, double y) {
             const int i = int(x / 0.1), j = int(y / 0.1);
             const int W = d.storedWidth(), H = d.storedHeight();

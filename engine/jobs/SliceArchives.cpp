@@ -52,6 +52,10 @@ public:
         mZip = std::make_unique<ZipStreamWriter>(mFile->stream());
     }
     void addLayer(int index, const std::string& png) override { mZip->add(layerName(mPrefix, index, ".png"), png); }
+    void addPngLayer(int index, const std::string& png, std::uint32_t crc) override
+    {
+        mZip->add(layerName(mPrefix, index, ".png"), png, crc);
+    }
     void finish(const SliceSummary& s) override
     {
         addTail(s);

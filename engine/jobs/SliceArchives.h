@@ -8,6 +8,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -57,6 +58,13 @@ public:
     virtual void begin(const SliceStart&) {}
     /// Layer @a index in the archive's encoding().
     virtual void addLayer(int index, const std::string& bytes) = 0;
+    /// Layer @a index as PNG bytes (LayerEncoding::png) whose CRC-32 is @a crc: a zip stores it
+    /// without reading the bytes again (encodeWindowPng gives it); others take it as addLayer().
+    virtual void addPngLayer(int index, const std::string& png, std::uint32_t crc)
+    {
+        (void)crc;
+        addLayer(index, png);
+    }
     /// Layer @a index as field values over the window (@a i0, @a j0, @a nx x @a ny) of the display.
     virtual void addLayerValues(int index, int nx, int ny, int i0, int j0, const std::vector<float>& values);
     /// Writes what follows the layers and makes the output appear whole.

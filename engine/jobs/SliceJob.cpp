@@ -23,6 +23,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <mutex>
 #include <sstream>
 
 namespace voxlat {
@@ -51,7 +52,30 @@ struct HeightMap {
         h = (ny + step - 1) / step;
         top.assign(std::size_t(w) * h, -1);
     }
-    void add(const LayerImage& image) { mark(image, top, image.index); }
+    /// A map of the highest layer marked per cell, as `top` but of layer + 1 (0: never), in 16
+    /// bits where the layers fit (half the bytes to read and write per layer).
+    struct Marks {
+        std::vector<std::uint16_t> narrow;
+        std::vector<int> wide;
+    };
+    /// Marks @a image into @a into: layers may come in any order and on any thread, each into its
+    /// own map, merged into `top` at the end (merge()).
+    void add(const LayerImage& image, Marks& into, int layers) const
+    {
+        if (layers < 0xffff) {
+            if (into.narrow.empty()) into.narrow.assign(top.size(), 0);
+            mark(image, into.narrow, std::uint16_t(image.index + 1));
+        } else {
+            if (into.wide.empty()) into.wide.assign(top.size(), 0);
+            mark(image, into.wide, image.index + 1);
+        }
+    }
+    /// Takes the highest layer of @a marks where it is higher (the same map for any order of layers).
+    void merge(const Marks& marks)
+    {
+        for (std::size_t c = 0; c < marks.narrow.size(); ++c) top[c] = std::max(top[c], int(marks.narrow[c]) - 1);
+        for (std::size_t c = 0; c < marks.wide.size(); ++c) top[c] = std::max(top[c], marks.wide[c] - 1);
+    }
     /// Layer @a image.index is a phase whose copies go up to layer @a count - 1, @a period apart.
     void addPhase(const LayerImage& image, int period, int count)
     {
@@ -72,8 +96,9 @@ struct HeightMap {
             if (j >= 0) top[c] = std::max(top[c], j + period * ((count - 1 - j) / period));
         }
     }
-    /// Sets @a into to @a value where the image is exposed (at least half), sampled every `step`.
-    void mark(const LayerImage& image, std::vector<int>& into, int value) const
+    /// Raises @a into to @a value where the image is exposed (at least half), sampled every `step`.
+    template <class T>
+    void mark(const LayerImage& image, std::vector<T>& into, T value) const
     {
         // A thumbnail needs no more than every `step` pixels. The samples of a row are gathered
         // first so the select runs as a vector loop (a branch per pixel mispredicts on lattices).
@@ -89,8 +114,8 @@ struct HeightMap {
                 for (int c = 0; c < width; ++c) samples[c] = src[std::size_t(c) * 2];
             else
                 for (int c = 0; c < width; ++c) samples[c] = src[std::size_t(c) * stride];
-            int* t = &into[std::size_t(j / stride) * width];
-            for (int c = 0; c < width; ++c) t[c] = samples[c] >= 128 ? value : t[c];
+            T* t = &into[std::size_t(j / stride) * width];
+            for (int c = 0; c < width; ++c) t[c] = samples[c] >= 128 ? std::max(t[c], value) : t[c];
         }
     }
     /// An RGBA image of tw x th with the map fitted in, y up.
@@ -208,6 +233,7 @@ struct LayerRepeats {
     std::size_t budget = 0, bytes = 0;
     std::vector<std::string> images;  ///< encoded images of the kept phases
     std::vector<double> exposed;      ///< exposed pixels of the kept phases
+    std::vector<std::uint32_t> crcs;  ///< CRC-32 of the kept phases' images (PNG)
     std::atomic<int> kept{0};         ///< phases kept so far (always a prefix)
     std::atomic<bool> closed{false};  ///< no further phase will be kept
     int copied = 0;
@@ -216,17 +242,19 @@ struct LayerRepeats {
     /// Whether a layer may be copied, as far as the input stage can tell (the writer decides).
     bool mayCopy(int layer) const { return repeats(layer) && !(closed.load() && layer % period >= kept.load()); }
     bool copies(int layer) const { return repeats(layer) && layer % period < kept.load(); }
-    /// Keeps the next phase's image (moved from @a image) if it and every phase before it fit;
-    /// the kept image, or null (@a image untouched).
-    const std::string* keep(std::string& image, double exposedPixels)
+    /// Keeps the next phase's image (moved from @a image, whose CRC-32 is @a crc) if it and every
+    /// phase before it fit; the kept image, or null (@a image untouched).
+    const std::string* keep(std::string& image, double exposedPixels, std::uint32_t crc)
     {
         if (closed.load() || bytes + image.size() > budget) {
             closed = true;
             return nullptr;
         }
         bytes += image.size();
+        image.shrink_to_fit();  // a layer's buffer is reused with slack; a kept image holds none
         images.push_back(std::move(image));
         exposed.push_back(exposedPixels);
+        crcs.push_back(crc);
         kept = int(images.size());
         if (kept.load() == period) closed = true;
         return &images.back();
@@ -364,38 +392,78 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
         LayerFeatures features;
         double exposedPixels = 0.0;  ///< summed in the parallel stage
         std::string bytes;
+        std::uint32_t crc = 0;  ///< CRC-32 of bytes (PNG layers)
         std::vector<float> values;
-        std::atomic<int>* held;
-        explicit Token(std::atomic<int>* h) : held(h) {}
-        ~Token() { --*held; }
     };
+    // Tokens are reused once written: a layer's image and encoded bytes keep their buffers, so no
+    // layer allocates, clears and faults in 1.4 MB of pixels again (rasterize() writes every
+    // pixel). What a token holds is all set anew for its next layer.
+    std::mutex poolMutex;
+    std::vector<std::unique_ptr<Token>> pool;
     std::atomic<int> held{0}, maxHeld{0};
     const int threads = tbb::this_task_arena::max_concurrency();
     const std::size_t tokens = std::size_t(threads) + 2;
     int next = 0;
     StageProgress progress(context, "slicing", count);
     const int storedW = display.storedWidth(), storedH = display.storedHeight();
+    // A layer's stored window (Goo) or a strip of it (PNG): kept per thread.
     tbb::enumerable_thread_specific<std::vector<std::uint8_t>> windows;
+    // The height map's marks per thread, made where the layer was (its pixels still in that core's
+    // cache, not in the serial stage's on the other core), merged after the last layer.
+    tbb::enumerable_thread_specific<HeightMap::Marks> tops;
     auto render = [&](Token* t) {
         const double z = part.min.z() + (t->image.index + 0.5) * layer;
         slicer.rasterize(z, t->image, &stats);
+        heights.add(t->image, tops.local(), count);
         if (fieldValues) {
             t->exposedPixels = t->image.exposedPixels();
             slicer.fieldValues(z, t->values);
-        } else {
-            std::vector<std::uint8_t>& window = windows.local();  // a layer's size: kept per thread
+        } else if (encoding == LayerEncoding::goo) {
+            std::vector<std::uint8_t>& window = windows.local();
             int col0, row0, w, h;
             t->image.storedWindow(display, window, col0, row0, w, h);
-            if (encoding == LayerEncoding::goo) {
-                t->exposedPixels = t->image.exposedPixels();
-                t->bytes = encodeGooLayer(storedW, storedH, window.data(), col0, row0, w, h);
-            } else {
-                // The exposed pixels summed by the encoder as it reads the window (the same sum).
-                std::uint64_t sum = 0;
-                t->bytes = encodeWindowPng(storedW, storedH, window.data(), col0, row0, w, h, &sum);
-                t->exposedPixels = double(sum) / 255.0;
-            }
+            t->exposedPixels = t->image.exposedPixels();
+            t->bytes = encodeGooLayer(storedW, storedH, window.data(), col0, row0, w, h);
+        } else {
+            // The exposed pixels summed by the encoder as it reads the window (the same sum), and
+            // the PNG's CRC-32 for the zip from the encoder's own.
+            StoredRows rows(t->image, display, windows.local());
+            std::uint64_t sum = 0;
+            encodeWindowPng(
+                t->bytes, storedW, storedH, [&](int r) { return rows.row(r); }, rows.col0(), rows.row0(), rows.width(),
+                rows.height(), &sum, &t->crc);
+            t->exposedPixels = double(sum) / 255.0;
         }
+    };
+
+    // The serial last stage: one layer, in order, into the archive and the summaries.
+    auto write = [&](Token& t) {
+        const int i = t.image.index;
+        if (checks) printability.addLayer(i, std::move(t.features));
+        if (repeats.copies(i)) {
+            const int phase = i % repeats.period;
+            result.layerAreas[i] = repeats.exposed[phase] * pixelArea;
+            ++repeats.copied;
+            if (encoding == LayerEncoding::png)
+                archive->addPngLayer(i, repeats.images[phase], repeats.crcs[phase]);
+            else
+                archive->addLayer(i, repeats.images[phase]);
+            progress.add();
+            return;
+        }
+        // The budget ran out while this layer waited as a copy: computed here.
+        if (t.copy) render(&t);
+        result.layerAreas[i] = t.exposedPixels * pixelArea;
+        const std::string* kept = i < repeats.period ? repeats.keep(t.bytes, t.exposedPixels, t.crc) : nullptr;
+        if (kept) heights.addPhase(t.image, repeats.period, count);
+        sheet.add(t.image, kept ? repeats.period : 0);
+        if (fieldValues)
+            archive->addLayerValues(i, slicer.nx(), slicer.ny(), slicer.i0(), slicer.j0(), t.values);
+        else if (encoding == LayerEncoding::png)
+            archive->addPngLayer(i, kept ? *kept : t.bytes, t.crc);
+        else
+            archive->addLayer(i, kept ? *kept : t.bytes);
+        progress.add();
     };
 
     tbb::parallel_pipeline(
@@ -408,7 +476,16 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
                     int seen = maxHeld.load();
                     while (now > seen && !maxHeld.compare_exchange_weak(seen, now)) {
                     }
-                    auto* t = new Token(&held);
+                    Token* t = nullptr;
+                    {
+                        const std::lock_guard<std::mutex> lock(poolMutex);
+                        if (!pool.empty()) {
+                            t = pool.back().release();
+                            pool.pop_back();
+                        }
+                    }
+                    if (!t) t = new Token;
+                    t->features = LayerFeatures{};
                     t->image.index = next++;
                     t->copy = repeats.mayCopy(t->image.index);
                     t->analyse = checks && printability.needsImage(t->image.index);
@@ -419,29 +496,13 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
                     return t;
                 }) & tbb::make_filter<Token*, void>(tbb::filter_mode::serial_in_order, [&](Token* raw) {
                     std::unique_ptr<Token> t(raw);
-                    const int i = t->image.index;
-                    if (checks) printability.addLayer(i, std::move(t->features));
-                    if (repeats.copies(i)) {
-                        const int phase = i % repeats.period;
-                        result.layerAreas[i] = repeats.exposed[phase] * pixelArea;
-                        ++repeats.copied;
-                        archive->addLayer(i, repeats.images[phase]);
-                        progress.add();
-                        return;
-                    }
-                    // The budget ran out while this layer waited as a copy: computed here.
-                    if (t->copy) render(t.get());
-                    result.layerAreas[i] = t->exposedPixels * pixelArea;
-                    heights.add(t->image);
-                    const std::string* kept = i < repeats.period ? repeats.keep(t->bytes, t->exposedPixels) : nullptr;
-                    if (kept) heights.addPhase(t->image, repeats.period, count);
-                    sheet.add(t->image, kept ? repeats.period : 0);
-                    if (fieldValues)
-                        archive->addLayerValues(i, slicer.nx(), slicer.ny(), slicer.i0(), slicer.j0(), t->values);
-                    else
-                        archive->addLayer(i, kept ? *kept : t->bytes);
-                    progress.add();
+                    write(*t);
+                    --held;
+                    const std::lock_guard<std::mutex> lock(poolMutex);
+                    pool.push_back(std::move(t));
                 }));
+
+    for (const HeightMap::Marks& local : tops) heights.merge(local);
     if (repeats.kept.load() > 0) heights.addCopies(repeats.period, count);
     if (checks) reportPrintability(printability, settings, path, context);
 

@@ -168,6 +168,18 @@ inline typename L::V edgeCoverage(typename L::V f, typename L::V gx, typename L:
     return minLanes(maxLanes(coverage, zero), one);
 }
 
+/// A vector of as many doubles as a float vector of @a Bytes has floats (for the conversion).
+template <std::size_t Bytes>
+struct DoubleLanes;
+template <>
+struct DoubleLanes<16> {
+    using type = double __attribute__((vector_size(32)));
+};
+template <>
+struct DoubleLanes<32> {
+    using type = double __attribute__((vector_size(64)));
+};
+
 /// The slicer's pass over a block's grid of values (@a nx columns of @a ny, column-major) before
 /// its tiles are decided: @a single gets the values in single precision, @a cells ((nx - 1)
 /// columns of ny - 1) the largest difference between the four corners of each grid cell (both
@@ -178,12 +190,34 @@ template <class L>
 inline bool prepareTileBlock(const double* values, int nx, int ny, float* single, float* cells, float& cellMax)
 {
     using V = typename L::V;
-    const std::size_t n = std::size_t(nx) * ny;
-    for (std::size_t k = 0; k < n; ++k) single[k] = float(values[k]);
+    using Doubles = typename DoubleLanes<sizeof(V)>::type;
+    // One pass: each column converted (and its finiteness summed) just before the cells between
+    // it and the column before are taken, while both are in registers or L1 (three passes over
+    // the block before).
+    V poison{};
+    float rest = 0.0f;
+    auto convert = [&](int a) {
+        const double* from = values + std::size_t(a) * ny;
+        float* to = single + std::size_t(a) * ny;
+        int b = 0;
+        for (; b + L::kWidth <= ny; b += L::kWidth) {
+            Doubles d;
+            std::memcpy(&d, from + b, sizeof d);
+            const V v = __builtin_convertvector(d, V);
+            std::memcpy(to + b, &v, sizeof v);
+            poison += v * 0.0f;
+        }
+        for (; b < ny; ++b) {
+            to[b] = float(from[b]);
+            rest += to[b] * 0.0f;
+        }
+    };
     const int cy = ny - 1;
     V largest{};
     cellMax = 0.0f;
+    convert(0);
     for (int a = 0; a + 1 < nx; ++a) {
+        convert(a + 1);
         const float* c0 = single + std::size_t(a) * ny;
         const float* c1 = c0 + ny;
         float* e = cells + std::size_t(a) * cy;
@@ -203,14 +237,7 @@ inline bool prepareTileBlock(const double* values, int nx, int ny, float* single
         }
     }
     for (int l = 0; l < L::kWidth; ++l) cellMax = std::max(cellMax, largest[l]);
-    V poison[2] = {};
-    std::size_t k = 0;
-    for (; k + 2 * L::kWidth <= n; k += 2 * L::kWidth)
-        for (int q = 0; q < 2; ++q) poison[q] += L::load(single + k + L::kWidth * q) * 0.0f;
-    float rest = 0.0f;
-    for (; k < n; ++k) rest += single[k] * 0.0f;
-    const V sum = poison[0] + poison[1];
-    for (int l = 0; l < L::kWidth; ++l) rest += sum[l];
+    for (int l = 0; l < L::kWidth; ++l) rest += poison[l];
     return rest == 0.0f;
 }
 

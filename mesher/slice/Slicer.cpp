@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 
 #if defined(__SSSE3__)
 #include <tmmintrin.h>
@@ -28,6 +29,38 @@ inline void transpose8x8(std::uint64_t r[8])
     for (int k : {0, 1, 4, 5}) swap(r[k], r[k + 2], 16, 0x0000FFFF0000FFFFull);
     for (int k : {0, 1, 2, 3}) swap(r[k], r[k + 4], 32, 0x00000000FFFFFFFFull);
 }
+
+#if defined(__SSSE3__)
+/// Loads the 16 x 16 bytes at @a src (rows @a pitch apart) transposed: x[c] byte k is src row k,
+/// column c. Four rounds of interleaving rows k and k + 8 rotate the bits (row, column) of each
+/// byte's place by one, so four transpose it.
+inline void transpose16x16(const std::uint8_t* src, std::size_t pitch, __m128i x[16])
+{
+    __m128i t[16];
+    for (int k = 0; k < 16; ++k) x[k] = _mm_loadu_si128(reinterpret_cast<const __m128i*>(src + std::size_t(k) * pitch));
+    for (int round = 0; round < 2; ++round) {
+        for (int k = 0; k < 8; ++k) {
+            t[2 * k] = _mm_unpacklo_epi8(x[k], x[k + 8]);
+            t[2 * k + 1] = _mm_unpackhi_epi8(x[k], x[k + 8]);
+        }
+        for (int k = 0; k < 8; ++k) {
+            x[2 * k] = _mm_unpacklo_epi8(t[k], t[k + 8]);
+            x[2 * k + 1] = _mm_unpackhi_epi8(t[k], t[k + 8]);
+        }
+    }
+}
+
+/// Stores 16 bytes at @a dst, or reversed ending at @a dst (the bytes at dst - 15 .. dst).
+inline void store16(std::uint8_t* dst, __m128i x, bool reversed)
+{
+    if (!reversed) {
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(dst), x);
+        return;
+    }
+    const __m128i reverse = _mm_setr_epi8(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(dst - 15), _mm_shuffle_epi8(x, reverse));
+}
+#endif
 
 /// True when this build has the eight-lane tile pass and the CPU running it has AVX2 (a check
 /// made here, outside the file built for AVX2, so it runs on any x86-64 CPU).
@@ -112,35 +145,16 @@ void LayerImage::storedWindow(const Display& display, std::vector<std::uint8_t>&
     // the ragged right and bottom edges take the plain loop below.
     int iDone = 0, jDone = 0;
 #if defined(__SSSE3__)
-    // 16 x 16 blocks in SSE registers where available: four rounds of interleaving rows k and
-    // k + 8 rotate the bits (row, column) of each byte's place by one, so four transpose it.
+    // 16 x 16 blocks in SSE registers where available.
     if (display.portrait && (dj == 1 || dj == -1)) {
         iDone = nx / 16 * 16;
         jDone = ny / 16 * 16;
-        const __m128i reverse = _mm_setr_epi8(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0);
         for (int jb = 0; jb < jDone; jb += 16)
             for (int ib = 0; ib < iDone; ib += 16) {
-                __m128i x[16], t[16];
-                for (int k = 0; k < 16; ++k)
-                    x[k] = _mm_loadu_si128(reinterpret_cast<const __m128i*>(&pixels[std::size_t(jb + k) * nx + ib]));
-                for (int round = 0; round < 2; ++round) {
-                    for (int k = 0; k < 8; ++k) {
-                        t[2 * k] = _mm_unpacklo_epi8(x[k], x[k + 8]);
-                        t[2 * k + 1] = _mm_unpackhi_epi8(x[k], x[k + 8]);
-                    }
-                    for (int k = 0; k < 8; ++k) {
-                        x[2 * k] = _mm_unpacklo_epi8(t[k], t[k + 8]);
-                        x[2 * k + 1] = _mm_unpackhi_epi8(t[k], t[k + 8]);
-                    }
-                }
+                __m128i x[16];
+                transpose16x16(&pixels[std::size_t(jb) * nx + ib], std::size_t(nx), x);
                 // x[c] byte k: source row jb + k, column ib + c.
-                for (int c = 0; c < 16; ++c) {
-                    std::uint8_t* dst = out.data() + origin + di * (ib + c) + dj * jb;
-                    if (dj == 1)
-                        _mm_storeu_si128(reinterpret_cast<__m128i*>(dst), x[c]);
-                    else
-                        _mm_storeu_si128(reinterpret_cast<__m128i*>(dst - 15), _mm_shuffle_epi8(x[c], reverse));
-                }
+                for (int c = 0; c < 16; ++c) store16(out.data() + origin + di * (ib + c) + dj * jb, x[c], dj != 1);
             }
     }
 #else
@@ -186,6 +200,88 @@ void LayerImage::storedWindow(const Display& display, std::vector<std::uint8_t>&
             }
 }
 
+StoredRows::StoredRows(const LayerImage& image, const Display& display, std::vector<std::uint8_t>& buffer)
+    : mImage(image), mBuffer(buffer)
+{
+#if defined(__SSSE3__)
+    mStrips = display.portrait && image.nx > 0 && image.ny > 0;
+#endif
+    if (!mStrips) {
+        image.storedWindow(display, mBuffer, mCol0, mRow0, mW, mH);
+        return;
+    }
+    // As storedWindow(): portrait, the stored row from i, reversed unless mirror_y, the column
+    // from j, reversed unless mirror_x (portrait toggles the x mirror).
+    mReverseI = !display.mirrorY;
+    mReverseJ = !display.mirrorX;
+    mW = image.ny;
+    mH = image.nx;
+    const int W = display.storedWidth(), H = display.storedHeight();
+    const int firstCol = mReverseJ ? W - 1 - image.j0 : image.j0,
+              lastCol = mReverseJ ? W - image.j0 - mW : image.j0 + mW - 1;
+    const int firstRow = mReverseI ? H - 1 - image.i0 : image.i0,
+              lastRow = mReverseI ? H - image.i0 - mH : image.i0 + mH - 1;
+    mCol0 = std::min(firstCol, lastCol);
+    mRow0 = std::min(firstRow, lastRow);
+    mBuffer.resize(std::size_t(kStripRows) * mW);
+}
+
+const std::uint8_t* StoredRows::row(int r)
+{
+    if (!mStrips) return mBuffer.data() + std::size_t(r) * mW;
+    if (r / kStripRows != mStrip) makeStrip(r / kStripRows);
+    return mBuffer.data() + std::size_t(r % kStripRows) * mW;
+}
+
+void StoredRows::makeStrip(int strip)
+{
+    mStrip = strip;
+    const int nx = mImage.nx, ny = mW;
+    const std::uint8_t* pixels = mImage.pixels.data();
+    // Stored window row r shows source column a = r (nx - 1 - r reversed), its column c source
+    // row b = c (ny - 1 - c reversed). The strip holds rows kStripRows strip and on: source
+    // columns aLo and on, in 16 x 16 blocks.
+    const int first = kStripRows * strip, rows = std::min(kStripRows, mH - first);
+    const int aLo = mReverseI ? nx - first - rows : first;
+    auto rowOf = [&](int a) { return mReverseI ? nx - 1 - a - first : a - first; };
+    int aDone = aLo;  // columns aLo .. aDone - 1 are done for rows 0 .. bDone - 1
+    int bDone = 0;
+#if defined(__SSSE3__)
+    aDone = aLo + rows / 16 * 16;
+    bDone = ny / 16 * 16;
+    // Locals, not members: the byte stores may alias any member, which would be reloaded.
+    std::uint8_t* const buffer = mBuffer.data();
+    const std::ptrdiff_t pitch = mW, rowStep = mReverseI ? -pitch : pitch;
+    // Column blocks outer, row blocks inner: each load walks down the image at a constant stride,
+    // which the prefetchers follow (the other way round the loads waited for memory); a source
+    // line's later three visits find it in L2.
+    auto transpose = [&](auto reverseJ) {
+        for (int ab = aLo; ab < aDone; ab += 16) {
+            std::uint8_t* const top = buffer + std::ptrdiff_t(rowOf(ab)) * pitch;  // the row of column ab
+            for (int bb = 0; bb < bDone; bb += 16) {
+                __m128i x[16];
+                transpose16x16(pixels + std::size_t(bb) * nx + ab, std::size_t(nx), x);
+                // x[c] byte k: source row bb + k, column ab + c.
+                std::uint8_t* const dst = top + (reverseJ ? ny - 1 - bb : bb);
+                for (int c = 0; c < 16; ++c) store16(dst + c * rowStep, x[c], reverseJ);
+            }
+        }
+    };
+    if (mReverseJ)
+        transpose(std::true_type{});
+    else
+        transpose(std::false_type{});
+#endif
+    for (int a = aDone; a < aLo + rows; ++a) {  // columns left over: every row
+        std::uint8_t* dst = mBuffer.data() + std::size_t(rowOf(a)) * mW;
+        for (int b = 0; b < ny; ++b) dst[mReverseJ ? ny - 1 - b : b] = pixels[std::size_t(b) * nx + a];
+    }
+    for (int a = aLo; a < aDone; ++a) {  // rows left over
+        std::uint8_t* dst = mBuffer.data() + std::size_t(rowOf(a)) * mW;
+        for (int b = bDone; b < ny; ++b) dst[mReverseJ ? ny - 1 - b : b] = pixels[std::size_t(b) * nx + a];
+    }
+}
+
 Slicer::Slicer(const FieldNode& field, const Box3& part, double offsetX, double offsetY, const Display& display,
                const RasterOptions& options)
     : mField(field),
@@ -209,6 +305,26 @@ Slicer::Slicer(const FieldNode& field, const Box3& part, double offsetX, double 
     const int j1 = std::clamp(int(std::ceil(y1 / py - 1e-9)), 0, display.pixelsY);
     mNx = std::max(0, i1 - mI0);
     mNy = std::max(0, j1 - mJ0);
+    // rasterize()'s whole-tile tests per column and row (the same expressions as edgeTile's):
+    // a pixel that overhangs the part's box by a rounding error counts as whole.
+    const double slackX = 1e-9 * px, slackY = 1e-9 * py;
+    std::vector<std::uint8_t> columnIn(static_cast<std::size_t>(mNx)), rowIn(static_cast<std::size_t>(mNy));
+    for (int a = 0; a < mNx; ++a) {
+        const double x = (double(mI0 + a) + 0.5) * px - mOffsetX;
+        columnIn[a] = x - 0.5 * px >= part.min.x() - slackX && x + 0.5 * px <= part.max.x() + slackX;
+    }
+    for (int b = 0; b < mNy; ++b) {
+        const double y = (double(mJ0 + b) + 0.5) * py - mOffsetY;
+        rowIn[b] = y - 0.5 * py >= part.min.y() - slackY && y + 0.5 * py <= part.max.y() + slackY;
+    }
+    mTileColumnsIn.assign(std::size_t(mNx), 0);
+    mTileRowsIn.assign(std::size_t(mNy), 0);
+    for (int a = 0; a + kLanes <= mNx; ++a) mTileColumnsIn[a] = columnIn[a] && columnIn[a + kLanes - 1];
+    for (int b = 0; b + kLanes <= mNy; ++b) {
+        bool all = true;
+        for (int k = 0; k < kLanes; ++k) all = all && rowIn[b + k];
+        mTileRowsIn[b] = all;
+    }
     const int s = std::max(1, options.supersample);
     mLevels.resize(std::size_t(s * s) + 1);
     for (int k = 0; k <= s * s; ++k) {
@@ -224,16 +340,19 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     out.j0 = mJ0;
     out.nx = mNx;
     out.ny = mNy;
-    out.pixels.assign(std::size_t(mNx) * mNy, 0);
-    if (z < mPart.min.z() || z > mPart.max.z()) return;
+    // Every pixel is written below (outside blocks as zeros), so a reused image is not cleared
+    // first: a layer's 1.4 MB memset was 2 % of slicing.
+    out.pixels.resize(std::size_t(mNx) * mNy);
+    if (z < mPart.min.z() || z > mPart.max.z()) {
+        std::fill(out.pixels.begin(), out.pixels.end(), std::uint8_t(0));
+        return;
+    }
     const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
     const int tile = std::max(2, mOptions.tile), block = 8 * tile;
     std::vector<double> values, sub;
     std::vector<float> single, cells;  // the values in single precision and their cells, for the tile tests
     RasterCounts counts;
     int quartersTried = 0, quartersCulled = 0;
-    // edgeTile's slack: a pixel that overhangs the part's box by a rounding error counts as whole.
-    const double slackX = 1e-9 * px, slackY = 1e-9 * py;
     const bool greyEdges = mOptions.supersample > 0 && mOptions.gamma == 1.0;
     const float tolerance = float(mOptions.linearTolerance);
     auto decideWholeTile = [&](const float* single, int stride, const float* cells, float blockCell,
@@ -266,15 +385,15 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         const bool whole = lx >= mPart.min.x() && hx <= mPart.max.x() && ly >= mPart.min.y() && hy <= mPart.max.y();
         return b.hi < 0.0 && whole ? -1 : 0;
     };
-    auto fill = [&](int i, int j, int n, int m) {
-        for (int b = 0; b < m; ++b) std::fill_n(&out.pixels[std::size_t(j + b) * mNx + i], n, std::uint8_t(255));
+    auto fill = [&](int i, int j, int n, int m, std::uint8_t grey) {
+        for (int b = 0; b < m; ++b) std::fill_n(&out.pixels[std::size_t(j + b) * mNx + i], n, grey);
     };
-    // Decides the pixel box of a block already classified as @a side: fills it, leaves it empty or
-    // evaluates it as one batch.
+    // Decides the pixel box of a block already classified as @a side: fills it (255 inside, 0
+    // outside) or evaluates it as one batch.
     auto decideBlock = [&](int bi, int bj, int bnx, int bny, int side) {
         const std::uint64_t tiles = std::uint64_t((bnx + tile - 1) / tile) * ((bny + tile - 1) / tile);
         if (side != 0) {
-            if (side < 0) fill(bi, bj, bnx, bny);
+            fill(bi, bj, bnx, bny, side < 0 ? 255 : 0);
             (side < 0 ? counts.tilesInside : counts.tilesOutside) += tiles;
             return;
         }
@@ -299,25 +418,15 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         const bool finite = prepareBlock(values.data(), grid.nx, grid.ny, single.data(), cells.data(), blockCell);
         // Whole 8 x 8 tiles within the part's box go straight to the tile pass; edgeTile (which
         // repeats it) only takes the others and those with pixels to sub-sample. The same tests
-        // as edgeTile's, per row and column of the block instead of per tile.
-        bool rowIn[64], columnIn[64];
+        // as edgeTile's, per row and column of the window (made by the constructor).
         const bool listed = bnx <= 64 && bny <= 64;
-        for (int b = 0; listed && b < bny; ++b) {
-            const double y = (double(mJ0 + bj + b) + 0.5) * py - mOffsetY;
-            rowIn[b] = y - 0.5 * py >= mPart.min.y() - slackY && y + 0.5 * py <= mPart.max.y() + slackY;
-        }
-        for (int a = 0; listed && a < bnx; ++a) {
-            const double x = (double(mI0 + bi + a) + 0.5) * px - mOffsetX;
-            columnIn[a] = x - 0.5 * px >= mPart.min.x() - slackX && x + 0.5 * px <= mPart.max.x() + slackX;
-        }
         for (int tj = bj; tj < bj + bny; tj += tile)
             for (int ti = bi; ti < bi + bnx; ti += tile) {
                 const int tnx = std::min(tile, bi + bnx - ti), tny = std::min(tile, bj + bny - tj);
                 const std::size_t at = std::size_t(ti - bi) * grid.ny + (tj - bj);
                 const std::size_t cellAt = std::size_t(ti - bi) * cy + (tj - bj);
-                bool whole = listed && finite && tnx == kLanes && tny == kLanes && columnIn[ti - bi] &&
-                             columnIn[ti - bi + kLanes - 1];
-                for (int b = 0; whole && b < kLanes; ++b) whole = rowIn[tj - bj + b];
+                const bool whole =
+                    listed && finite && tnx == kLanes && tny == kLanes && mTileColumnsIn[ti] && mTileRowsIn[tj];
                 if (whole) {
                     std::uint16_t slowList[kLanes * kLanes];
                     int slowCount = 0;

@@ -84,6 +84,38 @@ struct LayerImage {
                       int& h) const;
 };
 
+/// The window of a layer image in the stored orientation (LayerImage::storedWindow()), row by
+/// row: a portrait window is transposed kStripRows stored rows at a time into a strip that stays
+/// in the cache while the rows are read (a whole stored copy of a 1200 x 1200 window is written
+/// to and read back from memory); other orientations are copied whole once. The same bytes.
+class StoredRows {
+public:
+    /// Stored rows per strip: source columns of a whole cache line, so a line fetched from
+    /// memory is used whole while it is in L2 (16-row strips fetched every line four times).
+    static constexpr int kStripRows = 64;
+
+    /// Rows of @a image shown on @a display; @a buffer is storage reused from layer to layer. The
+    /// image must outlive this object.
+    StoredRows(const LayerImage& image, const Display& display, std::vector<std::uint8_t>& buffer);
+    /// Placement and size of the stored window, as storedWindow() gives them.
+    int col0() const { return mCol0; }
+    int row0() const { return mRow0; }
+    int width() const { return mW; }
+    int height() const { return mH; }
+    /// Stored window row @a r (width() bytes, valid until the next call); cheapest in order.
+    const std::uint8_t* row(int r);
+
+private:
+    void makeStrip(int strip);
+
+    const LayerImage& mImage;
+    std::vector<std::uint8_t>& mBuffer;
+    int mCol0 = 0, mRow0 = 0, mW = 0, mH = 0;
+    bool mStrips = false;                       ///< portrait, made a strip at a time (else the whole window)
+    bool mReverseI = false, mReverseJ = false;  ///< stored rows (columns) run against i (j)
+    int mStrip = -1;                            ///< the strip in the buffer
+};
+
 /// Counters of the work done (summed over layers; read after slicing).
 struct RasterStats {
     std::atomic<std::uint64_t> tilesInside{0}, tilesOutside{0}, tilesEdge{0};
@@ -141,6 +173,10 @@ private:
     bool mFits = true;
     bool mWideTiles = false;            ///< options.wideTiles and the CPU has AVX2
     std::vector<std::uint8_t> mLevels;  ///< grey of k inside sub-samples, k = 0..s^2
+    /// Per window column i (row j): whether columns i .. i + 7 (rows j .. j + 7) all lie within the
+    /// part's box up to edgeTile's slack, so a whole tile there may take the tile pass. They do
+    /// not depend on z: made once here, not per block of every layer.
+    std::vector<std::uint8_t> mTileColumnsIn, mTileRowsIn;
 };
 
 }  // namespace voxlat

@@ -7,8 +7,13 @@
 #include <png.h>
 #include <zlib.h>
 
+#include <algorithm>
 #include <cstring>
 #include <stdexcept>
+
+#if defined(__SSSE3__)
+#include <tmmintrin.h>
+#endif
 
 namespace voxlat {
 
@@ -58,16 +63,51 @@ constexpr std::uint32_t kDosTime = 0;
 constexpr std::uint32_t kDosDate = ((2020 - 1980) << 9) | (1 << 5) | 1;
 constexpr std::uint64_t kMax32 = 0xffffffffull;
 
+/// Bit t set where p[t] differs from the byte before it (@a carry's last byte before p[0]), for
+/// the 64 bytes at @a p; @a carry becomes the last 16 of them. Four SSE compares instead of a
+/// branch per run end: the runs of a lattice's layer are a few pixels long, and a branch per run
+/// mispredicted at most of them.
+inline std::uint64_t runStarts(const std::uint8_t* p, std::uint8_t before, std::uint64_t& carry)
+{
+#if defined(__SSSE3__)
+    (void)before;
+    std::uint64_t mask = 0;
+    __m128i previous = _mm_cvtsi64_si128(std::int64_t(carry));
+    previous = _mm_unpacklo_epi64(previous, previous);  // its byte 15 is the byte before p[0]
+    for (int q = 0; q < 4; ++q) {
+        const __m128i current = _mm_loadu_si128(reinterpret_cast<const __m128i*>(p + 16 * q));
+        const __m128i shifted = _mm_alignr_epi8(current, previous, 15);  // byte t: the byte before p[16 q + t]
+        mask |= std::uint64_t(~unsigned(_mm_movemask_epi8(_mm_cmpeq_epi8(current, shifted))) & 0xffffu) << (16 * q);
+        previous = current;
+    }
+    std::memcpy(&carry, p + 56, 8);
+    return mask;
+#else
+    (void)carry;
+    std::uint64_t mask = 0;
+    for (int t = 0; t < 64; ++t) {
+        mask |= std::uint64_t(p[t] != before) << t;
+        before = p[t];
+    }
+    return mask;
+#endif
+}
+
 /// A deflate stream of one fixed-Huffman block that codes each run of equal bytes as a literal and
-/// matches at distance 1 (RFC 1951 3.2.6), with the zlib wrapper's Adler-32 kept alongside.
+/// matches at distance 1 (RFC 1951 3.2.6), with the zlib wrapper's Adler-32 kept alongside. It
+/// appends to a string (kept from layer to layer by the caller, so its capacity is reused),
+/// writing whole words at a pointer: a string append per word was a call each time.
 class RunDeflater {
 public:
-    explicit RunDeflater(std::string& out) : mOut(out)
+    explicit RunDeflater(std::string& out) : mOut(out), mPos(out.size())
     {
         static const Tables tables;
         mTables = &tables;
-        put(1, 1);  // BFINAL
-        put(1, 2);  // BTYPE 01: fixed Huffman codes
+        reserve(64);
+        char* ptr = mOut.data() + mPos;
+        put(ptr, 1, 1);  // BFINAL
+        put(ptr, 1, 2);  // BTYPE 01: fixed Huffman codes
+        mPos = std::size_t(ptr - mOut.data());
     }
     void zeros(std::uint64_t n)
     {
@@ -80,56 +120,81 @@ public:
         // Rows longer than this are coded in parts, so the Adler sums below fit 64 bits.
         constexpr std::size_t kPart = std::size_t(1) << 24;
         for (; n > kPart; p += kPart, n -= kPart) bytes(p, kPart);
-        // Adler-32 run by run, reduced once at the end: m bytes c add m c to A and, to B, m A
-        // plus c m (m + 1) / 2 (A < 2^33 and B < 2^57 for at most 2^24 bytes).
-        std::uint64_t a = mA, b = mB, sum = mSum;  // locals: the byte stores may alias members
-        std::size_t k = 0;
-        while (k < n) {
-            if (p[k] != mRunByte) flushRun(), mRunByte = p[k];
-            std::size_t e = k + 1;
-            const std::uint64_t pattern = 0x0101010101010101ull * mRunByte;
-            // Eight bytes at a time; the run's end within a word from its first differing byte
-            // (the lowest set bit of the difference, the highest on big-endian), not byte by byte, as a
-            // branch per byte mispredicts at every run's end.
-            bool ended = false;
-            for (std::uint64_t word; e + 8 <= n;) {
-                std::memcpy(&word, p + e, 8);
-                const std::uint64_t diff = word ^ pattern;
-                if (diff != 0) {
-#if __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
-                    e += std::size_t(__builtin_clzll(diff) >> 3);
-#else
-                    e += std::size_t(__builtin_ctzll(diff) >> 3);
-#endif
-                    ended = true;
-                    break;
-                }
-                e += 8;
+        if (n == 0) return;
+        reserve(n + n / 8 + 64);  // a run of m bytes takes at most 9 m bits (long runs reserve their own)
+        // Adler-32 piece by piece, reduced once at the end: m bytes c add m c to A and, to B, m A
+        // plus c m (m + 1) / 2 (A < 2^33 and B < 2^57 for at most 2^24 bytes). Locals: the stores
+        // through the output pointer may alias members.
+        const Tables& tables = *mTables;
+        std::uint64_t a = mA, b = mB, sum = mSum, run = mRun, bits = mBits;
+        int count = mCount;
+        std::uint8_t runByte = mRunByte;
+        char* ptr = mOut.data() + mPos;
+        std::uint64_t carry = 0x0101010101010101ull * runByte;
+        std::size_t last = 0;  // where the current piece (bytes equal to runByte) starts in p
+        std::uint8_t tail[64];
+        for (std::size_t k = 0; k < n; k += 64) {
+            const std::uint8_t* chunk = p + k;
+            if (n - k < 64) {  // the last bytes padded with the last byte (no run starts there)
+                std::memcpy(tail, chunk, n - k);
+                std::memset(tail + (n - k), p[n - 1], 64 - (n - k));
+                chunk = tail;
             }
-            if (!ended)
-                while (e < n && p[e] == mRunByte) ++e;
-            const std::uint64_t m = e - k;
-            b += m * a + mRunByte * (m * (m + 1) / 2);
-            a += m * mRunByte;
-            sum += m * mRunByte;
-            mRun += m;
-            k = e;
+            for (std::uint64_t starts = runStarts(chunk, k == 0 ? runByte : p[k - 1], carry); starts != 0;
+                 starts &= starts - 1) {
+                const std::size_t e = k + std::size_t(__builtin_ctzll(starts));
+                const std::uint64_t m = e - last;
+                b += m * a + runByte * (m * (m + 1) / 2);
+                a += m * runByte;
+                sum += m * runByte;
+                run += m;
+                // The run ends here: its first byte as a literal, then the rest as literals
+                // (1 or 2) or one match, in one word (at most 9 + 18 bits); long runs elsewhere.
+                if (run - 1 < 259) {
+                    const std::uint32_t literal = tables.code[runByte], literalBits = tables.bits[runByte];
+                    const std::uint32_t rest = std::uint32_t(run) - 1;
+                    const std::uint32_t twice = literal | literal << literalBits;
+                    const std::uint32_t restCode =
+                        rest >= 3 ? tables.lengthCode[rest] : twice & ((1u << (rest * literalBits)) - 1u);
+                    const std::uint32_t restBits = rest >= 3 ? tables.lengthBits[rest] : rest * literalBits;
+                    putBits(ptr, bits, count, literal | std::uint64_t(restCode) << literalBits,
+                            int(literalBits + restBits));
+                } else if (run > 0) {
+                    mPos = std::size_t(ptr - mOut.data());
+                    mBits = bits, mCount = count, mRunByte = runByte, mRun = run;
+                    flushRun();
+                    ptr = mOut.data() + mPos;
+                    bits = mBits, count = mCount;
+                }
+                runByte = p[e];
+                run = 0;
+                last = e;
+            }
         }
+        const std::uint64_t m = n - last;
+        b += m * a + runByte * (m * (m + 1) / 2);
+        a += m * runByte;
+        sum += m * runByte;
+        mRun = run + m;
+        mRunByte = runByte;
+        mBits = bits;
+        mCount = count;
+        mPos = std::size_t(ptr - mOut.data());
         mSum = sum;
         mA = std::uint32_t(a % kBase);
         mB = std::uint32_t(b % kBase);
     }
     /// The sum of every byte coded.
-    std::uint64_t byteSum() const
-    {
-        return mSum;
-    }
-    /// Ends the block and returns the Adler-32 of everything coded.
+    std::uint64_t byteSum() const { return mSum; }
+    /// Ends the block, cuts the string after it and returns the Adler-32 of everything coded.
     std::uint32_t finish()
     {
         flushRun();
-        put(mTables->code[256], mTables->bits[256]);
-        for (; mCount > 0; mCount -= 8, mBits >>= 8) mOut.push_back(char(mBits & 0xff));
+        reserve(64);
+        char* ptr = mOut.data() + mPos;
+        put(ptr, mTables->code[256], mTables->bits[256]);
+        mPos = std::size_t(ptr - mOut.data()) + (mCount > 0 ? 1 : 0);  // the last bits' byte is written
+        mOut.resize(mPos);
         return std::uint32_t((mB << 16) | mA);
     }
 
@@ -167,39 +232,59 @@ private:
                 lengthCode[len] = code[sym] | (std::uint32_t(len - base[s]) << n);  // distance code 0: 5 zero bits
                 lengthBits[len] = std::uint8_t(n + extra[s] + 5);
             }
+            for (int len = 0; len < 3; ++len) lengthCode[len] = lengthBits[len] = 0;  // not used
         }
     };
 
-    void put(std::uint32_t value, int n)
+    /// Makes room for @a n more bytes (and a word's slack) after mPos.
+    void reserve(std::size_t n)
     {
-        mBits |= std::uint64_t(value) << mCount;
-        mCount += n;
-        if (mCount >= 32) {
-            const std::uint32_t word = std::uint32_t(mBits);
-            const char b[4] = {char(word), char(word >> 8), char(word >> 16), char(word >> 24)};
-            mOut.append(b, 4);
-            mBits >>= 32;
-            mCount -= 32;
-        }
+        const std::size_t need = mPos + n + 8;
+        if (need > mOut.size()) mOut.resize(std::max(need, 2 * mOut.size()));
+    }
+    /// Appends the @a n low bits of @a value (n <= 32; fewer than 8 bits pending before): the
+    /// pending bits are stored as a whole word and the pointer moves on by the whole bytes.
+    static void putBits(char*& ptr, std::uint64_t& bits, int& count, std::uint64_t value, int n)
+    {
+        bits |= value << count;
+        count += n;
+#if __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__
+        const std::uint64_t word = __builtin_bswap64(bits);
+#else
+        const std::uint64_t word = bits;
+#endif
+        std::memcpy(ptr, &word, 8);
+        const int whole = count >> 3;  // at most 4
+        ptr += whole;
+        bits >>= 8 * whole;
+        count &= 7;
+    }
+    void put(char*& ptr, std::uint32_t value, int n)
+    {
+        putBits(ptr, mBits, mCount, value, n);
     }
     void flushRun()
     {
         if (mRun == 0) return;
-        put(mTables->code[mRunByte], mTables->bits[mRunByte]);
+        reserve(std::size_t(mRun / 128) + 64);  // a match of 258 bytes takes 13 bits
+        char* ptr = mOut.data() + mPos;
+        put(ptr, mTables->code[mRunByte], mTables->bits[mRunByte]);
         std::uint64_t rest = mRun - 1;
-        for (; rest >= 258 + 3; rest -= 258) put(mTables->lengthCode[258], mTables->lengthBits[258]);
+        for (; rest >= 258 + 3; rest -= 258) put(ptr, mTables->lengthCode[258], mTables->lengthBits[258]);
         if (rest > 258) {  // leave at least 3 for the last match
-            put(mTables->lengthCode[rest - 3], mTables->lengthBits[rest - 3]);
+            put(ptr, mTables->lengthCode[rest - 3], mTables->lengthBits[rest - 3]);
             rest = 3;
         }
         if (rest >= 3)
-            put(mTables->lengthCode[rest], mTables->lengthBits[rest]);
+            put(ptr, mTables->lengthCode[rest], mTables->lengthBits[rest]);
         else
-            for (; rest > 0; --rest) put(mTables->code[mRunByte], mTables->bits[mRunByte]);
+            for (; rest > 0; --rest) put(ptr, mTables->code[mRunByte], mTables->bits[mRunByte]);
         mRun = 0;
+        mPos = std::size_t(ptr - mOut.data());
     }
 
     std::string& mOut;
+    std::size_t mPos;  ///< the first byte not yet whole: bits still pending (mCount < 8) go there
     const Tables* mTables;
     std::uint64_t mBits = 0;
     int mCount = 0;
@@ -227,35 +312,58 @@ void pngChunk(std::string& out, const char* type, const std::string& data)
 
 }  // namespace
 
-std::string encodeWindowPng(int width, int height, const std::uint8_t* window, int col0, int row0, int w, int h,
-                            std::uint64_t* byteSum)
+void encodeWindowPng(std::string& out, int width, int height, const std::function<const std::uint8_t*(int)>& row,
+                     int col0, int row0, int w, int h, std::uint64_t* byteSum, std::uint32_t* crc)
 {
     if (w <= 0 || h <= 0) col0 = row0 = w = h = 0;
     if (col0 < 0 || row0 < 0 || col0 + w > width || row0 + h > height)
         throw std::runtime_error("PNG window lies outside the image");
-    std::string idat{char(0x78), char(0x01)};  // zlib header: deflate, 32K window, no dictionary
-    idat.reserve(1 << 16);
-    RunDeflater deflater(idat);
-    const std::uint64_t rowBytes = std::uint64_t(width) + 1;  // filter byte NONE (0), then the pixels
-    deflater.zeros(std::uint64_t(row0) * rowBytes);
-    for (int r = 0; r < h; ++r) {
-        deflater.zeros(1 + std::uint64_t(col0));
-        deflater.bytes(window + std::size_t(r) * w, std::size_t(w));
-        deflater.zeros(std::uint64_t(width - col0 - w));
-    }
-    deflater.zeros(std::uint64_t(height - row0 - h) * rowBytes);
-    putBig32(idat, deflater.finish());
-    if (byteSum) *byteSum = deflater.byteSum();
-
-    std::string out("\x89PNG\r\n\x1a\n", 8);
-    out.reserve(8 + 3 * 12 + 13 + idat.size());  // exactly: a layer kept for copies holds no slack
+    out.assign("\x89PNG\r\n\x1a\n", 8);
     std::string ihdr;
     putBig32(ihdr, std::uint32_t(width));
     putBig32(ihdr, std::uint32_t(height));
     ihdr += std::string{char(8), char(0), char(0), char(0), char(0)};  // 8-bit grey, deflate, adaptive, no interlace
     pngChunk(out, "IHDR", ihdr);
-    pngChunk(out, "IDAT", idat);
+    // The IDAT chunk is coded in place: its length is filled in once known.
+    const std::size_t idat = out.size();
+    out.append(4, '\0');
+    out.append("IDAT", 4);
+    out.append({char(0x78), char(0x01)});  // zlib header: deflate, 32K window, no dictionary
+    RunDeflater deflater(out);
+    const std::uint64_t rowBytes = std::uint64_t(width) + 1;  // filter byte NONE (0), then the pixels
+    deflater.zeros(std::uint64_t(row0) * rowBytes);
+    for (int r = 0; r < h; ++r) {
+        deflater.zeros(1 + std::uint64_t(col0));
+        deflater.bytes(row(r), std::size_t(w));
+        deflater.zeros(std::uint64_t(width - col0 - w));
+    }
+    deflater.zeros(std::uint64_t(height - row0 - h) * rowBytes);
+    putBig32(out, deflater.finish());
+    if (byteSum) *byteSum = deflater.byteSum();
+    const std::size_t length = out.size() - idat - 8;
+    for (int k = 0; k < 4; ++k) out[idat + k] = char((length >> (24 - 8 * k)) & 0xff);
+    const uLong idatCrc = crc32(0L, reinterpret_cast<const Bytef*>(out.data() + idat + 4), uInt(length + 4));
+    putBig32(out, std::uint32_t(idatCrc));
     pngChunk(out, "IEND", std::string());
+    if (crc) {
+        // The whole file's CRC from the IDAT chunk's (every byte is read once): the bytes before
+        // it, the chunk's own CRC combined in, then its CRC field and IEND.
+        const auto* bytes = reinterpret_cast<const Bytef*>(out.data());
+        uLong whole = crc32(0L, bytes, uInt(idat + 4));
+        whole = crc32_combine(whole, idatCrc, z_off_t(length + 4));
+        const std::size_t after = idat + 8 + length;
+        *crc = std::uint32_t(crc32(whole, bytes + after, uInt(out.size() - after)));
+    }
+}
+
+std::string encodeWindowPng(int width, int height, const std::uint8_t* window, int col0, int row0, int w, int h,
+                            std::uint64_t* byteSum)
+{
+    std::string out;
+    encodeWindowPng(
+        out, width, height, [&](int r) { return window + std::size_t(r) * std::size_t(std::max(w, 0)); }, col0, row0, w,
+        h, byteSum, nullptr);
+    out.shrink_to_fit();
     return out;
 }
 
@@ -323,8 +431,12 @@ std::vector<std::uint8_t> decodePng(const std::string& bytes, int& width, int& h
 
 void ZipStreamWriter::add(const std::string& name, const std::string& data)
 {
-    Entry e{name, std::uint32_t(crc32(0L, reinterpret_cast<const Bytef*>(data.data()), uInt(data.size()))), data.size(),
-            mOffset};
+    add(name, data, std::uint32_t(crc32(0L, reinterpret_cast<const Bytef*>(data.data()), uInt(data.size()))));
+}
+
+void ZipStreamWriter::add(const std::string& name, const std::string& data, std::uint32_t crc)
+{
+    Entry e{name, crc, data.size(), mOffset};
     if (data.size() >= kMax32) throw std::runtime_error("zip entry " + name + " is larger than 4 GiB");
     std::string h;
     put32(h, 0x04034b50);

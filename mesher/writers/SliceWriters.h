@@ -27,6 +27,13 @@ std::string encodePng(int width, int height, int channels, const std::function<v
 std::string encodeWindowPng(int width, int height, const std::uint8_t* window, int col0, int row0, int w, int h,
                             std::uint64_t* byteSum = nullptr);
 
+/// encodeWindowPng into @a out (replaced; its capacity is kept, so a string reused from layer to
+/// layer is not grown again), the window's row r (@a w bytes) from @a row(r), asked for in order.
+/// With @a crc, also the CRC-32 of the whole PNG (a zip entry's), derived from the IDAT chunk's so
+/// the bytes are not read again.
+void encodeWindowPng(std::string& out, int width, int height, const std::function<const std::uint8_t*(int)>& row,
+                     int col0, int row0, int w, int h, std::uint64_t* byteSum = nullptr, std::uint32_t* crc = nullptr);
+
 /// Decodes an 8-bit grey or RGBA PNG (for tests and previews); throws std::runtime_error if it cannot.
 std::vector<std::uint8_t> decodePng(const std::string& bytes, int& width, int& height, int& channels);
 
@@ -37,6 +44,8 @@ class ZipStreamWriter {
 public:
     explicit ZipStreamWriter(std::ostream& out) : mOut(out) {}
     void add(const std::string& name, const std::string& data);
+    /// add() with the CRC-32 of @a data already known (where the data was made), so it is not read again.
+    void add(const std::string& name, const std::string& data, std::uint32_t crc);
     /// Writes the central directory; call once, after the last add().
     void finish();
     std::uint64_t bytesWritten() const { return mOffset; }
