@@ -5,9 +5,11 @@
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <numeric>
 #include <utility>
 #include <vector>
@@ -293,6 +295,9 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
         int lo[3], hi[3];
     };
     std::vector<Range> ranges(n);
+    // Each triangle's bounds in single precision, widened by a rounding: pairs whose bounds are
+    // apart cannot cross, and most pairs sharing a cell are (a test far cheaper than the crossing's).
+    std::vector<std::array<float, 6>> bounds(n);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 14), [&](const auto& r) {
         for (std::size_t t = r.begin(); t != r.end(); ++t) {
             const openvdb::Vec3I& tri = mesh.triangles[t];
@@ -309,6 +314,8 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
             for (int a = 0; a < 3; ++a) {
                 ranges[t].lo[a] = onBounds ? 1 : cellOf(b.min(), a);
                 ranges[t].hi[a] = onBounds ? 0 : cellOf(b.max(), a);
+                bounds[t][a] = std::nextafter(float(b.min()[a]), -std::numeric_limits<float>::infinity());
+                bounds[t][3 + a] = std::nextafter(float(b.max()[a]), std::numeric_limits<float>::infinity());
             }
         }
     });
@@ -389,6 +396,9 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
                             continue;
                         if (a.hi[0] < b.lo[0] || b.hi[0] < a.lo[0] || a.hi[1] < b.lo[1] || b.hi[1] < a.lo[1] ||
                             a.hi[2] < b.lo[2] || b.hi[2] < a.lo[2])
+                            continue;
+                        const std::array<float, 6>&p = bounds[members[x]], &q = bounds[members[y]];
+                        if (p[3] < q[0] || q[3] < p[0] || p[4] < q[1] || q[4] < p[1] || p[5] < q[2] || q[5] < p[2])
                             continue;
                         if (trianglesCross(mesh, mesh.triangles[members[x]], mesh.triangles[members[y]]))
                             found[block].emplace_back(std::min(members[x], members[y]),
