@@ -13,7 +13,7 @@ OUT ?= out
 DEB_PACKAGES := cmake ninja-build g++ pkg-config libopenvdb-dev libboost-iostreams-dev libtbb-dev libopenmesh-dev \
 	libopenexr-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libgtest-dev libpng-dev libzip-dev libsleef-dev \
 	lib3mf-dev libcgal-dev nettle-dev clang-format pybind11-dev python3-dev python3-numpy python3-jsonschema python3-yaml python3-scipy
-BENCH_PACKAGES := python3 python3-numpy python3-openvdb python3-scipy python3-skimage prusa-slicer
+BENCH_PACKAGES := python3 python3-numpy python3-openvdb python3-scipy python3-skimage prusa-slicer time
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 CCACHE := $(shell command -v ccache 2>/dev/null)
 

@@ -1,5 +1,6 @@
 """Shared helpers of the benchmark workloads: run a command, measure wall time and peak memory."""
 import os
+import tempfile
 import subprocess
 import sys
 import time
@@ -17,14 +18,30 @@ def measure(cmd, env=None, cwd=None):
     of a comparison pays for the other's writeback (W2g's voxlat STL stage took 1.9 s instead of
     1.1 s right after the reference's STL)."""
     os.sync()
+    # The peak is taken by GNU time when it is there: a child forked from this Python process
+    # inherits its resident size as its own high-water mark (Linux keeps the larger across exec),
+    # so after a workload that held gigabytes of numpy arrays every later peak read that instead.
+    gnu_time = os.path.exists("/usr/bin/time")
+    peak_file = None
+    argv = [str(c) for c in cmd]
+    if gnu_time:
+        fd, peak_file = tempfile.mkstemp(prefix="voxlat-peak-")
+        os.close(fd)
+        argv = ["/usr/bin/time", "-f", "%M", "-o", peak_file] + argv
     start = time.perf_counter()
-    proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, cwd=cwd)
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env, cwd=cwd)
     out = proc.stdout.read().decode(errors="replace")
     _, status, usage = os.wait4(proc.pid, 0)
     seconds = time.perf_counter() - start
+    peak_mb = usage.ru_maxrss / 1024.0
+    if peak_file:
+        text = open(peak_file).read().split()
+        os.unlink(peak_file)
+        if text and text[-1].isdigit():
+            peak_mb = int(text[-1]) / 1024.0
     if os.waitstatus_to_exitcode(status) != 0:
         sys.exit(f"failed: {' '.join(map(str, cmd))}\n{out}")
-    return seconds, usage.ru_maxrss / 1024.0, out
+    return seconds, peak_mb, out
 
 
 def row(name, seconds, mb):
