@@ -48,7 +48,11 @@ made once per job. Alternating old/new on the shared machine (another engineer's
 tests, load 2.5-3.8): single-thread CPU best 3.45 -> 3.09 s (8 pairs, median pairwise ratio
 0.89); both cores wall best 2.18 -> 1.72 s (7 pairs at load 2.5-2.7, median pairwise 0.91; CPU
 best 3.71 -> 3.31 s) and 3.79 -> 3.46 s (5 pairs at load 3.5, median pairwise 0.86). Peak 63 ->
-60 MB (copied: 92 -> 87 MB). Not yet measured on a quiet machine."""
+60 MB (copied: 92 -> 87 MB). Not yet measured on a quiet machine.
+Merged on main with the flat decimation and SLEEF sin/cos (2026-11-27, stop 30), W3 bench runs:
+every layer computed 2.47 s against 155.9 s (63x), 2.81 s (54x), 2.81 s against 163 s (58x);
+copied 0.75-1.33 s (122-208x). Alternating with the binary before both changes: 2.22-2.60 s
+against 2.64-2.82 s wall, 4.15-4.79 s against 4.80-5.29 s CPU."""
 import json
 import os
 import shutil

@@ -6,7 +6,11 @@ Deviation is measured here, independently of the mesher: every triangle of each 
 a barycentric grid (spacing <= 0.05 mm), and each sample's distance to the solid is taken from the
 gyroid's own equation and analytic gradient, |G - c| / |grad G| (first order, exact to ~1e-7 mm at
 these distances), combined with the exact distance to the domain box (the solid is their
-intersection); c is the level report.json gives."""
+intersection); c is the level report.json gives.
+
+2026-11-27 (stop 30): with the flat decimation, SLEEF sines and cosines and the cheaper crossing
+check, 8.63 s against 1.33 s raw (6.5x) and 8.91 s against 1.55 s (5.7x); before, 16.66 s against
+1.37 s (12.2x). 903 768 triangles, max 0.00989 mm, RMS 0.00269 mm."""
 import json
 import math
 
