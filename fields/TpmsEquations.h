@@ -22,21 +22,21 @@ struct TrigTerms {
     T s, c, s2, c2;
 };
 
-/// Trigonometric terms of X. For doubles the double-angle identities save two calls; intervals
-/// call sin/cos of 2X directly because the identities would widen the bound.
+/// Trigonometric terms of X (intervals: sin/cos of 2X directly, as the identities would widen the
+/// bound). Values and gradients take trigTermsFrom() with batched sines and cosines.
 template <typename T>
 TrigTerms<T> trigTerms(const T& x)
 {
     return {sin(x), cos(x), sin(2.0 * x), cos(2.0 * x)};
 }
-inline TrigTerms<double> trigTerms(double x)
+/// The terms from @a s = sin X and @a c = cos X (sinCosBatch), the double angles by identity.
+inline TrigTerms<double> trigTermsFrom(double s, double c)
 {
-    const double s = std::sin(x), c = std::cos(x);
     return {s, c, 2.0 * s * c, c * c - s * s};
 }
-/// Dual numbers by the same identities: one sine and one cosine per coordinate instead of a sine
-/// and a cosine for each of the four terms (gradients at points are dominated by those calls).
-/// The same from @a s = sin(x.v) and @a c = cos(x.v) already known.
+/// Dual numbers by the same identities from @a s = sin(x.v) and @a c = cos(x.v): one sine and one
+/// cosine per coordinate instead of a sine and a cosine for each of the four terms, as the
+/// generic trigTerms would take.
 inline TrigTerms<Dual3> trigTermsFrom(double s, double c, const Dual3& x)
 {
     const double s2 = 2.0 * s * c, c2 = c * c - s * s;
@@ -44,10 +44,6 @@ inline TrigTerms<Dual3> trigTermsFrom(double s, double c, const Dual3& x)
         return Dual3(value, slope * x.d[0], slope * x.d[1], slope * x.d[2]);
     };
     return {withSlope(s, c), withSlope(c, -s), withSlope(s2, 2.0 * c2), withSlope(c2, -2.0 * s2)};
-}
-inline TrigTerms<Dual3> trigTerms(const Dual3& x)
-{
-    return trigTermsFrom(std::sin(x.v), std::cos(x.v), x);
 }
 
 enum class TpmsType { Gyroid, SchwarzP, SchwarzD, IWP, Neovius, FischerKochS, Lidinoid, SplitP, FRD };

@@ -94,10 +94,8 @@ void TpmsField::values(std::span<const Vec3d> points, std::span<double> out) con
         const std::size_t n = std::min(kTrigChunk, points.size() - begin);
         t.compute(points, begin, n, mWave.asPointer());
         for (std::size_t k = 0; k < n; ++k) {
-            const double sx = t.s[0][k], cx = t.c[0][k], sy = t.s[1][k], cy = t.c[1][k], sz = t.s[2][k], cz = t.c[2][k];
-            out[begin + k] = tpmsEquation(mType, TrigTerms<double>{sx, cx, 2.0 * sx * cx, cx * cx - sx * sx},
-                                          TrigTerms<double>{sy, cy, 2.0 * sy * cy, cy * cy - sy * sy},
-                                          TrigTerms<double>{sz, cz, 2.0 * sz * cz, cz * cz - sz * sz});
+            out[begin + k] = tpmsEquation(mType, trigTermsFrom(t.s[0][k], t.c[0][k]),
+                                          trigTermsFrom(t.s[1][k], t.c[1][k]), trigTermsFrom(t.s[2][k], t.c[2][k]));
         }
     }
 }
@@ -121,11 +119,6 @@ void TpmsField::gradients(std::span<const Vec3d> points, std::span<double> out, 
 }
 
 namespace {
-/// trigTerms from the sine and cosine of the angle (the double angles by identity, as trigTerms).
-inline TrigTerms<double> termsFrom(double s, double c)
-{
-    return {s, c, 2.0 * s * c, c * c - s * s};
-}
 
 /// trigTerms of wave * (origin + i * spacing), i < n: sin and cos (sinCosBatch) at every eighth
 /// angle and rotated from it by exact offsets in between (angle addition, within a few ulp), so a
@@ -135,10 +128,10 @@ void axisTerms(double wave, double origin, double spacing, int n, TrigTerms<doub
     constexpr int kStride = 8;
     if (n < 2 * kStride) {
         // As the point path computes them (sinCosBatch of the same angles): the same doubles.
-        double angle[2 * kStride], s[2 * kStride], c[2 * kStride];
+        double angle[2 * kStride] = {}, s[2 * kStride], c[2 * kStride];
         for (int i = 0; i < n; ++i) angle[i] = wave * (origin + i * spacing);
         sinCosBatch(angle, s, c, std::size_t(n));
-        for (int i = 0; i < n; ++i) out[i] = termsFrom(s[i], c[i]);
+        for (int i = 0; i < n; ++i) out[i] = trigTermsFrom(s[i], c[i]);
         return;
     }
     // The offsets' sines and cosines depend on the spacing only: kept per thread for the next
@@ -166,9 +159,9 @@ void axisTerms(double wave, double origin, double spacing, int n, TrigTerms<doub
         for (int b = 0; b < bases; ++b) {
             const int i = first + b * kStride;
             const double sb = sines[b], cb = cosines[b];
-            out[i] = termsFrom(sb, cb);
+            out[i] = trigTermsFrom(sb, cb);
             for (int k = 1; k < kStride && i + k < n; ++k)
-                out[i + k] = termsFrom(sb * co[k] + cb * so[k], cb * co[k] - sb * so[k]);
+                out[i + k] = trigTermsFrom(sb * co[k] + cb * so[k], cb * co[k] - sb * so[k]);
         }
     }
 }
@@ -437,8 +430,8 @@ void TpmsField::gridValuesShifted(const GridBatch& batch, std::span<const Vec3d>
                 for (int a = 0; a < 3; ++a) {
                     const double s = sinA[a * n + p], c = cosA[a * n + p];
                     const double sb = base[a][0][index[a]], cb = base[a][1][index[a]];
-                    up[a] = termsFrom(sb * c + cb * s, cb * c - sb * s);
-                    down[a] = termsFrom(sb * c - cb * s, cb * c + sb * s);
+                    up[a] = trigTermsFrom(sb * c + cb * s, cb * c - sb * s);
+                    down[a] = trigTermsFrom(sb * c - cb * s, cb * c + sb * s);
                 }
                 plus[p] = tpmsEquation(mType, up[0], up[1], up[2]);
                 minus[p] = tpmsEquation(mType, down[0], down[1], down[2]);
