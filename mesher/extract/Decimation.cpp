@@ -142,7 +142,6 @@ public:
         mStamp.assign(nv, 0);
         mQueued.assign(nv, 0);
         mDirty.assign(nv, 0);
-        mDead.assign(nv, 0);
         mRefused.assign(nv * kSlots, 0);
         mRefusedCount.assign(nv, 0);
     }
@@ -154,7 +153,7 @@ public:
             const Entry top = mHeap.top();
             mHeap.pop();
             const std::uint32_t v = std::get<1>(top), w = std::get<3>(top);
-            if (std::get<2>(top) != mStamp[v] || mDead[v]) continue;
+            if (std::get<2>(top) != mStamp[v] || mCount[v] == 0) continue;  // gone
             if (mDirty[v]) {
                 // Its one-ring changed since it was queued: its candidate is chosen again now,
                 // once, rather than after every collapse next to it.
@@ -249,8 +248,9 @@ private:
         ++mStamp[v];
         mDirty[v] = 0;
         mQueued[v] = 0;
-        // A locked vertex stays, and so does one whose triangles do not close one fan.
-        if (mLocked[v] || mDead[v] || !ring(v, mRing)) return;
+        // A locked vertex stays, and so does one whose triangles do not close one fan (a
+        // collapsed vertex has none: nothing to choose from).
+        if (mLocked[v] || !ring(v, mRing)) return;
         double best = mMaxError;
         std::uint32_t bestTarget = 0;
         bool found = false;
@@ -283,15 +283,7 @@ private:
     }
 
     /// Whether @a a and @a b share a triangle.
-    bool joined(std::uint32_t a, std::uint32_t b) const
-    {
-        const std::uint32_t* s = slots(a);
-        for (int k = 0; k < mCount[a]; ++k) {
-            const auto& c = mTriangles[s[k]];
-            if (c[0] == b || c[1] == b || c[2] == b) return true;
-        }
-        return false;
-    }
+    bool joined(std::uint32_t a, std::uint32_t b) const { return hasTriangle(a, b, b); }
 
     /// In a block of a larger mesh, locked vertices are shared with other blocks, which may hold
     /// an edge between two of them or make one at the same time: a collapse onto a locked vertex
@@ -445,7 +437,6 @@ private:
             slots(c.v1)[mCount[c.v1]++] = f;
         }
         mCount[c.v0] = 0;
-        mDead[c.v0] = 1;
         mQuadrics[c.v1] += mQuadrics[c.v0];
         for (std::uint32_t w : mSupport) {
             mRefusedCount[w] = 0;
@@ -543,7 +534,7 @@ private:
     /// Each vertex's triangles (kSlots per vertex, mCount used), each triangle's liveness and
     /// the known midpoint distances of its edges (edge i from corner i to corner i + 1).
     std::vector<std::uint32_t> mSlots;
-    std::vector<std::uint8_t> mCount, mAlive, mDead;
+    std::vector<std::uint8_t> mCount, mAlive;
     /// Vertices with more triangles than slots (their lists are incomplete): nothing collapses
     /// onto them or next to them.
     std::vector<std::uint8_t> mOverflow;
