@@ -524,6 +524,8 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
                              {"edges_left_flat", split.leftFlat}};
         if (boxCut) report["creases"]["box_cut_failed"] = boxCut->failure;
     }
+    // Counted by the decimation on the mesh it leaves.
+    std::optional<std::size_t> crossingPairs;
     if (options.tolerance) {
         // The distance to the result's operands, with the domain box taken exactly at every point
         // the check looks at (the kink where a triangle meets the box along a crease).
@@ -546,7 +548,11 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         report["decimation"] = {{"tolerance_mm", d.tolerance},
                                 {"triangles_before", s.trianglesBefore},
                                 {"collapses", s.collapses},
-                                {"refused_collapses", s.refused}};
+                                {"refused_collapses", s.refused},
+                                {"crossing_pairs_found", s.crossingPairsFound},
+                                {"repair_rounds", s.repairRounds},
+                                {"vertices_kept_for_crossings", s.verticesKeptForCrossings}};
+        crossingPairs = s.crossingPairs;
         if (!s.decimated)
             mContext->warn("mesh_not_decimated",
                            "the mesh could not be decimated (a triangle repeats a corner); it is written "
@@ -569,7 +575,9 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         report["closed_pieces"] = t.closedPieces;
         report["genus"] = t.genus;
         // Projection and decimation move vertices and join triangles: check that no two cross.
-        const std::size_t crossing = timed("check self-intersections", [&] { return countSelfIntersections(m); });
+        const std::size_t crossing = crossingPairs
+                                         ? *crossingPairs
+                                         : timed("check self-intersections", [&] { return countSelfIntersections(m); });
         report["self_intersections"] = crossing;
         if (crossing > 0)
             mContext->warn("mesh_self_intersections",
@@ -680,6 +688,35 @@ std::unique_ptr<TriangleMesh> Job::clippedMesh(double h, ProjectionStats& projec
     return mesh;
 }
 
+std::optional<double> Job::probeChordError(double h)
+{
+    constexpr int kProbeVoxels = 32;
+    Domain d;
+    d.voxel = h;
+    double volume = 1.0;
+    for (int a = 0; a < 3; ++a) {
+        d.dims[a] = std::min(kProbeVoxels, int(std::floor(mDomain.box.extent()[a] / h)));
+        d.box.min[a] = mDomain.box.center()[a] - 0.5 * d.dims[a] * h;
+        d.box.max[a] = d.box.min[a] + d.dims[a] * h;
+        volume *= d.box.extent()[a] / mDomain.box.extent()[a];
+    }
+    if (volume > 0.125) return std::nullopt;
+    return timed("probe chord error", [&] {
+        SparseOptions so;
+        so.margin = 2;
+        so.stage = "probing the chord error at " + formatNumber(h) + " mm";
+        so.context = mContext;
+        const openvdb::FloatGrid::Ptr g = evaluateSparse(*mResult, d, so);
+        TriangleMesh mesh = marchingCubes(*g, 0.0f, {});
+        ProjectionOptions po;
+        po.maxMove = 0.5 * h;
+        po.tolerance = 1e-4 * mDomain.voxel;
+        projectToSurface(mesh, *mResult, po, {});
+        // Only triangles two voxels inside the probe: its faces end the mesh, they are no crease.
+        return interiorChordError(mesh, *distanceField(), d.box, 2.0 * h, 0.5 * h);
+    });
+}
+
 std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohmann::json& extraction, double& voxel,
                                               ProjectionStats& projection, std::optional<BoxClipStats>& boxCut)
 {
@@ -716,8 +753,23 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
     }
     nlohmann::json trials = nlohmann::json::array();
     std::string why = k > 1 ? "" : limit;
+    // The next factor after a chord error above the tolerance: the error grows as h squared.
+    auto finer = [&](double chord) {
+        return std::max(1, std::min(k - 1, int(std::lround(k * std::sqrt(tolerance / chord)))));
+    };
     while (k > 1) {
         const double h = k * mDomain.voxel;
+        if (const std::optional<double> probe = probeChordError(h); probe && *probe > tolerance) {
+            trials.push_back({{"voxel_mm", h},
+                              {"probe_chord_error_mm", *probe},
+                              {"rejected",
+                               "the chord error in a probe of 32 voxels at the domain's centre is above "
+                               "the tolerance"}});
+            why = "the chord error at " + formatNumber(h) + " mm is " + formatNumber(*probe) +
+                  " mm (in a probe at the domain's centre), above the tolerance";
+            k = finer(*probe);
+            continue;
+        }
         auto mesh = clippedMesh(h, projection, boxCut);
         nlohmann::json trial{{"voxel_mm", h}};
         if (!mesh) {
@@ -760,8 +812,7 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
             return mesh;
         }
         why = "the chord error at " + formatNumber(h) + " mm is " + formatNumber(chord) + " mm, above the tolerance";
-        const int next = int(std::lround(k * std::sqrt(tolerance / chord)));
-        k = std::max(1, std::min(k - 1, next));
+        k = finer(chord);
     }
     extraction = {{"voxel_mm", mDomain.voxel},
                   {"recipe_voxel_mm", mDomain.voxel},

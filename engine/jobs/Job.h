@@ -124,6 +124,12 @@ private:
     /// goes into @a extraction; @a voxel is set to the voxel the mesh was extracted at.
     std::unique_ptr<TriangleMesh> coarseMesh(const MeshOptions& options, nlohmann::json& extraction, double& voxel,
                                              ProjectionStats& projection, std::optional<BoxClipStats>& boxCut);
+    /// The chord error (as coarseMesh() measures it) of the result meshed at voxel @a h and
+    /// projected, in a probe box of 32 such voxels at the domain's centre; nullopt when such a box
+    /// would hold more than an eighth of the domain (the full trial is as cheap). The error in a
+    /// part of the mesh is at most the whole mesh's: a probe above the tolerance rejects @a h
+    /// without meshing the whole domain at it.
+    std::optional<double> probeChordError(double h);
     /// Whether the result's surface is one smooth field (no sharp boolean operands): its only
     /// creases are where it meets the domain box, which clippedMesh() makes exact.
     bool smoothResult();

@@ -1,6 +1,7 @@
 #include "mesher/extract/Decimation.h"
 
 #include "fields/BoxField.h"
+#include "mesher/extract/MeshCheck.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -8,6 +9,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
@@ -46,6 +48,18 @@ struct Midpoint {
     Vec3d p;
     double distance;
 };
+
+/// A bound on |q| over a triangle for the quadratic q through corner values @a s and edge
+/// midpoint values @a m (m[i] between corners i and i + 1): q's Bernstein coefficients are the
+/// corner values and 2 m - (s_i + s_j) / 2 on the edges, and q lies within their range (the
+/// convex hull property). A triangle this bound passes passes any sampling of q as well, so the
+/// samples are needed only where it does not.
+double bernsteinBound(const std::array<double, 3>& s, const std::array<double, 3>& m)
+{
+    double bound = std::max({std::abs(s[0]), std::abs(s[1]), std::abs(s[2])});
+    for (int i = 0; i < 3; ++i) bound = std::max(bound, std::abs(2.0 * m[i] - 0.5 * (s[i] + s[(i + 1) % 3])));
+    return bound;
+}
 
 /// Marks a distance not evaluated yet (no field reaches it: signedDistance caps at 1e30).
 constexpr double kUnknown = std::numeric_limits<double>::max();
@@ -486,13 +500,14 @@ private:
             };
             const double margin = std::abs(centre - quadratic(1.0 / 3, 1.0 / 3, 1.0 / 3));
             if (margin > tolerance) return false;
-            constexpr int kSteps = 6;
-            double largest = 0.0;
             // The box's distance is convex: over the triangle it is largest at a corner. Where
             // that is below -tolerance, max(quadratic, box) passes or fails as the quadratic does.
             bool nearBox = false;
             if (mBox)
                 for (int corner = 0; corner < 3 && !nearBox; ++corner) nearBox = boxDistance(t.p[corner]) > -tolerance;
+            if (!nearBox && bernsteinBound(s, m) * (1.0 + 1e-12) + margin <= tolerance) continue;
+            constexpr int kSteps = 6;
+            double largest = 0.0;
             for (int i = 0; i <= kSteps; ++i)
                 for (int j = 0; i + j <= kSteps; ++j) {
                     const double l0 = double(i) / kSteps, l1 = double(j) / kSteps, l2 = 1.0 - l0 - l1;
@@ -644,9 +659,9 @@ BlockResult decimateBlock(const TriangleMesh& mesh, const std::vector<std::uint3
 /// goes to the block of its centroid, vertices used by triangles of two blocks are kept, the
 /// blocks are decimated in parallel and put together in block order (vertices renumbered in
 /// their old order), so the result does not depend on the thread count.
-bool decimatePass(TriangleMesh& mesh, std::vector<double>& vertexDistance, const FieldNode& field,
-                  const DecimationOptions& options, const Vec3d& origin, double size, DecimationStats& stats,
-                  BlockProgress& progress)
+bool decimatePass(TriangleMesh& mesh, std::vector<double>& vertexDistance, std::vector<std::uint8_t>& kept,
+                  const FieldNode& field, const DecimationOptions& options, const Vec3d& origin, double size,
+                  DecimationStats& stats, BlockProgress& progress)
 {
     const std::size_t numTriangles = mesh.triangles.size();
     // (block key, triangle), sorted: blocks in key order, their triangles in index order (a
@@ -671,7 +686,7 @@ bool decimatePass(TriangleMesh& mesh, std::vector<double>& vertexDistance, const
         blocks.back().push_back(keyed[i].second);
     }
     keyed = {};
-    std::vector<std::uint8_t> locked(mesh.points.size(), 0);
+    std::vector<std::uint8_t> locked = kept;
     {
         std::vector<std::int64_t> owner(mesh.points.size(), -1);
         for (std::size_t b = 0; b < blocks.size(); ++b)
@@ -702,18 +717,89 @@ bool decimatePass(TriangleMesh& mesh, std::vector<double>& vertexDistance, const
             for (int k = 0; k < 3; ++k) newIndex[t[k]] = 0;
     }
     std::vector<double> distance;
+    std::vector<std::uint8_t> keptOut;
     for (std::size_t v = 0; v < mesh.points.size(); ++v) {
         if (newIndex[v] != 0) continue;
         newIndex[v] = std::uint32_t(out.points.size());
         out.points.push_back(mesh.points[v]);
         distance.push_back(vertexDistance[v]);
+        keptOut.push_back(kept[v]);
     }
     for (const BlockResult& r : results)
         for (const openvdb::Vec3I& t : r.triangles)
             out.triangles.emplace_back(newIndex[t[0]], newIndex[t[1]], newIndex[t[2]]);
     mesh = std::move(out);
     vertexDistance = std::move(distance);
+    kept = std::move(keptOut);
     return all;
+}
+
+}  // namespace
+
+namespace {
+
+/// One decimation of @a mesh (whose vertices' signed distances are @a vertexDistance) with the
+/// vertices flagged in @a kept staying: one block, or blocks in two shifted passes.
+bool decimateOnce(TriangleMesh& mesh, std::vector<double> vertexDistance, std::vector<std::uint8_t> kept,
+                  const FieldNode& field, const DecimationOptions& options, DecimationStats& stats,
+                  const ProgressFn& progress)
+{
+    const openvdb::BBoxd box = mesh.bounds();
+    const double extent = std::max({box.extents().x(), box.extents().y(), box.extents().z()});
+    const double size = std::max(options.blockVoxels * options.voxel, extent / 16.0);
+    BlockProgress report(progress);
+    if (mesh.triangles.size() < options.blockedFrom || extent <= size) {
+        // One block: the whole mesh at once, serial.
+        report.total = mesh.triangles.size();
+        return decimatePass(mesh, vertexDistance, kept, field, options, box.min() - Vec3d(1.0), 2.0 * extent + 4.0,
+                            stats, report);
+    }
+    // Blocks in parallel; then blocks shifted by half their size, so the first pass's seams
+    // (kept) lie inside the second pass's blocks.
+    report.total = 2 * mesh.triangles.size();
+    const Vec3d origin = box.min() - Vec3d(1e-3 * size);
+    const bool first = decimatePass(mesh, vertexDistance, kept, field, options, origin, size, stats, report);
+    report.total = report.done + mesh.triangles.size();
+    return decimatePass(mesh, vertexDistance, kept, field, options, origin - Vec3d(0.5 * size), size, stats, report) &&
+           first;
+}
+
+/// Flags the vertices of @a original that lie in the bounds of a triangle of a crossing pair of
+/// @a mesh grown by @a grow times its longest edge plus @a voxel: the region whose collapses
+/// made the pair.
+std::size_t keepAroundCrossings(const TriangleMesh& original, const TriangleMesh& mesh,
+                                const std::vector<std::pair<std::uint32_t, std::uint32_t>>& pairs, double grow,
+                                double voxel, std::vector<std::uint8_t>& kept)
+{
+    std::vector<openvdb::BBoxd> boxes;
+    for (const auto& [a, b] : pairs)
+        for (std::uint32_t t : {a, b}) {
+            openvdb::BBoxd bounds;
+            double longest = 0.0;
+            for (int i = 0; i < 3; ++i) {
+                const Vec3d p = toDouble(mesh.points[mesh.triangles[t][i]]);
+                bounds.expand(p);
+                longest = std::max(longest, (p - toDouble(mesh.points[mesh.triangles[t][(i + 1) % 3]])).length());
+            }
+            bounds.expand(grow * longest + voxel);
+            boxes.push_back(bounds);
+        }
+    std::atomic<std::size_t> flagged{0};
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, original.points.size()), [&](const auto& range) {
+        std::size_t count = 0;
+        for (std::size_t v = range.begin(); v != range.end(); ++v) {
+            if (kept[v]) continue;
+            const Vec3d p = toDouble(original.points[v]);
+            for (const openvdb::BBoxd& b : boxes)
+                if (b.isInside(p)) {
+                    kept[v] = 1;
+                    ++count;
+                    break;
+                }
+        }
+        flagged += count;
+    });
+    return flagged;
 }
 
 }  // namespace
@@ -742,25 +828,27 @@ DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, 
         }
     });
 
-    const openvdb::BBoxd box = mesh.bounds();
-    const double extent = std::max({box.extents().x(), box.extents().y(), box.extents().z()});
-    const double size = std::max(options.blockVoxels * options.voxel, extent / 16.0);
-    BlockProgress report(progress);
-    if (mesh.triangles.size() < options.blockedFrom || extent <= size) {
-        // One block: the whole mesh at once, serial.
-        report.total = mesh.triangles.size();
-        stats.decimated = decimatePass(mesh, vertexDistance, field, options, box.min() - Vec3d(1.0), 2.0 * extent + 4.0,
-                                       stats, report);
-    } else {
-        // Blocks in parallel; then blocks shifted by half their size, so the first pass's seams
-        // (kept) lie inside the second pass's blocks.
-        report.total = 2 * mesh.triangles.size();
-        const Vec3d origin = box.min() - Vec3d(1e-3 * size);
-        stats.decimated = decimatePass(mesh, vertexDistance, field, options, origin, size, stats, report);
-        report.total = report.done + mesh.triangles.size();
-        stats.decimated =
-            decimatePass(mesh, vertexDistance, field, options, origin - Vec3d(0.5 * size), size, stats, report) &&
-            stats.decimated;
+    // Each new triangle is checked against the field, not against the rest of the mesh: where
+    // two sheets of the surface come within about twice the tolerance of each other (a concave
+    // crease where struts meet), triangles of both may cross. The mesh is checked after
+    // decimation; around each crossing pair the original vertices are kept and the whole is
+    // decimated again from the original, a wider region each round.
+    const TriangleMesh original = options.repairCrossings ? mesh : TriangleMesh();
+    std::vector<std::uint8_t> kept(mesh.points.size(), 0);
+    stats.decimated = decimateOnce(mesh, vertexDistance, kept, field, options, stats, progress);
+    if (options.repairCrossings) {
+        auto pairs = selfIntersections(mesh);
+        stats.crossingPairsFound = pairs.size();
+        for (int round = 1; round <= options.repairRounds && !pairs.empty(); ++round) {
+            stats.verticesKeptForCrossings +=
+                keepAroundCrossings(original, mesh, pairs, double(round), options.voxel, kept);
+            ++stats.repairRounds;
+            mesh = original;
+            stats.collapses = stats.refused = 0;
+            stats.decimated = decimateOnce(mesh, vertexDistance, kept, field, options, stats, {});
+            pairs = selfIntersections(mesh);
+        }
+        stats.crossingPairs = pairs.size();
     }
     stats.trianglesAfter = mesh.triangles.size();
     stats.verticesAfter = mesh.points.size();
