@@ -19,8 +19,11 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iterator>
+#include <map>
 #include <numbers>
+#include <numeric>
 #include <random>
 #include <string>
 #include <vector>
@@ -555,6 +558,163 @@ TEST_F(Mesher, CheckTopologyFindsDefects)
     topo = checkTopology(fin);
     EXPECT_EQ(topo.nonManifoldEdges, 1u);
     EXPECT_GE(topo.nonManifoldVertices, 2u);
+}
+
+namespace {
+
+/// checkTopology() by definition, serially: edges in a map, each vertex's fan and link, pieces by
+/// a union-find over the triangles.
+MeshTopology bruteForceTopology(const TriangleMesh& mesh)
+{
+    MeshTopology r;
+    const std::size_t n = mesh.points.size();
+    std::vector<openvdb::Vec3I> valid;
+    for (const openvdb::Vec3I& t : mesh.triangles) {
+        if (t[0] >= n || t[1] >= n || t[2] >= n || t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) {
+            ++r.degenerateTriangles;
+            continue;
+        }
+        const Vec3d a(mesh.points[t[0]]), b(mesh.points[t[1]]), c(mesh.points[t[2]]);
+        if ((b - a).cross(c - a) == Vec3d(0.0)) ++r.degenerateTriangles;
+        valid.push_back(t);
+    }
+    // Undirected edge -> the directions its triangles run it in (true: low -> high).
+    std::map<std::pair<unsigned, unsigned>, std::vector<bool>> edges;
+    std::vector<std::vector<std::size_t>> around(n);
+    for (std::size_t i = 0; i < valid.size(); ++i)
+        for (int k = 0; k < 3; ++k) {
+            const unsigned a = valid[i][k], b = valid[i][(k + 1) % 3];
+            edges[std::minmax(a, b)].push_back(a < b);
+            around[a].push_back(i);
+        }
+    std::vector<unsigned> piece(n);
+    std::iota(piece.begin(), piece.end(), 0u);
+    std::function<unsigned(unsigned)> find = [&](unsigned v) { return piece[v] == v ? v : piece[v] = find(piece[v]); };
+    for (const auto& [e, dirs] : edges) {
+        r.boundaryEdges += dirs.size() == 1;
+        r.nonManifoldEdges += dirs.size() > 2;
+        r.inconsistentlyOrientedEdges += dirs.size() == 2 && dirs[0] == dirs[1];
+        const unsigned a = find(e.first), b = find(e.second);
+        piece[std::max(a, b)] = std::min(a, b);
+    }
+    std::size_t vertices = 0;
+    for (unsigned v = 0; v < n; ++v) {
+        if (around[v].empty()) continue;
+        ++vertices;
+        bool fan = true;
+        std::map<unsigned, unsigned> link;  // neighbour -> its root in the link
+        for (std::size_t i : around[v])
+            for (int k = 0; k < 3; ++k)
+                if (valid[i][k] != v) {
+                    link[valid[i][k]] = valid[i][k];
+                    fan = fan && edges[std::minmax(v, valid[i][k])].size() <= 2;
+                }
+        std::function<unsigned(unsigned)> root = [&](unsigned w) { return link[w] == w ? w : root(link[w]); };
+        std::size_t components = link.size();
+        for (std::size_t i : around[v]) {
+            std::vector<unsigned> others;
+            for (int k = 0; k < 3; ++k)
+                if (valid[i][k] != v) others.push_back(valid[i][k]);
+            const unsigned a = root(others[0]), b = root(others[1]);
+            if (a != b) {
+                link[a] = b;
+                --components;
+            }
+        }
+        r.nonManifoldVertices += !fan || components != 1;
+    }
+    r.eulerCharacteristic = int(vertices) - int(edges.size()) + int(valid.size());
+    std::map<unsigned, long> chi;
+    std::map<unsigned, bool> open;
+    for (unsigned v = 0; v < n; ++v)
+        if (!around[v].empty()) ++chi[find(v)], open[find(v)] = false;
+    for (const auto& [e, dirs] : edges) {
+        --chi[find(e.first)];
+        if (dirs.size() != 2) open[find(e.first)] = true;
+    }
+    for (const openvdb::Vec3I& t : valid) ++chi[find(t[0])];
+    r.pieces = chi.size();
+    for (const auto& [root, c] : chi)
+        if (!open[root]) {
+            ++r.closedPieces;
+            r.genus += int(1 - c / 2);
+        }
+    return r;
+}
+
+void expectSameTopology(const MeshTopology& a, const MeshTopology& b)
+{
+    EXPECT_EQ(a.boundaryEdges, b.boundaryEdges);
+    EXPECT_EQ(a.nonManifoldEdges, b.nonManifoldEdges);
+    EXPECT_EQ(a.nonManifoldVertices, b.nonManifoldVertices);
+    EXPECT_EQ(a.inconsistentlyOrientedEdges, b.inconsistentlyOrientedEdges);
+    EXPECT_EQ(a.degenerateTriangles, b.degenerateTriangles);
+    EXPECT_EQ(a.eulerCharacteristic, b.eulerCharacteristic);
+    EXPECT_EQ(a.pieces, b.pieces);
+    EXPECT_EQ(a.closedPieces, b.closedPieces);
+    EXPECT_EQ(a.genus, b.genus);
+}
+
+}  // namespace
+
+TEST_F(Mesher, CheckTopologyMatchesABruteForceCheckForAnyThreadCount)
+{
+    // Closed spheres (one shuffled, so that triangle blocks reach every vertex range), a double
+    // cone with a vertex of 40 triangles (past the closed-fan shortcut), then defects: flipped,
+    // dropped and repeated triangles, extra triangles on random corners, invalid indices.
+    std::mt19937 random(7);
+    TriangleMesh mesh = marchingCubes(*makeSphere(3.0, 0.25).grid);
+    const TriangleMesh ball = mesh;
+    std::vector<unsigned> order(ball.points.size());
+    std::iota(order.begin(), order.end(), 0u);
+    std::shuffle(order.begin(), order.end(), random);
+    for (openvdb::Vec3I t : ball.triangles) {
+        const auto base = unsigned(mesh.points.size());
+        mesh.triangles.emplace_back(base + order[t[0]], base + order[t[1]], base + order[t[2]]);
+    }
+    std::vector<openvdb::Vec3f> moved(ball.points.size());
+    for (std::size_t v = 0; v < ball.points.size(); ++v) moved[order[v]] = ball.points[v] + openvdb::Vec3f(10.0f);
+    mesh.points.insert(mesh.points.end(), moved.begin(), moved.end());
+    const auto apex = unsigned(mesh.points.size());
+    constexpr unsigned kRim = 40;
+    mesh.points.push_back({20.0f, 0.0f, 1.0f});
+    mesh.points.push_back({20.0f, 0.0f, -1.0f});
+    for (unsigned i = 0; i < kRim; ++i) {
+        const double angle = 2.0 * std::numbers::pi * i / kRim;
+        mesh.points.push_back({float(20.0 + std::cos(angle)), float(std::sin(angle)), 0.0f});
+        const unsigned a = apex + 2 + i, b = apex + 2 + (i + 1) % kRim;
+        mesh.triangles.emplace_back(apex, a, b);
+        mesh.triangles.emplace_back(apex + 1, b, a);
+    }
+    auto check = [&](const TriangleMesh& m) {
+        const MeshTopology expected = bruteForceTopology(m);
+        for (int threads : {1, 2, 3}) {
+            tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+            expectSameTopology(checkTopology(m), expected);
+        }
+        return expected;
+    };
+    const MeshTopology closed = check(mesh);
+    EXPECT_TRUE(closed.closedManifold());
+    EXPECT_EQ(closed.pieces, 3u);
+    EXPECT_EQ(closed.closedPieces, 3u);
+    EXPECT_EQ(closed.eulerCharacteristic, 6);
+
+    for (int trial = 0; trial < 6; ++trial) {
+        TriangleMesh broken = mesh;
+        std::uniform_int_distribution<std::size_t> pick(0, broken.triangles.size() - 1);
+        std::uniform_int_distribution<unsigned> corner(0, unsigned(broken.points.size()) - 1);
+        for (int k = 0; k < 3 * trial + 1; ++k) {
+            std::swap(broken.triangles[pick(random)][1], broken.triangles[pick(random)][2]);
+            broken.triangles.erase(broken.triangles.begin() + std::ptrdiff_t(pick(random)));
+            broken.triangles.push_back(broken.triangles[pick(random)]);
+            broken.triangles.emplace_back(corner(random), corner(random), corner(random));
+        }
+        broken.triangles.emplace_back(1u, 1u, 2u);
+        broken.triangles.emplace_back(0u, 1u, unsigned(broken.points.size()));
+        const MeshTopology t = check(broken);
+        EXPECT_FALSE(t.closedManifold());
+    }
 }
 
 TEST_F(Mesher, StlRoundTrip)

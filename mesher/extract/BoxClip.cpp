@@ -12,10 +12,12 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <deque>
 #include <map>
+#include <numeric>
 #include <optional>
 #include <vector>
 
@@ -337,30 +339,82 @@ void dropTrianglesOutside(TriangleMesh& mesh, const Box3& box, double margin)
 BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& box, const BoxClipOptions& options)
 {
     BoxClipStats stats;
-    Work w;
-    w.points.resize(mesh.points.size());
-    w.faces.assign(mesh.points.size(), 0);
-    for (std::size_t i = 0; i < mesh.points.size(); ++i) {
-        w.points[i] = toDouble(mesh.points[i]);
+    const std::size_t original = mesh.points.size(), numTriangles = mesh.triangles.size();
+    // A point within snap of a face is put onto it (in double), the faces it lies on kept as bits.
+    auto snapped = [&](std::size_t i, std::uint8_t& faces) {
+        Vec3d p = toDouble(mesh.points[i]);
+        faces = 0;
         for (int f = 0; f < kFaces; ++f)
-            if (std::abs(outside(w.points[i], box, f)) <= options.snap) {
-                w.points[i][f / 2] = planeOf(box, f);
-                w.faces[i] |= std::uint8_t(1u << f);
+            if (std::abs(outside(p, box, f)) <= options.snap) {
+                p[f / 2] = planeOf(box, f);
+                faces |= std::uint8_t(1u << f);
             }
-    }
-    // Triangles with every corner strictly inside the box are neither cut nor part of a cut's
-    // edge: set aside, put back first.
-    std::vector<std::uint8_t> deep(mesh.points.size(), 1);
-    for (std::size_t i = 0; i < mesh.points.size(); ++i)
-        for (int f = 0; f < kFaces; ++f) deep[i] &= std::uint8_t(outside(w.points[i], box, f) < 0.0 && !w.faces[i]);
-    std::vector<Tri> inner;
-    inner.reserve(mesh.triangles.size());
-    for (const openvdb::Vec3I& t : mesh.triangles) {
-        const Tri tri{t[0], t[1], t[2]};
-        (deep[t[0]] && deep[t[1]] && deep[t[2]] ? inner : w.triangles).push_back(tri);
-    }
-    w.leftOnEdge.assign(mesh.points.size(), 0);
-    const std::size_t original = mesh.points.size();
+        return p;
+    };
+    // Triangles with every corner strictly inside the box (deep: on no face either) are neither
+    // cut nor part of a cut's edge: set aside, put back first, unchanged with their corners.
+    // Only the others (a band along the faces) and their corners are worked on.
+    std::vector<std::uint8_t> deep(original);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, original, 1 << 14), [&](const auto& range) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+            std::uint8_t faces;
+            const Vec3d p = snapped(i, faces);
+            bool inside = faces == 0;
+            for (int f = 0; f < kFaces; ++f) inside = inside && outside(p, box, f) < 0.0;
+            deep[i] = inside;
+        }
+    });
+    // Per fixed block of triangles: how many are inner and the others' indices; the points the
+    // inner ones use are flagged (the same flag from any thread).
+    constexpr std::size_t kBlock = 1 << 14;
+    const std::size_t numBlocks = (numTriangles + kBlock - 1) / kBlock;
+    std::vector<std::size_t> innerBefore(numBlocks + 1, 0);
+    std::vector<std::vector<std::uint32_t>> outer(numBlocks);
+    std::vector<std::uint8_t> keep(original, 0);
+    auto isInner = [&](const openvdb::Vec3I& t) { return deep[t[0]] && deep[t[1]] && deep[t[2]]; };
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, 1), [&](const auto& range) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b)
+            for (std::size_t t = b * kBlock; t < std::min(numTriangles, (b + 1) * kBlock); ++t) {
+                const openvdb::Vec3I& tri = mesh.triangles[t];
+                if (!isInner(tri)) {
+                    outer[b].push_back(std::uint32_t(t));
+                    continue;
+                }
+                ++innerBefore[b + 1];
+                for (int k = 0; k < 3; ++k)
+                    std::atomic_ref<std::uint8_t>(keep[tri[k]]).store(1, std::memory_order_relaxed);
+            }
+    });
+    std::partial_sum(innerBefore.begin(), innerBefore.end(), innerBefore.begin());
+
+    // The band's points in ascending order, numbered from 0 (local indices keep the order of the
+    // mesh's, so every choice by index below comes out as on the whole mesh).
+    std::vector<std::uint8_t> inBand(original, 0);
+    for (const auto& list : outer)
+        for (std::uint32_t t : list)
+            for (int k = 0; k < 3; ++k) inBand[mesh.triangles[t][k]] = 1;
+    std::vector<std::vector<std::uint32_t>> bandBlocks((original + kBlock - 1) / kBlock);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, bandBlocks.size(), 1), [&](const auto& range) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b)
+            for (std::size_t v = b * kBlock; v < std::min(original, (b + 1) * kBlock); ++v)
+                if (inBand[v]) bandBlocks[b].push_back(std::uint32_t(v));
+    });
+    std::vector<std::uint32_t> band;
+    for (const auto& list : bandBlocks) band.insert(band.end(), list.begin(), list.end());
+    auto local = [&](std::uint32_t v) {
+        return std::uint32_t(std::lower_bound(band.begin(), band.end(), v) - band.begin());
+    };
+    Work w;
+    w.points.resize(band.size());
+    w.faces.resize(band.size());
+    for (std::size_t i = 0; i < band.size(); ++i) w.points[i] = snapped(band[i], w.faces[i]);
+    for (const auto& list : outer)
+        for (std::uint32_t t : list) {
+            const openvdb::Vec3I& tri = mesh.triangles[t];
+            w.triangles.push_back({local(tri[0]), local(tri[1]), local(tri[2])});
+        }
+    w.leftOnEdge.assign(band.size(), 0);
+    const std::size_t bandPoints = band.size();
     for (int f = 0; f < kFaces; ++f) cutByFace(w, f, field, box, options, stats);
     const std::size_t cutPoints = w.points.size();
 
@@ -458,35 +512,87 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
             }
     }
 
-    std::vector<Tri> caps;
+    // The six caps are independent: triangulated in parallel, joined (and the first failure
+    // taken) in face order.
+    std::array<std::vector<Tri>, kFaces> caps;
+    std::array<std::optional<std::string>, kFaces> failures;
+    tbb::parallel_for(0, kFaces, [&](int f) {
+        failures[std::size_t(f)] = capFace(w, f, segments[std::size_t(f)], caps[std::size_t(f)]);
+    });
     for (int f = 0; f < kFaces; ++f)
-        if (const auto failure = capFace(w, f, segments[std::size_t(f)], caps)) {
-            stats.failure = *failure;
+        if (failures[std::size_t(f)]) {
+            stats.failure = *failures[std::size_t(f)];
             return stats;
         }
-    stats.capTriangles = caps.size();
-    w.triangles.insert(w.triangles.end(), caps.begin(), caps.end());
-    w.triangles.insert(w.triangles.begin(), inner.begin(), inner.end());
+    for (const std::vector<Tri>& cap : caps) {
+        stats.capTriangles += cap.size();
+        w.triangles.insert(w.triangles.end(), cap.begin(), cap.end());
+    }
 
-    // Only the vertices the triangles use, in their order (the new ones after the mesh's own).
+    // Only the vertices the triangles use, in their order (the new ones after the mesh's own):
+    // the mesh's points the inner triangles use as they were, the band's as cut, then the new ones.
     TriangleMesh result;
-    std::vector<std::int64_t> index(w.points.size(), -1);
+    std::vector<std::int64_t> bandIndex(w.points.size(), -1);
     for (const Tri& t : w.triangles)
-        for (std::uint32_t v : t) index[v] = 0;
-    for (std::size_t v = original; v < cutPoints; ++v)
-        if (index[v] == 0) {
+        for (std::uint32_t v : t) bandIndex[v] = 0;
+    for (std::size_t v = 0; v < bandPoints; ++v)
+        if (bandIndex[v] == 0) keep[band[v]] = 1;
+    for (std::size_t v = bandPoints; v < cutPoints; ++v)
+        if (bandIndex[v] == 0) {
             ++stats.creaseVertices;
             stats.leftOnEdge += w.leftOnEdge[v];
         }
-    for (std::size_t v = 0; v < w.points.size(); ++v)
-        if (index[v] == 0) {
-            index[v] = std::int64_t(result.points.size());
-            result.points.push_back(toFloat(w.points[v]));
+    // Fixed blocks of points: their used counts, then each block's new indices from its offset.
+    const std::size_t numPointBlocks = (original + kBlock - 1) / kBlock;
+    std::vector<std::size_t> usedBefore(numPointBlocks + 1, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numPointBlocks, 1), [&](const auto& range) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b)
+            for (std::size_t v = b * kBlock; v < std::min(original, (b + 1) * kBlock); ++v)
+                usedBefore[b + 1] += keep[v];
+    });
+    std::partial_sum(usedBefore.begin(), usedBefore.end(), usedBefore.begin());
+    std::size_t numNew = 0;
+    for (std::size_t v = bandPoints; v < w.points.size(); ++v) numNew += bandIndex[v] == 0;
+    result.points.resize(usedBefore.back() + numNew);
+    std::vector<std::uint32_t> index(original);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numPointBlocks, 1), [&](const auto& range) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b) {
+            std::size_t n = usedBefore[b];
+            for (std::size_t v = b * kBlock; v < std::min(original, (b + 1) * kBlock); ++v)
+                if (keep[v]) {
+                    index[v] = std::uint32_t(n);
+                    result.points[n++] = mesh.points[v];
+                }
         }
-    result.triangles.reserve(w.triangles.size());
-    for (const Tri& t : w.triangles)
-        result.triangles.emplace_back(std::uint32_t(index[t[0]]), std::uint32_t(index[t[1]]),
-                                      std::uint32_t(index[t[2]]));
+    });
+    // The band's points as snapped (the deep ones among them the same), the new ones after all.
+    std::size_t n = usedBefore.back();
+    for (std::size_t v = 0; v < w.points.size(); ++v) {
+        if (bandIndex[v] != 0) continue;
+        if (v < bandPoints) {
+            bandIndex[v] = index[band[v]];
+            result.points[std::size_t(bandIndex[v])] = toFloat(w.points[v]);
+        } else {
+            bandIndex[v] = std::int64_t(n);
+            result.points[n++] = toFloat(w.points[v]);
+        }
+    }
+    const std::size_t numInner = innerBefore.back();
+    result.triangles.resize(numInner + w.triangles.size());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, 1), [&](const auto& range) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b) {
+            std::size_t k = innerBefore[b];
+            for (std::size_t t = b * kBlock; t < std::min(numTriangles, (b + 1) * kBlock); ++t) {
+                const openvdb::Vec3I& tri = mesh.triangles[t];
+                if (isInner(tri)) result.triangles[k++] = openvdb::Vec3I(index[tri[0]], index[tri[1]], index[tri[2]]);
+            }
+        }
+    });
+    for (std::size_t t = 0; t < w.triangles.size(); ++t) {
+        const Tri& tri = w.triangles[t];
+        result.triangles[numInner + t] = openvdb::Vec3I(
+            std::uint32_t(bandIndex[tri[0]]), std::uint32_t(bandIndex[tri[1]]), std::uint32_t(bandIndex[tri[2]]));
+    }
     const MeshTopology topology = checkTopology(result);
     if (!topology.closedManifold()) {
         stats.failure = "the capped mesh is not closed and manifold (" + std::to_string(topology.boundaryEdges) +

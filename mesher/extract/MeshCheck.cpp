@@ -3,13 +3,16 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <utility>
 #include <vector>
@@ -41,6 +44,73 @@ struct Spoke {
     bool operator<(const Spoke& o) const { return w < o.w || (w == o.w && outgoing < o.outgoing); }
 };
 
+/// A triangle around a vertex v, as the two corners after v in its order: it runs v -> next -> prev.
+struct Corner {
+    uint32_t next, prev;
+};
+
+/// Fans with more triangles than this take the general path (the cycle test is quadratic).
+constexpr std::size_t kMaxFastFan = 16;
+
+/// Whether the triangles @a row around a vertex form one closed fan, each edge at the vertex
+/// shared by exactly two of them in opposite directions: every @a next distinct, every @a prev
+/// some triangle's next, and stepping from a triangle to the one whose next is its prev visits
+/// all of them in one cycle. Then the general test (spokes and link components) finds every
+/// edge manifold and consistent and the link one cycle, which is what almost every vertex of a
+/// closed mesh is. Fixed loops without early exits: the rows are short and the exits would be
+/// mispredicted.
+bool closedFan(const Corner* row, std::size_t n)
+{
+    if (n > kMaxFastFan) return false;
+    std::array<uint8_t, kMaxFastFan> step;
+    unsigned repeated = 0, unmatched = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        unsigned matches = 0, to = 0;
+        for (std::size_t j = 0; j < n; ++j) {
+            const unsigned hit = row[j].next == row[i].prev;
+            matches += hit;
+            to += hit * unsigned(j);
+            repeated += j < i && row[j].next == row[i].next;
+        }
+        unmatched += matches != 1;
+        step[i] = uint8_t(to);
+    }
+    if (repeated != 0 || unmatched != 0) return false;
+    // Back at the first triangle after n steps and not before: one cycle through all n.
+    std::size_t current = 0, early = 0;
+    for (std::size_t k = 1; k < n; ++k) {
+        current = step[current];
+        early += current == 0;
+    }
+    return early == 0 && step[current] == 0;
+}
+
+/// Union-find over vertices shared by threads: a root is linked (by compare-and-swap) only
+/// under a lower root, so each set's root is its lowest vertex whatever order the unions come
+/// in; path halving only shortens paths to an ancestor.
+uint32_t findRoot(std::vector<std::atomic<uint32_t>>& parent, uint32_t i)
+{
+    for (;;) {
+        uint32_t p = parent[i].load(std::memory_order_relaxed);
+        if (p == i) return i;
+        const uint32_t g = parent[p].load(std::memory_order_relaxed);
+        if (g != p) parent[i].compare_exchange_weak(p, g, std::memory_order_relaxed);
+        i = g;
+    }
+}
+
+void unite(std::vector<std::atomic<uint32_t>>& parent, uint32_t a, uint32_t b)
+{
+    for (;;) {
+        a = findRoot(parent, a);
+        b = findRoot(parent, b);
+        if (a == b) return;
+        if (a < b) std::swap(a, b);
+        uint32_t expected = a;
+        if (parent[a].compare_exchange_strong(expected, b, std::memory_order_relaxed)) return;
+    }
+}
+
 uint32_t findRoot(std::vector<uint32_t>& parent, uint32_t i)
 {
     while (parent[i] != i) i = parent[i] = parent[parent[i]];
@@ -52,51 +122,87 @@ uint32_t findRoot(std::vector<uint32_t>& parent, uint32_t i)
 MeshTopology checkTopology(const TriangleMesh& mesh)
 {
     MeshTopology result;
-    const std::size_t numPoints = mesh.points.size();
+    const std::size_t numPoints = mesh.points.size(), numTriangles = mesh.triangles.size();
 
     // Triangles with repeated or invalid indices have no meaningful edges; leave them out of the
     // topology and only count them. Zero-area triangles are topologically fine and stay in.
-    std::vector<uint32_t> valid;
-    valid.reserve(mesh.triangles.size());
-    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
-        const openvdb::Vec3I& tri = mesh.triangles[t];
-        if (tri[0] >= numPoints || tri[1] >= numPoints || tri[2] >= numPoints || tri[0] == tri[1] || tri[1] == tri[2] ||
-            tri[0] == tri[2]) {
-            ++result.degenerateTriangles;
-            continue;
+    auto valid = [numPoints](const openvdb::Vec3I& tri) {
+        return tri[0] < numPoints && tri[1] < numPoints && tri[2] < numPoints && tri[0] != tri[1] && tri[1] != tri[2] &&
+               tri[0] != tri[2];
+    };
+    // Per fixed block of triangles: the valid and degenerate ones and the span of their
+    // vertices, so that the passes below skip blocks that do not touch their vertices.
+    struct Block {
+        std::size_t valid = 0, degenerate = 0;
+        uint32_t lo = std::numeric_limits<uint32_t>::max(), hi = 0;
+    };
+    constexpr std::size_t kBlock = 1 << 12;
+    std::vector<Block> blocks((numTriangles + kBlock - 1) / kBlock);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 16), [&](const auto& range) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b) {
+            Block& block = blocks[b];
+            for (std::size_t t = b * kBlock; t < std::min(numTriangles, (b + 1) * kBlock); ++t) {
+                const openvdb::Vec3I& tri = mesh.triangles[t];
+                if (!valid(tri)) {
+                    ++block.degenerate;
+                    continue;
+                }
+                ++block.valid;
+                block.lo = std::min({block.lo, tri[0], tri[1], tri[2]});
+                block.hi = std::max({block.hi, tri[0], tri[1], tri[2]});
+                const openvdb::Vec3d a(mesh.points[tri[0]]), b(mesh.points[tri[1]]), c(mesh.points[tri[2]]);
+                if ((b - a).cross(c - a) == openvdb::Vec3d(0.0)) ++block.degenerate;
+            }
         }
-        const openvdb::Vec3d a(mesh.points[tri[0]]), b(mesh.points[tri[1]]), c(mesh.points[tri[2]]);
-        if ((b - a).cross(c - a) == openvdb::Vec3d(0.0)) ++result.degenerateTriangles;
-        valid.push_back(uint32_t(t));
+    });
+    std::size_t numValid = 0;
+    for (const Block& block : blocks) {
+        numValid += block.valid;
+        result.degenerateTriangles += block.degenerate;
     }
 
-    // Vertex -> incident triangles, compressed rows.
+    // Vertex -> the incident valid triangles (as the corners after it), compressed rows in
+    // triangle order. Each task owns a range of vertices and scans the blocks that reach it for
+    // its corners: no counter is shared, and the rows come out the same for any split.
+    const std::size_t parts = std::size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
+    auto partBegin = [&](std::size_t part) { return numPoints * part / parts; };
+    auto forCorners = [&](std::size_t part, auto&& visit) {
+        const std::size_t lo = partBegin(part), hi = partBegin(part + 1);
+        for (std::size_t b = 0; b < blocks.size(); ++b) {
+            if (blocks[b].valid == 0 || blocks[b].hi < lo || blocks[b].lo >= hi) continue;
+            for (std::size_t t = b * kBlock; t < std::min(numTriangles, (b + 1) * kBlock); ++t) {
+                const openvdb::Vec3I& tri = mesh.triangles[t];
+                if (!valid(tri)) continue;
+                for (int k = 0; k < 3; ++k)
+                    if (tri[k] >= lo && tri[k] < hi) visit(tri[k], Corner{tri[(k + 1) % 3], tri[(k + 2) % 3]});
+            }
+        }
+    };
     std::vector<std::size_t> first(numPoints + 1, 0);
-    for (uint32_t t : valid) {
-        for (int k = 0; k < 3; ++k) ++first[mesh.triangles[t][k] + 1];
-    }
+    tbb::parallel_for(std::size_t(0), parts,
+                      [&](std::size_t part) { forCorners(part, [&](uint32_t v, const Corner&) { ++first[v + 1]; }); });
     std::partial_sum(first.begin(), first.end(), first.begin());
-    std::vector<uint32_t> incident(first.back());
-    {
-        std::vector<std::size_t> fill(first.begin(), first.end() - 1);
-        for (uint32_t t : valid) {
-            for (int k = 0; k < 3; ++k) incident[fill[mesh.triangles[t][k]]++] = t;
-        }
-    }
+    // Left uninitialised (every entry is filled below): the rows are the largest array here, and
+    // a fresh one is paged in as it is written. Each row's start serves as its cursor, leaving it
+    // at the next row's start: shifted back by one row after.
+    const std::unique_ptr<Corner[]> corners(new Corner[first.back()]);
+    tbb::parallel_for(std::size_t(0), parts, [&](std::size_t part) {
+        forCorners(part, [&](uint32_t v, const Corner& c) { corners[first[v]++] = c; });
+    });
+    std::copy_backward(first.begin(), first.end() - 1, first.end());
+    first[0] = 0;
 
-    // Pieces: vertices joined by the triangles (union-find, serial: a pass over the triangles).
-    std::vector<uint32_t> piece(numPoints);
-    std::iota(piece.begin(), piece.end(), 0u);
-    for (uint32_t t : valid) {
-        const openvdb::Vec3I& tri = mesh.triangles[t];
-        for (int k = 1; k < 3; ++k) {
-            const uint32_t a = findRoot(piece, tri[0]), b = findRoot(piece, tri[k]);
-            if (b != a) piece[std::max(a, b)] = std::min(a, b);
-        }
-    }
-    // Edges each vertex owns (those to higher neighbours), and how many of them are open or
-    // non-manifold, for the per-piece Euler characteristic.
-    std::vector<uint32_t> ownedEdges(numPoints, 0), ownedBad(numPoints, 0);
+    // Pieces: vertices joined by the edges, united at each edge's lower end in the pass below.
+    std::vector<std::atomic<uint32_t>> piece(numPoints);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numPoints, 1 << 16), [&](const auto& range) {
+        for (std::size_t v = range.begin(); v != range.end(); ++v)
+            piece[v].store(uint32_t(v), std::memory_order_relaxed);
+    });
+    // Per vertex, for the per-piece Euler characteristic and open edges: 1 - (edges it owns, those
+    // to higher neighbours) + (triangles it owns, those whose lowest corner it is), and whether
+    // any of its edges is open or non-manifold.
+    std::vector<int64_t> ownedChi(numPoints, 0);
+    std::vector<uint8_t> ownedBad(numPoints, 0);
 
     const Tally tally = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, numPoints, 1024), Tally{},
@@ -104,14 +210,28 @@ MeshTopology checkTopology(const TriangleMesh& mesh)
             std::vector<Spoke> spokes;
             std::vector<uint32_t> nodes, parent;
             for (std::size_t v = range.begin(); v != range.end(); ++v) {
-                if (first[v] == first[v + 1]) continue;
+                const std::size_t n = first[v + 1] - first[v];
+                if (n == 0) continue;
+                const Corner* row = corners.get() + first[v];
                 ++acc.vertices;
+                int64_t owned = 1;
+                for (std::size_t i = 0; i < n; ++i) owned += row[i].next > v && row[i].prev > v;
+                if (closedFan(row, n)) {
+                    // Each neighbour is one triangle's next and another's prev: two triangles per
+                    // edge, opposite directions, the link one cycle.
+                    for (std::size_t i = 0; i < n; ++i)
+                        if (row[i].next > v) {
+                            ++acc.edges;
+                            --owned;
+                            unite(piece, uint32_t(v), row[i].next);
+                        }
+                    ownedChi[v] = owned;
+                    continue;
+                }
                 spokes.clear();
-                for (std::size_t i = first[v]; i != first[v + 1]; ++i) {
-                    const openvdb::Vec3I& tri = mesh.triangles[incident[i]];
-                    const int k = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
-                    spokes.push_back({tri[(k + 1) % 3], true});
-                    spokes.push_back({tri[(k + 2) % 3], false});
+                for (std::size_t i = 0; i < n; ++i) {
+                    spokes.push_back({row[i].next, true});
+                    spokes.push_back({row[i].prev, false});
                 }
                 std::sort(spokes.begin(), spokes.end());
 
@@ -127,27 +247,27 @@ MeshTopology checkTopology(const TriangleMesh& mesh)
                     if (faces > 2) fan = false;
                     if (spokes[i].w > v) {
                         ++acc.edges;
-                        ++ownedEdges[v];
+                        --owned;
+                        unite(piece, uint32_t(v), spokes[i].w);
                         if (faces == 1) ++acc.boundary;
                         if (faces > 2) ++acc.nonManifoldEdges;
-                        if (faces != 2) ++ownedBad[v];
+                        if (faces != 2) ownedBad[v] = 1;
                         // Sorted with outgoing last: two equal flags mean the same direction twice.
                         if (faces == 2 && spokes[i].outgoing == spokes[i + 1].outgoing) ++acc.inconsistent;
                     }
                     i = j;
                 }
+                ownedChi[v] = owned;
                 // ...and its link (the opposite edges, over the neighbours) is connected.
                 parent.resize(nodes.size());
                 std::iota(parent.begin(), parent.end(), 0u);
                 std::size_t components = nodes.size();
-                for (std::size_t i = first[v]; i != first[v + 1]; ++i) {
-                    const openvdb::Vec3I& tri = mesh.triangles[incident[i]];
-                    const int k = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
-                    auto node = [&](uint32_t w) {
-                        return uint32_t(std::lower_bound(nodes.begin(), nodes.end(), w) - nodes.begin());
-                    };
-                    const uint32_t a = findRoot(parent, node(tri[(k + 1) % 3]));
-                    const uint32_t b = findRoot(parent, node(tri[(k + 2) % 3]));
+                auto node = [&](uint32_t w) {
+                    return uint32_t(std::lower_bound(nodes.begin(), nodes.end(), w) - nodes.begin());
+                };
+                for (std::size_t i = 0; i < n; ++i) {
+                    const uint32_t a = findRoot(parent, node(row[i].next));
+                    const uint32_t b = findRoot(parent, node(row[i].prev));
                     if (a != b) {
                         parent[a] = b;
                         --components;
@@ -166,28 +286,29 @@ MeshTopology checkTopology(const TriangleMesh& mesh)
     result.nonManifoldEdges = tally.nonManifoldEdges;
     result.nonManifoldVertices = tally.nonManifoldVertices;
     result.inconsistentlyOrientedEdges = tally.inconsistent;
-    result.eulerCharacteristic = int(int64_t(tally.vertices) - int64_t(tally.edges) + int64_t(valid.size()));
+    result.eulerCharacteristic = int(int64_t(tally.vertices) - int64_t(tally.edges) + int64_t(numValid));
 
-    // Per piece (indexed by its root, the piece's lowest vertex): V - E + F and open edges.
-    std::vector<int64_t> chi(numPoints, 0);
-    std::vector<uint32_t> bad(numPoints, 0);
-    std::vector<uint8_t> used(numPoints, 0);
-    for (uint32_t t : valid) {
-        const uint32_t root = findRoot(piece, mesh.triangles[t][0]);
-        ++chi[root];
-        for (int k = 0; k < 3; ++k) used[mesh.triangles[t][k]] = 1;
+    // Per piece (indexed by its root, the piece's lowest vertex): V - E + F and open edges,
+    // gathered at the root. A root is below its other vertices, so in ascending order each
+    // vertex is added to its root after its own sum is complete (and roots are not added on).
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numPoints, 1 << 14), [&](const auto& range) {
+        for (std::size_t v = range.begin(); v != range.end(); ++v)
+            piece[v].store(findRoot(piece, uint32_t(v)), std::memory_order_relaxed);
+    });
+    for (std::size_t v = 0; v < numPoints; ++v) {
+        if (first[v] == first[v + 1]) continue;
+        const uint32_t root = piece[v].load(std::memory_order_relaxed);
+        if (root == v) {
+            ++result.pieces;
+            continue;
+        }
+        ownedChi[root] += ownedChi[v];
+        ownedBad[root] |= ownedBad[v];
     }
     for (std::size_t v = 0; v < numPoints; ++v) {
-        if (!used[v]) continue;
-        const uint32_t root = findRoot(piece, uint32_t(v));
-        chi[root] += 1 - int64_t(ownedEdges[v]);
-        bad[root] += ownedBad[v];
-        if (root == v) ++result.pieces;
-    }
-    for (std::size_t v = 0; v < numPoints; ++v) {
-        if (!used[v] || piece[v] != v || bad[v] != 0) continue;
+        if (first[v] == first[v + 1] || piece[v].load(std::memory_order_relaxed) != v || ownedBad[v]) continue;
         ++result.closedPieces;
-        result.genus += int(1 - chi[v] / 2);
+        result.genus += int(1 - ownedChi[v] / 2);
     }
     return result;
 }

@@ -43,7 +43,7 @@ struct MeshTopology {
     }
 };
 
-/// Analyse the topology of @a mesh (parallel; O(triangles)).
+/// Analyse the topology of @a mesh (parallel; O(triangles); the same result for any thread count).
 MeshTopology checkTopology(const TriangleMesh& mesh);
 
 /// Pairs of triangles of @a mesh that cross each other: an edge of one passes through the
