@@ -32,6 +32,7 @@
 #include <functional>
 #include <numbers>
 #include <optional>
+#include <random>
 
 namespace {
 
@@ -414,6 +415,77 @@ TEST(Decimation, BlocksInParallelSameBytesForAnyThreadCountAndWithinTolerance)
     EXPECT_EQ(countSelfIntersections(one), 0u);
     EXPECT_NEAR(one.volume(), raw.volume(), 0.002 * raw.volume());
     EXPECT_LE(maxAwayFromBox(one, c.distance, 0.25 * c.voxel, c.box, 2.0 * c.voxel), c.tolerance);
+}
+
+TEST(Decimation, QuadraticBoundHoldsOverTheTriangleAndIsReached)
+{
+    // Random corner and midpoint values: the bound is at least |q| on a fine barycentric grid,
+    // and reached where a corner's value is the largest coefficient.
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> value(-1.0, 1.0);
+    int reached = 0;
+    for (int trial = 0; trial < 2000; ++trial) {
+        const std::array<double, 3> s = {value(rng), value(rng), value(rng)};
+        const std::array<double, 3> m = {value(rng), value(rng), value(rng)};
+        auto q = [&](double l0, double l1, double l2) {
+            return s[0] * l0 * (2 * l0 - 1) + s[1] * l1 * (2 * l1 - 1) + s[2] * l2 * (2 * l2 - 1) +
+                   4 * (m[0] * l0 * l1 + m[1] * l1 * l2 + m[2] * l2 * l0);
+        };
+        double largest = 0.0;
+        constexpr int kSteps = 60;
+        for (int i = 0; i <= kSteps; ++i)
+            for (int j = 0; i + j <= kSteps; ++j)
+                largest = std::max(largest, std::abs(q(double(i) / kSteps, double(j) / kSteps,
+                                                       1.0 - double(i) / kSteps - double(j) / kSteps)));
+        const double bound = quadraticBound(s, m);
+        ASSERT_GE(bound, largest - 1e-12) << trial;
+        reached += std::abs(bound - largest) < 1e-12;
+    }
+    EXPECT_GT(reached, 100);
+}
+
+TEST(Decimation, CrossingTrianglesAreDecimatedAgainAroundThem)
+{
+    // The gyroid sheet in blocks of 16 voxels: each block's new triangles are checked against
+    // the field, not against the other blocks' or the sheet's other side, and some pairs cross
+    // (none in the projected mesh). The repair keeps the original vertices around them and
+    // decimates again: none left, the same bytes for any thread count.
+    const DecimationCase c = decimationCases()[2];
+    TriangleMesh projected = marchingCubesOf(*c.field, Domain::fromBox(c.box, c.voxel));
+    projectToSurface(projected, *c.field, {0.0, 0.5 * c.voxel, 1e-6, 12});
+    DecimationOptions o;
+    o.tolerance = c.tolerance;
+    o.voxel = c.voxel;
+    o.blockedFrom = 0;
+    o.blockVoxels = 16.0;
+    auto decimate = [&](bool repair, int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        o.repairCrossings = repair;
+        TriangleMesh m = projected;
+        const DecimationStats s = decimateToTolerance(m, *c.field, o);
+        return std::make_pair(m, s);
+    };
+    const auto [plain, plainStats] = decimate(false, 2);
+    const auto [repaired, stats] = decimate(true, 2);
+    const auto [one, oneStats] = decimate(true, 1);
+    const std::size_t crossingPlain = countSelfIntersections(plain);
+    RecordProperty("crossing_pairs", std::to_string(crossingPlain) + " decimated, " +
+                                         std::to_string(stats.crossingPairs) + " after " +
+                                         std::to_string(stats.repairRounds) + " rounds");
+    EXPECT_EQ(countSelfIntersections(projected), 0u);
+    // The case exercises the repair: decimation alone leaves crossing pairs here.
+    EXPECT_GT(crossingPlain, 0u);
+    EXPECT_EQ(plainStats.crossingPairsFound, 0u);  // not looked for
+    EXPECT_EQ(stats.crossingPairsFound, crossingPlain);
+    EXPECT_GE(stats.repairRounds, 1);
+    EXPECT_GT(stats.verticesKeptForCrossings, 0u);
+    EXPECT_EQ(stats.crossingPairs, 0u);
+    EXPECT_EQ(countSelfIntersections(repaired), 0u);
+    expectClosedManifold(repaired);
+    EXPECT_LE(maxAwayFromBox(repaired, c.distance, 0.25 * c.voxel, c.box, 2.0 * c.voxel), c.tolerance);
+    // Kept only around the pairs: within 10 % of the plain decimation's triangles (5 % here).
+    EXPECT_LT(repaired.triangles.size(), plain.triangles.size() * 110 / 100);
+    EXPECT_TRUE(one.points == repaired.points && one.triangles == repaired.triangles);
 }
 
 TEST(Decimation, FlatFacesGoInTrianglesOfAtMostSixVoxels)
@@ -1249,6 +1321,51 @@ TEST(CoarseExtraction, AResultCutByAnotherSurfaceKeepsTheRecipesVoxel)
     const double worst = maxOverTriangles(
         m, [](const Vec3d& p) { return std::max(p.length() - 3.2, p.z() - 1.53); }, 0.02);
     EXPECT_LE(worst, r["mesh"]["deviation"]["max_mm"].get<double>() + 0.005);
+}
+
+TEST(CoarseExtraction, AProbeRejectsACoarseGridWithTheFullMeshsChordError)
+{
+    test::TempDir dir;
+    // 26 mm: a probe of 32 voxels at 0.4 mm holds at most an eighth of the domain.
+    const std::string text =
+        "voxel: 0.1\n"
+        "domain: {box: [[0, 0, 0], [26, 26, 26]]}\n"
+        "fields:\n"
+        "  lattice: {tpms: gyroid, cell: 10, solid: network, density: 0.3}\n"
+        "result: lattice\n"
+        "outputs: {mesh: {file: a.stl, tolerance: 0.01}}\n";
+    const auto [r, bytes] = runTolerance(text, dir.path);
+    const nlohmann::json& x = r["mesh"]["extraction"];
+    ASSERT_GE(x["trials"].size(), 2u) << x.dump();
+    const nlohmann::json& probe = x["trials"][0];
+    EXPECT_NEAR(probe["voxel_mm"].get<double>(), 0.4, 1e-12);
+    ASSERT_TRUE(probe.contains("probe_chord_error_mm")) << x.dump();
+    EXPECT_TRUE(probe.contains("rejected"));
+    EXPECT_FALSE(probe.contains("triangles"));  // the domain was not meshed at 0.4 mm
+    const double probed = probe["probe_chord_error_mm"].get<double>();
+    EXPECT_GT(probed, 0.01);
+    // The whole domain at 0.4 mm, meshed and projected here, measured with the test's own
+    // distance on triangles more than two voxels inside the box: the probe's triangles are a part
+    // of these (the same grid), and a probe holding a whole cell sees the worst of them.
+    const double level = r["fields"]["lattice"]["level"].get<double>();
+    const FieldPtr lattice = std::make_shared<LevelSolid>(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(10.0)),
+                                                          SolidSide::Below, level);
+    TriangleMesh coarse = marchingCubesOf(*lattice, Domain::fromBox(Box3{Vec3d(0.0), Vec3d(26.0)}, 0.4));
+    projectToSurface(coarse, *lattice, {0.0, 0.2, 1e-5, 12});
+    const Box3 inner{Vec3d(0.8), Vec3d(25.2)};
+    std::erase_if(coarse.triangles, [&](const openvdb::Vec3I& t) {
+        for (int i = 0; i < 3; ++i)
+            if (boxDistance(toDouble(coarse.points[t[i]]), inner) > 0.0) return true;
+        return false;
+    });
+    const double full = maxOverTriangles(
+        coarse, [&](const Vec3d& p) { return gyroidDistance(p, 10.0, level); }, 0.1);
+    RecordProperty("chord_error_mm", "probe " + std::to_string(probed) + ", whole domain " + std::to_string(full));
+    EXPECT_LE(probed, 1.02 * full);
+    EXPECT_GE(probed, 0.9 * full);
+    // And the grid kept is measured in full.
+    EXPECT_TRUE(x["trials"].back().contains("chord_error_mm")) << x.dump();
+    EXPECT_EQ(x["factor"].get<int>(), 2) << x.dump();
 }
 
 TEST(CoarseExtraction, PiecesACoarseGridJoinsFallBackToTheRecipesVoxel)

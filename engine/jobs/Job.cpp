@@ -695,8 +695,11 @@ std::optional<double> Job::probeChordError(double h)
     d.voxel = h;
     double volume = 1.0;
     for (int a = 0; a < 3; ++a) {
+        // On the whole domain's coarse grid (clippedMesh(): from the box's corner), so the probe's
+        // triangles away from its faces are the full mesh's.
         d.dims[a] = std::min(kProbeVoxels, int(std::floor(mDomain.box.extent()[a] / h)));
-        d.box.min[a] = mDomain.box.center()[a] - 0.5 * d.dims[a] * h;
+        const double start = mDomain.box.center()[a] - 0.5 * d.dims[a] * h;
+        d.box.min[a] = mDomain.box.min[a] + std::floor((start - mDomain.box.min[a]) / h) * h;
         d.box.max[a] = d.box.min[a] + d.dims[a] * h;
         volume *= d.box.extent()[a] / mDomain.box.extent()[a];
     }

@@ -125,7 +125,8 @@ private:
     std::unique_ptr<TriangleMesh> coarseMesh(const MeshOptions& options, nlohmann::json& extraction, double& voxel,
                                              ProjectionStats& projection, std::optional<BoxClipStats>& boxCut);
     /// The chord error (as coarseMesh() measures it) of the result meshed at voxel @a h and
-    /// projected, in a probe box of 32 such voxels at the domain's centre; nullopt when such a box
+    /// projected, in a probe box of 32 such voxels at the domain's centre on the full coarse grid
+    /// (its inner triangles are the full mesh's); nullopt when such a box
     /// would hold more than an eighth of the domain (the full trial is as cheap). The error in a
     /// part of the mesh is at most the whole mesh's: a probe above the tolerance rejects @a h
     /// without meshing the whole domain at it.

@@ -49,18 +49,6 @@ struct Midpoint {
     double distance;
 };
 
-/// A bound on |q| over a triangle for the quadratic q through corner values @a s and edge
-/// midpoint values @a m (m[i] between corners i and i + 1): q's Bernstein coefficients are the
-/// corner values and 2 m - (s_i + s_j) / 2 on the edges, and q lies within their range (the
-/// convex hull property). A triangle this bound passes passes any sampling of q as well, so the
-/// samples are needed only where it does not.
-double bernsteinBound(const std::array<double, 3>& s, const std::array<double, 3>& m)
-{
-    double bound = std::max({std::abs(s[0]), std::abs(s[1]), std::abs(s[2])});
-    for (int i = 0; i < 3; ++i) bound = std::max(bound, std::abs(2.0 * m[i] - 0.5 * (s[i] + s[(i + 1) % 3])));
-    return bound;
-}
-
 /// Marks a distance not evaluated yet (no field reaches it: signedDistance caps at 1e30).
 constexpr double kUnknown = std::numeric_limits<double>::max();
 
@@ -505,7 +493,7 @@ private:
             bool nearBox = false;
             if (mBox)
                 for (int corner = 0; corner < 3 && !nearBox; ++corner) nearBox = boxDistance(t.p[corner]) > -tolerance;
-            if (!nearBox && bernsteinBound(s, m) * (1.0 + 1e-12) + margin <= tolerance) continue;
+            if (!nearBox && quadraticBound(s, m) * (1.0 + 1e-12) + margin <= tolerance) continue;
             constexpr int kSteps = 6;
             double largest = 0.0;
             for (int i = 0; i <= kSteps; ++i)
@@ -803,6 +791,15 @@ std::size_t keepAroundCrossings(const TriangleMesh& original, const TriangleMesh
 }
 
 }  // namespace
+
+double quadraticBound(const std::array<double, 3>& s, const std::array<double, 3>& m)
+{
+    // q's Bernstein coefficients are the corner values and 2 m - (s_i + s_j) / 2 on the edges;
+    // q lies within their range (the convex hull property).
+    double bound = std::max({std::abs(s[0]), std::abs(s[1]), std::abs(s[2])});
+    for (int i = 0; i < 3; ++i) bound = std::max(bound, std::abs(2.0 * m[i] - 0.5 * (s[i] + s[(i + 1) % 3])));
+    return bound;
+}
 
 DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, const DecimationOptions& options,
                                     const ProgressFn& progress)
