@@ -18,6 +18,7 @@
 #include <numeric>
 #include <queue>
 #include <tuple>
+#include <unordered_map>
 #include <vector>
 
 namespace voxlat {
@@ -643,13 +644,19 @@ BlockResult decimateBlock(const TriangleMesh& mesh, const std::vector<std::uint3
     return result;
 }
 
+/// A pass's block results and the locks they were made with (see decimatePass).
+struct PassCache {
+    std::vector<std::uint8_t> locked;
+    std::vector<BlockResult> results;
+};
+
 /// One pass over blocks of edge @a size whose corners sit at @a origin + k size: each triangle
 /// goes to the block of its centroid, vertices used by triangles of two blocks are kept, the
 /// blocks are decimated in parallel and put together in block order (vertices renumbered in
 /// their old order), so the result does not depend on the thread count.
 bool decimatePass(TriangleMesh& mesh, std::vector<double>& vertexDistance, std::vector<std::uint8_t>& kept,
                   const FieldNode& field, const DecimationOptions& options, const Vec3d& origin, double size,
-                  DecimationStats& stats, BlockProgress& progress)
+                  DecimationStats& stats, BlockProgress& progress, PassCache* cache = nullptr)
 {
     const std::size_t numTriangles = mesh.triangles.size();
     // (block key, triangle), sorted: blocks in key order, their triangles in index order (a
@@ -688,12 +695,23 @@ bool decimatePass(TriangleMesh& mesh, std::vector<double>& vertexDistance, std::
                 }
     }
     std::vector<BlockResult> results(blocks.size());
+    // A block's result depends on its triangles and which of their vertices are locked alone: a
+    // block of the same mesh whose locks are those of a cached pass is taken from the cache.
+    const bool reuse = cache && cache->locked.size() == locked.size() && cache->results.size() == blocks.size();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1), [&](const auto& range) {
         for (std::size_t b = range.begin(); b != range.end(); ++b) {
-            results[b] = decimateBlock(mesh, blocks[b], locked, vertexDistance, field, options);
+            const bool same = reuse && std::all_of(blocks[b].begin(), blocks[b].end(), [&](std::uint32_t t) {
+                                  const openvdb::Vec3I& tri = mesh.triangles[t];
+                                  return locked[tri[0]] == cache->locked[tri[0]] &&
+                                         locked[tri[1]] == cache->locked[tri[1]] &&
+                                         locked[tri[2]] == cache->locked[tri[2]];
+                              });
+            results[b] =
+                same ? cache->results[b] : decimateBlock(mesh, blocks[b], locked, vertexDistance, field, options);
             progress.add(blocks[b].size());
         }
     });
+
     bool all = true;
     TriangleMesh out;
     std::vector<std::uint32_t> newIndex(mesh.points.size(), std::numeric_limits<std::uint32_t>::max());
@@ -719,18 +737,16 @@ bool decimatePass(TriangleMesh& mesh, std::vector<double>& vertexDistance, std::
     mesh = std::move(out);
     vertexDistance = std::move(distance);
     kept = std::move(keptOut);
+    if (cache && !reuse) *cache = {std::move(locked), std::move(results)};
     return all;
 }
 
-}  // namespace
-
-namespace {
-
 /// One decimation of @a mesh (whose vertices' signed distances are @a vertexDistance) with the
-/// vertices flagged in @a kept staying: one block, or blocks in two shifted passes.
+/// vertices flagged in @a kept staying: one block, or blocks in two shifted passes (the first
+/// pass's blocks cached in, or taken from, @a firstPass when given).
 bool decimateOnce(TriangleMesh& mesh, std::vector<double> vertexDistance, std::vector<std::uint8_t> kept,
                   const FieldNode& field, const DecimationOptions& options, DecimationStats& stats,
-                  const ProgressFn& progress)
+                  const ProgressFn& progress, PassCache* firstPass)
 {
     const openvdb::BBoxd box = mesh.bounds();
     const double extent = std::max({box.extents().x(), box.extents().y(), box.extents().z()});
@@ -746,7 +762,7 @@ bool decimateOnce(TriangleMesh& mesh, std::vector<double> vertexDistance, std::v
     // (kept) lie inside the second pass's blocks.
     report.total = 2 * mesh.triangles.size();
     const Vec3d origin = box.min() - Vec3d(1e-3 * size);
-    const bool first = decimatePass(mesh, vertexDistance, kept, field, options, origin, size, stats, report);
+    const bool first = decimatePass(mesh, vertexDistance, kept, field, options, origin, size, stats, report, firstPass);
     report.total = report.done + mesh.triangles.size();
     return decimatePass(mesh, vertexDistance, kept, field, options, origin - Vec3d(0.5 * size), size, stats, report) &&
            first;
@@ -772,14 +788,39 @@ std::size_t keepAroundCrossings(const TriangleMesh& original, const TriangleMesh
             bounds.expand(grow * longest + voxel);
             boxes.push_back(bounds);
         }
+    // The boxes binned in cells as large as the largest box (each box in at most 2 x 2 x 2), so
+    // a vertex is tested against the few in its cell.
+    openvdb::BBoxd all;
+    double cell = 0.0;
+    for (const openvdb::BBoxd& b : boxes) {
+        all.expand(b);
+        cell = std::max(cell, b.extents()[b.maxExtent()]);
+    }
+    auto cellOf = [&](const Vec3d& p) {
+        std::uint64_t key = 0;
+        for (int a = 0; a < 3; ++a)
+            key = (key << 21) | std::uint64_t(std::clamp<std::int64_t>(
+                                    std::int64_t(std::floor((p[a] - all.min()[a]) / cell)), 0, (1 << 21) - 1));
+        return key;
+    };
+    std::unordered_map<std::uint64_t, std::vector<std::uint32_t>> bins;
+    for (std::uint32_t i = 0; i < boxes.size(); ++i)
+        for (int corner = 0; corner < 8; ++corner) {
+            Vec3d p;
+            for (int a = 0; a < 3; ++a) p[a] = (corner >> a & 1) ? boxes[i].max()[a] : boxes[i].min()[a];
+            std::vector<std::uint32_t>& bin = bins[cellOf(p)];
+            if (bin.empty() || bin.back() != i) bin.push_back(i);
+        }
     std::atomic<std::size_t> flagged{0};
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, original.points.size()), [&](const auto& range) {
         std::size_t count = 0;
         for (std::size_t v = range.begin(); v != range.end(); ++v) {
-            if (kept[v]) continue;
             const Vec3d p = toDouble(original.points[v]);
-            for (const openvdb::BBoxd& b : boxes)
-                if (b.isInside(p)) {
+            if (kept[v] || !all.isInside(p)) continue;
+            const auto bin = bins.find(cellOf(p));
+            if (bin == bins.end()) continue;
+            for (std::uint32_t i : bin->second)
+                if (boxes[i].isInside(p)) {
                     kept[v] = 1;
                     ++count;
                     break;
@@ -826,23 +867,26 @@ DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, 
     });
 
     // Each new triangle is checked against the field, not against the rest of the mesh: where
-    // two sheets of the surface come within about twice the tolerance of each other (a concave
-    // crease where struts meet), triangles of both may cross. The mesh is checked after
-    // decimation; around each crossing pair the original vertices are kept and the whole is
-    // decimated again from the original, a wider region each round.
+    // two sheets of the surface come within about twice the tolerance of each other, or along a
+    // seam where each block's triangles were checked without the other block's, two may cross. The mesh is checked
+    // after decimation; around each crossing pair the original vertices are kept and the whole is decimated again from
+    // the original, a wider region each round.
     const TriangleMesh original = options.repairCrossings ? mesh : TriangleMesh();
     std::vector<std::uint8_t> kept(mesh.points.size(), 0);
-    stats.decimated = decimateOnce(mesh, vertexDistance, kept, field, options, stats, progress);
+    // The first pass's blocks away from the kept vertices come out as before: kept for the rounds.
+    PassCache firstPass;
+    PassCache* cache = options.repairCrossings ? &firstPass : nullptr;
+    stats.decimated = decimateOnce(mesh, vertexDistance, kept, field, options, stats, progress, cache);
     if (options.repairCrossings) {
         auto pairs = selfIntersections(mesh);
         stats.crossingPairsFound = pairs.size();
         for (int round = 1; round <= options.repairRounds && !pairs.empty(); ++round) {
             stats.verticesKeptForCrossings +=
-                keepAroundCrossings(original, mesh, pairs, double(round), options.voxel, kept);
+                keepAroundCrossings(original, mesh, pairs, 0.5 * round, options.voxel, kept);
             ++stats.repairRounds;
             mesh = original;
             stats.collapses = stats.refused = 0;
-            stats.decimated = decimateOnce(mesh, vertexDistance, kept, field, options, stats, {});
+            stats.decimated = decimateOnce(mesh, vertexDistance, kept, field, options, stats, {}, cache);
             pairs = selfIntersections(mesh);
         }
         stats.crossingPairs = pairs.size();
