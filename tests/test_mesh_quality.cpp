@@ -330,13 +330,30 @@ std::vector<DecimationCase> decimationCases()
     };
 }
 
+/// The case's marching-cubes mesh with its vertices projected onto the surface.
+TriangleMesh projectedMesh(const DecimationCase& c)
+{
+    TriangleMesh mesh = marchingCubesOf(*c.field, Domain::fromBox(c.box, c.voxel));
+    projectToSurface(mesh, *c.field, {0.0, 0.5 * c.voxel, 1e-6, 12});
+    return mesh;
+}
+
+/// The case's tolerance and voxel, with the blocked path forced in blocks of @a blockVoxels.
+DecimationOptions blockedOptions(const DecimationCase& c, double blockVoxels)
+{
+    DecimationOptions o;
+    o.tolerance = c.tolerance;
+    o.voxel = c.voxel;
+    o.blockedFrom = 0;
+    o.blockVoxels = blockVoxels;
+    return o;
+}
+
 TEST(Decimation, ClosedManifoldAndWithinToleranceOnSeveralShapes)
 {
     for (const DecimationCase& c : decimationCases()) {
         SCOPED_TRACE(c.name);
-        const Domain d = Domain::fromBox(c.box, c.voxel);
-        TriangleMesh mesh = marchingCubesOf(*c.field, d);
-        projectToSurface(mesh, *c.field, {0.0, 0.5 * c.voxel, 1e-6, 12});
+        TriangleMesh mesh = projectedMesh(c);
         const TriangleMesh projected = mesh;
         const MeshTopology before = checkTopology(projected);
         DecimationOptions o;
@@ -391,13 +408,8 @@ TEST(Decimation, BlocksInParallelSameBytesForAnyThreadCountAndWithinTolerance)
 {
     // The blocked path forced on a small gyroid: blocks of 10 voxels, two passes.
     const DecimationCase c = decimationCases()[1];
-    TriangleMesh raw = marchingCubesOf(*c.field, Domain::fromBox(c.box, c.voxel));
-    projectToSurface(raw, *c.field, {0.0, 0.5 * c.voxel, 1e-6, 12});
-    DecimationOptions o;
-    o.tolerance = c.tolerance;
-    o.voxel = c.voxel;
-    o.blockedFrom = 0;
-    o.blockVoxels = 10.0;
+    const TriangleMesh raw = projectedMesh(c);
+    const DecimationOptions o = blockedOptions(c, 10.0);
     auto decimate = [&](int threads) {
         tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
         TriangleMesh m = raw;
@@ -451,13 +463,8 @@ TEST(Decimation, CrossingTrianglesAreDecimatedAgainAroundThem)
     // (none in the projected mesh). The repair keeps the original vertices around them and
     // decimates again: none left, the same bytes for any thread count.
     const DecimationCase c = decimationCases()[2];
-    TriangleMesh projected = marchingCubesOf(*c.field, Domain::fromBox(c.box, c.voxel));
-    projectToSurface(projected, *c.field, {0.0, 0.5 * c.voxel, 1e-6, 12});
-    DecimationOptions o;
-    o.tolerance = c.tolerance;
-    o.voxel = c.voxel;
-    o.blockedFrom = 0;
-    o.blockVoxels = 16.0;
+    const TriangleMesh projected = projectedMesh(c);
+    DecimationOptions o = blockedOptions(c, 16.0);
     auto decimate = [&](bool repair, int threads) {
         tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
         o.repairCrossings = repair;
