@@ -6,6 +6,7 @@
 #include "FieldChecks.h"
 #include "MeshChecks.h"
 #include "TestUtil.h"
+#include "engine/core/Format.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/jobs/Job.h"
 #include "engine/parts/MeshReader.h"
@@ -1203,6 +1204,21 @@ std::pair<nlohmann::json, std::string> runTolerance(const std::string& text, con
 
 }  // namespace
 
+/// The acceptance gyroid (network, 30 %, 10 mm cells, 0.1 mm voxels) in the box from the origin
+/// to @a corner ("x, y, z"), meshed to `a.stl` with @a tolerance.
+std::string gyroidToleranceRecipe(const std::string& corner, double tolerance)
+{
+    return "voxel: 0.1\n"
+           "domain: {box: [[0, 0, 0], [" +
+           corner +
+           "]]}\n"
+           "fields:\n"
+           "  lattice: {tpms: gyroid, cell: 10, solid: network, density: 0.3}\n"
+           "result: lattice\n"
+           "outputs: {mesh: {file: a.stl, tolerance: " +
+           formatNumber(tolerance) + "}}\n";
+}
+
 TEST(CoarseExtraction, SphereIsClosedOutwardAndWithinTheTolerance)
 {
     test::TempDir dir;
@@ -1232,13 +1248,7 @@ TEST(CoarseExtraction, SphereIsClosedOutwardAndWithinTheTolerance)
 TEST(CoarseExtraction, ABoxCutGyroidIsMeshedCoarseCutByTheBoxWithinTheToleranceAndSameBytesForAnyThreadCount)
 {
     test::TempDir dir;
-    const std::string text =
-        "voxel: 0.1\n"
-        "domain: {box: [[0, 0, 0], [12, 12, 11]]}\n"
-        "fields:\n"
-        "  lattice: {tpms: gyroid, cell: 10, solid: network, density: 0.3}\n"
-        "result: lattice\n"
-        "outputs: {mesh: {file: a.stl, tolerance: 0.02}}\n";
+    const std::string text = gyroidToleranceRecipe("12, 12, 11", 0.02);
     const auto [r, bytes] = runTolerance(text, dir.path, 1);
     // The lattice meets the domain box: meshed past it and cut by its faces, its creases there are
     // exact at any voxel, so a coarser grid is taken.
@@ -1278,13 +1288,7 @@ TEST(CoarseExtraction, TrianglesMeetingTheBoxAlongACreaseStayWithinTheTolerance)
     // corners, midpoints and centre smooths over; before the decimation took the box's distance
     // exactly, two triangles here reached 0.0108 mm at 0.0125 mm from such an edge.
     test::TempDir dir;
-    const std::string text =
-        "voxel: 0.1\n"
-        "domain: {box: [[0, 0, 0], [20, 20, 20]]}\n"
-        "fields:\n"
-        "  lattice: {tpms: gyroid, cell: 10, solid: network, density: 0.3}\n"
-        "result: lattice\n"
-        "outputs: {mesh: {file: a.stl, tolerance: 0.01}}\n";
+    const std::string text = gyroidToleranceRecipe("20, 20, 20", 0.01);
     const auto [r, bytes] = runTolerance(text, dir.path);
     const TriangleMesh m = readStl((dir.path / "out/a.stl").string());
     expectClosedManifold(m);
@@ -1334,13 +1338,7 @@ TEST(CoarseExtraction, AProbeRejectsACoarseGridWithTheFullMeshsChordError)
 {
     test::TempDir dir;
     // 26 mm: a probe of 32 voxels at 0.4 mm holds at most an eighth of the domain.
-    const std::string text =
-        "voxel: 0.1\n"
-        "domain: {box: [[0, 0, 0], [26, 26, 26]]}\n"
-        "fields:\n"
-        "  lattice: {tpms: gyroid, cell: 10, solid: network, density: 0.3}\n"
-        "result: lattice\n"
-        "outputs: {mesh: {file: a.stl, tolerance: 0.01}}\n";
+    const std::string text = gyroidToleranceRecipe("26, 26, 26", 0.01);
     const auto [r, bytes] = runTolerance(text, dir.path);
     const nlohmann::json& x = r["mesh"]["extraction"];
     ASSERT_GE(x["trials"].size(), 2u) << x.dump();

@@ -608,6 +608,8 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
 namespace {
 /// The coarsest grid a tolerance mesh is tried at: k times the recipe's voxel.
 constexpr int kMaxCoarsening = 4;
+/// A coarse trial's probe: a cube of this many coarse voxels at the domain's centre.
+constexpr int kProbeVoxels = 32;
 /// The chord error is measured on at most about this many interior triangles (every n-th).
 constexpr std::size_t kChordSampleTriangles = 200000;
 
@@ -690,7 +692,6 @@ std::unique_ptr<TriangleMesh> Job::clippedMesh(double h, ProjectionStats& projec
 
 std::optional<double> Job::probeChordError(double h)
 {
-    constexpr int kProbeVoxels = 32;
     Domain d;
     d.voxel = h;
     double volume = 1.0;
@@ -765,9 +766,8 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
         if (const std::optional<double> probe = probeChordError(h); probe && *probe > tolerance) {
             trials.push_back({{"voxel_mm", h},
                               {"probe_chord_error_mm", *probe},
-                              {"rejected",
-                               "the chord error in a probe of 32 voxels at the domain's centre is above "
-                               "the tolerance"}});
+                              {"rejected", "the chord error in a probe of " + std::to_string(kProbeVoxels) +
+                                               " voxels at the domain's centre is above the tolerance"}});
             why = "the chord error at " + formatNumber(h) + " mm is " + formatNumber(*probe) +
                   " mm (in a probe at the domain's centre), above the tolerance";
             k = finer(*probe);
