@@ -17,6 +17,7 @@
 #include "fields/Sphere.h"
 #include "fields/SurfaceDistance.h"
 #include "fields/TpmsField.h"
+#include "mesher/extract/AdaptiveRefinement.h"
 #include "mesher/extract/BoxClip.h"
 #include "mesher/extract/CreaseSplit.h"
 #include "mesher/extract/Decimation.h"
@@ -612,7 +613,8 @@ TEST(MeshOutputs, BadTolerancesAndNamesAreRefusedWithTheLine)
     test::TempDir dir;
     for (const std::string bad :
          {"{file: a.stl, tolerance: 0}", "{file: a.stl, tolerance: -0.1}", "{file: a.stl, project: maybe}",
-          "{file: a.step}", "{tolerance: 0.1}", "{file: a.stl, tolerence: 0.1}"}) {
+          "{file: a.step}", "{tolerance: 0.1}", "{file: a.stl, tolerence: 0.1}",
+          "{file: a.stl, tolerance: 0.01, refine: maybe}", "{file: a.stl, refine: off}"}) {
         SCOPED_TRACE(bad);
         const auto path = dir.write("bad.yaml", std::string(kSmallGyroid) + "outputs: {mesh: " + bad + "}\n");
         std::string out;
@@ -634,6 +636,19 @@ TEST(MeshOutputs, BadTolerancesAndNamesAreRefusedWithTheLine)
             << out;
         EXPECT_NE(out.find("tolerance"), std::string::npos) << out;
         EXPECT_FALSE(std::filesystem::exists(file));
+    }
+    {
+        // --refine needs a tolerance and takes on or off.
+        std::string out;
+        const auto file = dir.path / "m.stl";
+        for (const std::string bad : {" --refine off", " --tolerance 0.02 --refine maybe"}) {
+            EXPECT_EQ(test::runCommand(
+                          test::voxlatBinary() + " -q mesh " + good.string() + " -o " + file.string() + bad, &out),
+                      2)
+                << out;
+            EXPECT_NE(out.find("--refine"), std::string::npos) << out;
+            EXPECT_FALSE(std::filesystem::exists(file));
+        }
     }
     std::string out;
     const auto file = dir.path / "m.3mf";
@@ -1191,6 +1206,85 @@ TEST(BoxClip, MeshesEntirelyInsideOrOutsideTheBox)
 
 namespace {
 
+/// A shape meshed on a coarse grid and cut by its box (cutByBox()), to be refined to a tolerance;
+/// its own distance to measure the result with.
+struct RefinementCase {
+    std::string name;
+    FieldPtr field;  ///< unclipped: the box cut makes the creases
+    std::function<double(const Vec3d&)> distance;
+    Box3 box;
+    double voxel, tolerance;
+};
+
+std::vector<RefinementCase> refinementCases()
+{
+    const GyroidCase g;
+    const FieldPtr network = std::make_shared<LevelSolid>(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(g.cell)),
+                                                          SolidSide::Below, g.level);
+    const FieldPtr sheet = std::make_shared<LevelSolid>(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(g.cell)),
+                                                        SolidSide::Band, 0.4);
+    const Vec3d centre(5.03, 4.98, 5.01);
+    // Whole coarse voxels (cutByBox() cuts at the grid's box).
+    const Box3 box{Vec3d(0.0), Vec3d(6.0, 5.6, 5.0)};
+    return {
+        {"sphere inside its box", std::make_shared<SquaredSphere>(centre, 3.7),
+         [centre](const Vec3d& p) { return (p - centre).length() - 3.7; }, Box3{Vec3d(0.0), Vec3d(10.0)}, 0.4, 0.002},
+        {"gyroid network cut by its box", network,
+         [g, box](const Vec3d& p) { return std::max(gyroidDistance(p, g.cell, g.level), boxDistance(p, box)); }, box,
+         0.2, 0.01},
+        {"gyroid sheet cut by its box", sheet,
+         [box](const Vec3d& p) { return std::max(gyroidSheetDistance(p, 5.0, 0.4), boxDistance(p, box)); }, box, 0.2,
+         0.005},
+    };
+}
+
+/// The case's coarse mesh refined with at most @a threads threads.
+std::pair<TriangleMesh, AdaptiveRefinementStats> refined(const RefinementCase& c, int threads)
+{
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    auto [m, cut] = cutByBox(*c.field, c.box, c.voxel);
+    EXPECT_TRUE(cut.ok) << cut.failure;
+    AdaptiveRefinementOptions o;
+    o.tolerance = 0.9 * c.tolerance;
+    o.box = c.box;
+    o.maxMove = 0.5 * c.voxel;
+    const AdaptiveRefinementStats stats = refineToTolerance(m, *c.field, o);
+    return {std::move(m), stats};
+}
+
+}  // namespace
+
+TEST(AdaptiveRefinement, ClosedManifoldWithinToleranceAndSameBytesForAnyThreadCount)
+{
+    for (const RefinementCase& c : refinementCases()) {
+        SCOPED_TRACE(c.name);
+        const TriangleMesh coarse = cutByBox(*c.field, c.box, c.voxel).first;
+        // The coarse mesh's chord error is above the tolerance: there is something to refine.
+        const double before = maxOverTriangles(coarse, c.distance, 0.02);
+        EXPECT_GT(before, 1.2 * c.tolerance);
+        const auto [m, stats] = refined(c, 1);
+        EXPECT_EQ(stats.remaining, 0u);
+        EXPECT_GT(stats.splits, 0u);
+        EXPECT_EQ(stats.trianglesBefore, coarse.triangles.size());
+        EXPECT_EQ(stats.trianglesAfter, m.triangles.size());
+        expectClosedManifold(m);
+        EXPECT_EQ(countSelfIntersections(m), 0u);
+        // Every point of every triangle (creases included) within the tolerance, by the test's
+        // own distance sampled every 0.01 mm.
+        const double worst = maxOverTriangles(m, c.distance, 0.01);
+        RecordProperty(c.name + " max_deviation_mm", std::to_string(before) + " -> " + std::to_string(worst));
+        EXPECT_LE(worst, c.tolerance);
+        RecordProperty(c.name + " triangles",
+                       std::to_string(coarse.triangles.size()) + " -> " + std::to_string(m.triangles.size()));
+        // The same bytes with two threads.
+        const auto [m2, stats2] = refined(c, 2);
+        EXPECT_EQ(m.points, m2.points);
+        EXPECT_EQ(m.triangles, m2.triangles);
+    }
+}
+
+namespace {
+
 /// Runs @a text (a recipe whose only output is a.stl) with at most @a threads threads.
 std::pair<nlohmann::json, std::string> runTolerance(const std::string& text, const std::filesystem::path& dir,
                                                     int threads = 0)
@@ -1206,7 +1300,7 @@ std::pair<nlohmann::json, std::string> runTolerance(const std::string& text, con
 
 /// The acceptance gyroid (network, 30 %, 10 mm cells, 0.1 mm voxels) in the box from the origin
 /// to @a corner ("x, y, z"), meshed to `a.stl` with @a tolerance.
-std::string gyroidToleranceRecipe(const std::string& corner, double tolerance)
+std::string gyroidToleranceRecipe(const std::string& corner, double tolerance, const std::string& meshKeys = "")
 {
     return "voxel: 0.1\n"
            "domain: {box: [[0, 0, 0], [" +
@@ -1216,7 +1310,7 @@ std::string gyroidToleranceRecipe(const std::string& corner, double tolerance)
            "  lattice: {tpms: gyroid, cell: 10, solid: network, density: 0.3}\n"
            "result: lattice\n"
            "outputs: {mesh: {file: a.stl, tolerance: " +
-           formatNumber(tolerance) + "}}\n";
+           formatNumber(tolerance) + meshKeys + "}}\n";
 }
 
 TEST(CoarseExtraction, SphereIsClosedOutwardAndWithinTheTolerance)
@@ -1337,8 +1431,9 @@ TEST(CoarseExtraction, AResultCutByAnotherSurfaceKeepsTheRecipesVoxel)
 TEST(CoarseExtraction, AProbeRejectsACoarseGridWithTheFullMeshsChordError)
 {
     test::TempDir dir;
-    // 26 mm: a probe of 32 voxels at 0.4 mm holds at most an eighth of the domain.
-    const std::string text = gyroidToleranceRecipe("26, 26, 26", 0.01);
+    // 26 mm: a probe of 32 voxels at 0.4 mm holds at most an eighth of the domain. Without
+    // refinement, the grid's chord error must be within the tolerance.
+    const std::string text = gyroidToleranceRecipe("26, 26, 26", 0.01, ", refine: off");
     const auto [r, bytes] = runTolerance(text, dir.path);
     const nlohmann::json& x = r["mesh"]["extraction"];
     ASSERT_GE(x["trials"].size(), 2u) << x.dump();
@@ -1371,6 +1466,41 @@ TEST(CoarseExtraction, AProbeRejectsACoarseGridWithTheFullMeshsChordError)
     // And the grid kept is measured in full.
     EXPECT_TRUE(x["trials"].back().contains("chord_error_mm")) << x.dump();
     EXPECT_EQ(x["factor"].get<int>(), 2) << x.dump();
+}
+
+TEST(CoarseExtraction, ASmoothResultIsRefinedFromTheCoarsestGridWithinTheTolerance)
+{
+    // The gyroid of the probe test above, with refinement (the default): meshed at 0.4 mm, its
+    // triangles bisected where they stray, not decimated.
+    test::TempDir dir;
+    const auto [r, bytes] = runTolerance(gyroidToleranceRecipe("26, 26, 26", 0.01), dir.path);
+    const nlohmann::json& x = r["mesh"]["extraction"];
+    EXPECT_EQ(x["factor"].get<int>(), 4) << x.dump();
+    ASSERT_TRUE(x.contains("refinement")) << x.dump();
+    EXPECT_EQ(x["refinement"]["triangles_left_over"].get<std::size_t>(), 0u);
+    EXPECT_EQ(x["refinement"]["crossing_pairs"].get<std::size_t>(), 0u);
+    EXPECT_GT(x["trials"][0]["chord_error_mm"].get<double>(), 0.01) << x.dump();
+    EXPECT_FALSE(r["mesh"].contains("decimation"));
+    const TriangleMesh m = readStl((dir.path / "out/a.stl").string());
+    expectClosedManifold(m);
+    EXPECT_EQ(countSelfIntersections(m), 0u);
+    EXPECT_EQ(m.triangles.size(), r["mesh"]["triangles"].get<std::size_t>());
+    const double level = r["fields"]["lattice"]["level"].get<double>();
+    const Box3 box{Vec3d(0.0), Vec3d(26.0)};
+    const auto distance = [&](const Vec3d& p) { return std::max(gyroidDistance(p, 10.0, level), boxDistance(p, box)); };
+    const double worst = maxOverTriangles(m, distance, 0.025);
+    EXPECT_LE(worst, 0.01);
+    EXPECT_NEAR(m.volume(), r["result"]["volume_mm3"].get<double>(), 0.002 * r["result"]["volume_mm3"].get<double>());
+    // Against `refine: off` (a 0.2 mm grid, decimated): both within the tolerance; refinement
+    // makes fewer than twice its triangles (1.45 times on W9).
+    test::TempDir dir2;
+    const auto [r2, bytes2] = runTolerance(gyroidToleranceRecipe("26, 26, 26", 0.01, ", refine: off"), dir2.path);
+    EXPECT_TRUE(r2["mesh"].contains("decimation"));
+    const TriangleMesh m2 = readStl((dir2.path / "out/a.stl").string());
+    EXPECT_LE(maxOverTriangles(m2, distance, 0.025), 0.01);
+    RecordProperty("triangles", std::to_string(m.triangles.size()) + " refined, " +
+                                    std::to_string(m2.triangles.size()) + " decimated");
+    EXPECT_LT(m.triangles.size(), 2 * m2.triangles.size());
 }
 
 TEST(CoarseExtraction, PiecesACoarseGridJoinsFallBackToTheRecipesVoxel)

@@ -217,6 +217,10 @@ int main(int argc, char** argv)
     mesh->add_option("--project", meshProject,
                      "on: vertices moved onto the true surface (the default with a tolerance); off: marching "
                      "cubes' vertices");
+    std::string meshRefine;
+    mesh->add_option("--refine", meshRefine,
+                     "with a tolerance: on, a coarse grid refined where it strays (the default); off, a grid fine "
+                     "enough for the tolerance, decimated (slower, fewer triangles)");
     std::string meshExtractor;
     mesh->add_option("--extractor", meshExtractor,
                      "how the grid becomes triangles: " + voxlat::joinWords(voxlat::meshExtractorNames()) +
@@ -304,6 +308,15 @@ int main(int argc, char** argv)
                 if (meshProject != "on" && meshProject != "off")
                     throw voxlat::InputError("--project " + meshProject + ": expected on or off");
                 options.project = meshProject == "on";
+            }
+            if (!meshRefine.empty()) {
+                if (meshRefine != "on" && meshRefine != "off")
+                    throw voxlat::InputError("--refine " + meshRefine + ": expected on or off");
+                if (!options.tolerance)
+                    throw voxlat::InputError(
+                        "--refine applies to a mesh with a tolerance: add --tolerance, like "
+                        "--tolerance 0.01");
+                options.refine = meshRefine == "on";
             }
             if (!meshExtractor.empty()) {
                 const auto extractor = voxlat::meshExtractorFromName(meshExtractor);

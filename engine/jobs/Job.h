@@ -7,6 +7,7 @@
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/MeshSettings.h"
 #include "engine/recipe/Recipe.h"
+#include "mesher/extract/AdaptiveRefinement.h"
 #include "mesher/extract/BoxClip.h"
 #include "mesher/extract/SurfaceProjection.h"
 #include "mesher/extract/TriangleMesh.h"
@@ -131,6 +132,9 @@ private:
     /// part of the mesh is at most the whole mesh's: a probe above the tolerance rejects @a h
     /// without meshing the whole domain at it.
     std::optional<double> probeChordError(double h);
+    /// Refines @a mesh (meshed at voxel @a h, projected and cut) until each triangle stays within
+    /// 0.9 of @a tolerance of the result (refineToTolerance()).
+    AdaptiveRefinementStats refineCoarseMesh(TriangleMesh& mesh, double h, double tolerance);
     /// Whether the result's surface is one smooth field (no sharp boolean operands): its only
     /// creases are where it meets the domain box, which clippedMesh() makes exact.
     bool smoothResult();

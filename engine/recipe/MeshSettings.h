@@ -37,13 +37,16 @@ struct MeshOptions {
     /// Error-bounded decimation: every point of every triangle within this of the true surface
     /// (mm); none: no decimation.
     std::optional<double> tolerance;
+    /// With a tolerance: a smooth result is meshed on a coarse grid and refined where it strays
+    /// (true), or meshed on a grid fine enough for the tolerance and decimated (false).
+    bool refine = true;
     /// Where the tolerance was given ("file:line:col" or "--tolerance"), for messages; not part
     /// of what makes two meshes the same.
     std::string toleranceWhere;
 
     bool operator==(const MeshOptions& o) const
     {
-        return extractor == o.extractor && project == o.project && tolerance == o.tolerance;
+        return extractor == o.extractor && project == o.project && tolerance == o.tolerance && refine == o.refine;
     }
     /// True for the extractor's mesh as it made it (what a bare file name asks for).
     bool raw() const { return !project && !tolerance; }

@@ -2,6 +2,7 @@
 
 #include "fields/BoxField.h"
 #include "mesher/extract/MeshCheck.h"
+#include "mesher/extract/TriangleCheck.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -479,33 +480,8 @@ private:
         for (const auto& [index, f, e] : mMidEdge) mEdgeMid[f][e] = mMid[index].distance;
         for (std::size_t k = 0; k < mChecks.size(); ++k) {
             const CheckTriangle& t = mChecks[k];
-            const std::array<double, 3>& s = t.s;
             const std::array<double, 3> m = {mMid[t.mid[0]].distance, mMid[t.mid[1]].distance, mMid[t.mid[2]].distance};
-            const double centre = mCentres[k];
-            // Quadratic through corners s_i and midpoints m_i (m_0 between corners 0 and 1).
-            auto quadratic = [&](double l0, double l1, double l2) {
-                return s[0] * l0 * (2 * l0 - 1) + s[1] * l1 * (2 * l1 - 1) + s[2] * l2 * (2 * l2 - 1) +
-                       4 * (m[0] * l0 * l1 + m[1] * l1 * l2 + m[2] * l2 * l0);
-            };
-            const double margin = std::abs(centre - quadratic(1.0 / 3, 1.0 / 3, 1.0 / 3));
-            if (margin > tolerance) return false;
-            // The box's distance is convex: over the triangle it is largest at a corner. Where
-            // that is below -tolerance, max(quadratic, box) passes or fails as the quadratic does.
-            bool nearBox = false;
-            if (mBox)
-                for (int corner = 0; corner < 3 && !nearBox; ++corner) nearBox = boxDistance(t.p[corner]) > -tolerance;
-            if (!nearBox && quadraticBound(s, m) * (1.0 + 1e-12) + margin <= tolerance) continue;
-            constexpr int kSteps = 6;
-            double largest = 0.0;
-            for (int i = 0; i <= kSteps; ++i)
-                for (int j = 0; i + j <= kSteps; ++j) {
-                    const double l0 = double(i) / kSteps, l1 = double(j) / kSteps, l2 = 1.0 - l0 - l1;
-                    double d = quadratic(l0, l1, l2);
-                    // The box's side of a crease exactly: the larger of the two is the solid's.
-                    if (nearBox) d = std::max(d, boxDistance(l0 * t.p[0] + l1 * t.p[1] + l2 * t.p[2]));
-                    largest = std::max(largest, std::abs(d));
-                }
-            if (largest + margin > tolerance) return false;
+            if (!triangleWithin(t.p, t.s, m, mCentres[k], mOptions.box, tolerance)) return false;
         }
         return true;
     }

@@ -5,6 +5,7 @@
 
 #include "fields/FieldNode.h"
 #include "mesher/extract/MarchingCubes.h"
+#include "mesher/extract/TriangleCheck.h"
 #include "mesher/extract/TriangleMesh.h"
 
 #include <array>
@@ -76,12 +77,6 @@ struct DecimationStats {
 /// @a progress (optional) runs from 0 to 1 over the first decimation and may throw to cancel.
 DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, const DecimationOptions& options,
                                     const ProgressFn& progress = {});
-
-/// A bound on |q| over a triangle, for the quadratic q through the corner values @a s and the
-/// edge-midpoint values @a m (m[i] between corners i and i + 1). The decimation's check passes a
-/// triangle on it and samples q only where it does not: a triangle the bound passes passes any
-/// sampling of q.
-double quadraticBound(const std::array<double, 3>& s, const std::array<double, 3>& m);
 
 /// How far a mesh strays from a level set, sampled on every triangle.
 struct MeshDeviation {
