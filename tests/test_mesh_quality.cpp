@@ -35,6 +35,7 @@
 #include <numbers>
 #include <optional>
 #include <random>
+#include <set>
 
 namespace {
 
@@ -824,6 +825,83 @@ TEST(MeshCheck, SelfIntersectionsWithASharedCorner)
     // The far edge passes the plane outside the first triangle, but that one's long edge goes
     // through the second: one crossing either way round.
     EXPECT_EQ(countSelfIntersections(pair({1.5f, 1.5f, -1.0f}, {1.5f, 1.5f, 1.0f})), 1u);
+}
+
+TEST(MeshCheck, SelfIntersectionsMatchPairwiseChecksOnRandomMeshes)
+{
+    // Random small meshes with many crossings and corners and edges shared, half of them on an
+    // integer lattice (exactly coplanar, touching and repeated points, degenerate triangles):
+    // the pairs listed are those a mesh of the two triangles alone lists, each once, in the same
+    // order for one thread and two, and with triangles flagged, those of them with one flagged.
+    // Two far tilted triangles frame every mesh, so that none of the others lies in a face plane
+    // of the bounds (those are left out, and the bounds of two triangles are not the whole's).
+    using Vec3f = openvdb::Vec3f;
+    using Vec3I = openvdb::Vec3I;
+    const std::vector<Vec3f> frame = {{-50.0f, -50.0f, -50.0f}, {-49.0f, -50.0f, -49.5f}, {-50.0f, -49.0f, -49.25f},
+                                      {50.0f, 50.0f, 50.0f},    {49.0f, 50.0f, 49.5f},    {50.0f, 49.0f, 49.25f}};
+    const uint32_t numFrame = uint32_t(frame.size()), numFrameTriangles = 2;
+    std::mt19937 rng(20261127);
+    std::size_t totalCrossings = 0;
+    for (int round = 0; round < 8; ++round) {
+        TriangleMesh mesh;
+        mesh.points = frame;
+        mesh.triangles = {Vec3I(0, 1, 2), Vec3I(3, 4, 5)};
+        const bool lattice = round % 2 == 0;
+        std::uniform_int_distribution<int> step(0, 6);
+        std::uniform_real_distribution<float> coord(0.0f, 6.0f);
+        for (int i = 0; i < 70; ++i)
+            mesh.points.push_back(lattice ? Vec3f(float(step(rng)), float(step(rng)), float(step(rng)))
+                                          : Vec3f(coord(rng), coord(rng), coord(rng)));
+        // Each triangle a point and two of its eight nearest: small ones (spanning a few grid
+        // cells), many sharing corners or edges.
+        for (int i = 0; i < 180; ++i) {
+            const uint32_t a = numFrame + uint32_t(rng() % 70);
+            std::vector<uint32_t> near;
+            for (uint32_t p = numFrame; p < mesh.points.size(); ++p)
+                if (p != a) near.push_back(p);
+            std::sort(near.begin(), near.end(), [&](uint32_t p, uint32_t q) {
+                return (mesh.points[p] - mesh.points[a]).lengthSqr() < (mesh.points[q] - mesh.points[a]).lengthSqr();
+            });
+            const uint32_t b = near[rng() % 8];
+            uint32_t c = near[rng() % 8];
+            while (c == b) c = near[rng() % 8];
+            mesh.triangles.emplace_back(a, b, c);
+        }
+        const auto pairs = selfIntersections(mesh);
+        std::set<std::pair<uint32_t, uint32_t>> listed(pairs.begin(), pairs.end());
+        EXPECT_EQ(listed.size(), pairs.size()) << "a pair listed twice";
+
+        // Every pair whose bounds overlap (others cannot cross), tested alone with the frame.
+        auto bounds = [&](uint32_t t) {
+            openvdb::BBoxd b;
+            for (int k = 0; k < 3; ++k) b.expand(Vec3d(mesh.points[mesh.triangles[t][k]]));
+            return b;
+        };
+        std::set<std::pair<uint32_t, uint32_t>> expected;
+        TriangleMesh two;
+        two.points = mesh.points;
+        for (uint32_t i = numFrameTriangles; i < mesh.triangles.size(); ++i)
+            for (uint32_t j = i + 1; j < mesh.triangles.size(); ++j) {
+                if (!bounds(i).hasOverlap(bounds(j))) continue;
+                two.triangles = {mesh.triangles[0], mesh.triangles[1], mesh.triangles[i], mesh.triangles[j]};
+                if (countSelfIntersections(two) == 1) expected.emplace(i, j);
+            }
+        EXPECT_EQ(listed, expected) << "round " << round;
+        totalCrossings += expected.size();
+
+        std::vector<uint8_t> flags(mesh.triangles.size());
+        for (auto& f : flags) f = uint8_t(rng() % 5 == 0);
+        const auto flagged = selfIntersections(mesh, flags);
+        std::vector<std::pair<uint32_t, uint32_t>> expectedFlagged;
+        for (const auto& [x, y] : pairs)
+            if (flags[x] || flags[y]) expectedFlagged.emplace_back(x, y);
+        EXPECT_EQ(flagged, expectedFlagged) << "round " << round;
+
+        tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+        EXPECT_EQ(selfIntersections(mesh), pairs) << "round " << round;
+        EXPECT_EQ(selfIntersections(mesh, flags), flagged) << "round " << round;
+    }
+    EXPECT_GT(totalCrossings, 200u);
 }
 
 TEST(MeshOutputs, TheReportCountsPiecesGenusAndCrossings)

@@ -5,9 +5,14 @@
 #include <tbb/parallel_reduce.h>
 #include <tbb/task_arena.h>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <functional>
@@ -337,50 +342,142 @@ bool segmentCrossesTriangle(const openvdb::Vec3d& p, const openvdb::Vec3d& q, co
     return t > eps && t < 1.0 - eps;
 }
 
-bool trianglesCross(const TriangleMesh& mesh, const openvdb::Vec3I& s, const openvdb::Vec3I& t)
+/// An upper bound of @a v.length() as computed in double, without a square root: the sum of the
+/// magnitudes (at least the length) raised by far more than the roundings of either. For vectors
+/// between points in single precision, neither underflows nor overflows in double.
+inline double lengthBound(const openvdb::Vec3d& v)
+{
+    return (std::abs(v.x()) + std::abs(v.y()) + std::abs(v.z())) * (1.0 + 1e-6);
+}
+
+/// A triangle as the crossing test reads it: its corners (indices and positions in double), its
+/// normal, and upper bounds of the terms of its side-test margin, gathered once per cell it is
+/// tested in rather than once per pair.
+struct CrossingTriangle {
+    openvdb::Vec3I tri;
+    openvdb::Vec3d corner[3];
+    openvdb::Vec3d normal;  // (b - a) x (c - a)
+    double scaleBound;      // >= scale()
+    double spanBound;       // >= span()
+
+    void gather(const TriangleMesh& mesh, uint32_t t)
+    {
+        tri = mesh.triangles[t];
+        for (int k = 0; k < 3; ++k) corner[k] = openvdb::Vec3d(mesh.points[tri[k]]);
+        const openvdb::Vec3d &a = corner[0], &b = corner[1], &c = corner[2];
+        normal = (b - a).cross(c - a);
+        scaleBound = 1e-12 * lengthBound(normal);
+        spanBound =
+            std::max({std::abs(a.x()), std::abs(a.y()), std::abs(a.z()), lengthBound(b - a), lengthBound(c - a)});
+    }
+    /// The side test's margin per length (rounding is monotonic: the bounds above, computed
+    /// from larger terms by the same operations, are no smaller).
+    double scale() const { return 1e-12 * normal.length(); }
+    /// The side test's length scale: the largest of |a| per axis, |b - a| and |c - a|.
+    double span() const
+    {
+        const openvdb::Vec3d &a = corner[0], &b = corner[1], &c = corner[2];
+        return std::max({std::abs(a.x()), std::abs(a.y()), std::abs(a.z()), (b - a).length(), (c - a).length()});
+    }
+    bool has(uint32_t v) const { return tri[0] == v || tri[1] == v || tri[2] == v; }
+};
+
+/// Whether the corners of @a other that @a plane does not share all lie strictly on one side of
+/// @a plane's plane, beyond a margin far below what segmentCrossesTriangle resolves (its ends and
+/// parameters within 1e-9 of an edge do not count): then no edge of either passes through the
+/// other. Decided against an upper bound of the margin first (no square roots): corners beyond
+/// it on one side are beyond the margin, corners beyond it on both sides straddle the plane
+/// whatever the margin; only corners within it (rare: the margin is 1e-12 of the sizes) take
+/// the margin itself. A NaN or infinite bound fails both shortcuts, and a NaN distance fails
+/// the sides against the bound as against the margin.
+bool oneSide(const CrossingTriangle& plane, const CrossingTriangle& other)
+{
+    const openvdb::Vec3d& a = plane.corner[0];
+    bool shared[3];
+    double d[3];
+    for (int k = 0; k < 3; ++k) {
+        shared[k] = plane.has(other.tri[k]);
+        d[k] = plane.normal.dot(other.corner[k] - a);
+    }
+    // Fixed loops without early exits (which corner is shared varies; exits would be mispredicted).
+    auto sides = [&](double margin, bool& above, bool& below) {
+        above = below = true;
+        for (int k = 0; k < 3; ++k) {
+            above &= shared[k] | (d[k] > margin);
+            below &= shared[k] | (d[k] < -margin);
+        }
+    };
+    bool above, below;
+    const double bound = plane.scaleBound * (plane.spanBound + lengthBound(other.corner[0] - a));
+    sides(bound, above, below);
+    if (above | below) return true;
+    bool up = false, down = false;
+    for (int k = 0; k < 3; ++k) {
+        up |= !shared[k] & (d[k] > bound);
+        down |= !shared[k] & (d[k] < -bound);
+    }
+    if (up & down) return false;
+    sides(plane.scale() * (plane.span() + (other.corner[0] - a).length()), above, below);
+    return above | below;
+}
+
+/// A triangle's cells (lowest and highest per axis; none when lo > hi) and its bounds in single
+/// precision, widened by a rounding.
+struct TriangleCells {
+    float min[3], max[3];
+    uint16_t lo[3], hi[3];
+};
+
+/// std::nextafter(x, -infinity) for a float, by its bits (inline: six per triangle).
+inline float floatBelow(float x)
+{
+    if (x != x || x == -std::numeric_limits<float>::infinity()) return x;
+    if (x == 0.0f) return -std::numeric_limits<float>::denorm_min();
+    const uint32_t bits = std::bit_cast<uint32_t>(x);
+    return std::bit_cast<float>(x > 0.0f ? bits - 1 : bits + 1);
+}
+
+/// std::nextafter(x, +infinity) for a float, by its bits.
+inline float floatAbove(float x)
+{
+    if (x != x || x == std::numeric_limits<float>::infinity()) return x;
+    if (x == 0.0f) return std::numeric_limits<float>::denorm_min();
+    const uint32_t bits = std::bit_cast<uint32_t>(x);
+    return std::bit_cast<float>(x > 0.0f ? bits + 1 : bits - 1);
+}
+
+/// A corner index no mesh uses (its triangles index fewer points), marking a CrossingTriangle
+/// not gathered yet.
+constexpr uint32_t kNotGathered = std::numeric_limits<uint32_t>::max();
+
+/// The number of corners triangles @a s and @a t share (by index).
+inline int sharedCorners(const openvdb::Vec3I& s, const openvdb::Vec3I& t)
 {
     int shared = 0;
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) shared += s[i] == t[j];
-    if (shared >= 2) return false;
-    auto point = [&](uint32_t v) { return openvdb::Vec3d(mesh.points[v]); };
-    const openvdb::Vec3d sa = point(s[0]), sb = point(s[1]), sc = point(s[2]);
-    const openvdb::Vec3d ta = point(t[0]), tb = point(t[1]), tc = point(t[2]);
-    auto has = [](const openvdb::Vec3I& tri, uint32_t v) { return tri[0] == v || tri[1] == v || tri[2] == v; };
+    return shared;
+}
+
+/// Whether triangles @a s and @a t, sharing at most one corner, cross (see
+/// countSelfIntersections()).
+bool trianglesCross(const CrossingTriangle& s, const CrossingTriangle& t)
+{
     // Most pairs that share a cell lie apart: the corners of one (those it does not share) all
     // strictly on one side of the other's plane leave no edge of either through the other.
-    // "Strictly" is a margin far below what segmentCrossesTriangle resolves (its ends and
-    // parameters within 1e-9 of an edge do not count), so only the work changes.
-    auto oneSide = [&](const openvdb::Vec3I& plane, const openvdb::Vec3d& a, const openvdb::Vec3d& b,
-                       const openvdb::Vec3d& c, const openvdb::Vec3I& other, const openvdb::Vec3d* corners) {
-        const openvdb::Vec3d n = (b - a).cross(c - a);
-        const double span =
-            std::max({std::abs(a.x()), std::abs(a.y()), std::abs(a.z()), (b - a).length(), (c - a).length()});
-        const double margin = 1e-12 * n.length() * (span + (corners[0] - a).length());
-        bool above = true, below = true;
-        for (int k = 0; k < 3; ++k) {
-            if (has(plane, other[k])) continue;
-            const double d = n.dot(corners[k] - a);
-            above = above && d > margin;
-            below = below && d < -margin;
-        }
-        return above || below;
-    };
-    const openvdb::Vec3d sCorners[3] = {sa, sb, sc}, tCorners[3] = {ta, tb, tc};
-    if (oneSide(s, sa, sb, sc, t, tCorners) || oneSide(t, ta, tb, tc, s, sCorners)) return false;
+    if (oneSide(s, t) || oneSide(t, s)) return false;
     // Edges of one through the other; an edge ending at a shared vertex cannot cross the interior
     // without the other edges doing so too, except in the coplanar case, which is not counted.
-    for (int i = 0; i < 3; ++i) {
-        const uint32_t p = s[i], q = s[(i + 1) % 3];
-        if (has(t, p) || has(t, q)) continue;
-        if (segmentCrossesTriangle(point(p), point(q), ta, tb, tc)) return true;
-    }
-    for (int i = 0; i < 3; ++i) {
-        const uint32_t p = t[i], q = t[(i + 1) % 3];
-        if (has(s, p) || has(s, q)) continue;
-        if (segmentCrossesTriangle(point(p), point(q), sa, sb, sc)) return true;
-    }
-    return false;
+    auto edgesThrough = [](const CrossingTriangle& edges, const CrossingTriangle& other) {
+        for (int i = 0; i < 3; ++i) {
+            if (other.has(edges.tri[i]) || other.has(edges.tri[(i + 1) % 3])) continue;
+            if (segmentCrossesTriangle(edges.corner[i], edges.corner[(i + 1) % 3], other.corner[0], other.corner[1],
+                                       other.corner[2]))
+                return true;
+        }
+        return false;
+    };
+    return edgesThrough(s, t) || edgesThrough(t, s);
 }
 
 }  // namespace
@@ -396,91 +493,114 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
     const std::size_t n = mesh.triangles.size();
     if (n < 2) return {};
     // Bounds of the triangles' corners only: callers pass a few triangles of a large mesh's points.
-    openvdb::BBoxd box;
+    // The mean edge is summed in triangle order (the cell size, and so the pairs' order, depend
+    // on its bits); the lengths themselves are computed in parallel.
+    constexpr std::size_t kGrain = 1 << 14;
+    std::vector<double> edgeLength(n);
+    const openvdb::BBoxd box = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, n, kGrain), openvdb::BBoxd(),
+        [&](const tbb::blocked_range<std::size_t>& r, openvdb::BBoxd b) {
+            for (std::size_t t = r.begin(); t != r.end(); ++t) {
+                const openvdb::Vec3I& tri = mesh.triangles[t];
+                for (int k = 0; k < 3; ++k) b.expand(openvdb::Vec3d(mesh.points[tri[k]]));
+                edgeLength[t] = (openvdb::Vec3d(mesh.points[tri[0]]) - openvdb::Vec3d(mesh.points[tri[1]])).length();
+            }
+            return b;
+        },
+        [](openvdb::BBoxd a, const openvdb::BBoxd& b) {
+            a.expand(b);
+            return a;
+        });
     double edgeSum = 0.0;
-    for (std::size_t t = 0; t < n; ++t) {
-        const openvdb::Vec3I& tri = mesh.triangles[t];
-        for (int k = 0; k < 3; ++k) box.expand(openvdb::Vec3d(mesh.points[tri[k]]));
-        edgeSum += (openvdb::Vec3d(mesh.points[tri[0]]) - openvdb::Vec3d(mesh.points[tri[1]])).length();
-    }
+    for (std::size_t t = 0; t < n; ++t) edgeSum += edgeLength[t];
+    std::vector<double>().swap(edgeLength);
     const openvdb::Vec3d extent = box.extents();
     // Cells about twice the mean edge, at most 256 per axis (so the cell count stays bounded).
     double cell = std::max(2.0 * edgeSum / double(n), 1e-9);
     for (int a = 0; a < 3; ++a) cell = std::max(cell, extent[a] / 256.0);
     int dims[3];
     for (int a = 0; a < 3; ++a) dims[a] = std::max(1, int(std::ceil(extent[a] / cell)) + 1);
-    auto cellOf = [&](const openvdb::Vec3d& p, int a) {
-        return std::clamp(int(std::floor((p[a] - box.min()[a]) / cell)), 0, dims[a] - 1);
+    auto cellOf = [&](double p, int a) {
+        return uint16_t(std::clamp(int(std::floor((p - box.min()[a]) / cell)), 0, dims[a] - 1));
     };
-    struct Range {
-        int lo[3], hi[3];
-    };
-    std::vector<Range> ranges(n);
-    // Each triangle's bounds in single precision, widened by a rounding: pairs whose bounds are
-    // apart cannot cross, and most pairs sharing a cell are (a test far cheaper than the crossing's).
-    std::vector<std::array<float, 6>> bounds(n);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 1 << 14), [&](const auto& r) {
-        for (std::size_t t = r.begin(); t != r.end(); ++t) {
-            const openvdb::Vec3I& tri = mesh.triangles[t];
-            openvdb::BBoxd b;
-            for (int k = 0; k < 3; ++k) b.expand(openvdb::Vec3d(mesh.points[tri[k]]));
-            // A triangle in a face plane of the bounds (a cap where a mesh was cut by a box) has
-            // every other triangle on one side: none can pass an edge through its interior, and
-            // its edges, in that plane, meet another triangle only on that one's boundary
-            // (coplanar overlaps are not counted). Left out, as its cells are often many.
-            bool onBounds = false;
-            for (int a = 0; a < 3; ++a)
-                onBounds = onBounds ||
-                           (b.min()[a] == b.max()[a] && (b.min()[a] == box.min()[a] || b.max()[a] == box.max()[a]));
-            for (int a = 0; a < 3; ++a) {
-                ranges[t].lo[a] = onBounds ? 1 : cellOf(b.min(), a);
-                ranges[t].hi[a] = onBounds ? 0 : cellOf(b.max(), a);
-                bounds[t][a] = std::nextafter(float(b.min()[a]), -std::numeric_limits<float>::infinity());
-                bounds[t][3 + a] = std::nextafter(float(b.max()[a]), std::numeric_limits<float>::infinity());
+    // Each triangle's cells and its bounds in single precision, widened by a rounding: pairs
+    // whose bounds are apart cannot cross, and most pairs sharing a cell are (a test far cheaper
+    // than the crossing's). Side by side, as the pair loop reads them together.
+    std::vector<TriangleCells> cells(n);
+    const std::size_t entries = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, n, kGrain), std::size_t(0),
+        [&](const tbb::blocked_range<std::size_t>& r, std::size_t sum) {
+            for (std::size_t t = r.begin(); t != r.end(); ++t) {
+                const openvdb::Vec3I& tri = mesh.triangles[t];
+                openvdb::BBoxd b;
+                for (int k = 0; k < 3; ++k) b.expand(openvdb::Vec3d(mesh.points[tri[k]]));
+                const openvdb::Vec3d &lo = b.min(), &hi = b.max();
+                TriangleCells& tc = cells[t];
+                // A triangle in a face plane of the bounds (a cap where a mesh was cut by a box) has
+                // every other triangle on one side: none can pass an edge through its interior, and
+                // its edges, in that plane, meet another triangle only on that one's boundary
+                // (coplanar overlaps are not counted). Left out, as its cells are often many.
+                bool onBounds = false;
+                for (int a = 0; a < 3; ++a)
+                    onBounds = onBounds || (lo[a] == hi[a] && (lo[a] == box.min()[a] || hi[a] == box.max()[a]));
+                for (int a = 0; a < 3; ++a) {
+                    tc.lo[a] = onBounds ? 1 : cellOf(lo[a], a);
+                    tc.hi[a] = onBounds ? 0 : cellOf(hi[a], a);
+                    tc.min[a] = floatBelow(float(lo[a]));
+                    tc.max[a] = floatAbove(float(hi[a]));
+                }
+                sum += std::size_t(tc.hi[0] + 1 - tc.lo[0]) * (tc.hi[1] + 1 - tc.lo[1]) * (tc.hi[2] + 1 - tc.lo[2]);
             }
-        }
-    });
+            return sum;
+        },
+        std::plus<std::size_t>());
     const std::size_t numCells = std::size_t(dims[0]) * dims[1] * dims[2];
     auto cellIndex = [&](int i, int j, int k) { return (std::size_t(i) * dims[1] + j) * dims[2] + k; };
-    // Occupied cells in ascending order, each with its triangles in index order (compressed
-    // rows). A few triangles spread over a large box (the refinement's local checks) would make
-    // a dense table of mostly empty cells: then (cell, triangle) entries are sorted instead.
-    std::vector<std::size_t> cells;  // occupied cell indices, ascending
-    std::vector<std::size_t> first;  // rows into members, one more than cells
+    auto forCells = [&](const TriangleCells& tc, auto&& visit) {
+        for (int i = tc.lo[0]; i <= tc.hi[0]; ++i)
+            for (int j = tc.lo[1]; j <= tc.hi[1]; ++j)
+                for (int k = tc.lo[2]; k <= tc.hi[2]; ++k) visit(cellIndex(i, j, k));
+    };
+    // Occupied cells in ascending order, each with its triangles (compressed rows; each row is
+    // sorted by triangle index in the pair loop). A few triangles spread over a large box (the
+    // refinement's local checks) would make a dense table of mostly empty cells: then
+    // (cell, triangle) entries are sorted instead.
+    std::vector<std::size_t> occupied;  // occupied cell indices, ascending
+    std::vector<std::size_t> first;     // rows into members, one more than cells
     std::vector<uint32_t> members;
-    std::size_t entries = 0;
-    for (const Range& r : ranges)
-        entries += std::size_t(r.hi[0] - r.lo[0] + 1) * (r.hi[1] - r.lo[1] + 1) * (r.hi[2] - r.lo[2] + 1);
     if (numCells <= 4 * entries) {
-        std::vector<std::size_t> count(numCells + 1, 0);
-        for (const Range& r : ranges)
-            for (int i = r.lo[0]; i <= r.hi[0]; ++i)
-                for (int j = r.lo[1]; j <= r.hi[1]; ++j)
-                    for (int k = r.lo[2]; k <= r.hi[2]; ++k) ++count[cellIndex(i, j, k) + 1];
-        std::partial_sum(count.begin(), count.end(), count.begin());
-        members.resize(count.back());
-        std::vector<std::size_t> fill(count.begin(), count.end() - 1);
-        for (std::size_t t = 0; t < n; ++t) {
-            const Range& r = ranges[t];
-            for (int i = r.lo[0]; i <= r.hi[0]; ++i)
-                for (int j = r.lo[1]; j <= r.hi[1]; ++j)
-                    for (int k = r.lo[2]; k <= r.hi[2]; ++k) members[fill[cellIndex(i, j, k)]++] = uint32_t(t);
+        // Counted and filled in parallel: the counts are order-independent; each row is filled
+        // from its start, so it comes out as the threads' ascending runs interleaved, sorted
+        // where it is used.
+        std::vector<std::atomic<uint32_t>> count(numCells);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const auto& r) {
+            for (std::size_t t = r.begin(); t != r.end(); ++t)
+                forCells(cells[t], [&](std::size_t c) { count[c].fetch_add(1, std::memory_order_relaxed); });
+        });
+        std::vector<std::size_t> start(numCells + 1);
+        start[0] = 0;
+        for (std::size_t c = 0; c < numCells; ++c) {
+            const uint32_t k = count[c].load(std::memory_order_relaxed);
+            start[c + 1] = start[c] + k;
+            if (k >= 2) occupied.push_back(c);
         }
-        for (std::size_t c = 0; c < numCells; ++c)
-            if (count[c + 1] - count[c] >= 2) {
-                cells.push_back(c);
-                first.push_back(count[c]);
-                first.push_back(count[c + 1]);
-            }
+        members.resize(start.back());
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const auto& r) {
+            for (std::size_t t = r.begin(); t != r.end(); ++t)
+                forCells(cells[t], [&](std::size_t c) {
+                    members[start[c + 1] - count[c].fetch_sub(1, std::memory_order_relaxed)] = uint32_t(t);
+                });
+        });
+        first.reserve(2 * occupied.size());
+        for (std::size_t c : occupied) {
+            first.push_back(start[c]);
+            first.push_back(start[c + 1]);
+        }
     } else {
         std::vector<std::pair<std::size_t, uint32_t>> list;
         list.reserve(entries);
-        for (std::size_t t = 0; t < n; ++t) {
-            const Range& r = ranges[t];
-            for (int i = r.lo[0]; i <= r.hi[0]; ++i)
-                for (int j = r.lo[1]; j <= r.hi[1]; ++j)
-                    for (int k = r.lo[2]; k <= r.hi[2]; ++k) list.emplace_back(cellIndex(i, j, k), uint32_t(t));
-        }
+        for (std::size_t t = 0; t < n; ++t)
+            forCells(cells[t], [&](std::size_t c) { list.emplace_back(c, uint32_t(t)); });
         std::sort(list.begin(), list.end());
         members.resize(list.size());
         for (std::size_t e = 0; e < list.size(); ++e) members[e] = list[e].second;
@@ -488,7 +608,7 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
             std::size_t end = e + 1;
             while (end < list.size() && list[end].first == list[e].first) ++end;
             if (end - e >= 2) {
-                cells.push_back(list[e].first);
+                occupied.push_back(list[e].first);
                 first.push_back(e);
                 first.push_back(end);
             }
@@ -498,33 +618,115 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
     // Per block of occupied cells its own list; blocks joined in order, so the list is the same
     // for any thread count (and pairs come in ascending lowest shared cell, then index order).
     constexpr std::size_t kCellsPerBlock = 256;
-    const std::size_t numBlocks = (cells.size() + kCellsPerBlock - 1) / kCellsPerBlock;
+    const std::size_t numBlocks = (occupied.size() + kCellsPerBlock - 1) / kCellsPerBlock;
     std::vector<std::vector<std::pair<uint32_t, uint32_t>>> found(numBlocks);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, 1), [&](const auto& r) {
+        // A cell's triangles gathered side by side (structure of arrays): the pairs of a cell
+        // are its rows squared, each mostly a few comparisons.
+        std::vector<uint32_t> index, candidates;
+        std::vector<CrossingTriangle> gathered;
+        std::vector<int32_t> corner;  // bits 0-2: this is the lowest cell per axis; 3: flagged
+        std::vector<float> lo[3], hi[3];
         for (std::size_t block = r.begin(); block != r.end(); ++block)
-            for (std::size_t o = block * kCellsPerBlock; o < std::min(cells.size(), (block + 1) * kCellsPerBlock);
+            for (std::size_t o = block * kCellsPerBlock; o < std::min(occupied.size(), (block + 1) * kCellsPerBlock);
                  ++o) {
-                const std::size_t c = cells[o];
+                const std::size_t c = occupied[o];
                 const int ci = int(c / (std::size_t(dims[1]) * dims[2])), cj = int((c / dims[2]) % dims[1]),
                           ck = int(c % dims[2]);
-                for (std::size_t x = first[2 * o]; x < first[2 * o + 1]; ++x)
-                    for (std::size_t y = x + 1; y < first[2 * o + 1]; ++y) {
-                        if (!tested.empty() && !tested[members[x]] && !tested[members[y]]) continue;
-                        const Range &a = ranges[members[x]], &b = ranges[members[y]];
-                        // Tested only in the lowest cell both cover.
-                        if (std::max(a.lo[0], b.lo[0]) != ci || std::max(a.lo[1], b.lo[1]) != cj ||
-                            std::max(a.lo[2], b.lo[2]) != ck)
-                            continue;
-                        if (a.hi[0] < b.lo[0] || b.hi[0] < a.lo[0] || a.hi[1] < b.lo[1] || b.hi[1] < a.lo[1] ||
-                            a.hi[2] < b.lo[2] || b.hi[2] < a.lo[2])
-                            continue;
-                        const std::array<float, 6>&p = bounds[members[x]], &q = bounds[members[y]];
-                        if (p[3] < q[0] || q[3] < p[0] || p[4] < q[1] || q[4] < p[1] || p[5] < q[2] || q[5] < p[2])
-                            continue;
-                        if (trianglesCross(mesh, mesh.triangles[members[x]], mesh.triangles[members[y]]))
-                            found[block].emplace_back(std::min(members[x], members[y]),
-                                                      std::max(members[x], members[y]));
+                const std::size_t rowBegin = first[2 * o], count = first[2 * o + 1] - rowBegin;
+                // A cell's triangles are scattered over the arrays (and the mesh): their reads
+                // are started a cell or two ahead, the corners' once their triangles are in.
+                if (o + 2 < occupied.size())
+                    for (std::size_t e = first[2 * (o + 2)]; e < first[2 * (o + 2) + 1]; ++e) {
+                        __builtin_prefetch(&cells[members[e]]);
+                        __builtin_prefetch(&mesh.triangles[members[e]]);
                     }
+                if (o + 1 < occupied.size())
+                    for (std::size_t e = first[2 * (o + 1)]; e < first[2 * (o + 1) + 1]; ++e) {
+                        const openvdb::Vec3I& tri = mesh.triangles[members[e]];
+                        for (int k = 0; k < 3; ++k) __builtin_prefetch(&mesh.points[tri[k]]);
+                    }
+                // Rows padded with three entries that pair with none: a row read four at a time
+                // from any start ends in them.
+                const std::size_t padded = count + 3;
+                if (index.size() < padded) {
+                    index.resize(padded);
+                    gathered.resize(padded);
+                    candidates.resize(padded);
+                    corner.resize(padded);
+                    for (int a = 0; a < 3; ++a) {
+                        lo[a].resize(padded);
+                        hi[a].resize(padded);
+                    }
+                }
+                for (std::size_t m = count; m < padded; ++m) corner[m] = 16;
+                // In triangle order, so the pairs come in index order (insertion: the row is
+                // sorted, or nearly).
+                uint32_t* row = members.data() + rowBegin;
+                for (std::size_t m = 1; m < count; ++m)
+                    for (std::size_t i = m; i > 0 && row[i - 1] > row[i]; --i) std::swap(row[i - 1], row[i]);
+                for (std::size_t m = 0; m < count; ++m) {
+                    const uint32_t t = members[rowBegin + m];
+                    index[m] = t;
+                    gathered[m].tri[0] = kNotGathered;
+                    const TriangleCells& tc = cells[t];
+                    // Bits 0-2: whether this is the triangle's lowest cell along each axis; bit 3:
+                    // whether it is flagged (or all are tested).
+                    corner[m] = int32_t((tc.lo[0] == ci) | (tc.lo[1] == cj) << 1 | (tc.lo[2] == ck) << 2 |
+                                        (tested.empty() || tested[t]) << 3);
+                    for (int a = 0; a < 3; ++a) {
+                        lo[a][m] = tc.min[a];
+                        hi[a][m] = tc.max[a];
+                    }
+                }
+                for (std::size_t x = 0; x + 1 < count; ++x) {
+                    const unsigned cx = corner[x];
+                    const float lx0 = lo[0][x], lx1 = lo[1][x], lx2 = lo[2][x];
+                    const float hx0 = hi[0][x], hx1 = hi[1][x], hx2 = hi[2][x];
+                    std::size_t numCandidates = 0;
+                    // Tested only in the lowest cell both cover (both cover this one: their cell
+                    // ranges overlap), one of them flagged, their bounds overlapping (written so
+                    // that a NaN bound rejects nothing, as before).
+#if defined(__SSE2__)
+                    // Four at a time.
+                    const __m128i cornerX = _mm_set1_epi32(int(cx)), full = _mm_set1_epi32(15);
+                    const __m128 lowX0 = _mm_set1_ps(lx0), lowX1 = _mm_set1_ps(lx1), lowX2 = _mm_set1_ps(lx2);
+                    const __m128 highX0 = _mm_set1_ps(hx0), highX1 = _mm_set1_ps(hx1), highX2 = _mm_set1_ps(hx2);
+                    for (std::size_t y = x + 1; y < count; y += 4) {
+                        const __m128i both =
+                            _mm_or_si128(cornerX, _mm_loadu_si128(reinterpret_cast<const __m128i*>(corner.data() + y)));
+                        __m128 keep = _mm_castsi128_ps(_mm_cmpeq_epi32(both, full));
+                        keep = _mm_and_ps(keep, _mm_cmpnlt_ps(highX0, _mm_loadu_ps(lo[0].data() + y)));
+                        keep = _mm_and_ps(keep, _mm_cmpnlt_ps(_mm_loadu_ps(hi[0].data() + y), lowX0));
+                        keep = _mm_and_ps(keep, _mm_cmpnlt_ps(highX1, _mm_loadu_ps(lo[1].data() + y)));
+                        keep = _mm_and_ps(keep, _mm_cmpnlt_ps(_mm_loadu_ps(hi[1].data() + y), lowX1));
+                        keep = _mm_and_ps(keep, _mm_cmpnlt_ps(highX2, _mm_loadu_ps(lo[2].data() + y)));
+                        keep = _mm_and_ps(keep, _mm_cmpnlt_ps(_mm_loadu_ps(hi[2].data() + y), lowX2));
+                        for (unsigned bits = unsigned(_mm_movemask_ps(keep)); bits != 0; bits &= bits - 1)
+                            candidates[numCandidates++] = uint32_t(y + unsigned(__builtin_ctz(bits)));
+                    }
+#else
+                    for (std::size_t y = x + 1; y < count; ++y) {
+                        const unsigned keep = unsigned((cx | corner[y]) == 15u) & unsigned(!(hx0 < lo[0][y])) &
+                                              unsigned(!(hi[0][y] < lx0)) & unsigned(!(hx1 < lo[1][y])) &
+                                              unsigned(!(hi[1][y] < lx1)) & unsigned(!(hx2 < lo[2][y])) &
+                                              unsigned(!(hi[2][y] < lx2));
+                        candidates[numCandidates] = uint32_t(y);
+                        numCandidates += keep;
+                    }
+#endif
+                    for (std::size_t e = 0; e < numCandidates; ++e) {
+                        const std::size_t y = candidates[e];
+                        // Gathered on first use: of the triangles a cell holds only those with a
+                        // candidate pair in it are read (a triangle is in about two cells).
+                        if (gathered[x].tri[0] == kNotGathered) gathered[x].gather(mesh, index[x]);
+                        if (gathered[y].tri[0] == kNotGathered) gathered[y].gather(mesh, index[y]);
+                        // Pairs sharing an edge are not tested.
+                        if (sharedCorners(gathered[x].tri, gathered[y].tri) >= 2) continue;
+                        if (trianglesCross(gathered[x], gathered[y]))
+                            found[block].emplace_back(std::min(index[x], index[y]), std::max(index[x], index[y]));
+                    }
+                }
             }
     });
     std::vector<std::pair<uint32_t, uint32_t>> pairs;
