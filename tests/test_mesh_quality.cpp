@@ -10,6 +10,7 @@
 #include "engine/core/SparseEvaluator.h"
 #include "engine/jobs/Job.h"
 #include "engine/parts/MeshReader.h"
+#include "engine/recipe/Recipe.h"
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
 #include "fields/Cylinder.h"
@@ -1579,6 +1580,31 @@ TEST(CoarseExtraction, ASmoothResultIsRefinedFromTheCoarsestGridWithinTheToleran
     RecordProperty("triangles", std::to_string(m.triangles.size()) + " refined, " +
                                     std::to_string(m2.triangles.size()) + " decimated");
     EXPECT_LT(m.triangles.size(), 2 * m2.triangles.size());
+}
+
+TEST(CoarseExtraction, ARefinementThatLeavesTrianglesOverFallsBackToAFinerGrid)
+{
+    // metaballs.yaml at 0.02 mm: at 0.4 mm a few needles of the coarse mesh keep long sides no
+    // split can take without folding a piece; the trial is rejected with its numbers and the grid
+    // half as coarse is refined instead.
+    test::TempDir dir;
+    Job job(loadRecipe((test::sourceDir() / "data/recipes/metaballs.yaml").string(),
+                       {"outputs.mesh={file: a.stl, tolerance: 0.02}"}));
+    job.writeOutputs(dir.path / "out", false);
+    const nlohmann::json r = job.report();
+    const nlohmann::json& x = r["mesh"]["extraction"];
+    ASSERT_EQ(x["trials"].size(), 2u) << x.dump();
+    const nlohmann::json& first = x["trials"][0];
+    EXPECT_NEAR(first["voxel_mm"].get<double>(), 0.4, 1e-12);
+    EXPECT_GT(first["refinement"]["triangles_left_over"].get<std::size_t>(), 0u) << x.dump();
+    EXPECT_NE(first["rejected"].get<std::string>().find("above the tolerance"), std::string::npos);
+    EXPECT_EQ(x["factor"].get<int>(), 2) << x.dump();
+    EXPECT_EQ(x["refinement"]["triangles_left_over"].get<std::size_t>(), 0u);
+    const TriangleMesh m = readStl((dir.path / "out/a.stl").string());
+    expectClosedManifold(m);
+    EXPECT_EQ(countSelfIntersections(m), 0u);
+    EXPECT_LE(r["mesh"]["deviation"]["max_mm"].get<double>(), 0.02);
+    EXPECT_NEAR(m.volume(), r["result"]["volume_mm3"].get<double>(), 0.005 * r["result"]["volume_mm3"].get<double>());
 }
 
 TEST(CoarseExtraction, PiecesACoarseGridJoinsFallBackToTheRecipesVoxel)

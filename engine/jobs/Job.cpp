@@ -838,6 +838,7 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
                                    {"splits_dropped", r.dropped},
                                    {"rounds", r.rounds},
                                    {"triangles_left_over", r.remaining},
+                                   {"abandoned", r.abandoned},
                                    {"crossing_pairs", crossing}};
             trials.push_back(trial);
             if (r.remaining == 0 && crossing == 0) {

@@ -351,6 +351,13 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             ++stats.splits;
         }
         stats.dropped += m - made.size();
+        // Where the field has creases of its own (a union of capsules at a joint), splits keep
+        // failing and the mesh grows round after round: given up once a round drops a twentieth of
+        // its splits (W9 dropped 0.3 %, a capsule lattice 29 %).
+        if (m >= 1000 && 20 * (m - made.size()) > m) {
+            stats.abandoned = true;
+            stats.remaining += failing.size();
+        }
         const std::vector<double> madeDistance = solid.distances(made);
         vertexDistance.insert(vertexDistance.end(), madeDistance.begin(), madeDistance.end());
         for (std::uint32_t t : failing) {
@@ -387,6 +394,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
         mesh.triangles = std::move(triangles);
         attempts = std::move(nextAttempts);
         pending = std::move(nextPending);
+        if (stats.abandoned) break;
     }
     stats.trianglesAfter = mesh.triangles.size();
     if (progress) progress(1.0);

@@ -47,6 +47,9 @@ struct AdaptiveRefinementStats {
     /// Triangles still outside the tolerance at the end (none tried all three edges in vain).
     std::size_t remaining = 0;
     int rounds = 0;
+    /// Whether it gave up: a round dropped more than a twentieth of its splits (the field has
+    /// creases of its own, which bisection does not resolve); remaining counts that round's.
+    bool abandoned = false;
 };
 
 /// Bisects the triangles of @a mesh (closed, vertices on the level set of @a field, e.g. after
