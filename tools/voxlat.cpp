@@ -304,19 +304,18 @@ int main(int argc, char** argv)
                 options.toleranceWhere = "--tolerance";
                 options.project = true;
             }
-            if (!meshProject.empty()) {
-                if (meshProject != "on" && meshProject != "off")
-                    throw voxlat::InputError("--project " + meshProject + ": expected on or off");
-                options.project = meshProject == "on";
-            }
+            auto onOff = [](const std::string& option, const std::string& word) {
+                if (word != "on" && word != "off")
+                    throw voxlat::InputError(option + " " + word + ": expected on or off");
+                return word == "on";
+            };
+            if (!meshProject.empty()) options.project = onOff("--project", meshProject);
             if (!meshRefine.empty()) {
-                if (meshRefine != "on" && meshRefine != "off")
-                    throw voxlat::InputError("--refine " + meshRefine + ": expected on or off");
+                options.refine = onOff("--refine", meshRefine);
                 if (!options.tolerance)
                     throw voxlat::InputError(
                         "--refine applies to a mesh with a tolerance: add --tolerance, like "
                         "--tolerance 0.01");
-                options.refine = meshRefine == "on";
             }
             if (!meshExtractor.empty()) {
                 const auto extractor = voxlat::meshExtractorFromName(meshExtractor);

@@ -61,6 +61,17 @@ double checkMeshTolerance(double tolerance, const std::string& where)
     return tolerance;
 }
 
+namespace {
+/// The value of an on/off key (`true` and `false` too); @a meaning says what each word does.
+bool onOff(const RecipeNode& node, const std::string& meaning)
+{
+    const std::string word = node.yaml().Scalar();
+    if (word == "on" || word == "true") return true;
+    if (word == "off" || word == "false") return false;
+    node.fail("expected " + meaning);
+}
+}  // namespace
+
 MeshSettings parseMeshSettings(const RecipeNode& spec)
 {
     MeshSettings s;
@@ -99,27 +110,15 @@ MeshSettings parseMeshSettings(const RecipeNode& spec)
         s.options.extractor = *extractor;
     }
     if (spec.has("refine")) {
-        const RecipeNode r = spec["refine"];
-        const std::string word = r.yaml().Scalar();
-        if (word == "on" || word == "true")
-            s.options.refine = true;
-        else if (word == "off" || word == "false")
-            s.options.refine = false;
-        else
-            r.fail("expected `on` (a coarse grid refined where it strays) or `off` (a finer grid, decimated)");
+        s.options.refine =
+            onOff(spec["refine"], "`on` (a coarse grid refined where it strays) or `off` (a finer grid, decimated)");
         if (!s.options.tolerance)
-            r.fail(
+            spec["refine"].fail(
                 "`refine` applies to a mesh with a `tolerance`, like `{file: part.stl, tolerance: 0.01, refine: off}`");
     }
-    if (spec.has("project")) {
-        const std::string word = spec["project"].yaml().Scalar();
-        if (word == "on" || word == "true")
-            s.options.project = true;
-        else if (word == "off" || word == "false")
-            s.options.project = false;
-        else
-            spec["project"].fail("expected `on` (vertices on the true surface) or `off` (marching cubes' vertices)");
-    }
+    if (spec.has("project"))
+        s.options.project =
+            onOff(spec["project"], "`on` (vertices on the true surface) or `off` (marching cubes' vertices)");
     return s;
 }
 
