@@ -616,7 +616,9 @@ TEST(MeshOutputs, BadTolerancesAndNamesAreRefusedWithTheLine)
     for (const std::string bad :
          {"{file: a.stl, tolerance: 0}", "{file: a.stl, tolerance: -0.1}", "{file: a.stl, project: maybe}",
           "{file: a.step}", "{tolerance: 0.1}", "{file: a.stl, tolerence: 0.1}",
-          "{file: a.stl, tolerance: 0.01, refine: maybe}", "{file: a.stl, refine: off}"}) {
+          "{file: a.stl, tolerance: 0.01, refine: maybe}", "{file: a.stl, refine: off}",
+          "{file: a.stl, tolerance: 0.01, refine: off, project: off}",
+          "{file: a.stl, tolerance: 0.01, refine: on, extractor: bcc}"}) {
         SCOPED_TRACE(bad);
         const auto path = dir.write("bad.yaml", std::string(kSmallGyroid) + "outputs: {mesh: " + bad + "}\n");
         std::string out;
@@ -643,7 +645,8 @@ TEST(MeshOutputs, BadTolerancesAndNamesAreRefusedWithTheLine)
         // --refine needs a tolerance and takes on or off.
         std::string out;
         const auto file = dir.path / "m.stl";
-        for (const std::string bad : {" --refine off", " --tolerance 0.02 --refine maybe"}) {
+        for (const std::string bad :
+             {" --refine off", " --tolerance 0.02 --refine maybe", " --tolerance 0.02 --project off --refine on"}) {
             EXPECT_EQ(test::runCommand(
                           test::voxlatBinary() + " -q mesh " + good.string() + " -o " + file.string() + bad, &out),
                       2)

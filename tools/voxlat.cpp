@@ -310,19 +310,24 @@ int main(int argc, char** argv)
                 return word == "on";
             };
             if (!meshProject.empty()) options.project = onOff("--project", meshProject);
-            if (!meshRefine.empty()) {
-                options.refine = onOff("--refine", meshRefine);
-                if (!options.tolerance)
-                    throw voxlat::InputError(
-                        "--refine applies to a mesh with a tolerance: add --tolerance, like "
-                        "--tolerance 0.01");
-            }
             if (!meshExtractor.empty()) {
                 const auto extractor = voxlat::meshExtractorFromName(meshExtractor);
                 if (!extractor)
                     throw voxlat::InputError("--extractor " + meshExtractor + ": expected one of " +
                                              voxlat::joinWords(voxlat::meshExtractorNames()));
                 options.extractor = *extractor;
+            }
+            if (!meshRefine.empty()) {
+                options.refine = onOff("--refine", meshRefine);
+                if (!options.tolerance)
+                    throw voxlat::InputError(
+                        "--refine applies to a mesh with a tolerance: add --tolerance, like "
+                        "--tolerance 0.01");
+                // Refinement starts from a projected marching-cubes mesh on a coarse grid.
+                if (!options.project || options.extractor != voxlat::MeshExtractor::MarchingCubes)
+                    throw voxlat::InputError(
+                        "--refine applies to a projected marching-cubes mesh: drop --project off or --extractor bcc, "
+                        "or --refine");
             }
             voxlat::Job job(std::move(recipe), &context);
             job.writeMesh(meshFile, options);

@@ -119,6 +119,10 @@ MeshSettings parseMeshSettings(const RecipeNode& spec)
     if (spec.has("project"))
         s.options.project =
             onOff(spec["project"], "`on` (vertices on the true surface) or `off` (marching cubes' vertices)");
+    // Refinement starts from a projected marching-cubes mesh on a coarse grid.
+    if (spec.has("refine") && (!s.options.project || s.options.extractor != MeshExtractor::MarchingCubes))
+        spec["refine"].fail("`refine` applies to a projected marching-cubes mesh: drop `project: off` or `extractor: " +
+                            meshExtractorName(s.options.extractor) + "`, or `refine`");
     return s;
 }
 
