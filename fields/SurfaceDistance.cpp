@@ -30,7 +30,7 @@ void SurfaceDistance::gradients(std::span<const Vec3d> points, std::span<double>
             mOperands[i]->gradients(p, std::span<double>(v.data(), count), std::span<Vec3d>(g.data(), count));
             for (std::size_t k = 0; k < count; ++k) {
                 const double length = g[k].length();
-                const double d = length > 0.0 ? v[k] / length : v[k] == 0.0 ? 0.0 : std::copysign(1e30, v[k]);
+                const double d = firstOrderSignedDistance(v[k], length);
                 if (i == 0 || d > out[begin + k]) {
                     out[begin + k] = d;
                     grad[begin + k] = length > 0.0 ? g[k] / length : Vec3d(0.0);

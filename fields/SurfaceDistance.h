@@ -5,9 +5,18 @@
 
 #include "fields/FieldNode.h"
 
+#include <cmath>
 #include <vector>
 
 namespace voxlat {
+
+/// The signed first-order distance r / |grad f| from a value @a r (f minus the level) and the
+/// gradient's length @a gradientLength; a flat spot off the level counts as 1e30 mm away.
+inline double firstOrderSignedDistance(double r, double gradientLength)
+{
+    if (gradientLength > 0.0) return r / gradientLength;
+    return r == 0.0 ? 0.0 : std::copysign(1e30, r);
+}
 
 /// max over the operands of f_i / |grad f_i| (each operand's solid below 0), with the unit
 /// normal grad f_k / |grad f_k| of the largest as its gradient (exact on the surface, where it

@@ -1,5 +1,6 @@
 #include "mesher/extract/AdaptiveRefinement.h"
 
+#include "fields/SurfaceDistance.h"
 #include "mesher/extract/SplitTriangle.h"
 #include "mesher/extract/TriangleCheck.h"
 
@@ -12,7 +13,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
-#include <limits>
+#include <span>
 #include <vector>
 
 namespace voxlat {
@@ -45,7 +46,15 @@ struct Solid {
     const FieldNode& field;
     double level;
 
-    /// Values minus the level and gradients of the field at @a points, in fixed batches in parallel.
+    /// Values minus the level and gradients of the field at @a points (at most kBatchSize), on
+    /// this thread.
+    void evaluateBatch(std::span<const Vec3d> points, std::span<double> values, std::span<Vec3d> gradients) const
+    {
+        field.gradients(points, values, gradients);
+        for (double& v : values) v -= level;
+    }
+
+    /// The same at any number of points, in fixed batches in parallel.
     void evaluate(const std::vector<Vec3d>& points, std::vector<double>& values, std::vector<Vec3d>& gradients) const
     {
         const std::size_t n = points.size();
@@ -54,22 +63,11 @@ struct Solid {
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, (n + kBatchSize - 1) / kBatchSize, 1), [&](const auto& r) {
             for (std::size_t c = r.begin(); c != r.end(); ++c) {
                 const std::size_t begin = c * kBatchSize, count = std::min(kBatchSize, n - begin);
-                field.gradients(std::span<const Vec3d>(points.data() + begin, count),
-                                std::span<double>(values.data() + begin, count),
-                                std::span<Vec3d>(gradients.data() + begin, count));
-                for (std::size_t k = begin; k < begin + count; ++k) values[k] -= level;
+                evaluateBatch(std::span<const Vec3d>(points.data() + begin, count),
+                              std::span<double>(values.data() + begin, count),
+                              std::span<Vec3d>(gradients.data() + begin, count));
             }
         });
-    }
-
-    /// Values minus the level and gradients at @a points (at most kBatchSize), on this thread.
-    void evaluateBatch(const std::vector<Vec3d>& points, std::vector<double>& values,
-                       std::vector<Vec3d>& gradients) const
-    {
-        values.resize(points.size());
-        gradients.resize(points.size());
-        field.gradients(points, values, gradients);
-        for (double& v : values) v -= level;
     }
 
     /// The field's signed first-order distance (f - level) / |grad f| at @a points.
@@ -84,8 +82,7 @@ struct Solid {
 
     static double distance(double value, const Vec3d& gradient)
     {
-        const double length = gradient.length();
-        return length > 0.0 ? value / length : value == 0.0 ? 0.0 : std::copysign(1e30, value);
+        return firstOrderSignedDistance(value, gradient.length());
     }
 };
 
@@ -203,6 +200,8 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                         for (int i = 0; i < 3; ++i) at.push_back(0.5 * (points[tri[i]] + points[tri[(i + 1) % 3]]));
                         at.push_back((points[tri[0]] + points[tri[1]] + points[tri[2]]) / 3.0);
                     }
+                    v.resize(at.size());
+                    g.resize(at.size());
                     solid.evaluateBatch(at, v, g);
                     for (std::size_t k = begin; k < end; ++k) {
                         const openvdb::Vec3I& tri = mesh.triangles[pending[k]];

@@ -1,6 +1,7 @@
 #include "mesher/extract/Decimation.h"
 
 #include "fields/BoxField.h"
+#include "fields/SurfaceDistance.h"
 #include "mesher/extract/MeshCheck.h"
 #include "mesher/extract/TriangleCheck.h"
 
@@ -32,9 +33,7 @@ constexpr double kMaxEdgeVoxels = 6.0;
 /// Signed first-order distance (f - level) / |grad f|; a flat spot away from the level is far.
 double signedDistance(double r, const Vec3d& g)
 {
-    const double length = g.length();
-    if (length > 0.0) return r / length;
-    return r == 0.0 ? 0.0 : std::copysign(1e30, r);
+    return firstOrderSignedDistance(r, g.length());
 }
 
 /// A triangle to check: corners, the signed distances there, and its edge midpoints (indices

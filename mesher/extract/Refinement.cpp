@@ -1,5 +1,6 @@
 #include "mesher/extract/Refinement.h"
 
+#include "fields/SurfaceDistance.h"
 #include "mesher/extract/MeshCheck.h"
 #include "mesher/extract/SplitTriangle.h"
 #include "mesher/extract/SurfaceList.h"
@@ -43,7 +44,7 @@ void solidDistance(const SurfaceList& list, const std::vector<Vec3d>& points, st
                 list.evaluate(s, p, std::span<double>(v.data(), count), std::span<Vec3d>(g.data(), count));
                 for (std::size_t k = 0; k < count; ++k) {
                     const double length = g[k].length();
-                    const double d = length > 0.0 ? v[k] / length : v[k] == 0.0 ? 0.0 : std::copysign(1e30, v[k]);
+                    const double d = firstOrderSignedDistance(v[k], length);
                     if (s == 0 || d > distance[begin + k]) {
                         distance[begin + k] = d;
                         if (normal) (*normal)[begin + k] = length > 0.0 ? g[k] / length : Vec3d(0.0);
