@@ -26,6 +26,7 @@
 #include "mesher/extract/MeshCheck.h"
 #include "mesher/extract/Refinement.h"
 #include "mesher/extract/SurfaceProjection.h"
+#include "mesher/extract/TriangleCheck.h"
 #include "mesher/writers/MeshWriters.h"
 
 #include <gtest/gtest.h>
@@ -458,6 +459,60 @@ TEST(Decimation, QuadraticBoundHoldsOverTheTriangleAndIsReached)
         reached += std::abs(bound - largest) < 1e-12;
     }
     EXPECT_GT(reached, 100);
+}
+
+namespace {
+
+/// The quadratic through corner values @a s and midpoint values @a m at the centre (a field that
+/// is exactly quadratic there: no margin).
+double q0Centre(const std::array<double, 3>& s, const std::array<double, 3>& m)
+{
+    const double l = 1.0 / 3;
+    return (s[0] + s[1] + s[2]) * l * (2 * l - 1) + 4 * (m[0] + m[1] + m[2]) * l * l;
+}
+
+}  // namespace
+
+TEST(TriangleQuadratic, LargestAndMeanSquareMatchADenseSampling)
+{
+    // Random corner and midpoint values on a triangle: largest() is |q|'s maximum (never below a
+    // 200-step sampling, and within what the sampling can miss), meanSquare() the mean of q^2
+    // (against the average over the sampling's sub-triangles' centres).
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> value(-1.0, 1.0);
+    const std::array<Vec3d, 3> p = {Vec3d(0, 0, 0), Vec3d(2, 0, 0), Vec3d(0.5, 1.5, 0)};
+    int inside = 0;
+    for (int trial = 0; trial < 500; ++trial) {
+        const std::array<double, 3> s = {value(rng), value(rng), value(rng)};
+        const std::array<double, 3> m = {value(rng), value(rng), value(rng)};
+        const TriangleQuadratic q(p, s, m, q0Centre(s, m), std::nullopt);
+        EXPECT_NEAR(q.margin(), 0.0, 1e-12);
+        constexpr int kSteps = 200;
+        double largest = 0.0, sum = 0.0;
+        int count = 0;
+        for (int i = 0; i <= kSteps; ++i)
+            for (int j = 0; i + j <= kSteps; ++j) {
+                const double l0 = double(i) / kSteps, l1 = double(j) / kSteps;
+                largest = std::max(largest, std::abs(q.at(l0, l1, 1.0 - l0 - l1)));
+                // The centres of the sub-triangles of the grid (both orientations) weigh equally.
+                if (i + j < kSteps) {
+                    const double c0 = l0 + 1.0 / (3 * kSteps), c1 = l1 + 1.0 / (3 * kSteps);
+                    sum += std::pow(q.at(c0, c1, 1.0 - c0 - c1), 2);
+                    ++count;
+                }
+                if (i + j < kSteps - 1) {
+                    const double c0 = l0 + 2.0 / (3 * kSteps), c1 = l1 + 2.0 / (3 * kSteps);
+                    sum += std::pow(q.at(c0, c1, 1.0 - c0 - c1), 2);
+                    ++count;
+                }
+            }
+        ASSERT_GE(q.largest(), largest - 1e-12) << trial;
+        ASSERT_LE(q.largest(), largest + 1e-3) << trial;
+        ASSERT_NEAR(q.meanSquare(), sum / count, 1e-3 * (1.0 + sum / count)) << trial;
+        inside += q.largest() > largest + 1e-9;
+    }
+    // The maximum falls between samples (at a stationary point) often enough to be tested.
+    EXPECT_GT(inside, 10);
 }
 
 TEST(Decimation, CrossingTrianglesAreDecimatedAgainAroundThem)
@@ -1356,6 +1411,17 @@ TEST(AdaptiveRefinement, ClosedManifoldWithinToleranceAndSameBytesForAnyThreadCo
         const double worst = maxOverTriangles(m, c.distance, 0.01);
         RecordProperty(c.name + " max_deviation_mm", std::to_string(before) + " -> " + std::to_string(worst));
         EXPECT_LE(worst, c.tolerance);
+        // The deviation it reports from its own check (the report's for a refined mesh) agrees with
+        // a dense measure of the mesh: a sample every 0.01 mm against the field and the box.
+        const SurfaceDistance solid({c.field, std::make_shared<BoxField>(c.box)});
+        const MeshDeviation dense = measureDeviation(m, solid, 0.0, 0.01);
+        RecordProperty(c.name + " reported_max_rms_mm",
+                       std::to_string(stats.maxDeviation) + " " + std::to_string(stats.rmsDeviation) + " dense " +
+                           std::to_string(dense.max) + " " + std::to_string(dense.rms));
+        EXPECT_LE(stats.maxDeviation, 0.9 * c.tolerance * (1.0 + 1e-9));
+        EXPECT_NEAR(stats.maxDeviation, dense.max, 0.1 * c.tolerance);
+        EXPECT_NEAR(stats.rmsDeviation, dense.rms, 0.15 * dense.rms);
+        EXPECT_EQ(stats.deviationSamples, m.points.size() + 4 * m.triangles.size());
         RecordProperty(c.name + " triangles",
                        std::to_string(coarse.triangles.size()) + " -> " + std::to_string(m.triangles.size()));
         // The same bytes with two threads.

@@ -12,6 +12,7 @@
 #include "tools/HugePages.h"
 #include "tools/TerminalProgress.h"
 
+#include <malloc.h>
 #include <tbb/global_control.h>
 #include <unistd.h>
 #include <CLI/CLI.hpp>
@@ -182,11 +183,26 @@ void exitSkippingTeardown(int code)
 #endif
 }
 
+/// Keeps freed memory in malloc's heaps for the next block instead of giving it back to the
+/// system. Why: a job allocates and frees the same large arrays stage after stage (a mesh's
+/// triangles, each refinement round's tables), and every block given back came again as fresh
+/// pages the kernel zeroes: on W9's tolerance run zeroing pages took a fifth of the CPU time and
+/// the system time fell from 0.6-0.9 s to 0.1-0.3 s without it (wall 1.9 s to 1.5 s), the peak
+/// memory the same. Blocks up to 32 MB (glibc's most) come from the heaps; the heaps grow 64 MB
+/// at a time instead of page by page.
+void keepFreedMemory()
+{
+    ::mallopt(M_TRIM_THRESHOLD, 1 << 30);
+    ::mallopt(M_MMAP_THRESHOLD, 32 << 20);
+    ::mallopt(M_TOP_PAD, 64 << 20);
+}
+
 }  // namespace
 
 int main(int argc, char** argv)
 {
     useHugePages(argv);
+    keepFreedMemory();
     CLI::App app{"voxlat: implicit lattices on sparse voxel grids"};
     app.require_subcommand(1);
     int threads = 0;

@@ -86,6 +86,16 @@ struct Solid {
     }
 };
 
+/// A triangle's deviation as last checked: the largest, and q squared integrated over it.
+struct Checked {
+    double largest = 0.0, squared = 0.0;
+};
+
+double triangleArea(const std::array<Vec3d, 3>& p)
+{
+    return 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
+}
+
 /// Bit a (0..2) set where both ends of an edge lie on a face of @a box across axis a (the new
 /// point stays on it).
 std::uint8_t sharedFaces(const Vec3d& p, const Vec3d& q, const std::optional<Box3>& box)
@@ -113,45 +123,51 @@ void placeOnSurface(const Solid& solid, const AdaptiveRefinementOptions& o, std:
     for (std::size_t k = 0; k < n; ++k) open[k] = std::uint32_t(k);
     std::vector<Vec3d> batch, g, direction(n, Vec3d(0.0));
     std::vector<double> v;
+    // One Newton step of point k (batch slot j): whether it stays open.
+    auto step = [&](std::size_t j, std::uint32_t k, int iteration) -> bool {
+        const double length = g[j].length();
+        if (!(length > 0.0)) return false;
+        if (std::abs(v[j]) / length <= o.newtonTolerance) {
+            found[k] = (x[k] - start[k]).length() <= o.maxMove;
+            return false;
+        }
+        if (iteration == o.maxIterations) return false;
+        // The line is the gradient's at its start (within the held faces): Newton along it.
+        if (direction[k] == Vec3d(0.0)) {
+            Vec3d d = g[j];
+            for (int a = 0; a < 3; ++a)
+                if (held[k] >> a & 1u) d[a] = 0.0;
+            if (!(d.length() > 1e-6 * length)) return false;
+            direction[k] = d / d.length();
+        }
+        const double along = g[j].dot(direction[k]);
+        if (!(std::abs(along) > 1e-3 * length)) return false;  // the line runs along the surface
+        x[k] -= (v[j] / along) * direction[k];
+        if (o.box)
+            for (int a = 0; a < 3; ++a) {
+                if (held[k] >> a & 1u) continue;
+                const double clamped = std::clamp(x[k][a], o.box->min[a], o.box->max[a]);
+                if (clamped != x[k][a]) {
+                    // Onto the face it crossed, then along the gradient within it.
+                    x[k][a] = clamped;
+                    held[k] |= std::uint8_t(1u << a);
+                    direction[k] = Vec3d(0.0);
+                }
+            }
+        return (x[k] - start[k]).length() <= 2.0 * o.maxMove;  // else wandered off
+    };
     for (int iteration = 0; iteration <= o.maxIterations && !open.empty(); ++iteration) {
         batch.resize(open.size());
         for (std::size_t j = 0; j < open.size(); ++j) batch[j] = x[open[j]];
         solid.evaluate(batch, v, g);
+        // Each point's step is its own: taken in parallel, the open ones kept in order after.
+        std::vector<std::uint8_t> keep(open.size(), 0);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, open.size(), 4096), [&](const auto& r) {
+            for (std::size_t j = r.begin(); j != r.end(); ++j) keep[j] = step(j, open[j], iteration);
+        });
         std::size_t kept = 0;
-        for (std::size_t j = 0; j < open.size(); ++j) {
-            const std::uint32_t k = open[j];
-            const double length = g[j].length();
-            if (!(length > 0.0)) continue;
-            if (std::abs(v[j]) / length <= o.newtonTolerance) {
-                found[k] = (x[k] - start[k]).length() <= o.maxMove;
-                continue;
-            }
-            if (iteration == o.maxIterations) continue;
-            // The line is the gradient's at its start (within the held faces): Newton along it.
-            if (direction[k] == Vec3d(0.0)) {
-                Vec3d d = g[j];
-                for (int a = 0; a < 3; ++a)
-                    if (held[k] >> a & 1u) d[a] = 0.0;
-                if (!(d.length() > 1e-6 * length)) continue;
-                direction[k] = d / d.length();
-            }
-            const double along = g[j].dot(direction[k]);
-            if (!(std::abs(along) > 1e-3 * length)) continue;  // the line runs along the surface
-            x[k] -= (v[j] / along) * direction[k];
-            if (o.box)
-                for (int a = 0; a < 3; ++a) {
-                    if (held[k] >> a & 1u) continue;
-                    const double clamped = std::clamp(x[k][a], o.box->min[a], o.box->max[a]);
-                    if (clamped != x[k][a]) {
-                        // Onto the face it crossed, then along the gradient within it.
-                        x[k][a] = clamped;
-                        held[k] |= std::uint8_t(1u << a);
-                        direction[k] = Vec3d(0.0);
-                    }
-                }
-            if (!((x[k] - start[k]).length() <= 2.0 * o.maxMove)) continue;  // wandered off
-            open[kept++] = k;
-        }
+        for (std::size_t j = 0; j < open.size(); ++j)
+            if (keep[j]) open[kept++] = open[j];
         open.resize(kept);
     }
     for (Vec3d& p : x) p = toDouble(toFloat(p));
@@ -171,10 +187,11 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
     for (std::size_t v = 0; v < points.size(); ++v) points[v] = toDouble(mesh.points[v]);
     std::vector<double> vertexDistance = solid.distances(points);
     // Triangles to check this round, and per triangle the edges tried in vain (0: the one bending
-    // most next).
+    // most next) and its deviation as last checked (largest, and q squared integrated).
     std::vector<std::uint32_t> pending(mesh.triangles.size());
     for (std::size_t t = 0; t < pending.size(); ++t) pending[t] = std::uint32_t(t);
     std::vector<std::uint8_t> attempts(mesh.triangles.size(), 0);
+    std::vector<Checked> checked(mesh.triangles.size());
 
     for (int round = 0; !pending.empty(); ++round) {
         if (progress) progress(double(round) / options.rounds);
@@ -204,7 +221,8 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                     g.resize(at.size());
                     solid.evaluateBatch(at, v, g);
                     for (std::size_t k = begin; k < end; ++k) {
-                        const openvdb::Vec3I& tri = mesh.triangles[pending[k]];
+                        const std::uint32_t t = pending[k];
+                        const openvdb::Vec3I& tri = mesh.triangles[t];
                         const std::size_t j = 4 * (k - begin);
                         std::array<Vec3d, 3> p;
                         std::array<double, 3> s, m;
@@ -216,40 +234,60 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                         const double centre = solid.distance(v[j + 3], g[j + 3]);
                         for (int i = 0; i < 3; ++i) bend[k][i] = std::abs(m[i] - 0.5 * (s[i] + s[(i + 1) % 3]));
                         over[k] = !triangleWithin(p, s, m, centre, options.box, options.tolerance);
+                        if (!over[k]) {
+                            // What the report gives as the mesh's deviation (a failing triangle is
+                            // split or checked again).
+                            const TriangleQuadratic q(p, s, m, centre, options.box);
+                            checked[t] = {q.largest() + q.margin(), q.meanSquare() * triangleArea(p)};
+                        }
                     }
                 }
             });
         // Each failing triangle's edge to split: the one bending most off its chord (times its
         // length; the longest where none bends) not yet tried. Splitting across the direction the
         // surface curves in, not along it, takes 7 % fewer triangles than the longest edge on W9.
+        // -1: none left to try (the triangle stays over the tolerance).
+        std::vector<std::int8_t> choice(pending.size(), -1);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pending.size(), 4096), [&](const auto& r) {
+            for (std::size_t k = r.begin(); k != r.end(); ++k) {
+                if (!over[k]) continue;
+                const std::uint32_t t = pending[k];
+                const openvdb::Vec3I& tri = mesh.triangles[t];
+                std::array<std::pair<double, int>, 3> byBend;
+                for (int i = 0; i < 3; ++i)
+                    byBend[i] = {
+                        -(bend[k][i] + 1e-3 * options.tolerance) * (points[tri[(i + 1) % 3]] - points[tri[i]]).length(),
+                        i};
+                std::sort(byBend.begin(), byBend.end());
+                // After the first choice, only an edge whose midpoint lies off its chord by a tenth
+                // of the tolerance: splitting a straight one (the short side of a needle whose long
+                // sides cannot be split) would only make needles again, round after round.
+                if (attempts[t] >= 3 || round == options.rounds ||
+                    (attempts[t] > 0 && bend[k][byBend[attempts[t]].second] < 0.1 * options.tolerance))
+                    continue;
+                choice[k] = std::int8_t(byBend[attempts[t]].second);
+            }
+        });
         std::vector<EdgeKey> split;
         std::vector<std::uint32_t> failing;
+        std::vector<std::uint8_t> isFailing(mesh.triangles.size(), 0);
         for (std::size_t k = 0; k < pending.size(); ++k) {
             if (!over[k]) continue;
-            const std::uint32_t t = pending[k];
-            const openvdb::Vec3I& tri = mesh.triangles[t];
-            std::array<std::pair<double, int>, 3> byBend;
-            for (int i = 0; i < 3; ++i)
-                byBend[i] = {
-                    -(bend[k][i] + 1e-3 * options.tolerance) * (points[tri[(i + 1) % 3]] - points[tri[i]]).length(), i};
-            std::sort(byBend.begin(), byBend.end());
-            // After the first choice, only an edge whose midpoint lies off its chord by a tenth of
-            // the tolerance: splitting a straight one (the short side of a needle whose long
-            // sides cannot be split) would only make needles again, round after round.
-            if (attempts[t] >= 3 || round == options.rounds ||
-                (attempts[t] > 0 && bend[k][byBend[attempts[t]].second] < 0.1 * options.tolerance)) {
+            if (choice[k] < 0) {
                 ++stats.remaining;
                 continue;
             }
+            const std::uint32_t t = pending[k];
+            const openvdb::Vec3I& tri = mesh.triangles[t];
             failing.push_back(t);
-            const int i = byBend[attempts[t]].second;
+            isFailing[t] = 1;
+            const int i = choice[k];
             split.push_back(edgeKey(tri[i], tri[(i + 1) % 3]));
         }
         if (split.empty()) break;
         ++stats.rounds;
         sortUnique(split);
         const std::size_t m = split.size();
-
         // The new points: from each edge's midpoint onto the surface.
         std::vector<Vec3d> target(m);
         std::vector<std::uint8_t> held(m), active;
@@ -270,7 +308,6 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                     active[e] = 1;
                 }
         }
-
         // The triangles around the split edges, with their edges' slots (-1: not split).
         std::vector<std::array<std::ptrdiff_t, 3>> slots(mesh.triangles.size());
         std::vector<std::uint8_t> isTouched(mesh.triangles.size(), 0), endpoint(points.size(), 0);
@@ -313,12 +350,23 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             }
             return worst;
         };
+        auto folds = [&](std::uint32_t t) {
+            const std::array<bool, 3> s = splitEdges(slots[t], active);
+            return (s[0] || s[1] || s[2]) && worstPiece(t, s) <= 0.0;
+        };
+        // Each pass finds the folding triangles in parallel, then drops their splits in order (a
+        // drop changes the neighbour across the edge: it is looked at again, by the next pass).
+        std::vector<std::uint8_t> folding(touched.size());
         for (;;) {
+            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, touched.size(), 4096), [&](const auto& r) {
+                for (std::size_t j = r.begin(); j != r.end(); ++j) folding[j] = folds(touched[j]);
+            });
             bool dropped = false;
-            for (std::uint32_t t : touched) {
+            for (std::size_t j = 0; j < touched.size(); ++j) {
+                const std::uint32_t t = touched[j];
+                if (!folding[j] || !folds(t)) continue;
                 const std::array<bool, 3> s = splitEdges(slots[t], active);
                 const int count = int(s[0]) + int(s[1]) + int(s[2]);
-                if (count == 0 || worstPiece(t, s) > 0.0) continue;
                 int drop = -1;
                 double best = 0.0;
                 for (int i = 0; i < 3 && count > 1; ++i) {
@@ -336,7 +384,6 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             }
             if (!dropped) break;
         }
-
         // New vertices in edge order; each split triangle replaced in place by its pieces, which
         // are checked next round (with failing triangles whose edge was dropped, on their next).
         std::vector<std::uint32_t> newVertex(m, 0);
@@ -363,39 +410,61 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             const std::array<bool, 3> s = splitEdges(slots[t], active);
             if (!s[0] && !s[1] && !s[2]) ++attempts[t];
         }
-        std::vector<openvdb::Vec3I> triangles;
-        std::vector<std::uint8_t> nextAttempts;
-        triangles.reserve(mesh.triangles.size() + 3 * made.size());
-        nextAttempts.reserve(triangles.capacity());
-        std::vector<std::uint32_t> nextPending;
-        std::size_t nextFailing = 0;
-        for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
-            const openvdb::Vec3I& tri = mesh.triangles[t];
-            const std::array<bool, 3> s =
-                isTouched[t] ? splitEdges(slots[t], active) : std::array<bool, 3>{false, false, false};
-            while (nextFailing < failing.size() && failing[nextFailing] < t) ++nextFailing;
-            if (!s[0] && !s[1] && !s[2]) {
-                if (nextFailing < failing.size() && failing[nextFailing] == t)
-                    nextPending.push_back(std::uint32_t(triangles.size()));
-                triangles.push_back(tri);
-                nextAttempts.push_back(attempts[t]);
-                continue;
+        // The next triangles: each triangle's pieces (or itself) at an offset counted in parallel.
+        const std::size_t n = mesh.triangles.size();
+        std::vector<std::uint32_t> offset(n + 1, 0);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& r) {
+            for (std::size_t t = r.begin(); t != r.end(); ++t) {
+                const std::array<bool, 3> s =
+                    isTouched[t] ? splitEdges(slots[t], active) : std::array<bool, 3>{false, false, false};
+                offset[t + 1] = std::uint32_t(1 + int(s[0]) + int(s[1]) + int(s[2]));
             }
-            std::array<std::uint32_t, 6> index{tri[0], tri[1], tri[2], 0, 0, 0};
-            for (int i = 0; i < 3; ++i)
-                if (s[i]) index[3 + i] = newVertex[std::size_t(slots[t][i])];
-            for (const SplitPiece& piece : splitPieces(positions(std::uint32_t(t)), s)) {
-                nextPending.push_back(std::uint32_t(triangles.size()));
-                triangles.emplace_back(index[piece[0]], index[piece[1]], index[piece[2]]);
-                nextAttempts.push_back(0);
+        });
+        for (std::size_t t = 0; t < n; ++t) offset[t + 1] += offset[t];
+        std::vector<openvdb::Vec3I> triangles(offset[n]);
+        std::vector<std::uint8_t> nextAttempts(offset[n], 0), isPending(offset[n], 0);
+        std::vector<Checked> nextChecked(offset[n]);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& r) {
+            for (std::size_t t = r.begin(); t != r.end(); ++t) {
+                const openvdb::Vec3I& tri = mesh.triangles[t];
+                const std::uint32_t o = offset[t];
+                if (offset[t + 1] - o == 1) {
+                    triangles[o] = tri;
+                    nextAttempts[o] = attempts[t];
+                    isPending[o] = isFailing[t];
+                    nextChecked[o] = checked[t];
+                    continue;
+                }
+                const std::array<bool, 3> s = splitEdges(slots[t], active);
+                std::array<std::uint32_t, 6> index{tri[0], tri[1], tri[2], 0, 0, 0};
+                for (int i = 0; i < 3; ++i)
+                    if (s[i]) index[3 + i] = newVertex[std::size_t(slots[t][i])];
+                std::uint32_t k = o;
+                for (const SplitPiece& piece : splitPieces(positions(std::uint32_t(t)), s)) {
+                    triangles[k] = openvdb::Vec3I(index[piece[0]], index[piece[1]], index[piece[2]]);
+                    isPending[k++] = 1;
+                }
             }
-        }
+        });
+        pending.clear();
+        for (std::size_t t = 0; t < triangles.size(); ++t)
+            if (isPending[t]) pending.push_back(std::uint32_t(t));
         mesh.triangles = std::move(triangles);
         attempts = std::move(nextAttempts);
-        pending = std::move(nextPending);
+        checked = std::move(nextChecked);
         if (stats.abandoned) break;
     }
     stats.trianglesAfter = mesh.triangles.size();
+    // Summed in triangle order: the same for any thread count.
+    double sum = 0.0, total = 0.0;
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
+        stats.maxDeviation = std::max(stats.maxDeviation, checked[t].largest);
+        sum += checked[t].squared;
+        total += triangleArea({points[tri[0]], points[tri[1]], points[tri[2]]});
+    }
+    stats.rmsDeviation = total > 0.0 ? std::sqrt(sum / total) : 0.0;
+    stats.deviationSamples = mesh.points.size() + 4 * mesh.triangles.size();
     if (progress) progress(1.0);
     return stats;
 }

@@ -50,6 +50,13 @@ struct AdaptiveRefinementStats {
     /// Whether it gave up: a round dropped more than a twentieth of its splits (the field has
     /// creases of its own, which bisection does not resolve); remaining counts that round's.
     bool abandoned = false;
+    /// The deviation of the mesh it leaves, from its own check of every triangle (the
+    /// TriangleQuadratic through the distances at the corners, edge midpoints and centre): the
+    /// largest |q| (exact) plus the centre's margin, and the root of q squared
+    /// integrated over the surface over its area. Measured on the triangles as stored (float).
+    double maxDeviation = 0.0, rmsDeviation = 0.0;
+    /// Field points behind them: the vertices and four per triangle.
+    std::size_t deviationSamples = 0;
 };
 
 /// Bisects the triangles of @a mesh (closed, vertices on the level set of @a field, e.g. after

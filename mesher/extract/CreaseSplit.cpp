@@ -315,7 +315,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
             std::array<std::uint32_t, 6> index{tri[0], tri[1], tri[2], 0, 0, 0};
             for (int i = 0; i < 3; ++i)
                 if (s[i]) index[3 + i] = newVertex[touchedEdges[next][i]];
-            const std::vector<SplitPiece> pieces = splitPieces(positions(next), s);
+            const SplitPieces pieces = splitPieces(positions(next), s);
             if (pieces.empty()) triangles.push_back(tri);
             for (const SplitPiece& piece : pieces)
                 triangles.emplace_back(index[piece[0]], index[piece[1]], index[piece[2]]);

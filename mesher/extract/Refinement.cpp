@@ -755,7 +755,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
         std::size_t next = 0;
         for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
             const openvdb::Vec3I& tri = mesh.triangles[t];
-            std::vector<Piece> pieces;
+            SplitPieces pieces;
             std::array<bool, 3> s{false, false, false};
             std::array<std::uint32_t, 6> index{tri[0], tri[1], tri[2], 0, 0, 0};
             if (next < touched.size() && touched[next] == t) {

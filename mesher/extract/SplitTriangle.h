@@ -8,6 +8,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <initializer_list>
 #include <vector>
 
 namespace voxlat {
@@ -16,9 +17,28 @@ namespace voxlat {
 /// edges (i, i + 1).
 using SplitPiece = std::array<int, 3>;
 
+/// At most four pieces, held in place (no allocation: the refinement asks for the pieces of
+/// every triangle it splits, several times per round).
+class SplitPieces {
+public:
+    SplitPieces() = default;
+    SplitPieces(std::initializer_list<SplitPiece> pieces)
+    {
+        for (const SplitPiece& p : pieces) mPieces[mCount++] = p;
+    }
+    const SplitPiece* begin() const { return mPieces.data(); }
+    const SplitPiece* end() const { return mPieces.data() + mCount; }
+    std::size_t size() const { return mCount; }
+    bool empty() const { return mCount == 0; }
+
+private:
+    std::array<SplitPiece, 4> mPieces{};
+    std::size_t mCount = 0;
+};
+
 /// The pieces of a triangle with positions @a p (corners, then split points) split on the edges
 /// flagged in @a split; with two splits, the quad left over by its shorter diagonal.
-inline std::vector<SplitPiece> splitPieces(const std::array<openvdb::Vec3d, 6>& p, const std::array<bool, 3>& split)
+inline SplitPieces splitPieces(const std::array<openvdb::Vec3d, 6>& p, const std::array<bool, 3>& split)
 {
     const int count = int(split[0]) + int(split[1]) + int(split[2]);
     if (count == 3) return {{0, 3, 5}, {3, 1, 4}, {5, 4, 2}, {3, 4, 5}};
@@ -31,12 +51,8 @@ inline std::vector<SplitPiece> splitPieces(const std::array<openvdb::Vec3d, 6>& 
         const int j = !split[0] ? 0 : !split[1] ? 1 : 2;
         const int a = j, b = (j + 1) % 3, c = (j + 2) % 3;
         const int mb = 3 + b, mc = 3 + c;
-        std::vector<SplitPiece> out = {{mb, c, mc}};
-        if ((p[a] - p[mb]).lengthSqr() <= (p[b] - p[mc]).lengthSqr())
-            out.insert(out.end(), {{a, b, mb}, {a, mb, mc}});
-        else
-            out.insert(out.end(), {{a, b, mc}, {b, mb, mc}});
-        return out;
+        if ((p[a] - p[mb]).lengthSqr() <= (p[b] - p[mc]).lengthSqr()) return {{mb, c, mc}, {a, b, mb}, {a, mb, mc}};
+        return {{mb, c, mc}, {a, b, mc}, {b, mb, mc}};
     }
     return {};
 }
