@@ -233,16 +233,18 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                         }
                         const double centre = solid.distance(v[j + 3], g[j + 3]);
                         for (int i = 0; i < 3; ++i) bend[k][i] = std::abs(m[i] - 0.5 * (s[i] + s[(i + 1) % 3]));
-                        over[k] = !triangleWithin(p, s, m, centre, options.box, options.tolerance);
-                        if (!over[k]) {
-                            // What the report gives as the mesh's deviation (a failing triangle is
-                            // split or checked again).
-                            const TriangleQuadratic q(p, s, m, centre, options.box);
-                            checked[t] = {q.largest() + q.margin(), q.meanSquare() * triangleArea(p)};
-                        }
+                        // triangleWithin()'s test (without the bound first: the largest value is
+                        // what the report gives as the mesh's deviation, and the coarse mesh's
+                        // before; a failing triangle is split or checked again).
+                        const TriangleQuadratic q(p, s, m, centre, options.box);
+                        const double largest = q.largest() + q.margin();
+                        over[k] = !(largest <= options.tolerance);
+                        if (!over[k] || round == 0) checked[t] = {largest, q.meanSquare() * triangleArea(p)};
                     }
                 }
             });
+        if (round == 0)
+            for (const Checked& c : checked) stats.maxBefore = std::max(stats.maxBefore, c.largest);
         // Each failing triangle's edge to split: the one bending most off its chord (times its
         // length; the longest where none bends) not yet tried. Splitting across the direction the
         // surface curves in, not along it, takes 7 % fewer triangles than the longest edge on W9.

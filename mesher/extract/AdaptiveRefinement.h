@@ -50,6 +50,9 @@ struct AdaptiveRefinementStats {
     /// Whether it gave up: a round dropped more than a twentieth of its splits (the field has
     /// creases of its own, which bisection does not resolve); remaining counts that round's.
     bool abandoned = false;
+    /// The largest deviation of the mesh it was given, by the same check (the coarse mesh's chord
+    /// error, with its creases and caps).
+    double maxBefore = 0.0;
     /// The deviation of the mesh it leaves, from its own check of every triangle (the
     /// TriangleQuadratic through the distances at the corners, edge midpoints and centre): the
     /// largest |q| (exact) plus the centre's margin, and the root of q squared
