@@ -8,6 +8,7 @@
 #include "fields/Ramp.h"
 #include "fields/SinCos.h"
 #include "fields/Sphere.h"
+#include "fields/TpmsEquations.h"
 #include "fields/TpmsField.h"
 #include "fields/Transform.h"
 #include "fields/Unary.h"
@@ -98,6 +99,31 @@ TEST(Tpms, GyroidGradientMatchesHandDerivative)
                              k * (-std::sin(Y) * std::sin(Z) + std::cos(Z) * std::cos(X)));
         const Vec3d g = f.valueAndGradient(p).second;
         for (int a = 0; a < 3; ++a) EXPECT_NEAR(g[a], expected[a], 1e-12);
+    }
+}
+
+TEST(Tpms, GyroidWrittenOutGivesTheDualNumbersDoubles)
+{
+    // gradients() writes the gyroid's derivative out instead of through dual numbers: the same
+    // doubles, bit for bit, as the dual numbers from the same sines and cosines.
+    const Vec3d cell(6, 8, 10);
+    const auto pts = randomPoints(100, -20, 20, 4);
+    const TpmsField f(TpmsType::Gyroid, cell);
+    std::vector<double> v(pts.size());
+    std::vector<Vec3d> g(pts.size());
+    f.gradients(pts, v, g);
+    double wave[3], angle[3][100], sn[3][100], cs[3][100];
+    for (int a = 0; a < 3; ++a) {
+        wave[a] = 2.0 * std::numbers::pi / cell[a];
+        for (std::size_t n = 0; n < pts.size(); ++n) angle[a][n] = wave[a] * pts[n][a];
+        sinCosBatch(angle[a], sn[a], cs[a], pts.size());
+    }
+    for (std::size_t n = 0; n < pts.size(); ++n) {
+        const Dual3 x(angle[0][n], wave[0], 0, 0), y(angle[1][n], 0, wave[1], 0), z(angle[2][n], 0, 0, wave[2]);
+        const Dual3 d = tpmsEquation(TpmsType::Gyroid, trigTermsFrom(sn[0][n], cs[0][n], x),
+                                     trigTermsFrom(sn[1][n], cs[1][n], y), trigTermsFrom(sn[2][n], cs[2][n], z));
+        ASSERT_EQ(v[n], d.v) << n;
+        for (int a = 0; a < 3; ++a) ASSERT_EQ(g[n][a], d.d[a]) << n << " axis " << a;
     }
 }
 
