@@ -192,6 +192,17 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
     for (std::size_t t = 0; t < pending.size(); ++t) pending[t] = std::uint32_t(t);
     std::vector<std::uint8_t> attempts(mesh.triangles.size(), 0);
     std::vector<Checked> checked(mesh.triangles.size());
+    // The rounds' tables, kept from round to round so their memory is used again: fresh pages
+    // cost their clearing by the kernel, which varied W9's refinement from 0.4 to 0.75 s.
+    std::vector<std::uint8_t> over, isFailing, isTouched, endpoint, isPending, folding, nextAttempts;
+    std::vector<std::array<double, 3>> bend;
+    std::vector<std::int8_t> choice;
+    // Per triangle its edges' slots in the split edges (-1: not split).
+    std::vector<std::array<std::int32_t, 3>> slots;
+    std::vector<std::uint32_t> offset, touched, failing, newVertex;
+    std::vector<openvdb::Vec3I> triangles;
+    std::vector<Checked> nextChecked;
+    std::vector<EdgeKey> split;
 
     for (int round = 0; !pending.empty(); ++round) {
         if (progress) progress(double(round) / options.rounds);
@@ -199,9 +210,9 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
         // triangles (a midpoint shared by two is evaluated twice, at the same bits: no table to
         // find it in).
         constexpr std::size_t kTrianglesPerBatch = kBatchSize / 4;
-        std::vector<std::uint8_t> over(pending.size(), 0);
+        over.assign(pending.size(), 0);
         // How far each edge's midpoint lies off the chord between its ends.
-        std::vector<std::array<double, 3>> bend(pending.size());
+        bend.resize(pending.size());
         tbb::parallel_for(
             tbb::blocked_range<std::size_t>(0, (pending.size() + kTrianglesPerBatch - 1) / kTrianglesPerBatch, 1),
             [&](const auto& r) {
@@ -249,7 +260,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
         // length; the longest where none bends) not yet tried. Splitting across the direction the
         // surface curves in, not along it, takes 7 % fewer triangles than the longest edge on W9.
         // -1: none left to try (the triangle stays over the tolerance).
-        std::vector<std::int8_t> choice(pending.size(), -1);
+        choice.assign(pending.size(), -1);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, pending.size(), 4096), [&](const auto& r) {
             for (std::size_t k = r.begin(); k != r.end(); ++k) {
                 if (!over[k]) continue;
@@ -270,9 +281,9 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                 choice[k] = std::int8_t(byBend[attempts[t]].second);
             }
         });
-        std::vector<EdgeKey> split;
-        std::vector<std::uint32_t> failing;
-        std::vector<std::uint8_t> isFailing(mesh.triangles.size(), 0);
+        split.clear();
+        failing.clear();
+        isFailing.assign(mesh.triangles.size(), 0);
         for (std::size_t k = 0; k < pending.size(); ++k) {
             if (!over[k]) continue;
             if (choice[k] < 0) {
@@ -310,9 +321,10 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                     active[e] = 1;
                 }
         }
-        // The triangles around the split edges, with their edges' slots (-1: not split).
-        std::vector<std::array<std::ptrdiff_t, 3>> slots(mesh.triangles.size());
-        std::vector<std::uint8_t> isTouched(mesh.triangles.size(), 0), endpoint(points.size(), 0);
+        // The triangles around the split edges, with their edges' slots.
+        slots.resize(mesh.triangles.size());
+        isTouched.assign(mesh.triangles.size(), 0);
+        endpoint.assign(points.size(), 0);
         for (EdgeKey e : split) endpoint[e >> 32] = endpoint[e & 0xffffffffu] = 1;
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.triangles.size(), 4096), [&](const auto& r) {
             for (std::size_t t = r.begin(); t != r.end(); ++t) {
@@ -323,12 +335,12 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                     continue;
                 }
                 for (int i = 0; i < 3; ++i) {
-                    slots[t][i] = find(split, edgeKey(tri[i], tri[(i + 1) % 3]));
+                    slots[t][i] = std::int32_t(find(split, edgeKey(tri[i], tri[(i + 1) % 3])));
                     isTouched[t] = isTouched[t] || slots[t][i] >= 0;
                 }
             }
         });
-        std::vector<std::uint32_t> touched;
+        touched.clear();
         for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
             if (isTouched[t]) touched.push_back(std::uint32_t(t));
         // A triangle whose pieces turn against it or lose their area (as stored) drops a split:
@@ -358,7 +370,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
         };
         // Each pass finds the folding triangles in parallel, then drops their splits in order (a
         // drop changes the neighbour across the edge: it is looked at again, by the next pass).
-        std::vector<std::uint8_t> folding(touched.size());
+        folding.resize(touched.size());
         for (;;) {
             tbb::parallel_for(tbb::blocked_range<std::size_t>(0, touched.size(), 4096), [&](const auto& r) {
                 for (std::size_t j = r.begin(); j != r.end(); ++j) folding[j] = folds(touched[j]);
@@ -388,7 +400,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
         }
         // New vertices in edge order; each split triangle replaced in place by its pieces, which
         // are checked next round (with failing triangles whose edge was dropped, on their next).
-        std::vector<std::uint32_t> newVertex(m, 0);
+        newVertex.assign(m, 0);
         std::vector<Vec3d> made;
         for (std::size_t e = 0; e < m; ++e) {
             if (!active[e]) continue;
@@ -414,7 +426,8 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
         }
         // The next triangles: each triangle's pieces (or itself) at an offset counted in parallel.
         const std::size_t n = mesh.triangles.size();
-        std::vector<std::uint32_t> offset(n + 1, 0);
+        offset.resize(n + 1);
+        offset[0] = 0;
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& r) {
             for (std::size_t t = r.begin(); t != r.end(); ++t) {
                 const std::array<bool, 3> s =
@@ -423,9 +436,10 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             }
         });
         for (std::size_t t = 0; t < n; ++t) offset[t + 1] += offset[t];
-        std::vector<openvdb::Vec3I> triangles(offset[n]);
-        std::vector<std::uint8_t> nextAttempts(offset[n], 0), isPending(offset[n], 0);
-        std::vector<Checked> nextChecked(offset[n]);
+        triangles.resize(offset[n]);
+        nextAttempts.resize(offset[n]);
+        isPending.resize(offset[n]);
+        nextChecked.resize(offset[n]);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, 4096), [&](const auto& r) {
             for (std::size_t t = r.begin(); t != r.end(); ++t) {
                 const openvdb::Vec3I& tri = mesh.triangles[t];
@@ -444,6 +458,8 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                 std::uint32_t k = o;
                 for (const SplitPiece& piece : splitPieces(positions(std::uint32_t(t)), s)) {
                     triangles[k] = openvdb::Vec3I(index[piece[0]], index[piece[1]], index[piece[2]]);
+                    nextAttempts[k] = 0;
+                    nextChecked[k] = {};
                     isPending[k++] = 1;
                 }
             }
@@ -451,9 +467,9 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
         pending.clear();
         for (std::size_t t = 0; t < triangles.size(); ++t)
             if (isPending[t]) pending.push_back(std::uint32_t(t));
-        mesh.triangles = std::move(triangles);
-        attempts = std::move(nextAttempts);
-        checked = std::move(nextChecked);
+        mesh.triangles.swap(triangles);
+        attempts.swap(nextAttempts);
+        checked.swap(nextChecked);
         if (stats.abandoned) break;
     }
     stats.trianglesAfter = mesh.triangles.size();

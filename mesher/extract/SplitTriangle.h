@@ -58,8 +58,8 @@ inline SplitPieces splitPieces(const std::array<openvdb::Vec3d, 6>& p, const std
 }
 
 /// Which edges of a triangle split: those with an edge slot (>= 0) that is @a active.
-inline std::array<bool, 3> splitEdges(const std::array<std::ptrdiff_t, 3>& edges,
-                                      const std::vector<std::uint8_t>& active)
+template <typename Slot>
+std::array<bool, 3> splitEdges(const std::array<Slot, 3>& edges, const std::vector<std::uint8_t>& active)
 {
     std::array<bool, 3> s;
     for (int i = 0; i < 3; ++i)
@@ -69,16 +69,16 @@ inline std::array<bool, 3> splitEdges(const std::array<std::ptrdiff_t, 3>& edges
 
 /// The positions splitPieces() takes: the corners of @a tri in @a points, then each edge's split
 /// point (@a target by edge slot where the edge splits, else the origin, unused).
-inline std::array<openvdb::Vec3d, 6> splitPositions(const openvdb::Vec3I& tri,
-                                                    const std::array<std::ptrdiff_t, 3>& edges,
-                                                    const std::vector<openvdb::Vec3d>& points,
-                                                    const std::vector<std::uint8_t>& active,
-                                                    const std::vector<openvdb::Vec3d>& target)
+template <typename Slot>
+std::array<openvdb::Vec3d, 6> splitPositions(const openvdb::Vec3I& tri, const std::array<Slot, 3>& edges,
+                                             const std::vector<openvdb::Vec3d>& points,
+                                             const std::vector<std::uint8_t>& active,
+                                             const std::vector<openvdb::Vec3d>& target)
 {
     std::array<openvdb::Vec3d, 6> p;
     for (int i = 0; i < 3; ++i) {
         p[std::size_t(i)] = points[tri[i]];
-        const std::ptrdiff_t e = edges[std::size_t(i)];
+        const Slot e = edges[std::size_t(i)];
         p[std::size_t(3 + i)] = e >= 0 && active[std::size_t(e)] ? target[std::size_t(e)] : openvdb::Vec3d(0.0);
     }
     return p;
