@@ -854,6 +854,7 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
                                    {"triangles_after", r.trianglesAfter},
                                    {"edges_split", r.splits},
                                    {"splits_dropped", r.dropped},
+                                   {"edges_flipped", r.flips},
                                    {"rounds", r.rounds},
                                    {"triangles_left_over", r.remaining},
                                    {"abandoned", r.abandoned},

@@ -13,6 +13,8 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <numbers>
 #include <span>
 #include <vector>
 
@@ -173,6 +175,111 @@ void placeOnSurface(const Solid& solid, const AdaptiveRefinementOptions& o, std:
     for (Vec3d& p : x) p = toDouble(toFloat(p));
 }
 
+/// The smallest angle of the triangle with corners @a a, @a b, @a c (radians; 0 when degenerate).
+double smallestAngle(const Vec3d& a, const Vec3d& b, const Vec3d& c)
+{
+    const std::array<Vec3d, 3> p = {a, b, c};
+    double smallest = std::numbers::pi;
+    for (int i = 0; i < 3; ++i) {
+        const Vec3d u = p[(i + 1) % 3] - p[i], v = p[(i + 2) % 3] - p[i];
+        const double lu = u.length(), lv = v.length();
+        if (!(lu > 0.0 && lv > 0.0)) return 0.0;
+        smallest = std::min(smallest, std::acos(std::clamp(u.dot(v) / (lu * lv), -1.0, 1.0)));
+    }
+    return smallest;
+}
+
+/// Flips the longest edge of each triangle in @a candidates (in order) with the triangle across
+/// it, where that gives the pair a larger smallest angle, both new triangles face the old pair's
+/// way, the new edge is not in the mesh already, the edge does not lie on a face of @a box (a
+/// crease) and neither triangle was flipped this round. The mesh stays closed and conforming
+/// (the quad's four sides stay). Returns the flipped triangles (two per flip, in place).
+std::vector<std::uint32_t> flipLongestEdges(TriangleMesh& mesh, const std::vector<Vec3d>& points,
+                                            const std::vector<std::uint32_t>& candidates,
+                                            const std::optional<Box3>& box)
+{
+    std::vector<std::uint32_t> flipped;
+    if (candidates.empty()) return flipped;
+    // Each candidate's longest edge (a, b) in its own order, and c opposite.
+    struct Flip {
+        std::uint32_t t = 0, u = std::numeric_limits<std::uint32_t>::max(), a = 0, b = 0, c = 0, d = 0;
+        EdgeKey edge = 0;
+    };
+    std::vector<Flip> flips;
+    for (std::uint32_t t : candidates) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
+        int longest = 0;
+        double most = -1.0;
+        for (int i = 0; i < 3; ++i)
+            if (const double l = (points[tri[(i + 1) % 3]] - points[tri[i]]).lengthSqr(); l > most) {
+                most = l;
+                longest = i;
+            }
+        Flip f;
+        f.t = t;
+        f.a = std::uint32_t(tri[longest]);
+        f.b = std::uint32_t(tri[(longest + 1) % 3]);
+        f.c = std::uint32_t(tri[(longest + 2) % 3]);
+        f.edge = edgeKey(f.a, f.b);
+        if (sharedFaces(points[f.a], points[f.b], box) == 0) flips.push_back(f);
+    }
+    // The triangle across each edge (b, a in its order), and whether the new edge (c, d) exists.
+    std::vector<EdgeKey> edges;
+    for (const Flip& f : flips) edges.push_back(f.edge);
+    sortUnique(edges);
+    std::vector<std::uint32_t> across(2 * edges.size(), std::numeric_limits<std::uint32_t>::max());
+    std::vector<std::uint8_t> endpoint(points.size(), 0);
+    for (EdgeKey e : edges) endpoint[e >> 32] = endpoint[e & 0xffffffffu] = 1;
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
+        if (endpoint[tri[0]] + endpoint[tri[1]] + endpoint[tri[2]] < 2) continue;
+        for (int i = 0; i < 3; ++i)
+            if (const std::ptrdiff_t e = find(edges, edgeKey(tri[i], tri[(i + 1) % 3])); e >= 0)
+                across[2 * e + (across[2 * e] != std::numeric_limits<std::uint32_t>::max())] = std::uint32_t(t);
+    }
+    std::vector<EdgeKey> made;
+    for (Flip& f : flips) {
+        const std::ptrdiff_t e = find(edges, f.edge);
+        f.u = across[2 * e] == f.t ? across[2 * e + 1] : across[2 * e];
+        if (f.u == std::numeric_limits<std::uint32_t>::max()) continue;
+        const openvdb::Vec3I& other = mesh.triangles[f.u];
+        for (int i = 0; i < 3; ++i)
+            if (std::uint32_t(other[i]) == f.b && std::uint32_t(other[(i + 1) % 3]) == f.a)
+                f.d = std::uint32_t(other[(i + 2) % 3]);
+        made.push_back(edgeKey(f.c, f.d));
+    }
+    std::vector<EdgeKey> existing = made;
+    sortUnique(existing);
+    std::vector<std::uint8_t> exists(existing.size(), 0);
+    std::fill(endpoint.begin(), endpoint.end(), 0);
+    for (EdgeKey e : existing) endpoint[e >> 32] = endpoint[e & 0xffffffffu] = 1;
+    for (const openvdb::Vec3I& tri : mesh.triangles) {
+        if (endpoint[tri[0]] + endpoint[tri[1]] + endpoint[tri[2]] < 2) continue;
+        for (int i = 0; i < 3; ++i)
+            if (const std::ptrdiff_t e = find(existing, edgeKey(tri[i], tri[(i + 1) % 3])); e >= 0) exists[e] = 1;
+    }
+    std::vector<std::uint8_t> used(mesh.triangles.size(), 0);
+    for (const Flip& f : flips) {
+        if (f.u == std::numeric_limits<std::uint32_t>::max() || used[f.t] || used[f.u] || f.c == f.d) continue;
+        const std::ptrdiff_t e = find(existing, edgeKey(f.c, f.d));
+        if (exists[e]) continue;
+        const Vec3d &a = points[f.a], &b = points[f.b], &c = points[f.c], &d = points[f.d];
+        const Vec3d before = (b - a).cross(c - a) + (a - b).cross(d - b);
+        const Vec3d n1 = (d - a).cross(c - a), n2 = (b - d).cross(c - d);
+        if (!(n1.dot(before) > 0.0 && n2.dot(before) > 0.0 && n1.dot(n2) > 0.0)) continue;
+        if (!(std::min(smallestAngle(a, d, c), smallestAngle(d, b, c)) >
+              std::min(smallestAngle(a, b, c), smallestAngle(b, a, d))))
+            continue;
+        mesh.triangles[f.t] = openvdb::Vec3I(int(f.a), int(f.d), int(f.c));
+        mesh.triangles[f.u] = openvdb::Vec3I(int(f.d), int(f.b), int(f.c));
+        used[f.t] = used[f.u] = 1;
+        exists[e] = 1;  // a second flip may not make it again
+        flipped.push_back(f.t);
+        flipped.push_back(f.u);
+    }
+    return flipped;
+}
+
 }  // namespace
 
 AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& field,
@@ -243,11 +350,11 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                             m[i] = solid.distance(v[j + i], g[j + i]);
                         }
                         const double centre = solid.distance(v[j + 3], g[j + 3]);
-                        for (int i = 0; i < 3; ++i) bend[k][i] = std::abs(m[i] - 0.5 * (s[i] + s[(i + 1) % 3]));
                         // triangleWithin()'s test (without the bound first: the largest value is
                         // what the report gives as the mesh's deviation, and the coarse mesh's
                         // before; a failing triangle is split or checked again).
                         const TriangleQuadratic q(p, s, m, centre, options.box);
+                        for (int i = 0; i < 3; ++i) bend[k][i] = q.bend(i);
                         const double largest = q.largest() + q.margin();
                         over[k] = !(largest <= options.tolerance);
                         if (!over[k] || round == 0) checked[t] = {largest, q.meanSquare() * triangleArea(p)};
@@ -284,8 +391,24 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
         split.clear();
         failing.clear();
         isFailing.assign(mesh.triangles.size(), 0);
+        // A triangle whose split was dropped before (a needle of marching cubes, whose long sides
+        // fold a piece when split) has its longest edge flipped first where that makes the pair
+        // rounder; the flipped pair is checked next round.
+        {
+            std::vector<std::uint32_t> candidates;
+            for (std::size_t k = 0; k < pending.size(); ++k)
+                if (over[k] && (attempts[pending[k]] > 0 || choice[k] < 0)) candidates.push_back(pending[k]);
+            const std::vector<std::uint32_t> flipped = flipLongestEdges(mesh, points, candidates, options.box);
+            stats.flips += flipped.size() / 2;
+            // isFailing: checked next round (a flipped triangle is not split this round: its
+            // chosen edge may be gone).
+            for (std::uint32_t t : flipped) {
+                isFailing[t] = 1;
+                attempts[t] = 0;
+            }
+        }
         for (std::size_t k = 0; k < pending.size(); ++k) {
-            if (!over[k]) continue;
+            if (!over[k] || isFailing[pending[k]]) continue;
             if (choice[k] < 0) {
                 ++stats.remaining;
                 continue;

@@ -44,6 +44,9 @@ struct AdaptiveRefinementStats {
     /// Edge splits dropped: Newton found no point on the surface within maxMove of the midpoint,
     /// or a piece would have turned over or lost its area.
     std::size_t dropped = 0;
+    /// Edges flipped: a triangle whose split was dropped (a needle) and the one across its
+    /// longest edge, where the flip makes the pair rounder.
+    std::size_t flips = 0;
     /// Triangles still outside the tolerance at the end (none tried all three edges in vain).
     std::size_t remaining = 0;
     int rounds = 0;

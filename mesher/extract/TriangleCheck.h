@@ -69,6 +69,10 @@ public:
     /// How far the centre's distance misses q.
     double margin() const { return mMargin; }
 
+    /// How far q's value at the midpoint of edge @a i (corners i and i + 1) lies off the chord
+    /// between its ends: the edge's bend (with the positive parts on a face).
+    double bend(int i) const { return std::abs(mM[i] - 0.5 * (mS[i] + mS[(i + 1) % 3])); }
+
     /// A bound on |q| over the triangle (quadraticBound()).
     double bound() const { return quadraticBound(mS, mM); }
 
