@@ -332,7 +332,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
     // tolerance: splitting a straight one (the short side of a needle whose long sides cannot be
     // split) would only make needles again, round after round.
     auto chooseEdge = [&](const std::array<Vec3d, 3>& p, const TriangleQuadratic& q, int attempts, int round) {
-        if (attempts >= 3 || round == options.rounds) return std::int8_t(-1);
+        if (attempts >= 3 || round >= options.rounds) return std::int8_t(-1);
         std::array<std::pair<double, int>, 3> byBend;
         for (int i = 0; i < 3; ++i)
             byBend[i] = {-(q.bend(i) + 1e-3 * options.tolerance) * (p[(i + 1) % 3] - p[i]).length(), i};
@@ -403,11 +403,13 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
         // A triangle whose split was dropped before (a needle of marching cubes, whose long sides
         // fold a piece when split) has its longest edge flipped first where that makes the pair
         // rounder; the flipped pair is checked next round.
-        {
+        std::size_t flips = 0;
+        if (round < options.rounds) {
             std::vector<std::uint32_t> candidates;
             for (std::size_t k = 0; k < pending.size(); ++k)
                 if (over[k] && (attempts[pending[k]] > 0 || choice[k] < 0)) candidates.push_back(pending[k]);
             const std::vector<std::uint32_t> flipped = flipLongestEdges(mesh, points, candidates, options.box);
+            flips = flipped.size() / 2;
             stats.flips += flipped.size() / 2;
             // isFailing: checked next round (a flipped triangle is not split this round: its
             // chosen edge may be gone).
@@ -429,7 +431,15 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             const int i = choice[k];
             split.push_back(edgeKey(tri[i], tri[(i + 1) % 3]));
         }
-        if (split.empty()) break;
+        if (split.empty()) {
+            if (flips == 0) break;
+            // Only flips this round: the flipped pairs are checked next round.
+            ++stats.rounds;
+            pending.clear();
+            for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
+                if (isFailing[t]) pending.push_back(std::uint32_t(t));
+            continue;
+        }
         ++stats.rounds;
         sortUnique(split);
         const std::size_t m = split.size();
