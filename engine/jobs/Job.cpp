@@ -845,8 +845,9 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
             return interiorChordError(*mesh, *distanceField(), mDomain.box, 2.0 * h, 0.5 * h);
         });
         trial["chord_error_mm"] = chord;
-        if (refinement && (refinement->splits > 0 || refinement->remaining > 0)) {
-            // Kept when no triangle is left above the tolerance and none cross.
+        if (refinement && (refinement->splits > 0 || refinement->flips > 0 || refinement->remaining > 0)) {
+            // Kept when no triangle is left above the tolerance and none cross (a mesh it did not
+            // change goes on as one whose chord error is within the tolerance).
             const AdaptiveRefinementStats& r = *refinement;
             const std::size_t crossing =
                 timed("check self-intersections", [&] { return countSelfIntersections(*mesh); });

@@ -67,17 +67,21 @@ struct AdaptiveRefinementStats {
 
 /// Bisects the triangles of @a mesh (closed, vertices on the level set of @a field, e.g. after
 /// projectToSurface() and clipToBox()) that fail triangleWithin() at options.tolerance, in
-/// rounds: each such triangle's longest edge (once that split was dropped, the next longest) is
-/// split in both triangles that share it, so the mesh stays closed, manifold and oriented. The new
+/// rounds: each such triangle's edge bending most off its chord (once that split was dropped, the
+/// next) is split in both triangles that share it, so the mesh stays closed, manifold and
+/// oriented; a triangle whose split was dropped has its longest edge flipped first where that
+/// makes the pair rounder (flipLongestEdges in the source: never an edge on a box face). The new
 /// vertex goes from the edge's midpoint onto the level set by Newton steps along the gradient;
 /// on an edge whose ends lie on one face of options.box the steps stay in that face (on two
 /// faces, the midpoint stays), and a point that would leave the box is held on the face it
 /// crosses (a point on the crease). A split is dropped when Newton fails within options.maxMove
 /// or a piece would turn against its parent or lose its area (as stored in float). The signed
-/// distance is (f - level) / |grad f|, with the box's exact distance where it is larger. Triangles
+/// distance is (f - level) / |grad f| (on a face of the box its positive part). Triangles
 /// are not checked against each other: the caller checks for crossings. New vertices are
-/// appended in the order of their edges and evaluation runs in fixed batches, so the bytes are
-/// the same for any thread count. @a progress (optional) runs from 0 to 1 and may throw to cancel.
+/// appended in the order of their edges, evaluation runs in fixed batches and the decisions that
+/// depend on each other run in triangle order, so the bytes are the same for any thread count.
+/// The stats carry the deviation of the mesh it leaves, from its own check of every triangle. @a progress (optional)
+/// runs from 0 to 1 and may throw to cancel.
 AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& field,
                                           const AdaptiveRefinementOptions& options, const ProgressFn& progress = {});
 
