@@ -208,8 +208,8 @@ double smallestAngle(const Vec3d& a, const Vec3d& b, const Vec3d& c)
 
 /// Flips the longest edge of each triangle in @a candidates (in order) with the triangle across
 /// it, where that gives the pair a larger smallest angle, both new triangles face the old pair's
-/// way, the new edge is not in the mesh already, the edge does not lie on a face of @a box (a
-/// crease) and neither triangle was flipped this round. The mesh stays closed and conforming
+/// way, the new edge is not in the mesh already, the edge is not a crease (on a face of @a box,
+/// only between two caps on it) and neither triangle was flipped this round. The mesh stays closed and conforming
 /// (the quad's four sides stay). Returns the flipped triangles (two per flip, in place).
 std::vector<std::uint32_t> flipLongestEdges(TriangleMesh& mesh, const std::vector<Vec3d>& points,
                                             const std::vector<std::uint32_t>& candidates,
@@ -238,7 +238,7 @@ std::vector<std::uint32_t> flipLongestEdges(TriangleMesh& mesh, const std::vecto
         f.b = std::uint32_t(tri[(longest + 1) % 3]);
         f.c = std::uint32_t(tri[(longest + 2) % 3]);
         f.edge = edgeKey(f.a, f.b);
-        if (sharedFaces(points[f.a], points[f.b], box) == 0) flips.push_back(f);
+        flips.push_back(f);
     }
     // The triangle across each edge (b, a in its order), and whether the new edge (c, d) exists.
     std::vector<EdgeKey> edges;
@@ -281,6 +281,14 @@ std::vector<std::uint32_t> flipLongestEdges(TriangleMesh& mesh, const std::vecto
         const std::ptrdiff_t e = find(existing, edgeKey(f.c, f.d));
         if (exists[e]) continue;
         const Vec3d &a = points[f.a], &b = points[f.b], &c = points[f.c], &d = points[f.d];
+        // An edge on a face of the box is flipped only between two caps on that face: between a cap
+        // and a side triangle it is the crease.
+        if (const std::uint8_t faces = sharedFaces(a, b, box); faces != 0) {
+            bool caps = true;
+            for (int ax = 0; ax < 3; ++ax)
+                if (faces >> ax & 1u) caps = caps && c[ax] == a[ax] && d[ax] == a[ax];
+            if (!caps) continue;
+        }
         const Vec3d before = (b - a).cross(c - a) + (a - b).cross(d - b);
         const Vec3d n1 = (d - a).cross(c - a), n2 = (b - d).cross(c - d);
         if (!(n1.dot(before) > 0.0 && n2.dot(before) > 0.0 && n1.dot(n2) > 0.0)) continue;
@@ -452,15 +460,26 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             held[e] = sharedFaces(p, q, options.box);
         }
         {
-            // A midpoint on two faces (a box edge) stays where it is: the box's edge is straight.
+            // A midpoint on two faces (a box edge) inside the solid stays where it is: the box's
+            // edge is its boundary there, and straight. Outside (the surface crosses the box's
+            // edge between the ends), it goes along the box's edge onto the surface as the others
+            // go (both other axes held): kept at the midpoint, it was off the surface, and the
+            // triangles around it were split round after round without end.
+            std::vector<std::uint32_t> onEdge;
+            std::vector<Vec3d> middle;
+            for (std::size_t e = 0; e < m; ++e)
+                if (std::popcount(unsigned(held[e])) >= 2) {
+                    onEdge.push_back(std::uint32_t(e));
+                    middle.push_back(toDouble(toFloat(target[e])));
+                }
+            const std::vector<double> middleDistance = solid.distances(middle);
             std::vector<std::uint8_t> found;
             placeOnSurface(solid, options, target, held, found);
             active = std::move(found);
-            for (std::size_t e = 0; e < m; ++e)
-                if (std::popcount(unsigned(held[e])) >= 2) {
-                    const Vec3d &p = points[split[e] >> 32], &q = points[split[e] & 0xffffffffu];
-                    target[e] = toDouble(toFloat(0.5 * (p + q)));
-                    active[e] = 1;
+            for (std::size_t j = 0; j < onEdge.size(); ++j)
+                if (middleDistance[j] <= 0.0) {
+                    target[onEdge[j]] = middle[j];
+                    active[onEdge[j]] = 1;
                 }
         }
         // The triangles around the split edges, with their edges' slots.
