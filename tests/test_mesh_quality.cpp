@@ -1415,6 +1415,15 @@ TEST(AdaptiveRefinement, ClosedManifoldWithinToleranceAndSameBytesForAnyThreadCo
         // a dense measure of the mesh: a sample every 0.01 mm against the field and the box.
         const SurfaceDistance solid({c.field, std::make_shared<BoxField>(c.box)});
         const MeshDeviation dense = measureDeviation(m, solid, 0.0, 0.01);
+        // Every vertex it adds lies on the solid's boundary: on the surface, or on the box where
+        // the field is inside (a midpoint on a box's edge stays there only inside the solid).
+        std::vector<Vec3d> added;
+        for (std::size_t v = coarse.points.size(); v < m.points.size(); ++v) added.push_back(toDouble(m.points[v]));
+        std::vector<double> distance(added.size());
+        solid.values(added, distance);
+        double farthest = 0.0;
+        for (double d : distance) farthest = std::max(farthest, std::abs(d));
+        EXPECT_LE(farthest, 1e-5) << added.size() << " vertices added";
         RecordProperty(c.name + " reported_max_rms_mm",
                        std::to_string(stats.maxDeviation) + " " + std::to_string(stats.rmsDeviation) + " dense " +
                            std::to_string(dense.max) + " " + std::to_string(dense.rms));
@@ -1429,6 +1438,45 @@ TEST(AdaptiveRefinement, ClosedManifoldWithinToleranceAndSameBytesForAnyThreadCo
         EXPECT_EQ(m.points, m2.points);
         EXPECT_EQ(m.triangles, m2.triangles);
     }
+}
+
+TEST(AdaptiveRefinement, VerticesItAddsLieOnTheSolidsBoundary)
+{
+    // A gyroid network of 5 mm cells (30 %) in a 10 mm box, meshed at 0.4 mm: splits on the caps
+    // (Newton within a face), across the creases and along the box's edges (a midpoint inside the
+    // solid stays: the box's edge is the boundary there; one outside would go along the edge onto
+    // the surface). Every vertex the refinement adds is on the solid's boundary.
+    const FieldPtr network = std::make_shared<LevelSolid>(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(5.0)),
+                                                          SolidSide::Below, -0.6164712563569216);
+    const Box3 box{Vec3d(0.0), Vec3d(10.0)};
+    auto [m, cut] = cutByBox(*network, box, 0.4);
+    ASSERT_TRUE(cut.ok) << cut.failure;
+    const std::size_t before = m.points.size();
+    AdaptiveRefinementOptions o;
+    o.tolerance = 0.009;
+    o.box = box;
+    o.maxMove = 0.2;
+    const AdaptiveRefinementStats stats = refineToTolerance(m, *network, o);
+    EXPECT_GT(stats.splits, 0u);
+    expectClosedManifold(m);
+    const SurfaceDistance solid({network, std::make_shared<BoxField>(box)});
+    std::vector<Vec3d> added;
+    std::size_t onBoxEdges = 0;
+    for (std::size_t v = before; v < m.points.size(); ++v) {
+        const Vec3d p = toDouble(m.points[v]);
+        added.push_back(p);
+        int faces = 0;
+        for (int a = 0; a < 3; ++a) faces += onBoxPlane(p[a], box, a);
+        onBoxEdges += faces >= 2;
+    }
+    std::vector<double> distance(added.size());
+    solid.values(added, distance);
+    double farthest = 0.0;
+    for (double d : distance) farthest = std::max(farthest, std::abs(d));
+    RecordProperty("vertices_added",
+                   std::to_string(added.size()) + ", on the box's edges " + std::to_string(onBoxEdges));
+    EXPECT_GT(onBoxEdges, 0u);
+    EXPECT_LE(farthest, 1e-5);
 }
 
 namespace {
