@@ -242,6 +242,7 @@ std::vector<std::uint32_t> flipLongestEdges(TriangleMesh& mesh, const std::vecto
     }
     // The triangle across each edge (b, a in its order), and whether the new edge (c, d) exists.
     std::vector<EdgeKey> edges;
+    edges.reserve(flips.size());
     for (const Flip& f : flips) edges.push_back(f.edge);
     sortUnique(edges);
     std::vector<std::uint32_t> across(2 * edges.size(), std::numeric_limits<std::uint32_t>::max());
