@@ -20,9 +20,9 @@ max 0.00897 mm, RMS 0.00257 mm; side by side with stop 31's binary 2.96 and 2.99
 and 6.01 s. Final tree, load 2.8: 3.59 s against 2.06 s raw (1.7x).
 2026-11-28 (stop 33): the refinement's check is the report's measure, decisions in parallel, the
 engine keeps freed memory, the gyroid's gradient written out, needles flipped. Five alternating
-runs of each per go, medians compared (a run's system time swings from 0.1 to 1 s): four goes
-gave 0.94x, 1.57x, 1.23x and 2.09x; all twenty pairs 1.13 s against 0.72 s (1.56x). 1 363 468
-triangles, max 0.00897 mm, RMS 0.00257 mm; peak 514 MB (raw 384)."""
+runs of each per go, medians compared (a run's system time swings from 0.1 to 1 s): five goes
+gave 0.94x, 1.57x, 1.23x, 2.09x and 1.06x (final tree); all twenty-five pairs 1.13 s against
+0.77 s (1.47x). 1 363 468 triangles, max 0.00897 mm, RMS 0.00257 mm; peak 507-514 MB (raw 384)."""
 import json
 import math
 import shutil
