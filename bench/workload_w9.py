@@ -116,7 +116,7 @@ def run(voxlat, tmp):
     t_raw, m_raw, r_raw = run_recipe(voxlat, tmp / "raw")
     t_tol, m_tol, r_tol = run_recipe(voxlat, tmp / "tol", TOLERANCE_MESH)
     t_p3, m_p3, r_p3 = run_recipe(voxlat, tmp / "p03", "voxel=0.3", "outputs.mesh={file: gyroid.stl, project: on}")
-    # The machine is noisy (a run's system time swings from 0.1 to 0.9 s with the pages the kernel
+    # The machine is noisy (a run's system time swings from 0.1 to 1 s with the pages the kernel
     # must clear): more raw and tolerance runs, alternating, and the medians compared.
     raw_times, tol_times = [t_raw], [t_tol]
     for k in range(TIME_PAIRS - 1):
@@ -155,7 +155,8 @@ def run(voxlat, tmp):
     print("  tolerance stages: " + ", ".join(f"{k} {v:.2f}s" for k, v in r_tol["timings_s"].items()))
     mesher = r_tol["mesh"].get("deviation", {})
     print(f"  the mesher's own measure: max {mesher.get('max_mm')} mm, rms {mesher.get('rms_mm')} mm")
-    return {"raw_s": t_raw, "tolerance_s": t_tol, "raw_runs_s": raw_times, "tolerance_runs_s": tol_times, "coarse_projected_s": t_p3, "raw_mb": m_raw, "tolerance_mb": m_tol,
+    return {"raw_s": t_raw, "tolerance_s": t_tol, "raw_runs_s": raw_times, "tolerance_runs_s": tol_times,
+            "coarse_projected_s": t_p3, "raw_mb": m_raw, "tolerance_mb": m_tol,
             "raw_triangles": n_raw, "tolerance_triangles": n_tol, "coarse_projected_triangles": n_p3,
             "raw_max_mm": dev_raw[0], "raw_rms_mm": dev_raw[1], "tolerance_max_mm": dev_tol[0],
             "tolerance_rms_mm": dev_tol[1], "coarse_projected_max_mm": dev_p3[0],

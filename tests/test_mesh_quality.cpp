@@ -1494,16 +1494,19 @@ std::pair<nlohmann::json, std::string> runTolerance(const std::string& text, con
 
 }  // namespace
 
-/// The acceptance gyroid (network, 30 %, 10 mm cells, 0.1 mm voxels) in the box from the origin
-/// to @a corner ("x, y, z"), meshed to `a.stl` with @a tolerance.
-std::string gyroidToleranceRecipe(const std::string& corner, double tolerance, const std::string& meshKeys = "")
+/// The acceptance gyroid (network, 30 %, 0.1 mm voxels; cells of @a cell mm, 10 by default) in the
+/// box from the origin to @a corner ("x, y, z"), meshed to `a.stl` with @a tolerance.
+std::string gyroidToleranceRecipe(const std::string& corner, double tolerance, const std::string& meshKeys = "",
+                                  double cell = 10.0)
 {
     return "voxel: 0.1\n"
            "domain: {box: [[0, 0, 0], [" +
            corner +
            "]]}\n"
            "fields:\n"
-           "  lattice: {tpms: gyroid, cell: 10, solid: network, density: 0.3}\n"
+           "  lattice: {tpms: gyroid, cell: " +
+           formatNumber(cell) +
+           ", solid: network, density: 0.3}\n"
            "result: lattice\n"
            "outputs: {mesh: {file: a.stl, tolerance: " +
            formatNumber(tolerance) + meshKeys + "}}\n";
@@ -1705,14 +1708,7 @@ TEST(CoarseExtraction, ARefinementThatLeavesTrianglesOverFallsBackToAFinerGrid)
     // grazes a box face keep sides no split can take without folding a piece (nor a flip mend);
     // the trial is rejected with its numbers and the grid half as coarse is refined instead.
     test::TempDir dir;
-    const std::string text =
-        "voxel: 0.1\n"
-        "domain: {box: [[0, 0, 0], [10, 10, 10]]}\n"
-        "fields:\n"
-        "  lattice: {tpms: gyroid, cell: 5, solid: network, density: 0.3}\n"
-        "result: lattice\n"
-        "outputs: {mesh: {file: a.stl, tolerance: 0.01}}\n";
-    Job job(parseRecipe(text, "r.yaml", dir.path));
+    Job job(parseRecipe(gyroidToleranceRecipe("10, 10, 10", 0.01, "", 5.0), "r.yaml", dir.path));
     job.writeOutputs(dir.path / "out", false);
     const nlohmann::json r = job.report();
     const nlohmann::json& x = r["mesh"]["extraction"];

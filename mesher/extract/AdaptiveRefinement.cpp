@@ -327,7 +327,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
     std::vector<Checked> checked(mesh.triangles.size());
     // The rounds' tables, kept from round to round so their memory is used again: fresh pages
     // cost their clearing by the kernel, which varied W9's refinement from 0.4 to 0.75 s.
-    std::vector<std::uint8_t> over, isFailing, isTouched, endpoint, isPending, folding, nextAttempts;
+    std::vector<std::uint8_t> over, checkAgain, isTouched, endpoint, isPending, folding, nextAttempts;
     std::vector<std::int8_t> choice;
     // Per triangle its edges' slots in the split edges (-1: not split).
     std::vector<std::array<std::int32_t, 3>> slots;
@@ -408,7 +408,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             for (const Checked& c : checked) stats.maxBefore = std::max(stats.maxBefore, double(c.largest));
         split.clear();
         failing.clear();
-        isFailing.assign(mesh.triangles.size(), 0);
+        checkAgain.assign(mesh.triangles.size(), 0);
         // A triangle whose split was dropped before (a needle of marching cubes, whose long sides
         // fold a piece when split) has its longest edge flipped first where that makes the pair
         // rounder; the flipped pair is checked next round.
@@ -419,16 +419,16 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                 if (over[k] && (attempts[pending[k]] > 0 || choice[k] < 0)) candidates.push_back(pending[k]);
             const std::vector<std::uint32_t> flipped = flipLongestEdges(mesh, points, candidates, options.box);
             flips = flipped.size() / 2;
-            stats.flips += flipped.size() / 2;
-            // isFailing: checked next round (a flipped triangle is not split this round: its
-            // chosen edge may be gone).
+            stats.flips += flips;
+            // Checked next round (a flipped triangle is not split this round: its chosen edge may be
+            // gone).
             for (std::uint32_t t : flipped) {
-                isFailing[t] = 1;
+                checkAgain[t] = 1;
                 attempts[t] = 0;
             }
         }
         for (std::size_t k = 0; k < pending.size(); ++k) {
-            if (!over[k] || isFailing[pending[k]]) continue;
+            if (!over[k] || checkAgain[pending[k]]) continue;
             if (choice[k] < 0) {
                 ++stats.remaining;
                 continue;
@@ -436,7 +436,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             const std::uint32_t t = pending[k];
             const openvdb::Vec3I& tri = mesh.triangles[t];
             failing.push_back(t);
-            isFailing[t] = 1;
+            checkAgain[t] = 1;
             const int i = choice[k];
             split.push_back(edgeKey(tri[i], tri[(i + 1) % 3]));
         }
@@ -446,7 +446,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             ++stats.rounds;
             pending.clear();
             for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
-                if (isFailing[t]) pending.push_back(std::uint32_t(t));
+                if (checkAgain[t]) pending.push_back(std::uint32_t(t));
             continue;
         }
         ++stats.rounds;
@@ -464,8 +464,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             // A midpoint on two faces (a box edge) inside the solid stays where it is: the box's
             // edge is its boundary there, and straight. Outside (the surface crosses the box's
             // edge between the ends), it goes along the box's edge onto the surface as the others
-            // go (both other axes held): kept at the midpoint, it was off the surface, and the
-            // triangles around it were split round after round without end.
+            // go (both other axes held): at the midpoint it would be off the solid's boundary.
             std::vector<std::uint32_t> onEdge;
             std::vector<Vec3d> middle;
             for (std::size_t e = 0; e < m; ++e)
@@ -609,7 +608,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                 if (offset[t + 1] - o == 1) {
                     triangles[o] = tri;
                     nextAttempts[o] = attempts[t];
-                    isPending[o] = isFailing[t];
+                    isPending[o] = checkAgain[t];
                     nextChecked[o] = checked[t];
                     continue;
                 }
