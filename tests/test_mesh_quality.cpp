@@ -886,6 +886,92 @@ TEST(MeshCheck, SelfIntersectionsWithASharedCorner)
     EXPECT_EQ(countSelfIntersections(pair({1.5f, 1.5f, -1.0f}, {1.5f, 1.5f, 1.0f})), 1u);
 }
 
+/// Crossing pairs of @a mesh by brute force with crossesByVolumes(): every pair sharing at most
+/// one corner, with the edges away from a shared corner.
+std::size_t bruteForceCrossings(const TriangleMesh& mesh)
+{
+    std::size_t crossings = 0;
+    for (std::size_t i = 0; i < mesh.triangles.size(); ++i)
+        for (std::size_t j = i + 1; j < mesh.triangles.size(); ++j) {
+            const openvdb::Vec3I s = mesh.triangles[i], t = mesh.triangles[j];
+            int shared = 0;
+            for (int x = 0; x < 3; ++x)
+                for (int y = 0; y < 3; ++y) shared += s[x] == t[y];
+            if (shared >= 2) continue;
+            auto away = [](const openvdb::Vec3I& tri, const openvdb::Vec3I& other, int e) {
+                for (int y = 0; y < 3; ++y)
+                    if (tri[e] == other[y] || tri[(e + 1) % 3] == other[y]) return false;
+                return true;
+            };
+            bool cross = false;
+            for (int e = 0; e < 3 && !cross; ++e)
+                cross = (away(s, t, e) && crossesByVolumes(at(mesh, s[e]), at(mesh, s[(e + 1) % 3]), at(mesh, t[0]),
+                                                           at(mesh, t[1]), at(mesh, t[2]))) ||
+                        (away(t, s, e) && crossesByVolumes(at(mesh, t[e]), at(mesh, t[(e + 1) % 3]), at(mesh, s[0]),
+                                                           at(mesh, s[1]), at(mesh, s[2])));
+            crossings += cross;
+        }
+    return crossings;
+}
+
+TEST(MeshCheck, AFanWoundTwiceStillHasItsCrossingsFound)
+{
+    // Pairs sharing a corner whose fan winds once around it (seen along the sum of its normals)
+    // are not tested: they cannot meet but at the corner. A fan wound twice (a spiral of eight
+    // quarter turns, closed back down to its start) has every sector turning the right way, yet
+    // crosses itself: its pairs are tested, and the count is the brute force's.
+    auto fan = [](int turns) {
+        TriangleMesh m;
+        m.points.push_back(openvdb::Vec3f(0.0f));
+        const int rays = 4 * turns;
+        for (int i = 0; i < rays; ++i) {
+            // Quarter turns and heights made uneven, so that no edge meets another exactly.
+            const double angle = 0.5 * std::numbers::pi * i * (1.0 + 0.05 * (i % 3 - 1));
+            m.points.emplace_back(float(std::cos(angle)), float(std::sin(angle)), float(0.1 * i + 0.013 * (i % 2)));
+        }
+        for (int i = 0; i < rays; ++i) m.triangles.emplace_back(0, 1 + i, 1 + (i + 1) % rays);
+        return m;
+    };
+    const TriangleMesh twice = fan(2);
+    const std::size_t brute = bruteForceCrossings(twice);
+    EXPECT_GT(brute, 0u);
+    EXPECT_EQ(countSelfIntersections(twice), brute);
+    EXPECT_EQ(selfIntersections(twice, std::vector<uint8_t>(twice.triangles.size(), 1)).size(), brute);
+    // Wound once (a square pyramid's four sides, its top pulled up one side): nothing crosses.
+    const TriangleMesh once = fan(1);
+    EXPECT_EQ(bruteForceCrossings(once), 0u);
+    EXPECT_EQ(countSelfIntersections(once), 0u);
+}
+
+TEST(MeshCheck, FoldsOfAClosedMeshAreFoundAsByBruteForce)
+{
+    // A sphere's marching-cubes mesh (every fan wound once) with vertices pushed along the surface
+    // past their neighbours: the folds cross triangles that share a corner with them and triangles
+    // that do not. The fans left whole are not tested pair by pair; the count must still be the
+    // brute force's over all pairs.
+    const TriangleMesh sphere =
+        marchingCubesOf(Sphere(Vec3d(2.5), 1.6), Domain::fromBox(Box3{Vec3d(0.0), Vec3d(5.0)}, 0.4));
+    ASSERT_EQ(countSelfIntersections(sphere), 0u);
+    std::mt19937 rng(20261128);
+    std::size_t total = 0;
+    for (int round = 0; round < 4; ++round) {
+        TriangleMesh mesh = sphere;
+        std::uniform_int_distribution<std::size_t> pick(0, mesh.points.size() - 1);
+        std::uniform_real_distribution<float> push(-0.9f, 0.9f);
+        for (int k = 0; k < 6; ++k) {
+            openvdb::Vec3f& p = mesh.points[pick(rng)];
+            const openvdb::Vec3f radial = (p - openvdb::Vec3f(2.5f)).unitSafe();
+            openvdb::Vec3f along(push(rng), push(rng), push(rng));
+            along -= radial * along.dot(radial);  // along the surface, mostly
+            p += along + radial * (0.1f * push(rng));
+        }
+        const std::size_t brute = bruteForceCrossings(mesh);
+        EXPECT_EQ(countSelfIntersections(mesh), brute) << "round " << round;
+        total += brute;
+    }
+    EXPECT_GT(total, 20u);
+}
+
 TEST(MeshCheck, SelfIntersectionsMatchPairwiseChecksOnRandomMeshes)
 {
     // Random small meshes with many crossings and corners and edges shared, half of them on an
