@@ -1788,6 +1788,43 @@ TEST(CoarseExtraction, ASmoothResultIsRefinedFromTheCoarsestGridWithinTheToleran
     EXPECT_LT(m.triangles.size(), 2 * m2.triangles.size());
 }
 
+TEST(CoarseExtraction, TheRecipesGridIsFreedOnlyWhenNothingAfterReadsIt)
+{
+    // A tolerance mesh on a coarse grid frees the recipe's grid once its pieces are counted, so
+    // that its tables take the grid's memory, unless an output after it reads the grid (a VDB, a
+    // mesh made otherwise). Asked for again, the grid is evaluated again: the same grid.
+    const std::string base = gyroidToleranceRecipe("12, 12, 12", 0.02);
+    auto freed = [](const nlohmann::json& r) { return r["timings_s"].contains("free the recipe's grid"); };
+    test::TempDir dir;
+    Job alone(parseRecipe(base, "r.yaml", dir.path));
+    alone.writeOutputs(dir.path / "alone", false);
+    EXPECT_TRUE(freed(alone.report()));
+    Job kept(parseRecipe(base, "r.yaml", dir.path));
+    const openvdb::FloatGrid& before = kept.grid();
+    const openvdb::Index64 voxels = before.activeVoxelCount(), leaves = before.tree().leafCount();
+    const openvdb::FloatGrid& again = alone.grid();
+    EXPECT_EQ(again.activeVoxelCount(), voxels);
+    EXPECT_EQ(again.tree().leafCount(), leaves);
+    // A VDB or a raw mesh after it: kept.
+    const std::string outputs = "outputs: {mesh: {file: a.stl, tolerance: 0.02}}\n";
+    auto with = [&](const std::string& replacement) {
+        std::string text = base;
+        text.replace(text.find(outputs), outputs.size(), replacement);
+        return text;
+    };
+    for (const std::string later : {"outputs: {mesh: {file: a.stl, tolerance: 0.02}, vdb: b.vdb}\n",
+                                    "outputs: {mesh: [{file: a.stl, tolerance: 0.02}, c.stl]}\n"}) {
+        Job job(parseRecipe(with(later), "r.yaml", dir.path));
+        job.writeOutputs(dir.path / "kept", false);
+        EXPECT_FALSE(freed(job.report())) << later;
+    }
+    // A raw mesh before it: freed (nothing after reads it).
+    Job first(parseRecipe(with("outputs: {mesh: [c.stl, {file: a.stl, tolerance: 0.02}]}\n"), "r.yaml", dir.path));
+    first.writeOutputs(dir.path / "first", false);
+    EXPECT_TRUE(freed(first.report()));
+    EXPECT_TRUE(std::filesystem::exists(dir.path / "first/c.stl"));
+}
+
 TEST(CoarseExtraction, ARefinementThatLeavesTrianglesOverFallsBackToAFinerGrid)
 {
     // A gyroid of 5 mm cells in a 10 mm box at 0.01 mm: at 0.4 mm a few triangles where the surface

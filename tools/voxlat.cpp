@@ -346,6 +346,7 @@ int main(int argc, char** argv)
                         "or --refine");
             }
             voxlat::Job job(std::move(recipe), &context);
+            job.setGridReleasable(true);  // nothing after the mesh reads the grid
             job.writeMesh(meshFile, options);
             printSummary(job);
         } else if (*info) {

@@ -413,7 +413,7 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
     for (const auto& v : mMeshes)
         if (v->options == options && v->mesh) return *v;
     if (options.tolerance) checkTolerance(options);
-    const openvdb::FloatGrid& g = grid();
+    grid();  // its pieces and volume go into the report; the meshers below ask for it again
     auto v = std::make_unique<MeshVariant>();
     v->options = options;
     const auto raw = std::find_if(mMeshes.begin(), mMeshes.end(), [&](const auto& m) {
@@ -446,13 +446,13 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         v->mesh = timed("mesh", [&] {
             StageProgress progress(mContext, "meshing (bcc)", 1000);
             std::atomic<std::uint64_t> last{0};
-            return std::make_unique<TriangleMesh>(bccTetrahedra(g, *field, 0.0f, feed(progress, last)));
+            return std::make_unique<TriangleMesh>(bccTetrahedra(grid(), *field, 0.0f, feed(progress, last)));
         });
     } else {
         v->mesh = timed("mesh", [&] {
             StageProgress progress(mContext, "meshing", 1000);
             std::atomic<std::uint64_t> last{0};
-            return std::make_unique<TriangleMesh>(marchingCubes(g, 0.0f, feed(progress, last)));
+            return std::make_unique<TriangleMesh>(marchingCubes(grid(), 0.0f, feed(progress, last)));
         });
     }
     TriangleMesh& m = *v->mesh;
@@ -763,8 +763,15 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
 {
     const double tolerance = *options.tolerance;
     voxel = mDomain.voxel;
-    grid();  // the recipe's grid: its pieces are what the coarse mesh must keep
+    if (!mReport.contains("pieces")) grid();  // the recipe's grid: its pieces are what the coarse mesh must keep
     const std::uint64_t finePieces = mReport["pieces"]["count"].get<std::uint64_t>();
+    // Freed before the coarse grids and the refinement, which then reuse its memory (nothing after
+    // this mesh reads it; asked again, it is evaluated again).
+    if (mGridReleasable && mGrid)
+        timed("free the recipe's grid", [&] {
+            mGrid.reset();
+            return 0;
+        });
     // The smallest feature a node knows must span at least three coarse voxels (two resolve it
     // on the grid; the third is the margin for its position between the samples).
     int k = kMaxCoarsening;
@@ -1083,14 +1090,28 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
                 return false;
         return std::none_of(mMeshes.begin(), mMeshes.end(), [&](const auto& v) { return v->options == options; });
     };
+    // Whether an output after the n-th may read the recipe's grid: a VDB, or a mesh made otherwise
+    // (the preview's mesh is the first one's, held by then).
+    auto gridNeededAfter = [&](std::size_t n) {
+        const MeshOptions options = meshOptions(mRecipe.outputs[n], mRecipe);
+        for (std::size_t m = n + 1; m < mRecipe.outputs.size(); ++m) {
+            const OutputSpec& later = mRecipe.outputs[m];
+            if (later.kind == "vdb" || (later.kind == "mesh" && !(meshOptions(later, mRecipe) == options))) return true;
+        }
+        return false;
+    };
     for (std::size_t n = 0; n < mRecipe.outputs.size(); ++n) {
         const OutputSpec& out = mRecipe.outputs[n];
         const std::filesystem::path& path = paths[n];
         if (out.kind == "mesh") {
-            if (onlyUse(n))
+            if (onlyUse(n)) {
                 writeStlWhileMeshing(path);
-            else
+            } else {
+                const bool releasable = mGridReleasable;
+                mGridReleasable = !gridNeededAfter(n);
                 writeMesh(path, meshOptions(out, mRecipe));
+                mGridReleasable = releasable;
+            }
         } else if (out.kind == "vdb") {
             const openvdb::FloatGrid& g = grid();
             timed("write " + out.file, [&] {

@@ -40,8 +40,14 @@ public:
     void solveLevels();
     /// A named field, with its levels solved.
     FieldPtr field(const std::string& name);
-    /// The sparse grid of the result clipped to the domain (negative inside), evaluated once.
+    /// The sparse grid of the result clipped to the domain (negative inside), evaluated once (and
+    /// again if a tolerance mesh freed it, see setGridReleasable()).
     const openvdb::FloatGrid& grid();
+    /// Whether a tolerance mesh made on a coarser grid may free the recipe's grid once its pieces
+    /// are counted (nothing after it reads the grid): the mesh's tables then take the grid's memory
+    /// instead of fresh pages (W9's peak 515 -> 380 MB, the raw run's). writeOutputs() decides it
+    /// per output from the outputs after it; `voxlat mesh` sets it.
+    void setGridReleasable(bool releasable) { mGridReleasable = releasable; }
     /// The watertight mesh of the grid (marching cubes), built once.
     const TriangleMesh& mesh() { return mesh(MeshOptions{}); }
     /// The mesh made with @a options, built once per options: marching cubes on the grid, then
@@ -104,6 +110,7 @@ private:
     FieldPtr mResult;
     bool mSolved = false;
     openvdb::FloatGrid::Ptr mGrid;
+    bool mGridReleasable = false;
     FieldPtr mSurfaceField, mDistanceField;
 
     /// One mesh the job made, with what report.json says about it.
