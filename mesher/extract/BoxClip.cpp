@@ -52,13 +52,17 @@ struct Work {
 };
 
 /// Moves each of @a vertices onto the level set within the faces it lies on (those coordinates
-/// are held), by Newton steps; a vertex that does not converge within maxMove, or leaves the box
-/// through one of the first @a cutFaces faces, keeps its position. Returns the new positions (the old ones where not
-/// moved).
+/// are held, and the axes in @a heldAxes, one set of bits per vertex, if given), by Newton steps;
+/// a vertex that does not converge within maxMove, or leaves the box through one of the first
+/// @a cutFaces faces, keeps its position. Returns the new positions (the old ones where not
+/// moved); @a leftAxes (if given) gets per vertex the axes of the cut faces it converged beyond.
 std::vector<Vec3d> newtonInFaces(const Work& w, const std::vector<std::uint32_t>& vertices, const FieldNode& field,
                                  const Box3& box, int cutFaces, const BoxClipOptions& o,
-                                 std::vector<std::uint8_t>& converged)
+                                 std::vector<std::uint8_t>& converged,
+                                 const std::vector<std::uint8_t>* heldAxes = nullptr,
+                                 std::vector<std::uint8_t>* leftAxes = nullptr)
 {
+    if (leftAxes) leftAxes->assign(vertices.size(), 0);
     std::vector<Vec3d> out(vertices.size());
     converged.assign(vertices.size(), 0);
     const std::size_t chunks = (vertices.size() + kBatchSize - 1) / kBatchSize;
@@ -87,7 +91,7 @@ std::vector<Vec3d> newtonInFaces(const Work& w, const std::vector<std::uint32_t>
                     const std::uint8_t held = w.faces[vertices[begin + k]];
                     Vec3d g = grad[j];
                     for (int a = 0; a < 3; ++a)
-                        if (held >> (2 * a) & 3u) g[a] = 0.0;
+                        if ((held >> (2 * a) & 3u) || (heldAxes && ((*heldAxes)[begin + k] >> a & 1u))) g[a] = 0.0;
                     const double r = value[j] - o.level, g2 = g.lengthSqr();
                     if (!(g2 > 0.0)) continue;
                     if (std::abs(r) / std::sqrt(g2) <= o.tolerance) {
@@ -106,7 +110,10 @@ std::vector<Vec3d> newtonInFaces(const Work& w, const std::vector<std::uint32_t>
                 bool good = done[k] && (x[k] - start).length() <= o.maxMove;
                 // Inside the faces cut already (the later ones cut what passes them).
                 for (int f = 0; f < cutFaces && good; ++f)
-                    if (!(w.faces[vertices[begin + k]] >> f & 1u)) good = outside(x[k], box, f) <= 0.0;
+                    if (!(w.faces[vertices[begin + k]] >> f & 1u) && !(outside(x[k], box, f) <= 0.0)) {
+                        good = false;
+                        if (leftAxes) (*leftAxes)[begin + k] |= std::uint8_t(1u << (f / 2));
+                    }
                 out[begin + k] = good ? x[k] : start;
                 converged[begin + k] = good;
             }
@@ -188,8 +195,31 @@ void cutByFace(Work& w, int face, const FieldNode& field, const Box3& box, const
     if (created.empty()) return;
 
     // The crease points onto the surface within the face, unless a piece would turn over.
-    std::vector<std::uint8_t> accept;
-    const std::vector<Vec3d> moved = newtonInFaces(w, created, field, box, face, o, accept);
+    std::vector<std::uint8_t> accept, left;
+    std::vector<Vec3d> moved = newtonInFaces(w, created, field, box, face, o, accept, nullptr, &left);
+    {
+        // A point whose way onto the surface leaves the box through a face cut before (the
+        // surface meets this face just past a box edge, W9 at 0.5 mm) goes again with that axis
+        // held too: onto the crease beside the edge, inside (else left on the straight edge,
+        // off the surface by up to 0.011 mm there).
+        std::vector<std::uint32_t> again;
+        std::vector<std::uint8_t> axes;
+        std::vector<std::size_t> slot;
+        for (std::size_t k = 0; k < created.size(); ++k)
+            if (!accept[k] && left[k]) {
+                again.push_back(created[k]);
+                axes.push_back(left[k]);
+                slot.push_back(k);
+            }
+        if (!again.empty()) {
+            std::vector<std::uint8_t> acceptAgain;
+            const std::vector<Vec3d> movedAgain = newtonInFaces(w, again, field, box, face, o, acceptAgain, &axes);
+            for (std::size_t j = 0; j < again.size(); ++j) {
+                moved[slot[j]] = movedAgain[j];
+                accept[slot[j]] = acceptAgain[j];
+            }
+        }
+    }
     const std::uint32_t firstNew = created.front();
     auto position = [&](std::uint32_t v) {
         return v >= firstNew && accept[v - firstNew] ? moved[v - firstNew] : w.points[v];
