@@ -967,6 +967,12 @@ TEST(MeshCheck, FoldsOfAClosedMeshAreFoundAsByBruteForce)
         }
         const std::size_t brute = bruteForceCrossings(mesh);
         EXPECT_EQ(countSelfIntersections(mesh), brute) << "round " << round;
+        // The same with the fans checkTopology() shows apart (most of them: the rest are tested).
+        std::vector<uint8_t> apart;
+        checkTopology(mesh, &apart);
+        ASSERT_EQ(apart.size(), mesh.points.size());
+        EXPECT_GT(std::count(apart.begin(), apart.end(), 1), std::ptrdiff_t(0.8 * double(apart.size())));
+        EXPECT_EQ(countSelfIntersections(mesh, apart), brute) << "round " << round;
         total += brute;
     }
     EXPECT_GT(total, 20u);

@@ -428,8 +428,9 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
     // A smooth result meets only the domain box: meshed past it and cut by its faces, its creases
     // there are exact (no chamfers), at any voxel.
     std::optional<BoxClipStats> boxCut;
+    std::optional<MeshTopology> topology;  // a refined mesh's, checked with its crossings
     if (options.project && options.extractor == MeshExtractor::MarchingCubes) {
-        if (options.tolerance) v->mesh = coarseMesh(options, extraction, meshVoxel, projected, boxCut);
+        if (options.tolerance) v->mesh = coarseMesh(options, extraction, meshVoxel, projected, boxCut, topology);
         if (!v->mesh && smoothResult()) {
             meshVoxel = mDomain.voxel;
             v->mesh = clippedMesh(mDomain.voxel, projected, boxCut);
@@ -587,7 +588,7 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         }
         report["deviation"] = {
             {"max_mm", dev.max}, {"rms_mm", dev.rms}, {"samples", dev.samples}, {"measure", measure}};
-        const MeshTopology t = checkTopology(m);
+        const MeshTopology t = topology ? *topology : checkTopology(m);
         report["closed_manifold"] = t.closedManifold();
         report["euler_characteristic"] = t.eulerCharacteristic;
         report["pieces"] = t.pieces;
@@ -759,7 +760,8 @@ std::optional<double> Job::probeChordError(double h)
 }
 
 std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohmann::json& extraction, double& voxel,
-                                              ProjectionStats& projection, std::optional<BoxClipStats>& boxCut)
+                                              ProjectionStats& projection, std::optional<BoxClipStats>& boxCut,
+                                              std::optional<MeshTopology>& topology)
 {
     const double tolerance = *options.tolerance;
     voxel = mDomain.voxel;
@@ -856,8 +858,12 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
             // Kept when no triangle is left above the tolerance and none cross (a mesh it did not
             // change goes on as one whose chord error is within the tolerance).
             const AdaptiveRefinementStats& r = *refinement;
+            // Its topology (for the report) first: the fans it walks show most corner-sharing pairs
+            // apart for the crossing check.
+            std::vector<std::uint8_t> fansApart;
+            topology = timed("check topology", [&] { return checkTopology(*mesh, &fansApart); });
             const std::size_t crossing =
-                timed("check self-intersections", [&] { return countSelfIntersections(*mesh); });
+                timed("check self-intersections", [&] { return countSelfIntersections(*mesh, fansApart); });
             trial["refinement"] = {{"triangles_before", r.trianglesBefore},
                                    {"triangles_after", r.trianglesAfter},
                                    {"edges_split", r.splits},
@@ -871,6 +877,7 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
                                    {"rms_deviation_mm", r.rmsDeviation},
                                    {"deviation_samples", r.deviationSamples}};
             trials.push_back(trial);
+            if (r.remaining != 0 || crossing != 0) topology.reset();
             if (r.remaining == 0 && crossing == 0) {
                 voxel = h;
                 extraction = {{"voxel_mm", h},

@@ -129,9 +129,11 @@ private:
     /// coarser than the recipe's, evaluated from surfaceField(), with its vertices projected
     /// (@a projection), when a k > 1 keeps the pieces, the smallest known feature (at least three
     /// coarse voxels) and a chord error within the tolerance; else null. What was chosen and why
-    /// goes into @a extraction; @a voxel is set to the voxel the mesh was extracted at.
+    /// goes into @a extraction; @a voxel is set to the voxel the mesh was extracted at; a refined
+    /// mesh's topology (checked with its crossings) goes into @a topology.
     std::unique_ptr<TriangleMesh> coarseMesh(const MeshOptions& options, nlohmann::json& extraction, double& voxel,
-                                             ProjectionStats& projection, std::optional<BoxClipStats>& boxCut);
+                                             ProjectionStats& projection, std::optional<BoxClipStats>& boxCut,
+                                             std::optional<MeshTopology>& topology);
     /// The chord error (as coarseMesh() measures it) of the result meshed at voxel @a h and
     /// projected, in a probe box of 32 such voxels at the domain's centre on the full coarse grid
     /// (its inner triangles are the full mesh's); nullopt when such a box

@@ -90,6 +90,67 @@ bool closedFan(const Corner* row, std::size_t n)
     return early == 0 && step[current] == 0;
 }
 
+/// Whether the fan of triangles around vertex @a v (@a row: each triangle with corner v as the
+/// corners after v in its order, all of them) lies
+/// apart but for v: no two of them that share only v meet anywhere else, so none need the pair
+/// test. Shown by a projection: along n, the sum of the fan's normals, every triangle projects
+/// with a positive area (beyond a margin far above the roundings), the triangles chain around
+/// v (corner after v of one is the corner before v of the next, one closed cycle) and the chain
+/// winds around v once. Then the projected triangles are sectors of angles below pi that tile
+/// the plane around v's image once: two that do not share an edge meet only in v's image, which
+/// each triangle covers only at v. A fan wound twice (a fold), open (a boundary) or not one
+/// cycle is not shown apart, and its pairs are tested.
+bool fanApart(const std::vector<openvdb::Vec3f>& points, uint32_t v, const Corner* row, std::size_t k)
+{
+    constexpr std::size_t kMost = 32;
+    if (k < 3 || k > kMost) return false;
+    const openvdb::Vec3d centre(points[v]);
+    // Each triangle's corners after v in its own order: the ray it starts from and the one it ends at.
+    std::array<uint32_t, kMost> from, to;
+    openvdb::Vec3d n(0.0);
+    for (std::size_t i = 0; i < k; ++i) {
+        from[i] = row[i].next;
+        to[i] = row[i].prev;
+        if (from[i] == v || to[i] == v || from[i] == to[i]) return false;
+        n += (openvdb::Vec3d(points[from[i]]) - centre).cross(openvdb::Vec3d(points[to[i]]) - centre);
+    }
+    // The rays in chain order: the next triangle starts where this one ends (one only).
+    std::array<openvdb::Vec3d, kMost + 1> ray;
+    std::array<bool, kMost> used{};
+    std::size_t current = 0;
+    used[0] = true;
+    ray[0] = openvdb::Vec3d(points[from[0]]) - centre;
+    for (std::size_t step = 1; step <= k; ++step) {
+        ray[step] = openvdb::Vec3d(points[to[current]]) - centre;
+        if (step == k) break;
+        std::size_t next = kMost;
+        for (std::size_t j = 0; j < k; ++j)
+            if (from[j] == to[current]) {
+                if (next != kMost || used[j]) return false;
+                next = j;
+            }
+        if (next == kMost) return false;
+        used[next] = true;
+        current = next;
+    }
+    if (to[current] != from[0]) return false;
+    // Turns as seen along n: the sectors, then whether any but the last reaches the first ray
+    // again. Margins compared squared: |turn| > 1e-9 |n| |u| |w|.
+    const double n2 = 1e-18 * n.lengthSqr();
+    std::array<double, kMost + 1> length2;
+    for (std::size_t i = 0; i <= k; ++i) length2[i] = ray[i].lengthSqr();
+    auto turn = [&](std::size_t i, std::size_t j) { return n.dot(ray[i].cross(ray[j])); };
+    auto clear = [&](double t, std::size_t i, std::size_t j) { return t * t > n2 * length2[i] * length2[j]; };
+    for (std::size_t i = 0; i < k; ++i)
+        if (const double t = turn(i, i + 1); !(t > 0.0 && clear(t, i, i + 1))) return false;
+    for (std::size_t i = 1; i + 1 < k; ++i) {
+        const double in = turn(i, 0), out = turn(0, i + 1);
+        if (!(clear(in, i, 0) && clear(out, 0, i + 1))) return false;
+        if (in > 0.0 && out > 0.0) return false;  // the first ray again: wound more than once
+    }
+    return true;
+}
+
 /// Union-find over vertices shared by threads: a root is linked (by compare-and-swap) only
 /// under a lower root, so each set's root is its lowest vertex whatever order the unions come
 /// in; path halving only shortens paths to an ancestor.
@@ -124,7 +185,7 @@ uint32_t findRoot(std::vector<uint32_t>& parent, uint32_t i)
 
 }  // namespace
 
-MeshTopology checkTopology(const TriangleMesh& mesh)
+MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansApart)
 {
     MeshTopology result;
     const std::size_t numPoints = mesh.points.size(), numTriangles = mesh.triangles.size();
@@ -208,6 +269,9 @@ MeshTopology checkTopology(const TriangleMesh& mesh)
     // any of its edges is open or non-manifold.
     std::vector<int64_t> ownedChi(numPoints, 0);
     std::vector<uint8_t> ownedBad(numPoints, 0);
+    // Whether each closed fan lies apart (fanApart()), when every triangle is in the rows.
+    if (fansApart) fansApart->assign(numPoints, 0);
+    const bool everyFanWhole = fansApart && numValid == numTriangles;
 
     const Tally tally = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, numPoints, 1024), Tally{},
@@ -222,6 +286,7 @@ MeshTopology checkTopology(const TriangleMesh& mesh)
                 int64_t owned = 1;
                 for (std::size_t i = 0; i < n; ++i) owned += row[i].next > v && row[i].prev > v;
                 if (closedFan(row, n)) {
+                    if (everyFanWhole) (*fansApart)[v] = fanApart(mesh.points, uint32_t(v), row, n);
                     // Each neighbour is one triangle's next and another's prev: two triangles per
                     // edge, opposite directions, the link one cycle.
                     for (std::size_t i = 0; i < n; ++i)
@@ -450,71 +515,9 @@ inline float floatAbove(float x)
 /// not gathered yet.
 constexpr uint32_t kNotGathered = std::numeric_limits<uint32_t>::max();
 
-/// Whether the fan of triangles around vertex @a v (@a fan: all triangles with corner v) lies
-/// apart but for v: no two of them that share only v meet anywhere else, so none need the pair
-/// test. Shown by a projection: along n, the sum of the fan's normals, every triangle projects
-/// with a positive area (beyond a margin far above the roundings), the triangles chain around
-/// v (corner after v of one is the corner before v of the next, one closed cycle) and the chain
-/// winds around v once. Then the projected triangles are sectors of angles below pi that tile
-/// the plane around v's image once: two that do not share an edge meet only in v's image, which
-/// each triangle covers only at v. A fan wound twice (a fold), open (a boundary) or not one
-/// cycle is not shown apart, and its pairs are tested.
-bool fanApart(const TriangleMesh& mesh, uint32_t v, const uint32_t* fan, std::size_t k)
-{
-    constexpr std::size_t kMost = 32;
-    if (k < 3 || k > kMost) return false;
-    const openvdb::Vec3d centre(mesh.points[v]);
-    // Each triangle's corners after v in its own order: the ray it starts from and the one it ends at.
-    std::array<uint32_t, kMost> from, to;
-    openvdb::Vec3d n(0.0);
-    for (std::size_t i = 0; i < k; ++i) {
-        const openvdb::Vec3I& tri = mesh.triangles[fan[i]];
-        const int at = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
-        from[i] = uint32_t(tri[(at + 1) % 3]);
-        to[i] = uint32_t(tri[(at + 2) % 3]);
-        if (from[i] == v || to[i] == v || from[i] == to[i]) return false;
-        n += (openvdb::Vec3d(mesh.points[from[i]]) - centre).cross(openvdb::Vec3d(mesh.points[to[i]]) - centre);
-    }
-    // The rays in chain order: the next triangle starts where this one ends (one only).
-    std::array<openvdb::Vec3d, kMost + 1> ray;
-    std::array<bool, kMost> used{};
-    std::size_t current = 0;
-    used[0] = true;
-    ray[0] = openvdb::Vec3d(mesh.points[from[0]]) - centre;
-    for (std::size_t step = 1; step <= k; ++step) {
-        ray[step] = openvdb::Vec3d(mesh.points[to[current]]) - centre;
-        if (step == k) break;
-        std::size_t next = kMost;
-        for (std::size_t j = 0; j < k; ++j)
-            if (from[j] == to[current]) {
-                if (next != kMost || used[j]) return false;
-                next = j;
-            }
-        if (next == kMost) return false;
-        used[next] = true;
-        current = next;
-    }
-    if (to[current] != from[0]) return false;
-    // Turns as seen along n: the sectors, then whether any but the last reaches the first ray
-    // again. Margins compared squared: |turn| > 1e-9 |n| |u| |w|.
-    const double n2 = 1e-18 * n.lengthSqr();
-    std::array<double, kMost + 1> length2;
-    for (std::size_t i = 0; i <= k; ++i) length2[i] = ray[i].lengthSqr();
-    auto turn = [&](std::size_t i, std::size_t j) { return n.dot(ray[i].cross(ray[j])); };
-    auto clear = [&](double t, std::size_t i, std::size_t j) { return t * t > n2 * length2[i] * length2[j]; };
-    for (std::size_t i = 0; i < k; ++i)
-        if (const double t = turn(i, i + 1); !(t > 0.0 && clear(t, i, i + 1))) return false;
-    for (std::size_t i = 1; i + 1 < k; ++i) {
-        const double in = turn(i, 0), out = turn(0, i + 1);
-        if (!(clear(in, i, 0) && clear(out, 0, i + 1))) return false;
-        if (in > 0.0 && out > 0.0) return false;  // the first ray again: wound more than once
-    }
-    return true;
-}
-
 /// Per vertex of @a mesh, fanApart() of its fan (1) or not (0); parallel, the same for any
 /// thread count (each fan in triangle order).
-std::vector<uint8_t> fansApart(const TriangleMesh& mesh)
+std::vector<uint8_t> fansApartOf(const TriangleMesh& mesh)
 {
     const std::size_t numPoints = mesh.points.size(), n = mesh.triangles.size();
     std::vector<std::atomic<uint32_t>> count(numPoints);
@@ -537,11 +540,18 @@ std::vector<uint8_t> fansApart(const TriangleMesh& mesh)
     });
     std::vector<uint8_t> apart(numPoints, 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numPoints, 4096), [&](const auto& r) {
+        std::vector<Corner> row;
         for (std::size_t v = r.begin(); v != r.end(); ++v) {
             uint32_t* fan = fans.data() + start[v];
             const std::size_t k = start[v + 1] - start[v];
             std::sort(fan, fan + k);
-            apart[v] = fanApart(mesh, uint32_t(v), fan, k);
+            row.clear();
+            for (std::size_t i = 0; i < k; ++i) {
+                const openvdb::Vec3I& tri = mesh.triangles[fan[i]];
+                const int at = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
+                row.push_back(Corner{tri[(at + 1) % 3], tri[(at + 2) % 3]});
+            }
+            apart[v] = fanApart(mesh.points, uint32_t(v), row.data(), k);
         }
     });
     return apart;
@@ -577,6 +587,13 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
 
 std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh& mesh,
                                                              const std::vector<std::uint8_t>& tested)
+{
+    return selfIntersections(mesh, tested, nullptr);
+}
+
+std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh& mesh,
+                                                             const std::vector<std::uint8_t>& tested,
+                                                             const std::vector<std::uint8_t>* fansApart)
 {
     const std::size_t n = mesh.triangles.size();
     if (n < 2) return {};
@@ -711,7 +728,8 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
     // Most pairs tested share a corner (W9: 7.0 M of 9.3 M); where that corner's fan lies apart,
     // they need no test. Left out of the local checks of a few flagged triangles, whose fans are
     // open (and whose vertices are a large mesh's).
-    const std::vector<uint8_t> apart = tested.empty() ? fansApart(mesh) : std::vector<uint8_t>();
+    const std::vector<uint8_t> computed = fansApart || !tested.empty() ? std::vector<uint8_t>() : fansApartOf(mesh);
+    const std::vector<uint8_t>& apart = fansApart ? *fansApart : computed;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, 1), [&](const auto& r) {
         // A cell's triangles gathered side by side (structure of arrays): the pairs of a cell
         // are its rows squared, each mostly a few comparisons.
@@ -861,6 +879,11 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
 std::size_t countSelfIntersections(const TriangleMesh& mesh)
 {
     return selfIntersections(mesh).size();
+}
+
+std::size_t countSelfIntersections(const TriangleMesh& mesh, const std::vector<std::uint8_t>& fansApart)
+{
+    return selfIntersections(mesh, {}, &fansApart).size();
 }
 
 }  // namespace voxlat

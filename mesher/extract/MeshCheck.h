@@ -44,7 +44,10 @@ struct MeshTopology {
 };
 
 /// Analyse the topology of @a mesh (parallel; O(triangles); the same result for any thread count).
-MeshTopology checkTopology(const TriangleMesh& mesh);
+/// With @a fansApart, also per vertex whether its fan is shown to lie apart (the crossing check's
+/// certificate, see countSelfIntersections(); all 0 where a triangle repeats a corner): the rows
+/// it walks anyway, so the crossing check after it need not build them again.
+MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<std::uint8_t>* fansApart = nullptr);
 
 /// Pairs of triangles of @a mesh that cross each other: an edge of one passes through the
 /// interior of the other. Pairs that share an edge are not tested; pairs that share one vertex
@@ -55,6 +58,8 @@ MeshTopology checkTopology(const TriangleMesh& mesh);
 /// tested, each pair once (in the lowest cell both boxes cover); parallel over fixed cell
 /// blocks, integer counts, so the same result for any thread count.
 std::size_t countSelfIntersections(const TriangleMesh& mesh);
+/// The same with the fans' certificate from checkTopology() (for this mesh as it is).
+std::size_t countSelfIntersections(const TriangleMesh& mesh, const std::vector<std::uint8_t>& fansApart);
 
 /// The crossing pairs countSelfIntersections() counts, as triangle indices (lower first), in a
 /// fixed order.
@@ -63,5 +68,10 @@ std::vector<std::pair<std::uint32_t, std::uint32_t>> selfIntersections(const Tri
 /// triangle; empty: all pairs): a local check of changed triangles among fixed ones.
 std::vector<std::pair<std::uint32_t, std::uint32_t>> selfIntersections(const TriangleMesh& mesh,
                                                                        const std::vector<std::uint8_t>& tested);
+/// The same with the fans' certificate given (from checkTopology(); null: computed when all pairs
+/// are tested, none used when some are flagged).
+std::vector<std::pair<std::uint32_t, std::uint32_t>> selfIntersections(const TriangleMesh& mesh,
+                                                                       const std::vector<std::uint8_t>& tested,
+                                                                       const std::vector<std::uint8_t>* fansApart);
 
 }  // namespace voxlat
