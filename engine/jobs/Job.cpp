@@ -627,7 +627,7 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
 
 namespace {
 /// The coarsest grid a tolerance mesh is tried at: k times the recipe's voxel.
-constexpr int kMaxCoarsening = 4;
+constexpr int kMaxCoarsening = 5;
 /// A coarse trial's probe: a cube of this many coarse voxels at the domain's centre.
 constexpr int kProbeVoxels = 32;
 /// The chord error is measured on at most about this many interior triangles (every n-th).
@@ -869,6 +869,7 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
                                    {"edges_split", r.splits},
                                    {"splits_dropped", r.dropped},
                                    {"edges_flipped", r.flips},
+                                   {"corners_moved", r.cornersMoved},
                                    {"rounds", r.rounds},
                                    {"triangles_left_over", r.remaining},
                                    {"abandoned", r.abandoned},
@@ -894,9 +895,11 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
             why = "at " + formatNumber(h) + " mm the refinement left " + std::to_string(r.remaining) +
                   " triangles above the tolerance and " + std::to_string(crossing) + " crossing pairs";
             trials.back()["rejected"] = why;
-            // Needles of the coarse mesh whose long sides cannot be bisected without folding a piece:
-            // a finer grid has fewer (W9-like cells of 5 and 7 mm need 0.2 mm).
-            k /= 2;
+            // Needles and slivers of the coarse mesh along the box's faces that no split or flip
+            // mends: a finer grid has fewer. From the coarsest, one step finer first (a gyroid of
+            // 6 mm cells in a 12 mm box: over at 0.5 mm, none at 0.4 mm), then half as coarse
+            // (cells of 5 and 7 mm need 0.2 mm).
+            k = k == kMaxCoarsening ? k - 1 : k / 2;
             continue;
         }
         trials.push_back(trial);

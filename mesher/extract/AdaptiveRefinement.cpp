@@ -334,6 +334,85 @@ std::vector<std::uint32_t> flipLongestEdges(TriangleMesh& mesh, const std::vecto
     return flipped;
 }
 
+/// Moves onto the surface (within the faces of @a box they lie on) the corners of the triangles
+/// in @a failing that lie on a face of the box but off the surface by more than the tolerance:
+/// crease points the box cut could not move without turning a piece over, whose triangles no
+/// split can bring within the tolerance. A corner moves only where none of its triangles turns
+/// over or loses its area (splits around it since may have made room). Returns the triangles
+/// around the corners moved (to be checked again); @a vertexDistance follows, @a count counts them.
+std::vector<std::uint32_t> moveFaceCornersOntoSurface(TriangleMesh& mesh, std::vector<Vec3d>& points,
+                                                      std::vector<double>& vertexDistance, const Solid& solid,
+                                                      const AdaptiveRefinementOptions& o,
+                                                      const std::vector<std::uint32_t>& failing, std::size_t& count)
+{
+    std::vector<std::uint32_t> around;
+    if (!o.box) return around;
+    // The corners, each once, in order of first appearance (the same for any thread count).
+    std::vector<std::uint32_t> corners;
+    std::vector<std::uint8_t> held;
+    std::vector<std::int32_t> slot(points.size(), -1);
+    for (std::uint32_t t : failing)
+        for (int i = 0; i < 3; ++i) {
+            const std::uint32_t v = mesh.triangles[t][i];
+            if (slot[v] >= 0 || !(std::abs(vertexDistance[v]) > o.tolerance)) continue;
+            std::uint8_t faces = 0;
+            for (int a = 0; a < 3; ++a)
+                if (onBoxPlane(points[v][a], *o.box, a)) faces |= std::uint8_t(1u << a);
+            if (faces == 0) continue;
+            slot[v] = std::int32_t(corners.size());
+            corners.push_back(v);
+            held.push_back(faces);
+        }
+    if (corners.empty()) return around;
+    std::vector<Vec3d> target(corners.size());
+    for (std::size_t c = 0; c < corners.size(); ++c) target[c] = points[corners[c]];
+    std::vector<std::uint8_t> accept;
+    placeOnSurface(solid, o, target, held, accept);
+    // Their triangles: none may turn over or lose its area with the corners moved (a corner of a
+    // triangle that would is held back, until none would).
+    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
+        if (slot[tri[0]] >= 0 || slot[tri[1]] >= 0 || slot[tri[2]] >= 0) around.push_back(std::uint32_t(t));
+    }
+    auto position = [&](std::uint32_t v) {
+        return slot[v] >= 0 && accept[std::size_t(slot[v])] ? target[std::size_t(slot[v])] : points[v];
+    };
+    for (bool changed = true; changed;) {
+        changed = false;
+        for (std::uint32_t t : around) {
+            const openvdb::Vec3I& tri = mesh.triangles[t];
+            const Vec3d n0 = (points[tri[1]] - points[tri[0]]).cross(points[tri[2]] - points[tri[0]]);
+            const Vec3d a = position(tri[0]), b = position(tri[1]), c = position(tri[2]);
+            const Vec3d n1 = (b - a).cross(c - a);
+            if (n1.dot(n0) > 0.0 && n1.length() > 1e-6 * n0.length()) continue;
+            for (int i = 0; i < 3; ++i)
+                if (slot[tri[i]] >= 0 && accept[std::size_t(slot[tri[i]])]) {
+                    accept[std::size_t(slot[tri[i]])] = 0;
+                    changed = true;
+                }
+        }
+    }
+    std::vector<Vec3d> moved;
+    for (std::size_t c = 0; c < corners.size(); ++c)
+        if (accept[c]) moved.push_back(target[c]);
+    const std::vector<double> movedDistance = solid.distances(moved);
+    std::size_t j = 0;
+    for (std::size_t c = 0; c < corners.size(); ++c) {
+        if (!accept[c]) continue;
+        points[corners[c]] = target[c];
+        mesh.points[corners[c]] = toFloat(target[c]);
+        vertexDistance[corners[c]] = movedDistance[j++];
+        ++count;
+    }
+    std::erase_if(around, [&](std::uint32_t t) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
+        for (int i = 0; i < 3; ++i)
+            if (slot[tri[i]] >= 0 && accept[std::size_t(slot[tri[i]])]) return false;
+        return true;
+    });
+    return around;
+}
+
 }  // namespace
 
 AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& field,
@@ -469,6 +548,18 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             // Checked next round (a flipped triangle is not split this round: its chosen edge may be
             // gone).
             for (std::uint32_t t : flipped) {
+                checkAgain[t] = 1;
+                attempts[t] = 0;
+            }
+            // Corners on a box face left off the surface, moved where their triangles now allow:
+            // those triangles are checked next round, not split this one.
+            std::vector<std::uint32_t> stuck;
+            for (std::size_t k = 0; k < pending.size(); ++k)
+                if (over[k] && !checkAgain[pending[k]]) stuck.push_back(pending[k]);
+            const std::vector<std::uint32_t> moved =
+                moveFaceCornersOntoSurface(mesh, points, vertexDistance, solid, options, stuck, stats.cornersMoved);
+            for (std::uint32_t t : moved) {
+                if (!checkAgain[t]) ++flips;  // counted with the flips: a change to check next round
                 checkAgain[t] = 1;
                 attempts[t] = 0;
             }

@@ -47,6 +47,9 @@ struct AdaptiveRefinementStats {
     /// Edges flipped: a triangle whose split was dropped (a needle) and the one across its
     /// longest edge, where the flip makes the pair rounder.
     std::size_t flips = 0;
+    /// Corners on a face of the box left off the surface (crease points the box cut could not
+    /// move without turning a piece over), moved onto it once their triangles allowed.
+    std::size_t cornersMoved = 0;
     /// Triangles still outside the tolerance at the end (none tried all three edges in vain).
     std::size_t remaining = 0;
     int rounds = 0;
