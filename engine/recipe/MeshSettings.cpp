@@ -21,7 +21,7 @@ const std::vector<KeySpec>& meshKeys()
          "none (no decimation)"},
         {"refine",
          {{"type", {"string", "boolean"}}},
-         "with `tolerance`, for a smooth result: on, meshed on a grid up to 4 times coarser than the recipe's and "
+         "with `tolerance`, for a smooth result: on, meshed on a grid up to 5 times coarser than the recipe's and "
          "its triangles bisected where they stray (fast); off, meshed on a grid fine enough for the tolerance and "
          "decimated (slower, about a third fewer triangles)",
          "on"},
