@@ -714,7 +714,11 @@ AdaptiveRefinementStats Job::refineCoarseMesh(TriangleMesh& mesh, double h, doub
 {
     std::vector<FieldPtr> operands;
     collectCreaseOperands(mResult, operands);
-    const SurfaceDistance field(std::move(operands));
+    // One operand (coarseMesh() refines only a smooth result) is its own first-order distance,
+    // f / |grad f|, as the refinement takes it: no wrapper normalising every value and gradient
+    // first (W9: 3 % of the CPU time).
+    const FieldPtr field =
+        operands.size() == 1 ? operands.front() : std::make_shared<SurfaceDistance>(std::move(operands));
     AdaptiveRefinementOptions o;
     // A tenth of the tolerance kept back for what the check's quadratic misses, as decimation does.
     o.tolerance = 0.9 * tolerance;
@@ -724,7 +728,7 @@ AdaptiveRefinementStats Job::refineCoarseMesh(TriangleMesh& mesh, double h, doub
     return timed("refine to tolerance", [&] {
         StageProgress progress(mContext, "refining to " + formatNumber(tolerance) + " mm", 1000);
         std::atomic<std::uint64_t> last{0};
-        return refineToTolerance(mesh, field, o, feed(progress, last));
+        return refineToTolerance(mesh, *field, o, feed(progress, last));
     });
 }
 
