@@ -882,7 +882,6 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
                                    {"rms_deviation_mm", r.rmsDeviation},
                                    {"deviation_samples", r.deviationSamples}};
             trials.push_back(trial);
-            if (r.remaining != 0 || crossing != 0) topology.reset();
             if (r.remaining == 0 && crossing == 0) {
                 voxel = h;
                 extraction = {{"voxel_mm", h},
@@ -899,6 +898,7 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
             why = "at " + formatNumber(h) + " mm the refinement left " + std::to_string(r.remaining) +
                   " triangles above the tolerance and " + std::to_string(crossing) + " crossing pairs";
             trials.back()["rejected"] = why;
+            topology.reset();
             // Needles and slivers of the coarse mesh along the box's faces that no split or flip
             // mends: a finer grid has fewer. From the coarsest, one step finer first (a gyroid of
             // 6 mm cells in a 12 mm box: over at 0.5 mm, none at 0.4 mm), then half as coarse

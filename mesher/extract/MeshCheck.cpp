@@ -515,48 +515,6 @@ inline float floatAbove(float x)
 /// not gathered yet.
 constexpr uint32_t kNotGathered = std::numeric_limits<uint32_t>::max();
 
-/// Per vertex of @a mesh, fanApart() of its fan (1) or not (0); parallel, the same for any
-/// thread count (each fan in triangle order).
-std::vector<uint8_t> fansApartOf(const TriangleMesh& mesh)
-{
-    const std::size_t numPoints = mesh.points.size(), n = mesh.triangles.size();
-    std::vector<std::atomic<uint32_t>> count(numPoints);
-    constexpr std::size_t kGrain = 1 << 14;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const auto& r) {
-        for (std::size_t t = r.begin(); t != r.end(); ++t)
-            for (int k = 0; k < 3; ++k)
-                if (std::size_t(mesh.triangles[t][k]) < numPoints)
-                    count[mesh.triangles[t][k]].fetch_add(1, std::memory_order_relaxed);
-    });
-    std::vector<uint32_t> start(numPoints + 1);
-    start[0] = 0;
-    for (std::size_t v = 0; v < numPoints; ++v) start[v + 1] = start[v] + count[v].load(std::memory_order_relaxed);
-    std::vector<uint32_t> fans(start.back());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const auto& r) {
-        for (std::size_t t = r.begin(); t != r.end(); ++t)
-            for (int k = 0; k < 3; ++k)
-                if (const std::size_t v = std::size_t(mesh.triangles[t][k]); v < numPoints)
-                    fans[start[v + 1] - count[v].fetch_sub(1, std::memory_order_relaxed)] = uint32_t(t);
-    });
-    std::vector<uint8_t> apart(numPoints, 0);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numPoints, 4096), [&](const auto& r) {
-        std::vector<Corner> row;
-        for (std::size_t v = r.begin(); v != r.end(); ++v) {
-            uint32_t* fan = fans.data() + start[v];
-            const std::size_t k = start[v + 1] - start[v];
-            std::sort(fan, fan + k);
-            row.clear();
-            for (std::size_t i = 0; i < k; ++i) {
-                const openvdb::Vec3I& tri = mesh.triangles[fan[i]];
-                const int at = tri[0] == v ? 0 : tri[1] == v ? 1 : 2;
-                row.push_back(Corner{tri[(at + 1) % 3], tri[(at + 2) % 3]});
-            }
-            apart[v] = fanApart(mesh.points, uint32_t(v), row.data(), k);
-        }
-    });
-    return apart;
-}
-
 /// Whether triangles @a s and @a t, sharing at most one corner, cross (see
 /// countSelfIntersections()).
 bool trianglesCross(const CrossingTriangle& s, const CrossingTriangle& t)
@@ -728,7 +686,8 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
     // Most pairs tested share a corner (W9: 7.0 M of 9.3 M); where that corner's fan lies apart,
     // they need no test. Left out of the local checks of a few flagged triangles, whose fans are
     // open (and whose vertices are a large mesh's).
-    const std::vector<uint8_t> computed = fansApart || !tested.empty() ? std::vector<uint8_t>() : fansApartOf(mesh);
+    std::vector<uint8_t> computed;
+    if (!fansApart && tested.empty()) checkTopology(mesh, &computed);  // its rows give the fans
     const std::vector<uint8_t>& apart = fansApart ? *fansApart : computed;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, 1), [&](const auto& r) {
         // A cell's triangles gathered side by side (structure of arrays): the pairs of a cell
