@@ -1838,6 +1838,24 @@ TEST(CoarseExtraction, TheRecipesGridIsFreedOnlyWhenNothingAfterReadsIt)
         job.writeOutputs(dir.path / "kept", false);
         EXPECT_FALSE(freed(job.report())) << later;
     }
+    // A result with sharp operands (the gyroid cut by a ball) is meshed from the recipe's grid
+    // (k = 1): kept, not freed and evaluated again.
+    {
+        const std::string sharp =
+            "voxel: 0.1\n"
+            "domain: {box: [[0, 0, 0], [12, 12, 12]]}\n"
+            "fields:\n"
+            "  lattice: {tpms: gyroid, cell: 10, solid: network, density: 0.3}\n"
+            "  ball: {sphere: {center: [6, 6, 6], radius: 5}}\n"
+            "  part: {intersection: [lattice, ball]}\n"
+            "result: part\n"
+            "outputs: {mesh: {file: a.stl, tolerance: 0.05}}\n";
+        Job job(parseRecipe(sharp, "r.yaml", dir.path));
+        job.writeOutputs(dir.path / "sharp", false);
+        const nlohmann::json r = job.report();
+        EXPECT_FALSE(freed(r));
+        EXPECT_EQ(r["mesh"]["extraction"]["factor"].get<int>(), 1) << r["mesh"]["extraction"].dump();
+    }
     // A raw mesh before it: freed (nothing after reads it).
     Job first(parseRecipe(with("outputs: {mesh: [c.stl, {file: a.stl, tolerance: 0.02}]}\n"), "r.yaml", dir.path));
     first.writeOutputs(dir.path / "first", false);

@@ -771,13 +771,6 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
     voxel = mDomain.voxel;
     if (!mReport.contains("pieces")) grid();  // the recipe's grid: its pieces are what the coarse mesh must keep
     const std::uint64_t finePieces = mReport["pieces"]["count"].get<std::uint64_t>();
-    // Freed before the coarse grids and the refinement, which then reuse its memory (nothing after
-    // this mesh reads it; asked again, it is evaluated again).
-    if (mGridReleasable && mGrid)
-        timed("free the recipe's grid", [&] {
-            mGrid.reset();
-            return 0;
-        });
     // The smallest feature a node knows must span at least three coarse voxels (two resolve it
     // on the grid; the third is the margin for its position between the samples).
     int k = kMaxCoarsening;
@@ -805,6 +798,14 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
         limit = "the result is cut by " + std::to_string(creaseOperands.size() - 1) +
                 " other surface(s): its creases need the recipe's voxel (their chamfers grow with the voxel)";
     }
+    // Freed before the coarse grids and the refinement, which then reuse its memory (nothing after
+    // this mesh reads it; asked again, it is evaluated again). Not at k = 1: the mesh is the
+    // recipe's grid's then (a result with sharp operands is meshed from it).
+    if (k > 1 && mGridReleasable && mGrid)
+        timed("free the recipe's grid", [&] {
+            mGrid.reset();
+            return 0;
+        });
     nlohmann::json trials = nlohmann::json::array();
     std::string why = k > 1 ? "" : limit;
     // The next factor after a chord error above the tolerance: the error grows as h squared.
