@@ -537,14 +537,13 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
         // A triangle whose split was dropped before (a needle of marching cubes, whose long sides
         // fold a piece when split) has its longest edge flipped first where that makes the pair
         // rounder; the flipped pair is checked next round.
-        std::size_t flips = 0;
+        bool changed = false;  // flips or corners moved: triangles to check next round
         if (round < options.rounds) {
             std::vector<std::uint32_t> candidates;
             for (std::size_t k = 0; k < pending.size(); ++k)
                 if (over[k] && (attempts[pending[k]] > 0 || choice[k] < 0)) candidates.push_back(pending[k]);
             const std::vector<std::uint32_t> flipped = flipLongestEdges(mesh, points, candidates, options.box);
-            flips = flipped.size() / 2;
-            stats.flips += flips;
+            stats.flips += flipped.size() / 2;
             // Checked next round (a flipped triangle is not split this round: its chosen edge may be
             // gone).
             for (std::uint32_t t : flipped) {
@@ -559,10 +558,10 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             const std::vector<std::uint32_t> moved =
                 moveFaceCornersOntoSurface(mesh, points, vertexDistance, solid, options, stuck, stats.cornersMoved);
             for (std::uint32_t t : moved) {
-                if (!checkAgain[t]) ++flips;  // counted with the flips: a change to check next round
                 checkAgain[t] = 1;
                 attempts[t] = 0;
             }
+            changed = !flipped.empty() || !moved.empty();
         }
         for (std::size_t k = 0; k < pending.size(); ++k) {
             if (!over[k] || checkAgain[pending[k]]) continue;
@@ -578,8 +577,8 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             split.push_back(edgeKey(tri[i], tri[(i + 1) % 3]));
         }
         if (split.empty()) {
-            if (flips == 0) break;
-            // Only flips this round: the flipped pairs are checked next round.
+            if (!changed) break;
+            // Only flips (or corners moved) this round: their triangles are checked next round.
             ++stats.rounds;
             pending.clear();
             for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
