@@ -18,12 +18,12 @@ void sinCosBatch(const double* x, double* s, double* c, std::size_t n)
     std::size_t i = 0;
 #if defined(VOXLAT_SLEEF_SSE2)
     for (; i + 2 <= n; i += 2) {
-        const Sleef___m128d_2 r = Sleef_sincosd2_u10sse2(_mm_loadu_pd(x + i));
+        const Sleef___m128d_2 r = Sleef_sincosd2_u35sse2(_mm_loadu_pd(x + i));
         _mm_storeu_pd(s + i, r.x);
         _mm_storeu_pd(c + i, r.y);
     }
     if (i < n) {  // the last one through the same function (padded): the same result anywhere
-        const Sleef___m128d_2 r = Sleef_sincosd2_u10sse2(_mm_set_pd(0.0, x[i]));
+        const Sleef___m128d_2 r = Sleef_sincosd2_u35sse2(_mm_set_pd(0.0, x[i]));
         s[i] = _mm_cvtsd_f64(r.x);
         c[i] = _mm_cvtsd_f64(r.y);
         return;

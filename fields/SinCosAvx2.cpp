@@ -17,7 +17,7 @@ void sinCosBatchAvx2(const double* x, double* s, double* c, std::size_t n)
 {
     std::size_t i = 0;
     for (; i + 4 <= n; i += 4) {
-        const Sleef___m256d_2 r = Sleef_sincosd4_u10avx2(_mm256_loadu_pd(x + i));
+        const Sleef___m256d_2 r = Sleef_sincosd4_u35avx2(_mm256_loadu_pd(x + i));
         _mm256_storeu_pd(s + i, r.x);
         _mm256_storeu_pd(c + i, r.y);
     }
@@ -26,7 +26,7 @@ void sinCosBatchAvx2(const double* x, double* s, double* c, std::size_t n)
         // result wherever it falls in a batch.
         double in[4] = {0.0, 0.0, 0.0, 0.0}, outS[4], outC[4];
         for (std::size_t k = i; k < n; ++k) in[k - i] = x[k];
-        const Sleef___m256d_2 r = Sleef_sincosd4_u10avx2(_mm256_loadu_pd(in));
+        const Sleef___m256d_2 r = Sleef_sincosd4_u35avx2(_mm256_loadu_pd(in));
         _mm256_storeu_pd(outS, r.x);
         _mm256_storeu_pd(outC, r.y);
         for (std::size_t k = i; k < n; ++k) s[k] = outS[k - i], c[k] = outC[k - i];

@@ -188,10 +188,10 @@ TEST(Periods, ReportedPeriodsRepeatTheField)
     expectRepeats(Sphere(Vec3d(0), 1), {none, none, none}, "sphere");
 }
 
-TEST(SinCos, WithinOneUlpAndTheSameWhereverAnAngleFallsInABatch)
+TEST(SinCos, WithinThreeAndAHalfUlpAndTheSameWhereverAnAngleFallsInABatch)
 {
-    // Against long double sin and cos: at most one unit in the last place (plus the rounding of
-    // the reference), over the angles TPMS coordinates reach and a few exact ones.
+    // Against long double sin and cos: at most 3.5 units in the last place (SLEEF's u35 bound, plus
+    // the rounding of the reference), over the angles TPMS coordinates reach and a few exact ones.
     std::mt19937_64 random(17);
     std::uniform_real_distribution<double> uniform(-3000.0, 3000.0);
     std::vector<double> x = {0.0, -0.0, std::numbers::pi / 2, std::numbers::pi, 1e-300, 1e-8, -2.5, 700.125};
@@ -200,10 +200,10 @@ TEST(SinCos, WithinOneUlpAndTheSameWhereverAnAngleFallsInABatch)
     sinCosBatch(x.data(), s.data(), c.data(), x.size());
     for (std::size_t i = 0; i < x.size(); ++i) {
         const long double rs = std::sin((long double)x[i]), rc = std::cos((long double)x[i]);
-        // One ulp of the exact value, and the absolute rounding floor near zero.
+        // An ulp of the exact value, and the absolute rounding floor near zero.
         auto ulp = [](long double v) { return std::max(std::abs(std::nextafter(double(v), 2.0) - double(v)), 1e-300); };
-        ASSERT_LE(std::abs((long double)s[i] - rs), 1.01L * ulp(rs)) << x[i];
-        ASSERT_LE(std::abs((long double)c[i] - rc), 1.01L * ulp(rc)) << x[i];
+        ASSERT_LE(std::abs((long double)s[i] - rs), 3.51L * ulp(rs)) << x[i];
+        ASSERT_LE(std::abs((long double)c[i] - rc), 3.51L * ulp(rc)) << x[i];
     }
     EXPECT_EQ(s[0], 0.0);
     EXPECT_EQ(c[0], 1.0);

@@ -47,13 +47,34 @@ void sortUnique(std::vector<EdgeKey>& keys)
 /// end (a binary search over W9's 300 000 split edges took 0.05 s a round).
 class EdgeIndex {
 public:
-    /// Indexes @a keys (sorted, without repeats) of edges between @a numPoints points.
-    void build(const std::vector<EdgeKey>& keys, std::size_t numPoints)
+    /// Sorts @a keys (of edges between @a numPoints points) and drops their repeats by their lower
+    /// vertex, a counting sort (W9's 190 000 split edges: 1.5 ms against 4 ms for a parallel
+    /// sort), and indexes them by it.
+    void sortAndBuild(std::vector<EdgeKey>& keys, std::size_t numPoints)
     {
         mKeys = &keys;
         mFirst.assign(numPoints + 1, 0);
         for (EdgeKey e : keys) ++mFirst[(e >> 32) + 1];
         for (std::size_t v = 0; v < numPoints; ++v) mFirst[v + 1] += mFirst[v];
+        mSorted.resize(keys.size());
+        // Each row's start is its cursor, left at the next row's start: shifted back after.
+        for (EdgeKey e : keys) mSorted[mFirst[e >> 32]++] = e;
+        std::copy_backward(mFirst.begin(), mFirst.end() - 1, mFirst.end());
+        mFirst[0] = 0;
+        // Each row (a vertex's few edges) sorted and its repeats dropped, packed from the front.
+        std::uint32_t packed = 0;
+        for (std::size_t v = 0; v < numPoints; ++v) {
+            const std::uint32_t begin = mFirst[v], end = mFirst[v + 1];
+            mFirst[v] = packed;
+            for (std::uint32_t i = begin + 1; i < end; ++i)
+                for (std::uint32_t j = i; j > begin && mSorted[j - 1] > mSorted[j]; --j)
+                    std::swap(mSorted[j - 1], mSorted[j]);
+            for (std::uint32_t i = begin; i < end; ++i)
+                if (i == begin || mSorted[i] != mSorted[i - 1]) mSorted[packed++] = mSorted[i];
+        }
+        mFirst[numPoints] = packed;
+        mSorted.resize(packed);
+        keys.swap(mSorted);
     }
 
     /// Index of edge (a, b) in the keys, or -1.
@@ -69,6 +90,7 @@ public:
 private:
     const std::vector<EdgeKey>* mKeys = nullptr;
     std::vector<std::uint32_t> mFirst;
+    std::vector<EdgeKey> mSorted;  // sortAndBuild()'s rows, kept for its next call
 };
 
 /// The field the distances are taken against.
@@ -116,9 +138,10 @@ struct Solid {
     }
 };
 
-/// A triangle's deviation as last checked: the largest, and q squared integrated over it.
+/// A triangle's deviation as last checked: the largest, q squared integrated over it, and its
+/// area then (the mesh's RMS deviation is their sums' quotient: no pass over the corners after).
 struct Checked {
-    float largest = 0.0f, squared = 0.0f;  // float: 8 bytes a triangle (W9: 1.4 M, twice)
+    float largest = 0.0f, squared = 0.0f, area = 0.0f;  // float: 12 bytes a triangle (W9: 1.2 M, twice)
 };
 
 double triangleArea(const std::array<Vec3d, 3>& p)
@@ -137,6 +160,16 @@ std::uint8_t sharedFaces(const Vec3d& p, const Vec3d& q, const std::optional<Box
     return faces;
 }
 
+/// placeChunkOnSurface()'s tables, kept from call to call so that their memory is used again.
+struct PlacementTables {
+    std::vector<Vec3d> start;
+    std::vector<std::uint8_t> held;
+    std::vector<std::uint32_t> open;
+    std::vector<Vec3d> batch, gradients, direction;
+    std::vector<double> values;
+    std::vector<std::uint8_t> keep;
+};
+
 /// Newton from each start onto the level set along the line of the gradient there, the axes in
 /// @a heldFaces fixed (a point that would leave the box is put back onto the face it crosses, which
 /// holds that axis from then on). Along a fixed line, not the gradient of each step: a midpoint
@@ -144,16 +177,17 @@ std::uint8_t sharedFaces(const Vec3d& p, const Vec3d& q, const std::optional<Box
 /// gradient's path can slide towards an end, and the split makes a sliver again and again).
 /// @a found: converged within o.maxMove of the start. Positions are rounded to float.
 void placeChunkOnSurface(const Solid& solid, const AdaptiveRefinementOptions& o, std::span<Vec3d> x,
-                         std::span<const std::uint8_t> heldFaces, std::span<std::uint8_t> found)
+                         std::span<const std::uint8_t> heldFaces, std::span<std::uint8_t> found,
+                         PlacementTables& tables)
 {
     const std::size_t n = x.size();
-    const std::vector<Vec3d> start(x.begin(), x.end());
-    std::vector<std::uint8_t> held(heldFaces.begin(), heldFaces.end());
+    auto& [start, held, open, batch, g, direction, v, keep] = tables;
+    start.assign(x.begin(), x.end());
+    held.assign(heldFaces.begin(), heldFaces.end());
     std::fill(found.begin(), found.end(), std::uint8_t(0));
-    std::vector<std::uint32_t> open(n);
+    open.resize(n);
     for (std::size_t k = 0; k < n; ++k) open[k] = std::uint32_t(k);
-    std::vector<Vec3d> batch, g, direction(n, Vec3d(0.0));
-    std::vector<double> v;
+    direction.assign(n, Vec3d(0.0));
     // One Newton step of point k (batch slot j): whether it stays open.
     auto step = [&](std::size_t j, std::uint32_t k, int iteration) -> bool {
         const double length = g[j].length();
@@ -192,7 +226,7 @@ void placeChunkOnSurface(const Solid& solid, const AdaptiveRefinementOptions& o,
         for (std::size_t j = 0; j < open.size(); ++j) batch[j] = x[open[j]];
         solid.evaluate(batch, v, g);
         // Each point's step is its own: taken in parallel, the open ones kept in order after.
-        std::vector<std::uint8_t> keep(open.size(), 0);
+        keep.resize(open.size());
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, open.size(), 4096), [&](const auto& r) {
             for (std::size_t j = r.begin(); j != r.end(); ++j) keep[j] = step(j, open[j], iteration);
         });
@@ -205,10 +239,12 @@ void placeChunkOnSurface(const Solid& solid, const AdaptiveRefinementOptions& o,
 }
 
 /// placeChunkOnSurface() over @a x in chunks: each point's Newton steps are its own, and a
-/// chunk's tables (a start, a direction, a batch and its values and gradients per point, 150
-/// bytes) are made once for all (W9's first round places 300 000 points: 46 MB at once).
+/// chunk's @a tables (a start, a direction, a batch and its values and gradients per point, 150
+/// bytes) serve every chunk and call (W9's first round places 190 000 points: 29 MB at once, and
+/// tables made afresh per chunk cost the kernel's clearing of their pages: 8 ms of that round's
+/// 10 ms).
 void placeOnSurface(const Solid& solid, const AdaptiveRefinementOptions& o, std::vector<Vec3d>& x,
-                    const std::vector<std::uint8_t>& held, std::vector<std::uint8_t>& found)
+                    const std::vector<std::uint8_t>& held, std::vector<std::uint8_t>& found, PlacementTables& tables)
 {
     constexpr std::size_t kChunk = std::size_t(1) << 16;
     found.assign(x.size(), 0);
@@ -216,7 +252,7 @@ void placeOnSurface(const Solid& solid, const AdaptiveRefinementOptions& o, std:
         const std::size_t count = std::min(kChunk, x.size() - begin);
         placeChunkOnSurface(solid, o, std::span<Vec3d>(x.data() + begin, count),
                             std::span<const std::uint8_t>(held.data() + begin, count),
-                            std::span<std::uint8_t>(found.data() + begin, count));
+                            std::span<std::uint8_t>(found.data() + begin, count), tables);
     }
 }
 
@@ -343,7 +379,8 @@ std::vector<std::uint32_t> flipLongestEdges(TriangleMesh& mesh, const std::vecto
 std::vector<std::uint32_t> moveFaceCornersOntoSurface(TriangleMesh& mesh, std::vector<Vec3d>& points,
                                                       std::vector<double>& vertexDistance, const Solid& solid,
                                                       const AdaptiveRefinementOptions& o,
-                                                      const std::vector<std::uint32_t>& failing, std::size_t& count)
+                                                      const std::vector<std::uint32_t>& failing, std::size_t& count,
+                                                      PlacementTables& tables)
 {
     std::vector<std::uint32_t> around;
     if (!o.box) return around;
@@ -367,7 +404,7 @@ std::vector<std::uint32_t> moveFaceCornersOntoSurface(TriangleMesh& mesh, std::v
     std::vector<Vec3d> target(corners.size());
     for (std::size_t c = 0; c < corners.size(); ++c) target[c] = points[corners[c]];
     std::vector<std::uint8_t> accept;
-    placeOnSurface(solid, o, target, held, accept);
+    placeOnSurface(solid, o, target, held, accept, tables);
     // Their triangles: none may turn over or lose its area with the corners moved (a corner of a
     // triangle that would is held back, until none would).
     for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
@@ -443,6 +480,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
     std::vector<Checked> nextChecked;
     std::vector<EdgeKey> split;
     EdgeIndex splitIndex;
+    PlacementTables placement;
     // Room for the refined mesh, reserved once (W9 grows 1.8 times): each growth copies a table
     // into fresh pages, which took W9's rebuild 0.02 s. Only what is used is ever touched.
     {
@@ -523,8 +561,10 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                         const TriangleQuadratic q(p, s, m, centre, options.box);
                         const double largest = q.largest() + q.margin();
                         over[k] = !(largest <= options.tolerance);
-                        if (!over[k] || round == 0)
-                            checked[t] = {float(largest), float(q.meanSquare() * triangleArea(p))};
+                        if (!over[k] || round == 0) {
+                            const double area = triangleArea(p);
+                            checked[t] = {float(largest), float(q.meanSquare() * area), float(area)};
+                        }
                         if (over[k]) choice[k] = chooseEdge(p, q, attempts[t], round);
                     }
                 }
@@ -555,8 +595,8 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             std::vector<std::uint32_t> stuck;
             for (std::size_t k = 0; k < pending.size(); ++k)
                 if (over[k] && !checkAgain[pending[k]]) stuck.push_back(pending[k]);
-            const std::vector<std::uint32_t> moved =
-                moveFaceCornersOntoSurface(mesh, points, vertexDistance, solid, options, stuck, stats.cornersMoved);
+            const std::vector<std::uint32_t> moved = moveFaceCornersOntoSurface(
+                mesh, points, vertexDistance, solid, options, stuck, stats.cornersMoved, placement);
             for (std::uint32_t t : moved) {
                 checkAgain[t] = 1;
                 attempts[t] = 0;
@@ -586,16 +626,18 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             continue;
         }
         ++stats.rounds;
-        sortUnique(split);
+        splitIndex.sortAndBuild(split, points.size());
         const std::size_t m = split.size();
         // The new points: from each edge's midpoint onto the surface.
         std::vector<Vec3d> target(m);
         std::vector<std::uint8_t> held(m), active;
-        for (std::size_t e = 0; e < m; ++e) {
-            const Vec3d &p = points[split[e] >> 32], &q = points[split[e] & 0xffffffffu];
-            target[e] = 0.5 * (p + q);
-            held[e] = sharedFaces(p, q, options.box);
-        }
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, m, 4096), [&](const auto& r) {
+            for (std::size_t e = r.begin(); e != r.end(); ++e) {
+                const Vec3d &p = points[split[e] >> 32], &q = points[split[e] & 0xffffffffu];
+                target[e] = 0.5 * (p + q);
+                held[e] = sharedFaces(p, q, options.box);
+            }
+        });
         {
             // A midpoint on two faces (a box edge) inside the solid stays where it is: the box's
             // edge is its boundary there, and straight. Outside (the surface crosses the box's
@@ -610,7 +652,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                 }
             const std::vector<double> middleDistance = solid.distances(middle);
             std::vector<std::uint8_t> found;
-            placeOnSurface(solid, options, target, held, found);
+            placeOnSurface(solid, options, target, held, found, placement);
             active = std::move(found);
             for (std::size_t j = 0; j < onEdge.size(); ++j)
                 if (middleDistance[j] <= 0.0) {
@@ -623,7 +665,6 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
         isTouched.assign(mesh.triangles.size(), 0);
         endpoint.assign(points.size(), 0);
         for (EdgeKey e : split) endpoint[e >> 32] = endpoint[e & 0xffffffffu] = 1;
-        splitIndex.build(split, points.size());
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.triangles.size(), 4096), [&](const auto& r) {
             for (std::size_t t = r.begin(); t != r.end(); ++t) {
                 const openvdb::Vec3I& tri = mesh.triangles[t];
@@ -773,11 +814,10 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
     stats.trianglesAfter = mesh.triangles.size();
     // Summed in triangle order: the same for any thread count.
     double sum = 0.0, total = 0.0;
-    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
-        const openvdb::Vec3I& tri = mesh.triangles[t];
-        stats.maxDeviation = std::max(stats.maxDeviation, double(checked[t].largest));
-        sum += checked[t].squared;
-        total += triangleArea({points[tri[0]], points[tri[1]], points[tri[2]]});
+    for (const Checked& c : checked) {
+        stats.maxDeviation = std::max(stats.maxDeviation, double(c.largest));
+        sum += c.squared;
+        total += c.area;
     }
     stats.rmsDeviation = total > 0.0 ? std::sqrt(sum / total) : 0.0;
     stats.deviationSamples = mesh.points.size() + 4 * mesh.triangles.size();

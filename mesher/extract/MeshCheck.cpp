@@ -63,11 +63,11 @@ constexpr std::size_t kMaxFastFan = 16;
 /// all of them in one cycle. Then the general test (spokes and link components) finds every
 /// edge manifold and consistent and the link one cycle, which is what almost every vertex of a
 /// closed mesh is. Fixed loops without early exits: the rows are short and the exits would be
-/// mispredicted.
-bool closedFan(const Corner* row, std::size_t n)
+/// mispredicted. @a step: for each triangle, the one after it in the cycle (whose next is its
+/// prev).
+bool closedFan(const Corner* row, std::size_t n, std::array<uint8_t, kMaxFastFan>& step)
 {
     if (n > kMaxFastFan) return false;
-    std::array<uint8_t, kMaxFastFan> step;
     unsigned repeated = 0, unmatched = 0;
     for (std::size_t i = 0; i < n; ++i) {
         unsigned matches = 0, to = 0;
@@ -90,54 +90,34 @@ bool closedFan(const Corner* row, std::size_t n)
     return early == 0 && step[current] == 0;
 }
 
-/// Whether the fan of triangles around vertex @a v (@a row: each triangle with corner v as the
-/// corners after v in its order, all of them) lies
-/// apart but for v: no two of them that share only v meet anywhere else, so none need the pair
-/// test. Shown by a projection: along n, the sum of the fan's normals, every triangle projects
-/// with a positive area (beyond a margin far above the roundings), the triangles chain around
-/// v (corner after v of one is the corner before v of the next, one closed cycle) and the chain
-/// winds around v once. Then the projected triangles are sectors of angles below pi that tile
-/// the plane around v's image once: two that do not share an edge meet only in v's image, which
-/// each triangle covers only at v. A fan wound twice (a fold), open (a boundary) or not one
-/// cycle is not shown apart, and its pairs are tested.
-bool fanApart(const std::vector<openvdb::Vec3f>& points, uint32_t v, const Corner* row, std::size_t k)
+/// Whether the closed fan of triangles around vertex @a v (@a row: each triangle with corner v
+/// as the corners after v in its order, all of them, chained in one cycle by @a step as
+/// closedFan() found) lies apart but for v: no two of them that share only v meet anywhere else,
+/// so none need the pair test. Shown by a projection: along n, the sum of the fan's normals,
+/// every triangle projects with a positive area (beyond a margin far above the roundings), and
+/// the chain of triangles around v winds around it once. Then the projected triangles are
+/// sectors of angles below pi that tile the plane around v's image once: two that do not share
+/// an edge meet only in v's image, which each triangle covers only at v. A fan wound twice (a
+/// fold) is not shown apart, and its pairs are tested.
+bool fanApart(const std::vector<openvdb::Vec3f>& points, uint32_t v, const Corner* row, std::size_t k,
+              const std::array<uint8_t, kMaxFastFan>& step)
 {
-    constexpr std::size_t kMost = 32;
-    if (k < 3 || k > kMost) return false;
+    if (k < 3) return false;
     const openvdb::Vec3d centre(points[v]);
-    // Each triangle's corners after v in its own order: the ray it starts from and the one it ends at.
-    std::array<uint32_t, kMost> from, to;
+    // The rays in chain order: each triangle starts (its next) where the one before ends (its prev).
+    std::array<openvdb::Vec3d, kMaxFastFan + 1> ray;
     openvdb::Vec3d n(0.0);
-    for (std::size_t i = 0; i < k; ++i) {
-        from[i] = row[i].next;
-        to[i] = row[i].prev;
-        if (from[i] == v || to[i] == v || from[i] == to[i]) return false;
-        n += (openvdb::Vec3d(points[from[i]]) - centre).cross(openvdb::Vec3d(points[to[i]]) - centre);
-    }
-    // The rays in chain order: the next triangle starts where this one ends (one only).
-    std::array<openvdb::Vec3d, kMost + 1> ray;
-    std::array<bool, kMost> used{};
     std::size_t current = 0;
-    used[0] = true;
-    ray[0] = openvdb::Vec3d(points[from[0]]) - centre;
-    for (std::size_t step = 1; step <= k; ++step) {
-        ray[step] = openvdb::Vec3d(points[to[current]]) - centre;
-        if (step == k) break;
-        std::size_t next = kMost;
-        for (std::size_t j = 0; j < k; ++j)
-            if (from[j] == to[current]) {
-                if (next != kMost || used[j]) return false;
-                next = j;
-            }
-        if (next == kMost) return false;
-        used[next] = true;
-        current = next;
+    ray[0] = openvdb::Vec3d(points[row[0].next]) - centre;
+    for (std::size_t i = 0; i < k; ++i) {
+        ray[i + 1] = openvdb::Vec3d(points[row[current].prev]) - centre;
+        n += ray[i].cross(ray[i + 1]);
+        current = step[current];
     }
-    if (to[current] != from[0]) return false;
     // Turns as seen along n: the sectors, then whether any but the last reaches the first ray
     // again. Margins compared squared: |turn| > 1e-9 |n| |u| |w|.
     const double n2 = 1e-18 * n.lengthSqr();
-    std::array<double, kMost + 1> length2;
+    std::array<double, kMaxFastFan + 1> length2;
     for (std::size_t i = 0; i <= k; ++i) length2[i] = ray[i].lengthSqr();
     auto turn = [&](std::size_t i, std::size_t j) { return n.dot(ray[i].cross(ray[j])); };
     auto clear = [&](double t, std::size_t i, std::size_t j) { return t * t > n2 * length2[i] * length2[j]; };
@@ -278,6 +258,7 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
         [&](const tbb::blocked_range<std::size_t>& range, Tally acc) {
             std::vector<Spoke> spokes;
             std::vector<uint32_t> nodes, parent;
+            std::array<uint8_t, kMaxFastFan> step;
             for (std::size_t v = range.begin(); v != range.end(); ++v) {
                 const std::size_t n = first[v + 1] - first[v];
                 if (n == 0) continue;
@@ -285,8 +266,8 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
                 ++acc.vertices;
                 int64_t owned = 1;
                 for (std::size_t i = 0; i < n; ++i) owned += row[i].next > v && row[i].prev > v;
-                if (closedFan(row, n)) {
-                    if (everyFanWhole) (*fansApart)[v] = fanApart(mesh.points, uint32_t(v), row, n);
+                if (closedFan(row, n, step)) {
+                    if (everyFanWhole) (*fansApart)[v] = fanApart(mesh.points, uint32_t(v), row, n, step);
                     // Each neighbour is one triangle's next and another's prev: two triangles per
                     // edge, opposite directions, the link one cycle.
                     for (std::size_t i = 0; i < n; ++i)
