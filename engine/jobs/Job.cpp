@@ -670,7 +670,7 @@ bool Job::smoothResult()
 }
 
 std::unique_ptr<TriangleMesh> Job::clippedMesh(double h, ProjectionStats& projection,
-                                               std::optional<BoxClipStats>& boxCut)
+                                               std::optional<BoxClipStats>& boxCut, bool checkCut)
 {
     solveLevels();
     // A grid of voxel h from the domain box's corner, covering the box and two voxels past it
@@ -704,7 +704,8 @@ std::unique_ptr<TriangleMesh> Job::clippedMesh(double h, ProjectionStats& projec
         std::atomic<std::uint64_t> last{0};
         return projectToSurface(*mesh, *mResult, po, feed(progress, last));
     });
-    const BoxClipOptions co{po};  // the crease points' Newton steps as the projection's
+    BoxClipOptions co{po};  // the crease points' Newton steps as the projection's
+    co.checkTopology = checkCut;
     boxCut = timed("cut by the domain box", [&] { return clipToBox(*mesh, *mResult, mDomain.box, co); });
     if (!boxCut->ok) return nullptr;
     return mesh;
@@ -829,7 +830,9 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
             k = finer(*probe);
             continue;
         }
-        auto mesh = clippedMesh(h, projection, boxCut);
+        // A mesh to be refined is checked once, after (refinement keeps it closed and manifold,
+        // and its pieces: the check finds it if not).
+        auto mesh = clippedMesh(h, projection, boxCut, !refine);
         nlohmann::json trial{{"voxel_mm", h}};
         if (!mesh) {
             trial["rejected"] = "the cut by the domain box could not be closed: " + boxCut->failure;
@@ -838,18 +841,26 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
             k /= 2;
             continue;
         }
-        const MeshTopology& t = boxCut->topology;  // checked by the cut
         trial["triangles"] = mesh->triangles.size();
-        trial["closed_pieces"] = t.closedPieces;
-        if (t.closedPieces != finePieces) {
-            trial["rejected"] = "closed pieces " + std::to_string(t.closedPieces) + ", the recipe's grid has " +
-                                std::to_string(finePieces);
+        // Whether the mesh (topology @a t) is closed and manifold with the recipe's grid's closed
+        // pieces; else the trial is rejected and the next grid is half as coarse.
+        auto keepsPieces = [&](const MeshTopology& t) {
+            trial["closed_pieces"] = t.closedPieces;
+            if (!t.closedManifold())
+                why = "at " + formatNumber(h) + " mm the mesh is not closed and manifold (" +
+                      std::to_string(t.boundaryEdges) + " open edges, " + std::to_string(t.nonManifoldEdges) +
+                      " shared by more than two)";
+            else if (t.closedPieces != finePieces)
+                why = "at " + formatNumber(h) + " mm the mesh has " + std::to_string(t.closedPieces) +
+                      " closed pieces, the recipe's grid " + std::to_string(finePieces);
+            else
+                return true;
+            trial["rejected"] = why;
             trials.push_back(trial);
-            why = "at " + formatNumber(h) + " mm the mesh has " + std::to_string(t.closedPieces) +
-                  " closed pieces, the recipe's grid " + std::to_string(finePieces);
             k /= 2;
-            continue;
-        }
+            return false;
+        };
+        if (!refine && !keepsPieces(boxCut->topology)) continue;  // checked by the cut
         // Refined where its triangles stray instead of meshed finer everywhere; its first round
         // checks every triangle, so its largest deviation there is the chord error (with the caps
         // and creases: W9 0.06 s less than measuring it apart).
@@ -867,6 +878,10 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
             // apart for the crossing check.
             std::vector<std::uint8_t> fansApart;
             topology = timed("check topology", [&] { return checkTopology(*mesh, &fansApart); });
+            if (!keepsPieces(*topology)) {
+                topology.reset();
+                continue;
+            }
             const std::size_t crossing =
                 timed("check self-intersections", [&] { return countSelfIntersections(*mesh, fansApart); });
             trial["refinement"] = {{"triangles_before", r.trianglesBefore},
@@ -907,6 +922,14 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
             k = k == kMaxCoarsening ? k - 1 : k / 2;
             continue;
         }
+        // A refined mesh the refinement left as it was: checked now.
+        if (refine) {
+            topology = timed("check topology", [&] { return checkTopology(*mesh); });
+            if (!keepsPieces(*topology)) {
+                topology.reset();
+                continue;
+            }
+        }
         trials.push_back(trial);
         if (chord <= tolerance) {
             voxel = h;
@@ -924,6 +947,7 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
             return mesh;
         }
         why = "the chord error at " + formatNumber(h) + " mm is " + formatNumber(chord) + " mm, above the tolerance";
+        topology.reset();
         k = finer(chord);
     }
     extraction = {{"voxel_mm", mDomain.voxel},

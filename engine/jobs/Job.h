@@ -149,9 +149,11 @@ private:
     bool smoothResult();
     /// The result meshed unclipped on a grid of voxel @a h (two voxels past the domain box),
     /// projected onto its surface (@a projection), then cut by the domain box's faces and capped
-    /// (@a boxCut); null when the cut could not be closed (boxCut->failure says why).
+    /// (@a boxCut); null when the cut could not be closed (boxCut->failure says why). Without
+    /// @a checkCut, the capped mesh's topology is left to the caller to check (boxCut->topology
+    /// is empty).
     std::unique_ptr<TriangleMesh> clippedMesh(double h, ProjectionStats& projection,
-                                              std::optional<BoxClipStats>& boxCut);
+                                              std::optional<BoxClipStats>& boxCut, bool checkCut = true);
     /// Refuses (InputError, naming where the tolerance was given) a mesh tolerance of half the
     /// thinnest strut a node knows or more; warns when it exceeds the voxel.
     void checkTolerance(const MeshOptions& options);

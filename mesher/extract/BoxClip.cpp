@@ -623,6 +623,11 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
         result.triangles[numInner + t] = openvdb::Vec3I(
             std::uint32_t(bandIndex[tri[0]]), std::uint32_t(bandIndex[tri[1]]), std::uint32_t(bandIndex[tri[2]]));
     }
+    if (!options.checkTopology) {
+        mesh = std::move(result);
+        stats.ok = true;
+        return stats;
+    }
     const MeshTopology topology = checkTopology(result);
     if (!topology.closedManifold()) {
         stats.failure = "the capped mesh is not closed and manifold (" + std::to_string(topology.boundaryEdges) +

@@ -26,12 +26,16 @@ namespace voxlat {
 struct BoxClipOptions : ProjectionOptions {
     /// Vertices closer than this to a face are put onto it before cutting (mm).
     double snap = 1e-5;
+    /// Whether the capped mesh's topology is checked (BoxClipStats::topology). False where the
+    /// caller checks it after changing the mesh further (a refined mesh is checked once, after:
+    /// W9's coarse mesh took 0.02 s to check).
+    bool checkTopology = true;
 };
 
 /// What clipToBox() did.
 struct BoxClipStats {
-    /// False when the cut could not be capped into a closed, manifold mesh; @a failure says why
-    /// and the mesh is left as it was.
+    /// False when the cut could not be capped into a closed, manifold mesh (without the topology
+    /// check: could not be capped); @a failure says why and the mesh is left as it was.
     bool ok = false;
     std::string failure;
     /// Triangles that straddled a face and were cut.
@@ -45,7 +49,7 @@ struct BoxClipStats {
     std::size_t corners = 0;
     /// Triangles of the caps on the box's faces.
     std::size_t capTriangles = 0;
-    /// The capped mesh's topology as checked (when ok): callers need not check it again.
+    /// The capped mesh's topology as checked (when ok and checked): callers need not check it again.
     MeshTopology topology;
 };
 
