@@ -541,13 +541,23 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
     // on its bits); the lengths themselves are computed in parallel.
     constexpr std::size_t kGrain = 1 << 14;
     std::vector<double> edgeLength(n);
+    // Each triangle's bounds, kept (as the points' floats, exactly) for its cells below: its
+    // corners are read once.
+    std::vector<TriangleCells> cells(n);
     const openvdb::BBoxd box = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, n, kGrain), openvdb::BBoxd(),
         [&](const tbb::blocked_range<std::size_t>& r, openvdb::BBoxd b) {
             for (std::size_t t = r.begin(); t != r.end(); ++t) {
                 const openvdb::Vec3I& tri = mesh.triangles[t];
-                for (int k = 0; k < 3; ++k) b.expand(openvdb::Vec3d(mesh.points[tri[k]]));
-                edgeLength[t] = (openvdb::Vec3d(mesh.points[tri[0]]) - openvdb::Vec3d(mesh.points[tri[1]])).length();
+                const openvdb::Vec3f &p0 = mesh.points[tri[0]], &p1 = mesh.points[tri[1]], &p2 = mesh.points[tri[2]];
+                TriangleCells& tc = cells[t];
+                for (int a = 0; a < 3; ++a) {
+                    tc.min[a] = std::min({p0[a], p1[a], p2[a]});
+                    tc.max[a] = std::max({p0[a], p1[a], p2[a]});
+                }
+                b.expand(openvdb::Vec3d(tc.min[0], tc.min[1], tc.min[2]));
+                b.expand(openvdb::Vec3d(tc.max[0], tc.max[1], tc.max[2]));
+                edgeLength[t] = (openvdb::Vec3d(p0) - openvdb::Vec3d(p1)).length();
             }
             return b;
         },
@@ -570,16 +580,12 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
     // Each triangle's cells and its bounds in single precision, widened by a rounding: pairs
     // whose bounds are apart cannot cross, and most pairs sharing a cell are (a test far cheaper
     // than the crossing's). Side by side, as the pair loop reads them together.
-    std::vector<TriangleCells> cells(n);
     const std::size_t entries = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, n, kGrain), std::size_t(0),
         [&](const tbb::blocked_range<std::size_t>& r, std::size_t sum) {
             for (std::size_t t = r.begin(); t != r.end(); ++t) {
-                const openvdb::Vec3I& tri = mesh.triangles[t];
-                openvdb::BBoxd b;
-                for (int k = 0; k < 3; ++k) b.expand(openvdb::Vec3d(mesh.points[tri[k]]));
-                const openvdb::Vec3d &lo = b.min(), &hi = b.max();
                 TriangleCells& tc = cells[t];
+                const openvdb::Vec3d lo(tc.min[0], tc.min[1], tc.min[2]), hi(tc.max[0], tc.max[1], tc.max[2]);
                 // A triangle in a face plane of the bounds (a cap where a mesh was cut by a box) has
                 // every other triangle on one side: none can pass an edge through its interior, and
                 // its edges, in that plane, meet another triangle only on that one's boundary

@@ -90,14 +90,19 @@ public:
             // Along edge i from corner i to i + 1: s_i + (4 m_i - 3 s_i - s_j) t + 2 (s_i + s_j - 2 m_i) t^2.
             const double linear = 4 * m[i] - 3 * s[i] - s[(i + 1) % 3];
             const double square = 2 * (s[i] + s[(i + 1) % 3] - 2 * m[i]);
-            if (square == 0.0) continue;
+            // The stationary point t = -linear / (2 square) lies on the edge only where the two
+            // have opposite signs and |linear| < 2 |square|: divided only then (most are not).
+            if (!(linear * square < 0.0 && std::abs(linear) < 2 * std::abs(square))) continue;
             const double t = -linear / (2 * square);
             if (t > 0.0 && t < 1.0) most = std::max(most, std::abs(s[i] + (linear + square * t) * t));
         }
-        // Inside: [2d e; e 2f] (u, v) = -(b, c).
+        // Inside: [2d e; e 2f] (u, v) = -(b, c), u = U / det and v = V / det.
         const double det = 4 * d * f - e * e;
-        if (det != 0.0) {
-            const double u = (-2 * f * b + e * c) / det, v = (-2 * d * c + e * b) / det;
+        const double numeratorU = -2 * f * b + e * c, numeratorV = -2 * d * c + e * b;
+        const bool inside = det > 0.0 ? numeratorU > 0.0 && numeratorV > 0.0 && numeratorU + numeratorV < det
+                                      : numeratorU < 0.0 && numeratorV < 0.0 && numeratorU + numeratorV > det;
+        if (det != 0.0 && inside) {
+            const double u = numeratorU / det, v = numeratorV / det;
             if (u > 0.0 && v > 0.0 && u + v < 1.0)
                 most = std::max(most, std::abs(a + b * u + c * v + d * u * u + e * u * v + f * v * v));
         }
