@@ -138,16 +138,96 @@ struct Solid {
     }
 };
 
+/// A batch of triangles to check, side by side (structure of arrays): their corners, the
+/// distances at their corners, edge midpoints and centres (with the positive parts on a face of
+/// the box, as TriangleQuadratic takes them), and what compute() finds. Side by side, the
+/// compiler takes compute()'s loops two triangles at a time (the same bits as one at a time).
+struct CheckBatch {
+    static constexpr std::size_t kSize = kBatchSize / 4;
+    std::array<std::array<double, kSize>, 3> x, y, z;  // corner i of each triangle
+    std::array<std::array<double, kSize>, 3> s, m;     // corner i, and midpoint of edge (i, i + 1)
+    std::array<double, kSize> centre, largest, margin, meanSquare, area;
+    std::array<double, kBatchSize> d;  // distances at the midpoints and centres, four per triangle
+
+    /// Distances (f - level) / |grad f| of the values @a v and gradients @a g: branch-free
+    /// firstOrderSignedDistance().
+    static double distance(double v, const Vec3d& g)
+    {
+        const double length = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+        return length > 0.0 ? v / length : (v == 0.0 ? 0.0 : std::copysign(1e30, v));
+    }
+
+    /// Triangles pending[begin, begin + n) of @a mesh, with their midpoints' and centres' values
+    /// @a v and gradients @a g (four per triangle: the three midpoints, then the centre).
+    void gather(const TriangleMesh& mesh, const std::vector<std::uint32_t>& pending, std::size_t begin, std::size_t n,
+                const std::vector<Vec3d>& points, const std::vector<double>& vertexDistance,
+                const std::vector<double>& v, const std::vector<Vec3d>& g, const std::optional<Box3>& box)
+    {
+        for (std::size_t q = 0; q < 4 * n; ++q) d[q] = distance(v[q], g[q]);
+        for (std::size_t j = 0; j < n; ++j) {
+            const openvdb::Vec3I& tri = mesh.triangles[pending[begin + j]];
+            for (int i = 0; i < 3; ++i) {
+                const Vec3d& p = points[tri[i]];
+                x[i][j] = p[0];
+                y[i][j] = p[1];
+                z[i][j] = p[2];
+                s[i][j] = vertexDistance[tri[i]];
+                m[i][j] = d[4 * j + i];
+            }
+            centre[j] = d[4 * j + 3];
+            // On a face of the box (every corner on its plane), the solid's distance is max(f, 0).
+            bool onFace = false;
+            if (box)
+                for (int a = 0; a < 3 && !onFace; ++a) {
+                    const auto& coordinate = a == 0 ? x : a == 1 ? y : z;
+                    onFace = coordinate[0][j] == coordinate[1][j] && coordinate[1][j] == coordinate[2][j] &&
+                             onBoxPlane(coordinate[0][j], *box, a);
+                }
+            if (onFace) {
+                for (int i = 0; i < 3; ++i) {
+                    s[i][j] = std::max(s[i][j], 0.0);
+                    m[i][j] = std::max(m[i][j], 0.0);
+                }
+                centre[j] = std::max(centre[j], 0.0);
+            }
+        }
+    }
+
+    /// Each triangle's largest |q|, margin, mean of q squared and area (TriangleQuadratic's).
+    void compute(std::size_t n)
+    {
+        for (std::size_t j = 0; j < n; ++j) {
+            const double s0 = s[0][j], s1 = s[1][j], s2 = s[2][j], m0 = m[0][j], m1 = m[1][j], m2 = m[2][j];
+            largest[j] = quadratic::largest(s0, s1, s2, m0, m1, m2);
+            margin[j] = std::abs(centre[j] - quadratic::atCentre(s0, s1, s2, m0, m1, m2));
+            meanSquare[j] = quadratic::meanSquare(s0, s1, s2, m0, m1, m2);
+            // Half the cross product's length, as (p1 - p0).cross(p2 - p0).length() / 2.
+            const double ux = x[1][j] - x[0][j], uy = y[1][j] - y[0][j], uz = z[1][j] - z[0][j];
+            const double wx = x[2][j] - x[0][j], wy = y[2][j] - y[0][j], wz = z[2][j] - z[0][j];
+            const double cx = uy * wz - uz * wy, cy = uz * wx - ux * wz, cz = ux * wy - uy * wx;
+            area[j] = 0.5 * std::sqrt(cx * cx + cy * cy + cz * cz);
+        }
+    }
+
+    std::array<Vec3d, 3> corners(std::size_t j) const
+    {
+        return {Vec3d(x[0][j], y[0][j], z[0][j]), Vec3d(x[1][j], y[1][j], z[1][j]), Vec3d(x[2][j], y[2][j], z[2][j])};
+    }
+
+    /// How far each edge's midpoint value lies off the chord between its ends (TriangleQuadratic::bend()).
+    std::array<double, 3> bends(std::size_t j) const
+    {
+        std::array<double, 3> b;
+        for (int i = 0; i < 3; ++i) b[i] = std::abs(m[i][j] - 0.5 * (s[i][j] + s[(i + 1) % 3][j]));
+        return b;
+    }
+};
+
 /// A triangle's deviation as last checked: the largest, q squared integrated over it, and its
 /// area then (the mesh's RMS deviation is their sums' quotient: no pass over the corners after).
 struct Checked {
     float largest = 0.0f, squared = 0.0f, area = 0.0f;  // float: 12 bytes a triangle (W9: 1.2 M, twice)
 };
-
-double triangleArea(const std::array<Vec3d, 3>& p)
-{
-    return 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
-}
 
 /// Bit a (0..2) set where both ends of an edge lie on a face of @a box across axis a (the new
 /// point stays on it).
@@ -503,14 +583,14 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
     // -1. After the first choice, only an edge whose midpoint lies off its chord by a tenth of the
     // tolerance: splitting a straight one (the short side of a needle whose long sides cannot be
     // split) would only make needles again, round after round.
-    auto chooseEdge = [&](const std::array<Vec3d, 3>& p, const TriangleQuadratic& q, int attempts, int round) {
+    auto chooseEdge = [&](const std::array<Vec3d, 3>& p, const std::array<double, 3>& bend, int attempts, int round) {
         if (attempts >= 3 || round >= options.rounds) return std::int8_t(-1);
         std::array<std::pair<double, int>, 3> byBend;
         for (int i = 0; i < 3; ++i)
-            byBend[i] = {-(q.bend(i) + 1e-3 * options.tolerance) * (p[(i + 1) % 3] - p[i]).length(), i};
+            byBend[i] = {-(bend[i] + 1e-3 * options.tolerance) * (p[(i + 1) % 3] - p[i]).length(), i};
         std::sort(byBend.begin(), byBend.end());
         const int i = byBend[attempts].second;
-        if (attempts > 0 && q.bend(i) < 0.1 * options.tolerance) return std::int8_t(-1);
+        if (attempts > 0 && bend[i] < 0.1 * options.tolerance) return std::int8_t(-1);
         return std::int8_t(i);
     };
     for (int round = 0; !pending.empty(); ++round) {
@@ -531,9 +611,10 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                 std::vector<Vec3d> at;
                 std::vector<double> v;
                 std::vector<Vec3d> g;
+                CheckBatch b;
                 for (std::size_t c = r.begin(); c != r.end(); ++c) {
                     const std::size_t begin = c * kTrianglesPerBatch,
-                                      end = std::min(pending.size(), begin + kTrianglesPerBatch);
+                                      end = std::min(pending.size(), begin + kTrianglesPerBatch), n = end - begin;
                     at.clear();
                     for (std::size_t k = begin; k < end; ++k) {
                         const openvdb::Vec3I& tri = mesh.triangles[pending[k]];
@@ -543,29 +624,19 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                     v.resize(at.size());
                     g.resize(at.size());
                     solid.evaluateBatch(at, v, g);
+                    // triangleWithin()'s test (without the bound first: the largest value is what
+                    // the report gives as the mesh's deviation, and the coarse mesh's before; a
+                    // failing triangle is split or checked again), side by side.
+                    b.gather(mesh, pending, begin, n, points, vertexDistance, v, g, options.box);
+                    b.compute(n);
                     for (std::size_t k = begin; k < end; ++k) {
+                        const std::size_t j = k - begin;
                         const std::uint32_t t = pending[k];
-                        const openvdb::Vec3I& tri = mesh.triangles[t];
-                        const std::size_t j = 4 * (k - begin);
-                        std::array<Vec3d, 3> p;
-                        std::array<double, 3> s, m;
-                        for (int i = 0; i < 3; ++i) {
-                            p[i] = points[tri[i]];
-                            s[i] = vertexDistance[tri[i]];
-                            m[i] = solid.distance(v[j + i], g[j + i]);
-                        }
-                        const double centre = solid.distance(v[j + 3], g[j + 3]);
-                        // triangleWithin()'s test (without the bound first: the largest value is
-                        // what the report gives as the mesh's deviation, and the coarse mesh's
-                        // before; a failing triangle is split or checked again).
-                        const TriangleQuadratic q(p, s, m, centre, options.box);
-                        const double largest = q.largest() + q.margin();
+                        const double largest = b.largest[j] + b.margin[j];
                         over[k] = !(largest <= options.tolerance);
-                        if (!over[k] || round == 0) {
-                            const double area = triangleArea(p);
-                            checked[t] = {float(largest), float(q.meanSquare() * area), float(area)};
-                        }
-                        if (over[k]) choice[k] = chooseEdge(p, q, attempts[t], round);
+                        if (!over[k] || round == 0)
+                            checked[t] = {float(largest), float(b.meanSquare[j] * b.area[j]), float(b.area[j])};
+                        if (over[k]) choice[k] = chooseEdge(b.corners(j), b.bends(j), attempts[t], round);
                     }
                 }
             });

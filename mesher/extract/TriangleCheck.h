@@ -28,6 +28,64 @@ inline bool onBoxPlane(double x, const Box3& box, int a)
     return x == double(float(box.min[a])) || x == double(float(box.max[a]));
 }
 
+/// TriangleQuadratic's arithmetic on plain numbers, without branches: the refinement runs it over
+/// structure-of-arrays batches, which the compiler then takes two triangles at a time (the same
+/// operations in the same order: the same bits as one at a time).
+namespace quadratic {
+
+/// q at the centre, for corner values @a s0.. and edge-midpoint values @a m0.. (m0 between
+/// corners 0 and 1).
+inline double atCentre(double s0, double s1, double s2, double m0, double m1, double m2)
+{
+    constexpr double l = 1.0 / 3;
+    return s0 * l * (2 * l - 1) + s1 * l * (2 * l - 1) + s2 * l * (2 * l - 1) +
+           4 * (m0 * l * l + m1 * l * l + m2 * l * l);
+}
+
+/// |q| at its stationary point along the edge from corner value @a si to @a sj (midpoint @a mi)
+/// where that lies inside the edge, else 0.
+inline double edgeExtremum(double si, double sj, double mi)
+{
+    // Along the edge: si + (4 mi - 3 si - sj) t + 2 (si + sj - 2 mi) t^2.
+    const double linear = 4 * mi - 3 * si - sj;
+    const double square = 2 * (si + sj - 2 * mi);
+    const double t = -linear / (2 * square);  // not finite where square is 0: not inside
+    const double value = std::abs(si + (linear + square * t) * t);
+    return t > 0.0 && t < 1.0 ? value : 0.0;
+}
+
+/// The largest |q| over the triangle: at a corner, where q is stationary along an edge, or where
+/// it is stationary inside.
+inline double largest(double s0, double s1, double s2, double m0, double m1, double m2)
+{
+    // q(u, v) = a + b u + c v + d u^2 + e u v + f v^2 with u = l0, v = l1 (corner 2 at 0).
+    const double a = s2, b = 4 * m2 - 3 * s2 - s0, c = 4 * m1 - 3 * s2 - s1;
+    const double d = 2 * (s0 + s2) - 4 * m2, f = 2 * (s1 + s2) - 4 * m1;
+    const double e = 4 * (m0 - a) - 2 * (b + c) - (d + f);
+    double most = std::max(std::max(std::abs(s0), std::abs(s1)), std::abs(s2));
+    most = std::max(most, edgeExtremum(s0, s1, m0));
+    most = std::max(most, edgeExtremum(s1, s2, m1));
+    most = std::max(most, edgeExtremum(s2, s0, m2));
+    // Inside: [2d e; e 2f] (u, v) = -(b, c).
+    const double det = 4 * d * f - e * e;
+    const double u = (-2 * f * b + e * c) / det, v = (-2 * d * c + e * b) / det;  // not finite where det is 0
+    const double inside = std::abs(a + b * u + c * v + d * u * u + e * u * v + f * v * v);
+    return u > 0.0 && v > 0.0 && u + v < 1.0 ? std::max(most, inside) : most;
+}
+
+/// The mean of q squared over the triangle: exact, by the quadratic element's mass matrix
+/// (corners 6, corner with corner -1, corner with the opposite midpoint -4, midpoint 32,
+/// midpoint with midpoint 16, over 180).
+inline double meanSquare(double s0, double s1, double s2, double m0, double m1, double m2)
+{
+    const double corners = 6.0 * (s0 * s0 + s1 * s1 + s2 * s2) - 2.0 * (s0 * s1 + s1 * s2 + s2 * s0);
+    const double midpoints = 32.0 * (m0 * m0 + m1 * m1 + m2 * m2) + 32.0 * (m0 * m1 + m1 * m2 + m2 * m0);
+    const double mixed = -8.0 * (s0 * m1 + s1 * m2 + s2 * m0);  // corner i faces the midpoint of edge (i + 1, i + 2)
+    return std::max(0.0, (corners + midpoints + mixed) / 180.0);
+}
+
+}  // namespace quadratic
+
 /// The quadratic q through a triangle's signed distances at its corners @a s and edge midpoints
 /// @a m (m[i] between corners i and i + 1), with the centre's miss of it (the field's distance
 /// @a centre there against q's) as a margin. With @a box (the solid is also inside it; every corner
@@ -56,7 +114,7 @@ public:
             }
             centre = std::max(centre, 0.0);
         }
-        mMargin = std::abs(centre - at(1.0 / 3, 1.0 / 3, 1.0 / 3));
+        mMargin = std::abs(centre - quadratic::atCentre(mS[0], mS[1], mS[2], mM[0], mM[1], mM[2]));
     }
 
     /// q at barycentric coordinates (l0, l1, l2).
@@ -78,51 +136,10 @@ public:
 
     /// The largest |q| over the triangle, exactly: at a corner, where q is stationary along an
     /// edge, or where it is stationary inside.
-    double largest() const
-    {
-        // q(u, v) = a + b u + c v + d u^2 + e u v + f v^2 with u = l0, v = l1 (corner 2 at 0).
-        const std::array<double, 3>&s = mS, &m = mM;
-        const double a = s[2], b = 4 * m[2] - 3 * s[2] - s[0], c = 4 * m[1] - 3 * s[2] - s[1];
-        const double d = 2 * (s[0] + s[2]) - 4 * m[2], f = 2 * (s[1] + s[2]) - 4 * m[1];
-        const double e = 4 * (m[0] - a) - 2 * (b + c) - (d + f);
-        double most = std::max({std::abs(s[0]), std::abs(s[1]), std::abs(s[2])});
-        for (int i = 0; i < 3; ++i) {
-            // Along edge i from corner i to i + 1: s_i + (4 m_i - 3 s_i - s_j) t + 2 (s_i + s_j - 2 m_i) t^2.
-            const double linear = 4 * m[i] - 3 * s[i] - s[(i + 1) % 3];
-            const double square = 2 * (s[i] + s[(i + 1) % 3] - 2 * m[i]);
-            // The stationary point t = -linear / (2 square) lies on the edge only where the two
-            // have opposite signs and |linear| < 2 |square|: divided only then (most are not).
-            if (!(linear * square < 0.0 && std::abs(linear) < 2 * std::abs(square))) continue;
-            const double t = -linear / (2 * square);
-            if (t > 0.0 && t < 1.0) most = std::max(most, std::abs(s[i] + (linear + square * t) * t));
-        }
-        // Inside: [2d e; e 2f] (u, v) = -(b, c), u = U / det and v = V / det.
-        const double det = 4 * d * f - e * e;
-        const double numeratorU = -2 * f * b + e * c, numeratorV = -2 * d * c + e * b;
-        const bool inside = det > 0.0 ? numeratorU > 0.0 && numeratorV > 0.0 && numeratorU + numeratorV < det
-                                      : numeratorU < 0.0 && numeratorV < 0.0 && numeratorU + numeratorV > det;
-        if (det != 0.0 && inside) {
-            const double u = numeratorU / det, v = numeratorV / det;
-            if (u > 0.0 && v > 0.0 && u + v < 1.0)
-                most = std::max(most, std::abs(a + b * u + c * v + d * u * u + e * u * v + f * v * v));
-        }
-        return most;
-    }
+    double largest() const { return quadratic::largest(mS[0], mS[1], mS[2], mM[0], mM[1], mM[2]); }
 
-    /// The mean of q squared over the triangle: exact, by the quadratic element's mass matrix
-    /// (corners 6, corner with corner -1, corner with the opposite midpoint -4, midpoint 32,
-    /// midpoint with midpoint 16, over 180).
-    double meanSquare() const
-    {
-        const std::array<double, 3>&s = mS, &m = mM;
-        double corners = 0.0, midpoints = 0.0, mixed = 0.0;
-        for (int i = 0; i < 3; ++i) {
-            corners += 6.0 * s[i] * s[i] - 2.0 * s[i] * s[(i + 1) % 3];
-            midpoints += 32.0 * m[i] * m[i] + 32.0 * m[i] * m[(i + 1) % 3];
-            mixed -= 8.0 * s[i] * m[(i + 1) % 3];  // corner i faces the midpoint of edge (i + 1, i + 2)
-        }
-        return std::max(0.0, (corners + midpoints + mixed) / 180.0);
-    }
+    /// The mean of q squared over the triangle (quadratic::meanSquare()).
+    double meanSquare() const { return quadratic::meanSquare(mS[0], mS[1], mS[2], mM[0], mM[1], mM[2]); }
 
 private:
     std::array<double, 3> mS, mM;
