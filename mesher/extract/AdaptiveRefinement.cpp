@@ -43,6 +43,31 @@ void sortUnique(std::vector<EdgeKey>& keys)
     keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
 }
 
+/// The indices i < @a n for which @a keep(i) holds, ascending: found in parallel in fixed blocks,
+/// joined in order (the same list for any thread count). For scans of every triangle or point
+/// that pick a few.
+template <typename Keep>
+void indicesWhere(std::size_t n, Keep&& keep, std::vector<std::uint32_t>& indices)
+{
+    constexpr std::size_t kBlock = 1 << 14;
+    std::vector<std::vector<std::uint32_t>> found((n + kBlock - 1) / kBlock);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, found.size(), 1), [&](const auto& r) {
+        for (std::size_t b = r.begin(); b != r.end(); ++b)
+            for (std::size_t i = b * kBlock; i < std::min(n, (b + 1) * kBlock); ++i)
+                if (keep(i)) found[b].push_back(std::uint32_t(i));
+    });
+    indices.clear();
+    for (const auto& f : found) indices.insert(indices.end(), f.begin(), f.end());
+}
+
+template <typename Keep>
+std::vector<std::uint32_t> indicesWhere(std::size_t n, Keep&& keep)
+{
+    std::vector<std::uint32_t> indices;
+    indicesWhere(n, keep, indices);
+    return indices;
+}
+
 /// Sorted edge keys indexed by their lower vertex: an edge is found in the few keys of its lower
 /// end (a binary search over W9's 300 000 split edges took 0.05 s a round).
 class EdgeIndex {
@@ -392,9 +417,13 @@ std::vector<std::uint32_t> flipLongestEdges(TriangleMesh& mesh, const std::vecto
     std::vector<std::uint32_t> across(2 * edges.size(), std::numeric_limits<std::uint32_t>::max());
     std::vector<std::uint8_t> endpoint(points.size(), 0);
     for (EdgeKey e : edges) endpoint[e >> 32] = endpoint[e & 0xffffffffu] = 1;
-    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+    // Only triangles with two corners among the edges' ends can have one of the edges.
+    auto withTwoEndpoints = [&](std::size_t t) {
         const openvdb::Vec3I& tri = mesh.triangles[t];
-        if (endpoint[tri[0]] + endpoint[tri[1]] + endpoint[tri[2]] < 2) continue;
+        return endpoint[tri[0]] + endpoint[tri[1]] + endpoint[tri[2]] >= 2;
+    };
+    for (std::uint32_t t : indicesWhere(mesh.triangles.size(), withTwoEndpoints)) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
         for (int i = 0; i < 3; ++i)
             if (const std::ptrdiff_t e = find(edges, edgeKey(tri[i], tri[(i + 1) % 3])); e >= 0)
                 across[2 * e + (across[2 * e] != std::numeric_limits<std::uint32_t>::max())] = std::uint32_t(t);
@@ -415,8 +444,8 @@ std::vector<std::uint32_t> flipLongestEdges(TriangleMesh& mesh, const std::vecto
     std::vector<std::uint8_t> exists(existing.size(), 0);
     std::fill(endpoint.begin(), endpoint.end(), 0);
     for (EdgeKey e : existing) endpoint[e >> 32] = endpoint[e & 0xffffffffu] = 1;
-    for (const openvdb::Vec3I& tri : mesh.triangles) {
-        if (endpoint[tri[0]] + endpoint[tri[1]] + endpoint[tri[2]] < 2) continue;
+    for (std::uint32_t t : indicesWhere(mesh.triangles.size(), withTwoEndpoints)) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
         for (int i = 0; i < 3; ++i)
             if (const std::ptrdiff_t e = find(existing, edgeKey(tri[i], tri[(i + 1) % 3])); e >= 0) exists[e] = 1;
     }
@@ -487,10 +516,10 @@ std::vector<std::uint32_t> moveFaceCornersOntoSurface(TriangleMesh& mesh, std::v
     placeOnSurface(solid, o, target, held, accept, tables);
     // Their triangles: none may turn over or lose its area with the corners moved (a corner of a
     // triangle that would is held back, until none would).
-    for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+    around = indicesWhere(mesh.triangles.size(), [&](std::size_t t) {
         const openvdb::Vec3I& tri = mesh.triangles[t];
-        if (slot[tri[0]] >= 0 || slot[tri[1]] >= 0 || slot[tri[2]] >= 0) around.push_back(std::uint32_t(t));
-    }
+        return slot[tri[0]] >= 0 || slot[tri[1]] >= 0 || slot[tri[2]] >= 0;
+    });
     auto position = [&](std::uint32_t v) {
         return slot[v] >= 0 && accept[std::size_t(slot[v])] ? target[std::size_t(slot[v])] : points[v];
     };
@@ -692,9 +721,8 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             if (!changed) break;
             // Only flips (or corners moved) this round: their triangles are checked next round.
             ++stats.rounds;
-            pending.clear();
-            for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
-                if (checkAgain[t]) pending.push_back(std::uint32_t(t));
+            indicesWhere(
+                mesh.triangles.size(), [&](std::size_t t) { return checkAgain[t] != 0; }, pending);
             continue;
         }
         ++stats.rounds;
@@ -737,14 +765,16 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
         isTouched.assign(mesh.triangles.size(), 0);
         endpoint.assign(points.size(), 0);
         for (EdgeKey e : split) endpoint[e >> 32] = endpoint[e & 0xffffffffu] = 1;
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.triangles.size(), 4096), [&](const auto& r) {
-            for (std::size_t t = r.begin(); t != r.end(); ++t) {
+        // A split edge has both ends among the endpoints: only such triangles are searched (the
+        // slots of the others are never read).
+        const std::vector<std::uint32_t> near = indicesWhere(mesh.triangles.size(), [&](std::size_t t) {
+            const openvdb::Vec3I& tri = mesh.triangles[t];
+            return endpoint[tri[0]] + endpoint[tri[1]] + endpoint[tri[2]] >= 2;
+        });
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, near.size(), 4096), [&](const auto& r) {
+            for (std::size_t j = r.begin(); j != r.end(); ++j) {
+                const std::uint32_t t = near[j];
                 const openvdb::Vec3I& tri = mesh.triangles[t];
-                // A split edge has both ends among the endpoints: most triangles need no search.
-                if (endpoint[tri[0]] + endpoint[tri[1]] + endpoint[tri[2]] < 2) {
-                    slots[t] = {-1, -1, -1};
-                    continue;
-                }
                 for (int i = 0; i < 3; ++i) {
                     slots[t][i] = std::int32_t(splitIndex.find(tri[i], tri[(i + 1) % 3]));
                     isTouched[t] = isTouched[t] || slots[t][i] >= 0;
@@ -752,8 +782,8 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             }
         });
         touched.clear();
-        for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
-            if (isTouched[t]) touched.push_back(std::uint32_t(t));
+        for (std::uint32_t t : near)
+            if (isTouched[t]) touched.push_back(t);
         // A triangle whose pieces turn against it or lose their area (as stored) drops a split:
         // the one whose loss leaves the best pieces (their smallest area along the parent's
         // normal), else all (where the surface grazes a box face, two split points on the face
@@ -875,9 +905,8 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                 }
             }
         });
-        pending.clear();
-        for (std::size_t t = 0; t < triangles.size(); ++t)
-            if (isPending[t]) pending.push_back(std::uint32_t(t));
+        indicesWhere(
+            triangles.size(), [&](std::size_t t) { return isPending[t] != 0; }, pending);
         mesh.triangles.swap(triangles);
         attempts.swap(nextAttempts);
         checked.swap(nextChecked);
