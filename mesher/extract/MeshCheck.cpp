@@ -123,8 +123,11 @@ bool fanApart(const std::vector<openvdb::Vec3f>& points, uint32_t v, const Corne
     auto clear = [&](double t, std::size_t i, std::size_t j) { return t * t > n2 * length2[i] * length2[j]; };
     for (std::size_t i = 0; i < k; ++i)
         if (const double t = turn(i, i + 1); !(t > 0.0 && clear(t, i, i + 1))) return false;
+    // Turns to and from the first ray: n . (u x r0) = u . (r0 x n) and n . (r0 x u) = -u . (r0 x n),
+    // one cross product for all.
+    const openvdb::Vec3d aside = ray[0].cross(n);
     for (std::size_t i = 1; i + 1 < k; ++i) {
-        const double in = turn(i, 0), out = turn(0, i + 1);
+        const double in = ray[i].dot(aside), out = -ray[i + 1].dot(aside);
         if (!(clear(in, i, 0) && clear(out, 0, i + 1))) return false;
         if (in > 0.0 && out > 0.0) return false;  // the first ray again: wound more than once
     }
