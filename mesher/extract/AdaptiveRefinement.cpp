@@ -505,6 +505,21 @@ std::vector<std::uint32_t> moveFaceCornersOntoSurface(TriangleMesh& mesh, std::v
 {
     std::vector<std::uint32_t> around;
     if (!o.box) return around;
+    // The faces of the box corner v lies on, where it is off the surface by more than the
+    // tolerance (else none).
+    auto facesOff = [&](std::uint32_t v) {
+        std::uint8_t faces = 0;
+        if (std::abs(vertexDistance[v]) > o.tolerance)
+            for (int a = 0; a < 3; ++a)
+                if (onBoxPlane(points[v][a], *o.box, a)) faces |= std::uint8_t(1u << a);
+        return faces;
+    };
+    // Most rounds have none (W9's): found before any table is made.
+    const bool any = std::any_of(failing.begin(), failing.end(), [&](std::uint32_t t) {
+        const openvdb::Vec3I& tri = mesh.triangles[t];
+        return facesOff(tri[0]) != 0 || facesOff(tri[1]) != 0 || facesOff(tri[2]) != 0;
+    });
+    if (!any) return around;
     // The corners, each once, in order of first appearance (the same for any thread count).
     std::vector<std::uint32_t> corners;
     std::vector<std::uint8_t> held;
@@ -512,16 +527,13 @@ std::vector<std::uint32_t> moveFaceCornersOntoSurface(TriangleMesh& mesh, std::v
     for (std::uint32_t t : failing)
         for (int i = 0; i < 3; ++i) {
             const std::uint32_t v = mesh.triangles[t][i];
-            if (slot[v] >= 0 || !(std::abs(vertexDistance[v]) > o.tolerance)) continue;
-            std::uint8_t faces = 0;
-            for (int a = 0; a < 3; ++a)
-                if (onBoxPlane(points[v][a], *o.box, a)) faces |= std::uint8_t(1u << a);
+            if (slot[v] >= 0) continue;
+            const std::uint8_t faces = facesOff(v);
             if (faces == 0) continue;
             slot[v] = std::int32_t(corners.size());
             corners.push_back(v);
             held.push_back(faces);
         }
-    if (corners.empty()) return around;
     std::vector<Vec3d> target(corners.size());
     for (std::size_t c = 0; c < corners.size(); ++c) target[c] = points[corners[c]];
     std::vector<std::uint8_t> accept;
