@@ -172,7 +172,40 @@ struct CheckBatch {
     std::array<std::array<double, kSize>, 3> x, y, z;  // corner i of each triangle
     std::array<std::array<double, kSize>, 3> s, m;     // corner i, and midpoint of edge (i, i + 1)
     std::array<double, kSize> centre, largest, margin, meanSquare, area;
-    std::array<double, kBatchSize> d;  // distances at the midpoints and centres, four per triangle
+    std::array<double, kBatchSize> d;              // distances at the points sampled
+    std::array<std::uint16_t, kBatchSize> source;  // per triangle its midpoints' and centre's index in d
+
+    /// The points to sample for triangles pending[begin, begin + n) of @a mesh into @a at: each
+    /// triangle's edge midpoints, then its centre. A midpoint of an edge that one of the two
+    /// triangles before has too (siblings of a split, marching cubes' neighbours in a cube) is
+    /// not sampled again: the same bits either way round, so the same distance.
+    void sample(const TriangleMesh& mesh, const std::vector<std::uint32_t>& pending, std::size_t begin, std::size_t n,
+                const std::vector<Vec3d>& points, std::vector<Vec3d>& at)
+    {
+        at.clear();
+        for (std::size_t j = 0; j < n; ++j) {
+            const openvdb::Vec3I& tri = mesh.triangles[pending[begin + j]];
+            for (int i = 0; i < 3; ++i) {
+                const auto a = tri[i], b = tri[(i + 1) % 3];
+                int shared = -1;
+                for (std::size_t back = 1; back <= std::min<std::size_t>(2, j) && shared < 0; ++back) {
+                    const openvdb::Vec3I& before = mesh.triangles[pending[begin + j - back]];
+                    for (int e = 0; e < 3; ++e)
+                        if ((before[e] == b && before[(e + 1) % 3] == a) ||
+                            (before[e] == a && before[(e + 1) % 3] == b))
+                            shared = source[4 * (j - back) + std::size_t(e)];
+                }
+                if (shared >= 0) {
+                    source[4 * j + std::size_t(i)] = std::uint16_t(shared);
+                    continue;
+                }
+                source[4 * j + std::size_t(i)] = std::uint16_t(at.size());
+                at.push_back(0.5 * (points[tri[i]] + points[tri[(i + 1) % 3]]));
+            }
+            source[4 * j + 3] = std::uint16_t(at.size());
+            at.push_back((points[tri[0]] + points[tri[1]] + points[tri[2]]) / 3.0);
+        }
+    }
 
     /// Distances (f - level) / |grad f| of the values @a v and gradients @a g: branch-free
     /// firstOrderSignedDistance().
@@ -182,13 +215,13 @@ struct CheckBatch {
         return length > 0.0 ? v / length : (v == 0.0 ? 0.0 : std::copysign(1e30, v));
     }
 
-    /// Triangles pending[begin, begin + n) of @a mesh, with their midpoints' and centres' values
-    /// @a v and gradients @a g (four per triangle: the three midpoints, then the centre).
+    /// Triangles pending[begin, begin + n) of @a mesh, with the values @a v and gradients @a g at
+    /// the points sample() gave.
     void gather(const TriangleMesh& mesh, const std::vector<std::uint32_t>& pending, std::size_t begin, std::size_t n,
                 const std::vector<Vec3d>& points, const std::vector<double>& vertexDistance,
                 const std::vector<double>& v, const std::vector<Vec3d>& g, const std::optional<Box3>& box)
     {
-        for (std::size_t q = 0; q < 4 * n; ++q) d[q] = distance(v[q], g[q]);
+        for (std::size_t q = 0; q < v.size(); ++q) d[q] = distance(v[q], g[q]);
         for (std::size_t j = 0; j < n; ++j) {
             const openvdb::Vec3I& tri = mesh.triangles[pending[begin + j]];
             for (int i = 0; i < 3; ++i) {
@@ -197,9 +230,9 @@ struct CheckBatch {
                 y[i][j] = p[1];
                 z[i][j] = p[2];
                 s[i][j] = vertexDistance[tri[i]];
-                m[i][j] = d[4 * j + i];
+                m[i][j] = d[source[4 * j + std::size_t(i)]];
             }
-            centre[j] = d[4 * j + 3];
+            centre[j] = d[source[4 * j + 3]];
             // On a face of the box (every corner on its plane), the solid's distance is max(f, 0).
             bool onFace = false;
             if (box)
@@ -650,8 +683,8 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
     for (int round = 0; !pending.empty(); ++round) {
         if (progress) progress(double(round) / options.rounds);
         // Each pending triangle's edge midpoints and centre, evaluated in fixed batches of
-        // triangles (a midpoint shared by two is evaluated twice, at the same bits: no table to
-        // find it in).
+        // triangles (a midpoint shared with one of the two triangles before once, CheckBatch::
+        // sample(); others shared are evaluated twice, at the same bits: no table to find them in).
         constexpr std::size_t kTrianglesPerBatch = kBatchSize / 4;
         over.assign(pending.size(), 0);
         // Each failing triangle's edge to split: the one bending most off its chord (times its
@@ -669,12 +702,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
                 for (std::size_t c = r.begin(); c != r.end(); ++c) {
                     const std::size_t begin = c * kTrianglesPerBatch,
                                       end = std::min(pending.size(), begin + kTrianglesPerBatch), n = end - begin;
-                    at.clear();
-                    for (std::size_t k = begin; k < end; ++k) {
-                        const openvdb::Vec3I& tri = mesh.triangles[pending[k]];
-                        for (int i = 0; i < 3; ++i) at.push_back(0.5 * (points[tri[i]] + points[tri[(i + 1) % 3]]));
-                        at.push_back((points[tri[0]] + points[tri[1]] + points[tri[2]]) / 3.0);
-                    }
+                    b.sample(mesh, pending, begin, n, points, at);
                     v.resize(at.size());
                     g.resize(at.size());
                     solid.evaluateBatch(at, v, g);
