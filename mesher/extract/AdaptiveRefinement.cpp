@@ -313,7 +313,8 @@ struct PlacementTables {
 /// holds that axis from then on). Along a fixed line, not the gradient of each step: a midpoint
 /// goes onto the surface across its edge, never along it (where the chord passes a saddle, the
 /// gradient's path can slide towards an end, and the split makes a sliver again and again).
-/// @a found: converged within o.maxMove of the start. Positions are rounded to float.
+/// @a found: converged (or one step from it, taken unconfirmed) within o.maxMove of the start.
+/// Positions are rounded to float.
 void placeChunkOnSurface(const Solid& solid, const AdaptiveRefinementOptions& o, std::span<Vec3d> x,
                          std::span<const std::uint8_t> heldFaces, std::span<std::uint8_t> found,
                          PlacementTables& tables)
