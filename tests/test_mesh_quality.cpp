@@ -24,6 +24,7 @@
 #include "mesher/extract/Decimation.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
+#include "mesher/extract/PairFilter.h"
 #include "mesher/extract/Refinement.h"
 #include "mesher/extract/SurfaceProjection.h"
 #include "mesher/extract/TriangleCheck.h"
@@ -34,6 +35,7 @@
 
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <numbers>
 #include <optional>
 #include <random>
@@ -941,6 +943,61 @@ TEST(MeshCheck, AFanWoundTwiceStillHasItsCrossingsFound)
     const TriangleMesh once = fan(1);
     EXPECT_EQ(bruteForceCrossings(once), 0u);
     EXPECT_EQ(countSelfIntersections(once), 0u);
+}
+
+TEST(MeshCheck, EightLanePairFilterKeepsWhatTheFourLaneAndAScalarOneKeep)
+{
+    // Random rows of a cell: corner bits, bounds (some NaN, many touching), corners drawn from a
+    // few vertices so that pairs share none, one or two; every x against the rest, both filters
+    // against a plain loop of the same rules.
+    std::mt19937 random(7);
+    for (int trial = 0; trial < 200; ++trial) {
+        const std::size_t count = 1 + random() % 40, padded = count + 7;
+        std::vector<std::int32_t> corner(padded, 16), vertex[3];
+        std::vector<float> lo[3], hi[3];
+        for (int a = 0; a < 3; ++a) {
+            vertex[a].assign(padded, -1);
+            lo[a].assign(padded, 0.0f);
+            hi[a].assign(padded, 0.0f);
+        }
+        for (std::size_t m = 0; m < count; ++m) {
+            corner[m] = std::int32_t(random() % 16);
+            for (int a = 0; a < 3; ++a) {
+                vertex[a][m] = std::int32_t(random() % 12);
+                lo[a][m] = float(random() % 8);
+                hi[a][m] = lo[a][m] + float(random() % 4);
+                if (random() % 50 == 0) lo[a][m] = std::numeric_limits<float>::quiet_NaN();
+            }
+        }
+        const PairRows rows{corner.data(),
+                            {lo[0].data(), lo[1].data(), lo[2].data()},
+                            {hi[0].data(), hi[1].data(), hi[2].data()},
+                            {vertex[0].data(), vertex[1].data(), vertex[2].data()}};
+        for (std::size_t x = 0; x + 1 < count; ++x) {
+            const bool apartX[3] = {random() % 2 == 0, random() % 2 == 0, random() % 2 == 0};
+            std::vector<std::uint32_t> expected;
+            for (std::size_t y = x + 1; y < count; ++y) {
+                int matches = 0;
+                bool sharedApart = false;
+                for (int k = 0; k < 3; ++k) {
+                    int matchesK = 0;
+                    for (int j = 0; j < 3; ++j) matchesK += vertex[k][x] == vertex[j][y];
+                    matches += matchesK;
+                    sharedApart = sharedApart || (matchesK > 0 && apartX[k]);
+                }
+                bool keep = (corner[x] | corner[y]) == 15 && (matches == 0 || (matches == 1 && !sharedApart));
+                for (int a = 0; a < 3; ++a) keep = keep && !(hi[a][x] < lo[a][y]) && !(hi[a][y] < lo[a][x]);
+                if (keep) expected.push_back(std::uint32_t(y));
+            }
+            std::vector<std::uint32_t> four(count), eight(count);
+            four.resize(filterPairs(rows, x, count, apartX, four.data()));
+            EXPECT_EQ(four, expected) << trial << " " << x;
+            if (pairFilterAvx2Available()) {
+                eight.resize(filterPairsAvx2(rows, x, count, apartX, eight.data()));
+                EXPECT_EQ(eight, expected) << trial << " " << x;
+            }
+        }
+    }
 }
 
 TEST(MeshCheck, FoldsOfAClosedMeshAreFoundAsByBruteForce)

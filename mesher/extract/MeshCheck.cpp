@@ -1,5 +1,7 @@
 #include "mesher/extract/MeshCheck.h"
 
+#include "mesher/extract/PairFilter.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
@@ -522,6 +524,79 @@ bool trianglesCross(const CrossingTriangle& s, const CrossingTriangle& t)
 
 }  // namespace
 
+std::size_t filterPairs(const PairRows& rows, std::size_t x, std::size_t count, const bool apartX[3],
+                        std::uint32_t* candidates)
+{
+    std::size_t numCandidates = 0;
+    // Tested only in the lowest cell both cover (both cover this one: their cell ranges overlap),
+    // one of them flagged, their bounds overlapping (written so that a NaN bound rejects nothing).
+#if defined(__SSE2__)
+    // Four at a time.
+    const __m128i cornerX = _mm_set1_epi32(rows.corner[x]), full = _mm_set1_epi32(15);
+    __m128 lowX[3], highX[3];
+    __m128i cornerOfX[3];
+    for (int a = 0; a < 3; ++a) {
+        lowX[a] = _mm_set1_ps(rows.lo[a][x]);
+        highX[a] = _mm_set1_ps(rows.hi[a][x]);
+        cornerOfX[a] = _mm_set1_epi32(rows.vertex[a][x]);
+    }
+    for (std::size_t y = x + 1; y < count; y += 4) {
+        const __m128i both = _mm_or_si128(cornerX, _mm_loadu_si128(reinterpret_cast<const __m128i*>(rows.corner + y)));
+        __m128 keep = _mm_castsi128_ps(_mm_cmpeq_epi32(both, full));
+        for (int a = 0; a < 3; ++a) {
+            keep = _mm_and_ps(keep, _mm_cmpnlt_ps(highX[a], _mm_loadu_ps(rows.lo[a] + y)));
+            keep = _mm_and_ps(keep, _mm_cmpnlt_ps(_mm_loadu_ps(rows.hi[a] + y), lowX[a]));
+        }
+        // Corners shared (each match -1), and whether a shared corner's fan is apart.
+        __m128i matches = _mm_setzero_si128(), sharedApart = _mm_setzero_si128();
+        for (int k = 0; k < 3; ++k) {
+            __m128i matchesK = _mm_setzero_si128();
+            for (int j = 0; j < 3; ++j)
+                matchesK = _mm_add_epi32(
+                    matchesK, _mm_cmpeq_epi32(cornerOfX[k],
+                                              _mm_loadu_si128(reinterpret_cast<const __m128i*>(rows.vertex[j] + y))));
+            matches = _mm_add_epi32(matches, matchesK);
+            if (apartX[k]) sharedApart = _mm_or_si128(sharedApart, matchesK);
+        }
+        const __m128i none = _mm_cmpeq_epi32(matches, _mm_setzero_si128());
+        const __m128i oneNotApart = _mm_and_si128(_mm_cmpeq_epi32(matches, _mm_set1_epi32(-1)),
+                                                  _mm_cmpeq_epi32(sharedApart, _mm_setzero_si128()));
+        keep = _mm_and_ps(keep, _mm_castsi128_ps(_mm_or_si128(none, oneNotApart)));
+        for (unsigned bits = unsigned(_mm_movemask_ps(keep)); bits != 0; bits &= bits - 1)
+            candidates[numCandidates++] = uint32_t(y + unsigned(__builtin_ctz(bits)));
+    }
+#else
+    const unsigned cx = unsigned(rows.corner[x]);
+    for (std::size_t y = x + 1; y < count; ++y) {
+        int matches = 0;
+        bool sharedApart = false;
+        for (int k = 0; k < 3; ++k) {
+            const int matchesK = int(rows.vertex[k][x] == rows.vertex[0][y]) +
+                                 int(rows.vertex[k][x] == rows.vertex[1][y]) +
+                                 int(rows.vertex[k][x] == rows.vertex[2][y]);
+            matches += matchesK;
+            sharedApart = sharedApart || (matchesK > 0 && apartX[k]);
+        }
+        unsigned keep = unsigned((cx | unsigned(rows.corner[y])) == 15u);
+        for (int a = 0; a < 3; ++a)
+            keep &= unsigned(!(rows.hi[a][x] < rows.lo[a][y])) & unsigned(!(rows.hi[a][y] < rows.lo[a][x]));
+        keep &= unsigned(matches == 0 || (matches == 1 && !sharedApart));
+        candidates[numCandidates] = uint32_t(y);
+        numCandidates += keep;
+    }
+#endif
+    return numCandidates;
+}
+
+bool pairFilterAvx2Available()
+{
+#if defined(VOXLAT_AVX2_PAIRS)
+    return __builtin_cpu_supports("avx2");
+#else
+    return false;
+#endif
+}
+
 std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh& mesh)
 {
     return selfIntersections(mesh, {});
@@ -684,6 +759,7 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
     std::vector<uint8_t> computed;
     if (!fansApart && tested.empty()) checkTopology(mesh, &computed);  // its rows give the fans
     const std::vector<uint8_t>& apart = fansApart ? *fansApart : computed;
+    const bool wide = pairFilterAvx2Available();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, 1), [&](const auto& r) {
         // A cell's triangles gathered side by side (structure of arrays): the pairs of a cell
         // are its rows squared, each mostly a few comparisons.
@@ -711,9 +787,9 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
                         const openvdb::Vec3I& tri = mesh.triangles[members[e]];
                         for (int k = 0; k < 3; ++k) __builtin_prefetch(&mesh.points[tri[k]]);
                     }
-                // Rows padded with three entries that pair with none: a row read four at a time
+                // Rows padded with seven entries that pair with none: a row read eight at a time
                 // from any start ends in them.
-                const std::size_t padded = count + 3;
+                const std::size_t padded = count + 7;
                 if (index.size() < padded) {
                     index.resize(padded);
                     gathered.resize(padded);
@@ -746,73 +822,17 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
                         hi[a][m] = tc.max[a];
                     }
                 }
+                const PairRows rows{corner.data(),
+                                    {lo[0].data(), lo[1].data(), lo[2].data()},
+                                    {hi[0].data(), hi[1].data(), hi[2].data()},
+                                    {vertex[0].data(), vertex[1].data(), vertex[2].data()}};
                 for (std::size_t x = 0; x + 1 < count; ++x) {
-                    const unsigned cx = corner[x];
-                    const float lx0 = lo[0][x], lx1 = lo[1][x], lx2 = lo[2][x];
-                    const float hx0 = hi[0][x], hx1 = hi[1][x], hx2 = hi[2][x];
                     // Pairs sharing an edge (two corners or more) are not tested, nor those sharing
                     // one corner whose fan lies apart.
-                    const int32_t vx[3] = {vertex[0][x], vertex[1][x], vertex[2][x]};
                     bool apartX[3];
-                    for (int k = 0; k < 3; ++k) apartX[k] = !apart.empty() && apart[uint32_t(vx[k])];
-                    std::size_t numCandidates = 0;
-                    // Tested only in the lowest cell both cover (both cover this one: their cell
-                    // ranges overlap), one of them flagged, their bounds overlapping (written so
-                    // that a NaN bound rejects nothing, as before).
-#if defined(__SSE2__)
-                    // Four at a time.
-                    const __m128i cornerX = _mm_set1_epi32(int(cx)), full = _mm_set1_epi32(15);
-                    const __m128 lowX0 = _mm_set1_ps(lx0), lowX1 = _mm_set1_ps(lx1), lowX2 = _mm_set1_ps(lx2);
-                    const __m128 highX0 = _mm_set1_ps(hx0), highX1 = _mm_set1_ps(hx1), highX2 = _mm_set1_ps(hx2);
-                    const __m128i cornerOfX[3] = {_mm_set1_epi32(vx[0]), _mm_set1_epi32(vx[1]), _mm_set1_epi32(vx[2])};
-                    for (std::size_t y = x + 1; y < count; y += 4) {
-                        const __m128i both =
-                            _mm_or_si128(cornerX, _mm_loadu_si128(reinterpret_cast<const __m128i*>(corner.data() + y)));
-                        __m128 keep = _mm_castsi128_ps(_mm_cmpeq_epi32(both, full));
-                        keep = _mm_and_ps(keep, _mm_cmpnlt_ps(highX0, _mm_loadu_ps(lo[0].data() + y)));
-                        keep = _mm_and_ps(keep, _mm_cmpnlt_ps(_mm_loadu_ps(hi[0].data() + y), lowX0));
-                        keep = _mm_and_ps(keep, _mm_cmpnlt_ps(highX1, _mm_loadu_ps(lo[1].data() + y)));
-                        keep = _mm_and_ps(keep, _mm_cmpnlt_ps(_mm_loadu_ps(hi[1].data() + y), lowX1));
-                        keep = _mm_and_ps(keep, _mm_cmpnlt_ps(highX2, _mm_loadu_ps(lo[2].data() + y)));
-                        keep = _mm_and_ps(keep, _mm_cmpnlt_ps(_mm_loadu_ps(hi[2].data() + y), lowX2));
-                        // Corners shared (each match -1), and whether a shared corner's fan is apart.
-                        __m128i matches = _mm_setzero_si128(), sharedApart = _mm_setzero_si128();
-                        for (int k = 0; k < 3; ++k) {
-                            __m128i matchesK = _mm_setzero_si128();
-                            for (int j = 0; j < 3; ++j)
-                                matchesK = _mm_add_epi32(
-                                    matchesK,
-                                    _mm_cmpeq_epi32(cornerOfX[k], _mm_loadu_si128(reinterpret_cast<const __m128i*>(
-                                                                      vertex[j].data() + y))));
-                            matches = _mm_add_epi32(matches, matchesK);
-                            if (apartX[k]) sharedApart = _mm_or_si128(sharedApart, matchesK);
-                        }
-                        const __m128i none = _mm_cmpeq_epi32(matches, _mm_setzero_si128());
-                        const __m128i oneNotApart = _mm_and_si128(_mm_cmpeq_epi32(matches, _mm_set1_epi32(-1)),
-                                                                  _mm_cmpeq_epi32(sharedApart, _mm_setzero_si128()));
-                        keep = _mm_and_ps(keep, _mm_castsi128_ps(_mm_or_si128(none, oneNotApart)));
-                        for (unsigned bits = unsigned(_mm_movemask_ps(keep)); bits != 0; bits &= bits - 1)
-                            candidates[numCandidates++] = uint32_t(y + unsigned(__builtin_ctz(bits)));
-                    }
-#else
-                    for (std::size_t y = x + 1; y < count; ++y) {
-                        int matches = 0;
-                        bool sharedApart = false;
-                        for (int k = 0; k < 3; ++k) {
-                            const int matchesK = int(vx[k] == vertex[0][y]) + int(vx[k] == vertex[1][y]) +
-                                                 int(vx[k] == vertex[2][y]);
-                            matches += matchesK;
-                            sharedApart = sharedApart || (matchesK > 0 && apartX[k]);
-                        }
-                        const unsigned keep = unsigned((cx | corner[y]) == 15u) & unsigned(!(hx0 < lo[0][y])) &
-                                              unsigned(!(hi[0][y] < lx0)) & unsigned(!(hx1 < lo[1][y])) &
-                                              unsigned(!(hi[1][y] < lx1)) & unsigned(!(hx2 < lo[2][y])) &
-                                              unsigned(!(hi[2][y] < lx2)) &
-                                              unsigned(matches == 0 || (matches == 1 && !sharedApart));
-                        candidates[numCandidates] = uint32_t(y);
-                        numCandidates += keep;
-                    }
-#endif
+                    for (int k = 0; k < 3; ++k) apartX[k] = !apart.empty() && apart[uint32_t(vertex[k][x])];
+                    const std::size_t numCandidates = wide ? filterPairsAvx2(rows, x, count, apartX, candidates.data())
+                                                           : filterPairs(rows, x, count, apartX, candidates.data());
                     for (std::size_t e = 0; e < numCandidates; ++e) {
                         const std::size_t y = candidates[e];
                         // Gathered on first use: of the triangles a cell holds only those with a
