@@ -657,8 +657,11 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
     for (int a = 0; a < 3; ++a) cell = std::max(cell, extent[a] / 256.0);
     int dims[3];
     for (int a = 0; a < 3; ++a) dims[a] = std::max(1, int(std::ceil(extent[a] / cell)) + 1);
+    // Times the inverse instead of six divisions a triangle (W9: 1.7 ms of 0.075 s). Monotonic in
+    // p, so overlapping bounds still share a cell; the same cells for any thread count.
+    const double perCell = 1.0 / cell;
     auto cellOf = [&](double p, int a) {
-        return uint16_t(std::clamp(int(std::floor((p - box.min()[a]) / cell)), 0, dims[a] - 1));
+        return uint16_t(std::clamp(int(std::floor((p - box.min()[a]) * perCell)), 0, dims[a] - 1));
     };
     // Each triangle's cells and its bounds in single precision, widened by a rounding: pairs
     // whose bounds are apart cannot cross, and most pairs sharing a cell are (a test far cheaper
