@@ -29,9 +29,9 @@ slivers, meshed at 0.5 mm: four goes 1.26x, 0.87x, 1.17x, 1.27x; all twenty pair
 0.705 s (1.14x). 1 159 120 triangles (0.095 of raw), max 0.00885 mm, RMS 0.00271 mm; peak 360 MB
 (raw 382).
 2026-11-28 (stop 35): 3.5-ulp sines, the refinement's check side by side, shared midpoints, one
-topology check, the pair filter eight lanes wide, bookkeeping: five goes on the final tree 0.60x,
-0.93x, 1.00x, 0.97x, 1.00x; all twenty-five pairs 0.61 s against 0.62 s (0.98x), the quietest
-runs 0.54 against 0.53 s. The same mesh; peak 361-383 MB (raw 383-385)."""
+topology check, the pair filter eight lanes wide, bookkeeping: seven goes on the final trees
+0.60x, 0.93x, 1.00x, 0.97x, 1.00x, 0.71x, 1.00x; all thirty-five pairs 0.62 s against 0.62 s
+(1.00x), the quietest runs 0.54 against 0.53 s. The same mesh; peak 361-388 MB (raw 383-385)."""
 import json
 import math
 import shutil
