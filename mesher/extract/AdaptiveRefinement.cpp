@@ -233,15 +233,8 @@ struct CheckBatch {
                 m[i][j] = d[source[4 * j + std::size_t(i)]];
             }
             centre[j] = d[source[4 * j + 3]];
-            // On a face of the box (every corner on its plane), the solid's distance is max(f, 0).
-            bool onFace = false;
-            if (box)
-                for (int a = 0; a < 3 && !onFace; ++a) {
-                    const auto& coordinate = a == 0 ? x : a == 1 ? y : z;
-                    onFace = coordinate[0][j] == coordinate[1][j] && coordinate[1][j] == coordinate[2][j] &&
-                             onBoxPlane(coordinate[0][j], *box, a);
-                }
-            if (onFace) {
+            // On a face of the box, the solid's distance is max(f, 0).
+            if (onBoxFace(corners(j), box)) {
                 for (int i = 0; i < 3; ++i) {
                     s[i][j] = std::max(s[i][j], 0.0);
                     m[i][j] = std::max(m[i][j], 0.0);
@@ -276,7 +269,7 @@ struct CheckBatch {
     std::array<double, 3> bends(std::size_t j) const
     {
         std::array<double, 3> b;
-        for (int i = 0; i < 3; ++i) b[i] = std::abs(m[i][j] - 0.5 * (s[i][j] + s[(i + 1) % 3][j]));
+        for (int i = 0; i < 3; ++i) b[i] = quadratic::bend(s[i][j], s[(i + 1) % 3][j], m[i][j]);
         return b;
     }
 };

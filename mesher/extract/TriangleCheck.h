@@ -28,6 +28,17 @@ inline bool onBoxPlane(double x, const Box3& box, int a)
     return x == double(float(box.min[a])) || x == double(float(box.max[a]));
 }
 
+/// Whether the triangle with corners @a p lies on a face of @a box (every corner on the face's
+/// plane): there the solid's distance is max(f, 0), and TriangleQuadratic takes the positive parts.
+inline bool onBoxFace(const std::array<openvdb::Vec3d, 3>& p, const std::optional<Box3>& box)
+{
+    bool onFace = false;
+    if (box)
+        for (int a = 0; a < 3 && !onFace; ++a)
+            onFace = p[0][a] == p[1][a] && p[1][a] == p[2][a] && onBoxPlane(p[0][a], *box, a);
+    return onFace;
+}
+
 /// TriangleQuadratic's arithmetic on plain numbers, without branches: the refinement runs it over
 /// structure-of-arrays batches, which the compiler then takes two triangles at a time (the same
 /// operations in the same order: the same bits as one at a time).
@@ -40,6 +51,13 @@ inline double atCentre(double s0, double s1, double s2, double m0, double m1, do
     constexpr double l = 1.0 / 3;
     return s0 * l * (2 * l - 1) + s1 * l * (2 * l - 1) + s2 * l * (2 * l - 1) +
            4 * (m0 * l * l + m1 * l * l + m2 * l * l);
+}
+
+/// How far the midpoint value @a mi of the edge from corner value @a si to @a sj lies off the
+/// chord between its ends: the edge's bend.
+inline double bend(double si, double sj, double mi)
+{
+    return std::abs(mi - 0.5 * (si + sj));
 }
 
 /// |q| at its stationary point along the edge from corner value @a si to @a sj (midpoint @a mi)
@@ -101,11 +119,7 @@ public:
                       const std::array<double, 3>& m, double centre, const std::optional<Box3>& box)
         : mS(s), mM(m)
     {
-        bool onFace = false;
-        if (box)
-            for (int a = 0; a < 3 && !onFace; ++a)
-                onFace = p[0][a] == p[1][a] && p[1][a] == p[2][a] && onBoxPlane(p[0][a], *box, a);
-        if (onFace) {
+        if (onBoxFace(p, box)) {
             // The solid's distance there is max(f, 0): the quadratic goes through that (deep
             // inside, where the field is far from quadratic, it is 0).
             for (int i = 0; i < 3; ++i) {
@@ -129,7 +143,7 @@ public:
 
     /// How far q's value at the midpoint of edge @a i (corners i and i + 1) lies off the chord
     /// between its ends: the edge's bend (with the positive parts on a face).
-    double bend(int i) const { return std::abs(mM[i] - 0.5 * (mS[i] + mS[(i + 1) % 3])); }
+    double bend(int i) const { return quadratic::bend(mS[i], mS[(i + 1) % 3], mM[i]); }
 
     /// A bound on |q| over the triangle (quadraticBound()).
     double bound() const { return quadraticBound(mS, mM); }
