@@ -9,6 +9,7 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <mutex>
 #include <random>
 
 using namespace voxlat;
@@ -98,6 +99,47 @@ TEST(Pieces, PiecesAcrossLeavesAndTilesMatchTheirVolumes)
         for (std::size_t i = 0; i < all.pieces.size(); ++i) {
             EXPECT_EQ(again.pieces[i].voxels, all.pieces[i].voxels);
             EXPECT_EQ(again.pieces[i].bounds, all.pieces[i].bounds);
+        }
+    }
+}
+
+TEST(Pieces, LeavesHandedToAVisitorCountAsTheKeptGrid)
+{
+    // The tolerance mesh's way (Job::evaluateRecipeGrid without the grid): the leaves' solid bits
+    // gathered by the evaluator's visitor, in no fixed order, plus the tiles of the grid it returns,
+    // give the pieces of the grid itself: same count, voxels and bounds, for any thread count.
+    const Domain d = Domain::fromBox(Box3{Vec3d(0), Vec3d(40)}, 0.25);
+    std::vector<FieldPtr> parts{std::make_shared<Sphere>(Vec3d(14, 14, 14), 11.0),
+                                std::make_shared<Sphere>(Vec3d(33, 33, 33), 4.0),
+                                std::make_shared<Sphere>(Vec3d(34, 6, 20), 0.3)};
+    const auto field = std::make_shared<BooleanField>(BooleanOp::Union, parts);
+    SparseOptions options;
+    options.clipToDomain = true;
+    const PieceCount kept = countPieces(*evaluateSparse(*field, d, options));
+    ASSERT_EQ(kept.pieces.size(), 3u);
+    for (int threads : {1, 2, 4}) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        std::mutex mutex;
+        std::vector<SolidBlock> leaves;
+        SparseOptions visited = options;
+        visited.leafVisitor = [&](const openvdb::Coord& origin, const float* values) {
+            SolidBlock b;
+            b.origin = origin;
+            b.bits.fill(0);
+            for (int i = 0; i < 512; ++i)
+                if (values[i] < 0.0f) b.bits[std::size_t(i >> 6)] |= std::uint64_t(1) << (i & 63);
+            const std::lock_guard<std::mutex> lock(mutex);
+            leaves.push_back(b);
+        };
+        const auto tiles = evaluateSparse(*field, d, visited);
+        ASSERT_EQ(tiles->tree().leafCount(), 0u);
+        ASSERT_FALSE(leaves.empty());
+        const PieceCount count = countPieces(solidBlocks(*tiles, std::move(leaves)));
+        EXPECT_EQ(count.solidVoxels, kept.solidVoxels);
+        ASSERT_EQ(count.pieces.size(), kept.pieces.size());
+        for (std::size_t i = 0; i < kept.pieces.size(); ++i) {
+            EXPECT_EQ(count.pieces[i].voxels, kept.pieces[i].voxels);
+            EXPECT_EQ(count.pieces[i].bounds, kept.pieces[i].bounds);
         }
     }
 }

@@ -1865,19 +1865,28 @@ TEST(CoarseExtraction, ASmoothResultIsRefinedFromTheCoarsestGridWithinTheToleran
     EXPECT_LT(m.triangles.size(), 2 * m2.triangles.size());
 }
 
-TEST(CoarseExtraction, TheRecipesGridIsFreedOnlyWhenNothingAfterReadsIt)
+TEST(CoarseExtraction, TheRecipesGridIsHeldOnlyWhenSomethingAfterReadsIt)
 {
-    // A tolerance mesh on a coarse grid frees the recipe's grid once its pieces are counted, so
-    // that its tables take the grid's memory, unless an output after it reads the grid (a VDB, a
-    // mesh made otherwise). Asked for again, the grid is evaluated again: the same grid.
+    // A tolerance mesh on a coarse grid holds no recipe's grid once its pieces are counted,
+    // unless an output after it reads the grid (a VDB, a mesh made otherwise): alone, it keeps
+    // only the solid's bits as the leaves are evaluated (the volume and pieces the same as the
+    // grid's); after an output that made the grid, it frees it. Asked for again, the grid is
+    // evaluated again: the same grid.
     const std::string base = gyroidToleranceRecipe("12, 12, 12", 0.02);
     auto freed = [](const nlohmann::json& r) { return r["timings_s"].contains("free the recipe's grid"); };
     test::TempDir dir;
     Job alone(parseRecipe(base, "r.yaml", dir.path));
     alone.writeOutputs(dir.path / "alone", false);
-    EXPECT_TRUE(freed(alone.report()));
+    EXPECT_FALSE(alone.holdsGrid());
+    EXPECT_FALSE(freed(alone.report()));  // never made
     Job kept(parseRecipe(base, "r.yaml", dir.path));
     const openvdb::FloatGrid& before = kept.grid();
+    EXPECT_TRUE(kept.holdsGrid());
+    for (const char* key : {"volume_fraction", "evaluated_leaves", "inside_tiles"})
+        EXPECT_EQ(alone.report()["result"][key], kept.report()["result"][key]) << key;
+    // The mesh's volume replaces the voxels' once a mesh is written.
+    EXPECT_EQ(alone.report()["result"]["voxel_count_volume_mm3"], kept.report()["result"]["volume_mm3"]);
+    EXPECT_EQ(alone.report()["pieces"], kept.report()["pieces"]);
     const openvdb::Index64 voxels = before.activeVoxelCount(), leaves = before.tree().leafCount();
     const openvdb::FloatGrid& again = alone.grid();
     EXPECT_EQ(again.activeVoxelCount(), voxels);
@@ -1894,6 +1903,7 @@ TEST(CoarseExtraction, TheRecipesGridIsFreedOnlyWhenNothingAfterReadsIt)
         Job job(parseRecipe(with(later), "r.yaml", dir.path));
         job.writeOutputs(dir.path / "kept", false);
         EXPECT_FALSE(freed(job.report())) << later;
+        EXPECT_TRUE(job.holdsGrid()) << later;
     }
     // A result with sharp operands (the gyroid cut by a ball) is meshed from the recipe's grid
     // (k = 1): kept, not freed and evaluated again.
@@ -1911,12 +1921,14 @@ TEST(CoarseExtraction, TheRecipesGridIsFreedOnlyWhenNothingAfterReadsIt)
         job.writeOutputs(dir.path / "sharp", false);
         const nlohmann::json r = job.report();
         EXPECT_FALSE(freed(r));
+        EXPECT_TRUE(job.holdsGrid());
         EXPECT_EQ(r["mesh"]["extraction"]["factor"].get<int>(), 1) << r["mesh"]["extraction"].dump();
     }
     // A raw mesh before it: freed (nothing after reads it).
     Job first(parseRecipe(with("outputs: {mesh: [c.stl, {file: a.stl, tolerance: 0.02}]}\n"), "r.yaml", dir.path));
     first.writeOutputs(dir.path / "first", false);
     EXPECT_TRUE(freed(first.report()));
+    EXPECT_FALSE(first.holdsGrid());
     EXPECT_TRUE(std::filesystem::exists(dir.path / "first/c.stl"));
 }
 

@@ -56,23 +56,22 @@ Bits grow(const Bits& set, const Bits& within)
     return out;
 }
 
-/// An 8^3 block of the solid: a leaf's voxels below zero, or all of a block inside a tile.
-struct Block {
-    Coord origin;
-    Bits bits;
-};
+using Block = SolidBlock;
 
-/// The solid's blocks, sorted by origin: a leaf's voxels with value < 0, and every 8^3 block of an
-/// inside tile (as sdfInteriorMask + voxelizeActiveTiles would give, at a fraction of the cost).
-std::vector<Block> solidBlocks(const openvdb::FloatGrid& grid)
+}  // namespace
+
+std::vector<SolidBlock> solidBlocks(const openvdb::FloatGrid& grid, std::vector<SolidBlock> leaves)
 {
-    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
-    leaves.reserve(grid.tree().leafCount());
-    for (auto it = grid.tree().cbeginLeaf(); it; ++it) leaves.push_back(&*it);
-    std::vector<Block> blocks(leaves.size());
-    tbb::parallel_for(std::size_t(0), leaves.size(), [&](std::size_t n) {
-        blocks[n].origin = leaves[n]->origin();
-        belowWords(leaves[n]->buffer().data(), 0.0f, blocks[n].bits.data());
+    // As sdfInteriorMask + voxelizeActiveTiles would give, at a fraction of the cost.
+    std::vector<const openvdb::FloatTree::LeafNodeType*> own;
+    own.reserve(grid.tree().leafCount());
+    for (auto it = grid.tree().cbeginLeaf(); it; ++it) own.push_back(&*it);
+    std::vector<Block> blocks = std::move(leaves);
+    const std::size_t given = blocks.size();
+    blocks.resize(given + own.size());
+    tbb::parallel_for(std::size_t(0), own.size(), [&](std::size_t n) {
+        blocks[given + n].origin = own[n]->origin();
+        belowWords(own[n]->buffer().data(), 0.0f, blocks[given + n].bits.data());
     });
     blocks.erase(std::remove_if(blocks.begin(), blocks.end(), [](const Block& b) { return isEmpty(b.bits); }),
                  blocks.end());
@@ -90,10 +89,13 @@ std::vector<Block> solidBlocks(const openvdb::FloatGrid& grid)
                     blocks.push_back(b);
                 }
     }
+    // Origins are distinct: the order is the same whatever order the blocks came in.
     tbb::parallel_sort(blocks.begin(), blocks.end(),
                        [](const Block& a, const Block& b) { return a.origin < b.origin; });
     return blocks;
 }
+
+namespace {
 
 /// One connected set of a block's voxels (6-connected within the block).
 struct Part {
@@ -232,8 +234,11 @@ private:
 
 PieceCount countPieces(const openvdb::FloatGrid& grid)
 {
-    const std::vector<Block> blocks = solidBlocks(grid);
+    return countPieces(solidBlocks(grid));
+}
 
+PieceCount countPieces(const std::vector<SolidBlock>& blocks)
+{
     // Each block's parts, found in parallel over fixed runs of blocks and laid out in block order:
     // part ids do not depend on the thread count.
     constexpr std::size_t kRun = 256;

@@ -6,6 +6,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -29,5 +30,20 @@ struct PieceCount {
 /// connected parts by flood fills on the leaf's 512 bits held in eight words, in parallel, then
 /// joins parts across leaf faces with a union-find; the result does not depend on the thread count.
 PieceCount countPieces(const openvdb::FloatGrid& grid);
+
+/// The solid voxels of an 8^3 block: bit (y << 3) | z of word x for the voxel at origin + (x, y, z)
+/// (belowWords() of a leaf's values).
+struct SolidBlock {
+    openvdb::Coord origin;
+    std::array<std::uint64_t, 8> bits;
+};
+
+/// The solid of @a grid as blocks, sorted by origin, none empty: each leaf's voxels below zero and
+/// every 8^3 block of its tiles below zero, with @a leaves (blocks of leaves evaluated but not
+/// kept in the grid, in any order; empty ones are dropped) in place of leaves of its own.
+std::vector<SolidBlock> solidBlocks(const openvdb::FloatGrid& grid, std::vector<SolidBlock> leaves = {});
+
+/// countPieces() of a solid given as solidBlocks() returns it.
+PieceCount countPieces(const std::vector<SolidBlock>& blocks);
 
 }  // namespace voxlat

@@ -25,12 +25,14 @@
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/MeshCheck.h"
 #include "mesher/extract/Refinement.h"
+#include "mesher/extract/SignWords.h"
 #include "mesher/extract/SurfaceProjection.h"
 #include "mesher/writers/AtomicFile.h"
 #include "mesher/writers/MeshPreview.h"
 #include "mesher/writers/MeshWriters.h"
 
 #include <openvdb/io/Stream.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 
@@ -296,30 +298,57 @@ FieldPtr Job::field(const std::string& name)
 
 const openvdb::FloatGrid& Job::grid()
 {
-    if (mGrid) return *mGrid;
+    if (!mGrid) evaluateRecipeGrid(true);
+    return *mGrid;
+}
+
+void Job::evaluateRecipeGrid(bool keep)
+{
     solveLevels();
+    // Measured once: a grid freed and asked for again is the same grid.
+    const bool measured = mReport.contains("pieces");
+    if (measured && (mGrid || !keep)) return;
     SparseStats stats;
-    mGrid = timed("evaluate", [&] {
+    // Without the grid: each leaf's solid bits, gathered per thread as the leaves are evaluated.
+    tbb::enumerable_thread_specific<std::vector<SolidBlock>> leafBits;
+    openvdb::FloatGrid::Ptr g = timed("evaluate", [&] {
         SparseOptions options;
         options.clipToDomain = true;
         options.stage = "evaluating " + mRecipe.result;
         options.context = mContext;
+        if (!keep)
+            options.leafVisitor = [&](const openvdb::Coord& origin, const float* values) {
+                SolidBlock& b = leafBits.local().emplace_back();
+                b.origin = origin;
+                belowWords(values, 0.0f, b.bits.data());
+            };
         return evaluateSparse(*mResult, mDomain, options, &stats);
     });
-    mGrid->setName(mRecipe.result);
+    if (keep) {
+        mGrid = g;
+        mGrid->setName(mRecipe.result);
+    }
+    if (measured) return;
     const std::uint64_t inside = stats.domainVoxelsBelowZero;
     mReport["result"] = {{"field", mRecipe.result},
                          {"volume_fraction", double(inside) / double(mDomain.voxelCount())},
                          {"volume_mm3", double(inside) * std::pow(mDomain.voxel, 3)},
                          {"evaluated_leaves", stats.leaves},
                          {"inside_tiles", stats.insideTiles}};
-    checkPieces();
+    {
+        std::vector<SolidBlock> leaves;
+        for (std::vector<SolidBlock>& part : leafBits) {
+            leaves.insert(leaves.end(), part.begin(), part.end());
+            std::vector<SolidBlock>().swap(part);
+        }
+        checkPieces(solidBlocks(*g, std::move(leaves)));
+    }
     if (!mBuilder.gradedNodes().empty())
         timed("measure slabs", [&] {
             for (const GradedNode& node : mBuilder.gradedNodes()) {
                 // Measure the graded node itself: on the result grid when it is the result, else on
                 // a grid of its own.
-                openvdb::FloatGrid::ConstPtr own = mGrid;
+                openvdb::FloatGrid::ConstPtr own = g;
                 if (node.node != mResult) {
                     SparseOptions options;
                     options.clipToDomain = true;
@@ -332,7 +361,6 @@ const openvdb::FloatGrid& Job::grid()
             }
             return 0;
         });
-    return *mGrid;
 }
 
 namespace {
@@ -413,7 +441,9 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
     for (const auto& v : mMeshes)
         if (v->options == options && v->mesh) return *v;
     if (options.tolerance) checkTolerance(options);
-    grid();  // its pieces and volume go into the report; the meshers below ask for it again
+    // Its pieces and volume go into the report; the meshers below ask for it again. A tolerance
+    // mesh made on a coarser grid asks for what it needs (coarseMesh()).
+    if (!(options.tolerance && options.project && options.extractor == MeshExtractor::MarchingCubes)) grid();
     auto v = std::make_unique<MeshVariant>();
     v->options = options;
     const auto raw = std::find_if(mMeshes.begin(), mMeshes.end(), [&](const auto& m) {
@@ -770,8 +800,7 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
 {
     const double tolerance = *options.tolerance;
     voxel = mDomain.voxel;
-    if (!mReport.contains("pieces")) grid();  // the recipe's grid: its pieces are what the coarse mesh must keep
-    const std::uint64_t finePieces = mReport["pieces"]["count"].get<std::uint64_t>();
+    solveLevels();
     // The smallest feature a node knows must span at least three coarse voxels (two resolve it
     // on the grid; the third is the margin for its position between the samples).
     int k = kMaxCoarsening;
@@ -799,9 +828,13 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
         limit = "the result is cut by " + std::to_string(creaseOperands.size() - 1) +
                 " other surface(s): its creases need the recipe's voxel (their chamfers grow with the voxel)";
     }
-    // Freed before the coarse grids and the refinement, which then reuse its memory (nothing after
-    // this mesh reads it; asked again, it is evaluated again). Not at k = 1: the mesh is the
-    // recipe's grid's then (a result with sharp operands is meshed from it).
+    // The recipe's grid: its pieces are what the coarse mesh must keep. When nothing after this
+    // mesh reads it, only its solid's bits are made (asked again, it is evaluated again), or it is
+    // freed before the coarse grids and the refinement, which then reuse its memory. Not at k = 1:
+    // the mesh is the recipe's grid's then (a result with sharp operands is meshed from it); nor
+    // with graded densities, whose slabs are measured on it.
+    evaluateRecipeGrid(!(k > 1 && mGridReleasable && mBuilder.gradedNodes().empty()));
+    const std::uint64_t finePieces = mReport["pieces"]["count"].get<std::uint64_t>();
     if (k > 1 && mGridReleasable && mGrid)
         timed("free the recipe's grid", [&] {
             mGrid.reset();
@@ -987,9 +1020,9 @@ void Job::checkTolerance(const MeshOptions& options)
                        {{"tolerance_mm", tolerance}, {"voxel_mm", mDomain.voxel}});
 }
 
-void Job::checkPieces()
+void Job::checkPieces(const std::vector<SolidBlock>& blocks)
 {
-    const PieceCount count = timed("count pieces", [&] { return countPieces(*mGrid); });
+    const PieceCount count = timed("count pieces", [&] { return countPieces(blocks); });
     const double voxelVolume = std::pow(mDomain.voxel, 3);
     auto describe = [&](const Piece& p) {
         const Vec3d lo = mDomain.worldOf(p.bounds.min()), hi = mDomain.worldOf(p.bounds.max());
