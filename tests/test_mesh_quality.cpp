@@ -1930,6 +1930,28 @@ TEST(CoarseExtraction, TheRecipesGridIsHeldOnlyWhenSomethingAfterReadsIt)
     EXPECT_TRUE(freed(first.report()));
     EXPECT_FALSE(first.holdsGrid());
     EXPECT_TRUE(std::filesystem::exists(dir.path / "first/c.stl"));
+    // A graded density's slabs are measured on the recipe's grid: made, measured, then freed.
+    {
+        const std::string graded =
+            "voxel: 0.1\n"
+            "domain: {box: [[0, 0, 0], [12, 12, 12]]}\n"
+            "fields:\n"
+            "  lattice: {tpms: gyroid, cell: 6, solid: network,\n"
+            "            density: {ramp: {axis: z, from: 0.2, to: 0.4}}}\n"
+            "result: lattice\n"
+            "outputs: {mesh: {file: a.stl, tolerance: 0.02}}\n";
+        Job job(parseRecipe(graded, "r.yaml", dir.path));
+        job.writeOutputs(dir.path / "graded", false);
+        const nlohmann::json r = job.report();
+        EXPECT_TRUE(freed(r));
+        EXPECT_FALSE(job.holdsGrid());
+        EXPECT_GT(r["mesh"]["extraction"]["factor"].get<int>(), 1) << r["mesh"]["extraction"].dump();
+        ASSERT_TRUE(r["fields"]["lattice"].contains("slabs")) << r["fields"]["lattice"].dump();
+        EXPECT_FALSE(r["fields"]["lattice"]["slabs"]["slabs"].empty());
+        Job reference(parseRecipe(graded, "r.yaml", dir.path));
+        reference.grid();
+        EXPECT_EQ(r["fields"]["lattice"]["slabs"], reference.report()["fields"]["lattice"]["slabs"]);
+    }
 }
 
 TEST(CoarseExtraction, ARefinementThatLeavesTrianglesOverFallsBackToAFinerGrid)
