@@ -107,13 +107,16 @@ bool fanApart(const std::vector<openvdb::Vec3f>& points, uint32_t v, const Corne
     if (k < 3) return false;
     const openvdb::Vec3d centre(points[v]);
     // The rays in chain order: each triangle starts (its next) where the one before ends (its prev).
+    // Each sector's cross product is kept for its turn below (the same bits as computed again).
     std::array<openvdb::Vec3d, kMaxFastFan + 1> ray;
+    std::array<openvdb::Vec3d, kMaxFastFan> sector;
     openvdb::Vec3d n(0.0);
     std::size_t current = 0;
     ray[0] = openvdb::Vec3d(points[row[0].next]) - centre;
     for (std::size_t i = 0; i < k; ++i) {
         ray[i + 1] = openvdb::Vec3d(points[row[current].prev]) - centre;
-        n += ray[i].cross(ray[i + 1]);
+        sector[i] = ray[i].cross(ray[i + 1]);
+        n += sector[i];
         current = step[current];
     }
     // Turns as seen along n: the sectors, then whether any but the last reaches the first ray
@@ -121,10 +124,9 @@ bool fanApart(const std::vector<openvdb::Vec3f>& points, uint32_t v, const Corne
     const double n2 = 1e-18 * n.lengthSqr();
     std::array<double, kMaxFastFan + 1> length2;
     for (std::size_t i = 0; i <= k; ++i) length2[i] = ray[i].lengthSqr();
-    auto turn = [&](std::size_t i, std::size_t j) { return n.dot(ray[i].cross(ray[j])); };
     auto clear = [&](double t, std::size_t i, std::size_t j) { return t * t > n2 * length2[i] * length2[j]; };
     for (std::size_t i = 0; i < k; ++i)
-        if (const double t = turn(i, i + 1); !(t > 0.0 && clear(t, i, i + 1))) return false;
+        if (const double t = n.dot(sector[i]); !(t > 0.0 && clear(t, i, i + 1))) return false;
     // Turns to and from the first ray: n . (u x r0) = u . (r0 x n) and n . (r0 x u) = -u . (r0 x n),
     // one cross product for all.
     const openvdb::Vec3d aside = ray[0].cross(n);
