@@ -59,6 +59,10 @@ struct Corner {
 /// Fans with more triangles than this take the general path (the cycle test is quadratic).
 constexpr std::size_t kMaxFastFan = 16;
 
+/// The topology's rows are sorted by at most this many parts, each with a count per vertex (4
+/// bytes a vertex each, beside the rows' 48).
+constexpr std::size_t kMaxRowParts = 8;
+
 /// Whether the triangles @a row around a vertex form one closed fan, each edge at the vertex
 /// shared by exactly two of them in opposite directions: every @a next distinct, every @a prev
 /// some triangle's next, and stepping from a triangle to the one whose next is its prev visits
@@ -183,67 +187,62 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
         return tri[0] < numPoints && tri[1] < numPoints && tri[2] < numPoints && tri[0] != tri[1] && tri[1] != tri[2] &&
                tri[0] != tri[2];
     };
-    // Per fixed block of triangles: the valid and degenerate ones and the span of their
-    // vertices, so that the passes below skip blocks that do not touch their vertices.
-    struct Block {
-        std::size_t valid = 0, degenerate = 0;
-        uint32_t lo = std::numeric_limits<uint32_t>::max(), hi = 0;
-    };
-    constexpr std::size_t kBlock = 1 << 12;
-    std::vector<Block> blocks((numTriangles + kBlock - 1) / kBlock);
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 16), [&](const auto& range) {
-        for (std::size_t b = range.begin(); b != range.end(); ++b) {
-            Block& block = blocks[b];
-            for (std::size_t t = b * kBlock; t < std::min(numTriangles, (b + 1) * kBlock); ++t) {
-                const openvdb::Vec3I& tri = mesh.triangles[t];
-                if (!valid(tri)) {
-                    ++block.degenerate;
-                    continue;
-                }
-                ++block.valid;
-                block.lo = std::min({block.lo, tri[0], tri[1], tri[2]});
-                block.hi = std::max({block.hi, tri[0], tri[1], tri[2]});
-                const openvdb::Vec3d a(mesh.points[tri[0]]), b(mesh.points[tri[1]]), c(mesh.points[tri[2]]);
-                if ((b - a).cross(c - a) == openvdb::Vec3d(0.0)) ++block.degenerate;
+    // Vertex -> the incident valid triangles (as the corners after it), compressed rows in
+    // triangle order: a counting sort over fixed ranges of triangles, one per part. Each part
+    // counts its corners per vertex (and its valid and degenerate triangles), the counts become
+    // each part's cursors within each row, and each part fills its corners in order: every
+    // triangle is read twice in all, and the rows are the same for any split.
+    const std::size_t parts =
+        std::clamp<std::size_t>(std::size_t(tbb::this_task_arena::max_concurrency()), 1, kMaxRowParts);
+    auto partBegin = [&](std::size_t part) { return numTriangles * part / parts; };
+    std::vector<uint32_t> cursor(parts * numPoints, 0);  // part-major
+    std::vector<std::size_t> partValid(parts, 0), partDegenerate(parts, 0);
+    tbb::parallel_for(std::size_t(0), parts, [&](std::size_t part) {
+        uint32_t* count = cursor.data() + part * numPoints;
+        std::size_t numValid = 0, numDegenerate = 0;
+        for (std::size_t t = partBegin(part); t < partBegin(part + 1); ++t) {
+            const openvdb::Vec3I& tri = mesh.triangles[t];
+            if (!valid(tri)) {
+                ++numDegenerate;
+                continue;
             }
+            ++numValid;
+            const openvdb::Vec3d a(mesh.points[tri[0]]), b(mesh.points[tri[1]]), c(mesh.points[tri[2]]);
+            if ((b - a).cross(c - a) == openvdb::Vec3d(0.0)) ++numDegenerate;
+            for (int k = 0; k < 3; ++k) ++count[tri[k]];
+        }
+        partValid[part] = numValid;
+        partDegenerate[part] = numDegenerate;
+    });
+    const std::size_t numValid = std::accumulate(partValid.begin(), partValid.end(), std::size_t(0));
+    result.degenerateTriangles = std::accumulate(partDegenerate.begin(), partDegenerate.end(), std::size_t(0));
+    // Per vertex its row's length, and each part's counts turned into its start within the row.
+    std::vector<std::size_t> first(numPoints + 1, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numPoints, 1 << 14), [&](const auto& range) {
+        for (std::size_t v = range.begin(); v != range.end(); ++v) {
+            uint32_t running = 0;
+            for (std::size_t part = 0; part < parts; ++part) {
+                const uint32_t c = cursor[part * numPoints + v];
+                cursor[part * numPoints + v] = running;
+                running += c;
+            }
+            first[v + 1] = running;
         }
     });
-    std::size_t numValid = 0;
-    for (const Block& block : blocks) {
-        numValid += block.valid;
-        result.degenerateTriangles += block.degenerate;
-    }
-
-    // Vertex -> the incident valid triangles (as the corners after it), compressed rows in
-    // triangle order. Each task owns a range of vertices and scans the blocks that reach it for
-    // its corners: no counter is shared, and the rows come out the same for any split.
-    const std::size_t parts = std::size_t(std::max(1, tbb::this_task_arena::max_concurrency()));
-    auto partBegin = [&](std::size_t part) { return numPoints * part / parts; };
-    auto forCorners = [&](std::size_t part, auto&& visit) {
-        const std::size_t lo = partBegin(part), hi = partBegin(part + 1);
-        for (std::size_t b = 0; b < blocks.size(); ++b) {
-            if (blocks[b].valid == 0 || blocks[b].hi < lo || blocks[b].lo >= hi) continue;
-            for (std::size_t t = b * kBlock; t < std::min(numTriangles, (b + 1) * kBlock); ++t) {
-                const openvdb::Vec3I& tri = mesh.triangles[t];
-                if (!valid(tri)) continue;
-                for (int k = 0; k < 3; ++k)
-                    if (tri[k] >= lo && tri[k] < hi) visit(tri[k], Corner{tri[(k + 1) % 3], tri[(k + 2) % 3]});
-            }
-        }
-    };
-    std::vector<std::size_t> first(numPoints + 1, 0);
-    tbb::parallel_for(std::size_t(0), parts,
-                      [&](std::size_t part) { forCorners(part, [&](uint32_t v, const Corner&) { ++first[v + 1]; }); });
     std::partial_sum(first.begin(), first.end(), first.begin());
     // Left uninitialised (every entry is filled below): the rows are the largest array here, and
-    // a fresh one is paged in as it is written. Each row's start serves as its cursor, leaving it
-    // at the next row's start: shifted back by one row after.
+    // a fresh one is paged in as it is written.
     const std::unique_ptr<Corner[]> corners(new Corner[first.back()]);
     tbb::parallel_for(std::size_t(0), parts, [&](std::size_t part) {
-        forCorners(part, [&](uint32_t v, const Corner& c) { corners[first[v]++] = c; });
+        uint32_t* at = cursor.data() + part * numPoints;
+        for (std::size_t t = partBegin(part); t < partBegin(part + 1); ++t) {
+            const openvdb::Vec3I& tri = mesh.triangles[t];
+            if (!valid(tri)) continue;
+            for (int k = 0; k < 3; ++k)
+                corners[first[tri[k]] + at[tri[k]]++] = Corner{tri[(k + 1) % 3], tri[(k + 2) % 3]};
+        }
     });
-    std::copy_backward(first.begin(), first.end() - 1, first.end());
-    first[0] = 0;
+    std::vector<uint32_t>().swap(cursor);
 
     // Pieces: vertices joined by the edges, united at each edge's lower end in the pass below.
     std::vector<std::atomic<uint32_t>> piece(numPoints);
