@@ -47,8 +47,8 @@ public:
     /// Whether a tolerance mesh made on a coarser grid may go without the recipe's grid once its
     /// pieces are counted (nothing after it reads the grid): it keeps only the solid's bits while
     /// the leaves are evaluated, or frees a grid made before (W9's peak 515 -> 380 MB freed, 230 MB
-    /// with the bits only). writeOutputs() decides it
-    /// per output from the outputs after it; `voxlat mesh` sets it.
+    /// with the bits only). writeOutputs() decides it per output from the outputs after it;
+    /// `voxlat mesh` sets it.
     void setGridReleasable(bool releasable) { mGridReleasable = releasable; }
     /// Whether the recipe's grid is held now (made and not freed).
     bool holdsGrid() const { return bool(mGrid); }

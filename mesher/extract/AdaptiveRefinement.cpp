@@ -939,7 +939,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             }
         });
         stats.splits += kept.size();
-        stats.dropped += m - made.size();
+        stats.dropped += m - kept.size();
         // Where the field has creases of its own (a union of capsules at a joint), splits keep
         // failing and the mesh grows round after round: given up once a round drops a twentieth of
         // its splits (W9 dropped 0.3 %, a capsule lattice 29 %).
