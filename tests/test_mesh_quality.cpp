@@ -1875,8 +1875,14 @@ TEST(CoarseExtraction, TheRecipesGridIsHeldOnlyWhenSomethingAfterReadsIt)
     const std::string base = gyroidToleranceRecipe("12, 12, 12", 0.02);
     auto freed = [](const nlohmann::json& r) { return r["timings_s"].contains("free the recipe's grid"); };
     test::TempDir dir;
-    Job alone(parseRecipe(base, "r.yaml", dir.path));
-    alone.writeOutputs(dir.path / "alone", false);
+    // The job of recipe @a text, its outputs written into @a folder.
+    auto written = [&](const std::string& text, const char* folder) {
+        auto job = std::make_unique<Job>(parseRecipe(text, "r.yaml", dir.path));
+        job->writeOutputs(dir.path / folder, false);
+        return job;
+    };
+    const auto alonePtr = written(base, "alone");
+    Job& alone = *alonePtr;
     EXPECT_FALSE(alone.holdsGrid());
     EXPECT_FALSE(freed(alone.report()));  // never made
     Job kept(parseRecipe(base, "r.yaml", dir.path));
@@ -1900,8 +1906,8 @@ TEST(CoarseExtraction, TheRecipesGridIsHeldOnlyWhenSomethingAfterReadsIt)
     };
     for (const std::string later : {"outputs: {mesh: {file: a.stl, tolerance: 0.02}, vdb: b.vdb}\n",
                                     "outputs: {mesh: [{file: a.stl, tolerance: 0.02}, c.stl]}\n"}) {
-        Job job(parseRecipe(with(later), "r.yaml", dir.path));
-        job.writeOutputs(dir.path / "kept", false);
+        const auto made = written(with(later), "kept");
+        Job& job = *made;
         EXPECT_FALSE(freed(job.report())) << later;
         EXPECT_TRUE(job.holdsGrid()) << later;
     }
@@ -1917,16 +1923,16 @@ TEST(CoarseExtraction, TheRecipesGridIsHeldOnlyWhenSomethingAfterReadsIt)
             "  part: {intersection: [lattice, ball]}\n"
             "result: part\n"
             "outputs: {mesh: {file: a.stl, tolerance: 0.05}}\n";
-        Job job(parseRecipe(sharp, "r.yaml", dir.path));
-        job.writeOutputs(dir.path / "sharp", false);
+        const auto made = written(sharp, "sharp");
+        Job& job = *made;
         const nlohmann::json r = job.report();
         EXPECT_FALSE(freed(r));
         EXPECT_TRUE(job.holdsGrid());
         EXPECT_EQ(r["mesh"]["extraction"]["factor"].get<int>(), 1) << r["mesh"]["extraction"].dump();
     }
     // A raw mesh before it: freed (nothing after reads it).
-    Job first(parseRecipe(with("outputs: {mesh: [c.stl, {file: a.stl, tolerance: 0.02}]}\n"), "r.yaml", dir.path));
-    first.writeOutputs(dir.path / "first", false);
+    const auto firstPtr = written(with("outputs: {mesh: [c.stl, {file: a.stl, tolerance: 0.02}]}\n"), "first");
+    Job& first = *firstPtr;
     EXPECT_TRUE(freed(first.report()));
     EXPECT_FALSE(first.holdsGrid());
     EXPECT_TRUE(std::filesystem::exists(dir.path / "first/c.stl"));
@@ -1940,8 +1946,8 @@ TEST(CoarseExtraction, TheRecipesGridIsHeldOnlyWhenSomethingAfterReadsIt)
             "            density: {ramp: {axis: z, from: 0.2, to: 0.4}}}\n"
             "result: lattice\n"
             "outputs: {mesh: {file: a.stl, tolerance: 0.02}}\n";
-        Job job(parseRecipe(graded, "r.yaml", dir.path));
-        job.writeOutputs(dir.path / "graded", false);
+        const auto made = written(graded, "graded");
+        Job& job = *made;
         const nlohmann::json r = job.report();
         EXPECT_TRUE(freed(r));
         EXPECT_FALSE(job.holdsGrid());

@@ -442,8 +442,9 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         if (v->options == options && v->mesh) return *v;
     if (options.tolerance) checkTolerance(options);
     // Its pieces and volume go into the report; the meshers below ask for it again. A tolerance
-    // mesh made on a coarser grid asks for what it needs (coarseMesh()).
-    if (!(options.tolerance && options.project && options.extractor == MeshExtractor::MarchingCubes)) grid();
+    // mesh tried on a coarser grid first asks for what it needs (coarseMesh()).
+    const bool coarseFirst = options.tolerance && options.project && options.extractor == MeshExtractor::MarchingCubes;
+    if (!coarseFirst) grid();
     auto v = std::make_unique<MeshVariant>();
     v->options = options;
     const auto raw = std::find_if(mMeshes.begin(), mMeshes.end(), [&](const auto& m) {
@@ -460,7 +461,7 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
     std::optional<BoxClipStats> boxCut;
     std::optional<MeshTopology> topology;  // a refined mesh's, checked with its crossings
     if (options.project && options.extractor == MeshExtractor::MarchingCubes) {
-        if (options.tolerance) v->mesh = coarseMesh(options, extraction, meshVoxel, projected, boxCut, topology);
+        if (coarseFirst) v->mesh = coarseMesh(options, extraction, meshVoxel, projected, boxCut, topology);
         if (!v->mesh && smoothResult()) {
             meshVoxel = mDomain.voxel;
             v->mesh = clippedMesh(mDomain.voxel, projected, boxCut);
