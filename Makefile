@@ -42,7 +42,7 @@ build: deps
 
 run: build
 	$(BUILD)/voxlat run $(RECIPE) --out $(OUT)
-	@echo "outputs are in $(abspath $(OUT)): the mesh, a preview picture (*.preview.png) and report.json"
+	@echo "outputs are in $(abspath $(OUT)): the mesh, a preview picture (NAME.stl.preview.png) and report.json"
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)

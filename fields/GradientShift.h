@@ -31,7 +31,7 @@ struct ShiftSpec {
     Vec3d direction{0.0, 0.0, 1.0};               ///< constant build direction (any length > 0)
     FieldPtr directionGradient;                   ///< or: the unit gradient of this field
     std::array<FieldPtr, 3> directionComponents;  ///< or: (bx, by, bz) from three fields
-    ShiftRotation rotation = ShiftRotation::Rodrigues;
+    ShiftRotation rotation = ShiftRotation::Tensor;
     double scale = 1.0;  ///< multiplies every magnitude (0.5 turns total wall thicknesses into shifts)
     /// One side only (an offset): F(x) = f(x - s(x)), f's zero set moved by s along the unit
     /// gradient. The magnitude keeps its sign (m < 0 moves the set against the gradient).

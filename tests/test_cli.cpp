@@ -370,8 +370,12 @@ outputs: {mesh: part.stl}
     ASSERT_GT(report["pieces"]["count"].get<int>(), 1) << "the box no longer cuts crumbs: choose another";
     EXPECT_EQ(report["pieces"]["free"], 0);
     EXPECT_EQ(report["pieces"]["crumbs"]["count"].get<int>(), report["pieces"]["count"].get<int>() - 1);
-    EXPECT_NE(out.find("are crumbs a cut leaves"), std::string::npos) << out;
-    EXPECT_EQ(report["warnings"][0]["code"], "crumbs");
+    // Slivers under a cubic millimetre each are listed, not warned of (issue 42: nearly every box
+    // cut of a TPMS leaves some).
+    EXPECT_LT(report["pieces"]["crumbs"]["largest_mm3"].get<double>(), 1.0);
+    EXPECT_GT(report["pieces"]["crumbs"]["volume_mm3"].get<double>(), 0.0);
+    EXPECT_EQ(out.find("are crumbs a cut leaves"), std::string::npos) << out;
+    for (const auto& w : report["warnings"]) EXPECT_NE(w["code"], "crumbs");
     // Two balls apart: a free piece, the job fails with exit 3 and writes nothing.
     const auto two = dir.write("two.yaml", R"(voxel: 0.25
 domain: {box: [[-8, -8, -8], [8, 8, 8]]}

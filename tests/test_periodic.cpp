@@ -239,12 +239,11 @@ TEST(DensityPieces, BoxOfCellsHitsTheTargetOnTheMesh)
     // axis. The mesh's own volume is the independent measure.
     Job job(parseRecipe(bccBoxRecipe(0.1), "bcc.yaml", "."));
     job.solveLevels();
-    ASSERT_TRUE(job.report()["fields"]["lattice"].contains("density_measured_on"));
+    ASSERT_TRUE(job.report()["fields"]["lattice"].contains("density_sampling"));
     // BCC is its own mirror image along every axis: one face zone per axis, and each part of the
     // period measured by its half (twice) and its middle sample: four segments; and its own image
     // with x and y swapped: 10 of the 16 x-y pairs.
-    EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
-              "one period of the interior (40 weighted pieces)");
+    EXPECT_EQ(job.report()["fields"]["lattice"]["density_sampling"], "one period of the interior (40 weighted pieces)");
     expectMeshHoldsTheTarget(job);
 }
 
@@ -276,8 +275,7 @@ TEST(DensityPieces, AsymmetricCellMeasuresBothFaceZones)
         "result: lattice\n";
     Job job(parseRecipe(text, "diagonal.yaml", "."));
     job.solveLevels();
-    EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
-              "one period of the interior (40 weighted pieces)");
+    EXPECT_EQ(job.report()["fields"]["lattice"]["density_sampling"], "one period of the interior (40 weighted pieces)");
     expectMeshHoldsTheTarget(job);
 }
 
@@ -408,8 +406,7 @@ TEST(DensityPieces, RadiiGradedAlongAnAxisHitTheTargetOnTheMesh)
     job.solveLevels();
     // BCC mirrors along x and y (the radii depend on z only): four segments each (the face zone,
     // halves and middles of the period), one along z; x and y swapped: 10 of the 16 pairs.
-    EXPECT_EQ(job.report()["fields"]["lattice"]["density_measured_on"],
-              "one period of the interior (10 weighted pieces)");
+    EXPECT_EQ(job.report()["fields"]["lattice"]["density_sampling"], "one period of the interior (10 weighted pieces)");
     const TriangleMesh& mesh = job.mesh();
     EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.01 * 0.20);
     EXPECT_TRUE(checkTopology(mesh).closedManifold());

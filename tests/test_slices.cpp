@@ -259,7 +259,7 @@ TEST(Slices, ArchiveOpensAndConfigIsConsistent)
         for (std::uint8_t p : decodePng(entries.at(name), w, h, c)) exposed += p / 255.0;
     }
     EXPECT_NEAR(std::stod(config.at("usedMaterial")) * 1000.0, exposed * 0.05 * 0.05 * 0.05, 1e-3);
-    EXPECT_TRUE(std::filesystem::exists(dir.path / "out" / "small.preview.png"));
+    EXPECT_TRUE(std::filesystem::exists(dir.path / "out" / "small.sl1s.preview.png"));
     // A preview named in the recipe goes next to the outputs too.
     std::string text = kSmallSlices;
     text.replace(text.find("file: small.sl1s"), 16, "file: b.sl1s, preview: sheet.png");
@@ -362,7 +362,8 @@ TEST(Slices, SameBytesForAnyThreadCount)
     const std::string one = readFile(dir.path / "t1" / "part.sl1s");
     EXPECT_GT(one.size(), 10000u);
     EXPECT_TRUE(one == readFile(dir.path / "t3" / "part.sl1s"));  // not EXPECT_EQ: binary
-    EXPECT_TRUE(readFile(dir.path / "t1" / "part.preview.png") == readFile(dir.path / "t3" / "part.preview.png"));
+    EXPECT_TRUE(readFile(dir.path / "t1" / "part.sl1s.preview.png") ==
+                readFile(dir.path / "t3" / "part.sl1s.preview.png"));
     const std::string goo = readFile(dir.path / "t1" / "part.goo");
     EXPECT_GT(goo.size(), 195477u);
     EXPECT_TRUE(goo == readFile(dir.path / "t3" / "part.goo"));
@@ -425,8 +426,8 @@ TEST(Slices, LayersAPeriodApartAreCopied)
     EXPECT_LE(double(any), 1e-6 * double(pixels));
     for (int i = 0; i < 100; ++i) EXPECT_NEAR(copied.layerAreas[i], computed.layerAreas[i], 1e-6) << i;
     for (int i = 40; i < 100; ++i) EXPECT_EQ(copied.layerAreas[i], copied.layerAreas[i % 40]) << i;
-    const auto [previewAny, previewLarge] = pixelsDiffering(readFile(dir.path / "computed" / "part.preview.png"),
-                                                            readFile(dir.path / "copied" / "part.preview.png"));
+    const auto [previewAny, previewLarge] = pixelsDiffering(readFile(dir.path / "computed" / "part.sl1s.preview.png"),
+                                                            readFile(dir.path / "copied" / "part.sl1s.preview.png"));
     EXPECT_EQ(previewLarge, 0u);
 
     // A budget for the first 15 phases: 30 layers copied, the rest computed, the same bytes for 1

@@ -846,7 +846,7 @@ TEST(StrutRecipes, BadInputNamesFileAndLineAndWritesNothing)
         {"  lattice: {struts: {wireframe: bad.csv}, kernel: {gaussian: {sigma: 0.5}}, level: 0.1}\n",
          "bad.csv:3: strut refers to node 7"},
         {"  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, radius: [1, 2]}\n",
-         "the radius list has 2 entries but the frame has 64 struts"},
+         "the radius list has 2 entries but the frame has 512 struts"},
     };
     dir.write("bad.csv", "node,0,0,0\nnode,1,1,1\nstrut,0,7\n");
     for (const Case& c : cases) {

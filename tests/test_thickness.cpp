@@ -193,6 +193,32 @@ TEST(GradientShift, AnisotropicLimits)
     }
 }
 
+TEST(GradientShift, ObliqueBuildKeepsWallAndLayerByDefault)
+{
+    // Issue 42: `build: [1, 1, 1]` with wall 0.3 / layer 0.8 and no `rotation:` gave 0.673 mm
+    // walls both ways (the Rodrigues form mixes d and l off the axes). The default honours the
+    // split for any direction: a wall whose normal makes an angle theta with the build direction
+    // is 2 (d sin^2 theta + l cos^2 theta) thick, measured across the sheet along its normal.
+    test::TempDir dir;
+    Job job(
+        recipe("voxel: 0.1\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n  s: {tpms: gyroid, cell: 10, "
+               "solid: sheet, wall: 0.3, layer: 0.8, build: [1, 1, 1]}\nresult: s\n",
+               dir));
+    const FieldPtr sheet = job.field("s");
+    const Vec3d b = Vec3d(1, 1, 1) / std::sqrt(3.0);
+    const auto f = gyroid(10.0);
+    int inPlane = 0, along = 0;
+    for (const auto& [p, n] : surfacePoints(*f, 3000, 0.0, 10.0, 17)) {
+        const double c = std::abs(n.dot(b));
+        const double w = chordAcross([&](double t) { return sheet->value(p + t * n); }, 0.01, 2.0);
+        EXPECT_NEAR(w, 2 * (0.15 * (1 - c * c) + 0.4 * c * c), 0.03) << "at " << p << ", cos theta " << c;
+        if (c <= 0.05) ++inPlane;
+        if (c >= 0.98) ++along;
+    }
+    EXPECT_GT(inPlane, 20);
+    EXPECT_GT(along, 3);
+}
+
 TEST(GradientShift, RotationSpecialCasesAreExact)
 {
     const double d = 0.3, l = 0.1;

@@ -1,5 +1,7 @@
 #include "tools/TerminalProgress.h"
 
+#include "mesher/writers/AtomicFile.h"
+
 #include <unistd.h>
 
 #include <algorithm>
@@ -19,7 +21,9 @@ volatile std::sig_atomic_t gSignal = 0;
 extern "C" void onSignal(int signal)
 {
     if (gSignal != 0) {
-        // A second signal: the job did not stop (blocked in a system call?); end now, the default way.
+        // A second signal: the job did not stop (blocked in a system call?); end now, the default
+        // way, leaving no temporary file behind.
+        removeTemporaries();
         std::signal(signal, SIG_DFL);
         std::raise(signal);
         return;

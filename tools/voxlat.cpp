@@ -49,9 +49,17 @@ void printSummary(voxlat::Job& job)
               << d["dims"].dump() << " = " << d["voxels"] << " voxels\n";
     if (r.contains("fields"))
         for (const auto& [name, f] : r["fields"].items()) {
-            std::cout << "field   " << name << " (" << f["type"].get<std::string>() << "): level " << f["level"];
-            if (f.contains("target_density"))
-                std::cout << ", density " << f["achieved_density"] << " (target " << f["target_density"] << ")";
+            // Only the values the report has: a graded lattice has a level per point, not one.
+            std::vector<std::string> parts;
+            auto text = [](const nlohmann::json& v) { return v.is_string() ? v.get<std::string>() : v.dump(); };
+            if (f.contains("level")) parts.push_back("level " + text(f["level"]));
+            if (f.contains("achieved_density"))
+                parts.push_back("density " + text(f["achieved_density"]) +
+                                (f.contains("target_density") ? " (target " + text(f["target_density"]) + ")" : ""));
+            else if (f.contains("target_density"))
+                parts.push_back("density " + text(f["target_density"]));
+            std::cout << "field   " << name << " (" << f["type"].get<std::string>() << ")";
+            for (std::size_t i = 0; i < parts.size(); ++i) std::cout << (i ? ", " : ": ") << parts[i];
             std::cout << "\n";
         }
     if (r.contains("result"))

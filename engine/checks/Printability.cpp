@@ -13,6 +13,9 @@ namespace {
 
 using Word = std::uint64_t;
 
+/// A closed cavity of fewer pixel-layers than this (3 x 3 x 3) is a numeric crumb of the surface.
+constexpr double kCrumbVoxels = 27.0;
+
 /// Exposed pixels of a row as bits (bit i of word i / 64 = pixel i has grey >= 128).
 void packRow(const std::uint8_t* pixels, int nx, Word* bits)
 {
@@ -301,6 +304,7 @@ struct PrintabilityCheck::State {
     nlohmann::json islandList = nlohmann::json::array(), trapList = nlohmann::json::array(),
                    thinList = nlohmann::json::array();
     std::size_t listed = 200;
+    std::int64_t trapsAboveCrumbs = 0;
 
     // Void bodies of the previous layer: body per void region, and the bodies themselves.
     std::vector<int> bodyOf;
@@ -392,18 +396,35 @@ struct PrintabilityCheck::State {
         bodies = std::move(next);
     }
 
+    /// Traps smaller than this are numeric crumbs (a few pixels across): listed, not warned of.
+    double crumbVolume() const { return kCrumbVoxels * voxel(); }
+
+    /// Largest volume first; ties in the order found (a stable sort: the same for any run).
+    static void sortByVolume(nlohmann::json& list)
+    {
+        std::stable_sort(list.begin(), list.end(), [](const nlohmann::json& a, const nlohmann::json& b) {
+            return a["volume_mm3"].get<double>() > b["volume_mm3"].get<double>();
+        });
+    }
+
     void closeTrap(const VoidBody& b)
     {
         ++traps;
         const double volume = double(b.pixels) * voxel();
         trapVolume += volume;
-        if (trapList.size() < listed)
-            trapList.push_back({{"volume_mm3", volume},
-                                {"x", geometry.x(b.nearI)},
-                                {"y", geometry.y(b.nearJ)},
-                                {"z", zOf(b.nearLayer)},
-                                {"drain_mm", b.nearDistance * std::min(geometry.pitchX, geometry.pitchY)},
-                                {"layers", {b.firstLayer, b.lastLayer}}});
+        // The largest `listed` traps are kept (a sealed core first, numeric crumbs last): pruned to
+        // the largest half whenever the list doubles, so memory stays bounded and order fixed.
+        if (trapList.size() >= 2 * listed) {
+            sortByVolume(trapList);
+            trapList.erase(trapList.begin() + std::ptrdiff_t(listed), trapList.end());
+        }
+        if (volume >= crumbVolume()) ++trapsAboveCrumbs;
+        trapList.push_back({{"volume_mm3", volume},
+                            {"x", geometry.x(b.nearI)},
+                            {"y", geometry.y(b.nearJ)},
+                            {"z", zOf(b.nearLayer)},
+                            {"drain_mm", b.nearDistance * std::min(geometry.pitchX, geometry.pitchY)},
+                            {"layers", {b.firstLayer, b.lastLayer}}});
     }
 };
 
@@ -456,6 +477,8 @@ void PrintabilityCheck::addLayer(int index, LayerFeatures features)
 nlohmann::json PrintabilityCheck::report(std::size_t listed) const
 {
     const State& s = *mState;
+    nlohmann::json traps = s.trapList;
+    State::sortByVolume(traps);
     auto cut = [&](const nlohmann::json& list) {
         nlohmann::json out = nlohmann::json::array();
         for (std::size_t k = 0; k < std::min(listed, list.size()); ++k) out.push_back(list[k]);
@@ -466,8 +489,10 @@ nlohmann::json PrintabilityCheck::report(std::size_t listed) const
         {"island_count", s.islands},
         {"island_area_mm2", s.islandArea},
         {"largest_island_mm2", s.largestIsland},
-        {"resin_traps", cut(s.trapList)},
+        {"resin_traps", cut(traps)},
         {"resin_trap_count", s.traps},
+        {"resin_trap_crumb_mm3", s.crumbVolume()},
+        {"resin_traps_above_crumb", s.trapsAboveCrumbs},
         {"resin_trap_volume_mm3", s.trapVolume},
         {"thin",
          {{"pixels", s.thinPixels},
@@ -478,7 +503,8 @@ nlohmann::json PrintabilityCheck::report(std::size_t listed) const
         {"layers_replayed", s.replayed},
         {"definitions",
          "islands: exposed regions (8-connected, grey >= 128) touching no exposed pixel of the layer below; "
-         "resin traps: void regions reaching neither the part box's sides nor the last layer; thin: exposed "
+         "resin traps: void regions reaching neither the part box's sides nor the last layer, largest first (those "
+         "below resin_trap_crumb_mm3, 27 pixel-layers, are listed but not warned of); thin: exposed "
          "pixels in no fully exposed 2 x 2 block, in groups (8-connected) of at least 4 pixels or making up a whole "
          "exposed region"}};
 }
@@ -490,6 +516,10 @@ std::int64_t PrintabilityCheck::islandCount() const
 std::int64_t PrintabilityCheck::trapCount() const
 {
     return mState->traps;
+}
+std::int64_t PrintabilityCheck::trapCountAboveCrumbs() const
+{
+    return mState->trapsAboveCrumbs;
 }
 std::int64_t PrintabilityCheck::thinPixelCount() const
 {

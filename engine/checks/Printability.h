@@ -86,6 +86,8 @@ public:
 
     std::int64_t islandCount() const;
     std::int64_t trapCount() const;
+    /// Traps of at least `resin_trap_crumb_mm3` (27 pixel-layers): the ones worth a warning.
+    std::int64_t trapCountAboveCrumbs() const;
     std::int64_t thinPixelCount() const;
     /// The first @a count islands as readable text, for messages.
     std::string describeIslands(std::size_t count) const;

@@ -9,6 +9,7 @@
 #include <array>
 #include <functional>
 #include <map>
+#include <optional>
 #include <tuple>
 
 namespace voxlat {
@@ -20,9 +21,15 @@ struct Frame {
     /// Radii at the two ends of each strut (mm) when the frame came with them (a wireframe CSV
     /// with `r1,r2` columns); empty otherwise.
     std::vector<std::array<double, 2>> radii;
+    /// The box the frame was laid to fill when its struts run past it (a box frame laid one cell
+    /// past the domain and cut by it): what "the frame's box" means for its density and graded
+    /// radii. Unset: bounds().
+    std::optional<Box3> layoutBox{};
 
     /// The box holding every node.
     Box3 bounds() const;
+    /// layoutBox when set, else bounds().
+    Box3 box() const { return layoutBox ? *layoutBox : bounds(); }
 };
 
 /// Builds a frame, merging nodes closer than a tolerance and dropping repeated or

@@ -7,6 +7,7 @@
 #include "engine/core/SystemInfo.h"
 #include "engine/core/Version.h"
 #include "engine/density/DensitySolver.h"
+#include "engine/jobs/Drains.h"
 #include "engine/jobs/OutputPaths.h"
 #include "engine/jobs/PiecesAdvice.h"
 #include "engine/jobs/PropertiesJob.h"
@@ -15,6 +16,8 @@
 #include "engine/recipe/RecipeParams.h"
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
+#include "fields/Cylinder.h"
+#include "fields/DrainChannels.h"
 #include "fields/GradedLevel.h"
 #include "fields/SurfaceDistance.h"
 #include "fields/Unary.h"
@@ -234,6 +237,8 @@ void Job::solveLevels()
                                     *node.density, node.densityMask.get(), node.subVoxelDensity, mContext);
             });
             if (node.densityMask) entry["density_of"] = node.densityOf;
+            // The region whose share `density:` is, in the words a user set it in.
+            entry["density_measured_on"] = node.densityOf.empty() ? "the domain box" : node.densityOf;
             node.solid->solve(node.solid->levelFromIndicator(s.level));
             if (node.onSolved) node.onSolved(node.solid->level());
             entry["target_density"] = *node.density;
@@ -242,7 +247,7 @@ void Job::solveLevels()
             entry["density_measure"] = s.coverage ? "sub-voxel coverage" : "voxel count";
             entry["evaluated_leaves"] = s.evaluatedLeaves;
             if (!pieces.empty())
-                entry["density_measured_on"] =
+                entry["density_sampling"] =
                     "one period of the interior (" + std::to_string(pieces.size()) + " weighted pieces)";
         }
         if (mDesign.contains(node.name)) entry.update(mDesign[node.name]);
@@ -287,6 +292,9 @@ void Job::solveLevels()
                                {"level_at_90_percent", table.levelAt(0.9)}}}};
     }
     mReport["fields"] = fields;
+    // Drain channels need the levels (a trap is the void of the solved solid).
+    if (!mBuilder.drains().empty())
+        mReport["drain"] = timed("drain holes", [&] { return planDrains(mBuilder.drains(), mDomain.voxel, mContext); });
     mSolved = true;
 }
 
@@ -392,6 +400,17 @@ namespace {
 /// @a f itself.
 void collectCreaseOperands(const FieldPtr& f, std::vector<FieldPtr>& out)
 {
+    if (const auto* d = dynamic_cast<const DrainedSolid*>(f.get()); d && d->hasChannels()) {
+        // Drain channels cut the solid sharply: each is a surface of its own.
+        collectCreaseOperands(d->solid(), out);
+        for (const DrainChannel& c : d->channels()) {
+            const Vec3d axis = c.to - c.from;
+            out.push_back(std::make_shared<UnaryField>(
+                std::make_shared<Cylinder>(0.5 * (c.from + c.to), axis, 0.5 * c.diameter, axis.length()),
+                UnaryOp::Negate));
+        }
+        return;
+    }
     const auto* b = dynamic_cast<const BooleanField*>(f.get());
     if (b && b->blendRadius() == 0.0 && out.size() < 24) {
         if (b->op() == BooleanOp::Intersection) {
@@ -1021,6 +1040,9 @@ void Job::checkTolerance(const MeshOptions& options)
                        {{"tolerance_mm", tolerance}, {"voxel_mm", mDomain.voxel}});
 }
 
+/// A crumb a cut leaves is warned of from this volume on (smaller ones stay in report.json).
+constexpr double kCrumbWarningMm3 = 1.0;
+
 void Job::checkPieces(const std::vector<SolidBlock>& blocks)
 {
     const PieceCount count = timed("count pieces", [&] { return countPieces(blocks); });
@@ -1067,7 +1089,14 @@ void Job::checkPieces(const std::vector<SolidBlock>& blocks)
             << formatNumber(double(crumbVoxels) * voxelVolume)
             << " mm3 in all), loose in print: move or resize `domain:` (or the trimming shape) to cut the cells "
                "elsewhere";
-        mContext->warn("crumbs", msg.str(), {{"count", crumbs}, {"volume_mm3", double(crumbVoxels) * voxelVolume}});
+        // Slivers smaller than a cubic millimetre each are listed (report.json `pieces.crumbs`)
+        // but not warned of: nearly every box cut of a TPMS leaves some at its corners.
+        const double largestCrumb = double(second.voxels) * voxelVolume;
+        mReport["pieces"]["crumbs"]["largest_mm3"] = largestCrumb;
+        if (largestCrumb >= kCrumbWarningMm3)
+            mContext->warn(
+                "crumbs", msg.str(),
+                {{"count", crumbs}, {"volume_mm3", double(crumbVoxels) * voxelVolume}, {"largest_mm3", largestCrumb}});
         return;
     }
     msg << "; " << free << " float free inside the domain, the largest of them "
@@ -1075,8 +1104,7 @@ void Job::checkPieces(const std::vector<SolidBlock>& blocks)
     msg << ". Struts or walls thinner than two voxels (" << formatNumber(2 * mDomain.voxel)
         << " mm) break apart on the grid: use `voxel: " << formatNumber(mDomain.voxel / 2)
         << "` or less, or raise the density, radius or thickness; a convolution lattice at low density "
-           "loses its struts to its joints when sigma is large: lower sigma. A plate of separate parts: "
-           "add `allow: [pieces]`";
+           "loses its struts to its joints when sigma is large: lower sigma";
     if (mRecipe.allows("pieces")) {
         mContext->warn("pieces", msg.str(), {{"count", count.pieces.size()}, {"free", free}});
         return;
@@ -1087,6 +1115,7 @@ void Job::checkPieces(const std::vector<SolidBlock>& blocks)
     if (sigma)
         msg << ". At its density this lattice stays in one piece for sigma <= " << formatNumber(*sigma)
             << " mm (trials over 2 x 2 x 2 of its cells at this voxel)";
+    msg << ". A plate of separate parts: add `allow: [pieces]`";
     throw JobError(mRecipe.source->path + ": " + msg.str());
 }
 
@@ -1142,7 +1171,10 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         throw OutputError("cannot create the output folder `" + outDir.string() + "`: " + made.message() +
                           " (choose another --out)");
     std::vector<std::filesystem::path> paths;
-    for (const OutputSpec& out : mRecipe.outputs) paths.push_back(outputPathIn(outDir, out.file, where));
+    for (const OutputSpec& out : mRecipe.outputs) {
+        paths.push_back(outputPathIn(outDir, out.file, where));
+        for (const std::string& side : out.sideFiles) outputPathIn(outDir, side, where);
+    }
     outputPathIn(outDir, "report.json", where);
     // All or none: every file is written under a temporary name and the renames wait for the
     // report; an output that fails (or a cancel) half-way leaves the folder as it was.
@@ -1209,8 +1241,8 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
     }
     // A picture of what was meshed, next to the first mesh, so the part can be checked by eye.
     if (preview && firstMesh != mRecipe.outputs.end()) {
-        std::filesystem::path picture = outDir / firstMesh->file;
-        picture.replace_extension(".preview.png");
+        const std::filesystem::path picture = outDir / (firstMesh->file + ".preview.png");
+        checkReplaceable(picture, where);
         writePreview(picture, meshOptions(*firstMesh, mRecipe));
     }
     writeReport(outDir / "report.json");
@@ -1308,12 +1340,22 @@ void Job::writeSlices(const YAML::Node& spec, const std::filesystem::path& path)
     const SliceSettings settings = parseSliceSettings(node);
     const PrinterProfile printer = loadPrinterProfile(settings.printer, settings.printerWhere);
     solveLevels();  // a `density:` level is solved on the recipe's voxel grid first
-    // The part is the recipe's domain box as written (not snapped to voxels): slices need no voxels.
-    const Box3 part = *mRecipe.domainBox;
+    // The part is the recipe's domain box as written (not snapped to voxels): slices need no
+    // voxels. Without one, the result's own bounding box, the one a mesh's domain is grown from
+    // (the part then stands on the build plate, with no empty layers under it).
+    const std::optional<Box3> support = mResult->support();
+    const Box3 part = mRecipe.domainBox ? *mRecipe.domainBox : support ? *support : mDomain.box;
+    const std::string where = mRecipe.domainBox ? mRecipe.node("domain").where() : mRecipe.source->path;
     const SliceResult result = timed("slice " + path.filename().string(), [&] {
-        return sliceToFile(*mResult, part, printer, settings, path, mRecipe.node("domain").where(), mContext);
+        return sliceToFile(*mResult, part, printer, settings, path, where, mContext);
     });
-    mReport["slices"].push_back(result.report);
+    nlohmann::json entry = result.report;
+    entry["part_box"] = {{"from", mRecipe.domainBox ? "recipe domain"
+                                  : support         ? "result's bounding box"
+                                                    : "job domain"},
+                         {"min", vec(part.min)},
+                         {"max", vec(part.max)}};
+    mReport["slices"].push_back(entry);
     // The first slice job's findings also at the top (`printability.islands`, ...), where users look.
     if (result.report.contains("printability") && !mReport.contains("printability"))
         mReport["printability"] = result.report["printability"];

@@ -1,5 +1,6 @@
 #include "engine/jobs/SliceJob.h"
 
+#include "engine/jobs/OutputPaths.h"
 #include "engine/jobs/SliceArchives.h"
 
 #include "engine/checks/Printability.h"
@@ -281,19 +282,24 @@ void reportPrintability(const PrintabilityCheck& check, const SliceSettings& set
             throw JobError(settings.printerWhere + ": " + message + "; `checks: strict` refuses the job");
         if (context) context->warn("islands", message, {{"islands", check.islandCount()}});
     }
-    if (check.trapCount() > 0 && context) {
+    // Largest first; crumbs of a few pixels are listed in report.json but not warned of.
+    const std::int64_t traps = check.trapCountAboveCrumbs();
+    if (traps > 0 && context) {
         const nlohmann::json& first = found["resin_traps"][0];
+        const std::int64_t crumbs = check.trapCount() - traps;
         context->warn("resin_traps",
-                      name + ": " + std::to_string(check.trapCount()) + " closed cavit" +
-                          (check.trapCount() == 1 ? "y holds " : "ies hold ") +
+                      name + ": " + std::to_string(traps) + " closed cavit" + (traps == 1 ? "y holds " : "ies hold ") +
                           number(found["resin_trap_volume_mm3"].get<double>()) +
-                          " mm^3 of uncured resin (first: " + number(first["volume_mm3"].get<double>()) +
+                          " mm^3 of uncured resin (the largest: " + number(first["volume_mm3"].get<double>()) +
                           " mm^3, a drain hole at x " + number(first["x"].get<double>()) + ", y " +
                           number(first["y"].get<double>()) + ", z " + number(first["z"].get<double>()) +
-                          " reaches it after " + number(first["drain_mm"].get<double>()) +
-                          " mm); they cause suction (cupping) and leak later: add drain holes (report.json "
-                          "`printability.resin_traps`)",
-                      {{"resin_traps", check.trapCount()}});
+                          " reaches it after " + number(first["drain_mm"].get<double>()) + " mm" +
+                          (crumbs > 0 ? "; " + std::to_string(crumbs) + " crumbs below " +
+                                            number(found["resin_trap_crumb_mm3"].get<double>()) + " mm^3 not counted"
+                                      : std::string()) +
+                          "); they cause suction (cupping) and leak later: add drain holes (`drain: {diameter: "
+                          "2}` on an infill or shell; report.json `printability.resin_traps`)",
+                      {{"resin_traps", traps}, {"largest_mm3", first["volume_mm3"]}});
     }
     if (check.thinPixelCount() > 0 && context) {
         const nlohmann::json& first = found["thin"]["first"][0];
@@ -542,10 +548,11 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
 
     std::string previewPath;
     if (settings.preview != "off") {
-        // A relative preview name sits next to the slices (like every output, relative to --out).
-        previewPath = settings.preview.empty() ? (path.parent_path() / (path.stem().string() + ".preview.png")).string()
-                      : fs::path(settings.preview).is_absolute() ? settings.preview
-                                                                 : (path.parent_path() / settings.preview).string();
+        // Named after the slices' whole file name (two archives of one part never share it), or
+        // the recipe's `preview:` next to the slices (a relative name, checked at load).
+        previewPath = settings.preview.empty() ? path.string() + ".preview.png"
+                                               : (path.parent_path() / settings.preview).string();
+        checkReplaceable(previewPath, "the slices' preview");
         AtomicFile preview(previewPath);
         const std::string png = sheet.render();
         preview.stream().write(png.data(), std::streamsize(png.size()));

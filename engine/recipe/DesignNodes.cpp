@@ -1,5 +1,6 @@
 // Recipe node types for design spaces from meshes, shells, infill, and the conformal frames of
 // lattices (issue 6).
+#include "engine/core/Format.h"
 #include "engine/parts/MeshDesignSpace.h"
 #include "engine/recipe/FieldBuilder.h"
 #include "fields/Boolean.h"
@@ -85,22 +86,46 @@ double wallThickness(const RecipeNode& node, double voxel, const std::string& wh
     return t;
 }
 
+/// @a solid with drain channels through @a part when @a s has `drain: {diameter: D}` (planned by
+/// the job once the levels are solved), else @a solid.
+FieldPtr withDrains(FieldBuilder& builder, const RecipeNode& s, const std::string& name, FieldPtr solid,
+                    const FieldPtr& part, double wall)
+{
+    if (!s.has("drain")) return solid;
+    const RecipeNode d = s["drain"];
+    if (!d.isMap()) d.fail("expected `drain: {diameter: D}`: every resin trap is opened by a channel of D mm");
+    d.checkKeys({"diameter"});
+    if (!d.has("diameter")) d.fail("give the channels' `diameter:` in mm, like `drain: {diameter: 2}`");
+    const double diameter = d["diameter"].positiveNumber();
+    const double voxel = builder.recipe().voxel;
+    if (diameter < 2.0 * voxel)
+        d["diameter"].fail("a drain channel of " + formatNumber(diameter) + " mm is less than two voxels (" +
+                           formatNumber(2.0 * voxel) +
+                           " mm) across: it would not show on the grid; use 1.5 mm or more "
+                           "(resin drains through 1.5-3 mm holes)");
+    auto drained = std::make_shared<DrainedSolid>(std::move(solid));
+    builder.addDrain({name, d.where(), drained, part, diameter, wall});
+    return drained;
+}
+
 FieldPtr buildShell(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
 {
     const RecipeNode s = spec["shell"];
-    s.checkKeys({"part", "thickness"});
+    s.checkKeys({"part", "thickness", "drain"});
     const FieldPtr part = builder.operand(s["part"], name + "/part");
     const double t = wallThickness(s["thickness"], builder.recipe().voxel, "the shell's thickness");
     if (MeshDesignSpace* space = meshSpaceOf(part)) space->requireInteriorBand(t + 2 * builder.recipe().voxel);
     // The wall: inside the part, outside the part shrunk by t: max(d, -(d + t)).
     const FieldPtr inner = std::make_shared<UnaryField>(part, UnaryOp::Offset, t);
-    return std::make_shared<BooleanField>(BooleanOp::Difference, std::vector<FieldPtr>{part, inner});
+    return withDrains(builder, s, name,
+                      std::make_shared<BooleanField>(BooleanOp::Difference, std::vector<FieldPtr>{part, inner}), part,
+                      t);
 }
 
 FieldPtr buildInfill(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
 {
     const RecipeNode s = spec["infill"];
-    s.checkKeys({"part", "lattice", "skin", "density", "blend", "material_density"});
+    s.checkKeys({"part", "lattice", "skin", "density", "blend", "material_density", "drain"});
     const double voxel = builder.recipe().voxel;
     const std::string partName = s["part"].isScalar() ? s["part"].string() : name + "/part";
     const FieldPtr part = builder.operand(s["part"], partName);
@@ -149,12 +174,17 @@ FieldPtr buildInfill(FieldBuilder& builder, const RecipeNode& spec, const std::s
             if (latticeSpec.has(key))
                 latticeSpec[key].fail(std::string("the infill `") + name +
                                       "` solves this lattice's level for its density: remove `" + key + ":` here");
+        if (node->solid->isSolved())
+            d.fail("the lattice `" + latticeName +
+                   "` sets its own size (a fixed level or a thickness in millimetres), so the infill cannot solve it "
+                   "for a density: remove `density:` here, or the lattice's size keys there");
         if (node->densityMask && node->densityMask != node->region)
             d.fail("the lattice `" + latticeName +
                    "` already fills another infill; give each infill its own lattice node");
         node->density = density;
         node->densityMask = core;
-        node->densityOf = "the space inside the " + std::to_string(skin) + " mm skin of `" + partName + "`";
+        node->densityOf = skin > 0.0 ? "the space inside the " + formatNumber(skin) + " mm skin of `" + partName + "`"
+                                     : "the inside of `" + partName + "`";
         if (node->region) {
             // A skin frame's lattice fills only its cells: its share of the core within them.
             node->densityMask =
@@ -194,7 +224,7 @@ FieldPtr buildInfill(FieldBuilder& builder, const RecipeNode& spec, const std::s
         }
         report["infill"][name] = r;
     });
-    return result;
+    return withDrains(builder, s, name, result, part, skin > 0.0 ? skin : 2.0 * voxel);
 }
 
 }  // namespace
@@ -213,6 +243,23 @@ bool levelSolvedByInfill(const Recipe& recipe, const std::string& name)
         if (lattice.IsScalar() ? lattice.Scalar() == name : it->first.Scalar() + "/lattice" == name) return true;
     }
     return false;
+}
+
+std::optional<Box3> infillPartBox(FieldBuilder& builder, const std::string& name)
+{
+    const YAML::Node fields = builder.recipe().root["fields"];
+    if (!fields.IsMap()) return std::nullopt;
+    for (auto it = fields.begin(); it != fields.end(); ++it) {
+        if (!it->second.IsMap()) continue;
+        const YAML::Node spec = it->second;  // a copy (see levelSolvedByInfill)
+        const YAML::Node infill = spec["infill"];
+        if (!infill.IsDefined() || !infill.IsMap() || !infill["lattice"] || !infill["part"]) continue;
+        const YAML::Node lattice = infill["lattice"];
+        const bool fills = lattice.IsScalar() ? lattice.Scalar() == name : it->first.Scalar() + "/lattice" == name;
+        // A part given by name is built once, whoever asks first; an inline one is the infill's own.
+        if (fills && infill["part"].IsScalar()) return builder.field(infill["part"].Scalar())->support();
+    }
+    return std::nullopt;
 }
 
 FieldPtr applyFrame(const RecipeNode& frame, FieldPtr raw, const Vec3d& cell)
@@ -247,31 +294,39 @@ FieldPtr applyFrame(const RecipeNode& frame, FieldPtr raw, const Vec3d& cell)
 void addDesignNodeTypes(std::vector<NodeType>& types)
 {
     using namespace valueSchema;
+    const auto drainSchema = [] {
+        return object({{"diameter", number(), "the channels' diameter (mm)", "required"}}, {"diameter"});
+    };
     types.push_back({"mesh",
                      {{"mesh", string(), "mesh file (.stl, .obj, .ply, .3mf), relative to the recipe", "required"},
                       {"repair", boolean(), "fill small holes", "false"},
                       {"units", oneOfWords({"um", "mm", "cm", "m", "in", "ft"}), "the file's length unit",
                        "the file's own (3MF), else mm"}},
                      buildMesh});
-    types.push_back({"shell",
-                     {{"shell",
-                       object({{"part", field(), "the part", "required"},
-                               {"thickness", number(), "wall thickness inside the surface (mm)", "required"}},
-                              {"part", "thickness"}),
-                       "a solid wall inside a part's surface: {part, thickness}", "required"}},
-                     buildShell});
-    types.push_back({"infill",
-                     {{"infill",
-                       object({{"part", field(), "the part (a mesh or any closed field)", "required"},
-                               {"lattice", field(), "the lattice filling the core", "required"},
-                               {"skin", number(), "skin thickness inside the part's surface (mm)", "0"},
-                               {"density", density(), "the lattice's share of the space inside the skin", "—"},
-                               {"blend", number(), "smooth-union radius where lattice meets skin (mm)", "0"},
-                               {"material_density", number(), "material density (g/cm^3) for the part's mass", "—"}},
-                              {"part", "lattice"}),
-                       "skin plus a lattice filling the rest: {part, lattice, skin, density, blend, material_density}",
-                       "required"}},
-                     buildInfill});
+    types.push_back(
+        {"shell",
+         {{"shell",
+           object({{"part", field(), "the part", "required"},
+                   {"thickness", number(), "wall thickness inside the surface (mm)", "required"},
+                   {"drain", drainSchema(), "drain holes: every resin trap opened by a channel of D mm", "—"}},
+                  {"part", "thickness"}),
+           "a solid wall inside a part's surface: {part, thickness, drain}", "required"}},
+         buildShell});
+    types.push_back(
+        {"infill",
+         {{"infill",
+           object({{"part", field(), "the part (a mesh or any closed field)", "required"},
+                   {"lattice", field(), "the lattice filling the core", "required"},
+                   {"skin", number(), "skin thickness inside the part's surface (mm)", "0"},
+                   {"density", density(), "the lattice's share of the space inside the skin", "—"},
+                   {"blend", number(), "smooth-union radius where lattice meets skin (mm)", "0"},
+                   {"material_density", number(), "material density (g/cm^3) for the part's mass", "—"},
+                   {"drain", drainSchema(), "drain holes: every resin trap opened by a channel of D mm", "—"}},
+                  {"part", "lattice"}),
+           "skin plus a lattice filling the rest: {part, lattice, skin, density, blend, material_density, "
+           "drain}",
+           "required"}},
+         buildInfill});
 }
 
 }  // namespace voxlat

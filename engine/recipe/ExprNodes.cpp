@@ -103,12 +103,18 @@ private:
 FieldPtr buildExpr(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
 {
     FieldPtr raw = equationField(builder, spec["expr"]);
-    if (!spec.has("solid") && !spec.has("level") && !spec.has("density") && !spec.has("offset")) return raw;
+    // An infill's `density:` solves this equation's level (a network f <= c unless `solid:` says).
+    const bool solvedByInfill = levelSolvedByInfill(builder.recipe(), name);
+    if (!solvedByInfill && !spec.has("solid") && !spec.has("level") && !spec.has("density") && !spec.has("offset"))
+        return raw;
     const SolidSide side = readSolidSide(spec);
     std::string offset;
     if (spec.has("offset")) raw = networkOffset(builder, spec, raw, side, name, 0.0, offset);
     LevelNode node{name, (side == SolidSide::Band ? "expr sheet" : "expr network") + offset, nullptr};
-    readLevelKeys(spec, node, raw, side, 0.0, side == SolidSide::Band ? LevelRule::Required : LevelRule::Optional);
+    readLevelKeys(spec, node, raw, side, 0.0,
+                  solvedByInfill            ? LevelRule::SolvedElsewhere
+                  : side == SolidSide::Band ? LevelRule::Required
+                                            : LevelRule::Optional);
     FieldPtr result = node.solid;
     builder.addLevelNode(std::move(node));
     return result;

@@ -146,7 +146,8 @@ FieldPtr buildFalloff(FieldBuilder& builder, const RecipeNode& spec, const std::
                        : falloff == Falloff::InverseSquare ? "inverse-square"
                                                            : "gaussian";
     LevelNode node{name, std::string(what) + " field (" + kind + " falloff), solid F >= level", nullptr};
-    readLevelKeys(spec, node, raw, SolidSide::Above, 1.0, LevelRule::Optional);
+    readLevelKeys(spec, node, raw, SolidSide::Above, 1.0,
+                  levelSolvedByInfill(builder.recipe(), name) ? LevelRule::SolvedElsewhere : LevelRule::Optional);
     if (node.solid->isSolved() && !(node.solid->level() > 0.0))
         spec["level"].fail("the level must be greater than zero: F >= " + spec["level"].yaml().Scalar() +
                            " holds far from every " + what + " (F tends to 0 there), so the solid would fill space");

@@ -6,6 +6,7 @@
 #include "engine/core/JobContext.h"
 #include "engine/recipe/KeySpec.h"
 #include "engine/recipe/Recipe.h"
+#include "fields/DrainChannels.h"
 #include "fields/LevelSolid.h"
 
 #include <nlohmann/json.hpp>
@@ -83,6 +84,17 @@ struct StrutFrameRecord {
     std::function<std::vector<std::array<double, 2>>()> radii;
 };
 
+/// A solid whose resin traps get drain channels once its levels are solved (`drain:` on an
+/// infill or a shell): the Job finds the traps and gives the node its channels.
+struct DrainRequest {
+    std::string name;   ///< the field
+    std::string where;  ///< file:line:col of `drain:`
+    std::shared_ptr<DrainedSolid> node;
+    FieldPtr part;          ///< the part: a channel ends outside it
+    double diameter = 0.0;  ///< mm
+    double wall = 0.0;      ///< the skin's or shell's thickness (mm): the traps are searched finer than it
+};
+
 class FieldBuilder;
 class ParametricSurface;
 
@@ -146,6 +158,9 @@ public:
     /// Graded-density lattices, in build order.
     const std::vector<GradedNode>& gradedNodes() const { return mGradedNodes; }
     void addGradedNode(GradedNode node) { mGradedNodes.push_back(std::move(node)); }
+    /// Drain channels to plan once the levels are solved, in build order.
+    const std::vector<DrainRequest>& drains() const { return mDrains; }
+    void addDrain(DrainRequest d) { mDrains.push_back(std::move(d)); }
     /// Strut frames, in build order (the fields the result uses).
     const std::vector<StrutFrameRecord>& strutFrames() const { return mStrutFrames; }
     void addStrutFrame(StrutFrameRecord frame) { mStrutFrames.push_back(std::move(frame)); }
@@ -193,6 +208,7 @@ private:
     std::vector<std::function<void(nlohmann::json&)>> mReporters;
     std::vector<GradedNode> mGradedNodes;
     std::vector<StrutFrameRecord> mStrutFrames;
+    std::vector<DrainRequest> mDrains;
     std::optional<Box3> mUnitBox;
     std::size_t mUnitBoxUses = 0;
     /// Named fields whose equations use u, v, w, with the box they were built for.
@@ -243,6 +259,9 @@ void addFalloffNodeTypes(std::vector<NodeType>& types);  // FalloffNodes.cpp: po
 /// DesignNodes.cpp: true when an `infill` node solves the level of the lattice field @a name (its
 /// `density:` counts for that lattice, which then needs no level of its own).
 bool levelSolvedByInfill(const Recipe& recipe, const std::string& name);
+/// The bounding box of the part an `infill` fills with the lattice @a name (the part named, not
+/// inline), if any: a box frame without a `domain:` fills it.
+std::optional<Box3> infillPartBox(FieldBuilder& builder, const std::string& name);
 /// DesignNodes.cpp: wraps a lattice's raw field in the conformal frame given by @a frame
 /// (`{cylinder: ...}` or `{sphere: ...}`); @a cell is the lattice's cell size per axis.
 FieldPtr applyFrame(const RecipeNode& frame, FieldPtr raw, const Vec3d& cell);

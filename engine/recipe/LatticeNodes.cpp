@@ -340,7 +340,7 @@ void addLatticeNodeTypes(std::vector<NodeType>& types)
         {"wall", gradedNumber, "total wall thickness in the build plane (mm)", "—"},
         {"layer", gradedNumber, "total wall thickness along the build direction (mm)", "—"},
         {"build", anything(), "build direction: [x, y, z], a vector field or any field's unit gradient", "[0, 0, 1]"},
-        {"rotation", oneOfWords({"rodrigues", "tensor"}), "how wall / layer follow the build direction", "rodrigues"}};
+        {"rotation", oneOfWords({"rodrigues", "tensor"}), "how wall / layer follow the build direction", "tensor"}};
     std::vector<KeySpec> tpms{
         {"tpms", oneOfWords(tpmsNames()), "the surface", "required"},
         {"cell", numberOrVec3(), "cell size in mm, or [x, y, z]", "required"},

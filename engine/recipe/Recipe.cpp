@@ -6,7 +6,9 @@
 #include "engine/recipe/RecipeParams.h"
 #include "engine/recipe/SliceSettings.h"
 
+#include <algorithm>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 namespace voxlat {
@@ -63,6 +65,33 @@ void applyOverride(YAML::Node root, const std::string& assignment, const std::st
     }
     chain.back()[parts.back()] = parsed;
     collectNodes(chain.back()[parts.back()], overrides);
+}
+
+/// Fails at the second of two outputs that would write one file (their own files, their side
+/// files or report.json), naming both: a run writes all its outputs or none, so it must not
+/// find out half-way.
+void refuseCollidingOutputs(const Recipe& r, const RecipeNode& outputs)
+{
+    std::map<std::string, std::string> writer;  // normal path -> who writes it
+    writer["report.json"] = "the run's report";
+    auto where = [&](const OutputSpec& o) {
+        const YAML::Mark m = o.spec.Mark();
+        return m.line >= 0 ? r.source->path + ":" + std::to_string(m.line + 1) + ":" + std::to_string(m.column + 1)
+                           : r.source->path;
+    };
+    for (const OutputSpec& o : r.outputs) {
+        std::vector<std::pair<std::string, std::string>> files{{o.file, "the " + o.kind + " output `" + o.file + "`"}};
+        for (const std::string& side : o.sideFiles)
+            files.push_back({side, "the side file `" + side + "` of the " + o.kind + " output `" + o.file + "`"});
+        for (const auto& [file, who] : files) {
+            const std::string key = std::filesystem::path(file).lexically_normal().string();
+            const std::string by = who + " (" + where(o) + ")";
+            const auto [it, fresh] = writer.emplace(key, by);
+            if (!fresh)
+                outputs.fail("two outputs write `" + key + "`: " + it->second + " and " + by +
+                             "; give each output its own file name");
+        }
+    }
 }
 
 Recipe build(YAML::Node root, const std::string& name, const std::filesystem::path& folder,
@@ -138,9 +167,15 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
             if (kind == "slices") {  // a map (or a list of maps) of slice settings
                 for (std::size_t i = 0; i < (entry.isSequence() ? entry.size() : 1); ++i) {
                     const RecipeNode one = entry.isSequence() ? entry.at(i) : entry;
-                    parseSliceSettings(one);  // checks keys and values now, before any work
+                    const SliceSettings settings = parseSliceSettings(one);  // checks keys and values now
                     checkOutputName(one["file"], kind);
-                    r.outputs.push_back({kind, one["file"].string(), one.yaml()});
+                    OutputSpec out{kind, one["file"].string(), one.yaml()};
+                    if (settings.preview != "off")
+                        out.sideFiles.push_back(
+                            settings.preview.empty()
+                                ? out.file + ".preview.png"
+                                : (std::filesystem::path(out.file).parent_path() / settings.preview).string());
+                    r.outputs.push_back(std::move(out));
                 }
                 continue;
             }
@@ -148,14 +183,22 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
                 const RecipeNode one = entry.isSequence() ? entry.at(i) : entry;
                 if (kind == "mesh") {                                      // a file name or a map of mesh settings
                     const MeshSettings settings = parseMeshSettings(one);  // checks keys and values now
-                    r.outputs.push_back({kind, settings.file, one.yaml()});
+                    OutputSpec out{kind, settings.file, one.yaml()};
+                    if (std::none_of(r.outputs.begin(), r.outputs.end(),
+                                     [](const OutputSpec& o) { return o.kind == "mesh"; }))
+                        out.sideFiles.push_back(out.file + ".preview.png");
+                    r.outputs.push_back(std::move(out));
                     continue;
                 }
                 checkOutputName(one, kind);
                 // A frame output keeps its node: without struts the job names its line.
-                r.outputs.push_back({kind, one.string(), kind == "frame" ? one.yaml() : YAML::Node()});
+                OutputSpec out{kind, one.string(), one.yaml()};
+                if (kind == "properties")
+                    out.sideFiles.push_back(std::filesystem::path(out.file).replace_extension(".png").string());
+                r.outputs.push_back(std::move(out));
             }
         }
+        refuseCollidingOutputs(r, outputs);
     }
     return r;
 }

@@ -20,6 +20,11 @@ struct OutputSpec {
     std::string kind;  ///< "mesh", "vdb" or "slices"
     std::string file;  ///< relative to the output folder
     YAML::Node spec;   ///< the entry's own map (`slices`: printer, layer, file, ...)
+    /// The other files the output writes, relative to the output folder and named after its whole
+    /// file name: a slices output's contact sheet (`FILE.preview.png` or its `preview:`), a
+    /// properties output's picture, the first mesh's preview picture (`FILE.preview.png`, written
+    /// by `voxlat run` unless --no-preview). No two outputs of a recipe share any of these names.
+    std::vector<std::string> sideFiles{};
 };
 
 struct Recipe {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 
 namespace voxlat {
 
@@ -101,6 +102,18 @@ SliceSettings parseSliceSettings(const RecipeNode& spec)
     if (spec.has("preview")) {
         const std::string word = spec["preview"].yaml().Scalar();
         s.preview = word == "false" || word == "off" ? "off" : word;
+        if (s.preview != "off") {
+            // A side file of the slices: inside the output folder, like every output.
+            const std::filesystem::path p(s.preview);
+            if (p.is_absolute() || s.preview.front() == '~' ||
+                std::any_of(p.begin(), p.end(), [](const auto& part) { return part == ".."; }))
+                spec["preview"].fail(
+                    "the preview is a PNG inside the output folder (--out), like `part.preview.png`; `" + s.preview +
+                    "` leaves it");
+            if (p.extension() != ".png")
+                spec["preview"].fail("the preview is a PNG picture: its name ends in .png; `" + s.preview +
+                                     "` does not");
+        }
     }
     if (spec.has("timestamp")) s.timestamp = spec["timestamp"].string();
     if (spec.has("reuse")) {

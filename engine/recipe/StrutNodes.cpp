@@ -7,6 +7,7 @@
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/ScalarMaps.h"
 #include "engine/recipe/SkinNodes.h"
+#include "fields/Boolean.h"
 #include "fields/GradedLevel.h"
 #include "fields/IsoRadius.h"
 #include "fields/ParametricSurface.h"
@@ -19,6 +20,7 @@
 #include <cmath>
 #include <iostream>
 #include <limits>
+#include <map>
 #include <numbers>
 #include <sstream>
 
@@ -151,8 +153,8 @@ const std::vector<FrameLayout>& frameLayouts()
         {"sphere", "a sphere frame (cells from `sphere: {radius, inner, center, cells}`)", {"cell", "sphere"}},
         {"within",
          "a frame `within:` a solid (uniform cells over the domain, trimmed)",
-         {"cell", "size", "within", "min_length"}},
-        {"", "a box frame", {"cell", "size", "count", "origin"}},
+         {"cell", "size", "within", "min_length", "trim"}},
+        {"", "a box frame", {"cell", "size", "count", "origin", "edges"}},
     };
     return kinds;
 }
@@ -176,7 +178,8 @@ const FrameLayout& readFrameLayout(const RecipeNode& s)
     for (const std::string& key : all)
         if (s.has(key) && std::find(kind->keys.begin(), kind->keys.end(), key) == kind->keys.end()) {
             std::string hint;
-            if (key == "min_length") hint = " (`min_length` applies to frames trimmed `within:` a solid)";
+            if (key == "min_length" || key == "trim")
+                hint = " (`" + key + "` applies to frames trimmed `within:` a solid)";
             if (*kind->key == '\0' && key == "cells")
                 hint = " (`cells:` counts the cells of a frame `between:` two surfaces; a box frame takes `count:`)";
             s[key].fail("`" + key + "` has no use in " + kind->what + ", which takes " + joinWords(kind->keys) + hint +
@@ -244,8 +247,9 @@ Frame buildBetweenFrame(FieldBuilder& builder, const RecipeNode& s, const UnitCe
 
 /// @a uniform receives the cell and its size when the frame is made of uniform cells.
 /// @a region receives the cells' space for a skin frame (its density is measured there).
+/// @a within receives the solid a `within:` frame is trimmed to.
 Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& name,
-                 std::optional<UniformCells>& uniform, FieldPtr& region)
+                 std::optional<UniformCells>& uniform, FieldPtr& region, FieldPtr& within)
 {
     const std::string kind = readFrameLayout(s).key;
     if (kind == "wireframe") return readWireframe(builder.recipe().resolve(s["wireframe"].string()).string());
@@ -253,7 +257,9 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
     const UnitCell cell = readCell(builder, s["cell"]);
     if (kind == "skin") return buildSkinStrutFrame(builder, s, cell, name, region);
     if (kind == "between") return buildBetweenFrame(builder, s, cell, name);
-    const auto& domainBox = builder.recipe().domainBox;
+    // The box a frame fills: the domain, else the part an infill fills with this lattice.
+    std::optional<Box3> domainBox = builder.recipe().domainBox;
+    if (!domainBox && kind != "within") domainBox = infillPartBox(builder, name);
     if (kind == "cylinder") {
         const RecipeNode c = s["cylinder"];
         c.checkKeys({"radius", "inner", "height", "base", "cells"});
@@ -288,7 +294,7 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
     for (int a = 0; a < 3; ++a)
         if (!(size[a] > 0.0)) s["size"].fail("cell sizes must be greater than zero (millimetres)");
     if (kind == "within") {
-        const FieldPtr solid = builder.operand(s["within"], name + "/within");
+        const FieldPtr solid = within = builder.operand(s["within"], name + "/within");
         // The cells fill the domain, or without one the solid's own box (a bounded part).
         const std::optional<Box3> fill = domainBox ? domainBox : solid->support();
         if (!fill)
@@ -301,6 +307,29 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
         return clippedFrame(
             cell, *fill, size, [&](const Vec3d& p) { return solid->value(p); }, minLength);
     }
+    // A box frame filling the domain runs one cell past it on every side and is cut by the domain
+    // box, as a TPMS is (`edges: cut`): the struts at the faces are whole there, neither thinned
+    // into spikes (a convolution strut with no neighbour beyond) nor left as loose ends.
+    // `edges: frame`, `origin:` or `count:` lay the frame as written.
+    const std::string edges = s.has("edges") ? s["edges"].string() : "cut";
+    if (edges != "cut" && edges != "frame")
+        s["edges"].fail(
+            "`edges:` is `cut` (the frame runs a cell past the domain and the domain box cuts it) or "
+            "`frame` (the cells that fit, struts ending at their nodes); got `" +
+            edges + "`");
+    if (edges == "cut" && domainBox && !s.has("origin") && !s.has("count")) {
+        std::array<int, 3> counts;
+        for (int a = 0; a < 3; ++a)
+            counts[a] = int(std::clamp(std::ceil(domainBox->extent()[a] / size[a] - 1e-9), 1.0, 2e9)) + 2;
+        uniform = UniformCells{cell, size};
+        Frame f = boxFrame(cell, domainBox->min - size, size, counts);
+        f.layoutBox = *domainBox;
+        return f;
+    }
+    if (s.has("edges") && edges == "cut")
+        s["edges"].fail(std::string("`edges: cut` lays a frame that fills the domain; ") +
+                        (domainBox ? "`origin:` and `count:` lay it as written" : "this recipe has no `domain:`") +
+                        ": remove `edges:`");
     Vec3d origin = s.has("origin") ? s["origin"].vec3() : (domainBox ? domainBox->min : Vec3d(0.0));
     std::array<int, 3> counts;
     if (s.has("count")) {
@@ -367,7 +396,7 @@ std::vector<std::array<double, 2>> readRadii(FieldBuilder& builder, const Recipe
     if (r.isScalar() || (r.isMap() && !r.has("gradient"))) {
         FieldPtr field;
         {
-            FieldBuilder::UnitBoxScope unitBox(builder, frame.bounds());
+            FieldBuilder::UnitBoxScope unitBox(builder, frame.box());
             field = builder.operand(r, name + "/radius");
         }
         std::vector<Vec3d> ends(2 * n);
@@ -409,7 +438,7 @@ std::vector<std::array<double, 2>> readRadii(FieldBuilder& builder, const Recipe
     const double lo = positive(r["min"]), hi = positive(r["max"]);
     int axis = 0;
     if (r.has("axis")) axis = r["axis"].axis();
-    const Box3 box = frame.bounds();
+    const Box3 box = frame.box();
     auto g = [&](const Vec3d& p) {
         Vec3d u;
         for (int a = 0; a < 3; ++a) u[a] = box.extent()[a] > 0 ? (p[a] - box.min[a]) / box.extent()[a] : 0.0;
@@ -431,6 +460,53 @@ std::vector<std::array<double, 2>> readRadii(FieldBuilder& builder, const Recipe
 void recordFrame(FieldBuilder& builder, const std::string& name, const Frame& frame,
                  std::function<double(std::size_t, int, double)> endRadius, std::function<double(const Vec3d&)> levelAt)
 {
+    if (frame.layoutBox) {
+        // A frame laid past the domain is written as the domain cuts it: each strut's piece inside
+        // the box, its radius at a cut end interpolated along the strut.
+        const Box3 box = *frame.layoutBox;
+        Frame inside;
+        std::vector<std::size_t> source;
+        std::vector<std::array<double, 2>> at;
+        std::map<std::array<double, 3>, int> index;
+        auto node = [&](const Vec3d& p) {
+            const auto [it, fresh] = index.emplace(std::array<double, 3>{p[0], p[1], p[2]}, int(inside.nodes.size()));
+            if (fresh) inside.nodes.push_back(p);
+            return it->second;
+        };
+        for (std::size_t j = 0; j < frame.struts.size(); ++j) {
+            const Vec3d a = frame.nodes[frame.struts[j][0]], b = frame.nodes[frame.struts[j][1]];
+            // Liang-Barsky: the parameters of the segment inside the box.
+            double t0 = 0.0, t1 = 1.0;
+            for (int ax = 0; ax < 3 && t0 <= t1; ++ax) {
+                const double d = b[ax] - a[ax];
+                if (d == 0.0) {
+                    if (a[ax] < box.min[ax] || a[ax] > box.max[ax]) t1 = -1.0;
+                    continue;
+                }
+                double lo = (box.min[ax] - a[ax]) / d, hi = (box.max[ax] - a[ax]) / d;
+                if (lo > hi) std::swap(lo, hi);
+                t0 = std::max(t0, lo);
+                t1 = std::min(t1, hi);
+            }
+            if (!(t1 - t0 > 1e-9)) continue;  // outside, or touching a face or an edge only
+            inside.struts.push_back({node(a + t0 * (b - a)), node(a + t1 * (b - a))});
+            source.push_back(j);
+            at.push_back({t0, t1});
+        }
+        StrutFrameRecord record{name, inside.nodes, inside.struts, {}};
+        record.radii = [frame, source, at, endRadius = std::move(endRadius), levelAt = std::move(levelAt)] {
+            std::vector<std::array<double, 2>> r(source.size());
+            for (std::size_t k = 0; k < source.size(); ++k) {
+                const std::size_t j = source[k];
+                const double r0 = endRadius(j, 0, levelAt(frame.nodes[frame.struts[j][0]]));
+                const double r1 = endRadius(j, 1, levelAt(frame.nodes[frame.struts[j][1]]));
+                for (int e = 0; e < 2; ++e) r[k][e] = r0 + at[k][e] * (r1 - r0);
+            }
+            return r;
+        };
+        builder.addStrutFrame(std::move(record));
+        return;
+    }
     StrutFrameRecord record{name, frame.nodes, frame.struts, {}};
     record.radii = [frame, endRadius = std::move(endRadius), levelAt = std::move(levelAt)] {
         std::vector<std::array<double, 2>> r(frame.struts.size());
@@ -459,15 +535,20 @@ int radiusGradientAxis(const RecipeNode& spec)
     return r.has("axis") ? r["axis"].string()[0] - 'x' : 0;
 }
 
-FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
+/// A strut lattice as its frame lays it out; @a within receives the solid a `within:` frame is
+/// trimmed to (its struts' axes end at its surface, their solid does not yet).
+FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const std::string& name, FieldPtr& within)
 {
     std::optional<UniformCells> uniform;
     FieldPtr region;
+    const std::string withinName = spec["struts"].has("within") && spec["struts"]["within"].isScalar()
+                                       ? spec["struts"]["within"].string()
+                                       : name + "/within";
     for (const char* key : {"stiffness", "optimize"})
         if (spec.has(key)) refuseUnresolvedDesign(spec[key]);
     const Frame frame = [&] {
         try {
-            return buildFrame(builder, spec["struts"], name, uniform, region);
+            return buildFrame(builder, spec["struts"], name, uniform, region, within);
         } catch (const JobError& e) {
             throw JobError(spec["struts"].where() + ": " + e.what());  // the line of the frame
         }
@@ -507,7 +588,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         radii = readRadii(builder, spec["radius"], frame, name);
     else if (!frame.radii.empty())
         radii = frame.radii;  // a wireframe CSV with r1,r2 columns (a frame output read back)
-    const Box3 box = frame.bounds();
+    const Box3 box = frame.box();
     // A frame is finite: its solid lies within its box grown by the struts' reach, which gives
     // the domain when the recipe has none (as a shape's box does).
     // A box of identical cells with identical struts repeats cell by cell deeper inside its box
@@ -516,20 +597,28 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         uniform && !spec["struts"].has("within") && (!radii || spec["radius"].isNumber()) && !graded;
     // @a solidReach (when given) is how far the solid reaches from the struts once its level is
     // known: deeper inside the box than that, a box of identical cells repeats (RepeatZone).
-    auto withinReach = [&box, &uniform](FieldPtr solid, double reach,
-                                        std::function<double()> solidReach = {}) -> FieldPtr {
+    const Box3 extent = frame.bounds();  // where the struts are (past the box for a cut frame)
+    auto withinReach = [&box, &extent, &uniform](FieldPtr solid, double reach,
+                                                 std::function<double()> solidReach = {}) -> FieldPtr {
         std::function<std::optional<RepeatZone>()> zone;
         if (solidReach)
             zone = [box, size = uniform->size, solidReach]() -> std::optional<RepeatZone> {
                 const double r = solidReach();
                 return RepeatZone{size, Box3{box.min + Vec3d(r), box.max - Vec3d(r)}, box.min};
             };
-        return std::make_shared<SupportedField>(std::move(solid), Box3{box.min - Vec3d(reach), box.max + Vec3d(reach)},
-                                                std::move(zone));
+        return std::make_shared<SupportedField>(
+            std::move(solid), Box3{extent.min - Vec3d(reach), extent.max + Vec3d(reach)}, std::move(zone));
     };
     LevelNode node;
     node.name = name;
     node.region = region;
+    // An infill's `density:` solves this lattice's level over the part's core: a `radius:` then
+    // only shapes the struts relative to each other (a common shift), as with `density:`.
+    const bool solvedByInfill = levelSolvedByInfill(builder.recipe(), name);
+    if (solvedByInfill) {
+        if (graded) spec["density"].fail("the infill's `density:` sets this lattice's density: remove it here");
+        node.subVoxelDensity = true;  // struts line up with the voxels: coverage, not a count
+    }
     if (spec.has("density") && !graded) {
         const RecipeNode d = spec["density"];
         const double rho = d.number();
@@ -547,7 +636,14 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
             if (!(box.extent()[a] > 0.0))
                 d.fail("the frame is flat along " + std::string(1, "xyz"[a]) +
                        ": its bounding box has no volume to measure a density in; give `level:` or `radius:`");
-        if (!region) node.densityBox = box;
+        if (within) {
+            // `within:` a part: the share of the part's interior (the struts are trimmed to it).
+            node.densityMask = within;
+            node.densityOf = "the inside of `" + withinName + "`";
+        } else if (!region) {
+            node.densityBox = box;
+            node.densityOf = frame.layoutBox ? "the domain box" : "the frame's bounding box";
+        }
         // Cells of a whole number of voxels line struts up with the voxel lattice, and counting
         // voxel centres then aliases (about 2 % for BCC at 0.1 mm); coverage does not.
         node.subVoxelDensity = true;
@@ -567,7 +663,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
                 }
             }
         }
-        if (!radii && !node.density && !graded)
+        if (!radii && !node.density && !graded && !solvedByInfill)
             spec.fail("capsules need `radius:` (or `density:`, which solves a uniform radius)");
         auto capsuleStruts = [](const Frame& f, const std::optional<std::vector<std::array<double, 2>>>& r) {
             std::vector<CapsuleStrut> struts;
@@ -601,9 +697,10 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
             // The table's levels stay below the cap, so the solid is within rMax + blend + cap.
             return withinReach(result, rMax + blend + cap);
         }
-        node.solid = node.density ? LevelSolid::unsolved(raw, SolidSide::Below)
-                                  : std::make_shared<LevelSolid>(raw, SolidSide::Below,
-                                                                 spec.has("level") ? spec["level"].number() : 0.0);
+        const bool solved = node.density || solvedByInfill;
+        node.solid = solved ? LevelSolid::unsolved(raw, SolidSide::Below)
+                            : std::make_shared<LevelSolid>(raw, SolidSide::Below,
+                                                           spec.has("level") ? spec["level"].number() : 0.0);
         // A capsule's level is an offset of every radius.
         double rMin = std::numeric_limits<double>::infinity();
         for (const CapsuleStrut& c : struts) rMin = std::min({rMin, c.ra, c.rb});
@@ -611,7 +708,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         recordFrame(builder, name, frame, capsuleRadius, [solid = node.solid](const Vec3d&) { return solid->level(); });
         // A capsule reaches its radius plus the level (an offset) plus the blend; a solved level
         // stays below the cap.
-        const double reach = rMax + blend + (node.density ? cap : std::max(0.0, node.solid->level()));
+        const double reach = rMax + blend + (solved ? cap : std::max(0.0, node.solid->level()));
         std::function<double()> solidReach;
         if (identicalBoxCells)
             solidReach = [solid = node.solid, rMax, blend] { return rMax + blend + std::max(0.0, solid->level()); };
@@ -644,7 +741,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         if (!(eps > 0.0 && eps < 0.1))
             g["cutoff"].fail("the cut-off is a small fraction of a strut's peak, in (0, 0.1); default 1e-4");
     }
-    if (!radii && !node.density && !spec.has("level") && !graded)
+    if (!radii && !node.density && !spec.has("level") && !graded && !solvedByInfill)
         spec.fail("give `density:` (solves the iso-value), `level:` (the iso-value t in F >= t) or `radius:`");
     // Weights: with radii, w = t0 exp(R^2 / (2 sigma^2)) / (sigma sqrt(2 pi)) at t0 = 1, so an
     // isolated long strut has radius R at level 1 (and radius sqrt(R^2 + 2 sigma^2 ln(1 / t))
@@ -729,8 +826,9 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         // Beyond the cut-off radius F = 0, below every iso-value.
         return withinReach(result, rcMax);
     }
-    node.solid = node.density ? LevelSolid::unsolved(evaluated, SolidSide::Below)
-                              : std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
+    const bool solved = node.density || solvedByInfill;
+    node.solid = solved ? LevelSolid::unsolved(evaluated, SolidSide::Below)
+                        : std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
     // Mid-strut, away from joints, a strut of peak p is a cylinder of radius sigma sqrt(2 ln(p / t))
     // at iso-value t (none where p <= t: the strut vanishes).
     node.thinnest = [raw, iso, n, sigma](double level) {
@@ -762,7 +860,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         node.densityVoxel = std::min(*node.densityVoxel / 1.5, *std::min_element(sigma.begin(), sigma.end()) / 8.0);
     }
     const double sigmaShown = sigma.front();
-    if (node.density) {
+    if (solved) {
         JobContext* context = &builder.context();
         if (radii)
             node.onSolved = [context, name, iso, sigmaShown](double rho) {
@@ -778,13 +876,32 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     // Beyond the cut-off radius F = 0, below every iso-value (the value there is the cap 2 rcMax,
     // above any level a density solve or a positive iso-value gives).
     FieldPtr result = node.solid;
-    if (node.density || iso->radiusOf(t) < 2.0 * rcMax) {
+    if (solved || iso->radiusOf(t) < 2.0 * rcMax) {
         std::function<double()> solidReach;
         if (identicalBoxCells && !g["sigma"].isSequence()) solidReach = [rcMax] { return rcMax; };
         result = withinReach(node.solid, rcMax, solidReach);
     }
     builder.addLevelNode(std::move(node));
     return result;
+}
+
+FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::string& name)
+{
+    FieldPtr within;
+    FieldPtr lattice = buildStrutLattice(builder, spec, name, within);
+    if (!within) return lattice;
+    // A lattice `within:` a part stays inside it: the struts' solid ends at the surface (`trim:
+    // solid`, the default), or only their axes do and the solid stands out by a radius (`trim:
+    // axis`, the frame as trimmed).
+    const RecipeNode s = spec["struts"];
+    const std::string trim = s.has("trim") ? s["trim"].string() : "solid";
+    if (trim == "axis") return lattice;
+    if (trim != "solid")
+        s["trim"].fail(
+            "`trim:` is `solid` (the struts' solid ends at the surface, the default) or `axis` (only "
+            "their axes do); got `" +
+            trim + "`");
+    return std::make_shared<BooleanField>(BooleanOp::Intersection, std::vector<FieldPtr>{lattice, within});
 }
 
 }  // namespace
@@ -797,10 +914,14 @@ void addStrutNodeTypes(std::vector<NodeType>& types)
                 {"size", numberOrVec3(), "cell size in mm, or [x, y, z]", "required"},
                 {"count", anything(), "cells per axis: a number or [x, y, z]", "—"},
                 {"origin", vec3(), "the frame's corner (mm)", "[0, 0, 0]"},
+                {"edges", oneOfWords({"cut", "frame"}),
+                 "a box frame filling the domain: laid a cell past it and cut by the domain box, or as written", "cut"},
                 {"cylinder", anyMap(), "{radius, inner, height, base, cells}: a cylinder frame", "—"},
                 {"sphere", anyMap(), "{radius, inner, center, cells}: a spherical frame", "—"},
                 {"within", field(), "a solid the uniform frame is trimmed to", "—"},
                 {"min_length", number(), "trimmed pieces shorter than this are dropped (mm)", "—"},
+                {"trim", oneOfWords({"solid", "axis"}),
+                 "with `within:`, where the struts end: their solid at the surface, or only their axes", "solid"},
                 {"wireframe", string(), "OBJ or CSV file used directly as the frame", "—"},
                 {"between", anything(),
                  "[S1, S2]: cells between two surfaces (S1 a `surface` node; S2 one too, {axis: [[x, y, z], [x, y, "

@@ -2,8 +2,11 @@
 
 #include <unistd.h>
 
+#include <array>
+#include <atomic>
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <stdexcept>
@@ -18,14 +21,51 @@ std::string reason()
     return errno != 0 ? std::string(": ") + std::strerror(errno) : std::string();
 }
 
+/// Registered temporaries: C strings owned by the slots (malloc'd), null where free. A slot is
+/// claimed and released with atomic exchanges, so a signal handler may read them at any time.
+constexpr std::size_t kTemporarySlots = 4096;
+std::array<std::atomic<char*>, kTemporarySlots> gTemporaries{};
+
 }  // namespace
+
+void registerTemporary(const std::string& path)
+{
+    char* copy = strdup(path.c_str());
+    if (!copy) return;
+    for (auto& slot : gTemporaries) {
+        char* expected = nullptr;
+        if (slot.compare_exchange_strong(expected, copy)) return;
+    }
+    std::free(copy);  // more open temporaries than slots: this one is not removed by a signal
+}
+
+void unregisterTemporary(const std::string& path)
+{
+    for (auto& slot : gTemporaries) {
+        char* held = slot.load();
+        if (held && path == held && slot.compare_exchange_strong(held, nullptr)) {
+            std::free(held);
+            return;
+        }
+    }
+}
+
+void removeTemporaries() noexcept
+{
+    for (auto& slot : gTemporaries)
+        if (const char* held = slot.load()) ::unlink(held);
+}
 
 AtomicFile::AtomicFile(std::string path)
     : mPath(std::move(path)), mTempPath(mPath + ".tmp-" + std::to_string(::getpid()))
 {
     errno = 0;
+    registerTemporary(mTempPath);
     mStream.open(mTempPath, std::ios::out | std::ios::binary | std::ios::trunc);
-    if (!mStream) throw OutputError("cannot open '" + mTempPath + "' to write '" + mPath + "'" + reason());
+    if (!mStream) {
+        unregisterTemporary(mTempPath);
+        throw OutputError("cannot open '" + mTempPath + "' to write '" + mPath + "'" + reason());
+    }
 }
 
 AtomicFile::~AtomicFile()
@@ -37,6 +77,7 @@ void AtomicFile::discard() noexcept
 {
     if (mStream.is_open()) mStream.close();
     std::remove(mTempPath.c_str());
+    unregisterTemporary(mTempPath);
 }
 
 void AtomicFile::commit()
@@ -64,6 +105,7 @@ void AtomicFile::commit()
         discard();
         throw OutputError("failed to rename '" + mTempPath + "' onto '" + mPath + "'" + why);
     }
+    unregisterTemporary(mTempPath);
     mCommitted = true;
 }
 
@@ -86,6 +128,7 @@ OutputTransaction::~OutputTransaction()
             std::filesystem::remove_all(r.temp, ec);
         else
             std::filesystem::remove(r.temp, ec);
+        unregisterTemporary(r.temp);
     }
 }
 
@@ -114,6 +157,7 @@ void OutputTransaction::commit()
             mRenames.erase(mRenames.begin(), mRenames.begin() + std::ptrdiff_t(i));
             throw OutputError(message);
         }
+        unregisterTemporary(r.temp);
     }
     mCommitted = true;
 }

@@ -17,6 +17,13 @@ public:
     using std::runtime_error::runtime_error;
 };
 
+/// The temporary files that exist now (AtomicFile's, until renamed or removed), so that a
+/// process ended by a signal leaves none: the command line's handler calls removeTemporaries().
+void registerTemporary(const std::string& path);
+void unregisterTemporary(const std::string& path);
+/// Unlinks every registered temporary file. Async-signal-safe (atomic loads and unlink() only).
+void removeTemporaries() noexcept;
+
 /// A binary output file that appears at its final path only once it is complete.
 ///
 /// The data goes to "<path>.tmp-<pid>" in the same directory; commit() flushes and closes it and

@@ -1,0 +1,106 @@
+#include "engine/checks/Traps.h"
+
+#include "fields/BlockLattice.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace voxlat {
+
+std::vector<Trap> findTraps(const FieldNode& solid, const Box3& box, double spacing, const JobContext* context)
+{
+    BlockLattice lattice;
+    lattice.base = box.min;
+    lattice.step = Vec3d(spacing);
+    lattice.offset = Vec3d(0.5);
+    for (int a = 0; a < 3; ++a) lattice.count[a] = std::max(1, int(std::ceil(box.extent()[a] / spacing - 1e-9)));
+    const std::int64_t nx = lattice.count[0], ny = lattice.count[1], nz = lattice.count[2];
+    const std::size_t total = std::size_t(nx * ny * nz);
+    // 0 solid, 1 void not yet reached, 2 void reached (from outside or by a labelled cavity).
+    std::vector<std::uint8_t> state(total, 0);
+    {
+        StageProgress progress(context, "looking for resin traps", lattice.blockCount());
+        sampleBlocks(
+            solid, lattice,
+            [&](std::size_t, const GridBatch& batch, const std::array<int, 3>& first, std::span<const double> values) {
+                std::size_t n = 0;
+                for (int i = 0; i < batch.nx; ++i)
+                    for (int j = 0; j < batch.ny; ++j)
+                        for (int k = 0; k < batch.nz; ++k, ++n)
+                            state[std::size_t(((first[0] + i) * ny + (first[1] + j)) * nz + first[2] + k)] =
+                                values[n] >= 0.0 ? 1 : 0;
+                progress.add();
+            });
+    }
+    auto index = [&](std::int64_t i, std::int64_t j, std::int64_t k) { return std::size_t((i * ny + j) * nz + k); };
+    std::vector<std::size_t> queue;
+    // Visits the void region of @a seed (marking it reached), calling visit(index) on each sample.
+    auto flood = [&](std::size_t seed, auto&& visit) {
+        queue.clear();
+        state[seed] = 2;
+        queue.push_back(seed);
+        for (std::size_t q = 0; q < queue.size(); ++q) {
+            const std::size_t s = queue[q];
+            visit(s);
+            const std::int64_t k = std::int64_t(s % std::size_t(nz)), j = std::int64_t(s / std::size_t(nz)) % ny,
+                               i = std::int64_t(s / std::size_t(nz * ny));
+            const std::int64_t step[6][3] = {{-1, 0, 0}, {1, 0, 0}, {0, -1, 0}, {0, 1, 0}, {0, 0, -1}, {0, 0, 1}};
+            for (const auto& d : step) {
+                const std::int64_t a = i + d[0], b = j + d[1], c = k + d[2];
+                if (a < 0 || b < 0 || c < 0 || a >= nx || b >= ny || c >= nz) continue;
+                const std::size_t t = index(a, b, c);
+                if (state[t] == 1) {
+                    state[t] = 2;
+                    queue.push_back(t);
+                }
+            }
+        }
+    };
+    // Everything the faces' void reaches is open to the outside.
+    for (std::int64_t i = 0; i < nx; ++i)
+        for (std::int64_t j = 0; j < ny; ++j)
+            for (std::int64_t k = 0; k < nz; ++k) {
+                const bool face = i == 0 || j == 0 || k == 0 || i == nx - 1 || j == ny - 1 || k == nz - 1;
+                if (face && state[index(i, j, k)] == 1) flood(index(i, j, k), [](std::size_t) {});
+            }
+    if (context) context->checkCancelled();
+    auto centre = [&](std::size_t s) {
+        const std::int64_t k = std::int64_t(s % std::size_t(nz)), j = std::int64_t(s / std::size_t(nz)) % ny,
+                           i = std::int64_t(s / std::size_t(nz * ny));
+        return Vec3d(box.min.x() + (double(i) + 0.5) * spacing, box.min.y() + (double(j) + 0.5) * spacing,
+                     box.min.z() + (double(k) + 0.5) * spacing);
+    };
+    std::vector<Trap> traps;
+    std::vector<std::size_t> members;
+    for (std::size_t s = 0; s < total; ++s) {
+        if (state[s] != 1) continue;
+        members.clear();
+        Vec3d sum(0.0);
+        flood(s, [&](std::size_t t) {
+            members.push_back(t);
+            sum += centre(t);
+        });
+        Trap trap;
+        trap.samples = members.size();
+        trap.volumeMm3 = double(members.size()) * spacing * spacing * spacing;
+        trap.centroid = sum / double(members.size());
+        double lowestZ = std::numeric_limits<double>::infinity(), nearest = lowestZ;
+        for (const std::size_t t : members) lowestZ = std::min(lowestZ, centre(t).z());
+        for (const std::size_t t : members) {
+            const Vec3d p = centre(t);
+            if (p.z() != lowestZ) continue;
+            const double d = (p.x() - trap.centroid.x()) * (p.x() - trap.centroid.x()) +
+                             (p.y() - trap.centroid.y()) * (p.y() - trap.centroid.y());
+            if (d < nearest) {
+                nearest = d;
+                trap.lowest = p;
+            }
+        }
+        traps.push_back(trap);
+    }
+    std::stable_sort(traps.begin(), traps.end(), [](const Trap& a, const Trap& b) { return a.samples > b.samples; });
+    return traps;
+}
+
+}  // namespace voxlat

@@ -1,0 +1,30 @@
+/// @file Traps.h
+/// @brief Closed cavities of a solid in 3D (resin traps), found on a lattice of samples.
+#pragma once
+
+#include "engine/core/JobContext.h"
+#include "fields/FieldNode.h"
+
+#include <cstdint>
+#include <vector>
+
+namespace voxlat {
+
+/// One closed cavity: void that reaches none of the searched box's faces.
+struct Trap {
+    double volumeMm3 = 0.0;  ///< samples times the sample's cell volume
+    std::uint64_t samples = 0;
+    Vec3d lowest{0.0};  ///< the sample lowest along z (ties: nearest the cavity's centroid in x, y)
+    Vec3d centroid{0.0};
+};
+
+/// The closed cavities of the solid {@a solid < 0} in @a box, sampled at the centres of cells of
+/// @a spacing (min + (ijk + 1/2) spacing): void samples (value >= 0) 6-connected to each other and
+/// not to a sample on the lattice's faces, so the box must hold the solid with a sample of void
+/// around it. Largest first (ties in the order of their first sample, x-major, z fastest): the
+/// same list for any thread count. Cavities narrower than the spacing may be missed or joined;
+/// throws Cancelled when @a context is cancelled.
+std::vector<Trap> findTraps(const FieldNode& solid, const Box3& box, double spacing,
+                            const JobContext* context = nullptr);
+
+}  // namespace voxlat

@@ -1,0 +1,232 @@
+#!/usr/bin/env python3
+"""Lattices in parts, end to end (issue 42): every lattice kind x placement x output run through
+the command line at a coarse voxel, each run checked independently of the code that made it.
+
+- Every lattice node type of `voxlat schema` (tpms, struts, points, curves, expr) must have a row
+  in KINDS: a new lattice type fails this test until it is placed here.
+- Each run exits 0, or 2 with a message naming the recipe's file and line (a refusal that is
+  expected is listed in REFUSED with the words it must give).
+- Every mesh is read back here (binary STL, numpy): closed and manifold (every edge in exactly two
+  triangles, once each way), and its volume from the divergence theorem.
+- `density:` is the share of the region the user sees: the domain box (a box placement), the
+  part (`within:` a part, an infill without skin) or the core inside the skin (a skinned infill:
+  (V_mesh - V_skin) / (V_part - V_skin), with V_skin from a `shell:` of the same part and
+  thickness and V_part from the part's STL). Measured from the meshes, it must be within 1 % of
+  the target, and report.json must name the region (`density_measured_on`).
+- Drained infills: report.json lists at least one hole and no trap left; the slices' printability
+  check (a different, 2D code path) finds no trap above its crumb size.
+- Every output is present and nothing else is left in --out.
+
+usage: check_lattice_matrix.py VOXLAT_BINARY SOURCE_DIR [--only SUBSTRING]
+"""
+import json
+import os
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+VOXEL = float(os.environ.get("MATRIX_VOXEL", "0.25"))
+TARGET = 0.2
+failures = []
+failed_runs_all = set()
+
+
+def check(condition, message):
+    if not condition:
+        failures.append(message)
+        failed_runs_all.add(message.split(":")[0])
+        print("FAIL:", message, flush=True)
+    return condition
+
+
+def read_stl(path):
+    """Triangles (n x 3 x 3 float64) of a binary STL."""
+    with open(path, "rb") as f:
+        data = f.read()
+    n = struct.unpack_from("<I", data, 80)[0]
+    rec = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
+    tri = np.frombuffer(data, dtype=rec, count=n, offset=84)
+    return tri["v"].astype(np.float64)
+
+
+def mesh_facts(path):
+    """(closed and manifold, volume mm^3, triangles) of a binary STL, from its bytes alone."""
+    t = read_stl(path)
+    if len(t) == 0:
+        return False, 0.0, 0
+    verts, index = np.unique(t.reshape(-1, 3), axis=0, return_inverse=True)
+    f = index.reshape(-1, 3)
+    directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    # Closed and manifold: every directed edge once, and its reverse once.
+    keys = directed[:, 0].astype(np.int64) * len(verts) + directed[:, 1]
+    rev = directed[:, 1].astype(np.int64) * len(verts) + directed[:, 0]
+    unique_once = len(np.unique(keys)) == len(keys)
+    closed = unique_once and np.array_equal(np.sort(keys), np.sort(rev))
+    c = t.mean(axis=(0, 1))
+    a, b, d = t[:, 0] - c, t[:, 1] - c, t[:, 2] - c
+    volume = float(np.einsum("ij,ij->i", a, np.cross(b, d)).sum() / 6.0)
+    return closed, volume, len(t)
+
+
+def schema_lattice_types(voxlat):
+    schema = json.loads(subprocess.run([voxlat, "schema"], capture_output=True, text=True, check=True).stdout)
+    text = json.dumps(schema)
+    return [k for k in ("tpms", "struts", "points", "curves", "expr") if '"' + k + '"' in text]
+
+
+def grid_points(lo, hi, step):
+    axes = [np.arange(lo[a] + step / 2, hi[a], step) for a in range(3)]
+    return [[round(float(x), 3), round(float(y), 3), round(float(z), 3)] for x in axes[0] for y in axes[1]
+            for z in axes[2]]
+
+
+# The lattice kinds: the node (without its size key) and the keys that size it.
+BRACKET_BOX = ([0, 0, 0], [30, 24, 24])
+KINDS = {
+    "tpms-network": ("{tpms: gyroid, cell: 6}", "tpms"),
+    "tpms-sheet": ("{tpms: gyroid, cell: 6, solid: sheet}", "tpms"),
+    "struts-gaussian": ("{struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}}", "struts"),
+    "struts-capsule": ("{struts: {cell: bcc, size: 5}, kernel: capsule}", "struts"),
+    "points": ("{points: {at: %s, falloff: gaussian, sigma: 1.5}}" % json.dumps(grid_points(*BRACKET_BOX, 3.0)),
+               "points"),
+    # A simple-cubic lattice of rods along x, y and z, 5 mm apart, as polylines.
+    "curves": ("{curves: {polylines: %s, falloff: gaussian, sigma: 0.6}}" % json.dumps(
+        [[[-1.0, a, b], [31.0, a, b]] for a in (2.5, 7.5, 12.5, 17.5, 22.5) for b in (2.5, 7.5, 12.5, 17.5, 22.5)] +
+        [[[a, -1.0, b], [a, 25.0, b]] for a in (2.5, 7.5, 12.5, 17.5, 22.5, 27.5) for b in (2.5, 7.5, 12.5, 17.5, 22.5)] +
+        [[[a, b, -1.0], [a, b, 25.0]] for a in (2.5, 7.5, 12.5, 17.5, 22.5, 27.5) for b in (2.5, 7.5, 12.5, 17.5, 22.5)]),
+        "curves"),
+    "expr": ("{expr: \"sin(2*pi*x/6)*cos(2*pi*y/6) + sin(2*pi*y/6)*cos(2*pi*z/6) + sin(2*pi*z/6)*cos(2*pi*x/6)\"}",
+             "expr"),
+}
+
+
+def with_keys(node, extra):
+    """The inline map @node with @extra keys added before its closing brace."""
+    return node[:-1] + ", " + extra + "}" if extra else node
+
+
+def recipe(kind, placement, outputs, mesh_path):
+    """Recipe text, and the region whose share `density:` is ('box', 'part' or 'core')."""
+    node, _ = KINDS[kind]
+    lines = ["voxel: %g" % VOXEL]
+    if placement == "box":
+        lines.append("domain: {box: [[0, 0, 0], [20, 20, 20]]}")
+        lines += ["fields:", "  lat: %s" % with_keys(node, "density: %g" % TARGET), "result: lat"]
+        region = "box"
+    elif placement == "within":
+        if kind.startswith("struts"):
+            node = node.replace("size: 5}", "size: 5, within: part}")
+        lines += ["fields:", "  part: {mesh: %s}" % mesh_path, "  lat: %s" % with_keys(node, "density: %g" % TARGET),
+                  "result: lat"]
+        region = "part"
+    else:
+        skin = {"infill": 0, "infill-skin": 1, "infill-drain": 1}[placement]
+        drain = ", drain: {diameter: 2}" if placement == "infill-drain" else ""
+        lines += ["fields:", "  part: {mesh: %s}" % mesh_path, "  lat: %s" % node,
+                  "  filled: {infill: {part: part, lattice: lat, skin: %g, density: %g%s}}" % (skin, TARGET, drain),
+                  "result: filled"]
+        region = "core" if skin else "part"
+    lines.append("outputs: {%s}" % ", ".join(outputs))
+    return "\n".join(lines) + "\n", region
+
+
+def run(voxlat, text, folder, name):
+    path = os.path.join(folder, name + ".yaml")
+    with open(path, "w") as f:
+        f.write(text)
+    out = os.path.join(folder, name + ".out")
+    start = time.time()
+    p = subprocess.run([voxlat, "run", path, "--out", out], capture_output=True, text=True)
+    return p, out, path, time.time() - start
+
+
+def main():
+    voxlat, source = sys.argv[1], sys.argv[2]
+    only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv else ""
+    mesh_path = os.path.abspath(os.path.join(source, "data", "meshes", "bracket.stl"))
+    covered = {family for _, family in KINDS.values()}
+    for t in schema_lattice_types(voxlat):
+        check(t in covered, "the lattice node type `%s` has no row in KINDS: place it in the matrix" % t)
+    part_closed, part_volume, _ = mesh_facts(mesh_path)
+    check(part_closed, "bracket.stl is not closed")
+    runs = 0
+    failed_runs = set()
+    start = time.time()
+    with tempfile.TemporaryDirectory() as folder:
+        # The skin's own volume, for the core of a skinned infill (a shell of the same thickness).
+        shell = ("voxel: %g\nfields:\n  part: {mesh: %s}\n  s: {shell: {part: part, thickness: 1}}\nresult: s\n"
+                 "outputs: {mesh: s.stl}\n" % (VOXEL, mesh_path))
+        p, out, _, _ = run(voxlat, shell, folder, "shell")
+        check(p.returncode == 0, "shell: exit %d: %s" % (p.returncode, p.stderr.strip()[-300:]))
+        _, skin_volume, _ = mesh_facts(os.path.join(out, "s.stl"))
+        for kind, (node, family) in KINDS.items():
+            for placement in ("box", "within", "infill", "infill-skin", "infill-drain"):
+                name = "%s-%s" % (kind, placement)
+                if placement == "within" and family != "struts":
+                    continue  # `within:` is a strut frame's key; other lattices fill a part as an infill
+                if only and only not in name:
+                    continue
+                outputs = ["mesh: m.stl"]
+                if placement == "box" and family == "struts":
+                    outputs.append("frame: m.csv")
+                if placement == "infill-drain":
+                    outputs.append("slices: {printer: sl1s, layer: 1.0, file: m.sl1s}")
+                text, region = recipe(kind, placement, outputs, mesh_path)
+                p, out, path, seconds = run(voxlat, text, folder, name)
+                runs += 1
+                print("%-32s exit %d  %.1f s" % (name, p.returncode, seconds), flush=True)
+                if not check(p.returncode == 0, "%s: exit %d: %s" % (name, p.returncode, p.stderr.strip()[-400:])):
+                    continue
+                report = json.load(open(os.path.join(out, "report.json")))
+                expected = {"report.json", "m.stl", "m.stl.preview.png"}
+                if "frame: m.csv" in outputs:
+                    expected.add("m.csv")
+                if placement == "infill-drain":
+                    expected |= {"m.sl1s", "m.sl1s.preview.png"}
+                check(set(os.listdir(out)) == expected,
+                      "%s: --out holds %s, expected %s" % (name, sorted(os.listdir(out)), sorted(expected)))
+                closed, volume, triangles = mesh_facts(os.path.join(out, "m.stl"))
+                check(closed, "%s: the mesh is not closed and manifold" % name)
+                if region == "box":
+                    measured = volume / 20.0 ** 3
+                elif region == "part":
+                    measured = volume / part_volume
+                else:
+                    measured = (volume - skin_volume) / (part_volume - skin_volume)
+                check(abs(measured / TARGET - 1) <= 0.01,
+                      "%s: density measured from the mesh over the %s is %.4f, target %.2f" %
+                      (name, region, measured, TARGET))
+                fields = report["fields"]
+                solved = [f for f in fields.values() if "target_density" in f]
+                check(len(solved) == 1 and "density_measured_on" in solved[0],
+                      "%s: report.json does not say where the density is measured" % name)
+                print("    density %.4f over the %s (%s), %d triangles" %
+                      (measured, region, solved[0].get("density_measured_on", "?") if solved else "?", triangles))
+                if "frame: m.csv" in outputs:
+                    rows = np.loadtxt(os.path.join(out, "m.csv"), delimiter=",", skiprows=1, ndmin=2)
+                    ends = rows[:, :6].reshape(-1, 3)
+                    check(len(rows) > 0 and ends.min() >= -1e-6 and ends.max() <= 20 + 1e-6,
+                          "%s: the frame export has struts outside the domain box" % name)
+                if placement == "infill-drain":
+                    drain = report.get("drain", {}).get("filled", {})
+                    check(len(drain.get("holes", [])) >= 1 and drain.get("traps_left") == 0,
+                          "%s: drain: %s" % (name, json.dumps(drain)[:300]))
+                    printability = report["slices"][0].get("printability", {})
+                    check(printability.get("resin_traps_above_crumb", 1) == 0,
+                          "%s: the slices still hold resin traps: %s" %
+                          (name, json.dumps(printability.get("resin_traps", []))[:300]))
+    print("%d runs in %.0f s" % (runs, time.time() - start))
+    if failures:
+        print("%d failed:" % len(failures))
+        for f in failures:
+            print("  " + f)
+    print("%d passed, %d failed" % (runs - len(failed_runs_all), len(failed_runs_all)))
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
