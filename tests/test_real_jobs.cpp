@@ -1,0 +1,318 @@
+// Real jobs end to end (issue 42): lattices in parts, drain holes, outputs that never collide,
+// slices without a domain, traps largest first. The whole kind x placement x output matrix is
+// tests/scripts/check_lattice_matrix.py (ctest: lattice_matrix).
+#include "TestUtil.h"
+#include "engine/checks/Traps.h"
+#include "engine/jobs/Job.h"
+#include "engine/recipe/Recipe.h"
+#include "fields/Boolean.h"
+#include "fields/DrainChannels.h"
+#include "fields/Sphere.h"
+#include "mesher/extract/MeshCheck.h"
+#include "mesher/writers/AtomicFile.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <numbers>
+#include <random>
+
+using namespace voxlat;
+using namespace voxlat::test;
+
+namespace {
+
+/// A hollow ball: outer radius 5, a cavity of radius 3 (a shell with a sealed inside).
+FieldPtr hollowBall()
+{
+    return std::make_shared<BooleanField>(
+        BooleanOp::Difference,
+        std::vector<FieldPtr>{std::make_shared<Sphere>(Vec3d(0.0), 5.0), std::make_shared<Sphere>(Vec3d(0.0), 3.0)});
+}
+
+std::string bracket()
+{
+    return (sourceDir() / "data" / "meshes" / "bracket.stl").string();
+}
+
+Recipe recipeText(const std::string& text, const TempDir& dir)
+{
+    return parseRecipe(text, (dir.path / "r.yaml").string(), dir.path);
+}
+
+}  // namespace
+
+TEST(Traps, AHollowBallHasOneTrapOfItsCavitysVolume)
+{
+    // The cavity's samples against the brute-force count of lattice points inside radius 3
+    // (the same lattice), and the lowest point at the cavity's bottom.
+    const double h = 0.25;
+    const Box3 box{Vec3d(-6.0), Vec3d(6.0)};
+    const auto traps = findTraps(*hollowBall(), box, h);
+    ASSERT_EQ(traps.size(), 1u);
+    std::uint64_t inside = 0;
+    const int n = int(std::ceil(12.0 / h));
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j)
+            for (int k = 0; k < n; ++k) {
+                const Vec3d p = box.min + (Vec3d(i, j, k) + Vec3d(0.5)) * h;
+                if (p.length() - 3.0 >= 0.0 && 5.0 - p.length() >= 0.0) continue;  // solid shell: not void
+                inside += p.length() < 3.0 + 1e-12 ? 1 : 0;
+            }
+    EXPECT_EQ(traps[0].samples, inside);
+    EXPECT_NEAR(traps[0].volumeMm3, 4.0 / 3.0 * std::numbers::pi * 27.0, 0.03 * 4.0 / 3.0 * std::numbers::pi * 27.0);
+    EXPECT_NEAR(traps[0].lowest.z(), -3.0, h);
+    EXPECT_NEAR(traps[0].lowest.x(), 0.0, h);
+    EXPECT_NEAR(traps[0].lowest.y(), 0.0, h);
+    // A solid ball and an open cup have none.
+    EXPECT_TRUE(findTraps(Sphere(Vec3d(0.0), 5.0), box, h).empty());
+    // Largest first, the same for any thread count.
+    const auto two = std::make_shared<BooleanField>(
+        BooleanOp::Difference,
+        std::vector<FieldPtr>{std::make_shared<Sphere>(Vec3d(0.0), 5.0), std::make_shared<Sphere>(Vec3d(0, 0, 2), 1.0),
+                              std::make_shared<Sphere>(Vec3d(0, 0, -2), 2.0)});
+    std::vector<Trap> one;
+    {
+        tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+        one = findTraps(*two, box, h);
+    }
+    const auto many = findTraps(*two, box, h);
+    ASSERT_EQ(many.size(), 2u);
+    EXPECT_GT(many[0].volumeMm3, many[1].volumeMm3);
+    EXPECT_NEAR(many[0].centroid.z(), -2.0, h);
+    ASSERT_EQ(one.size(), 2u);
+    for (int t = 0; t < 2; ++t) EXPECT_EQ(one[t].samples, many[t].samples);
+}
+
+TEST(DrainChannels, ValuesAreTheDifferenceWithCylinders)
+{
+    auto drained = std::make_shared<DrainedSolid>(hollowBall());
+    EXPECT_THROW(drained->value(Vec3d(0.0)), std::logic_error);  // channels not set yet
+    const DrainChannel c{Vec3d(0, 0, -2.5), Vec3d(0, 0, -7), 2.0};
+    drained->setChannels({c});
+    EXPECT_THROW(drained->setChannels({}), std::logic_error);
+    const Cylinder cylinder(0.5 * (c.from + c.to), c.to - c.from, 1.0, (c.to - c.from).length());
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> u(-6.0, 6.0);
+    std::vector<Vec3d> points;
+    for (int i = 0; i < 2000; ++i) points.emplace_back(u(rng), u(rng), u(rng));
+    std::vector<double> values(points.size());
+    drained->values(points, values);
+    for (std::size_t i = 0; i < points.size(); ++i)
+        EXPECT_DOUBLE_EQ(values[i], std::max(hollowBall()->value(points[i]), -cylinder.value(points[i])));
+    // The block path and the bound agree with the points.
+    GridBatch batch;
+    batch.origin = Vec3d(-1.0, -1.0, -6.0);
+    batch.spacing = Vec3d(0.25);
+    std::vector<double> grid(batch.size());
+    drained->gridValues(batch, grid);
+    const Interval b = drained->bound(batch.bounds());
+    for (int i = 0, n = 0; i < 8; ++i)
+        for (int j = 0; j < 8; ++j)
+            for (int k = 0; k < 8; ++k, ++n) {
+                EXPECT_DOUBLE_EQ(grid[std::size_t(n)], drained->value(batch.point(i, j, k)));
+                EXPECT_TRUE(b.contains(grid[std::size_t(n)]));
+            }
+    // The channel opens the cavity: no trap is left.
+    EXPECT_TRUE(findTraps(*drained, Box3{Vec3d(-6.0), Vec3d(6.0)}, 0.25).empty());
+}
+
+TEST(RealJobs, AShellWithDrainHasItsCavityOpenedAboveThePlate)
+{
+    TempDir dir;
+    Job job(
+        recipeText("voxel: 0.2\nfields:\n  ball: {sphere: {radius: 5}}\n"
+                   "  hollow: {shell: {part: ball, thickness: 1, drain: {diameter: 2}}}\nresult: hollow\n",
+                   dir));
+    const TriangleMesh& mesh = job.mesh();
+    EXPECT_TRUE(checkTopology(mesh).closedManifold());
+    const auto report = job.report();
+    const auto& drain = report["drain"]["hollow"];
+    ASSERT_EQ(drain["traps_found"], 1) << drain.dump(1);
+    ASSERT_EQ(drain["holes"].size(), 1u);
+    EXPECT_EQ(drain["traps_left"], 0);
+    // The ball's bottom stands on the plate: the channel leaves sideways, a radius above it.
+    const auto& hole = drain["holes"][0];
+    EXPECT_EQ(hole["direction"][2].get<double>(), 0.0) << hole.dump();
+    EXPECT_GE(hole["position"][2].get<double>(), -5.0 + 1.0);
+    // The mesh has the hole: its volume is the shell's less a channel through the 1 mm wall.
+    const double shell = 4.0 / 3.0 * std::numbers::pi * (125.0 - 64.0);
+    EXPECT_LT(mesh.volume(), shell);
+    EXPECT_GT(mesh.volume(), shell - 2.0 * std::numbers::pi * 1.0 * 1.5);
+}
+
+TEST(RealJobs, StrutsFillAPartForTheInfillsDensity)
+{
+    // Issue 42's first report: `radius:` on a lattice an infill solves crashed (the level was set
+    // twice), and without it the lattice demanded one.
+    for (const std::string radius : {", radius: 0.5", ""}) {
+        TempDir dir;
+        Job job(recipeText("voxel: 0.15\nfields:\n  part: {mesh: " + bracket() +
+                               "}\n  bcc: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}" + radius +
+                               "}\n  lattice: {infill: {part: part, lattice: bcc, skin: 0, density: 0.20}}\nresult: "
+                               "lattice\n",
+                           dir));
+        const TriangleMesh& mesh = job.mesh();
+        EXPECT_TRUE(checkTopology(mesh).closedManifold());
+        const auto report = job.report();
+        EXPECT_EQ(report["fields"]["bcc"]["density_measured_on"], "the inside of `part`");
+        // Measured from the mesh over the part's own volume (its STL): 1 % at 0.15 mm (1.01 % at 0.2).
+        const double part = report["parts"]["part"]["mesh_volume_mm3"].get<double>();
+        EXPECT_NEAR(mesh.volume() / part, 0.20, 0.01 * 0.20) << "radius`" << radius << "`";
+    }
+}
+
+TEST(RealJobs, AFixedLatticeInADensityInfillIsRefusedNamingBoth)
+{
+    TempDir dir;
+    const std::string message = errorOf([&] {
+        Job job(
+            recipeText("voxel: 0.2\nfields:\n  part: {mesh: " + bracket() +
+                           "}\n  g: {tpms: gyroid, cell: 6, solid: sheet, thickness: 0.4}\n"
+                           "  lattice: {infill: {part: part, lattice: g, skin: 1, density: 0.20}}\nresult: lattice\n",
+                       dir));
+    });
+    EXPECT_NE(message.find("r.yaml:5:"), std::string::npos) << message;
+    EXPECT_NE(message.find("sets its own size"), std::string::npos) << message;
+}
+
+TEST(RealJobs, StrutsWithinAPartStayInsideIt)
+{
+    // `within:` a part: the density is the part's share and the struts' solid ends at its
+    // surface (before, the capsules stood a radius out and the report measured the box).
+    TempDir dir;
+    Job job(recipeText("voxel: 0.2\nfields:\n  part: {mesh: " + bracket() +
+                           "}\n  lattice: {struts: {cell: bcc, size: 5, within: part}, kernel: {gaussian: {sigma: "
+                           "0.5}}, density: 0.20}\nresult: lattice\n",
+                       dir));
+    const TriangleMesh& mesh = job.mesh();
+    const auto report = job.report();
+    EXPECT_EQ(report["fields"]["lattice"]["density_measured_on"], "the inside of `part`");
+    const double part = report["parts"]["part"]["mesh_volume_mm3"].get<double>();
+    EXPECT_NEAR(mesh.volume() / part, 0.20, 0.01 * 0.20);
+    const FieldPtr bracketField = job.field("part");
+    double outside = 0.0;
+    for (const auto& p : mesh.points) outside = std::max(outside, bracketField->value(Vec3d(p[0], p[1], p[2])));
+    EXPECT_LT(outside, 0.2) << "a vertex stands " << outside << " mm out of the part";
+}
+
+TEST(RealJobs, OutputsThatWouldShareAFileAreRefusedAtLoad)
+{
+    TempDir dir;
+    const std::string head =
+        "voxel: 0.5\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n  lattice: {tpms: gyroid, "
+        "cell: 5, density: 0.3, solid: sheet}\nresult: lattice\n";
+    for (const auto& [outputs, words] : std::vector<std::pair<std::string, std::string>>{
+             {"outputs: {mesh: [a.stl, {file: a.stl}]}", "two outputs write `a.stl`"},
+             {"outputs: {frame: a.obj, mesh: a.obj}", "two outputs write `a.obj`"},
+             {"outputs: {properties: report.json}", "the run's report"},
+             {"outputs: {mesh: p.stl, slices: {printer: sl1s, file: s.sl1s, preview: p.stl.preview.png}}",
+              "two outputs write `p.stl.preview.png`"},
+             {"outputs: {slices: {printer: sl1s, file: s.sl1s, preview: ../victim.png}}", "leaves it"},
+             {"outputs: {slices: {printer: sl1s, file: s.sl1s, preview: /tmp/victim.png}}", "leaves it"}}) {
+        const std::string message = errorOf([&] { recipeText(head + outputs + "\n", dir); });
+        EXPECT_NE(message.find("r.yaml:6:"), std::string::npos) << outputs << ": " << message;
+        EXPECT_NE(message.find(words), std::string::npos) << outputs << ": " << message;
+    }
+    // A mesh and slices of one part: each side file after its output's whole name.
+    const Recipe r = recipeText(head + "outputs: {slices: {printer: sl1s, file: conv.sl1s}, mesh: conv.stl}\n", dir);
+    std::vector<std::string> sides;
+    for (const OutputSpec& o : r.outputs) sides.insert(sides.end(), o.sideFiles.begin(), o.sideFiles.end());
+    EXPECT_EQ(sides, (std::vector<std::string>{"conv.stl.preview.png", "conv.sl1s.preview.png"}));
+}
+
+TEST(RealJobs, AMeshAndSlicesOfOneRecipeWriteEverythingAndSlicesNeedNoDomain)
+{
+    // Issue 42: both wrote conv.preview.png (exit 3, no report, files left), and slices asked for
+    // a `domain:` that a mesh takes from the part.
+    TempDir dir;
+    const auto recipe = dir.write("conv.yaml",
+                                  "voxel: 0.25\nfields:\n  ball: {sphere: {radius: 4, center: [0, 0, 4]}}\n"
+                                  "  g: {tpms: gyroid, cell: 4, solid: sheet, level: 0.4}\n"
+                                  "  part: {infill: {part: ball, lattice: g, skin: 0.5}}\nresult: part\n"
+                                  "outputs: {slices: {printer: sl1s, layer: 0.5, file: conv.sl1s}, mesh: "
+                                  "conv.stl}\n");
+    std::string out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " -q run " + recipe.string() + " --out " + (dir.path / "out").string(), &out),
+              0)
+        << out;
+    auto files = listFolder(dir.path / "out");
+    std::sort(files.begin(), files.end());
+    EXPECT_EQ(files, (std::vector<std::string>{"conv.sl1s", "conv.sl1s.preview.png", "conv.stl", "conv.stl.preview.png",
+                                               "report.json"}));
+    const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
+    const auto& box = report["slices"][0]["part_box"];
+    EXPECT_EQ(box["from"], "result's bounding box");
+    EXPECT_NEAR(box["min"][2].get<double>(), 0.0, 1e-9);  // the ball stands on the plate
+    EXPECT_NEAR(box["max"][2].get<double>(), 8.0, 1e-9);
+    // The sealed inside is the largest trap, listed first, and the warning points at `drain:`.
+    const auto& traps = report["slices"][0]["printability"]["resin_traps"];
+    ASSERT_GE(traps.size(), 1u);
+    for (std::size_t i = 1; i < traps.size(); ++i)
+        EXPECT_GE(traps[i - 1]["volume_mm3"].get<double>(), traps[i]["volume_mm3"].get<double>());
+    EXPECT_GT(traps[0]["volume_mm3"].get<double>(), 50.0);
+    EXPECT_NE(out.find("drain: {diameter"), std::string::npos) << out;
+}
+
+TEST(RealJobs, GradedSummaryPrintsNoBlankValues)
+{
+    std::string out;
+    TempDir dir;
+    ASSERT_EQ(runCommand(voxlatBinary() + " run " + (sourceDir() / "data/recipes/gyroid-graded.yaml").string() +
+                             " --set voxel=0.5 --no-preview --out " + (dir.path / "o").string(),
+                         &out),
+              0)
+        << out;
+    EXPECT_EQ(out.find("level ,"), std::string::npos) << out;
+    EXPECT_EQ(out.find("density  ("), std::string::npos) << out;
+    EXPECT_EQ(out.find("null"), std::string::npos) << out;
+}
+
+TEST(RealJobs, RegisteredTemporariesAreRemovedBySignalCleanUp)
+{
+    TempDir dir;
+    const std::string a = (dir.path / "x.stl.tmp-1").string();
+    std::ofstream(a) << "half";
+    registerTemporary(a);
+    removeTemporaries();
+    EXPECT_FALSE(std::filesystem::exists(a));
+    unregisterTemporary(a);
+    // An AtomicFile's temporary is registered while it exists.
+    {
+        AtomicFile f((dir.path / "y.stl").string());
+        f.stream() << "data";
+        removeTemporaries();  // what a second signal does
+        EXPECT_FALSE(std::filesystem::exists(f.tempPath()));
+    }
+    EXPECT_FALSE(std::filesystem::exists(dir.path / "y.stl"));
+}
+
+TEST(RealJobs, BoxFramesAreUniformUpToTheDomainsFaces)
+{
+    // A BCC box frame filling its domain (4 mm cells, sigma 0.4, 15 %): with `edges: cut` (the
+    // default) the struts at the faces are as thick as inside, so the field repeats across a face
+    // cell; laid as written (`edges: frame`) the face struts thin (no neighbour beyond).
+    auto field = [](const std::string& edges) {
+        TempDir dir;
+        Job job(
+            recipeText("voxel: 0.2\ndomain: {box: [[0, 0, 0], [16, 16, 16]]}\nfields:\n  lattice: {struts: "
+                       "{cell: bcc, size: 4" +
+                           edges + "}, kernel: {gaussian: {sigma: 0.4}}, density: 0.15}\nresult: lattice\n",
+                       dir));
+        return job.field("lattice");
+    };
+    for (const auto& [edges, uniform] :
+         std::vector<std::pair<std::string, bool>>{{"", true}, {", edges: cut", true}, {", edges: frame", false}}) {
+        const FieldPtr f = field(edges);
+        // A point on the strut from a face corner (0, 4, 4) towards the cell centre (2, 6, 6), and
+        // its image one cell inside: the same value when the lattice is uniform.
+        const Vec3d face(0.3, 4.3, 4.3), inner(4.3, 4.3, 4.3);
+        const double a = f->value(face), b = f->value(inner);
+        if (uniform)
+            EXPECT_NEAR(a, b, 1e-6) << edges;
+        else
+            EXPECT_GT(a, b + 1e-3) << edges << ": the face strut is not thinner";
+    }
+}
