@@ -142,11 +142,22 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
     thread_local std::vector<std::uint32_t> cand;
     mIndex.gather(batch.bounds(), cand);
     std::fill(out.begin(), out.begin() + batch.size(), 0.0);
+    // Rows run along z (k, the fastest index). A plane of points (nz = 1, a slicer's layer) has
+    // rows of one point, where the row machinery below costs more than the point: there the rows
+    // run along y instead. The batch is seen with y and z swapped (the output's layout, i * ny + j,
+    // is the swapped batch's (i * 1 + 0) * ny + j), and so are the struts' coordinates; distances
+    // and h do not change, only their rounding.
+    const bool swapped = batch.nz == 1 && batch.ny > 1;
+    auto seen = [swapped](const Vec3d& v) { return swapped ? Vec3d(v.x(), v.z(), v.y()) : v; };
+    const Vec3d origin = seen(batch.origin), spacing = seen(batch.spacing);
+    const int nx = batch.nx, ny = swapped ? 1 : batch.ny, nz = swapped ? batch.ny : batch.nz;
+    auto pointAt = [&](int i, int jj, int k) {
+        return Vec3d(origin.x() + i * spacing.x(), origin.y() + jj * spacing.y(), origin.z() + k * spacing.z());
+    };
     thread_local std::vector<double> gauss;
-    gauss.resize(std::size_t(batch.nz));
+    gauss.resize(std::size_t(nz));
     const bool avx2 = hasAvx2Rows();
-    const double dx = batch.spacing.x(), dy = batch.spacing.y(), dz = batch.spacing.z();
-    const int nz = batch.nz;
+    const double dx = spacing.x(), dy = spacing.y(), dz = spacing.z();
     // Strut-outer, point-inner: each point still sums its struts in ascending index order. Along
     // a row (k) h is linear and r^2 quadratic in k, so exp(-r^2 / 2 sigma^2) follows from two
     // exponentials per row by the recurrence E(k+1) = E(k) R(k), R(k+1) = R(k) Q (a few ulps of
@@ -156,23 +167,23 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
         const double rc2 = mCutoffSqr[j];
         const double sigma = s.sigma, invSigma = 1.0 / sigma, inv2s2 = 0.5 / (sigma * sigma);
         const double length = s.length, w0 = s.w0, slope = s.slope, s2 = sigma * sigma;
-        const Vec3d& u = s.u;
-        const Vec3d d0 = batch.origin - s.a;
+        const Vec3d sa = seen(s.a), u = seen(s.u);
+        const Vec3d d0 = origin - sa;
         const double hz = dz * u.z();
         // r^2(k) = r0 + b k + c k^2 along a row; Q = exp(-2 c / 2 sigma^2).
         const double c = dz * dz - hz * hz;
         const double q = std::exp(-2.0 * c * inv2s2);
         // Rows nearly parallel to the strut get no analytic range (r^2 barely changes along them).
         const bool ranged = c > 1e-9 * dz * dz;
-        const StrutRowConstants constants{s.a.x(), s.a.y(),  s.a.z(), u.x(), u.y(), u.z(), length,
-                                          sigma,   invSigma, s2,      w0,    slope, rc2};
+        const StrutRowConstants constants{sa.x(), sa.y(),   sa.z(), u.x(), u.y(), u.z(), length,
+                                          sigma,  invSigma, s2,     w0,    slope, rc2};
         // The analytic range is only a filter: points within a step of its ends, and all points
         // between, still take the exact cut-off test, so the same points count as before.
         const double rcWide2 = rc2 * (1.0 + 1e-9) + 1e-300;
         std::size_t n = 0;
-        for (int i = 0; i < batch.nx; ++i) {
+        for (int i = 0; i < nx; ++i) {
             const double px = d0.x() + i * dx;
-            for (int jj = 0; jj < batch.ny; ++jj, n += nz) {
+            for (int jj = 0; jj < ny; ++jj, n += nz) {
                 const double py = d0.y() + jj * dy;
                 int kLo = 0, kHi = nz - 1;
                 if (ranged) {
@@ -193,7 +204,7 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                 const double qRow = px * px + py * py;
                 const double r0 = qRow + d0.z() * d0.z() - hRow * hRow;
                 const double b = 2.0 * (d0.z() * dz - hRow * hz) + c;  // r^2(1) - r^2(0)
-                const Vec3d rowStart = batch.point(i, jj, 0);
+                const Vec3d rowStart = pointAt(i, jj, 0);
                 const StrutRow row{rowStart.x(), rowStart.y(), rowStart.z(), dz, kLo, kHi};
                 // The recurrence's factors stay well inside double range for ordinary batches;
                 // otherwise every point takes its own exponential.
@@ -213,7 +224,7 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                 } else {
                     for (int k = kLo; k <= kHi; ++k) {
                         double h, r2;
-                        s.distanceSqr(batch.point(i, jj, k), h, r2);
+                        s.distanceSqr(seen(pointAt(i, jj, k)), h, r2);
                         gauss[k] = std::exp(-r2 * inv2s2);
                     }
                 }
