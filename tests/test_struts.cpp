@@ -191,18 +191,25 @@ TEST(StrutConvolution, GridValuesMatchValuesWithinTheTableBound)
     const StrutConvolution f(struts);
     double worst = 0.0;
     for (const Vec3d& origin : {Vec3d(0.05), Vec3d(2.33, 4.1, 7.9), Vec3d(-1.5, 3.0, 9.5), Vec3d(4.6, 4.9, 5.1)}) {
-        for (const double spacing : {0.1, 0.037, 0.3}) {
+        // Blocks, and planes (nz = 1: a slicer's layer, whose rows run along y).
+        for (const double spacing : {0.1, 0.037, 0.3, -0.1, -0.037}) {
             GridBatch batch;
             batch.origin = origin;
-            batch.spacing = Vec3d(spacing, 0.9 * spacing, 1.1 * spacing);
-            std::vector<double> fast(512), slow(512);
+            batch.spacing = Vec3d(std::abs(spacing), 0.9 * std::abs(spacing), 1.1 * std::abs(spacing));
+            if (spacing < 0.0) {
+                batch.nx = 23;
+                batch.ny = 22;
+                batch.nz = 1;
+            }
+            const int size = int(batch.size());
+            std::vector<double> fast(size), slow(size);
             f.gridValues(batch, fast);
             std::vector<Vec3d> pts;
-            for (int i = 0; i < 8; ++i)
-                for (int j = 0; j < 8; ++j)
-                    for (int k = 0; k < 8; ++k) pts.push_back(batch.point(i, j, k));
+            for (int i = 0; i < batch.nx; ++i)
+                for (int j = 0; j < batch.ny; ++j)
+                    for (int k = 0; k < batch.nz; ++k) pts.push_back(batch.point(i, j, k));
             f.values(pts, slow);
-            for (int n = 0; n < 512; ++n) {
+            for (int n = 0; n < size; ++n) {
                 ASSERT_NEAR(fast[n], slow[n], 1e-9 * (1.0 + slow[n])) << n;
                 worst = std::max(worst, std::abs(fast[n] - slow[n]));
             }
