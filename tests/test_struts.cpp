@@ -218,6 +218,48 @@ TEST(StrutConvolution, GridValuesMatchValuesWithinTheTableBound)
     EXPECT_GT(worst, 0.0);  // the fast path really is a different computation
 }
 
+TEST(StrutConvolution, SmallPlaneBatchesStayWithinTheTaylorBound)
+{
+    // A pixel's sub-samples (a plane batch within 0.1 sigma of its centre along every strut) take
+    // J(h) from its cubic Taylor polynomial: each strut's error is at most 0.512 wMax rho^4 /
+    // sigma^3 (rho: the batch's half extent along the strut), summed over the struts.
+    std::vector<ConvolutionStrut> struts = bccStruts(0.4);
+    for (std::size_t j = 0; j < struts.size(); ++j) struts[j].w1 = 0.5 + 0.03 * j;  // graded weights
+    const StrutConvolution f(struts);
+    double worst = 0.0, largestBound = 0.0;
+    int batches = 0;
+    for (int trial = 0; trial < 400; ++trial) {
+        GridBatch batch;
+        batch.origin = Vec3d(0.3 + 0.0231 * trial, 0.7 + 0.0173 * trial, 0.4 + 0.0219 * trial);
+        batch.spacing = Vec3d(0.0024, 0.003, 1.0);
+        batch.nx = batch.ny = 8;
+        batch.nz = 1;
+        std::vector<double> fast(64), slow(64);
+        f.gridValues(batch, fast);
+        std::vector<Vec3d> pts;
+        for (int i = 0; i < 8; ++i)
+            for (int j = 0; j < 8; ++j) pts.push_back(batch.point(i, j, 0));
+        f.values(pts, slow);
+        const Box3 box = batch.bounds();
+        const Vec3d half = 0.5 * (box.max - box.min);
+        double bound = 0.0;
+        for (std::size_t j = 0; j < f.strutCount(); ++j) {
+            const GaussianSegment& s = f.segment(j);
+            const double rho = half.x() * std::abs(s.u.x()) + half.y() * std::abs(s.u.y());
+            const double wMax = std::max(s.w0, s.w0 + s.slope * s.length);
+            bound += 0.512 * wMax * std::pow(rho, 4) / std::pow(s.sigma, 3) + 1e-9 * wMax;  // + table, rounding
+        }
+        for (int n = 0; n < 64; ++n) {
+            ASSERT_LE(std::abs(fast[n] - slow[n]), bound) << trial << " " << n;
+            worst = std::max(worst, std::abs(fast[n] - slow[n]));
+        }
+        largestBound = std::max(largestBound, bound);
+        batches += slow[0] > 0.0;
+    }
+    EXPECT_GT(batches, 200);  // most batches lie within some strut's reach
+    EXPECT_LT(worst, largestBound);
+}
+
 TEST(StrutRows, FourLanesAddTheSameDoublesAsTheScalarLoop)
 {
     // gridValues picks the AVX2 row loop where the CPU has it: the same recipe must give the same
