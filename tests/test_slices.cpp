@@ -429,6 +429,25 @@ TEST(Slices, SameBytesForAnyThreadCount)
     EXPECT_TRUE(goo == readFile(dir.path / "t3" / "part.goo"));
 }
 
+TEST(Slices, StrutSlicesSameBytesForAnyThreadCount)
+{
+    // Graded struts on the Saturn 4 (plane rows, Taylor sub-samples): the same .goo for 1 and 3 threads.
+    TempDir dir;
+    const auto recipe = dir.write("struts.yaml", R"(domain: {box: [[0, 0, 0], [8, 6, 2]]}
+fields:
+  lattice: {struts: {cell: bcc, size: 2}, kernel: {gaussian: {sigma: 0.2}}, radius: {gradient: centred, min: 0.15, max: 0.3}}
+result: lattice
+outputs: {slices: {printer: saturn4, layer: 0.1, file: struts.goo, reuse: off, preview: off}}
+)");
+    for (int threads : {1, 3})
+        ASSERT_EQ(runCommand(voxlatBinary() + " -q --threads " + std::to_string(threads) + " run " + recipe.string() +
+                             " --out " + (dir.path / ("t" + std::to_string(threads))).string()),
+                  0);
+    const std::string one = readFile(dir.path / "t1" / "struts.goo");
+    EXPECT_GT(one.size(), 195477u);
+    EXPECT_TRUE(one == readFile(dir.path / "t3" / "struts.goo"));  // not EXPECT_EQ: binary
+}
+
 /// Pixels of two PNG images that differ at all, and by more than one grey level.
 std::pair<std::size_t, std::size_t> pixelsDiffering(const std::string& a, const std::string& b)
 {
