@@ -5,6 +5,17 @@ with the printability checks on. Targets: <= 10 min and <= 2 GB on the 2-core ma
 struts' pixel rate within 10x of a TPMS's on the same window (a gyroid sheet sliced here alongside,
 every layer computed: W4's figure).
 
+Measured (2 shared cores at load 5-7: two other engineers building; VOXLAT_W10_HEIGHT=2, so 40
+layers and the full plate extrapolated):
+- 2026-11-29, plane rows (issue 38): struts 450.5 s, 378 MB, 4.3 Mpixel/s of window; TPMS 13.4 s,
+  144 Mpixel/s: 34x (target 10x: missed); full plate 4504 s (target 600 s: missed); info 19.4 s.
+- 2026-11-29, plus Taylor sub-samples: struts 335.7 s, 425 MB, 5.8 Mpixel/s; TPMS 13.0 s,
+  148.8 Mpixel/s: 26x (missed); full plate 3357 s at that load, about 1250 s on two free cores from
+  the CPU time of a 4-layer plate (25.1 s for 193 Mpixel; 211.7 s before issue 38) (missed);
+  info 19.8 s, 279 MB.
+Before issue 38 a 20 x 20 x 2 mm window took 32 s for 40 layers and the 2 mm plate did not finish
+in ten minutes (the issue's figures).
+
 VOXLAT_W10_HEIGHT (mm, default 20) slices a shorter stack of the same plate (the same window and
 struts per layer): the time of the full 20 mm plate is then extrapolated linearly in the layer count
 and printed as such. VOXLAT_W10_INFO=0 skips the `voxlat info` timing.
