@@ -191,24 +191,73 @@ TEST(StrutConvolution, GridValuesMatchValuesWithinTheTableBound)
     const StrutConvolution f(struts);
     double worst = 0.0;
     for (const Vec3d& origin : {Vec3d(0.05), Vec3d(2.33, 4.1, 7.9), Vec3d(-1.5, 3.0, 9.5), Vec3d(4.6, 4.9, 5.1)}) {
-        for (const double spacing : {0.1, 0.037, 0.3}) {
+        // Blocks, and planes (nz = 1: a slicer's layer, whose rows run along y).
+        for (const double spacing : {0.1, 0.037, 0.3, -0.1, -0.037}) {
             GridBatch batch;
             batch.origin = origin;
-            batch.spacing = Vec3d(spacing, 0.9 * spacing, 1.1 * spacing);
-            std::vector<double> fast(512), slow(512);
+            batch.spacing = Vec3d(std::abs(spacing), 0.9 * std::abs(spacing), 1.1 * std::abs(spacing));
+            if (spacing < 0.0) {
+                batch.nx = 23;
+                batch.ny = 22;
+                batch.nz = 1;
+            }
+            const int size = int(batch.size());
+            std::vector<double> fast(size), slow(size);
             f.gridValues(batch, fast);
             std::vector<Vec3d> pts;
-            for (int i = 0; i < 8; ++i)
-                for (int j = 0; j < 8; ++j)
-                    for (int k = 0; k < 8; ++k) pts.push_back(batch.point(i, j, k));
+            for (int i = 0; i < batch.nx; ++i)
+                for (int j = 0; j < batch.ny; ++j)
+                    for (int k = 0; k < batch.nz; ++k) pts.push_back(batch.point(i, j, k));
             f.values(pts, slow);
-            for (int n = 0; n < 512; ++n) {
+            for (int n = 0; n < size; ++n) {
                 ASSERT_NEAR(fast[n], slow[n], 1e-9 * (1.0 + slow[n])) << n;
                 worst = std::max(worst, std::abs(fast[n] - slow[n]));
             }
         }
     }
     EXPECT_GT(worst, 0.0);  // the fast path really is a different computation
+}
+
+TEST(StrutConvolution, SmallPlaneBatchesStayWithinTheTaylorBound)
+{
+    // A pixel's sub-samples (a plane batch within 0.1 sigma of its centre along every strut) take
+    // J(h) from its cubic Taylor polynomial: each strut's error is at most 0.512 wMax rho^4 /
+    // sigma^3 (rho: the batch's half extent along the strut), summed over the struts.
+    std::vector<ConvolutionStrut> struts = bccStruts(0.4);
+    for (std::size_t j = 0; j < struts.size(); ++j) struts[j].w1 = 0.5 + 0.03 * j;  // graded weights
+    const StrutConvolution f(struts);
+    double worst = 0.0, largestBound = 0.0;
+    int batches = 0;
+    for (int trial = 0; trial < 400; ++trial) {
+        GridBatch batch;
+        batch.origin = Vec3d(0.3 + 0.0231 * trial, 0.7 + 0.0173 * trial, 0.4 + 0.0219 * trial);
+        batch.spacing = Vec3d(0.0024, 0.003, 1.0);
+        batch.nx = batch.ny = 8;
+        batch.nz = 1;
+        std::vector<double> fast(64), slow(64);
+        f.gridValues(batch, fast);
+        std::vector<Vec3d> pts;
+        for (int i = 0; i < 8; ++i)
+            for (int j = 0; j < 8; ++j) pts.push_back(batch.point(i, j, 0));
+        f.values(pts, slow);
+        const Box3 box = batch.bounds();
+        const Vec3d half = 0.5 * (box.max - box.min);
+        double bound = 0.0;
+        for (std::size_t j = 0; j < f.strutCount(); ++j) {
+            const GaussianSegment& s = f.segment(j);
+            const double rho = half.x() * std::abs(s.u.x()) + half.y() * std::abs(s.u.y());
+            const double wMax = std::max(s.w0, s.w0 + s.slope * s.length);
+            bound += 0.512 * wMax * std::pow(rho, 4) / std::pow(s.sigma, 3) + 1e-9 * wMax;  // + table, rounding
+        }
+        for (int n = 0; n < 64; ++n) {
+            ASSERT_LE(std::abs(fast[n] - slow[n]), bound) << trial << " " << n;
+            worst = std::max(worst, std::abs(fast[n] - slow[n]));
+        }
+        largestBound = std::max(largestBound, bound);
+        batches += slow[0] > 0.0;
+    }
+    EXPECT_GT(batches, 200);  // most batches lie within some strut's reach
+    EXPECT_LT(worst, largestBound);
 }
 
 TEST(StrutRows, FourLanesAddTheSameDoublesAsTheScalarLoop)

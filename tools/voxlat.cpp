@@ -24,6 +24,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <iostream>
+#include <limits>
 #include <memory>
 #include <sstream>
 
@@ -62,7 +63,12 @@ void printSummary(voxlat::Job& job)
             for (std::size_t i = 0; i < parts.size(); ++i) std::cout << (i ? ", " : ": ") << parts[i];
             std::cout << "\n";
         }
-    if (r.contains("result"))
+    if (r.contains("result") && r["result"].contains("estimated"))
+        std::cout << "result  " << r["result"]["field"].get<std::string>() << ": volume fraction ~"
+                  << r["result"]["volume_fraction"] << " of the domain, ~" << r["result"]["volume_mm3"]
+                  << " mm3 (estimated on a coarser grid: voxel " << r["result"]["estimated"]["voxel"] << " mm, "
+                  << r["result"]["estimated"]["voxels"] << " voxels; --exact counts every voxel)\n";
+    else if (r.contains("result"))
         std::cout << "result  " << r["result"]["field"].get<std::string>() << ": volume fraction "
                   << r["result"]["volume_fraction"] << " of the domain, " << r["result"]["volume_mm3"] << " mm3\n";
     if (r.contains("mesh")) {
@@ -224,6 +230,7 @@ int main(int argc, char** argv)
     Common runArgs, meshArgs, infoArgs, sampleArgs;
     std::string outDir = ".", meshFile, sampleField;
     bool sampleGradient = false;
+    bool infoExact = false;
 
     auto* run = app.add_subcommand("run", "run a recipe: write its outputs and report.json");
     addCommon(run, runArgs);
@@ -251,6 +258,9 @@ int main(int argc, char** argv)
                          " (default: the recipe's first mesh output's, else marching-cubes)");
     auto* info = app.add_subcommand("info", "print the domain, voxel count, solved levels and density");
     addCommon(info, infoArgs);
+    info->add_flag("--exact", infoExact,
+                   "count the volume on the recipe's grid even when the domain has more than 2^24 voxels "
+                   "(else estimated on a coarser grid)");
     auto* sampleCmd = app.add_subcommand("sample", "read `x y z` lines on stdin, print the field value per line");
     addCommon(sampleCmd, sampleArgs);
     sampleCmd->add_option("--field", sampleField, "field to sample (default: the result)");
@@ -359,7 +369,10 @@ int main(int argc, char** argv)
             printSummary(job);
         } else if (*info) {
             voxlat::Job job(voxlat::loadRecipe(infoArgs.recipe, infoArgs.sets), &context);
-            job.grid();
+            // Above kInfoVoxels voxels the volume is estimated on a coarser grid (said in the
+            // output) unless --exact asks for every voxel.
+            constexpr std::uint64_t kInfoVoxels = std::uint64_t(1) << 24;
+            job.measureVolume(infoExact ? std::numeric_limits<std::uint64_t>::max() : kInfoVoxels);
             printSummary(job);
         } else if (*schemaCmd) {
             if (schemaMarkdown)

@@ -310,6 +310,38 @@ const openvdb::FloatGrid& Job::grid()
     return *mGrid;
 }
 
+bool Job::measureVolume(std::uint64_t maxVoxels)
+{
+    if (mDomain.voxelCount() <= maxVoxels || mReport.contains("pieces")) {
+        grid();
+        return false;
+    }
+    solveLevels();
+    // The coarse voxel: the domain's voxel scaled so that the box holds at most maxVoxels (the
+    // box is snapped to the coarse voxel, so the fraction is taken over the coarse box).
+    double factor = std::cbrt(double(mDomain.voxelCount()) / double(maxVoxels));
+    Domain coarse = Domain::fromBox(mDomain.box, mDomain.voxel * factor);
+    while (coarse.voxelCount() > maxVoxels) {
+        factor *= 1.01;
+        coarse = Domain::fromBox(mDomain.box, mDomain.voxel * factor);
+    }
+    SparseStats stats;
+    timed("estimate volume", [&] {
+        SparseOptions options;
+        options.clipToDomain = true;
+        options.stage = "estimating the volume of " + mRecipe.result;
+        options.context = mContext;
+        options.leafVisitor = [](const openvdb::Coord&, const float*) {};  // counted, not kept
+        return evaluateSparse(*mResult, coarse, options, &stats);
+    });
+    const double fraction = double(stats.domainVoxelsBelowZero) / double(coarse.voxelCount());
+    mReport["result"] = {{"field", mRecipe.result},
+                         {"volume_fraction", fraction},
+                         {"volume_mm3", fraction * double(mDomain.voxelCount()) * std::pow(mDomain.voxel, 3)},
+                         {"estimated", {{"voxel", coarse.voxel}, {"voxels", coarse.voxelCount()}}}};
+    return true;
+}
+
 void Job::evaluateRecipeGrid(bool keep)
 {
     solveLevels();

@@ -44,6 +44,12 @@ public:
     /// The sparse grid of the result clipped to the domain (negative inside), evaluated once (and
     /// again if a tolerance mesh freed it, see setGridReleasable()).
     const openvdb::FloatGrid& grid();
+    /// Estimates the result's volume without evaluating the recipe's grid when the domain has more
+    /// than @a maxVoxels voxels: the result is counted on the domain's box at a coarser voxel (the
+    /// smallest whole-grid voxel with at most @a maxVoxels voxels), and `report.json`'s `result`
+    /// says so (`estimated`: the voxel and voxel count used). Smaller domains take grid() (exact
+    /// count, pieces). Returns whether the volume was estimated.
+    bool measureVolume(std::uint64_t maxVoxels);
     /// Whether a tolerance mesh made on a coarser grid may go without the recipe's grid once its
     /// pieces are counted (nothing after it reads the grid): it keeps only the solid's bits while
     /// the leaves are evaluated, or frees a grid made before (W9's peak 515 -> 380 MB freed, 230 MB

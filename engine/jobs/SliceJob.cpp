@@ -349,6 +349,7 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
     RasterOptions options;
     options.supersample = settings.supersample;
     options.gamma = settings.gamma;
+    if (context) options.interrupt = [context] { context->checkCancelled(); };
     const Slicer slicer(field, part, px - centre.x(), py - centre.y(), display, options);
     if (!slicer.fitsDisplay())
         throw InputError(partWhere + ": the part (" + number(part.extent().x()) + " x " + number(part.extent().y()) +

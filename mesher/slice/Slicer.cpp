@@ -450,7 +450,8 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     // Blocks of 8 x 8 tiles, culled by their quarters (4 x 4 tiles): a block whose quarters all
     // straddle the surface is evaluated as one batch (per-axis terms shared by twice the pixels per
     // side), otherwise quarter by quarter as the culling allows.
-    for (int bj = 0; bj < mNy; bj += block)
+    for (int bj = 0; bj < mNy; bj += block) {
+        if (mOptions.interrupt) mOptions.interrupt();
         for (int bi = 0; bi < mNx; bi += block) {
             const int bnx = std::min(block, mNx - bi), bny = std::min(block, mNy - bj);
             const int side = classify(bi, bj, bnx, bny);
@@ -486,6 +487,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
                     decideBlock(qi, qj, std::min(half, bi + bnx - qi), std::min(half, bj + bny - qj),
                                 quarterSide[quarters++]);
         }
+    }
     if (stats) {
         stats->tilesInside += counts.tilesInside;
         stats->tilesOutside += counts.tilesOutside;

@@ -28,6 +28,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 namespace voxlat {
@@ -62,6 +63,9 @@ struct RasterOptions {
     /// Whole tiles eight lanes at a time where the CPU has AVX2 (else four); the bytes are the
     /// same either way, so this only exists to compare the two.
     bool wideTiles = true;
+    /// Called once per row of 64 x 64 blocks while a layer is made (none: never); it throws to
+    /// stop the layer (a job's cancel check), so a layer of a large plate stops promptly.
+    std::function<void()> interrupt;
 };
 
 /// A window [i0, i0 + nx) x [j0, j0 + ny) of the landscape pixel grid, row-major (row = j).
