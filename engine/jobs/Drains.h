@@ -13,10 +13,10 @@ namespace voxlat {
 /// channel per cavity, from the cavity's lowest point: straight down (-z, the build direction
 /// reversed) where it comes out above the build plate (the part's lowest face, which closes a
 /// hole there) and is no longer than a sideways way by a diameter; else sideways, the shortest of
-/// +-x, +-y, a radius above the plate; else along the part's outward normal (the thinnest wall). Then looks for cavities again in the drained solid. Cavities of fewer than 8 samples
-/// are crumbs (listed, not drained). Returns report.json's `drain` entry (per field: the holes with
-/// position, direction and length, the cavities found before and after); warns when a cavity is
-/// left. Deterministic: the same channels for any thread count.
+/// +-x, +-y, a radius above the plate; else along the part's outward normal (the thinnest wall). Then looks for
+/// cavities again in the drained solid. Cavities of fewer than 8 samples are crumbs (listed, not drained). Returns
+/// report.json's `drain` entry (per field: the holes with position, direction and length, the cavities found before and
+/// after); warns when a cavity is left. Deterministic: the same channels for any thread count.
 nlohmann::json planDrains(const std::vector<DrainRequest>& drains, double voxel, const JobContext* context);
 
 }  // namespace voxlat
