@@ -14,6 +14,7 @@
 #include "engine/jobs/PropertyDesign.h"
 #include "engine/jobs/SliceJob.h"
 #include "engine/recipe/RecipeParams.h"
+#include "fields/BlockLattice.h"
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
 #include "fields/Cylinder.h"
@@ -41,6 +42,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <climits>
 #include <iostream>
 #include <sstream>
 
@@ -92,6 +94,50 @@ Domain domainOf(const Recipe& recipe, const FieldNode& result)
 nlohmann::json vec(const Vec3d& v)
 {
     return {v[0], v[1], v[2]};
+}
+
+/// The height of the lowest point of the solid {@a f < 0} inside @a box, when a support box is
+/// conservative (a part's box grows by its grid's margin): samples at spacing @a h rise slab by
+/// slab (eight samples deep) from the box's floor until one is solid; the lowest solid sample's
+/// column is then bisected between it and the void sample below it. The box's floor when the
+/// solid reaches it or none is found. The same for any thread count (the lowest sample is the
+/// first in lattice order among the slab's lowest).
+double lowestSolidZ(const FieldNode& f, const Box3& box, double h)
+{
+    BlockLattice lattice;
+    lattice.base = box.min;
+    lattice.step = Vec3d(h);
+    lattice.offset = Vec3d(0.5);
+    for (int a = 0; a < 2; ++a) lattice.count[a] = std::max(1, int(std::ceil(box.extent()[a] / h)));
+    lattice.count[2] = 8;
+    const int slabs = std::max(1, int(std::ceil(box.extent().z() / (8.0 * h))));
+    for (int s = 0; s < slabs; ++s) {
+        lattice.base.z() = box.min.z() + 8.0 * h * s;
+        std::vector<std::array<int, 3>> lowest(lattice.blockCount(), {INT_MAX, INT_MAX, INT_MAX});
+        sampleBlocks(f, lattice,
+                     [&](std::size_t b, const GridBatch& batch, const std::array<int, 3>& first,
+                         std::span<const double> values) {
+                         std::size_t n = 0;
+                         for (int i = 0; i < batch.nx; ++i)
+                             for (int j = 0; j < batch.ny; ++j)
+                                 for (int k = 0; k < batch.nz; ++k, ++n)
+                                     if (values[n] < 0.0) {
+                                         const std::array<int, 3> at{first[2] + k, first[0] + i, first[1] + j};
+                                         lowest[b] = std::min(lowest[b], at);
+                                     }
+                     });
+        const std::array<int, 3> low = *std::min_element(lowest.begin(), lowest.end());
+        if (low[0] == INT_MAX) continue;
+        const double x = box.min.x() + (low[1] + 0.5) * h, y = box.min.y() + (low[2] + 0.5) * h;
+        double solid = lattice.base.z() + (low[0] + 0.5) * h, empty = solid - h;
+        if (empty <= box.min.z()) return box.min.z();
+        for (int it = 0; it < 40; ++it) {
+            const double mid = 0.5 * (solid + empty);
+            (f.value(Vec3d(x, y, mid)) < 0.0 ? solid : empty) = mid;
+        }
+        return empty;
+    }
+    return box.min.z();
 }
 
 /// Target (mean of the density field over the slab's voxel centres, sampled with a stride) and
@@ -1376,7 +1422,10 @@ void Job::writeSlices(const YAML::Node& spec, const std::filesystem::path& path)
     // voxels. Without one, the result's own bounding box, the one a mesh's domain is grown from
     // (the part then stands on the build plate, with no empty layers under it).
     const std::optional<Box3> support = mResult->support();
-    const Box3 part = mRecipe.domainBox ? *mRecipe.domainBox : support ? *support : mDomain.box;
+    Box3 part = mRecipe.domainBox ? *mRecipe.domainBox : support ? *support : mDomain.box;
+    if (!mRecipe.domainBox)
+        part.min.z() =
+            timed("find the part's floor", [&] { return lowestSolidZ(*mResult, part, 0.5 * mDomain.voxel); });
     const std::string where = mRecipe.domainBox ? mRecipe.node("domain").where() : mRecipe.source->path;
     const SliceResult result = timed("slice " + path.filename().string(), [&] {
         return sliceToFile(*mResult, part, printer, settings, path, where, mContext);
