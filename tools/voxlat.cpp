@@ -50,6 +50,8 @@ void printSummary(voxlat::Job& job)
     if (r.contains("fields"))
         for (const auto& [name, f] : r["fields"].items()) {
             std::cout << "field   " << name << " (" << f["type"].get<std::string>() << "): level " << f["level"];
+            if (f.contains("level_radius_mm"))
+                std::cout << " (isolated strut radius " << f["level_radius_mm"] << " mm)";
             if (f.contains("target_density"))
                 std::cout << ", density " << f["achieved_density"] << " (target " << f["target_density"] << ")";
             std::cout << "\n";

@@ -176,6 +176,9 @@ private:
     /// What `stiffness:` and `optimize:` found, by field name (merged into report.json `fields`).
     nlohmann::json mDesign = nlohmann::json::object();
     std::array<std::array<double, 6>, 6> mPropertiesStiffness{};
+    /// properties() of a box frame too small to hold a whole repeating cell (@a zone): the frame's
+    /// cell homogenized in a frame of enough of them; false when the frame is not a box frame.
+    bool unitCellProperties(const RepeatZone& zone);
     nlohmann::json mTimings = nlohmann::json::object();
 };
 

@@ -35,10 +35,40 @@ nlohmann::json matrixJson(const Matrix3& m, double scale = 1.0)
 
 const char* kAxis = "xyz";
 
+/// The largest relative difference between a cell's density and the density asked, when a level
+/// is solved on the cell (issue 37: 0.5 %).
+constexpr double kCellDensityTolerance = 0.005;
+/// The fractions of a voxel the voxel lattice moves off a symmetric cell's corner when the
+/// aligned one cannot hold the density asked: 1/(2 pi), 1/(2 e), 1/(2 sqrt 2), no two alike.
+constexpr double kVoxelPhase[3] = {0.15915494309189535, 0.18393972058572117, 0.35355339059327379};
+
+double solidFraction(const VoxelCell& cell)
+{
+    std::int64_t solid = 0;
+    for (std::uint8_t v : cell.solid) solid += v;
+    return double(solid) / double(cell.solid.size());
+}
+
 }  // namespace
 
+std::optional<RepeatZone> frameWithoutWholeCell(const FieldNode& field, const PropertiesSettings& settings)
+{
+    if (settings.cell) return std::nullopt;
+    bool periodless = false;
+    for (int a = 0; a < 3; ++a) periodless = periodless || field.period(a) == FieldNode::kNoPeriod;
+    if (!periodless) return std::nullopt;
+    const std::optional<RepeatZone> zone = field.repeatZone();
+    if (!zone) return std::nullopt;
+    for (int a = 0; a < 3; ++a) {
+        const double p = zone->period[a];
+        const double o = zone->phase[a] + p * std::ceil((zone->box.min[a] - zone->phase[a]) / p - 1e-9);
+        if (o + p > zone->box.max[a] + 1e-9 * p) return zone;
+    }
+    return std::nullopt;
+}
+
 PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe, const Vec3d& domainMin, double voxel,
-                                   const JobContext* context)
+                                   const JobContext* context, const CellDensityTarget* target)
 {
     const PropertiesSettings& settings = recipe.properties;
     if (!recipe.material)
@@ -71,12 +101,12 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
                     "` is a frame of identical cells, which repeat "
                     "only deeper inside its box than the struts reach (" +
                     formatNumber(zone->box.min[a] - zone->phase[a]) + " mm), and along " + kAxis[a] +
-                    " no whole cell of " + formatNumber(p) + " mm lies that deep: make the frame longer along " +
-                    kAxis[a] +
-                    " (a frame of 3 cells has a middle cell that sees all its neighbours when the reach is below "
-                    "a cell), or give the cell, e.g. `properties: {cell: [" +
-                    formatNumber(size[0]) + ", " + formatNumber(size[1]) + ", " + formatNumber(size[2]) +
-                    "], origin: [x, y, z]}`");
+                    " no whole cell of " + formatNumber(p) +
+                    " mm lies that deep, and voxlat cannot repeat this frame's cell itself (a frame of "
+                    "identical cells in a box, `struts: {cell, size}`, is homogenized as its cell repeated): "
+                    "make the frame longer along " +
+                    kAxis[a] + ", or give the cell, e.g. `properties: {cell: [" + formatNumber(size[0]) + ", " +
+                    formatNumber(size[1]) + ", " + formatNumber(size[2]) + "], origin: [x, y, z]}`");
         }
         zoneOrigin = o;
     } else {
@@ -112,11 +142,33 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
 
     StageProgress sampling(context, "sampling the cell", 100);
     std::uint64_t reported = 0;
-    const VoxelCell cell = sampleCell(field, origin, size, counts, [&](double f) {
+    const auto sampleProgress = [&](double f) {
         const auto now = std::uint64_t(f * 100);
         if (now > reported) sampling.add(now - reported), reported = now;  // serialised by StageProgress
         return !(context && context->cancelled());
-    });
+    };
+    // With a density target the level is solved on this voxel model: the shift of the field's
+    // values at which the voxels hold the density asked.
+    double shift = 0.0;
+    VoxelCell cell;
+    Vec3d phase(0.0);  // how far the voxel lattice is moved off the cell's corner (mm)
+    if (target) {
+        std::vector<double> values = sampleCellValues(field, origin, size, counts, sampleProgress);
+        shift = cellLevelShift(values, target->density);
+        cell = cellAtShift(values, size, counts, shift);
+        if (std::abs(solidFraction(cell) / target->density - 1.0) > kCellDensityTolerance) {
+            // Struts along the voxel lattice's axes or diagonals (a grid or an X cell) put whole
+            // rows of voxels, and their mirror images, at one distance: the voxel model's density
+            // jumps by percents between levels. Voxel centres moved off the symmetry by a generic
+            // fraction of a voxel, different along each axis, leave only rows along a strut.
+            for (int a = 0; a < 3; ++a) phase[a] = kVoxelPhase[a] * size[a] / counts[a];
+            values = sampleCellValues(field, origin + phase, size, counts, sampleProgress);
+            shift = cellLevelShift(values, target->density);
+            cell = cellAtShift(values, size, counts, shift);
+        }
+    } else {
+        cell = sampleCell(field, origin, size, counts, sampleProgress);
+    }
     sampling.finish();
     std::int64_t solid = 0;
     for (std::uint8_t v : cell.solid) solid += v;
@@ -126,6 +178,7 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
                        ", " + formatNumber(origin[2]) + " holds no solid voxel (" + std::to_string(counts[0]) + " x " +
                        std::to_string(counts[1]) + " x " + std::to_string(counts[2]) +
                        "): raise the density or move the cell (`properties: {origin: ...}`)");
+    const double cellDensity = double(solid) / double(cell.solid.size());
 
     HomogenizationSettings solver;
     solver.tolerance = settings.tolerance;
@@ -150,11 +203,18 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
 
     PropertiesResult result;
     result.stiffnessMPa = elastic.C;
-    result.relativeDensity = elastic.relativeDensity;
+    result.relativeDensity = cellDensity;
     const double Es = material.modulusMPa;
     nlohmann::json nu = matrixJson(c.nu);
     nlohmann::json& r = result.report;
-    r["relative_density"] = elastic.relativeDensity;
+    r["relative_density"] = cellDensity;
+    if (target) {
+        // Below and Band: value = indicator - level, so the shift adds to the level; Above subtracts.
+        const double level = target->side == SolidSide::Above ? target->level - shift : target->level + shift;
+        r["relative_density_target"] = target->density;
+        r["level"] = target->recipeLevel ? target->recipeLevel(level) : level;
+    }
+    if (elastic.islandVoxelsRemoved > 0) r["load_bearing_relative_density"] = elastic.relativeDensity;
     r["C_MPa"] = matrixJson(elastic.C);
     r["S_per_MPa"] = matrixJson(c.S);
     r["E_MPa"] = {c.Ex, c.Ey, c.Ez};
@@ -176,13 +236,17 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
     }
     r["material"] = {{"name", material.name}, {"E_MPa", Es}, {"nu", material.poisson}, {"source", material.source}};
     if (material.conductivity) r["material"]["k_W_per_mK"] = *material.conductivity;
-    r["cell"] = {{"origin", {origin[0], origin[1], origin[2]}},
-                 {"size", {size[0], size[1], size[2]}},
-                 {"voxels", counts},
-                 {"voxel_mm", h},
-                 {"from", settings.cell ? "properties: cell"
-                          : zoneOrigin  ? "the frame's repeating interior"
-                                        : "the result's periods"}};
+    // The cell's corner is where its voxel lattice starts (moved off a symmetric corner, the same
+    // periodic lattice): `properties: {origin}` with it and `level:` give this voxel model again.
+    if (target) r["cell"]["voxel_offset_mm"] = {phase[0], phase[1], phase[2]};
+    const Vec3d corner = origin + phase;
+    r["cell"].update({{"origin", {corner[0], corner[1], corner[2]}},
+                      {"size", {size[0], size[1], size[2]}},
+                      {"voxels", counts},
+                      {"voxel_mm", h},
+                      {"from", settings.cell ? "properties: cell"
+                               : zoneOrigin  ? "the frame's repeating interior"
+                                             : "the result's periods"}});
     r["solver"] = {{"method", "voxel FE homogenization (8-node hexahedra, periodic), multigrid-preconditioned CG"},
                    {"tolerance", settings.tolerance}};
     if (context) {
@@ -234,8 +298,10 @@ std::string propertiesTable(const nlohmann::json& p)
 {
     std::ostringstream out;
     auto n = [](const nlohmann::json& v) { return formatNumber(v.get<double>()); };
-    out << "relative density " << n(p["relative_density"]) << "   material " << p["material"]["name"].get<std::string>()
-        << " (E_s " << n(p["material"]["E_MPa"]) << " MPa, nu " << n(p["material"]["nu"]) << ")\n";
+    out << "relative density " << n(p["relative_density"]);
+    if (p.contains("relative_density_target")) out << " (asked " << n(p["relative_density_target"]) << ")";
+    out << "   material " << p["material"]["name"].get<std::string>() << " (E_s " << n(p["material"]["E_MPa"])
+        << " MPa, nu " << n(p["material"]["nu"]) << ")\n";
     out << "E_x E_y E_z     " << n(p["E_MPa"][0]) << "  " << n(p["E_MPa"][1]) << "  " << n(p["E_MPa"][2])
         << " MPa   (E/E_s " << n(p["E_ratio"][0]) << "  " << n(p["E_ratio"][1]) << "  " << n(p["E_ratio"][2]) << ")\n";
     out << "G_yz G_xz G_xy  " << n(p["G_MPa"][0]) << "  " << n(p["G_MPa"][1]) << "  " << n(p["G_MPa"][2]) << " MPa\n";

@@ -8,9 +8,12 @@
 #include "engine/properties/Homogenization.h"
 #include "engine/recipe/Recipe.h"
 #include "fields/FieldNode.h"
+#include "fields/LevelSolid.h"
 
 #include <nlohmann/json.hpp>
 
+#include <functional>
+#include <optional>
 #include <string>
 
 namespace voxlat {
@@ -22,14 +25,34 @@ struct PropertiesResult {
     double relativeDensity = 0.0;
 };
 
+/// The relative density a lattice was asked for (`density:`): the homogenized cell's level is
+/// solved again on the voxel model that is homogenized, at its resolution, so that the cell holds
+/// exactly that density (the job's level is solved over the frame's box, whose edge cells lack
+/// their neighbours, and the voxel model aliases with the struts).
+struct CellDensityTarget {
+    double density = 0.0;               ///< the relative density asked
+    double level = 0.0;                 ///< the level the job solved, in the node's own units
+    SolidSide side = SolidSide::Below;  ///< which side of the level is solid
+    /// The node's level as the recipe's `level:` key means it (a Gaussian lattice's iso-value t);
+    /// empty when the two are the same.
+    std::function<double(double)> recipeLevel;
+};
+
+/// A frame of identical cells (FieldNode::repeatZone()) too small to hold a whole cell deeper
+/// than its struts reach (a frame of one or two cells): the zone, whose period is the cell and
+/// whose phase is the frame's corner; empty when the cell is given (`properties: {cell}`), when
+/// the result is periodic or has a whole repeating cell.
+std::optional<RepeatZone> frameWithoutWholeCell(const FieldNode& field, const PropertiesSettings& settings);
+
 /// Homogenizes one periodic cell of @a field (the recipe's result, levels solved): the cell is
 /// `properties: {cell, origin, resolution}`, or one period of the field along each axis starting
 /// at @a domainMin, or (a finite frame of identical cells, FieldNode::repeatZone()) the first
-/// whole cell of the frame's repeating interior; voxels of about @a voxel. Needs `material:`. Throws InputError for a
-/// missing material or period (naming the recipe line), JobError for a cell with no solid or one that carries no load
-/// along any axis.
+/// whole cell of the frame's repeating interior; voxels of about @a voxel. With @a target the
+/// cell's level is solved on its voxel model (CellDensityTarget). Needs `material:`. Throws
+/// InputError for a missing material or period (naming the recipe line), JobError for a cell with
+/// no solid or one that carries no load along any axis.
 PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe, const Vec3d& domainMin, double voxel,
-                                   const JobContext* context);
+                                   const JobContext* context, const CellDensityTarget* target = nullptr);
 
 /// A shaded picture (PNG, @a size pixels square) of the directional Young's modulus surface
 /// E(d) of @a C: the surface r = E(d) / max E over the unit sphere.

@@ -567,8 +567,10 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
                 }
             }
         }
-        if (!radii && !node.density && !graded)
-            spec.fail("capsules need `radius:` (or `density:`, which solves a uniform radius)");
+        if (!radii && !node.density && !graded && !spec.has("level"))
+            spec.fail(
+                "capsules need `radius:` (or `density:`, which solves a uniform radius, or `level:`, the radius "
+                "offset, which alone is the radius)");
         auto capsuleStruts = [](const Frame& f, const std::optional<std::vector<std::array<double, 2>>>& r) {
             std::vector<CapsuleStrut> struts;
             for (std::size_t j = 0; j < f.struts.size(); ++j)
@@ -708,8 +710,8 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     const double t = spec.has("level") ? spec["level"].positiveNumber() : 1.0;
     {
         std::ostringstream d;
-        d << "strut convolution (gaussian); level in mm = sigma sqrt(2 ln(P / t)), the radius of an isolated strut at "
-             "iso-value t, with P = "
+        d << "strut convolution (gaussian); level: the iso-value t in F >= t; level_radius_mm = sigma sqrt(2 ln(P / "
+             "t)), the radius of an isolated strut at iso-value t, with P = "
           << peak << ", sigma = " << sigmaMax;
         node.description = d.str();
     }
@@ -731,6 +733,22 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
     }
     node.solid = node.density ? LevelSolid::unsolved(evaluated, SolidSide::Below)
                               : std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
+    // The recipe's `level:` is t: the double t whose radiusOf() gives back this level exactly (a
+    // neighbour of valueOf()'s when rounding moves it), so the reported t pasted into the recipe
+    // builds the same solid, bit for bit.
+    node.recipeLevel = [iso](double level) {
+        const double t = iso->valueOf(level);
+        double best = t, bestError = std::abs(iso->radiusOf(t) - level);
+        for (const double direction : {-1.0, 1.0}) {
+            double u = t;
+            for (int k = 0; k < 64 && bestError > 0.0; ++k) {
+                u = std::nextafter(u, direction * std::numeric_limits<double>::infinity());
+                const double error = std::abs(iso->radiusOf(u) - level);
+                if (error < bestError) best = u, bestError = error;
+            }
+        }
+        return best;
+    };
     // Mid-strut, away from joints, a strut of peak p is a cylinder of radius sigma sqrt(2 ln(p / t))
     // at iso-value t (none where p <= t: the strut vanishes).
     node.thinnest = [raw, iso, n, sigma](double level) {
