@@ -1275,8 +1275,7 @@ const nlohmann::json& Job::properties()
             // done: a frame too small to hold a whole repeating cell, homogenized as its cell repeated
         } else {
             PropertiesResult r = timed("homogenize", [&] {
-                return computeProperties(*result, mRecipe, corner, mDomain.voxel, mContext,
-                                         target ? &*target : nullptr);
+                return computeProperties(*result, mRecipe, corner, mContext, target ? &*target : nullptr);
             });
             mReport["properties"] = std::move(r.report);
             mPropertiesStiffness = r.stiffnessMPa;

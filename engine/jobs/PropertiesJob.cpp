@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <sstream>
 
@@ -42,6 +43,74 @@ constexpr double kCellDensityTolerance = 0.005;
 /// aligned one cannot hold the density asked: 1/(2 pi), 1/(2 e), 1/(2 sqrt 2), no two alike.
 constexpr double kVoxelPhase[3] = {0.15915494309189535, 0.18393972058572117, 0.35355339059327379};
 
+/// The first resolution of the default convergence ladder (voxels along the cell's longest side).
+constexpr int kConvergenceStart = 24;
+
+/// The default resolutions: 24 voxels, then steps of sqrt 2 (34, 48, 68, 96, 136, ...) up to
+/// @a most.
+std::vector<int> convergenceLadder(int most)
+{
+    std::vector<int> ladder;
+    for (int k = 0;; ++k) {
+        const int n = int(std::lround(kConvergenceStart * std::pow(std::sqrt(2.0), k)));
+        if (n > most) break;
+        ladder.push_back(n);
+    }
+    return ladder;
+}
+
+/// Richardson extrapolation of the moduli over the last three resolutions of @a n.
+struct ConvergenceEstimate {
+    double error = std::numeric_limits<double>::infinity();  ///< largest |E - limit| / limit over the axes
+    std::array<double, 3> limit{};                           ///< the extrapolated E per axis
+    std::array<double, 3> order{};                           ///< the observed order p (E = limit + a h^p)
+    int axis = 0;                                            ///< the axis of the largest error
+    /// No axis converged faster than second order (a last step much smaller than the one
+    /// before, which can be a step that happened to be small: the next estimate must confirm).
+    bool steady = true;
+};
+
+ConvergenceEstimate richardson(const std::vector<int>& n, const std::vector<std::array<double, 3>>& E)
+{
+    ConvergenceEstimate out;
+    out.error = 0.0;
+    const std::size_t m = E.size();
+    const double r12 = double(n[m - 2]) / n[m - 3], r23 = double(n[m - 1]) / n[m - 2];
+    for (int a = 0; a < 3; ++a) {
+        const double e1 = E[m - 3][a], e2 = E[m - 2][a], e3 = E[m - 1][a];
+        out.limit[a] = e3;
+        if (e1 == 0.0 && e2 == 0.0 && e3 == 0.0) continue;  // no load path along a at any resolution
+        double error = std::numeric_limits<double>::infinity();
+        if (e1 > 0.0 && e2 > 0.0 && e3 > 0.0) {
+            const double d1 = e2 - e1, d2 = e3 - e2;
+            // E = limit + a h^p: d1 / d2 = (h1^p - h2^p) / (h2^p - h3^p), for steps of one ratio
+            // r^p. Differences of one sign that do not shrink are not yet in the asymptotic
+            // range: first order (p = 1), the cautious guess, extrapolates from the last step.
+            // Differences that change sign are the voxel model's jitter (which voxels a strut's
+            // surface takes): no trend to extrapolate, the error is their spread.
+            if (d1 * d2 < 0.0) {
+                out.limit[a] = (e1 + e2 + e3) / 3.0;
+                out.order[a] = 0.0;
+                error = (std::max({e1, e2, e3}) - std::min({e1, e2, e3})) / e3;
+            } else {
+                double p = 1.0;
+                if (d2 == 0.0)
+                    p = std::numeric_limits<double>::infinity();
+                else if (std::abs(d2) < std::abs(d1))
+                    p = std::log(d1 / d2) / std::log(std::sqrt(r12 * r23));
+                if (p > 2.0) out.steady = false;
+                p = std::clamp(p, 0.5, 2.0);
+                out.limit[a] = std::isfinite(p) ? e3 + d2 / (std::pow(r23, p) - 1.0) : e3;
+                out.order[a] = std::isfinite(p) ? p : 0.0;
+                error = out.limit[a] > 0.0 ? std::abs(e3 - out.limit[a]) / out.limit[a]
+                                           : std::numeric_limits<double>::infinity();
+            }
+        }
+        if (error > out.error) out.error = error, out.axis = a;
+    }
+    return out;
+}
+
 double solidFraction(const VoxelCell& cell)
 {
     std::int64_t solid = 0;
@@ -67,7 +136,7 @@ std::optional<RepeatZone> frameWithoutWholeCell(const FieldNode& field, const Pr
     return std::nullopt;
 }
 
-PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe, const Vec3d& domainMin, double voxel,
+PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe, const Vec3d& domainMin,
                                    const JobContext* context, const CellDensityTarget* target)
 {
     const PropertiesSettings& settings = recipe.properties;
@@ -131,47 +200,147 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
     const Vec3d origin = settings.origin ? Vec3d((*settings.origin)[0], (*settings.origin)[1], (*settings.origin)[2])
                                          : zoneOrigin.value_or(domainMin);
     const double longest = std::max({size[0], size[1], size[2]});
-    const int resolution = settings.resolution ? *settings.resolution : int(std::lround(longest / voxel));
-    if (resolution < 4 || resolution > 512)
-        throw InputError(settings.where + ": the cell (" + formatNumber(longest) + " mm along its longest side) at " +
-                         formatNumber(voxel) + " mm voxels gives " + std::to_string(resolution) +
-                         " voxels per side; homogenization takes 4 to 512: set `properties: {resolution: 64}`");
-    const double h = longest / resolution;
-    std::array<int, 3> counts;
-    for (int a = 0; a < 3; ++a) counts[a] = std::max(1, int(std::lround(size[a] / h)));
 
-    StageProgress sampling(context, "sampling the cell", 100);
-    std::uint64_t reported = 0;
-    const auto sampleProgress = [&](double f) {
-        const auto now = std::uint64_t(f * 100);
-        if (now > reported) sampling.add(now - reported), reported = now;  // serialised by StageProgress
-        return !(context && context->cancelled());
+    // One voxel model of the cell and its stiffness at @a n voxels along the longest side.
+    struct Solved {
+        int n = 0;
+        std::array<int, 3> counts{};
+        double h = 0.0;
+        VoxelCell cell;
+        std::int64_t solid = 0;
+        double shift = 0.0;
+        Vec3d phase{0.0};  // how far the voxel lattice is moved off the cell's corner (mm)
+        ElasticityResult elastic;
     };
-    // With a density target the level is solved on this voxel model: the shift of the field's
-    // values at which the voxels hold the density asked.
-    double shift = 0.0;
-    VoxelCell cell;
-    Vec3d phase(0.0);  // how far the voxel lattice is moved off the cell's corner (mm)
-    if (target) {
-        std::vector<double> values = sampleCellValues(field, origin, size, counts, sampleProgress);
-        shift = cellLevelShift(values, target->density);
-        cell = cellAtShift(values, size, counts, shift);
-        if (std::abs(solidFraction(cell) / target->density - 1.0) > kCellDensityTolerance) {
-            // Struts along the voxel lattice's axes or diagonals (a grid or an X cell) put whole
-            // rows of voxels, and their mirror images, at one distance: the voxel model's density
-            // jumps by percents between levels. Voxel centres moved off the symmetry by a generic
-            // fraction of a voxel, different along each axis, leave only rows along a strut.
-            for (int a = 0; a < 3; ++a) phase[a] = kVoxelPhase[a] * size[a] / counts[a];
-            values = sampleCellValues(field, origin + phase, size, counts, sampleProgress);
-            shift = cellLevelShift(values, target->density);
-            cell = cellAtShift(values, size, counts, shift);
+    HomogenizationSettings solver;
+    solver.tolerance = settings.tolerance;
+    const auto solveAt = [&](int n) {
+        Solved s;
+        StageProgress sampling(context, "sampling the cell at " + std::to_string(n) + " voxels", 100);
+        std::uint64_t reported = 0;
+        const auto sampleProgress = [&](double f) {
+            const auto now = std::uint64_t(f * 100);
+            if (now > reported) sampling.add(now - reported), reported = now;  // serialised by StageProgress
+            return !(context && context->cancelled());
+        };
+        const std::function<bool(double)> cancelOnly = [&](double) { return !(context && context->cancelled()); };
+        const auto at = [&](int m) {
+            s.n = m;
+            s.h = longest / m;
+            for (int a = 0; a < 3; ++a) s.counts[a] = std::max(1, int(std::lround(size[a] / s.h)));
+        };
+        at(n);
+        // With a density target the level is solved on this voxel model: the shift of the field's
+        // values at which the voxels hold the density asked.
+        if (target) {
+            // The voxel lattice is moved off the cell's corner by a generic fraction of a voxel,
+            // different along each axis: struts along the voxel lattice's axes or diagonals (a grid
+            // or an X cell) would otherwise put whole rows of voxels, and their mirror images, at
+            // one distance, and the voxel model's density would jump by percents between levels
+            // (a capsule X cell at 40 voxels: 0.094, then above 0.1). Moved, only rows along a
+            // strut stay together, and the models at successive resolutions sample the struts
+            // alike (E converges smoothly instead of jumping with the alignment). Where a row
+            // is still too large a step (few voxels), the resolution is raised until the density
+            // is met.
+            for (int m = n;; ++m) {
+                at(m);
+                for (int a = 0; a < 3; ++a) s.phase[a] = kVoxelPhase[a] * size[a] / s.counts[a];
+                const std::vector<double> values =
+                    sampleCellValues(field, origin + s.phase, size, s.counts,
+                                     m == n ? std::function<bool(double)>(sampleProgress) : cancelOnly);
+                s.shift = cellLevelShift(values, target->density);
+                s.cell = cellAtShift(values, size, s.counts, s.shift);
+                if (std::abs(solidFraction(s.cell) / target->density - 1.0) <= kCellDensityTolerance ||
+                    m >= std::min(512, 2 * n))
+                    break;
+            }
+        } else {
+            s.cell = sampleCell(field, origin, size, s.counts, sampleProgress);
         }
+        sampling.finish();
+        for (std::uint8_t v : s.cell.solid) s.solid += v;
+        if (s.solid == 0) return s;
+        StageProgress solving(context, "homogenizing at " + std::to_string(s.n) + " voxels", 1000);
+        std::uint64_t solved = 0;
+        solver.progress = [&](double f) {
+            const auto now = std::uint64_t(std::clamp(f, 0.0, 1.0) * 1000);
+            if (now > solved) solving.add(now - solved), solved = now;
+            return !(context && context->cancelled());
+        };
+        s.elastic = homogenizeElasticity(s.cell, {material.modulusMPa, material.poisson}, solver);
+        solving.finish();
+        return s;
+    };
+    const auto moduli = [](const Solved& s) {
+        if (s.solid == 0) return std::array<double, 3>{0.0, 0.0, 0.0};
+        const EngineeringConstants e = engineeringConstants(s.elastic.C);
+        return std::array<double, 3>{s.elastic.percolates[0] ? e.Ex : 0.0, s.elastic.percolates[1] ? e.Ey : 0.0,
+                                     s.elastic.percolates[2] ? e.Ez : 0.0};
+    };
+
+    // The resolution: given, or the first of a ladder (24 voxels, then steps of sqrt 2) at which
+    // Richardson extrapolation of E over the last three resolutions says E is within the
+    // tolerance of its limit.
+    Solved final;
+    nlohmann::json convergence;
+    if (settings.resolution) {
+        final = solveAt(*settings.resolution);
     } else {
-        cell = sampleCell(field, origin, size, counts, sampleProgress);
+        const std::vector<int> ladder = convergenceLadder(settings.maxResolution);
+        if (ladder.size() < 3)
+            throw InputError(settings.where + ": `max_resolution: " + std::to_string(settings.maxResolution) +
+                             "` leaves fewer than three resolutions to check convergence on (" +
+                             std::to_string(kConvergenceStart) + ", 34, 48): raise it, or give `resolution:`");
+        std::vector<int> used;
+        std::vector<std::array<double, 3>> E;
+        ConvergenceEstimate estimate;
+        for (int n : ladder) {
+            final = solveAt(n);
+            used.push_back(final.n);  // raised from n when the density asked needs it
+            E.push_back(moduli(final));
+            if (E.size() < 3) continue;
+            // An estimate from a last step much smaller than the one before (faster than second
+            // order) needs the next to confirm it: such a step can have happened to be small (the
+            // voxel model's jitter; the Gaussian X cell at rho 0.1 moved 0.4 % from 48 to 68
+            // voxels, then 1.9 % to 96).
+            const double before = estimate.error;
+            estimate = richardson(used, E);
+            if (estimate.error <= settings.convergence && (estimate.steady || before <= settings.convergence)) break;
+        }
+        nlohmann::json rows = nlohmann::json::array();
+        for (const auto& e : E) rows.push_back({e[0], e[1], e[2]});
+        convergence = {
+            {"resolutions", used},
+            {"E_MPa", rows},
+            {"estimated_error", estimate.error},
+            {"extrapolated_E_MPa", {estimate.limit[0], estimate.limit[1], estimate.limit[2]}},
+            {"order", {estimate.order[0], estimate.order[1], estimate.order[2]}},
+            {"tolerance", settings.convergence},
+            {"method",
+             "Richardson extrapolation of E_x, E_y, E_z over three successive resolutions (order 0.5 to 2; faster "
+             "convergence confirmed by the next)"}};
+        if (estimate.error > settings.convergence && context) {
+            const int a = estimate.axis;
+            const std::size_t m = E.size();
+            context->warn("not_converged",
+                          "the cell's moduli are within an estimated " + formatNumber(100.0 * estimate.error) +
+                              " % of their extrapolated values at " + std::to_string(used.back()) +
+                              " voxels, more than the " + formatNumber(100.0 * settings.convergence) + " % asked: E_" +
+                              kAxis[a] + " is " + formatNumber(E[m - 3][a]) + ", " + formatNumber(E[m - 2][a]) + ", " +
+                              formatNumber(E[m - 1][a]) + " MPa at " + std::to_string(used[m - 3]) + ", " +
+                              std::to_string(used[m - 2]) + ", " + std::to_string(used[m - 1]) +
+                              " voxels (extrapolated " + formatNumber(estimate.limit[a]) +
+                              "); raise `properties: {max_resolution: N}` (now " +
+                              std::to_string(settings.maxResolution) + ") or give `resolution:`",
+                          {{"estimated_error", estimate.error}, {"resolutions", used}});
+        }
     }
-    sampling.finish();
-    std::int64_t solid = 0;
-    for (std::uint8_t v : cell.solid) solid += v;
+    const VoxelCell& cell = final.cell;
+    const std::array<int, 3>& counts = final.counts;
+    const double h = final.h;
+    const double shift = final.shift;
+    const Vec3d phase = final.phase;
+    const std::int64_t solid = final.solid;
     if (solid == 0)
         throw JobError(settings.where + ": the cell [" + formatNumber(size[0]) + ", " + formatNumber(size[1]) + ", " +
                        formatNumber(size[2]) + "] mm at " + formatNumber(origin[0]) + ", " + formatNumber(origin[1]) +
@@ -179,24 +348,29 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
                        std::to_string(counts[1]) + " x " + std::to_string(counts[2]) +
                        "): raise the density or move the cell (`properties: {origin: ...}`)");
     const double cellDensity = double(solid) / double(cell.solid.size());
-
-    HomogenizationSettings solver;
-    solver.tolerance = settings.tolerance;
-    StageProgress solving(context, "homogenizing", 1000);
-    std::uint64_t solved = 0;
-    solver.progress = [&](double f) {
-        const auto now = std::uint64_t(std::clamp(f, 0.0, 1.0) * 1000);
-        if (now > solved) solving.add(now - solved), solved = now;
-        return !(context && context->cancelled());
-    };
-    const ElasticityResult elastic = homogenizeElasticity(cell, {material.modulusMPa, material.poisson}, solver);
-    solving.finish();
+    if (target && context) {
+        if (settings.resolution && final.n != *settings.resolution)
+            context->warn("resolution_raised",
+                          "the cell is homogenized at " + std::to_string(final.n) + " voxels instead of " +
+                              std::to_string(*settings.resolution) + ": at " + std::to_string(*settings.resolution) +
+                              " no level gives the density asked (" + formatNumber(target->density) +
+                              ") within 0.5 % on the voxels",
+                          {{"resolution", final.n}, {"asked", *settings.resolution}});
+        if (std::abs(cellDensity / target->density - 1.0) > kCellDensityTolerance)
+            context->warn("cell_density",
+                          "the cell's voxel model holds " + formatNumber(cellDensity) + ", not the density asked (" +
+                              formatNumber(target->density) + ") within 0.5 %, even at " + std::to_string(final.n) +
+                              " voxels: give a finer `resolution:`",
+                          {{"relative_density", cellDensity}, {"target", target->density}});
+    }
+    const ElasticityResult& elastic = final.elastic;
     if (!elastic.percolates[0] && !elastic.percolates[1] && !elastic.percolates[2])
         throw JobError(settings.where + ": the cell falls apart: no piece of it connects to its neighbour cell along " +
                        "x, y or z (" + std::to_string(elastic.islandsRemoved) + " loose pieces, " +
                        formatNumber(100.0 * double(elastic.islandVoxelsRemoved) / double(solid)) +
                        " % of the solid), so it carries no load: raise the density or the strut radius, or use a "
                        "finer voxel (`properties: {resolution: N}`)");
+    solver.progress = {};
     const ConductivityResult thermal =
         settings.conductivity ? homogenizeConductivity(cell, 1.0, solver) : ConductivityResult{};
     const EngineeringConstants c = engineeringConstants(elastic.C);
@@ -247,6 +421,7 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
                       {"from", settings.cell ? "properties: cell"
                                : zoneOrigin  ? "the frame's repeating interior"
                                              : "the result's periods"}});
+    if (!convergence.is_null()) r["convergence"] = convergence;
     r["solver"] = {{"method", "voxel FE homogenization (8-node hexahedra, periodic), multigrid-preconditioned CG"},
                    {"tolerance", settings.tolerance}};
     if (context) {
@@ -325,6 +500,14 @@ std::string propertiesTable(const nlohmann::json& p)
     for (std::size_t k = 0; k < 6; ++k) {
         iterations = std::max(iterations, p["iterations"][k].get<int>());
         residual = std::max(residual, p["residual"][k].get<double>());
+    }
+    if (p.contains("convergence")) {
+        const nlohmann::json& c = p["convergence"];
+        out << "resolution " << c["resolutions"].back().get<int>() << " voxels, chosen by convergence: E_x E_y E_z";
+        for (std::size_t k = 0; k < c["resolutions"].size(); ++k)
+            out << (k ? ";" : "") << " " << c["resolutions"][k].get<int>() << ": " << n(c["E_MPa"][k][0]) << " "
+                << n(c["E_MPa"][k][1]) << " " << n(c["E_MPa"][k][2]);
+        out << " MPa; estimated error " << formatNumber(100.0 * c["estimated_error"].get<double>()) << " %\n";
     }
     out << "solver: at most " << iterations << " iterations per load case, residual <= " << formatNumber(residual)
         << "; " << p["islands_removed"].get<int>() << " loose pieces left out\n";

@@ -45,13 +45,16 @@ struct CellDensityTarget {
 std::optional<RepeatZone> frameWithoutWholeCell(const FieldNode& field, const PropertiesSettings& settings);
 
 /// Homogenizes one periodic cell of @a field (the recipe's result, levels solved): the cell is
-/// `properties: {cell, origin, resolution}`, or one period of the field along each axis starting
-/// at @a domainMin, or (a finite frame of identical cells, FieldNode::repeatZone()) the first
-/// whole cell of the frame's repeating interior; voxels of about @a voxel. With @a target the
-/// cell's level is solved on its voxel model (CellDensityTarget). Needs `material:`. Throws
+/// `properties: {cell, origin}`, or one period of the field along each axis starting at
+/// @a domainMin, or (a finite frame of identical cells, FieldNode::repeatZone()) the first whole
+/// cell of the frame's repeating interior. Its resolution is `properties: {resolution}`, or the
+/// first of 24, 34, 48, 68, ... voxels along its longest side at which Richardson extrapolation
+/// of E over the last three says E is within `properties: {convergence}` of its limit (report
+/// `convergence`; a `not_converged` warning when `max_resolution` comes first). With @a target
+/// the cell's level is solved on its voxel model (CellDensityTarget). Needs `material:`. Throws
 /// InputError for a missing material or period (naming the recipe line), JobError for a cell with
 /// no solid or one that carries no load along any axis.
-PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe, const Vec3d& domainMin, double voxel,
+PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe, const Vec3d& domainMin,
                                    const JobContext* context, const CellDensityTarget* target = nullptr);
 
 /// A shaded picture (PNG, @a size pixels square) of the directional Young's modulus surface
