@@ -11,6 +11,7 @@
 #include <cctype>
 #include <cmath>
 #include <filesystem>
+#include <map>
 
 using namespace voxlat;
 using namespace voxlat::test;
@@ -643,4 +644,55 @@ TEST(Properties, TheDefaultResolutionIsConvergedWithinTwoPercent)
             EXPECT_NE(w["message"].get<std::string>().find("at 24, 34, 48 voxels"), std::string::npos) << w.dump();
         }
     EXPECT_TRUE(warned) << report["warnings"].dump();
+}
+
+TEST(Properties, TheDensityCurveAndItsGibsonAshbyFitTellBendingFromStretching)
+{
+    // Issue 37: `voxlat properties R --curve density=FROM:TO:COUNT` homogenizes the cell at each
+    // density and fits E/E_s = C rho^n per axis. A BCC cell bends (n near 2 or above: the joints
+    // stiffen it further as the density rises), an octet cell stretches (n near 1).
+    TempDir dir;
+    std::map<std::string, double> exponent;
+    for (const std::string cell : {"bcc", "octet"}) {
+        const auto recipe = dir.write(cell + ".yaml",
+                                      "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [5, 5, 5]]}\n"
+                                      "properties: {resolution: 32}\nfields:\n  lattice: {struts: {cell: " +
+                                          cell + ", size: 5}, kernel: capsule, density: 0.1}\nresult: lattice\n");
+        const auto json = dir.path / (cell + "-curve.json");
+        std::string out;
+        ASSERT_EQ(runCommand(voxlatBinary() + " -q properties " + recipe.string() +
+                                 " --curve density=0.1:0.3:3 --json " + json.string(),
+                             &out),
+                  0)
+            << out;
+        EXPECT_NE(out.find("Gibson-Ashby"), std::string::npos) << out;
+        const auto c = nlohmann::json::parse(readFile(json));
+        ASSERT_EQ(c["curve"].size(), 3u);
+        const double targets[3] = {0.1, 0.2, 0.3};
+        for (int k = 0; k < 3; ++k) {
+            const auto& p = c["curve"][k];
+            EXPECT_NEAR(p["relative_density_target"].get<double>(), targets[k], 1e-12);
+            EXPECT_LT(std::abs(p["relative_density"].get<double>() / targets[k] - 1.0), 0.005);
+            for (const char* key : {"C_MPa", "E_MPa", "G_MPa", "K_ratio"}) EXPECT_TRUE(p.contains(key)) << key;
+            if (k > 0) EXPECT_GT(p["E_MPa"][2].get<double>(), c["curve"][k - 1]["E_MPa"][2].get<double>());
+        }
+        // The fit, recomputed here from the curve's own points.
+        const auto& g = c["gibson_ashby"];
+        for (int a = 0; a < 3; ++a) {
+            const double x0 = std::log(c["curve"][0]["relative_density"].get<double>()),
+                         x2 = std::log(c["curve"][2]["relative_density"].get<double>());
+            const double y0 = std::log(c["curve"][0]["E_ratio"][a].get<double>()),
+                         y2 = std::log(c["curve"][2]["E_ratio"][a].get<double>());
+            EXPECT_NEAR(g["n"][a].get<double>(), (y2 - y0) / (x2 - x0), 0.1);  // the chord, for 3 points
+        }
+        EXPECT_LT(g["max_relative_error"].get<double>(), 0.1);
+        exponent[cell] = g["n"][2].get<double>();
+        std::printf("%s: n = %.3f, C = %.4f, largest misfit %.2f %%\n", cell.c_str(), g["n"][2].get<double>(),
+                    g["C"][2].get<double>(), 100.0 * g["max_relative_error"].get<double>());
+    }
+    EXPECT_GT(exponent["bcc"], 1.8);
+    EXPECT_LT(exponent["bcc"], 3.0);
+    EXPECT_GT(exponent["octet"], 0.9);
+    EXPECT_LT(exponent["octet"], 1.6);
+    EXPECT_GT(exponent["bcc"] - exponent["octet"], 0.8);
 }

@@ -442,6 +442,66 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
     return result;
 }
 
+GibsonAshbyFit fitGibsonAshby(const std::vector<double>& density,
+                              const std::vector<std::array<double, 3>>& modulusRatio)
+{
+    GibsonAshbyFit fit;
+    for (int a = 0; a < 3; ++a) {
+        double sx = 0, sy = 0, sxx = 0, sxy = 0;
+        int m = 0;
+        for (std::size_t k = 0; k < density.size(); ++k)
+            if (density[k] > 0.0 && modulusRatio[k][a] > 0.0) {
+                const double x = std::log(density[k]), y = std::log(modulusRatio[k][a]);
+                sx += x, sy += y, sxx += x * x, sxy += x * y, ++m;
+            }
+        const double d = m * sxx - sx * sx;
+        if (m < 2 || !(std::abs(d) > 0.0)) continue;
+        fit.n[a] = (m * sxy - sx * sy) / d;
+        fit.C[a] = std::exp((sy - fit.n[a] * sx) / m);
+        for (std::size_t k = 0; k < density.size(); ++k)
+            if (density[k] > 0.0 && modulusRatio[k][a] > 0.0)
+                fit.maxRelativeError =
+                    std::max(fit.maxRelativeError,
+                             std::abs(fit.C[a] * std::pow(density[k], fit.n[a]) / modulusRatio[k][a] - 1.0));
+    }
+    return fit;
+}
+
+nlohmann::json densityCurvePoint(const nlohmann::json& p)
+{
+    nlohmann::json row{{"relative_density", p["relative_density"]},
+                       {"C_MPa", p["C_MPa"]},
+                       {"E_MPa", p["E_MPa"]},
+                       {"G_MPa", p["G_MPa"]},
+                       {"E_ratio", p["E_ratio"]},
+                       {"nu", p["nu"]},
+                       {"resolution", p["cell"]["voxels"]}};
+    if (p.contains("relative_density_target")) row["relative_density_target"] = p["relative_density_target"];
+    if (p.contains("level")) row["level"] = p["level"];
+    if (p.contains("conductivity")) row["K_ratio"] = p["conductivity"]["K_ratio"];
+    return row;
+}
+
+nlohmann::json densityCurve(const std::vector<nlohmann::json>& points)
+{
+    std::vector<double> rho;
+    std::vector<std::array<double, 3>> ratio;
+    nlohmann::json curve = nlohmann::json::array();
+    for (const nlohmann::json& p : points) {
+        curve.push_back(p);
+        if (!p.contains("E_ratio")) continue;  // a point where the cell falls apart
+        rho.push_back(p["relative_density"].get<double>());
+        ratio.push_back({p["E_ratio"][0].get<double>(), p["E_ratio"][1].get<double>(), p["E_ratio"][2].get<double>()});
+    }
+    const GibsonAshbyFit fit = fitGibsonAshby(rho, ratio);
+    return {{"curve", curve},
+            {"gibson_ashby",
+             {{"C", fit.C},
+              {"n", fit.n},
+              {"max_relative_error", fit.maxRelativeError},
+              {"law", "E/E_s = C rho^n per axis, least squares on log E/E_s against log rho"}}}};
+}
+
 std::string directionalModulusPng(const Matrix6& C, int size)
 {
     // A latitude-longitude sphere whose radius is E(d) / max E.

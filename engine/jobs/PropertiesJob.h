@@ -12,9 +12,11 @@
 
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <functional>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace voxlat {
 
@@ -56,6 +58,26 @@ std::optional<RepeatZone> frameWithoutWholeCell(const FieldNode& field, const Pr
 /// no solid or one that carries no load along any axis.
 PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe, const Vec3d& domainMin,
                                    const JobContext* context, const CellDensityTarget* target = nullptr);
+
+/// The Gibson–Ashby law E/E_s = C rho^n fitted per axis (least squares on log E/E_s against log
+/// rho, over the points that carry load along that axis).
+struct GibsonAshbyFit {
+    std::array<double, 3> C{};      ///< prefactor per axis (0 with fewer than two points)
+    std::array<double, 3> n{};      ///< exponent per axis (about 2 for bending, 1 for stretching)
+    double maxRelativeError = 0.0;  ///< largest |C rho^n / (E/E_s) - 1| over the fitted points
+};
+
+/// Fits @a modulusRatio (E/E_s per axis) against @a density (relative densities, > 0).
+GibsonAshbyFit fitGibsonAshby(const std::vector<double>& density,
+                              const std::vector<std::array<double, 3>>& modulusRatio);
+
+/// One point of a density curve (`voxlat properties --curve`) from a properties() report:
+/// relative_density (the cell's), relative_density_target, C_MPa, E_MPa, G_MPa, E_ratio, nu,
+/// K_ratio, level and the resolution.
+nlohmann::json densityCurvePoint(const nlohmann::json& properties);
+
+/// The curve's JSON: {curve: [points], gibson_ashby: {C, n, max_relative_error}}.
+nlohmann::json densityCurve(const std::vector<nlohmann::json>& points);
 
 /// A shaded picture (PNG, @a size pixels square) of the directional Young's modulus surface
 /// E(d) of @a C: the surface r = E(d) / max E over the unit sphere.
