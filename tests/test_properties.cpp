@@ -8,10 +8,13 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <sstream>
 
 using namespace voxlat;
 using namespace voxlat::test;
@@ -695,4 +698,90 @@ TEST(Properties, TheDensityCurveAndItsGibsonAshbyFitTellBendingFromStretching)
     EXPECT_GT(exponent["octet"], 0.9);
     EXPECT_LT(exponent["octet"], 1.6);
     EXPECT_GT(exponent["bcc"] - exponent["octet"], 0.8);
+}
+
+namespace {
+
+/// A small reader of a CalculiX/Abaqus deck's `*MATERIAL` / `*ELASTIC, TYPE=ANISO` card: the
+/// material's name and its 6x6 stiffness in voxlat's Voigt order (xx, yy, zz, yz, xz, xy).
+struct MaterialCard {
+    std::string name;
+    std::array<std::array<double, 6>, 6> C{};
+    int constants = 0;
+};
+
+MaterialCard readMaterialCard(const std::string& text)
+{
+    MaterialCard card;
+    std::istringstream in(text);
+    std::string line;
+    bool elastic = false;
+    std::vector<double> d;
+    while (std::getline(in, line)) {
+        if (line.rfind("**", 0) == 0) continue;  // a comment
+        std::string upper = line;
+        for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
+        upper.erase(std::remove(upper.begin(), upper.end(), ' '), upper.end());
+        if (upper.rfind("*MATERIAL,NAME=", 0) == 0) {
+            card.name = upper.substr(15);
+            elastic = false;
+        } else if (upper.rfind("*ELASTIC,TYPE=ANISO", 0) == 0) {
+            elastic = true;
+        } else if (!upper.empty() && upper[0] == '*') {
+            elastic = false;
+        } else if (elastic) {
+            std::istringstream values(line);
+            std::string v;
+            while (std::getline(values, v, ',')) d.push_back(std::stod(v));
+        }
+    }
+    card.constants = int(d.size());
+    constexpr int kVoigt[6] = {0, 1, 2, 5, 4, 3};  // 11, 22, 33, 12, 13, 23
+    std::size_t k = 0;
+    for (int j = 0; j < 6; ++j)
+        for (int i = 0; i <= j && k < d.size(); ++i, ++k)
+            card.C[kVoigt[i]][kVoigt[j]] = card.C[kVoigt[j]][kVoigt[i]] = d[k];
+    return card;
+}
+
+}  // namespace
+
+TEST(Properties, TheMaterialCardReadsBackAsTheCellsStiffness)
+{
+    // `properties: {export: cell.inp}` writes the homogenized C as a CalculiX/Abaqus card; read
+    // back by a parser of its own, it is the C of the cell's report. Columns along x, 1 mm of a
+    // 2 mm cell: E_x = E_s / 4 and nothing across, so the shear order (12, 13, 23) shows.
+    TempDir dir;
+    const auto report = runReport(dir, "card", R"(material: {E: 2 GPa, nu: 0.3}
+properties: {cell: [2, 2, 2], origin: [0, 0, 0], resolution: 8, export: cell.inp}
+fields:
+  column: {box: [[-1, 0.5, 0.5], [3, 1.5, 1.5]]}
+result: column
+outputs: {properties: cell.json}
+)");
+    ASSERT_FALSE(report.is_null());
+    const std::string text = readFile(dir.path / "card" / "cell.inp");
+    EXPECT_NE(text.find("units: MPa"), std::string::npos) << text;
+    const MaterialCard card = readMaterialCard(text);
+    EXPECT_EQ(card.name, "COLUMN_CELL");
+    EXPECT_EQ(card.constants, 21);
+    const auto p = nlohmann::json::parse(readFile(dir.path / "card" / "cell.json"));
+    for (int i = 0; i < 6; ++i)
+        for (int j = 0; j < 6; ++j)
+            EXPECT_NEAR(card.C[i][j], p["C_MPa"][i][j].get<double>(), 1e-9 * 2000 + 1e-9 * std::abs(card.C[i][j]))
+                << i << "," << j;
+    EXPECT_NEAR(card.C[0][0], 500.0, 1e-3);  // E_s / 4 along the columns (no Poisson coupling across)
+    bool listed = false;
+    for (const auto& o : report["outputs"])
+        listed = listed || o.get<std::string>().find("cell.inp") != std::string::npos;
+    EXPECT_TRUE(listed);
+    // Not an .inp name: refused with the line.
+    int status = 0;
+    std::string out;
+    runReport(dir, "bad",
+              "material: form2\nproperties: {cell: [2, 2, 2], export: cell.txt}\nfields:\n  c: {box: [[0, 0, 0], [1, "
+              "1, 1]]}\nresult: c\n",
+              &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("bad.yaml:2:"), std::string::npos) << out;
 }

@@ -1148,6 +1148,9 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
     std::vector<std::filesystem::path> paths;
     for (const OutputSpec& out : mRecipe.outputs) paths.push_back(outputPathIn(outDir, out.file, where));
     outputPathIn(outDir, "report.json", where);
+    std::optional<std::filesystem::path> materialCard;
+    if (mRecipe.properties.exportFile)
+        materialCard = outputPathIn(outDir, *mRecipe.properties.exportFile, mRecipe.properties.where + ": export");
     // All or none: every file is written under a temporary name and the renames wait for the
     // report; an output that fails (or a cancel) half-way leaves the folder as it was.
     OutputTransaction transaction;
@@ -1211,6 +1214,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
             writeFrameFile(path);
         }
     }
+    if (materialCard) writeMaterialCard(*materialCard);
     // A picture of what was meshed, next to the first mesh, so the part can be checked by eye.
     if (preview && firstMesh != mRecipe.outputs.end()) {
         std::filesystem::path picture = outDir / firstMesh->file;
@@ -1233,6 +1237,19 @@ BeamFrame Job::frame()
         all.radii.insert(all.radii.end(), radii.begin(), radii.end());
     }
     return all;
+}
+
+void Job::writeMaterialCard(const std::filesystem::path& path)
+{
+    checkReplaceable(path, mRecipe.properties.where + ": export");
+    const nlohmann::json& p = properties();
+    timed("write " + path.filename().string(), [&] {
+        AtomicFile file(path.string());
+        file.stream() << abaqusMaterialCard(p, mRecipe.result + "_cell", mRecipe.source->path);
+        file.commit();
+        return 0;
+    });
+    mReport["outputs"].push_back(path.string());
 }
 
 void Job::writeFrameFile(const std::filesystem::path& path)

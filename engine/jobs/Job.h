@@ -179,6 +179,8 @@ private:
     /// properties() of a box frame too small to hold a whole repeating cell (@a zone): the frame's
     /// cell homogenized in a frame of enough of them; false when the frame is not a box frame.
     bool unitCellProperties(const RepeatZone& zone);
+    /// Writes properties() as a CalculiX/Abaqus material card (`properties: {export}`).
+    void writeMaterialCard(const std::filesystem::path& path);
     nlohmann::json mTimings = nlohmann::json::object();
 };
 

@@ -7,6 +7,7 @@
 #include "mesher/writers/MeshPreview.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -500,6 +501,36 @@ nlohmann::json densityCurve(const std::vector<nlohmann::json>& points)
               {"n", fit.n},
               {"max_relative_error", fit.maxRelativeError},
               {"law", "E/E_s = C rho^n per axis, least squares on log E/E_s against log rho"}}}};
+}
+
+std::string abaqusMaterialCard(const nlohmann::json& p, const std::string& name, const std::string& recipe)
+{
+    // Abaqus/CalculiX order the shear components 12, 13, 23; voxlat's Voigt order is xx, yy, zz,
+    // yz, xz, xy.
+    constexpr int kVoigt[6] = {0, 1, 2, 5, 4, 3};  // Abaqus component 11, 22, 33, 12, 13, 23 -> voxlat index
+    std::vector<double> d;
+    for (int j = 0; j < 6; ++j)
+        for (int i = 0; i <= j; ++i) d.push_back(p["C_MPa"][kVoigt[i]][kVoigt[j]].get<double>());
+    std::string upper = name;
+    for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
+    std::ostringstream out;
+    out << "** voxlat: homogenized elastic constants of one periodic cell of `" << recipe << "`\n";
+    out << "** units: MPa (N/mm^2); use with lengths in mm and forces in N\n";
+    out << "** cell relative density " << formatNumber(p["relative_density"].get<double>()) << ", "
+        << p["cell"]["voxels"][0].get<int>() << " x " << p["cell"]["voxels"][1].get<int>() << " x "
+        << p["cell"]["voxels"][2].get<int>() << " voxels; solid: " << p["material"]["name"].get<std::string>() << ", E "
+        << formatNumber(p["material"]["E_MPa"].get<double>()) << " MPa, nu "
+        << formatNumber(p["material"]["nu"].get<double>()) << "\n";
+    out << "** E_x E_y E_z " << formatNumber(p["E_MPa"][0].get<double>()) << " "
+        << formatNumber(p["E_MPa"][1].get<double>()) << " " << formatNumber(p["E_MPa"][2].get<double>()) << " MPa\n";
+    out << "*MATERIAL, NAME=" << upper << "\n";
+    out << "*ELASTIC, TYPE=ANISO\n";
+    for (std::size_t k = 0; k < d.size(); ++k) {
+        char text[32];
+        std::snprintf(text, sizeof text, "%.10g", d[k]);
+        out << text << (k + 1 == d.size() || k % 8 == 7 ? "\n" : ", ");
+    }
+    return out.str();
 }
 
 std::string directionalModulusPng(const Matrix6& C, int size)

@@ -136,7 +136,8 @@ const std::vector<KeySpec>& propertiesKeys()
          "chosen by a convergence check (24, 34, 48, ... voxels)"},
         {"convergence", number(), "the relative error in E the default resolution is chosen for", "0.02"},
         {"max_resolution", number(), "the finest resolution the convergence check may reach", "136"},
-        {"tolerance", number(), "relative residual each load case is solved to", "1e-6"}};
+        {"tolerance", number(), "relative residual each load case is solved to", "1e-6"},
+        {"export", string(), "FILE.inp: the cell's elastic constants as a CalculiX/Abaqus *MATERIAL card", "—"}};
     return keys;
 }
 
@@ -171,6 +172,12 @@ PropertiesSettings parseProperties(const RecipeNode* node, const std::string& fa
             (*node)["max_resolution"].fail(
                 "expected a whole number of voxels from 48 to 512 (the convergence check needs 24, 34 and 48)");
         s.maxResolution = int(v);
+    }
+    if (node->has("export")) {
+        const std::string file = (*node)["export"].string();
+        if (file.size() < 5 || file.substr(file.size() - 4) != ".inp")
+            (*node)["export"].fail("expected a file name ending in .inp (a CalculiX/Abaqus input deck), like cell.inp");
+        s.exportFile = file;
     }
     if (node->has("tolerance")) {
         s.tolerance = (*node)["tolerance"].positiveNumber();

@@ -46,6 +46,9 @@ struct PropertiesSettings {
     double tolerance = 1e-6;    ///< relative residual of each load case
     double convergence = 0.02;  ///< the default resolution's estimated relative error in E
     int maxResolution = 136;    ///< the finest resolution the convergence check may reach
+    /// `export: FILE.inp`: the cell's anisotropic elastic constants as a CalculiX/Abaqus material
+    /// card, written by `voxlat run` into its output folder.
+    std::optional<std::string> exportFile;
     /// Also solve the conductivity (not a key: property searches, which need only the stiffness, turn it off).
     bool conductivity = true;
     std::string where;  ///< file:line:col of `properties:` (or the recipe)
