@@ -2,6 +2,7 @@
 // the result's periods or the recipe, materials with units, exact cases through the whole path
 // (a solid cell, square columns), symmetry, thread independence and the errors users meet.
 #include "TestUtil.h"
+#include "engine/core/Format.h"
 #include "engine/parts/MeshReader.h"
 #include "mesher/writers/FrameWriters.h"
 
@@ -368,6 +369,19 @@ fields:
     const double capsule = modulus("capsule", "capsule");
     EXPECT_NEAR(o["capsule_E_MPa"].get<double>(), capsule, 1e-9 * capsule);
     EXPECT_NEAR(o["ratio_to_capsule"].get<double>(), E / capsule, 1e-9);
+    // `voxlat properties` says which sigma it chose, and the capsule baseline.
+    {
+        int status = 0;
+        std::string out;
+        propertiesOf(dir, "said",
+                     head +
+                         "    kernel: {gaussian: {sigma: 0.3}}\n"
+                         "    optimize: {sigma: [0.2, 0.8], axis: z, samples: 4, tolerance: 0.05}\nresult: lattice\n",
+                     "", &status, &out);
+        ASSERT_EQ(status, 0) << out;
+        EXPECT_NE(out.find("optimize lattice: sigma " + formatNumber(sigma) + " mm"), std::string::npos) << out;
+        EXPECT_NE(out.find("capsule joints " + formatNumber(capsule) + " MPa"), std::string::npos) << out;
+    }
     // `optimize: off` (from --set) keeps the sigma as written.
     const auto off = propertiesOf(dir, "off",
                                   head +

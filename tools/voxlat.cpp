@@ -1,5 +1,6 @@
 // The `voxlat` command line: run, mesh, info and sample a recipe.
 #include "engine/core/Errors.h"
+#include "engine/core/Format.h"
 #include "engine/core/Version.h"
 #include "engine/jobs/Job.h"
 #include "engine/jobs/PrinterProfile.h"
@@ -90,6 +91,33 @@ int sample(voxlat::Job& job, const std::string& fieldName, bool gradient)
     return 0;
 }
 
+/// What `stiffness:` and `optimize:` chose, one line per field (empty without them).
+std::string designSummary(const nlohmann::json& report)
+{
+    if (!report.contains("design")) return {};
+    std::ostringstream out;
+    auto n = [](const nlohmann::json& v) { return voxlat::formatNumber(v.get<double>()); };
+    for (const auto& [name, d] : report["design"].items()) {
+        if (d.contains("optimize")) {
+            const auto& o = d["optimize"];
+            out << "optimize " << name << ": sigma " << n(o["sigma"]) << " mm (the stiffest E_"
+                << o["axis"].get<std::string>() << " " << n(o["E_MPa"]) << " MPa at density " << n(o["density"]) << ", "
+                << o["trials"].size() << " trials at " << o["resolution"].get<int>() << " voxels)";
+            if (o.contains("capsule_E_MPa"))
+                out << "; capsule joints " << n(o["capsule_E_MPa"]) << " MPa"
+                    << (o["ratio_to_capsule"].is_null() ? "" : ", ratio " + n(o["ratio_to_capsule"]));
+            out << "\n";
+        }
+        if (d.contains("stiffness")) {
+            const auto& s = d["stiffness"];
+            out << "stiffness " << name << ": density " << n(s["density"]) << " gives E_"
+                << s["axis"].get<std::string>() << " " << n(s["achieved_E_MPa"]) << " MPa (target "
+                << n(s["target_E_MPa"]) << ")\n";
+        }
+    }
+    return out.str();
+}
+
 /// `voxlat properties --curve density=FROM:TO:COUNT`: the cell at each density of the result's
 /// lattice, and the Gibson–Ashby fit.
 int propertiesCurve(const Common& args, const std::string& jsonFile, const std::string& curve,
@@ -156,7 +184,7 @@ int properties(const Common& args, const std::string& jsonFile, const std::strin
     if (sweep.empty()) {
         voxlat::Job job(voxlat::loadRecipe(args.recipe, args.sets), &context);
         const nlohmann::json p = job.properties();
-        std::cout << voxlat::propertiesTable(p);
+        std::cout << designSummary(job.report()) << voxlat::propertiesTable(p);
         if (!jsonFile.empty()) writeFile(jsonFile, p.dump(2) + "\n");
         if (!pngFile.empty()) {
             voxlat::Matrix6 C{};
