@@ -799,3 +799,40 @@ outputs: {properties: cell.json}
     EXPECT_EQ(status, 2) << out;
     EXPECT_NE(out.find("bad.yaml:2:"), std::string::npos) << out;
 }
+
+TEST(Properties, DensityOfCellSolvesTheJobsLevelOnThePeriodicCell)
+{
+    // `density_of: cell`: the printed lattice's level is solved so that the periodic cell (the
+    // frame's middle one) holds the density, the cell `voxlat properties` homogenizes; by default
+    // (`frame`) the frame box holds it and the interior cell of a Gaussian X lattice is heavier.
+    TempDir dir;
+    std::map<std::string, nlohmann::json> reports;
+    for (const std::string of : {"frame", "cell"}) {
+        reports[of] = runReport(dir, of,
+                                "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [30, 30, 30]]}\n"
+                                "properties: {resolution: 64}\nfields:\n  lattice: {struts: {cell: x, size: 10}, "
+                                "kernel: {gaussian: {sigma: 0.8}}, density: 0.1, density_of: " +
+                                    of + "}\nresult: lattice\noutputs: {properties: p.json}\n");
+        ASSERT_FALSE(reports[of].is_null()) << of;
+    }
+    auto level = [&](const std::string& of) { return reports[of]["fields"]["lattice"]["level"].get<double>(); };
+    auto cellLevel = [&](const std::string& of) { return reports[of]["properties"]["level"].get<double>(); };
+    // The cell's own level (solved on its 64-voxel model) is the same for both: the lattice asked.
+    EXPECT_NEAR(cellLevel("cell"), cellLevel("frame"), 1e-12);
+    EXPECT_LT(std::abs(level("cell") / cellLevel("cell") - 1.0), 0.005)
+        << level("cell") << " vs the voxel cell's " << cellLevel("cell");
+    EXPECT_GT(std::abs(level("frame") / cellLevel("frame") - 1.0), 0.02)
+        << level("frame") << " vs the voxel cell's " << cellLevel("frame");
+    std::printf("iso-value t: frame %.5f, cell %.5f, the 64-voxel cell's %.5f\n", level("frame"), level("cell"),
+                cellLevel("cell"));
+    // Refused where no periodic cell is known, naming the line.
+    int status = 0;
+    std::string out;
+    runReport(dir, "few",
+              "voxel: 0.25\nfields:\n  lattice: {struts: {cell: x, size: 10, count: [3, 3, 2]}, kernel: capsule, "
+              "density: 0.1, density_of: cell}\nresult: lattice\n",
+              &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("few.yaml:3:"), std::string::npos) << out;
+    EXPECT_NE(out.find("along z"), std::string::npos) << out;
+}

@@ -234,7 +234,7 @@ void Job::solveLevels()
                                                       : mDomain,
                                     *node.density, node.densityMask.get(), node.subVoxelDensity, mContext);
             });
-            if (node.densityMask) entry["density_of"] = node.densityOf;
+            if (node.densityMask) entry["density_measured_in"] = node.densityOf;
             node.solid->solve(node.solid->levelFromIndicator(s.level));
             if (node.onSolved) node.onSolved(node.solid->level());
             entry["target_density"] = *node.density;

@@ -527,6 +527,42 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         return std::make_shared<SupportedField>(std::move(solid), Box3{box.min - Vec3d(reach), box.max + Vec3d(reach)},
                                                 std::move(zone));
     };
+    // `density_of: cell`: the density is the periodic cell's (the middle cell of the frame, which
+    // sees all its neighbours), as `voxlat properties` homogenizes it, not the frame box's.
+    bool perCell = false;
+    Box3 middleCell;
+    double neighbourDepth = 0.0;  // how far the middle cell's neighbours reach on its thinnest side (mm)
+    if (spec.has("density_of")) {
+        const RecipeNode of = spec["density_of"];
+        const std::string where = of.string();
+        if (where != "cell" && where != "frame")
+            of.fail(
+                "expected `cell` (the periodic cell, as `voxlat properties` homogenizes it) or `frame` (the "
+                "frame's bounding box, the default)");
+        if (!spec.has("density") || graded)
+            of.fail("`density_of:` says where the node's `density:` (one number) is measured; give `density:`");
+        perCell = where == "cell";
+        if (perCell && !identicalBoxCells)
+            of.fail(
+                "`density_of: cell` needs a box of identical cells (`struts: {cell, size}` with one radius, no "
+                "`within:`): only there is the cell known");
+        if (perCell) {
+            Vec3d lo, hi;
+            for (int a = 0; a < 3; ++a) {
+                const int count = int(std::lround(box.extent()[a] / uniform->size[a]));
+                if (count < 3)
+                    of.fail(
+                        "`density_of: cell` measures the frame's middle cell, which needs a neighbour on each "
+                        "side: give at least 3 cells along " +
+                        std::string(1, "xyz"[a]) + " (`count:` or a larger domain)");
+                lo[a] = box.min[a] + (count / 2) * uniform->size[a];
+                hi[a] = lo[a] + uniform->size[a];
+                const double depth = std::min(count / 2, count - count / 2 - 1) * uniform->size[a];
+                neighbourDepth = a == 0 ? depth : std::min(neighbourDepth, depth);
+            }
+            middleCell = Box3{lo, hi};
+        }
+    }
     LevelNode node;
     node.name = name;
     node.region = region;
@@ -547,7 +583,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
             if (!(box.extent()[a] > 0.0))
                 d.fail("the frame is flat along " + std::string(1, "xyz"[a]) +
                        ": its bounding box has no volume to measure a density in; give `level:` or `radius:`");
-        if (!region) node.densityBox = box;
+        if (!region) node.densityBox = perCell ? middleCell : box;
         // Cells of a whole number of voxels line struts up with the voxel lattice, and counting
         // voxel centres then aliases (about 2 % for BCC at 0.1 mm); coverage does not.
         node.subVoxelDensity = true;
@@ -555,6 +591,7 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         node.densityVoxel = builder.recipe().voxel / (1.0 + 1.0 / (2.0 * std::numbers::pi));
     }
 
+    if (capsule && perCell) node.densityVoxel = *node.densityVoxel / 1.5;  // one cell at a fixed phase
     if (capsule) {
         double blend = 0.0;
         if (kernel.isMap()) {
@@ -761,7 +798,16 @@ FieldPtr buildStruts(FieldBuilder& builder, const RecipeNode& spec, const std::s
         return thinnest;
     };
     recordFrame(builder, name, frame, convolutionRadius, [solid = node.solid](const Vec3d&) { return solid->level(); });
-    if ((periodic || partlyPeriodic) && node.density) {
+    if (perCell) {
+        // One cell: its lattice sampled at a fixed phase, finer (as one period below) and fine
+        // enough for the kernel.
+        node.densityVoxel = std::min(*node.densityVoxel / 1.5, *std::min_element(sigma.begin(), sigma.end()) / 8.0);
+        if (rcMax > neighbourDepth)
+            spec["density_of"].fail("the Gaussian kernel reaches " + formatNumber(rcMax) + " mm, beyond the " +
+                                    formatNumber(neighbourDepth) +
+                                    " mm of cells around the frame's middle cell: give the frame more cells (or a "
+                                    "smaller sigma) for `density_of: cell`");
+    } else if ((periodic || partlyPeriodic) && node.density) {
         node.densityPeriod = period;
         node.densityReach = rcMax;
         // The density pieces measure one face zone for both faces of a mirror axis, and one of
@@ -852,6 +898,10 @@ void addStrutNodeTypes(std::vector<NodeType>& types)
            "chosen, the capsule kernel at that density reported next to it (needs `material:`); `off`: the sigma "
            "as written",
            "—"},
+          {"density_of", oneOfWords({"cell", "frame"}),
+           "where `density:` is measured: `frame` (its bounding box) or `cell` (the periodic cell, the middle one "
+           "of the frame, as `voxlat properties` homogenizes it)",
+           "frame"},
           levelKey()},
          buildStruts});
 }
