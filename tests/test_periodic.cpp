@@ -255,7 +255,7 @@ TEST(DensityPieces, CoarseJobVoxelKeepsTheLevel)
     auto level = [](double voxel) {
         Job job(parseRecipe(bccBoxRecipe(voxel), "bcc.yaml", "."));
         job.solveLevels();
-        return job.report()["fields"]["lattice"]["level"].get<double>();
+        return job.report()["fields"]["lattice"]["level_radius_mm"].get<double>();
     };
     EXPECT_NEAR(level(0.25), level(0.1), 0.0006);
 }

@@ -382,7 +382,7 @@ result: lat
     job.solveLevels();
     const auto report = job.report();
     EXPECT_NEAR(report["fields"]["lat"]["achieved_density"].get<double>(), 0.2, 0.002);
-    EXPECT_EQ(report["fields"]["lat"]["density_of"], "the cells of the skin frame");
+    EXPECT_EQ(report["fields"]["lat"]["density_measured_in"], "the cells of the skin frame");
     EXPECT_TRUE(checkTopology(job.mesh()).closedManifold());
 }
 

@@ -1,5 +1,6 @@
 // The `voxlat` command line: run, mesh, info and sample a recipe.
 #include "engine/core/Errors.h"
+#include "engine/core/Format.h"
 #include "engine/core/Version.h"
 #include "engine/jobs/Job.h"
 #include "engine/jobs/PrinterProfile.h"
@@ -53,7 +54,11 @@ void printSummary(voxlat::Job& job)
             // Only the values the report has: a graded lattice has a level per point, not one.
             std::vector<std::string> parts;
             auto text = [](const nlohmann::json& v) { return v.is_string() ? v.get<std::string>() : v.dump(); };
-            if (f.contains("level")) parts.push_back("level " + text(f["level"]));
+            if (f.contains("level"))
+                parts.push_back("level " + text(f["level"]) +
+                                (f.contains("level_radius_mm")
+                                     ? " (isolated strut radius " + text(f["level_radius_mm"]) + " mm)"
+                                     : ""));
             if (f.contains("achieved_density"))
                 parts.push_back("density " + text(f["achieved_density"]) +
                                 (f.contains("target_density") ? " (target " + text(f["target_density"]) + ")" : ""));
@@ -102,6 +107,87 @@ int sample(voxlat::Job& job, const std::string& fieldName, bool gradient)
     return 0;
 }
 
+/// What `stiffness:` and `optimize:` chose, one line per field (empty without them).
+std::string designSummary(const nlohmann::json& report)
+{
+    if (!report.contains("design")) return {};
+    std::ostringstream out;
+    auto n = [](const nlohmann::json& v) { return voxlat::formatNumber(v.get<double>()); };
+    for (const auto& [name, d] : report["design"].items()) {
+        if (d.contains("optimize")) {
+            const auto& o = d["optimize"];
+            out << "optimize " << name << ": sigma " << n(o["sigma"]) << " mm (the stiffest E_"
+                << o["axis"].get<std::string>() << " " << n(o["E_MPa"]) << " MPa at density " << n(o["density"]) << ", "
+                << o["trials"].size() << " trials at " << o["resolution"].get<int>() << " voxels)";
+            if (o.contains("capsule_E_MPa"))
+                out << "; capsule joints " << n(o["capsule_E_MPa"]) << " MPa"
+                    << (o["ratio_to_capsule"].is_null() ? "" : ", ratio " + n(o["ratio_to_capsule"]));
+            out << "\n";
+        }
+        if (d.contains("stiffness")) {
+            const auto& s = d["stiffness"];
+            out << "stiffness " << name << ": density " << n(s["density"]) << " gives E_"
+                << s["axis"].get<std::string>() << " " << n(s["achieved_E_MPa"]) << " MPa (target "
+                << n(s["target_E_MPa"]) << ")\n";
+        }
+    }
+    return out.str();
+}
+
+/// `voxlat properties --curve density=FROM:TO:COUNT`: the cell at each density of the result's
+/// lattice, and the Gibson–Ashby fit.
+int propertiesCurve(const Common& args, const std::string& jsonFile, const std::string& curve,
+                    voxlat::JobContext& context)
+{
+    const auto eq = curve.find('=');
+    double from = 0, to = 0;
+    int count = 0;
+    char c1 = 0, c2 = 0;
+    std::istringstream range(eq == std::string::npos ? "" : curve.substr(eq + 1));
+    if (eq == std::string::npos || curve.substr(0, eq) != "density" || !(range >> from >> c1 >> to >> c2 >> count) ||
+        c1 != ':' || c2 != ':' || count < 2 || count > 100 || !(from > 0.0 && to < 1.0 && from < to))
+        throw voxlat::InputError("--curve " + curve +
+                                 ": expected density=FROM:TO:COUNT with 0 < FROM < TO < 1 and COUNT from 2 to 100, "
+                                 "e.g. density=0.05:0.4:8");
+    const voxlat::Recipe base = voxlat::loadRecipe(args.recipe, args.sets);
+    const std::string key = "fields." + base.result + ".density";
+    std::vector<nlohmann::json> points;
+    std::printf("%9s %9s %12s %12s %12s %12s %10s\n", "density", "cell", "E_x MPa", "E_y MPa", "E_z MPa", "G_yz MPa",
+                "K_zz/k_s");
+    for (int k = 0; k < count; ++k) {
+        const double value = from + (to - from) * k / (count - 1);
+        std::vector<std::string> sets = args.sets;
+        char text[64];
+        std::snprintf(text, sizeof text, "%.10g", value);
+        sets.push_back(key + "=" + text);
+        voxlat::Job job(voxlat::loadRecipe(args.recipe, sets), &context);
+        try {
+            const nlohmann::json point = voxlat::densityCurvePoint(job.properties());
+            std::printf("%9s %9.5f %12.5g %12.5g %12.5g %12.5g %10.5g\n", text, point["relative_density"].get<double>(),
+                        point["E_MPa"][0].get<double>(), point["E_MPa"][1].get<double>(),
+                        point["E_MPa"][2].get<double>(), point["G_MPa"][0].get<double>(),
+                        point.contains("K_ratio") ? point["K_ratio"][2][2].get<double>() : 0.0);
+            points.push_back(point);
+        } catch (const voxlat::JobError& e) {
+            std::printf("%9s   (falls apart: no stiffness)\n", text);
+            points.push_back({{"relative_density_target", value}, {"error", e.what()}});
+        }
+        std::fflush(stdout);
+    }
+    const nlohmann::json result = voxlat::densityCurve(points);
+    const auto& g = result["gibson_ashby"];
+    std::printf(
+        "Gibson-Ashby E/E_s = C rho^n:  C %.4g %.4g %.4g   n %.4f %.4f %.4f   (x y z; largest misfit %.2f %%)\n",
+        g["C"][0].get<double>(), g["C"][1].get<double>(), g["C"][2].get<double>(), g["n"][0].get<double>(),
+        g["n"][1].get<double>(), g["n"][2].get<double>(), 100.0 * g["max_relative_error"].get<double>());
+    if (!jsonFile.empty()) {
+        voxlat::AtomicFile file(jsonFile);
+        file.stream() << result.dump(2) << "\n";
+        file.commit();
+    }
+    return 0;
+}
+
 /// `voxlat properties`: one homogenization, or a sweep of one key.
 int properties(const Common& args, const std::string& jsonFile, const std::string& pngFile, const std::string& sweep,
                voxlat::JobContext& context)
@@ -114,7 +200,7 @@ int properties(const Common& args, const std::string& jsonFile, const std::strin
     if (sweep.empty()) {
         voxlat::Job job(voxlat::loadRecipe(args.recipe, args.sets), &context);
         const nlohmann::json p = job.properties();
-        std::cout << voxlat::propertiesTable(p);
+        std::cout << designSummary(job.report()) << voxlat::propertiesTable(p);
         if (!jsonFile.empty()) writeFile(jsonFile, p.dump(2) + "\n");
         if (!pngFile.empty()) {
             voxlat::Matrix6 C{};
@@ -296,7 +382,7 @@ int main(int argc, char** argv)
     sliceCmd->add_option("--preview", slicePreview, "contact-sheet PNG (default FILE.preview.png; `off` for none)");
 
     Common propertiesArgs;
-    std::string propertiesJson, propertiesPng, propertiesSweep;
+    std::string propertiesJson, propertiesPng, propertiesSweep, propertiesCurveSpec;
     auto* propertiesCmd = app.add_subcommand(
         "properties", "effective stiffness and conductivity of one periodic cell of the result (homogenization)");
     addCommon(propertiesCmd, propertiesArgs);
@@ -305,6 +391,9 @@ int main(int argc, char** argv)
     propertiesCmd->add_option("--sweep", propertiesSweep,
                               "KEY=FROM:TO:COUNT: the moduli against any --set key, e.g. "
                               "fields.lattice.kernel.gaussian.sigma=0.4:1.6:7");
+    propertiesCmd->add_option("--curve", propertiesCurveSpec,
+                              "density=FROM:TO:COUNT: C^H, E, G and conductivity against the result lattice's "
+                              "density, with the Gibson-Ashby fit E/E_s = C rho^n, e.g. density=0.05:0.4:8");
 
     CLI11_PARSE(app, argc, argv);
     voxlat::JobContext context;
@@ -430,6 +519,10 @@ int main(int argc, char** argv)
             if (!s["preview"].get<std::string>().empty())
                 std::cout << "preview " << s["preview"].get<std::string>() << "\n";
         } else if (*propertiesCmd) {
+            if (!propertiesCurveSpec.empty()) {
+                if (!propertiesSweep.empty()) throw voxlat::InputError("give either --curve or --sweep, not both");
+                return propertiesCurve(propertiesArgs, propertiesJson, propertiesCurveSpec, context);
+            }
             return properties(propertiesArgs, propertiesJson, propertiesPng, propertiesSweep, context);
         } else if (*sampleCmd) {
             voxlat::Job job(voxlat::loadRecipe(sampleArgs.recipe, sampleArgs.sets), &context);

@@ -13,6 +13,7 @@
 #include "engine/jobs/PropertiesJob.h"
 #include "engine/jobs/PropertyDesign.h"
 #include "engine/jobs/SliceJob.h"
+#include "engine/jobs/TrialRecipe.h"
 #include "engine/recipe/RecipeParams.h"
 #include "fields/BlockLattice.h"
 #include "fields/Boolean.h"
@@ -282,7 +283,7 @@ void Job::solveLevels()
                                                       : mDomain,
                                     *node.density, node.densityMask.get(), node.subVoxelDensity, mContext);
             });
-            if (node.densityMask) entry["density_of"] = node.densityOf;
+            if (node.densityMask) entry["density_measured_in"] = node.densityOf;
             // The region whose share `density:` is, in the words a user set it in.
             entry["density_measured_on"] = node.densityOf.empty() ? "the domain box" : node.densityOf;
             node.solid->solve(node.solid->levelFromIndicator(s.level));
@@ -297,7 +298,10 @@ void Job::solveLevels()
                     "one period of the interior (" + std::to_string(pieces.size()) + " weighted pieces)";
         }
         if (mDesign.contains(node.name)) entry.update(mDesign[node.name]);
-        entry["level"] = node.solid->level();
+        // Under the recipe key's name, what the key means (a Gaussian lattice's iso-value t); the
+        // solid's own level (an isolated strut's radius) under its own name.
+        entry["level"] = node.recipeLevel ? node.recipeLevel(node.solid->level()) : node.solid->level();
+        if (node.recipeLevel) entry["level_radius_mm"] = node.solid->level();
         if (node.thinnest) {
             // Known before any evaluation of the result: a strut or wall thinner than two voxels
             // breaks up or vanishes on the grid (and in the mesh and slices made from it).
@@ -1254,6 +1258,9 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         for (const std::string& side : out.sideFiles) outputPathIn(outDir, side, where);
     }
     outputPathIn(outDir, "report.json", where);
+    std::optional<std::filesystem::path> materialCard;
+    if (mRecipe.properties.exportFile)
+        materialCard = outputPathIn(outDir, *mRecipe.properties.exportFile, mRecipe.properties.where + ": export");
     // All or none: every file is written under a temporary name and the renames wait for the
     // report; an output that fails (or a cancel) half-way leaves the folder as it was.
     OutputTransaction transaction;
@@ -1317,6 +1324,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
             writeFrameFile(path);
         }
     }
+    if (materialCard) writeMaterialCard(*materialCard);
     // A picture of what was meshed, next to the first mesh, so the part can be checked by eye.
     if (preview && firstMesh != mRecipe.outputs.end()) {
         const std::filesystem::path picture = outDir / (firstMesh->file + ".preview.png");
@@ -1339,6 +1347,19 @@ BeamFrame Job::frame()
         all.radii.insert(all.radii.end(), radii.begin(), radii.end());
     }
     return all;
+}
+
+void Job::writeMaterialCard(const std::filesystem::path& path)
+{
+    checkReplaceable(path, mRecipe.properties.where + ": export");
+    const nlohmann::json& p = properties();
+    timed("write " + path.filename().string(), [&] {
+        AtomicFile file(path.string());
+        file.stream() << abaqusMaterialCard(p, mRecipe.result + "_cell", mRecipe.source->path);
+        file.commit();
+        return 0;
+    });
+    mReport["outputs"].push_back(path.string());
 }
 
 void Job::writeFrameFile(const std::filesystem::path& path)
@@ -1370,13 +1391,64 @@ const nlohmann::json& Job::properties()
     if (!mReport.contains("properties")) {
         // One period of the result, from the domain's minimum corner unless the recipe says otherwise.
         const Vec3d corner = mRecipe.domainBox ? mRecipe.domainBox->min : mDomain.box.min;
-        PropertiesResult r = timed("homogenize", [&] {
-            return computeProperties(*field(mRecipe.result), mRecipe, corner, mDomain.voxel, mContext);
-        });
-        mReport["properties"] = std::move(r.report);
-        mPropertiesStiffness = r.stiffnessMPa;
+        const FieldPtr result = field(mRecipe.result);
+        // A lattice asked for a density: the cell's level is solved on its own voxel model.
+        std::optional<CellDensityTarget> target;
+        for (const LevelNode& node : mBuilder.levelNodes())
+            if (node.name == mRecipe.result && node.density && !node.densityMask)
+                target = CellDensityTarget{*node.density, node.solid->level(), node.solid->side(), node.recipeLevel};
+        if (const std::optional<RepeatZone> zone = frameWithoutWholeCell(*result, mRecipe.properties);
+            zone && unitCellProperties(*zone)) {
+            // done: a frame too small to hold a whole repeating cell, homogenized as its cell repeated
+        } else {
+            PropertiesResult r = timed("homogenize", [&] {
+                return computeProperties(*result, mRecipe, corner, mContext, target ? &*target : nullptr);
+            });
+            mReport["properties"] = std::move(r.report);
+            mPropertiesStiffness = r.stiffnessMPa;
+        }
     }
     return mReport["properties"];
+}
+
+bool Job::unitCellProperties(const RepeatZone& zone)
+{
+    // Only a box frame (`struts: {cell, size}`, with `count:` and `origin:` or filling the
+    // domain) is laid out by keys this can change; any other frame keeps the error that asks
+    // for `properties: {cell}`.
+    const RecipeNode spec = mRecipe.fieldSpec(mRecipe.result);
+    if (!spec.isMap() || !spec.has("struts") || !spec["struts"].isMap()) return false;
+    const RecipeNode frame = spec["struts"];
+    if (!frame.has("cell") || !frame.has("size")) return false;
+    for (const char* other : {"within", "skin", "between", "cylinder", "sphere", "wireframe"})
+        if (frame.has(other)) return false;
+    // The same cells, enough of them around the frame's first cell that it sees every strut that
+    // reaches it (the reach grows a little when a density is solved over the larger frame).
+    YAML::Node copy = YAML::Clone(spec.yaml());
+    YAML::Node count(YAML::NodeType::Sequence), origin(YAML::NodeType::Sequence);
+    int cells = 1;
+    for (int a = 0; a < 3; ++a) {
+        const double p = zone.period[a];
+        const int margin = std::max(1, int(std::ceil(1.25 * (zone.box.min[a] - zone.phase[a]) / p - 1e-9)));
+        count.push_back(2 * margin + 1);
+        origin.push_back(exactNumber(zone.phase[a] - margin * p));
+        cells *= 2 * margin + 1;
+    }
+    copy["struts"]["count"] = count;
+    copy["struts"]["origin"] = origin;
+    Recipe repeated = trialRecipe(mRecipe, mRecipe.result, copy);
+    // Its own warnings (a domain the larger frame overhangs) are not about the recipe's part.
+    JobContext quiet;
+    mContext->checkCancelled();
+    Job job(std::move(repeated), &quiet);
+    nlohmann::json report = timed("homogenize", [&] { return job.properties(); });
+    report["cell"]["from"] = "the frame's cell, repeated (the infinite lattice of that cell)";
+    report["cell"]["frame_cells_homogenized"] = cells;
+    for (const auto& w : quiet.warnings())
+        if (w.code == "no_load_path" || w.code == "loose_pieces") mContext->warn(w);
+    mReport["properties"] = std::move(report);
+    mPropertiesStiffness = job.mPropertiesStiffness;
+    return true;
 }
 
 void Job::writeProperties(const std::filesystem::path& path)

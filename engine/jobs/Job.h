@@ -182,6 +182,11 @@ private:
     /// What `stiffness:` and `optimize:` found, by field name (merged into report.json `fields`).
     nlohmann::json mDesign = nlohmann::json::object();
     std::array<std::array<double, 6>, 6> mPropertiesStiffness{};
+    /// properties() of a box frame too small to hold a whole repeating cell (@a zone): the frame's
+    /// cell homogenized in a frame of enough of them; false when the frame is not a box frame.
+    bool unitCellProperties(const RepeatZone& zone);
+    /// Writes properties() as a CalculiX/Abaqus material card (`properties: {export}`).
+    void writeMaterialCard(const std::filesystem::path& path);
     nlohmann::json mTimings = nlohmann::json::object();
 };
 

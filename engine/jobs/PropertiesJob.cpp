@@ -7,7 +7,9 @@
 #include "mesher/writers/MeshPreview.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <sstream>
 
@@ -35,10 +37,108 @@ nlohmann::json matrixJson(const Matrix3& m, double scale = 1.0)
 
 const char* kAxis = "xyz";
 
+/// The largest relative difference between a cell's density and the density asked, when a level
+/// is solved on the cell (issue 37: 0.5 %).
+constexpr double kCellDensityTolerance = 0.005;
+/// The fractions of a voxel the voxel lattice moves off a symmetric cell's corner when the
+/// aligned one cannot hold the density asked: 1/(2 pi), 1/(2 e), 1/(2 sqrt 2), no two alike.
+constexpr double kVoxelPhase[3] = {0.15915494309189535, 0.18393972058572117, 0.35355339059327379};
+
+/// The first resolution of the default convergence ladder (voxels along the cell's longest side).
+constexpr int kConvergenceStart = 24;
+
+/// The default resolutions: 24 voxels, then steps of sqrt 2 (34, 48, 68, 96, 136, ...) up to
+/// @a most.
+std::vector<int> convergenceLadder(int most)
+{
+    std::vector<int> ladder;
+    for (int k = 0;; ++k) {
+        const int n = int(std::lround(kConvergenceStart * std::pow(std::sqrt(2.0), k)));
+        if (n > most) break;
+        ladder.push_back(n);
+    }
+    return ladder;
+}
+
+/// Richardson extrapolation of the moduli over the last three resolutions of @a n.
+struct ConvergenceEstimate {
+    double error = std::numeric_limits<double>::infinity();  ///< largest |E - limit| / limit over the axes
+    std::array<double, 3> limit{};                           ///< the extrapolated E per axis
+    std::array<double, 3> order{};                           ///< the observed order p (E = limit + a h^p)
+    int axis = 0;                                            ///< the axis of the largest error
+    /// No axis converged faster than second order (a last step much smaller than the one
+    /// before, which can be a step that happened to be small: the next estimate must confirm).
+    bool steady = true;
+};
+
+ConvergenceEstimate richardson(const std::vector<int>& n, const std::vector<std::array<double, 3>>& E)
+{
+    ConvergenceEstimate out;
+    out.error = 0.0;
+    const std::size_t m = E.size();
+    const double r12 = double(n[m - 2]) / n[m - 3], r23 = double(n[m - 1]) / n[m - 2];
+    for (int a = 0; a < 3; ++a) {
+        const double e1 = E[m - 3][a], e2 = E[m - 2][a], e3 = E[m - 1][a];
+        out.limit[a] = e3;
+        if (e1 == 0.0 && e2 == 0.0 && e3 == 0.0) continue;  // no load path along a at any resolution
+        double error = std::numeric_limits<double>::infinity();
+        if (e1 > 0.0 && e2 > 0.0 && e3 > 0.0) {
+            const double d1 = e2 - e1, d2 = e3 - e2;
+            // E = limit + a h^p: d1 / d2 = (h1^p - h2^p) / (h2^p - h3^p), for steps of one ratio
+            // r^p. Differences of one sign that do not shrink are not yet in the asymptotic
+            // range: first order (p = 1), the cautious guess, extrapolates from the last step.
+            // Differences that change sign are the voxel model's jitter (which voxels a strut's
+            // surface takes): no trend to extrapolate, the error is their spread.
+            if (d1 * d2 < 0.0) {
+                out.limit[a] = (e1 + e2 + e3) / 3.0;
+                out.order[a] = 0.0;
+                error = (std::max({e1, e2, e3}) - std::min({e1, e2, e3})) / e3;
+            } else {
+                double p = 1.0;
+                if (d2 == 0.0)
+                    p = std::numeric_limits<double>::infinity();
+                else if (std::abs(d2) < std::abs(d1))
+                    p = std::log(d1 / d2) / std::log(std::sqrt(r12 * r23));
+                if (p > 2.0) out.steady = false;
+                p = std::clamp(p, 0.5, 2.0);
+                out.limit[a] = std::isfinite(p) ? e3 + d2 / (std::pow(r23, p) - 1.0) : e3;
+                out.order[a] = std::isfinite(p) ? p : 0.0;
+                error = out.limit[a] > 0.0 ? std::abs(e3 - out.limit[a]) / out.limit[a]
+                                           : std::numeric_limits<double>::infinity();
+            }
+        }
+        if (error > out.error) out.error = error, out.axis = a;
+    }
+    return out;
+}
+
+double solidFraction(const VoxelCell& cell)
+{
+    std::int64_t solid = 0;
+    for (std::uint8_t v : cell.solid) solid += v;
+    return double(solid) / double(cell.solid.size());
+}
+
 }  // namespace
 
-PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe, const Vec3d& domainMin, double voxel,
-                                   const JobContext* context)
+std::optional<RepeatZone> frameWithoutWholeCell(const FieldNode& field, const PropertiesSettings& settings)
+{
+    if (settings.cell) return std::nullopt;
+    bool periodless = false;
+    for (int a = 0; a < 3; ++a) periodless = periodless || field.period(a) == FieldNode::kNoPeriod;
+    if (!periodless) return std::nullopt;
+    const std::optional<RepeatZone> zone = field.repeatZone();
+    if (!zone) return std::nullopt;
+    for (int a = 0; a < 3; ++a) {
+        const double p = zone->period[a];
+        const double o = zone->phase[a] + p * std::ceil((zone->box.min[a] - zone->phase[a]) / p - 1e-9);
+        if (o + p > zone->box.max[a] + 1e-9 * p) return zone;
+    }
+    return std::nullopt;
+}
+
+PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe, const Vec3d& domainMin,
+                                   const JobContext* context, const CellDensityTarget* target)
 {
     const PropertiesSettings& settings = recipe.properties;
     if (!recipe.material)
@@ -71,12 +171,12 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
                     "` is a frame of identical cells, which repeat "
                     "only deeper inside its box than the struts reach (" +
                     formatNumber(zone->box.min[a] - zone->phase[a]) + " mm), and along " + kAxis[a] +
-                    " no whole cell of " + formatNumber(p) + " mm lies that deep: make the frame longer along " +
-                    kAxis[a] +
-                    " (a frame of 3 cells has a middle cell that sees all its neighbours when the reach is below "
-                    "a cell), or give the cell, e.g. `properties: {cell: [" +
-                    formatNumber(size[0]) + ", " + formatNumber(size[1]) + ", " + formatNumber(size[2]) +
-                    "], origin: [x, y, z]}`");
+                    " no whole cell of " + formatNumber(p) +
+                    " mm lies that deep, and voxlat cannot repeat this frame's cell itself (a frame of "
+                    "identical cells in a box, `struts: {cell, size}`, is homogenized as its cell repeated): "
+                    "make the frame longer along " +
+                    kAxis[a] + ", or give the cell, e.g. `properties: {cell: [" + formatNumber(size[0]) + ", " +
+                    formatNumber(size[1]) + ", " + formatNumber(size[2]) + "], origin: [x, y, z]}`");
         }
         zoneOrigin = o;
     } else {
@@ -101,60 +201,195 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
     const Vec3d origin = settings.origin ? Vec3d((*settings.origin)[0], (*settings.origin)[1], (*settings.origin)[2])
                                          : zoneOrigin.value_or(domainMin);
     const double longest = std::max({size[0], size[1], size[2]});
-    const int resolution = settings.resolution ? *settings.resolution : int(std::lround(longest / voxel));
-    if (resolution < 4 || resolution > 512)
-        throw InputError(settings.where + ": the cell (" + formatNumber(longest) + " mm along its longest side) at " +
-                         formatNumber(voxel) + " mm voxels gives " + std::to_string(resolution) +
-                         " voxels per side; homogenization takes 4 to 512: set `properties: {resolution: 64}`");
-    const double h = longest / resolution;
-    std::array<int, 3> counts;
-    for (int a = 0; a < 3; ++a) counts[a] = std::max(1, int(std::lround(size[a] / h)));
 
-    StageProgress sampling(context, "sampling the cell", 100);
-    std::uint64_t reported = 0;
-    const VoxelCell cell = sampleCell(field, origin, size, counts, [&](double f) {
-        const auto now = std::uint64_t(f * 100);
-        if (now > reported) sampling.add(now - reported), reported = now;  // serialised by StageProgress
-        return !(context && context->cancelled());
-    });
-    sampling.finish();
-    std::int64_t solid = 0;
-    for (std::uint8_t v : cell.solid) solid += v;
+    // One voxel model of the cell and its stiffness at @a n voxels along the longest side.
+    struct Solved {
+        int n = 0;
+        std::array<int, 3> counts{};
+        double h = 0.0;
+        VoxelCell cell;
+        std::int64_t solid = 0;
+        double shift = 0.0;
+        Vec3d phase{0.0};  // how far the voxel lattice is moved off the cell's corner (mm)
+        ElasticityResult elastic;
+    };
+    HomogenizationSettings solver;
+    solver.tolerance = settings.tolerance;
+    const auto solveAt = [&](int n) {
+        Solved s;
+        StageProgress sampling(context, "sampling the cell at " + std::to_string(n) + " voxels", 100);
+        std::uint64_t reported = 0;
+        const auto sampleProgress = [&](double f) {
+            const auto now = std::uint64_t(f * 100);
+            if (now > reported) sampling.add(now - reported), reported = now;  // serialised by StageProgress
+            return !(context && context->cancelled());
+        };
+        const std::function<bool(double)> cancelOnly = [&](double) { return !(context && context->cancelled()); };
+        const auto at = [&](int m) {
+            s.n = m;
+            s.h = longest / m;
+            for (int a = 0; a < 3; ++a) s.counts[a] = std::max(1, int(std::lround(size[a] / s.h)));
+        };
+        at(n);
+        // With a density target the level is solved on this voxel model: the shift of the field's
+        // values at which the voxels hold the density asked.
+        if (target) {
+            // The voxel lattice is moved off the cell's corner by a generic fraction of a voxel,
+            // different along each axis: struts along the voxel lattice's axes or diagonals (a grid
+            // or an X cell) would otherwise put whole rows of voxels, and their mirror images, at
+            // one distance, and the voxel model's density would jump by percents between levels
+            // (a capsule X cell at 40 voxels: 0.094, then above 0.1). Moved, only rows along a
+            // strut stay together, and the models at successive resolutions sample the struts
+            // alike (E converges smoothly instead of jumping with the alignment). Where a row
+            // is still too large a step (few voxels), the resolution is raised until the density
+            // is met.
+            for (int m = n;; ++m) {
+                at(m);
+                for (int a = 0; a < 3; ++a) s.phase[a] = kVoxelPhase[a] * size[a] / s.counts[a];
+                const std::vector<double> values =
+                    sampleCellValues(field, origin + s.phase, size, s.counts,
+                                     m == n ? std::function<bool(double)>(sampleProgress) : cancelOnly);
+                s.shift = cellLevelShift(values, target->density);
+                s.cell = cellAtShift(values, size, s.counts, s.shift);
+                if (std::abs(solidFraction(s.cell) / target->density - 1.0) <= kCellDensityTolerance ||
+                    m >= std::min(512, 2 * n))
+                    break;
+            }
+        } else {
+            s.cell = sampleCell(field, origin, size, s.counts, sampleProgress);
+        }
+        sampling.finish();
+        for (std::uint8_t v : s.cell.solid) s.solid += v;
+        if (s.solid == 0) return s;
+        StageProgress solving(context, "homogenizing at " + std::to_string(s.n) + " voxels", 1000);
+        std::uint64_t solved = 0;
+        solver.progress = [&](double f) {
+            const auto now = std::uint64_t(std::clamp(f, 0.0, 1.0) * 1000);
+            if (now > solved) solving.add(now - solved), solved = now;
+            return !(context && context->cancelled());
+        };
+        s.elastic = homogenizeElasticity(s.cell, {material.modulusMPa, material.poisson}, solver);
+        solving.finish();
+        return s;
+    };
+    const auto moduli = [](const Solved& s) {
+        if (s.solid == 0) return std::array<double, 3>{0.0, 0.0, 0.0};
+        const EngineeringConstants e = engineeringConstants(s.elastic.C);
+        return std::array<double, 3>{s.elastic.percolates[0] ? e.Ex : 0.0, s.elastic.percolates[1] ? e.Ey : 0.0,
+                                     s.elastic.percolates[2] ? e.Ez : 0.0};
+    };
+
+    // The resolution: given, or the first of a ladder (24 voxels, then steps of sqrt 2) at which
+    // Richardson extrapolation of E over the last three resolutions says E is within the
+    // tolerance of its limit.
+    Solved final;
+    nlohmann::json convergence;
+    if (settings.resolution) {
+        final = solveAt(*settings.resolution);
+    } else {
+        const std::vector<int> ladder = convergenceLadder(settings.maxResolution);
+        if (ladder.size() < 3)
+            throw InputError(settings.where + ": `max_resolution: " + std::to_string(settings.maxResolution) +
+                             "` leaves fewer than three resolutions to check convergence on (" +
+                             std::to_string(kConvergenceStart) + ", 34, 48): raise it, or give `resolution:`");
+        std::vector<int> used;
+        std::vector<std::array<double, 3>> E;
+        ConvergenceEstimate estimate;
+        for (int n : ladder) {
+            final = solveAt(n);
+            used.push_back(final.n);  // raised from n when the density asked needs it
+            E.push_back(moduli(final));
+            if (E.size() < 3) continue;
+            // An estimate from a last step much smaller than the one before (faster than second
+            // order) needs the next to confirm it: such a step can have happened to be small (the
+            // voxel model's jitter; the Gaussian X cell at rho 0.1 moved 0.4 % from 48 to 68
+            // voxels, then 1.9 % to 96).
+            const double before = estimate.error;
+            estimate = richardson(used, E);
+            if (estimate.error <= settings.convergence && (estimate.steady || before <= settings.convergence)) break;
+        }
+        nlohmann::json rows = nlohmann::json::array();
+        for (const auto& e : E) rows.push_back({e[0], e[1], e[2]});
+        convergence = {
+            {"resolutions", used},
+            {"E_MPa", rows},
+            {"estimated_error", estimate.error},
+            {"extrapolated_E_MPa", {estimate.limit[0], estimate.limit[1], estimate.limit[2]}},
+            {"order", {estimate.order[0], estimate.order[1], estimate.order[2]}},
+            {"tolerance", settings.convergence},
+            {"method",
+             "Richardson extrapolation of E_x, E_y, E_z over three successive resolutions (order 0.5 to 2; faster "
+             "convergence confirmed by the next)"}};
+        if (estimate.error > settings.convergence && context) {
+            const int a = estimate.axis;
+            const std::size_t m = E.size();
+            context->warn("not_converged",
+                          "the cell's moduli are within an estimated " + formatNumber(100.0 * estimate.error) +
+                              " % of their extrapolated values at " + std::to_string(used.back()) +
+                              " voxels, more than the " + formatNumber(100.0 * settings.convergence) + " % asked: E_" +
+                              kAxis[a] + " is " + formatNumber(E[m - 3][a]) + ", " + formatNumber(E[m - 2][a]) + ", " +
+                              formatNumber(E[m - 1][a]) + " MPa at " + std::to_string(used[m - 3]) + ", " +
+                              std::to_string(used[m - 2]) + ", " + std::to_string(used[m - 1]) +
+                              " voxels (extrapolated " + formatNumber(estimate.limit[a]) +
+                              "); raise `properties: {max_resolution: N}` (now " +
+                              std::to_string(settings.maxResolution) + ") or give `resolution:`",
+                          {{"estimated_error", estimate.error}, {"resolutions", used}});
+        }
+    }
+    const VoxelCell& cell = final.cell;
+    const std::array<int, 3>& counts = final.counts;
+    const double h = final.h;
+    const double shift = final.shift;
+    const Vec3d phase = final.phase;
+    const std::int64_t solid = final.solid;
     if (solid == 0)
         throw JobError(settings.where + ": the cell [" + formatNumber(size[0]) + ", " + formatNumber(size[1]) + ", " +
                        formatNumber(size[2]) + "] mm at " + formatNumber(origin[0]) + ", " + formatNumber(origin[1]) +
                        ", " + formatNumber(origin[2]) + " holds no solid voxel (" + std::to_string(counts[0]) + " x " +
                        std::to_string(counts[1]) + " x " + std::to_string(counts[2]) +
                        "): raise the density or move the cell (`properties: {origin: ...}`)");
-
-    HomogenizationSettings solver;
-    solver.tolerance = settings.tolerance;
-    StageProgress solving(context, "homogenizing", 1000);
-    std::uint64_t solved = 0;
-    solver.progress = [&](double f) {
-        const auto now = std::uint64_t(std::clamp(f, 0.0, 1.0) * 1000);
-        if (now > solved) solving.add(now - solved), solved = now;
-        return !(context && context->cancelled());
-    };
-    const ElasticityResult elastic = homogenizeElasticity(cell, {material.modulusMPa, material.poisson}, solver);
-    solving.finish();
+    const double cellDensity = double(solid) / double(cell.solid.size());
+    if (target && context) {
+        if (settings.resolution && final.n != *settings.resolution)
+            context->warn("resolution_raised",
+                          "the cell is homogenized at " + std::to_string(final.n) + " voxels instead of " +
+                              std::to_string(*settings.resolution) + ": at " + std::to_string(*settings.resolution) +
+                              " no level gives the density asked (" + formatNumber(target->density) +
+                              ") within 0.5 % on the voxels",
+                          {{"resolution", final.n}, {"asked", *settings.resolution}});
+        if (std::abs(cellDensity / target->density - 1.0) > kCellDensityTolerance)
+            context->warn("cell_density",
+                          "the cell's voxel model holds " + formatNumber(cellDensity) + ", not the density asked (" +
+                              formatNumber(target->density) + ") within 0.5 %, even at " + std::to_string(final.n) +
+                              " voxels: give a finer `resolution:`",
+                          {{"relative_density", cellDensity}, {"target", target->density}});
+    }
+    const ElasticityResult& elastic = final.elastic;
     if (!elastic.percolates[0] && !elastic.percolates[1] && !elastic.percolates[2])
         throw JobError(settings.where + ": the cell falls apart: no piece of it connects to its neighbour cell along " +
                        "x, y or z (" + std::to_string(elastic.islandsRemoved) + " loose pieces, " +
                        formatNumber(100.0 * double(elastic.islandVoxelsRemoved) / double(solid)) +
                        " % of the solid), so it carries no load: raise the density or the strut radius, or use a "
                        "finer voxel (`properties: {resolution: N}`)");
+    solver.progress = {};
     const ConductivityResult thermal =
         settings.conductivity ? homogenizeConductivity(cell, 1.0, solver) : ConductivityResult{};
     const EngineeringConstants c = engineeringConstants(elastic.C);
 
     PropertiesResult result;
     result.stiffnessMPa = elastic.C;
-    result.relativeDensity = elastic.relativeDensity;
+    result.relativeDensity = cellDensity;
     const double Es = material.modulusMPa;
     nlohmann::json nu = matrixJson(c.nu);
     nlohmann::json& r = result.report;
-    r["relative_density"] = elastic.relativeDensity;
+    r["relative_density"] = cellDensity;
+    if (target) {
+        // Below and Band: value = indicator - level, so the shift adds to the level; Above subtracts.
+        const double level = target->side == SolidSide::Above ? target->level - shift : target->level + shift;
+        r["relative_density_target"] = target->density;
+        r["level"] = target->recipeLevel ? target->recipeLevel(level) : level;
+    }
+    if (elastic.islandVoxelsRemoved > 0) r["load_bearing_relative_density"] = elastic.relativeDensity;
     r["C_MPa"] = matrixJson(elastic.C);
     r["S_per_MPa"] = matrixJson(c.S);
     r["E_MPa"] = {c.Ex, c.Ey, c.Ez};
@@ -176,13 +411,18 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
     }
     r["material"] = {{"name", material.name}, {"E_MPa", Es}, {"nu", material.poisson}, {"source", material.source}};
     if (material.conductivity) r["material"]["k_W_per_mK"] = *material.conductivity;
-    r["cell"] = {{"origin", {origin[0], origin[1], origin[2]}},
-                 {"size", {size[0], size[1], size[2]}},
-                 {"voxels", counts},
-                 {"voxel_mm", h},
-                 {"from", settings.cell ? "properties: cell"
-                          : zoneOrigin  ? "the frame's repeating interior"
-                                        : "the result's periods"}};
+    // The cell's corner is where its voxel lattice starts (moved off a symmetric corner, the same
+    // periodic lattice): `properties: {origin}` with it and `level:` give this voxel model again.
+    if (target) r["cell"]["voxel_offset_mm"] = {phase[0], phase[1], phase[2]};
+    const Vec3d corner = origin + phase;
+    r["cell"].update({{"origin", {corner[0], corner[1], corner[2]}},
+                      {"size", {size[0], size[1], size[2]}},
+                      {"voxels", counts},
+                      {"voxel_mm", h},
+                      {"from", settings.cell ? "properties: cell"
+                               : zoneOrigin  ? "the frame's repeating interior"
+                                             : "the result's periods"}});
+    if (!convergence.is_null()) r["convergence"] = convergence;
     r["solver"] = {{"method", "voxel FE homogenization (8-node hexahedra, periodic), multigrid-preconditioned CG"},
                    {"tolerance", settings.tolerance}};
     if (context) {
@@ -201,6 +441,96 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
                           {{"islands_removed", elastic.islandsRemoved}});
     }
     return result;
+}
+
+GibsonAshbyFit fitGibsonAshby(const std::vector<double>& density,
+                              const std::vector<std::array<double, 3>>& modulusRatio)
+{
+    GibsonAshbyFit fit;
+    for (int a = 0; a < 3; ++a) {
+        double sx = 0, sy = 0, sxx = 0, sxy = 0;
+        int m = 0;
+        for (std::size_t k = 0; k < density.size(); ++k)
+            if (density[k] > 0.0 && modulusRatio[k][a] > 0.0) {
+                const double x = std::log(density[k]), y = std::log(modulusRatio[k][a]);
+                sx += x, sy += y, sxx += x * x, sxy += x * y, ++m;
+            }
+        const double d = m * sxx - sx * sx;
+        if (m < 2 || !(std::abs(d) > 0.0)) continue;
+        fit.n[a] = (m * sxy - sx * sy) / d;
+        fit.C[a] = std::exp((sy - fit.n[a] * sx) / m);
+        for (std::size_t k = 0; k < density.size(); ++k)
+            if (density[k] > 0.0 && modulusRatio[k][a] > 0.0)
+                fit.maxRelativeError =
+                    std::max(fit.maxRelativeError,
+                             std::abs(fit.C[a] * std::pow(density[k], fit.n[a]) / modulusRatio[k][a] - 1.0));
+    }
+    return fit;
+}
+
+nlohmann::json densityCurvePoint(const nlohmann::json& p)
+{
+    nlohmann::json row{{"relative_density", p["relative_density"]},
+                       {"C_MPa", p["C_MPa"]},
+                       {"E_MPa", p["E_MPa"]},
+                       {"G_MPa", p["G_MPa"]},
+                       {"E_ratio", p["E_ratio"]},
+                       {"nu", p["nu"]},
+                       {"resolution", p["cell"]["voxels"]}};
+    if (p.contains("relative_density_target")) row["relative_density_target"] = p["relative_density_target"];
+    if (p.contains("level")) row["level"] = p["level"];
+    if (p.contains("conductivity")) row["K_ratio"] = p["conductivity"]["K_ratio"];
+    return row;
+}
+
+nlohmann::json densityCurve(const std::vector<nlohmann::json>& points)
+{
+    std::vector<double> rho;
+    std::vector<std::array<double, 3>> ratio;
+    nlohmann::json curve = nlohmann::json::array();
+    for (const nlohmann::json& p : points) {
+        curve.push_back(p);
+        if (!p.contains("E_ratio")) continue;  // a point where the cell falls apart
+        rho.push_back(p["relative_density"].get<double>());
+        ratio.push_back({p["E_ratio"][0].get<double>(), p["E_ratio"][1].get<double>(), p["E_ratio"][2].get<double>()});
+    }
+    const GibsonAshbyFit fit = fitGibsonAshby(rho, ratio);
+    return {{"curve", curve},
+            {"gibson_ashby",
+             {{"C", fit.C},
+              {"n", fit.n},
+              {"max_relative_error", fit.maxRelativeError},
+              {"law", "E/E_s = C rho^n per axis, least squares on log E/E_s against log rho"}}}};
+}
+
+std::string abaqusMaterialCard(const nlohmann::json& p, const std::string& name, const std::string& recipe)
+{
+    // Abaqus/CalculiX order the shear components 12, 13, 23; voxlat's Voigt order is xx, yy, zz,
+    // yz, xz, xy.
+    constexpr int kVoigt[6] = {0, 1, 2, 5, 4, 3};  // Abaqus component 11, 22, 33, 12, 13, 23 -> voxlat index
+    std::vector<double> d;
+    for (int j = 0; j < 6; ++j)
+        for (int i = 0; i <= j; ++i) d.push_back(p["C_MPa"][kVoigt[i]][kVoigt[j]].get<double>());
+    std::string upper = name;
+    for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
+    std::ostringstream out;
+    out << "** voxlat: homogenized elastic constants of one periodic cell of `" << recipe << "`\n";
+    out << "** units: MPa (N/mm^2); use with lengths in mm and forces in N\n";
+    out << "** cell relative density " << formatNumber(p["relative_density"].get<double>()) << ", "
+        << p["cell"]["voxels"][0].get<int>() << " x " << p["cell"]["voxels"][1].get<int>() << " x "
+        << p["cell"]["voxels"][2].get<int>() << " voxels; solid: " << p["material"]["name"].get<std::string>() << ", E "
+        << formatNumber(p["material"]["E_MPa"].get<double>()) << " MPa, nu "
+        << formatNumber(p["material"]["nu"].get<double>()) << "\n";
+    out << "** E_x E_y E_z " << formatNumber(p["E_MPa"][0].get<double>()) << " "
+        << formatNumber(p["E_MPa"][1].get<double>()) << " " << formatNumber(p["E_MPa"][2].get<double>()) << " MPa\n";
+    out << "*MATERIAL, NAME=" << upper << "\n";
+    out << "*ELASTIC, TYPE=ANISO\n";
+    for (std::size_t k = 0; k < d.size(); ++k) {
+        char text[32];
+        std::snprintf(text, sizeof text, "%.10g", d[k]);
+        out << text << (k + 1 == d.size() || k % 8 == 7 ? "\n" : ", ");
+    }
+    return out.str();
 }
 
 std::string directionalModulusPng(const Matrix6& C, int size)
@@ -234,8 +564,10 @@ std::string propertiesTable(const nlohmann::json& p)
 {
     std::ostringstream out;
     auto n = [](const nlohmann::json& v) { return formatNumber(v.get<double>()); };
-    out << "relative density " << n(p["relative_density"]) << "   material " << p["material"]["name"].get<std::string>()
-        << " (E_s " << n(p["material"]["E_MPa"]) << " MPa, nu " << n(p["material"]["nu"]) << ")\n";
+    out << "relative density " << n(p["relative_density"]);
+    if (p.contains("relative_density_target")) out << " (asked " << n(p["relative_density_target"]) << ")";
+    out << "   material " << p["material"]["name"].get<std::string>() << " (E_s " << n(p["material"]["E_MPa"])
+        << " MPa, nu " << n(p["material"]["nu"]) << ")\n";
     out << "E_x E_y E_z     " << n(p["E_MPa"][0]) << "  " << n(p["E_MPa"][1]) << "  " << n(p["E_MPa"][2])
         << " MPa   (E/E_s " << n(p["E_ratio"][0]) << "  " << n(p["E_ratio"][1]) << "  " << n(p["E_ratio"][2]) << ")\n";
     out << "G_yz G_xz G_xy  " << n(p["G_MPa"][0]) << "  " << n(p["G_MPa"][1]) << "  " << n(p["G_MPa"][2]) << " MPa\n";
@@ -259,6 +591,14 @@ std::string propertiesTable(const nlohmann::json& p)
     for (std::size_t k = 0; k < 6; ++k) {
         iterations = std::max(iterations, p["iterations"][k].get<int>());
         residual = std::max(residual, p["residual"][k].get<double>());
+    }
+    if (p.contains("convergence")) {
+        const nlohmann::json& c = p["convergence"];
+        out << "resolution " << c["resolutions"].back().get<int>() << " voxels, chosen by convergence: E_x E_y E_z";
+        for (std::size_t k = 0; k < c["resolutions"].size(); ++k)
+            out << (k ? ";" : "") << " " << c["resolutions"][k].get<int>() << ": " << n(c["E_MPa"][k][0]) << " "
+                << n(c["E_MPa"][k][1]) << " " << n(c["E_MPa"][k][2]);
+        out << " MPa; estimated error " << formatNumber(100.0 * c["estimated_error"].get<double>()) << " %\n";
     }
     out << "solver: at most " << iterations << " iterations per load case, residual <= " << formatNumber(residual)
         << "; " << p["islands_removed"].get<int>() << " loose pieces left out\n";

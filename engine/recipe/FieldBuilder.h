@@ -61,6 +61,9 @@ struct LevelNode {
     /// The field the density solve measures when it is not the solid's indicator (the same
     /// values; e.g. without a tiling whose tables would not pay off on the measuring pieces).
     FieldPtr densityIndicator{};
+    /// The solid's level as the recipe's `level:` key means it, when the two differ (a Gaussian
+    /// lattice's level is the iso-value t, its solid's the isolated strut's radius in mm).
+    std::function<double(double level)> recipeLevel{};
 };
 
 /// A lattice whose level follows a target-density field (GradedLevel); the job reports its

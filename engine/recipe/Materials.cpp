@@ -132,8 +132,12 @@ const std::vector<KeySpec>& propertiesKeys()
     static const std::vector<KeySpec> keys{
         {"cell", vec3(), "the periodic cell's size [a, b, c] (mm)", "the result's periods"},
         {"origin", vec3(), "the cell's minimum corner (mm)", "the domain's minimum corner"},
-        {"resolution", number(), "voxels along the cell's longest side", "that side / the recipe's voxel"},
-        {"tolerance", number(), "relative residual each load case is solved to", "1e-6"}};
+        {"resolution", number(), "voxels along the cell's longest side",
+         "chosen by a convergence check (24, 34, 48, ... voxels)"},
+        {"convergence", number(), "the relative error in E the default resolution is chosen for", "0.02"},
+        {"max_resolution", number(), "the finest resolution the convergence check may reach", "136"},
+        {"tolerance", number(), "relative residual each load case is solved to", "1e-6"},
+        {"export", string(), "FILE.inp: the cell's elastic constants as a CalculiX/Abaqus *MATERIAL card", "—"}};
     return keys;
 }
 
@@ -156,6 +160,24 @@ PropertiesSettings parseProperties(const RecipeNode* node, const std::string& fa
         if (v != std::floor(v) || v < 4 || v > 512)
             (*node)["resolution"].fail("expected a whole number of voxels from 4 to 512 along the cell's longest side");
         s.resolution = int(v);
+    }
+    if (node->has("convergence")) {
+        s.convergence = (*node)["convergence"].positiveNumber();
+        if (s.convergence >= 0.5)
+            (*node)["convergence"].fail("expected a relative error in E below 0.5, like 0.02 (2 %)");
+    }
+    if (node->has("max_resolution")) {
+        const double v = (*node)["max_resolution"].number();
+        if (v != std::floor(v) || v < 48 || v > 512)
+            (*node)["max_resolution"].fail(
+                "expected a whole number of voxels from 48 to 512 (the convergence check needs 24, 34 and 48)");
+        s.maxResolution = int(v);
+    }
+    if (node->has("export")) {
+        const std::string file = (*node)["export"].string();
+        if (file.size() < 5 || file.substr(file.size() - 4) != ".inp")
+            (*node)["export"].fail("expected a file name ending in .inp (a CalculiX/Abaqus input deck), like cell.inp");
+        s.exportFile = file;
     }
     if (node->has("tolerance")) {
         s.tolerance = (*node)["tolerance"].positiveNumber();

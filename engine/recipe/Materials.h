@@ -41,8 +41,14 @@ const std::vector<KeySpec>& materialKeys();
 struct PropertiesSettings {
     std::optional<std::array<double, 3>> cell;    ///< cell size (mm); default: the result's periods
     std::optional<std::array<double, 3>> origin;  ///< cell's minimum corner; default: the domain's
-    std::optional<int> resolution;                ///< voxels along the cell's longest side; default: side / voxel
-    double tolerance = 1e-6;                      ///< relative residual of each load case
+    /// Voxels along the cell's longest side; default: chosen by a convergence check.
+    std::optional<int> resolution;
+    double tolerance = 1e-6;    ///< relative residual of each load case
+    double convergence = 0.02;  ///< the default resolution's estimated relative error in E
+    int maxResolution = 136;    ///< the finest resolution the convergence check may reach
+    /// `export: FILE.inp`: the cell's anisotropic elastic constants as a CalculiX/Abaqus material
+    /// card, written by `voxlat run` into its output folder.
+    std::optional<std::string> exportFile;
     /// Also solve the conductivity (not a key: property searches, which need only the stiffness, turn it off).
     bool conductivity = true;
     std::string where;  ///< file:line:col of `properties:` (or the recipe)

@@ -609,6 +609,42 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
         return std::make_shared<SupportedField>(
             std::move(solid), Box3{extent.min - Vec3d(reach), extent.max + Vec3d(reach)}, std::move(zone));
     };
+    // `density_of: cell`: the density is the periodic cell's (the middle cell of the frame, which
+    // sees all its neighbours), as `voxlat properties` homogenizes it, not the frame box's.
+    bool perCell = false;
+    Box3 middleCell;
+    double neighbourDepth = 0.0;  // how far the middle cell's neighbours reach on its thinnest side (mm)
+    if (spec.has("density_of")) {
+        const RecipeNode of = spec["density_of"];
+        const std::string where = of.string();
+        if (where != "cell" && where != "frame")
+            of.fail(
+                "expected `cell` (the periodic cell, as `voxlat properties` homogenizes it) or `frame` (the "
+                "frame's bounding box, the default)");
+        if (!spec.has("density") || graded)
+            of.fail("`density_of:` says where the node's `density:` (one number) is measured; give `density:`");
+        perCell = where == "cell";
+        if (perCell && !identicalBoxCells)
+            of.fail(
+                "`density_of: cell` needs a box of identical cells (`struts: {cell, size}` with one radius, no "
+                "`within:`): only there is the cell known");
+        if (perCell) {
+            Vec3d lo, hi;
+            for (int a = 0; a < 3; ++a) {
+                const int count = int(std::lround(box.extent()[a] / uniform->size[a]));
+                if (count < 3)
+                    of.fail(
+                        "`density_of: cell` measures the frame's middle cell, which needs a neighbour on each "
+                        "side: give at least 3 cells along " +
+                        std::string(1, "xyz"[a]) + " (`count:` or a larger domain)");
+                lo[a] = box.min[a] + (count / 2) * uniform->size[a];
+                hi[a] = lo[a] + uniform->size[a];
+                const double depth = std::min(count / 2, count - count / 2 - 1) * uniform->size[a];
+                neighbourDepth = a == 0 ? depth : std::min(neighbourDepth, depth);
+            }
+            middleCell = Box3{lo, hi};
+        }
+    }
     LevelNode node;
     node.name = name;
     node.region = region;
@@ -641,8 +677,10 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
             node.densityMask = within;
             node.densityOf = "the inside of `" + withinName + "`";
         } else if (!region) {
-            node.densityBox = box;
-            node.densityOf = frame.layoutBox ? "the domain box" : "the frame's bounding box";
+            node.densityBox = perCell ? middleCell : box;
+            node.densityOf = perCell           ? "one cell of the periodic lattice (`density_of: cell`)"
+                             : frame.layoutBox ? "the domain box"
+                                               : "the frame's bounding box";
         }
         // Cells of a whole number of voxels line struts up with the voxel lattice, and counting
         // voxel centres then aliases (about 2 % for BCC at 0.1 mm); coverage does not.
@@ -651,6 +689,7 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
         node.densityVoxel = builder.recipe().voxel / (1.0 + 1.0 / (2.0 * std::numbers::pi));
     }
 
+    if (capsule && perCell) node.densityVoxel = *node.densityVoxel / 1.5;  // one cell at a fixed phase
     if (capsule) {
         double blend = 0.0;
         if (kernel.isMap()) {
@@ -663,8 +702,10 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
                 }
             }
         }
-        if (!radii && !node.density && !graded && !solvedByInfill)
-            spec.fail("capsules need `radius:` (or `density:`, which solves a uniform radius)");
+        if (!radii && !node.density && !graded && !spec.has("level") && !solvedByInfill)
+            spec.fail(
+                "capsules need `radius:` (or `density:`, which solves a uniform radius, or `level:`, the radius "
+                "offset, which alone is the radius)");
         auto capsuleStruts = [](const Frame& f, const std::optional<std::vector<std::array<double, 2>>>& r) {
             std::vector<CapsuleStrut> struts;
             for (std::size_t j = 0; j < f.struts.size(); ++j)
@@ -805,8 +846,8 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     const double t = spec.has("level") ? spec["level"].positiveNumber() : 1.0;
     {
         std::ostringstream d;
-        d << "strut convolution (gaussian); level in mm = sigma sqrt(2 ln(P / t)), the radius of an isolated strut at "
-             "iso-value t, with P = "
+        d << "strut convolution (gaussian); level: the iso-value t in F >= t; level_radius_mm = sigma sqrt(2 ln(P / "
+             "t)), the radius of an isolated strut at iso-value t, with P = "
           << peak << ", sigma = " << sigmaMax;
         node.description = d.str();
     }
@@ -829,6 +870,22 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     const bool solved = node.density || solvedByInfill;
     node.solid = solved ? LevelSolid::unsolved(evaluated, SolidSide::Below)
                         : std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
+    // The recipe's `level:` is t: the double t whose radiusOf() gives back this level exactly (a
+    // neighbour of valueOf()'s when rounding moves it), so the reported t pasted into the recipe
+    // builds the same solid, bit for bit.
+    node.recipeLevel = [iso](double level) {
+        const double t = iso->valueOf(level);
+        double best = t, bestError = std::abs(iso->radiusOf(t) - level);
+        for (const double direction : {-1.0, 1.0}) {
+            double u = t;
+            for (int k = 0; k < 64 && bestError > 0.0; ++k) {
+                u = std::nextafter(u, direction * std::numeric_limits<double>::infinity());
+                const double error = std::abs(iso->radiusOf(u) - level);
+                if (error < bestError) best = u, bestError = error;
+            }
+        }
+        return best;
+    };
     // Mid-strut, away from joints, a strut of peak p is a cylinder of radius sigma sqrt(2 ln(p / t))
     // at iso-value t (none where p <= t: the strut vanishes).
     node.thinnest = [raw, iso, n, sigma](double level) {
@@ -841,7 +898,16 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
         return thinnest;
     };
     recordFrame(builder, name, frame, convolutionRadius, [solid = node.solid](const Vec3d&) { return solid->level(); });
-    if ((periodic || partlyPeriodic) && node.density) {
+    if (perCell) {
+        // One cell: its lattice sampled at a fixed phase, finer (as one period below) and fine
+        // enough for the kernel.
+        node.densityVoxel = std::min(*node.densityVoxel / 1.5, *std::min_element(sigma.begin(), sigma.end()) / 8.0);
+        if (rcMax > neighbourDepth)
+            spec["density_of"].fail("the Gaussian kernel reaches " + formatNumber(rcMax) + " mm, beyond the " +
+                                    formatNumber(neighbourDepth) +
+                                    " mm of cells around the frame's middle cell: give the frame more cells (or a "
+                                    "smaller sigma) for `density_of: cell`");
+    } else if ((periodic || partlyPeriodic) && node.density) {
         node.densityPeriod = period;
         node.densityReach = rcMax;
         // The density pieces measure one face zone for both faces of a mirror axis, and one of
@@ -955,6 +1021,10 @@ void addStrutNodeTypes(std::vector<NodeType>& types)
            "chosen, the capsule kernel at that density reported next to it (needs `material:`); `off`: the sigma "
            "as written",
            "—"},
+          {"density_of", oneOfWords({"cell", "frame"}),
+           "where `density:` is measured: `frame` (its bounding box) or `cell` (the periodic cell, the middle one "
+           "of the frame, as `voxlat properties` homogenizes it)",
+           "frame"},
           levelKey()},
          buildStruts});
 }
