@@ -165,12 +165,8 @@ void addStrutRowTaylor(const StrutRowConstants& s, const StrutRow& row, const do
 {
     const double dx = row.x - s.ax, dy = row.y - s.ay;
     for (int k = row.kLo; k <= row.kHi; ++k) {
-        const double dz = (row.z0 + k * row.dz) - s.az;
-        const double h = dx * s.ux + dy * s.uy + dz * s.uz;
-        const double lengthSqr = dx * dx + dy * dy + dz * dz;
-        const double r2 = std::max(0.0, lengthSqr - h * h);
-        const double beyond = h < 0.0 ? h : (h > s.length ? h - s.length : 0.0);
-        if (r2 + beyond * beyond >= s.cutoffSqr) continue;
+        double h;
+        if (!withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
         const double d = h - hc;
         out[k] += gauss[k] * (c[0] + d * (c[1] + d * (c[2] + d * c[3])));
     }

@@ -25,6 +25,18 @@ struct StrutRow {
     int kLo, kHi;
 };
 
+/// Whether the point at (dx, dy, dz) from the strut's start is within its cut-off, with @a h its
+/// coordinate along the strut (GaussianSegment::distanceSqr's operations in its order: the same
+/// doubles wherever it is inlined).
+inline bool withinCutoff(const StrutRowConstants& s, double dx, double dy, double dz, double& h)
+{
+    h = dx * s.ux + dy * s.uy + dz * s.uz;
+    const double lengthSqr = dx * dx + dy * dy + dz * dz;
+    const double r2 = std::max(0.0, lengthSqr - h * h);
+    const double beyond = h < 0.0 ? h : (h > s.length ? h - s.length : 0.0);
+    return r2 + beyond * beyond < s.cutoffSqr;
+}
+
 /// Adds gauss[k] * J(h_k) to out[k] for every point of @a row within the strut's cut-off, where
 /// h_k is the point's coordinate along the strut and J the weighted erf integral (GaussianTable).
 inline void addStrutRowScalar(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
@@ -32,13 +44,8 @@ inline void addStrutRowScalar(const StrutRowConstants& s, const StrutRow& row, c
     const GaussianTable& table = GaussianTable::instance();
     const double dx = row.x - s.ax, dy = row.y - s.ay;
     for (int k = row.kLo; k <= row.kHi; ++k) {
-        // GaussianSegment::distanceSqr's operations in its order.
-        const double dz = (row.z0 + k * row.dz) - s.az;
-        const double h = dx * s.ux + dy * s.uy + dz * s.uz;
-        const double lengthSqr = dx * dx + dy * dy + dz * dz;
-        const double r2 = std::max(0.0, lengthSqr - h * h);
-        const double beyond = h < 0.0 ? h : (h > s.length ? h - s.length : 0.0);
-        if (r2 + beyond * beyond >= s.cutoffSqr) continue;
+        double h;
+        if (!withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
         double j0;
         if (s.slope == 0.0) {
             j0 = s.w0 * s.sigma * (table.erfIntegral((s.length - h) * s.invSigma) + table.erfIntegral(h * s.invSigma));

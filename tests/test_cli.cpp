@@ -375,8 +375,9 @@ outputs: {mesh: part.stl}
     EXPECT_LT(report["pieces"]["crumbs"]["largest_mm3"].get<double>(), 1.0);
     EXPECT_GT(report["pieces"]["crumbs"]["volume_mm3"].get<double>(), 0.0);
     EXPECT_EQ(out.find("are crumbs a cut leaves"), std::string::npos) << out;
-    if (report.contains("warnings") && report["warnings"].is_array())
+    if (report.contains("warnings") && report["warnings"].is_array()) {
         for (const auto& w : report["warnings"]) EXPECT_NE(w.value("code", ""), "crumbs");
+    }
     // Two balls apart: a free piece, the job fails with exit 3 and writes nothing.
     const auto two = dir.write("two.yaml", R"(voxel: 0.25
 domain: {box: [[-8, -8, -8], [8, 8, 8]]}

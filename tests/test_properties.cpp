@@ -700,7 +700,9 @@ TEST(Properties, TheDensityCurveAndItsGibsonAshbyFitTellBendingFromStretching)
             EXPECT_NEAR(p["relative_density_target"].get<double>(), targets[k], 1e-12);
             EXPECT_LT(std::abs(p["relative_density"].get<double>() / targets[k] - 1.0), 0.005);
             for (const char* key : {"C_MPa", "E_MPa", "G_MPa", "K_ratio"}) EXPECT_TRUE(p.contains(key)) << key;
-            if (k > 0) EXPECT_GT(p["E_MPa"][2].get<double>(), c["curve"][k - 1]["E_MPa"][2].get<double>());
+            if (k > 0) {
+                EXPECT_GT(p["E_MPa"][2].get<double>(), c["curve"][k - 1]["E_MPa"][2].get<double>());
+            }
         }
         // The fit, recomputed here from the curve's own points.
         const auto& g = c["gibson_ashby"];
