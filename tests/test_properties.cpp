@@ -814,18 +814,28 @@ outputs: {properties: cell.json}
 TEST(Properties, DensityOfCellSolvesTheJobsLevelOnThePeriodicCell)
 {
     // `density_of: cell`: the printed lattice's level is solved so that the periodic cell (the
-    // frame's middle one) holds the density, the cell `voxlat properties` homogenizes; by default
-    // (`frame`) the frame box holds it and the interior cell of a Gaussian X lattice is heavier.
+    // frame's middle one) holds the density, the cell `voxlat properties` homogenizes; with
+    // `density_of: frame` on a frame laid as written (`edges: frame`) the frame box holds it and the
+    // interior cell of a Gaussian X lattice is heavier. A frame laid past the domain and cut by it
+    // (`edges: cut`, the default, issue 42) has no light edge cells: its box holds the cell's
+    // density too.
     TempDir dir;
     std::map<std::string, nlohmann::json> reports;
-    for (const std::string of : {"frame", "cell"}) {
+    for (const std::string of : {"frame", "cell", "cut"}) {
+        const std::string keys = of == "cut" ? "}, kernel: {gaussian: {sigma: 0.8}}, density: 0.1"
+                                             : ", edges: frame}, kernel: {gaussian: {sigma: 0.8}}, density: 0.1, "
+                                               "density_of: " +
+                                                   of;
         reports[of] = runReport(dir, of,
                                 "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [30, 30, 30]]}\n"
-                                "properties: {resolution: 64}\nfields:\n  lattice: {struts: {cell: x, size: 10}, "
-                                "kernel: {gaussian: {sigma: 0.8}}, density: 0.1, density_of: " +
-                                    of + "}\nresult: lattice\noutputs: {properties: p.json}\n");
+                                "properties: {resolution: 64}\nfields:\n  lattice: {struts: {cell: x, size: 10" +
+                                    keys + "}\nresult: lattice\noutputs: {properties: p.json}\n");
         ASSERT_FALSE(reports[of].is_null()) << of;
     }
+    EXPECT_LT(std::abs(reports["cut"]["fields"]["lattice"]["level"].get<double>() /
+                           reports["cut"]["properties"]["level"].get<double>() -
+                       1.0),
+              0.005);
     auto level = [&](const std::string& of) { return reports[of]["fields"]["lattice"]["level"].get<double>(); };
     auto cellLevel = [&](const std::string& of) { return reports[of]["properties"]["level"].get<double>(); };
     // The cell's own level (solved on its 64-voxel model) is the same for both: the lattice asked.
