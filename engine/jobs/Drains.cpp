@@ -69,7 +69,7 @@ nlohmann::json planDrains(const std::vector<DrainRequest>& drains, double voxel,
                                 {{0, -1, 0}, "the cavity's lowest point, sideways (-y)"},
                                 {{0, 1, 0}, "the cavity's lowest point, sideways (+y)"}};
             const Way* best = nullptr;
-            double reach = limit;
+            double reach = limit, bestCost = 0.0;
             for (const Way& w : ways) {
                 Vec3d from = p;
                 if (w.dir.z() == 0.0) from.z() = std::max(p.z(), plate + 0.5 * d.diameter + spacing);
@@ -79,9 +79,10 @@ nlohmann::json planDrains(const std::vector<DrainRequest>& drains, double voxel,
                 if (w.dir.z() < 0.0 && exit.z() - 0.5 * d.diameter < plate + spacing) continue;  // onto the plate
                 // Straight down is preferred while it is no longer than a sideways way by a diameter.
                 const double cost = t - (w.dir.z() < 0.0 ? d.diameter : 0.0);
-                if (!best || cost < reach - (best->dir.z() < 0.0 ? d.diameter : 0.0)) {
+                if (!best || cost < bestCost) {
                     best = &w;
                     reach = t;
+                    bestCost = cost;
                 }
             }
             Vec3d dir;
