@@ -8,7 +8,53 @@
 
 namespace voxlat {
 
-std::vector<Trap> findTraps(const FieldNode& solid, const Box3& box, double spacing, const JobContext* context)
+namespace {
+
+/// The samples open to the outside (1) or not (0, solid or a closed cavity), as a field: +1 and -1
+/// at the nearest sample, +1 beyond the sampled box.
+class OpenSpace final : public FieldNode {
+public:
+    OpenSpace(const Box3& box, double spacing, std::array<std::int64_t, 3> n, std::vector<std::uint8_t> open)
+        : mBox(box), mSpacing(spacing), mN(n), mOpen(std::move(open))
+    {
+    }
+    void values(std::span<const Vec3d> points, std::span<double> out) const override
+    {
+        for (std::size_t i = 0; i < points.size(); ++i) out[i] = at(points[i]);
+    }
+    void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override
+    {
+        for (std::size_t i = 0; i < points.size(); ++i) {
+            out[i] = at(points[i]);
+            for (int a = 0; a < 3; ++a) {
+                Vec3d d(0.0);
+                d[a] = mSpacing;
+                grad[i][a] = (at(points[i] + d) - at(points[i] - d)) / (2.0 * mSpacing);
+            }
+        }
+    }
+    Interval bound(const Box3&) const override { return Interval(-1.0, 1.0); }
+
+private:
+    double at(const Vec3d& p) const
+    {
+        std::array<std::int64_t, 3> c{};
+        for (int a = 0; a < 3; ++a) {
+            c[a] = std::int64_t(std::floor((p[a] - mBox.min[a]) / mSpacing));
+            if (c[a] < 0 || c[a] >= mN[a]) return 1.0;
+        }
+        return mOpen[std::size_t((c[0] * mN[1] + c[1]) * mN[2] + c[2])] ? 1.0 : -1.0;
+    }
+    Box3 mBox;
+    double mSpacing;
+    std::array<std::int64_t, 3> mN;
+    std::vector<std::uint8_t> mOpen;
+};
+
+}  // namespace
+
+std::vector<Trap> findTraps(const FieldNode& solid, const Box3& box, double spacing, const JobContext* context,
+                            std::shared_ptr<const FieldNode>* openSpace)
 {
     BlockLattice lattice;
     lattice.base = box.min;
@@ -65,6 +111,12 @@ std::vector<Trap> findTraps(const FieldNode& solid, const Box3& box, double spac
                 if (face && state[index(i, j, k)] == 1) flood(index(i, j, k), [](std::size_t) {});
             }
     if (context) context->checkCancelled();
+    if (openSpace) {
+        std::vector<std::uint8_t> open(total);
+        for (std::size_t s = 0; s < total; ++s) open[s] = state[s] == 2;
+        *openSpace =
+            std::make_shared<OpenSpace>(box, spacing, std::array<std::int64_t, 3>{nx, ny, nz}, std::move(open));
+    }
     auto centre = [&](std::size_t s) {
         const std::int64_t k = std::int64_t(s % std::size_t(nz)), j = std::int64_t(s / std::size_t(nz)) % ny,
                            i = std::int64_t(s / std::size_t(nz * ny));

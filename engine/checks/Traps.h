@@ -6,6 +6,7 @@
 #include "fields/FieldNode.h"
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 namespace voxlat {
@@ -24,7 +25,12 @@ struct Trap {
 /// around it. Largest first (ties in the order of their first sample, x-major, z fastest): the
 /// same list for any thread count. Cavities narrower than the spacing may be missed or joined;
 /// throws Cancelled when @a context is cancelled.
+/// When @a openSpace is given it receives the void open to the outside as findTraps() sampled it:
+/// a field positive on the void samples reached from the box's faces and beyond the box, negative
+/// on solid samples and in closed cavities (the nearest sample's; gradients by central
+/// differences of the samples). It tells where a channel from a cavity comes out when the solid
+/// is no part with an outside of its own (`drain:` under `slices:`).
 std::vector<Trap> findTraps(const FieldNode& solid, const Box3& box, double spacing,
-                            const JobContext* context = nullptr);
+                            const JobContext* context = nullptr, std::shared_ptr<const FieldNode>* openSpace = nullptr);
 
 }  // namespace voxlat

@@ -41,7 +41,11 @@ nlohmann::json planDrains(const std::vector<DrainRequest>& drains, double voxel,
         // Finer than the wall and the channel, and never finer than the recipe's voxel.
         const double spacing = std::max(voxel, 0.5 * std::min(d.wall, d.diameter));
         const Box3 box{support->min - Vec3d(2.0 * spacing), support->max + Vec3d(2.0 * spacing)};
-        const std::vector<Trap> traps = findTraps(*d.node->solid(), box, spacing, context);
+        // A part's outside is where its field is positive; a result drained for its slices has
+        // no part, and its outside is the void the search reaches from the faces of its box.
+        std::shared_ptr<const FieldNode> open;
+        const std::vector<Trap> traps = findTraps(*d.node->solid(), box, spacing, context, d.part ? nullptr : &open);
+        const FieldNode& part = d.part ? *d.part : *open;
         std::vector<DrainChannel> channels;
         nlohmann::json holes = nlohmann::json::array();
         std::uint64_t crumbs = 0;
@@ -73,7 +77,7 @@ nlohmann::json planDrains(const std::vector<DrainRequest>& drains, double voxel,
             for (const Way& w : ways) {
                 Vec3d from = p;
                 if (w.dir.z() == 0.0) from.z() = std::max(p.z(), plate + 0.5 * d.diameter + spacing);
-                const double t = exitDistance(*d.part, from, w.dir, step, limit);
+                const double t = exitDistance(part, from, w.dir, step, limit);
                 if (t >= limit) continue;  // never leaves the part within its box
                 const Vec3d exit = from + t * w.dir;
                 if (w.dir.z() < 0.0 && exit.z() - 0.5 * d.diameter < plate + spacing) continue;  // onto the plate
@@ -92,11 +96,11 @@ nlohmann::json planDrains(const std::vector<DrainRequest>& drains, double voxel,
                 placed = best->placed;
                 if (dir.z() == 0.0) p.z() = std::max(p.z(), plate + 0.5 * d.diameter + spacing);
             } else {
-                Vec3d normal = d.part->valueAndGradient(p).second;
+                Vec3d normal = part.valueAndGradient(p).second;
                 const double length = normal.length();
                 dir = length > 0.0 ? normal / length : Vec3d(1, 0, 0);
                 placed = "the thinnest wall (the part's outward normal)";
-                reach = exitDistance(*d.part, p, dir, step, limit);
+                reach = exitDistance(part, p, dir, step, limit);
             }
             // From half a sample inside the cavity to a radius and a sample past the part's surface.
             DrainChannel c{p - 0.5 * spacing * dir, p + (reach + 0.5 * d.diameter + spacing) * dir, d.diameter};

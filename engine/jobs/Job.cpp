@@ -1,6 +1,7 @@
 #include "engine/jobs/Job.h"
 
 #include "engine/checks/Pieces.h"
+#include "engine/checks/SheetWalls.h"
 #include "engine/core/Format.h"
 #include "engine/core/GridMeasure.h"
 #include "engine/core/SparseEvaluator.h"
@@ -48,6 +49,13 @@
 #include <sstream>
 
 namespace voxlat {
+
+namespace {
+/// A sheet's measured walls may miss `thickness:` by this share on average, and its thinnest 1 %
+/// by this share, before the job warns.
+constexpr double kWallMeanTolerance = 0.02;
+constexpr double kWallThinTolerance = 0.10;
+}  // namespace
 
 namespace {
 /// Voxels of margin around the result's box when the recipe gives no domain (room for the
@@ -209,6 +217,7 @@ Job::Job(Recipe recipe, JobContext* context)
     timed("build fields", [&] {
         // Build every field, so a mistake anywhere in the recipe is reported before any work.
         mResult = mBuilder.buildAll();
+        drainForSlices();
         return 0;
     });
     try {
@@ -260,6 +269,66 @@ Job::Job(Recipe recipe, JobContext* context)
     }
 }
 
+void Job::checkSheetWalls(const LevelNode& node, nlohmann::json& entry)
+{
+    const LevelNode::WallCheck& w = *node.wallCheck;
+    const SheetWallStats s =
+        timed("measure walls " + node.name, [&] { return measureSheetWalls(*w.mid, *w.sheet, w.cell, w.thickness); });
+    if (s.samples == 0) return;
+    entry["walls_measured"] = {
+        {"thickness_mm", w.thickness},
+        {"mean_mm", s.mean},
+        {"p01_mm", s.p01},
+        {"min_mm", s.min},
+        {"max_mm", s.max},
+        {"samples", s.samples},
+        {"measure",
+         "the chord along the mid-surface's normal between the sheet's faces, at mid-surface points of "
+         "one cell"}};
+    const double meanGap = s.mean / w.thickness - 1.0, thin = s.p01 / w.thickness - 1.0;
+    if (std::abs(meanGap) > kWallMeanTolerance || thin < -kWallThinTolerance) {
+        char numbers[200];
+        std::snprintf(numbers, sizeof numbers,
+                      "the walls of `%s` measure %.3g mm on average (%+.1f %%), the thinnest 1 %% under %.3g mm, for "
+                      "`thickness: %g`",
+                      node.name.c_str(), s.mean, 100.0 * meanGap, s.p01, w.thickness);
+        mContext->warn("wall_thickness",
+                       std::string(numbers) +
+                           ": the shift along the gradient is exact only where the walls are thin against their "
+                           "curvature; a larger `cell:`, a thinner wall, or `density:` (solved on the voxels) instead",
+                       {{"field", node.name}, {"thickness_mm", w.thickness}, {"mean_mm", s.mean}, {"p01_mm", s.p01}});
+    }
+}
+
+void Job::drainForSlices()
+{
+    bool drained = false;
+    for (const OutputSpec& out : mRecipe.outputs) {
+        if (out.kind != "slices") continue;
+        const RecipeNode spec(out.spec, mRecipe.source, "outputs");
+        const SliceSettings settings = parseSliceSettings(spec);
+        if (!settings.drainDiameter) continue;
+        const double diameter = *settings.drainDiameter;
+        if (drained)
+            spec["drain"].fail("the result is drained once for every output: give `drain:` on one slices output");
+        for (const DrainRequest& d : mBuilder.drains())
+            if (d.name == mRecipe.result)
+                spec["drain"].fail("the result `" + d.name + "` drains its traps already (`drain:` at " + d.where +
+                                   "): remove one of the two");
+        if (diameter < 2.0 * mRecipe.voxel)
+            spec["drain"]["diameter"].fail("a drain channel of " + formatNumber(diameter) +
+                                           " mm is less than two voxels (" + formatNumber(2.0 * mRecipe.voxel) +
+                                           " mm) across: it would not show on the grid; use 1.5 mm or more "
+                                           "(resin drains through 1.5-3 mm holes)");
+        auto node = std::make_shared<DrainedSolid>(mResult);
+        // No part here: a channel ends in the void the trap search reaches from outside; walls
+        // are searched at the recipe's voxel.
+        mBuilder.addDrain({mRecipe.result, settings.drainWhere, node, nullptr, diameter, 2.0 * mRecipe.voxel});
+        mResult = node;
+        drained = true;
+    }
+}
+
 void Job::solveLevels()
 {
     if (mSolved) return;
@@ -284,6 +353,11 @@ void Job::solveLevels()
                                     *node.density, node.densityMask.get(), node.subVoxelDensity, mContext);
             });
             if (node.densityMask) entry["density_measured_in"] = node.densityOf;
+            // The region's volume: the mask's voxels, or the box the density is measured over.
+            const double measuringVoxel = node.densityBox && node.densityVoxel ? *node.densityVoxel : mDomain.voxel;
+            const Box3 box = node.densityBox ? *node.densityBox : mDomain.box;
+            mDensityRegionMm3[node.name] = node.densityMask ? double(s.domainVoxels) * std::pow(measuringVoxel, 3)
+                                                            : box.extent()[0] * box.extent()[1] * box.extent()[2];
             // The region whose share `density:` is, in the words a user set it in.
             entry["density_measured_on"] = node.densityOf.empty() ? "the domain box" : node.densityOf;
             node.solid->solve(node.solid->levelFromIndicator(s.level));
@@ -297,6 +371,7 @@ void Job::solveLevels()
                 entry["density_sampling"] =
                     "one period of the interior (" + std::to_string(pieces.size()) + " weighted pieces)";
         }
+        if (node.wallCheck) checkSheetWalls(node, entry);
         if (mDesign.contains(node.name)) entry.update(mDesign[node.name]);
         // Under the recipe key's name, what the key means (a Gaussian lattice's iso-value t); the
         // solid's own level (an isolated strut's radius) under its own name.
@@ -1219,6 +1294,7 @@ void Job::writeMesh(const std::filesystem::path& path, const MeshOptions& option
     });
     v.files.push_back(path.string());
     mReport["outputs"].push_back(path.string());
+    checkDensityFromMesh();
 }
 
 void Job::writeStlWhileMeshing(const std::filesystem::path& path)
@@ -1241,6 +1317,70 @@ void Job::writeStlWhileMeshing(const std::filesystem::path& path)
     v->files.push_back(path.string());
     mMeshes.push_back(std::move(v));
     mReport["outputs"].push_back(path.string());
+    checkDensityFromMesh();
+}
+
+void Job::checkDensityFromMesh()
+{
+    if (mDensityChecked || mMeshes.empty() || mMeshes.front()->files.empty()) return;
+    mDensityChecked = true;
+    const MeshVariant& v = *mMeshes.front();
+    if (!v.measures) v.measures = v.mesh->measure();
+    const double meshVolume = v.measures->volume;
+    for (const LevelNode& node : mBuilder.levelNodes()) {
+        const auto region = mDensityRegionMm3.find(node.name);
+        if (!node.density || region == mDensityRegionMm3.end() || !(region->second > 0.0)) continue;
+        const std::optional<LevelNode::MeshShare>& share = node.meshShare;
+        if (mRecipe.result != (share ? share->meshOf : node.name)) continue;
+        double regionVolume = region->second, latticeVolume = meshVolume;
+        std::string regionWords;
+        if (share) {
+            const double part = share->partVolume ? share->partVolume() : 0.0;
+            if (share->skinned) {
+                // The skin is the part outside the region: its volume leaves the lattice's.
+                if (!(part > regionVolume)) continue;
+                latticeVolume = meshVolume - (part - regionVolume);
+            } else if (part > 0.0) {
+                regionVolume = part;  // the part as its mesh encloses it
+            }
+            regionWords = node.densityOf;
+        } else {
+            // Alone, over a box: the mesh is cut by the domain, so the box must be the domain's
+            // (within a voxel on every face; a snapped domain is measured over what it holds).
+            if (node.densityMask) continue;
+            const Box3 box = node.densityBox ? *node.densityBox : mDomain.box;
+            bool same = true;
+            for (int a = 0; a < 3; ++a)
+                same = same && std::abs(box.min[a] - mDomain.box.min[a]) <= mDomain.voxel &&
+                       std::abs(box.max[a] - mDomain.box.max[a]) <= mDomain.voxel;
+            if (!same) continue;
+            const Vec3d e = mDomain.box.extent();
+            regionVolume = e[0] * e[1] * e[2];
+            regionWords = node.densityOf.empty() ? "the domain box" : node.densityOf;
+        }
+        const double measured = latticeVolume / regionVolume;
+        const double gap = measured / *node.density - 1.0;
+        mDensityFromMesh[node.name] = {
+            {"density_from_mesh", measured}, {"density_from_mesh_gap", gap}, {"density_from_mesh_of", v.files.front()}};
+        if (std::abs(gap) > 0.01) {
+            // The gap is the mesh's surface placement between samples, second order in the voxel.
+            const double finer = mDomain.voxel * std::sqrt(0.008 / std::abs(gap));
+            char numbers[160];
+            std::snprintf(numbers, sizeof numbers, " holds %.4f of %s for `%s`, %+.1f %% from its density: %g",
+                          measured, regionWords.c_str(), node.name.c_str(), 100.0 * gap, *node.density);
+            char fix[160];
+            std::snprintf(fix, sizeof fix, "a `voxel:` of about %.2g mm (now %g)", finer, mDomain.voxel);
+            mContext->warn("density_from_mesh",
+                           "the mesh " + std::filesystem::path(v.files.front()).filename().string() + numbers +
+                               " (the solve met it on the voxels; the mesh's surface lies between them): " + fix +
+                               " brings the mesh within 1 %, as does a field that varies more about its level",
+                           {{"field", node.name},
+                            {"density_from_mesh", measured},
+                            {"target", *node.density},
+                            {"gap", gap},
+                            {"suggested_voxel_mm", finer}});
+        }
+    }
 }
 
 void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
@@ -1543,6 +1683,8 @@ nlohmann::json Job::report() const
             r["meshes"].push_back(entry);
         }
     }
+    for (const auto& [name, found] : mDensityFromMesh.items())
+        if (r.contains("fields") && r["fields"].contains(name)) r["fields"][name].update(found);
     for (const auto& reporter : mBuilder.reporters()) reporter(r);
     const std::vector<Warning> warnings = mContext->warnings();
     if (!warnings.empty()) {

@@ -16,6 +16,7 @@
 #include "mesher/writers/MeshWriters.h"
 
 #include <openvdb/openvdb.h>
+#include <map>
 #include <nlohmann/json.hpp>
 
 #include <array>
@@ -114,6 +115,18 @@ private:
     /// warning with the numbers and the fix, unless the recipe says `allow: [pieces]` (a plate of
     /// separate parts).
     void checkPieces(const std::vector<SolidBlock>& blocks);
+    /// Once the first mesh is written: each solved lattice's share of its region measured from the
+    /// mesh's volume (`density_from_mesh`), and a warning with the numbers and a voxel that closes
+    /// the gap when it is more than 1 % from the target. Lattices whose share the mesh cannot give
+    /// (a result other than the lattice or its infill, a density box that is not the domain's, a
+    /// blended or skin-framed infill) are left out.
+    void checkDensityFromMesh();
+    /// `drain:` under a `slices:` output: the result wrapped in drain channels (planned with the
+    /// other drains after the levels are solved), so every output of the run has them.
+    void drainForSlices();
+    /// A sheet of a constant `thickness:`: its walls measured over one cell into @a entry
+    /// (`walls_measured`), and a warning with the numbers when they miss the thickness.
+    void checkSheetWalls(const LevelNode& node, nlohmann::json& entry);
 
     template <typename Fn>
     auto timed(const std::string& stage, Fn&& fn);
@@ -181,6 +194,11 @@ private:
     nlohmann::json mReport;
     /// What `stiffness:` and `optimize:` found, by field name (merged into report.json `fields`).
     nlohmann::json mDesign = nlohmann::json::object();
+    /// The volume (mm³) of the region each solved lattice's density is measured on, by name.
+    std::map<std::string, double> mDensityRegionMm3;
+    /// checkDensityFromMesh()'s findings, by field name (merged into report.json `fields`).
+    nlohmann::json mDensityFromMesh = nlohmann::json::object();
+    bool mDensityChecked = false;
     std::array<std::array<double, 6>, 6> mPropertiesStiffness{};
     /// properties() of a box frame too small to hold a whole repeating cell (@a zone): the frame's
     /// cell homogenized in a frame of enough of them; false when the frame is not a box frame.

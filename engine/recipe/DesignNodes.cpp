@@ -77,6 +77,16 @@ MeshDesignSpace* meshSpaceOf(const FieldPtr& part)
     return p ? p->space().get() : nullptr;
 }
 
+}  // namespace
+
+std::function<double()> partMeshVolume(const FieldPtr& part)
+{
+    MeshDesignSpace* space = meshSpaceOf(part);
+    return [space] { return space ? space->meshVolume() : 0.0; };
+}
+
+namespace {
+
 double wallThickness(const RecipeNode& node, double voxel, const std::string& what)
 {
     const double t = node.number();
@@ -190,6 +200,9 @@ FieldPtr buildInfill(FieldBuilder& builder, const RecipeNode& spec, const std::s
             node->densityMask =
                 std::make_shared<BooleanField>(BooleanOp::Intersection, std::vector<FieldPtr>{core, node->region});
             node->densityOf += " within the cells of its skin frame";
+        } else if (blend == 0.0) {
+            // Skin plus lattice in the core: the mesh's share is read back by the job.
+            node->meshShare = LevelNode::MeshShare{name, partMeshVolume(part), skin > 0.0};
         }
     }
 

@@ -61,6 +61,27 @@ struct LevelNode {
     /// The field the density solve measures when it is not the solid's indicator (the same
     /// values; e.g. without a tiling whose tables would not pay off on the measuring pieces).
     FieldPtr densityIndicator{};
+    /// How the printed mesh holds this lattice, so the job can measure the lattice's share of its
+    /// region from the mesh (the volume a user gets) and compare it with the solve's.
+    struct MeshShare {
+        std::string meshOf;  ///< the node whose mesh holds the lattice (an infill, or the lattice)
+        /// mm³ of the part the region lies in (its mesh, read after the parts are built); 0 when
+        /// the part is not a mesh
+        std::function<double()> partVolume{};
+        bool skinned = false;  ///< the mesh also holds a skin: the part outside the region
+    };
+    /// Set by placements that mask the density (infill, `within:`); a lattice meshed alone over
+    /// its density box needs none.
+    std::optional<MeshShare> meshShare{};
+    /// A sheet of a constant `thickness:` in mm around @a mid's zero set: the job measures the
+    /// walls it really has over one @a cell (measureSheetWalls()) and warns when they miss.
+    struct WallCheck {
+        FieldPtr mid;
+        FieldPtr sheet;  ///< solid where <= 0
+        Box3 cell;
+        double thickness = 0.0;
+    };
+    std::optional<WallCheck> wallCheck{};
     /// The solid's level as the recipe's `level:` key means it, when the two differ (a Gaussian
     /// lattice's level is the iso-value t, its solid's the isolated strut's radius in mm).
     std::function<double(double level)> recipeLevel{};
@@ -93,7 +114,7 @@ struct DrainRequest {
     std::string name;   ///< the field
     std::string where;  ///< file:line:col of `drain:`
     std::shared_ptr<DrainedSolid> node;
-    FieldPtr part;          ///< the part: a channel ends outside it
+    FieldPtr part;          ///< the part: a channel ends outside it (null: outside the solid and its cavities)
     double diameter = 0.0;  ///< mm
     double wall = 0.0;      ///< the skin's or shell's thickness (mm): the traps are searched finer than it
 };
@@ -262,6 +283,9 @@ void addFalloffNodeTypes(std::vector<NodeType>& types);  // FalloffNodes.cpp: po
 /// DesignNodes.cpp: true when an `infill` node solves the level of the lattice field @a name (its
 /// `density:` counts for that lattice, which then needs no level of its own).
 bool levelSolvedByInfill(const Recipe& recipe, const std::string& name);
+/// DesignNodes.cpp: the enclosed volume (mm³) of the mesh behind the part field @a part, read when
+/// called (after the parts are built); 0 when @a part is not a mesh part.
+std::function<double()> partMeshVolume(const FieldPtr& part);
 /// The bounding box of the part an `infill` fills with the lattice @a name (the part named, not
 /// inline), if any: a box frame without a `domain:` fills it.
 std::optional<Box3> infillPartBox(FieldBuilder& builder, const std::string& name);

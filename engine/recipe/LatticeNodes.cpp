@@ -245,7 +245,10 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
                        std::make_shared<LevelSolid>(sheet, SolidSide::Below, 0.0),
                        {},
                        {}};
-        // The walls are as thick as asked (the shift is exact to first order in the curvature).
+        // The shift is exact to first order in the curvature: the job measures what it gives.
+        if (spec.has("thickness") && spec["thickness"].isNumber())
+            node.wallCheck = LevelNode::WallCheck{raw, sheet, Box3{Vec3d(0.0), Vec3d(cell[0], cell[1], cell[2])},
+                                                  spec["thickness"].number()};
         if (std::isfinite(thinnestWall)) {
             node.thinnest = [thinnestWall](double) { return thinnestWall; };
             node.thinnestKind = "wall";

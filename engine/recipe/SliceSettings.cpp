@@ -53,7 +53,9 @@ const std::vector<KeySpec>& sliceKeys()
         {"checks",
          {{"type", {"string", "boolean"}}},
          "printability checks (islands, resin traps, thin features): on, off, or strict (an island fails the job)",
-         "on"}};
+         "on"},
+        {"drain", object({{"diameter", number(), "the channels' diameter (mm)", "required"}}, {"diameter"}),
+         "drain holes in the result: every resin trap opened by a channel of D mm (the mesh has them too)", "—"}};
     return keys;
 }
 
@@ -130,6 +132,14 @@ SliceSettings parseSliceSettings(const RecipeNode& spec)
             spec["checks"].fail(
                 "expected `on` (report islands, resin traps and thin features), `strict` (an island "
                 "fails the job) or `off`");
+    }
+    if (spec.has("drain")) {
+        const RecipeNode d = spec["drain"];
+        if (!d.isMap()) d.fail("expected `drain: {diameter: D}`: every resin trap is opened by a channel of D mm");
+        d.checkKeys({"diameter"});
+        if (!d.has("diameter")) d.fail("give the channels' `diameter:` in mm, like `drain: {diameter: 2}`");
+        s.drainDiameter = d["diameter"].positiveNumber();
+        s.drainWhere = d.where();
     }
     return s;
 }

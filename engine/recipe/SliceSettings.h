@@ -48,6 +48,10 @@ struct SliceSettings {
     /// period are kept up to this many bytes and copied to the layers a period above (`reuse:
     /// off` sets 0: every layer computed).
     std::size_t reuseBytes = std::size_t(64) << 20;
+    /// `drain: {diameter}`: the result's resin traps opened by channels of this diameter (mm),
+    /// in the result itself, so a mesh of the same run has them too.
+    std::optional<double> drainDiameter;
+    std::string drainWhere;  ///< file:line:col of `drain:`
 };
 
 /// Reads a `slices:` map (errors name file, line and key).

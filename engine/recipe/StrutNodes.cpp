@@ -676,6 +676,7 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
             // `within:` a part: the share of the part's interior (the struts are trimmed to it).
             node.densityMask = within;
             node.densityOf = "the inside of `" + withinName + "`";
+            node.meshShare = LevelNode::MeshShare{name, partMeshVolume(within), false};
         } else if (!region) {
             node.densityBox = perCell ? middleCell : box;
             node.densityOf = perCell           ? "one cell of the periodic lattice (`density_of: cell`)"

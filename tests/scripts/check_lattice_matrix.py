@@ -42,6 +42,9 @@ TARGET_TOLERANCE = 0.01
 GUARD = 0.03
 KNOWN_MISSES = {"points-infill-skin": 0.08, "points-infill-drain": 0.08}
 TARGET = 0.2
+# The report's density_from_mesh against this script's: the same mesh, but a skinned infill's skin
+# is the part less the core's voxels there and a separately meshed shell here.
+REPORT_AGREEMENT = 0.005
 failures = []
 failed_runs_all = set()
 
@@ -209,7 +212,9 @@ def main():
                 closed, volume, triangles = mesh_facts(os.path.join(out, "m.stl"))
                 check(closed, "%s: the mesh is not closed and manifold" % name)
                 if region == "box":
-                    measured = volume / 20.0 ** 3
+                    # Over the domain as meshed (snapped to whole voxels: 19.95 mm at 0.15 mm).
+                    extent = np.array(report["domain"]["max"]) - np.array(report["domain"]["min"])
+                    measured = volume / float(np.prod(extent))
                 elif region == "part":
                     measured = volume / part_volume
                 else:
@@ -226,6 +231,17 @@ def main():
                       "%s: report.json does not say where the density is measured" % name)
                 print("    density %.4f over the %s (%s), %d triangles" %
                       (measured, region, solved[0].get("density_measured_on", "?") if solved else "?", triangles))
+                # The job reads the same share back from its mesh (`density_from_mesh`, its skin as
+                # the part less the core's voxels): it agrees with this independent measure, and a
+                # run off its target by more than 1 % is not silent.
+                from_mesh = solved[0].get("density_from_mesh") if len(solved) == 1 else None
+                if check(from_mesh is not None, "%s: report.json has no density_from_mesh" % name):
+                    check(abs(from_mesh / measured - 1) <= REPORT_AGREEMENT,
+                          "%s: report.json's density_from_mesh %.4f, measured here %.4f" % (name, from_mesh, measured))
+                    warned = any(w.get("code") == "density_from_mesh" for w in report.get("warnings", []))
+                    check(warned == (abs(from_mesh / TARGET - 1) > TARGET_TOLERANCE),
+                          "%s: density_from_mesh %.4f, the warning %s" %
+                          (name, from_mesh, "given" if warned else "missing"))
                 if "frame: m.csv" in outputs:
                     rows = np.loadtxt(os.path.join(out, "m.csv"), delimiter=",", skiprows=1, ndmin=2)
                     ends = rows[:, :6].reshape(-1, 3)
