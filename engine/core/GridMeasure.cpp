@@ -2,6 +2,7 @@
 
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
+#include <algorithm>
 
 #include <vector>
 
@@ -65,6 +66,30 @@ BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& 
         split.band.insert(split.band.end(), perLeaf[n].begin(), perLeaf[n].end());
     }
     return split;
+}
+
+double distanceCoverage(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, double voxel)
+{
+    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    grid.tree().getNodes(leaves);
+    std::vector<double> perLeaf(leaves.size(), 0.0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+        for (std::size_t n = range.begin(); n != range.end(); ++n) {
+            const auto* leaf = leaves[n];
+            const openvdb::CoordBBox box = leaf->getNodeBoundingBox();
+            if (!box.hasOverlap(region)) continue;
+            const float* data = leaf->buffer().data();
+            const bool whole = region.isInside(box);
+            double sum = 0.0;
+            for (int i = 0; i < 512; ++i)
+                if (whole || region.isInside(leaf->offsetToGlobalCoord(i)))
+                    sum += std::clamp(0.5 - double(data[i]) / voxel, 0.0, 1.0);
+            perLeaf[n] = sum;
+        }
+    });
+    double covered = double(countTilesBelow(grid, region, 0.0f));
+    for (const double sum : perLeaf) covered += sum;
+    return covered;
 }
 
 std::uint64_t countBelow(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float threshold)

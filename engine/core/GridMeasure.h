@@ -18,6 +18,12 @@ struct BandSplit {
 };
 BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi);
 
+/// The voxels of @a region inside a distance field's zero set, each sample's cell counted by how
+/// much of it lies inside: 1/2 - value/@a voxel clamped to [0, 1] (exact for a face parallel to
+/// the cells, where a count of samples below zero is half a voxel off), tiles below zero whole.
+/// Summed per leaf, then in leaf order: the same for any thread count.
+double distanceCoverage(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, double voxel);
+
 /// Number of voxels in @a region whose value is below @a threshold (tiles included).
 std::uint64_t countBelow(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float threshold);
 

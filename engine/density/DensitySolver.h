@@ -18,8 +18,11 @@ struct DensitySolution {
     double achieved = 0.0;  ///< share of domain voxel centres inside, measured on the grid
     std::uint64_t insideVoxels = 0;
     std::uint64_t domainVoxels = 0;  ///< the denominator: domain voxels (inside the mask, if any)
-    bool coverage = false;           ///< measured with sub-voxel coverage (value ties), not a count
-    int rounds = 0;                  ///< fine passes needed (1 unless the coarse bracket missed)
+    /// With a mask: its inside in voxels by distanceCoverage() (the region's volume as a mesh of
+    /// it would enclose; the count above is half a voxel off along faces in planes of samples).
+    double maskCoverageVoxels = 0.0;
+    bool coverage = false;  ///< measured with sub-voxel coverage (value ties), not a count
+    int rounds = 0;         ///< fine passes needed (1 unless the coarse bracket missed)
     std::uint64_t evaluatedLeaves = 0;
 };
 

@@ -201,7 +201,9 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         options.context = context;
         options.margin = 0;
         options.stage = "measuring the density's space";
-        sol.domainVoxels = countBelow(*evaluateSparse(*mask, domain, options), domain.indexBox(), 0.0f);
+        const openvdb::FloatGrid::Ptr maskGrid = evaluateSparse(*mask, domain, options);
+        sol.domainVoxels = countBelow(*maskGrid, domain.indexBox(), 0.0f);
+        sol.maskCoverageVoxels = distanceCoverage(*maskGrid, domain.indexBox(), domain.voxel);
         if (sol.domainVoxels == 0)
             throw JobError(
                 "the space the density is measured in has no voxel inside the domain: check the "

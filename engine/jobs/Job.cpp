@@ -356,7 +356,7 @@ void Job::solveLevels()
             // The region's volume: the mask's voxels, or the box the density is measured over.
             const double measuringVoxel = node.densityBox && node.densityVoxel ? *node.densityVoxel : mDomain.voxel;
             const Box3 box = node.densityBox ? *node.densityBox : mDomain.box;
-            mDensityRegionMm3[node.name] = node.densityMask ? double(s.domainVoxels) * std::pow(measuringVoxel, 3)
+            mDensityRegionMm3[node.name] = node.densityMask ? s.maskCoverageVoxels * std::pow(measuringVoxel, 3)
                                                             : box.extent()[0] * box.extent()[1] * box.extent()[2];
             // The region whose share `density:` is, in the words a user set it in.
             entry["density_measured_on"] = node.densityOf.empty() ? "the domain box" : node.densityOf;

@@ -121,6 +121,48 @@ KINDS = {
 SLICED = {"tpms-network", "tpms-sheet", "struts-gaussian", "expr"}
 
 
+# The other ways of sizing a lattice, the other frames, and the properties output: each run is
+# (name, fields and result, outputs, what to check). Box domains of 12 mm keep them quick.
+BOX12 = "domain: {box: [[0, 0, 0], [12, 12, 12]]}"
+EXTRA_RUNS = [
+    ("size-tpms-level", BOX12 + "\nfields:\n  g: {tpms: gyroid, cell: 6, level: 0.4}\nresult: g", ["mesh: m.stl"], {}),
+    ("size-tpms-thickness-mm", BOX12 + "\nfields:\n  g: {tpms: gyroid, cell: 6, solid: sheet, thickness: 0.6}\nresult: g",
+     ["mesh: m.stl"], {"walls_mm": ("g", 0.6)}),
+    ("size-tpms-density-map",
+     BOX12 + "\nfields:\n  g: {tpms: gyroid, cell: 6, density: {ramp: {axis: z, from: 0.2, to: 0.3}}}\nresult: g",
+     ["mesh: m.stl"], {"box_density": 0.25}),
+    ("size-tpms-stiffness",
+     BOX12 + "\nmaterial: form2\nfields:\n  g: {tpms: gyroid, cell: 6, solid: network, stiffness: {E_ratio: 0.03}}"
+     "\nresult: g",
+     ["mesh: m.stl"], {"design": "g"}),
+    ("size-struts-radius",
+     BOX12 + "\nfields:\n  s: {struts: {cell: bcc, size: 4}, kernel: capsule, radius: 0.5}\nresult: s", ["mesh: m.stl"], {}),
+    ("size-struts-level",
+     BOX12 + "\nfields:\n  s: {struts: {cell: bcc, size: 4}, kernel: {gaussian: {sigma: 0.4}}, level: 0.35}\nresult: s",
+     ["mesh: m.stl"], {}),
+    ("frame-cylinder",
+     "fields:\n  t: {struts: {cell: grid, cylinder: {radius: 10, inner: 6, height: 8, base: [0, 0, 0], cells: [2, 12, 2]}}, "
+     "kernel: capsule, density: 0.2}\nresult: t", ["mesh: m.stl", "frame: m.csv"], {}),
+    ("frame-sphere",
+     "fields:\n  b: {struts: {cell: bcc, sphere: {radius: 8, inner: 5, center: [0, 0, 0], cells: [3, 10, 1]}}, "
+     "kernel: capsule, radius: 0.4}\nresult: b", ["mesh: m.stl"], {}),
+    ("frame-between",
+     "fields:\n  floor: {surface: {x: \"20*u\", y: \"12*v\", z: \"1.5*sin(tau*u)*sin(pi*v)\"}}\n"
+     "  roof: {surface: {x: \"20*u\", y: \"12*v\", z: \"7 + 2*v\"}}\n"
+     "  slab: {struts: {cell: bcc, between: [floor, roof], cells: [5, 3, 2]}, kernel: capsule, radius: 0.4}\nresult: slab",
+     ["mesh: m.stl", "frame: m.csv"], {}),
+    ("frame-skin-infill",
+     "fields:\n  part: {mesh: %(part)s}\n"
+     "  sp: {tpms: schwarz-p, cell: [2, 2, 1.4], solid: sheet, frame: {skin: {part: part, depth: 0.8}}}\n"
+     "  filled: {infill: {part: part, lattice: sp, skin: 0.8, density: 0.3}}\nresult: filled",
+     ["mesh: m.stl"], {"measured_on": "cells of its skin frame"}),
+    ("output-properties",
+     BOX12 + "\nmaterial: form2\nfields:\n  g: {tpms: gyroid, cell: 6, density: 0.2}\nresult: g\n"
+     "properties: {resolution: 24}",
+     ["properties: p.json"], {"properties": "p.json"}),
+]
+
+
 def with_keys(node, extra):
     """The inline map @node with @extra keys added before its closing brace."""
     return node[:-1] + ", " + extra + "}" if extra else node
@@ -171,6 +213,7 @@ def main():
     part_closed, part_volume, _ = mesh_facts(mesh_path)
     check(part_closed, "bracket.stl is not closed")
     runs = 0
+    density_runs = 0  # the kind x placement runs, each solved for TARGET
     over_target = []
     start = time.time()
     with tempfile.TemporaryDirectory() as folder:
@@ -220,6 +263,7 @@ def main():
                 else:
                     measured = (volume - skin_volume) / (part_volume - skin_volume)
                 error = abs(measured / TARGET - 1)
+                density_runs += 1
                 if error > TARGET_TOLERANCE:
                     over_target.append("%s %.4f" % (name, measured))
                 check(error <= KNOWN_MISSES.get(name, GUARD),
@@ -256,9 +300,55 @@ def main():
                     check(printability.get("resin_traps_above_crumb", 1) == 0,
                           "%s: the slices still hold resin traps: %s" %
                           (name, json.dumps(printability.get("resin_traps", []))[:300]))
+        for name, body, outputs, checks in EXTRA_RUNS:
+            if only and only not in name:
+                continue
+            text = "voxel: %g\n%s\noutputs: {%s}\n" % (VOXEL, body % {"part": mesh_path}, ", ".join(outputs))
+            p, out, path, seconds = run(voxlat, text, folder, name)
+            runs += 1
+            print("%-32s exit %d  %.1f s" % (name, p.returncode, seconds), flush=True)
+            if not check(p.returncode == 0, "%s: exit %d: %s" % (name, p.returncode, p.stderr.strip()[-400:])):
+                continue
+            report = json.load(open(os.path.join(out, "report.json")))
+            expected = {"report.json"}
+            for o in outputs:
+                f = o.split(": ")[1]
+                expected.add(f)
+                if o.startswith("mesh"):
+                    expected.add(f + ".preview.png")
+                if o.startswith("properties"):
+                    expected.add(f[:-len(".json")] + ".png")
+            check(set(os.listdir(out)) == expected,
+                  "%s: --out holds %s, expected %s" % (name, sorted(os.listdir(out)), sorted(expected)))
+            if "mesh: m.stl" in outputs:
+                closed, volume, triangles = mesh_facts(os.path.join(out, "m.stl"))
+                check(closed and triangles > 0, "%s: the mesh is not closed and manifold" % name)
+                if "box_density" in checks:
+                    extent = np.array(report["domain"]["max"]) - np.array(report["domain"]["min"])
+                    measured = volume / float(np.prod(extent))
+                    check(abs(measured / checks["box_density"] - 1) <= GUARD,
+                          "%s: a graded density of mean %.3f measures %.4f from the mesh" %
+                          (name, checks["box_density"], measured))
+            if "walls_mm" in checks:
+                field, thickness = checks["walls_mm"]
+                walls = report["fields"][field].get("walls_measured", {})
+                check(abs(walls.get("mean_mm", 0) / thickness - 1) <= 0.02,
+                      "%s: walls %s for thickness %g" % (name, json.dumps(walls), thickness))
+            if "design" in checks:
+                check("design" in report and "density" in json.dumps(report["design"]),
+                      "%s: report.json has no density designed from the stiffness" % name)
+            if "measured_on" in checks:
+                solved = [f for f in report["fields"].values() if "target_density" in f]
+                check(len(solved) == 1 and checks["measured_on"] in solved[0].get("density_measured_on", ""),
+                      "%s: density measured on %s" % (name, solved[0].get("density_measured_on") if solved else "?"))
+            if "properties" in checks:
+                props = json.load(open(os.path.join(out, checks["properties"])))
+                text = json.dumps(props)
+                check("C" in props or "stiffness" in text or "E_MPa" in text,
+                      "%s: the properties JSON has no stiffness: %s" % (name, text[:200]))
     print("%d runs in %.0f s" % (runs, time.time() - start))
     print("density within %g %% of the target (from the mesh): %d of %d runs; over: %s" %
-          (100 * TARGET_TOLERANCE, runs - len(over_target), runs, ", ".join(over_target) or "none"))
+          (100 * TARGET_TOLERANCE, density_runs - len(over_target), density_runs, ", ".join(over_target) or "none"))
     if failures:
         print("%d failed:" % len(failures))
         for f in failures:
