@@ -4,6 +4,7 @@
 
 #include "engine/jobs/PrinterProfile.h"
 #include "engine/jobs/SliceJob.h"
+#include "engine/recipe/SliceSettings.h"
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
 #include "fields/LevelSolid.h"
@@ -680,20 +681,125 @@ TEST(Slices, TheFormatIsTheRecipesThenTheExtensionsThenTheProfiles)
     auto startsWith = [](const std::filesystem::path& p, const std::string& bytes) {
         return readFile(p).compare(0, bytes.size(), bytes) == 0;
     };
-    for (const std::string format : {"sl1", "sl1s", "zip", "goo", "png", "exr"}) {
+    for (const std::string& format : voxlat::sliceFormatNames()) {
         const auto out = dir.path / ("any-" + format);
         slice("--printer mono-4k --format " + format, out);
         if (format == "png" || format == "exr")
             EXPECT_TRUE(std::filesystem::exists(out / ("00000." + format))) << format;
         else if (format == "goo")
             EXPECT_TRUE(startsWith(out, "V3.0")) << format;
-        else
+        else if (format == "ctb")
+            EXPECT_TRUE(startsWith(out, std::string("\x06\x01\xFD\x12", 4))) << format;
+        else if (format.starts_with("sl1") || format == "zip")
             EXPECT_TRUE(startsWith(out, "PK")) << format;
+        else  // the Photon Workshop formats
+            EXPECT_TRUE(startsWith(out, std::string("ANYCUBIC\0\0\0\0", 12))) << format;
     }
     for (const char* printer : {"saturn3-ultra", "saturn4", "mars4-max"}) {
         slice(std::string("--printer ") + printer, dir.path / printer);
         EXPECT_TRUE(startsWith(dir.path / printer, "V3.0")) << printer;
     }
+    // A .goo printer asked for part.ctb gets a .ctb (issue 39), a .ctb printer part.goo a .goo.
+    slice("--printer saturn4", dir.path / "part.ctb");
+    EXPECT_TRUE(startsWith(dir.path / "part.ctb", std::string("\x06\x01\xFD\x12", 4)));
+    slice("--printer mars2-pro", dir.path / "part.goo");
+    EXPECT_TRUE(startsWith(dir.path / "part.goo", "V3.0"));
+}
+
+TEST(Slices, AnExtensionThatNamesNoFormatIsRefusedBeforeAnyWork)
+{
+    TempDir dir;
+    const auto recipe = dir.write("small.yaml", kSmallSlices);
+    auto slice = [&](const std::string& args, const std::filesystem::path& out, std::string* text) {
+        return runCommand(
+            voxlatBinary() + " -q slice " + recipe.string() + " --preview off " + args + " -o " + out.string(), text);
+    };
+    std::string text;
+    for (const char* args : {"--printer saturn4", "--printer mono-4k --format zip", "--printer photon-mono-x"}) {
+        EXPECT_EQ(slice(args, dir.path / "part.xyz", &text), 2) << args << ": " << text;
+        EXPECT_NE(text.find("`.xyz`, which names no slice format"), std::string::npos) << text;
+        EXPECT_NE(text.find(".ctb"), std::string::npos) << "the message lists the extensions: " << text;
+        // Before any work: no slicing progress, no file.
+        EXPECT_EQ(text.find("slicing"), std::string::npos) << text;
+        EXPECT_FALSE(std::filesystem::exists(dir.path / "part.xyz")) << args;
+    }
+    // A folder of layers may have any name.
+    EXPECT_EQ(slice("--printer mono-4k --format png", dir.path / "layers.v1", &text), 0) << text;
+    EXPECT_TRUE(std::filesystem::exists(dir.path / "layers.v1" / "00000.png"));
+}
+
+TEST(Slices, PrintersListsEveryProfileWithItsDisplayAndFormat)
+{
+    std::string out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " printers", &out), 0) << out;
+    int native = 0, profiles = 0;
+    for (const auto& entry : std::filesystem::directory_iterator(sourceDir() / "data/printers")) {
+        if (entry.path().extension() != ".yaml") continue;
+        ++profiles;
+        // The profile's own words, read from its text, on the line that starts with its name.
+        const std::string text = readFile(entry.path());
+        // Keys at a line's start, or inside `display: {...}`.
+        auto value = [&](const std::string& key) {
+            const bool inDisplay = key != "name" && key != "format";
+            const std::string pattern = (inDisplay ? "" : "\n") + key + ": ";
+            const auto at = text.find(pattern, inDisplay ? text.find("\ndisplay:") : 0);
+            EXPECT_NE(at, std::string::npos) << entry.path() << " " << key;
+            const auto from = at + pattern.size();
+            std::string v = text.substr(from, text.find_first_of(",}#\n", from) - from);
+            while (!v.empty() && v.back() == ' ') v.pop_back();
+            return v;
+        };
+        const std::string name = entry.path().stem().string();
+        const auto line = out.find("\n" + name + " ");
+        ASSERT_NE(line, std::string::npos) << name << " missing from:\n" << out;
+        const std::string row = out.substr(line + 1, out.find('\n', line + 1) - line - 1);
+        const std::string format = value("format");
+        EXPECT_NE(row.find(" " + format + " "), std::string::npos) << row;
+        EXPECT_NE(row.find(value("pixels_x") + " x " + value("pixels_y")), std::string::npos) << row;
+        EXPECT_NE(row.find(value("width") + " x " + value("height")), std::string::npos) << row;
+        EXPECT_NE(row.find(value("name")), std::string::npos) << row;
+        native += format == "ctb" || text.find("Photon Workshop") != std::string::npos;
+    }
+    EXPECT_GE(native, 6) << "at least six Chitubox and Anycubic printers";
+    EXPECT_GE(profiles, 14);
+}
+
+TEST(Slices, HelpListsEverySubcommandWithAnExample)
+{
+    std::string out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " --help", &out), 0) << out;
+    // The subcommands CLI11 lists, each with a `voxlat NAME ...` line under Examples.
+    const auto list = out.find("SUBCOMMANDS:");
+    const auto examples = out.find("Examples:");
+    ASSERT_NE(list, std::string::npos) << out;
+    ASSERT_NE(examples, std::string::npos) << out;
+    std::istringstream lines(out.substr(list, examples - list));
+    std::string line;
+    std::getline(lines, line);
+    int count = 0;
+    while (std::getline(lines, line)) {
+        std::istringstream words(line);
+        std::string name;
+        if (!(words >> name)) continue;
+        ++count;
+        EXPECT_NE(out.find("voxlat " + name + " ", examples), std::string::npos) << name << " has no example";
+    }
+    EXPECT_EQ(count, 9) << out;
+    // The completion script offers the subcommands and the printers.
+    const std::string script = (sourceDir() / "tools/completion/voxlat.bash").string();
+    const std::string bin = std::filesystem::path(voxlatBinary()).parent_path().string();
+    auto complete = [&](const std::string& words, int cword) {
+        std::string reply;
+        EXPECT_EQ(runCommand("PATH=" + bin + ":$PATH bash -c '. " + script + "; COMP_WORDS=(" + words +
+                                 "); COMP_CWORD=" + std::to_string(cword) + "; _voxlat; echo \"${COMPREPLY[*]}\"'",
+                             &reply),
+                  0)
+            << reply;
+        return reply;
+    };
+    EXPECT_NE(complete("voxlat sl", 1).find("slice"), std::string::npos);
+    EXPECT_NE(complete("voxlat slice r.yaml --printer photon-mono", 3).find("photon-mono-x-6k"), std::string::npos);
+    EXPECT_NE(complete("voxlat slice r.yaml --format pm", 3).find("pm4n"), std::string::npos);
 }
 
 namespace {
