@@ -286,9 +286,9 @@ std::pair<double, double> storedDisplayMm(const PrinterProfile& p)
     return p.portrait ? std::pair{p.heightMm, p.widthMm} : std::pair{p.widthMm, p.heightMm};
 }
 
-/// Chitubox's .ctb, the plain layout (version from the profile's `ctb_version:`, default 4):
-/// the head (header, preview slots, parameters, layer table) reserved, each layer's record and
-/// ciphered RLE7 appended, the head written at the end.
+/// Chitubox's .ctb, the plain or encrypted layout (the profile's `ctb_version:`, default 4, and
+/// `ctb_encrypted:`): the head (header, preview slots, parameters, layer table) reserved, each
+/// layer's record and ciphered RLE7 appended, the signature (encrypted), the head written last.
 class CtbArchive final : public SliceArchive {
 public:
     CtbArchive(const fs::path& path, const std::string& where) : mFile(path, where) {}
@@ -297,6 +297,7 @@ public:
     {
         const PrinterProfile& p = s.printer;
         mHeader.version = p.ctbVersion;
+        mHeader.encrypted = p.ctbEncrypted;
         std::tie(mHeader.displayWidthMm, mHeader.displayHeightMm) = storedDisplayMm(p);
         mHeader.machineZMm = p.maxHeightMm;
         mHeader.layerMm = s.layerMm;
@@ -325,7 +326,7 @@ public:
         d.motion = index < bottom ? mHeader.bottom : mHeader.normal;
         d.lightOffS =
             mHeader.version >= 4 ? 0.0 : d.motion.waitBeforeLift + d.motion.waitAfterLift + d.motion.waitAfterRetract;
-        d.dataOffset = mFile.position() + ctbLayerRecordBytes(mHeader.version);
+        d.dataOffset = mFile.position() + ctbLayerRecordBytes(mHeader);
         d.dataLength = std::uint32_t(rle.size());
         std::string data = rle;
         ctbCipher(data, mHeader.key, std::uint32_t(index));
@@ -343,7 +344,9 @@ public:
         w = kCtbSmallPreviewW, h = kCtbSmallPreviewH;
         std::vector<std::uint8_t> small = thumbnailPixels(s, w, h);
         const std::string smallPreview = ctbPreview(small.data(), w, h, kCtbSmallPreviewW, kCtbSmallPreviewH);
-        mFile.commitWithHead(ctbHeadBytes(mHeader, largePreview, smallPreview, mLayers));
+        const std::uint64_t layersEnd = mFile.position();
+        mFile.append(ctbTailBytes(mHeader));
+        mFile.commitWithHead(ctbHeadBytes(mHeader, largePreview, smallPreview, mLayers, layersEnd));
     }
 
 private:

@@ -26,6 +26,9 @@ struct CtbHeader {
     double volumeMl = 0;
     std::string machineName;
     std::uint32_t antiAliasing = 1;
+    /// The encrypted layout (magic 0x12FD0107, §7: AES-256-CBC settings and signature) that
+    /// Chitubox 2 writes and some boards require; versions 4 and 5.
+    bool encrypted = false;
 };
 
 /// One entry of the layer table.
@@ -35,6 +38,11 @@ struct CtbLayerDef {
     std::uint64_t dataOffset = 0;
     std::uint32_t dataLength = 0;
 };
+
+/// The magic of the encrypted layout.
+constexpr std::uint32_t kCtbMagicEncrypted = 0x12FD0107;
+/// The encrypted layout's settings checksum: any value, its SHA-256 is signed (UVtools' choice).
+constexpr std::uint64_t kCtbChecksum = 0xCAFEBABE;
 
 /// Where the sections go: the header, the two preview slots (each its 32-byte header and room
 /// for the worst RLE15 image), the parameters, the layer table; layer records start at
@@ -56,14 +64,26 @@ CtbLayout ctbLayout(const CtbHeader& header);
 
 /// Everything before the first layer record: `layout.layersStart` bytes. @a largePreview and
 /// @a smallPreview are RLE15 data (ctbPreview()); @a layers holds every layer's entry.
+/// For the encrypted layout @a layersEnd (where the signature goes) is needed too.
 std::string ctbHeadBytes(const CtbHeader& header, const std::string& largePreview, const std::string& smallPreview,
-                         const std::vector<CtbLayerDef>& layers);
+                         const std::vector<CtbLayerDef>& layers, std::uint64_t layersEnd = 0);
 
-/// A layer's bytes in the file from its record on: v3+ the 84-byte LayerDefEx then @a data
-/// (already ciphered), v2 @a data alone. @a layer.dataOffset must be where the data lands.
+/// AES-256-CBC of @a plain (a multiple of 16 bytes) with the format's published key and IV
+/// (§7), from the IV afresh.
+std::string ctbAesCbc(const std::string& plain);
+
+/// What follows the last layer: nothing for the plain layout; for the encrypted one the
+/// signature (AES of SHA-256 of the checksum), after UVtools' 8 bytes and before its 4 for v5.
+std::string ctbTailBytes(const CtbHeader& header);
+/// Where the signature starts in a file whose layers end at @a layersEnd (encrypted layout).
+std::uint64_t ctbSignatureOffset(const CtbHeader& header, std::uint64_t layersEnd);
+
+/// A layer's bytes in the file from its record on: v3+ the 84-byte LayerDefEx (encrypted: the
+/// 88-byte record) then @a data (already ciphered), v2 @a data alone. @a layer.dataOffset must be
+/// where the data lands.
 std::string ctbLayerBytes(const CtbHeader& header, const CtbLayerDef& layer, const std::string& data);
-/// The size of the record before a layer's data (84 from v3, 0 for v2).
-std::size_t ctbLayerRecordBytes(int version);
+/// The size of the record before a layer's data (84 from v3, 0 for v2, 88 encrypted).
+std::size_t ctbLayerRecordBytes(const CtbHeader& header);
 
 /// RLE7 of a layer: the display is @a width x @a height grey pixels, black except the window of
 /// @a w x @a h bytes (row-major) at column @a col0, row @a row0. Grey g is stored as g >> 1.

@@ -10,6 +10,7 @@ refused before any work, and a bad `ctb_version:` is refused with the profile's 
 
 usage: check_ctb.py VOXLAT_BINARY
 """
+import hashlib
 import os
 import struct
 import subprocess
@@ -118,7 +119,33 @@ def decode_rle15(data, width, height):
     return count == width * height
 
 
+AES_KEY = bytes.fromhex("D05B8E3371DE3D1AE54F22DDDF5BFD94AB5D643A9D7EBFAF4203F310D8522AEA")
+AES_IV = bytes.fromhex("0F010A05050B060708060A0C0C0D090F")
+
+
+def aes_cbc(data, decrypt=False):
+    """§7: AES-256-CBC, no padding, from the published IV (python3-cryptography, else openssl)."""
+    try:
+        from cryptography.hazmat.primitives.ciphers import Cipher, algorithms, modes
+        c = Cipher(algorithms.AES(AES_KEY), modes.CBC(AES_IV))
+        op = c.decryptor() if decrypt else c.encryptor()
+        return op.update(data) + op.finalize()
+    except ImportError:
+        run = subprocess.run(["openssl", "enc", "-d" if decrypt else "-e", "-aes-256-cbc", "-K", AES_KEY.hex(), "-iv",
+                              AES_IV.hex(), "-nopad"], input=data, capture_output=True, check=True)
+        return run.stdout
+
+
+def signature_of(checksum):
+    return aes_cbc(hashlib.sha256(struct.pack("<Q", checksum)).digest())
+
+
 def check_cipher_vectors():
+    check(aes_cbc(bytes(16)).hex() == "fdef75459601828a4b0e88f22dcc56e8", "AES-CBC test vector of the reference")
+    check(signature_of(0).hex() == "1e9c9a1e7689201ecf60bbe265f7e84087e9cfb56565023913d35ee71acf87dc",
+          "signature of checksum 0")
+    check(signature_of(0xCAFEBABE).hex() == "05a372416adc7b35cd508ab10ac36bc451e640ed11760220be73bf8d962caed6",
+          "signature of checksum 0xCAFEBABE")
     check(keystream(0x12345678, 0, 12).hex() == "27c5d1ceea294a23ad8ec277", "layer 0 keystream of the reference")
     check(keystream(0x12345678, 1, 12).hex() == "4e051e24116a9678d4ce0ecd", "layer 1 keystream of the reference")
 
@@ -136,11 +163,68 @@ def slice_pair(voxlat, tmp, printer, name):
     return ctb, folder
 
 
-def check_archive(voxlat, tmp, printer, name, version, expect):
+def check_encrypted(b, folder, name, version, expect):
+    """§7: header, AES settings, previews, name, disclaimer, pointers, 88-byte records, signature."""
+    magic, settings_size, settings_off, _, ver, sig_size, sig_off = struct.unpack_from("<7I", b, 0)
+    check(magic == 0x12FD0107 and ver == version, f"{name}: magic {magic:#x}, version {ver}")
+    check(settings_size == 288 and settings_off == 48 and sig_size == 32, f"{name}: settings and signature sizes")
+    check(struct.unpack_from("<HHIII", b, 0x20) == (1, 1, 0, 42, 0), f"{name}: the header's fixed words")
+    st = aes_cbc(b[48:48 + 288], decrypt=True)
+    checksum = struct.unpack_from("<Q", st, 0)[0]
+    check(b[sig_off:sig_off + 32] == signature_of(checksum), f"{name}: the signature matches the settings' checksum")
+    if version >= 5:
+        check(b[sig_off - 8:sig_off] == bytes.fromhex("FA52204200000000") and b[sig_off + 32:] == bytes.fromhex(
+            "B332426D"), f"{name}: v5's bytes around the signature")
+    else:
+        check(sig_off + 32 == len(b), f"{name}: the signature ends the file")
+    h = {"width_mm": f32(st, 0x0C), "height_mm": f32(st, 0x10), "machine_z": f32(st, 0x14),
+         "total_mm": f32(st, 0x20), "layer_mm": f32(st, 0x24), "exposure": f32(st, 0x28),
+         "bottom_exposure": f32(st, 0x2C), "bottom_layers": u32(st, 0x34), "res_x": u32(st, 0x38),
+         "res_y": u32(st, 0x3C), "layers": u32(st, 0x40), "pwm": struct.unpack_from("<H", st, 0x7C)[0],
+         "key": u32(st, 0x80)}
+    for key, value in expect.items():
+        check(abs(h[key] - value) < 1e-4 if isinstance(value, float) else h[key] == value,
+              f"{name}: settings {key} = {h[key]}, expected {value}")
+    N, W, H = h["layers"], h["res_x"], h["res_y"]
+    check(N == 20 and h["key"] != 0, f"{name}: 20 layers, a non-zero key")
+    check(u32(st, 0xF4) == N - 1 and u32(st, 0x10C) == 320, f"{name}: last layer index, disclaimer length")
+    d_off = u32(st, 0x108)
+    check(b[d_off:d_off + 320] == DISCLAIMER, f"{name}: the disclaimer")
+    m_off, m_len = u32(st, 0xA0), u32(st, 0xA4)
+    check(b[m_off:m_off + m_len].decode() == expect_name_enc[name], f"{name}: machine name")
+    for off, size in ((u32(st, 0x44), (400, 300)), (u32(st, 0x48), (200, 125))):
+        pw, ph, data_off, data_len = struct.unpack_from("<4I", b, off)
+        check((pw, ph) == size and data_off == off + 16, f"{name}: preview header at {off}")
+        check(decode_rle15(b[data_off:data_off + data_len], pw, ph), f"{name}: preview {size} covers its pixels")
+    table = u32(st, 0x08)
+    for i in range(N):
+        record, page, size, zero = struct.unpack_from("<4I", b, table + 16 * i)
+        check(page == 0 and size == 88 and zero == 0, f"{name}: layer {i} pointer")
+        rsize, z, exposure, _off, data_off, page2, data_len, _, win_off, win_len = struct.unpack_from(
+            "<IfffIIIIII", b, record)
+        check(rsize == 88 and data_off == record + 88 and win_len == 0, f"{name}: layer {i} record")
+        check(abs(z - (i + 1) * 0.05) < 1e-5, f"{name}: layer {i} Z {z}")
+        bottom = i < h["bottom_layers"]
+        check(abs(exposure - (h["bottom_exposure"] if bottom else h["exposure"])) < 1e-5, f"{name}: layer {i} exposure")
+        image = decode_rle7(decipher(b[data_off:data_off + data_len], h["key"], i), W, H)
+        png = read_png(os.path.join(folder, f"{i:05d}.png"))
+        if image is not None:
+            expected = np.where(png >> 1 == 0, 0, png | 1).astype(np.uint8)
+            check(np.array_equal(expected, image), f"{name}: layer {i}: .ctb pixels differ from the PNG folder's")
+    print(f"{name}: encrypted v{version}, {N} layers of {W} x {H} decoded, signature checked, {len(b)} bytes")
+
+
+expect_name_enc = {}
+
+
+def check_archive(voxlat, tmp, printer, name, version, expect, encrypted=False):
     ctb, folder = slice_pair(voxlat, tmp, printer, name)
     if not ctb:
         return
     b = open(ctb, "rb").read()
+    if encrypted:
+        expect_name_enc[name] = expect_name[printer]
+        return check_encrypted(b, folder, name, version, expect)
     magic, ver = u32(b, 0), u32(b, 4)
     check(magic == (0x12FD0106 if version >= 4 else 0x12FD0086), f"{name}: magic {magic:#x}")
     check(ver == version, f"{name}: version {ver}")
@@ -211,14 +295,16 @@ def check_archive(voxlat, tmp, printer, name, version, expect):
     print(f"{name}: v{version}, {N} layers of {W} x {H} decoded, {len(b)} bytes")
 
 
-expect_name = {"elegoo-saturn": "ELEGOO SATURN", "mars2-pro": "ELEGOO Mars 2 Pro", "saturn4": "ELEGOO Saturn 4"}
+expect_name = {"elegoo-saturn": "ELEGOO SATURN", "mars2-pro": "ELEGOO Mars 2 Pro", "saturn4": "ELEGOO Saturn 4",
+               "mars3": "ELEGOO Mars 3"}
 
 
-def versioned_profile(tmp, version):
+def versioned_profile(tmp, version, encrypted=False):
     """elegoo-saturn's profile with another ctb_version, as a file of the user's."""
     source = os.path.join(os.path.dirname(__file__), "..", "..", "data", "printers", "elegoo-saturn.yaml")
-    text = open(source).read().replace("ctb_version: 4", f"ctb_version: {version}")
-    path = os.path.join(tmp, f"saturn-v{version}.yaml")
+    text = open(source).read().replace("ctb_version: 4", f"ctb_version: {version}" +
+                                       ("\nctb_encrypted: true" if encrypted else ""))
+    path = os.path.join(tmp, f"saturn-v{version}{'e' if encrypted else ''}.yaml")
     open(path, "w").write(text)
     expect_name[path] = "ELEGOO SATURN"
     return path
@@ -247,6 +333,12 @@ def check_refusals(voxlat, tmp):
                          capture_output=True, text=True)
     check(run.returncode == 2 and "saturn-v7.yaml:10" in run.stderr, f"ctb_version: 7 refused: {run.stderr}")
     check(not os.path.exists(os.path.join(tmp, "v7.ctb")), "ctb_version: 7: nothing written")
+    # The encrypted layout before version 4 likewise.
+    profile = versioned_profile(tmp, 3, True)
+    run = subprocess.run([voxlat, "-q", "slice", recipe, "--printer", profile, "-o", os.path.join(tmp, "v3e.ctb")],
+                         capture_output=True, text=True)
+    check(run.returncode == 2 and "saturn-v3e.yaml:11" in run.stderr, f"ctb_encrypted on v3 refused: {run.stderr}")
+    check(not os.path.exists(os.path.join(tmp, "v3e.ctb")), "ctb_encrypted on v3: nothing written")
 
 
 def main():
@@ -258,8 +350,14 @@ def main():
         check_archive(voxlat, tmp, "elegoo-saturn", "saturn", 4, saturn)
         for version in (2, 3, 5):
             check_archive(voxlat, tmp, versioned_profile(tmp, version), f"saturn-v{version}", version, saturn)
+        for version in (4, 5):
+            check_archive(voxlat, tmp, versioned_profile(tmp, version, True), f"saturn-v{version}e", version, saturn,
+                          encrypted=True)
         check_archive(voxlat, tmp, "mars2-pro", "mars2-pro", 4,
                       {"res_x": 1620, "res_y": 2560, "width_mm": 82.62, "height_mm": 130.56, "machine_z": 160.0})
+        check_archive(voxlat, tmp, "mars3", "mars3", 4,
+                      {"res_x": 4098, "res_y": 2560, "width_mm": 143.43, "height_mm": 89.6, "machine_z": 175.0},
+                      encrypted=True)
         # The issue's command line: a Saturn 4 (a .goo printer) asked for part.ctb gets a .ctb.
         check_archive(voxlat, tmp, "saturn4", "saturn4", 4,
                       {"res_x": 11520, "res_y": 5120, "width_mm": 218.88, "height_mm": 122.88})
