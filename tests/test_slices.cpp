@@ -4,6 +4,7 @@
 
 #include "engine/jobs/PrinterProfile.h"
 #include "engine/jobs/SliceJob.h"
+#include "engine/recipe/SliceSettings.h"
 #include "fields/Boolean.h"
 #include "fields/BoxField.h"
 #include "fields/LevelSolid.h"
@@ -12,6 +13,8 @@
 #include "fields/StrutConvolution.h"
 #include "fields/TpmsField.h"
 #include "mesher/slice/Slicer.h"
+#include "mesher/writers/CtbWriter.h"
+#include "mesher/writers/PhotonWorkshopWriter.h"
 #include "mesher/writers/SliceWriters.h"
 
 #include <gtest/gtest.h>
@@ -23,6 +26,7 @@
 #include <cmath>
 #include <map>
 #include <numbers>
+#include <sstream>
 
 using namespace voxlat;
 using namespace voxlat::test;
@@ -680,20 +684,126 @@ TEST(Slices, TheFormatIsTheRecipesThenTheExtensionsThenTheProfiles)
     auto startsWith = [](const std::filesystem::path& p, const std::string& bytes) {
         return readFile(p).compare(0, bytes.size(), bytes) == 0;
     };
-    for (const std::string format : {"sl1", "sl1s", "zip", "goo", "png", "exr"}) {
+    for (const std::string& format : voxlat::sliceFormatNames()) {
         const auto out = dir.path / ("any-" + format);
         slice("--printer mono-4k --format " + format, out);
         if (format == "png" || format == "exr")
             EXPECT_TRUE(std::filesystem::exists(out / ("00000." + format))) << format;
         else if (format == "goo")
             EXPECT_TRUE(startsWith(out, "V3.0")) << format;
-        else
+        else if (format == "ctb")
+            EXPECT_TRUE(startsWith(out, std::string("\x06\x01\xFD\x12", 4))) << format;
+        else if (format.starts_with("sl1") || format == "zip")
             EXPECT_TRUE(startsWith(out, "PK")) << format;
+        else  // the Photon Workshop formats
+            EXPECT_TRUE(startsWith(out, std::string("ANYCUBIC\0\0\0\0", 12))) << format;
     }
     for (const char* printer : {"saturn3-ultra", "saturn4", "mars4-max"}) {
         slice(std::string("--printer ") + printer, dir.path / printer);
         EXPECT_TRUE(startsWith(dir.path / printer, "V3.0")) << printer;
     }
+    // A .goo printer asked for part.ctb gets a .ctb (issue 39), a .ctb printer part.goo a .goo.
+    slice("--printer saturn4", dir.path / "part.ctb");
+    EXPECT_TRUE(startsWith(dir.path / "part.ctb", std::string("\x06\x01\xFD\x12", 4)));
+    slice("--printer mars2-pro", dir.path / "part.goo");
+    EXPECT_TRUE(startsWith(dir.path / "part.goo", "V3.0"));
+}
+
+TEST(Slices, AnExtensionThatNamesNoFormatIsRefusedBeforeAnyWork)
+{
+    TempDir dir;
+    const auto recipe = dir.write("small.yaml", kSmallSlices);
+    auto slice = [&](const std::string& args, const std::filesystem::path& out, std::string* text) {
+        return runCommand(
+            voxlatBinary() + " -q slice " + recipe.string() + " --preview off " + args + " -o " + out.string(), text);
+    };
+    std::string text;
+    for (const char* args : {"--printer saturn4", "--printer mono-4k --format zip", "--printer photon-mono-x"}) {
+        EXPECT_EQ(slice(args, dir.path / "part.xyz", &text), 2) << args << ": " << text;
+        EXPECT_NE(text.find("`.xyz`, which names no slice format"), std::string::npos) << text;
+        EXPECT_NE(text.find(".ctb"), std::string::npos) << "the message lists the extensions: " << text;
+        // Before any work: no slicing progress, no file.
+        EXPECT_EQ(text.find("slicing"), std::string::npos) << text;
+        EXPECT_FALSE(std::filesystem::exists(dir.path / "part.xyz")) << args;
+    }
+    // A folder of layers may have any name.
+    EXPECT_EQ(slice("--printer mono-4k --format png", dir.path / "layers.v1", &text), 0) << text;
+    EXPECT_TRUE(std::filesystem::exists(dir.path / "layers.v1" / "00000.png"));
+}
+
+TEST(Slices, PrintersListsEveryProfileWithItsDisplayAndFormat)
+{
+    std::string out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " printers", &out), 0) << out;
+    int native = 0, profiles = 0;
+    for (const auto& entry : std::filesystem::directory_iterator(sourceDir() / "data/printers")) {
+        if (entry.path().extension() != ".yaml") continue;
+        ++profiles;
+        // The profile's own words, read from its text, on the line that starts with its name.
+        const std::string text = readFile(entry.path());
+        // Keys at a line's start, or inside `display: {...}`.
+        auto value = [&](const std::string& key) {
+            const bool inDisplay = key != "name" && key != "format";
+            const std::string pattern = (inDisplay ? "" : "\n") + key + ": ";
+            const auto at = text.find(pattern, inDisplay ? text.find("\ndisplay:") : 0);
+            EXPECT_NE(at, std::string::npos) << entry.path() << " " << key;
+            const auto from = at + pattern.size();
+            std::string v = text.substr(from, text.find_first_of(",}#\n", from) - from);
+            while (!v.empty() && v.back() == ' ') v.pop_back();
+            return v;
+        };
+        const std::string name = entry.path().stem().string();
+        const auto line = out.find("\n" + name + " ");
+        ASSERT_NE(line, std::string::npos) << name << " missing from:\n" << out;
+        const std::string row = out.substr(line + 1, out.find('\n', line + 1) - line - 1);
+        const std::string format = value("format");
+        EXPECT_NE(row.find(" " + format + " "), std::string::npos) << row;
+        EXPECT_NE(row.find(value("pixels_x") + " x " + value("pixels_y")), std::string::npos) << row;
+        EXPECT_NE(row.find(value("width") + " x " + value("height")), std::string::npos) << row;
+        EXPECT_NE(row.find(value("name")), std::string::npos) << row;
+        native += format == "ctb" || text.find("Photon Workshop") != std::string::npos;
+    }
+    EXPECT_GE(native, 6) << "at least six Chitubox and Anycubic printers";
+    EXPECT_GE(profiles, 14);
+}
+
+TEST(Slices, HelpListsEverySubcommandWithAnExample)
+{
+    std::string out;
+    ASSERT_EQ(runCommand(voxlatBinary() + " --help", &out), 0) << out;
+    // The subcommands CLI11 lists, each with a `voxlat NAME ...` line under Examples.
+    auto list = out.find("Subcommands:");  // CLI11 2.x; later versions write SUBCOMMANDS
+    if (list == std::string::npos) list = out.find("SUBCOMMANDS:");
+    const auto examples = out.find("Examples:");
+    ASSERT_NE(list, std::string::npos) << out;
+    ASSERT_NE(examples, std::string::npos) << out;
+    std::istringstream lines(out.substr(list, examples - list));
+    std::string line;
+    std::getline(lines, line);
+    int count = 0;
+    while (std::getline(lines, line)) {
+        std::istringstream words(line);
+        std::string name;
+        if (!(words >> name)) continue;
+        ++count;
+        EXPECT_NE(out.find("voxlat " + name + " ", examples), std::string::npos) << name << " has no example";
+    }
+    EXPECT_EQ(count, 9) << out;
+    // The completion script offers the subcommands and the printers.
+    const std::string script = (sourceDir() / "tools/completion/voxlat.bash").string();
+    const std::string bin = std::filesystem::path(voxlatBinary()).parent_path().string();
+    auto complete = [&](const std::string& words, int cword) {
+        std::string reply;
+        EXPECT_EQ(runCommand("PATH=" + bin + ":$PATH bash -c '. " + script + "; COMP_WORDS=(" + words +
+                                 "); COMP_CWORD=" + std::to_string(cword) + "; _voxlat; echo \"${COMPREPLY[*]}\"'",
+                             &reply),
+                  0)
+            << reply;
+        return reply;
+    };
+    EXPECT_NE(complete("voxlat sl", 1).find("slice"), std::string::npos);
+    EXPECT_NE(complete("voxlat slice r.yaml --printer photon-mono", 4).find("photon-mono-x-6k"), std::string::npos);
+    EXPECT_NE(complete("voxlat slice r.yaml --format pm", 4).find("pm4n"), std::string::npos);
 }
 
 namespace {
@@ -808,4 +918,117 @@ TEST(Slices, AFolderOutputNeverDeletesWhatItDidNotMake)
               0)
         << out;
     EXPECT_TRUE(std::filesystem::exists(folder / "slices.json"));
+}
+
+namespace {
+/// Bytes from a hex dump with spaces ("06 01 FD 12").
+std::string fromHex(const std::string& text)
+{
+    std::string out;
+    std::istringstream in(text);
+    std::string byte;
+    while (in >> byte) out.push_back(char(std::stoi(byte, nullptr, 16)));
+    return out;
+}
+}  // namespace
+
+TEST(Slices, NativeFormatsMatchTheReferencesWorkedExamples)
+{
+    // shared/reference/ctb-format.md §9 and anycubic-format.md §11, built and re-parsed by their
+    // authors: a 4 x 4 panel of 0.2 x 0.2 mm, layer 0 all white, layer 1 a white 2 x 2 square in
+    // the centre, 0.05 mm layers, 30 s bottom exposure (one bottom layer), 2.5 s after.
+    const std::vector<std::uint8_t> white(16, 255), square(4, 255);
+    std::string c0 = voxlat::encodeCtbLayer(4, 4, white.data(), 0, 0, 4, 4);
+    std::string c1 = voxlat::encodeCtbLayer(4, 4, square.data(), 1, 1, 2, 2);
+    EXPECT_EQ(c0, fromHex("FF 10"));
+    EXPECT_EQ(c1, fromHex("80 05 FF 02 80 02 FF 02 80 05"));
+    voxlat::ctbCipher(c0, 0x12345678, 0);
+    voxlat::ctbCipher(c1, 0x12345678, 1);
+    EXPECT_EQ(c0, fromHex("D8 D5"));
+    EXPECT_EQ(c1, fromHex("CE 00 E1 26 91 68 69 7A 54 CB"));
+    voxlat::CtbHeader ctb;
+    ctb.version = 4;
+    ctb.displayWidthMm = ctb.displayHeightMm = 0.2;
+    ctb.machineZMm = 100;
+    ctb.totalHeightMm = 0.1;
+    ctb.layerMm = 0.05;
+    ctb.exposureS = 2.5;
+    ctb.bottomExposureS = 30;
+    ctb.bottomLayers = 1;
+    ctb.resolutionX = ctb.resolutionY = 4;
+    ctb.layers = 2;
+    ctb.key = 0x12345678;
+    ctb.machineName = "Test 4x4";
+    std::vector<voxlat::CtbLayerDef> defs(2);
+    defs[0].zMm = 0.05, defs[0].exposureS = 30, defs[0].dataLength = 2;
+    defs[1].zMm = 0.1, defs[1].exposureS = 2.5, defs[1].dataLength = 10;
+    const std::string head = voxlat::ctbHeadBytes(ctb, "", "", defs);
+    const std::string header = fromHex(
+        "06 01 FD 12 04 00 00 00 CD CC 4C 3E CD CC 4C 3E 00 00 C8 42 00 00 00 00 00 00 00 00 CD CC CC 3D "
+        "CD CC 4C 3D 00 00 20 40 00 00 F0 41 00 00 00 00 01 00 00 00 04 00 00 00 04 00 00 00 70 00 00 00 "
+        "E4 04 00 00 02 00 00 00 08 01 00 00 00 00 00 00 01 00 00 00 44 01 00 00 3C 00 00 00 01 00 00 00 "
+        "FF 00 FF 00 78 56 34 12 80 01 00 00 4C 00 00 00");
+    // Equal but for the offsets of sections the example packs and voxlat gives fixed preview slots.
+    for (const auto& [from, to] :
+         std::vector<std::pair<int, int>>{{0x00, 0x40}, {0x44, 0x48}, {0x4C, 0x54}, {0x58, 0x68}, {0x6C, 0x70}})
+        EXPECT_EQ(head.substr(from, to - from), header.substr(from, to - from)) << "header bytes at " << from;
+    const std::uint32_t table = *reinterpret_cast<const std::uint32_t*>(head.data() + 0x40);
+    const std::string entries = fromHex(
+        "CD CC 4C 3D 00 00 F0 41 00 00 00 00 80 05 00 00 02 00 00 00 00 00 00 00 54 00 00 00 00 00 00 00 "
+        "00 00 00 00 CD CC CC 3D 00 00 20 40 00 00 00 00 D6 05 00 00 0A 00 00 00 00 00 00 00 54 00 00 00 "
+        "00 00 00 00 00 00 00 00");
+    for (int k = 0; k < 2; ++k) {  // each entry but its data offset
+        EXPECT_EQ(head.substr(table + 36 * k, 12), entries.substr(36 * k, 12)) << k;
+        EXPECT_EQ(head.substr(table + 36 * k + 16, 20), entries.substr(36 * k + 16, 20)) << k;
+    }
+    const std::uint32_t info = *reinterpret_cast<const std::uint32_t*>(head.data() + 0x68);
+    const std::uint32_t nameAt = *reinterpret_cast<const std::uint32_t*>(head.data() + info + 0x1C);
+    EXPECT_EQ(head.substr(nameAt, 8 + 320), "Test 4x4" + voxlat::ctbDisclaimer());
+
+    // Photon Workshop, file version 516.
+    const std::string p0 = voxlat::encodePw0Layer(4, 4, white.data(), 0, 0, 4, 4);
+    const std::string p1 = voxlat::encodePw0Layer(4, 4, square.data(), 1, 1, 2, 2);
+    EXPECT_EQ(p0, fromHex("F0 10"));
+    EXPECT_EQ(p1, fromHex("00 05 F0 02 00 02 F0 02 00 05"));
+    EXPECT_EQ(voxlat::pw0ExposedPixels(p0), 16u);
+    EXPECT_EQ(voxlat::pw0ExposedPixels(p1), 4u);
+    voxlat::PhotonWorkshopHeader pw;
+    pw.version = 516;
+    pw.pixelUm = 50;
+    pw.layerMm = 0.05;
+    pw.exposureS = 2.5;
+    pw.bottomExposureS = 30;
+    pw.bottomLayers = 1;
+    pw.resolutionX = pw.resolutionY = 4;
+    pw.layers = 2;
+    for (voxlat::GooMotion* m : {&pw.bottom, &pw.normal}) {
+        m->liftDistance = {6, 0};
+        m->liftSpeed = {180, 180};  // mm/min: 3 mm/s in the file
+        m->retractSpeed = {180, 180};
+        m->waitAfterRetract = 1;
+    }
+    pw.machineName = "Photon Mono X";
+    pw.displayWidthMm = pw.displayHeightMm = 0.2;
+    pw.machineZMm = 245;
+    ASSERT_EQ(voxlat::photonWorkshopLayersStart(516, 2), 75784u);
+    const std::string ph = voxlat::photonWorkshopHeadBytes(pw, {{75784, 2, 30, true, 16}, {75786, 10, 2.5, false, 4}});
+    ASSERT_EQ(ph.size(), 75784u);
+    EXPECT_EQ(ph.substr(0, 0xA8),
+              fromHex("41 4E 59 43 55 42 49 43 00 00 00 00 04 02 00 00 08 00 00 00 34 00 00 00 00 00 00 00 98 00 00 00 "
+                      "B4 26 01 00 D0 26 01 00 24 27 01 00 6C 27 01 00 08 28 01 00 "
+                      "48 45 41 44 45 52 00 00 00 00 00 00 54 00 00 00 00 00 48 42 CD CC 4C 3D 00 00 20 40 00 00 80 3F "
+                      "00 00 F0 41 00 00 80 3F 00 00 C0 40 00 00 40 40 00 00 40 40 00 00 00 00 01 00 00 00 04 00 00 00 "
+                      "04 00 00 00 00 00 00 00 00 00 00 00 24 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 "
+                      "00 00 00 00 50 52 45 56 49 45 57 00 00 00 00 00 1C 26 01 00"));
+    EXPECT_EQ(ph.substr(0xA8, 12), fromHex("E0 00 00 00 78 00 00 00 A8 00 00 00"));
+    EXPECT_EQ(ph.substr(0x126B4, 0x12724 - 0x126B4),
+              fromHex("00 00 00 00 10 00 00 00 FF FF FF FF FF FF FF FF FF FF FF FF FF FF FF FF 00 00 00 00 "
+                      "4C 41 59 45 52 44 45 46 00 00 00 00 44 00 00 00 02 00 00 00 08 28 01 00 02 00 00 00 00 00 C0 40 "
+                      "00 00 40 40 00 00 F0 41 CD CC 4C 3D 10 00 00 00 00 00 00 00 0A 28 01 00 0A 00 00 00 00 00 C0 40 "
+                      "00 00 40 40 00 00 20 40 CD CC 4C 3D 04 00 00 00 00 00 00 00"));
+    EXPECT_EQ(ph.substr(0x1276C, 16), fromHex("4D 41 43 48 49 4E 45 00 00 00 00 00 9C 00 00 00"));
+    EXPECT_EQ(ph.substr(0x1277C, 14), std::string("Photon Mono X\0", 14));
+    EXPECT_EQ(ph.substr(0x127DC, 0x12808 - 0x127DC),
+              fromHex("70 77 30 49 6D 67 00 00 00 00 00 00 00 00 00 00 10 00 00 00 07 00 00 00 CD CC 4C 3E CD CC 4C 3E "
+                      "00 00 75 43 04 02 00 00 01 47 63 00"));
 }

@@ -371,7 +371,9 @@ int main(int argc, char** argv)
     auto* sliceCmd = app.add_subcommand("slice", "slice a recipe's result for a resin printer (" + formats + ")");
     addCommon(sliceCmd, sliceArgs);
     sliceCmd->add_option("--printer", slicePrinter, "printer profile: " + printers + " or a profile file");
-    sliceCmd->add_option("-o,--output", sliceFile, "archive (.sl1, .sl1s, .zip) or folder (with --format png|exr)");
+    sliceCmd->add_option("-o,--output", sliceFile,
+                         "archive, its format named by its extension (.ctb, .goo, .pwmx, .sl1s, ...), or folder (with "
+                         "--format png|exr)");
     sliceCmd->add_option("--layer", sliceLayer, "layer height in mm (default: the recipe's, else the printer's)");
     sliceCmd->add_option("--aa", sliceAa,
                          "anti-aliasing: on (default), off (binary, pixel centre) or sub-samples per axis");
@@ -395,6 +397,27 @@ int main(int argc, char** argv)
                               "density=FROM:TO:COUNT: C^H, E, G and conductivity against the result lattice's "
                               "density, with the Gibson-Ashby fit E/E_s = C rho^n, e.g. density=0.05:0.4:8");
 
+    auto* printersCmd = app.add_subcommand("printers", "list the printer profiles: display size, pixels, format");
+
+    // One example per subcommand, in the order above (tests/test_cli.cpp checks each is here).
+    app.footer(
+        "Examples:\n"
+        "  voxlat run gyroid.yaml --out out             all outputs of a recipe and report.json into out/\n"
+        "  voxlat mesh gyroid.yaml -o part.stl --tolerance 0.01\n"
+        "                                               one mesh, within 0.01 mm of the surface\n"
+        "  voxlat info gyroid.yaml --set voxel=0.1      domain, voxels, solved levels, density\n"
+        "  echo '1 2 3' | voxlat sample gyroid.yaml --gradient\n"
+        "                                               the field's value and gradient at points\n"
+        "  voxlat schema --markdown                     the recipe language's keys\n"
+        "  voxlat check gyroid.yaml                     validate a recipe without evaluating it\n"
+        "  voxlat slice gyroid.yaml --printer saturn4 -o part.goo\n"
+        "                                               layers for a resin printer (the extension names the "
+        "format)\n"
+        "  voxlat properties gyroid.yaml --json cell.json\n"
+        "                                               stiffness and conductivity of one cell\n"
+        "  voxlat printers                              the printer profiles --printer takes\n"
+        "Shell completion for bash: tools/completion/voxlat.bash");
+
     CLI11_PARSE(app, argc, argv);
     voxlat::JobContext context;
     voxlat::cli::attachTerminal(context, quiet);
@@ -405,7 +428,18 @@ int main(int argc, char** argv)
 
     try {
         openvdb::initialize();
-        if (*run) {
+        if (*printersCmd) {
+            std::printf("%-18s %-17s %-13s %-7s %s\n", "printer", "display mm", "pixels", "format", "name");
+            for (const std::string& name : voxlat::printerNames()) {
+                const voxlat::PrinterProfile p = voxlat::loadPrinterProfile(name);
+                const std::string mm = voxlat::formatNumber(p.widthMm) + " x " + voxlat::formatNumber(p.heightMm);
+                const std::string px = std::to_string(p.pixelsX) + " x " + std::to_string(p.pixelsY);
+                std::printf("%-18s %-17s %-13s %-7s %s\n", name.c_str(), mm.c_str(), px.c_str(), p.format.c_str(),
+                            p.name.c_str());
+            }
+            std::printf("(profiles in %s; --printer also takes the path of a profile file)\n",
+                        voxlat::printersFolder().c_str());
+        } else if (*run) {
             voxlat::Job job(voxlat::loadRecipe(runArgs.recipe, runArgs.sets), &context);
             job.writeOutputs(outDir, !noPreview);
             printSummary(job);

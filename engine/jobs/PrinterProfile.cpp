@@ -52,7 +52,9 @@ const std::vector<std::string> kProfileKeys{"name",
                                             "bottom_wait_after_lift",
                                             "bottom_wait_after_retract",
                                             "light_pwm",
-                                            "bottom_light_pwm"};
+                                            "bottom_light_pwm",
+                                            "ctb_version",
+                                            "ctb_encrypted"};
 
 bool looksLikePath(const std::string& s)
 {
@@ -190,6 +192,18 @@ PrinterProfile loadPrinterProfile(const std::string& nameOrPath, const std::stri
     if (top.has("area_fill")) p.areaFillPercent = top["area_fill"].positiveNumber();
     if (top.has("bottom_layers")) p.bottomLayers = wholeNumber(top["bottom_layers"], 1000);
     if (top.has("transition_layers")) p.transitionLayers = wholeNumber(top["transition_layers"], 1000);
+    if (top.has("ctb_version")) {
+        const RecipeNode v = top["ctb_version"];
+        p.ctbVersion = wholeNumber(v, 5);
+        if (p.ctbVersion < 2) v.fail("expected a .ctb version from 2 to 5 (4 is what Chitubox 1.9 writes)");
+    }
+    if (top.has("ctb_encrypted")) {
+        p.ctbEncrypted = top["ctb_encrypted"].boolean();
+        if (p.ctbEncrypted && p.ctbVersion < 4)
+            top["ctb_encrypted"].fail(
+                "the encrypted .ctb layout is version 4 or 5: set `ctb_version: 5` (what "
+                "Chitubox 2 writes) or drop `ctb_encrypted`");
+    }
     readMotion(top, "", p.motion);
     readMotion(top, "bottom_", p.bottomMotion);
     return p;

@@ -32,6 +32,8 @@ struct PrinterProfile {
     /// cure at exposure_first with `bottomMotion`, then `transition_layers` step down to exposure.
     int bottomLayers = 4, transitionLayers = 0;
     GooMotion bottomMotion, motion;
+    int ctbVersion = 4;          ///< the .ctb layout version written for this printer (2 to 5)
+    bool ctbEncrypted = false;   ///< the encrypted .ctb layout (versions 4 and 5)
     std::string displayWhere;    ///< file:line:col of `display` (for messages)
     std::string maxHeightWhere;  ///< file:line:col of `max_height`
 

@@ -5,7 +5,9 @@
 #include "engine/core/Version.h"
 #include "engine/jobs/OutputPaths.h"
 #include "mesher/writers/AtomicFile.h"
+#include "mesher/writers/CtbWriter.h"
 #include "mesher/writers/GooWriter.h"
+#include "mesher/writers/PhotonWorkshopWriter.h"
 #include "mesher/writers/SliceWriters.h"
 
 #include <unistd.h>
@@ -209,6 +211,214 @@ public:
     }
 };
 
+/// The seconds a layer's moves and waits take (speeds in mm/min).
+double moveTime(const GooMotion& m)
+{
+    double t = m.waitBeforeLift + m.waitAfterLift + m.waitAfterRetract;
+    for (int k = 0; k < 2; ++k) {
+        if (m.liftSpeed[k] > 0) t += 60.0 * m.liftDistance[k] / m.liftSpeed[k];
+        if (m.retractSpeed[k] > 0) t += 60.0 * m.retractDistance[k] / m.retractSpeed[k];
+    }
+    return t;
+}
+
+/// Layer @a index's exposure: the bottom layers' for the first @a bottom, then @a transition
+/// layers stepping down to the normal one.
+double layerExposure(int index, int bottom, int transition, double bottomExposure, double exposure)
+{
+    if (index < bottom) return bottomExposure;
+    if (index < bottom + transition)
+        return bottomExposure - (index - bottom + 1) * (bottomExposure - exposure) / (transition + 1);
+    return exposure;
+}
+
+/// The thumbnail of @a s as RGBA pixels of @a w x @a h.
+std::vector<std::uint8_t> thumbnailPixels(const SliceSummary& s, int& w, int& h)
+{
+    int channels = 0;
+    std::vector<std::uint8_t> rgba = decodePng(s.thumbnail(w, h), w, h, channels);
+    if (channels != 4) throw std::logic_error("the thumbnail is not RGBA");
+    return rgba;
+}
+
+/// An archive written as one file: the head (whose size begin() knows) reserved, the layers
+/// appended as they come, the head written over the reservation at finish().
+class HeadFirstFile {
+public:
+    HeadFirstFile(const fs::path& path, const std::string& where)
+    {
+        checkReplaceable(path, where);
+        fs::create_directories(fs::absolute(path).parent_path());
+        mFile = std::make_unique<AtomicFile>(path.string());
+    }
+    void reserve(std::uint64_t bytes)
+    {
+        const std::string zeros(1 << 16, '\0');
+        for (std::uint64_t left = bytes; left > 0;) {
+            const std::size_t n = std::size_t(std::min<std::uint64_t>(left, zeros.size()));
+            mFile->stream().write(zeros.data(), std::streamsize(n));
+            left -= n;
+        }
+        mPosition = bytes;
+    }
+    void append(const std::string& bytes)
+    {
+        mFile->stream().write(bytes.data(), std::streamsize(bytes.size()));
+        mPosition += bytes.size();
+    }
+    std::uint64_t position() const { return mPosition; }
+    void commitWithHead(const std::string& head)
+    {
+        mFile->stream().seekp(0);
+        mFile->stream().write(head.data(), std::streamsize(head.size()));
+        mFile->commit();
+    }
+
+private:
+    std::unique_ptr<AtomicFile> mFile;
+    std::uint64_t mPosition = 0;
+};
+
+/// The display's size in mm as stored (a portrait display's sides swapped), as the native
+/// formats state it beside the stored image's pixels.
+std::pair<double, double> storedDisplayMm(const PrinterProfile& p)
+{
+    return p.portrait ? std::pair{p.heightMm, p.widthMm} : std::pair{p.widthMm, p.heightMm};
+}
+
+/// Chitubox's .ctb, the plain or encrypted layout (the profile's `ctb_version:`, default 4, and
+/// `ctb_encrypted:`): the head (header, preview slots, parameters, layer table) reserved, each
+/// layer's record and ciphered RLE7 appended, the signature (encrypted), the head written last.
+class CtbArchive final : public SliceArchive {
+public:
+    CtbArchive(const fs::path& path, const std::string& where) : mFile(path, where) {}
+    LayerEncoding encoding() const override { return LayerEncoding::ctb; }
+    void begin(const SliceStart& s) override
+    {
+        const PrinterProfile& p = s.printer;
+        mHeader.version = p.ctbVersion;
+        mHeader.encrypted = p.ctbEncrypted;
+        std::tie(mHeader.displayWidthMm, mHeader.displayHeightMm) = storedDisplayMm(p);
+        mHeader.machineZMm = p.maxHeightMm;
+        mHeader.layerMm = s.layerMm;
+        mHeader.totalHeightMm = s.layers * s.layerMm;
+        mHeader.exposureS = s.exposureS;
+        mHeader.bottomExposureS = s.exposureFirstS;
+        mHeader.bottomLayers = std::uint32_t(std::min(p.bottomLayers, s.layers));
+        mHeader.transitionLayers = std::uint32_t(std::min(p.transitionLayers, s.layers - int(mHeader.bottomLayers)));
+        mHeader.resolutionX = std::uint32_t(s.storedWidth);
+        mHeader.resolutionY = std::uint32_t(s.storedHeight);
+        mHeader.layers = std::uint32_t(s.layers);
+        mHeader.bottom = p.bottomMotion;
+        mHeader.normal = p.motion;
+        mHeader.key = kKey;
+        mHeader.machineName = p.name;
+        mHeader.antiAliasing = s.settings.supersample > 0 ? 8 : 1;
+        mLayers.reserve(std::size_t(s.layers));
+        mFile.reserve(ctbLayout(mHeader).layersStart);
+    }
+    void addLayer(int index, const std::string& rle) override
+    {
+        CtbLayerDef d;
+        d.zMm = (index + 1) * mHeader.layerMm;
+        const int bottom = int(mHeader.bottomLayers), transition = int(mHeader.transitionLayers);
+        d.exposureS = layerExposure(index, bottom, transition, mHeader.bottomExposureS, mHeader.exposureS);
+        d.motion = index < bottom ? mHeader.bottom : mHeader.normal;
+        d.lightOffS =
+            mHeader.version >= 4 ? 0.0 : d.motion.waitBeforeLift + d.motion.waitAfterLift + d.motion.waitAfterRetract;
+        d.dataOffset = mFile.position() + ctbLayerRecordBytes(mHeader);
+        d.dataLength = std::uint32_t(rle.size());
+        std::string data = rle;
+        ctbCipher(data, mHeader.key, std::uint32_t(index));
+        mFile.append(ctbLayerBytes(mHeader, d, data));
+        mPrintTime += d.exposureS + moveTime(d.motion);
+        mLayers.push_back(d);
+    }
+    void finish(const SliceSummary& s) override
+    {
+        mHeader.printTimeS = std::uint32_t(std::lround(mPrintTime));
+        mHeader.volumeMl = s.volumeMm3 / 1000.0;
+        int w = kCtbLargePreviewW, h = kCtbLargePreviewH;
+        std::vector<std::uint8_t> large = thumbnailPixels(s, w, h);
+        const std::string largePreview = ctbPreview(large.data(), w, h, kCtbLargePreviewW, kCtbLargePreviewH);
+        w = kCtbSmallPreviewW, h = kCtbSmallPreviewH;
+        std::vector<std::uint8_t> small = thumbnailPixels(s, w, h);
+        const std::string smallPreview = ctbPreview(small.data(), w, h, kCtbSmallPreviewW, kCtbSmallPreviewH);
+        const std::uint64_t layersEnd = mFile.position();
+        mFile.append(ctbTailBytes(mHeader));
+        mFile.commitWithHead(ctbHeadBytes(mHeader, largePreview, smallPreview, mLayers, layersEnd));
+    }
+
+private:
+    static constexpr std::uint32_t kKey = 0x4C584F56;  // "VOXL": any non-zero key (firmware refuses 0)
+    HeadFirstFile mFile;
+    CtbHeader mHeader;
+    std::vector<CtbLayerDef> mLayers;
+    double mPrintTime = 0;
+};
+
+/// Anycubic Photon Workshop's binary layout in the file version of its extension: the head
+/// (tables before the layers) reserved, PW0 layers appended, the head written at the end.
+class PhotonWorkshopArchive final : public SliceArchive {
+public:
+    PhotonWorkshopArchive(const fs::path& path, const std::string& where, std::uint32_t version) : mFile(path, where)
+    {
+        mHeader.version = version;
+    }
+    LayerEncoding encoding() const override { return LayerEncoding::pw0; }
+    void begin(const SliceStart& s) override
+    {
+        const PrinterProfile& p = s.printer;
+        mHeader.pixelUm = 1000.0 * std::max(p.pitchX(), p.pitchY());
+        mHeader.layerMm = s.layerMm;
+        mHeader.exposureS = s.exposureS;
+        mHeader.bottomExposureS = s.exposureFirstS;
+        mHeader.bottomLayers = std::uint32_t(std::min(p.bottomLayers, s.layers));
+        mHeader.resolutionX = std::uint32_t(s.storedWidth);
+        mHeader.resolutionY = std::uint32_t(s.storedHeight);
+        mHeader.layers = std::uint32_t(s.layers);
+        mHeader.bottom = p.bottomMotion;
+        mHeader.normal = p.motion;
+        mHeader.machineName = p.name;
+        mHeader.softwareVersion = versionString();
+        std::tie(mHeader.displayWidthMm, mHeader.displayHeightMm) = storedDisplayMm(p);
+        mHeader.machineZMm = p.maxHeightMm;
+        mLayers.reserve(std::size_t(s.layers));
+        mFile.reserve(photonWorkshopLayersStart(mHeader.version, mHeader.layers));
+    }
+    void addLayer(int index, const std::string& code) override
+    {
+        if (mFile.position() + code.size() > 0xFFFFFFFFu)
+            throw JobError(
+                "the layers take more than the 4 GB a Photon Workshop file can address; slice a smaller "
+                "part or with a thicker `layer:`");
+        PhotonWorkshopLayer l;
+        l.address = std::uint32_t(mFile.position());
+        l.length = std::uint32_t(code.size());
+        l.bottom = index < int(mHeader.bottomLayers);
+        l.exposureS = l.bottom ? mHeader.bottomExposureS : mHeader.exposureS;
+        l.exposedPixels = pw0ExposedPixels(code);
+        mFile.append(code);  // every layer its own block: firmware refuses shared ones
+        mPrintTime += l.exposureS + moveTime(l.bottom ? mHeader.bottom : mHeader.normal);
+        mLayers.push_back(l);
+    }
+    void finish(const SliceSummary& s) override
+    {
+        mHeader.printTimeS = std::uint32_t(std::lround(mPrintTime));
+        mHeader.volumeMl = s.volumeMm3 / 1000.0;
+        int w = kPhotonPreviewW, h = kPhotonPreviewH;
+        const std::vector<std::uint8_t> rgba = thumbnailPixels(s, w, h);
+        mHeader.preview = photonWorkshopPreview(rgba.data(), w, h);
+        mFile.commitWithHead(photonWorkshopHeadBytes(mHeader, mLayers));
+    }
+
+private:
+    HeadFirstFile mFile;
+    PhotonWorkshopHeader mHeader;
+    std::vector<PhotonWorkshopLayer> mLayers;
+    double mPrintTime = 0;
+};
+
 /// Elegoo's .goo (V3): a placeholder header, the layers as they come, the ending, then the real
 /// header (which needs the previews and totals) written over the placeholder.
 class GooArchive final : public SliceArchive {
@@ -257,11 +467,7 @@ public:
         GooLayerDefinition d;
         d.zMm = (index + 1) * mHeader.layerMm;
         const int bottom = int(mHeader.bottomLayers), transition = int(mHeader.transitionLayers);
-        d.exposureS = index < bottom ? mHeader.bottomExposureS
-                      : index < bottom + transition
-                          ? mHeader.bottomExposureS -
-                                (index - bottom + 1) * (mHeader.bottomExposureS - mHeader.exposureS) / (transition + 1)
-                          : mHeader.exposureS;
+        d.exposureS = layerExposure(index, bottom, transition, mHeader.bottomExposureS, mHeader.exposureS);
         d.motion = index < bottom ? mHeader.bottom : mHeader.normal;
         const std::string block = gooLayerBytes(d, image);
         mFile->stream().write(block.data(), std::streamsize(block.size()));
@@ -282,20 +488,10 @@ public:
     }
 
 private:
-    static double moveTime(const GooMotion& m)
-    {
-        double t = m.waitBeforeLift + m.waitAfterLift + m.waitAfterRetract;
-        for (int k = 0; k < 2; ++k) {
-            if (m.liftSpeed[k] > 0) t += 60.0 * m.liftDistance[k] / m.liftSpeed[k];
-            if (m.retractSpeed[k] > 0) t += 60.0 * m.retractDistance[k] / m.retractSpeed[k];
-        }
-        return t;
-    }
     static std::string preview(const SliceSummary& s, int side)
     {
-        int w = 0, h = 0, channels = 0;
-        const std::vector<std::uint8_t> rgba = decodePng(s.thumbnail(side, side), w, h, channels);
-        if (channels != 4) throw std::logic_error("the thumbnail is not RGBA");
+        int w = side, h = side;
+        const std::vector<std::uint8_t> rgba = thumbnailPixels(s, w, h);
         return gooPreview(rgba.data(), w, h, side);
     }
 
@@ -304,6 +500,17 @@ private:
     GooHeader mHeader;
     double mPrintTime = 0;
 };
+
+/// The Photon Workshop formats of the archive table and the file version each is written in
+/// (the version Anycubic's own slicer writes for that printer: shared/reference/anycubic-format.md §10).
+const std::map<std::string, std::uint32_t>& photonWorkshopVersions()
+{
+    static const std::map<std::string, std::uint32_t> versions{
+        {"pwmo", 516}, {"pwms", 516}, {"pwma", 516}, {"pwmx", 516}, {"pmsq", 516}, {"pwmb", 516},
+        {"pm3", 516},  {"pm3m", 516}, {"dlp", 516},  {"px6s", 517}, {"pmx2", 517}, {"pm3r", 517},
+        {"pm3n", 517}, {"pm4n", 517}, {"pm5", 517},  {"dl2p", 517}};
+    return versions;
+}
 
 using ArchiveFactory = std::function<std::unique_ptr<SliceArchive>(const fs::path&, const std::string& where)>;
 
@@ -316,8 +523,17 @@ const std::map<std::string, ArchiveFactory>& archiveFactories()
         {"zip", [](const fs::path& p, const std::string& w) { return std::make_unique<ZipArchive>(p, "", w); }},
         {"png", [](const fs::path& p, const std::string& w) { return std::make_unique<PngFolder>(p, w); }},
         {"exr", [](const fs::path& p, const std::string& w) { return std::make_unique<ExrFolder>(p, w); }},
-        {"goo", [](const fs::path& p, const std::string& w) { return std::make_unique<GooArchive>(p, w); }}};
-    return factories;
+        {"goo", [](const fs::path& p, const std::string& w) { return std::make_unique<GooArchive>(p, w); }},
+        {"ctb", [](const fs::path& p, const std::string& w) { return std::make_unique<CtbArchive>(p, w); }}};
+    static const std::map<std::string, ArchiveFactory> all = [] {
+        std::map<std::string, ArchiveFactory> table = factories;
+        for (const auto& [format, version] : photonWorkshopVersions())
+            table[format] = [version](const fs::path& p, const std::string& w) {
+                return std::make_unique<PhotonWorkshopArchive>(p, w, version);
+            };
+        return table;
+    }();
+    return all;
 }
 
 }  // namespace

@@ -43,6 +43,8 @@ struct SliceStart {
 enum class LayerEncoding {
     png,         ///< PNG bytes of the stored image (encodeWindowPng)
     goo,         ///< Elegoo .goo image data (encodeGooLayer)
+    ctb,         ///< Chitubox RLE7, not yet ciphered (encodeCtbLayer)
+    pw0,         ///< Anycubic Photon Workshop PW0 (encodePw0Layer)
     fieldValues  ///< the field's float values over the window
 };
 

@@ -10,7 +10,9 @@
 #include "engine/core/Version.h"
 #include "mesher/slice/Slicer.h"
 #include "mesher/writers/AtomicFile.h"
+#include "mesher/writers/CtbWriter.h"
 #include "mesher/writers/GooWriter.h"
+#include "mesher/writers/PhotonWorkshopWriter.h"
 #include "mesher/writers/SliceWriters.h"
 
 #include <tbb/enumerable_thread_specific.h>
@@ -425,12 +427,15 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
         if (fieldValues) {
             t->exposedPixels = t->image.exposedPixels();
             slicer.fieldValues(z, t->values);
-        } else if (encoding == LayerEncoding::goo) {
+        } else if (encoding != LayerEncoding::png) {
             std::vector<std::uint8_t>& window = windows.local();
             int col0, row0, w, h;
             t->image.storedWindow(display, window, col0, row0, w, h);
             t->exposedPixels = t->image.exposedPixels();
-            t->bytes = encodeGooLayer(storedW, storedH, window.data(), col0, row0, w, h);
+            const auto encode = encoding == LayerEncoding::goo   ? encodeGooLayer
+                                : encoding == LayerEncoding::ctb ? encodeCtbLayer
+                                                                 : encodePw0Layer;
+            t->bytes = encode(storedW, storedH, window.data(), col0, row0, w, h);
         } else {
             // The exposed pixels summed by the encoder as it reads the window (the same sum), and
             // the PNG's CRC-32 for the zip from the encoder's own.

@@ -14,8 +14,28 @@ const std::vector<ArchiveFormatInfo>& archiveFormats()
         {"zip", ".zip", "a zip of PNG layers and slices.json, for DLP hosts that take PNG stacks"},
         {"png", "", "a folder of PNG layers and slices.json"},
         {"exr", "", "a folder of OpenEXR float layers (the field's values) and slices.json"},
-        {"goo", ".goo", "Elegoo .goo (V3) for Elegoo's Saturn and Mars printers: run-length layers, previews"}};
-    return formats;
+        {"goo", ".goo", "Elegoo .goo (V3) for Elegoo's Saturn and Mars printers: run-length layers, previews"},
+        {"ctb", ".ctb",
+         "Chitubox .ctb, unencrypted (version 2 to 5, the profile's `ctb_version:`, default 4) for the printers "
+         "that read Chitubox files (Elegoo Mars and Saturn, Creality LD, Phrozen, ...): RLE7 layers, previews"}};
+    static const std::vector<ArchiveFormatInfo> all = [] {
+        // Anycubic Photon Workshop: one binary layout, one extension per printer (its firmware
+        // reads only its own).
+        const std::vector<std::pair<const char*, const char*>> photon{
+            {"pwmo", "Photon Mono"},       {"pwms", "Photon Mono SE"},    {"pwma", "Photon Mono 4K"},
+            {"pwmx", "Photon Mono X"},     {"pmsq", "Photon Mono SQ"},    {"pwmb", "Photon Mono X 6K, M3 Plus"},
+            {"px6s", "Photon Mono X 6Ks"}, {"pmx2", "Photon Mono X2"},    {"pm3", "Photon M3"},
+            {"pm3m", "Photon M3 Max"},     {"pm3r", "Photon M3 Premium"}, {"pm3n", "Photon Mono 2"},
+            {"pm4n", "Photon Mono 4"},     {"pm5", "Photon Mono M5"},     {"dlp", "Photon Ultra"},
+            {"dl2p", "Photon D2"}};
+        std::vector<ArchiveFormatInfo> table = formats;
+        for (const auto& [ext, printer] : photon)
+            table.push_back(
+                {ext, std::string(".") + ext,
+                 std::string("Anycubic Photon Workshop file for the ") + printer + ": PW0 layers, preview"});
+        return table;
+    }();
+    return all;
 }
 
 std::vector<std::string> sliceFormatNames()
@@ -73,6 +93,21 @@ SliceSettings parseSliceSettings(const RecipeNode& spec)
         const auto formats = sliceFormatNames();
         if (std::find(formats.begin(), formats.end(), s.format) == formats.end())
             spec["format"].fail("unknown format `" + s.format + "` (valid: " + joinWords(formats) + ")");
+    }
+    // A file's extension names its format: one that names none is refused, never written in
+    // another format (a folder of PNG or EXR layers, `format: png` / `exr`, may have any name).
+    const std::string extension = std::filesystem::path(s.file).extension().string();
+    const auto formats = archiveFormats();
+    const auto named = std::find_if(formats.begin(), formats.end(),
+                                    [&](const ArchiveFormatInfo& f) { return f.extension == extension; });
+    const bool folder = s.format == "png" || s.format == "exr";
+    if (!extension.empty() && !folder && named == formats.end()) {
+        std::string known;
+        for (const ArchiveFormatInfo& f : formats)
+            if (!f.extension.empty()) known += (known.empty() ? "" : " ") + f.extension;
+        spec["file"].fail("`" + s.file + "` ends in `" + extension +
+                          "`, which names no slice format; name the file after the format the printer reads (" + known +
+                          "), or give `format: png` or `exr` for a folder of layers");
     }
     if (spec.has("position")) {
         const RecipeNode p = spec["position"];

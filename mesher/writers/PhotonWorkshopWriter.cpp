@@ -1,0 +1,305 @@
+#include "mesher/writers/PhotonWorkshopWriter.h"
+
+#include <algorithm>
+#include <cstring>
+#include <stdexcept>
+
+namespace voxlat {
+
+namespace {
+
+/// Appends little-endian numbers, fixed-width strings and table prefixes.
+class LittleEndian {
+public:
+    explicit LittleEndian(std::string& out) : mOut(out) {}
+    void u8(unsigned v) { mOut.push_back(char(v & 0xFF)); }
+    void u16(unsigned v)
+    {
+        u8(v);
+        u8(v >> 8);
+    }
+    void u32(std::uint32_t v)
+    {
+        u16(v & 0xFFFF);
+        u16(v >> 16);
+    }
+    void f32(double v)
+    {
+        const float f = float(v);
+        std::uint32_t bits;
+        std::memcpy(&bits, &f, 4);
+        u32(bits);
+    }
+    /// @a s NUL-padded to @a width bytes (cut to width - 1 so a NUL always ends it).
+    void text(const std::string& s, std::size_t width)
+    {
+        const std::size_t n = std::min(s.size(), width - 1);
+        mOut.append(s, 0, n);
+        mOut.append(width - n, '\0');
+    }
+    /// A named table's prefix: its 12-byte name and length field.
+    void table(const char* name, std::uint32_t length)
+    {
+        text(name, 12);
+        u32(length);
+    }
+    void raw(const std::string& s) { mOut += s; }
+
+private:
+    std::string& mOut;
+};
+
+constexpr std::uint32_t kPreviewTableBytes = 28 + 2 * kPhotonPreviewW * kPhotonPreviewH;
+constexpr std::uint32_t kColourTableBytes = 28, kExtraTableBytes = 16 + 56, kMachineTableBytes = 156,
+                        kSoftwareTableBytes = 164, kModelTableBytes = 48;
+
+std::uint32_t fileMarkBytes(std::uint32_t version)
+{
+    return version >= 517 ? 56 : version == 516 ? 52 : 48;
+}
+
+std::uint32_t headerBodyBytes(std::uint32_t version)
+{
+    return version >= 517 ? 92 : version == 516 ? 84 : 80;
+}
+
+/// Where each table starts (0: absent), in the order real files have them.
+struct Addresses {
+    std::uint32_t header = 0, preview = 0, colour = 0, layerDef = 0, extra = 0, machine = 0, software = 0, model = 0,
+                  layers = 0;
+};
+
+Addresses addresses(std::uint32_t version, std::uint32_t layers)
+{
+    if (version < 515 || version > 517) throw std::logic_error("photon workshop: file versions 515 to 517 only");
+    Addresses a;
+    a.header = fileMarkBytes(version);
+    a.preview = a.header + 16 + headerBodyBytes(version);
+    a.colour = a.preview + kPreviewTableBytes;
+    a.layerDef = a.colour + kColourTableBytes;
+    std::uint32_t next = a.layerDef + 16 + 4 + 32 * layers;
+    if (version >= 516) {
+        a.extra = next;
+        a.machine = a.extra + kExtraTableBytes;
+        next = a.machine + kMachineTableBytes;
+    }
+    if (version >= 517) {
+        a.software = next;
+        a.model = a.software + kSoftwareTableBytes;
+        next = a.model + kModelTableBytes;
+    }
+    a.layers = next;
+    return a;
+}
+
+double mmPerSecond(double mmPerMinute)
+{
+    return mmPerMinute / 60.0;
+}
+
+}  // namespace
+
+std::uint32_t photonWorkshopLayersStart(std::uint32_t version, std::uint32_t layers)
+{
+    return addresses(version, layers).layers;
+}
+
+std::string photonWorkshopHeadBytes(const PhotonWorkshopHeader& h, const std::vector<PhotonWorkshopLayer>& layers)
+{
+    if (layers.size() != h.layers) throw std::logic_error("photon workshop: one LAYERDEF record per layer");
+    const Addresses a = addresses(h.version, h.layers);
+    std::string out;
+    out.reserve(a.layers);
+    LittleEndian le(out);
+    const bool twoStages = h.normal.liftDistance[1] > 0 || h.bottom.liftDistance[1] > 0;
+    // File mark (§3).
+    le.text("ANYCUBIC", 12);
+    le.u32(h.version);
+    le.u32(h.version >= 517 ? 9 : h.version == 516 ? 8 : 5);
+    le.u32(a.header);
+    le.u32(a.software);
+    le.u32(a.preview);
+    le.u32(a.colour);
+    le.u32(a.layerDef);
+    le.u32(a.extra);
+    if (h.version == 515) {
+        le.u32(a.layers);
+    } else {
+        le.u32(a.machine);
+        le.u32(a.layers);
+    }
+    if (h.version >= 517) le.u32(a.model);
+    // HEADER (§4).
+    le.table("HEADER", headerBodyBytes(h.version));
+    le.f32(h.pixelUm);
+    le.f32(h.layerMm);
+    le.f32(h.exposureS);
+    le.f32(h.normal.waitAfterRetract);  // wait before cure
+    le.f32(h.bottomExposureS);
+    le.f32(double(h.bottomLayers));  // a float in this format
+    le.f32(h.normal.liftDistance[0] + h.normal.liftDistance[1]);
+    le.f32(mmPerSecond(h.normal.liftSpeed[0]));
+    le.f32(mmPerSecond(h.normal.retractSpeed[0]));
+    le.f32(h.volumeMl);
+    le.u32(1);  // anti-aliasing level: grey is in the pixels
+    le.u32(h.resolutionX);
+    le.u32(h.resolutionY);
+    le.f32(0);  // weight
+    le.f32(0);  // price
+    le.raw(std::string("$\0\0\0", 4));
+    le.u32(0);  // per-layer values off: the printer uses these globals (firmware trouble otherwise)
+    le.u32(h.printTimeS);
+    le.u32(0);                                        // transition layers
+    le.u32(0);                                        // transition type
+    if (h.version >= 516) le.u32(twoStages ? 1 : 0);  // advanced mode: EXTRA's two-stage lift
+    if (h.version >= 517) {
+        le.u16(0);  // grey
+        le.u16(0);  // blur
+        le.u32(0);  // resin type
+    }
+    // PREVIEW (§5).
+    le.table("PREVIEW", kPreviewTableBytes);
+    le.u32(kPhotonPreviewW);
+    le.raw(std::string("x\0\0\0", 4));
+    le.u32(kPhotonPreviewH);
+    const std::size_t previewBytes = std::size_t(2) * kPhotonPreviewW * kPhotonPreviewH;
+    if (h.preview.empty()) {
+        for (std::size_t k = 0; k < previewBytes / 2; ++k) le.u16(((40 >> 3) << 11) | ((40 >> 2) << 5) | (40 >> 3));
+    } else {
+        if (h.preview.size() != previewBytes) throw std::logic_error("photon workshop: the preview is 224 x 168");
+        le.raw(h.preview);
+    }
+    // Layer image colour table (§6).
+    le.u32(0);
+    le.u32(16);
+    for (int k = 0; k < 16; ++k) le.u8(0xFF);
+    le.u32(0);
+    // LAYERDEF (§7): each record as the globals of its kind of layer.
+    le.table("LAYERDEF", 4 + 32 * h.layers);
+    le.u32(h.layers);
+    for (const PhotonWorkshopLayer& l : layers) {
+        const GooMotion& m = l.bottom ? h.bottom : h.normal;
+        le.u32(l.address);
+        le.u32(l.length);
+        le.f32(m.liftDistance[0] + m.liftDistance[1]);
+        le.f32(mmPerSecond(m.liftSpeed[0]));
+        le.f32(l.exposureS);
+        le.f32(h.layerMm);
+        le.u32(l.exposedPixels);
+        le.u32(0);
+    }
+    if (h.version >= 516) {
+        // EXTRA (§8): its length field says 24 although it holds 56 bytes.
+        le.table("EXTRA", 24);
+        for (const GooMotion* m : {&h.bottom, &h.normal}) {
+            le.u32(2);
+            le.f32(m->liftDistance[0]);
+            le.f32(mmPerSecond(m->liftSpeed[0]));
+            le.f32(mmPerSecond(m->retractSpeed[0]));
+            le.f32(m->liftDistance[1]);
+            le.f32(mmPerSecond(m->liftSpeed[1]));
+            le.f32(mmPerSecond(m->retractSpeed[1]));
+        }
+        le.table("MACHINE", kMachineTableBytes);
+        le.text(h.machineName, 96);
+        le.text("pw0Img", 16);
+        le.u32(16);  // most anti-aliasing levels
+        le.u32(7);   // property fields, as real files
+        le.f32(h.displayWidthMm);
+        le.f32(h.displayHeightMm);
+        le.f32(h.machineZMm);
+        le.u32(h.version);
+        le.u32(6506241);  // machine background, as real files
+    }
+    if (h.version >= 517) {
+        le.text("voxlat", 32);
+        le.u32(kSoftwareTableBytes);
+        le.text(h.softwareVersion, 32);
+        le.text("linux-x64", 64);
+        le.text("", 32);
+        le.table("MODEL", kModelTableBytes);
+        for (double v : h.modelBox) le.f32(v);
+        le.u32(0);  // no supports
+        le.f32(0);
+    }
+    if (out.size() != a.layers) throw std::logic_error("photon workshop: the head has the wrong size");
+    return out;
+}
+
+std::string encodePw0Layer(int width, int height, const std::uint8_t* window, int col0, int row0, int w, int h)
+{
+    std::string out;
+    unsigned colour = 0;
+    std::uint64_t length = 0;
+    auto flush = [&] {
+        const std::uint64_t most = colour == 0 || colour == 15 ? 4095 : 15;
+        while (length > 0) {
+            const unsigned run = unsigned(std::min(length, most));
+            length -= run;
+            if (most == 4095) {
+                const unsigned word = (colour << 12) | run;
+                out.push_back(char(word >> 8));
+                out.push_back(char(word & 0xFF));
+            } else {
+                out.push_back(char((colour << 4) | run));
+            }
+        }
+    };
+    auto add = [&](unsigned c, std::uint64_t n) {
+        if (n == 0) return;
+        if (c != colour && length > 0) flush();
+        colour = c;
+        length += n;
+    };
+    add(0, std::uint64_t(row0) * width);
+    for (int r = 0; r < h; ++r) {
+        add(0, std::uint64_t(col0));
+        const std::uint8_t* row = window + std::size_t(r) * w;
+        for (int c = 0; c < w;) {
+            const unsigned v = row[c] >> 4;
+            int e = c + 1;
+            while (e < w && (row[e] >> 4) == v) ++e;
+            add(v, std::uint64_t(e - c));
+            c = e;
+        }
+        add(0, std::uint64_t(width - col0 - w));
+    }
+    add(0, std::uint64_t(height - row0 - h) * width);
+    flush();
+    return out;
+}
+
+std::uint32_t pw0ExposedPixels(const std::string& code)
+{
+    std::uint64_t exposed = 0;
+    for (std::size_t k = 0; k < code.size();) {
+        const unsigned b = std::uint8_t(code[k]);
+        const unsigned c = b >> 4;
+        if (c == 0 || c == 15) {
+            const unsigned run = ((b & 0x0F) << 8) | std::uint8_t(code[k + 1]);
+            if (c == 15) exposed += run;
+            k += 2;
+        } else {
+            exposed += b & 0x0F;
+            k += 1;
+        }
+    }
+    return std::uint32_t(exposed);
+}
+
+std::string photonWorkshopPreview(const std::uint8_t* rgba, int width, int height)
+{
+    std::string out;
+    out.reserve(std::size_t(2) * kPhotonPreviewW * kPhotonPreviewH);
+    LittleEndian le(out);
+    for (int r = 0; r < kPhotonPreviewH; ++r)
+        for (int c = 0; c < kPhotonPreviewW; ++c) {
+            const int x = std::min(width - 1, c * width / kPhotonPreviewW);
+            const int y = std::min(height - 1, r * height / kPhotonPreviewH);
+            const std::uint8_t* p = rgba + 4 * (std::size_t(y) * width + x);
+            le.u16(unsigned((p[0] & 0xF8) << 8) | unsigned((p[1] & 0xFC) << 3) | unsigned(p[2] >> 3));
+        }
+    return out;
+}
+
+}  // namespace voxlat
