@@ -857,3 +857,195 @@ TEST(Properties, DensityOfCellSolvesTheJobsLevelOnThePeriodicCell)
     EXPECT_NE(out.find("few.yaml:3:"), std::string::npos) << out;
     EXPECT_NE(out.find("along z"), std::string::npos) << out;
 }
+
+TEST(PropertyDesign, SearchTrialsRunAtTheConvergedResolution)
+{
+    // With no `resolution:` anywhere, a stiffness or sigma search homogenizes its trials at the
+    // resolution the convergence check chooses at its first trial that carries load (the same
+    // policy as `voxlat properties`), reported with that check's numbers.
+    TempDir dir;
+    const std::string gyroid = R"(material: form2
+voxel: 0.25
+domain: {box: [[0, 0, 0], [10, 10, 10]]}
+properties: {max_resolution: 48}
+fields:
+  lattice: {tpms: gyroid, cell: 5, solid: network, stiffness: {E: 40 MPa, axis: z}}
+result: lattice
+outputs: {properties: p.json}
+)";
+    const auto report = runReport(dir, "stiff", gyroid);
+    ASSERT_FALSE(report.is_null());
+    const auto& s = report["design"]["lattice"]["stiffness"];
+    EXPECT_NE(s["resolution_from"].get<std::string>().find("convergence"), std::string::npos) << s.dump();
+    ASSERT_TRUE(s.contains("convergence")) << s.dump();
+    EXPECT_EQ(s["resolution"], s["convergence"]["resolutions"].back());
+    // (At most 48 voxels here, to keep the test short: the check's own estimate bounds the error.)
+    const double estimated = s["estimated_error"].get<double>();
+    EXPECT_GT(estimated, 0.0) << s.dump();
+    // The job's own homogenization of the result, converged on its own ladder, meets the target
+    // within the search's tolerance and the convergence error.
+    const auto p = nlohmann::json::parse(readFile(dir.path / "stiff" / "p.json"));
+    const double E = p["E_MPa"][2].get<double>();
+    EXPECT_LE(std::abs(E / 40.0 - 1.0), 0.01 + estimated) << E;
+    std::printf("stiffness at the converged resolution %d: E_z %.4f MPa (target 40, estimated error %.4f)\n",
+                s["resolution"].get<int>(), E, estimated);
+
+    // `optimize:`: every trial at one resolution, the convergence check's; an independent
+    // homogenization at that resolution of the chosen sigma gives the search's modulus.
+    const std::string head = R"(material: form2
+voxel: 0.25
+domain: {box: [[0, 0, 0], [15, 15, 15]]}
+properties: {cell: [5, 5, 5], origin: [5, 5, 5], max_resolution: 48}
+fields:
+  lattice:
+    struts: {cell: x, size: 5}
+    density: 0.2
+)";
+    const auto opt = runReport(dir, "opt",
+                               head +
+                                   "    kernel: {gaussian: {sigma: 0.3}}\n"
+                                   "    optimize: {sigma: [0.2, 0.8], axis: z, samples: 3, tolerance: 0.1, baseline: "
+                                   "false}\nresult: lattice\n");
+    ASSERT_FALSE(opt.is_null());
+    const auto& o = opt["design"]["lattice"]["optimize"];
+    ASSERT_TRUE(o.contains("convergence")) << o.dump();
+    const int resolution = o["resolution"].get<int>();
+    EXPECT_EQ(resolution, o["convergence"]["resolutions"].back().get<int>());
+    char chosen[160];
+    std::snprintf(chosen, sizeof chosen, "    kernel: {gaussian: {sigma: %.17g}}\nresult: lattice\n",
+                  o["sigma"].get<double>());
+    std::string fixed = head;
+    fixed.replace(fixed.find("max_resolution: 48"), 18, "resolution: " + std::to_string(resolution));
+    const auto again = propertiesOf(dir, "again", fixed + chosen);
+    ASSERT_FALSE(again.is_null());
+    EXPECT_NEAR(again["E_MPa"][2].get<double>(), o["E_MPa"].get<double>(), 1e-9 * o["E_MPa"].get<double>());
+}
+
+TEST(Properties, DensityOfCellOnATpmsHoldsTheDensityInOnePeriod)
+{
+    // A gyroid network of 10 mm cells in a 13 mm box (one cell and 0.3 of the next): `density:`
+    // over the box (`frame`, the default) is not the density of the periodic cell; `density_of:
+    // cell` solves the level over one period. Reference: the solid share of one period at the
+    // job's level, counted on a 160^3 lattice of points.
+    TempDir dir;
+    std::map<std::string, double> inCell;
+    for (const std::string of : {"frame", "cell"}) {
+        const std::string text =
+            "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [13, 13, 13]]}\n"
+            "properties: {resolution: 48}\nfields:\n  lattice: {tpms: gyroid, cell: 10, solid: "
+            "network, density: 0.3, density_of: " +
+            of + "}\nresult: lattice\noutputs: {properties: p.json}\n";
+        const auto report = runReport(dir, of, text);
+        ASSERT_FALSE(report.is_null()) << of;
+        if (of == "cell")
+            EXPECT_NE(report["fields"]["lattice"]["density_measured_on"].get<std::string>().find("one period"),
+                      std::string::npos);
+        Recipe r = parseRecipe(text, of + ".yaml", dir.path.string());
+        Job job(std::move(r));
+        job.solveLevels();
+        const FieldPtr f = job.field("lattice");
+        constexpr int n = 160;
+        std::vector<Vec3d> points;
+        std::vector<double> values(std::size_t(n) * n);
+        std::int64_t solid = 0;
+        for (int i = 0; i < n; ++i) {
+            points.clear();
+            for (int j = 0; j < n; ++j)
+                for (int k = 0; k < n; ++k)
+                    points.emplace_back((i + 0.5) * 10.0 / n, (j + 0.5) * 10.0 / n, (k + 0.5) * 10.0 / n);
+            f->values(points, values);
+            for (double v : values) solid += v < 0.0;
+        }
+        inCell[of] = double(solid) / double(std::int64_t(n) * n * n);
+        // The homogenized cell holds the density asked either way (its level solved on its voxels).
+        const auto p = nlohmann::json::parse(readFile(dir.path / of / "p.json"));
+        EXPECT_LT(std::abs(p["relative_density"].get<double>() / 0.3 - 1.0), 0.005);
+    }
+    std::printf("one period's density: density_of frame %.5f, cell %.5f (asked 0.3)\n", inCell["frame"],
+                inCell["cell"]);
+    EXPECT_LT(std::abs(inCell["cell"] / 0.3 - 1.0), 0.002) << inCell["cell"];
+    EXPECT_GT(std::abs(inCell["frame"] / 0.3 - 1.0), 0.005) << inCell["frame"];
+    // Refused where the cells change from place to place, naming the line.
+    int status = 0;
+    std::string out;
+    runReport(dir, "oriented",
+              "voxel: 0.25\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n  lattice: {tpms: gyroid, cell: 5, "
+              "density: 0.3, density_of: cell, frame: {cylinder: {center: [5, 5, 0], axis: [0, 0, 1], around: "
+              "6}}}\nresult: lattice\n",
+              &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("oriented.yaml:4:"), std::string::npos) << out;
+    runReport(dir, "graded",
+              "voxel: 0.25\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n  lattice: {tpms: gyroid, cell: 5, "
+              "density: {ramp: {axis: z, from: 0.2, to: 0.4}}, density_of: cell}\nresult: lattice\n",
+              &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("graded.yaml:4:"), std::string::npos) << out;
+}
+
+TEST(Properties, AGradedLatticeExportsOneMaterialPerSlab)
+{
+    // A gyroid graded along z from 0.2 to 0.4 over 20 mm, cells of 5 mm: four slabs, one
+    // material each, the cell homogenized at the slab's mean target density (a linear ramp: its
+    // value at the slab's middle), each card equal to an independent homogenization of the
+    // uniform lattice at that density.
+    TempDir dir;
+    const std::string head =
+        "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [10, 10, 20]]}\n"
+        "properties: {resolution: 24, export: graded.inp}\nfields:\n";
+    const auto report =
+        runReport(dir, "graded",
+                  head +
+                      "  lattice: {tpms: gyroid, cell: 5, solid: network, density: {ramp: {axis: z, from: 0.2, to: "
+                      "0.4}}}\nresult: lattice\n");
+    ASSERT_FALSE(report.is_null());
+    const std::string text = readFile(dir.path / "graded" / "graded.inp");
+    // Split at each card's first comment line.
+    std::vector<std::string> cards;
+    for (std::size_t at = text.find("** voxlat"); at != std::string::npos;) {
+        const std::size_t next = text.find("** voxlat", at + 1);
+        cards.push_back(text.substr(at, next == std::string::npos ? std::string::npos : next - at));
+        at = next;
+    }
+    ASSERT_EQ(cards.size(), 4u) << text;
+    double previous = 0.0;
+    for (int s = 0; s < 4; ++s) {
+        const MaterialCard card = readMaterialCard(cards[s]);
+        EXPECT_EQ(card.name, "LATTICE_SLAB" + std::to_string(s + 1));
+        EXPECT_EQ(card.constants, 21);
+        const std::string region = "** region: z from " + formatNumber(5.0 * s) + " to " + formatNumber(5.0 * s + 5.0);
+        EXPECT_NE(cards[s].find(region), std::string::npos) << cards[s];
+        const double rho = 0.2 + 0.2 * (5.0 * s + 2.5) / 20.0;
+        const auto& row = report["material_cards"]["slabs"][s];
+        EXPECT_NEAR(row["target_density"].get<double>(), rho, 1e-3);
+        char density[40];
+        std::snprintf(density, sizeof density, "%.17g", row["target_density"].get<double>());
+        const auto uniform =
+            propertiesOf(dir, "uniform" + std::to_string(s),
+                         "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nproperties: "
+                         "{resolution: 24}\nfields:\n  lattice: {tpms: gyroid, cell: 5, solid: network, density: " +
+                             std::string(density) + "}\nresult: lattice\n");
+        ASSERT_FALSE(uniform.is_null());
+        EXPECT_LT(std::abs(uniform["relative_density"].get<double>() / rho - 1.0), 0.01);
+        for (int i = 0; i < 6; ++i)
+            for (int j = 0; j < 6; ++j)
+                EXPECT_NEAR(card.C[i][j], uniform["C_MPa"][i][j].get<double>(),
+                            1e-6 * uniform["C_MPa"][0][0].get<double>())
+                    << s << ": " << i << "," << j;
+        EXPECT_GT(card.C[2][2], previous);  // stiffer as the density rises
+        previous = card.C[2][2];
+    }
+    // A density that varies across the slabs: refused with the reason, nothing written.
+    int status = 0;
+    std::string out;
+    runReport(dir, "across",
+              head +
+                  "  ball: {sphere: {center: [5, 5, 10], radius: 2}}\n  rho: {distance-ramp: {field: ball, from: "
+                  "0.4, to: 0.2, over: 6}}\n  lattice: {tpms: gyroid, cell: 5, solid: network, density: rho}\n"
+                  "result: lattice\n",
+              &status, &out);
+    EXPECT_EQ(status, 2) << out;
+    EXPECT_NE(out.find("across.yaml:4:"), std::string::npos) << out;
+    EXPECT_NE(out.find("varies across"), std::string::npos) << out;
+    EXPECT_FALSE(std::filesystem::exists(dir.path / "across" / "report.json"));
+}

@@ -107,6 +107,14 @@ int sample(voxlat::Job& job, const std::string& fieldName, bool gradient)
     return 0;
 }
 
+/// ", chosen by convergence, estimated error E %" when a search's resolution was chosen so.
+std::string resolutionNote(const nlohmann::json& search)
+{
+    if (!search.contains("estimated_error")) return {};
+    return ", chosen by convergence, estimated error " +
+           voxlat::formatNumber(100.0 * search["estimated_error"].get<double>()) + " %";
+}
+
 /// What `stiffness:` and `optimize:` chose, one line per field (empty without them).
 std::string designSummary(const nlohmann::json& report)
 {
@@ -118,7 +126,8 @@ std::string designSummary(const nlohmann::json& report)
             const auto& o = d["optimize"];
             out << "optimize " << name << ": sigma " << n(o["sigma"]) << " mm (the stiffest E_"
                 << o["axis"].get<std::string>() << " " << n(o["E_MPa"]) << " MPa at density " << n(o["density"]) << ", "
-                << o["trials"].size() << " trials at " << o["resolution"].get<int>() << " voxels)";
+                << o["trials"].size() << " trials at " << o["resolution"].get<int>() << " voxels" << resolutionNote(o)
+                << ")";
             if (o.contains("capsule_E_MPa"))
                 out << "; capsule joints " << n(o["capsule_E_MPa"]) << " MPa"
                     << (o["ratio_to_capsule"].is_null() ? "" : ", ratio " + n(o["ratio_to_capsule"]));
@@ -128,7 +137,8 @@ std::string designSummary(const nlohmann::json& report)
             const auto& s = d["stiffness"];
             out << "stiffness " << name << ": density " << n(s["density"]) << " gives E_"
                 << s["axis"].get<std::string>() << " " << n(s["achieved_E_MPa"]) << " MPa (target "
-                << n(s["target_E_MPa"]) << ")\n";
+                << n(s["target_E_MPa"]) << "; trials at " << s["resolution"].get<int>() << " voxels"
+                << resolutionNote(s) << ")\n";
         }
     }
     return out.str();

@@ -1492,6 +1492,18 @@ BeamFrame Job::frame()
 void Job::writeMaterialCard(const std::filesystem::path& path)
 {
     checkReplaceable(path, mRecipe.properties.where + ": export");
+    for (const GradedNode& node : mBuilder.gradedNodes())
+        if (node.name == mRecipe.result) {
+            const std::string cards = gradedMaterialCards(node);
+            timed("write " + path.filename().string(), [&] {
+                AtomicFile file(path.string());
+                file.stream() << cards;
+                file.commit();
+                return 0;
+            });
+            mReport["outputs"].push_back(path.string());
+            return;
+        }
     const nlohmann::json& p = properties();
     timed("write " + path.filename().string(), [&] {
         AtomicFile file(path.string());
@@ -1500,6 +1512,104 @@ void Job::writeMaterialCard(const std::filesystem::path& path)
         return 0;
     });
     mReport["outputs"].push_back(path.string());
+}
+
+std::string Job::gradedMaterialCards(const GradedNode& node)
+{
+    const std::string where = mRecipe.properties.where + ": export";
+    const RecipeNode spec = mRecipe.fieldSpec(node.name);
+    if (!spec.isMap() || !spec.has("density"))
+        throw InputError(where + ": the graded lattice `" + node.name +
+                         "` has no `density:` map to take slab by slab; export the cards of a lattice of one density");
+    const int axis = node.axis;
+    const char* axisName = "xyz";
+    const Box3 box = mDomain.box;
+    const double slab = node.slab;
+    const int slabs = std::max(1, int(std::ceil(box.extent()[axis] / slab - 1e-9)));
+    // The density field on a lattice of 16 x 16 points across each of 8 planes of a slab: the
+    // slab's mean target density, and how much the density varies across the slab (which one
+    // material per slab cannot carry).
+    constexpr int kAcross = 16, kPlanes = 8;
+    const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+    std::vector<double> mean(slabs, 0.0), lows(slabs), highs(slabs);
+    double worstAcross = 0.0, worstAt = 0.0;
+    for (int s = 0; s < slabs; ++s) {
+        const double from = box.min[axis] + s * slab, to = std::min(box.max[axis], from + slab);
+        std::vector<Vec3d> points;
+        for (int k = 0; k < kPlanes; ++k)
+            for (int i = 0; i < kAcross; ++i)
+                for (int j = 0; j < kAcross; ++j) {
+                    Vec3d p;
+                    p[axis] = from + (k + 0.5) / kPlanes * (to - from);
+                    p[u] = box.min[u] + (i + 0.5) / kAcross * box.extent()[u];
+                    p[v] = box.min[v] + (j + 0.5) / kAcross * box.extent()[v];
+                    points.push_back(p);
+                }
+        std::vector<double> rho(points.size());
+        node.densityField->values(points, rho);
+        double sum = 0.0;
+        lows[s] = std::numeric_limits<double>::infinity(), highs[s] = -lows[s];
+        for (int k = 0; k < kPlanes; ++k) {
+            const auto first = rho.begin() + std::ptrdiff_t(k) * kAcross * kAcross;
+            const auto [lo, hi] = std::minmax_element(first, first + kAcross * kAcross);
+            if (*hi - *lo > worstAcross)
+                worstAcross = *hi - *lo, worstAt = points[std::size_t(k) * kAcross * kAcross][axis];
+        }
+        for (double r : rho) {
+            sum += r;
+            lows[s] = std::min(lows[s], r);
+            highs[s] = std::max(highs[s], r);
+        }
+        mean[s] = sum / double(rho.size());
+    }
+    // One material per slab holds when the density is the same across a slab: 0.005 (half a
+    // per cent of density) is below what the density solve itself resolves.
+    constexpr double kAcrossTolerance = 0.005;
+    if (worstAcross > kAcrossTolerance)
+        throw InputError(where + ": the graded lattice `" + node.name + "` is taken in slabs along " + axisName[axis] +
+                         " (one cell thick), but its density also varies across them (by " + formatNumber(worstAcross) +
+                         " at " + axisName[axis] + " = " + formatNumber(worstAt) +
+                         " mm), which one material per slab cannot carry: grade the density along " + axisName[axis] +
+                         " only, or export the cards of lattices of one density");
+    std::string cards;
+    nlohmann::json rows = nlohmann::json::array();
+    StageProgress progress(mContext, "material cards of " + node.name, std::uint64_t(slabs));
+    for (int s = 0; s < slabs; ++s) {
+        mContext->checkCancelled();
+        YAML::Node copy = YAML::Clone(spec.yaml());
+        copy["density"] = exactNumber(mean[s]);
+        Recipe uniform = trialRecipe(mRecipe, node.name, copy);
+        JobContext quiet;
+        Job job(std::move(uniform), &quiet);
+        const nlohmann::json p = timed("homogenize", [&] { return job.properties(); });
+        for (const auto& w : quiet.warnings())
+            if (w.code == "no_load_path" || w.code == "loose_pieces" || w.code == "not_converged") mContext->warn(w);
+        const double from = box.min[axis] + s * slab, to = std::min(box.max[axis], from + slab);
+        const std::string name = node.name + "_slab" + std::to_string(s + 1);
+        std::string region = std::string(1, axisName[axis]) + " from " + formatNumber(from) + " to " +
+                             formatNumber(to) + " mm (slab " + std::to_string(s + 1) + " of " + std::to_string(slabs) +
+                             " of the grading, one cell thick); target density " + formatNumber(mean[s]) +
+                             " (mean over the slab; " + formatNumber(lows[s]) + " to " + formatNumber(highs[s]) + ")";
+        cards += abaqusMaterialCard(p, name, mRecipe.source->path, region);
+        std::string upper = name;
+        for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
+        rows.push_back({{"material", upper},
+                        {"from_mm", from},
+                        {"to_mm", to},
+                        {"target_density", mean[s]},
+                        {"target_density_range", {lows[s], highs[s]}},
+                        {"relative_density", p["relative_density"]},
+                        {"E_MPa", p["E_MPa"]},
+                        {"resolution", p["cell"]["voxels"]}});
+        progress.add();
+    }
+    progress.finish();
+    mReport["material_cards"] = {{"axis", std::string(1, axisName[axis])},
+                                 {"slabs", rows},
+                                 {"method",
+                                  "one material per slab of the grading (one cell thick): the cell "
+                                  "homogenized at the slab's mean target density"}};
+    return cards;
 }
 
 void Job::writeFrameFile(const std::filesystem::path& path)

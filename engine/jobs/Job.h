@@ -205,6 +205,10 @@ private:
     bool unitCellProperties(const RepeatZone& zone);
     /// Writes properties() as a CalculiX/Abaqus material card (`properties: {export}`).
     void writeMaterialCard(const std::filesystem::path& path);
+    /// The material cards of a graded lattice (the result, a GradedNode): one per slab of its
+    /// grading (one cell thick along its axis), each the cell homogenized at the slab's mean target
+    /// density; refused (InputError) when the density also varies across the slabs.
+    std::string gradedMaterialCards(const GradedNode& node);
     nlohmann::json mTimings = nlohmann::json::object();
 };
 

@@ -503,7 +503,8 @@ nlohmann::json densityCurve(const std::vector<nlohmann::json>& points)
               {"law", "E/E_s = C rho^n per axis, least squares on log E/E_s against log rho"}}}};
 }
 
-std::string abaqusMaterialCard(const nlohmann::json& p, const std::string& name, const std::string& recipe)
+std::string abaqusMaterialCard(const nlohmann::json& p, const std::string& name, const std::string& recipe,
+                               const std::string& region)
 {
     // Abaqus/CalculiX order the shear components 12, 13, 23; voxlat's Voigt order is xx, yy, zz,
     // yz, xz, xy.
@@ -516,6 +517,7 @@ std::string abaqusMaterialCard(const nlohmann::json& p, const std::string& name,
     std::ostringstream out;
     out << "** voxlat: homogenized elastic constants of one periodic cell of `" << recipe << "`\n";
     out << "** units: MPa (N/mm^2); use with lengths in mm and forces in N\n";
+    if (!region.empty()) out << "** region: " << region << "\n";
     out << "** cell relative density " << formatNumber(p["relative_density"].get<double>()) << ", "
         << p["cell"]["voxels"][0].get<int>() << " x " << p["cell"]["voxels"][1].get<int>() << " x "
         << p["cell"]["voxels"][2].get<int>() << " voxels; solid: " << p["material"]["name"].get<std::string>() << ", E "

@@ -83,8 +83,10 @@ nlohmann::json densityCurve(const std::vector<nlohmann::json>& points);
 /// card named @a name: `*MATERIAL, NAME=...` and `*ELASTIC, TYPE=ANISO` with the 21 constants
 /// D1111, D1122, D2222, D1133, D2233, D3333, D1112, D2212, D3312, D1212, D1113, D2213, D3313,
 /// D1213, D1313, D1123, D2223, D3323, D1223, D1323, D2323 (engineering shear strains, MPa =
-/// N/mm^2: a model in mm and N), eight to a line; comment lines (`**`) say where it came from.
-std::string abaqusMaterialCard(const nlohmann::json& properties, const std::string& name, const std::string& recipe);
+/// N/mm^2: a model in mm and N), eight to a line; comment lines (`**`) say where it came from and,
+/// with @a region, where in the part the material holds (a slab of a graded lattice).
+std::string abaqusMaterialCard(const nlohmann::json& properties, const std::string& name, const std::string& recipe,
+                               const std::string& region = {});
 
 /// A shaded picture (PNG, @a size pixels square) of the directional Young's modulus surface
 /// E(d) of @a C: the surface r = E(d) / max E over the unit sphere.

@@ -30,19 +30,29 @@ YAML::Node mapWithout(const YAML::Node& map, const std::vector<std::string>& dro
 }
 
 /// One trial: a job on a copy of @a base whose only field (with its inputs) is @a name, given
-/// @a spec, homogenized at @a resolution voxels along the cell's longest side.
+/// @a spec, homogenized at the search's resolution.
 struct Measured {
     double modulus = 0.0;  ///< along the axis asked for; 0 when the cell falls apart or is empty
     double density = 0.0;  ///< the voxel model's relative density
     std::string failure;   ///< why the modulus is 0, if it is
 };
 
-Measured measure(const Recipe& base, const std::string& name, const YAML::Node& spec, int axis, int resolution,
-                 JobContext* parent)
+/// The resolution every trial of a search is homogenized at: given (the key's `resolution:` or
+/// `properties: {resolution}`), or the one the convergence check of `voxlat properties` chooses
+/// (Richardson extrapolation of E to `properties: {convergence}`) at the search's first trial that
+/// carries load, then kept for the others, so that trials compare on one voxel model size.
+struct TrialResolution {
+    std::optional<int> voxels;   ///< empty until the first converged trial has set it
+    nlohmann::json convergence;  ///< that trial's `convergence` report (null when given)
+    std::string from;            ///< "given" or "convergence"
+};
+
+Measured measure(const Recipe& base, const std::string& name, const YAML::Node& spec, int axis,
+                 TrialResolution& resolution, JobContext* parent)
 {
     if (parent) parent->checkCancelled();
     Recipe r = trialRecipe(base, name, spec);
-    r.properties.resolution = resolution;
+    r.properties.resolution = resolution.voxels;
     r.properties.conductivity = false;
     // The trials' own warnings (loose pieces, a cell with no load path) are about candidates the
     // search leaves behind, not about the result.
@@ -53,17 +63,35 @@ Measured measure(const Recipe& base, const std::string& name, const YAML::Node& 
         const nlohmann::json& p = job.properties();
         m.modulus = p["E_MPa"][axis].get<double>();
         m.density = p["relative_density"].get<double>();
+        if (!resolution.voxels && p.contains("convergence") && m.modulus > 0.0) {
+            resolution.voxels = p["convergence"]["resolutions"].back().get<int>();
+            resolution.convergence = p["convergence"];
+        }
     } catch (const JobError& e) {
         m.failure = e.what();  // no solid, or no load path along any axis: no stiffness
     }
     return m;
 }
 
-int trialResolution(const std::optional<int>& own, const Recipe& recipe)
+TrialResolution trialResolution(const std::optional<int>& own, const Recipe& recipe)
 {
-    if (own) return *own;
-    if (recipe.properties.resolution) return *recipe.properties.resolution;
-    return 32;
+    if (own) return {own, nullptr, "given"};
+    if (recipe.properties.resolution) return {recipe.properties.resolution, nullptr, "given"};
+    return {std::nullopt, nullptr, "convergence"};
+}
+
+/// The search's resolution for report.json `design`: the voxels, where they came from and, when
+/// chosen by convergence, the check's numbers (its estimated error is the trials' error in E).
+void reportResolution(nlohmann::json& entry, const TrialResolution& r)
+{
+    entry["resolution"] = r.voxels ? nlohmann::json(*r.voxels) : nlohmann::json();
+    entry["resolution_from"] = r.from == "given" ? "given (`resolution:`)"
+                                                 : "the convergence check at the search's first trial that carries "
+                                                   "load, kept for every trial";
+    if (!r.convergence.is_null()) {
+        entry["convergence"] = r.convergence;
+        entry["estimated_error"] = r.convergence["estimated_error"];
+    }
 }
 
 void requireMaterial(const Recipe& recipe, const RecipeNode& key, const std::string& what)
@@ -93,7 +121,7 @@ nlohmann::json solveStiffness(Recipe& recipe, const std::string& name, const Rec
     if (goal >= Es)
         key.fail("the target modulus " + goalText + " is not below the solid's own (" + formatNumber(Es) + " MPa, " +
                  recipe.material->name + "): no lattice of it reaches that");
-    const int resolution = trialResolution(target.resolution, recipe);
+    TrialResolution resolution = trialResolution(target.resolution, recipe);
     const YAML::Node base = mapWithout(spec.yaml(), {"stiffness"});
 
     struct Trial {
@@ -180,22 +208,24 @@ nlohmann::json solveStiffness(Recipe& recipe, const std::string& name, const Rec
         context->warn("stiffness_tolerance",
                       "field `" + name + "`: the closest density found gives " + formatNumber(best.modulus) + " MPa, " +
                           formatNumber(100.0 * error) + " % from the target " + goalText + ": at " +
-                          std::to_string(resolution) + " voxels the modulus steps from " + formatNumber(below) +
-                          " to " + formatNumber(above) + " MPa within a density change of " + formatNumber(b - a) +
+                          std::to_string(resolution.voxels.value_or(0)) + " voxels the modulus steps from " +
+                          formatNumber(below) + " to " + formatNumber(above) + " MPa within a density change of " +
+                          formatNumber(b - a) +
                           " (voxels flip together); a finer `resolution:` makes the steps smaller",
                       {{"field", name}, {"steps_MPa", {below, above}}});
     }
-    return {{"target_E_MPa", goal},
-            {"axis", kAxisName[target.axis]},
-            {"density", best.rho},
-            {"achieved_E_MPa", best.modulus},
-            {"achieved_E_ratio", best.modulus / Es},
-            {"relative_error", error},
-            {"cell_relative_density", best.cellDensity},
-            {"resolution", resolution},
-            {"tolerance", target.tolerance},
-            {"method", "Illinois on log E vs density, bracketed from sqrt(E/E_s)"},
-            {"trials", rows}};
+    nlohmann::json entry{{"target_E_MPa", goal},
+                         {"axis", kAxisName[target.axis]},
+                         {"density", best.rho},
+                         {"achieved_E_MPa", best.modulus},
+                         {"achieved_E_ratio", best.modulus / Es},
+                         {"relative_error", error},
+                         {"cell_relative_density", best.cellDensity},
+                         {"tolerance", target.tolerance},
+                         {"method", "Illinois on log E vs density, bracketed from sqrt(E/E_s)"},
+                         {"trials", rows}};
+    reportResolution(entry, resolution);
+    return entry;
 }
 
 /// `optimize:`: a coarse sweep of sigma, then golden-section refinement around its best point.
@@ -208,7 +238,7 @@ nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const Reci
     if (!spec.has("kernel") || !spec["kernel"].has("gaussian"))
         key.fail("`optimize:` picks the Gaussian kernel's sigma: give `kernel: {gaussian: {sigma: S}}`");
     requireMaterial(recipe, key, "`optimize:`");
-    const int resolution = trialResolution(o.resolution, recipe);
+    TrialResolution resolution = trialResolution(o.resolution, recipe);
     const YAML::Node base = mapWithout(spec.yaml(), {"optimize"});
     auto withSigma = [&](double sigma) {
         YAML::Node s = mapWithout(base, {});
@@ -233,10 +263,14 @@ nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const Reci
         return m.modulus;
     };
     std::vector<double> xs(o.samples), ys(o.samples);
-    for (int k = 0; k < o.samples; ++k) {
-        xs[k] = o.lo + (o.hi - o.lo) * k / (o.samples - 1);
-        ys[k] = f(xs[k]);
-    }
+    for (int k = 0; k < o.samples; ++k) xs[k] = o.lo + (o.hi - o.lo) * k / (o.samples - 1);
+    // The middle of the range first: with no `resolution:` its convergence check chooses the
+    // resolution of every trial (the range's ends are the likeliest to fall apart or to be
+    // outliers).
+    const int middle = o.samples / 2;
+    ys[middle] = f(xs[middle]);
+    for (int k = 0; k < o.samples; ++k)
+        if (k != middle) ys[k] = f(xs[k]);
     const int k = int(std::max_element(ys.begin(), ys.end()) - ys.begin());
     if (ys[k] <= 0.0)
         key.fail("no sigma in [" + formatNumber(o.lo) + ", " + formatNumber(o.hi) + "] gives a lattice that carries " +
@@ -270,10 +304,10 @@ nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const Reci
                          {"cell_relative_density", best.cellDensity},
                          {"range", {o.lo, o.hi}},
                          {"tolerance", o.tolerance},
-                         {"resolution", resolution},
                          {"method", "coarse sweep of " + std::to_string(o.samples) +
                                         " points, golden-section refinement around the best"},
                          {"trials", rows}};
+    reportResolution(entry, resolution);
     if (o.baseline) {
         // The Boolean-joint lattice: hard capsules of one radius, solved for the same density.
         YAML::Node capsule = mapWithout(base, {"radius", "kernel"});

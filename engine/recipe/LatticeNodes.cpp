@@ -221,6 +221,9 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
         spec["density"].fail(
             "a graded density needs box cells (its table comes from one box cell); on a skin frame "
             "give one number");
+    if (spec.has("density_of") && !(spec.has("density") && spec["density"].isNumber()))
+        spec["density_of"].fail(
+            "`density_of:` says where the node's `density:` (one number) is measured; give `density:`");
     if (spec.has("axes")) raw = orientedField(builder, spec["axes"], raw, name);
     if (hasShiftKeys(spec)) {
         const std::string key = spec.has("thickness") ? "thickness"
@@ -286,7 +289,52 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
     // at 0.1 mm measures 101^3 samples instead of 500^3. periodicPieces() declines (and the
     // solve counts the whole box) when the box is not a whole number of cells.
     const Recipe& recipe = builder.recipe();
-    if (node.density && raw == plain && !region && recipe.domainBox && cell[0] == cell[1] && cell[1] == cell[2]) {
+    // `density_of: cell`: the density is one period's (the periodic cell `voxlat properties`
+    // homogenizes), not the domain box's, which differ when the box is not a whole number of
+    // cells. One period, sampled on exactly one period of voxels (cell / n: a uniform rule over a
+    // whole period of a smooth periodic field), 1.5 times finer than the job's voxel.
+    bool perCell = false;
+    if (spec.has("density_of")) {
+        const RecipeNode of = spec["density_of"];
+        const std::string where = of.string();
+        if (where != "cell" && where != "frame")
+            of.fail(
+                "expected `cell` (one period of the TPMS, the cell `voxlat properties` homogenizes) or `frame` (the "
+                "domain box, the default)");
+        if (!node.density || solvedByInfill)
+            of.fail("`density_of:` says where the node's `density:` (one number) is measured; give `density:`");
+        perCell = where == "cell";
+        if (perCell && (spec.has("frame") || spec.has("axes") || region))
+            of.fail(std::string("`density_of: cell` needs the TPMS in box cells (its period is the cell); with `") +
+                    (spec.has("axes") ? "axes:" : "frame:") +
+                    "` the cells change shape or direction from place to place: measure the density over the "
+                    "domain (remove `density_of`)");
+        if (perCell && !recipe.domainBox)
+            of.fail("`density_of: cell` measures one period at the domain's corner: give `domain: {box: ...}`");
+    }
+    if (perCell) {
+        const double longest = std::max({cell[0], cell[1], cell[2]});
+        const int base = std::max(8, int(std::ceil(longest / (recipe.voxel / 1.5))));
+        // The first count from base whose voxel divides every side of the cell (a cubic cell: base).
+        int n = base;
+        for (int m = base; m < base + 256; ++m) {
+            bool whole = true;
+            for (int a = 0; a < 3; ++a) {
+                const double k = cell[a] / (longest / m);
+                whole = whole && std::abs(k - std::round(k)) < 1e-9 * k;
+            }
+            if (whole) {
+                n = m;
+                break;
+            }
+        }
+        const Vec3d lo = recipe.domainBox->min;
+        node.densityBox = Box3{lo, lo + cell};
+        node.densityVoxel = longest / n;
+        node.subVoxelDensity = true;
+        node.densityOf = "one period of the TPMS (`density_of: cell`)";
+    } else if (node.density && raw == plain && !region && recipe.domainBox && cell[0] == cell[1] &&
+               cell[1] == cell[2]) {
         node.densityPeriod = cell;
         node.densityReach = 0.0;
         node.densityBox = *recipe.domainBox;
@@ -355,7 +403,11 @@ void addLatticeNodeTypes(std::vector<NodeType>& types)
          "instead of `density:`: {E: 40 MPa, axis: z} or {E_ratio: 0.05}, the density whose homogenized modulus "
          "meets it is solved (needs `material:`)",
          "—"},
-        {"frame", anyMap(), "conformal cells: {cylinder: ...}, {sphere: ...} or {skin: ...}", "box cells"}};
+        {"frame", anyMap(), "conformal cells: {cylinder: ...}, {sphere: ...} or {skin: ...}", "box cells"},
+        {"density_of", oneOfWords({"cell", "frame"}),
+         "where `density:` is measured: `frame` (the domain box) or `cell` (one period, the cell `voxlat "
+         "properties` homogenizes; they differ when the box is not a whole number of cells)",
+         "frame"}};
     tpms.insert(tpms.end(), thicknessKeys.begin(), thicknessKeys.end());
     tpms.push_back(
         {"offset", number(), "moves a network's surface m mm along its unit gradient (outwards for m > 0)", "—"});
