@@ -60,6 +60,37 @@ inline void addStrutRowScalar(const StrutRowConstants& s, const StrutRow& row, c
     }
 }
 
+/// J(h) of one strut tabled along the rows of a batch: nodes h_n = h0 + n delta, delta the step of
+/// h from one point of a row to the next, holding J(h_n) and delta J'(h_n); the point k of a row
+/// whose h(0) lies at node n0 + tau takes the cubic Hermite polynomial between nodes n0 + k and
+/// n0 + k + 1 at tau, whose weights (w00, w10, w01, w11) are the row's constants.
+struct StrutRowTable {
+    const double* value;  ///< J(h_n)
+    const double* slope;  ///< delta J'(h_n)
+    int n0;               ///< node of the row's point 0
+    double w00, w10, w01, w11;
+};
+
+/// addStrutRowScalar with J(h_k) from @a table (the same points pass the same cut-off test).
+inline void addStrutRowTabledScalar(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                                    const double* gauss, double* out)
+{
+    const double dx = row.x - s.ax, dy = row.y - s.ay;
+    for (int k = row.kLo; k <= row.kHi; ++k) {
+        double h;
+        if (!withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
+        const int n = table.n0 + k;
+        const double j0 = ((table.w00 * table.value[n] + table.w10 * table.slope[n]) + table.w01 * table.value[n + 1]) +
+                          table.w11 * table.slope[n + 1];
+        out[k] += gauss[k] * j0;
+    }
+}
+
+/// addStrutRowTabledScalar with four lanes; the same doubles (the same build rules as
+/// addStrutRowAvx2).
+void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                           const double* gauss, double* out);
+
 /// addStrutRowScalar with four lanes; the same doubles. Defined only where VOXLAT_AVX2_ROWS is
 /// (x86-64 builds); call it only when hasAvx2Rows() says the CPU has AVX2.
 void addStrutRowAvx2(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out);
