@@ -157,20 +157,6 @@ void taylorOfJ(const GaussianSegment& s, double h, double c[4])
     c[3] = (s.w0 * i0ddd + s.slope * i1ddd) / 6.0;
 }
 
-/// J(h) = w0 I0(h) + k I1(h) and J'(h) (GaussianSegment; see taylorOfJ) from GaussianTable, as
-/// addStrutRowScalar takes J.
-void jAndDerivative(const GaussianSegment& s, double h, double& j, double& dj)
-{
-    const GaussianTable& table = GaussianTable::instance();
-    const double invSigma = 1.0 / s.sigma;
-    double uL, gL, uA, gA;
-    table.evaluate((s.length - h) * invSigma, uL, gL);
-    table.evaluate(h * invSigma, uA, gA);
-    const double i0 = s.sigma * (uL + uA);
-    j = (s.w0 + s.slope * h) * i0 + s.slope * s.sigma * s.sigma * (gA - gL);
-    dj = s.w0 * (gA - gL) + s.slope * (i0 - s.length * gL);
-}
-
 /// gauss[k] = exp(-r2(k) / 2 sigma^2) for k = kLo..kHi (and up to three points past kHi), r2(k) =
 /// r0 + (b - c) k + c k^2: two exponentials at kLo, then four interleaved recurrences E(k + 4) =
 /// E(k) R4(k), R4(k + 4) = R4(k) q^16 (q = exp(-2 c / 2 sigma^2)); a few ulps of drift over a row.
@@ -340,12 +326,10 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                 // Margin: the four-lane loop reads up to four nodes past a row's last point.
                 nodeValue.assign(count + 8, 0.0);
                 nodeSlope.assign(count + 8, 0.0);
-                for (std::size_t m = 0; m < count; ++m) {
-                    double j, dj;
-                    jAndDerivative(s, h0 + double(int(m) + nLo) * hz, j, dj);
-                    nodeValue[m] = j;
-                    nodeSlope[m] = dj * hz;
-                }
+                if (avx2)
+                    strutRowNodesAvx2(constants, h0, hz, nLo, int(count), nodeValue.data(), nodeSlope.data());
+                else
+                    strutRowNodesScalar(constants, h0, hz, nLo, int(count), nodeValue.data(), nodeSlope.data());
             }
         }
         // Pass 2: the rows' Gaussians and J.

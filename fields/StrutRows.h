@@ -86,6 +86,29 @@ inline void addStrutRowTabledScalar(const StrutRowConstants& s, const StrutRow& 
     }
 }
 
+/// The nodes of a StrutRowTable: for m = 0..count-1 at h = h0 + (m + first) step, value[m] = J(h)
+/// (as addStrutRowScalar takes it from GaussianTable) and slope[m] = step J'(h), J' = w0 (g(h) -
+/// g(L - h)) + slope (I0(h) - L g(L - h)) with g(t) = exp(-t^2 / 2 sigma^2), I0 = J's erf sum.
+inline void strutRowNodesScalar(const StrutRowConstants& s, double h0, double step, int first, int count, double* value,
+                                double* slope)
+{
+    const GaussianTable& table = GaussianTable::instance();
+    for (int m = 0; m < count; ++m) {
+        const double h = h0 + double(m + first) * step;
+        double uL, gL, uA, gA;
+        table.evaluate((s.length - h) * s.invSigma, uL, gL);
+        table.evaluate(h * s.invSigma, uA, gA);
+        const double i0 = s.sigma * (uL + uA);
+        value[m] = (s.w0 + s.slope * h) * i0 + s.slope * s.s2 * (gA - gL);
+        slope[m] = (s.w0 * (gA - gL) + s.slope * (i0 - s.length * gL)) * step;
+    }
+}
+
+/// strutRowNodesScalar with four lanes; the same doubles. @a value and @a slope have room for
+/// count rounded up to four.
+void strutRowNodesAvx2(const StrutRowConstants& s, double h0, double step, int first, int count, double* value,
+                       double* slope);
+
 /// addStrutRowTabledScalar with four lanes; the same doubles (the same build rules as
 /// addStrutRowAvx2).
 void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,

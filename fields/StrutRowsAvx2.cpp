@@ -156,6 +156,32 @@ void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, cons
     }
 }
 
+void strutRowNodesAvx2(const StrutRowConstants& s, double h0, double step, int first, int count, double* value,
+                       double* slope)
+{
+    const double* nodes = GaussianTable::instance().nodeData();
+    const __m256d h0v = _mm256_set1_pd(h0), stepv = _mm256_set1_pd(step), length = _mm256_set1_pd(s.length),
+                  invSigma = _mm256_set1_pd(s.invSigma), sigma = _mm256_set1_pd(s.sigma), w0 = _mm256_set1_pd(s.w0),
+                  slopeK = _mm256_set1_pd(s.slope), s2 = _mm256_set1_pd(s.s2);
+    for (int m = 0; m < count; m += 4) {
+        const __m256d mm =
+            _mm256_setr_pd(double(m + first), double(m + 1 + first), double(m + 2 + first), double(m + 3 + first));
+        const __m256d h = _mm256_add_pd(h0v, _mm256_mul_pd(mm, stepv));
+        __m256d uL, gL, uA, gA;
+        tableLanes<true>(nodes, _mm256_mul_pd(_mm256_sub_pd(length, h), invSigma), uL, gL);
+        tableLanes<true>(nodes, _mm256_mul_pd(h, invSigma), uA, gA);
+        const __m256d i0 = _mm256_mul_pd(sigma, _mm256_add_pd(uL, uA));
+        const __m256d dg = _mm256_sub_pd(gA, gL);
+        const __m256d j = _mm256_add_pd(_mm256_mul_pd(_mm256_add_pd(w0, _mm256_mul_pd(slopeK, h)), i0),
+                                        _mm256_mul_pd(_mm256_mul_pd(slopeK, s2), dg));
+        const __m256d dj = _mm256_mul_pd(
+            _mm256_add_pd(_mm256_mul_pd(w0, dg), _mm256_mul_pd(slopeK, _mm256_sub_pd(i0, _mm256_mul_pd(length, gL)))),
+            stepv);
+        _mm256_storeu_pd(value + m, j);
+        _mm256_storeu_pd(slope + m, dj);
+    }
+}
+
 void addStrutRowAvx2(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
 {
     if (s.slope == 0.0)
@@ -171,6 +197,12 @@ bool hasAvx2Rows()
 }
 
 #else
+
+void strutRowNodesAvx2(const StrutRowConstants& s, double h0, double step, int first, int count, double* value,
+                       double* slope)
+{
+    strutRowNodesScalar(s, h0, step, first, count, value, slope);
+}
 
 void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
                            const double* gauss, double* out)

@@ -356,8 +356,8 @@ TEST(StrutRows, FourLanesAddTheSameDoublesAsTheScalarLoop)
 
 TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
 {
-    // The rows that take J from a strut's own table (addStrutRowTabled*): both loops add the same
-    // doubles, bit for bit, on random struts, tables, row fractions and partial sums.
+    // The rows that take J from a strut's own table (addStrutRowTabled*, strutRowNodes*): both
+    // forms give the same doubles, bit for bit, on random struts, tables, row fractions and sums.
     if (!hasAvx2Rows()) GTEST_SKIP() << "this CPU (or build) has no AVX2 row loop to compare";
     std::mt19937_64 rng(20261129);
     std::uniform_real_distribution<double> unit(-1.0, 1.0);
@@ -374,6 +374,17 @@ TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
         const int kLo = int(rng() % nz), kHi = kLo + int(rng() % (nz - kLo));
         const StrutRow row{
             0.3 * unit(rng), 0.3 * unit(rng), unit(rng) - 1.0, 0.01 + 0.05 * std::abs(unit(rng)), kLo, kHi};
+        // The table's nodes (J and step J' from GaussianTable) in both forms: the same doubles.
+        const int count = 1 + int(rng() % 40), first = int(rng() % 50) - 25;
+        const double h0 = 2.0 * unit(rng), step = 0.02 * unit(rng);
+        StrutRowConstants graded = c;
+        graded.slope = trial % 3 == 0 ? 0.0 : unit(rng);
+        std::vector<double> valueS(std::size_t(count) + 4), slopeS(valueS.size()), valueV(valueS.size()),
+            slopeV(valueS.size());
+        strutRowNodesScalar(graded, h0, step, first, count, valueS.data(), slopeS.data());
+        strutRowNodesAvx2(graded, h0, step, first, count, valueV.data(), slopeV.data());
+        ASSERT_EQ(std::memcmp(valueS.data(), valueV.data(), std::size_t(count) * sizeof(double)), 0) << trial;
+        ASSERT_EQ(std::memcmp(slopeS.data(), slopeV.data(), std::size_t(count) * sizeof(double)), 0) << trial;
         const int n0 = int(rng() % 5);
         std::vector<double> value(std::size_t(n0 + nz + 8)), slope(value.size());
         for (std::size_t m = 0; m < value.size(); ++m) {
