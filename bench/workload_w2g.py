@@ -139,7 +139,7 @@ def case(voxlat, tmp, name, struts_yaml, box, struts, target):
     recipe = tmp / f"{name}.yaml"
     recipe.write_text(f"voxel: 0.1\ndomain: {{box: [{list(lo)}, {list(hi)}]}}\nfields:\n"
                       f"  lattice: {{struts: {struts_yaml}, kernel: {{gaussian: {{sigma: {SIGMA}}}}}, radius: {radius}, "
-                      f"density: 0.20}}\nresult: lattice\noutputs: {{mesh: {name}.stl}}\n")
+                      f"density: 0.20}}\nresult: lattice\nallow: [pieces]\noutputs: {{mesh: {name}.stl}}\n")
     t_v, m_v, _ = measure([voxlat, "-q", "run", recipe, "--out", tmp / name, "--no-preview"])
     report = json.loads((tmp / name / "report.json").read_text())
     frame = np.array([[a, b] for a, b in struts])
