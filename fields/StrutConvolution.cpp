@@ -157,14 +157,12 @@ void taylorOfJ(const GaussianSegment& s, double h, double c[4])
     c[3] = (s.w0 * i0ddd + s.slope * i1ddd) / 6.0;
 }
 
-/// gauss[k] = exp(-r2(k) / 2 sigma^2) for k = kLo..kHi (and up to three points past kHi), r2(k) =
-/// r0 + (b - c) k + c k^2: two exponentials at kLo, then four interleaved recurrences E(k + 4) =
-/// E(k) R4(k), R4(k + 4) = R4(k) q^16 (q = exp(-2 c / 2 sigma^2)); a few ulps of drift over a row.
-void rowGaussians(double r0, double b, double c, double inv2s2, double q, double q16, int kLo, int kHi, double* gauss)
+/// gauss[k] = exp(-r2(k) / 2 sigma^2) for k = kLo..kHi (and up to three points past kHi), from @a e
+/// at kLo and @a ratio = exp(-(r2(kLo + 1) - r2(kLo)) / 2 sigma^2): four interleaved recurrences
+/// E(k + 4) = E(k) R4(k), R4(k + 4) = R4(k) q^16 (q = exp(-2 c / 2 sigma^2), r2(k) = r0 + (b - c) k +
+/// c k^2); a few ulps of drift over a row.
+void rowGaussiansFrom(double e, double ratio, double q, double q16, int kLo, int kHi, double* gauss)
 {
-    const double k0 = kLo;
-    const double e = std::exp(-(r0 + k0 * (b - c) + k0 * k0 * c) * inv2s2);
-    const double ratio = std::exp(-(b + 2.0 * c * k0) * inv2s2);
     double ratios[7], lanes[4], steps[4];
     ratios[0] = ratio;
     for (int m = 1; m < 7; ++m) ratios[m] = ratios[m - 1] * q;
@@ -177,6 +175,14 @@ void rowGaussians(double r0, double b, double c, double inv2s2, double q, double
             lanes[l] *= steps[l];
             steps[l] *= q16;
         }
+}
+
+/// rowGaussiansFrom with its two exponentials taken at kLo.
+void rowGaussians(double r0, double b, double c, double inv2s2, double q, double q16, int kLo, int kHi, double* gauss)
+{
+    const double k0 = kLo;
+    rowGaussiansFrom(std::exp(-(r0 + k0 * (b - c) + k0 * k0 * c) * inv2s2), std::exp(-(b + 2.0 * c * k0) * inv2s2), q,
+                     q16, kLo, kHi, gauss);
 }
 
 /// addStrutRowScalar (StrutRows.h) with J(h) from its cubic Taylor polynomial @a c about @a hc
@@ -332,10 +338,31 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                     strutRowNodesScalar(constants, h0, hz, nLo, int(count), nodeValue.data(), nodeSlope.data());
             }
         }
-        // Pass 2: the rows' Gaussians and J.
+        // Pass 2: the rows' Gaussians and J. Short rows (a pixel's sub-samples, every row whole)
+        // take their first point's two exponentials by recurrence across the columns too: r2 at a
+        // column's first point is quadratic in i, and r2(1) - r2(0) linear, so E0(i + 1) = E0(i)
+        // S(i), S(i + 1) = S(i) Qx, R0(i + 1) = R0(i) T: four exponentials per strut, not two per column.
+        const bool acrossColumns = shortRows && ny == 1;
+        double colE = 0.0, colS = 0.0, colQ = 0.0, colR = 0.0, colT = 0.0;
+        if (acrossColumns) {
+            const double hRow0 = d0.x() * u.x() + d0.y() * u.y() + d0.z() * u.z();
+            const double r00 = d0.x() * d0.x() + d0.y() * d0.y() + d0.z() * d0.z() - hRow0 * hRow0;
+            const double ux2 = 1.0 - u.x() * u.x();
+            colE = std::exp(-r00 * inv2s2);
+            colS = std::exp(-(2.0 * dx * (d0.x() - u.x() * hRow0) + dx * dx * ux2) * inv2s2);
+            colQ = std::exp(-2.0 * dx * dx * ux2 * inv2s2);
+            colR = std::exp(-(2.0 * (d0.z() * dz - hRow0 * hz) + c) * inv2s2);
+            colT = std::exp(2.0 * hz * dx * u.x() * inv2s2);
+        }
         std::size_t n = 0;
         for (int i = 0; i < nx; ++i) {
             const double px = d0.x() + i * dx;
+            const double firstE = colE, firstRatio = colR;
+            if (acrossColumns) {
+                colE *= colS;
+                colS *= colQ;
+                colR *= colT;
+            }
             for (int jj = 0; jj < ny; ++jj, n += nz) {
                 const RowRange& range = rows[std::size_t(i) * ny + jj];
                 const int kLo = range.kLo, kHi = range.kHi;
@@ -350,7 +377,10 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                 // The recurrence's factors stay well inside double range for ordinary batches;
                 // otherwise every point takes its own exponential.
                 if (std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0) {
-                    rowGaussians(r0, b, c, inv2s2, q, q16, kLo, kHi, gauss.data());
+                    if (acrossColumns)
+                        rowGaussiansFrom(firstE, firstRatio, q, q16, kLo, kHi, gauss.data());
+                    else
+                        rowGaussians(r0, b, c, inv2s2, q, q16, kLo, kHi, gauss.data());
                 } else {
                     for (int k = kLo; k <= kHi; ++k) {
                         double h, r2;
