@@ -169,12 +169,10 @@ void rowGaussiansFrom(double e, double ratio, double q, double q16, int kLo, int
     lanes[0] = e;
     for (int l = 1; l < 4; ++l) lanes[l] = lanes[l - 1] * ratios[l - 1];
     for (int l = 0; l < 4; ++l) steps[l] = ((ratios[l] * ratios[l + 1]) * ratios[l + 2]) * ratios[l + 3];
-    for (int k = kLo; k <= kHi; k += 4)
-        for (int l = 0; l < 4; ++l) {
-            gauss[k + l] = lanes[l];
-            lanes[l] *= steps[l];
-            steps[l] *= q16;
-        }
+    if (hasAvx2Rows())
+        fillGaussiansAvx2(lanes, steps, q16, kHi - kLo + 1, gauss + kLo);
+    else
+        fillGaussiansScalar(lanes, steps, q16, kHi - kLo + 1, gauss + kLo);
 }
 
 /// rowGaussiansFrom with its two exponentials taken at kLo.
@@ -204,6 +202,7 @@ void addStrutRowTaylor(const StrutRowConstants& s, const StrutRow& row, const do
 
 void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out) const
 {
+    constexpr int kShortRow = 16;  // the longest rows counted as a pixel's sub-samples
     thread_local std::vector<std::uint32_t> cand;
     mIndex.gather(batch.bounds(), cand);
     std::fill(out.begin(), out.begin() + batch.size(), 0.0);
@@ -262,7 +261,7 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
         double coefficients[4] = {0.0, 0.0, 0.0, 0.0};
         const double hc = (centre - s.a).dot(s.u);
         if (taylor) taylorOfJ(s, hc, coefficients);
-        const bool shortRows = taylor && nz <= 16;
+        const bool shortRows = taylor && nz <= kShortRow;
         // The analytic range is only a filter: points within a step of its ends, and all points
         // between, still take the exact cut-off test, so the same points count as before.
         const double rcWide2 = rc2 * (1.0 + 1e-9) + 1e-300;
@@ -338,31 +337,37 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                     strutRowNodesScalar(constants, h0, hz, nLo, int(count), nodeValue.data(), nodeSlope.data());
             }
         }
-        // Pass 2: the rows' Gaussians and J. Short rows (a pixel's sub-samples, every row whole)
-        // take their first point's two exponentials by recurrence across the columns too: r2 at a
-        // column's first point is quadratic in i, and r2(1) - r2(0) linear, so E0(i + 1) = E0(i)
-        // S(i), S(i + 1) = S(i) Qx, R0(i + 1) = R0(i) T: four exponentials per strut, not two per column.
-        const bool acrossColumns = shortRows && ny == 1;
-        double colE = 0.0, colS = 0.0, colQ = 0.0, colR = 0.0, colT = 0.0;
+        // Pass 2: the rows' Gaussians and J. Short rows (a pixel's sub-samples, every row whole,
+        // one row per column) take their Gaussians by recurrence across the columns: r2(i + 1, k) -
+        // r2(i, k) is linear in i and in k, so with S(i, k) = exp(-(r2(i + 1, k) - r2(i, k)) / 2
+        // sigma^2), G(i + 1, k) = G(i, k) S(i, k), S(i + 1, k) = S(i, k) Qx and S(0, k) = S(0, 0) T^k:
+        // five exponentials per strut and batch, not two per column.
+        const bool acrossColumns = shortRows && ny == 1 && nz <= kShortRow;
+        double columnGauss[kShortRow + 4], columnStep[kShortRow], columnQ = 0.0;
         if (acrossColumns) {
             const double hRow0 = d0.x() * u.x() + d0.y() * u.y() + d0.z() * u.z();
             const double r00 = d0.x() * d0.x() + d0.y() * d0.y() + d0.z() * d0.z() - hRow0 * hRow0;
             const double ux2 = 1.0 - u.x() * u.x();
-            colE = std::exp(-r00 * inv2s2);
-            colS = std::exp(-(2.0 * dx * (d0.x() - u.x() * hRow0) + dx * dx * ux2) * inv2s2);
-            colQ = std::exp(-2.0 * dx * dx * ux2 * inv2s2);
-            colR = std::exp(-(2.0 * (d0.z() * dz - hRow0 * hz) + c) * inv2s2);
-            colT = std::exp(2.0 * hz * dx * u.x() * inv2s2);
+            double e = std::exp(-r00 * inv2s2), ratio = std::exp(-(2.0 * (d0.z() * dz - hRow0 * hz) + c) * inv2s2);
+            double step = std::exp(-(2.0 * dx * (d0.x() - u.x() * hRow0) + dx * dx * ux2) * inv2s2);
+            const double across = std::exp(2.0 * hz * dx * u.x() * inv2s2);
+            columnQ = std::exp(-2.0 * dx * dx * ux2 * inv2s2);
+            for (int k = 0; k < nz; ++k) {
+                columnGauss[k] = e;
+                columnStep[k] = step;
+                e *= ratio;
+                ratio *= q;
+                step *= across;
+            }
         }
         std::size_t n = 0;
         for (int i = 0; i < nx; ++i) {
             const double px = d0.x() + i * dx;
-            const double firstE = colE, firstRatio = colR;
-            if (acrossColumns) {
-                colE *= colS;
-                colS *= colQ;
-                colR *= colT;
-            }
+            if (acrossColumns && i > 0)
+                for (int k = 0; k < nz; ++k) {
+                    columnGauss[k] *= columnStep[k];
+                    columnStep[k] *= columnQ;
+                }
             for (int jj = 0; jj < ny; ++jj, n += nz) {
                 const RowRange& range = rows[std::size_t(i) * ny + jj];
                 const int kLo = range.kLo, kHi = range.kHi;
@@ -376,9 +381,10 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                 const StrutRow row{rowStart.x(), rowStart.y(), rowStart.z(), dz, kLo, kHi};
                 // The recurrence's factors stay well inside double range for ordinary batches;
                 // otherwise every point takes its own exponential.
+                const double* g = gauss.data();
                 if (std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0) {
                     if (acrossColumns)
-                        rowGaussiansFrom(firstE, firstRatio, q, q16, kLo, kHi, gauss.data());
+                        g = columnGauss;
                     else
                         rowGaussians(r0, b, c, inv2s2, q, q16, kLo, kHi, gauss.data());
                 } else {
@@ -389,20 +395,20 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                     }
                 }
                 if (taylor) {
-                    addStrutRowTaylor(constants, row, coefficients, hc, gauss.data(), out.data() + n);
+                    addStrutRowTaylor(constants, row, coefficients, hc, g, out.data() + n);
                 } else if (tabled) {
                     const double t = range.tau, t2 = t * t, t3 = t2 * t;
                     const StrutRowTable table{
                         nodeValue.data(), nodeSlope.data(), range.n0 - nodeLo, 2 * t3 - 3 * t2 + 1, t3 - 2 * t2 + t,
                         -2 * t3 + 3 * t2, t3 - t2};
                     if (avx2)
-                        addStrutRowTabledAvx2(constants, row, table, gauss.data(), out.data() + n);
+                        addStrutRowTabledAvx2(constants, row, table, g, out.data() + n);
                     else
-                        addStrutRowTabledScalar(constants, row, table, gauss.data(), out.data() + n);
+                        addStrutRowTabledScalar(constants, row, table, g, out.data() + n);
                 } else if (avx2) {
-                    addStrutRowAvx2(constants, row, gauss.data(), out.data() + n);
+                    addStrutRowAvx2(constants, row, g, out.data() + n);
                 } else {
-                    addStrutRowScalar(constants, row, gauss.data(), out.data() + n);
+                    addStrutRowScalar(constants, row, g, out.data() + n);
                 }
             }
         }

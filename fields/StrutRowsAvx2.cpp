@@ -156,6 +156,17 @@ void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, cons
     }
 }
 
+void fillGaussiansAvx2(const double lanes[4], const double steps[4], double q16, int count, double* gauss)
+{
+    __m256d e = _mm256_loadu_pd(lanes), r = _mm256_loadu_pd(steps);
+    const __m256d q = _mm256_set1_pd(q16);
+    for (int k = 0; k < count; k += 4) {
+        _mm256_storeu_pd(gauss + k, e);
+        e = _mm256_mul_pd(e, r);
+        r = _mm256_mul_pd(r, q);
+    }
+}
+
 void strutRowNodesAvx2(const StrutRowConstants& s, double h0, double step, int first, int count, double* value,
                        double* slope)
 {
@@ -197,6 +208,11 @@ bool hasAvx2Rows()
 }
 
 #else
+
+void fillGaussiansAvx2(const double lanes[4], const double steps[4], double q16, int count, double* gauss)
+{
+    fillGaussiansScalar(lanes, steps, q16, count, gauss);
+}
 
 void strutRowNodesAvx2(const StrutRowConstants& s, double h0, double step, int first, int count, double* value,
                        double* slope)

@@ -385,6 +385,15 @@ TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
         strutRowNodesAvx2(graded, h0, step, first, count, valueV.data(), slopeV.data());
         ASSERT_EQ(std::memcmp(valueS.data(), valueV.data(), std::size_t(count) * sizeof(double)), 0) << trial;
         ASSERT_EQ(std::memcmp(slopeS.data(), slopeV.data(), std::size_t(count) * sizeof(double)), 0) << trial;
+        // The rows' Gaussians (four interleaved recurrences) in both forms.
+        const double lanes0[4] = {std::abs(unit(rng)), std::abs(unit(rng)), std::abs(unit(rng)), std::abs(unit(rng))};
+        const double steps0[4] = {1.0 + 0.1 * unit(rng), 1.0 + 0.1 * unit(rng), 1.0 + 0.1 * unit(rng),
+                                  1.0 + 0.1 * unit(rng)};
+        const double q16 = 1.0 + 0.01 * unit(rng);
+        std::vector<double> gaussS(std::size_t(count) + 4), gaussV(gaussS.size());
+        fillGaussiansScalar(lanes0, steps0, q16, count, gaussS.data());
+        fillGaussiansAvx2(lanes0, steps0, q16, count, gaussV.data());
+        ASSERT_EQ(std::memcmp(gaussS.data(), gaussV.data(), std::size_t(count) * sizeof(double)), 0) << trial;
         const int n0 = int(rng() % 5);
         std::vector<double> value(std::size_t(n0 + nz + 8)), slope(value.size());
         for (std::size_t m = 0; m < value.size(); ++m) {
