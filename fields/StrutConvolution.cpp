@@ -183,21 +183,6 @@ void rowGaussians(double r0, double b, double c, double inv2s2, double q, double
                      q16, kLo, kHi, gauss);
 }
 
-/// addStrutRowScalar (StrutRows.h) with J(h) from its cubic Taylor polynomial @a c about @a hc
-/// instead of the table: the same points pass the cut-off, each J within the bound stated in
-/// StrutConvolution::gridValues of the exact one.
-void addStrutRowTaylor(const StrutRowConstants& s, const StrutRow& row, const double c[4], double hc,
-                       const double* gauss, double* out)
-{
-    const double dx = row.x - s.ax, dy = row.y - s.ay;
-    for (int k = row.kLo; k <= row.kHi; ++k) {
-        double h;
-        if (!withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
-        const double d = h - hc;
-        out[k] += gauss[k] * (c[0] + d * (c[1] + d * (c[2] + d * c[3])));
-    }
-}
-
 }  // namespace
 
 void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out) const
@@ -395,7 +380,10 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                     }
                 }
                 if (taylor) {
-                    addStrutRowTaylor(constants, row, coefficients, hc, g, out.data() + n);
+                    if (avx2)
+                        addStrutRowTaylorAvx2(constants, row, coefficients, hc, g, out.data() + n);
+                    else
+                        addStrutRowTaylorScalar(constants, row, coefficients, hc, g, out.data() + n);
                 } else if (tabled) {
                     const double t = range.tau, t2 = t * t, t3 = t2 * t;
                     const StrutRowTable table{

@@ -60,6 +60,25 @@ inline void addStrutRowScalar(const StrutRowConstants& s, const StrutRow& row, c
     }
 }
 
+/// addStrutRowScalar with J(h) from its cubic Taylor polynomial @a c about @a hc instead of the
+/// table (a pixel's sub-samples: StrutConvolution::gridValues states the bound): the same points
+/// pass the cut-off.
+inline void addStrutRowTaylorScalar(const StrutRowConstants& s, const StrutRow& row, const double c[4], double hc,
+                                    const double* gauss, double* out)
+{
+    const double dx = row.x - s.ax, dy = row.y - s.ay;
+    for (int k = row.kLo; k <= row.kHi; ++k) {
+        double h;
+        if (!withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
+        const double d = h - hc;
+        out[k] += gauss[k] * (c[0] + d * (c[1] + d * (c[2] + d * c[3])));
+    }
+}
+
+/// addStrutRowTaylorScalar with four lanes; the same doubles.
+void addStrutRowTaylorAvx2(const StrutRowConstants& s, const StrutRow& row, const double c[4], double hc,
+                           const double* gauss, double* out);
+
 /// J(h) of one strut tabled along the rows of a batch: nodes h_n = h0 + n delta, delta the step of
 /// h from one point of a row to the next, holding J(h_n) and delta J'(h_n); the point k of a row
 /// whose h(0) lies at node n0 + tau takes the cubic Hermite polynomial between nodes n0 + k and

@@ -394,6 +394,19 @@ TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
         fillGaussiansScalar(lanes0, steps0, q16, count, gaussS.data());
         fillGaussiansAvx2(lanes0, steps0, q16, count, gaussV.data());
         ASSERT_EQ(std::memcmp(gaussS.data(), gaussV.data(), std::size_t(count) * sizeof(double)), 0) << trial;
+        // The sub-samples' rows (J from a cubic Taylor polynomial) in both forms.
+        {
+            const double poly[4] = {unit(rng), unit(rng), unit(rng), unit(rng)};
+            const double hc = unit(rng);
+            const StrutRow shortRow{row.x, row.y, row.z0, row.dz, 0, int(rng() % 12)};
+            std::vector<double> outS(16), outV, weights(16);
+            for (double& v : outS) v = std::abs(unit(rng));
+            for (double& v : weights) v = std::abs(unit(rng));
+            outV = outS;
+            addStrutRowTaylorScalar(c, shortRow, poly, hc, weights.data(), outS.data());
+            addStrutRowTaylorAvx2(c, shortRow, poly, hc, weights.data(), outV.data());
+            ASSERT_EQ(std::memcmp(outS.data(), outV.data(), outS.size() * sizeof(double)), 0) << trial;
+        }
         const int n0 = int(rng() % 5);
         std::vector<double> value(std::size_t(n0 + nz + 8)), slope(value.size());
         for (std::size_t m = 0; m < value.size(); ++m) {
