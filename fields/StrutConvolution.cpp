@@ -290,7 +290,11 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
         // and the nodes are read in order, instead of two GaussianTable look-ups per point. Its
         // error is at most delta^4 / 384 max |J''''| <= 0.0128 (delta / sigma)^4 of the strut's
         // peak (|J''''| as above): 1.3e-6 of it at delta = 0.1 sigma.
-        const bool tabled = !taylor && ranged && nz >= 16 && hz != 0.0 && std::abs(hz) <= 0.1 * sigma;
+        // The table spans the batch's range of h: at most eight rows' worth of nodes (struts nearly
+        // across the rows, whose h barely steps along them, keep the per-point look-ups).
+        const double spread = std::abs(dx * u.x()) * (nx - 1) + std::abs(dy * u.y()) * (ny - 1);
+        const bool tabled = !taylor && ranged && nz >= 16 && hz != 0.0 && std::abs(hz) <= 0.1 * sigma &&
+                            spread <= 8.0 * nz * std::abs(hz);
         int nodeLo = 0;
         if (tabled) {
             // h at a row's point 0 is hRow (below); nodes h0 + n hz, with h0 one node past the
