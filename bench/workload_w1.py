@@ -11,7 +11,9 @@ at load 4.5: 3.69 s vs 25.95 s (7.0x; mesh 1.67 s, evaluate 0.56 s, solve 0.52 s
 load 1: 8.8x, 8.9x, 10.1x (1.45 s vs 14.59 s). Since then three pairs, run alternately, and
 their median ratio decide the verdict (every pair is printed). After the second pass of
 2026-11-27 (instruction count of the run -24 %), at load 1.7-1.9: 11.1x, 10.4x, 11.4x (1.21 s vs
-13.50 s), peak 379 MB."""
+13.50 s), peak 379 MB. 2026-11-29 (issue 38's second round; W1's path untouched) at load 16 (six
+agents on the 2 cores): 6.0x, 8.3x, 7.9x (median 15.44 s vs 121.63 s), peak 385 MB: 10x in every
+run missed at that load."""
 import json
 
 from common import PYTHON, ROOT, measure, row, verdict

@@ -13,6 +13,14 @@ layers and the full plate extrapolated):
   148.8 Mpixel/s: 26x (missed); full plate 3357 s at that load, about 1250 s on two free cores from
   the CPU time of a 4-layer plate (25.1 s for 193 Mpixel; 211.7 s before issue 38) (missed);
   info 19.8 s, 279 MB.
+- 2026-11-29, issue 38 second round (per-strut J tables along the columns, four-lane Gaussian
+  recurrences, sub-samples' Gaussians across columns, AVX2 Taylor rows; same archive bytes), at
+  load 14-17: VOXLAT_W10_HEIGHT=0.5 (10 layers) struts 328.2 s wall, 402 MB, 1.5 Mpixel/s; TPMS
+  15.6 s, 31.0 Mpixel/s: 21x by wall (the load swung during the struts' run); info 97.9 s at that
+  load. Side by side by CPU time on 4 layers of the plate (193 Mpixel; /usr/bin/time): before
+  27.7 s, after 13.8 s (2.0x), gyroid sheet 1.25 s: struts 11.0x the TPMS per window pixel
+  (target 10x: missed); full plate from that CPU time about 690 s on two free cores (target 600 s:
+  missed).
 Before issue 38 a 20 x 20 x 2 mm window took 32 s for 40 layers and the 2 mm plate did not finish
 in ten minutes (the issue's figures).
 

@@ -157,25 +157,37 @@ void taylorOfJ(const GaussianSegment& s, double h, double c[4])
     c[3] = (s.w0 * i0ddd + s.slope * i1ddd) / 6.0;
 }
 
-/// addStrutRowScalar (StrutRows.h) with J(h) from its cubic Taylor polynomial @a c about @a hc
-/// instead of the table: the same points pass the cut-off, each J within the bound stated in
-/// StrutConvolution::gridValues of the exact one.
-void addStrutRowTaylor(const StrutRowConstants& s, const StrutRow& row, const double c[4], double hc,
-                       const double* gauss, double* out)
+/// gauss[k] = exp(-r2(k) / 2 sigma^2) for k = kLo..kHi (and up to three points past kHi), from @a e
+/// at kLo and @a ratio = exp(-(r2(kLo + 1) - r2(kLo)) / 2 sigma^2): four interleaved recurrences
+/// E(k + 4) = E(k) R4(k), R4(k + 4) = R4(k) q^16 (q = exp(-2 c / 2 sigma^2), r2(k) = r0 + (b - c) k +
+/// c k^2); a few ulps of drift over a row.
+void rowGaussiansFrom(double e, double ratio, double q, double q16, int kLo, int kHi, double* gauss)
 {
-    const double dx = row.x - s.ax, dy = row.y - s.ay;
-    for (int k = row.kLo; k <= row.kHi; ++k) {
-        double h;
-        if (!withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
-        const double d = h - hc;
-        out[k] += gauss[k] * (c[0] + d * (c[1] + d * (c[2] + d * c[3])));
-    }
+    double ratios[7], lanes[4], steps[4];
+    ratios[0] = ratio;
+    for (int m = 1; m < 7; ++m) ratios[m] = ratios[m - 1] * q;
+    lanes[0] = e;
+    for (int l = 1; l < 4; ++l) lanes[l] = lanes[l - 1] * ratios[l - 1];
+    for (int l = 0; l < 4; ++l) steps[l] = ((ratios[l] * ratios[l + 1]) * ratios[l + 2]) * ratios[l + 3];
+    if (hasAvx2Rows())
+        fillGaussiansAvx2(lanes, steps, q16, kHi - kLo + 1, gauss + kLo);
+    else
+        fillGaussiansScalar(lanes, steps, q16, kHi - kLo + 1, gauss + kLo);
+}
+
+/// rowGaussiansFrom with its two exponentials taken at kLo.
+void rowGaussians(double r0, double b, double c, double inv2s2, double q, double q16, int kLo, int kHi, double* gauss)
+{
+    const double k0 = kLo;
+    rowGaussiansFrom(std::exp(-(r0 + k0 * (b - c) + k0 * k0 * c) * inv2s2), std::exp(-(b + 2.0 * c * k0) * inv2s2), q,
+                     q16, kLo, kHi, gauss);
 }
 
 }  // namespace
 
 void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out) const
 {
+    constexpr int kShortRow = 16;  // the longest rows counted as a pixel's sub-samples
     thread_local std::vector<std::uint32_t> cand;
     mIndex.gather(batch.bounds(), cand);
     std::fill(out.begin(), out.begin() + batch.size(), 0.0);
@@ -199,8 +211,13 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
     auto pointAt = [&](int i, int jj, int k) {
         return Vec3d(origin.x() + i * spacing.x(), origin.y() + jj * spacing.y(), origin.z() + k * spacing.z());
     };
-    thread_local std::vector<double> gauss;
-    gauss.resize(std::size_t(nz));
+    thread_local std::vector<double> gauss, nodeValue, nodeSlope;
+    gauss.resize(std::size_t(nz) + 4);  // rowGaussians writes up to three points past a row
+    struct RowRange {
+        int kLo, kHi, n0;
+        double tau;
+    };
+    thread_local std::vector<RowRange> rows;
     const bool avx2 = hasAvx2Rows();
     const double dx = spacing.x(), dy = spacing.y(), dz = spacing.z();
     // Strut-outer, point-inner: each point still sums its struts in ascending index order. Along
@@ -218,6 +235,7 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
         // r^2(k) = r0 + b k + c k^2 along a row; Q = exp(-2 c / 2 sigma^2).
         const double c = dz * dz - hz * hz;
         const double q = std::exp(-2.0 * c * inv2s2);
+        const double q2 = q * q, q4 = q2 * q2, q8 = q4 * q4, q16 = q8 * q8;
         // Rows nearly parallel to the strut get no analytic range (r^2 barely changes along them).
         const bool ranged = c > 1e-9 * dz * dz;
         const StrutRowConstants constants{sa.x(), sa.y(),   sa.z(), u.x(), u.y(), u.z(), length,
@@ -228,33 +246,122 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
         double coefficients[4] = {0.0, 0.0, 0.0, 0.0};
         const double hc = (centre - s.a).dot(s.u);
         if (taylor) taylorOfJ(s, hc, coefficients);
-        const bool shortRows = taylor && nz <= 16;
+        const bool shortRows = taylor && nz <= kShortRow;
         // The analytic range is only a filter: points within a step of its ends, and all points
         // between, still take the exact cut-off test, so the same points count as before.
         const double rcWide2 = rc2 * (1.0 + 1e-9) + 1e-300;
-        std::size_t n = 0;
+        // Pass 1: each row's range of points (kLo > kHi: none).
+        rows.resize(std::size_t(nx) * ny);
         for (int i = 0; i < nx; ++i) {
             const double px = d0.x() + i * dx;
-            for (int jj = 0; jj < ny; ++jj, n += nz) {
+            for (int jj = 0; jj < ny; ++jj) {
                 const double py = d0.y() + jj * dy;
-                int kLo = 0, kHi = nz - 1;
+                RowRange& r = rows[std::size_t(i) * ny + jj];
+                r.kLo = 0;
+                r.kHi = nz - 1;
                 if (shortRows) {
                     // A few points per row (a pixel's sub-samples): their own cut-off tests are
                     // cheaper than the row's range.
                 } else if (ranged) {
                     double tLo, tHi;
                     capsuleRowRange(Vec3d(px, py, d0.z()), dz, u, length, rcWide2, tLo, tHi);
-                    if (!(tLo <= tHi)) continue;
-                    kLo = int(std::clamp(std::floor(std::max(tLo, -1.0)) - 1.0, 0.0, double(nz)));
-                    kHi = int(std::min(double(nz - 1), std::ceil(std::min(tHi, double(nz))) + 1.0));
-                    if (kLo > kHi) continue;
+                    if (!(tLo <= tHi)) {
+                        r.kLo = 1;
+                        r.kHi = 0;
+                        continue;
+                    }
+                    r.kLo = int(std::clamp(std::floor(std::max(tLo, -1.0)) - 1.0, 0.0, double(nz)));
+                    r.kHi = int(std::min(double(nz - 1), std::ceil(std::min(tHi, double(nz))) + 1.0));
                 } else {
                     // Skip rows whose every point is beyond the cut-off (centre distance test).
                     const double rowHalf = 0.5 * (nz - 1) * dz;
                     const Vec3d mid(px, py, d0.z() + rowHalf);
                     const double hm = std::clamp(mid.dot(u), 0.0, length);
-                    if ((mid - hm * u).length() - rowHalf >= std::sqrt(rc2)) continue;
+                    if ((mid - hm * u).length() - rowHalf >= std::sqrt(rc2)) {
+                        r.kLo = 1;
+                        r.kHi = 0;
+                    }
                 }
+            }
+        }
+        // Long rows along which h advances by at most 0.1 sigma per point take J(h) from a table of
+        // the strut's own, with nodes one step of h apart (StrutRowTable): a row's points then
+        // sit at one fraction tau between consecutive nodes, so the Hermite weights are the row's
+        // and the nodes are read in order, instead of two GaussianTable look-ups per point. Its
+        // error is at most delta^4 / 384 max |J''''| <= 0.0128 (delta / sigma)^4 of the strut's
+        // peak (|J''''| as above): 1.3e-6 of it at delta = 0.1 sigma.
+        // The table spans the batch's range of h: at most eight rows' worth of nodes (struts nearly
+        // across the rows, whose h barely steps along them, keep the per-point look-ups).
+        const double spread = std::abs(dx * u.x()) * (nx - 1) + std::abs(dy * u.y()) * (ny - 1);
+        const bool tabled = !taylor && ranged && nz >= 16 && hz != 0.0 && std::abs(hz) <= 0.1 * sigma &&
+                            spread <= 8.0 * nz * std::abs(hz);
+        int nodeLo = 0;
+        if (tabled) {
+            // h at a row's point 0 is hRow (below); nodes h0 + n hz, with h0 one node past the
+            // batch's extreme hRow, so every row's n0 + tau is at least about 1.
+            const double hFirst = d0.x() * u.x() + d0.y() * u.y() + d0.z() * u.z();
+            const double hLast = hFirst + (nx - 1) * dx * u.x() + (ny - 1) * dy * u.y();
+            const double h0 = (hz > 0.0 ? std::min(hFirst, hLast) : std::max(hFirst, hLast)) - hz;
+            int nLo = std::numeric_limits<int>::max(), nHi = -1;
+            for (int i = 0; i < nx; ++i)
+                for (int jj = 0; jj < ny; ++jj) {
+                    RowRange& r = rows[std::size_t(i) * ny + jj];
+                    if (r.kLo > r.kHi) continue;
+                    const double hRow = (d0.x() + i * dx) * u.x() + (d0.y() + jj * dy) * u.y() + d0.z() * u.z();
+                    const double at = (hRow - h0) / hz;
+                    r.n0 = int(std::floor(at));
+                    r.tau = at - r.n0;
+                    nLo = std::min(nLo, r.n0 + r.kLo);
+                    nHi = std::max(nHi, r.n0 + r.kHi + 1);
+                }
+            if (nHi >= 0) {
+                nodeLo = nLo;
+                const std::size_t count = std::size_t(nHi - nLo + 1);
+                // Margin: the four-lane loop reads up to four nodes past a row's last point.
+                nodeValue.assign(count + 8, 0.0);
+                nodeSlope.assign(count + 8, 0.0);
+                if (avx2)
+                    strutRowNodesAvx2(constants, h0, hz, nLo, int(count), nodeValue.data(), nodeSlope.data());
+                else
+                    strutRowNodesScalar(constants, h0, hz, nLo, int(count), nodeValue.data(), nodeSlope.data());
+            }
+        }
+        // Pass 2: the rows' Gaussians and J. Short rows (a pixel's sub-samples, every row whole,
+        // one row per column) take their Gaussians by recurrence across the columns: r2(i + 1, k) -
+        // r2(i, k) is linear in i and in k, so with S(i, k) = exp(-(r2(i + 1, k) - r2(i, k)) / 2
+        // sigma^2), G(i + 1, k) = G(i, k) S(i, k), S(i + 1, k) = S(i, k) Qx and S(0, k) = S(0, 0) T^k:
+        // five exponentials per strut and batch, not two per column.
+        const bool acrossColumns = shortRows && ny == 1 && nz <= kShortRow;
+        double columnGauss[kShortRow + 4], columnStep[kShortRow], columnQ = 0.0;
+        if (acrossColumns) {
+            const double hRow0 = d0.x() * u.x() + d0.y() * u.y() + d0.z() * u.z();
+            const double r00 = d0.x() * d0.x() + d0.y() * d0.y() + d0.z() * d0.z() - hRow0 * hRow0;
+            const double ux2 = 1.0 - u.x() * u.x();
+            double e = std::exp(-r00 * inv2s2), ratio = std::exp(-(2.0 * (d0.z() * dz - hRow0 * hz) + c) * inv2s2);
+            double step = std::exp(-(2.0 * dx * (d0.x() - u.x() * hRow0) + dx * dx * ux2) * inv2s2);
+            const double across = std::exp(2.0 * hz * dx * u.x() * inv2s2);
+            columnQ = std::exp(-2.0 * dx * dx * ux2 * inv2s2);
+            for (int k = 0; k < nz; ++k) {
+                columnGauss[k] = e;
+                columnStep[k] = step;
+                e *= ratio;
+                ratio *= q;
+                step *= across;
+            }
+        }
+        std::size_t n = 0;
+        for (int i = 0; i < nx; ++i) {
+            const double px = d0.x() + i * dx;
+            if (acrossColumns && i > 0)
+                for (int k = 0; k < nz; ++k) {
+                    columnGauss[k] *= columnStep[k];
+                    columnStep[k] *= columnQ;
+                }
+            for (int jj = 0; jj < ny; ++jj, n += nz) {
+                const RowRange& range = rows[std::size_t(i) * ny + jj];
+                const int kLo = range.kLo, kHi = range.kHi;
+                if (kLo > kHi) continue;
+                const double py = d0.y() + jj * dy;
                 const double hRow = px * u.x() + py * u.y() + d0.z() * u.z();
                 const double qRow = px * px + py * py;
                 const double r0 = qRow + d0.z() * d0.z() - hRow * hRow;
@@ -263,19 +370,12 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                 const StrutRow row{rowStart.x(), rowStart.y(), rowStart.z(), dz, kLo, kHi};
                 // The recurrence's factors stay well inside double range for ordinary batches;
                 // otherwise every point takes its own exponential.
+                const double* g = gauss.data();
                 if (std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0) {
-                    double e = std::exp(-r0 * inv2s2);
-                    double ratio = std::exp(-b * inv2s2);
-                    // Points before the range advance the recurrence the same way (same bits).
-                    for (int k = 0; k < kLo; ++k) {
-                        e *= ratio;
-                        ratio *= q;
-                    }
-                    for (int k = kLo; k <= kHi; ++k) {
-                        gauss[k] = e;
-                        e *= ratio;
-                        ratio *= q;
-                    }
+                    if (acrossColumns)
+                        g = columnGauss;
+                    else
+                        rowGaussians(r0, b, c, inv2s2, q, q16, kLo, kHi, gauss.data());
                 } else {
                     for (int k = kLo; k <= kHi; ++k) {
                         double h, r2;
@@ -283,12 +383,25 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                         gauss[k] = std::exp(-r2 * inv2s2);
                     }
                 }
-                if (taylor)
-                    addStrutRowTaylor(constants, row, coefficients, hc, gauss.data(), out.data() + n);
-                else if (avx2)
-                    addStrutRowAvx2(constants, row, gauss.data(), out.data() + n);
-                else
-                    addStrutRowScalar(constants, row, gauss.data(), out.data() + n);
+                if (taylor) {
+                    if (avx2)
+                        addStrutRowTaylorAvx2(constants, row, coefficients, hc, g, out.data() + n);
+                    else
+                        addStrutRowTaylorScalar(constants, row, coefficients, hc, g, out.data() + n);
+                } else if (tabled) {
+                    const double t = range.tau, t2 = t * t, t3 = t2 * t;
+                    const StrutRowTable table{
+                        nodeValue.data(), nodeSlope.data(), range.n0 - nodeLo, 2 * t3 - 3 * t2 + 1, t3 - 2 * t2 + t,
+                        -2 * t3 + 3 * t2, t3 - t2};
+                    if (avx2)
+                        addStrutRowTabledAvx2(constants, row, table, g, out.data() + n);
+                    else
+                        addStrutRowTabledScalar(constants, row, table, g, out.data() + n);
+                } else if (avx2) {
+                    addStrutRowAvx2(constants, row, g, out.data() + n);
+                } else {
+                    addStrutRowScalar(constants, row, g, out.data() + n);
+                }
             }
         }
     }

@@ -210,12 +210,66 @@ TEST(StrutConvolution, GridValuesMatchValuesWithinTheTableBound)
                     for (int k = 0; k < batch.nz; ++k) pts.push_back(batch.point(i, j, k));
             f.values(pts, slow);
             for (int n = 0; n < size; ++n) {
-                ASSERT_NEAR(fast[n], slow[n], 1e-9 * (1.0 + slow[n])) << n;
+                // A plane's long rows along which h steps by at most 0.1 sigma take J from the
+                // strut's own table: at most 0.0128 (delta / sigma)^4 <= 1.28e-6 of the peak of
+                // each strut within reach (StrutConvolution::gridValues).
+                double tabled = 0.0;
+                if (batch.nz == 1)
+                    for (std::size_t j = 0; j < f.strutCount(); ++j) {
+                        double h, r2;
+                        if (f.segment(j).distanceSqr(pts[n], h, r2) < std::pow(f.cutoffRadius(j), 2))
+                            tabled += 1.28e-6 * f.peak(j);
+                    }
+                ASSERT_NEAR(fast[n], slow[n], 1e-9 * (1.0 + slow[n]) + tabled) << n;
                 worst = std::max(worst, std::abs(fast[n] - slow[n]));
             }
         }
     }
     EXPECT_GT(worst, 0.0);  // the fast path really is a different computation
+}
+
+TEST(StrutConvolution, PixelRowsStayWithinTheirTableBound)
+{
+    // A slicer's block at a printer's pitch (W10: sigma 0.2, pixels 19 x 24 um, 66 x 66 with the
+    // halo) over graded BCC struts: every row takes J from the strut's own table (h steps by
+    // 0.024 / sqrt 3 = 0.069 sigma). Against values() (std::erf per point), each point within
+    // 0.0128 (delta / sigma)^4 of the peaks of the struts within reach, delta = 0.024 / sqrt 3.
+    std::vector<ConvolutionStrut> struts = bccStruts(2.0);
+    for (std::size_t j = 0; j < struts.size(); ++j) {
+        struts[j].sigma = 0.2;
+        struts[j].w0 = 2.0 + 0.05 * double(j % 7);
+        struts[j].w1 = 2.5 - 0.03 * double(j % 5);
+    }
+    const StrutConvolution f(struts);
+    const double delta = 0.024 / std::sqrt(3.0), factor = 0.0128 * std::pow(delta / 0.2, 4);
+    double worst = 0.0, worstShare = 0.0;
+    for (const Vec3d& origin : {Vec3d(2.01, 2.02, 2.3), Vec3d(3.3, 2.9, 3.05), Vec3d(4.4, 5.1, 4.77)}) {
+        GridBatch batch;
+        batch.origin = origin;
+        batch.spacing = Vec3d(0.019, 0.024, 1.0);
+        batch.nx = 66;
+        batch.ny = 66;
+        batch.nz = 1;
+        std::vector<double> fast(batch.size()), slow(batch.size());
+        f.gridValues(batch, fast);
+        std::vector<Vec3d> pts;
+        for (int i = 0; i < batch.nx; ++i)
+            for (int j = 0; j < batch.ny; ++j) pts.push_back(batch.point(i, j, 0));
+        f.values(pts, slow);
+        for (std::size_t n = 0; n < pts.size(); ++n) {
+            double bound = 1e-9 * (1.0 + slow[n]);
+            for (std::size_t j = 0; j < f.strutCount(); ++j) {
+                double h, r2;
+                if (f.segment(j).distanceSqr(pts[n], h, r2) < std::pow(f.cutoffRadius(j), 2))
+                    bound += factor * f.peak(j);
+            }
+            ASSERT_LE(std::abs(fast[n] - slow[n]), bound) << n;
+            worst = std::max(worst, std::abs(fast[n] - slow[n]));
+            worstShare = std::max(worstShare, std::abs(fast[n] - slow[n]) / bound);
+        }
+    }
+    EXPECT_GT(worst, 0.0);
+    RecordProperty("worst_share_of_bound", std::to_string(worstShare));
 }
 
 TEST(StrutConvolution, SmallPlaneBatchesStayWithinTheTaylorBound)
@@ -298,6 +352,82 @@ TEST(StrutRows, FourLanesAddTheSameDoublesAsTheScalarLoop)
     }
     // The comparison covered points within the cut-off (not only skipped ones).
     EXPECT_GT(lanesAdded, lanesCompared / 4);
+}
+
+TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
+{
+    // The rows that take J from a strut's own table (addStrutRowTabled*, strutRowNodes*): both
+    // forms give the same doubles, bit for bit, on random struts, tables, row fractions and sums.
+    if (!hasAvx2Rows()) GTEST_SKIP() << "this CPU (or build) has no AVX2 row loop to compare";
+    std::mt19937_64 rng(20261129);
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    std::uint64_t lanesAdded = 0, lanesCompared = 0;
+    for (int trial = 0; trial < 20000; ++trial) {
+        const Vec3d a(unit(rng), unit(rng), unit(rng));
+        Vec3d dir(unit(rng), unit(rng), unit(rng));
+        dir.normalize();
+        const double sigma = 0.05 + 0.5 * std::abs(unit(rng)), length = 0.1 + 3.0 * std::abs(unit(rng));
+        const double rc = gaussianCutoffRadius(sigma, 1e-4);
+        const StrutRowConstants c{a.x(), a.y(),       a.z(),         dir.x(), dir.y(), dir.z(), length,
+                                  sigma, 1.0 / sigma, sigma * sigma, 1.0,     0.0,     rc * rc};
+        const int nz = 16 + int(rng() % 60);
+        const int kLo = int(rng() % nz), kHi = kLo + int(rng() % (nz - kLo));
+        const StrutRow row{
+            0.3 * unit(rng), 0.3 * unit(rng), unit(rng) - 1.0, 0.01 + 0.05 * std::abs(unit(rng)), kLo, kHi};
+        // The table's nodes (J and step J' from GaussianTable) in both forms: the same doubles.
+        const int count = 1 + int(rng() % 40), first = int(rng() % 50) - 25;
+        const double h0 = 2.0 * unit(rng), step = 0.02 * unit(rng);
+        StrutRowConstants graded = c;
+        graded.slope = trial % 3 == 0 ? 0.0 : unit(rng);
+        std::vector<double> valueS(std::size_t(count) + 4), slopeS(valueS.size()), valueV(valueS.size()),
+            slopeV(valueS.size());
+        strutRowNodesScalar(graded, h0, step, first, count, valueS.data(), slopeS.data());
+        strutRowNodesAvx2(graded, h0, step, first, count, valueV.data(), slopeV.data());
+        ASSERT_EQ(std::memcmp(valueS.data(), valueV.data(), std::size_t(count) * sizeof(double)), 0) << trial;
+        ASSERT_EQ(std::memcmp(slopeS.data(), slopeV.data(), std::size_t(count) * sizeof(double)), 0) << trial;
+        // The rows' Gaussians (four interleaved recurrences) in both forms.
+        const double lanes0[4] = {std::abs(unit(rng)), std::abs(unit(rng)), std::abs(unit(rng)), std::abs(unit(rng))};
+        const double steps0[4] = {1.0 + 0.1 * unit(rng), 1.0 + 0.1 * unit(rng), 1.0 + 0.1 * unit(rng),
+                                  1.0 + 0.1 * unit(rng)};
+        const double q16 = 1.0 + 0.01 * unit(rng);
+        std::vector<double> gaussS(std::size_t(count) + 4), gaussV(gaussS.size());
+        fillGaussiansScalar(lanes0, steps0, q16, count, gaussS.data());
+        fillGaussiansAvx2(lanes0, steps0, q16, count, gaussV.data());
+        ASSERT_EQ(std::memcmp(gaussS.data(), gaussV.data(), std::size_t(count) * sizeof(double)), 0) << trial;
+        // The sub-samples' rows (J from a cubic Taylor polynomial) in both forms.
+        {
+            const double poly[4] = {unit(rng), unit(rng), unit(rng), unit(rng)};
+            const double hc = unit(rng);
+            const StrutRow shortRow{row.x, row.y, row.z0, row.dz, 0, int(rng() % 12)};
+            std::vector<double> outS(16), outV, weights(16);
+            for (double& v : outS) v = std::abs(unit(rng));
+            for (double& v : weights) v = std::abs(unit(rng));
+            outV = outS;
+            addStrutRowTaylorScalar(c, shortRow, poly, hc, weights.data(), outS.data());
+            addStrutRowTaylorAvx2(c, shortRow, poly, hc, weights.data(), outV.data());
+            ASSERT_EQ(std::memcmp(outS.data(), outV.data(), outS.size() * sizeof(double)), 0) << trial;
+        }
+        const int n0 = int(rng() % 5);
+        std::vector<double> value(std::size_t(n0 + nz + 8)), slope(value.size());
+        for (std::size_t m = 0; m < value.size(); ++m) {
+            value[m] = std::abs(unit(rng));
+            slope[m] = 0.1 * unit(rng);
+        }
+        const double t = 0.5 * (unit(rng) + 1.0), t2 = t * t, t3 = t2 * t;
+        const StrutRowTable table{value.data(),    slope.data(),     n0,     2 * t3 - 3 * t2 + 1,
+                                  t3 - 2 * t2 + t, -2 * t3 + 3 * t2, t3 - t2};
+        std::vector<double> gauss(nz), scalar(nz + 4), lanes;
+        for (double& g : gauss) g = std::abs(unit(rng));
+        for (double& v : scalar) v = trial % 2 ? std::abs(unit(rng)) : 0.0;
+        lanes = scalar;
+        const std::vector<double> before = scalar;
+        addStrutRowTabledScalar(c, row, table, gauss.data(), scalar.data());
+        addStrutRowTabledAvx2(c, row, table, gauss.data(), lanes.data());
+        ASSERT_EQ(std::memcmp(scalar.data(), lanes.data(), scalar.size() * sizeof(double)), 0) << "trial " << trial;
+        lanesCompared += std::uint64_t(kHi - kLo + 1);
+        for (int k = kLo; k <= kHi; ++k) lanesAdded += scalar[k] != before[k] ? 1 : 0;
+    }
+    EXPECT_GT(lanesAdded, lanesCompared / 8);
 }
 
 TEST(GaussianTable, InterpolationErrorWithinItsDocumentedBound)
