@@ -212,9 +212,14 @@ std::shared_ptr<Job> makeJob(const Recipe& recipe, py::object progress)
                 }
             });
     }
-    {
+    try {
         py::gil_scoped_release release;
         owner->job.emplace(recipe, &owner->context);
+    } catch (const Cancelled&) {
+        // Stopped by the progress callable while the job was set up (a design solve): its error.
+        if (std::shared_ptr<py::error_already_set> error = std::move(owner->context.error))
+            throw py::error_already_set(*error);
+        throw;
     }
     return std::shared_ptr<Job>(owner, &*owner->job);
 }
@@ -345,5 +350,6 @@ PYBIND11_MODULE(_voxlat, m)
             },
             "effective stiffness and conductivity of one periodic cell of the result (a dict; needs material:)")
         .def(
-            "report", [](Job& j) { return jsonToPython(runJob(j, [&j] { return j.report(); })); }, "levels, densities, counts, timings");
+            "report", [](Job& j) { return jsonToPython(runJob(j, [&j] { return j.report(); })); },
+            "levels, densities, counts, timings");
 }

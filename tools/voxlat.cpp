@@ -591,6 +591,17 @@ int main(int argc, char** argv)
         // The disk, not the recipe: full, read-only or not ours to write.
         std::cerr << "error: " << e.what() << "\n";
         return 3;
+    } catch (const std::invalid_argument& e) {
+        // The fields' own checks of their inputs (a direction field zero somewhere, a bad size):
+        // bad input the recipe loader could not see, found at run time.
+        std::cerr << "error: " << e.what() << "\n";
+        return 2;
+    } catch (const std::domain_error& e) {
+        std::cerr << "error: " << e.what() << "\n";
+        return 2;
+    } catch (const std::bad_alloc&) {
+        std::cerr << "error: this machine ran out of memory for the job: raise `voxel:` or shrink the domain\n";
+        return 3;
     } catch (const std::exception& e) {
         std::cerr << "error: " << e.what() << "\n";
         return 1;

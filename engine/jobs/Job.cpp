@@ -370,11 +370,13 @@ void Job::solveLevels()
         mReport["drain"] = timed("drain holes", [&] { return planDrains(mBuilder.drains(), mDomain.voxel, mContext); });
     // A field infinite everywhere (`1/0`, a number past 1.8e308) is culled as outside before any
     // leaf is evaluated: the evaluator's NaN check never sees it, and the part came out empty at
-    // exit 0. 27 points of the domain (corners, edge and face centres, centre) catch it.
+    // exit 0. 27 voxel centres of the grid (its corners, edge and face middles, middle) catch it;
+    // the grid's own points, so a pole between them (1/x at x = 0) is no error.
     for (int i = 0; i < 27; ++i) {
-        const Vec3d t(0.5 * (i % 3), 0.5 * (i / 3 % 3), 0.5 * (i / 9));
-        const Vec3d p = mDomain.box.min + Vec3d(t[0] * mDomain.box.extent()[0], t[1] * mDomain.box.extent()[1],
-                                                t[2] * mDomain.box.extent()[2]);
+        const int t[3] = {i % 3, i / 3 % 3, i / 9};
+        openvdb::Coord ijk;
+        for (int a = 0; a < 3; ++a) ijk[a] = t[a] * (std::max(1, mDomain.dims[a]) - 1) / 2;
+        const Vec3d p = mDomain.worldOf(ijk);
         const double v = mResult->value(p);
         if (!std::isfinite(v))
             throw JobError(mRecipe.source->path + ": the result `" + mRecipe.result + "` is " + formatNumber(v) +
@@ -1273,6 +1275,10 @@ void Job::writeMesh(const std::filesystem::path& path, const MeshOptions& option
     std::optional<OutputTransaction> own;
     if (!OutputTransaction::current()) own.emplace();
     MeshVariant& v = variant(options);
+    if (v.mesh->triangles.empty())
+        throw JobError(mRecipe.source->path + ": the result `" + mRecipe.result +
+                       "` has no surface in the domain: the mesh would be empty (check the domain, the density or "
+                       "level, and the fields' sizes)");
     timed("write " + path.filename().string(), [&] {
         voxlat::writeMesh(*v.mesh, path.string(), v.measures ? nullptr : &v.measures, meshMetadata());
         return 0;
@@ -1309,6 +1315,10 @@ void Job::writeStlWhileMeshing(const std::filesystem::path& path)
     });
     v->measures = made.measures;
     const StreamedMeshCounts& counts = made.counts;
+    if (counts.triangles == 0)
+        throw JobError(mRecipe.source->path + ": the result `" + mRecipe.result +
+                       "` has no surface in the domain: the mesh would be empty (check the domain, the density or "
+                       "level, and the fields' sizes)");
     v->report["extractor"] = meshExtractorName(MeshExtractor::MarchingCubes);
     v->report["triangles"] = counts.triangles;
     v->report["vertices"] = counts.vertices;
@@ -1371,6 +1381,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         return false;
     };
     for (std::size_t n = 0; n < mRecipe.outputs.size(); ++n) {
+        mContext->checkCancelled();  // a cancel between outputs stops before the next one
         const OutputSpec& out = mRecipe.outputs[n];
         const std::filesystem::path& path = paths[n];
         if (out.kind == "mesh") {
