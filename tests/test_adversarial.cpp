@@ -9,6 +9,7 @@
 #include "engine/core/SystemInfo.h"
 #include "engine/jobs/Job.h"
 #include "engine/jobs/PrinterProfile.h"
+#include "engine/jobs/TrialRecipe.h"
 #include "engine/recipe/Recipe.h"
 #include "mesher/writers/AtomicFile.h"
 
@@ -18,6 +19,7 @@
 
 #include <atomic>
 #include <cerrno>
+#include <chrono>
 #include <thread>
 
 using namespace voxlat;
@@ -360,4 +362,27 @@ TEST(Adversarial, JobsThatCannotFitAreRefusedWithTheEstimate)
     }
     e = errorOf<JobError>([&] { Job job(parse("voxel: 0.5\nfields:\n  part: {mesh: big.3mf}\nresult: part\n", dir)); });
     EXPECT_NE(e.find("decompresses to 1048576 MB"), std::string::npos) << e;
+}
+
+TEST(Adversarial, TrialJobsStopWithTheirParent)
+{
+    // Trial jobs (optimize:, stiffness:, a frame's repeated cell, the pieces advice) keep their
+    // own context; a SIGTERM during `optimize:` once ran on for minutes. Their progress checks
+    // look at the parent's cancel.
+    JobContext parent, trial;
+    followCancel(trial, &parent);
+    StageProgress stage(&trial, "trial", 100);
+    stage.add();
+    parent.cancel();
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));  // the next progress tick
+    EXPECT_THROW(
+        {
+            stage.add();
+            stage.add();
+        },
+        Cancelled);
+    // Already cancelled: the trial starts cancelled.
+    JobContext late;
+    followCancel(late, &parent);
+    EXPECT_TRUE(late.cancelled());
 }

@@ -1532,6 +1532,7 @@ bool Job::unitCellProperties(const RepeatZone& zone)
     Recipe repeated = trialRecipe(mRecipe, mRecipe.result, copy);
     // Its own warnings (a domain the larger frame overhangs) are not about the recipe's part.
     JobContext quiet;
+    followCancel(quiet, mContext);
     mContext->checkCancelled();
     Job job(std::move(repeated), &quiet);
     nlohmann::json report = timed("homogenize", [&] { return job.properties(); });

@@ -47,6 +47,7 @@ Measured measure(const Recipe& base, const std::string& name, const YAML::Node& 
     // The trials' own warnings (loose pieces, a cell with no load path) are about candidates the
     // search leaves behind, not about the result.
     JobContext quiet;
+    followCancel(quiet, parent);
     Measured m;
     try {
         Job job(std::move(r), &quiet);
