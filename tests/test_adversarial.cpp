@@ -270,7 +270,7 @@ TEST(Adversarial, ResultsThatCannotBeRightFailTheirCheck)
     // A part far from the origin against its voxel: refused with the limit.
     e = errorOf<InputError>([&] {
         Job job(
-            parse("voxel: 0.5\ndomain: {box: [[1e9, 0, 0], [1e9 + 4, 4, 4]]}\nfields:\n  s: {sphere: {radius: "
+            parse("voxel: 0.5\ndomain: {box: [[1e9, 0, 0], [1000000004, 4, 4]]}\nfields:\n  s: {sphere: {radius: "
                   "1, center: [1e9, 2, 2]}}\nresult: s\n",
                   dir));
     });
