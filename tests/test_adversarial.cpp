@@ -386,3 +386,25 @@ TEST(Adversarial, TrialJobsStopWithTheirParent)
     followCancel(late, &parent);
     EXPECT_TRUE(late.cancelled());
 }
+
+TEST(Adversarial, CommandLineNumbersKeepTheirDigits)
+{
+    // --layer went through std::to_string: 0.0000004 became "0.000000" (refused as zero) and
+    // 0.0123456 became 0.012346. Both ends of the layer range show the digits as given.
+    TempDir dir;
+    const auto recipe = dir.write("r.yaml", kSmall);
+    std::string text;
+    EXPECT_EQ(runCommand(voxlatBinary() + " -q slice " + recipe.string() + " --printer sl1s -o " +
+                             (dir.path / "a.sl1s").string() + " --layer 0.0000004",
+                         &text),
+              2)
+        << text;
+    EXPECT_NE(text.find("a layer of 4e-07 mm"), std::string::npos) << text;
+    EXPECT_EQ(runCommand(voxlatBinary() + " -q slice " + recipe.string() + " --printer sl1s -o " +
+                             (dir.path / "a.sl1s").string() + " --layer 10.0000001",
+                         &text),
+              2)
+        << text;
+    EXPECT_NE(text.find("a layer of 10.0000001 mm"), std::string::npos) << text;
+    EXPECT_TRUE(listFolder(dir.path) == std::vector<std::string>{"r.yaml"});
+}
