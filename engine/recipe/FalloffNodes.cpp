@@ -143,8 +143,8 @@ FieldPtr buildFalloff(FieldBuilder& builder, const RecipeNode& spec, const std::
     // the time grows as sources x voxels (10^6 points still ran after two minutes on a small
     // domain). Past kMaxReachingSources the job is refused before any work.
     if (falloff != Falloff::Gaussian && sources.size() > kMaxReachingSources)
-        throw JobError(m.where() + ": " + std::to_string(sources.size()) + " " + what + "s with `falloff: " +
-                       (falloff == Falloff::Inverse ? "inverse" : "inverse-square") +
+        throw JobError(m.where() + ": " + std::to_string(sources.size()) + " " + what +
+                       "s with `falloff: " + (falloff == Falloff::Inverse ? "inverse" : "inverse-square") +
                        "` make every voxel sum all of them (about " + std::to_string(sources.size()) +
                        " terms a voxel, more than the " + std::to_string(kMaxReachingSources) +
                        " a job can run in reasonable time): use `falloff: gaussian` with a `sigma:` (cut off at "

@@ -67,7 +67,8 @@ double parseModulusMPa(const RecipeNode& node)
     // solver's numbers overflow (1e308 GPa) or vanish.
     const double mpa = value * scale;
     if (mpa > 1e7 || mpa < 1e-6)
-        node.fail("a modulus of " + text + " is outside any material's (1 Pa to 10 000 GPa): check the number and its unit");
+        node.fail("a modulus of " + text +
+                  " is outside any material's (1 Pa to 10 000 GPa): check the number and its unit");
     return mpa;
 }
 
