@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <map>
@@ -406,7 +407,10 @@ private:
         }
         const std::string token = mText.substr(start, mPos - start);
         if (token == ".") throw ExprError("a lone `.` is not a number", start);
-        return constant(std::strtod(token.c_str(), nullptr));
+        const double value = std::strtod(token.c_str(), nullptr);
+        if (!std::isfinite(value))
+            throw ExprError("the number `" + token + "` is past the largest double (1.8e308)", start);
+        return constant(value);
     }
 
     int parseParameter()

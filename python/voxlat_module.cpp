@@ -12,7 +12,14 @@
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 #include <tbb/parallel_for.h>
+
+#include <chrono>
+#include <future>
+#include <memory>
+#include <mutex>
 #include <optional>
+#include <stdexcept>
+#include <thread>
 
 namespace py = pybind11;
 using namespace voxlat;
@@ -98,11 +105,71 @@ py::object jsonToPython(const nlohmann::json& j)
     return py::module_::import("json").attr("loads")(j.dump());
 }
 
+/// A Python job's context: one call at a time (`busy`), and the Python exception that stopped
+/// the job (one raised in the progress callable, or KeyboardInterrupt), raised again once the
+/// job has unwound.
+struct PyJobContext : JobContext {
+    std::mutex busy;
+    std::mutex errorMutex;
+    std::shared_ptr<py::error_already_set> error;  // set and reset with the GIL held
+
+    /// Keeps the Python exception now set (GIL held) unless one is kept already, and cancels.
+    void stopWith(py::error_already_set&& e)
+    {
+        {
+            std::lock_guard<std::mutex> lock(errorMutex);
+            if (!error) error = std::make_shared<py::error_already_set>(std::move(e));
+        }
+        cancel();
+    }
+};
+
 /// A job and the context it reports through, alive together (the Job's shared_ptr aliases this).
 struct JobWithContext {
-    JobContext context;
+    PyJobContext context;
     std::optional<Job> job;
 };
+
+/// Runs @a work (a job's stage) on a thread of its own while this one, without the GIL, looks for
+/// Python signals every tenth of a second: Ctrl-C (KeyboardInterrupt) cancels the job, which
+/// unwinds cleanly (no output left) before the exception is raised here. An exception from the
+/// progress callable is raised the same way. A Job used from a second Python thread while it runs
+/// refuses with RuntimeError instead of racing. Called with the GIL held.
+template <class F>
+auto runJob(Job& j, F work) -> decltype(work())
+{
+    using Result = decltype(work());
+    auto& context = static_cast<PyJobContext&>(j.context());
+    std::unique_lock<std::mutex> busy(context.busy, std::try_to_lock);
+    if (!busy.owns_lock())
+        throw std::runtime_error(
+            "this Job is running in another thread: a Job does one thing at a time; wait for that call to return, or "
+            "make a Job per thread");
+    std::packaged_task<Result()> task(std::move(work));
+    std::future<Result> done = task.get_future();
+    {
+        py::gil_scoped_release release;
+        std::thread worker(std::move(task));
+        while (done.wait_for(std::chrono::milliseconds(100)) != std::future_status::ready) {
+            py::gil_scoped_acquire gil;
+            if (PyErr_CheckSignals() != 0) context.stopWith(py::error_already_set());
+        }
+        worker.join();
+    }
+    std::shared_ptr<py::error_already_set> error;
+    {
+        std::lock_guard<std::mutex> lock(context.errorMutex);
+        error.swap(context.error);
+    }
+    if (error) {
+        try {
+            done.get();  // the job's own exception (Cancelled) gives way to the one that caused it
+        } catch (...) {
+        }
+        throw py::error_already_set(*error);
+    }
+    return done.get();
+}
 
 /// Makes a Job whose progress goes to @a progress (a Python callable `f(stage, done, total)`, or None).
 /// The mesh options of `mesh()` and `write_mesh()`: as `voxlat mesh --tolerance T --project on|off
@@ -127,17 +194,32 @@ std::shared_ptr<Job> makeJob(const Recipe& recipe, py::object progress)
 {
     auto owner = std::make_shared<JobWithContext>();
     if (!progress.is_none()) {
+        if (!PyCallable_Check(progress.ptr()))
+            throw py::type_error("progress= takes a callable f(stage, done, total), not " +
+                                 std::string(py::str(py::type::of(progress).attr("__name__"))));
         // Called from worker threads while the job runs without the GIL: take it for the call.
+        // An exception there cancels the job; runJob raises it once the job has unwound.
         auto callback = std::make_shared<py::object>(std::move(progress));
+        PyJobContext* context = &owner->context;
         owner->context.setProgressCallback(
-            [callback](const std::string& stage, std::uint64_t done, std::uint64_t total) {
+            [callback, context](const std::string& stage, std::uint64_t done, std::uint64_t total) {
                 py::gil_scoped_acquire gil;
-                (*callback)(stage, done, total);
+                if (context->error) return;
+                try {
+                    (*callback)(stage, done, total);
+                } catch (py::error_already_set& e) {
+                    context->stopWith(std::move(e));
+                }
             });
     }
-    {
+    try {
         py::gil_scoped_release release;
         owner->job.emplace(recipe, &owner->context);
+    } catch (const Cancelled&) {
+        // Stopped by the progress callable while the job was set up (a design solve): its error.
+        if (std::shared_ptr<py::error_already_set> error = std::move(owner->context.error))
+            throw py::error_already_set(*error);
+        throw;
     }
     return std::shared_ptr<Job>(owner, &*owner->job);
 }
@@ -220,20 +302,11 @@ PYBIND11_MODULE(_voxlat, m)
             "cancel", [](Job& j) { j.context().cancel(); },
             "ask a running stage (in another thread) to stop; it raises voxlat.Cancelled")
         .def(
-            "solve",
-            [](Job& j) {
-                py::gil_scoped_release release;
-                j.solveLevels();
-            },
-            "solve every density: level")
+            "solve", [](Job& j) { runJob(j, [&j] { j.solveLevels(); }); }, "solve every density: level")
         .def(
             "field",
             [](Job& j, const std::string& name) {
-                FieldPtr f;
-                {
-                    py::gil_scoped_release release;
-                    f = j.field(name.empty() ? j.recipe().result : name);
-                }
+                const FieldPtr f = runJob(j, [&] { return j.field(name.empty() ? j.recipe().result : name); });
                 return Field{f, name.empty() ? j.recipe().result : name};
             },
             py::arg("name") = "", "a named field (levels solved); the result by default")
@@ -241,11 +314,7 @@ PYBIND11_MODULE(_voxlat, m)
             "mesh",
             [](Job& j, std::optional<double> tolerance, std::optional<bool> project, const std::string& extractor) {
                 const MeshOptions options = meshOptions(tolerance, project, extractor);
-                const TriangleMesh* mesh;
-                {
-                    py::gil_scoped_release release;
-                    mesh = &j.mesh(options);
-                }
+                const TriangleMesh* mesh = runJob(j, [&] { return &j.mesh(options); });
                 py::array_t<float> points({py::ssize_t(mesh->points.size()), py::ssize_t(3)});
                 py::array_t<std::uint32_t> tris({py::ssize_t(mesh->triangles.size()), py::ssize_t(3)});
                 std::memcpy(points.mutable_data(), mesh->points.data(), mesh->points.size() * 3 * sizeof(float));
@@ -258,41 +327,29 @@ PYBIND11_MODULE(_voxlat, m)
             "decimated to that distance from the true surface; project: vertices on the true surface; extractor: "
             "marching-cubes or bcc")
         .def(
-            "write_outputs",
-            [](Job& j, const std::string& dir) {
-                py::gil_scoped_release release;
-                j.writeOutputs(dir);
-            },
+            "write_outputs", [](Job& j, const std::string& dir) { runJob(j, [&] { j.writeOutputs(dir); }); },
             py::arg("out_dir"), "write the recipe's outputs and report.json")
         .def(
             "write_mesh",
             [](Job& j, const std::string& path, std::optional<double> tolerance, std::optional<bool> project,
                const std::string& extractor) {
                 const MeshOptions options = meshOptions(tolerance, project, extractor);
-                py::gil_scoped_release release;
-                j.writeMesh(path, options);
+                runJob(j, [&] { j.writeMesh(path, options); });
             },
             py::arg("path"), py::arg("tolerance") = py::none(), py::arg("project") = py::none(),
             py::arg("extractor") = "marching-cubes",
             "write the mesh (.stl, .3mf, .ply, .obj), with the options of mesh()")
         .def(
-            "write_report",
-            [](Job& j, const std::string& path) {
-                py::gil_scoped_release release;
-                j.writeReport(path);
-            },
+            "write_report", [](Job& j, const std::string& path) { runJob(j, [&] { j.writeReport(path); }); },
             py::arg("path"))
         .def(
             "properties",
             [](Job& j) {
-                nlohmann::json p;
-                {
-                    py::gil_scoped_release release;
-                    p = j.properties();
-                }
+                const nlohmann::json p = runJob(j, [&] { return j.properties(); });
                 return jsonToPython(p);
             },
             "effective stiffness and conductivity of one periodic cell of the result (a dict; needs material:)")
         .def(
-            "report", [](const Job& j) { return jsonToPython(j.report()); }, "levels, densities, counts, timings");
+            "report", [](Job& j) { return jsonToPython(runJob(j, [&j] { return j.report(); })); },
+            "levels, densities, counts, timings");
 }

@@ -3,6 +3,7 @@
 #include "engine/core/Format.h"
 #include "engine/core/Version.h"
 #include "engine/jobs/Job.h"
+#include "engine/jobs/OutputPaths.h"
 #include "engine/jobs/PrinterProfile.h"
 #include "engine/jobs/PropertiesJob.h"
 #include "engine/recipe/MeshSettings.h"
@@ -191,6 +192,7 @@ int propertiesCurve(const Common& args, const std::string& jsonFile, const std::
         g["C"][0].get<double>(), g["C"][1].get<double>(), g["C"][2].get<double>(), g["n"][0].get<double>(),
         g["n"][1].get<double>(), g["n"][2].get<double>(), 100.0 * g["max_relative_error"].get<double>());
     if (!jsonFile.empty()) {
+        context.checkCancelled();
         voxlat::AtomicFile file(jsonFile);
         file.stream() << result.dump(2) << "\n";
         file.commit();
@@ -202,7 +204,8 @@ int propertiesCurve(const Common& args, const std::string& jsonFile, const std::
 int properties(const Common& args, const std::string& jsonFile, const std::string& pngFile, const std::string& sweep,
                voxlat::JobContext& context)
 {
-    auto writeFile = [](const std::string& path, const std::string& bytes) {
+    auto writeFile = [&](const std::string& path, const std::string& bytes) {
+        context.checkCancelled();
         voxlat::AtomicFile file(path);
         file.stream() << bytes;
         file.commit();
@@ -260,6 +263,34 @@ int properties(const Common& args, const std::string& jsonFile, const std::strin
     }
     if (!jsonFile.empty()) writeFile(jsonFile, nlohmann::json{{"key", key}, {"sweep", rows}}.dump(2) + "\n");
     return 0;
+}
+
+/// The shortest text that reads back as @a value (a --layer of 0.0000004 stays that, not
+/// std::to_string's "0.000000").
+std::string exactText(double value)
+{
+    char text[64];
+    for (int digits = 1; digits <= 17; ++digits) {
+        std::snprintf(text, sizeof text, "%.*g", digits, value);
+        if (std::strtod(text, nullptr) == value) break;
+    }
+    return text;
+}
+
+/// A file a command writes (`--json`, `--png`, `-o`), checked before any work like every
+/// output: a regular file or nothing there, and the extension its content has.
+void checkWritable(const std::string& file, const std::string& option, const std::string& extension)
+{
+    if (file.empty()) return;
+    voxlat::checkReplaceable(file, option + " " + file);
+    if (!extension.empty() && std::filesystem::path(file).extension() != extension)
+        throw voxlat::InputError(option + " " + file + ": the file is " + extension.substr(1) +
+                                 "; give a name ending in " + extension);
+    const std::filesystem::path folder = std::filesystem::path(file).parent_path();
+    std::error_code ec;
+    if (!folder.empty() && !std::filesystem::is_directory(folder, ec))
+        throw voxlat::InputError(option + " " + file + ": the folder `" + folder.string() +
+                                 "` does not exist; create it first");
 }
 
 /// Runs this program again with huge pages asked for (voxlat::requestHugePages()), unless it
@@ -428,7 +459,13 @@ int main(int argc, char** argv)
         "  voxlat printers                              the printer profiles --printer takes\n"
         "Shell completion for bash: tools/completion/voxlat.bash");
 
-    CLI11_PARSE(app, argc, argv);
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+        // --help and --version print and succeed; every usage error is bad input: exit 2.
+        const int code = app.exit(e);
+        return code == 0 ? 0 : 2;
+    }
     voxlat::JobContext context;
     voxlat::cli::attachTerminal(context, quiet);
     voxlat::cli::cancelOnSignals(context);
@@ -457,6 +494,7 @@ int main(int argc, char** argv)
                       << " (report.json has levels, densities and timings)\n";
             exitSkippingTeardown(0);
         } else if (*mesh) {
+            checkWritable(meshFile, "-o", "");
             voxlat::Recipe recipe = voxlat::loadRecipe(meshArgs.recipe, meshArgs.sets);
             // The recipe's first mesh output says how to mesh; the options here override it.
             voxlat::MeshOptions options;
@@ -537,11 +575,12 @@ int main(int argc, char** argv)
             if (!slicePrinter.empty()) set("printer", slicePrinter);
             // -o is the user's own path (anywhere); the recipe's entry takes only its name.
             if (!sliceFile.empty()) set("file", std::filesystem::path(sliceFile).filename().string());
-            if (sliceLayer != 0.0 || sliceCmd->count("--layer")) set("layer", std::to_string(sliceLayer));
+            // Numbers keep every digit given (the option's text, not a re-formatted double).
+            if (sliceCmd->count("--layer")) set("layer", exactText(sliceLayer));
             if (!sliceAa.empty()) set("aa", sliceAa);
-            if (sliceGamma >= 0.0 || sliceCmd->count("--gamma")) set("gamma", std::to_string(sliceGamma));
+            if (sliceCmd->count("--gamma")) set("gamma", exactText(sliceGamma));
             if (!slicePosition.empty())
-                set("position", "[" + std::to_string(slicePosition[0]) + ", " + std::to_string(slicePosition[1]) + "]");
+                set("position", "[" + exactText(slicePosition[0]) + ", " + exactText(slicePosition[1]) + "]");
             if (!sliceFormat.empty()) set("format", sliceFormat);
             if (!slicePreview.empty()) set("preview", slicePreview);
             voxlat::Recipe recipe = voxlat::loadRecipe(sliceArgs.recipe, sets);
@@ -563,6 +602,15 @@ int main(int argc, char** argv)
             if (!s["preview"].get<std::string>().empty())
                 std::cout << "preview " << s["preview"].get<std::string>() << "\n";
         } else if (*propertiesCmd) {
+            // Both files are checked before any work, with the rules of every output: a regular
+            // file or nothing (never a device, FIFO or symbolic link), and not one file twice.
+            checkWritable(propertiesJson, "--json", ".json");
+            checkWritable(propertiesPng, "--png", ".png");
+            if (!propertiesJson.empty() && !propertiesPng.empty() &&
+                std::filesystem::absolute(propertiesJson).lexically_normal() ==
+                    std::filesystem::absolute(propertiesPng).lexically_normal())
+                throw voxlat::InputError("--json and --png name one file `" + propertiesJson +
+                                         "`: give each its own name");
             if (!propertiesCurveSpec.empty()) {
                 if (!propertiesSweep.empty()) throw voxlat::InputError("give either --curve or --sweep, not both");
                 return propertiesCurve(propertiesArgs, propertiesJson, propertiesCurveSpec, context);
@@ -586,6 +634,17 @@ int main(int argc, char** argv)
     } catch (const voxlat::OutputError& e) {
         // The disk, not the recipe: full, read-only or not ours to write.
         std::cerr << "error: " << e.what() << "\n";
+        return 3;
+    } catch (const std::invalid_argument& e) {
+        // The fields' own checks of their inputs (a direction field zero somewhere, a bad size):
+        // bad input the recipe loader could not see, found at run time.
+        std::cerr << "error: " << e.what() << "\n";
+        return 2;
+    } catch (const std::domain_error& e) {
+        std::cerr << "error: " << e.what() << "\n";
+        return 2;
+    } catch (const std::bad_alloc&) {
+        std::cerr << "error: this machine ran out of memory for the job: raise `voxel:` or shrink the domain\n";
         return 3;
     } catch (const std::exception& e) {
         std::cerr << "error: " << e.what() << "\n";

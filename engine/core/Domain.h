@@ -19,6 +19,9 @@ inline constexpr int kMaxVoxelsPerAxis = 1 << 24;
 /// The most voxels a job's domain may hold: past this even listing the 128^3 blocks to cull costs
 /// gigabytes (a 1 m cube at 0.01 mm is 10^15).
 inline constexpr double kMaxDomainVoxels = 1e13;
+/// How far (in voxels) a domain may reach from the origin: 2^21, so single-precision vertices
+/// (24 bits) still place points to an eighth of a voxel.
+inline constexpr double kMaxVoxelsFromOrigin = 2097152.0;
 
 struct Domain {
     Box3 box;

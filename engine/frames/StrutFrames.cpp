@@ -249,10 +249,10 @@ Frame readWireframe(const std::string& path)
             try {
                 std::size_t used = 0;
                 const double v = std::stod(cells.at(i), &used);
-                if (used != cells[i].size()) throw std::invalid_argument("");
+                if (used != cells[i].size() || !std::isfinite(v)) throw std::invalid_argument("");
                 return v;
             } catch (const std::exception&) {
-                throw InputError(where + ": column " + std::to_string(i + 1) + " is not a number");
+                throw InputError(where + ": column " + std::to_string(i + 1) + " is not a finite number");
             }
         };
         // A header row (`x1,y1,z1,x2,y2,z2,r1,r2` as a frame output writes it, or any other

@@ -45,7 +45,9 @@
 #include <algorithm>
 #include <chrono>
 #include <climits>
+#include <cmath>
 #include <iostream>
+#include <optional>
 #include <sstream>
 
 namespace voxlat {
@@ -233,6 +235,20 @@ Job::Job(Recipe recipe, JobContext* context)
         // A job this machine cannot run (exit 3), said before any allocation.
         throw JobError((mRecipe.root["voxel"] ? mRecipe.node("voxel").where() : mRecipe.source->path) + ": " + message);
     }
+    // Grids, meshes and slices keep coordinates in single precision (24 bits): a part far from
+    // the origin against its voxel loses its shape (at 1e9 mm every vertex had one x). Refused
+    // with the limit rather than written wrong.
+    {
+        double far = 0.0;
+        for (int a = 0; a < 3; ++a) far = std::max({far, std::abs(mDomain.box.min[a]), std::abs(mDomain.box.max[a])});
+        if (far > kMaxVoxelsFromOrigin * mDomain.voxel)
+            throw InputError((mRecipe.root["domain"] ? mRecipe.node("domain").where() : mRecipe.source->path) +
+                             ": the part lies " + formatNumber(far) + " mm from the origin, more than " +
+                             formatNumber(kMaxVoxelsFromOrigin) + " voxels (" +
+                             formatNumber(kMaxVoxelsFromOrigin * mDomain.voxel) +
+                             " mm at this voxel): single-precision vertices would lose its shape; model it near the "
+                             "origin and move it in the slicer or CAD tool");
+    }
     for (const OutputSpec& out : mRecipe.outputs)
         if (out.kind == "frame" && mBuilder.strutFrames().empty())
             RecipeNode(out.spec, mRecipe.source, "outputs")
@@ -364,6 +380,15 @@ void Job::solveLevels()
             if (node.onSolved) node.onSolved(node.solid->level());
             entry["target_density"] = *node.density;
             entry["achieved_density"] = s.achieved;
+            // A solve that cannot reach its target (a cell of 1e300 mm: the domain holds no
+            // surface) would give an empty or solid part at exit 0: a failed check instead. (A
+            // coarse grid's ties may miss by tens of percent; that is the voxel's, and reported.)
+            if ((s.achieved <= 0.0 || s.achieved >= 1.0) && *node.density > 0.0 && *node.density < 1.0)
+                throw JobError(mRecipe.source->path + ": field `" + node.name + "` reaches a density of " +
+                               formatNumber(s.achieved) + ", not the " + formatNumber(*node.density) +
+                               " asked: no level of this field holds that share of the domain, the part would be " +
+                               (s.achieved <= 0.0 ? "empty" : "solid") +
+                               " (check its cell size against the domain, and its equation)");
             entry["solve_rounds"] = s.rounds;
             entry["density_measure"] = s.coverage ? "sub-voxel coverage" : "voxel count";
             entry["evaluated_leaves"] = s.evaluatedLeaves;
@@ -420,6 +445,21 @@ void Job::solveLevels()
     // Drain channels need the levels (a trap is the void of the solved solid).
     if (!mBuilder.drains().empty())
         mReport["drain"] = timed("drain holes", [&] { return planDrains(mBuilder.drains(), mDomain.voxel, mContext); });
+    // A field infinite everywhere (`1/0`, a number past 1.8e308) is culled as outside before any
+    // leaf is evaluated: the evaluator's NaN check never sees it, and the part came out empty at
+    // exit 0. 27 voxel centres of the grid (its corners, edge and face middles, middle) catch it;
+    // the grid's own points, so a pole between them (1/x at x = 0) is no error.
+    for (int i = 0; i < 27; ++i) {
+        const int t[3] = {i % 3, i / 3 % 3, i / 9};
+        openvdb::Coord ijk;
+        for (int a = 0; a < 3; ++a) ijk[a] = t[a] * (std::max(1, mDomain.dims[a]) - 1) / 2;
+        const Vec3d p = mDomain.worldOf(ijk);
+        const double v = mResult->value(p);
+        if (!std::isfinite(v))
+            throw JobError(mRecipe.source->path + ": the result `" + mRecipe.result + "` is " + formatNumber(v) +
+                           " at (" + formatNumber(p[0]) + ", " + formatNumber(p[1]) + ", " + formatNumber(p[2]) +
+                           "), not a finite number: check divisions by zero and numbers past 1.8e308 in its fields");
+    }
     mSolved = true;
 }
 
@@ -1168,6 +1208,9 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
     return nullptr;
 }
 
+/// How many times marching cubes' triangles a tolerance mesh may need (checkTolerance()).
+constexpr double kMaxToleranceRefinement = 125.0;
+
 void Job::checkTolerance(const MeshOptions& options)
 {
     solveLevels();
@@ -1186,6 +1229,17 @@ void Job::checkTolerance(const MeshOptions& options)
                              "below " +
                              formatNumber(0.5 * thinnest) + " mm");
     }
+    // Edges meeting a tolerance T on a surface curved over about a voxel v are sqrt(8 v T) long:
+    // v / (8 T) times the triangles of marching cubes at the voxel. Past kMaxToleranceRefinement
+    // the job runs out of memory after minutes (1e-6 mm at 0.1 mm voxels: 6-7 GB, then bad_alloc):
+    // refused with the estimate before any work.
+    if (const double factor = mDomain.voxel / (8.0 * tolerance); factor > kMaxToleranceRefinement)
+        throw JobError(where + ": a mesh tolerance of " + formatNumber(tolerance) +
+                       " mm at `voxel: " + formatNumber(mDomain.voxel) + "` needs edges of about " +
+                       formatNumber(std::sqrt(8.0 * mDomain.voxel * tolerance)) + " mm, about " +
+                       formatNumber(std::round(factor)) + " times the triangles of marching cubes, more than the " +
+                       formatNumber(kMaxToleranceRefinement) + " a job can hold: use a tolerance of at least " +
+                       formatNumber(mDomain.voxel / (8.0 * kMaxToleranceRefinement)) + " mm");
     // The grid resolves features down to about two voxels; a tolerance above half of that (one
     // voxel) may flatten features the grid kept.
     if (tolerance > mDomain.voxel)
@@ -1286,15 +1340,43 @@ MeshMetadata Job::meshMetadata() const
 
 void Job::writeMesh(const std::filesystem::path& path, const MeshOptions& options)
 {
+    // The file's kind and place are checked before any work, not after the mesh is made.
+    std::string extension = path.extension().string();
+    for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (extension != ".stl" && extension != ".3mf" && extension != ".ply" && extension != ".obj")
+        throw InputError("`" + path.string() + "`: a mesh file ends in .stl, .3mf, .ply or .obj");
     checkReplaceable(path, mRecipe.source->path + ": mesh output");
+    warnStaleTemporaries({path});
+    // Written alone (the command line's `mesh`, Python): held back until the file is complete
+    // and the job was not cancelled meanwhile, so a cancel keeps the old file.
+    std::optional<OutputTransaction> own;
+    if (!OutputTransaction::current()) own.emplace();
     MeshVariant& v = variant(options);
+    if (v.mesh->triangles.empty())
+        throw JobError(mRecipe.source->path + ": the result `" + mRecipe.result +
+                       "` has no surface in the domain: the mesh would be empty (check the domain, the density or "
+                       "level, and the fields' sizes)");
     timed("write " + path.filename().string(), [&] {
         voxlat::writeMesh(*v.mesh, path.string(), v.measures ? nullptr : &v.measures, meshMetadata());
         return 0;
     });
+    if (own) {
+        mContext->checkCancelled();
+        own->commit();
+    }
     v.files.push_back(path.string());
     mReport["outputs"].push_back(path.string());
     checkDensityFromMesh();
+}
+
+void Job::warnStaleTemporaries(const std::vector<std::filesystem::path>& paths) const
+{
+    for (const std::filesystem::path& path : paths)
+        for (const std::string& stale : staleTemporaries(path.string()))
+            mContext->warn("stale_temporary",
+                           "`" + stale + "` is a temporary file left by a run that was killed before it finished `" +
+                               path.filename().string() + "`; it is not used: remove it",
+                           {{"file", stale}});
 }
 
 void Job::writeStlWhileMeshing(const std::filesystem::path& path)
@@ -1311,6 +1393,10 @@ void Job::writeStlWhileMeshing(const std::filesystem::path& path)
     });
     v->measures = made.measures;
     const StreamedMeshCounts& counts = made.counts;
+    if (counts.triangles == 0)
+        throw JobError(mRecipe.source->path + ": the result `" + mRecipe.result +
+                       "` has no surface in the domain: the mesh would be empty (check the domain, the density or "
+                       "level, and the fields' sizes)");
     v->report["extractor"] = meshExtractorName(MeshExtractor::MarchingCubes);
     v->report["triangles"] = counts.triangles;
     v->report["vertices"] = counts.vertices;
@@ -1397,10 +1483,16 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         paths.push_back(outputPathIn(outDir, out.file, where));
         for (const std::string& side : out.sideFiles) outputPathIn(outDir, side, where);
     }
-    outputPathIn(outDir, "report.json", where);
+    std::vector<std::filesystem::path> written = paths;
+    for (const OutputSpec& out : mRecipe.outputs)
+        for (const std::string& side : out.sideFiles) written.push_back(outDir / side);
+    written.push_back(outputPathIn(outDir, "report.json", where));
     std::optional<std::filesystem::path> materialCard;
-    if (mRecipe.properties.exportFile)
+    if (mRecipe.properties.exportFile) {
         materialCard = outputPathIn(outDir, *mRecipe.properties.exportFile, mRecipe.properties.where + ": export");
+        written.push_back(*materialCard);
+    }
+    warnStaleTemporaries(written);
     // All or none: every file is written under a temporary name and the renames wait for the
     // report; an output that fails (or a cancel) half-way leaves the folder as it was.
     OutputTransaction transaction;
@@ -1431,6 +1523,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         return false;
     };
     for (std::size_t n = 0; n < mRecipe.outputs.size(); ++n) {
+        mContext->checkCancelled();  // a cancel between outputs stops before the next one
         const OutputSpec& out = mRecipe.outputs[n];
         const std::filesystem::path& path = paths[n];
         if (out.kind == "mesh") {
@@ -1472,6 +1565,8 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         writePreview(picture, meshOptions(*firstMesh, mRecipe));
     }
     writeReport(outDir / "report.json");
+    // A cancel that came while the last files were written still keeps the folder as it was.
+    mContext->checkCancelled();
     transaction.commit();
 }
 
@@ -1689,6 +1784,7 @@ bool Job::unitCellProperties(const RepeatZone& zone)
     Recipe repeated = trialRecipe(mRecipe, mRecipe.result, copy);
     // Its own warnings (a domain the larger frame overhangs) are not about the recipe's part.
     JobContext quiet;
+    followCancel(quiet, mContext);
     mContext->checkCancelled();
     Job job(std::move(repeated), &quiet);
     nlohmann::json report = timed("homogenize", [&] { return job.properties(); });
@@ -1738,6 +1834,17 @@ void Job::writeSlices(const YAML::Node& spec, const std::filesystem::path& path)
 {
     const RecipeNode node(spec, mRecipe.source, "outputs `slices`");
     const SliceSettings settings = parseSliceSettings(node);
+    // Where the archive and its preview go, checked before any work (the preview is a relative
+    // name beside the archive: checked when the recipe loads, resolved here).
+    if (settings.preview != "off") {
+        const std::string preview =
+            settings.preview.empty() ? path.filename().string() + ".preview.png" : settings.preview;
+        outputPathIn(path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path(), preview,
+                     node.where() + ": preview");
+    }
+    warnStaleTemporaries({path});
+    std::optional<OutputTransaction> own;
+    if (!OutputTransaction::current()) own.emplace();
     const PrinterProfile printer = loadPrinterProfile(settings.printer, settings.printerWhere);
     solveLevels();  // a `density:` level is solved on the recipe's voxel grid first
     // The part is the recipe's domain box as written (not snapped to voxels): slices need no
@@ -1762,6 +1869,10 @@ void Job::writeSlices(const YAML::Node& spec, const std::filesystem::path& path)
     // The first slice job's findings also at the top (`printability.islands`, ...), where users look.
     if (result.report.contains("printability") && !mReport.contains("printability"))
         mReport["printability"] = result.report["printability"];
+    if (own) {
+        mContext->checkCancelled();
+        own->commit();
+    }
     mReport["outputs"].push_back(path.string());
 }
 

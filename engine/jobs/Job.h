@@ -106,6 +106,8 @@ public:
     nlohmann::json report() const;
 
 private:
+    /// Warns (`stale_temporary`) about temporaries a killed run left beside @a paths.
+    void warnStaleTemporaries(const std::vector<std::filesystem::path>& paths) const;
     /// Evaluates the recipe's grid and puts its volume and pieces into the report (once). With
     /// @a keep false, for a job that only needs those (a tolerance mesh made on a coarser grid with
     /// nothing after it reading the grid), only the solid's bits are kept, 64 bytes a leaf instead

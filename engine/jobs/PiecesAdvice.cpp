@@ -66,6 +66,7 @@ std::optional<double> sigmaKeepingOnePiece(const Recipe& recipe, const std::stri
         r.domainBox = Box3{origin, origin + 2.0 * *cell};
         r.allow = {"pieces"};  // counted, not thrown: the trial reads the count
         JobContext quiet;
+        followCancel(quiet, context);
         try {
             Job job(std::move(r), &quiet);
             job.grid();

@@ -1,5 +1,8 @@
 #include "engine/jobs/PrinterProfile.h"
 
+#include "engine/core/Format.h"
+#include "engine/core/InputFiles.h"
+
 #include "engine/recipe/RecipeNode.h"
 #include "engine/recipe/SliceSettings.h"
 
@@ -99,6 +102,8 @@ void readMotion(const RecipeNode& top, const std::string& prefix, GooMotion& m)
     if (top.has(key("light_pwm"))) m.lightPwm = wholeNumber(top[key("light_pwm")], 255);
 }
 
+constexpr double kMaxDisplayPixels = double(1 << 28);
+
 int positiveInt(const RecipeNode& n)
 {
     const double v = n.positiveNumber();
@@ -137,19 +142,14 @@ PrinterProfile loadPrinterProfile(const std::string& nameOrPath, const std::stri
                              ": " + joinWords(names) + "; or give the path of a profile file)");
         }
     }
-    std::ifstream in(path);
-    if (!in)
-        throw InputError((where.empty() ? "" : where + ": ") + path +
-                         ": cannot open the printer profile (check the path)");
-    std::stringstream text;
-    text << in.rdbuf();
-    YAML::Node root;
+    // A profile is a few hundred bytes of YAML: a regular file of at most 1 MB.
+    std::string text;
     try {
-        root = YAML::Load(text.str());
-    } catch (const YAML::ParserException& e) {
-        throw InputError(path + ":" + std::to_string(e.mark.line + 1) + ":" + std::to_string(e.mark.column + 1) +
-                         ": not valid YAML: " + e.msg);
+        text = readInputFile(path, std::uintmax_t(1) << 20, "printer profile");
+    } catch (const InputError& e) {
+        throw InputError((where.empty() ? "" : where + ": ") + e.what());
     }
+    const YAML::Node root = loadYaml(text, path);
     auto source = std::make_shared<RecipeSource>();
     source->path = path;
     if (!root.IsMap()) throw InputError(path + ":1:1: a printer profile is a map of keys (display, orientation, ...)");
@@ -171,6 +171,13 @@ PrinterProfile loadPrinterProfile(const std::string& nameOrPath, const std::stri
     p.heightMm = display["height"].positiveNumber();
     p.pixelsX = positiveInt(display["pixels_x"]);
     p.pixelsY = positiveInt(display["pixels_y"]);
+    // A layer is held as one byte a pixel, several layers at once: a display past 2^28 pixels
+    // (twice a 16K printer's) cannot be sliced in memory (10^6 x 10^6 ran out of it).
+    if (double(p.pixelsX) * double(p.pixelsY) > kMaxDisplayPixels)
+        display.fail("a display of " + std::to_string(p.pixelsX) + " x " + std::to_string(p.pixelsY) + " = " +
+                     formatNumber(double(p.pixelsX) * double(p.pixelsY)) + " pixels is more than the " +
+                     formatNumber(kMaxDisplayPixels) +
+                     " a layer may have (a 16K printer has 1.3e8): check pixels_x and pixels_y");
     p.mirrorX = top["mirror_x"].boolean();
     p.mirrorY = top["mirror_y"].boolean();
     const std::string orientation = top["orientation"].string();

@@ -2,6 +2,7 @@
 
 #include "engine/core/Errors.h"
 #include "engine/core/Format.h"
+#include "engine/core/SystemInfo.h"
 #include "engine/properties/CellSample.h"
 #include "mesher/extract/TriangleMesh.h"
 #include "mesher/writers/MeshPreview.h"
@@ -36,6 +37,9 @@ nlohmann::json matrixJson(const Matrix3& m, double scale = 1.0)
 }
 
 const char* kAxis = "xyz";
+/// Memory of homogenization per voxel of the cell (bytes): measured about 50 at 512 voxels
+/// before the allocation that failed; the solver's vectors for all load cases reach about 150.
+constexpr double kBytesPerCellVoxel = 150.0;
 
 /// The largest relative difference between a cell's density and the density asked, when a level
 /// is solved on the cell (issue 37: 0.5 %).
@@ -158,6 +162,17 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
     };
     if (settings.cell) {
         size = Vec3d((*settings.cell)[0], (*settings.cell)[1], (*settings.cell)[2]);
+        // A cell the result does not repeat over is not a periodic cell: its moduli would be
+        // of a lattice cut and glued wrong at the faces (3 mm of a 5 mm gyroid).
+        for (int a = 0; a < 3; ++a) {
+            const double p = field.period(a);
+            if (p == FieldNode::kNoPeriod || !std::isfinite(p) || p <= 0.0) continue;
+            const double cells = size[a] / p;
+            if (std::abs(cells - std::round(cells)) > 1e-6 * std::max(1.0, cells) || std::round(cells) < 1.0)
+                throw InputError(settings.where + ": `cell:` is " + formatNumber(size[a]) + " mm along " + kAxis[a] +
+                                 ", not a whole number of the result's period there (" + formatNumber(p) +
+                                 " mm): give " + formatNumber(p) + " mm or a multiple of it");
+        }
     } else if (const std::optional<RepeatZone> zone = periodless() >= 0 ? field.repeatZone() : std::nullopt) {
         size = zone->period;
         Vec3d o;
@@ -215,7 +230,21 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
     };
     HomogenizationSettings solver;
     solver.tolerance = settings.tolerance;
+    // The voxel model, its labels and the solver's vectors (six load cases of three unknowns a
+    // node, the CG and multigrid work vectors): about kBytesPerCellVoxel a voxel. Refused before
+    // sampling when that cannot fit (`resolution: 512` ran out of memory at 6 GB).
+    const auto checkMemory = [&](int n) {
+        double voxels = 1.0;
+        for (int a = 0; a < 3; ++a) voxels *= std::max(1.0, std::round(size[a] / (longest / n)));
+        const double need = voxels * kBytesPerCellVoxel, have = 0.7 * double(availableMemoryBytes());
+        if (need > have)
+            throw JobError(settings.where + ": homogenizing the cell at " + std::to_string(n) + " voxels (" +
+                           formatNumber(voxels) + " voxels) needs about " + formatNumber(std::round(need / 1048576.0)) +
+                           " MB, more than the " + formatNumber(std::round(have / 1048576.0)) +
+                           " MB this machine can give: lower `resolution:` (or `max_resolution:`)");
+    };
     const auto solveAt = [&](int n) {
+        checkMemory(n);
         Solved s;
         StageProgress sampling(context, "sampling the cell at " + std::to_string(n) + " voxels", 100);
         std::uint64_t reported = 0;
@@ -374,6 +403,25 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
     solver.progress = {};
     const ConductivityResult thermal =
         settings.conductivity ? homogenizeConductivity(cell, 1.0, solver) : ConductivityResult{};
+    // A load case that stopped above its tolerance (the iteration cap, or a solve that diverged)
+    // gives moduli that are not the cell's: exit 3 with the numbers, never a report at exit 0.
+    auto refuseUnconverged = [&](const char* what, const auto& residuals, const auto& iterations) {
+        for (std::size_t k = 0; k < residuals.size(); ++k)
+            if (!(residuals[k] <= 10.0 * settings.tolerance))
+                throw JobError(settings.where + ": the " + what + " solve of load case " + std::to_string(k + 1) +
+                               " stopped after " + std::to_string(iterations[k]) +
+                               " iterations at a relative residual of " + formatNumber(residuals[k]) +
+                               ", above its tolerance " + formatNumber(settings.tolerance) +
+                               " (not converged): use the default `tolerance: 1e-6` or a coarser `resolution:`");
+    };
+    refuseUnconverged("elastic", elastic.residual, elastic.iterations);
+    if (settings.conductivity) refuseUnconverged("conductivity", thermal.residual, thermal.iterations);
+    for (const auto& row : elastic.C)
+        for (const double v : row)
+            if (!std::isfinite(v))
+                throw JobError(settings.where +
+                               ": the stiffness of the cell is not a finite number (the solve broke "
+                               "down): check `material:` and the cell");
     const EngineeringConstants c = engineeringConstants(elastic.C);
 
     PropertiesResult result;

@@ -57,6 +57,7 @@ Measured measure(const Recipe& base, const std::string& name, const YAML::Node& 
     // The trials' own warnings (loose pieces, a cell with no load path) are about candidates the
     // search leaves behind, not about the result.
     JobContext quiet;
+    followCancel(quiet, parent);
     Measured m;
     try {
         Job job(std::move(r), &quiet);
@@ -228,6 +229,10 @@ nlohmann::json solveStiffness(Recipe& recipe, const std::string& name, const Rec
     return entry;
 }
 
+/// How far a trial cell's voxel density may stray from the density asked (relative) and still
+/// count: a coarse trial model holds the density to about a percent.
+constexpr double kTrialDensityTolerance = 0.05;
+
 /// `optimize:`: a coarse sweep of sigma, then golden-section refinement around its best point.
 nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const RecipeNode& spec, JobContext* context)
 {
@@ -256,11 +261,17 @@ nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const Reci
     std::vector<Trial> trials;
     const int golden = int(std::ceil(std::log(2.0 * (o.hi - o.lo) / (o.samples - 1) / o.tolerance) / std::log(1.618)));
     StageProgress progress(context, "optimizing sigma of " + name, std::uint64_t(o.samples + std::max(0, golden) + 1));
+    // A sigma whose cell cannot hold the density asked (a kernel so wide the field is flat: the
+    // cell turns solid) is no candidate, however stiff: it counts as carrying nothing.
+    const double density = spec["density"].number();
+    auto holdsDensity = [&](double cellDensity) {
+        return std::abs(cellDensity / density - 1.0) <= kTrialDensityTolerance;
+    };
     auto f = [&](double sigma) {
         const Measured m = measure(recipe, name, withSigma(sigma), o.axis, resolution, context);
         trials.push_back({sigma, m.modulus, m.density});
         progress.add();
-        return m.modulus;
+        return holdsDensity(m.density) ? m.modulus : 0.0;
     };
     std::vector<double> xs(o.samples), ys(o.samples);
     for (int k = 0; k < o.samples; ++k) xs[k] = o.lo + (o.hi - o.lo) * k / (o.samples - 1);
@@ -291,8 +302,13 @@ nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const Reci
             y2 = f(x2);
         }
     }
-    const Trial best = *std::max_element(trials.begin(), trials.end(),
-                                         [](const Trial& p, const Trial& q) { return p.modulus < q.modulus; });
+    const Trial best = *std::max_element(trials.begin(), trials.end(), [&](const Trial& p, const Trial& q) {
+        return (holdsDensity(p.cellDensity) ? p.modulus : 0.0) < (holdsDensity(q.cellDensity) ? q.modulus : 0.0);
+    });
+    if (!holdsDensity(best.cellDensity))
+        throw JobError(key.where() + ": the best sigma found (" + formatNumber(best.sigma) +
+                       " mm) gives a cell of density " + formatNumber(best.cellDensity) + ", not the " +
+                       formatNumber(density) + " asked: narrow `sigma:` to kernels about the struts' size");
     std::sort(trials.begin(), trials.end(), [](const Trial& p, const Trial& q) { return p.sigma < q.sigma; });
     nlohmann::json rows = nlohmann::json::array();
     for (const Trial& t : trials) rows.push_back({{"sigma", t.sigma}, {"E_MPa", t.modulus}});

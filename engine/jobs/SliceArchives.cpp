@@ -10,10 +10,13 @@
 #include "mesher/writers/PhotonWorkshopWriter.h"
 #include "mesher/writers/SliceWriters.h"
 
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <map>
 #include <sstream>
 
@@ -156,10 +159,17 @@ public:
             throw InputError(where + ": `" + mPath.string() +
                              "` exists and is not an empty folder; slices go to a new or empty folder (nothing there "
                              "is deleted or overwritten): choose another name or empty it");
-        mTemp = mPath;
-        mTemp += ".tmp-" + std::to_string(::getpid());
-        fs::remove_all(mTemp);  // only ever one of our own temporary names
-        fs::create_directories(mTemp);
+        // A fresh folder of our own (mkdir fails on anything already there: never a planted link).
+        bool made = false;
+        for (int attempt = 0; attempt < 100 && !made; ++attempt) {
+            mTemp = temporaryName(mPath.string());
+            errno = 0;
+            made = ::mkdir(mTemp.c_str(), 0777) == 0;
+            if (!made && errno != EEXIST) break;
+        }
+        if (!made)
+            throw OutputError("cannot create the folder '" + mTemp.string() + "' to write '" + mPath.string() +
+                              "': " + std::strerror(errno));
     }
     ~FolderArchive() override
     {

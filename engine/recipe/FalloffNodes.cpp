@@ -60,6 +60,9 @@ std::vector<FalloffSource> readPointFile(const std::string& path, bool& weighted
     return sources;
 }
 
+/// The most sources an inverse or inverse-square falloff may sum at every voxel.
+constexpr std::size_t kMaxReachingSources = 100000;
+
 /// A node's map of sources (`points:` or `curves:`) into the field; @a label is "point" or "curve".
 FieldPtr buildFalloff(FieldBuilder& builder, const RecipeNode& spec, const std::string& name, const std::string& key)
 {
@@ -136,6 +139,17 @@ FieldPtr buildFalloff(FieldBuilder& builder, const RecipeNode& spec, const std::
         m["sigma"].fail("`sigma` is the width of a gaussian falloff; with `falloff: " +
                         std::string(falloff == Falloff::Inverse ? "inverse" : "inverse-square") + "` remove it");
     }
+    // 1/d and 1/d^2 reach everywhere: every voxel sums every source (no cut-off to gather by), so
+    // the time grows as sources x voxels (10^6 points still ran after two minutes on a small
+    // domain). Past kMaxReachingSources the job is refused before any work.
+    if (falloff != Falloff::Gaussian && sources.size() > kMaxReachingSources)
+        throw JobError(m.where() + ": " + std::to_string(sources.size()) + " " + what +
+                       "s with `falloff: " + (falloff == Falloff::Inverse ? "inverse" : "inverse-square") +
+                       "` make every voxel sum all of them (about " + std::to_string(sources.size()) +
+                       " terms a voxel, more than the " + std::to_string(kMaxReachingSources) +
+                       " a job can run in reasonable time): use `falloff: gaussian` with a `sigma:` (cut off at "
+                       "7.4 sigma), or fewer " +
+                       what + "s");
     bool anyPositive = false;
     for (const FalloffSource& s : sources) anyPositive = anyPositive || s.weight > 0.0;
     if (!anyPositive)

@@ -63,7 +63,13 @@ double parseModulusMPa(const RecipeNode& node)
         node.fail("a modulus needs its unit (Pa, kPa, MPa or GPa), like `" + text + " GPa` or `" + text +
                   " MPa`; got `" + text + "`");
     if (!(value > 0.0) || !std::isfinite(value)) node.fail("expected a positive modulus, got `" + text + "`");
-    return value * scale;
+    // Diamond, the stiffest solid, is about 1.2 TPa; rubber about 1 MPa. Far outside, the
+    // solver's numbers overflow (1e308 GPa) or vanish.
+    const double mpa = value * scale;
+    if (mpa > 1e7 || mpa < 1e-6)
+        node.fail("a modulus of " + text +
+                  " is outside any material's (1 Pa to 10 000 GPa): check the number and its unit");
+    return mpa;
 }
 
 namespace {
@@ -181,7 +187,12 @@ PropertiesSettings parseProperties(const RecipeNode* node, const std::string& fa
     }
     if (node->has("tolerance")) {
         s.tolerance = (*node)["tolerance"].positiveNumber();
-        if (s.tolerance >= 0.1) (*node)["tolerance"].fail("expected a relative residual below 0.1, like 1e-6");
+        // Double-precision CG on a voxel model reaches about 1e-12 at best: a smaller tolerance
+        // could never be met (at 1e-15 the conductivity solve diverged).
+        if (s.tolerance >= 0.1 || s.tolerance < 1e-10)
+            (*node)["tolerance"].fail(
+                "expected a relative residual from 1e-10 to 0.1, like 1e-6 (double precision "
+                "cannot meet a smaller one)");
     }
     return s;
 }

@@ -104,10 +104,15 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
     if (!root.IsDefined() || root.IsNull()) throw InputError(name + ": the recipe is empty");
     if (!root.IsMap())
         throw InputError(name + ":1:1: a recipe is a map of keys (voxel, domain, fields, result, outputs)");
+    // `--set include=FILE` names what is merged: applied before the merge (after it, the key
+    // would be set and never read).
+    auto setsInclude = [](const std::string& o) { return o.rfind("include=", 0) == 0 || o.rfind("include.", 0) == 0; };
+    for (const std::string& o : overrides)
+        if (setsInclude(o)) applyOverride(root, o, name, r.source->overrides);
     mergeIncludes(root, name, folder, *r.source);
     const auto declared = declaredParams(root, r.source);
     for (const std::string& o : overrides)
-        applyOverride(root, routeAssignment(root, o, name, kTopKeys), name, r.source->overrides);
+        if (!setsInclude(o)) applyOverride(root, routeAssignment(root, o, name, kTopKeys), name, r.source->overrides);
     r.params = substituteParams(root, r.source, declared);
     r.root = root;
 
@@ -311,15 +316,7 @@ std::filesystem::path Recipe::resolve(const std::string& path) const
 Recipe parseRecipe(const std::string& text, const std::string& name, const std::filesystem::path& folder,
                    const std::vector<std::string>& overrides)
 {
-    YAML::Node root;
-    try {
-        root = YAML::Load(text);
-    } catch (const YAML::ParserException& e) {
-        throw InputError(name + ":" + std::to_string(e.mark.line + 1) + ":" + std::to_string(e.mark.column + 1) +
-                         ": not valid YAML: " + e.msg);
-    }
-    checkYamlSize(root, name);
-    return build(root, name, folder, overrides);
+    return build(loadYaml(text, name), name, folder, overrides);
 }
 
 Recipe loadRecipe(const std::string& path, const std::vector<std::string>& overrides)

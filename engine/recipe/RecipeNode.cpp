@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <set>
 #include <sstream>
 
 namespace voxlat {
@@ -180,6 +182,56 @@ void checkYamlSize(const YAML::Node& root, const std::string& name)
         throw InputError(name + ": the YAML expands to more than " + std::to_string(kMaxYamlNodes) +
                          " nodes or nests deeper than " + std::to_string(kMaxYamlDepth) +
                          " levels (nested aliases?); a recipe is a small map of fields");
+}
+
+namespace {
+
+std::string markText(const YAML::Mark& m)
+{
+    return std::to_string(m.line + 1) + ":" + std::to_string(m.column + 1);
+}
+
+/// Refuses a map that gives one key twice (yaml-cpp keeps both; a lookup finds the first, so the
+/// second would be ignored without a word).
+void checkKeysOnce(const YAML::Node& node, const std::string& name, int depth)
+{
+    if (depth > kMaxYamlDepth) return;
+    if (node.IsMap()) {
+        std::map<std::string, YAML::Mark> keys;
+        for (auto it = node.begin(); it != node.end(); ++it) {
+            if (it->first.IsScalar()) {
+                const auto [at, fresh] = keys.emplace(it->first.Scalar(), it->first.Mark());
+                if (!fresh)
+                    throw InputError(name + ":" + markText(it->first.Mark()) + ": the key `" + it->first.Scalar() +
+                                     "` is given twice in one map (first at " + markText(at->second) +
+                                     "); only one can count: keep one of them");
+            }
+            checkKeysOnce(it->second, name, depth + 1);
+        }
+    } else if (node.IsSequence()) {
+        for (auto it = node.begin(); it != node.end(); ++it) checkKeysOnce(*it, name, depth + 1);
+    }
+}
+
+}  // namespace
+
+YAML::Node loadYaml(const std::string& text, const std::string& name)
+{
+    std::vector<YAML::Node> documents;
+    try {
+        documents = YAML::LoadAll(text);
+    } catch (const YAML::ParserException& e) {
+        throw InputError(name + ":" + markText(e.mark) + ": not valid YAML: " + e.msg);
+    }
+    for (std::size_t i = 1; i < documents.size(); ++i)
+        if (documents[i].IsDefined() && !documents[i].IsNull())
+            throw InputError(name + ":" + markText(documents[i].Mark()) +
+                             ": a second YAML document (after `---`); a file holds one, the rest would be ignored: "
+                             "remove the `---` or move that part to a file of its own");
+    const YAML::Node root = documents.empty() ? YAML::Node() : documents.front();
+    checkYamlSize(root, name);  // bounds the walk below
+    checkKeysOnce(root, name, 0);
+    return root;
 }
 
 }  // namespace voxlat

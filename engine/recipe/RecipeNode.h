@@ -80,4 +80,9 @@ inline constexpr std::size_t kMaxYamlNodes = 1'000'000;
 inline constexpr int kMaxYamlDepth = 64;
 void checkYamlSize(const YAML::Node& root, const std::string& name);
 
+/// Parses one YAML document of a user's file @a name (a recipe, an include, a printer profile):
+/// InputError with name:line:col for bad YAML, a second document, a key given twice in one map,
+/// or a tree past checkYamlSize's limits.
+YAML::Node loadYaml(const std::string& text, const std::string& name);
+
 }  // namespace voxlat

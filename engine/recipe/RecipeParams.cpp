@@ -189,14 +189,7 @@ void mergeFile(YAML::Node root, const std::filesystem::path& file, RecipeSource&
 {
     const auto included = std::make_shared<RecipeSource>();
     included->path = file.string();
-    YAML::Node sub;
-    try {
-        sub = YAML::Load(readInputFile(file, std::uintmax_t(16) << 20, "included file"));
-    } catch (const YAML::ParserException& e) {
-        throw InputError(file.string() + ":" + std::to_string(e.mark.line + 1) + ":" +
-                         std::to_string(e.mark.column + 1) + ": not valid YAML: " + e.msg);
-    }
-    checkYamlSize(sub, file.string());
+    YAML::Node sub = loadYaml(readInputFile(file, std::uintmax_t(16) << 20, "included file"), file.string());
     if (!sub.IsMap()) throw InputError(file.string() + ":1:1: an included file is a map with `params:` and `fields:`");
     const RecipeNode top(sub, included, "included file");
     top.checkKeys(kIncludeKeys);

@@ -82,7 +82,10 @@ FieldPtr buildScale(FieldBuilder& b, const RecipeNode& spec, const std::string& 
     const RecipeNode s = spec["scale"];
     const Vec3d factors = s.scalarOrVec3();
     for (int a = 0; a < 3; ++a)
-        if (!(factors[a] > 0.0)) s.fail("scale factors must be greater than zero");
+        if (!(factors[a] >= 1e-9 && factors[a] <= 1e9))
+            s.fail(
+                "scale factors are from 1e-9 to 1e9 (a factor outside turns lengths into numbers a double cannot "
+                "keep)");
     Mat3d m = Mat3d::zero();
     for (int a = 0; a < 3; ++a) m(a, a) = factors[a];
     return transformed(b, spec, name, m, Vec3d(0.0));

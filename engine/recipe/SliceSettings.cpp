@@ -86,7 +86,13 @@ SliceSettings parseSliceSettings(const RecipeNode& spec)
     SliceSettings s;
     s.printer = spec["printer"].string();
     s.printerWhere = spec["printer"].where();
-    if (spec.has("layer")) s.layer = spec["layer"].positiveNumber();
+    if (spec.has("layer")) {
+        s.layer = spec["layer"].positiveNumber();
+        // Resin printers lay 0.01 to 0.3 mm; 4e-7 mm would be 15 million layers for 6 mm.
+        if (*s.layer < 0.001 || *s.layer > 10.0)
+            spec["layer"].fail("a layer of " + spec["layer"].yaml().Scalar() +
+                               " mm is outside what a resin printer lays (0.001 to 10 mm), like 0.05");
+    }
     s.file = spec["file"].string();
     if (spec.has("format")) {
         s.format = spec["format"].string();

@@ -1,7 +1,13 @@
 #include "mesher/writers/AtomicFile.h"
 
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include <ext/stdio_filebuf.h>
+
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cerrno>
@@ -56,16 +62,49 @@ void removeTemporaries() noexcept
         if (const char* held = slot.load()) ::unlink(held);
 }
 
-AtomicFile::AtomicFile(std::string path)
-    : mPath(std::move(path)), mTempPath(mPath + ".tmp-" + std::to_string(::getpid()))
+std::string temporaryName(const std::string& path)
 {
-    errno = 0;
-    registerTemporary(mTempPath);
-    mStream.open(mTempPath, std::ios::out | std::ios::binary | std::ios::trunc);
-    if (!mStream) {
-        unregisterTemporary(mTempPath);
-        throw OutputError("cannot open '" + mTempPath + "' to write '" + mPath + "'" + reason());
+    static std::atomic<std::uint64_t> counter{0};
+    return path + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(counter.fetch_add(1));
+}
+
+std::vector<std::string> staleTemporaries(const std::string& path)
+{
+    namespace fs = std::filesystem;
+    std::vector<std::string> stale;
+    const fs::path p(path);
+    const std::string prefix = p.filename().string() + ".tmp-";
+    std::error_code ec;
+    fs::directory_iterator it(p.parent_path().empty() ? fs::path(".") : p.parent_path(), ec), end;
+    for (; !ec && it != end; it.increment(ec)) {
+        const std::string name = it->path().filename().string();
+        if (name.compare(0, prefix.size(), prefix) != 0) continue;
+        const std::string rest = name.substr(prefix.size());
+        const std::size_t digits = rest.find_first_not_of("0123456789");
+        if (digits == 0 || (digits != std::string::npos && rest[digits] != '-')) continue;
+        const long pid = std::strtol(rest.substr(0, digits).c_str(), nullptr, 10);
+        // A process that still runs (this one, or another writing the same folder) owns its own.
+        if (pid > 0 && (::kill(pid_t(pid), 0) == 0 || errno == EPERM)) continue;
+        stale.push_back(it->path().string());
     }
+    std::sort(stale.begin(), stale.end());
+    return stale;
+}
+
+AtomicFile::AtomicFile(std::string path) : mPath(std::move(path))
+{
+    // A fresh name each time; O_EXCL | O_NOFOLLOW: never a file or link someone put there.
+    int fd = -1;
+    for (int attempt = 0; attempt < 100 && fd < 0; ++attempt) {
+        mTempPath = temporaryName(mPath);
+        errno = 0;
+        fd = ::open(mTempPath.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0666);
+        if (fd < 0 && errno != EEXIST) break;
+    }
+    if (fd < 0) throw OutputError("cannot create '" + mTempPath + "' to write '" + mPath + "'" + reason());
+    registerTemporary(mTempPath);
+    mBuffer = std::make_unique<__gnu_cxx::stdio_filebuf<char>>(fd, std::ios::out | std::ios::binary, 1 << 16);
+    mStream.rdbuf(mBuffer.get());
 }
 
 AtomicFile::~AtomicFile()
@@ -73,9 +112,16 @@ AtomicFile::~AtomicFile()
     if (!mCommitted) discard();
 }
 
+bool AtomicFile::close() noexcept
+{
+    auto* buffer = static_cast<__gnu_cxx::stdio_filebuf<char>*>(mBuffer.get());
+    if (!buffer || !buffer->is_open()) return true;
+    return buffer->close() != nullptr;
+}
+
 void AtomicFile::discard() noexcept
 {
-    if (mStream.is_open()) mStream.close();
+    close();
     std::remove(mTempPath.c_str());
     unregisterTemporary(mTempPath);
 }
@@ -88,8 +134,7 @@ void AtomicFile::commit()
     // A failed write anywhere earlier (disk full, ...) leaves the stream bad; check before the
     // rename so a truncated file never replaces a good one.
     const bool written = bool(mStream);
-    mStream.close();
-    if (!written || mStream.fail()) {
+    if (!close() || !written) {
         const std::string why = reason();
         discard();
         throw OutputError("failed to write '" + mPath + "'" + why);

@@ -2,9 +2,10 @@
 /// @brief Write-to-temporary-then-rename, so a reader never sees a half-written output file.
 #pragma once
 
-#include <fstream>
+#include <memory>
 #include <ostream>
 #include <stdexcept>
+#include <streambuf>
 #include <string>
 #include <vector>
 
@@ -24,9 +25,20 @@ void unregisterTemporary(const std::string& path);
 /// Unlinks every registered temporary file. Async-signal-safe (atomic loads and unlink() only).
 void removeTemporaries() noexcept;
 
+/// A fresh temporary name beside @a path: "<path>.tmp-<pid>-<n>", n counted per process, so two
+/// writers of one path (two threads, two processes) never share one.
+std::string temporaryName(const std::string& path);
+
+/// Temporaries "<path>.tmp-<pid>[-<n>]" beside @a path left by a process that no longer runs (a
+/// run killed by SIGKILL or a power cut): the caller names them (they are never reused or removed
+/// silently; a new run's temporary has a name of its own).
+std::vector<std::string> staleTemporaries(const std::string& path);
+
 /// A binary output file that appears at its final path only once it is complete.
 ///
-/// The data goes to "<path>.tmp-<pid>" in the same directory; commit() flushes and closes it and
+/// The data goes to a temporary file "<path>.tmp-<pid>-<n>" in the same directory, created
+/// exclusively (O_CREAT | O_EXCL | O_NOFOLLOW: a file or symbolic link planted at that name is
+/// refused, never followed or truncated) and unique per writer; commit() flushes and closes it and
 /// renames it onto @a path, atomically replacing any existing file. If the object is destroyed
 /// without a successful commit() (an exception, an early return), the temporary file is removed
 /// and @a path is left untouched.
@@ -54,10 +66,12 @@ public:
 
 private:
     void discard() noexcept;
+    bool close() noexcept;
 
     std::string mPath;
     std::string mTempPath;
-    std::ofstream mStream;
+    std::unique_ptr<std::streambuf> mBuffer;
+    std::ostream mStream{nullptr};
     bool mCommitted = false;
 };
 

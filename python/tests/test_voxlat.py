@@ -245,6 +245,64 @@ class VoxlatModule(unittest.TestCase):
         self.assertGreater(elapsed, 0.05)
         self.assertGreater(len(during), 3)
 
+    def _slow_recipe(self):
+        # The whole 31 mm box counted by the solve: long enough (a second or more) to stop halfway.
+        return voxlat.Recipe(voxlat.gyroid(cell=5).network(density=0.3), domain=[[0, 0, 0], [31, 31, 31]], voxel=0.1)
+
+    def test_a_progress_callback_exception_is_raised_after_a_clean_cancel(self):
+        # Issue 40: any exception in progress= aborted the interpreter (SIGABRT).
+        def bad(stage, done, total):
+            raise ZeroDivisionError("from the callback")
+        job = self._slow_recipe().job(progress=bad)
+        with self.assertRaises(ZeroDivisionError):
+            job.solve()
+        wrong_signature = self._slow_recipe().job(progress=lambda: None)
+        with self.assertRaises(TypeError):
+            wrong_signature.solve()
+        with self.assertRaises(TypeError):
+            self._slow_recipe().job(progress=5)
+        exits = self._slow_recipe().job(progress=lambda *a: (_ for _ in ()).throw(SystemExit(4)))
+        with self.assertRaises(SystemExit):
+            exits.mesh()
+
+    def test_keyboard_interrupt_cancels_a_running_job(self):
+        import _thread
+        job = self._slow_recipe().job()
+        timer = threading.Timer(0.2, _thread.interrupt_main)
+        start = time.perf_counter()
+        timer.start()
+        with self.assertRaises(KeyboardInterrupt):
+            job.mesh()
+        elapsed = time.perf_counter() - start
+        timer.join()
+        # Whole job: several seconds; the interrupt lands within a few tenths of its arrival.
+        self.assertLess(elapsed, 2.0)
+        out = self.dir / "out"
+        self.assertFalse(out.exists())
+
+    def test_a_job_refuses_a_second_thread_while_it_runs(self):
+        job = self._slow_recipe().job()
+        errors = []
+
+        def second():
+            time.sleep(0.1)
+            try:
+                job.report()
+            except RuntimeError as e:
+                errors.append(str(e))
+
+        t = threading.Thread(target=second)
+        t.start()
+        job.mesh()
+        t.join()
+        self.assertEqual(len(errors), 1)
+        self.assertIn("running in another thread", errors[0])
+        self.assertIn("fields", job.report())  # free again once the call returned
+
+    def test_recipe_result_name_is_not_dropped(self):
+        with self.assertRaises(ValueError):
+            voxlat.Recipe(voxlat.sphere(radius=1), fields={"result": voxlat.sphere(radius=2)}, voxel=0.5)
+
     def test_mesh_node_signed_distance_of_the_bracket(self):
         # data/meshes/bracket.stl: an L of 5 mm plates, base y 0-24 z 0-5, upright y 0-5 z 0-24,
         # x 0-30, a 3 mm fillet in the inner corner (centre y = z = 8) and 2.5 mm holes through

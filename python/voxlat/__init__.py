@@ -233,7 +233,10 @@ class Recipe:
             doc["domain"] = {"box": _spec(domain)}
         named = {k: _spec(v) for k, v in (fields or {}).items()}
         if isinstance(result, Node):
-            named.setdefault("result", result.spec)
+            if "result" in named:
+                raise ValueError('Recipe(node, fields={"result": ...}): the name `result` is the node given first; '
+                                 'give the other field another name')
+            named["result"] = result.spec
             result_name = "result"
         else:
             result_name = result

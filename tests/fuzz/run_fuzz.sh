@@ -45,11 +45,15 @@ seed wireframe 01 "$src"/data/recipes/*.csv "$tiny/frame.csv"
 seed wireframe 00 "$tiny/cell.obj"
 seed values 00 "$tiny/values.csv"
 seed values 01 "$tiny/cell.obj"
+seed profile "" "$src"/data/printers/*.yaml
+printf 'material: form2\nproperties: {resolution: 8}\n' >"$tiny/properties.yaml"
+printf 'material: {E: 1.6 GPa, nu: 0.38, k: 0.2}\nproperties: {cell: [4, 4, 4], resolution: 6, tolerance: 1e-4}\n' >"$tiny/properties2.yaml"
+seed properties "" "$tiny/properties.yaml" "$tiny/properties2.yaml"
 
 # Leaks inside third-party libraries only (lib3mf's libzip error record), as in `make sanitize`.
 export LSAN_OPTIONS=suppressions=$src/tests/lsan.supp
 status=0
-for harness in recipe equation mesh wireframe values; do
+for harness in recipe equation mesh wireframe values profile properties; do
     mkdir -p "$corpus/$harness" "$findings/$harness"
     echo "fuzzing $harness for ${seconds} s"
     if ! "$build/fuzz_$harness" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=4096 -max_len=65536 \
