@@ -12,6 +12,7 @@
 #include "engine/jobs/PiecesAdvice.h"
 #include "engine/jobs/PropertiesJob.h"
 #include "engine/jobs/PropertyDesign.h"
+#include "engine/jobs/ReportPage.h"
 #include "engine/jobs/SliceJob.h"
 #include "engine/jobs/TrialRecipe.h"
 #include "engine/recipe/RecipeParams.h"
@@ -25,6 +26,7 @@
 #include "fields/Unary.h"
 #include "mesher/extract/AdaptiveRefinement.h"
 #include "mesher/extract/BccTetrahedra.h"
+#include "mesher/extract/ClusterDecimation.h"
 #include "mesher/extract/CreaseSplit.h"
 #include "mesher/extract/Decimation.h"
 #include "mesher/extract/MarchingCubes.h"
@@ -1243,7 +1245,7 @@ void Job::writeStlWhileMeshing(const std::filesystem::path& path)
     mReport["outputs"].push_back(path.string());
 }
 
-void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
+void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool html)
 {
     // Every output's place is checked before any work: inside outDir, onto nothing but files.
     const std::string where = mRecipe.source->path + ": outputs";
@@ -1258,6 +1260,12 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         for (const std::string& side : out.sideFiles) outputPathIn(outDir, side, where);
     }
     outputPathIn(outDir, "report.json", where);
+    // The page's scripts are read before any work: a missing three.js fails the run at once.
+    std::vector<std::string> pageScripts;
+    if (html) {
+        outputPathIn(outDir, "report.html", where);
+        pageScripts = reportPageScripts();
+    }
     std::optional<std::filesystem::path> materialCard;
     if (mRecipe.properties.exportFile)
         materialCard = outputPathIn(outDir, *mRecipe.properties.exportFile, mRecipe.properties.where + ": export");
@@ -1331,8 +1339,33 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         checkReplaceable(picture, where);
         writePreview(picture, meshOptions(*firstMesh, mRecipe));
     }
+    std::optional<TriangleMesh> shown;
+    if (html) shown = timed("report.html mesh", [&] { return pageMesh(); });
     writeReport(outDir / "report.json");
+    if (html) {
+        AtomicFile file((outDir / "report.html").string());
+        file.stream() << reportPage(report(), *shown, pageScripts);
+        file.commit();
+    }
     transaction.commit();
+}
+
+TriangleMesh Job::pageMesh()
+{
+    constexpr std::size_t kTriangles = 60000;
+    for (const auto& v : mMeshes)
+        if (v->mesh && !v->mesh->triangles.empty()) return clusterDecimate(*v->mesh, kTriangles);
+    // No mesh held (slices only, or a mesh streamed to its file): the result on a coarse grid of
+    // the domain, at most 2^20 voxels.
+    solveLevels();
+    const double factor = std::max(1.0, std::cbrt(double(mDomain.voxelCount()) / double(1 << 20)));
+    const Domain coarse = Domain::fromBox(mDomain.box, mDomain.voxel * factor);
+    SparseOptions options;
+    options.clipToDomain = true;
+    options.stage = "evaluating " + mRecipe.result + " for report.html";
+    options.context = mContext;
+    const openvdb::FloatGrid::Ptr g = evaluateSparse(*mResult, coarse, options);
+    return clusterDecimate(marchingCubes(*g, 0.0f), kTriangles);
 }
 
 BeamFrame Job::frame()

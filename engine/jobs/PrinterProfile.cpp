@@ -1,5 +1,7 @@
 #include "engine/jobs/PrinterProfile.h"
 
+#include "engine/jobs/DataFolder.h"
+
 #include "engine/recipe/RecipeNode.h"
 #include "engine/recipe/SliceSettings.h"
 
@@ -10,10 +12,6 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
-
-#ifndef VOXLAT_DATA_DIR
-#define VOXLAT_DATA_DIR "data"
-#endif
 
 namespace voxlat {
 
@@ -108,7 +106,7 @@ int positiveInt(const RecipeNode& n)
 std::string printersFolder()
 {
     if (const char* env = std::getenv("VOXLAT_PRINTERS"); env && *env) return env;
-    return std::string(VOXLAT_DATA_DIR) + "/printers";
+    return dataFolder() + "/printers";
 }
 
 std::vector<std::string> printerNames()
