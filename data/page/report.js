@@ -215,9 +215,14 @@
       for (const t of (found.thin && found.thin.first) || [])
         marks.push({ layer: t.layer, x: t.x, y: t.y, r: 0, kind: "thin", text: "thin feature" });
     }
-    for (const d of (report.drain && report.drain.channels) || []) {
-      const a = d.from || d.start, b = d.to || d.end;
-      if (!a || !b) continue;
+    // Drain holes (report.drain.NAME.holes): a channel from `position` along `direction`.
+    const channels = [];
+    for (const field of Object.values(report.drain || {}))
+      for (const h of (field && field.holes) || [])
+        if (Array.isArray(h.position) && Array.isArray(h.direction))
+          channels.push({ a: h.position, b: h.position.map((p, k) => p + h.direction[k] * (h.length_mm || 0)), diameter: field.diameter_mm });
+    for (const d of channels) {
+      const a = d.a, b = d.b;
       const z0 = Math.min(a[2], b[2]), z1 = Math.max(a[2], b[2]);
       const l0 = Math.max(0, Math.floor((z0 - first) / height)), l1 = Math.min(count - 1, Math.ceil((z1 - first) / height));
       for (let l = l0; l <= l1; ++l) {
@@ -270,7 +275,9 @@
         }
       }
       ctx.stroke();
-      const here = marks.filter((m) => m.layer === layer);
+      // Islands last: on top of a thin feature or drain at the same place.
+      const order = { drain: 0, thin: 1, trap: 2, island: 3 };
+      const here = marks.filter((m) => m.layer === layer).sort((a, b) => order[a.kind] - order[b.kind]);
       for (const m of here) {
         ctx.strokeStyle = ctx.fillStyle = COLORS[m.kind];
         ctx.lineWidth = 3;
@@ -297,7 +304,7 @@
       const data = ctx.getImageData(0, 0, canvas.width, canvas.height).data;
       let n = 0;
       for (let i = 0; i < data.length; i += 4)
-        if (Math.abs(data[i] - want[0]) < 8 && Math.abs(data[i + 1] - want[1]) < 8 && Math.abs(data[i + 2] - want[2]) < 8) ++n;
+        if (Math.abs(data[i] - want[0]) < 24 && Math.abs(data[i + 1] - want[1]) < 24 && Math.abs(data[i + 2] - want[2]) < 24) ++n;
       return n;
     };
     layers.countDark = function () {

@@ -1356,9 +1356,9 @@ TriangleMesh Job::pageMesh()
     for (const auto& v : mMeshes)
         if (v->mesh && !v->mesh->triangles.empty()) return clusterDecimate(*v->mesh, kTriangles);
     // No mesh held (slices only, or a mesh streamed to its file): the result on a coarse grid of
-    // the domain, at most 2^20 voxels.
+    // the domain, at most 2^18 voxels (64^3: a picture).
     solveLevels();
-    const double factor = std::max(1.0, std::cbrt(double(mDomain.voxelCount()) / double(1 << 20)));
+    const double factor = std::max(1.0, std::cbrt(double(mDomain.voxelCount()) / double(1 << 18)));
     const Domain coarse = Domain::fromBox(mDomain.box, mDomain.voxel * factor);
     SparseOptions options;
     options.clipToDomain = true;
