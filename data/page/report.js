@@ -513,7 +513,7 @@
   // ---- the page checks itself (tests) ---------------------------------------------------------
   window.voxlatPage = { view: view, layers: layers };
   if (location.hash === "#check") {
-    const result = { mesh_triangles: meshData.triangles, layers: layers.count };
+    const result = { mesh_triangles: meshData.triangles, layers: layers.count, coloured_by: graded ? graded.name : null };
     if (view.countPixels) result.view3d = view.countPixels();
     if (layers.setLayer) {
       const island = (layers.marks || []).find((m) => m.kind === "island");

@@ -63,11 +63,20 @@ TriangleMesh clusterDecimate(const TriangleMesh& mesh, std::size_t maxTriangles)
             lo[a] = std::min(lo[a], double(p[a]));
             hi[a] = std::max(hi[a], double(p[a]));
         }
-    double cell = std::max((hi - lo).length() / 4096.0, 1e-9);
+    // A surface clustered on cells of c keeps about area / c^2 vertices: start a little below the
+    // cell that gives the budget (from the mean edge length), then grow it by a fifth at a time.
+    double edges = 0.0;
+    for (const openvdb::Vec3I& t : mesh.triangles)
+        edges += (mesh.points[t[0]] - mesh.points[t[1]]).length() + (mesh.points[t[1]] - mesh.points[t[2]]).length() +
+                 (mesh.points[t[2]] - mesh.points[t[0]]).length();
+    const double meanEdge = edges / (3.0 * double(mesh.triangles.size()));
+    double cell = std::max(
+        {0.8 * meanEdge * std::sqrt(double(mesh.triangles.size()) / double(std::max<std::size_t>(1, maxTriangles))),
+         (hi - lo).length() / 1e6, 1e-9});
     for (;;) {
         TriangleMesh out = clustered(mesh, lo, cell);
         if (out.triangles.size() <= maxTriangles) return out;
-        cell *= 2.0;
+        cell *= 1.2;
     }
 }
 

@@ -12,8 +12,8 @@
 namespace voxlat {
 
 /// @a mesh with its vertices merged per cell of a cubic grid (each cell's vertices replaced by
-/// their mean) and the triangles that collapse dropped, the cell chosen as the smallest power of
-/// two times (the bounding box's diagonal / 4096) that leaves at most @a maxTriangles triangles.
+/// their mean) and the triangles that collapse dropped, the cell grown in steps of a fifth (from
+/// an estimate made from the mean edge length) until at most @a maxTriangles triangles are left.
 /// Orientation is kept; the result is the same for any thread count (serial).
 TriangleMesh clusterDecimate(const TriangleMesh& mesh, std::size_t maxTriangles);
 
