@@ -88,6 +88,21 @@ def main():
                           str(islands[0]["layer"]))
                     check(found.get("island_marks", 0) >= 1 and found.get("island_pixels", 0) > 20,
                           recipe + ": the island is not marked on its layer (" + json.dumps(found) + ")")
+        # report.html is checked like every output: a folder in its place refuses the run before
+        # anything is written; --no-html neither writes nor checks it.
+        tiny = os.path.join(tmp, "tiny.yaml")
+        with open(tiny, "w") as f:
+            f.write("voxel: 0.5\ndomain: {box: [[0, 0, 0], [4, 4, 4]]}\nfields:\n  ball: {sphere: {radius: 1.5, center: [2, 2, 2]}}\n"
+                    "result: ball\noutputs: {mesh: ball.stl}\n")
+        out = os.path.join(tmp, "blocked")
+        os.makedirs(os.path.join(out, "report.html"))
+        p = subprocess.run([args.voxlat, "run", tiny, "--out", out, "-q"], capture_output=True, text=True)
+        check(p.returncode == 2 and "report.html" in p.stderr, "a folder named report.html was not refused (exit " +
+              str(p.returncode) + "): " + p.stderr[-500:])
+        check(sorted(os.listdir(out)) == ["report.html"], "a refused run wrote " + str(os.listdir(out)))
+        p = subprocess.run([args.voxlat, "run", tiny, "--out", out, "-q", "--no-html"], capture_output=True, text=True)
+        check(p.returncode == 0 and os.path.isfile(os.path.join(out, "report.json")) and
+              os.path.isdir(os.path.join(out, "report.html")), "--no-html did not run past the folder: " + p.stderr[-500:])
     for f in failures:
         print("FAIL:", f)
     print("report.html: " + ("ok" if not failures else str(len(failures)) + " failures"))
