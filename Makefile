@@ -4,6 +4,7 @@
 #   make sanitize  the whole test suite under ASan + UBSan (CI runs it after make test)
 #   make fuzz  builds the libFuzzer harnesses with clang and runs each for FUZZ_SECONDS (default 60)
 #   make bench runs the benchmarks in bench/ (installs their reference tools too)
+#   make install PREFIX=DIR  installs voxlat, its data and docs under DIR (default /usr/local)
 
 BUILD ?= build
 JOBS ?= $(shell nproc)
@@ -12,12 +13,13 @@ OUT ?= out
 
 DEB_PACKAGES := cmake ninja-build g++ pkg-config libopenvdb-dev libboost-iostreams-dev libtbb-dev libopenmesh-dev \
 	libopenexr-dev libyaml-cpp-dev libcli11-dev nlohmann-json3-dev libgtest-dev libpng-dev libzip-dev libsleef-dev \
-	lib3mf-dev libcgal-dev nettle-dev clang-format pybind11-dev python3-dev python3-numpy python3-jsonschema python3-yaml python3-scipy
+	lib3mf-dev libcgal-dev nettle-dev clang-format pybind11-dev python3-dev python3-numpy python3-jsonschema python3-yaml python3-scipy \
+	libjs-three chromium python3-pip python3-venv python3-setuptools python3-wheel
 BENCH_PACKAGES := python3 python3-numpy python3-openvdb python3-scipy python3-skimage prusa-slicer time
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 CCACHE := $(shell command -v ccache 2>/dev/null)
 
-.PHONY: all deps bench-deps build run test sanitize fuzz bench format docs-keys clean
+.PHONY: all deps bench-deps build run test sanitize fuzz bench format docs-keys clean install
 
 all: build
 
@@ -42,7 +44,11 @@ build: deps
 
 run: build
 	$(BUILD)/voxlat run $(RECIPE) --out $(OUT)
-	@echo "outputs are in $(abspath $(OUT)): the mesh, a preview picture (NAME.stl.preview.png) and report.json"
+	@echo "outputs are in $(abspath $(OUT)): the mesh, a preview picture (NAME.stl.preview.png), report.json and report.html"
+
+PREFIX ?= /usr/local
+install: build
+	cmake --install $(BUILD) --prefix $(PREFIX)
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)

@@ -2,6 +2,7 @@
 // and fields of the engine, with numpy arrays in and out. The GIL is released while the engine
 // works, so Python threads run alongside.
 #include "engine/core/Errors.h"
+#include "engine/jobs/DataFolder.h"
 #include "engine/jobs/Job.h"
 #include "engine/recipe/RecipeParams.h"
 #include "engine/recipe/Schema.h"
@@ -245,6 +246,9 @@ PYBIND11_MODULE(_voxlat, m)
     });
     openvdb::initialize();
 
+    m.def("set_data_folder", &setDataFolder, py::arg("folder"),
+          "where printer profiles and examples are read from (an installed package sets its own)");
+    m.def("data_folder", &dataFolder, "where printer profiles and examples are read from");
     m.def(
         "schema", [] { return recipeSchema().dump(2); }, "the recipe language as JSON Schema text");
 
@@ -327,8 +331,10 @@ PYBIND11_MODULE(_voxlat, m)
             "decimated to that distance from the true surface; project: vertices on the true surface; extractor: "
             "marching-cubes or bcc")
         .def(
-            "write_outputs", [](Job& j, const std::string& dir) { runJob(j, [&] { j.writeOutputs(dir); }); },
-            py::arg("out_dir"), "write the recipe's outputs and report.json")
+            "write_outputs",
+            [](Job& j, const std::string& dir, bool html) { runJob(j, [&] { j.writeOutputs(dir, true, html); }); },
+            py::arg("out_dir"), py::arg("html") = true,
+            "write the recipe's outputs, report.json and (html) report.html")
         .def(
             "write_mesh",
             [](Job& j, const std::string& path, std::optional<double> tolerance, std::optional<bool> project,

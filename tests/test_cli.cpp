@@ -283,7 +283,7 @@ outputs: {mesh: ball.stl, vdb: ball.vdb, properties: ball.json}
     EXPECT_NE(out.find("no period is known"), std::string::npos) << out;
     ASSERT_TRUE(std::filesystem::exists(dir.path / "out"));
     EXPECT_EQ(listFolder(dir.path / "out"), std::vector<std::string>{}) << out;
-    // Without the failing output both files and the report appear.
+    // Without the failing output both files, the report and its page appear.
     const auto good =
         dir.write("good.yaml", readFile(recipe).replace(readFile(recipe).find(", properties: ball.json"), 23, ""));
     ASSERT_EQ(
@@ -293,7 +293,7 @@ outputs: {mesh: ball.stl, vdb: ball.vdb, properties: ball.json}
         << out;
     auto names = listFolder(dir.path / "out");
     std::sort(names.begin(), names.end());
-    EXPECT_EQ(names, (std::vector<std::string>{"ball.stl", "ball.vdb", "report.json"}));
+    EXPECT_EQ(names, (std::vector<std::string>{"ball.stl", "ball.vdb", "report.html", "report.json"}));
     // The report's volume is the mesh's (the voxel count's is kept apart, named).
     const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
     EXPECT_EQ(report["result"]["volume_mm3"], report["mesh"]["volume_mm3"]);

@@ -2,7 +2,9 @@
 // any thread count.
 #include "engine/core/Domain.h"
 #include "engine/core/SparseEvaluator.h"
+#include "engine/jobs/ReportPage.h"
 #include "fields/Sphere.h"
+#include "mesher/extract/ClusterDecimation.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/writers/MeshPreview.h"
 #include "mesher/writers/SliceWriters.h"
@@ -10,7 +12,9 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <cmath>
 #include <numbers>
+#include <regex>
 
 using namespace voxlat;
 
@@ -46,4 +50,49 @@ TEST(Preview, SphereRendersAsAFilledDiskForAnyThreadCount)
     const double radius = 0.5 * (maxX - minX + 1);
     EXPECT_GT(radius, 50.0);
     EXPECT_NEAR(lit, std::numbers::pi * radius * radius, 0.02 * std::numbers::pi * radius * radius);
+}
+
+TEST(Preview, ClusteredSphereStaysWithinItsTriangleBudgetAndShape)
+{
+    const Domain d = Domain::fromBox(Box3{Vec3d(-6), Vec3d(6)}, 0.05);
+    const TriangleMesh mesh = marchingCubes(*evaluateSparse(Sphere(Vec3d(0), 5.0), d, SparseOptions{}), 0.0f);
+    ASSERT_GT(mesh.triangles.size(), 100000u);
+    const TriangleMesh small = clusterDecimate(mesh, 5000);
+    EXPECT_LE(small.triangles.size(), 5000u);
+    EXPECT_GT(small.triangles.size(), 1000u) << "far coarser than the budget asks";
+    // Still the ball: its volume within 3 % (clustering keeps the orientation) and every used
+    // vertex near the sphere.
+    const double ball = 4.0 / 3.0 * std::numbers::pi * 125.0;
+    EXPECT_NEAR(small.volume(), ball, 0.03 * ball);
+    for (const openvdb::Vec3I& t : small.triangles)
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(small.points[t[c]].length(), 5.0, 0.3);
+    EXPECT_EQ(clusterDecimate(small, 5000).triangles.size(), small.triangles.size()) << "within budget: kept";
+}
+
+TEST(Preview, ReportPageInlinesTheReportMeshAndScripts)
+{
+    TriangleMesh mesh;
+    mesh.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    mesh.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+    const nlohmann::json report = {{"recipe", "a</script><b>.yaml"}, {"peak_memory_mb", 12.5}};
+    const std::string page = reportPage(report, mesh, {"var a = '</script>';", "var b = 2;"});
+    // Exactly one closing tag per script element: nothing inlined can end one early.
+    const std::regex closing("</script>");
+    const auto tags = std::distance(std::sregex_iterator(page.begin(), page.end(), closing), std::sregex_iterator());
+    EXPECT_EQ(tags, 4);
+    EXPECT_EQ(page.find("<script src"), std::string::npos);
+    // The report comes back from its element as the same JSON (`<\/` reads as `</`).
+    const std::string open = "<script type=\"application/json\" id=\"voxlat-report\">";
+    const std::size_t from = page.find(open) + open.size();
+    const nlohmann::json back = nlohmann::json::parse(page.substr(from, page.find("</script>", from) - from));
+    EXPECT_EQ(back, report);
+    // The mesh as base64 of its float and index arrays: 4 points = 48 bytes = 64 digits.
+    const std::string meshOpen = "<script type=\"application/json\" id=\"voxlat-mesh\">";
+    const std::size_t m = page.find(meshOpen) + meshOpen.size();
+    const nlohmann::json meshBack = nlohmann::json::parse(page.substr(m, page.find("</script>", m) - m));
+    EXPECT_EQ(meshBack["vertices"], 4);
+    EXPECT_EQ(meshBack["triangles"], 4);
+    EXPECT_EQ(meshBack["points"].get<std::string>().size(), 64u);
+    EXPECT_NE(page.find("<title>voxlat report: a&lt;/script&gt;&lt;b&gt;.yaml</title>"), std::string::npos)
+        << "the title is escaped";
 }

@@ -271,7 +271,7 @@ TEST(RealJobs, AMeshAndSlicesOfOneRecipeWriteEverythingAndSlicesNeedNoDomain)
     auto files = listFolder(dir.path / "out");
     std::sort(files.begin(), files.end());
     EXPECT_EQ(files, (std::vector<std::string>{"conv.sl1s", "conv.sl1s.preview.png", "conv.stl", "conv.stl.preview.png",
-                                               "report.json"}));
+                                               "report.html", "report.json"}));
     const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
     const auto& box = report["slices"][0]["part_box"];
     EXPECT_EQ(box["from"], "result's bounding box");

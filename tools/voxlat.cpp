@@ -2,6 +2,7 @@
 #include "engine/core/Errors.h"
 #include "engine/core/Format.h"
 #include "engine/core/Version.h"
+#include "engine/jobs/DataFolder.h"
 #include "engine/jobs/Job.h"
 #include "engine/jobs/OutputPaths.h"
 #include "engine/jobs/PrinterProfile.h"
@@ -344,6 +345,10 @@ int main(int argc, char** argv)
 {
     useHugePages(argv);
     keepFreedMemory();
+    // An installed copy reads its profiles and examples from <prefix>/share/voxlat, never from a
+    // source tree.
+    if (const std::string data = voxlat::installedDataFolder("/proc/self/exe"); !data.empty())
+        voxlat::setDataFolder(data);
     CLI::App app{"voxlat: implicit lattices on sparse voxel grids"};
     app.require_subcommand(1);
     int threads = 0;
@@ -359,11 +364,13 @@ int main(int argc, char** argv)
     bool sampleGradient = false;
     bool infoExact = false;
 
-    auto* run = app.add_subcommand("run", "run a recipe: write its outputs and report.json");
+    auto* run = app.add_subcommand("run", "run a recipe: write its outputs, report.json and report.html");
     addCommon(run, runArgs);
     run->add_option("--out", outDir, "output folder (default: current folder)");
     bool noPreview = false;
     run->add_flag("--no-preview", noPreview, "do not render NAME.preview.png next to the first mesh");
+    bool noHtml = false;
+    run->add_flag("--no-html", noHtml, "do not write report.html (the run's page: 3D view, layers, findings)");
     auto* mesh = app.add_subcommand("mesh", "mesh a recipe's result to one file (.stl, .3mf, .ply, .obj)");
     addCommon(mesh, meshArgs);
     mesh->add_option("-o,--output", meshFile, "mesh file")->required();
@@ -488,10 +495,10 @@ int main(int argc, char** argv)
                         voxlat::printersFolder().c_str());
         } else if (*run) {
             voxlat::Job job(voxlat::loadRecipe(runArgs.recipe, runArgs.sets), &context);
-            job.writeOutputs(outDir, !noPreview);
+            job.writeOutputs(outDir, !noPreview, !noHtml);
             printSummary(job);
             std::cout << "outputs written to " << std::filesystem::absolute(outDir).lexically_normal().string()
-                      << " (report.json has levels, densities and timings)\n";
+                      << " (report.json has levels, densities and timings; open report.html to see them)\n";
             exitSkippingTeardown(0);
         } else if (*mesh) {
             checkWritable(meshFile, "-o", "");

@@ -13,6 +13,7 @@
 #include "engine/jobs/PiecesAdvice.h"
 #include "engine/jobs/PropertiesJob.h"
 #include "engine/jobs/PropertyDesign.h"
+#include "engine/jobs/ReportPage.h"
 #include "engine/jobs/SliceJob.h"
 #include "engine/jobs/TrialRecipe.h"
 #include "engine/recipe/RecipeParams.h"
@@ -26,6 +27,7 @@
 #include "fields/Unary.h"
 #include "mesher/extract/AdaptiveRefinement.h"
 #include "mesher/extract/BccTetrahedra.h"
+#include "mesher/extract/ClusterDecimation.h"
 #include "mesher/extract/CreaseSplit.h"
 #include "mesher/extract/Decimation.h"
 #include "mesher/extract/MarchingCubes.h"
@@ -1469,7 +1471,7 @@ void Job::checkDensityFromMesh()
     }
 }
 
-void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
+void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool html)
 {
     // Every output's place is checked before any work: inside outDir, onto nothing but files.
     const std::string where = mRecipe.source->path + ": outputs";
@@ -1487,6 +1489,12 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
     for (const OutputSpec& out : mRecipe.outputs)
         for (const std::string& side : out.sideFiles) written.push_back(outDir / side);
     written.push_back(outputPathIn(outDir, "report.json", where));
+    // The page's scripts are read before any work: a missing three.js fails the run at once.
+    std::vector<std::string> pageScripts;
+    if (html) {
+        written.push_back(outputPathIn(outDir, "report.html", where));
+        pageScripts = reportPageScripts();
+    }
     std::optional<std::filesystem::path> materialCard;
     if (mRecipe.properties.exportFile) {
         materialCard = outputPathIn(outDir, *mRecipe.properties.exportFile, mRecipe.properties.where + ": export");
@@ -1564,10 +1572,35 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview)
         checkReplaceable(picture, where);
         writePreview(picture, meshOptions(*firstMesh, mRecipe));
     }
+    std::optional<TriangleMesh> shown;
+    if (html) shown = timed("report.html mesh", [&] { return pageMesh(); });
     writeReport(outDir / "report.json");
+    if (html) {
+        AtomicFile file((outDir / "report.html").string());
+        file.stream() << reportPage(report(), *shown, pageScripts);
+        file.commit();
+    }
     // A cancel that came while the last files were written still keeps the folder as it was.
     mContext->checkCancelled();
     transaction.commit();
+}
+
+TriangleMesh Job::pageMesh()
+{
+    constexpr std::size_t kTriangles = 60000;
+    for (const auto& v : mMeshes)
+        if (v->mesh && !v->mesh->triangles.empty()) return clusterDecimate(*v->mesh, kTriangles);
+    // No mesh held (slices only, or a mesh streamed to its file): the result on a coarse grid of
+    // the domain, at most 2^18 voxels (64^3: a picture).
+    solveLevels();
+    const double factor = std::max(1.0, std::cbrt(double(mDomain.voxelCount()) / double(1 << 18)));
+    const Domain coarse = Domain::fromBox(mDomain.box, mDomain.voxel * factor);
+    SparseOptions options;
+    options.clipToDomain = true;
+    options.stage = "evaluating " + mRecipe.result + " for report.html";
+    options.context = mContext;
+    const openvdb::FloatGrid::Ptr g = evaluateSparse(*mResult, coarse, options);
+    return clusterDecimate(marchingCubes(*g, 0.0f), kTriangles);
 }
 
 BeamFrame Job::frame()

@@ -75,8 +75,12 @@ public:
     FieldPtr distanceField();
 
     /// Writes the recipe's outputs (paths relative to @a outDir) and report.json.
-    /// With @a preview, also a picture of the first mesh (NAME.preview.png).
-    void writeOutputs(const std::filesystem::path& outDir, bool preview = true);
+    /// With @a preview, also a picture of the first mesh (NAME.preview.png); with @a html, the
+    /// page report.html (ReportPage.h) beside report.json (`voxlat run` and Python ask for it).
+    void writeOutputs(const std::filesystem::path& outDir, bool preview = true, bool html = false);
+    /// A small mesh of the result for report.html: the first mesh made, clustered
+    /// (clusterDecimate), else the result meshed on a coarse grid of the domain.
+    TriangleMesh pageMesh();
     /// Writes only the mesh made with @a options, to @a path.
     void writeMesh(const std::filesystem::path& path, const MeshOptions& options = {});
     /// Writes the raw marching-cubes mesh to the binary STL @a path as it is made, without ever

@@ -2,6 +2,7 @@
 
 #include "engine/core/Format.h"
 #include "engine/core/InputFiles.h"
+#include "engine/jobs/DataFolder.h"
 
 #include "engine/recipe/RecipeNode.h"
 #include "engine/recipe/SliceSettings.h"
@@ -13,10 +14,6 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
-
-#ifndef VOXLAT_DATA_DIR
-#define VOXLAT_DATA_DIR "data"
-#endif
 
 namespace voxlat {
 
@@ -115,7 +112,7 @@ int positiveInt(const RecipeNode& n)
 std::string printersFolder()
 {
     if (const char* env = std::getenv("VOXLAT_PRINTERS"); env && *env) return env;
-    return std::string(VOXLAT_DATA_DIR) + "/printers";
+    return dataFolder() + "/printers";
 }
 
 std::vector<std::string> printerNames()

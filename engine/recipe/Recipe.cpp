@@ -74,6 +74,7 @@ void refuseCollidingOutputs(const Recipe& r, const RecipeNode& outputs)
 {
     std::map<std::string, std::string> writer;  // normal path -> who writes it
     writer["report.json"] = "the run's report";
+    writer["report.html"] = "the run's page";
     auto where = [&](const OutputSpec& o) {
         const YAML::Mark m = o.spec.Mark();
         return m.line >= 0 ? r.source->path + ":" + std::to_string(m.line + 1) + ":" + std::to_string(m.column + 1)

@@ -19,6 +19,11 @@ import numpy as np
 from . import _voxlat as _core
 from ._voxlat import Cancelled, InputError, JobError
 
+# An installed package (pip install .) carries its printer profiles and examples in share/voxlat.
+_SHARE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "share", "voxlat")
+if os.path.isdir(os.path.join(_SHARE, "printers")):
+    _core.set_data_folder(_SHARE)
+
 __all__ = [
     "Node", "Recipe", "Cancelled", "InputError", "JobError", "schema", "tpms", "gyroid", "schwarz_p", "schwarz_d", "iwp",
     "neovius", "expr", "vector", "sphere", "box", "cylinder", "mesh", "union", "intersection", "difference", "load",
@@ -304,11 +309,12 @@ class Recipe:
         `voxlat mesh --tolerance --project --extractor`)."""
         return self.job().mesh(tolerance=tolerance, project=project, extractor=extractor)
 
-    def run(self, out_dir, progress=None):
-        """Writes the recipe's outputs and report.json to out_dir; returns the report (its
-        `warnings` list holds every warning, as dicts with `code`, `message` and the numbers)."""
+    def run(self, out_dir, progress=None, html=True):
+        """Writes the recipe's outputs, report.json and (html) report.html to out_dir; returns the
+        report (its `warnings` list holds every warning, as dicts with `code`, `message` and the
+        numbers)."""
         job = self.job(progress=progress)
-        job.write_outputs(str(out_dir))
+        job.write_outputs(str(out_dir), html=html)
         return job.report()
 
     def write_mesh(self, path, tolerance=None, project=None, extractor="marching-cubes"):

@@ -245,7 +245,7 @@ def main():
                 if not check(p.returncode == 0, "%s: exit %d: %s" % (name, p.returncode, p.stderr.strip()[-400:])):
                     continue
                 report = json.load(open(os.path.join(out, "report.json")))
-                expected = {"report.json", "m.stl", "m.stl.preview.png"}
+                expected = {"report.json", "report.html", "m.stl", "m.stl.preview.png"}
                 if "frame: m.csv" in outputs:
                     expected.add("m.csv")
                 if sliced:

@@ -1,0 +1,123 @@
+#include "engine/jobs/ReportPage.h"
+
+#include "engine/jobs/DataFolder.h"
+#include "mesher/writers/AtomicFile.h"
+
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace voxlat {
+
+namespace {
+/// The first of @a candidates that can be read, whole; empty when none can.
+std::string readFirst(const std::vector<std::filesystem::path>& candidates)
+{
+    for (const auto& path : candidates) {
+        std::ifstream in(path, std::ios::binary);
+        if (!in) continue;
+        std::ostringstream text;
+        text << in.rdbuf();
+        if (!text.str().empty()) return text.str();
+    }
+    return {};
+}
+
+std::string base64(const void* data, std::size_t size)
+{
+    static const char* kDigits = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    const auto* bytes = static_cast<const unsigned char*>(data);
+    std::string out;
+    out.reserve((size + 2) / 3 * 4);
+    for (std::size_t i = 0; i < size; i += 3) {
+        const std::uint32_t b0 = bytes[i], b1 = i + 1 < size ? bytes[i + 1] : 0, b2 = i + 2 < size ? bytes[i + 2] : 0;
+        const std::uint32_t word = (b0 << 16) | (b1 << 8) | b2;
+        out += kDigits[(word >> 18) & 63];
+        out += kDigits[(word >> 12) & 63];
+        out += i + 1 < size ? kDigits[(word >> 6) & 63] : '=';
+        out += i + 2 < size ? kDigits[word & 63] : '=';
+    }
+    return out;
+}
+
+/// @a text made safe inside a <script> element: no `</` that could close it (in JavaScript a
+/// `<\/` inside strings, regular expressions and JSON means the same).
+std::string scriptSafe(const std::string& text)
+{
+    std::string out;
+    out.reserve(text.size());
+    for (std::size_t i = 0; i < text.size(); ++i) {
+        if (text[i] == '<' && i + 1 < text.size() && text[i + 1] == '/') {
+            out += "<\\/";
+            ++i;
+        } else {
+            out += text[i];
+        }
+    }
+    return out;
+}
+
+std::string htmlEscape(const std::string& text)
+{
+    std::string out;
+    for (char c : text) {
+        if (c == '<')
+            out += "&lt;";
+        else if (c == '>')
+            out += "&gt;";
+        else if (c == '&')
+            out += "&amp;";
+        else
+            out += c;
+    }
+    return out;
+}
+}  // namespace
+
+std::vector<std::string> reportPageScripts()
+{
+    const std::filesystem::path page = std::filesystem::path(dataFolder()) / "page";
+    const std::filesystem::path debian = "/usr/share/javascript/three";
+    const std::vector<std::pair<std::string, std::vector<std::filesystem::path>>> wanted{
+        {"three.js (install Debian's libjs-three)", {page / "three.min.js", debian / "three.min.js"}},
+        {"three.js's OrbitControls (install Debian's libjs-three)",
+         {page / "OrbitControls.js", debian / "examples/js/controls/OrbitControls.js"}},
+        {"the page's script report.js", {page / "report.js"}}};
+    std::vector<std::string> scripts;
+    for (const auto& [what, candidates] : wanted) {
+        std::string text = readFirst(candidates);
+        if (text.empty()) {
+            std::string places;
+            for (const auto& c : candidates) places += (places.empty() ? "" : ", ") + c.string();
+            throw OutputError("report.html needs " + what + ", not found in " + places + " (or run with --no-html)");
+        }
+        scripts.push_back(std::move(text));
+    }
+    return scripts;
+}
+
+std::string reportPage(const nlohmann::json& report, const TriangleMesh& mesh, const std::vector<std::string>& scripts)
+{
+    static_assert(sizeof(openvdb::Vec3f) == 12 && sizeof(openvdb::Vec3I) == 12);
+    const nlohmann::json meshJson = {
+        {"vertices", mesh.points.size()},
+        {"triangles", mesh.triangles.size()},
+        {"points", base64(mesh.points.data(), mesh.points.size() * sizeof(openvdb::Vec3f))},
+        {"indices", base64(mesh.triangles.data(), mesh.triangles.size() * sizeof(openvdb::Vec3I))}};
+    std::string title = "voxlat report";
+    if (report.contains("recipe") && report["recipe"].is_string()) title += ": " + report["recipe"].get<std::string>();
+    std::ostringstream html;
+    html << "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+         << "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n"
+         << "<meta name=\"generator\" content=\"voxlat\">\n<title>" << htmlEscape(title) << "</title>\n</head>\n"
+         << "<body>\n<div id=\"voxlat-page\"></div>\n"
+         << "<script type=\"application/json\" id=\"voxlat-report\">" << scriptSafe(report.dump()) << "</script>\n"
+         << "<script type=\"application/json\" id=\"voxlat-mesh\">" << scriptSafe(meshJson.dump()) << "</script>\n";
+    for (const std::string& script : scripts) html << "<script>\n" << scriptSafe(script) << "\n</script>\n";
+    html << "</body>\n</html>\n";
+    return html.str();
+}
+
+}  // namespace voxlat
