@@ -1096,11 +1096,14 @@ TEST(StrutRecipes, ALatticeThatFallsApartIsCountedOnTheGrid)
     EXPECT_GT(report["pieces"]["free"].get<int>(), 0);
     // Before any evaluation the struts were known to be too thin for the grid: warned with numbers.
     std::vector<std::string> codes;
-    for (const auto& w : report["warnings"]) codes.push_back(w["code"]);
+    // (The mesh's own density is read back too: the lost pieces may take it over 1 % off.)
+    for (const auto& w : report["warnings"])
+        if (w["code"] != "density_from_mesh") codes.push_back(w["code"]);
     EXPECT_EQ(codes, (std::vector<std::string>{"sub_voxel_features", "pieces"}));
     EXPECT_EQ(report["fields"]["lattice"]["thinnest_strut_mm"].get<double>(), 0.0);
     EXPECT_NE(out.find("some struts vanish between their joints"), std::string::npos) << out;
-    // A sensible lattice is one piece and gives no warning.
+    // A sensible lattice is one piece and gives no warning of pieces or thin struts (its mesh
+    // is 1.0 % light at 0.2 mm, which `density_from_mesh` may tell).
     const std::string fine =
         runRecipe(dir,
                   "voxel: 0.2\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
@@ -1108,7 +1111,9 @@ TEST(StrutRecipes, ALatticeThatFallsApartIsCountedOnTheGrid)
                   "result: lattice\noutputs: {mesh: a.stl}\n",
                   &status);
     EXPECT_EQ(status, 0) << fine;
-    EXPECT_EQ(fine.find("warning"), std::string::npos) << fine;
+    EXPECT_EQ(fine.find("falls apart"), std::string::npos) << fine;
+    EXPECT_EQ(fine.find("less than two voxels"), std::string::npos) << fine;
+    EXPECT_EQ(fine.find("vanish"), std::string::npos) << fine;
 }
 
 TEST(StrutRecipes, StrutsThinnerThanTwoVoxelsWarnBeforeEvaluation)

@@ -310,7 +310,7 @@ def main():
             if not check(p.returncode == 0, "%s: exit %d: %s" % (name, p.returncode, p.stderr.strip()[-400:])):
                 continue
             report = json.load(open(os.path.join(out, "report.json")))
-            expected = {"report.json"}
+            expected = {"report.json", "report.html"}
             for o in outputs:
                 f = o.split(": ")[1]
                 expected.add(f)
