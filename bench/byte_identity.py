@@ -30,7 +30,7 @@ def sha(data: bytes) -> str:
 
 def run_recipe(voxlat: str, recipe: pathlib.Path) -> dict:
     with tempfile.TemporaryDirectory() as out:
-        cmd = [voxlat, "-q", "run", str(recipe), "--set", f"voxel={VOXEL}", "--out", out, "--no-preview"]
+        cmd = [voxlat, "-q", "run", str(recipe), "--set", f"voxel={VOXEL}", "--out", out, "--no-preview", "--no-html"]
         done = subprocess.run(cmd, capture_output=True, text=True)
         if done.returncode != 0:
             return {"exit": done.returncode, "stderr": done.stderr.strip().splitlines()[-1:]}
