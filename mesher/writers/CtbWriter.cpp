@@ -1,5 +1,7 @@
 #include "mesher/writers/CtbWriter.h"
 
+#include "mesher/writers/LittleEndian.h"
+
 #include <nettle/aes.h>
 #include <nettle/cbc.h>
 #include <nettle/sha2.h>
@@ -11,41 +13,6 @@
 namespace voxlat {
 
 namespace {
-
-/// Appends little-endian numbers.
-class LittleEndian {
-public:
-    explicit LittleEndian(std::string& out) : mOut(out) {}
-    void u8(unsigned v) { mOut.push_back(char(v & 0xFF)); }
-    void u16(unsigned v)
-    {
-        u8(v);
-        u8(v >> 8);
-    }
-    void u32(std::uint32_t v)
-    {
-        u16(v & 0xFFFF);
-        u16(v >> 16);
-    }
-    void f32(double v)
-    {
-        const float f = float(v);
-        std::uint32_t bits;
-        std::memcpy(&bits, &f, 4);
-        u32(bits);
-    }
-    void zeros(std::size_t n) { mOut.append(n, '\0'); }
-    void raw(const std::string& s) { mOut += s; }
-    /// Pads with zeros up to absolute offset @a at (a section's start).
-    void to(std::size_t at)
-    {
-        if (mOut.size() > at) throw std::logic_error("ctb: a section overruns the next one");
-        mOut.append(at - mOut.size(), '\0');
-    }
-
-private:
-    std::string& mOut;
-};
 
 constexpr std::uint32_t kHeaderBytes = 112, kPreviewHeaderBytes = 32, kPrintParametersBytes = 60, kSlicerInfoBytes = 76,
                         kPrintParametersV4Bytes = 464, kResinParametersBytes = 40, kLayerDefBytes = 36,

@@ -1,5 +1,7 @@
 #include "mesher/writers/PhotonWorkshopWriter.h"
 
+#include "mesher/writers/LittleEndian.h"
+
 #include <algorithm>
 #include <cstring>
 #include <stdexcept>
@@ -8,45 +10,16 @@ namespace voxlat {
 
 namespace {
 
-/// Appends little-endian numbers, fixed-width strings and table prefixes.
-class LittleEndian {
+/// Little-endian bytes plus the format's named tables.
+class Tables : public LittleEndian {
 public:
-    explicit LittleEndian(std::string& out) : mOut(out) {}
-    void u8(unsigned v) { mOut.push_back(char(v & 0xFF)); }
-    void u16(unsigned v)
-    {
-        u8(v);
-        u8(v >> 8);
-    }
-    void u32(std::uint32_t v)
-    {
-        u16(v & 0xFFFF);
-        u16(v >> 16);
-    }
-    void f32(double v)
-    {
-        const float f = float(v);
-        std::uint32_t bits;
-        std::memcpy(&bits, &f, 4);
-        u32(bits);
-    }
-    /// @a s NUL-padded to @a width bytes (cut to width - 1 so a NUL always ends it).
-    void text(const std::string& s, std::size_t width)
-    {
-        const std::size_t n = std::min(s.size(), width - 1);
-        mOut.append(s, 0, n);
-        mOut.append(width - n, '\0');
-    }
+    using LittleEndian::LittleEndian;
     /// A named table's prefix: its 12-byte name and length field.
     void table(const char* name, std::uint32_t length)
     {
         text(name, 12);
         u32(length);
     }
-    void raw(const std::string& s) { mOut += s; }
-
-private:
-    std::string& mOut;
 };
 
 constexpr std::uint32_t kPreviewTableBytes = 28 + 2 * kPhotonPreviewW * kPhotonPreviewH;
@@ -110,7 +83,7 @@ std::string photonWorkshopHeadBytes(const PhotonWorkshopHeader& h, const std::ve
     const Addresses a = addresses(h.version, h.layers);
     std::string out;
     out.reserve(a.layers);
-    LittleEndian le(out);
+    Tables le(out);
     const bool twoStages = h.normal.liftDistance[1] > 0 || h.bottom.liftDistance[1] > 0;
     // File mark (§3).
     le.text("ANYCUBIC", 12);
@@ -291,7 +264,7 @@ std::string photonWorkshopPreview(const std::uint8_t* rgba, int width, int heigh
 {
     std::string out;
     out.reserve(std::size_t(2) * kPhotonPreviewW * kPhotonPreviewH);
-    LittleEndian le(out);
+    Tables le(out);
     for (int r = 0; r < kPhotonPreviewH; ++r)
         for (int c = 0; c < kPhotonPreviewW; ++c) {
             const int x = std::min(width - 1, c * width / kPhotonPreviewW);
