@@ -4,7 +4,7 @@ voxels) from recipe to STL, side by side with the seed paper's method written in
 is cheap, so the solved levels can be compared at two resolutions.
 
 Measured (2 shared cores, side by side): leaf-by-leaf evaluation and a whole-box density solve,
-68 s vs 218 s (3.2x). With the box's cells tabled one period deep (fields/PeriodicTiling) and the
+68 s vs 218 s (3.2x). With the box's cells tabled one period deep (fields/maps/PeriodicTiling) and the
 density measured on one period of the interior (periodicPieces): 3.80 s vs 112 s (29.5x; solve
 1.33 s, mesh 0.77 s, STL 0.78 s, evaluate 0.61 s), peak 905 MB; 8.6 s vs 120 s (13.9x) and
 4.8 s vs 121 s (25.1x) in loaded runs. Target 50x missed. With the density pieces on dense

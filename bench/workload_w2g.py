@@ -33,7 +33,7 @@ Trimmed (quiet): 29.3 s vs 225 s (7.7x; evaluate 9.2 s, solve 17.1 s); cylinder 
 After the pieces count on leaf bit masks, huge pages and the streamed density count (graded case
 only, side by side at load 7 falling to 4.5): 19.38 s vs 667.1 s (34.4x, target 50x missed),
 peak 952 MB (evaluate 5.89 s, solve 5.49 s, mesh 3.62 s, STL 2.93 s, pieces 0.69 s).
-2026-11-27 (quiet, load 1.0-1.1), after the AVX2 row loop (fields/StrutRowsAvx2.cpp, same
+2026-11-27 (quiet, load 1.0-1.1), after the AVX2 row loop (fields/struts/StrutRowsAvx2.cpp, same
 doubles), the density pieces' in-period mirror (one half of each part of the period, counted
 twice: solve 2.73 -> 1.16 s) and the tiling table's mirror and 8^3 bricks (evaluate 1.9 -> 1.4 s):
 graded 4.01 s vs 232.7 s (58.0x, target met), peak 581 MB (solve 1.16 s, evaluate 1.39 s, mesh +

@@ -6,7 +6,7 @@
 #include "engine/jobs/Job.h"
 #include "engine/recipe/RecipeParams.h"
 #include "engine/recipe/Schema.h"
-#include "fields/VectorField.h"
+#include "fields/maps/VectorField.h"
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>

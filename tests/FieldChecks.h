@@ -2,9 +2,9 @@
 // node's own values, bounds that contain every sampled value.
 #pragma once
 
-#include "fields/Boolean.h"
-#include "fields/BoxField.h"
-#include "fields/FieldNode.h"
+#include "fields/core/FieldNode.h"
+#include "fields/shapes/Boolean.h"
+#include "fields/shapes/BoxField.h"
 
 #include <gtest/gtest.h>
 

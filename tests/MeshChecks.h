@@ -1,6 +1,6 @@
 #pragma once
 // Checks shared by the mesh tests (marching cubes, bcc, projection, decimation).
-#include "mesher/extract/MeshCheck.h"
+#include "mesher/checks/MeshCheck.h"
 #include "mesher/extract/TriangleMesh.h"
 
 #include <gtest/gtest.h>

@@ -1,9 +1,9 @@
 // Checks of a result: its connected pieces counted on the grid.
 #include "engine/checks/Pieces.h"
 #include "engine/core/SparseEvaluator.h"
-#include "fields/Boolean.h"
-#include "fields/BoxField.h"
-#include "fields/Sphere.h"
+#include "fields/shapes/Boolean.h"
+#include "fields/shapes/BoxField.h"
+#include "fields/shapes/Sphere.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>

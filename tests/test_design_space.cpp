@@ -6,11 +6,11 @@
 #include "engine/jobs/Job.h"
 #include "engine/parts/MeshDesignSpace.h"
 #include "engine/parts/MeshSdf.h"
-#include "fields/BoxField.h"
-#include "fields/CoordinateMap.h"
-#include "fields/LevelSolid.h"
-#include "fields/Sphere.h"
-#include "fields/TpmsField.h"
+#include "fields/frames/CoordinateMap.h"
+#include "fields/levels/LevelSolid.h"
+#include "fields/shapes/BoxField.h"
+#include "fields/shapes/Sphere.h"
+#include "fields/tpms/TpmsField.h"
 #include "mesher/writers/MeshWriters.h"
 
 #include <gtest/gtest.h>

@@ -1,9 +1,9 @@
 // User equations: values, gradients and bounds against the built-in nodes and hand-written
 // references; batch paths against the point path; syntax errors with their positions.
-#include "fields/ExprField.h"
-#include "fields/Expression.h"
-#include "fields/Sphere.h"
-#include "fields/TpmsField.h"
+#include "fields/expr/ExprField.h"
+#include "fields/expr/Expression.h"
+#include "fields/shapes/Sphere.h"
+#include "fields/tpms/TpmsField.h"
 
 #include <gtest/gtest.h>
 

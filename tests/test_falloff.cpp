@@ -3,8 +3,8 @@
 #include "FieldChecks.h"
 #include "TestUtil.h"
 #include "engine/jobs/Job.h"
-#include "fields/DistanceFalloff.h"
-#include "mesher/extract/MeshCheck.h"
+#include "fields/struts/DistanceFalloff.h"
+#include "mesher/checks/MeshCheck.h"
 
 #include <gtest/gtest.h>
 

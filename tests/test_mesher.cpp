@@ -1,7 +1,7 @@
 // Tests of the mesher: marching cubes topology and determinism, mesh checks, writers.
 
+#include "mesher/checks/MeshCheck.h"
 #include "mesher/extract/MarchingCubes.h"
-#include "mesher/extract/MeshCheck.h"
 #include "mesher/writers/AtomicFile.h"
 #include "mesher/writers/MeshWriters.h"
 

@@ -7,13 +7,13 @@
 #include "engine/jobs/Job.h"
 #include "engine/recipe/ExprNodes.h"
 #include "engine/recipe/Recipe.h"
-#include "fields/Constant.h"
-#include "fields/ExprField.h"
-#include "fields/Expression.h"
-#include "fields/OrientField.h"
-#include "fields/TpmsField.h"
-#include "fields/Transform.h"
-#include "mesher/extract/MeshCheck.h"
+#include "fields/core/Constant.h"
+#include "fields/expr/ExprField.h"
+#include "fields/expr/Expression.h"
+#include "fields/frames/OrientField.h"
+#include "fields/shapes/Transform.h"
+#include "fields/tpms/TpmsField.h"
+#include "mesher/checks/MeshCheck.h"
 
 #include <gtest/gtest.h>
 

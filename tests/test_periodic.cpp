@@ -6,11 +6,11 @@
 #include "engine/frames/StrutFrames.h"
 #include "engine/frames/UnitCells.h"
 #include "engine/jobs/Job.h"
-#include "fields/IsoRadius.h"
-#include "fields/PeriodicTiling.h"
-#include "fields/PointField.h"
-#include "fields/StrutConvolution.h"
-#include "mesher/extract/MeshCheck.h"
+#include "fields/core/PointField.h"
+#include "fields/maps/PeriodicTiling.h"
+#include "fields/struts/IsoRadius.h"
+#include "fields/struts/StrutConvolution.h"
+#include "mesher/checks/MeshCheck.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>

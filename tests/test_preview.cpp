@@ -3,9 +3,9 @@
 #include "engine/core/Domain.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/jobs/ReportPage.h"
-#include "fields/Sphere.h"
-#include "mesher/extract/ClusterDecimation.h"
+#include "fields/shapes/Sphere.h"
 #include "mesher/extract/MarchingCubes.h"
+#include "mesher/tolerance/ClusterDecimation.h"
 #include "mesher/writers/MeshPreview.h"
 #include "mesher/writers/SliceWriters.h"
 

@@ -6,10 +6,10 @@
 #include "engine/checks/Traps.h"
 #include "engine/jobs/Job.h"
 #include "engine/recipe/Recipe.h"
-#include "fields/Boolean.h"
-#include "fields/DrainChannels.h"
-#include "fields/Sphere.h"
-#include "mesher/extract/MeshCheck.h"
+#include "fields/shapes/Boolean.h"
+#include "fields/shapes/DrainChannels.h"
+#include "fields/shapes/Sphere.h"
+#include "mesher/checks/MeshCheck.h"
 #include "mesher/writers/AtomicFile.h"
 
 #include <gtest/gtest.h>

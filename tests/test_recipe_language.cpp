@@ -10,8 +10,8 @@
 #include "engine/recipe/RecipeParams.h"
 #include "engine/recipe/Schema.h"
 #include "engine/recipe/Sha256.h"
-#include "fields/TpmsField.h"
-#include "fields/VectorField.h"
+#include "fields/maps/VectorField.h"
+#include "fields/tpms/TpmsField.h"
 
 #include <gtest/gtest.h>
 

@@ -6,12 +6,12 @@
 #include "engine/frames/SkinFrame.h"
 #include "engine/jobs/Job.h"
 #include "engine/parts/MeshSdf.h"
-#include "fields/BoxField.h"
-#include "fields/MeshDistance.h"
-#include "fields/SkinMap.h"
-#include "fields/Sphere.h"
-#include "fields/TpmsField.h"
-#include "mesher/extract/MeshCheck.h"
+#include "fields/frames/SkinMap.h"
+#include "fields/shapes/BoxField.h"
+#include "fields/shapes/MeshDistance.h"
+#include "fields/shapes/Sphere.h"
+#include "fields/tpms/TpmsField.h"
+#include "mesher/checks/MeshCheck.h"
 
 #include <gtest/gtest.h>
 

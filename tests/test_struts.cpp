@@ -6,14 +6,14 @@
 #include "engine/frames/StrutFrames.h"
 #include "engine/frames/UnitCells.h"
 #include "engine/jobs/Job.h"
-#include "fields/GaussianTable.h"
-#include "fields/Sphere.h"
-#include "fields/StrutCapsules.h"
-#include "fields/StrutConvolution.h"
-#include "fields/StrutIndex.h"
-#include "fields/StrutRows.h"
+#include "fields/shapes/Sphere.h"
+#include "fields/struts/GaussianTable.h"
+#include "fields/struts/StrutCapsules.h"
+#include "fields/struts/StrutConvolution.h"
+#include "fields/struts/StrutIndex.h"
+#include "fields/struts/StrutRows.h"
+#include "mesher/checks/MeshCheck.h"
 #include "mesher/extract/MarchingCubes.h"
-#include "mesher/extract/MeshCheck.h"
 
 #include <gtest/gtest.h>
 

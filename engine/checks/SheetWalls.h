@@ -2,7 +2,7 @@
 /// @brief The wall thickness a sheet really has, measured across its mid-surface.
 #pragma once
 
-#include "fields/FieldNode.h"
+#include "fields/core/FieldNode.h"
 
 #include <cstddef>
 

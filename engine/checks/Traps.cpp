@@ -1,6 +1,6 @@
 #include "engine/checks/Traps.h"
 
-#include "fields/BlockLattice.h"
+#include "fields/core/BlockLattice.h"
 
 #include <algorithm>
 #include <cmath>

@@ -3,7 +3,7 @@
 #pragma once
 
 #include "engine/core/JobContext.h"
-#include "fields/FieldNode.h"
+#include "fields/core/FieldNode.h"
 
 #include <cstdint>
 #include <memory>

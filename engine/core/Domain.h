@@ -2,7 +2,7 @@
 /// @brief The box a job lives in and the voxel grid that samples it.
 #pragma once
 
-#include "fields/FieldNode.h"
+#include "fields/core/FieldNode.h"
 
 #include <openvdb/math/Coord.h>
 #include <openvdb/math/Transform.h>

@@ -2,7 +2,7 @@
 
 #include "engine/core/Errors.h"
 #include "engine/core/SystemInfo.h"
-#include "fields/BoxField.h"
+#include "fields/shapes/BoxField.h"
 
 #include <tbb/parallel_for.h>
 

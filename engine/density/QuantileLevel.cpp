@@ -4,7 +4,7 @@
 #include "engine/core/GridMeasure.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/density/Coverage.h"
-#include "fields/BlockLattice.h"
+#include "fields/core/BlockLattice.h"
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>

@@ -1,6 +1,6 @@
 #include "engine/frames/SkinFrame.h"
 
-#include "fields/BlockLattice.h"
+#include "fields/core/BlockLattice.h"
 
 #include "engine/core/Errors.h"
 

@@ -5,7 +5,7 @@
 #pragma once
 
 #include "engine/frames/StrutFrames.h"
-#include "fields/SkinCells.h"
+#include "fields/frames/SkinCells.h"
 
 #include <nlohmann/json.hpp>
 

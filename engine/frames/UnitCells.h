@@ -3,7 +3,7 @@
 /// between them; presets, cells from lines, and the validity rule.
 #pragma once
 
-#include "fields/FieldNode.h"
+#include "fields/core/FieldNode.h"
 
 #include <array>
 #include <string>

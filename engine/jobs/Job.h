@@ -8,10 +8,10 @@
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/MeshSettings.h"
 #include "engine/recipe/Recipe.h"
-#include "mesher/extract/AdaptiveRefinement.h"
-#include "mesher/extract/BoxClip.h"
-#include "mesher/extract/SurfaceProjection.h"
+#include "mesher/clip/BoxClip.h"
 #include "mesher/extract/TriangleMesh.h"
+#include "mesher/tolerance/AdaptiveRefinement.h"
+#include "mesher/tolerance/SurfaceProjection.h"
 #include "mesher/writers/FrameWriters.h"
 #include "mesher/writers/MeshWriters.h"
 
@@ -70,7 +70,7 @@ public:
     FieldPtr surfaceField();
     /// The first-order signed distance to the surface of surfaceField()'s solid in mm: the largest
     /// of f / |grad f| over the operands of the result's outermost sharp intersection (or the
-    /// result) and the domain box (fields/SurfaceDistance). Decimation and the mesh report
+    /// result) and the domain box (fields/shapes/SurfaceDistance). Decimation and the mesh report
     /// measure with it.
     FieldPtr distanceField();
 

@@ -7,8 +7,8 @@
 #include "engine/core/JobContext.h"
 #include "engine/properties/Homogenization.h"
 #include "engine/recipe/Recipe.h"
-#include "fields/FieldNode.h"
-#include "fields/LevelSolid.h"
+#include "fields/core/FieldNode.h"
+#include "fields/levels/LevelSolid.h"
 
 #include <nlohmann/json.hpp>
 

@@ -5,7 +5,7 @@
 #include "engine/core/JobContext.h"
 #include "engine/jobs/PrinterProfile.h"
 #include "engine/recipe/SliceSettings.h"
-#include "fields/FieldNode.h"
+#include "fields/core/FieldNode.h"
 
 #include <nlohmann/json.hpp>
 

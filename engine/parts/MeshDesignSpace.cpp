@@ -3,7 +3,7 @@
 #include "engine/core/Errors.h"
 #include "engine/core/SystemInfo.h"
 #include "engine/parts/MeshSdf.h"
-#include "mesher/extract/MeshCheck.h"
+#include "mesher/checks/MeshCheck.h"
 
 #include <openvdb/tools/MeshToVolume.h>
 #include <tbb/parallel_for.h>

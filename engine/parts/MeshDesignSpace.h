@@ -4,7 +4,7 @@
 #pragma once
 
 #include "engine/parts/MeshReader.h"
-#include "fields/MeshDistance.h"
+#include "fields/shapes/MeshDistance.h"
 
 #include <nlohmann/json.hpp>
 

@@ -4,7 +4,7 @@
 #pragma once
 
 #include "engine/properties/Homogenization.h"
-#include "fields/FieldNode.h"
+#include "fields/core/FieldNode.h"
 
 #include <array>
 #include <functional>

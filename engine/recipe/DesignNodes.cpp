@@ -3,9 +3,9 @@
 #include "engine/core/Format.h"
 #include "engine/parts/MeshDesignSpace.h"
 #include "engine/recipe/FieldBuilder.h"
-#include "fields/Boolean.h"
-#include "fields/CoordinateMap.h"
-#include "fields/Unary.h"
+#include "fields/frames/CoordinateMap.h"
+#include "fields/shapes/Boolean.h"
+#include "fields/shapes/Unary.h"
 
 #include <cmath>
 #include <iostream>

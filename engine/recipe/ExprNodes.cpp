@@ -1,11 +1,11 @@
 // Recipe node types for user equations (`expr`) and direction fields (`vector`).
 #include "engine/recipe/ExprNodes.h"
 
-#include "fields/Constant.h"
-#include "fields/ExprField.h"
-#include "fields/LevelSolid.h"
-#include "fields/ParametricSurface.h"
-#include "fields/Ramp.h"
+#include "fields/core/Constant.h"
+#include "fields/expr/ExprField.h"
+#include "fields/frames/ParametricSurface.h"
+#include "fields/levels/LevelSolid.h"
+#include "fields/maps/Ramp.h"
 
 #include <algorithm>
 #include <cctype>

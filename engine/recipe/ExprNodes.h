@@ -3,8 +3,8 @@
 #pragma once
 
 #include "engine/recipe/FieldBuilder.h"
-#include "fields/OrientField.h"
-#include "fields/VectorField.h"
+#include "fields/frames/OrientField.h"
+#include "fields/maps/VectorField.h"
 
 namespace voxlat {
 

@@ -3,7 +3,7 @@
 #include "engine/core/InputFiles.h"
 #include "engine/frames/UnitCells.h"
 #include "engine/recipe/FieldBuilder.h"
-#include "fields/DistanceFalloff.h"
+#include "fields/struts/DistanceFalloff.h"
 
 #include <cmath>
 #include <sstream>

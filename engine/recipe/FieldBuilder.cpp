@@ -1,6 +1,6 @@
 #include "engine/recipe/FieldBuilder.h"
 
-#include "fields/ParametricSurface.h"
+#include "fields/frames/ParametricSurface.h"
 
 #include <algorithm>
 #include <iostream>

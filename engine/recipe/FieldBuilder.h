@@ -6,8 +6,8 @@
 #include "engine/core/JobContext.h"
 #include "engine/recipe/KeySpec.h"
 #include "engine/recipe/Recipe.h"
-#include "fields/DrainChannels.h"
-#include "fields/LevelSolid.h"
+#include "fields/levels/LevelSolid.h"
+#include "fields/shapes/DrainChannels.h"
 
 #include <nlohmann/json.hpp>
 

@@ -4,12 +4,12 @@
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/ScalarMaps.h"
 #include "engine/recipe/SkinNodes.h"
-#include "fields/Constant.h"
-#include "fields/GradedLevel.h"
-#include "fields/GradientShift.h"
-#include "fields/TpmsEquations.h"
-#include "fields/TpmsField.h"
-#include "fields/VectorField.h"
+#include "fields/core/Constant.h"
+#include "fields/levels/GradedLevel.h"
+#include "fields/levels/GradientShift.h"
+#include "fields/maps/VectorField.h"
+#include "fields/tpms/TpmsEquations.h"
+#include "fields/tpms/TpmsField.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,6 +1,6 @@
 #include "engine/recipe/RecipeNode.h"
 
-#include "fields/EditDistance.h"
+#include "fields/core/EditDistance.h"
 
 #include <algorithm>
 #include <cmath>

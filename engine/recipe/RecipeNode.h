@@ -3,7 +3,7 @@
 #pragma once
 
 #include "engine/core/Errors.h"
-#include "fields/FieldNode.h"
+#include "fields/core/FieldNode.h"
 
 #include <yaml-cpp/yaml.h>
 

@@ -2,9 +2,9 @@
 
 #include "engine/core/InputFiles.h"
 
-#include "fields/Constant.h"
-#include "fields/Ramp.h"
-#include "fields/SampledGrid.h"
+#include "fields/core/Constant.h"
+#include "fields/maps/Ramp.h"
+#include "fields/maps/SampledGrid.h"
 
 #include <algorithm>
 #include <cmath>

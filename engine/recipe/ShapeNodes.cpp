@@ -1,10 +1,10 @@
 // Recipe node types for primitives, booleans and transforms.
 #include "engine/recipe/FieldBuilder.h"
-#include "fields/Boolean.h"
-#include "fields/BoxField.h"
-#include "fields/Cylinder.h"
-#include "fields/Sphere.h"
-#include "fields/Transform.h"
+#include "fields/shapes/Boolean.h"
+#include "fields/shapes/BoxField.h"
+#include "fields/shapes/Cylinder.h"
+#include "fields/shapes/Sphere.h"
+#include "fields/shapes/Transform.h"
 
 namespace voxlat {
 

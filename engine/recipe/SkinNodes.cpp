@@ -6,7 +6,7 @@
 #include "engine/frames/SkinFrame.h"
 #include "engine/parts/MeshDesignSpace.h"
 #include "engine/parts/MeshSdf.h"
-#include "fields/SkinMap.h"
+#include "fields/frames/SkinMap.h"
 
 #include <cmath>
 #include <iostream>

@@ -7,14 +7,14 @@
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/ScalarMaps.h"
 #include "engine/recipe/SkinNodes.h"
-#include "fields/Boolean.h"
-#include "fields/GradedLevel.h"
-#include "fields/IsoRadius.h"
-#include "fields/ParametricSurface.h"
-#include "fields/PeriodicTiling.h"
-#include "fields/StrutCapsules.h"
-#include "fields/StrutConvolution.h"
-#include "fields/Supported.h"
+#include "fields/core/Supported.h"
+#include "fields/frames/ParametricSurface.h"
+#include "fields/levels/GradedLevel.h"
+#include "fields/maps/PeriodicTiling.h"
+#include "fields/shapes/Boolean.h"
+#include "fields/struts/IsoRadius.h"
+#include "fields/struts/StrutCapsules.h"
+#include "fields/struts/StrutConvolution.h"
 
 #include <algorithm>
 #include <cmath>

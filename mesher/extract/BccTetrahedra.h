@@ -15,7 +15,7 @@
 /// which the centres of their cubes then share.
 #pragma once
 
-#include "fields/FieldNode.h"
+#include "fields/core/FieldNode.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/extract/TriangleMesh.h"
 

@@ -24,7 +24,7 @@
 /// sub-samples and the tiles the part's box cuts.
 #pragma once
 
-#include "fields/FieldNode.h"
+#include "fields/core/FieldNode.h"
 
 #include <atomic>
 #include <cstdint>

@@ -3,7 +3,7 @@
 /// Beam Lattice extension through lib3mf; and a 3MF beam-lattice reader for tests.
 #pragma once
 
-#include "fields/FieldNode.h"
+#include "fields/core/FieldNode.h"
 
 #include <array>
 #include <string>

@@ -1,5 +1,5 @@
 // libFuzzer harness: an equation (the `expr:` language) compiled and evaluated at a point.
-#include "fields/Expression.h"
+#include "fields/expr/Expression.h"
 
 #include <cstddef>
 #include <cstdint>

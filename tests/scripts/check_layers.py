@@ -6,27 +6,42 @@ import re
 import sys
 
 # folder -> the folders it may include from (besides itself). Lower layers first.
+# fields/ by family: core below everything; frames and levels build on the families they compose.
+FIELDS = ["fields/core", "fields/tpms", "fields/struts", "fields/expr", "fields/shapes", "fields/maps",
+          "fields/frames", "fields/levels"]
+# The mesher's grid -> mesh stages (one library, voxlat_extract), in the order a mesh passes them.
+MESH = ["mesher/extract", "mesher/checks", "mesher/tolerance", "mesher/clip"]
 ALLOWED = {
-    "fields": [],
-    "mesher/extract": ["fields"],
-    "mesher/slice": ["fields"],
-    "mesher/writers": ["fields", "mesher/extract", "mesher/slice"],
-    "engine/core": ["fields"],
-    "engine/density": ["fields", "engine/core"],
-    "engine/frames": ["fields", "engine/core"],
-    "engine/parts": ["fields", "mesher/extract", "engine/core"],
-    "engine/properties": ["fields", "engine/core"],  # to come: homogenization (issue 15)
-    "engine/checks": ["fields", "mesher/extract", "mesher/slice", "engine/core"],  # pieces, printability
-    "engine/recipe": ["fields", "mesher/extract", "engine/core", "engine/density", "engine/frames", "engine/parts"],
-    "engine/jobs": ["fields", "mesher/extract", "mesher/slice", "mesher/writers", "engine/core", "engine/density",
-                    "engine/frames", "engine/parts", "engine/properties", "engine/checks", "engine/recipe"],
+    "fields/core": [],
+    "fields/tpms": ["fields/core"],
+    "fields/struts": ["fields/core"],
+    "fields/expr": ["fields/core"],
+    "fields/shapes": ["fields/core"],
+    "fields/maps": ["fields/core"],
+    "fields/frames": ["fields/core", "fields/expr", "fields/maps"],
+    "fields/levels": ["fields/core", "fields/maps", "fields/shapes", "fields/tpms"],
+    "mesher/extract": FIELDS,
+    "mesher/checks": FIELDS + MESH[:1],
+    "mesher/tolerance": FIELDS + MESH[:2],
+    "mesher/clip": FIELDS + MESH[:3],
+    "mesher/slice": FIELDS,
+    "mesher/writers": FIELDS + MESH + ["mesher/slice"],
+    "engine/core": FIELDS,
+    "engine/density": FIELDS + ["engine/core"],
+    "engine/frames": FIELDS + ["engine/core"],
+    "engine/parts": FIELDS + MESH + ["engine/core"],
+    "engine/properties": FIELDS + ["engine/core"],
+    "engine/checks": FIELDS + MESH + ["mesher/slice", "engine/core"],  # pieces, printability
+    "engine/recipe": FIELDS + MESH + ["engine/core", "engine/density", "engine/frames", "engine/parts"],
+    "engine/jobs": FIELDS + MESH + ["mesher/slice", "mesher/writers", "engine/core", "engine/density",
+                                    "engine/frames", "engine/parts", "engine/properties", "engine/checks",
+                                    "engine/recipe"],
 }
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 
 
 def folder_of(path: str) -> str:
-    parts = path.split("/")
-    return parts[0] if parts[0] == "fields" else "/".join(parts[:2])
+    return "/".join(path.split("/")[:2])
 
 
 def main() -> int:

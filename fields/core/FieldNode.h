@@ -1,0 +1,136 @@
+/// @file FieldNode.h
+/// @brief The one interface every field node implements.
+///
+/// Sign convention everywhere: a value is negative inside the solid and positive outside
+/// (OpenVDB's level-set convention). Nodes are immutable once they can be evaluated and safe to
+/// evaluate from many threads at once. The one node made before all its numbers are known, a
+/// LevelSolid whose level a density solve finds, refuses to be evaluated until its level is given,
+/// and takes it once (LevelSolid::unsolved, solve): build, solve, then evaluate.
+#pragma once
+
+#include "fields/core/Interval.h"
+
+#include <openvdb/math/Vec3.h>
+
+#include <cstddef>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <span>
+#include <utility>
+
+namespace voxlat {
+
+using Vec3d = openvdb::math::Vec3<double>;
+
+/// An axis-aligned box in world units (millimetres).
+struct Box3 {
+    Vec3d min{0.0};
+    Vec3d max{0.0};
+
+    Vec3d center() const { return 0.5 * (min + max); }
+    Vec3d extent() const { return max - min; }
+    /// Half the length of the diagonal: the largest distance from the centre to the box.
+    double radius() const { return 0.5 * extent().length(); }
+};
+
+/// Where a field that does not repeat everywhere still does: inside @a box its solid (value <= 0)
+/// repeats with @a period, cells aligned with @a phase. A finite frame of identical cells is such
+/// a field: deeper inside its box than the struts' reach, the box's faces are out of sight.
+struct RepeatZone {
+    Vec3d period{0.0};
+    Box3 box;
+    Vec3d phase{0.0};  ///< a corner of one cell (the frame's origin)
+};
+
+/// A regular block of sample points origin + (i*spacing.x, j*spacing.y, k*spacing.z) for
+/// i < nx, j < ny, k < nz. Values are laid out with k fastest: offset = (i*ny + j)*nz + k, which
+/// is the linear voxel order of an OpenVDB leaf when the block is one 8x8x8 leaf.
+struct GridBatch {
+    Vec3d origin{0.0};
+    Vec3d spacing{1.0};
+    int nx = 8, ny = 8, nz = 8;
+
+    std::size_t size() const { return std::size_t(nx) * ny * nz; }
+    Vec3d point(int i, int j, int k) const
+    {
+        return {origin.x() + i * spacing.x(), origin.y() + j * spacing.y(), origin.z() + k * spacing.z()};
+    }
+    /// The box spanned by the sample points.
+    Box3 bounds() const { return {origin, point(nx - 1, ny - 1, nz - 1)}; }
+};
+
+/// A scalar field that can be evaluated in batches, differentiated and bounded.
+class FieldNode {
+public:
+    virtual ~FieldNode() = default;
+
+    /// Values at @a points; @a out has the same size.
+    virtual void values(std::span<const Vec3d> points, std::span<double> out) const = 0;
+
+    /// Values and analytic gradients at @a points.
+    virtual void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const = 0;
+
+    /// Values on a regular block of points. The default expands the block into points; nodes
+    /// that can share work along the axes (separable TPMS terms) override it.
+    virtual void gridValues(const GridBatch& batch, std::span<double> out) const;
+
+    /// Values and gradients on a regular block of points (same layout as gridValues). The
+    /// default expands the block into points; separable nodes (TPMS) override it.
+    virtual void gridGradients(const GridBatch& batch, std::span<double> out, std::span<Vec3d> grad) const;
+
+    /// Values at the block's points moved both ways by a per-point shift (same layout):
+    /// plus[n] = value(p_n + shift[n]), minus[n] = value(p_n - shift[n]). The default forms the
+    /// 2N points; a TPMS reuses its per-axis terms through the angle-addition formulas.
+    virtual void gridValuesShifted(const GridBatch& batch, std::span<const Vec3d> shift, std::span<double> plus,
+                                   std::span<double> minus) const;
+
+    /// A conservative bound of the value over @a box: every value inside lies in the interval.
+    virtual Interval bound(const Box3& box) const = 0;
+
+    /// A box outside which the field is positive (the solid lies inside it), or none when the
+    /// solid is unbounded (a bare lattice). The engine uses it for the domain when none is given.
+    virtual std::optional<Box3> support() const { return std::nullopt; }
+
+    /// The field's translation period along @a axis (0, 1, 2 for x, y, z): a length P with
+    /// value(p + P e_axis) = value(p) for every p; kNoPeriod when the node does not know one,
+    /// kInvariant when the value never changes along the axis. Composite nodes derive it from
+    /// their operands (commonPeriod()); the slicer copies layers one z-period apart.
+    virtual double period(int axis) const
+    {
+        (void)axis;
+        return kNoPeriod;
+    }
+    static constexpr double kNoPeriod = 0.0;
+
+    /// Where the solid repeats though the field has no period (RepeatZone); none by default.
+    /// Lattice properties take their cell from it when period() gives none.
+    virtual std::optional<RepeatZone> repeatZone() const { return std::nullopt; }
+    static constexpr double kInvariant = std::numeric_limits<double>::infinity();
+
+    /// Convenience single-point queries (slow path; batches are the fast path).
+    double value(const Vec3d& p) const;
+    std::pair<double, Vec3d> valueAndGradient(const Vec3d& p) const;
+};
+
+using FieldPtr = std::shared_ptr<const FieldNode>;
+
+/// Largest batch composite nodes process at once (one VDB leaf).
+inline constexpr std::size_t kBatchSize = 512;
+
+/// Calls fn(begin, count) over [0, n) in chunks of at most kBatchSize.
+template <typename Fn>
+void forEachChunk(std::size_t n, Fn&& fn)
+{
+    for (std::size_t b = 0; b < n; b += kBatchSize) fn(b, std::min(kBatchSize, n - b));
+}
+
+/// A period shared by two fields that repeat with periods @a a and @a b (FieldNode::period()):
+/// the other one where either is invariant, the larger where it is a whole multiple of the
+/// smaller (to 1e-9 relative), otherwise kNoPeriod.
+double commonPeriod(double a, double b);
+
+/// A bound from a Lipschitz constant: value(centre) +- lipschitz * radius.
+Interval lipschitzBound(const FieldNode& node, const Box3& box, double lipschitz);
+
+}  // namespace voxlat

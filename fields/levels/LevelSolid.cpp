@@ -1,0 +1,132 @@
+#include "fields/levels/LevelSolid.h"
+
+#include "fields/shapes/Unary.h"
+#include "fields/tpms/TpmsField.h"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace voxlat {
+
+LevelSolid::LevelSolid(FieldPtr raw, SolidSide side, double level) : mRaw(std::move(raw)), mSide(side), mLevel(level) {}
+
+std::shared_ptr<LevelSolid> LevelSolid::unsolved(FieldPtr raw, SolidSide side)
+{
+    auto solid = std::make_shared<LevelSolid>(std::move(raw), side, 0.0);
+    solid->mSolved = false;
+    return solid;
+}
+
+void LevelSolid::solve(double level)
+{
+    if (mSolved) throw std::logic_error("LevelSolid::solve: the level is already set (a solid is solved once)");
+    mLevel = level;
+    mSolved = true;
+}
+
+void LevelSolid::throwUnsolved()
+{
+    throw std::logic_error(
+        "LevelSolid: the level is used before the density solve gave it (build, solve, then evaluate)");
+}
+
+namespace {
+/// Maps raw values in place to the solid's value and derivative factor.
+inline double applySide(SolidSide side, double raw, double level, double& slope)
+{
+    switch (side) {
+        case SolidSide::Below:
+            slope = 1.0;
+            return raw - level;
+        case SolidSide::Band:
+            slope = raw < 0 ? -1.0 : 1.0;
+            return std::abs(raw) - level;
+        case SolidSide::Above:
+            slope = -1.0;
+            return level - raw;
+    }
+    slope = 1.0;
+    return raw;
+}
+
+/// applySide over a whole span, one loop per side so each vectorises (no switch per value).
+void applySideInPlace(SolidSide side, std::span<double> out, double level)
+{
+    switch (side) {
+        case SolidSide::Below:
+            for (double& v : out) v -= level;
+            return;
+        case SolidSide::Band:
+            for (double& v : out) v = std::abs(v) - level;
+            return;
+        case SolidSide::Above:
+            for (double& v : out) v = level - v;
+            return;
+    }
+}
+}  // namespace
+
+void LevelSolid::values(std::span<const Vec3d> points, std::span<double> out) const
+{
+    requireSolved();
+    mRaw->values(points, out);
+    applySideInPlace(mSide, out, mLevel);
+}
+
+void LevelSolid::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
+{
+    requireSolved();
+    mRaw->gradients(points, out, grad);
+    for (std::size_t n = 0; n < out.size(); ++n) {
+        double slope;
+        out[n] = applySide(mSide, out[n], mLevel, slope);
+        grad[n] *= slope;
+    }
+}
+
+void LevelSolid::gridValues(const GridBatch& batch, std::span<double> out) const
+{
+    requireSolved();
+    // A TPMS applies the level as it makes its values (the same doubles, one pass less).
+    if (const auto* tpms = dynamic_cast<const TpmsField*>(mRaw.get())) {
+        tpms->gridValuesAtLevel(batch, out, mSide, mLevel);
+        return;
+    }
+    mRaw->gridValues(batch, out);
+    applySideInPlace(mSide, out, mLevel);
+}
+
+Interval LevelSolid::bound(const Box3& box) const
+{
+    requireSolved();
+    const Interval r = mRaw->bound(box);
+    switch (mSide) {
+        case SolidSide::Below:
+            return r - mLevel;
+        case SolidSide::Band:
+            return abs(r) - mLevel;
+        case SolidSide::Above:
+            return mLevel - r;
+    }
+    return r;
+}
+
+FieldPtr LevelSolid::indicator() const
+{
+    switch (mSide) {
+        case SolidSide::Below:
+            return mRaw;
+        case SolidSide::Band:
+            return std::make_shared<UnaryField>(mRaw, UnaryOp::Abs);
+        case SolidSide::Above:
+            return std::make_shared<UnaryField>(mRaw, UnaryOp::Negate);
+    }
+    return mRaw;
+}
+
+double LevelSolid::levelFromIndicator(double indicatorLevel) const
+{
+    return mSide == SolidSide::Above ? -indicatorLevel : indicatorLevel;
+}
+
+}  // namespace voxlat

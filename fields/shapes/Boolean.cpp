@@ -1,0 +1,141 @@
+#include "fields/shapes/Boolean.h"
+
+#include <algorithm>
+#include <array>
+#include <stdexcept>
+
+namespace voxlat {
+
+BooleanField::BooleanField(BooleanOp op, std::vector<FieldPtr> operands, double blendRadius)
+    : mOp(op), mOperands(std::move(operands)), mBlend(blendRadius)
+{
+    if (mOperands.empty()) throw std::invalid_argument("a boolean needs at least one operand");
+    if (mOp == BooleanOp::Difference && mOperands.size() < 2)
+        throw std::invalid_argument("a difference needs at least two operands");
+}
+
+void BooleanField::combine(double& a, Vec3d* ga, double b, const Vec3d* gb) const
+{
+    // Intersection and difference are negated unions: max(a, b) = -min(-a, -b).
+    const double sa = mOp == BooleanOp::Union ? 1.0 : -1.0;
+    const double sb = mOp == BooleanOp::Intersection ? -1.0 : 1.0;
+    const double x = sa * a, y = sb * b;  // minimise x and y
+    double m, h;
+    if (mBlend > 0.0) {
+        h = std::clamp(0.5 + 0.5 * (y - x) / mBlend, 0.0, 1.0);
+        m = y + h * (x - y) - mBlend * h * (1.0 - h);
+    } else {
+        h = x <= y ? 1.0 : 0.0;
+        m = x <= y ? x : y;
+    }
+    a = sa * m;
+    if (ga) *ga = sa * (h * sa * (*ga) + (1.0 - h) * sb * (*gb));
+}
+
+void BooleanField::values(std::span<const Vec3d> points, std::span<double> out) const
+{
+    mOperands[0]->values(points, out);
+    std::array<double, kBatchSize> buf;
+    for (std::size_t o = 1; o < mOperands.size(); ++o)
+        forEachChunk(points.size(), [&](std::size_t b, std::size_t n) {
+            mOperands[o]->values(points.subspan(b, n), std::span<double>(buf.data(), n));
+            for (std::size_t i = 0; i < n; ++i) combine(out[b + i], nullptr, buf[i], nullptr);
+        });
+}
+
+void BooleanField::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
+{
+    mOperands[0]->gradients(points, out, grad);
+    std::array<double, kBatchSize> buf;
+    std::array<Vec3d, kBatchSize> gbuf;
+    for (std::size_t o = 1; o < mOperands.size(); ++o)
+        forEachChunk(points.size(), [&](std::size_t b, std::size_t n) {
+            mOperands[o]->gradients(points.subspan(b, n), std::span<double>(buf.data(), n),
+                                    std::span<Vec3d>(gbuf.data(), n));
+            for (std::size_t i = 0; i < n; ++i) combine(out[b + i], &grad[b + i], buf[i], &gbuf[i]);
+        });
+}
+
+void BooleanField::gridValues(const GridBatch& batch, std::span<double> out) const
+{
+    if (batch.size() > kBatchSize) {
+        FieldNode::gridValues(batch, out);
+        return;
+    }
+    mOperands[0]->gridValues(batch, out);
+    std::array<double, kBatchSize> buf;
+    const std::size_t n = batch.size();
+    // combine() without gradients, one loop per case (the same arithmetic, so the same values).
+    const double sa = mOp == BooleanOp::Union ? 1.0 : -1.0;
+    const double sb = mOp == BooleanOp::Intersection ? -1.0 : 1.0;
+    const double k = mBlend;
+    for (std::size_t o = 1; o < mOperands.size(); ++o) {
+        mOperands[o]->gridValues(batch, std::span<double>(buf.data(), n));
+        if (k > 0.0) {
+            for (std::size_t i = 0; i < n; ++i) {
+                const double x = sa * out[i], y = sb * buf[i];
+                const double h = std::clamp(0.5 + 0.5 * (y - x) / k, 0.0, 1.0);
+                out[i] = sa * (y + h * (x - y) - k * h * (1.0 - h));
+            }
+        } else {
+            for (std::size_t i = 0; i < n; ++i) {
+                const double x = sa * out[i], y = sb * buf[i];
+                out[i] = sa * (x <= y ? x : y);
+            }
+        }
+    }
+}
+
+double BooleanField::period(int axis) const
+{
+    double p = kInvariant;
+    for (const FieldPtr& operand : mOperands) p = commonPeriod(p, operand->period(axis));
+    return p;
+}
+
+Interval BooleanField::bound(const Box3& box) const
+{
+    Interval r = mOperands[0]->bound(box);
+    for (std::size_t o = 1; o < mOperands.size(); ++o) {
+        const Interval b = mOperands[o]->bound(box);
+        switch (mOp) {
+            case BooleanOp::Union:
+                r = min(r, b);
+                break;
+            case BooleanOp::Intersection:
+                r = max(r, b);
+                break;
+            case BooleanOp::Difference:
+                r = max(r, -b);
+                break;
+        }
+        // The smooth minimum lies within r/4 below the hard one (above it for max).
+        if (mBlend > 0.0)
+            r = mOp == BooleanOp::Union ? Interval{r.lo - 0.25 * mBlend, r.hi} : Interval{r.lo, r.hi + 0.25 * mBlend};
+    }
+    return r;
+}
+
+std::optional<Box3> BooleanField::support() const
+{
+    if (mOp == BooleanOp::Difference) return mOperands[0]->support();
+    std::optional<Box3> r;
+    for (std::size_t o = 0; o < mOperands.size(); ++o) {
+        const std::optional<Box3> b = mOperands[o]->support();
+        if (mOp == BooleanOp::Union) {
+            if (!b) return std::nullopt;  // one unbounded operand makes the union unbounded
+            r = o == 0 ? *b
+                       : Box3{openvdb::math::minComponent(r->min, b->min), openvdb::math::maxComponent(r->max, b->max)};
+        } else if (b) {
+            // The smooth maximum is never below the hard one, so any box bounds the result.
+            r = !r ? *b
+                   : Box3{openvdb::math::maxComponent(r->min, b->min), openvdb::math::minComponent(r->max, b->max)};
+        }
+    }
+    if (r && mOp == BooleanOp::Union && mBlend > 0.0) r = Box3{r->min - Vec3d(mBlend), r->max + Vec3d(mBlend)};
+    if (r)
+        for (int a = 0; a < 3; ++a) r->max[a] = std::max(r->max[a], r->min[a]);  // disjoint: an empty box
+    return r;
+}
+
+}  // namespace voxlat

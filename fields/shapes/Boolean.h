@@ -1,0 +1,44 @@
+/// @file Boolean.h
+/// @brief Union, intersection and difference of fields, with an optional smooth blend radius.
+#pragma once
+
+#include "fields/core/FieldNode.h"
+
+#include <vector>
+
+namespace voxlat {
+
+enum class BooleanOp { Union, Intersection, Difference };
+
+/// Folds the operands left to right: union = min, intersection = max, difference = max(a, -b).
+/// With blend radius r > 0 the polynomial smooth minimum replaces min (smin(a, b) >= min - r/4),
+/// rounding the joint with a fillet of about radius r when the operands are distance-like.
+class BooleanField final : public FieldNode {
+public:
+    BooleanField(BooleanOp op, std::vector<FieldPtr> operands, double blendRadius = 0.0);
+
+    void values(std::span<const Vec3d> points, std::span<double> out) const override;
+    void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
+    void gridValues(const GridBatch& batch, std::span<double> out) const override;
+    Interval bound(const Box3& box) const override;
+    /// Intersection: the overlap of the operands' boxes; union: their hull (grown by the blend
+    /// radius, which assumes distance-like operands); difference: the first operand's box.
+    std::optional<Box3> support() const override;
+    /// A period every operand shares (commonPeriod()).
+    double period(int axis) const override;
+
+    BooleanOp op() const { return mOp; }
+    const std::vector<FieldPtr>& operands() const { return mOperands; }
+    /// The smooth blend radius (0: a sharp min / max).
+    double blendRadius() const { return mBlend; }
+
+private:
+    /// Combines accumulated value a (gradient ga) with operand b (gradient gb) in place.
+    void combine(double& a, Vec3d* ga, double b, const Vec3d* gb) const;
+
+    BooleanOp mOp;
+    std::vector<FieldPtr> mOperands;
+    double mBlend;
+};
+
+}  // namespace voxlat

@@ -1,0 +1,193 @@
+#include "fields/shapes/MeshDistance.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace voxlat {
+
+namespace {
+constexpr int kBlock = 8;
+int blockOf(int i)
+{
+    return i >= 0 ? i / kBlock : -((-i + kBlock - 1) / kBlock);
+}
+}  // namespace
+
+MeshDistance::MeshDistance(openvdb::FloatGrid::ConstPtr grid, std::optional<Box3> support)
+    : mGrid(std::move(grid)), mSupport(support)
+{
+    const auto& xform = mGrid->transform();
+    if (!xform.isLinear() || !xform.hasUniformScale())
+        throw std::invalid_argument("MeshDistance needs a grid with a uniform linear transform");
+    mVoxel = xform.voxelSize()[0];
+    mOrigin = xform.indexToWorld(openvdb::Vec3d(0.0));
+    mBackground = mGrid->background();
+
+    // Min / max of every 8^3 block of samples over the grid's leaves (and the tiles between
+    // them), one block of background around.
+    openvdb::CoordBBox leafBox;
+    if (!mGrid->tree().evalLeafBoundingBox(leafBox) || leafBox.empty()) return;
+    mBlockMin = openvdb::Coord(blockOf(leafBox.min().x()), blockOf(leafBox.min().y()), blockOf(leafBox.min().z())) -
+                openvdb::Coord(1);
+    const openvdb::Coord blockMax =
+        openvdb::Coord(blockOf(leafBox.max().x()), blockOf(leafBox.max().y()), blockOf(leafBox.max().z())) +
+        openvdb::Coord(1);
+    mBlockDims = blockMax - mBlockMin + openvdb::Coord(1);
+    const std::size_t count = std::size_t(mBlockDims.x()) * mBlockDims.y() * mBlockDims.z();
+    mBlockLo.assign(count, mBackground);
+    mBlockHi.assign(count, mBackground);
+    tbb::parallel_for(tbb::blocked_range<int>(0, mBlockDims.x()), [&](const tbb::blocked_range<int>& range) {
+        auto acc = mGrid->getConstAccessor();
+        for (int bx = range.begin(); bx != range.end(); ++bx)
+            for (int by = 0; by < mBlockDims.y(); ++by)
+                for (int bz = 0; bz < mBlockDims.z(); ++bz) {
+                    const openvdb::Coord block = mBlockMin + openvdb::Coord(bx, by, bz);
+                    const openvdb::Coord origin(block.x() * kBlock, block.y() * kBlock, block.z() * kBlock);
+                    const std::size_t n = (std::size_t(bx) * mBlockDims.y() + by) * mBlockDims.z() + bz;
+                    if (const auto* leaf = acc.probeConstLeaf(origin)) {
+                        const float* data = leaf->buffer().data();
+                        const auto [lo, hi] = std::minmax_element(data, data + 512);
+                        mBlockLo[n] = *lo;
+                        mBlockHi[n] = *hi;
+                    } else {
+                        mBlockLo[n] = mBlockHi[n] = acc.getValue(origin);  // a tile or the background
+                    }
+                }
+    });
+}
+
+template <typename Accessor>
+double MeshDistance::sample(Accessor& acc, const Vec3d& p, Vec3d* grad) const
+{
+    const Vec3d x = (p - mOrigin) / mVoxel;
+    const openvdb::Coord i0(int(std::floor(x[0])), int(std::floor(x[1])), int(std::floor(x[2])));
+    const double fx = x[0] - i0.x(), fy = x[1] - i0.y(), fz = x[2] - i0.z();
+    double v[2][2][2];
+    for (int a = 0; a < 2; ++a)
+        for (int b = 0; b < 2; ++b)
+            for (int c = 0; c < 2; ++c) v[a][b][c] = acc.getValue(i0.offsetBy(a, b, c));
+    // Along z, then y, then x.
+    double e[2][2], de[2][2];
+    for (int a = 0; a < 2; ++a)
+        for (int b = 0; b < 2; ++b) {
+            e[a][b] = v[a][b][0] + fz * (v[a][b][1] - v[a][b][0]);
+            de[a][b] = v[a][b][1] - v[a][b][0];
+        }
+    const double f0 = e[0][0] + fy * (e[0][1] - e[0][0]), f1 = e[1][0] + fy * (e[1][1] - e[1][0]);
+    if (grad) {
+        const double dz0 = de[0][0] + fy * (de[0][1] - de[0][0]), dz1 = de[1][0] + fy * (de[1][1] - de[1][0]);
+        const double dy0 = e[0][1] - e[0][0], dy1 = e[1][1] - e[1][0];
+        *grad = Vec3d(f1 - f0, dy0 + fx * (dy1 - dy0), dz0 + fx * (dz1 - dz0)) / mVoxel;
+    }
+    return f0 + fx * (f1 - f0);
+}
+
+void MeshDistance::values(std::span<const Vec3d> points, std::span<double> out) const
+{
+    auto acc = mGrid->getConstAccessor();
+    for (std::size_t n = 0; n < points.size(); ++n) out[n] = sample(acc, points[n], nullptr);
+}
+
+void MeshDistance::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
+{
+    auto acc = mGrid->getConstAccessor();
+    for (std::size_t n = 0; n < points.size(); ++n) out[n] = sample(acc, points[n], &grad[n]);
+}
+
+void MeshDistance::gridValues(const GridBatch& batch, std::span<double> out) const
+{
+    const Vec3d first = (batch.origin - mOrigin) / mVoxel;
+    bool onSamples = true;
+    for (int a = 0; a < 3; ++a) onSamples = onSamples && std::abs(first[a] - std::round(first[a])) <= 1e-6;
+    // Spacing in whole voxels (a coarse pass): every point is a sample, looked up alone (the
+    // interpolation at a sample gives the sample).
+    const double stride = std::round(batch.spacing[0] / mVoxel);
+    bool strided = onSamples && stride >= 2.0;
+    for (int a = 0; a < 3; ++a) {
+        strided = strided && std::abs(batch.spacing[a] - stride * mVoxel) <= 1e-9 * mVoxel;
+        onSamples = onSamples && std::abs(batch.spacing[a] - mVoxel) <= 1e-9 * mVoxel;
+    }
+    if (strided) {
+        const int step = int(stride);
+        const openvdb::Coord base(int(std::round(first[0])), int(std::round(first[1])), int(std::round(first[2])));
+        auto acc = mGrid->getConstAccessor();
+        std::size_t n = 0;
+        for (int i = 0; i < batch.nx; ++i)
+            for (int j = 0; j < batch.ny; ++j)
+                for (int k = 0; k < batch.nz; ++k, ++n)
+                    out[n] = acc.getValue(base.offsetBy(i * step, j * step, k * step));
+        return;
+    }
+    if (!onSamples) {
+        FieldNode::gridValues(batch, out);
+        return;
+    }
+    const openvdb::Coord base(int(std::round(first[0])), int(std::round(first[1])), int(std::round(first[2])));
+    const openvdb::Coord last = base.offsetBy(batch.nx - 1, batch.ny - 1, batch.nz - 1);
+    auto acc = mGrid->getConstAccessor();
+    // One lookup per 8^3 leaf of the grid the batch overlaps, then its values straight from the
+    // leaf's buffer (a leaf's value is its buffer's, active or not; elsewhere a tile's value).
+    using Leaf = openvdb::FloatTree::LeafNodeType;
+    const int sj = batch.nz, si = batch.ny * batch.nz;
+    const openvdb::Coord leafLo = base & ~(Leaf::DIM - 1), leafHi = last & ~(Leaf::DIM - 1);
+    for (int lx = leafLo.x(); lx <= leafHi.x(); lx += Leaf::DIM)
+        for (int ly = leafLo.y(); ly <= leafHi.y(); ly += Leaf::DIM)
+            for (int lz = leafLo.z(); lz <= leafHi.z(); lz += Leaf::DIM) {
+                const openvdb::Coord leafOrigin(lx, ly, lz);
+                const openvdb::Coord lo = openvdb::Coord::maxComponent(leafOrigin, base);
+                const openvdb::Coord hi = openvdb::Coord::minComponent(leafOrigin.offsetBy(Leaf::DIM - 1), last);
+                if (const Leaf* leaf = acc.probeConstLeaf(leafOrigin)) {
+                    const float* data = leaf->buffer().data();
+                    for (int x = lo.x(); x <= hi.x(); ++x)
+                        for (int y = lo.y(); y <= hi.y(); ++y) {
+                            const float* row = data + Leaf::coordToOffset(openvdb::Coord(x, y, lo.z()));
+                            double* dst = out.data() + (x - base.x()) * si + (y - base.y()) * sj - base.z();
+                            for (int z = lo.z(); z <= hi.z(); ++z) dst[z] = row[z - lo.z()];
+                        }
+                } else {
+                    const double value = acc.getValue(leafOrigin);
+                    for (int x = lo.x(); x <= hi.x(); ++x)
+                        for (int y = lo.y(); y <= hi.y(); ++y) {
+                            double* dst = out.data() + (x - base.x()) * si + (y - base.y()) * sj - base.z();
+                            for (int z = lo.z(); z <= hi.z(); ++z) dst[z] = value;
+                        }
+                }
+            }
+}
+
+Interval MeshDistance::bound(const Box3& box) const
+{
+    // Index range of every interpolation stencil with a point in the box.
+    openvdb::Coord lo, hi;
+    for (int a = 0; a < 3; ++a) {
+        lo[a] = int(std::floor((box.min[a] - mOrigin[a]) / mVoxel)) - 1;
+        hi[a] = int(std::floor((box.max[a] - mOrigin[a]) / mVoxel)) + 2;
+    }
+    float vlo = std::numeric_limits<float>::max(), vhi = std::numeric_limits<float>::lowest();
+    bool outsideArray = mBlockLo.empty();
+    openvdb::Coord blo, bhi;
+    for (int a = 0; a < 3; ++a) {
+        blo[a] = blockOf(lo[a]) - mBlockMin[a];
+        bhi[a] = blockOf(hi[a]) - mBlockMin[a];
+        if (blo[a] < 0 || bhi[a] >= mBlockDims[a]) outsideArray = true;
+        blo[a] = std::max(blo[a], 0);
+        bhi[a] = std::min(bhi[a], mBlockDims[a] - 1);
+        if (blo[a] > bhi[a]) outsideArray = true;
+    }
+    if (outsideArray) vlo = vhi = mBackground;
+    if (!mBlockLo.empty() && blo.x() <= bhi.x() && blo.y() <= bhi.y() && blo.z() <= bhi.z())
+        for (int x = blo.x(); x <= bhi.x(); ++x)
+            for (int y = blo.y(); y <= bhi.y(); ++y) {
+                const std::size_t row = (std::size_t(x) * mBlockDims.y() + y) * mBlockDims.z();
+                for (int z = blo.z(); z <= bhi.z(); ++z) {
+                    vlo = std::min(vlo, mBlockLo[row + z]);
+                    vhi = std::max(vhi, mBlockHi[row + z]);
+                }
+            }
+    return {double(vlo), double(vhi)};
+}
+
+}  // namespace voxlat

@@ -1,0 +1,441 @@
+#include "fields/struts/StrutConvolution.h"
+
+#include "fields/struts/StrutRows.h"
+
+#include <algorithm>
+#include <limits>
+#include <numbers>
+#include <stdexcept>
+
+namespace voxlat {
+
+StrutConvolution::StrutConvolution(const std::vector<ConvolutionStrut>& struts, double eps) : mEps(eps)
+{
+    if (!(eps > 0.0 && eps < 1.0)) throw std::invalid_argument("the convolution cut-off eps must be in (0, 1)");
+    std::vector<Vec3d> a, b;
+    std::vector<double> reach;
+    for (const ConvolutionStrut& s : struts) {
+        if (!(s.sigma > 0.0)) throw std::invalid_argument("sigma must be greater than zero");
+        if (!((s.b - s.a).length() > 0.0)) throw std::invalid_argument("a strut has zero length");
+        if (!(s.w0 > 0.0 && s.w1 > 0.0)) throw std::invalid_argument("strut weights must be greater than zero");
+        mSegments.emplace_back(s.a, s.b, s.sigma, s.w0, s.w1);
+        mEnd.push_back(s.b);
+        const double rc = gaussianCutoffRadius(s.sigma, eps);
+        mCutoffSqr.push_back(rc * rc);
+        mPeak.push_back(std::max(s.w0, s.w1) * s.sigma * kSqrtTwoPi);
+        mWMin.push_back(std::min(s.w0, s.w1));
+        a.push_back(s.a);
+        b.push_back(s.b);
+        reach.push_back(rc);
+    }
+    mIndex = StrutIndex(a, b, reach);
+}
+
+double StrutConvolution::pointValue(const Vec3d& p, const std::vector<std::uint32_t>& cand) const
+{
+    double sum = 0.0;
+    for (const std::uint32_t j : cand) {
+        const GaussianSegment& s = mSegments[j];
+        double h, r2;
+        if (s.distanceSqr(p, h, r2) >= mCutoffSqr[j]) continue;
+        sum += s.value(h, r2);
+    }
+    return sum;
+}
+
+void StrutConvolution::values(std::span<const Vec3d> points, std::span<double> out) const
+{
+    std::vector<std::uint32_t> cand;
+    for (std::size_t n = 0; n < points.size(); ++n) {
+        mIndex.candidates(Box3{points[n], points[n]}, cand);
+        out[n] = pointValue(points[n], cand);
+    }
+}
+
+void StrutConvolution::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
+{
+    std::vector<std::uint32_t> cand;
+    for (std::size_t n = 0; n < points.size(); ++n) {
+        mIndex.candidates(Box3{points[n], points[n]}, cand);
+        double sum = 0.0;
+        Vec3d g(0.0);
+        for (const std::uint32_t j : cand) {
+            const GaussianSegment& s = mSegments[j];
+            double h, r2;
+            if (s.distanceSqr(points[n], h, r2) >= mCutoffSqr[j]) continue;
+            Vec3d gj;
+            sum += s.valueAndGradient(points[n], gj);
+            g += gj;
+        }
+        out[n] = sum;
+        grad[n] = g;
+    }
+}
+
+namespace {
+
+/// Adds to [lo, hi] the t with q(t) = a t^2 + b t + c < 0 (a >= 0); false if none.
+bool quadraticBelowZero(double a, double b, double c, double& lo, double& hi)
+{
+    if (a <= 0.0) {
+        // Linear or constant: a row parallel to the strut (the callers guard the degenerate case).
+        if (b == 0.0) {
+            if (c >= 0.0) return false;
+            lo = -std::numeric_limits<double>::infinity();
+            hi = std::numeric_limits<double>::infinity();
+            return true;
+        }
+        const double t = -c / b;
+        lo = b > 0.0 ? -std::numeric_limits<double>::infinity() : t;
+        hi = b > 0.0 ? t : std::numeric_limits<double>::infinity();
+        return true;
+    }
+    const double disc = b * b - 4.0 * a * c;
+    if (disc <= 0.0) return false;
+    const double root = std::sqrt(disc);
+    // The stable pair of roots (no cancellation between -b and the root).
+    const double qq = -0.5 * (b + std::copysign(root, b));
+    double t1 = qq / a, t2 = qq != 0.0 ? c / qq : t1;
+    if (t1 > t2) std::swap(t1, t2);
+    lo = t1;
+    hi = t2;
+    return true;
+}
+
+/// The range of k (a real interval, possibly empty: lo > hi) where the row D + k e, e = (0, 0,
+/// dz), comes within @a rc of the segment from the origin along @a u of @a length: the union of
+/// the cylinder's part inside the slab 0 <= h <= length and the two end balls (a capsule is
+/// convex, so the union is one interval).
+void capsuleRowRange(const Vec3d& D, double dz, const Vec3d& u, double length, double rc2, double& lo, double& hi)
+{
+    lo = std::numeric_limits<double>::infinity();
+    hi = -std::numeric_limits<double>::infinity();
+    auto merge = [&](double a, double b) {
+        if (a > b) return;
+        lo = std::min(lo, a);
+        hi = std::max(hi, b);
+    };
+    // End balls: |D + k e - C|^2 < rc^2.
+    for (const double h : {0.0, length}) {
+        const Vec3d d = D - h * u;
+        double a, b;
+        if (quadraticBelowZero(dz * dz, 2.0 * d.z() * dz, d.lengthSqr() - rc2, a, b)) merge(a, b);
+    }
+    // Cylinder: r^2(k) = |D + k e|^2 - h(k)^2, h(k) = D.u + k dz u_z.
+    const double h0 = D.dot(u), hz = dz * u.z();
+    const double c = dz * dz - hz * hz;
+    double a, b;
+    if (quadraticBelowZero(c, 2.0 * (D.z() * dz - h0 * hz), D.lengthSqr() - h0 * h0 - rc2, a, b)) {
+        if (hz != 0.0) {
+            double s0 = -h0 / hz, s1 = (length - h0) / hz;
+            if (s0 > s1) std::swap(s0, s1);
+            merge(std::max(a, s0), std::min(b, s1));
+        } else if (h0 >= 0.0 && h0 <= length) {
+            merge(a, b);
+        }
+    }
+}
+
+/// The cubic Taylor polynomial of J(h) = w0 I0(h) + k I1(h) (GaussianSegment) about @a h:
+/// c = {J, J', J'' / 2, J''' / 6}. With e0 = g(h), eL = g(L - h), g(t) = exp(-t^2 / 2 sigma^2):
+/// I0' = e0 - eL, I1' = I0 - L eL, e0' = -h / sigma^2 e0, eL' = (L - h) / sigma^2 eL,
+/// e0'' = (h^2 / sigma^4 - 1 / sigma^2) e0, eL'' = ((L - h)^2 / sigma^4 - 1 / sigma^2) eL.
+void taylorOfJ(const GaussianSegment& s, double h, double c[4])
+{
+    const double s2 = s.sigma * s.sigma, inv2s2 = 0.5 / s2, invS2 = 1.0 / (s.sigma * std::numbers::sqrt2);
+    const double L = s.length, m = L - h;
+    const double i0 = s.sigma * std::sqrt(std::numbers::pi / 2.0) * erfSum(m * invS2, h * invS2);
+    const double e0 = std::exp(-h * h * inv2s2), eL = std::exp(-m * m * inv2s2);
+    const double e0d = -h / s2 * e0, eLd = m / s2 * eL;
+    const double e0dd = (h * h / (s2 * s2) - 1.0 / s2) * e0, eLdd = (m * m / (s2 * s2) - 1.0 / s2) * eL;
+    const double i0d = e0 - eL, i0dd = e0d - eLd, i0ddd = e0dd - eLdd;
+    const double i1 = s2 * (e0 - eL) + h * i0;
+    const double i1d = i0 - L * eL, i1dd = i0d - L * eLd, i1ddd = i0dd - L * eLdd;
+    c[0] = s.w0 * i0 + s.slope * i1;
+    c[1] = s.w0 * i0d + s.slope * i1d;
+    c[2] = 0.5 * (s.w0 * i0dd + s.slope * i1dd);
+    c[3] = (s.w0 * i0ddd + s.slope * i1ddd) / 6.0;
+}
+
+/// gauss[k] = exp(-r2(k) / 2 sigma^2) for k = kLo..kHi (and up to three points past kHi), from @a e
+/// at kLo and @a ratio = exp(-(r2(kLo + 1) - r2(kLo)) / 2 sigma^2): four interleaved recurrences
+/// E(k + 4) = E(k) R4(k), R4(k + 4) = R4(k) q^16 (q = exp(-2 c / 2 sigma^2), r2(k) = r0 + (b - c) k +
+/// c k^2); a few ulps of drift over a row.
+void rowGaussiansFrom(double e, double ratio, double q, double q16, int kLo, int kHi, double* gauss)
+{
+    double ratios[7], lanes[4], steps[4];
+    ratios[0] = ratio;
+    for (int m = 1; m < 7; ++m) ratios[m] = ratios[m - 1] * q;
+    lanes[0] = e;
+    for (int l = 1; l < 4; ++l) lanes[l] = lanes[l - 1] * ratios[l - 1];
+    for (int l = 0; l < 4; ++l) steps[l] = ((ratios[l] * ratios[l + 1]) * ratios[l + 2]) * ratios[l + 3];
+    if (hasAvx2Rows())
+        fillGaussiansAvx2(lanes, steps, q16, kHi - kLo + 1, gauss + kLo);
+    else
+        fillGaussiansScalar(lanes, steps, q16, kHi - kLo + 1, gauss + kLo);
+}
+
+/// rowGaussiansFrom with its two exponentials taken at kLo.
+void rowGaussians(double r0, double b, double c, double inv2s2, double q, double q16, int kLo, int kHi, double* gauss)
+{
+    const double k0 = kLo;
+    rowGaussiansFrom(std::exp(-(r0 + k0 * (b - c) + k0 * k0 * c) * inv2s2), std::exp(-(b + 2.0 * c * k0) * inv2s2), q,
+                     q16, kLo, kHi, gauss);
+}
+
+}  // namespace
+
+void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out) const
+{
+    constexpr int kShortRow = 16;  // the longest rows counted as a pixel's sub-samples
+    thread_local std::vector<std::uint32_t> cand;
+    mIndex.gather(batch.bounds(), cand);
+    std::fill(out.begin(), out.begin() + batch.size(), 0.0);
+    // Rows run along z (k, the fastest index). A plane of points (nz = 1, a slicer's layer) has
+    // rows of one point, where the row machinery below costs more than the point: there the rows
+    // run along y instead. The batch is seen with y and z swapped (the output's layout, i * ny + j,
+    // is the swapped batch's (i * 1 + 0) * ny + j), and so are the struts' coordinates; distances
+    // and h do not change, only their rounding.
+    const bool swapped = batch.nz == 1 && batch.ny > 1;
+    auto seen = [swapped](const Vec3d& v) { return swapped ? Vec3d(v.x(), v.z(), v.y()) : v; };
+    const Vec3d origin = seen(batch.origin), spacing = seen(batch.spacing);
+    // A plane batch whose points lie within 0.1 sigma of its centre along a strut (a pixel's
+    // sub-samples; struts nearly across the plane) takes J(h) from its cubic Taylor polynomial
+    // about the centre instead of the table: J'''' = int w(s) g''''(s - h) ds, so |J''''| <=
+    // wMax int |g''''| <= wMax sqrt(2 pi) sqrt(24) / sigma^3 (Cauchy-Schwarz on the Hermite
+    // polynomial He4), and the remainder is at most 0.512 wMax rho^4 / sigma^3 <= 2.1e-5 of the
+    // strut's peak wMax sigma sqrt(2 pi) at rho = 0.1 sigma: below the 1e-4 the cut-off drops.
+    const Box3 box = batch.bounds();
+    const Vec3d centre = box.center(), halfExtent = 0.5 * (box.max - box.min);
+    const int nx = batch.nx, ny = swapped ? 1 : batch.ny, nz = swapped ? batch.ny : batch.nz;
+    auto pointAt = [&](int i, int jj, int k) {
+        return Vec3d(origin.x() + i * spacing.x(), origin.y() + jj * spacing.y(), origin.z() + k * spacing.z());
+    };
+    thread_local std::vector<double> gauss, nodeValue, nodeSlope;
+    gauss.resize(std::size_t(nz) + 4);  // rowGaussians writes up to three points past a row
+    struct RowRange {
+        int kLo, kHi, n0;
+        double tau;
+    };
+    thread_local std::vector<RowRange> rows;
+    const bool avx2 = hasAvx2Rows();
+    const double dx = spacing.x(), dy = spacing.y(), dz = spacing.z();
+    // Strut-outer, point-inner: each point still sums its struts in ascending index order. Along
+    // a row (k) h is linear and r^2 quadratic in k, so exp(-r^2 / 2 sigma^2) follows from two
+    // exponentials per row by the recurrence E(k+1) = E(k) R(k), R(k+1) = R(k) Q (a few ulps of
+    // drift over a row); the erf sum comes from GaussianTable (error below 1e-10 of a peak).
+    for (const std::uint32_t j : cand) {
+        const GaussianSegment& s = mSegments[j];
+        const double rc2 = mCutoffSqr[j];
+        const double sigma = s.sigma, invSigma = 1.0 / sigma, inv2s2 = 0.5 / (sigma * sigma);
+        const double length = s.length, w0 = s.w0, slope = s.slope, s2 = sigma * sigma;
+        const Vec3d sa = seen(s.a), u = seen(s.u);
+        const Vec3d d0 = origin - sa;
+        const double hz = dz * u.z();
+        // r^2(k) = r0 + b k + c k^2 along a row; Q = exp(-2 c / 2 sigma^2).
+        const double c = dz * dz - hz * hz;
+        const double q = std::exp(-2.0 * c * inv2s2);
+        const double q2 = q * q, q4 = q2 * q2, q8 = q4 * q4, q16 = q8 * q8;
+        // Rows nearly parallel to the strut get no analytic range (r^2 barely changes along them).
+        const bool ranged = c > 1e-9 * dz * dz;
+        const StrutRowConstants constants{sa.x(), sa.y(),   sa.z(), u.x(), u.y(), u.z(), length,
+                                          sigma,  invSigma, s2,     w0,    slope, rc2};
+        const double rho = halfExtent.x() * std::abs(s.u.x()) + halfExtent.y() * std::abs(s.u.y()) +
+                           halfExtent.z() * std::abs(s.u.z());
+        const bool taylor = batch.nz == 1 && rho <= 0.1 * sigma;
+        double coefficients[4] = {0.0, 0.0, 0.0, 0.0};
+        const double hc = (centre - s.a).dot(s.u);
+        if (taylor) taylorOfJ(s, hc, coefficients);
+        const bool shortRows = taylor && nz <= kShortRow;
+        // The analytic range is only a filter: points within a step of its ends, and all points
+        // between, still take the exact cut-off test, so the same points count as before.
+        const double rcWide2 = rc2 * (1.0 + 1e-9) + 1e-300;
+        // Pass 1: each row's range of points (kLo > kHi: none).
+        rows.resize(std::size_t(nx) * ny);
+        for (int i = 0; i < nx; ++i) {
+            const double px = d0.x() + i * dx;
+            for (int jj = 0; jj < ny; ++jj) {
+                const double py = d0.y() + jj * dy;
+                RowRange& r = rows[std::size_t(i) * ny + jj];
+                r.kLo = 0;
+                r.kHi = nz - 1;
+                if (shortRows) {
+                    // A few points per row (a pixel's sub-samples): their own cut-off tests are
+                    // cheaper than the row's range.
+                } else if (ranged) {
+                    double tLo, tHi;
+                    capsuleRowRange(Vec3d(px, py, d0.z()), dz, u, length, rcWide2, tLo, tHi);
+                    if (!(tLo <= tHi)) {
+                        r.kLo = 1;
+                        r.kHi = 0;
+                        continue;
+                    }
+                    r.kLo = int(std::clamp(std::floor(std::max(tLo, -1.0)) - 1.0, 0.0, double(nz)));
+                    r.kHi = int(std::min(double(nz - 1), std::ceil(std::min(tHi, double(nz))) + 1.0));
+                } else {
+                    // Skip rows whose every point is beyond the cut-off (centre distance test).
+                    const double rowHalf = 0.5 * (nz - 1) * dz;
+                    const Vec3d mid(px, py, d0.z() + rowHalf);
+                    const double hm = std::clamp(mid.dot(u), 0.0, length);
+                    if ((mid - hm * u).length() - rowHalf >= std::sqrt(rc2)) {
+                        r.kLo = 1;
+                        r.kHi = 0;
+                    }
+                }
+            }
+        }
+        // Long rows along which h advances by at most 0.1 sigma per point take J(h) from a table of
+        // the strut's own, with nodes one step of h apart (StrutRowTable): a row's points then
+        // sit at one fraction tau between consecutive nodes, so the Hermite weights are the row's
+        // and the nodes are read in order, instead of two GaussianTable look-ups per point. Its
+        // error is at most delta^4 / 384 max |J''''| <= 0.0128 (delta / sigma)^4 of the strut's
+        // peak (|J''''| as above): 1.3e-6 of it at delta = 0.1 sigma.
+        // The table spans the batch's range of h: at most eight rows' worth of nodes (struts nearly
+        // across the rows, whose h barely steps along them, keep the per-point look-ups).
+        const double spread = std::abs(dx * u.x()) * (nx - 1) + std::abs(dy * u.y()) * (ny - 1);
+        const bool tabled = !taylor && ranged && nz >= 16 && hz != 0.0 && std::abs(hz) <= 0.1 * sigma &&
+                            spread <= 8.0 * nz * std::abs(hz);
+        int nodeLo = 0;
+        if (tabled) {
+            // h at a row's point 0 is hRow (below); nodes h0 + n hz, with h0 one node past the
+            // batch's extreme hRow, so every row's n0 + tau is at least about 1.
+            const double hFirst = d0.x() * u.x() + d0.y() * u.y() + d0.z() * u.z();
+            const double hLast = hFirst + (nx - 1) * dx * u.x() + (ny - 1) * dy * u.y();
+            const double h0 = (hz > 0.0 ? std::min(hFirst, hLast) : std::max(hFirst, hLast)) - hz;
+            int nLo = std::numeric_limits<int>::max(), nHi = -1;
+            for (int i = 0; i < nx; ++i)
+                for (int jj = 0; jj < ny; ++jj) {
+                    RowRange& r = rows[std::size_t(i) * ny + jj];
+                    if (r.kLo > r.kHi) continue;
+                    const double hRow = (d0.x() + i * dx) * u.x() + (d0.y() + jj * dy) * u.y() + d0.z() * u.z();
+                    const double at = (hRow - h0) / hz;
+                    r.n0 = int(std::floor(at));
+                    r.tau = at - r.n0;
+                    nLo = std::min(nLo, r.n0 + r.kLo);
+                    nHi = std::max(nHi, r.n0 + r.kHi + 1);
+                }
+            if (nHi >= 0) {
+                nodeLo = nLo;
+                const std::size_t count = std::size_t(nHi - nLo + 1);
+                // Margin: the four-lane loop reads up to four nodes past a row's last point.
+                nodeValue.assign(count + 8, 0.0);
+                nodeSlope.assign(count + 8, 0.0);
+                if (avx2)
+                    strutRowNodesAvx2(constants, h0, hz, nLo, int(count), nodeValue.data(), nodeSlope.data());
+                else
+                    strutRowNodesScalar(constants, h0, hz, nLo, int(count), nodeValue.data(), nodeSlope.data());
+            }
+        }
+        // Pass 2: the rows' Gaussians and J. Short rows (a pixel's sub-samples, every row whole,
+        // one row per column) take their Gaussians by recurrence across the columns: r2(i + 1, k) -
+        // r2(i, k) is linear in i and in k, so with S(i, k) = exp(-(r2(i + 1, k) - r2(i, k)) / 2
+        // sigma^2), G(i + 1, k) = G(i, k) S(i, k), S(i + 1, k) = S(i, k) Qx and S(0, k) = S(0, 0) T^k:
+        // five exponentials per strut and batch, not two per column.
+        const bool acrossColumns = shortRows && ny == 1 && nz <= kShortRow;
+        double columnGauss[kShortRow + 4], columnStep[kShortRow], columnQ = 0.0;
+        if (acrossColumns) {
+            const double hRow0 = d0.x() * u.x() + d0.y() * u.y() + d0.z() * u.z();
+            const double r00 = d0.x() * d0.x() + d0.y() * d0.y() + d0.z() * d0.z() - hRow0 * hRow0;
+            const double ux2 = 1.0 - u.x() * u.x();
+            double e = std::exp(-r00 * inv2s2), ratio = std::exp(-(2.0 * (d0.z() * dz - hRow0 * hz) + c) * inv2s2);
+            double step = std::exp(-(2.0 * dx * (d0.x() - u.x() * hRow0) + dx * dx * ux2) * inv2s2);
+            const double across = std::exp(2.0 * hz * dx * u.x() * inv2s2);
+            columnQ = std::exp(-2.0 * dx * dx * ux2 * inv2s2);
+            for (int k = 0; k < nz; ++k) {
+                columnGauss[k] = e;
+                columnStep[k] = step;
+                e *= ratio;
+                ratio *= q;
+                step *= across;
+            }
+        }
+        std::size_t n = 0;
+        for (int i = 0; i < nx; ++i) {
+            const double px = d0.x() + i * dx;
+            if (acrossColumns && i > 0)
+                for (int k = 0; k < nz; ++k) {
+                    columnGauss[k] *= columnStep[k];
+                    columnStep[k] *= columnQ;
+                }
+            for (int jj = 0; jj < ny; ++jj, n += nz) {
+                const RowRange& range = rows[std::size_t(i) * ny + jj];
+                const int kLo = range.kLo, kHi = range.kHi;
+                if (kLo > kHi) continue;
+                const double py = d0.y() + jj * dy;
+                const double hRow = px * u.x() + py * u.y() + d0.z() * u.z();
+                const double qRow = px * px + py * py;
+                const double r0 = qRow + d0.z() * d0.z() - hRow * hRow;
+                const double b = 2.0 * (d0.z() * dz - hRow * hz) + c;  // r^2(1) - r^2(0)
+                const Vec3d rowStart = pointAt(i, jj, 0);
+                const StrutRow row{rowStart.x(), rowStart.y(), rowStart.z(), dz, kLo, kHi};
+                // The recurrence's factors stay well inside double range for ordinary batches;
+                // otherwise every point takes its own exponential.
+                const double* g = gauss.data();
+                if (std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0) {
+                    if (acrossColumns)
+                        g = columnGauss;
+                    else
+                        rowGaussians(r0, b, c, inv2s2, q, q16, kLo, kHi, gauss.data());
+                } else {
+                    for (int k = kLo; k <= kHi; ++k) {
+                        double h, r2;
+                        s.distanceSqr(seen(pointAt(i, jj, k)), h, r2);
+                        gauss[k] = std::exp(-r2 * inv2s2);
+                    }
+                }
+                if (taylor) {
+                    if (avx2)
+                        addStrutRowTaylorAvx2(constants, row, coefficients, hc, g, out.data() + n);
+                    else
+                        addStrutRowTaylorScalar(constants, row, coefficients, hc, g, out.data() + n);
+                } else if (tabled) {
+                    const double t = range.tau, t2 = t * t, t3 = t2 * t;
+                    const StrutRowTable table{
+                        nodeValue.data(), nodeSlope.data(), range.n0 - nodeLo, 2 * t3 - 3 * t2 + 1, t3 - 2 * t2 + t,
+                        -2 * t3 + 3 * t2, t3 - t2};
+                    if (avx2)
+                        addStrutRowTabledAvx2(constants, row, table, g, out.data() + n);
+                    else
+                        addStrutRowTabledScalar(constants, row, table, g, out.data() + n);
+                } else if (avx2) {
+                    addStrutRowAvx2(constants, row, g, out.data() + n);
+                } else {
+                    addStrutRowScalar(constants, row, g, out.data() + n);
+                }
+            }
+        }
+    }
+}
+
+Interval StrutConvolution::bound(const Box3& box) const
+{
+    thread_local std::vector<std::uint32_t> cand;
+    mIndex.gather(box, cand);
+    double lo = 0.0, hi = 0.0;
+    const Vec3d c = box.center();
+    const double radius = box.radius();
+    for (const std::uint32_t j : cand) {
+        const GaussianSegment& s = mSegments[j];
+        const double sigma = s.sigma;
+        const double dMin = segmentBoxDistance(s.a, mEnd[j], box);
+        hi += gaussianSegmentUpperBound(dMin, sigma, mPeak[j] / (sigma * kSqrtTwoPi));
+        // A positive lower bound only where the whole box lies within the cut-off.
+        double h, r2;
+        const double dc = std::sqrt(s.distanceSqr(c, h, r2));
+        if (dc + radius >= std::sqrt(mCutoffSqr[j])) continue;
+        const double rMax = std::sqrt(r2) + radius;
+        const double hLo = h - radius, hHi = h + radius;
+        // I0(h) is symmetric about L/2 and falls away from it: its minimum over [hLo, hHi] is
+        // at the end farther from L/2.
+        const double hFar = std::abs(hLo - 0.5 * s.length) > std::abs(hHi - 0.5 * s.length) ? hLo : hHi;
+        GaussianSegment unit = s;
+        unit.w0 = 1.0;
+        unit.slope = 0.0;
+        lo += mWMin[j] * unit.value(hFar, rMax * rMax);
+    }
+    // Rounding: the sums above and the evaluation's sums may differ in the last bits.
+    const double slack = 1e-12 * (hi + 1e-300);
+    return {std::max(0.0, lo * (1.0 - 1e-12)), hi + slack};
+}
+
+}  // namespace voxlat

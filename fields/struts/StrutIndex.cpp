@@ -1,0 +1,164 @@
+#include "fields/struts/StrutIndex.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace voxlat {
+
+double pointSegmentDistanceSqr(const Vec3d& p, const Vec3d& a, const Vec3d& b)
+{
+    const Vec3d ab = b - a, ap = p - a;
+    const double l2 = ab.lengthSqr();
+    const double s = l2 > 0.0 ? std::clamp(ap.dot(ab) / l2, 0.0, 1.0) : 0.0;
+    return (ap - s * ab).lengthSqr();
+}
+
+namespace {
+double pointBoxDistance(const Vec3d& p, const Box3& box)
+{
+    double s = 0.0;
+    for (int a = 0; a < 3; ++a) {
+        const double d = std::max({box.min[a] - p[a], 0.0, p[a] - box.max[a]});
+        s += d * d;
+    }
+    return std::sqrt(s);
+}
+}  // namespace
+
+double segmentBoxDistance(const Vec3d& a, const Vec3d& b, const Box3& box)
+{
+    // The squared distance from a + t (b - a) to the box is a sum over axes of squared excesses
+    // beyond the box's slab, each zero or quadratic in t between the points where the segment
+    // crosses a slab face. Between consecutive crossings it is one convex quadratic: its minimum
+    // is at an end or where its derivative vanishes. Those few candidates give the minimum.
+    const Vec3d ab = b - a;
+    double ts[8];
+    int n = 0;
+    ts[n++] = 0.0;
+    ts[n++] = 1.0;
+    for (int k = 0; k < 3; ++k) {
+        if (ab[k] == 0.0) continue;
+        for (const double face : {box.min[k], box.max[k]}) {
+            const double t = (face - a[k]) / ab[k];
+            if (t > 0.0 && t < 1.0) ts[n++] = t;
+        }
+    }
+    for (int i = 1; i < n; ++i)  // insertion sort: at most eight values
+        for (int j = i; j > 0 && ts[j] < ts[j - 1]; --j) std::swap(ts[j], ts[j - 1]);
+    double best = std::min(pointBoxDistance(a, box), pointBoxDistance(b, box));
+    for (int i = 0; i + 1 < n && best > 0.0; ++i) {
+        const double t0 = ts[i], t1 = ts[i + 1];
+        if (!(t1 > t0)) continue;
+        // The axes outside their slab in the interval's middle, and the face each is beyond.
+        const Vec3d mid = a + (0.5 * (t0 + t1)) * ab;
+        double A = 0.0, B = 0.0;
+        for (int k = 0; k < 3; ++k) {
+            const double face = mid[k] < box.min[k] ? box.min[k] : mid[k] > box.max[k] ? box.max[k] : mid[k];
+            if (face == mid[k]) continue;
+            // (a_k - face + t ab_k)^2: A t^2 + B t + const.
+            A += ab[k] * ab[k];
+            B += 2.0 * (a[k] - face) * ab[k];
+        }
+        best = std::min(best, pointBoxDistance(a + t1 * ab, box));
+        if (A > 0.0) {
+            const double t = std::clamp(-B / (2.0 * A), t0, t1);
+            best = std::min(best, pointBoxDistance(a + t * ab, box));
+        }
+    }
+    // Rounding in the candidates' positions: a hair below, so the result stays a lower bound.
+    return std::max(0.0, best - 1e-12 * (ab.length() + box.radius() + 1.0));
+}
+
+double segmentBoxMaxDistance(const Vec3d& a, const Vec3d& b, const Box3& box)
+{
+    return std::sqrt(pointSegmentDistanceSqr(box.center(), a, b)) + box.radius();
+}
+
+StrutIndex::StrutIndex(const std::vector<Vec3d>& a, const std::vector<Vec3d>& b, const std::vector<double>& reach)
+    : mA(a), mB(b), mReach(reach)
+{
+    if (a.empty()) return;
+    mBounds = {Vec3d(std::numeric_limits<double>::max()), Vec3d(-std::numeric_limits<double>::max())};
+    double meanExtent = 0.0;
+    for (std::size_t j = 0; j < a.size(); ++j) {
+        for (int k = 0; k < 3; ++k) {
+            mBounds.min[k] = std::min(mBounds.min[k], std::min(a[j][k], b[j][k]) - reach[j]);
+            mBounds.max[k] = std::max(mBounds.max[k], std::max(a[j][k], b[j][k]) + reach[j]);
+        }
+        meanExtent += ((b[j] - a[j]).length() + 2.0 * reach[j]) / double(a.size());
+    }
+    // Bins about half a capsule across: each capsule touches a few dozen bins, a leaf a few.
+    const Vec3d ext = mBounds.extent();
+    mBin = std::max(0.5 * meanExtent, std::cbrt(ext[0] * ext[1] * ext[2] / 4.0e6));
+    for (int k = 0; k < 3; ++k) mDims[k] = std::max(1, int(std::ceil(ext[k] / mBin)));
+    const std::size_t bins = std::size_t(mDims[0]) * mDims[1] * mDims[2];
+    auto binRange = [&](std::size_t j, int lo[3], int hi[3]) {
+        for (int k = 0; k < 3; ++k) {
+            const double l = std::min(a[j][k], b[j][k]) - reach[j], h = std::max(a[j][k], b[j][k]) + reach[j];
+            lo[k] = std::clamp(int(std::floor((l - mBounds.min[k]) / mBin)), 0, mDims[k] - 1);
+            hi[k] = std::clamp(int(std::floor((h - mBounds.min[k]) / mBin)), 0, mDims[k] - 1);
+        }
+    };
+    // Two passes (count, fill) keep the item lists in ascending segment order.
+    mStart.assign(bins + 1, 0);
+    for (int pass = 0; pass < 2; ++pass) {
+        std::vector<std::uint32_t> fill;
+        if (pass == 1) {
+            for (std::size_t n = 0; n < bins; ++n) mStart[n + 1] += mStart[n];
+            mItems.resize(mStart[bins]);
+            fill.assign(mStart.begin(), mStart.end() - 1);
+        }
+        for (std::size_t j = 0; j < a.size(); ++j) {
+            int lo[3], hi[3];
+            binRange(j, lo, hi);
+            for (int x = lo[0]; x <= hi[0]; ++x)
+                for (int y = lo[1]; y <= hi[1]; ++y)
+                    for (int z = lo[2]; z <= hi[2]; ++z) {
+                        const std::size_t n = (std::size_t(x) * mDims[1] + y) * mDims[2] + z;
+                        if (pass == 0)
+                            ++mStart[n + 1];
+                        else
+                            mItems[fill[n]++] = std::uint32_t(j);
+                    }
+        }
+    }
+}
+
+void StrutIndex::candidates(const Box3& box, std::vector<std::uint32_t>& out) const
+{
+    out.clear();
+    if (mA.empty()) return;
+    int lo[3], hi[3];
+    for (int k = 0; k < 3; ++k) {
+        if (box.max[k] < mBounds.min[k] || box.min[k] > mBounds.max[k]) return;
+        lo[k] = std::clamp(int(std::floor((box.min[k] - mBounds.min[k]) / mBin)), 0, mDims[k] - 1);
+        hi[k] = std::clamp(int(std::floor((box.max[k] - mBounds.min[k]) / mBin)), 0, mDims[k] - 1);
+    }
+    for (int x = lo[0]; x <= hi[0]; ++x)
+        for (int y = lo[1]; y <= hi[1]; ++y)
+            for (int z = lo[2]; z <= hi[2]; ++z) {
+                const std::size_t n = (std::size_t(x) * mDims[1] + y) * mDims[2] + z;
+                out.insert(out.end(), mItems.begin() + mStart[n], mItems.begin() + mStart[n + 1]);
+            }
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+}
+
+void StrutIndex::gather(const Box3& box, std::vector<std::uint32_t>& out) const
+{
+    candidates(box, out);
+    const Vec3d c = box.center();
+    const double radius = box.radius();
+    std::size_t kept = 0;
+    for (const std::uint32_t j : out) {
+        const double reach = mReach[j];
+        // Cheap accept / reject by the centre distance first; the exact test only near the edge.
+        const double dc = std::sqrt(pointSegmentDistanceSqr(c, mA[j], mB[j]));
+        if (dc - radius > reach) continue;
+        if (dc > reach && segmentBoxDistance(mA[j], mB[j], box) > reach) continue;
+        out[kept++] = j;
+    }
+    out.resize(kept);
+}
+
+}  // namespace voxlat

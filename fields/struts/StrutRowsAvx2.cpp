@@ -1,0 +1,281 @@
+/// @file StrutRowsAvx2.cpp
+/// addStrutRowScalar (StrutRows.h) with four lanes. This file alone is compiled for AVX2, without
+/// FMA and without contraction: each lane makes the scalar loop's IEEE operations in its order,
+/// so both give the same doubles (tests/test_struts.cpp compares them bit for bit).
+
+#include "fields/struts/StrutRows.h"
+
+#ifdef VOXLAT_AVX2_ROWS
+#include <immintrin.h>
+#endif
+
+namespace voxlat {
+
+#ifdef VOXLAT_AVX2_ROWS
+
+namespace {
+
+/// |x| and x's sign bit.
+inline __m256d absOf(__m256d x)
+{
+    return _mm256_andnot_pd(_mm256_set1_pd(-0.0), x);
+}
+inline __m256d copySign(__m256d magnitude, __m256d sign)
+{
+    const __m256d bit = _mm256_set1_pd(-0.0);
+    return _mm256_or_pd(_mm256_andnot_pd(bit, magnitude), _mm256_and_pd(bit, sign));
+}
+
+/// nodes[index] in four lanes (the masked form with every lane on: the unmasked intrinsic leaves
+/// GCC warning about its undefined source).
+inline __m256d gather(const double* nodes, __m128i index)
+{
+    return _mm256_mask_i32gather_pd(_mm256_setzero_pd(), nodes, index, _mm256_castsi256_pd(_mm256_set1_epi64x(-1)), 8);
+}
+
+/// GaussianTable::evaluate (withGaussian) or erfIntegral in four lanes.
+template <bool withGaussian>
+inline void tableLanes(const double* nodes, __m256d y, __m256d& u, __m256d& g)
+{
+    const __m256d a = absOf(y);
+    // Lanes at or beyond the table's end (or NaN) take U = sign * sqrt(pi / 2), g = 0; they
+    // interpolate at 0 meanwhile so that every gather stays inside the table.
+    const __m256d inside = _mm256_cmp_pd(a, _mm256_set1_pd(GaussianTable::kEnd), _CMP_LT_OQ);
+    const __m256d s = _mm256_mul_pd(_mm256_and_pd(inside, a), _mm256_set1_pd(double(GaussianTable::kPerUnit)));
+    const __m128i i = _mm256_cvttpd_epi32(s);
+    const __m256d t = _mm256_sub_pd(s, _mm256_cvtepi32_pd(i));
+    const __m256d t2 = _mm256_mul_pd(t, t), t3 = _mm256_mul_pd(t2, t);
+    const __m256d two = _mm256_set1_pd(2.0), three = _mm256_set1_pd(3.0), delta = _mm256_set1_pd(GaussianTable::kDelta);
+    // span(): 2 t^3 - 3 t^2 + 1, (t^3 - 2 t^2 + t) delta, -2 t^3 + 3 t^2, (t^3 - t^2) delta.
+    const __m256d h00 =
+        _mm256_add_pd(_mm256_sub_pd(_mm256_mul_pd(two, t3), _mm256_mul_pd(three, t2)), _mm256_set1_pd(1.0));
+    const __m256d h10 = _mm256_mul_pd(_mm256_add_pd(_mm256_sub_pd(t3, _mm256_mul_pd(two, t2)), t), delta);
+    const __m256d h01 = _mm256_add_pd(_mm256_mul_pd(_mm256_set1_pd(-2.0), t3), _mm256_mul_pd(three, t2));
+    const __m256d h11 = _mm256_mul_pd(_mm256_sub_pd(t3, t2), delta);
+    // Node i is nodes[3 i .. 3 i + 2] = (U, g, g'); node i + 1 follows it.
+    const __m128i p = _mm_mullo_epi32(i, _mm_set1_epi32(3));
+    const __m256d pu = gather(nodes, p), pg = gather(nodes + 1, p);
+    const __m256d qu = gather(nodes + 3, p), qg = gather(nodes + 4, p);
+    const __m256d sum = _mm256_add_pd(
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(h00, pu), _mm256_mul_pd(h10, pg)), _mm256_mul_pd(h01, qu)),
+        _mm256_mul_pd(h11, qg));
+    u = copySign(_mm256_blendv_pd(_mm256_set1_pd(GaussianTable::kHalfRootTwoPi), sum, inside), y);
+    if constexpr (withGaussian) {
+        const __m256d pd = gather(nodes + 2, p), qd = gather(nodes + 5, p);
+        const __m256d gs = _mm256_add_pd(
+            _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(h00, pg), _mm256_mul_pd(h10, pd)), _mm256_mul_pd(h01, qg)),
+            _mm256_mul_pd(h11, qd));
+        g = _mm256_and_pd(inside, gs);
+    }
+}
+
+template <bool graded>
+void addRow(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
+{
+    const double* nodes = GaussianTable::instance().nodeData();
+    const double dxs = row.x - s.ax, dys = row.y - s.ay;
+    // The parts of h and |d|^2 that do not change along the row, summed first as the scalar does.
+    const __m256d hxy = _mm256_set1_pd(dxs * s.ux + dys * s.uy);
+    const __m256d lxy = _mm256_set1_pd(dxs * dxs + dys * dys);
+    const __m256d uz = _mm256_set1_pd(s.uz), az = _mm256_set1_pd(s.az), z0 = _mm256_set1_pd(row.z0),
+                  stepZ = _mm256_set1_pd(row.dz);
+    const __m256d length = _mm256_set1_pd(s.length), invSigma = _mm256_set1_pd(s.invSigma),
+                  cutoff = _mm256_set1_pd(s.cutoffSqr), zero = _mm256_setzero_pd();
+    const __m256d w0 = _mm256_set1_pd(s.w0), slope = _mm256_set1_pd(s.slope), sigma = _mm256_set1_pd(s.sigma);
+    const __m256d w0Sigma = _mm256_set1_pd(s.w0 * s.sigma), slopeS2 = _mm256_set1_pd(s.slope * s.s2);
+    for (int k = row.kLo; k <= row.kHi; k += 4) {
+        const int lanes = std::min(4, row.kHi - k + 1);
+        const __m256i live = _mm256_cmpgt_epi64(_mm256_set1_epi64x(lanes), _mm256_setr_epi64x(0, 1, 2, 3));
+        const __m256d kk = _mm256_setr_pd(double(k), double(k + 1), double(k + 2), double(k + 3));
+        const __m256d dz = _mm256_sub_pd(_mm256_add_pd(z0, _mm256_mul_pd(kk, stepZ)), az);
+        const __m256d h = _mm256_add_pd(hxy, _mm256_mul_pd(dz, uz));
+        const __m256d r2 =
+            _mm256_max_pd(_mm256_sub_pd(_mm256_add_pd(lxy, _mm256_mul_pd(dz, dz)), _mm256_mul_pd(h, h)), zero);
+        // beyond = h < 0 ? h : (h > L ? h - L : 0)
+        const __m256d beyond =
+            _mm256_blendv_pd(_mm256_and_pd(_mm256_cmp_pd(h, length, _CMP_GT_OQ), _mm256_sub_pd(h, length)), h,
+                             _mm256_cmp_pd(h, zero, _CMP_LT_OQ));
+        const __m256d dist2 = _mm256_add_pd(r2, _mm256_mul_pd(beyond, beyond));
+        const __m256d within = _mm256_and_pd(_mm256_castsi256_pd(live), _mm256_cmp_pd(dist2, cutoff, _CMP_LT_OQ));
+        if (_mm256_movemask_pd(within) == 0) continue;
+        __m256d uL, gL, uA, gA;
+        tableLanes<graded>(nodes, _mm256_mul_pd(_mm256_sub_pd(length, h), invSigma), uL, gL);
+        tableLanes<graded>(nodes, _mm256_mul_pd(h, invSigma), uA, gA);
+        __m256d j0;
+        if constexpr (graded) {
+            const __m256d i0 = _mm256_mul_pd(sigma, _mm256_add_pd(uL, uA));
+            j0 = _mm256_add_pd(_mm256_mul_pd(_mm256_add_pd(w0, _mm256_mul_pd(slope, h)), i0),
+                               _mm256_mul_pd(slopeS2, _mm256_sub_pd(gA, gL)));
+        } else {
+            j0 = _mm256_mul_pd(w0Sigma, _mm256_add_pd(uL, uA));
+        }
+        // Lanes past the row are neither read nor written; lanes beyond the cut-off keep their sums.
+        const __m256d before = _mm256_maskload_pd(out + k, live);
+        const __m256d added = _mm256_add_pd(before, _mm256_mul_pd(_mm256_maskload_pd(gauss + k, live), j0));
+        _mm256_maskstore_pd(out + k, live, _mm256_blendv_pd(before, added, within));
+    }
+}
+
+}  // namespace
+
+void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                           const double* gauss, double* out)
+{
+    const double dxs = row.x - s.ax, dys = row.y - s.ay;
+    const __m256d hxy = _mm256_set1_pd(dxs * s.ux + dys * s.uy);
+    const __m256d lxy = _mm256_set1_pd(dxs * dxs + dys * dys);
+    const __m256d uz = _mm256_set1_pd(s.uz), az = _mm256_set1_pd(s.az), z0 = _mm256_set1_pd(row.z0),
+                  stepZ = _mm256_set1_pd(row.dz);
+    const __m256d length = _mm256_set1_pd(s.length), cutoff = _mm256_set1_pd(s.cutoffSqr), zero = _mm256_setzero_pd();
+    const __m256d w00 = _mm256_set1_pd(table.w00), w10 = _mm256_set1_pd(table.w10), w01 = _mm256_set1_pd(table.w01),
+                  w11 = _mm256_set1_pd(table.w11);
+    for (int k = row.kLo; k <= row.kHi; k += 4) {
+        const int lanes = std::min(4, row.kHi - k + 1);
+        const __m256i live = _mm256_cmpgt_epi64(_mm256_set1_epi64x(lanes), _mm256_setr_epi64x(0, 1, 2, 3));
+        const __m256d kk = _mm256_setr_pd(double(k), double(k + 1), double(k + 2), double(k + 3));
+        const __m256d dz = _mm256_sub_pd(_mm256_add_pd(z0, _mm256_mul_pd(kk, stepZ)), az);
+        const __m256d h = _mm256_add_pd(hxy, _mm256_mul_pd(dz, uz));
+        const __m256d r2 =
+            _mm256_max_pd(_mm256_sub_pd(_mm256_add_pd(lxy, _mm256_mul_pd(dz, dz)), _mm256_mul_pd(h, h)), zero);
+        const __m256d beyond =
+            _mm256_blendv_pd(_mm256_and_pd(_mm256_cmp_pd(h, length, _CMP_GT_OQ), _mm256_sub_pd(h, length)), h,
+                             _mm256_cmp_pd(h, zero, _CMP_LT_OQ));
+        const __m256d dist2 = _mm256_add_pd(r2, _mm256_mul_pd(beyond, beyond));
+        const __m256d within = _mm256_and_pd(_mm256_castsi256_pd(live), _mm256_cmp_pd(dist2, cutoff, _CMP_LT_OQ));
+        if (_mm256_movemask_pd(within) == 0) continue;
+        // Lanes past the row read nodes the table holds (its caller sizes it with a margin).
+        const int n = table.n0 + k;
+        const __m256d j0 =
+            _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(w00, _mm256_loadu_pd(table.value + n)),
+                                                      _mm256_mul_pd(w10, _mm256_loadu_pd(table.slope + n))),
+                                        _mm256_mul_pd(w01, _mm256_loadu_pd(table.value + n + 1))),
+                          _mm256_mul_pd(w11, _mm256_loadu_pd(table.slope + n + 1)));
+        const __m256d before = _mm256_maskload_pd(out + k, live);
+        const __m256d added = _mm256_add_pd(before, _mm256_mul_pd(_mm256_maskload_pd(gauss + k, live), j0));
+        _mm256_maskstore_pd(out + k, live, _mm256_blendv_pd(before, added, within));
+    }
+}
+
+void addStrutRowTaylorAvx2(const StrutRowConstants& s, const StrutRow& row, const double c[4], double hc,
+                           const double* gauss, double* out)
+{
+    const double dxs = row.x - s.ax, dys = row.y - s.ay;
+    const __m256d hxy = _mm256_set1_pd(dxs * s.ux + dys * s.uy);
+    const __m256d lxy = _mm256_set1_pd(dxs * dxs + dys * dys);
+    const __m256d uz = _mm256_set1_pd(s.uz), az = _mm256_set1_pd(s.az), z0 = _mm256_set1_pd(row.z0),
+                  stepZ = _mm256_set1_pd(row.dz);
+    const __m256d length = _mm256_set1_pd(s.length), cutoff = _mm256_set1_pd(s.cutoffSqr), zero = _mm256_setzero_pd();
+    const __m256d c0 = _mm256_set1_pd(c[0]), c1 = _mm256_set1_pd(c[1]), c2 = _mm256_set1_pd(c[2]),
+                  c3 = _mm256_set1_pd(c[3]), centre = _mm256_set1_pd(hc);
+    for (int k = row.kLo; k <= row.kHi; k += 4) {
+        const int lanes = std::min(4, row.kHi - k + 1);
+        const __m256i live = _mm256_cmpgt_epi64(_mm256_set1_epi64x(lanes), _mm256_setr_epi64x(0, 1, 2, 3));
+        const __m256d kk = _mm256_setr_pd(double(k), double(k + 1), double(k + 2), double(k + 3));
+        const __m256d dz = _mm256_sub_pd(_mm256_add_pd(z0, _mm256_mul_pd(kk, stepZ)), az);
+        const __m256d h = _mm256_add_pd(hxy, _mm256_mul_pd(dz, uz));
+        const __m256d r2 =
+            _mm256_max_pd(_mm256_sub_pd(_mm256_add_pd(lxy, _mm256_mul_pd(dz, dz)), _mm256_mul_pd(h, h)), zero);
+        const __m256d beyond =
+            _mm256_blendv_pd(_mm256_and_pd(_mm256_cmp_pd(h, length, _CMP_GT_OQ), _mm256_sub_pd(h, length)), h,
+                             _mm256_cmp_pd(h, zero, _CMP_LT_OQ));
+        const __m256d dist2 = _mm256_add_pd(r2, _mm256_mul_pd(beyond, beyond));
+        const __m256d within = _mm256_and_pd(_mm256_castsi256_pd(live), _mm256_cmp_pd(dist2, cutoff, _CMP_LT_OQ));
+        if (_mm256_movemask_pd(within) == 0) continue;
+        const __m256d d = _mm256_sub_pd(h, centre);
+        const __m256d j0 = _mm256_add_pd(
+            c0, _mm256_mul_pd(d, _mm256_add_pd(c1, _mm256_mul_pd(d, _mm256_add_pd(c2, _mm256_mul_pd(d, c3))))));
+        const __m256d before = _mm256_maskload_pd(out + k, live);
+        const __m256d added = _mm256_add_pd(before, _mm256_mul_pd(_mm256_maskload_pd(gauss + k, live), j0));
+        _mm256_maskstore_pd(out + k, live, _mm256_blendv_pd(before, added, within));
+    }
+}
+
+void fillGaussiansAvx2(const double lanes[4], const double steps[4], double q16, int count, double* gauss)
+{
+    __m256d e = _mm256_loadu_pd(lanes), r = _mm256_loadu_pd(steps);
+    const __m256d q = _mm256_set1_pd(q16);
+    for (int k = 0; k < count; k += 4) {
+        _mm256_storeu_pd(gauss + k, e);
+        e = _mm256_mul_pd(e, r);
+        r = _mm256_mul_pd(r, q);
+    }
+}
+
+void strutRowNodesAvx2(const StrutRowConstants& s, double h0, double step, int first, int count, double* value,
+                       double* slope)
+{
+    const double* nodes = GaussianTable::instance().nodeData();
+    const __m256d h0v = _mm256_set1_pd(h0), stepv = _mm256_set1_pd(step), length = _mm256_set1_pd(s.length),
+                  invSigma = _mm256_set1_pd(s.invSigma), sigma = _mm256_set1_pd(s.sigma), w0 = _mm256_set1_pd(s.w0),
+                  slopeK = _mm256_set1_pd(s.slope), s2 = _mm256_set1_pd(s.s2);
+    for (int m = 0; m < count; m += 4) {
+        const __m256d mm =
+            _mm256_setr_pd(double(m + first), double(m + 1 + first), double(m + 2 + first), double(m + 3 + first));
+        const __m256d h = _mm256_add_pd(h0v, _mm256_mul_pd(mm, stepv));
+        __m256d uL, gL, uA, gA;
+        tableLanes<true>(nodes, _mm256_mul_pd(_mm256_sub_pd(length, h), invSigma), uL, gL);
+        tableLanes<true>(nodes, _mm256_mul_pd(h, invSigma), uA, gA);
+        const __m256d i0 = _mm256_mul_pd(sigma, _mm256_add_pd(uL, uA));
+        const __m256d dg = _mm256_sub_pd(gA, gL);
+        const __m256d j = _mm256_add_pd(_mm256_mul_pd(_mm256_add_pd(w0, _mm256_mul_pd(slopeK, h)), i0),
+                                        _mm256_mul_pd(_mm256_mul_pd(slopeK, s2), dg));
+        const __m256d dj = _mm256_mul_pd(
+            _mm256_add_pd(_mm256_mul_pd(w0, dg), _mm256_mul_pd(slopeK, _mm256_sub_pd(i0, _mm256_mul_pd(length, gL)))),
+            stepv);
+        _mm256_storeu_pd(value + m, j);
+        _mm256_storeu_pd(slope + m, dj);
+    }
+}
+
+void addStrutRowAvx2(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
+{
+    if (s.slope == 0.0)
+        addRow<false>(s, row, gauss, out);
+    else
+        addRow<true>(s, row, gauss, out);
+}
+
+bool hasAvx2Rows()
+{
+    static const bool has = __builtin_cpu_supports("avx2");
+    return has;
+}
+
+#else
+
+void addStrutRowTaylorAvx2(const StrutRowConstants& s, const StrutRow& row, const double c[4], double hc,
+                           const double* gauss, double* out)
+{
+    addStrutRowTaylorScalar(s, row, c, hc, gauss, out);
+}
+
+void fillGaussiansAvx2(const double lanes[4], const double steps[4], double q16, int count, double* gauss)
+{
+    fillGaussiansScalar(lanes, steps, q16, count, gauss);
+}
+
+void strutRowNodesAvx2(const StrutRowConstants& s, double h0, double step, int first, int count, double* value,
+                       double* slope)
+{
+    strutRowNodesScalar(s, h0, step, first, count, value, slope);
+}
+
+void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                           const double* gauss, double* out)
+{
+    addStrutRowTabledScalar(s, row, table, gauss, out);
+}
+
+void addStrutRowAvx2(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
+{
+    addStrutRowScalar(s, row, gauss, out);
+}
+
+bool hasAvx2Rows()
+{
+    return false;
+}
+
+#endif
+
+}  // namespace voxlat
