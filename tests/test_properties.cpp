@@ -23,6 +23,22 @@ using namespace voxlat::test;
 
 namespace {
 
+/// Under the sanitizers (ASan + UBSan at -O1, about six times slower) the heavy tests run smaller
+/// instances of the same code paths: coarser cells, fewer resolutions. Their numerical accuracy
+/// assertions (against references, limits, exponents) need the full instances and run in the
+/// Release build only.
+#ifdef VOXLAT_SANITIZE
+constexpr bool kSanitized = true;
+#else
+constexpr bool kSanitized = false;
+#endif
+
+/// 3 x 3 x 3 X cells of 10 mm in Form 2, up to the fields. The homogenized cell does not depend on
+/// the job's voxel (its level is solved on its own voxel model: the same bytes at 0.25 mm and 1 mm),
+/// so a 1 mm voxel keeps the frame's own level solve short (the capsule cell at 24 voxels: 2.5 s of
+/// CPU at 0.25 mm, 0.4 s at 1 mm).
+const std::string kXCellsHead = "material: form2\nvoxel: 1\ndomain: {box: [[0, 0, 0], [30, 30, 30]]}\n";
+
 nlohmann::json propertiesOf(const TempDir& dir, const std::string& name, const std::string& recipe,
                             const std::string& extra = "", int* status = nullptr, std::string* output = nullptr)
 {
@@ -235,10 +251,12 @@ nlohmann::json runReport(const TempDir& dir, const std::string& name, const std:
     return nlohmann::json::parse(readFile(dir.path / name / "report.json"));
 }
 
-const char* kGyroidHead = R"(material: form2
+/// A gyroid's recipe up to its fields, homogenized at 32 voxels (16 under the sanitizers).
+const std::string kGyroidHead = std::string(R"(material: form2
 voxel: 0.25
 domain: {box: [[0, 0, 0], [10, 10, 10]]}
-properties: {resolution: 32}
+properties: {resolution: )") + (kSanitized ? "16" : "32") +
+                                R"(}
 fields:
 )";
 
@@ -249,10 +267,10 @@ TEST(PropertyDesign, StiffnessSolvesTheDensityAndAnIndependentHomogenizationMeet
     TempDir dir;
     for (const std::string target : {"{E: 40 MPa, axis: z}", "{E_ratio: 0.025}"}) {
         const std::string name = target[1] == 'E' && target[2] == ':' ? "absolute" : "ratio";
-        const auto report = runReport(dir, name,
-                                      std::string(kGyroidHead) +
-                                          "  lattice: {tpms: gyroid, cell: 5, solid: network, stiffness: " + target +
-                                          "}\nresult: lattice\noutputs: {properties: p.json}\n");
+        const auto report =
+            runReport(dir, name,
+                      kGyroidHead + "  lattice: {tpms: gyroid, cell: 5, solid: network, stiffness: " + target +
+                          "}\nresult: lattice\noutputs: {properties: p.json}\n");
         ASSERT_FALSE(report.is_null()) << target;
         const auto& s = report["design"]["lattice"]["stiffness"];
         EXPECT_EQ(s["axis"], "z");
@@ -267,10 +285,10 @@ TEST(PropertyDesign, StiffnessSolvesTheDensityAndAnIndependentHomogenizationMeet
         // Re-measured independently: the solved density written in, no stiffness key at all.
         char density[40];
         std::snprintf(density, sizeof density, "%.17g", rho);
-        const auto again = propertiesOf(dir, name + "_again",
-                                        std::string(kGyroidHead) +
-                                            "  lattice: {tpms: gyroid, cell: 5, solid: network, density: " + density +
-                                            "}\nresult: lattice\n");
+        const auto again =
+            propertiesOf(dir, name + "_again",
+                         kGyroidHead + "  lattice: {tpms: gyroid, cell: 5, solid: network, density: " + density +
+                             "}\nresult: lattice\n");
         ASSERT_FALSE(again.is_null());
         EXPECT_NEAR(again["E_MPa"][2].get<double>(), 40.0, 0.01 * 40.0) << target;
     }
@@ -282,18 +300,18 @@ TEST(PropertyDesign, BadStiffnessAndOptimizeKeysNameTheLine)
     int status = 0;
     std::string out;
     // Both density and stiffness.
-    runReport(dir, "both",
-              std::string(kGyroidHead) +
-                  "  lattice: {tpms: gyroid, cell: 5, density: 0.2, stiffness: {E: 40 MPa}}\nresult: lattice\n",
-              &status, &out);
+    runReport(
+        dir, "both",
+        kGyroidHead + "  lattice: {tpms: gyroid, cell: 5, density: 0.2, stiffness: {E: 40 MPa}}\nresult: lattice\n",
+        &status, &out);
     EXPECT_EQ(status, 2) << out;
     EXPECT_NE(out.find("both.yaml:6:"), std::string::npos) << out;
     EXPECT_NE(out.find("not both"), std::string::npos) << out;
     EXPECT_FALSE(std::filesystem::exists(dir.path / "both" / "report.json"));
     // Above the solid's modulus (form2: 1.6 GPa).
     runReport(dir, "stiff",
-              std::string(kGyroidHead) + "  lattice: {tpms: gyroid, cell: 5, stiffness: {E: 2 GPa}}\nresult: lattice\n",
-              &status, &out);
+              kGyroidHead + "  lattice: {tpms: gyroid, cell: 5, stiffness: {E: 2 GPa}}\nresult: lattice\n", &status,
+              &out);
     EXPECT_EQ(status, 2) << out;
     EXPECT_NE(out.find("stiff.yaml:6:"), std::string::npos) << out;
     EXPECT_NE(out.find("not below the solid"), std::string::npos) << out;
@@ -307,17 +325,16 @@ TEST(PropertyDesign, BadStiffnessAndOptimizeKeysNameTheLine)
     EXPECT_NE(out.find("material"), std::string::npos) << out;
     // Neither or both of E and E_ratio; an unknown axis.
     runReport(dir, "neither",
-              std::string(kGyroidHead) + "  lattice: {tpms: gyroid, cell: 5, stiffness: {axis: z}}\nresult: lattice\n",
-              &status, &out);
+              kGyroidHead + "  lattice: {tpms: gyroid, cell: 5, stiffness: {axis: z}}\nresult: lattice\n", &status,
+              &out);
     EXPECT_EQ(status, 2) << out;
     EXPECT_NE(out.find("E_ratio"), std::string::npos) << out;
     runReport(dir, "axis",
-              std::string(kGyroidHead) +
-                  "  lattice: {tpms: gyroid, cell: 5, stiffness: {E: 40 MPa, axis: w}}\nresult: lattice\n",
+              kGyroidHead + "  lattice: {tpms: gyroid, cell: 5, stiffness: {E: 40 MPa, axis: w}}\nresult: lattice\n",
               &status, &out);
     EXPECT_EQ(status, 2) << out;
     // optimize: without a density.
-    runReport(dir, "nodensity", std::string(kGyroidHead) + R"(  lattice:
+    runReport(dir, "nodensity", kGyroidHead + R"(  lattice:
     struts: {cell: x, size: 5}
     kernel: {gaussian: {sigma: 0.5}}
     radius: 0.5
@@ -333,11 +350,14 @@ result: lattice
 TEST(PropertyDesign, OptimizePicksTheStiffestSigmaAndReportsTheCapsuleBaseline)
 {
     TempDir dir;
-    // X cells of 5 mm, 3 x 3 x 3; the middle cell is homogenized (it sees all its neighbours).
-    const std::string head = R"(material: form2
-voxel: 0.25
+    // X cells of 5 mm, 3 x 3 x 3; the middle cell is homogenized (it sees all its neighbours), at
+    // 20 voxels (12 and a 0.5 mm job voxel under the sanitizers).
+    const std::string head = std::string(R"(material: form2
+voxel: )") + (kSanitized ? "0.5" : "0.25") +
+                             R"(
 domain: {box: [[0, 0, 0], [15, 15, 15]]}
-properties: {cell: [5, 5, 5], origin: [5, 5, 5], resolution: 20}
+properties: {cell: [5, 5, 5], origin: [5, 5, 5], resolution: )" +
+                             (kSanitized ? "12" : "20") + R"(}
 fields:
   lattice:
     struts: {cell: x, size: 5}
@@ -407,9 +427,11 @@ fields:
   lattice: {tpms: gyroid, cell: 5, solid: network, level: 0}
 result: lattice
 )";
+    // Under the sanitizers: 16, 24 and 32 voxels, the changes shrinking; the 0.1 % in Release only.
     std::vector<double> E;
     std::string sequence;
     for (int n : {16, 24, 32, 48, 64}) {
+        if (kSanitized && n > 32) break;
         const auto p =
             propertiesOf(dir, "g" + std::to_string(n), recipe, "--set properties.resolution=" + std::to_string(n));
         ASSERT_FALSE(p.is_null());
@@ -419,7 +441,9 @@ result: lattice
     }
     for (std::size_t k = 2; k < E.size(); ++k)
         EXPECT_LT(std::abs(E[k] - E[k - 1]), std::abs(E[k - 1] - E[k - 2])) << sequence;
-    EXPECT_LT(std::abs(E[4] - E[3]), 1e-3 * E[4]) << sequence;
+    if (!kSanitized) {
+        EXPECT_LT(std::abs(E[4] - E[3]), 1e-3 * E[4]) << sequence;
+    }
     std::printf("E_z by resolution: %s\n", sequence.c_str());
 }
 
@@ -477,11 +501,13 @@ TEST(Properties, TheCellHoldsTheDensityAskedAtEveryResolution)
     // Issue 37: a capsule X cell at density 0.1 gave voxel models of 0.093 to 0.118 at
     // resolutions 40 to 96 (the level was solved over the frame's box, and the voxels alias with
     // the struts). The cell's level is now solved on the voxel model itself.
+    // Under the sanitizers: 16 voxels (the capsule's raised to 17 to hold the density) and 24.
     TempDir dir;
-    const std::string head = "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [30, 30, 30]]}\n";
+    const std::string& head = kXCellsHead;
+    const int last = kSanitized ? 24 : 48;
     for (const std::string kernel : {std::string("capsule"), std::string("{gaussian: {sigma: 0.8}}")}) {
-        for (int n : {40, 48}) {
-            if (kernel != "capsule" && n != 48) continue;  // the Gaussian at one resolution suffices
+        for (int n : {kSanitized ? 16 : 40, last}) {
+            if (kernel != "capsule" && n != last) continue;  // the Gaussian at one resolution suffices
             const std::string resolution = "--set properties.resolution=" + std::to_string(n);
             int status = 0;
             std::string out;
@@ -494,7 +520,7 @@ TEST(Properties, TheCellHoldsTheDensityAskedAtEveryResolution)
             EXPECT_LT(std::abs(p["relative_density"].get<double>() / 0.1 - 1.0), 0.005) << kernel << " " << n;
             std::printf("%s at %d voxels: cell density %.5f, E_z %.4f MPa\n", kernel.c_str(), n,
                         p["relative_density"].get<double>(), p["E_MPa"][2].get<double>());
-            if (n != 48) continue;
+            if (n != last) continue;
             // The cell's level, written into the recipe as `level:` (a capsule's radius offset, a
             // Gaussian lattice's iso-value t), with the cell's corner, is the same voxel model.
             char level[64], origin[200];
@@ -551,7 +577,8 @@ TEST(Properties, TheReportsSolvedLevelPastedIntoTheRecipeGivesTheSameBytes)
     // Issue 37: every value report.json gives under a recipe key's name means what the key means.
     // For each shipped recipe whose lattice solves its level from one `density:` (no search keys),
     // the report's `level` replaces `density:` in the recipe text and the outputs are the same
-    // bytes (at a coarser voxel, the same for both runs, to keep the test short).
+    // bytes (at a coarser voxel, the same for both runs, to keep the test short; not coarser under
+    // the sanitizers: at 0.8 mm a shipped lattice's 0.85 mm struts are under two voxels, exit 3).
     TempDir dir;
     int checked = 0;
     for (const auto& entry : std::filesystem::directory_iterator(sourceDir() / "data/recipes")) {
@@ -633,19 +660,25 @@ TEST(Properties, TheDefaultResolutionIsConvergedWithinTwoPercent)
     // Richardson extrapolation of E over the last three puts E within 2 % of its limit. Checked
     // against a 128-voxel reference for the capsule X cell and the Gaussian X cell (sigma 0.8),
     // both at density 0.1 (10 mm cells, Form 2).
+    // Under the sanitizers: the capsule cell alone, converged to 30 % at 24, 34, 48 voxels (E_x's
+    // estimate there is 21 %; at 20 % the ladder went on to 96), and no 128-voxel reference.
     TempDir dir;
-    const std::string head = "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [30, 30, 30]]}\n";
+    const std::string& head = kXCellsHead;
+    const double tolerance = kSanitized ? 0.3 : 0.02;
     for (const std::string kernel : {std::string("capsule"), std::string("{gaussian: {sigma: 0.8}}")}) {
+        if (kSanitized && kernel != "capsule") continue;
         const std::string body = "fields:\n  lattice: {struts: {cell: x, size: 10}, kernel: " + kernel +
                                  ", density: 0.1}\nresult: lattice\n";
-        const auto p = stiffnessOnly(head + body);
+        const auto p =
+            stiffnessOnly(head + (kSanitized ? "properties: {convergence: 0.3, max_resolution: 48}\n" : "") + body);
         const auto& c = p["convergence"];
         ASSERT_GE(c["resolutions"].size(), 3u) << c.dump();
         EXPECT_EQ(c["resolutions"][0], 24);
         EXPECT_EQ(c["E_MPa"].size(), c["resolutions"].size());
-        EXPECT_LE(c["estimated_error"].get<double>(), 0.02) << c.dump();
+        EXPECT_LE(c["estimated_error"].get<double>(), tolerance) << c.dump();
         EXPECT_EQ(p["cell"]["voxels"][0], c["resolutions"].back());
         EXPECT_LT(std::abs(p["relative_density"].get<double>() / 0.1 - 1.0), 0.005);
+        if (kSanitized) continue;
         const auto reference = stiffnessOnly(head + "properties: {resolution: 128}\n" + body);
         for (int a = 0; a < 3; ++a) {
             const double E = p["E_MPa"][a].get<double>(), ref = reference["E_MPa"][a].get<double>();
@@ -678,13 +711,18 @@ TEST(Properties, TheDensityCurveAndItsGibsonAshbyFitTellBendingFromStretching)
     // Issue 37: `voxlat properties R --curve density=FROM:TO:COUNT` homogenizes the cell at each
     // density and fits E/E_s = C rho^n per axis. A BCC cell bends (n near 2 or above: the joints
     // stiffen it further as the density rises), an octet cell stretches (n near 1).
+    // Under the sanitizers: 16 voxels, and the exponents and the fit's misfit (which need 32) are
+    // not checked.
     TempDir dir;
+    const int resolution = kSanitized ? 16 : 32;
     std::map<std::string, double> exponent;
     for (const std::string cell : {"bcc", "octet"}) {
-        const auto recipe = dir.write(cell + ".yaml",
-                                      "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [5, 5, 5]]}\n"
-                                      "properties: {resolution: 32}\nfields:\n  lattice: {struts: {cell: " +
-                                          cell + ", size: 5}, kernel: capsule, density: 0.1}\nresult: lattice\n");
+        const auto recipe =
+            dir.write(cell + ".yaml",
+                      "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [5, 5, 5]]}\n"
+                      "properties: {resolution: " +
+                          std::to_string(resolution) + "}\nfields:\n  lattice: {struts: {cell: " + cell +
+                          ", size: 5}, kernel: capsule, density: 0.1}\nresult: lattice\n");
         const auto json = dir.path / (cell + "-curve.json");
         std::string out;
         ASSERT_EQ(runCommand(voxlatBinary() + " -q properties " + recipe.string() +
@@ -714,11 +752,14 @@ TEST(Properties, TheDensityCurveAndItsGibsonAshbyFitTellBendingFromStretching)
                          y2 = std::log(c["curve"][2]["E_ratio"][a].get<double>());
             EXPECT_NEAR(g["n"][a].get<double>(), (y2 - y0) / (x2 - x0), 0.1);  // the chord, for 3 points
         }
-        EXPECT_LT(g["max_relative_error"].get<double>(), 0.1);
+        if (!kSanitized) {
+            EXPECT_LT(g["max_relative_error"].get<double>(), 0.1);  // bcc at 16 voxels: 14 %
+        }
         exponent[cell] = g["n"][2].get<double>();
         std::printf("%s: n = %.3f, C = %.4f, largest misfit %.2f %%\n", cell.c_str(), g["n"][2].get<double>(),
                     g["C"][2].get<double>(), 100.0 * g["max_relative_error"].get<double>());
     }
+    if (kSanitized) return;
     EXPECT_GT(exponent["bcc"], 1.8);
     EXPECT_LT(exponent["bcc"], 3.0);
     EXPECT_GT(exponent["octet"], 0.9);
@@ -820,32 +861,37 @@ TEST(Properties, DensityOfCellSolvesTheJobsLevelOnThePeriodicCell)
     // interior cell of a Gaussian X lattice is heavier. A frame laid past the domain and cut by it
     // (`edges: cut`, the default, issue 42) has no light edge cells: its box holds the cell's
     // density too.
+    // Under the sanitizers the cell has 32 voxels instead of 64: its level is then 0.6 % off the
+    // frame's (solved at the job's voxel), so the agreement asked there is 1 %, not 0.5 %.
     TempDir dir;
+    const double agree = kSanitized ? 0.01 : 0.005;
     std::map<std::string, nlohmann::json> reports;
     for (const std::string of : {"frame", "cell", "cut"}) {
         const std::string keys = of == "cut" ? "}, kernel: {gaussian: {sigma: 0.8}}, density: 0.1"
                                              : ", edges: frame}, kernel: {gaussian: {sigma: 0.8}}, density: 0.1, "
                                                "density_of: " +
                                                    of;
-        reports[of] = runReport(dir, of,
-                                "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [30, 30, 30]]}\n"
-                                "properties: {resolution: 64}\nfields:\n  lattice: {struts: {cell: x, size: 10" +
-                                    keys + "}\nresult: lattice\noutputs: {properties: p.json}\n");
+        reports[of] =
+            runReport(dir, of,
+                      "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [30, 30, 30]]}\n"
+                      "properties: {resolution: " +
+                          std::string(kSanitized ? "32" : "64") + "}\nfields:\n  lattice: {struts: {cell: x, size: 10" +
+                          keys + "}\nresult: lattice\noutputs: {properties: p.json}\n");
         ASSERT_FALSE(reports[of].is_null()) << of;
     }
     EXPECT_LT(std::abs(reports["cut"]["fields"]["lattice"]["level"].get<double>() /
                            reports["cut"]["properties"]["level"].get<double>() -
                        1.0),
-              0.005);
+              agree);
     auto level = [&](const std::string& of) { return reports[of]["fields"]["lattice"]["level"].get<double>(); };
     auto cellLevel = [&](const std::string& of) { return reports[of]["properties"]["level"].get<double>(); };
-    // The cell's own level (solved on its 64-voxel model) is the same for both: the lattice asked.
+    // The cell's own level (solved on its voxel model) is the same for both: the lattice asked.
     EXPECT_NEAR(cellLevel("cell"), cellLevel("frame"), 1e-12);
-    EXPECT_LT(std::abs(level("cell") / cellLevel("cell") - 1.0), 0.005)
+    EXPECT_LT(std::abs(level("cell") / cellLevel("cell") - 1.0), agree)
         << level("cell") << " vs the voxel cell's " << cellLevel("cell");
     EXPECT_GT(std::abs(level("frame") / cellLevel("frame") - 1.0), 0.02)
         << level("frame") << " vs the voxel cell's " << cellLevel("frame");
-    std::printf("iso-value t: frame %.5f, cell %.5f, the 64-voxel cell's %.5f\n", level("frame"), level("cell"),
+    std::printf("iso-value t: frame %.5f, cell %.5f, the voxel cell's %.5f\n", level("frame"), level("cell"),
                 cellLevel("cell"));
     // Refused where no periodic cell is known, naming the line.
     int status = 0;
@@ -864,13 +910,18 @@ TEST(PropertyDesign, SearchTrialsRunAtTheConvergedResolution)
     // With no `resolution:` anywhere, a stiffness or sigma search homogenizes its trials at the
     // resolution the convergence check chooses at its first trial that carries load (the same
     // policy as `voxlat properties`), reported with that check's numbers.
+    // Under the sanitizers the stiffness search stops at 10 % (fewer trials) instead of 1 %, and
+    // the job's voxel is 0.5 mm (the homogenized cells do not depend on it).
     TempDir dir;
-    const std::string gyroid = R"(material: form2
-voxel: 0.25
+    const double tolerance = kSanitized ? 0.1 : 0.01;
+    const std::string gyroid = std::string(R"(material: form2
+voxel: )") + (kSanitized ? "0.5" : "0.25") +
+                               R"(
 domain: {box: [[0, 0, 0], [10, 10, 10]]}
 properties: {max_resolution: 48}
 fields:
-  lattice: {tpms: gyroid, cell: 5, solid: network, stiffness: {E: 40 MPa, axis: z}}
+  lattice: {tpms: gyroid, cell: 5, solid: network, stiffness: {E: 40 MPa, axis: z, tolerance: )" +
+                               (kSanitized ? "0.1" : "0.01") + R"(}}
 result: lattice
 outputs: {properties: p.json}
 )";
@@ -887,14 +938,15 @@ outputs: {properties: p.json}
     // within the search's tolerance and the convergence error.
     const auto p = nlohmann::json::parse(readFile(dir.path / "stiff" / "p.json"));
     const double E = p["E_MPa"][2].get<double>();
-    EXPECT_LE(std::abs(E / 40.0 - 1.0), 0.01 + estimated) << E;
+    EXPECT_LE(std::abs(E / 40.0 - 1.0), tolerance + estimated) << E;
     std::printf("stiffness at the converged resolution %d: E_z %.4f MPa (target 40, estimated error %.4f)\n",
                 s["resolution"].get<int>(), E, estimated);
 
     // `optimize:`: every trial at one resolution, the convergence check's; an independent
     // homogenization at that resolution of the chosen sigma gives the search's modulus.
-    const std::string head = R"(material: form2
-voxel: 0.25
+    const std::string head = std::string(R"(material: form2
+voxel: )") + (kSanitized ? "0.5" : "0.25") +
+                             R"(
 domain: {box: [[0, 0, 0], [15, 15, 15]]}
 properties: {cell: [5, 5, 5], origin: [5, 5, 5], max_resolution: 48}
 fields:
@@ -927,13 +979,16 @@ TEST(Properties, DensityOfCellOnATpmsHoldsTheDensityInOnePeriod)
     // A gyroid network of 10 mm cells in a 13 mm box (one cell and 0.3 of the next): `density:`
     // over the box (`frame`, the default) is not the density of the periodic cell; `density_of:
     // cell` solves the level over one period. Reference: the solid share of one period at the
-    // job's level, counted on a 160^3 lattice of points.
+    // job's level, counted on a 160^3 lattice of points (under the sanitizers 80^3, and the cell
+    // homogenized at 24 voxels instead of 48).
     TempDir dir;
     std::map<std::string, double> inCell;
     for (const std::string of : {"frame", "cell"}) {
         const std::string text =
             "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [13, 13, 13]]}\n"
-            "properties: {resolution: 48}\nfields:\n  lattice: {tpms: gyroid, cell: 10, solid: "
+            "properties: {resolution: " +
+            std::string(kSanitized ? "24" : "48") +
+            "}\nfields:\n  lattice: {tpms: gyroid, cell: 10, solid: "
             "network, density: 0.3, density_of: " +
             of + "}\nresult: lattice\noutputs: {properties: p.json}\n";
         const auto report = runReport(dir, of, text);
@@ -945,7 +1000,7 @@ TEST(Properties, DensityOfCellOnATpmsHoldsTheDensityInOnePeriod)
         Job job(std::move(r));
         job.solveLevels();
         const FieldPtr f = job.field("lattice");
-        constexpr int n = 160;
+        const int n = kSanitized ? 80 : 160;
         std::vector<Vec3d> points;
         std::vector<double> values(std::size_t(n) * n);
         std::int64_t solid = 0;
@@ -989,11 +1044,12 @@ TEST(Properties, AGradedLatticeExportsOneMaterialPerSlab)
     // A gyroid graded along z from 0.2 to 0.4 over 20 mm, cells of 5 mm: four slabs, one
     // material each, the cell homogenized at the slab's mean target density (a linear ramp: its
     // value at the slab's middle), each card equal to an independent homogenization of the
-    // uniform lattice at that density.
+    // uniform lattice at that density (at 24 voxels, 16 under the sanitizers).
     TempDir dir;
     const std::string head =
         "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [10, 10, 20]]}\n"
-        "properties: {resolution: 24, export: graded.inp}\nfields:\n";
+        "properties: {resolution: " +
+        std::string(kSanitized ? "16" : "24") + ", export: graded.inp}\nfields:\n";
     const auto report =
         runReport(dir, "graded",
                   head +
@@ -1021,11 +1077,13 @@ TEST(Properties, AGradedLatticeExportsOneMaterialPerSlab)
         EXPECT_NEAR(row["target_density"].get<double>(), rho, 1e-3);
         char density[40];
         std::snprintf(density, sizeof density, "%.17g", row["target_density"].get<double>());
-        const auto uniform =
-            propertiesOf(dir, "uniform" + std::to_string(s),
-                         "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nproperties: "
-                         "{resolution: 24}\nfields:\n  lattice: {tpms: gyroid, cell: 5, solid: network, density: " +
-                             std::string(density) + "}\nresult: lattice\n");
+        const auto uniform = propertiesOf(
+            dir, "uniform" + std::to_string(s),
+            "material: form2\nvoxel: 0.25\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nproperties: "
+            "{resolution: " +
+                std::string(kSanitized ? "16" : "24") +
+                "}\nfields:\n  lattice: {tpms: gyroid, cell: 5, solid: network, density: " + std::string(density) +
+                "}\nresult: lattice\n");
         ASSERT_FALSE(uniform.is_null());
         EXPECT_LT(std::abs(uniform["relative_density"].get<double>() / rho - 1.0), 0.01);
         for (int i = 0; i < 6; ++i)
