@@ -1,5 +1,7 @@
 #include "mesher/writers/BitPlanes.h"
 
+#include "mesher/writers/WindowRuns.h"
+
 #include <algorithm>
 #include <stdexcept>
 
@@ -33,32 +35,9 @@ std::string encodeBitPlanes(int planes, int width, int height, const std::uint8_
     for (int k = 1; k <= planes; ++k) {
         // On where the grey is nearer bitPlanesGrey(k) than bitPlanesGrey(k - 1).
         const unsigned threshold = unsigned(bitPlanesGrey(k - 1, planes) + bitPlanesGrey(k, planes)) / 2 + 1;
-        bool on = false;
-        std::uint64_t length = 0;
-        auto add = [&](bool v, std::uint64_t n) {
-            if (n == 0) return;
-            if (v != on && length > 0) {
-                appendRuns(out, on, length);
-                length = 0;
-            }
-            on = v;
-            length += n;
-        };
-        add(false, std::uint64_t(row0) * width);
-        for (int r = 0; r < h; ++r) {
-            add(false, std::uint64_t(col0));
-            const std::uint8_t* row = window + std::size_t(r) * w;
-            for (int c = 0; c < w;) {
-                const bool v = row[c] >= threshold;
-                int e = c + 1;
-                while (e < w && (row[e] >= threshold) == v) ++e;
-                add(v, std::uint64_t(e - c));
-                c = e;
-            }
-            add(false, std::uint64_t(width - col0 - w));
-        }
-        add(false, std::uint64_t(height - row0 - h) * width);
-        appendRuns(out, on, length);
+        windowRuns(
+            width, height, window, col0, row0, w, h, [threshold](std::uint8_t g) { return g >= threshold; },
+            [&](bool on, std::uint64_t n) { appendRuns(out, on, n); });
     }
     return out;
 }

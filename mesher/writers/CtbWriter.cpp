@@ -1,6 +1,7 @@
 #include "mesher/writers/CtbWriter.h"
 
 #include "mesher/writers/LittleEndian.h"
+#include "mesher/writers/WindowRuns.h"
 
 #include <nettle/aes.h>
 #include <nettle/cbc.h>
@@ -545,32 +546,9 @@ std::string ctbLayerBytes(const CtbHeader& h, const CtbLayerDef& d, const std::s
 std::string encodeCtbLayer(int width, int height, const std::uint8_t* window, int col0, int row0, int w, int h)
 {
     std::string out;
-    unsigned value = 0;
-    std::uint64_t length = 0;
-    auto add = [&](unsigned v, std::uint64_t n) {
-        if (n == 0) return;
-        if (v != value && length > 0) {
-            appendRun(out, value, length);
-            length = 0;
-        }
-        value = v;
-        length += n;
-    };
-    add(0, std::uint64_t(row0) * width);
-    for (int r = 0; r < h; ++r) {
-        add(0, std::uint64_t(col0));
-        const std::uint8_t* row = window + std::size_t(r) * w;
-        for (int c = 0; c < w;) {
-            const unsigned v = row[c] >> 1;
-            int e = c + 1;
-            while (e < w && (row[e] >> 1) == v) ++e;
-            add(v, std::uint64_t(e - c));
-            c = e;
-        }
-        add(0, std::uint64_t(width - col0 - w));
-    }
-    add(0, std::uint64_t(height - row0 - h) * width);
-    if (length > 0) appendRun(out, value, length);
+    windowRuns(
+        width, height, window, col0, row0, w, h, [](std::uint8_t g) { return unsigned(g >> 1); },
+        [&](unsigned v, std::uint64_t n) { appendRun(out, v, n); });
     return out;
 }
 

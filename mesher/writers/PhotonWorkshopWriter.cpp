@@ -1,6 +1,7 @@
 #include "mesher/writers/PhotonWorkshopWriter.h"
 
 #include "mesher/writers/LittleEndian.h"
+#include "mesher/writers/WindowRuns.h"
 
 #include <algorithm>
 #include <cstring>
@@ -268,9 +269,7 @@ std::string photonWorkshopHeadBytes(const PhotonWorkshopHeader& h, const std::ve
 std::string encodePw0Layer(int width, int height, const std::uint8_t* window, int col0, int row0, int w, int h)
 {
     std::string out;
-    unsigned colour = 0;
-    std::uint64_t length = 0;
-    auto flush = [&] {
+    auto emit = [&](unsigned colour, std::uint64_t length) {
         const std::uint64_t most = colour == 0 || colour == 15 ? 4095 : 15;
         while (length > 0) {
             const unsigned run = unsigned(std::min(length, most));
@@ -284,27 +283,8 @@ std::string encodePw0Layer(int width, int height, const std::uint8_t* window, in
             }
         }
     };
-    auto add = [&](unsigned c, std::uint64_t n) {
-        if (n == 0) return;
-        if (c != colour && length > 0) flush();
-        colour = c;
-        length += n;
-    };
-    add(0, std::uint64_t(row0) * width);
-    for (int r = 0; r < h; ++r) {
-        add(0, std::uint64_t(col0));
-        const std::uint8_t* row = window + std::size_t(r) * w;
-        for (int c = 0; c < w;) {
-            const unsigned v = row[c] >> 4;
-            int e = c + 1;
-            while (e < w && (row[e] >> 4) == v) ++e;
-            add(v, std::uint64_t(e - c));
-            c = e;
-        }
-        add(0, std::uint64_t(width - col0 - w));
-    }
-    add(0, std::uint64_t(height - row0 - h) * width);
-    flush();
+    windowRuns(
+        width, height, window, col0, row0, w, h, [](std::uint8_t g) { return unsigned(g >> 4); }, emit);
     return out;
 }
 
