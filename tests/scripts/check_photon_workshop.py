@@ -289,6 +289,10 @@ def main():
         check_archive(voxlat, tmp, "photon-s", "pws", 1,
                       {"res_x": 1440, "res_y": 2560, "width_mm": 68.04, "exposure": 8.0, "bottom_exposure": 60.0,
                        "planes": 4})
+        # Version 1 with PW0 layers (.pw0, .pwx): the Photon S profile as a .pw0 printer.
+        pw0 = os.path.join(tmp, "pw0-small.yaml")
+        open(pw0, "w").write(open(os.path.join(source, "photon-s.yaml")).read().replace("format: pws", "format: pw0"))
+        check_archive(voxlat, tmp, pw0, "pw0", 1, {"res_x": 1440, "res_y": 2560, "width_mm": 68.04})
         check_refusals(voxlat, tmp)
     if failures:
         print(f"{len(failures)} check(s) failed")
