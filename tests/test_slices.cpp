@@ -694,6 +694,8 @@ TEST(Slices, TheFormatIsTheRecipesThenTheExtensionsThenTheProfiles)
             EXPECT_TRUE(startsWith(out, "V3.0")) << format;
         else if (format == "ctb")
             EXPECT_TRUE(startsWith(out, std::string("\x06\x01\xFD\x12", 4))) << format;
+        else if (format == "cbddlp" || format == "photon")
+            EXPECT_TRUE(startsWith(out, std::string("\x19\x00\xFD\x12", 4))) << format;
         else if (format.starts_with("sl1") || format == "zip")
             EXPECT_TRUE(startsWith(out, "PK")) << format;
         else  // the Photon Workshop formats
