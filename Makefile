@@ -19,7 +19,7 @@ BENCH_PACKAGES := python3 python3-numpy python3-openvdb python3-scipy python3-sk
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 CCACHE := $(shell command -v ccache 2>/dev/null)
 
-.PHONY: all deps bench-deps build run test sanitize fuzz bench format docs-keys clean install
+.PHONY: all deps bench-deps build run test sanitize fuzz bench format docs-keys clean install check-pip-scratch
 
 all: build
 
@@ -52,6 +52,12 @@ install: build
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+
+# `pip install .` as a new user runs it: a copy of the checkout with no build folder, no
+# VOXLAT_BUILD_DIR (setup.py compiles the copy's build/), then docs/python.md's first example in
+# the venv. Minutes (ccache reuses this checkout's objects), so not part of `make test`.
+check-pip-scratch: build
+	/usr/bin/python3 tests/scripts/check_pip_install.py --from-scratch $(BUILD) .
 
 # The whole test suite under AddressSanitizer + UndefinedBehaviorSanitizer (its own build folder).
 # The Python module is loaded by /usr/bin/python3, which is not built with ASan: its tests run with

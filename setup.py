@@ -3,8 +3,12 @@
 #
 # No network: `pip install --no-build-isolation .` with Debian's setuptools, wheel, CMake and
 # pybind11 (python3-setuptools python3-wheel cmake pybind11-dev). The compiled parts come from a
-# CMake build: the one named by VOXLAT_BUILD_DIR when set (a `make build` folder is reused as it
-# is), else a Release build made here in VOXLAT_PIP_WORK (default build-pip/).
+# CMake build: the one named by VOXLAT_BUILD_DIR when set (used as it is), else `build/` of the
+# checkout, the folder `make build` uses: configured as `make build` does when it is not there,
+# brought up to date when it is (a Release build), so pip and make share one build and ccache's
+# objects (its base_dir makes paths relative to `build/`, so any checkout's `build/` hits the
+# same objects). A `build/` of another type is left alone and `build-release/` used instead.
+# Setuptools' own files go to VOXLAT_PIP_WORK (default build-pip/).
 import glob
 import os
 import shutil
@@ -28,20 +32,43 @@ def version():
     raise RuntimeError("no project version in CMakeLists.txt")
 
 
+def cached(build, name):
+    """A variable of @build's CMakeCache.txt, or None."""
+    try:
+        with open(os.path.join(build, "CMakeCache.txt")) as f:
+            for line in f:
+                if line.startswith(name + ":"):
+                    return line.split("=", 1)[1].strip()
+    except OSError:
+        return None
+    return None
+
+
 def cmake_build():
     """The CMake build folder holding voxlat, voxlat-engine and python/voxlat/_voxlat*.so."""
     given = os.environ.get("VOXLAT_BUILD_DIR")
     if given:
         return os.path.abspath(given)
-    build = os.path.join(WORK, "cmake")
-    configure = ["cmake", "-S", HERE, "-B", build, "-DCMAKE_BUILD_TYPE=Release", "-DPython_EXECUTABLE=" + sys.executable]
-    if shutil.which("ninja"):
-        configure += ["-G", "Ninja"]
-    if shutil.which("ccache"):
-        configure += ["-DCMAKE_CXX_COMPILER_LAUNCHER=ccache"]
-    subprocess.check_call(configure)
+    build = os.path.join(HERE, "build")
+    if cached(build, "CMAKE_BUILD_TYPE") not in (None, "Release"):
+        build = os.path.join(HERE, "build-release")
+    configure = ["cmake", "-S", HERE, "-B", build, "-DCMAKE_BUILD_TYPE=Release"]
+    # The module is built for the Python running pip (a venv's python is a link to it): named only
+    # when the build's differs, so an existing build is not reconfigured for a link that may go.
+    python = os.path.realpath(sys.executable)
+    known = cached(build, "Python_EXECUTABLE")
+    if not known or os.path.realpath(known) != python:
+        configure.append("-DPython_EXECUTABLE=" + python)
+    if not os.path.isfile(os.path.join(build, "CMakeCache.txt")):
+        if shutil.which("ninja"):
+            configure += ["-G", "Ninja"]
+        if shutil.which("ccache"):
+            configure += ["-DCMAKE_CXX_COMPILER_LAUNCHER=ccache"]
+    print("voxlat: compiling in " + build + " (ccache " + ("on" if shutil.which("ccache") else "off") + ")",
+          file=sys.stderr)
+    subprocess.check_call(configure, stdout=sys.stderr)
     subprocess.check_call(["cmake", "--build", build, "-j", str(os.cpu_count() or 1),
-                           "--target", "voxlat", "voxlat_cli", "voxlat_python"])
+                           "--target", "voxlat", "voxlat_cli", "voxlat_python"], stdout=sys.stderr)
     return build
 
 

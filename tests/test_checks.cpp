@@ -1,5 +1,6 @@
 // Checks of a result: its connected pieces counted on the grid.
 #include "engine/checks/Pieces.h"
+#include "engine/checks/SurfaceThickness.h"
 #include "engine/core/SparseEvaluator.h"
 #include "fields/shapes/Boolean.h"
 #include "fields/shapes/BoxField.h"
@@ -230,4 +231,24 @@ TEST(Pieces, RandomVoxelsMatchABruteForceFloodFill)
             }
         }
     }
+}
+
+TEST(SurfaceThickness, ChordsThroughABallAreItsDiameter)
+{
+    // A ball of radius 3: from any surface point the chord along the inward normal is the
+    // diameter. Points 0.04 mm off the surface (in or out, as a decimated mesh's are) give it too.
+    const voxlat::Sphere ball(voxlat::Vec3d(1, 2, 3), 3.0);
+    std::vector<openvdb::Vec3f> points;
+    std::mt19937 random(7);
+    std::normal_distribution<double> gauss;
+    for (int k = 0; k < 200; ++k) {
+        voxlat::Vec3d d(gauss(random), gauss(random), gauss(random));
+        d.normalize();
+        const double r = 3.0 + (k % 3 - 1) * 0.04;
+        points.emplace_back(float(1 + r * d.x()), float(2 + r * d.y()), float(3 + r * d.z()));
+    }
+    const std::vector<float> chords = voxlat::surfaceThickness(ball, points, 0.05, 10.0);
+    for (float c : chords) EXPECT_NEAR(c, 6.0, 0.01);
+    // Not closed within `most`: given as `most`.
+    for (float c : voxlat::surfaceThickness(ball, points, 0.05, 4.0)) EXPECT_EQ(c, 4.0f);
 }

@@ -13,6 +13,7 @@
 #include "fields/struts/StrutConvolution.h"
 #include "fields/tpms/TpmsField.h"
 #include "mesher/slice/Slicer.h"
+#include "mesher/writers/BitPlanes.h"
 #include "mesher/writers/CtbWriter.h"
 #include "mesher/writers/PhotonWorkshopWriter.h"
 #include "mesher/writers/SliceWriters.h"
@@ -693,6 +694,8 @@ TEST(Slices, TheFormatIsTheRecipesThenTheExtensionsThenTheProfiles)
             EXPECT_TRUE(startsWith(out, "V3.0")) << format;
         else if (format == "ctb")
             EXPECT_TRUE(startsWith(out, std::string("\x06\x01\xFD\x12", 4))) << format;
+        else if (format == "cbddlp" || format == "photon")
+            EXPECT_TRUE(startsWith(out, std::string("\x19\x00\xFD\x12", 4))) << format;
         else if (format.starts_with("sl1") || format == "zip")
             EXPECT_TRUE(startsWith(out, "PK")) << format;
         else  // the Photon Workshop formats
@@ -984,6 +987,33 @@ TEST(Slices, NativeFormatsMatchTheReferencesWorkedExamples)
     const std::uint32_t info = *reinterpret_cast<const std::uint32_t*>(head.data() + 0x68);
     const std::uint32_t nameAt = *reinterpret_cast<const std::uint32_t*>(head.data() + info + 0x1C);
     EXPECT_EQ(head.substr(nameAt, 8 + 320), "Test 4x4" + voxlat::ctbDisclaimer());
+
+    // The bit-plane variant (.cbddlp, §9's last paragraph): one plane, runs of 7 bits with bit 7 on.
+    EXPECT_EQ(voxlat::encodeBitPlanes(1, 4, 4, white.data(), 0, 0, 4, 4), fromHex("90"));
+    EXPECT_EQ(voxlat::encodeBitPlanes(1, 4, 4, square.data(), 1, 1, 2, 2), fromHex("05 82 02 82 05"));
+    // Four planes: a reader shows n·64 − 1 for a pixel on in n planes; each grey goes to the nearest.
+    const std::vector<std::uint8_t> greys{0, 31, 32, 100, 160, 224, 254, 255};
+    const std::string planes = voxlat::encodeBitPlanes(4, 8, 1, greys.data(), 0, 0, 8, 1);
+    EXPECT_EQ(voxlat::bitPlaneLengths(planes, 4, 8), (std::vector<std::size_t>(4, planes.size() / 4)));
+    std::vector<int> on(8, 0);
+    for (std::size_t k = 0, pixel = 0; k < planes.size(); ++k)
+        for (int r = 0; r < (std::uint8_t(planes[k]) & 0x7F); ++r, ++pixel)
+            on[pixel % 8] += std::uint8_t(planes[k]) >> 7;
+    for (int p = 0; p < 8; ++p) {
+        int best = 0;
+        for (int n = 1; n <= 4; ++n)
+            if (std::abs(voxlat::bitPlanesGrey(n, 4) - greys[p]) < std::abs(voxlat::bitPlanesGrey(best, 4) - greys[p]))
+                best = n;
+        EXPECT_EQ(on[p], best) << "grey " << int(greys[p]);
+    }
+    EXPECT_EQ(voxlat::bitPlanesExposed(planes, 8), 6u);  // all but 0 and 31
+    voxlat::CtbHeader cbddlp = ctb;
+    cbddlp.bitPlanes = true;
+    cbddlp.version = 2;
+    cbddlp.key = 0;
+    const std::string bitHead = voxlat::ctbHeadBytes(cbddlp, "", "", defs);
+    EXPECT_EQ(bitHead.substr(0, 4), fromHex("19 00 FD 12"));
+    EXPECT_EQ(bitHead.substr(0x64, 12), std::string(12, '\0'));  // key 0, no SlicerInfo
 
     // Photon Workshop, file version 516.
     const std::string p0 = voxlat::encodePw0Layer(4, 4, white.data(), 0, 0, 4, 4);

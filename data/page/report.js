@@ -69,6 +69,13 @@
     const bytes = Uint8Array.from(atob(base64), (c) => c.charCodeAt(0));
     return new Type(bytes.buffer);
   }
+  // How many different vertex colours (to 1/64 of each channel) a colour array holds.
+  function distinctColours(colors) {
+    const seen = new Set();
+    for (let i = 0; i < colors.length; i += 3)
+      seen.add(Math.round(64 * colors[i]) + "," + Math.round(64 * colors[i + 1]) + "," + Math.round(64 * colors[i + 2]));
+    return seen.size;
+  }
   // Perceptual colour ramp (viridis, 5 stops), t in [0, 1].
   function ramp(t) {
     const stops = [[0.267, 0.005, 0.329], [0.229, 0.322, 0.546], [0.128, 0.567, 0.551], [0.369, 0.789, 0.383], [0.993, 0.906, 0.144]];
@@ -124,14 +131,23 @@
     geometry.setIndex(new THREE.BufferAttribute(indices, 1));
     geometry.computeVertexNormals();
     const material = { side: THREE.DoubleSide, shininess: 20 };
-    if (graded) {
-      const colors = new Float32Array(points.length);
+    // Colours: the walls measured at each vertex (a recipe that grades them), else the achieved
+    // density of the first graded field's slab the vertex lies in.
+    let values = null, legend = null;
+    if (meshData.colour && meshData.colour.values) {
+      values = decode(meshData.colour.values, Float32Array);
+      const sorted = Array.from(values).sort((a, b) => a - b);
+      // The 2nd to 98th percentile spans the ramp (a few chords where walls meet read long).
+      legend = { by: meshData.colour.by + " of `" + meshData.colour.field + "`", unit: meshData.colour.unit,
+                 lo: sorted[Math.floor(0.02 * (sorted.length - 1))], hi: sorted[Math.floor(0.98 * (sorted.length - 1))],
+                 note: meshData.colour.note };
+    } else if (graded) {
+      values = new Float32Array(points.length / 3);
       let dmin = Infinity, dmax = -Infinity;
       for (const s of graded.slabs) {
         dmin = Math.min(dmin, s.achieved);
         dmax = Math.max(dmax, s.achieved);
       }
-      const span = dmax > dmin ? dmax - dmin : 1;
       for (let v = 0; v < points.length / 3; ++v) {
         const x = points[3 * v + graded.axis];
         let slab = graded.slabs[graded.slabs.length - 1];
@@ -140,15 +156,39 @@
             slab = s;
             break;
           }
-        const c = ramp((slab.achieved - dmin) / span);
-        colors.set(c, 3 * v);
+        values[v] = slab.achieved;
       }
+      legend = { by: "achieved relative density of `" + graded.name + "`", unit: "", lo: dmin, hi: dmax,
+                 note: "per slab along " + "xyz"[graded.axis] + " (report.json's slabs)" };
+    }
+    if (values) {
+      const colors = new Float32Array(points.length);
+      const span = legend.hi > legend.lo ? legend.hi - legend.lo : 1;
+      for (let v = 0; v < values.length; ++v) colors.set(ramp((values[v] - legend.lo) / span), 3 * v);
       geometry.setAttribute
         ? geometry.setAttribute("color", new attribute(colors, 3))
         : geometry.addAttribute("color", new attribute(colors, 3));
       material.vertexColors = THREE.VertexColors !== undefined ? THREE.VertexColors : true;
-      caption.textContent = "Coloured by the achieved relative density of `" + graded.name + "` per slab along " +
-        "xyz"[graded.axis] + ": " + fmt(dmin, 3) + " (dark) to " + fmt(dmax, 3) + " (yellow). ";
+      // The legend: the ramp from its low end to its high end, labelled.
+      const box = el("div", { id: "voxlat-legend", class: "row" });
+      const bar = document.createElement("canvas");
+      bar.width = 240;
+      bar.height = 14;
+      const g = bar.getContext("2d");
+      for (let x = 0; x < bar.width; ++x) {
+        const c = ramp(x / (bar.width - 1));
+        g.fillStyle = "rgb(" + c.map((a) => Math.round(255 * a)).join(",") + ")";
+        g.fillRect(x, 0, 1, bar.height);
+      }
+      const unit = legend.unit ? " " + legend.unit : "";
+      box.appendChild(document.createTextNode(legend.by + ": " + fmt(legend.lo, 3) + unit));
+      box.appendChild(bar);
+      box.appendChild(document.createTextNode(fmt(legend.hi, 3) + unit));
+      canvas.parentNode.insertBefore(box, canvas);
+      caption.textContent = "Coloured by the " + legend.by + ", " + legend.note + ". ";
+      view.legend = { by: legend.by, lo: legend.lo, hi: legend.hi, colours: distinctColours(colors) };
+      view.values = values;
+      view.points = points;
     } else {
       material.color = 0x8fa6c8;
     }
@@ -514,6 +554,19 @@
   window.voxlatPage = { view: view, layers: layers };
   if (location.hash === "#check") {
     const result = { mesh_triangles: meshData.triangles, layers: layers.count, coloured_by: graded ? graded.name : null };
+    if (view.legend) {
+      result.legend = view.legend;
+      result.legend_shown = !!document.getElementById("voxlat-legend");
+      if (meshData.colour) result.coloured_by = meshData.colour.field;
+      // The colouring values' median over the lowest and highest tenth of the part along x.
+      const xs = [];
+      for (let v = 0; v < view.values.length; ++v) xs.push([view.points[3 * v], view.values[v]]);
+      xs.sort((a, b) => a[0] - b[0]);
+      const median = (part) => part.map((p) => p[1]).sort((a, b) => a - b)[Math.floor(part.length / 2)];
+      const tenth = Math.max(1, Math.floor(xs.length / 10));
+      result.values_low_x = median(xs.slice(0, tenth));
+      result.values_high_x = median(xs.slice(xs.length - tenth));
+    }
     if (view.countPixels) result.view3d = view.countPixels();
     if (layers.setLayer) {
       const island = (layers.marks || []).find((m) => m.kind === "island");

@@ -2,6 +2,7 @@
 
 #include "engine/checks/Pieces.h"
 #include "engine/checks/SheetWalls.h"
+#include "engine/checks/SurfaceThickness.h"
 #include "engine/core/Format.h"
 #include "engine/core/GridMeasure.h"
 #include "engine/core/SparseEvaluator.h"
@@ -1573,11 +1574,15 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
         writePreview(picture, meshOptions(*firstMesh, mRecipe));
     }
     std::optional<TriangleMesh> shown;
-    if (html) shown = timed("report.html mesh", [&] { return pageMesh(); });
+    std::optional<PageColouring> colouring;
+    if (html) {
+        shown = timed("report.html mesh", [&] { return pageMesh(); });
+        colouring = timed("report.html walls", [&] { return pageColouring(*shown); });
+    }
     writeReport(outDir / "report.json");
     if (html) {
         AtomicFile file((outDir / "report.html").string());
-        file.stream() << reportPage(report(), *shown, pageScripts);
+        file.stream() << reportPage(report(), *shown, pageScripts, colouring ? &*colouring : nullptr);
         file.commit();
     }
     // A cancel that came while the last files were written still keeps the folder as it was.
@@ -1601,6 +1606,25 @@ TriangleMesh Job::pageMesh()
     options.context = mContext;
     const openvdb::FloatGrid::Ptr g = evaluateSparse(*mResult, coarse, options);
     return clusterDecimate(marchingCubes(*g, 0.0f), kTriangles);
+}
+
+std::optional<PageColouring> Job::pageColouring(const TriangleMesh& mesh)
+{
+    // A sheet with graded walls: the walls the part has, measured at each vertex of the page's
+    // mesh. (Graded densities are coloured by the page itself, from the slabs in the report.)
+    for (const LevelNode& node : mBuilder.levelNodes()) {
+        if (node.gradedWalls.empty() || mesh.points.empty()) continue;
+        PageColouring c;
+        c.by = "wall thickness";
+        c.field = node.name;
+        c.unit = "mm";
+        const double step = mDomain.voxel / 8.0, most = 64.0 * mDomain.voxel;
+        c.note = "measured at each vertex: the chord into the part along its normal, to " + formatNumber10(step) +
+                 " mm (a wall seen obliquely, or where walls meet, reads thicker); " + node.gradedWalls;
+        c.values = surfaceThickness(*mResult, mesh.points, step, most);
+        return c;
+    }
+    return std::nullopt;
 }
 
 BeamFrame Job::frame()

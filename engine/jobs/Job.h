@@ -5,6 +5,7 @@
 #include "engine/checks/Pieces.h"
 #include "engine/core/Domain.h"
 #include "engine/core/JobContext.h"
+#include "engine/jobs/ReportPage.h"
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/MeshSettings.h"
 #include "engine/recipe/Recipe.h"
@@ -81,6 +82,8 @@ public:
     /// A small mesh of the result for report.html: the first mesh made, clustered
     /// (clusterDecimate), else the result meshed on a coarse grid of the domain.
     TriangleMesh pageMesh();
+    /// The values that colour report.html's mesh, where the recipe grades walls.
+    std::optional<PageColouring> pageColouring(const TriangleMesh& mesh);
     /// Writes only the mesh made with @a options, to @a path.
     void writeMesh(const std::filesystem::path& path, const MeshOptions& options = {});
     /// Writes the raw marching-cubes mesh to the binary STL @a path as it is made, without ever

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 
 namespace voxlat {
 
@@ -98,14 +99,24 @@ std::vector<std::string> reportPageScripts()
     return scripts;
 }
 
-std::string reportPage(const nlohmann::json& report, const TriangleMesh& mesh, const std::vector<std::string>& scripts)
+std::string reportPage(const nlohmann::json& report, const TriangleMesh& mesh, const std::vector<std::string>& scripts,
+                       const PageColouring* colouring)
 {
     static_assert(sizeof(openvdb::Vec3f) == 12 && sizeof(openvdb::Vec3I) == 12);
-    const nlohmann::json meshJson = {
+    nlohmann::json meshJson = {
         {"vertices", mesh.points.size()},
         {"triangles", mesh.triangles.size()},
         {"points", base64(mesh.points.data(), mesh.points.size() * sizeof(openvdb::Vec3f))},
         {"indices", base64(mesh.triangles.data(), mesh.triangles.size() * sizeof(openvdb::Vec3I))}};
+    if (colouring) {
+        if (colouring->values.size() != mesh.points.size())
+            throw std::logic_error("report.html: one colouring value per vertex");
+        meshJson["colour"] = {{"by", colouring->by},
+                              {"field", colouring->field},
+                              {"unit", colouring->unit},
+                              {"note", colouring->note},
+                              {"values", base64(colouring->values.data(), colouring->values.size() * sizeof(float))}};
+    }
     std::string title = "voxlat report";
     if (report.contains("recipe") && report["recipe"].is_string()) title += ": " + report["recipe"].get<std::string>();
     std::ostringstream html;

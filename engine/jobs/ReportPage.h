@@ -22,8 +22,20 @@ namespace voxlat {
 /// missing (install libjs-three, or run with --no-html).
 std::vector<std::string> reportPageScripts();
 
+/// A value per vertex of the page's mesh that colours it (with a legend), e.g. the walls measured
+/// on a part whose recipe grades them.
+struct PageColouring {
+    std::string by;     ///< what the values are, e.g. "wall thickness"
+    std::string field;  ///< the field that grades it
+    std::string unit;   ///< e.g. "mm"
+    std::string note;   ///< how the values were found (shown under the view)
+    std::vector<float> values;
+};
+
 /// The page's HTML: @a report (report.json's content), @a mesh (drawn as it is; small: see
 /// clusterDecimate) and @a scripts (reportPageScripts()) inlined, so that the file opens offline.
-std::string reportPage(const nlohmann::json& report, const TriangleMesh& mesh, const std::vector<std::string>& scripts);
+/// @a colouring, when given, colours the mesh by its values (one per vertex).
+std::string reportPage(const nlohmann::json& report, const TriangleMesh& mesh, const std::vector<std::string>& scripts,
+                       const PageColouring* colouring = nullptr);
 
 }  // namespace voxlat

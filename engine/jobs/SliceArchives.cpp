@@ -5,6 +5,7 @@
 #include "engine/core/Version.h"
 #include "engine/jobs/OutputPaths.h"
 #include "mesher/writers/AtomicFile.h"
+#include "mesher/writers/BitPlanes.h"
 #include "mesher/writers/CtbWriter.h"
 #include "mesher/writers/GooWriter.h"
 #include "mesher/writers/PhotonWorkshopWriter.h"
@@ -296,18 +297,42 @@ std::pair<double, double> storedDisplayMm(const PrinterProfile& p)
     return p.portrait ? std::pair{p.heightMm, p.widthMm} : std::pair{p.widthMm, p.heightMm};
 }
 
+/// The bit planes of a `.cbddlp`, `.photon` or `.pws` layer: 4 with anti-aliasing (grey in
+/// steps of 64), else 1 (on where the pixel is at least half covered).
+int planesFor(const SliceStart& s)
+{
+    return s.settings.supersample > 0 ? 4 : 1;
+}
+
 /// Chitubox's .ctb, the plain or encrypted layout (the profile's `ctb_version:`, default 4, and
-/// `ctb_encrypted:`): the head (header, preview slots, parameters, layer table) reserved, each
-/// layer's record and ciphered RLE7 appended, the signature (encrypted), the head written last.
+/// `ctb_encrypted:`), or its bit-plane variant (.cbddlp version 2, .photon version 1): the head
+/// (header, preview slots, parameters, layer table) reserved, each layer's record and ciphered
+/// RLE7 (or its planes) appended, the signature (encrypted), the head written last.
 class CtbArchive final : public SliceArchive {
 public:
-    CtbArchive(const fs::path& path, const std::string& where) : mFile(path, where) {}
-    LayerEncoding encoding() const override { return LayerEncoding::ctb; }
+    /// @a bitPlaneVersion: 0 for .ctb, else the bit-plane variant's version (2 .cbddlp, 1 .photon).
+    CtbArchive(const fs::path& path, const std::string& where, int bitPlaneVersion = 0)
+        : mFile(path, where), mBitPlaneVersion(bitPlaneVersion)
+    {
+    }
+    LayerEncoding encoding() const override
+    {
+        return mHeader.bitPlanes ? LayerEncoding::bitPlanes : LayerEncoding::ctb;
+    }
+    int bitPlanes() const override { return int(mHeader.planes); }
     void begin(const SliceStart& s) override
     {
         const PrinterProfile& p = s.printer;
         mHeader.version = p.ctbVersion;
         mHeader.encrypted = p.ctbEncrypted;
+        mHeader.key = kKey;
+        if (mBitPlaneVersion > 0) {
+            mHeader.bitPlanes = true;
+            mHeader.version = mBitPlaneVersion;
+            mHeader.encrypted = false;
+            mHeader.key = 0;
+            mHeader.planes = std::uint32_t(planesFor(s));
+        }
         std::tie(mHeader.displayWidthMm, mHeader.displayHeightMm) = storedDisplayMm(p);
         mHeader.machineZMm = p.maxHeightMm;
         mHeader.layerMm = s.layerMm;
@@ -321,13 +346,13 @@ public:
         mHeader.layers = std::uint32_t(s.layers);
         mHeader.bottom = p.bottomMotion;
         mHeader.normal = p.motion;
-        mHeader.key = kKey;
         mHeader.machineName = p.name;
         mHeader.antiAliasing = s.settings.supersample > 0 ? 8 : 1;
-        mLayers.reserve(std::size_t(s.layers));
+        mPlaneLayers.assign(mHeader.planes, {});
+        for (std::vector<CtbLayerDef>& layers : mPlaneLayers) layers.reserve(std::size_t(s.layers));
         mFile.reserve(ctbLayout(mHeader).layersStart);
     }
-    void addLayer(int index, const std::string& rle) override
+    void addLayer(int index, const std::string& code) override
     {
         CtbLayerDef d;
         d.zMm = (index + 1) * mHeader.layerMm;
@@ -336,13 +361,22 @@ public:
         d.motion = index < bottom ? mHeader.bottom : mHeader.normal;
         d.lightOffS =
             mHeader.version >= 4 ? 0.0 : d.motion.waitBeforeLift + d.motion.waitAfterLift + d.motion.waitAfterRetract;
-        d.dataOffset = mFile.position() + ctbLayerRecordBytes(mHeader);
-        d.dataLength = std::uint32_t(rle.size());
-        std::string data = rle;
-        ctbCipher(data, mHeader.key, std::uint32_t(index));
-        mFile.append(ctbLayerBytes(mHeader, d, data));
+        const std::vector<std::size_t> lengths =
+            mHeader.bitPlanes
+                ? bitPlaneLengths(code, int(mHeader.planes), std::uint64_t(mHeader.resolutionX) * mHeader.resolutionY)
+                : std::vector<std::size_t>{code.size()};
+        std::size_t start = 0;
+        for (std::size_t p = 0; p < lengths.size(); ++p) {
+            // Each plane its own table entry (plane-major) and data block.
+            d.dataOffset = mFile.position() + ctbLayerRecordBytes(mHeader);
+            d.dataLength = std::uint32_t(lengths[p]);
+            std::string data = code.substr(start, lengths[p]);
+            start += lengths[p];
+            ctbCipher(data, mHeader.key, std::uint32_t(index));
+            mFile.append(ctbLayerBytes(mHeader, d, data));
+            mPlaneLayers[p].push_back(d);
+        }
         mPrintTime += d.exposureS + moveTime(d.motion);
-        mLayers.push_back(d);
     }
     void finish(const SliceSummary& s) override
     {
@@ -355,15 +389,19 @@ public:
         std::vector<std::uint8_t> small = thumbnailPixels(s, w, h);
         const std::string smallPreview = ctbPreview(small.data(), w, h, kCtbSmallPreviewW, kCtbSmallPreviewH);
         const std::uint64_t layersEnd = mFile.position();
+        std::vector<CtbLayerDef> table;
+        for (const std::vector<CtbLayerDef>& layers : mPlaneLayers)
+            table.insert(table.end(), layers.begin(), layers.end());
         mFile.append(ctbTailBytes(mHeader));
-        mFile.commitWithHead(ctbHeadBytes(mHeader, largePreview, smallPreview, mLayers, layersEnd));
+        mFile.commitWithHead(ctbHeadBytes(mHeader, largePreview, smallPreview, table, layersEnd));
     }
 
 private:
     static constexpr std::uint32_t kKey = 0x4C584F56;  // "VOXL": any non-zero key (firmware refuses 0)
     HeadFirstFile mFile;
+    int mBitPlaneVersion = 0;
     CtbHeader mHeader;
-    std::vector<CtbLayerDef> mLayers;
+    std::vector<std::vector<CtbLayerDef>> mPlaneLayers;  ///< the table's entries, per plane
     double mPrintTime = 0;
 };
 
@@ -371,14 +409,18 @@ private:
 /// (tables before the layers) reserved, PW0 layers appended, the head written at the end.
 class PhotonWorkshopArchive final : public SliceArchive {
 public:
-    PhotonWorkshopArchive(const fs::path& path, const std::string& where, std::uint32_t version) : mFile(path, where)
+    /// @a pws: the `.pws` layer code (bit planes) instead of PW0.
+    PhotonWorkshopArchive(const fs::path& path, const std::string& where, std::uint32_t version, bool pws)
+        : mFile(path, where), mPws(pws)
     {
         mHeader.version = version;
     }
-    LayerEncoding encoding() const override { return LayerEncoding::pw0; }
+    LayerEncoding encoding() const override { return mPws ? LayerEncoding::bitPlanes : LayerEncoding::pw0; }
+    int bitPlanes() const override { return int(mHeader.antiAliasing); }
     void begin(const SliceStart& s) override
     {
         const PrinterProfile& p = s.printer;
+        mHeader.antiAliasing = mPws ? std::uint32_t(planesFor(s)) : 1;
         mHeader.pixelUm = 1000.0 * std::max(p.pitchX(), p.pitchY());
         mHeader.layerMm = s.layerMm;
         mHeader.exposureS = s.exposureS;
@@ -407,7 +449,8 @@ public:
         l.length = std::uint32_t(code.size());
         l.bottom = index < int(mHeader.bottomLayers);
         l.exposureS = l.bottom ? mHeader.bottomExposureS : mHeader.exposureS;
-        l.exposedPixels = pw0ExposedPixels(code);
+        l.exposedPixels = mPws ? bitPlanesExposed(code, std::uint64_t(mHeader.resolutionX) * mHeader.resolutionY)
+                               : pw0ExposedPixels(code);
         mFile.append(code);  // every layer its own block: firmware refuses shared ones
         mPrintTime += l.exposureS + moveTime(l.bottom ? mHeader.bottom : mHeader.normal);
         mLayers.push_back(l);
@@ -419,11 +462,17 @@ public:
         int w = kPhotonPreviewW, h = kPhotonPreviewH;
         const std::vector<std::uint8_t> rgba = thumbnailPixels(s, w, h);
         mHeader.preview = photonWorkshopPreview(rgba.data(), w, h);
+        if (mHeader.version >= 518) {
+            w = kPhotonPreview2W, h = kPhotonPreview2H;
+            const std::vector<std::uint8_t> large = thumbnailPixels(s, w, h);
+            mHeader.preview2 = photonWorkshopPreview(large.data(), w, h, kPhotonPreview2W, kPhotonPreview2H);
+        }
         mFile.commitWithHead(photonWorkshopHeadBytes(mHeader, mLayers));
     }
 
 private:
     HeadFirstFile mFile;
+    bool mPws = false;
     PhotonWorkshopHeader mHeader;
     std::vector<PhotonWorkshopLayer> mLayers;
     double mPrintTime = 0;
@@ -516,9 +565,9 @@ private:
 const std::map<std::string, std::uint32_t>& photonWorkshopVersions()
 {
     static const std::map<std::string, std::uint32_t> versions{
-        {"pwmo", 516}, {"pwms", 516}, {"pwma", 516}, {"pwmx", 516}, {"pmsq", 516}, {"pwmb", 516},
-        {"pm3", 516},  {"pm3m", 516}, {"dlp", 516},  {"px6s", 517}, {"pmx2", 517}, {"pm3r", 517},
-        {"pm3n", 517}, {"pm4n", 517}, {"pm5", 517},  {"dl2p", 517}};
+        {"pwmo", 516}, {"pwms", 516}, {"pwma", 516}, {"pwmx", 516}, {"pmsq", 516}, {"pwmb", 516}, {"pm3", 516},
+        {"pm3m", 516}, {"dlp", 516},  {"px6s", 517}, {"pmx2", 517}, {"pm3r", 517}, {"pm3n", 517}, {"pm4n", 517},
+        {"pm5", 517},  {"dl2p", 517}, {"pm5s", 518}, {"m5sp", 518}, {"pws", 1},    {"pw0", 1},    {"pwx", 1}};
     return versions;
 }
 
@@ -534,12 +583,14 @@ const std::map<std::string, ArchiveFactory>& archiveFactories()
         {"png", [](const fs::path& p, const std::string& w) { return std::make_unique<PngFolder>(p, w); }},
         {"exr", [](const fs::path& p, const std::string& w) { return std::make_unique<ExrFolder>(p, w); }},
         {"goo", [](const fs::path& p, const std::string& w) { return std::make_unique<GooArchive>(p, w); }},
-        {"ctb", [](const fs::path& p, const std::string& w) { return std::make_unique<CtbArchive>(p, w); }}};
+        {"ctb", [](const fs::path& p, const std::string& w) { return std::make_unique<CtbArchive>(p, w); }},
+        {"cbddlp", [](const fs::path& p, const std::string& w) { return std::make_unique<CtbArchive>(p, w, 2); }},
+        {"photon", [](const fs::path& p, const std::string& w) { return std::make_unique<CtbArchive>(p, w, 1); }}};
     static const std::map<std::string, ArchiveFactory> all = [] {
         std::map<std::string, ArchiveFactory> table = factories;
         for (const auto& [format, version] : photonWorkshopVersions())
-            table[format] = [version](const fs::path& p, const std::string& w) {
-                return std::make_unique<PhotonWorkshopArchive>(p, w, version);
+            table[format] = [version, format = format](const fs::path& p, const std::string& w) {
+                return std::make_unique<PhotonWorkshopArchive>(p, w, version, format == "pws");
             };
         return table;
     }();

@@ -45,6 +45,7 @@ enum class LayerEncoding {
     goo,         ///< Elegoo .goo image data (encodeGooLayer)
     ctb,         ///< Chitubox RLE7, not yet ciphered (encodeCtbLayer)
     pw0,         ///< Anycubic Photon Workshop PW0 (encodePw0Layer)
+    bitPlanes,   ///< RLE1 bit planes, concatenated (encodeBitPlanes with bitPlanes())
     fieldValues  ///< the field's float values over the window
 };
 
@@ -56,6 +57,8 @@ public:
     virtual ~SliceArchive() = default;
     /// The form addLayer() (or addLayerValues()) takes.
     virtual LayerEncoding encoding() const { return LayerEncoding::png; }
+    /// The planes of a LayerEncoding::bitPlanes layer (known after begin()).
+    virtual int bitPlanes() const { return 1; }
     /// Called once before the first layer; checks what the format cannot hold (throws InputError).
     virtual void begin(const SliceStart&) {}
     /// Layer @a index in the archive's encoding().

@@ -10,6 +10,7 @@
 #include "engine/core/Version.h"
 #include "mesher/slice/Slicer.h"
 #include "mesher/writers/AtomicFile.h"
+#include "mesher/writers/BitPlanes.h"
 #include "mesher/writers/CtbWriter.h"
 #include "mesher/writers/GooWriter.h"
 #include "mesher/writers/PhotonWorkshopWriter.h"
@@ -366,6 +367,7 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
         {printer, settings, count, layer, exposure, exposureFirst, display.storedWidth(), display.storedHeight()});
     const LayerEncoding encoding = archive->encoding();
     const bool fieldValues = encoding == LayerEncoding::fieldValues;
+    const int planes = archive->bitPlanes();
 
     SliceResult result;
     result.layerAreas.resize(count);
@@ -432,10 +434,14 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
             int col0, row0, w, h;
             t->image.storedWindow(display, window, col0, row0, w, h);
             t->exposedPixels = t->image.exposedPixels();
-            const auto encode = encoding == LayerEncoding::goo   ? encodeGooLayer
-                                : encoding == LayerEncoding::ctb ? encodeCtbLayer
-                                                                 : encodePw0Layer;
-            t->bytes = encode(storedW, storedH, window.data(), col0, row0, w, h);
+            if (encoding == LayerEncoding::bitPlanes) {
+                t->bytes = encodeBitPlanes(planes, storedW, storedH, window.data(), col0, row0, w, h);
+            } else {
+                const auto encode = encoding == LayerEncoding::goo   ? encodeGooLayer
+                                    : encoding == LayerEncoding::ctb ? encodeCtbLayer
+                                                                     : encodePw0Layer;
+                t->bytes = encode(storedW, storedH, window.data(), col0, row0, w, h);
+            }
         } else {
             // The exposed pixels summed by the encoder as it reads the window (the same sum), and
             // the PNG's CRC-32 for the zip from the encoder's own.

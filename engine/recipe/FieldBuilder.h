@@ -82,6 +82,9 @@ struct LevelNode {
         double thickness = 0.0;
     };
     std::optional<WallCheck> wallCheck{};
+    /// A sheet whose `thickness:` varies in space: what it follows (e.g. "walls 0.4 to 1 mm (ramp
+    /// along x ...)"); report.html colours the part by the walls it measures.
+    std::string gradedWalls{};
     /// The solid's level as the recipe's `level:` key means it, when the two differ (a Gaussian
     /// lattice's level is the iso-value t, its solid's the isolated strut's radius in mm).
     std::function<double(double level)> recipeLevel{};

@@ -252,6 +252,8 @@ FieldPtr buildTpms(FieldBuilder& builder, const RecipeNode& spec, const std::str
         if (spec.has("thickness") && spec["thickness"].isNumber())
             node.wallCheck = LevelNode::WallCheck{raw, sheet, Box3{Vec3d(0.0), Vec3d(cell[0], cell[1], cell[2])},
                                                   spec["thickness"].number()};
+        else if (spec.has("thickness"))
+            node.gradedWalls = walls;
         if (std::isfinite(thinnestWall)) {
             node.thinnest = [thinnestWall](double) { return thinnestWall; };
             node.thinnestKind = "wall";

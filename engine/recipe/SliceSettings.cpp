@@ -17,7 +17,11 @@ const std::vector<ArchiveFormatInfo>& archiveFormats()
         {"goo", ".goo", "Elegoo .goo (V3) for Elegoo's Saturn and Mars printers: run-length layers, previews"},
         {"ctb", ".ctb",
          "Chitubox .ctb, unencrypted (version 2 to 5, the profile's `ctb_version:`, default 4) for the printers "
-         "that read Chitubox files (Elegoo Mars and Saturn, Creality LD, Phrozen, ...): RLE7 layers, previews"}};
+         "that read Chitubox files (Elegoo Mars and Saturn, Creality LD, Phrozen, ...): RLE7 layers, previews"},
+        {"cbddlp", ".cbddlp",
+         "Chitubox .cbddlp (version 2) for older Chitubox printers (Elegoo Mars, EPAX X1, ...): bit-plane layers, "
+         "previews"},
+        {"photon", ".photon", "Anycubic Photon's .photon (the .cbddlp layout, version 1): bit-plane layers, previews"}};
     static const std::vector<ArchiveFormatInfo> all = [] {
         // Anycubic Photon Workshop: one binary layout, one extension per printer (its firmware
         // reads only its own).
@@ -27,12 +31,14 @@ const std::vector<ArchiveFormatInfo>& archiveFormats()
             {"px6s", "Photon Mono X 6Ks"}, {"pmx2", "Photon Mono X2"},    {"pm3", "Photon M3"},
             {"pm3m", "Photon M3 Max"},     {"pm3r", "Photon M3 Premium"}, {"pm3n", "Photon Mono 2"},
             {"pm4n", "Photon Mono 4"},     {"pm5", "Photon Mono M5"},     {"dlp", "Photon Ultra"},
-            {"dl2p", "Photon D2"}};
+            {"dl2p", "Photon D2"},         {"pm5s", "Photon Mono M5s"},   {"m5sp", "Photon Mono M5s Pro"},
+            {"pws", "Photon S"},           {"pw0", "Photon Zero"},        {"pwx", "Photon X"}};
         std::vector<ArchiveFormatInfo> table = formats;
         for (const auto& [ext, printer] : photon)
             table.push_back(
                 {ext, std::string(".") + ext,
-                 std::string("Anycubic Photon Workshop file for the ") + printer + ": PW0 layers, preview"});
+                 std::string("Anycubic Photon Workshop file for the ") + printer +
+                     (std::string(ext) == "pws" ? ": bit-plane layers, preview" : ": PW0 layers, preview")});
         return table;
     }();
     return all;

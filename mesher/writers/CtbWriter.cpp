@@ -1,6 +1,7 @@
 #include "mesher/writers/CtbWriter.h"
 
 #include "mesher/writers/LittleEndian.h"
+#include "mesher/writers/WindowRuns.h"
 
 #include <nettle/aes.h>
 #include <nettle/cbc.h>
@@ -110,6 +111,27 @@ void appendRun(std::string& out, unsigned v, std::uint64_t n)
     }
 }
 
+/// PrintParameters (§3.3) at @a at: heights are the totals of both stages from v4 on.
+void printParameters(LittleEndian& le, const CtbHeader& h, std::uint32_t at)
+{
+    const bool v4 = h.version >= 4;
+    le.to(at);
+    const double bottomLift = h.bottom.liftDistance[0] + (v4 ? h.bottom.liftDistance[1] : 0.0);
+    const double lift = h.normal.liftDistance[0] + (v4 ? h.normal.liftDistance[1] : 0.0);
+    le.f32(bottomLift);
+    le.f32(h.bottom.liftSpeed[0]);
+    le.f32(lift);
+    le.f32(h.normal.liftSpeed[0]);
+    le.f32(h.normal.retractSpeed[0]);
+    le.f32(h.volumeMl);
+    le.f32(0);  // weight
+    le.f32(0);  // cost
+    le.f32(lightOff(h, h.bottom));
+    le.f32(lightOff(h, h.normal));
+    le.u32(h.bottomLayers);
+    le.zeros(16);
+}
+
 }  // namespace
 
 const std::string& ctbDisclaimer()
@@ -124,9 +146,23 @@ const std::string& ctbDisclaimer()
 
 CtbLayout ctbLayout(const CtbHeader& h)
 {
-    if (h.version < 2 || h.version > 5) throw std::logic_error("ctb: versions 2 to 5 only");
+    if (h.bitPlanes ? h.version < 1 || h.version > 2 || h.encrypted : h.version < 2 || h.version > 5)
+        throw std::logic_error("ctb: versions 2 to 5 (bit planes: 1 or 2) only");
     if (h.encrypted && h.version < 4) throw std::logic_error("ctb: the encrypted layout is version 4 or 5");
     CtbLayout l;
+    if (h.bitPlanes) {
+        // Header, previews, PrintParameters (version 2), the table: no SlicerInfo, no name.
+        l.largePreview = kHeaderBytes;
+        l.smallPreview = l.largePreview + kPreviewHeaderBytes + previewSlot(kCtbLargePreviewW, kCtbLargePreviewH);
+        std::uint32_t next = l.smallPreview + kPreviewHeaderBytes + previewSlot(kCtbSmallPreviewW, kCtbSmallPreviewH);
+        if (h.version >= 2) {
+            l.printParameters = next;
+            next += kPrintParametersBytes;
+        }
+        l.layerTable = next;
+        l.layersStart = std::uint64_t(l.layerTable) + std::uint64_t(kLayerDefBytes) * h.layers * h.planes;
+        return l;
+    }
     if (h.encrypted) {
         l.largePreview = kEncryptedHeaderBytes + kSettingsBytes;
         l.smallPreview =
@@ -335,7 +371,8 @@ std::string ctbHeadBytes(const CtbHeader& h, const std::string& largePreview, co
 {
     if (h.encrypted) return encryptedHead(h, largePreview, smallPreview, layers, layersEnd);
     const CtbLayout l = ctbLayout(h);
-    if (layers.size() != h.layers) throw std::logic_error("ctb: one table entry per layer");
+    if (layers.size() != std::size_t(h.layers) * h.planes)
+        throw std::logic_error("ctb: one table entry per layer and plane");
     if (largePreview.size() > previewSlot(kCtbLargePreviewW, kCtbLargePreviewH) ||
         smallPreview.size() > previewSlot(kCtbSmallPreviewW, kCtbSmallPreviewH))
         throw std::logic_error("ctb: a preview is larger than its slot");
@@ -343,9 +380,9 @@ std::string ctbHeadBytes(const CtbHeader& h, const std::string& largePreview, co
     out.reserve(std::size_t(l.layersStart));
     LittleEndian le(out);
     const bool v4 = h.version >= 4;
-    const double normalOff = lightOff(h, h.normal), bottomOff = lightOff(h, h.bottom);
+    const double normalOff = lightOff(h, h.normal);
     // Header, 112 bytes (§3.1).
-    le.u32(v4 ? kCtbMagicV4 : kCtbMagicV3);
+    le.u32(h.bitPlanes ? kCtbMagicBitPlanes : v4 ? kCtbMagicV4 : kCtbMagicV3);
     le.u32(std::uint32_t(h.version));
     le.f32(h.displayWidthMm);
     le.f32(h.displayHeightMm);
@@ -367,13 +404,13 @@ std::string ctbHeadBytes(const CtbHeader& h, const std::string& largePreview, co
     le.u32(h.printTimeS);
     le.u32(1);  // projector type: mirrored LCD, as every real file
     le.u32(l.printParameters);
-    le.u32(kPrintParametersBytes);
-    le.u32(1);  // one plane (anti-aliasing is in the grey levels)
+    le.u32(l.printParameters ? kPrintParametersBytes : 0);
+    le.u32(h.planes);  // .ctb: one plane (anti-aliasing is in the grey levels)
     le.u16(unsigned(std::clamp(h.normal.lightPwm, 0, 255)));
     le.u16(unsigned(std::clamp(h.bottom.lightPwm, 0, 255)));
-    le.u32(h.key);
+    le.u32(h.bitPlanes ? 0 : h.key);  // the bit-plane variant has no cipher
     le.u32(l.slicerInfo);
-    le.u32(kSlicerInfoBytes);
+    le.u32(l.slicerInfo ? kSlicerInfoBytes : 0);
     // Previews (§3.2): each header, its data, the rest of its slot zero.
     auto preview = [&](std::uint32_t at, int w, int hgt, const std::string& data) {
         le.to(at);
@@ -386,74 +423,61 @@ std::string ctbHeadBytes(const CtbHeader& h, const std::string& largePreview, co
     };
     preview(l.largePreview, kCtbLargePreviewW, kCtbLargePreviewH, largePreview);
     preview(l.smallPreview, kCtbSmallPreviewW, kCtbSmallPreviewH, smallPreview);
-    // PrintParameters (§3.3): heights are the totals of both stages from v4 on.
-    le.to(l.printParameters);
-    const double bottomLift = h.bottom.liftDistance[0] + (v4 ? h.bottom.liftDistance[1] : 0.0);
-    const double lift = h.normal.liftDistance[0] + (v4 ? h.normal.liftDistance[1] : 0.0);
-    le.f32(bottomLift);
-    le.f32(h.bottom.liftSpeed[0]);
-    le.f32(lift);
-    le.f32(h.normal.liftSpeed[0]);
-    le.f32(h.normal.retractSpeed[0]);
-    le.f32(h.volumeMl);
-    le.f32(0);  // weight
-    le.f32(0);  // cost
-    le.f32(bottomOff);
-    le.f32(normalOff);
-    le.u32(h.bottomLayers);
-    le.zeros(16);
-    // SlicerInfo (§3.4) and the machine name.
-    le.to(l.slicerInfo);
-    le.f32(v4 ? h.bottom.liftDistance[1] : 0.0);
-    le.f32(v4 ? h.bottom.liftSpeed[1] : 0.0);
-    le.f32(v4 ? h.normal.liftDistance[1] : 0.0);
-    le.f32(v4 ? h.normal.liftSpeed[1] : 0.0);
-    le.f32(v4 ? h.normal.retractDistance[1] : 0.0);
-    le.f32(v4 ? h.normal.retractSpeed[1] : 0.0);
-    le.f32(h.normal.waitAfterLift);
-    le.u32(l.machineName);
-    le.u32(std::uint32_t(h.machineName.size()));
-    le.u8(0x0F);  // anti-alias flag, as real files
-    le.u16(0);
-    le.u8(0);   // per-layer settings off: the header's values
-    le.u32(0);  // modified time (0: the same bytes every run)
-    le.u32(h.antiAliasing);
-    le.u32(h.version >= 5 ? 0x02000000u : 0x01090000u);
-    le.f32(h.normal.waitAfterRetract);
-    le.f32(h.normal.waitAfterLift);
-    le.u32(h.transitionLayers);
-    le.u32(l.printParametersV4);
-    le.u32(0);
-    le.u32(0);
-    le.raw(h.machineName);
-    if (v4) {
-        // Disclaimer (§3.5) and PrintParametersV4 (§3.6).
-        le.to(l.disclaimer);
-        le.raw(ctbDisclaimer());
-        le.to(l.printParametersV4);
-        le.f32(h.bottom.retractSpeed[0]);
-        le.f32(h.bottom.retractSpeed[1]);
-        le.u32(0);
-        le.f32(4.0);
-        le.u32(0);
-        le.f32(4.0);
+    if (l.printParameters) printParameters(le, h, l.printParameters);
+    if (l.slicerInfo) {  // not in the bit-plane variant
+        // SlicerInfo (§3.4) and the machine name.
+        le.to(l.slicerInfo);
+        le.f32(v4 ? h.bottom.liftDistance[1] : 0.0);
+        le.f32(v4 ? h.bottom.liftSpeed[1] : 0.0);
+        le.f32(v4 ? h.normal.liftDistance[1] : 0.0);
+        le.f32(v4 ? h.normal.liftSpeed[1] : 0.0);
+        le.f32(v4 ? h.normal.retractDistance[1] : 0.0);
+        le.f32(v4 ? h.normal.retractSpeed[1] : 0.0);
+        le.f32(h.normal.waitAfterLift);
+        le.u32(l.machineName);
+        le.u32(std::uint32_t(h.machineName.size()));
+        le.u8(0x0F);  // anti-alias flag, as real files
+        le.u16(0);
+        le.u8(0);   // per-layer settings off: the header's values
+        le.u32(0);  // modified time (0: the same bytes every run)
+        le.u32(h.antiAliasing);
+        le.u32(h.version >= 5 ? 0x02000000u : 0x01090000u);
         le.f32(h.normal.waitAfterRetract);
         le.f32(h.normal.waitAfterLift);
-        le.f32(h.normal.waitBeforeLift);
-        le.f32(h.bottom.retractDistance[1]);
-        le.f32(0);
+        le.u32(h.transitionLayers);
+        le.u32(l.printParametersV4);
         le.u32(0);
-        le.u32(4);
-        le.u32(h.layers > 0 ? h.layers - 1 : 0);
-        le.zeros(16);
-        le.u32(l.disclaimer);
-        le.u32(std::uint32_t(ctbDisclaimer().size()));
-        le.u32(l.resinParameters);
-        le.zeros(380);
-    }
-    if (h.version >= 5) {
-        le.to(l.resinParameters);
-        resinParameters(le, h, l.resinParameters);
+        le.u32(0);
+        le.raw(h.machineName);
+        if (v4) {
+            // Disclaimer (§3.5) and PrintParametersV4 (§3.6).
+            le.to(l.disclaimer);
+            le.raw(ctbDisclaimer());
+            le.to(l.printParametersV4);
+            le.f32(h.bottom.retractSpeed[0]);
+            le.f32(h.bottom.retractSpeed[1]);
+            le.u32(0);
+            le.f32(4.0);
+            le.u32(0);
+            le.f32(4.0);
+            le.f32(h.normal.waitAfterRetract);
+            le.f32(h.normal.waitAfterLift);
+            le.f32(h.normal.waitBeforeLift);
+            le.f32(h.bottom.retractDistance[1]);
+            le.f32(0);
+            le.u32(0);
+            le.u32(4);
+            le.u32(h.layers > 0 ? h.layers - 1 : 0);
+            le.zeros(16);
+            le.u32(l.disclaimer);
+            le.u32(std::uint32_t(ctbDisclaimer().size()));
+            le.u32(l.resinParameters);
+            le.zeros(380);
+        }
+        if (h.version >= 5) {
+            le.to(l.resinParameters);
+            resinParameters(le, h, l.resinParameters);
+        }
     }
     // The layer table (§4).
     le.to(l.layerTable);
@@ -522,32 +546,9 @@ std::string ctbLayerBytes(const CtbHeader& h, const CtbLayerDef& d, const std::s
 std::string encodeCtbLayer(int width, int height, const std::uint8_t* window, int col0, int row0, int w, int h)
 {
     std::string out;
-    unsigned value = 0;
-    std::uint64_t length = 0;
-    auto add = [&](unsigned v, std::uint64_t n) {
-        if (n == 0) return;
-        if (v != value && length > 0) {
-            appendRun(out, value, length);
-            length = 0;
-        }
-        value = v;
-        length += n;
-    };
-    add(0, std::uint64_t(row0) * width);
-    for (int r = 0; r < h; ++r) {
-        add(0, std::uint64_t(col0));
-        const std::uint8_t* row = window + std::size_t(r) * w;
-        for (int c = 0; c < w;) {
-            const unsigned v = row[c] >> 1;
-            int e = c + 1;
-            while (e < w && (row[e] >> 1) == v) ++e;
-            add(v, std::uint64_t(e - c));
-            c = e;
-        }
-        add(0, std::uint64_t(width - col0 - w));
-    }
-    add(0, std::uint64_t(height - row0 - h) * width);
-    if (length > 0) appendRun(out, value, length);
+    windowRuns(
+        width, height, window, col0, row0, w, h, [](std::uint8_t g) { return unsigned(g >> 1); },
+        [&](unsigned v, std::uint64_t n) { appendRun(out, v, n); });
     return out;
 }
 

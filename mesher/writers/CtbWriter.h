@@ -1,7 +1,9 @@
 /// @file CtbWriter.h
 /// @brief Chitubox's `.ctb`, the plain (unencrypted) layout of versions 2 to 5
 /// (shared/reference/ctb-format.md §3–§6): the header and its sections, the RLE15 previews, the
-/// layer table and per-layer records, the RLE7 layer code and its per-layer XOR cipher. Every
+/// layer table and per-layer records, the RLE7 layer code and its per-layer XOR cipher; and the
+/// same layout's bit-plane variant (`.cbddlp` version 2, `.photon` version 1: magic 0x12FD0019,
+/// no key, no SlicerInfo, one table entry per layer and plane, RLE1 planes of BitPlanes.h). Every
 /// number is little-endian except RLE7's run lengths.
 #pragma once
 
@@ -29,6 +31,10 @@ struct CtbHeader {
     /// The encrypted layout (magic 0x12FD0107, §7: AES-256-CBC settings and signature) that
     /// Chitubox 2 writes and some boards require; versions 4 and 5.
     bool encrypted = false;
+    /// The bit-plane variant (magic 0x12FD0019): `.cbddlp` (version 2) or `.photon` (version 1).
+    bool bitPlanes = false;
+    /// Bit planes per layer (bit-plane variant: 1, 2, 4, 8 or 16; .ctb: 1).
+    std::uint32_t planes = 1;
 };
 
 /// One entry of the layer table.
@@ -54,8 +60,8 @@ struct CtbLayout {
 };
 
 constexpr int kCtbLargePreviewW = 400, kCtbLargePreviewH = 300, kCtbSmallPreviewW = 200, kCtbSmallPreviewH = 125;
-/// The magic of the plain layout for versions 2–3 and 4–5.
-constexpr std::uint32_t kCtbMagicV3 = 0x12FD0086, kCtbMagicV4 = 0x12FD0106;
+/// The magic of the plain layout for versions 2–3 and 4–5, and of the bit-plane variant.
+constexpr std::uint32_t kCtbMagicV3 = 0x12FD0086, kCtbMagicV4 = 0x12FD0106, kCtbMagicBitPlanes = 0x12FD0019;
 /// The fixed disclaimer of versions 4 and 5 (320 bytes).
 const std::string& ctbDisclaimer();
 
@@ -63,7 +69,8 @@ const std::string& ctbDisclaimer();
 CtbLayout ctbLayout(const CtbHeader& header);
 
 /// Everything before the first layer record: `layout.layersStart` bytes. @a largePreview and
-/// @a smallPreview are RLE15 data (ctbPreview()); @a layers holds every layer's entry.
+/// @a smallPreview are RLE15 data (ctbPreview()); @a layers holds every layer's entry (the
+/// bit-plane variant: every plane's, plane-major: plane p of layer i at p·N + i).
 /// For the encrypted layout @a layersEnd (where the signature goes) is needed too.
 std::string ctbHeadBytes(const CtbHeader& header, const std::string& largePreview, const std::string& smallPreview,
                          const std::vector<CtbLayerDef>& layers, std::uint64_t layersEnd = 0);

@@ -1,5 +1,7 @@
 #include "mesher/writers/GooWriter.h"
 
+#include "mesher/writers/WindowRuns.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -181,32 +183,9 @@ std::string encodeGooLayer(int width, int height, const std::uint8_t* window, in
 {
     std::string out(1, char(0x55));
     // Runs of equal pixels over the whole display, row after row; the margins are black.
-    std::uint8_t value = 0;
-    std::uint64_t length = 0;
-    auto add = [&](std::uint8_t v, std::uint64_t n) {
-        if (n == 0) return;
-        if (v != value && length > 0) {
-            appendRun(out, value, length);
-            length = 0;
-        }
-        value = v;
-        length += n;
-    };
-    add(0, std::uint64_t(row0) * width);
-    for (int r = 0; r < h; ++r) {
-        add(0, std::uint64_t(col0));
-        const std::uint8_t* row = window + std::size_t(r) * w;
-        for (int c = 0; c < w;) {
-            const std::uint8_t v = row[c];
-            int e = c + 1;
-            while (e < w && row[e] == v) ++e;
-            add(v, std::uint64_t(e - c));
-            c = e;
-        }
-        add(0, std::uint64_t(width - col0 - w));
-    }
-    add(0, std::uint64_t(height - row0 - h) * width);
-    if (length > 0) appendRun(out, value, length);
+    windowRuns(
+        width, height, window, col0, row0, w, h, [](std::uint8_t g) { return g; },
+        [&](std::uint8_t v, std::uint64_t n) { appendRun(out, v, n); });
     unsigned sum = 0;
     for (std::size_t k = 1; k < out.size(); ++k) sum += std::uint8_t(out[k]);
     out.push_back(char(~sum & 0xFF));

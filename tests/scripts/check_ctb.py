@@ -3,7 +3,9 @@
 alone (no code shared with the writer): the header and its sections at the offsets it names, the
 layer table and each LayerDefEx, the XOR cipher (against the reference's test vectors first), every
 layer's RLE7 decoding to exactly width x height pixels and equal to the PNG folder the same recipe
-gives (at the format's 7 bits), the RLE15 previews, for versions 2 to 5. Also: the issue's command
+gives (at the format's 7 bits), the RLE15 previews, for versions 2 to 5; and the bit-plane variant
+(.cbddlp version 2, .photon version 1: magic 0x12FD0019, no key, no SlicerInfo, one table entry per
+layer and plane, RLE1 planes whose grey is the nearest of the planes' levels). Also: the issue's command
 line (`--printer saturn4 -o part.ctb`) writes a real .ctb, an extension that names no format is
 refused before any work, and a bad `ctb_version:` is refused with the profile's file:line.
 (The plain .ctb has no checksum; its integrity is the exact pixel count of every layer.)
@@ -22,7 +24,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from check_goo import read_png  # noqa: E402  (the PNG reader of the .goo check: no writer code)
 
-RECIPE = """domain: {box: [[0, 0, 0], [24, 18, 1]]}
+RECIPE = """domain: {box: [[0, 0, 0], [24, 18, 0.5]]}
 fields:
   lattice: {tpms: gyroid, cell: 6, solid: sheet, level: 0.5}
 result: lattice
@@ -150,17 +152,26 @@ def check_cipher_vectors():
     check(keystream(0x12345678, 1, 12).hex() == "4e051e24116a9678d4ce0ecd", "layer 1 keystream of the reference")
 
 
-def slice_pair(voxlat, tmp, printer, name):
+PNG_FOLDERS = {}
+
+
+def slice_pair(voxlat, tmp, printer, name, ext="ctb"):
+    """The archive, and the PNG folder of the same recipe (one per display: the saturn-v* profiles,
+    copies of elegoo-saturn's, share elegoo-saturn's)."""
     recipe = os.path.join(tmp, f"{name}-recipe.yaml")
-    open(recipe, "w").write(RECIPE.replace("PRINTER", printer).replace("FILE", "part.ctb"))
-    ctb = os.path.join(tmp, f"{name}.ctb")
-    folder = os.path.join(tmp, f"{name}-png")
-    for args in (["-o", ctb], ["--format", "png", "--preview", "off", "-o", folder]):
+    open(recipe, "w").write(RECIPE.replace("PRINTER", printer).replace("FILE", f"part.{ext}"))
+    ctb = os.path.join(tmp, f"{name}.{ext}")
+    display = name.split("-v")[0]
+    runs = [["-o", ctb]]
+    if display not in PNG_FOLDERS:
+        PNG_FOLDERS[display] = os.path.join(tmp, f"{name}-png")
+        runs.append(["--format", "png", "--preview", "off", "-o", PNG_FOLDERS[display]])
+    for args in runs:
         run = subprocess.run([voxlat, "-q", "slice", recipe] + args, capture_output=True, text=True)
         check(run.returncode == 0, f"voxlat slice {printer} {args}: {run.stderr}")
         if run.returncode:
             return None, None
-    return ctb, folder
+    return ctb, PNG_FOLDERS[display]
 
 
 def check_encrypted(b, folder, name, version, expect):
@@ -186,7 +197,7 @@ def check_encrypted(b, folder, name, version, expect):
         check(abs(h[key] - value) < 1e-4 if isinstance(value, float) else h[key] == value,
               f"{name}: settings {key} = {h[key]}, expected {value}")
     N, W, H = h["layers"], h["res_x"], h["res_y"]
-    check(N == 20 and h["key"] != 0, f"{name}: 20 layers, a non-zero key")
+    check(N == 10 and h["key"] != 0, f"{name}: 10 layers, a non-zero key")
     check(u32(st, 0xF4) == N - 1 and u32(st, 0x10C) == 320, f"{name}: last layer index, disclaimer length")
     d_off = u32(st, 0x108)
     check(b[d_off:d_off + 320] == DISCLAIMER, f"{name}: the disclaimer")
@@ -237,7 +248,7 @@ def check_archive(voxlat, tmp, printer, name, version, expect, encrypted=False):
         check(abs(h[key] - value) < 1e-4 if isinstance(value, float) else h[key] == value,
               f"{name}: header {key} = {h[key]}, expected {value}")
     N, W, H = h["layers"], h["res_x"], h["res_y"]
-    check(N == 20, f"{name}: 20 layers of 0.05 mm in 1 mm, header says {N}")
+    check(N == 10, f"{name}: 10 layers of 0.05 mm in 0.5 mm, header says {N}")
     check(abs(h["layer_mm"] - 0.05) < 1e-7 and abs(h["total_mm"] - N * 0.05) < 1e-4, f"{name}: heights")
     check(h["planes"] == 1 and h["key"] != 0, f"{name}: one plane, a non-zero key (firmware refuses 0)")
     # Previews: header, data right after it, RLE15 covering exactly width x height.
@@ -293,6 +304,67 @@ def check_archive(voxlat, tmp, printer, name, version, expect, encrypted=False):
                   f"{name}: layer {i}: .ctb pixels differ from the PNG folder's")
     check(end == len(b), f"{name}: the file ends with the last layer ({end} of {len(b)} bytes)")
     print(f"{name}: v{version}, {N} layers of {W} x {H} decoded, {len(b)} bytes")
+
+
+def decode_rle1(data, width, height):
+    """§5.2: one byte a run, bit 7 = on, bits 6-0 = 1 to 125 pixels; exactly one bilevel image."""
+    data = np.frombuffer(data, np.uint8)
+    counts = (data & 0x7F).astype(np.int64)
+    check(bool(np.all(counts > 0)) and bool(np.all(counts <= 125)), "RLE1 runs of 1 to 125 pixels")
+    total = int(counts.sum())
+    check(total == width * height, f"an RLE1 plane decodes to {total} pixels, not {width} x {height}")
+    if total != width * height:
+        return None
+    return np.repeat((data >> 7).astype(np.int32), counts).reshape(height, width)
+
+
+def check_bit_planes(voxlat, tmp, printer, name, ext, version, expect):
+    """The bit-plane variant (§1, §3, §4, §5.2): header, previews, PrintParameters (v2), no
+    SlicerInfo, N x planes table entries (plane p of layer i at p·N + i), every plane decoded."""
+    path, folder = slice_pair(voxlat, tmp, printer, name, ext)
+    if not path:
+        return
+    b = open(path, "rb").read()
+    check(u32(b, 0) == 0x12FD0019 and u32(b, 4) == version, f"{name}: magic {u32(b, 0):#x}, version {u32(b, 4)}")
+    N, W, H, planes = u32(b, 0x44), u32(b, 0x34), u32(b, 0x38), u32(b, 0x5C)
+    check((W, H) == (expect["res_x"], expect["res_y"]) and N == 10, f"{name}: {W} x {H}, {N} layers")
+    check(planes == expect["planes"], f"{name}: {planes} planes, expected {expect['planes']}")
+    check(u32(b, 0x64) == 0 and u32(b, 0x68) == 0, f"{name}: key 0 and no SlicerInfo")
+    bottom_layers, exposure, bottom_exposure = u32(b, 0x30), f32(b, 0x24), f32(b, 0x28)
+    check(abs(exposure - expect["exposure"]) < 1e-5 and abs(bottom_exposure - expect["bottom_exposure"]) < 1e-5,
+          f"{name}: exposures {exposure}, {bottom_exposure}")
+    pp, pp_size = u32(b, 0x54), u32(b, 0x58)
+    if version >= 2:
+        check(pp_size == 60 and u32(b, pp + 0x28) == bottom_layers, f"{name}: PrintParameters")
+    else:
+        check(pp == 0, f"{name}: version 1 has no PrintParameters")
+    for off, size in ((u32(b, 0x3C), (400, 300)), (u32(b, 0x48), (200, 125))):
+        pw, ph, data_off, data_len = struct.unpack_from("<4I", b, off)
+        check((pw, ph) == size and data_off == off + 32, f"{name}: preview header at {off}")
+        check(decode_rle15(b[data_off:data_off + data_len], pw, ph), f"{name}: preview {size} covers its pixels")
+    table = u32(b, 0x40)
+    levels = np.array([0] + [n * (256 // planes) - 1 for n in range(1, planes + 1)], np.int32)
+    end = 0
+    for i in range(N):
+        on = np.zeros((H, W), np.int32)
+        for p in range(planes):
+            z, exp, _off, data_off, data_len, page, _record = struct.unpack_from("<fffIIII", b, table + 36 * (p * N + i))
+            check(abs(z - (i + 1) * 0.05) < 1e-5 and page == 0, f"{name}: layer {i} plane {p}: Z {z}")
+            check(abs(exp - (bottom_exposure if i < bottom_layers else exposure)) < 1e-5,
+                  f"{name}: layer {i} plane {p}: exposure")
+            end = max(end, data_off + data_len)
+            plane = decode_rle1(b[data_off:data_off + data_len], W, H)
+            if plane is None:
+                return
+            on += plane
+        image = np.where(on == 0, 0, on * (256 // planes) - 1)
+        png = read_png(os.path.join(folder, f"{i:05d}.png")).astype(np.int32)
+        # Each pixel at the planes' level nearest its grey (ties either way).
+        best = np.abs(png[..., None] - levels).min(axis=-1)
+        check(png.shape == image.shape and np.array_equal(np.abs(png - image), best),
+              f"{name}: layer {i}: pixels are not the nearest levels to the PNG folder's")
+    check(end == len(b), f"{name}: the file ends with the last plane ({end} of {len(b)} bytes)")
+    print(f"{name}: .{ext} v{version}, {N} layers x {planes} planes of {W} x {H} decoded, {len(b)} bytes")
 
 
 expect_name = {"elegoo-saturn": "ELEGOO SATURN", "mars2-pro": "ELEGOO Mars 2 Pro", "saturn4": "ELEGOO Saturn 4",
@@ -361,6 +433,12 @@ def main():
         # The issue's command line: a Saturn 4 (a .goo printer) asked for part.ctb gets a .ctb.
         check_archive(voxlat, tmp, "saturn4", "saturn4", 4,
                       {"res_x": 11520, "res_y": 5120, "width_mm": 218.88, "height_mm": 122.88})
+        # The bit-plane variant, anti-aliasing on (the recipe's default: 4 planes) and off (1).
+        old_rgb = {"res_x": 1440, "res_y": 2560, "exposure": 8.0, "bottom_exposure": 60.0}
+        check_bit_planes(voxlat, tmp, "epax-x1", "epax-x1", "cbddlp", 2, dict(old_rgb, planes=4))
+        global RECIPE
+        RECIPE = RECIPE.replace("file: FILE", "file: FILE, aa: off")
+        check_bit_planes(voxlat, tmp, "anycubic-photon", "anycubic-photon", "photon", 1, dict(old_rgb, planes=1))
         check_refusals(voxlat, tmp)
     if failures:
         print(f"{len(failures)} check(s) failed")

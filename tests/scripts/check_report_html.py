@@ -2,11 +2,15 @@
 """report.html in a real browser: headless Chromium loads the page of shipped recipes (address
 ending in #check: the page reads its own pixels back and writes what it found into
 <pre id="voxlat-check">, dumped with the DOM). Checked: the page is one file that fetches nothing,
-the browser logs no console message (errors included), the 3D canvas is not blank, and on a recipe
-with islands the layer slider, set to the first island's layer, marks it in the island colour.
+the browser logs no console message (errors included), the 3D canvas is not blank, on a recipe
+with islands the layer slider, set to the first island's layer, marks it in the island colour, and a
+graded recipe's part is coloured (a colour per slab, and a legend). A sheet with graded walls
+carries the walls measured at each vertex in the page's mesh (read here without the browser: its
+colouring is the same per-vertex path), which match the recipe's thickness ramp at both ends.
 
 usage: check_report_html.py --chromium CHROMIUM VOXLAT SOURCE_DIR"""
 import argparse
+import base64
 import json
 import os
 import re
@@ -14,11 +18,23 @@ import subprocess
 import sys
 import tempfile
 
+import numpy as np
+
 # (recipe, overrides making it quick, what the page must show): the graded gyroid (coloured by
-# density per slab), sliced too, where the lattice's lowest bridges start as islands.
+# density per slab), sliced too, where the lattice's lowest bridges start as islands; and a sheet
+# whose walls thicken from 0.4 mm at x = 0 to 1.0 mm at x = 20 (docs/recipes.md's `ramped`),
+# coloured by the walls measured at each vertex.
+WALLS = """voxel: 0.2
+domain: {box: [[0, 0, 0], [20, 10, 10]]}
+fields:
+  ramped: {tpms: gyroid, cell: 10, solid: sheet, thickness: {ramp: {axis: x, from: 0.4, to: 1.0}}}
+result: ramped
+outputs: {mesh: ramped.stl}
+"""
 CASES = [
     ("gyroid-graded.yaml", ["voxel=0.4", "domain.box=[[0,0,0],[12,12,30]]",
                             "outputs.slices={printer: sl1s, layer: 0.1, file: graded.sl1s}"], {"graded", "islands"}),
+    (WALLS, [], {"walls"}),
 ]
 
 
@@ -49,8 +65,15 @@ def main():
 
     with tempfile.TemporaryDirectory(prefix="voxlat-html-") as tmp:
         for recipe, sets, shows in CASES:
+            if recipe.endswith(".yaml"):
+                path = os.path.join(args.source, "data", "recipes", recipe)
+            else:
+                path = os.path.join(tmp, "walls.yaml")
+                with open(path, "w") as f:
+                    f.write(recipe)
+                recipe = "walls.yaml"
             out = os.path.join(tmp, recipe.replace(".yaml", ""))
-            command = [args.voxlat, "run", os.path.join(args.source, "data", "recipes", recipe), "--out", out, "-q"]
+            command = [args.voxlat, "run", path, "--out", out, "-q"]
             for s in sets:
                 command += ["--set", s]
             p = subprocess.run(command, capture_output=True, text=True)
@@ -65,6 +88,29 @@ def main():
             # One file: no element loads anything (scripts and styles are inline).
             fetches = re.findall(r"<(?:script|link|img|iframe)\b[^>]*\b(?:src|href)\s*=", html, re.I)
             check(not fetches, recipe + ": the page fetches " + str(fetches[:3]))
+            if shows == {"walls"}:
+                # The walls measured at each vertex, read from the page's data (the browser's part,
+                # colours and legend from per-vertex values, is the graded case's above).
+                mesh = json.loads(re.search(r'<script type="application/json" id="voxlat-mesh">(.*?)</script>', html,
+                                            re.S).group(1).replace("<\\/", "</"))
+                colour = mesh.get("colour") or {}
+                check(colour.get("by") == "wall thickness" and colour.get("field") == "ramped",
+                      recipe + ": the page's mesh is not coloured by the walls of `ramped` (" + str(colour.keys()) + ")")
+                if not colour:
+                    continue
+                xs = np.frombuffer(base64.b64decode(mesh["points"]), np.float32).reshape(-1, 3)[:, 0]
+                walls = np.frombuffer(base64.b64decode(colour["values"]), np.float32)
+                check(walls.size == xs.size, recipe + ": one wall per vertex")
+                order = np.argsort(xs, kind="stable")
+                tenth = max(1, xs.size // 10)
+                # The walls at the thin and the thick end against the ramp there (0.4 to 0.46 mm over
+                # the first tenth, 0.94 to 1.0 over the last; chords read a little long).
+                low, high = float(np.median(walls[order[:tenth]])), float(np.median(walls[order[-tenth:]]))
+                print("walls measured: %.3f mm at the thin end, %.3f at the thick end (%d vertices)" % (low, high, xs.size))
+                check(0.38 <= low <= 0.52 and 0.88 <= high <= 1.12,
+                      recipe + ": walls measured " + str(low) + " mm at the thin end (ramp 0.4-0.46), " + str(high) +
+                      " mm at the thick end (0.94-1.0)")
+                continue
             found, console, run = load(args.chromium, page, tmp)
             check(found is not None, recipe + ": the page wrote no check result (exit " + str(run.returncode) + "): " +
                   run.stderr[-1500:])
@@ -74,11 +120,16 @@ def main():
             view = found.get("view3d") or {}
             check(view.get("drawn", 0) > 0.02 * view.get("total", 1),
                   recipe + ": the 3D view is blank (" + json.dumps(view) + ")")
-            check(found.get("outline_pixels", 0) > 0, recipe + ": the layer view draws no cut of the part")
+            if "islands" in shows:
+                check(found.get("outline_pixels", 0) > 0, recipe + ": the layer view draws no cut of the part")
             if "graded" in shows:
-                graded = [name for name, f in report.get("fields", {}).items() if "slabs" in f]
-                check(graded and found.get("coloured_by") == graded[0],
-                      recipe + ": the 3D view is not coloured by the graded field's slabs (" + json.dumps(found) + ")")
+                # One colour per slab, and the legend.
+                legend = found.get("legend") or {}
+                slabs = [len(f["slabs"]["slabs"]) for f in report.get("fields", {}).values() if "slabs" in f]
+                colours = slabs[0] if slabs else 2
+                check(found.get("legend_shown") and legend.get("colours", 0) >= colours and
+                      legend.get("hi", 0) > legend.get("lo", 0),
+                      recipe + ": no legend, or fewer than " + str(colours) + " vertex colours (" + json.dumps(legend) + ")")
             if "islands" in shows:
                 islands = report["slices"][0]["printability"]["islands"]
                 check(len(islands) > 0, recipe + ": the recipe has no island (choose another for this check)")
