@@ -4,7 +4,7 @@
 /// walls the recipe grades by it.
 #pragma once
 
-#include "fields/FieldNode.h"
+#include "fields/core/FieldNode.h"
 
 #include <openvdb/openvdb.h>
 
