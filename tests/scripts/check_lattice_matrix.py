@@ -2,8 +2,9 @@
 """Lattices in parts, end to end (issue 42): every lattice kind x placement x output run through
 the command line at a coarse voxel, each run checked independently of the code that made it.
 
-- Every lattice node type of `voxlat schema` (tpms, struts, points, curves, expr) must have a row
-  in KINDS: a new lattice type fails this test until it is placed here.
+- Every lattice node type of the engine's node-type table (read from `voxlat schema`, which is
+  generated from it: every type with a `density:` key), and each value of its `solid:` enum, must
+  have a row in KINDS: a new lattice type fails this test until it is placed here.
 - Each run exits 0, or 2 with a message naming the recipe's file and line (a refusal that is
   expected is listed in REFUSED with the words it must give).
 - Every mesh is read back here (binary STL, numpy): closed and manifold (every edge in exactly two
@@ -86,10 +87,18 @@ def mesh_facts(path):
     return closed, volume, len(t)
 
 
-def schema_lattice_types(voxlat):
+def schema_lattices(voxlat):
+    """The lattice node types of the engine's node-type table (`voxlat schema` is generated from it):
+    every type with a `density:` key, the size a density solve sets, with the values of its enumerated
+    keys that change what it is (`solid:`), as {type: {key: [values]}}."""
     schema = json.loads(subprocess.run([voxlat, "schema"], capture_output=True, text=True, check=True).stdout)
-    text = json.dumps(schema)
-    return [k for k in ("tpms", "struts", "points", "curves", "expr") if '"' + k + '"' in text]
+    lattices = {}
+    for name, node in schema["$defs"].items():
+        keys = node.get("properties", {})
+        if not name.startswith("node_") or "density" not in keys:
+            continue
+        lattices[name[len("node_"):]] = {k: keys[k]["enum"] for k in ("solid",) if "enum" in keys.get(k, {})}
+    return lattices
 
 
 def grid_points(lo, hi, step):
@@ -115,7 +124,12 @@ KINDS = {
         "curves"),
     "expr": ("{expr: \"sin(2*pi*x/6)*cos(2*pi*y/6) + sin(2*pi*y/6)*cos(2*pi*z/6) + sin(2*pi*z/6)*cos(2*pi*x/6)\"}",
              "expr"),
+    # An equation's sheet: the same solid as a TPMS sheet (|f| <= level) in every placement, so it
+    # is run in a box only (PLACED_ONLY).
+    "expr-sheet": ("{expr: \"sin(2*pi*x/6)*cos(2*pi*y/6) + sin(2*pi*y/6)*cos(2*pi*z/6) + sin(2*pi*z/6)*cos(2*pi*x/6)\", "
+                   "solid: sheet}", "expr"),
 }
+PLACED_ONLY = {"expr-sheet": ("box",)}
 
 
 SLICED = {"tpms-network", "tpms-sheet", "struts-gaussian", "expr"}
@@ -208,8 +222,15 @@ def main():
     only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv else ""
     mesh_path = os.path.abspath(os.path.join(source, "data", "meshes", "bracket.stl"))
     covered = {family for _, family in KINDS.values()}
-    for t in schema_lattice_types(voxlat):
+    lattices = schema_lattices(voxlat)
+    check(len(lattices) >= 5, "voxlat schema lists %d lattice node types: %s" % (len(lattices), sorted(lattices)))
+    for t, enums in lattices.items():
         check(t in covered, "the lattice node type `%s` has no row in KINDS: place it in the matrix" % t)
+        for key, values in enums.items():
+            for v in values:
+                rows = [n for n, (node, family) in KINDS.items() if family == t and
+                        ("%s: %s" % (key, v) in node or (v == values[0] and "%s:" % key not in node))]
+                check(rows, "the lattice `%s` with `%s: %s` has no row in KINDS: place it in the matrix" % (t, key, v))
     part_closed, part_volume, _ = mesh_facts(mesh_path)
     check(part_closed, "bracket.stl is not closed")
     runs = 0
@@ -228,6 +249,8 @@ def main():
                 name = "%s-%s" % (kind, placement)
                 if placement == "within" and family != "struts":
                     continue  # `within:` is a strut frame's key; other lattices fill a part as an infill
+                if placement not in PLACED_ONLY.get(kind, (placement,)):
+                    continue
                 if only and only not in name:
                     continue
                 outputs = ["mesh: m.stl"]
