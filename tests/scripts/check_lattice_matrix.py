@@ -32,17 +32,18 @@ import time
 import numpy as np
 
 VOXEL = float(os.environ.get("MATRIX_VOXEL", "0.15"))
-# Issue 42's target: the density measured from the mesh within 1 % of `density:`. At this voxel the
-# mesh and the solve's sub-voxel measure still differ by up to 2.7 % (1.0-2.7 % in 9 of 30 runs;
-# at 0.12 mm the sampled ones are within 1 %): a run is held to GUARD, and the runs over 1 % are
-# listed, so the target's state is printed every time. The point-field infill with a skin is 5-6 %
-# off at every voxel (sigma 1.2: 0.2105 at 0.25 mm, 0.2100 at 0.12 mm; sigma 1.5: 0.1906 and 0.1875
-# drained at 0.15 mm): a defect not yet found, held to its
-# own bound so that it cannot grow unseen.
+# Issue 42's target: the density measured from the mesh within 1 % of `density:`. The job aims the
+# level at its first (marching-cubes) mesh (`mesh_aim`), and 29 of 31 runs are within 0.45 %. A
+# run is held to GUARD, and the runs over 1 % are listed, so the target's state is printed every
+# time. The point-field infill with a skin is 3-4 % off (0.1941, 0.1923 drained, at 0.15 mm): its
+# field varies by only +-2 % about its level, so one step along the solve's slope lands short;
+# held to its own bound so that it cannot grow unseen.
 TARGET_TOLERANCE = 0.01
-GUARD = 0.03
-KNOWN_MISSES = {"points-infill-skin": 0.08, "points-infill-drain": 0.08}
+GUARD = TARGET_TOLERANCE
+KNOWN_MISSES = {"points-infill-skin": 0.05, "points-infill-drain": 0.05}
 TARGET = 0.2
+# A density map's mean from the mesh (a graded lattice is not aimed at its mesh).
+MAP_GUARD = 0.03
 # The report's density_from_mesh against this script's: the same mesh, but a skinned infill's skin
 # is the part less the core's voxels there and a separately meshed shell here.
 REPORT_AGREEMENT = 0.005
@@ -132,7 +133,12 @@ KINDS = {
 PLACED_ONLY = {"expr-sheet": ("box",)}
 
 
-SLICED = {"tpms-network", "tpms-sheet", "struts-gaussian", "expr"}
+# Slices of the drained infill where the slicer is quick (the strut slicer has its own tests; a
+# Gaussian strut part took 40 s of the matrix's 4 minutes to slice here).
+SLICED = {"tpms-network", "tpms-sheet", "expr"}
+# The box placement's edge (mm): capsule struts and Gaussian points evaluate slowly, so their box is
+# 2 x 2 x 2 cells (3 x 3 x 3 points).
+BOX_EDGE = {"struts-capsule": 10, "points": 10}
 
 
 # The other ways of sizing a lattice, the other frames, and the properties output: each run is
@@ -187,7 +193,8 @@ def recipe(kind, placement, outputs, mesh_path):
     node, _ = KINDS[kind]
     lines = ["voxel: %g" % VOXEL]
     if placement == "box":
-        lines.append("domain: {box: [[0, 0, 0], [20, 20, 20]]}")
+        edge = BOX_EDGE.get(kind, 20)
+        lines.append("domain: {box: [[0, 0, 0], [%g, %g, %g]]}" % (edge, edge, edge))
         lines += ["fields:", "  lat: %s" % with_keys(node, "density: %g" % TARGET), "result: lat"]
         region = "box"
     elif placement == "within":
@@ -312,7 +319,7 @@ def main():
                 if "frame: m.csv" in outputs:
                     rows = np.loadtxt(os.path.join(out, "m.csv"), delimiter=",", skiprows=1, ndmin=2)
                     ends = rows[:, :6].reshape(-1, 3)
-                    check(len(rows) > 0 and ends.min() >= -1e-6 and ends.max() <= 20 + 1e-6,
+                    check(len(rows) > 0 and ends.min() >= -1e-6 and ends.max() <= BOX_EDGE.get(kind, 20) + 1e-6,
                           "%s: the frame export has struts outside the domain box" % name)
                 if placement == "infill-drain":
                     drain = report.get("drain", {}).get("filled", {})
@@ -349,7 +356,7 @@ def main():
                 if "box_density" in checks:
                     extent = np.array(report["domain"]["max"]) - np.array(report["domain"]["min"])
                     measured = volume / float(np.prod(extent))
-                    check(abs(measured / checks["box_density"] - 1) <= GUARD,
+                    check(abs(measured / checks["box_density"] - 1) <= MAP_GUARD,
                           "%s: a graded density of mean %.3f measures %.4f from the mesh" %
                           (name, checks["box_density"], measured))
             if "walls_mm" in checks:
