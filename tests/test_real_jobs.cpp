@@ -396,13 +396,13 @@ TEST(RealJobs, TheLevelIsAimedAtTheMeshSoTheMeshHoldsTheDensity)
     // its grid before making it and moves the level by the solve's slope: the file written holds
     // the density (measured here from its bytes and the domain). A projected mesh (not what the
     // grid's marching cubes give) is not aimed at: its gap over 1 % is a warning with a voxel.
-    auto run = [](const std::string& mesh, nlohmann::json& report, double& meshShare) {
+    auto run = [](double voxel, const std::string& mesh, nlohmann::json& report, double& meshShare) {
         TempDir dir;
-        Job job(
-            recipeText("voxel: 0.5\ndomain: {box: [[0, 0, 0], [12, 12, 12]]}\nfields:\n  g: {tpms: gyroid, "
-                       "cell: 6, density: 0.3}\nresult: g\noutputs: {mesh: " +
-                           mesh + "}\n",
-                       dir));
+        Job job(recipeText("voxel: " + std::to_string(voxel) +
+                               "\ndomain: {box: [[0, 0, 0], [12, 12, 12]]}\nfields:\n  g: {tpms: gyroid, "
+                               "cell: 6, density: 0.3}\nresult: g\noutputs: {mesh: " +
+                               mesh + "}\n",
+                           dir));
         job.writeOutputs(dir.path / "out", false, false);
         report = job.report();
         const auto lo = report["domain"]["min"], hi = report["domain"]["max"];
@@ -412,19 +412,19 @@ TEST(RealJobs, TheLevelIsAimedAtTheMeshSoTheMeshHoldsTheDensity)
     };
     nlohmann::json raw;
     double share = 0.0;
-    run("g.stl", raw, share);
+    run(0.5, "g.stl", raw, share);
     const auto& g = raw["fields"]["g"];
     ASSERT_TRUE(g.contains("mesh_aim")) << g.dump(1);
     const double before = g["mesh_aim"]["density_from_mesh_at_solved_level"].get<double>();
     EXPECT_GT(std::abs(before / 0.3 - 1.0), 0.01) << "0.5 mm was expected to leave the solved level's mesh off";
     EXPECT_TRUE(g["mesh_aim"]["moved"].get<bool>());
     EXPECT_NEAR(g["density_from_mesh"].get<double>(), share, 1e-6);
-    EXPECT_NEAR(share, 0.3, 0.005 * 0.3) << "the mesh at the aimed level, " << before << " at the solved level";
+    EXPECT_NEAR(share, 0.3, 0.01 * 0.3) << "the mesh at the aimed level, " << before << " at the solved level";
     for (const auto& w : raw.value("warnings", nlohmann::json::array()))
         EXPECT_NE(w["code"], "density_from_mesh") << w.dump();
 
     nlohmann::json projected;
-    run("{file: g.stl, project: on}", projected, share);
+    run(0.4, "{file: g.stl, project: on}", projected, share);
     const auto& p = projected["fields"]["g"];
     EXPECT_FALSE(p.contains("mesh_aim")) << p.dump(1);
     ASSERT_TRUE(p.contains("density_from_mesh")) << p.dump(1);
@@ -433,7 +433,7 @@ TEST(RealJobs, TheLevelIsAimedAtTheMeshSoTheMeshHoldsTheDensity)
     for (const auto& w : projected["warnings"])
         if (w["code"] == "density_from_mesh") suggested = w["suggested_voxel_mm"].get<double>();
     EXPECT_EQ(suggested > 0.0, std::abs(share / 0.3 - 1.0) > 0.01) << share << " " << projected["warnings"].dump(1);
-    if (suggested > 0.0) EXPECT_LT(suggested, 0.5);
+    if (suggested > 0.0) EXPECT_LT(suggested, 0.4);
 }
 
 TEST(RealJobs, CapsuleStrutsInABoxHoldTheirDensityByMonteCarlo)
@@ -448,7 +448,8 @@ TEST(RealJobs, CapsuleStrutsInABoxHoldTheirDensityByMonteCarlo)
                    "size: 10}, kernel: capsule, density: 0.1}\nresult: s\n",
                    dir));
     const FieldPtr f = job.field("s");
-    const auto& entry = job.report()["fields"]["s"];
+    const nlohmann::json report = job.report();
+    const auto& entry = report["fields"]["s"];
     EXPECT_NEAR(entry["achieved_density"].get<double>(), 0.1, 0.001) << entry.dump(1);
     std::mt19937_64 rng(42);
     std::uniform_real_distribution<double> u(0.0, 20.0);
@@ -456,8 +457,10 @@ TEST(RealJobs, CapsuleStrutsInABoxHoldTheirDensityByMonteCarlo)
     std::vector<Vec3d> points(kPoints);
     for (Vec3d& p : points) p = Vec3d(u(rng), u(rng), u(rng));
     std::vector<double> values(kPoints);
-    for (std::size_t b = 0; b < kPoints; b += 1024)
-        f->values(std::span<const Vec3d>(points).subspan(b, 1024), std::span<double>(values).subspan(b, 1024));
+    for (std::size_t b = 0; b < kPoints; b += 1024) {
+        const std::size_t n = std::min<std::size_t>(1024, kPoints - b);
+        f->values(std::span<const Vec3d>(points).subspan(b, n), std::span<double>(values).subspan(b, n));
+    }
     const double inside = double(std::count_if(values.begin(), values.end(), [](double v) { return v < 0.0; }));
     const double share = inside / double(kPoints);
     const double sigma = std::sqrt(0.1 * 0.9 / double(kPoints));  // 0.00047

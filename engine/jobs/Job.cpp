@@ -43,7 +43,6 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/global_control.h>
 #include <tbb/info.h>
-#include <tbb/task_group.h>
 
 #include <algorithm>
 #include <chrono>
@@ -52,7 +51,6 @@
 #include <iostream>
 #include <optional>
 #include <sstream>
-#include <thread>
 
 namespace voxlat {
 
@@ -588,38 +586,6 @@ openvdb::FloatGrid::Ptr Job::evaluateResult(SparseStats& stats,
 }
 
 namespace {
-/// @a fn run so that a cancel stops it within 20 ms: its parallel loops run under a task group that a
-/// watcher cancels once @a context is, and Cancelled is thrown after it. Only for work whose loops
-/// may stop part-way without harm (a measure whose partial result is then dropped).
-template <class Fn>
-auto stoppable(const JobContext& context, Fn&& fn)
-{
-    using Result = decltype(fn());
-    std::optional<Result> result;
-    tbb::task_group group;
-    std::atomic<bool> done{false};
-    std::thread watcher([&] {
-        while (!done.load()) {
-            if (context.cancelled()) {
-                group.cancel();
-                return;
-            }
-            std::this_thread::sleep_for(std::chrono::milliseconds(20));
-        }
-    });
-    try {
-        group.run_and_wait([&] { result.emplace(fn()); });
-    } catch (...) {
-        done = true;
-        watcher.join();
-        throw;
-    }
-    done = true;
-    watcher.join();
-    context.checkCancelled();
-    return std::move(*result);
-}
-
 /// How far from its target the share the first mesh will hold may be before the level is moved
 /// for it (half the 1 % the mesh is held to: a move costs an evaluation of the grid).
 constexpr double kMeshAimTolerance = 0.005;
@@ -679,9 +645,9 @@ void Job::aimLevelsAtMesh()
     if (node.recipeLevel) entry["level_radius_mm"] = level;
     if (node.thinnest)
         entry[node.thinnestKind == "wall" ? "thinnest_wall_mm" : "thinnest_strut_mm"] = node.thinnest(level);
-    // The solve's own measure at the new level, along its slope (what slices of the field hold).
-    entry["achieved_density"] = solved.achieved + missing;
-    aim["density_on_voxels_at_solved_level"] = solved.achieved;
+    // `achieved_density` stays the solve's (the target met on the voxels at the solved level); the
+    // voxels' share at the moved level, along the solve's slope, is what slices of the field hold.
+    aim["density_on_voxels_at_level"] = solved.achieved + missing;
     entry["mesh_aim"] = aim;
 }
 
@@ -945,9 +911,7 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
                 "value over the triangle plus its miss at the centre (max), its square integrated over the "
                 "triangle (rms)";
         } else {
-            dev = timed("measure mesh", [&] {
-                return stoppable(*mContext, [&] { return measureDeviation(m, *distanceField(), 0.0, mDomain.voxel); });
-            });
+            dev = timed("measure mesh", [&] { return measureDeviation(m, *distanceField(), 0.0, mDomain.voxel); });
             measure =
                 "|max f / |grad f|| over the result's operands and the domain box, on every triangle sampled "
                 "at most one voxel apart";
