@@ -23,6 +23,10 @@ struct DensitySolution {
     double maskCoverageVoxels = 0.0;
     bool coverage = false;  ///< measured with sub-voxel coverage (value ties), not a count
     int rounds = 0;         ///< fine passes needed (1 unless the coarse bracket missed)
+    /// d achieved / d level about the level found, the solve's own measure over a window of about
+    /// 1 % of the target either side (a secant; 0 when the values give none): how far a level
+    /// must move to change the share, for a correction aimed at another measure (the mesh's).
+    double slope = 0.0;
     std::uint64_t evaluatedLeaves = 0;
 };
 

@@ -327,6 +327,8 @@ DensitySolution solveDensity(const FieldNode& indicator, std::span<const Density
         samples = collect(a, b, settled);
     }
     if (samples.empty() && settled == 0.0) throw std::invalid_argument("no voxel to measure a density on");
+    // The slope over the bracket (the cut samples' coverage at its ends; the settled weight is the same at both).
+    if (b > a) sol.slope = (planeCovered(samples, b) - planeCovered(samples, a)) / (b - a) / total;
     sol.level = solvePlaneCoverage(std::move(samples), settled, wanted, a, b, &settled);
     sol.domainVoxels = std::uint64_t(std::llround(total));
     sol.insideVoxels = std::uint64_t(std::llround(settled));

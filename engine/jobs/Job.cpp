@@ -380,6 +380,7 @@ void Job::solveLevels()
             // The region whose share `density:` is, in the words a user set it in.
             entry["density_measured_on"] = node.densityOf.empty() ? "the domain box" : node.densityOf;
             node.solid->solve(node.solid->levelFromIndicator(s.level));
+            mSolvedDensity[node.name] = {s.level, s.slope, s.achieved};
             if (node.onSolved) node.onSolved(node.solid->level());
             entry["target_density"] = *node.density;
             entry["achieved_density"] = s.achieved;
@@ -519,19 +520,20 @@ void Job::evaluateRecipeGrid(bool keep)
     SparseStats stats;
     // Without the grid: each leaf's solid bits, gathered per thread as the leaves are evaluated.
     tbb::enumerable_thread_specific<std::vector<SolidBlock>> leafBits;
-    openvdb::FloatGrid::Ptr g = timed("evaluate", [&] {
-        SparseOptions options;
-        options.clipToDomain = true;
-        options.stage = "evaluating " + mRecipe.result;
-        options.context = mContext;
-        if (!keep)
-            options.leafVisitor = [&](const openvdb::Coord& origin, const float* values) {
-                SolidBlock& b = leafBits.local().emplace_back();
-                b.origin = origin;
-                belowWords(values, 0.0f, b.bits.data());
-            };
-        return evaluateSparse(*mResult, mDomain, options, &stats);
-    });
+    openvdb::FloatGrid::Ptr g;
+    if (mAimGrid) {
+        // Evaluated at this level already, to measure the mesh's share (aimLevelsAtMesh()).
+        g = std::move(mAimGrid);
+        stats = mAimStats;
+    } else if (keep) {
+        g = evaluateResult(stats);
+    } else {
+        g = evaluateResult(stats, [&](const openvdb::Coord& origin, const float* values) {
+            SolidBlock& b = leafBits.local().emplace_back();
+            b.origin = origin;
+            belowWords(values, 0.0f, b.bits.data());
+        });
+    }
     if (keep) {
         mGrid = g;
         mGrid->setName(mRecipe.result);
@@ -569,6 +571,85 @@ void Job::evaluateRecipeGrid(bool keep)
             }
             return 0;
         });
+}
+
+openvdb::FloatGrid::Ptr Job::evaluateResult(SparseStats& stats,
+                                            std::function<void(const openvdb::Coord&, const float*)> leafVisitor)
+{
+    return timed("evaluate", [&] {
+        SparseOptions options;
+        options.clipToDomain = true;
+        options.stage = "evaluating " + mRecipe.result;
+        options.context = mContext;
+        options.leafVisitor = std::move(leafVisitor);
+        return evaluateSparse(*mResult, mDomain, options, &stats);
+    });
+}
+
+namespace {
+/// How far from its target the share the first mesh will hold may be before the level is moved
+/// for it (half the 1 % the mesh is held to: a move costs an evaluation of the grid).
+constexpr double kMeshAimTolerance = 0.005;
+}  // namespace
+
+void Job::aimLevelsAtMesh()
+{
+    if (mMeshAimed) return;
+    mMeshAimed = true;
+    solveLevels();
+    if (!mMeshes.empty() || mGrid || mReport.contains("pieces")) return;  // made at the solved level already
+    const LevelNode* aimed = nullptr;
+    int candidates = 0;
+    for (const LevelNode& node : mBuilder.levelNodes())
+        if (node.density && mSolvedDensity.contains(node.name) && meshShareOf(node, 1.0)) {
+            aimed = &node;
+            ++candidates;
+        }
+    if (candidates != 1) return;  // one share, one level: several lattices in one mesh are left as solved
+    const LevelNode& node = *aimed;
+    const SolvedDensity solved = mSolvedDensity.at(node.name);
+    const double target = *node.density;
+    SparseStats stats;
+    openvdb::FloatGrid::Ptr g = evaluateResult(stats);
+    const double volume =
+        timed("measure the mesh's share", [&] { return marchingCubesVolume(*g, 0.0f, mDomain.box.center()); });
+    const std::optional<MeshShareMeasure> before = meshShareOf(node, volume);
+    nlohmann::json aim = {
+        {"measure", "the volume the marching-cubes mesh of the recipe's grid encloses, before it is made"},
+        {"tolerance", kMeshAimTolerance},
+        {"solved_level", node.recipeLevel ? node.recipeLevel(node.solid->level()) : node.solid->level()},
+        {"density_from_mesh_at_solved_level", before ? before->measured : 0.0}};
+    const double missing = before ? target - before->measured : 0.0;
+    // The solve's slope is the share's change with the level on the voxels; the mesh's follows it
+    // (the same surface moves), so one step lands within a few percent of the gap.
+    const bool move = before && std::abs(missing) > kMeshAimTolerance * target && solved.slope > 0.0 &&
+                      std::isfinite(solved.slope) && std::abs(missing) < 0.25 * target;
+    if (!move) {
+        aim["moved"] = false;
+        mReport["fields"][node.name]["mesh_aim"] = aim;
+        mAimGrid = std::move(g);  // the outputs' grid: nothing moved
+        mAimStats = stats;
+        return;
+    }
+    const double indicatorLevel = solved.indicatorLevel + missing / solved.slope;
+    node.solid->correct(node.solid->levelFromIndicator(indicatorLevel));
+    if (mTimings.contains("evaluate")) {
+        mTimings["evaluate at the solved level"] = mTimings["evaluate"];
+        mTimings.erase("evaluate");
+    }
+    g.reset();  // evaluated again at the new level by the first output that needs it
+    nlohmann::json& entry = mReport["fields"][node.name];
+    const double level = node.solid->level();
+    aim["moved"] = true;
+    aim["slope"] = solved.slope;
+    entry["level"] = node.recipeLevel ? node.recipeLevel(level) : level;
+    if (node.recipeLevel) entry["level_radius_mm"] = level;
+    if (node.thinnest)
+        entry[node.thinnestKind == "wall" ? "thinnest_wall_mm" : "thinnest_strut_mm"] = node.thinnest(level);
+    // `achieved_density` stays the solve's (the target met on the voxels at the solved level); the
+    // voxels' share at the moved level, along the solve's slope, is what slices of the field hold.
+    aim["density_on_voxels_at_level"] = solved.achieved + missing;
+    entry["mesh_aim"] = aim;
 }
 
 namespace {
@@ -1354,6 +1435,7 @@ void Job::writeMesh(const std::filesystem::path& path, const MeshOptions& option
     // and the job was not cancelled meanwhile, so a cancel keeps the old file.
     std::optional<OutputTransaction> own;
     if (!OutputTransaction::current()) own.emplace();
+    if (options.raw() && options.extractor == MeshExtractor::MarchingCubes) aimLevelsAtMesh();
     MeshVariant& v = variant(options);
     if (v.mesh->triangles.empty())
         throw JobError(mRecipe.source->path + ": the result `" + mRecipe.result +
@@ -1409,6 +1491,41 @@ void Job::writeStlWhileMeshing(const std::filesystem::path& path)
     checkDensityFromMesh();
 }
 
+std::optional<Job::MeshShareMeasure> Job::meshShareOf(const LevelNode& node, double meshVolume)
+{
+    const auto region = mDensityRegionMm3.find(node.name);
+    if (!node.density || region == mDensityRegionMm3.end() || !(region->second > 0.0)) return std::nullopt;
+    const std::optional<LevelNode::MeshShare>& share = node.meshShare;
+    if (mRecipe.result != (share ? share->meshOf : node.name)) return std::nullopt;
+    double regionVolume = region->second, latticeVolume = meshVolume;
+    std::string regionWords;
+    if (share) {
+        const double part = share->partVolume ? share->partVolume() : 0.0;
+        if (share->skinned) {
+            // The skin is the part outside the region: its volume leaves the lattice's.
+            if (!(part > regionVolume)) return std::nullopt;
+            latticeVolume = meshVolume - (part - regionVolume);
+        } else if (part > 0.0) {
+            regionVolume = part;  // the part as its mesh encloses it
+        }
+        regionWords = node.densityOf;
+    } else {
+        // Alone, over a box: the mesh is cut by the domain, so the box must be the domain's
+        // (within a voxel on every face; a snapped domain is measured over what it holds).
+        if (node.densityMask) return std::nullopt;
+        const Box3 box = node.densityBox ? *node.densityBox : mDomain.box;
+        bool same = true;
+        for (int a = 0; a < 3; ++a)
+            same = same && std::abs(box.min[a] - mDomain.box.min[a]) <= mDomain.voxel &&
+                   std::abs(box.max[a] - mDomain.box.max[a]) <= mDomain.voxel;
+        if (!same) return std::nullopt;
+        const Vec3d e = mDomain.box.extent();
+        regionVolume = e[0] * e[1] * e[2];
+        regionWords = node.densityOf.empty() ? "the domain box" : node.densityOf;
+    }
+    return MeshShareMeasure{latticeVolume / regionVolume, regionWords};
+}
+
 void Job::checkDensityFromMesh()
 {
     if (mDensityChecked || mMeshes.empty() || mMeshes.front()->files.empty()) return;
@@ -1417,37 +1534,10 @@ void Job::checkDensityFromMesh()
     if (!v.measures) v.measures = v.mesh->measure();
     const double meshVolume = v.measures->volume;
     for (const LevelNode& node : mBuilder.levelNodes()) {
-        const auto region = mDensityRegionMm3.find(node.name);
-        if (!node.density || region == mDensityRegionMm3.end() || !(region->second > 0.0)) continue;
-        const std::optional<LevelNode::MeshShare>& share = node.meshShare;
-        if (mRecipe.result != (share ? share->meshOf : node.name)) continue;
-        double regionVolume = region->second, latticeVolume = meshVolume;
-        std::string regionWords;
-        if (share) {
-            const double part = share->partVolume ? share->partVolume() : 0.0;
-            if (share->skinned) {
-                // The skin is the part outside the region: its volume leaves the lattice's.
-                if (!(part > regionVolume)) continue;
-                latticeVolume = meshVolume - (part - regionVolume);
-            } else if (part > 0.0) {
-                regionVolume = part;  // the part as its mesh encloses it
-            }
-            regionWords = node.densityOf;
-        } else {
-            // Alone, over a box: the mesh is cut by the domain, so the box must be the domain's
-            // (within a voxel on every face; a snapped domain is measured over what it holds).
-            if (node.densityMask) continue;
-            const Box3 box = node.densityBox ? *node.densityBox : mDomain.box;
-            bool same = true;
-            for (int a = 0; a < 3; ++a)
-                same = same && std::abs(box.min[a] - mDomain.box.min[a]) <= mDomain.voxel &&
-                       std::abs(box.max[a] - mDomain.box.max[a]) <= mDomain.voxel;
-            if (!same) continue;
-            const Vec3d e = mDomain.box.extent();
-            regionVolume = e[0] * e[1] * e[2];
-            regionWords = node.densityOf.empty() ? "the domain box" : node.densityOf;
-        }
-        const double measured = latticeVolume / regionVolume;
+        const std::optional<MeshShareMeasure> share = meshShareOf(node, meshVolume);
+        if (!share) continue;
+        const double measured = share->measured;
+        const std::string& regionWords = share->region;
         const double gap = measured / *node.density - 1.0;
         mDensityFromMesh[node.name] = {
             {"density_from_mesh", measured}, {"density_from_mesh_gap", gap}, {"density_from_mesh_of", v.files.front()}};
@@ -1507,6 +1597,12 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
     OutputTransaction transaction;
     const auto firstMesh = std::find_if(mRecipe.outputs.begin(), mRecipe.outputs.end(),
                                         [](const OutputSpec& o) { return o.kind == "mesh"; });
+    // The first mesh is the one whose share of its region `density:` is held to: its level is aimed
+    // at it before any output is made, so every output has the same level.
+    if (firstMesh != mRecipe.outputs.end()) {
+        const MeshOptions options = meshOptions(*firstMesh, mRecipe);
+        if (options.raw() && options.extractor == MeshExtractor::MarchingCubes) aimLevelsAtMesh();
+    }
     // A raw marching-cubes STL whose mesh nothing else uses (no other output with the same mesh
     // settings, not the preview's) is written as it is made: the mesh is never held.
     auto onlyUse = [&](std::size_t n) {

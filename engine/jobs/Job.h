@@ -5,6 +5,7 @@
 #include "engine/checks/Pieces.h"
 #include "engine/core/Domain.h"
 #include "engine/core/JobContext.h"
+#include "engine/core/SparseEvaluator.h"
 #include "engine/jobs/ReportPage.h"
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/MeshSettings.h"
@@ -130,6 +131,23 @@ private:
     /// (a result other than the lattice or its infill, a density box that is not the domain's, a
     /// blended or skin-framed infill) are left out.
     void checkDensityFromMesh();
+    /// A solved lattice's share of its region as a mesh of @a meshVolume mm³ holds it, and the
+    /// region's words; nullopt for a lattice whose share the mesh of the result cannot give.
+    struct MeshShareMeasure {
+        double measured = 0.0;
+        std::string region;
+    };
+    std::optional<MeshShareMeasure> meshShareOf(const LevelNode& node, double meshVolume);
+    /// Before the first mesh (a raw marching-cubes one, the default) is made: the one solved
+    /// lattice's share as that mesh will hold it, measured from the recipe's grid at the solved
+    /// level (marchingCubesVolume()); more than kMeshAimTolerance off its target, its level is
+    /// moved by the solve's slope so the mesh holds the target, and the grid is evaluated again
+    /// (`mesh_aim` in report.json). Else the grid is kept for the outputs. Once.
+    void aimLevelsAtMesh();
+    /// The recipe's grid as evaluateRecipeGrid() evaluates it (clipped to the domain), with the
+    /// evaluator's counts in @a stats; @a leafVisitor, when set, takes each leaf instead of the grid.
+    openvdb::FloatGrid::Ptr evaluateResult(SparseStats& stats,
+                                           std::function<void(const openvdb::Coord&, const float*)> leafVisitor = {});
     /// `drain:` under a `slices:` output: the result wrapped in drain channels (planned with the
     /// other drains after the levels are solved), so every output of the run has them.
     void drainForSlices();
@@ -208,6 +226,17 @@ private:
     /// checkDensityFromMesh()'s findings, by field name (merged into report.json `fields`).
     nlohmann::json mDensityFromMesh = nlohmann::json::object();
     bool mDensityChecked = false;
+    /// Each density solve's level of the indicator, its slope and its achieved share, by name.
+    struct SolvedDensity {
+        double indicatorLevel = 0.0;
+        double slope = 0.0;
+        double achieved = 0.0;
+    };
+    std::map<std::string, SolvedDensity> mSolvedDensity;
+    bool mMeshAimed = false;
+    /// aimLevelsAtMesh()'s grid at the final level and its counts, taken by evaluateRecipeGrid().
+    openvdb::FloatGrid::Ptr mAimGrid;
+    SparseStats mAimStats;
     std::array<std::array<double, 6>, 6> mPropertiesStiffness{};
     /// properties() of a box frame too small to hold a whole repeating cell (@a zone): the frame's
     /// cell homogenized in a frame of enough of them; false when the frame is not a box frame.

@@ -24,6 +24,14 @@ void LevelSolid::solve(double level)
     mSolved = true;
 }
 
+void LevelSolid::correct(double level)
+{
+    if (!mSolved || mCorrected)
+        throw std::logic_error("LevelSolid::correct: only a solved level is corrected, and once");
+    mLevel = level;
+    mCorrected = true;
+}
+
 void LevelSolid::throwUnsolved()
 {
     throw std::logic_error(

@@ -1076,6 +1076,26 @@ StreamedMeshCounts marchingCubesStreamed(const openvdb::FloatGrid& grid, float i
     return counts;
 }
 
+double marchingCubesVolume(const openvdb::FloatGrid& grid, float isoValue, const openvdb::Vec3d& reference,
+                           ProgressFn progress)
+{
+    TriangleStream stream;
+    std::vector<double> slotVolume(stream.slots, 0.0);
+    double total = 0.0;
+    stream.format = [&](std::size_t, std::size_t slot, std::span<const TriangleCorners> triangles) {
+        double sum = 0.0;
+        for (const TriangleCorners& t : triangles) {
+            const openvdb::Vec3d a = openvdb::Vec3d(t[0]) - reference, b = openvdb::Vec3d(t[1]) - reference,
+                                 c = openvdb::Vec3d(t[2]) - reference;
+            sum += a.dot(b.cross(c));
+        }
+        slotVolume[slot] = sum;
+    };
+    stream.write = [&](std::size_t, std::size_t slot) { total += slotVolume[slot]; };
+    marchingCubesStreamed(grid, isoValue, stream, std::move(progress));
+    return total / 6.0;
+}
+
 MarchingCubesTableInfo marchingCubesTableInfo()
 {
     return caseTable().info;

@@ -83,6 +83,13 @@ struct StreamedMeshCounts {
 StreamedMeshCounts marchingCubesStreamed(const openvdb::FloatGrid& grid, float isoValue, const TriangleStream& stream,
                                          ProgressFn progress = {}, MarchingCubesStats* stats = nullptr);
 
+/// The volume marchingCubes(@a grid, @a isoValue) encloses, without the mesh: its triangles
+/// streamed (marchingCubesStreamed()) and their signed tetrahedra about @a reference (a point
+/// near the mesh) summed per chunk, then in chunk order: the same for any thread count, and the
+/// volume a file of that mesh holds (up to the rounding of its sums).
+double marchingCubesVolume(const openvdb::FloatGrid& grid, float isoValue, const openvdb::Vec3d& reference,
+                           ProgressFn progress = {});
+
 /// Facts about the precomputed case table, for tests and reports.
 struct MarchingCubesTableInfo {
     std::size_t entries = 0;        ///< reachable (corner case, face decision) combinations

@@ -2,8 +2,9 @@
 """Lattices in parts, end to end (issue 42): every lattice kind x placement x output run through
 the command line at a coarse voxel, each run checked independently of the code that made it.
 
-- Every lattice node type of `voxlat schema` (tpms, struts, points, curves, expr) must have a row
-  in KINDS: a new lattice type fails this test until it is placed here.
+- Every lattice node type of the engine's node-type table (read from `voxlat schema`, which is
+  generated from it: every type with a `density:` key), and each value of its `solid:` enum, must
+  have a row in KINDS: a new lattice type fails this test until it is placed here.
 - Each run exits 0, or 2 with a message naming the recipe's file and line (a refusal that is
   expected is listed in REFUSED with the words it must give).
 - Every mesh is read back here (binary STL, numpy): closed and manifold (every edge in exactly two
@@ -31,17 +32,18 @@ import time
 import numpy as np
 
 VOXEL = float(os.environ.get("MATRIX_VOXEL", "0.15"))
-# Issue 42's target: the density measured from the mesh within 1 % of `density:`. At this voxel the
-# mesh and the solve's sub-voxel measure still differ by up to 2.7 % (1.0-2.7 % in 9 of 30 runs;
-# at 0.12 mm the sampled ones are within 1 %): a run is held to GUARD, and the runs over 1 % are
-# listed, so the target's state is printed every time. The point-field infill with a skin is 5-6 %
-# off at every voxel (sigma 1.2: 0.2105 at 0.25 mm, 0.2100 at 0.12 mm; sigma 1.5: 0.1906 and 0.1875
-# drained at 0.15 mm): a defect not yet found, held to its
-# own bound so that it cannot grow unseen.
+# Issue 42's target: the density measured from the mesh within 1 % of `density:`. The job aims the
+# level at its first (marching-cubes) mesh (`mesh_aim`), and 29 of 31 runs are within 0.45 %. A
+# run is held to GUARD, and the runs over 1 % are listed, so the target's state is printed every
+# time. The point-field infill with a skin is 3-4 % off (0.1941, 0.1923 drained, at 0.15 mm): its
+# field varies by only +-2 % about its level, so one step along the solve's slope lands short;
+# held to its own bound so that it cannot grow unseen.
 TARGET_TOLERANCE = 0.01
-GUARD = 0.03
-KNOWN_MISSES = {"points-infill-skin": 0.08, "points-infill-drain": 0.08}
+GUARD = TARGET_TOLERANCE
+KNOWN_MISSES = {"points-infill-skin": 0.05, "points-infill-drain": 0.05}
 TARGET = 0.2
+# A density map's mean from the mesh (a graded lattice is not aimed at its mesh).
+MAP_GUARD = 0.03
 # The report's density_from_mesh against this script's: the same mesh, but a skinned infill's skin
 # is the part less the core's voxels there and a separately meshed shell here.
 REPORT_AGREEMENT = 0.005
@@ -86,10 +88,18 @@ def mesh_facts(path):
     return closed, volume, len(t)
 
 
-def schema_lattice_types(voxlat):
+def schema_lattices(voxlat):
+    """The lattice node types of the engine's node-type table (`voxlat schema` is generated from it):
+    every type with a `density:` key, the size a density solve sets, with the values of its enumerated
+    keys that change what it is (`solid:`), as {type: {key: [values]}}."""
     schema = json.loads(subprocess.run([voxlat, "schema"], capture_output=True, text=True, check=True).stdout)
-    text = json.dumps(schema)
-    return [k for k in ("tpms", "struts", "points", "curves", "expr") if '"' + k + '"' in text]
+    lattices = {}
+    for name, node in schema["$defs"].items():
+        keys = node.get("properties", {})
+        if not name.startswith("node_") or "density" not in keys:
+            continue
+        lattices[name[len("node_"):]] = {k: keys[k]["enum"] for k in ("solid",) if "enum" in keys.get(k, {})}
+    return lattices
 
 
 def grid_points(lo, hi, step):
@@ -115,10 +125,20 @@ KINDS = {
         "curves"),
     "expr": ("{expr: \"sin(2*pi*x/6)*cos(2*pi*y/6) + sin(2*pi*y/6)*cos(2*pi*z/6) + sin(2*pi*z/6)*cos(2*pi*x/6)\"}",
              "expr"),
+    # An equation's sheet: the same solid as a TPMS sheet (|f| <= level) in every placement, so it
+    # is run in a box only (PLACED_ONLY).
+    "expr-sheet": ("{expr: \"sin(2*pi*x/6)*cos(2*pi*y/6) + sin(2*pi*y/6)*cos(2*pi*z/6) + sin(2*pi*z/6)*cos(2*pi*x/6)\", "
+                   "solid: sheet}", "expr"),
 }
+PLACED_ONLY = {"expr-sheet": ("box",)}
 
 
-SLICED = {"tpms-network", "tpms-sheet", "struts-gaussian", "expr"}
+# Slices of the drained infill where the slicer is quick (the strut slicer has its own tests; a
+# Gaussian strut part took 40 s of the matrix's 4 minutes to slice here).
+SLICED = {"tpms-network", "tpms-sheet", "expr"}
+# The box placement's edge (mm): capsule struts and Gaussian points evaluate slowly, so their box is
+# 2 x 2 x 2 cells (3 x 3 x 3 points).
+BOX_EDGE = {"struts-capsule": 10, "points": 10}
 
 
 # The other ways of sizing a lattice, the other frames, and the properties output: each run is
@@ -173,7 +193,8 @@ def recipe(kind, placement, outputs, mesh_path):
     node, _ = KINDS[kind]
     lines = ["voxel: %g" % VOXEL]
     if placement == "box":
-        lines.append("domain: {box: [[0, 0, 0], [20, 20, 20]]}")
+        edge = BOX_EDGE.get(kind, 20)
+        lines.append("domain: {box: [[0, 0, 0], [%g, %g, %g]]}" % (edge, edge, edge))
         lines += ["fields:", "  lat: %s" % with_keys(node, "density: %g" % TARGET), "result: lat"]
         region = "box"
     elif placement == "within":
@@ -208,8 +229,15 @@ def main():
     only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv else ""
     mesh_path = os.path.abspath(os.path.join(source, "data", "meshes", "bracket.stl"))
     covered = {family for _, family in KINDS.values()}
-    for t in schema_lattice_types(voxlat):
+    lattices = schema_lattices(voxlat)
+    check(len(lattices) >= 5, "voxlat schema lists %d lattice node types: %s" % (len(lattices), sorted(lattices)))
+    for t, enums in lattices.items():
         check(t in covered, "the lattice node type `%s` has no row in KINDS: place it in the matrix" % t)
+        for key, values in enums.items():
+            for v in values:
+                rows = [n for n, (node, family) in KINDS.items() if family == t and
+                        ("%s: %s" % (key, v) in node or (v == values[0] and "%s:" % key not in node))]
+                check(rows, "the lattice `%s` with `%s: %s` has no row in KINDS: place it in the matrix" % (t, key, v))
     part_closed, part_volume, _ = mesh_facts(mesh_path)
     check(part_closed, "bracket.stl is not closed")
     runs = 0
@@ -228,6 +256,8 @@ def main():
                 name = "%s-%s" % (kind, placement)
                 if placement == "within" and family != "struts":
                     continue  # `within:` is a strut frame's key; other lattices fill a part as an infill
+                if placement not in PLACED_ONLY.get(kind, (placement,)):
+                    continue
                 if only and only not in name:
                     continue
                 outputs = ["mesh: m.stl"]
@@ -289,7 +319,7 @@ def main():
                 if "frame: m.csv" in outputs:
                     rows = np.loadtxt(os.path.join(out, "m.csv"), delimiter=",", skiprows=1, ndmin=2)
                     ends = rows[:, :6].reshape(-1, 3)
-                    check(len(rows) > 0 and ends.min() >= -1e-6 and ends.max() <= 20 + 1e-6,
+                    check(len(rows) > 0 and ends.min() >= -1e-6 and ends.max() <= BOX_EDGE.get(kind, 20) + 1e-6,
                           "%s: the frame export has struts outside the domain box" % name)
                 if placement == "infill-drain":
                     drain = report.get("drain", {}).get("filled", {})
@@ -326,7 +356,7 @@ def main():
                 if "box_density" in checks:
                     extent = np.array(report["domain"]["max"]) - np.array(report["domain"]["min"])
                     measured = volume / float(np.prod(extent))
-                    check(abs(measured / checks["box_density"] - 1) <= GUARD,
+                    check(abs(measured / checks["box_density"] - 1) <= MAP_GUARD,
                           "%s: a graded density of mean %.3f measures %.4f from the mesh" %
                           (name, checks["box_density"], measured))
             if "walls_mm" in checks:
