@@ -77,7 +77,7 @@ fuzz: deps
 	$(call install_missing,clang)
 	cmake -S . -B $(FUZZ_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ -DVOXLAT_FUZZ=ON \
 	  $(if $(CCACHE),-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
-	cmake --build $(FUZZ_BUILD) -j $(JOBS) --target fuzz_recipe fuzz_equation fuzz_mesh fuzz_wireframe fuzz_values
+	cmake --build $(FUZZ_BUILD) -j $(JOBS) --target fuzz_recipe fuzz_equation fuzz_mesh fuzz_wireframe fuzz_values fuzz_profile fuzz_properties
 	FUZZ_SECONDS=$(FUZZ_SECONDS) tests/fuzz/run_fuzz.sh $(CURDIR) $(FUZZ_BUILD)
 
 bench: build bench-deps

@@ -408,3 +408,171 @@ TEST(Adversarial, CommandLineNumbersKeepTheirDigits)
     EXPECT_NE(text.find("a layer of 10.0000001 mm"), std::string::npos) << text;
     EXPECT_TRUE(listFolder(dir.path) == std::vector<std::string>{"r.yaml"});
 }
+
+/// Every file in @a folder (recursively) whose name holds ".tmp-": temporaries left behind.
+static std::vector<std::string> temporariesIn(const std::filesystem::path& folder)
+{
+    std::vector<std::string> left;
+    for (const auto& f : std::filesystem::recursive_directory_iterator(folder))
+        if (f.path().filename().string().find(".tmp-") != std::string::npos) left.push_back(f.path().string());
+    return left;
+}
+
+TEST(Adversarial, ALongWriteChecksItsInterrupterEveryChunkAndKeepsTheOldFile)
+{
+    // A write of 16 MB whose job is cancelled after its third chunk: it stops within one more
+    // chunk (64 KB), not at the end, and the old file stays, with no temporary.
+    TempDir dir;
+    const auto path = dir.write("big.bin", "old");
+    JobContext context;
+    int calls = 0;
+    std::size_t written = 0;
+    {
+        OutputTransaction transaction([&] {
+            if (++calls == 3) context.cancel();
+            context.checkCancelled();
+        });
+        EXPECT_THROW(
+            {
+                AtomicFile file(path.string());
+                const std::string block(1000, 'x');
+                for (int i = 0; i < 16000; ++i, written += block.size()) file.stream() << block;
+                file.commit();
+            },
+            Cancelled);
+    }
+    EXPECT_EQ(calls, 3);
+    EXPECT_LE(written, 3 * kWriteChunkBytes + 1000);
+    EXPECT_EQ(readFile(path), "old");
+    EXPECT_EQ(temporariesIn(dir.path), std::vector<std::string>{});
+
+    // Each mesh format (STL formatted in parallel, OBJ and PLY through OpenMesh, 3MF packed by
+    // lib3mf) stops on a cancel made before it starts, the old file kept.
+    TriangleMesh mesh;
+    for (int i = 0; i < 4000; ++i) {
+        const float x = float(i % 64), y = float(i / 64);
+        const auto base = std::uint32_t(mesh.points.size());
+        mesh.points.insert(mesh.points.end(), {{x, y, 0.0f}, {x + 0.5f, y, 0.0f}, {x, y + 0.5f, 0.0f}});
+        mesh.triangles.push_back({base, base + 1, base + 2});
+    }
+    JobContext cancelled;
+    cancelled.cancel();
+    for (const std::string name : {"m.stl", "m.obj", "m.ply", "m.3mf"}) {
+        const auto file = dir.write(name, "old");
+        OutputTransaction transaction([&] { cancelled.checkCancelled(); });
+        EXPECT_THROW(writeMesh(mesh, file.string()), Cancelled) << name;
+        EXPECT_EQ(readFile(file), "old") << name;
+    }
+    EXPECT_EQ(temporariesIn(dir.path), std::vector<std::string>{});
+    // Not cancelled, the same writes go through.
+    for (const std::string name : {"m.stl", "m.obj", "m.ply", "m.3mf"}) {
+        JobContext fine;
+        OutputTransaction transaction([&] { fine.checkCancelled(); });
+        writeMesh(mesh, (dir.path / name).string());
+        transaction.commit();
+        EXPECT_NE(readFile(dir.path / name), "old") << name;
+    }
+}
+
+TEST(Adversarial, ASecondSignalRemovesTemporaryFoldersWithTheirFiles)
+{
+    // A slice folder's temporary (layers written into it) is registered as a folder: the second
+    // signal's clean-up removes it with everything inside, subfolders included.
+    TempDir dir;
+    const auto folder = dir.path / "layers.tmp-1-0";
+    std::filesystem::create_directories(folder / "sub");
+    for (int i = 0; i < 300; ++i) std::ofstream(folder / ("layer" + std::to_string(i) + ".png")) << "png";
+    std::ofstream(folder / "sub" / "deep.txt") << "x";
+    registerTemporary(folder.string(), true);
+    removeTemporaries();
+    unregisterTemporary(folder.string());
+    EXPECT_FALSE(std::filesystem::exists(folder));
+    EXPECT_EQ(listFolder(dir.path), std::vector<std::string>{});
+}
+
+TEST(Adversarial, AMeshBeyondItsToleranceIsWarnedWithNumbersAndFailsWhenStrict)
+{
+    // Two crossed cylinders: their union's crease is left flat (a vertex cannot sit on both), so
+    // the mesh strays about 0.1 mm at 0.25 mm voxels, past a tolerance of 0.01 mm.
+    TempDir dir;
+    const std::string recipe = R"(voxel: 0.25
+domain: {box: [[-6, -6, -6], [6, 6, 6]]}
+fields:
+  a: {cylinder: {radius: 2, height: 10, axis: [1, 0, 0]}}
+  b: {cylinder: {radius: 2, height: 10, axis: [0, 1, 0]}}
+  u: {union: [a, b]}
+result: u
+)";
+    auto run = [&](const std::string& name, const std::string& outputs, std::string* text,
+                   const std::string& extra = "") {
+        const auto path = dir.write(name + ".yaml", recipe + outputs);
+        return runCommand(voxlatBinary() + " -q run " + path.string() + " --no-html --no-preview --out " +
+                              (dir.path / name).string() + extra,
+                          text);
+    };
+    std::string text;
+    ASSERT_EQ(run("warn", "outputs: {mesh: {file: u.stl, tolerance: 0.01}}\n", &text), 0) << text;
+    const auto report = nlohmann::json::parse(readFile(dir.path / "warn" / "report.json"));
+    nlohmann::json warning;
+    for (const auto& w : report["warnings"])
+        if (w["code"] == "mesh_tolerance") warning = w;
+    ASSERT_FALSE(warning.is_null()) << report["warnings"].dump();
+    const double stray = report["mesh"]["deviation"]["max_mm"].get<double>();
+    EXPECT_GT(stray, 0.01);
+    EXPECT_EQ(warning["max_mm"].get<double>(), stray);
+    EXPECT_EQ(warning["tolerance_mm"].get<double>(), 0.01);
+    // The fixes: a tolerance the mesh meets, and a voxel that shrinks the stray below the
+    // tolerance if it shrinks in proportion (with a margin).
+    EXPECT_GE(warning["suggested_tolerance_mm"].get<double>(), stray);
+    EXPECT_LE(warning["suggested_tolerance_mm"].get<double>(), 1.1 * stray);
+    EXPECT_LE(warning["suggested_voxel_mm"].get<double>(), 0.25 * 0.01 / stray);
+    EXPECT_NE(warning["message"].get<std::string>().find("use `voxel: " +
+                                                         formatNumber(warning["suggested_voxel_mm"].get<double>())),
+              std::string::npos)
+        << warning["message"];
+    EXPECT_EQ(report["mesh"]["tolerance_missed"]["suggested_voxel_mm"], warning["suggested_voxel_mm"]);
+    // The stray does shrink with the voxel: at half the voxel it is smaller.
+    ASSERT_EQ(run("half", "outputs: {mesh: {file: u.stl, tolerance: 0.01}}\n", &text, " --set voxel=0.125"), 0) << text;
+    const double halfStray =
+        nlohmann::json::parse(readFile(dir.path / "half" / "report.json"))["mesh"]["deviation"]["max_mm"].get<double>();
+    EXPECT_LT(halfStray, 0.7 * stray);
+    // `strict: on`: the same miss fails the job, exit 3, with the numbers, and nothing is written.
+    EXPECT_EQ(run("strict", "outputs: {mesh: {file: u.stl, tolerance: 0.01, strict: on}}\n", &text), 3) << text;
+    EXPECT_NE(text.find("strays up to " + formatNumber(stray) + " mm"), std::string::npos) << text;
+    EXPECT_NE(text.find("or a tolerance of at least"), std::string::npos) << text;
+    EXPECT_EQ(listFolder(dir.path / "strict"), std::vector<std::string>{});
+    // Met, strict passes: a tolerance above the stray.
+    EXPECT_EQ(run("met", "outputs: {mesh: {file: u.stl, tolerance: 0.2, strict: on}}\n", &text), 0) << text;
+    // `strict` without a tolerance is bad input at its line.
+    EXPECT_EQ(run("bad", "outputs: {mesh: {file: u.stl, strict: on}}\n", &text), 2) << text;
+    EXPECT_NE(text.find("bad.yaml:8:"), std::string::npos) << text;
+}
+
+TEST(Adversarial, AnAbsurdSigmaRangeIsRefusedAtItsLine)
+{
+    // `optimize: {sigma: [0.3, 1e6]}` once picked sigma = 250 000 mm with a solid cell, then (with
+    // the density check) ran for minutes on its first trial: a kernel far wider than the struts
+    // gathers the struts of millions of cells per point. A sigma wider than the longest strut is
+    // refused, at once, at the line that asks for it.
+    TempDir dir;
+    const std::string head = R"(material: form2
+voxel: 0.25
+domain: {box: [[0, 0, 0], [10, 10, 10]]}
+properties: {cell: [5, 5, 5], origin: [5, 5, 5], resolution: 16}
+fields:
+  lattice:
+    struts: {cell: x, size: 5}
+    density: 0.2
+)";
+    for (const std::string& tail : {std::string("    kernel: {gaussian: {sigma: 1e6}}\n"),
+                                    std::string("    kernel: {gaussian: {sigma: 0.3}}\n"
+                                                "    optimize: {sigma: [0.3, 1e6], axis: z, samples: 3}\n")}) {
+        const auto path = dir.write("r.yaml", head + tail + "result: lattice\n");
+        std::string text;
+        const auto start = std::chrono::steady_clock::now();
+        EXPECT_EQ(runCommand(voxlatBinary() + " -q properties " + path.string(), &text), 2) << text;
+        EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 20.0);
+        EXPECT_NE(text.find("r.yaml:"), std::string::npos) << text;
+        EXPECT_NE(text.find("wider than the frame's longest strut"), std::string::npos) << text;
+    }
+}

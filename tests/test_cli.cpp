@@ -225,6 +225,15 @@ static bool waitForSignalHandler(pid_t pid, int signal)
     return false;
 }
 
+/// Every file or folder under @a folder whose name holds ".tmp-": temporaries left behind.
+static std::vector<std::string> temporariesUnder(const std::filesystem::path& folder)
+{
+    std::vector<std::string> left;
+    for (const auto& f : std::filesystem::recursive_directory_iterator(folder))
+        if (f.path().filename().string().find(".tmp-") != std::string::npos) left.push_back(f.path().string());
+    return left;
+}
+
 TEST(Cli, SigintAndSigtermCancelAndLeaveNoFiles)
 {
     // A job of about a second (0.06 mm voxels over a 30 mm gyroid); the signal lands while it works.
@@ -258,9 +267,96 @@ outputs: {mesh: part.stl, vdb: part.vdb}
         if (std::filesystem::exists(out)) {
             EXPECT_EQ(listFolder(out), std::vector<std::string>{}) << "signal " << signal;
         }
-        for (const auto& f : std::filesystem::recursive_directory_iterator(dir.path))
-            EXPECT_EQ(f.path().filename().string().find(".tmp-"), std::string::npos) << "left behind: " << f.path();
+        EXPECT_EQ(temporariesUnder(dir.path), std::vector<std::string>{}) << "signal " << signal;
     }
+}
+
+/// Starts `voxlat ARGS` with every output write slowed by @a delayMs per chunk (the writers' test
+/// hook), waits until a temporary file or folder shows in @a folder (the write has begun) and
+/// its signal handler is in place, and returns its pid.
+static pid_t startSlowWriter(const std::vector<std::string>& args, const std::filesystem::path& folder, int delayMs)
+{
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+        ::setenv("VOXLAT_TEST_WRITE_DELAY_MS", std::to_string(delayMs).c_str(), 1);
+        std::vector<std::string> all{voxlatBinary(), "-q"};
+        all.insert(all.end(), args.begin(), args.end());
+        std::vector<char*> argv;
+        for (std::string& a : all) argv.push_back(a.data());
+        argv.push_back(nullptr);
+        ::execv(argv[0], argv.data());
+        ::_exit(127);
+    }
+    if (pid < 0 || !waitForSignalHandler(pid, SIGINT)) return -1;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (std::chrono::steady_clock::now() < deadline) {
+        std::error_code ec;
+        for (const auto& f : std::filesystem::recursive_directory_iterator(folder, ec))
+            if (f.path().filename().string().find(".tmp-") != std::string::npos) return pid;
+        if (::waitpid(pid, nullptr, WNOHANG) == pid) return -1;
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    return -1;
+}
+
+TEST(Cli, ASignalDuringAWriteStopsItWithinASecondAndKeepsTheOldFile)
+{
+    // The mesh's write is slowed to 40 ms a chunk (64 KB; the STL and OBJ are megabytes, seconds
+    // to write): SIGINT or SIGTERM while it writes exits 130 / 143 within a second, the user's
+    // old file untouched and no temporary left. Before, a write ran to its end and replaced it.
+    TempDir dir;
+    const auto recipe = dir.write("r.yaml", R"(voxel: 0.25
+domain: {box: [[0, 0, 0], [20, 20, 20]]}
+fields:
+  lattice: {tpms: gyroid, cell: 5, solid: network, level: 0.2}
+result: lattice
+)");
+    for (const auto& [name, signal] : {std::pair<std::string, int>{"g.stl", SIGINT}, {"g.obj", SIGTERM}}) {
+        const auto out = dir.path / ("out-" + name);
+        std::filesystem::create_directories(out);
+        const auto old = out / name;
+        std::ofstream(old) << "the user's old file";
+        const pid_t pid = startSlowWriter({"mesh", recipe.string(), "-o", old.string()}, out, 40);
+        ASSERT_GT(pid, 0) << name << ": the write never began";
+        std::this_thread::sleep_for(std::chrono::milliseconds(150));
+        const auto sent = std::chrono::steady_clock::now();
+        ::kill(pid, signal);
+        int status = 0;
+        ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+        const double latency = std::chrono::duration<double>(std::chrono::steady_clock::now() - sent).count();
+        ASSERT_TRUE(WIFEXITED(status)) << name << ": killed instead of cancelled";
+        EXPECT_EQ(WEXITSTATUS(status), 128 + signal) << name;
+        EXPECT_LT(latency, 1.0) << name << ": the write went on after the signal";
+        EXPECT_EQ(readFile(old), "the user's old file") << name;
+        EXPECT_EQ(temporariesUnder(out), std::vector<std::string>{}) << name;
+    }
+}
+
+TEST(Cli, ASecondSignalLeavesNoTemporarySliceFolder)
+{
+    // Slices to a folder of PNG layers, each layer's write slowed to 3 s: the first SIGINT asks
+    // the job to stop, the second (the job did not stop yet) ends the process at once, and the
+    // temporary folder goes with its layers.
+    TempDir dir;
+    const auto recipe = dir.write("r.yaml", R"(domain: {box: [[0, 0, 0], [10, 10, 2]]}
+fields:
+  lattice: {tpms: gyroid, cell: 5, solid: sheet, level: 0.3}
+result: lattice
+outputs: {slices: {printer: sl1s, layer: 0.5, file: layers, format: png, preview: off}}
+)");
+    const auto out = dir.path / "out";
+    std::filesystem::create_directories(out);
+    const pid_t pid = startSlowWriter({"run", recipe.string(), "--out", out.string(), "--no-html"}, out, 3000);
+    ASSERT_GT(pid, 0) << "the write never began";
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    ::kill(pid, SIGINT);
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    ::kill(pid, SIGINT);
+    int status = 0;
+    ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+    EXPECT_TRUE(WIFSIGNALED(status) || (WIFEXITED(status) && WEXITSTATUS(status) == 130));
+    EXPECT_EQ(temporariesUnder(out), std::vector<std::string>{});
+    EXPECT_EQ(listFolder(out), std::vector<std::string>{});
 }
 
 TEST(Cli, OutputsAppearAllTogetherOrNotAtAll)

@@ -386,6 +386,10 @@ int main(int argc, char** argv)
     mesh->add_option("--refine", meshRefine,
                      "with a tolerance: on, a coarse grid refined where it strays (the default); off, a grid fine "
                      "enough for the tolerance, decimated (slower, fewer triangles)");
+    std::string meshStrict;
+    mesh->add_option("--strict", meshStrict,
+                     "with a tolerance: on, a mesh that strays beyond it fails (exit 3) instead of a warning; "
+                     "default: the recipe's first mesh output's, else off");
     std::string meshExtractor;
     mesh->add_option("--extractor", meshExtractor,
                      "how the grid becomes triangles: " + voxlat::joinWords(voxlat::meshExtractorNames()) +
@@ -507,8 +511,7 @@ int main(int argc, char** argv)
             voxlat::MeshOptions options;
             for (const voxlat::OutputSpec& out : recipe.outputs)
                 if (out.kind == "mesh") {
-                    options = voxlat::parseMeshSettings(voxlat::RecipeNode(out.spec, recipe.source, "outputs `mesh`"))
-                                  .options;
+                    options = out.mesh->options;
                     break;
                 }
             if (mesh->count("--tolerance")) {
@@ -540,6 +543,12 @@ int main(int argc, char** argv)
                     throw voxlat::InputError(
                         "--refine applies to a projected marching-cubes mesh: drop --project off or --extractor bcc, "
                         "or --refine");
+            }
+            if (!meshStrict.empty()) {
+                options.strict = onOff("--strict", meshStrict);
+                if (!options.tolerance)
+                    throw voxlat::InputError(
+                        "--strict applies to a mesh with a tolerance: add --tolerance, like --tolerance 0.01");
             }
             voxlat::Job job(std::move(recipe), &context);
             job.setGridReleasable(true);  // nothing after the mesh reads the grid
@@ -595,10 +604,10 @@ int main(int argc, char** argv)
                                            [](const voxlat::OutputSpec& o) { return o.kind == "slices"; });
             if (spec == recipe.outputs.end())
                 throw voxlat::InputError(sliceArgs.recipe + ": no printer given; use --printer NAME -o FILE");
-            const YAML::Node sliceSpec = spec->spec;
+            const voxlat::SliceSettings settings = *spec->slices;
             const std::string file = sliceFile.empty() ? spec->file : sliceFile;
             voxlat::Job job(std::move(recipe), &context);
-            job.writeSlices(sliceSpec, file);
+            job.writeSlices(settings, file);
             const auto r = job.report();
             const auto& s = r["slices"].back();
             std::cout << "slices  " << s["layers"] << " layers of " << s["layer_height_mm"] << " mm for "

@@ -67,6 +67,41 @@ namespace {
 /// mesher's cap and the blend of a smooth union).
 constexpr int kAutoDomainMargin = 3;
 
+/// A stream buffer that gathers a file's bytes in memory, kWriteChunkBytes at a time, and calls
+/// the write interrupter before each chunk: a .vdb is made in memory (its header's UUID is set
+/// before the file is written), which takes seconds for a large grid; a cancel stops it.
+class CheckedStringBuffer : public std::streambuf {
+public:
+    CheckedStringBuffer() : mChunk(kWriteChunkBytes) { setp(mChunk.data(), mChunk.data() + mChunk.size()); }
+    /// Every byte written so far.
+    std::string take()
+    {
+        gather();
+        return std::move(mBytes);
+    }
+
+protected:
+    int_type overflow(int_type c) override
+    {
+        checkWriteInterrupt();
+        gather();
+        if (!traits_type::eq_int_type(c, traits_type::eof())) {
+            *pptr() = traits_type::to_char_type(c);
+            pbump(1);
+        }
+        return traits_type::not_eof(c);
+    }
+
+private:
+    void gather()
+    {
+        mBytes.append(pbase(), pptr());
+        setp(mChunk.data(), mChunk.data() + mChunk.size());
+    }
+    std::vector<char> mChunk;
+    std::string mBytes;
+};
+
 /// OpenVDB stamps every file with a random UUID (36 characters after the 21-byte header start),
 /// so identical runs would differ. The UUID is replaced by one derived from @a recipeHash: the same
 /// recipe gives the same bytes.
@@ -254,8 +289,9 @@ Job::Job(Recipe recipe, JobContext* context)
     }
     for (const OutputSpec& out : mRecipe.outputs)
         if (out.kind == "frame" && mBuilder.strutFrames().empty())
-            RecipeNode(out.spec, mRecipe.source, "outputs")
-                .fail("a frame output writes the struts of a `struts:` field, and this recipe has none");
+            throw InputError(
+                out.where +
+                ": outputs: a frame output writes the struts of a `struts:` field, and this recipe has none");
     for (const FieldBuilder::Preparation& p : mBuilder.preparations())
         timed(p.stage, [&] {
             p.run();
@@ -324,21 +360,22 @@ void Job::drainForSlices()
     bool drained = false;
     for (const OutputSpec& out : mRecipe.outputs) {
         if (out.kind != "slices") continue;
-        const RecipeNode spec(out.spec, mRecipe.source, "outputs");
-        const SliceSettings settings = parseSliceSettings(spec);
+        const SliceSettings& settings = *out.slices;
         if (!settings.drainDiameter) continue;
         const double diameter = *settings.drainDiameter;
+        const std::string where = settings.drainWhere + ": outputs `drain`: ";
         if (drained)
-            spec["drain"].fail("the result is drained once for every output: give `drain:` on one slices output");
+            throw InputError(where + "the result is drained once for every output: give `drain:` on one slices output");
         for (const DrainRequest& d : mBuilder.drains())
             if (d.name == mRecipe.result)
-                spec["drain"].fail("the result `" + d.name + "` drains its traps already (`drain:` at " + d.where +
-                                   "): remove one of the two");
+                throw InputError(where + "the result `" + d.name + "` drains its traps already (`drain:` at " +
+                                 d.where + "): remove one of the two");
         if (diameter < 2.0 * mRecipe.voxel)
-            spec["drain"]["diameter"].fail("a drain channel of " + formatNumber(diameter) +
-                                           " mm is less than two voxels (" + formatNumber(2.0 * mRecipe.voxel) +
-                                           " mm) across: it would not show on the grid; use 1.5 mm or more "
-                                           "(resin drains through 1.5-3 mm holes)");
+            throw InputError(settings.drainDiameterWhere + ": outputs `drain` `diameter`: a drain channel of " +
+                             formatNumber(diameter) + " mm is less than two voxels (" +
+                             formatNumber(2.0 * mRecipe.voxel) +
+                             " mm) across: it would not show on the grid; use 1.5 mm or more (resin drains through "
+                             "1.5-3 mm holes)");
         auto node = std::make_shared<DrainedSolid>(mResult);
         // No part here: a channel ends in the void the trap search reaches from outside; walls
         // are searched at the recipe's voxel.
@@ -663,10 +700,10 @@ ProgressFn feed(StageProgress& progress, std::atomic<std::uint64_t>& last)
     };
 }
 
-/// The mesh settings of a `mesh:` output entry (checked when the recipe was loaded).
-MeshOptions meshOptions(const OutputSpec& out, const Recipe& recipe)
+/// The mesh settings of a `mesh:` output entry (parsed when the recipe was loaded).
+const MeshOptions& meshOptions(const OutputSpec& out)
 {
-    return parseMeshSettings(RecipeNode(out.spec, recipe.source, "outputs `mesh`")).options;
+    return out.mesh->options;
 }
 
 nlohmann::json deviationJson(double max, double rms)
@@ -733,6 +770,36 @@ FieldPtr Job::distanceField()
 const TriangleMesh& Job::mesh(const MeshOptions& options)
 {
     return *variant(options).mesh;
+}
+
+Job::MeshToleranceMiss Job::toleranceMiss(double strayMm, const MeshOptions& options) const
+{
+    const double tolerance = *options.tolerance;
+    // Where a mesh strays beyond its tolerance, crease edges were left flat across about a voxel:
+    // the stray shrinks about in proportion to the voxel, a little slower on fine grids (two
+    // crossed cylinders: 0.106, 0.054, 0.030 mm at 0.25, 0.125, 0.0625 mm), hence the margin of
+    // 0.8. Both suggestions rounded to 2 digits, the voxel down and the tolerance up.
+    auto round2 = [](double v, bool up) {
+        const double scale = std::pow(10.0, std::floor(std::log10(v)) - 1.0);
+        return (up ? std::ceil(v / scale - 1e-9) : std::floor(v / scale + 1e-9)) * scale;
+    };
+    const double voxel = round2(0.8 * mDomain.voxel * tolerance / strayMm, false);
+    const double atLeast = round2(strayMm, true);
+    MeshToleranceMiss miss;
+    miss.message =
+        "the mesh strays up to " + formatNumber(strayMm) + " mm from the true surface, more than the tolerance " +
+        formatNumber(tolerance) + " mm" + (options.toleranceWhere.empty() ? "" : " (" + options.toleranceWhere + ")") +
+        ": " + (options.extractor == MeshExtractor::Bcc ? "the bcc extractor's" : "marching cubes'") +
+        " triangles already did there (crease edges left flat where a vertex could not be moved onto the "
+        "surface, see `creases`); use `voxel: " +
+        formatNumber(voxel) + "` (now " + formatNumber(mDomain.voxel) +
+        "; the stray shrinks about with the voxel) or a tolerance of at least " + formatNumber(atLeast) + " mm";
+    miss.details = {{"max_mm", strayMm},
+                    {"tolerance_mm", tolerance},
+                    {"voxel_mm", mDomain.voxel},
+                    {"suggested_voxel_mm", voxel},
+                    {"suggested_tolerance_mm", atLeast}};
+    return miss;
 }
 
 Job::MeshVariant& Job::variant(const MeshOptions& options)
@@ -937,17 +1004,11 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
                                "region there: mesh without `tolerance:` (or with `project: off`) or use a smaller "
                                "`voxel:`",
                            {{"pairs", crossing}});
-        if (options.tolerance && dev.max > *options.tolerance)
-            mContext->warn("mesh_tolerance",
-                           "the mesh strays up to " + formatNumber(dev.max) +
-                               " mm from the true surface, more than "
-                               "the tolerance " +
-                               formatNumber(*options.tolerance) + " mm: " +
-                               (options.extractor == MeshExtractor::Bcc ? "the bcc extractor's" : "marching cubes'") +
-                               " triangles already did there (crease edges left flat "
-                               "where a vertex could not be moved onto the surface, see `creases`); use a "
-                               "smaller `voxel:` or a larger tolerance",
-                           {{"max_mm", dev.max}, {"tolerance_mm", *options.tolerance}});
+        if (options.tolerance && dev.max > *options.tolerance) {
+            const MeshToleranceMiss miss = toleranceMiss(dev.max, options);
+            report["tolerance_missed"] = miss.details;
+            if (!options.strict) mContext->warn("mesh_tolerance", miss.message, miss.details);
+        }
     }
     report["extractor"] = meshExtractorName(options.extractor);
     report["triangles"] = m.triangles.size();
@@ -1434,13 +1495,19 @@ void Job::writeMesh(const std::filesystem::path& path, const MeshOptions& option
     // Written alone (the command line's `mesh`, Python): held back until the file is complete
     // and the job was not cancelled meanwhile, so a cancel keeps the old file.
     std::optional<OutputTransaction> own;
-    if (!OutputTransaction::current()) own.emplace();
+    if (!OutputTransaction::current()) own.emplace(writeInterrupter());
     if (options.raw() && options.extractor == MeshExtractor::MarchingCubes) aimLevelsAtMesh();
     MeshVariant& v = variant(options);
     if (v.mesh->triangles.empty())
         throw JobError(mRecipe.source->path + ": the result `" + mRecipe.result +
                        "` has no surface in the domain: the mesh would be empty (check the domain, the density or "
                        "level, and the fields' sizes)");
+    // `strict: on`: a mesh beyond its tolerance is not written; the job fails (exit 3) with the numbers.
+    if (options.strict && v.report.contains("tolerance_missed")) {
+        const nlohmann::json& miss = v.report["tolerance_missed"];
+        throw JobError(path.string() +
+                       ": `strict: on`: " + toleranceMiss(miss["max_mm"].get<double>(), options).message);
+    }
     timed("write " + path.filename().string(), [&] {
         voxlat::writeMesh(*v.mesh, path.string(), v.measures ? nullptr : &v.measures, meshMetadata());
         return 0;
@@ -1594,7 +1661,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
     warnStaleTemporaries(written);
     // All or none: every file is written under a temporary name and the renames wait for the
     // report; an output that fails (or a cancel) half-way leaves the folder as it was.
-    OutputTransaction transaction;
+    OutputTransaction transaction(writeInterrupter());
     const auto firstMesh = std::find_if(mRecipe.outputs.begin(), mRecipe.outputs.end(),
                                         [](const OutputSpec& o) { return o.kind == "mesh"; });
     // The first mesh is the one whose share of its region `density:` is held to: its level is aimed
@@ -1606,24 +1673,23 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
     // A raw marching-cubes STL whose mesh nothing else uses (no other output with the same mesh
     // settings, not the preview's) is written as it is made: the mesh is never held.
     auto onlyUse = [&](std::size_t n) {
-        const MeshOptions options = meshOptions(mRecipe.outputs[n], mRecipe);
+        const MeshOptions options = meshOptions(mRecipe.outputs[n]);
         if (!options.raw() || options.extractor != MeshExtractor::MarchingCubes) return false;
         std::string extension = paths[n].extension().string();
         for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
         if (extension != ".stl") return false;
         if (preview && n == std::size_t(firstMesh - mRecipe.outputs.begin())) return false;
         for (std::size_t m = 0; m < mRecipe.outputs.size(); ++m)
-            if (m != n && mRecipe.outputs[m].kind == "mesh" && meshOptions(mRecipe.outputs[m], mRecipe) == options)
-                return false;
+            if (m != n && mRecipe.outputs[m].kind == "mesh" && meshOptions(mRecipe.outputs[m]) == options) return false;
         return std::none_of(mMeshes.begin(), mMeshes.end(), [&](const auto& v) { return v->options == options; });
     };
     // Whether an output after the n-th may read the recipe's grid: a VDB, or a mesh made otherwise
     // (the preview's mesh is the first one's, held by then).
     auto gridNeededAfter = [&](std::size_t n) {
-        const MeshOptions options = meshOptions(mRecipe.outputs[n], mRecipe);
+        const MeshOptions options = meshOptions(mRecipe.outputs[n]);
         for (std::size_t m = n + 1; m < mRecipe.outputs.size(); ++m) {
             const OutputSpec& later = mRecipe.outputs[m];
-            if (later.kind == "vdb" || (later.kind == "mesh" && !(meshOptions(later, mRecipe) == options))) return true;
+            if (later.kind == "vdb" || (later.kind == "mesh" && !(meshOptions(later) == options))) return true;
         }
         return false;
     };
@@ -1637,16 +1703,18 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
             } else {
                 const bool releasable = mGridReleasable;
                 mGridReleasable = !gridNeededAfter(n);
-                writeMesh(path, meshOptions(out, mRecipe));
+                writeMesh(path, meshOptions(out));
                 mGridReleasable = releasable;
             }
         } else if (out.kind == "vdb") {
             const openvdb::FloatGrid& g = grid();
             timed("write " + out.file, [&] {
                 openvdb::GridCPtrVec grids{g.copyGrid()};
-                std::ostringstream bytes;
+                CheckedStringBuffer buffer;
+                std::ostream bytes(&buffer);
+                bytes.exceptions(std::ios::badbit);  // the interrupter's Cancelled leaves the writer
                 openvdb::io::Stream(bytes).write(grids);
-                std::string data = bytes.str();
+                std::string data = buffer.take();
                 setVdbUuid(data, recipeHash(mRecipe));
                 AtomicFile file(path.string());
                 file.stream().write(data.data(), std::streamsize(data.size()));
@@ -1655,7 +1723,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
             });
             mReport["outputs"].push_back(path.string());
         } else if (out.kind == "slices") {
-            writeSlices(out.spec, path);
+            writeSlices(*out.slices, path);
         } else if (out.kind == "properties") {
             writeProperties(path);
         } else if (out.kind == "frame") {
@@ -1667,7 +1735,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
     if (preview && firstMesh != mRecipe.outputs.end()) {
         const std::filesystem::path picture = outDir / (firstMesh->file + ".preview.png");
         checkReplaceable(picture, where);
-        writePreview(picture, meshOptions(*firstMesh, mRecipe));
+        writePreview(picture, meshOptions(*firstMesh));
     }
     std::optional<TriangleMesh> shown;
     std::optional<PageColouring> colouring;
@@ -1983,21 +2051,19 @@ void Job::writePreview(const std::filesystem::path& path, const MeshOptions& opt
     mReport["preview"] = path.string();
 }
 
-void Job::writeSlices(const YAML::Node& spec, const std::filesystem::path& path)
+void Job::writeSlices(const SliceSettings& settings, const std::filesystem::path& path)
 {
-    const RecipeNode node(spec, mRecipe.source, "outputs `slices`");
-    const SliceSettings settings = parseSliceSettings(node);
     // Where the archive and its preview go, checked before any work (the preview is a relative
     // name beside the archive: checked when the recipe loads, resolved here).
     if (settings.preview != "off") {
         const std::string preview =
             settings.preview.empty() ? path.filename().string() + ".preview.png" : settings.preview;
         outputPathIn(path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path(), preview,
-                     node.where() + ": preview");
+                     settings.where + ": preview");
     }
     warnStaleTemporaries({path});
     std::optional<OutputTransaction> own;
-    if (!OutputTransaction::current()) own.emplace();
+    if (!OutputTransaction::current()) own.emplace(writeInterrupter());
     const PrinterProfile printer = loadPrinterProfile(settings.printer, settings.printerWhere);
     solveLevels();  // a `density:` level is solved on the recipe's voxel grid first
     // The part is the recipe's domain box as written (not snapped to voxels): slices need no

@@ -94,9 +94,10 @@ public:
     void writeReport(const std::filesystem::path& path);
     /// Writes a shaded PNG picture of the mesh made with @a options (front-right-top view).
     void writePreview(const std::filesystem::path& path, const MeshOptions& options = {});
-    /// Slices the result for a resin printer into @a path; @a spec is a `slices:` entry. Builds
-    /// no grid and no mesh: every pixel is decided from the field (engine/SliceJob).
-    void writeSlices(const YAML::Node& spec, const std::filesystem::path& path);
+    /// Slices the result for a resin printer into @a path with @a settings (a `slices:` entry,
+    /// parsed when the recipe loaded). Builds no grid and no mesh: every pixel is decided from the
+    /// field (engine/SliceJob).
+    void writeSlices(const SliceSettings& settings, const std::filesystem::path& path);
 
     /// The effective stiffness and conductivity of one periodic cell of the result
     /// (engine/jobs/PropertiesJob), computed once; also report.json's `properties`.
@@ -116,6 +117,11 @@ public:
 private:
     /// Warns (`stale_temporary`) about temporaries a killed run left beside @a paths.
     void warnStaleTemporaries(const std::vector<std::filesystem::path>& paths) const;
+    /// What the output files check between chunks: the context's cancel (throws Cancelled).
+    WriteInterrupter writeInterrupter() const
+    {
+        return [context = mContext] { context->checkCancelled(); };
+    }
     /// Evaluates the recipe's grid and puts its volume and pieces into the report (once). With
     /// @a keep false, for a job that only needs those (a tolerance mesh made on a coarser grid with
     /// nothing after it reading the grid), only the solid's bits are kept, 64 bytes a leaf instead
@@ -179,6 +185,13 @@ private:
         mutable std::optional<TriangleMesh::Measures> measures;
         std::vector<std::string> files;
     };
+    /// A mesh that strays @a strayMm beyond its tolerance: the warning's message (the numbers and a
+    /// voxel and a tolerance that meet it) and report.json's figures.
+    struct MeshToleranceMiss {
+        std::string message;
+        nlohmann::json details;
+    };
+    MeshToleranceMiss toleranceMiss(double strayMm, const MeshOptions& options) const;
     /// The mesh made with @a options, made on first use (marching cubes, projection, decimation).
     MeshVariant& variant(const MeshOptions& options);
     /// For a tolerance mesh (marching cubes, projected): the mesh extracted from a grid k times

@@ -171,11 +171,14 @@ public:
         if (!made)
             throw OutputError("cannot create the folder '" + mTemp.string() + "' to write '" + mPath.string() +
                               "': " + std::strerror(errno));
+        registerTemporary(mTemp.string(), true);  // a second signal removes it with its layers
     }
     ~FolderArchive() override
     {
         std::error_code ec;
-        if (!mCommitted) fs::remove_all(mTemp, ec);
+        if (mCommitted) return;
+        fs::remove_all(mTemp, ec);
+        unregisterTemporary(mTemp.string());
     }
     void finish(const SliceSummary& s) override
     {
@@ -188,6 +191,7 @@ public:
         std::error_code ec;
         fs::remove(mPath, ec);  // an empty folder only (checked when opened; remove() fails on a full one)
         fs::rename(mTemp, mPath);
+        unregisterTemporary(mTemp.string());
         mCommitted = true;
     }
 

@@ -25,6 +25,11 @@ const std::vector<KeySpec>& meshKeys()
          "its triangles bisected where they stray (fast); off, meshed on a grid fine enough for the tolerance and "
          "decimated (slower, about a third fewer triangles)",
          "on"},
+        {"strict",
+         {{"type", {"string", "boolean"}}},
+         "with `tolerance`: on, a mesh that strays beyond the tolerance fails the job (exit 3); off, it is written "
+         "with the warning `mesh_tolerance` (its largest stray, and a voxel and a tolerance that meet it)",
+         "off"},
         {"extractor", oneOfWords(meshExtractorNames()),
          "how the grid becomes triangles: marching-cubes (the grid's voxels) or bcc (marching tetrahedra on the "
          "body-centred-cubic lattice: the voxels plus the field at the cube centres; more, less regular triangles)",
@@ -115,6 +120,14 @@ MeshSettings parseMeshSettings(const RecipeNode& spec)
         if (!s.options.tolerance)
             spec["refine"].fail(
                 "`refine` applies to a mesh with a `tolerance`, like `{file: part.stl, tolerance: 0.01, refine: off}`");
+    }
+    if (spec.has("strict")) {
+        s.options.strict =
+            onOff(spec["strict"], "`on` (a mesh beyond its tolerance fails the job) or `off` (a warning)");
+        if (!s.options.tolerance)
+            spec["strict"].fail(
+                "`strict` applies to a mesh with a `tolerance`, like `{file: part.stl, tolerance: 0.01, "
+                "strict: on}`");
     }
     if (spec.has("project"))
         s.options.project =

@@ -40,6 +40,9 @@ struct MeshOptions {
     /// With a tolerance: a smooth result is meshed on a coarse grid and refined where it strays
     /// (true), or meshed on a grid fine enough for the tolerance and decimated (false).
     bool refine = true;
+    /// With a tolerance: a mesh that strays beyond it fails the job (JobError, exit 3) instead of
+    /// the warning `mesh_tolerance`. Not part of what makes two meshes the same.
+    bool strict = false;
     /// Where the tolerance was given ("file:line:col" or "--tolerance"), for messages; not part
     /// of what makes two meshes the same.
     std::string toleranceWhere;

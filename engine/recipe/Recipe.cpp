@@ -173,23 +173,25 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
             if (kind == "slices") {  // a map (or a list of maps) of slice settings
                 for (std::size_t i = 0; i < (entry.isSequence() ? entry.size() : 1); ++i) {
                     const RecipeNode one = entry.isSequence() ? entry.at(i) : entry;
-                    const SliceSettings settings = parseSliceSettings(one);  // checks keys and values now
+                    SliceSettings settings = parseSliceSettings(one);  // parsed and checked once, here
                     checkOutputName(one["file"], kind);
-                    OutputSpec out{kind, one["file"].string(), one.yaml()};
+                    OutputSpec out{kind, one["file"].string(), one.yaml(), one.where()};
                     if (settings.preview != "off")
                         out.sideFiles.push_back(
                             settings.preview.empty()
                                 ? out.file + ".preview.png"
                                 : (std::filesystem::path(out.file).parent_path() / settings.preview).string());
+                    out.slices = std::move(settings);
                     r.outputs.push_back(std::move(out));
                 }
                 continue;
             }
             for (std::size_t i = 0; i < (entry.isSequence() ? entry.size() : 1); ++i) {
                 const RecipeNode one = entry.isSequence() ? entry.at(i) : entry;
-                if (kind == "mesh") {                                      // a file name or a map of mesh settings
-                    const MeshSettings settings = parseMeshSettings(one);  // checks keys and values now
-                    OutputSpec out{kind, settings.file, one.yaml()};
+                if (kind == "mesh") {                                // a file name or a map of mesh settings
+                    MeshSettings settings = parseMeshSettings(one);  // parsed and checked once, here
+                    OutputSpec out{kind, settings.file, one.yaml(), one.where()};
+                    out.mesh = std::move(settings);
                     if (std::none_of(r.outputs.begin(), r.outputs.end(),
                                      [](const OutputSpec& o) { return o.kind == "mesh"; }))
                         out.sideFiles.push_back(out.file + ".preview.png");
@@ -198,7 +200,7 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
                 }
                 checkOutputName(one, kind);
                 // A frame output keeps its node: without struts the job names its line.
-                OutputSpec out{kind, one.string(), one.yaml()};
+                OutputSpec out{kind, one.string(), one.yaml(), one.where()};
                 if (kind == "properties")
                     out.sideFiles.push_back(std::filesystem::path(out.file).replace_extension(".png").string());
                 r.outputs.push_back(std::move(out));

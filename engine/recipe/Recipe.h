@@ -4,7 +4,9 @@
 
 #include "engine/recipe/KeySpec.h"
 #include "engine/recipe/Materials.h"
+#include "engine/recipe/MeshSettings.h"
 #include "engine/recipe/RecipeNode.h"
+#include "engine/recipe/SliceSettings.h"
 
 #include <algorithm>
 #include <filesystem>
@@ -17,9 +19,14 @@ namespace voxlat {
 
 /// One entry of `outputs:`.
 struct OutputSpec {
-    std::string kind;  ///< "mesh", "vdb" or "slices"
-    std::string file;  ///< relative to the output folder
-    YAML::Node spec;   ///< the entry's own map (`slices`: printer, layer, file, ...)
+    std::string kind;   ///< "mesh", "vdb" or "slices"
+    std::string file;   ///< relative to the output folder
+    YAML::Node spec;    ///< the entry as written (for the canonical recipe; jobs read the settings below)
+    std::string where;  ///< file:line:col of the entry, for messages
+    /// A `mesh:` entry's settings, parsed and checked when the recipe loads.
+    std::optional<MeshSettings> mesh{};
+    /// A `slices:` entry's settings, parsed and checked when the recipe loads.
+    std::optional<SliceSettings> slices{};
     /// The other files the output writes, relative to the output folder and named after its whole
     /// file name: a slices output's contact sheet (`FILE.preview.png` or its `preview:`), a
     /// properties output's picture, the first mesh's preview picture (`FILE.preview.png`, written

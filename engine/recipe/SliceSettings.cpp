@@ -90,6 +90,7 @@ SliceSettings parseSliceSettings(const RecipeNode& spec)
     if (!spec.isMap()) spec.fail("expected a map like `{printer: sl1s, layer: 0.05, file: part.sl1s}`");
     spec.checkKeys(keyNames(sliceKeys()));
     SliceSettings s;
+    s.where = spec.where();
     s.printer = spec["printer"].string();
     s.printerWhere = spec["printer"].where();
     if (spec.has("layer")) {
@@ -187,6 +188,7 @@ SliceSettings parseSliceSettings(const RecipeNode& spec)
         if (!d.has("diameter")) d.fail("give the channels' `diameter:` in mm, like `drain: {diameter: 2}`");
         s.drainDiameter = d["diameter"].positiveNumber();
         s.drainWhere = d.where();
+        s.drainDiameterWhere = d["diameter"].where();
     }
     return s;
 }

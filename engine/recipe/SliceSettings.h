@@ -51,7 +51,9 @@ struct SliceSettings {
     /// `drain: {diameter}`: the result's resin traps opened by channels of this diameter (mm),
     /// in the result itself, so a mesh of the same run has them too.
     std::optional<double> drainDiameter;
-    std::string drainWhere;  ///< file:line:col of `drain:`
+    std::string drainWhere;          ///< file:line:col of `drain:`
+    std::string drainDiameterWhere;  ///< file:line:col of `drain: {diameter}`
+    std::string where;               ///< file:line:col of the entry
 };
 
 /// Reads a `slices:` map (errors name file, line and key).

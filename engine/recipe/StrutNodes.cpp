@@ -763,9 +763,20 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     g.checkKeys({"sigma", "cutoff"});
     std::vector<double> sigma(n);
     const RecipeNode sn = g["sigma"];
-    auto positiveSigma = [](const RecipeNode& s) {
+    // A kernel wider than the frame's longest strut flattens the field over the whole cell (no
+    // struts left to see), and its reach (7.4 sigma) gathers the struts of ever more cells per
+    // point: `optimize: {sigma: [0.3, 1e6]}` ran for minutes on its first trial. Refused.
+    double longest = 0.0;
+    for (const auto& st : frame.struts) longest = std::max(longest, (frame.nodes[st[1]] - frame.nodes[st[0]]).length());
+    auto positiveSigma = [longest](const RecipeNode& s) {
         const double v = s.number();
         if (!(v > 0.0)) s.fail("sigma must be greater than zero (millimetres; it sets the joint size)");
+        if (longest > 0.0 && v > longest)
+            s.fail("a sigma of " + formatNumber(v) + " mm is wider than the frame's longest strut (" +
+                   formatNumber(longest) +
+                   " mm): the kernel would blur the struts into a flat field; use a sigma of a fraction of the "
+                   "strut, like " +
+                   formatNumber(0.1 * longest) + " mm");
         return v;
     };
     if (sn.isSequence()) {

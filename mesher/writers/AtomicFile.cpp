@@ -3,19 +3,20 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/stat.h>
+#include <sys/syscall.h>
 #include <unistd.h>
-
-#include <ext/stdio_filebuf.h>
 
 #include <algorithm>
 #include <array>
 #include <atomic>
 #include <cerrno>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <stdexcept>
+#include <thread>
 #include <utility>
 
 namespace voxlat {
@@ -27,17 +28,177 @@ std::string reason()
     return errno != 0 ? std::string(": ") + std::strerror(errno) : std::string();
 }
 
-/// Registered temporaries: C strings owned by the slots (malloc'd), null where free. A slot is
-/// claimed and released with atomic exchanges, so a signal handler may read them at any time.
+/// Registered temporaries: C strings owned by the slots (malloc'd), null where free, each a kind
+/// letter ('f' a file, 'd' a folder) and the path. A slot is claimed and released with atomic
+/// exchanges, so a signal handler may read them at any time.
 constexpr std::size_t kTemporarySlots = 4096;
 std::array<std::atomic<char*>, kTemporarySlots> gTemporaries{};
 
+/// getdents64's record (the kernel's struct linux_dirent64).
+struct DirectoryEntry {
+    std::uint64_t inode;
+    std::int64_t offset;
+    unsigned short length;
+    unsigned char type;
+    char name[1];
+};
+
+/// Removes @a name under the folder @a parent, a folder with what it holds. System calls only
+/// (async-signal-safe); a folder's listing is read again until a pass removes nothing, since
+/// removing entries while listing them may skip some.
+void removeTree(int parent, const char* name, int depth) noexcept
+{
+    if (::unlinkat(parent, name, 0) == 0 || (errno != EISDIR && errno != EPERM)) return;
+    if (depth < 16) {
+        const int fd = ::openat(parent, name, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
+        if (fd >= 0) {
+            alignas(8) char listing[4096];
+            for (int pass = 0; pass < 64; ++pass) {
+                bool removed = false;
+                ::lseek(fd, 0, SEEK_SET);
+                for (long n; (n = ::syscall(SYS_getdents64, fd, listing, sizeof listing)) > 0;)
+                    for (long at = 0; at < n;) {
+                        const auto* entry = reinterpret_cast<const DirectoryEntry*>(listing + at);
+                        at += entry->length;
+                        const char* child = entry->name;
+                        if (child[0] == '.' && (child[1] == 0 || (child[1] == '.' && child[2] == 0))) continue;
+                        removeTree(fd, child, depth + 1);
+                        removed = true;
+                    }
+                if (!removed) break;
+            }
+            ::close(fd);
+        }
+    }
+    ::unlinkat(parent, name, AT_REMOVEDIR);
+}
+
+/// A test hook: VOXLAT_TEST_WRITE_DELAY_MS slows every chunk (and the last bytes) of every output
+/// file by that many milliseconds, so a test can signal a run while it writes (tests/test_cli.cpp). 0 when unset.
+int writeDelayMs()
+{
+    static const int delay = [] {
+        const char* value = std::getenv("VOXLAT_TEST_WRITE_DELAY_MS");
+        return value ? std::max(0, std::atoi(value)) : 0;
+    }();
+    return delay;
+}
+
+/// The temporary's stream buffer: kWriteChunkBytes of buffer, written with write(2), the
+/// interrupter called before each chunk. A failed write (disk full) is kept (its errno) and the
+/// bytes after it dropped, so the stream goes bad only by an exception (the interrupter's), which
+/// the stream passes on; the failure is found by close().
+class ChunkedFileBuffer : public std::streambuf {
+public:
+    ChunkedFileBuffer(int fd, WriteInterrupter interrupter)
+        : mFd(fd), mInterrupter(std::move(interrupter)), mBytes(kWriteChunkBytes)
+    {
+        setp(mBytes.data(), mBytes.data() + mBytes.size());
+    }
+    ~ChunkedFileBuffer() override { close(); }
+
+    /// Writes what is buffered (no interrupter: the caller commits) and closes the file. False
+    /// (errno set) if any write or the close failed.
+    bool close() noexcept
+    {
+        if (mFd < 0) return mError == 0;
+        put(pbase(), std::size_t(pptr() - pbase()));
+        setp(mBytes.data(), mBytes.data() + mBytes.size());
+        if (::close(mFd) != 0 && mError == 0) mError = errno;
+        mFd = -1;
+        errno = mError;
+        return mError == 0;
+    }
+
+protected:
+    int_type overflow(int_type c) override
+    {
+        flushChunk();
+        if (!traits_type::eq_int_type(c, traits_type::eof())) {
+            *pptr() = traits_type::to_char_type(c);
+            pbump(1);
+        }
+        return traits_type::not_eof(c);
+    }
+
+    std::streamsize xsputn(const char* s, std::streamsize n) override
+    {
+        for (std::streamsize left = n; left > 0;) {
+            const std::streamsize room = epptr() - pptr();
+            if (room == 0) {
+                flushChunk();
+                continue;
+            }
+            const std::streamsize take = std::min(room, left);
+            std::memcpy(pptr(), s, std::size_t(take));
+            pbump(int(take));
+            s += take;
+            left -= take;
+        }
+        return n;
+    }
+
+    int sync() override
+    {
+        flushChunk();
+        return 0;
+    }
+
+    /// tellp() and seekp() (the streamed STL writes its triangle count into its header last):
+    /// what is buffered is written first, then the file's offset is moved.
+    pos_type seekoff(off_type offset, std::ios_base::seekdir dir, std::ios_base::openmode) override
+    {
+        put(pbase(), std::size_t(pptr() - pbase()));
+        setp(mBytes.data(), mBytes.data() + mBytes.size());
+        if (mError != 0 || mFd < 0) return pos_type(off_type(-1));
+        const int whence = dir == std::ios_base::beg ? SEEK_SET : dir == std::ios_base::cur ? SEEK_CUR : SEEK_END;
+        const off_t at = ::lseek(mFd, off_t(offset), whence);
+        return at < 0 ? pos_type(off_type(-1)) : pos_type(off_type(at));
+    }
+    pos_type seekpos(pos_type position, std::ios_base::openmode which) override
+    {
+        return seekoff(off_type(position), std::ios_base::beg, which);
+    }
+
+private:
+    void flushChunk()
+    {
+        const std::size_t n = std::size_t(pptr() - pbase());
+        if (n == 0) return;
+        if (mInterrupter) mInterrupter();  // throws to stop the write
+        put(pbase(), n);
+        setp(mBytes.data(), mBytes.data() + mBytes.size());
+    }
+
+    void put(const char* p, std::size_t n) noexcept
+    {
+        if (const int delay = writeDelayMs(); delay > 0 && n > 0)
+            std::this_thread::sleep_for(std::chrono::milliseconds(delay));
+        while (n > 0 && mError == 0 && mFd >= 0) {
+            const ssize_t written = ::write(mFd, p, n);
+            if (written < 0) {
+                if (errno != EINTR) mError = errno;
+                continue;
+            }
+            p += written;
+            n -= std::size_t(written);
+        }
+    }
+
+    int mFd;
+    WriteInterrupter mInterrupter;
+    std::vector<char> mBytes;
+    int mError = 0;
+};
+
 }  // namespace
 
-void registerTemporary(const std::string& path)
+void registerTemporary(const std::string& path, bool folder)
 {
-    char* copy = strdup(path.c_str());
+    char* copy = static_cast<char*>(std::malloc(path.size() + 2));
     if (!copy) return;
+    copy[0] = folder ? 'd' : 'f';
+    std::memcpy(copy + 1, path.c_str(), path.size() + 1);
     for (auto& slot : gTemporaries) {
         char* expected = nullptr;
         if (slot.compare_exchange_strong(expected, copy)) return;
@@ -49,7 +210,7 @@ void unregisterTemporary(const std::string& path)
 {
     for (auto& slot : gTemporaries) {
         char* held = slot.load();
-        if (held && path == held && slot.compare_exchange_strong(held, nullptr)) {
+        if (held && path == held + 1 && slot.compare_exchange_strong(held, nullptr)) {
             std::free(held);
             return;
         }
@@ -58,8 +219,21 @@ void unregisterTemporary(const std::string& path)
 
 void removeTemporaries() noexcept
 {
-    for (auto& slot : gTemporaries)
-        if (const char* held = slot.load()) ::unlink(held);
+    // Files first: a file's temporary may sit inside a temporary folder.
+    for (const char kind : {'f', 'd'})
+        for (auto& slot : gTemporaries)
+            if (const char* held = slot.load(); held && held[0] == kind) {
+                if (kind == 'f')
+                    ::unlink(held + 1);
+                else
+                    removeTree(AT_FDCWD, held + 1, 0);
+            }
+}
+
+void checkWriteInterrupt()
+{
+    if (const OutputTransaction* transaction = OutputTransaction::current())
+        if (transaction->interrupter()) transaction->interrupter()();
 }
 
 std::string temporaryName(const std::string& path)
@@ -103,8 +277,12 @@ AtomicFile::AtomicFile(std::string path) : mPath(std::move(path))
     }
     if (fd < 0) throw OutputError("cannot create '" + mTempPath + "' to write '" + mPath + "'" + reason());
     registerTemporary(mTempPath);
-    mBuffer = std::make_unique<__gnu_cxx::stdio_filebuf<char>>(fd, std::ios::out | std::ios::binary, 1 << 16);
+    if (const OutputTransaction* transaction = OutputTransaction::current()) mInterrupter = transaction->interrupter();
+    mBuffer = std::make_unique<ChunkedFileBuffer>(fd, mInterrupter);
     mStream.rdbuf(mBuffer.get());
+    // The buffer fails only by throwing (the interrupter's exception), and that must leave the
+    // writer: the stream passes it on.
+    mStream.exceptions(std::ios::badbit);
 }
 
 AtomicFile::~AtomicFile()
@@ -114,9 +292,8 @@ AtomicFile::~AtomicFile()
 
 bool AtomicFile::close() noexcept
 {
-    auto* buffer = static_cast<__gnu_cxx::stdio_filebuf<char>*>(mBuffer.get());
-    if (!buffer || !buffer->is_open()) return true;
-    return buffer->close() != nullptr;
+    auto* buffer = static_cast<ChunkedFileBuffer*>(mBuffer.get());
+    return !buffer || buffer->close();
 }
 
 void AtomicFile::discard() noexcept
@@ -130,9 +307,8 @@ void AtomicFile::commit()
 {
     if (mCommitted) return;
     errno = 0;
-    mStream.flush();
-    // A failed write anywhere earlier (disk full, ...) leaves the stream bad; check before the
-    // rename so a truncated file never replaces a good one.
+    // A failed write anywhere earlier (disk full, ...) is kept by the buffer and found by
+    // close(); checked before the rename so a truncated file never replaces a good one.
     const bool written = bool(mStream);
     if (!close() || !written) {
         const std::string why = reason();
@@ -158,8 +334,10 @@ namespace {
 thread_local OutputTransaction* tCurrentTransaction = nullptr;
 }
 
-OutputTransaction::OutputTransaction() : mOuter(tCurrentTransaction)
+OutputTransaction::OutputTransaction(WriteInterrupter interrupter)
+    : mOuter(tCurrentTransaction), mInterrupter(std::move(interrupter))
 {
+    if (!mInterrupter && mOuter) mInterrupter = mOuter->mInterrupter;
     tCurrentTransaction = this;
 }
 

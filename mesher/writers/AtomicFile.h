@@ -2,6 +2,7 @@
 /// @brief Write-to-temporary-then-rename, so a reader never sees a half-written output file.
 #pragma once
 
+#include <functional>
 #include <memory>
 #include <ostream>
 #include <stdexcept>
@@ -18,12 +19,25 @@ public:
     using std::runtime_error::runtime_error;
 };
 
-/// The temporary files that exist now (AtomicFile's, until renamed or removed), so that a
-/// process ended by a signal leaves none: the command line's handler calls removeTemporaries().
-void registerTemporary(const std::string& path);
+/// The temporary files and folders that exist now (AtomicFile's and the slice folders', until
+/// renamed or removed), so that a process ended by a signal leaves none: the command line's
+/// handler calls removeTemporaries(). A @a folder is removed with what it holds.
+void registerTemporary(const std::string& path, bool folder = false);
 void unregisterTemporary(const std::string& path);
-/// Unlinks every registered temporary file. Async-signal-safe (atomic loads and unlink() only).
+/// Removes every registered temporary file and folder (a folder's files and subfolders first).
+/// Async-signal-safe: atomic loads and system calls only (open, getdents64, unlinkat, close).
 void removeTemporaries() noexcept;
+
+/// What a long write calls between chunks (at most kWriteChunkBytes apart, and in the loops that
+/// prepare the bytes) to learn whether to stop: it throws (the job's Cancelled) to stop, and the
+/// write's temporary file is then removed, the old file kept. The job passes its own to the
+/// OutputTransaction it opens; every AtomicFile created while that transaction is open uses it.
+using WriteInterrupter = std::function<void()>;
+constexpr std::size_t kWriteChunkBytes = std::size_t(1) << 16;
+
+/// Calls the interrupter of the OutputTransaction open on this thread, if any (for the loops that
+/// prepare a file's bytes before they reach its stream: lib3mf's packing, OpenMesh's mesh).
+void checkWriteInterrupt();
 
 /// A fresh temporary name beside @a path: "<path>.tmp-<pid>-<n>", n counted per process, so two
 /// writers of one path (two threads, two processes) never share one.
@@ -51,8 +65,12 @@ public:
     AtomicFile(const AtomicFile&) = delete;
     AtomicFile& operator=(const AtomicFile&) = delete;
 
-    /// The stream to write the content to (binary mode).
+    /// The stream to write the content to (binary mode). Its bytes reach the file in chunks of
+    /// kWriteChunkBytes; before each the interrupter is called, and an exception it throws leaves
+    /// the stream's write (the stream throws on badbit) and, through the caller, the writer.
     std::ostream& stream() { return mStream; }
+    /// The interrupter this file's chunks check (the open transaction's when it was created).
+    const WriteInterrupter& interrupter() const { return mInterrupter; }
 
     /// The final path.
     const std::string& path() const { return mPath; }
@@ -70,6 +88,7 @@ private:
 
     std::string mPath;
     std::string mTempPath;
+    WriteInterrupter mInterrupter;
     std::unique_ptr<std::streambuf> mBuffer;
     std::ostream mStream{nullptr};
     bool mCommitted = false;
@@ -84,7 +103,9 @@ private:
 /// fails half-way leaves the output folder as it was.
 class OutputTransaction {
 public:
-    OutputTransaction();
+    /// @a interrupter: what the files written under this transaction check between chunks (none:
+    /// the enclosing transaction's, if any).
+    explicit OutputTransaction(WriteInterrupter interrupter = {});
     ~OutputTransaction();
     OutputTransaction(const OutputTransaction&) = delete;
     OutputTransaction& operator=(const OutputTransaction&) = delete;
@@ -99,6 +120,8 @@ public:
     /// Performs every held-back rename. Throws OutputError naming the path if one fails.
     void commit();
 
+    const WriteInterrupter& interrupter() const { return mInterrupter; }
+
 private:
     struct Rename {
         std::string temp, path;
@@ -106,6 +129,7 @@ private:
     };
     std::vector<Rename> mRenames;
     OutputTransaction* mOuter;
+    WriteInterrupter mInterrupter;
     bool mCommitted = false;
 };
 

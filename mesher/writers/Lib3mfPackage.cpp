@@ -2,12 +2,28 @@
 
 #include "mesher/writers/AtomicFile.h"
 
+#include <exception>
 #include <filesystem>
 #include <stdexcept>
 
 namespace voxlat {
 
 using namespace NMR;
+
+namespace {
+/// lib3mf's progress callback: the open transaction's interrupter, its exception kept to be
+/// thrown again once lib3mf has unwound (it reports NMR_USERABORTED meanwhile).
+bool interruptPacking(int, ProgressIdentifier, void* userData)
+{
+    try {
+        checkWriteInterrupt();
+        return true;
+    } catch (...) {
+        *static_cast<std::exception_ptr*>(userData) = std::current_exception();
+        return false;
+    }
+}
+}  // namespace
 
 Lib3mfPackage::Lib3mfPackage(std::string path, const std::vector<std::pair<std::string, std::string>>& metadata)
     : mPath(std::move(path))
@@ -47,11 +63,18 @@ void Lib3mfPackage::write(const std::array<std::string, 3>& uuids) const
     PLib3MFModelWriter* writerRaw = nullptr;
     check(lib3mf_model_querywriter(model, "3mf", &writerRaw), model, "start the writer");
     const Lib3mfHandle writer(writerRaw);
+    // Packing a large model takes seconds: a cancel meanwhile stops it.
+    std::exception_ptr interrupted;
+    check(lib3mf_writer_setprogresscallback(writerRaw, interruptPacking, &interrupted), writerRaw,
+          "set the progress callback");
+    auto checkPacking = [&](LIB3MFRESULT result, const std::string& what) {
+        if (interrupted) std::rethrow_exception(interrupted);
+        check(result, writerRaw, what);
+    };
     ULONG64 size = 0;
-    check(lib3mf_writer_getstreamsize(writerRaw, &size), writerRaw, "measure the package");
+    checkPacking(lib3mf_writer_getstreamsize(writerRaw, &size), "measure the package");
     std::vector<char> bytes(size);
-    check(lib3mf_writer_writetobuffer(writerRaw, reinterpret_cast<BYTE*>(bytes.data()), size), writerRaw,
-          "pack the model");
+    checkPacking(lib3mf_writer_writetobuffer(writerRaw, reinterpret_cast<BYTE*>(bytes.data()), size), "pack the model");
     AtomicFile file(mPath);
     file.stream().write(bytes.data(), std::streamsize(bytes.size()));
     file.commit();

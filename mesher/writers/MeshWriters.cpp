@@ -35,6 +35,8 @@ namespace {
 constexpr std::size_t kStlHeaderSize = 80;
 constexpr std::size_t kStlFacetSize = 50;
 constexpr std::size_t kStlChunkFacets = 1 << 14;  // ~800 KB per write
+/// Items between two checks of the write interrupter in the loops that prepare a file's bytes.
+constexpr std::size_t kInterruptEvery = 1 << 16;
 
 // Explicit little-endian encoding keeps the files identical on any host.
 void putU32(char* p, std::uint32_t v)
@@ -89,8 +91,13 @@ void writeOpenMesh(const TriangleMesh& mesh, const std::string& path, const std:
     om.reserve(mesh.points.size(), 3 * mesh.triangles.size() / 2, mesh.triangles.size());
     std::vector<OMesh::VertexHandle> handles;
     handles.reserve(mesh.points.size());
-    for (const openvdb::Vec3f& p : mesh.points) handles.push_back(om.add_vertex(OMesh::Point(p.x(), p.y(), p.z())));
-    for (const openvdb::Vec3I& t : mesh.triangles) {
+    for (const openvdb::Vec3f& p : mesh.points) {
+        if (handles.size() % kInterruptEvery == 0) checkWriteInterrupt();
+        handles.push_back(om.add_vertex(OMesh::Point(p.x(), p.y(), p.z())));
+    }
+    for (std::size_t i = 0; i < mesh.triangles.size(); ++i) {
+        if (i % kInterruptEvery == 0) checkWriteInterrupt();
+        const openvdb::Vec3I& t = mesh.triangles[i];
         if (!om.add_face(handles[t[0]], handles[t[1]], handles[t[2]]).is_valid()) {
             throw std::runtime_error("cannot write '" + path +
                                      "': OpenMesh rejected a non-manifold or degenerate face");
@@ -148,11 +155,15 @@ void write3mf(const TriangleMesh& mesh, const std::string& path, const MeshMetad
     const Lib3mfPackage package(path, metadata);
     PLib3MFModelMeshObject* objectRaw = package.object();
     std::vector<MODELMESHVERTEX> vertices(mesh.points.size());
-    for (std::size_t i = 0; i < mesh.points.size(); ++i)
+    for (std::size_t i = 0; i < mesh.points.size(); ++i) {
+        if (i % kInterruptEvery == 0) checkWriteInterrupt();
         for (int k = 0; k < 3; ++k) vertices[i].m_fPosition[k] = mesh.points[i][k];
+    }
     std::vector<MODELMESHTRIANGLE> triangles(mesh.triangles.size());
-    for (std::size_t i = 0; i < mesh.triangles.size(); ++i)
+    for (std::size_t i = 0; i < mesh.triangles.size(); ++i) {
+        if (i % kInterruptEvery == 0) checkWriteInterrupt();
         for (int k = 0; k < 3; ++k) triangles[i].m_nIndices[k] = DWORD(mesh.triangles[i][k]);
+    }
     package.check(lib3mf_meshobject_setgeometry(objectRaw, vertices.data(), DWORD(vertices.size()), triangles.data(),
                                                 DWORD(triangles.size())),
                   objectRaw, "store the mesh");

@@ -26,7 +26,7 @@ _voxlat()
     --format)
         COMPREPLY=($(compgen -W "sl1 sl1s zip png exr goo ctb cbddlp photon pwmo pwms pwma pwmx pmsq pwmb px6s pmx2 pm3 pm3m pm3r pm3n pm4n pm5 pm5s m5sp pws pw0 pwx dlp dl2p" -- "$cur"))
         return ;;
-    --aa | --project | --refine | --preview)
+    --aa | --project | --refine | --strict | --preview)
         COMPREPLY=($(compgen -W "on off" -- "$cur"))
         return ;;
     --extractor)
@@ -46,7 +46,7 @@ _voxlat()
     case "$command" in
     "") COMPREPLY=($(compgen -W "$commands $global" -- "$cur")); return ;;
     run) options="--set --out --no-preview" ;;
-    mesh) options="--set -o --output --tolerance --project --refine --extractor" ;;
+    mesh) options="--set -o --output --tolerance --project --refine --strict --extractor" ;;
     info) options="--set --exact" ;;
     sample) options="--set --field --gradient" ;;
     schema) options="--markdown" ;;
