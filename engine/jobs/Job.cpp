@@ -1667,7 +1667,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
     // The first mesh is the one whose share of its region `density:` is held to: its level is aimed
     // at it before any output is made, so every output has the same level.
     if (firstMesh != mRecipe.outputs.end()) {
-        const MeshOptions options = meshOptions(*firstMesh, mRecipe);
+        const MeshOptions options = meshOptions(*firstMesh);
         if (options.raw() && options.extractor == MeshExtractor::MarchingCubes) aimLevelsAtMesh();
     }
     // A raw marching-cubes STL whose mesh nothing else uses (no other output with the same mesh
