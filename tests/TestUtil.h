@@ -77,9 +77,18 @@ inline std::vector<std::string> listFolder(const std::filesystem::path& p)
     return names;
 }
 
-inline  /// A cube [lo, hi]^3 as 12 outward triangles.
-    TriangleMesh
-    cubeMesh(double lo, double hi)
+/// Every file or folder under @a folder (recursively) whose name holds ".tmp-": temporaries left
+/// behind.
+inline std::vector<std::string> temporariesUnder(const std::filesystem::path& folder)
+{
+    std::vector<std::string> left;
+    for (const auto& f : std::filesystem::recursive_directory_iterator(folder))
+        if (f.path().filename().string().find(".tmp-") != std::string::npos) left.push_back(f.path().string());
+    return left;
+}
+
+/// A cube [lo, hi]^3 as 12 outward triangles.
+inline TriangleMesh cubeMesh(double lo, double hi)
 {
     TriangleMesh m;
     for (int i = 0; i < 8; ++i)

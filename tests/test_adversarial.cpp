@@ -409,15 +409,6 @@ TEST(Adversarial, CommandLineNumbersKeepTheirDigits)
     EXPECT_TRUE(listFolder(dir.path) == std::vector<std::string>{"r.yaml"});
 }
 
-/// Every file in @a folder (recursively) whose name holds ".tmp-": temporaries left behind.
-static std::vector<std::string> temporariesIn(const std::filesystem::path& folder)
-{
-    std::vector<std::string> left;
-    for (const auto& f : std::filesystem::recursive_directory_iterator(folder))
-        if (f.path().filename().string().find(".tmp-") != std::string::npos) left.push_back(f.path().string());
-    return left;
-}
-
 TEST(Adversarial, ALongWriteChecksItsInterrupterEveryChunkAndKeepsTheOldFile)
 {
     // A write of 16 MB whose job is cancelled after its third chunk: it stops within one more
@@ -444,7 +435,7 @@ TEST(Adversarial, ALongWriteChecksItsInterrupterEveryChunkAndKeepsTheOldFile)
     EXPECT_EQ(calls, 3);
     EXPECT_LE(written, 3 * kWriteChunkBytes + 1000);
     EXPECT_EQ(readFile(path), "old");
-    EXPECT_EQ(temporariesIn(dir.path), std::vector<std::string>{});
+    EXPECT_EQ(temporariesUnder(dir.path), std::vector<std::string>{});
 
     // Each mesh format (STL formatted in parallel, OBJ and PLY through OpenMesh, 3MF packed by
     // lib3mf) stops on a cancel made before it starts, the old file kept.
@@ -463,7 +454,7 @@ TEST(Adversarial, ALongWriteChecksItsInterrupterEveryChunkAndKeepsTheOldFile)
         EXPECT_THROW(writeMesh(mesh, file.string()), Cancelled) << name;
         EXPECT_EQ(readFile(file), "old") << name;
     }
-    EXPECT_EQ(temporariesIn(dir.path), std::vector<std::string>{});
+    EXPECT_EQ(temporariesUnder(dir.path), std::vector<std::string>{});
     // Not cancelled, the same writes go through.
     for (const std::string name : {"m.stl", "m.obj", "m.ply", "m.3mf"}) {
         JobContext fine;

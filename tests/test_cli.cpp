@@ -226,15 +226,6 @@ static bool waitForSignalHandler(pid_t pid, int signal)
     return false;
 }
 
-/// Every file or folder under @a folder whose name holds ".tmp-": temporaries left behind.
-static std::vector<std::string> temporariesUnder(const std::filesystem::path& folder)
-{
-    std::vector<std::string> left;
-    for (const auto& f : std::filesystem::recursive_directory_iterator(folder))
-        if (f.path().filename().string().find(".tmp-") != std::string::npos) left.push_back(f.path().string());
-    return left;
-}
-
 TEST(Cli, SigintAndSigtermCancelAndLeaveNoFiles)
 {
     // A job of about a second (0.06 mm voxels over a 30 mm gyroid); the signal lands while it works.

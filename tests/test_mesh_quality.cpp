@@ -264,6 +264,28 @@ TEST(SurfaceProjection, BoxCutGyroidKeepsItsCreases)
     expectClosedManifold(mesh);
 }
 
+TEST(BoxClip, FlatTrianglesAreFlippedAwayAndTheMeshStaysClosed)
+{
+    // A tetrahedron whose face on y = 0 is split at the midpoint c of its edge a-b, closed by the
+    // flat triangle (a, b, c): closed and manifold but for that triangle, which has no area.
+    TriangleMesh m;
+    m.points = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {0.5f, 0, 0}};  // a b d e c
+    m.triangles = {{0, 2, 1}, {0, 4, 3}, {4, 1, 3}, {0, 3, 2}, {1, 2, 3}, {0, 1, 4}};
+    const MeshTopology before = checkTopology(m);
+    EXPECT_EQ(before.degenerateTriangles, 1u);
+    EXPECT_EQ(before.boundaryEdges + before.nonManifoldEdges, 0u);
+    EXPECT_EQ(flipFlatTriangles(m), 1u);
+    const MeshTopology after = checkTopology(m);
+    EXPECT_TRUE(after.closedManifold());
+    EXPECT_EQ(after.eulerCharacteristic, 2);
+    EXPECT_NEAR(m.volume(), 1.0 / 6.0, 1e-12);  // the two flipped triangles cover the same face
+    EXPECT_EQ(m.triangles.size(), 6u);
+    // Nothing flat: nothing changes.
+    const TriangleMesh again = m;
+    EXPECT_EQ(flipFlatTriangles(m), 0u);
+    EXPECT_EQ(m.triangles, again.triangles);
+}
+
 TEST(SurfaceProjection, SameBytesForAnyThreadCount)
 {
     const GyroidCase g;

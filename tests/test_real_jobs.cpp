@@ -173,6 +173,62 @@ TEST(RealJobs, AShellWithDrainHasItsCavityOpenedAboveThePlate)
     EXPECT_GT(mesh.volume(), shell - 2.0 * std::numbers::pi * 1.0 * 1.5);
 }
 
+TEST(RealJobs, DrainsFollowTheBuildDirection)
+{
+    // A hollow ball built along +x and along an oblique direction: the cavity's lowest point is
+    // lowest along that direction, the ball's bottom along it stands on the plate, so the channel
+    // leaves across the direction, a radius above the plate; the drained solid has no trap.
+    const double root3 = std::sqrt(3.0);
+    for (const Vec3d& up : {Vec3d(1, 0, 0), Vec3d(1, 1, 1) / root3}) {
+        TempDir dir;
+        const std::string build = up.y() == 0.0 ? "[1, 0, 0]" : "[1, 1, 1]";  // the recipe's (unnormalised) direction
+        Job job(
+            recipeText("voxel: 0.2\nfields:\n  ball: {sphere: {radius: 5}}\n"
+                       "  hollow: {shell: {part: ball, thickness: 1, drain: {diameter: 2, build: " +
+                           build + "}}}\nresult: hollow\n",
+                       dir));
+        const TriangleMesh& mesh = job.mesh();
+        EXPECT_TRUE(checkTopology(mesh).closedManifold());
+        const auto report = job.report();
+        const auto& drain = report["drain"]["hollow"];
+        ASSERT_EQ(drain["holes"].size(), 1u) << drain.dump(1);
+        EXPECT_EQ(drain["traps_left"], 0);
+        for (int a = 0; a < 3; ++a) EXPECT_NEAR(drain["build_direction"][a].get<double>(), up[a], 1e-12);
+        const auto& hole = drain["holes"][0];
+        const Vec3d from(hole["position"][0].get<double>(), hole["position"][1].get<double>(),
+                         hole["position"][2].get<double>());
+        const Vec3d along(hole["direction"][0].get<double>(), hole["direction"][1].get<double>(),
+                          hole["direction"][2].get<double>());
+        EXPECT_NEAR(along.dot(up), 0.0, 1e-12) << hole.dump();
+        // The ball's bottom along up is at -5: the channel's axis is a radius (1 mm) above it.
+        EXPECT_GE(from.dot(up), -5.0 + 1.0) << hole.dump();
+        // It starts in the cavity near its lowest point (-3 along up), within a search sample.
+        EXPECT_LT(from.dot(up), -3.0 + 1.0 + 0.5) << hole.dump();
+        // Independently of the report: the mesh has lost the channel through the 1 mm wall.
+        const double shell = 4.0 / 3.0 * std::numbers::pi * (125.0 - 64.0);
+        EXPECT_LT(mesh.volume(), shell - 0.5 * std::numbers::pi * 1.0 * 1.0);
+    }
+    // A slices' drain builds along the printer's +z; a zero direction is refused.
+    TempDir dir;
+    std::string message = errorOf([&] {
+        Job job(
+            recipeText("voxel: 0.2\nfields:\n  ball: {sphere: {radius: 5}}\nresult: ball\n"
+                       "outputs: {slices: {printer: sl1s, file: h.sl1s, drain: {diameter: 2, build: [1, 0, 0]}}}\n",
+                       dir));
+    });
+    EXPECT_NE(message.find("r.yaml:4:"), std::string::npos) << message;
+    EXPECT_NE(message.find("built along +z"), std::string::npos) << message;
+    message = errorOf([&] {
+        Job job(
+            recipeText("voxel: 0.2\nfields:\n  ball: {sphere: {radius: 5}}\n"
+                       "  hollow: {shell: {part: ball, thickness: 1, drain: {diameter: 2, build: [0, 0, 0]}}}\n"
+                       "result: hollow\n",
+                       dir));
+    });
+    EXPECT_NE(message.find("r.yaml:3:"), std::string::npos) << message;
+    EXPECT_NE(message.find("zero length"), std::string::npos) << message;
+}
+
 TEST(RealJobs, StrutsFillAPartForTheInfillsDensity)
 {
     // Issue 42's first report: `radius:` on a lattice an infill solves crashed (the level was set

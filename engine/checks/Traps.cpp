@@ -54,7 +54,7 @@ private:
 }  // namespace
 
 std::vector<Trap> findTraps(const FieldNode& solid, const Box3& box, double spacing, const JobContext* context,
-                            std::shared_ptr<const FieldNode>* openSpace)
+                            std::shared_ptr<const FieldNode>* openSpace, const Vec3d& up, double* lowestSolid)
 {
     BlockLattice lattice;
     lattice.base = box.min;
@@ -65,19 +65,31 @@ std::vector<Trap> findTraps(const FieldNode& solid, const Box3& box, double spac
     const std::size_t total = std::size_t(nx * ny * nz);
     // 0 solid, 1 void not yet reached, 2 void reached (from outside or by a labelled cavity).
     std::vector<std::uint8_t> state(total, 0);
+    // Per block, the lowest height along @a up of a solid sample (joined in block order below).
+    std::vector<double> blockLowest(lowestSolid ? lattice.blockCount() : 0, std::numeric_limits<double>::infinity());
     {
         StageProgress progress(context, "looking for resin traps", lattice.blockCount());
-        sampleBlocks(
-            solid, lattice,
-            [&](std::size_t, const GridBatch& batch, const std::array<int, 3>& first, std::span<const double> values) {
-                std::size_t n = 0;
-                for (int i = 0; i < batch.nx; ++i)
-                    for (int j = 0; j < batch.ny; ++j)
-                        for (int k = 0; k < batch.nz; ++k, ++n)
-                            state[std::size_t(((first[0] + i) * ny + (first[1] + j)) * nz + first[2] + k)] =
-                                values[n] >= 0.0 ? 1 : 0;
-                progress.add();
-            });
+        sampleBlocks(solid, lattice,
+                     [&](std::size_t block, const GridBatch& batch, const std::array<int, 3>& first,
+                         std::span<const double> values) {
+                         std::size_t n = 0;
+                         double lowest = std::numeric_limits<double>::infinity();
+                         for (int i = 0; i < batch.nx; ++i)
+                             for (int j = 0; j < batch.ny; ++j)
+                                 for (int k = 0; k < batch.nz; ++k, ++n) {
+                                     const bool isVoid = values[n] >= 0.0;
+                                     state[std::size_t(((first[0] + i) * ny + (first[1] + j)) * nz + first[2] + k)] =
+                                         isVoid ? 1 : 0;
+                                     if (lowestSolid && !isVoid)
+                                         lowest = std::min(lowest, batch.point(i, j, k).dot(up));
+                                 }
+                         if (lowestSolid) blockLowest[block] = lowest;
+                         progress.add();
+                     });
+    }
+    if (lowestSolid) {
+        *lowestSolid = std::numeric_limits<double>::infinity();
+        for (double l : blockLowest) *lowestSolid = std::min(*lowestSolid, l);
     }
     auto index = [&](std::int64_t i, std::int64_t j, std::int64_t k) { return std::size_t((i * ny + j) * nz + k); };
     std::vector<std::size_t> queue;
@@ -137,13 +149,15 @@ std::vector<Trap> findTraps(const FieldNode& solid, const Box3& box, double spac
         trap.samples = members.size();
         trap.volumeMm3 = double(members.size()) * spacing * spacing * spacing;
         trap.centroid = sum / double(members.size());
-        double lowestZ = std::numeric_limits<double>::infinity(), nearest = lowestZ;
-        for (const std::size_t t : members) lowestZ = std::min(lowestZ, centre(t).z());
+        // Heights along @a up; samples within a thousandth of a sample of the lowest tie (an
+        // oblique direction rounds the heights of one layer of samples apart).
+        double lowestHeight = std::numeric_limits<double>::infinity(), nearest = lowestHeight;
+        for (const std::size_t t : members) lowestHeight = std::min(lowestHeight, centre(t).dot(up));
         for (const std::size_t t : members) {
             const Vec3d p = centre(t);
-            if (p.z() != lowestZ) continue;
-            const double d = (p.x() - trap.centroid.x()) * (p.x() - trap.centroid.x()) +
-                             (p.y() - trap.centroid.y()) * (p.y() - trap.centroid.y());
+            if (p.dot(up) > lowestHeight + 1e-3 * spacing) continue;
+            const Vec3d off = p - trap.centroid;
+            const double d = (off - off.dot(up) * up).lengthSqr();
             if (d < nearest) {
                 nearest = d;
                 trap.lowest = p;

@@ -15,7 +15,8 @@ namespace voxlat {
 struct Trap {
     double volumeMm3 = 0.0;  ///< samples times the sample's cell volume
     std::uint64_t samples = 0;
-    Vec3d lowest{0.0};  ///< the sample lowest along z (ties: nearest the cavity's centroid in x, y)
+    /// The sample lowest along the build direction (ties: nearest the cavity's centroid across it).
+    Vec3d lowest{0.0};
     Vec3d centroid{0.0};
 };
 
@@ -29,8 +30,12 @@ struct Trap {
 /// a field positive on the void samples reached from the box's faces and beyond the box, negative
 /// on solid samples and in closed cavities (the nearest sample's; gradients by central
 /// differences of the samples). It tells where a channel from a cavity comes out when the solid
-/// is no part with an outside of its own (`drain:` under `slices:`).
+/// is no part with an outside of its own (`drain:` under `slices:`). @a up is the build direction
+/// (a unit vector) along which Trap::lowest is lowest; @a lowestSolid, when given, receives the
+/// lowest height along it of a solid sample (the part's bottom, within a sample; infinity when
+/// there is none).
 std::vector<Trap> findTraps(const FieldNode& solid, const Box3& box, double spacing,
-                            const JobContext* context = nullptr, std::shared_ptr<const FieldNode>* openSpace = nullptr);
+                            const JobContext* context = nullptr, std::shared_ptr<const FieldNode>* openSpace = nullptr,
+                            const Vec3d& up = Vec3d(0.0, 0.0, 1.0), double* lowestSolid = nullptr);
 
 }  // namespace voxlat

@@ -5,6 +5,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <string>
 
 namespace voxlat {
 
@@ -16,6 +18,14 @@ constexpr std::uint64_t kCrumbSamples = 8;
 nlohmann::json vec(const Vec3d& v)
 {
     return {v[0], v[1], v[2]};
+}
+
+/// "+x" for an axis, else "[x, y, z]".
+std::string directionName(const Vec3d& v)
+{
+    for (int a = 0; a < 3; ++a)
+        if (std::abs(std::abs(v[a]) - 1.0) < 1e-12) return std::string(v[a] > 0 ? "+" : "-") + "xyz"[a];
+    return "[" + formatNumber(v[0]) + ", " + formatNumber(v[1]) + ", " + formatNumber(v[2]) + "]";
 }
 
 /// How far from @a p along @a dir the part is left (its value positive), in steps of @a step up
@@ -44,45 +54,68 @@ nlohmann::json planDrains(const std::vector<DrainRequest>& drains, double voxel,
         // A part's outside is where its field is positive; a result drained for its slices has
         // no part, and its outside is the void the search reaches from the faces of its box.
         std::shared_ptr<const FieldNode> open;
-        const std::vector<Trap> traps = findTraps(*d.node->solid(), box, spacing, context, d.part ? nullptr : &open);
+        double lowestSolid = 0.0;
+        const std::vector<Trap> traps =
+            findTraps(*d.node->solid(), box, spacing, context, d.part ? nullptr : &open, d.up, &lowestSolid);
         const FieldNode& part = d.part ? *d.part : *open;
         std::vector<DrainChannel> channels;
         nlohmann::json holes = nlohmann::json::array();
         std::uint64_t crumbs = 0;
         const double limit = box.extent().length();
+        // The build direction and two directions across it (x and y for +z). The plate is the
+        // part's lowest extent along it: along an axis its support box's face, else its lowest
+        // solid sample (a box's corner lies below an oblique part's bottom).
+        const Vec3d up = d.up;
+        Vec3d across = std::abs(up.x()) < 0.9 ? Vec3d(1, 0, 0) : Vec3d(0, 1, 0);
+        across = across - across.dot(up) * up;
+        across.normalize();
+        const Vec3d across2 = up.cross(across);
+        const bool alongAxis = std::abs(std::abs(up.x()) + std::abs(up.y()) + std::abs(up.z()) - 1.0) < 1e-12;
+        double plate = lowestSolid;
+        if (alongAxis) {
+            plate = std::numeric_limits<double>::infinity();
+            for (int c = 0; c < 8; ++c) {
+                const Vec3d corner(c & 1 ? support->max.x() : support->min.x(),
+                                   c & 2 ? support->max.y() : support->min.y(),
+                                   c & 4 ? support->max.z() : support->min.z());
+                plate = std::min(plate, corner.dot(up));
+            }
+        }
+        struct Way {
+            Vec3d dir;
+            std::string placed;
+        };
+        const std::vector<Way> ways{{-up, "the cavity's lowest point, straight down"},
+                                    {-across, "the cavity's lowest point, sideways (" + directionName(-across) + ")"},
+                                    {across, "the cavity's lowest point, sideways (" + directionName(across) + ")"},
+                                    {-across2, "the cavity's lowest point, sideways (" + directionName(-across2) + ")"},
+                                    {across2, "the cavity's lowest point, sideways (" + directionName(across2) + ")"}};
         for (const Trap& trap : traps) {
             if (trap.samples < kCrumbSamples) {
                 ++crumbs;
                 continue;
             }
-            // The part's lowest face stands on the build plate, which closes a hole there: the
-            // channel leaves at the cavity's lowest point straight down only where it comes out
-            // above the plate, else sideways (the shortest of +-x, +-y) at the same height, kept a
-            // radius and a sample above the plate; where neither way out exists, along the
-            // part's outward normal (the thinnest wall).
-            const double plate = support->min.z();
+            // The part's lowest face (along the build direction) stands on the build plate,
+            // which closes a hole there: the channel leaves at the cavity's lowest point straight
+            // down (against the build direction) only where it comes out above the plate, else
+            // sideways (the shortest of four directions across the build direction) at the same
+            // height, kept a radius and a sample above the plate; where neither way out exists,
+            // along the part's outward normal (the thinnest wall).
             Vec3d p = trap.lowest;
             const double step = 0.25 * spacing;
-            struct Way {
-                Vec3d dir;
-                const char* placed;
-            };
-            const Way ways[] = {{{0, 0, -1}, "the cavity's lowest point, straight down"},
-                                {{-1, 0, 0}, "the cavity's lowest point, sideways (-x)"},
-                                {{1, 0, 0}, "the cavity's lowest point, sideways (+x)"},
-                                {{0, -1, 0}, "the cavity's lowest point, sideways (-y)"},
-                                {{0, 1, 0}, "the cavity's lowest point, sideways (+y)"}};
+            const double lift = 0.5 * d.diameter + spacing;  // a sideways channel's height above the plate
+            auto raised = [&](const Vec3d& q) { return q + std::max(0.0, plate + lift - q.dot(up)) * up; };
             const Way* best = nullptr;
             double reach = limit, bestCost = 0.0;
             for (const Way& w : ways) {
-                Vec3d from = p;
-                if (w.dir.z() == 0.0) from.z() = std::max(p.z(), plate + 0.5 * d.diameter + spacing);
+                const bool down = w.dir.dot(up) < -0.5;
+                const Vec3d from = down ? p : raised(p);
                 const double t = exitDistance(part, from, w.dir, step, limit);
                 if (t >= limit) continue;  // never leaves the part within its box
                 const Vec3d exit = from + t * w.dir;
-                if (w.dir.z() < 0.0 && exit.z() - 0.5 * d.diameter < plate + spacing) continue;  // onto the plate
+                if (down && exit.dot(up) - 0.5 * d.diameter < plate + spacing) continue;  // onto the plate
                 // Straight down is preferred while it is no longer than a sideways way by a diameter.
-                const double cost = t - (w.dir.z() < 0.0 ? d.diameter : 0.0);
+                const double cost = t - (down ? d.diameter : 0.0);
                 if (!best || cost < bestCost) {
                     best = &w;
                     reach = t;
@@ -90,11 +123,11 @@ nlohmann::json planDrains(const std::vector<DrainRequest>& drains, double voxel,
                 }
             }
             Vec3d dir;
-            const char* placed;
+            std::string placed;
             if (best) {
                 dir = best->dir;
                 placed = best->placed;
-                if (dir.z() == 0.0) p.z() = std::max(p.z(), plate + 0.5 * d.diameter + spacing);
+                if (dir.dot(up) > -0.5) p = raised(p);
             } else {
                 Vec3d normal = part.valueAndGradient(p).second;
                 const double length = normal.length();
@@ -125,6 +158,7 @@ nlohmann::json planDrains(const std::vector<DrainRequest>& drains, double voxel,
         double found = 0.0;
         for (const Trap& t : traps) found += t.volumeMm3;
         out[d.name] = {{"diameter_mm", d.diameter},
+                       {"build_direction", vec(up)},
                        {"search_spacing_mm", spacing},
                        {"traps_found", traps.size() - crumbs},
                        {"trap_volume_mm3", found},

@@ -49,9 +49,12 @@
 #include <chrono>
 #include <climits>
 #include <cmath>
+#include <cstdlib>
+#include <fstream>
 #include <iostream>
 #include <optional>
 #include <sstream>
+#include <thread>
 
 namespace voxlat {
 
@@ -224,11 +227,63 @@ nlohmann::json densityBySlab(const openvdb::FloatGrid& grid, const Domain& domai
     }
     return {{"axis", std::string(1, "xyz"[axis])}, {"slabs", slabs}, {"max_abs_error", worst}};
 }
+
+/// A mesher's progress (a fraction, from any thread) fed into a stage of 1000 units.
+ProgressFn feed(StageProgress& progress, std::atomic<std::uint64_t>& last)
+{
+    return [&progress, &last](double fraction) {
+        // Every call checks the cancel flag (add(0) too): a phase that reports the same
+        // fraction again still stops.
+        const auto now = std::uint64_t(std::clamp(fraction, 0.0, 1.0) * 1000);
+        std::uint64_t before = last.load(std::memory_order_relaxed);
+        while (now > before && !last.compare_exchange_weak(before, now, std::memory_order_relaxed)) {
+        }
+        progress.add(now > before ? now - before : 0);
+    };
+}
+
+/// Runs @a work with a ProgressFn that reports @a label's progress through @a context and stops
+/// it (Cancelled) once the job is cancelled.
+template <class Work>
+auto reporting(const JobContext* context, const std::string& label, Work&& work)
+{
+    StageProgress progress(context, label, 1000);
+    std::atomic<std::uint64_t> last{0};
+    return work(feed(progress, last));
+}
+
+/// A test hook for bench/cancel_latency.py: VOXLAT_TEST_CANCEL_AT=STAGE cancels the job the way a
+/// signal does, VOXLAT_TEST_CANCEL_AFTER_MS after the stage of that name (a key of report.json's
+/// `timings_s`) begins (at once by default), and VOXLAT_TEST_CANCEL_STAMP=FILE records when
+/// (steady clock, CLOCK_MONOTONIC, in ns), so the time the stage takes to stop can be measured
+/// from outside.
+void cancelAtTestStage(const std::string& stage, JobContext& context)
+{
+    static const char* const at = std::getenv("VOXLAT_TEST_CANCEL_AT");
+    if (at == nullptr || stage != at || context.cancelled()) return;
+    const char* after = std::getenv("VOXLAT_TEST_CANCEL_AFTER_MS");
+    const int delayMs = after ? std::atoi(after) : 0;
+    const char* stamp = std::getenv("VOXLAT_TEST_CANCEL_STAMP");
+    auto cancel = [&context, stamp, delayMs] {
+        if (delayMs > 0) std::this_thread::sleep_for(std::chrono::milliseconds(delayMs));
+        if (stamp)
+            std::ofstream(stamp) << std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                        std::chrono::steady_clock::now().time_since_epoch())
+                                        .count()
+                                 << '\n';
+        context.cancel();
+    };
+    if (delayMs > 0)
+        std::thread(cancel).detach();  // the context outlives the job (the command line's)
+    else
+        cancel();
+}
 }  // namespace
 
 template <typename Fn>
 auto Job::timed(const std::string& stage, Fn&& fn)
 {
+    cancelAtTestStage(stage, *mContext);
     const auto start = std::chrono::steady_clock::now();
     struct Record {
         nlohmann::json& timings;
@@ -648,8 +703,11 @@ void Job::aimLevelsAtMesh()
     const double target = *node.density;
     SparseStats stats;
     openvdb::FloatGrid::Ptr g = evaluateResult(stats);
-    const double volume =
-        timed("measure the mesh's share", [&] { return marchingCubesVolume(*g, 0.0f, mDomain.box.center()); });
+    const double volume = timed("measure the mesh's share", [&] {
+        return reporting(mContext, "measuring the mesh's volume", [&](const ProgressFn& progress) {
+            return marchingCubesVolume(*g, 0.0f, mDomain.box.center(), progress);
+        });
+    });
     const std::optional<MeshShareMeasure> before = meshShareOf(node, volume);
     nlohmann::json aim = {
         {"measure", "the volume the marching-cubes mesh of the recipe's grid encloses, before it is made"},
@@ -668,16 +726,50 @@ void Job::aimLevelsAtMesh()
         mAimStats = stats;
         return;
     }
-    const double indicatorLevel = solved.indicatorLevel + missing / solved.slope;
-    node.solid->correct(node.solid->levelFromIndicator(indicatorLevel));
+    const double firstIndicator = solved.indicatorLevel + missing / solved.slope;
+    node.solid->correct(node.solid->levelFromIndicator(firstIndicator));
     if (mTimings.contains("evaluate")) {
         mTimings["evaluate at the solved level"] = mTimings["evaluate"];
         mTimings.erase("evaluate");
     }
-    g.reset();  // evaluated again at the new level by the first output that needs it
+    g.reset();
+    // Checked on the grid at the moved level (the outputs' grid when it holds, so nothing is
+    // evaluated in vain): a field too flat about its level for one step along the voxels' slope
+    // (a points infill: -3 % after one) takes a secant step through the two measured shares.
+    double indicatorLevel = firstIndicator;
+    SparseStats movedStats;
+    openvdb::FloatGrid::Ptr moved = evaluateResult(movedStats);
+    const double movedVolume = timed("measure the mesh's share at the moved level", [&] {
+        return reporting(mContext, "measuring the mesh's volume again", [&](const ProgressFn& progress) {
+            return marchingCubesVolume(*moved, 0.0f, mDomain.box.center(), progress);
+        });
+    });
+    const std::optional<MeshShareMeasure> after = meshShareOf(node, movedVolume);
+    int steps = 1;
+    if (after) {
+        aim["density_from_mesh_at_first_step"] = after->measured;
+        const double stillMissing = target - after->measured;
+        const double secant = (firstIndicator - solved.indicatorLevel) / (after->measured - before->measured);
+        if (std::abs(stillMissing) > kMeshAimTolerance * target && std::isfinite(secant) && secant > 0.0 &&
+            std::abs(stillMissing * secant) <= 4.0 * std::abs(firstIndicator - solved.indicatorLevel)) {
+            indicatorLevel = firstIndicator + stillMissing * secant;
+            node.solid->correct(node.solid->levelFromIndicator(indicatorLevel));
+            steps = 2;
+            if (mTimings.contains("evaluate")) {
+                mTimings["evaluate at the first step"] = mTimings["evaluate"];
+                mTimings.erase("evaluate");
+            }
+        }
+    }
+    if (steps == 1) {
+        mAimGrid = std::move(moved);  // the outputs' grid
+        mAimStats = movedStats;
+    }
+    moved.reset();  // at two steps: evaluated again at the final level by the first output that needs it
     nlohmann::json& entry = mReport["fields"][node.name];
     const double level = node.solid->level();
     aim["moved"] = true;
+    aim["steps"] = steps;
     aim["slope"] = solved.slope;
     entry["level"] = node.recipeLevel ? node.recipeLevel(level) : level;
     if (node.recipeLevel) entry["level_radius_mm"] = level;
@@ -685,20 +777,11 @@ void Job::aimLevelsAtMesh()
         entry[node.thinnestKind == "wall" ? "thinnest_wall_mm" : "thinnest_strut_mm"] = node.thinnest(level);
     // `achieved_density` stays the solve's (the target met on the voxels at the solved level); the
     // voxels' share at the moved level, along the solve's slope, is what slices of the field hold.
-    aim["density_on_voxels_at_level"] = solved.achieved + missing;
+    aim["density_on_voxels_at_level"] = solved.achieved + solved.slope * (indicatorLevel - solved.indicatorLevel);
     entry["mesh_aim"] = aim;
 }
 
 namespace {
-/// A mesher's progress (a fraction, from any thread) fed into a stage of 1000 units.
-ProgressFn feed(StageProgress& progress, std::atomic<std::uint64_t>& last)
-{
-    return [&progress, &last](double fraction) {
-        const auto now = std::uint64_t(fraction * 1000);
-        const std::uint64_t before = last.exchange(now);
-        if (now > before) progress.add(now - before);
-    };
-}
 
 /// The mesh settings of a `mesh:` output entry (parsed when the recipe was loaded).
 const MeshOptions& meshOptions(const OutputSpec& out)
@@ -843,15 +926,15 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         // The grid's voxels plus the cube centres of the field the grid samples (clipped alike).
         const FieldPtr field = surfaceField();
         v->mesh = timed("mesh", [&] {
-            StageProgress progress(mContext, "meshing (bcc)", 1000);
-            std::atomic<std::uint64_t> last{0};
-            return std::make_unique<TriangleMesh>(bccTetrahedra(grid(), *field, 0.0f, feed(progress, last)));
+            return reporting(mContext, "meshing (bcc)", [&](const ProgressFn& progress) {
+                return std::make_unique<TriangleMesh>(bccTetrahedra(grid(), *field, 0.0f, progress));
+            });
         });
     } else {
         v->mesh = timed("mesh", [&] {
-            StageProgress progress(mContext, "meshing", 1000);
-            std::atomic<std::uint64_t> last{0};
-            return std::make_unique<TriangleMesh>(marchingCubes(grid(), 0.0f, feed(progress, last)));
+            return reporting(mContext, "meshing", [&](const ProgressFn& progress) {
+                return std::make_unique<TriangleMesh>(marchingCubes(grid(), 0.0f, progress));
+            });
         });
     }
     TriangleMesh& m = *v->mesh;
@@ -863,9 +946,8 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
     if (options.project) {
         const FieldPtr field = surfaceField();
         const ProjectionStats s = isProjected ? projected : timed("project vertices", [&] {
-            StageProgress progress(mContext, "projecting vertices onto the surface", 1000);
-            std::atomic<std::uint64_t> last{0};
-            return projectToSurface(m, *field, po, feed(progress, last));
+            return reporting(mContext, "projecting vertices onto the surface",
+                             [&](const ProgressFn& progress) { return projectToSurface(m, *field, po, progress); });
         });
         report["projection"] = {{"vertices_moved", s.moved},
                                 {"vertices_held_back", s.heldBack},
@@ -885,8 +967,11 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         // Where the solid meets the domain box, a vertex of each edge across the crease goes onto both.
         ProjectionOptions co = po;
         co.maxMove = meshVoxel;
-        const CreaseStats c =
-            timed("sharpen creases", [&] { return sharpenCreases(m, *mResult, BoxField(mDomain.box), co); });
+        const CreaseStats c = timed("sharpen creases", [&] {
+            return reporting(mContext, "sharpening creases", [&](const ProgressFn& progress) {
+                return sharpenCreases(m, *mResult, BoxField(mDomain.box), co, progress);
+            });
+        });
         // The edges still across a crease (and the box's own edges and corners) are split at
         // the point on both surfaces (on all three at a corner).
         std::vector<FieldPtr> operands;
@@ -894,7 +979,10 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         CreaseSurfaces surfaces;
         for (const FieldPtr& f : operands) surfaces.fields.push_back(f.get());
         surfaces.box = mDomain.box;
-        const CreaseSplitStats split = timed("split crease edges", [&] { return splitCreaseEdges(m, surfaces, co); });
+        const CreaseSplitStats split = timed("split crease edges", [&] {
+            return reporting(mContext, "splitting crease edges",
+                             [&](const ProgressFn& progress) { return splitCreaseEdges(m, surfaces, co, progress); });
+        });
         // Triangles that still cut into the solid or stray out of it (a chamfer across a sharp
         // wedge whose crease runs outside the triangle) are bisected at points on the surface.
         RefinementOptions ro;
@@ -902,7 +990,10 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         ro.spacing = 0.25 * meshVoxel;
         ro.maxMove = 2.0 * meshVoxel;
         ro.tolerance = po.tolerance;
-        const RefinementStats refined = timed("refine creases", [&] { return refineCreases(m, surfaces, ro); });
+        const RefinementStats refined = timed("refine creases", [&] {
+            return reporting(mContext, "refining creases",
+                             [&](const ProgressFn& progress) { return refineCreases(m, surfaces, ro, progress); });
+        });
         report["refinement"] = {
             {"threshold_mm", ro.threshold},
             {"triangles_checked", refined.checked},
@@ -945,9 +1036,8 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         // a quarter refuses 0.4 M (14 s) for 4 % more triangles; a tenth keeps 30 % more.
         d.quadricShare = 0.25;
         const DecimationStats s = timed("decimate", [&] {
-            StageProgress progress(mContext, "decimating to " + formatNumber(d.tolerance) + " mm", 1000);
-            std::atomic<std::uint64_t> last{0};
-            return decimateToTolerance(m, *field, d, feed(progress, last));
+            return reporting(mContext, "decimating to " + formatNumber(d.tolerance) + " mm",
+                             [&](const ProgressFn& progress) { return decimateToTolerance(m, *field, d, progress); });
         });
         report["decimation"] = {{"tolerance_mm", d.tolerance},
                                 {"triangles_before", s.trianglesBefore},
@@ -979,23 +1069,31 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
                 "value over the triangle plus its miss at the centre (max), its square integrated over the "
                 "triangle (rms)";
         } else {
-            dev = timed("measure mesh", [&] { return measureDeviation(m, *distanceField(), 0.0, mDomain.voxel); });
+            dev = timed("measure mesh", [&] {
+                return reporting(mContext, "measuring the mesh against the surface", [&](const ProgressFn& progress) {
+                    return measureDeviation(m, *distanceField(), 0.0, mDomain.voxel, progress);
+                });
+            });
             measure =
                 "|max f / |grad f|| over the result's operands and the domain box, on every triangle sampled "
                 "at most one voxel apart";
         }
         report["deviation"] = {
             {"max_mm", dev.max}, {"rms_mm", dev.rms}, {"samples", dev.samples}, {"measure", measure}};
-        const MeshTopology t = topology ? *topology : checkTopology(m);
+        const MeshTopology t = topology ? *topology : timed("check topology", [&] {
+            return reporting(mContext, "checking the mesh's topology",
+                             [&](const ProgressFn& progress) { return checkTopology(m, nullptr, progress); });
+        });
         report["closed_manifold"] = t.closedManifold();
         report["euler_characteristic"] = t.eulerCharacteristic;
         report["pieces"] = t.pieces;
         report["closed_pieces"] = t.closedPieces;
         report["genus"] = t.genus;
         // Projection and decimation move vertices and join triangles: check that no two cross.
-        const std::size_t crossing = crossingPairs
-                                         ? *crossingPairs
-                                         : timed("check self-intersections", [&] { return countSelfIntersections(m); });
+        const std::size_t crossing = crossingPairs ? *crossingPairs : timed("check self-intersections", [&] {
+            return reporting(mContext, "checking self-intersections",
+                             [&](const ProgressFn& progress) { return countSelfIntersections(m, progress); });
+        });
         report["self_intersections"] = crossing;
         if (crossing > 0)
             mContext->warn("mesh_self_intersections",
@@ -1092,13 +1190,16 @@ std::unique_ptr<TriangleMesh> Job::clippedMesh(double h, ProjectionStats& projec
     po.maxMove = 0.5 * h;
     po.tolerance = 1e-4 * mDomain.voxel;
     projection = timed("project vertices", [&] {
-        StageProgress progress(mContext, "projecting vertices onto the surface", 1000);
-        std::atomic<std::uint64_t> last{0};
-        return projectToSurface(*mesh, *mResult, po, feed(progress, last));
+        return reporting(mContext, "projecting vertices onto the surface",
+                         [&](const ProgressFn& progress) { return projectToSurface(*mesh, *mResult, po, progress); });
     });
     BoxClipOptions co{po};  // the crease points' Newton steps as the projection's
     co.checkTopology = checkCut;
-    boxCut = timed("cut by the domain box", [&] { return clipToBox(*mesh, *mResult, mDomain.box, co); });
+    boxCut = timed("cut by the domain box", [&] {
+        return reporting(mContext, "cutting by the domain box", [&](const ProgressFn& progress) {
+            return clipToBox(*mesh, *mResult, mDomain.box, co, progress);
+        });
+    });
     if (!boxCut->ok) return nullptr;
     return mesh;
 }
@@ -1119,9 +1220,8 @@ AdaptiveRefinementStats Job::refineCoarseMesh(TriangleMesh& mesh, double h, doub
     o.maxMove = 0.5 * h;
     o.newtonTolerance = 1e-4 * mDomain.voxel;
     return timed("refine to tolerance", [&] {
-        StageProgress progress(mContext, "refining to " + formatNumber(tolerance) + " mm", 1000);
-        std::atomic<std::uint64_t> last{0};
-        return refineToTolerance(mesh, *field, o, feed(progress, last));
+        return reporting(mContext, "refining to " + formatNumber(tolerance) + " mm",
+                         [&](const ProgressFn& progress) { return refineToTolerance(mesh, *field, o, progress); });
     });
 }
 
@@ -1272,13 +1372,20 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
             // Its topology (for the report) first: the fans it walks show most corner-sharing pairs
             // apart for the crossing check.
             std::vector<std::uint8_t> fansApart;
-            topology = timed("check topology", [&] { return checkTopology(*mesh, &fansApart); });
+            topology = timed("check topology", [&] {
+                return reporting(mContext, "checking the mesh's topology", [&](const ProgressFn& progress) {
+                    return checkTopology(*mesh, &fansApart, progress);
+                });
+            });
             if (!keepsPieces(*topology)) {
                 topology.reset();
                 continue;
             }
-            const std::size_t crossing =
-                timed("check self-intersections", [&] { return countSelfIntersections(*mesh, fansApart); });
+            const std::size_t crossing = timed("check self-intersections", [&] {
+                return reporting(mContext, "checking self-intersections", [&](const ProgressFn& progress) {
+                    return countSelfIntersections(*mesh, fansApart, progress);
+                });
+            });
             trial["refinement"] = {{"triangles_before", r.trianglesBefore},
                                    {"triangles_after", r.trianglesAfter},
                                    {"edges_split", r.splits},
@@ -1319,7 +1426,10 @@ std::unique_ptr<TriangleMesh> Job::coarseMesh(const MeshOptions& options, nlohma
         }
         // A refined mesh the refinement left as it was: checked now.
         if (refine) {
-            topology = timed("check topology", [&] { return checkTopology(*mesh); });
+            topology = timed("check topology", [&] {
+                return reporting(mContext, "checking the mesh's topology",
+                                 [&](const ProgressFn& progress) { return checkTopology(*mesh, nullptr, progress); });
+            });
             if (!keepsPieces(*topology)) {
                 topology.reset();
                 continue;

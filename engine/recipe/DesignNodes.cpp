@@ -2,6 +2,7 @@
 // lattices (issue 6).
 #include "engine/core/Format.h"
 #include "engine/parts/MeshDesignSpace.h"
+#include "engine/recipe/DrainSpec.h"
 #include "engine/recipe/FieldBuilder.h"
 #include "fields/frames/CoordinateMap.h"
 #include "fields/shapes/Boolean.h"
@@ -103,10 +104,8 @@ FieldPtr withDrains(FieldBuilder& builder, const RecipeNode& s, const std::strin
 {
     if (!s.has("drain")) return solid;
     const RecipeNode d = s["drain"];
-    if (!d.isMap()) d.fail("expected `drain: {diameter: D}`: every resin trap is opened by a channel of D mm");
-    d.checkKeys({"diameter"});
-    if (!d.has("diameter")) d.fail("give the channels' `diameter:` in mm, like `drain: {diameter: 2}`");
-    const double diameter = d["diameter"].positiveNumber();
+    const DrainSpec spec = parseDrain(d, true);
+    const double diameter = spec.diameter;
     const double voxel = builder.recipe().voxel;
     if (diameter < 2.0 * voxel)
         d["diameter"].fail("a drain channel of " + formatNumber(diameter) + " mm is less than two voxels (" +
@@ -114,7 +113,7 @@ FieldPtr withDrains(FieldBuilder& builder, const RecipeNode& s, const std::strin
                            " mm) across: it would not show on the grid; use 1.5 mm or more "
                            "(resin drains through 1.5-3 mm holes)");
     auto drained = std::make_shared<DrainedSolid>(std::move(solid));
-    builder.addDrain({name, d.where(), drained, part, diameter, wall});
+    builder.addDrain({name, d.where(), drained, part, diameter, wall, spec.up});
     return drained;
 }
 
@@ -307,9 +306,7 @@ FieldPtr applyFrame(const RecipeNode& frame, FieldPtr raw, const Vec3d& cell)
 void addDesignNodeTypes(std::vector<NodeType>& types)
 {
     using namespace valueSchema;
-    const auto drainSchema = [] {
-        return object({{"diameter", number(), "the channels' diameter (mm)", "required"}}, {"diameter"});
-    };
+    const auto drainSchema = [] { return voxlat::drainSchema(true); };
     types.push_back({"mesh",
                      {{"mesh", string(), "mesh file (.stl, .obj, .ply, .3mf), relative to the recipe", "required"},
                       {"repair", boolean(), "fill small holes", "false"},

@@ -117,9 +117,10 @@ struct DrainRequest {
     std::string name;   ///< the field
     std::string where;  ///< file:line:col of `drain:`
     std::shared_ptr<DrainedSolid> node;
-    FieldPtr part;          ///< the part: a channel ends outside it (null: outside the solid and its cavities)
-    double diameter = 0.0;  ///< mm
-    double wall = 0.0;      ///< the skin's or shell's thickness (mm): the traps are searched finer than it
+    FieldPtr part;            ///< the part: a channel ends outside it (null: outside the solid and its cavities)
+    double diameter = 0.0;    ///< mm
+    double wall = 0.0;        ///< the skin's or shell's thickness (mm): the traps are searched finer than it
+    Vec3d up{0.0, 0.0, 1.0};  ///< the build direction (unit): channels leave each cavity's lowest point along it
 };
 
 class FieldBuilder;

@@ -1,5 +1,7 @@
 #include "engine/recipe/SliceSettings.h"
 
+#include "engine/recipe/DrainSpec.h"
+
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -80,7 +82,7 @@ const std::vector<KeySpec>& sliceKeys()
          {{"type", {"string", "boolean"}}},
          "printability checks (islands, resin traps, thin features): on, off, or strict (an island fails the job)",
          "on"},
-        {"drain", object({{"diameter", number(), "the channels' diameter (mm)", "required"}}, {"diameter"}),
+        {"drain", drainSchema(false),
          "drain holes in the result: every resin trap opened by a channel of D mm (the mesh has them too)", "—"}};
     return keys;
 }
@@ -182,13 +184,10 @@ SliceSettings parseSliceSettings(const RecipeNode& spec)
                 "fails the job) or `off`");
     }
     if (spec.has("drain")) {
-        const RecipeNode d = spec["drain"];
-        if (!d.isMap()) d.fail("expected `drain: {diameter: D}`: every resin trap is opened by a channel of D mm");
-        d.checkKeys({"diameter"});
-        if (!d.has("diameter")) d.fail("give the channels' `diameter:` in mm, like `drain: {diameter: 2}`");
-        s.drainDiameter = d["diameter"].positiveNumber();
-        s.drainWhere = d.where();
-        s.drainDiameterWhere = d["diameter"].where();
+        const DrainSpec d = parseDrain(spec["drain"], false);
+        s.drainDiameter = d.diameter;
+        s.drainWhere = d.where;
+        s.drainDiameterWhere = d.diameterWhere;
     }
     return s;
 }

@@ -26,10 +26,10 @@ void LevelSolid::solve(double level)
 
 void LevelSolid::correct(double level)
 {
-    if (!mSolved || mCorrected)
-        throw std::logic_error("LevelSolid::correct: only a solved level is corrected, and once");
+    if (!mSolved || mCorrections >= 2)
+        throw std::logic_error("LevelSolid::correct: only a solved level is corrected, at most twice");
     mLevel = level;
-    mCorrected = true;
+    ++mCorrections;
 }
 
 void LevelSolid::throwUnsolved()

@@ -35,9 +35,10 @@ public:
     }
     /// Gives an unsolved() solid its level (the density solve's result); once only.
     void solve(double level);
-    /// Moves a solved level once more (the job's aim at the mesh's share, after measuring the
-    /// grid the first level gives). Called between evaluations, never during one: no node keeps
-    /// values that depend on the level (tables and caches live below the solid).
+    /// Moves a solved level, at most twice (the job's aim at the mesh's share after measuring the
+    /// grid the solved level gives, and its secant step after measuring the moved one). Called
+    /// between evaluations, never during one: no node keeps values that depend on the level
+    /// (tables and caches live below the solid).
     void correct(double level);
     bool isSolved() const { return mSolved; }
     SolidSide side() const { return mSide; }
@@ -61,7 +62,7 @@ private:
     SolidSide mSide;
     double mLevel;
     bool mSolved = true;
-    bool mCorrected = false;
+    int mCorrections = 0;
 };
 
 }  // namespace voxlat

@@ -176,9 +176,19 @@ uint32_t findRoot(std::vector<uint32_t>& parent, uint32_t i)
 
 }  // namespace
 
-MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansApart)
+MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansApart, const ProgressFn& progress)
 {
     MeshTopology result;
+    // Each pass reports where it starts, and its loops report it again every 64 K items (so
+    // they can cancel).
+    double phase = 0.0;
+    auto check = [&](std::size_t i = 0) {
+        if (progress && (i & 0xffff) == 0) progress(phase);
+    };
+    auto begin = [&](double fraction) {
+        phase = fraction;
+        check();
+    };
     const std::size_t numPoints = mesh.points.size(), numTriangles = mesh.triangles.size();
 
     // Triangles with repeated or invalid indices have no meaningful edges; leave them out of the
@@ -201,6 +211,7 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
         uint32_t* count = cursor.data() + part * numPoints;
         std::size_t numValid = 0, numDegenerate = 0;
         for (std::size_t t = partBegin(part); t < partBegin(part + 1); ++t) {
+            check(t);
             const openvdb::Vec3I& tri = mesh.triangles[t];
             if (!valid(tri)) {
                 ++numDegenerate;
@@ -233,9 +244,11 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
     // Left uninitialised (every entry is filled below): the rows are the largest array here, and
     // a fresh one is paged in as it is written.
     const std::unique_ptr<Corner[]> corners(new Corner[first.back()]);
+    begin(0.3);
     tbb::parallel_for(std::size_t(0), parts, [&](std::size_t part) {
         uint32_t* at = cursor.data() + part * numPoints;
         for (std::size_t t = partBegin(part); t < partBegin(part + 1); ++t) {
+            check(t);
             const openvdb::Vec3I& tri = mesh.triangles[t];
             if (!valid(tri)) continue;
             for (int k = 0; k < 3; ++k)
@@ -259,9 +272,11 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
     if (fansApart) fansApart->assign(numPoints, 0);
     const bool everyFanWhole = fansApart && numValid == numTriangles;
 
+    begin(0.6);
     const Tally tally = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, numPoints, 1024), Tally{},
         [&](const tbb::blocked_range<std::size_t>& range, Tally acc) {
+            check();
             std::vector<Spoke> spokes;
             std::vector<uint32_t> nodes, parent;
             std::array<uint8_t, kMaxFastFan> step;
@@ -348,6 +363,7 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
     // Per piece (indexed by its root, the piece's lowest vertex): V - E + F and open edges,
     // gathered at the root. A root is below its other vertices, so in ascending order each
     // vertex is added to its root after its own sum is complete (and roots are not added on).
+    begin(0.9);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numPoints, 1 << 14), [&](const auto& range) {
         for (std::size_t v = range.begin(); v != range.end(); ++v)
             piece[v].store(findRoot(piece, uint32_t(v)), std::memory_order_relaxed);
@@ -611,10 +627,12 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
 
 std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh& mesh,
                                                              const std::vector<std::uint8_t>& tested,
-                                                             const std::vector<std::uint8_t>* fansApart)
+                                                             const std::vector<std::uint8_t>* fansApart,
+                                                             const ProgressFn& progress)
 {
     const std::size_t n = mesh.triangles.size();
     if (n < 2) return {};
+    if (progress) progress(0.0);
     // Bounds of the triangles' corners only: callers pass a few triangles of a large mesh's points.
     // Each triangle's bounds are kept (as the points' floats, exactly) for its cells below: its
     // corners are read once. The edge lengths are summed per fixed block, the blocks' sums in
@@ -760,10 +778,13 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
     // Most pairs tested share a corner (W9: 7.0 M of 9.3 M); where that corner's fan lies apart,
     // they need no test. Left out of the local checks of a few flagged triangles, whose fans are
     // open (and whose vertices are a large mesh's).
+    if (progress) progress(0.2);
     std::vector<uint8_t> computed;
-    if (!fansApart && tested.empty()) checkTopology(mesh, &computed);  // its rows give the fans
+    if (!fansApart && tested.empty())
+        checkTopology(mesh, &computed, progressPart(progress, 0.2, 0.3));  // its rows give the fans
     const std::vector<uint8_t>& apart = fansApart ? *fansApart : computed;
     const bool wide = pairFilterAvx2Available();
+    ExtractProgress blocksDone(progressPart(progress, 0.3, 1.0), numBlocks);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numBlocks, 1), [&](const auto& r) {
         // A cell's triangles gathered side by side (structure of arrays): the pairs of a cell
         // are its rows squared, each mostly a few comparisons.
@@ -848,20 +869,23 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
                     }
                 }
             }
+        blocksDone.advance(r.size());
     });
+    blocksDone.finish();
     std::vector<std::pair<uint32_t, uint32_t>> pairs;
     for (const auto& f : found) pairs.insert(pairs.end(), f.begin(), f.end());
     return pairs;
 }
 
-std::size_t countSelfIntersections(const TriangleMesh& mesh)
+std::size_t countSelfIntersections(const TriangleMesh& mesh, const ProgressFn& progress)
 {
-    return selfIntersections(mesh).size();
+    return selfIntersections(mesh, {}, nullptr, progress).size();
 }
 
-std::size_t countSelfIntersections(const TriangleMesh& mesh, const std::vector<std::uint8_t>& fansApart)
+std::size_t countSelfIntersections(const TriangleMesh& mesh, const std::vector<std::uint8_t>& fansApart,
+                                   const ProgressFn& progress)
 {
-    return selfIntersections(mesh, {}, &fansApart).size();
+    return selfIntersections(mesh, {}, &fansApart, progress).size();
 }
 
 }  // namespace voxlat

@@ -2,6 +2,7 @@
 /// @brief Topological validation of triangle meshes: watertightness, manifoldness, orientation.
 #pragma once
 
+#include "mesher/extract/ExtractProgress.h"
 #include "mesher/extract/TriangleMesh.h"
 
 #include <cstddef>
@@ -46,8 +47,10 @@ struct MeshTopology {
 /// Analyse the topology of @a mesh (parallel; O(triangles); the same result for any thread count).
 /// With @a fansApart, also per vertex whether its fan is shown to lie apart (the crossing check's
 /// certificate, see countSelfIntersections(); all 0 where a triangle repeats a corner): the rows
-/// it walks anyway, so the crossing check after it need not build them again.
-MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<std::uint8_t>* fansApart = nullptr);
+/// it walks anyway, so the crossing check after it need not build them again. @a progress
+/// (optional) runs from 0 to 1, is called from any thread and may throw to cancel.
+MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<std::uint8_t>* fansApart = nullptr,
+                           const ProgressFn& progress = {});
 
 /// Pairs of triangles of @a mesh that cross each other: an edge of one passes through the
 /// interior of the other. Pairs that share an edge are not tested; pairs that share one vertex
@@ -56,10 +59,12 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<std::uint8_t>* 
 /// meet only there; W9 skips 7.0 M of 9.3 M pair tests so). Coplanar overlaps are not counted. Triangles are
 /// binned in a uniform grid (cells about twice the mean edge) and only pairs sharing a cell are
 /// tested, each pair once (in the lowest cell both boxes cover); parallel over fixed cell
-/// blocks, integer counts, so the same result for any thread count.
-std::size_t countSelfIntersections(const TriangleMesh& mesh);
+/// blocks, integer counts, so the same result for any thread count. @a progress (optional) runs
+/// from 0 to 1 and may throw to cancel.
+std::size_t countSelfIntersections(const TriangleMesh& mesh, const ProgressFn& progress = {});
 /// The same with the fans' certificate from checkTopology() (for this mesh as it is).
-std::size_t countSelfIntersections(const TriangleMesh& mesh, const std::vector<std::uint8_t>& fansApart);
+std::size_t countSelfIntersections(const TriangleMesh& mesh, const std::vector<std::uint8_t>& fansApart,
+                                   const ProgressFn& progress = {});
 
 /// The crossing pairs countSelfIntersections() counts, as triangle indices (lower first), in a
 /// fixed order.
@@ -69,9 +74,11 @@ std::vector<std::pair<std::uint32_t, std::uint32_t>> selfIntersections(const Tri
 std::vector<std::pair<std::uint32_t, std::uint32_t>> selfIntersections(const TriangleMesh& mesh,
                                                                        const std::vector<std::uint8_t>& tested);
 /// The same with the fans' certificate given (from checkTopology(); null: computed when all pairs
-/// are tested, none used when some are flagged).
+/// are tested, none used when some are flagged); @a progress (optional) runs from 0 to 1 and may
+/// throw to cancel.
 std::vector<std::pair<std::uint32_t, std::uint32_t>> selfIntersections(const TriangleMesh& mesh,
                                                                        const std::vector<std::uint8_t>& tested,
-                                                                       const std::vector<std::uint8_t>* fansApart);
+                                                                       const std::vector<std::uint8_t>* fansApart,
+                                                                       const ProgressFn& progress = {});
 
 }  // namespace voxlat

@@ -346,6 +346,76 @@ std::optional<std::string> capFace(const Work& w, int face,
 
 }  // namespace
 
+std::size_t flipFlatTriangles(TriangleMesh& mesh, std::size_t first)
+{
+    auto area2 = [&](const openvdb::Vec3I& t) {
+        const Vec3d a = toDouble(mesh.points[t[0]]), b = toDouble(mesh.points[t[1]]), c = toDouble(mesh.points[t[2]]);
+        return (b - a).cross(c - a);
+    };
+    auto key = [](std::uint32_t from, std::uint32_t to) { return std::uint64_t(from) << 32 | to; };
+    std::size_t flipped = 0;
+    for (int round = 0; round < 3; ++round) {
+        // Each flat triangle's longest edge, directed as the neighbour across it runs it.
+        std::map<std::uint64_t, std::size_t> wanted;  // edge -> the flat triangle
+        std::vector<std::size_t> flat;
+        for (std::size_t t = first; t < mesh.triangles.size(); ++t) {
+            const openvdb::Vec3I& tri = mesh.triangles[t];
+            if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] || area2(tri).lengthSqr() != 0.0) continue;
+            int longest = 0;
+            double length = -1.0;
+            for (int i = 0; i < 3; ++i) {
+                const double l = (toDouble(mesh.points[tri[(i + 1) % 3]]) - toDouble(mesh.points[tri[i]])).lengthSqr();
+                if (l > length) {
+                    length = l;
+                    longest = i;
+                }
+            }
+            if (!(length > 0.0)) continue;  // its corners coincide: no flip helps
+            wanted.emplace(key(tri[(longest + 1) % 3], tri[longest]), t);
+            flat.push_back(t);
+        }
+        if (flat.empty()) break;
+        // The neighbours: only triangles with a corner that starts a wanted edge are looked up.
+        std::vector<std::uint8_t> starts(mesh.points.size(), 0);
+        for (const auto& [edge, t] : wanted) starts[edge >> 32] = 1;
+        std::map<std::size_t, std::size_t> across;  // flat triangle -> its neighbour
+        for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
+            const openvdb::Vec3I& tri = mesh.triangles[t];
+            if (!starts[tri[0]] && !starts[tri[1]] && !starts[tri[2]]) continue;
+            for (int i = 0; i < 3; ++i)
+                if (const auto it = wanted.find(key(tri[i], tri[(i + 1) % 3])); it != wanted.end())
+                    across.emplace(it->second, t);
+        }
+        std::vector<std::uint8_t> changed(mesh.triangles.size(), 0);
+        std::size_t flips = 0;
+        for (const std::size_t t : flat) {
+            const auto it = across.find(t);
+            if (it == across.end() || changed[t] || changed[it->second]) continue;
+            const std::size_t n = it->second;
+            const openvdb::Vec3I tri = mesh.triangles[t], other = mesh.triangles[n];
+            // The flat triangle (a, b, c) with c on the edge a-b; the neighbour (b, a, d).
+            int e = 0;
+            for (int i = 0; i < 3; ++i)
+                if (wanted.count(key(tri[(i + 1) % 3], tri[i])) && wanted.at(key(tri[(i + 1) % 3], tri[i])) == t) e = i;
+            const std::uint32_t a = tri[e], b = tri[(e + 1) % 3], c = tri[(e + 2) % 3];
+            std::uint32_t d = other[0];
+            for (int i = 0; i < 3; ++i)
+                if (other[i] != a && other[i] != b) d = other[i];
+            const openvdb::Vec3I first1(a, d, c), second1(d, b, c);
+            const Vec3d facing = area2(other);
+            const Vec3d n1 = area2(first1), n2 = area2(second1);
+            if (!(n1.dot(facing) > 0.0) || !(n2.dot(facing) > 0.0)) continue;
+            mesh.triangles[t] = first1;
+            mesh.triangles[n] = second1;
+            changed[t] = changed[n] = 1;
+            ++flips;
+        }
+        flipped += flips;
+        if (flips == 0) break;
+    }
+    return flipped;
+}
+
 void dropTrianglesOutside(TriangleMesh& mesh, const Box3& box, double margin)
 {
     std::vector<std::uint8_t> far(mesh.points.size(), 0);
@@ -366,9 +436,14 @@ void dropTrianglesOutside(TriangleMesh& mesh, const Box3& box, double margin)
         for (int i = 0; i < 3; ++i) t[i] = std::uint32_t(index[t[i]]);
 }
 
-BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& box, const BoxClipOptions& options)
+BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& box, const BoxClipOptions& options,
+                       const ProgressFn& progress)
 {
     BoxClipStats stats;
+    auto reached = [&](double fraction) {
+        if (progress) progress(fraction);
+    };
+    reached(0.0);
     const std::size_t original = mesh.points.size(), numTriangles = mesh.triangles.size();
     // A point within snap of a face is put onto it (in double), the faces it lies on kept as bits.
     auto snapped = [&](std::size_t i, std::uint8_t& faces) {
@@ -393,6 +468,7 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
             for (int f = 0; f < kFaces; ++f) inside = inside && outside(p, box, f) < 0.0;
             deep[i] = inside;
         }
+        reached(0.0);
     });
     // Per fixed block of triangles: how many are inner and the others' indices; the points the
     // inner ones use are flagged (the same flag from any thread).
@@ -414,6 +490,7 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
                 for (int k = 0; k < 3; ++k)
                     std::atomic_ref<std::uint8_t>(keep[tri[k]]).store(1, std::memory_order_relaxed);
             }
+        reached(0.1);
     });
     std::partial_sum(innerBefore.begin(), innerBefore.end(), innerBefore.begin());
 
@@ -445,7 +522,11 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
         }
     w.leftOnEdge.assign(band.size(), 0);
     const std::size_t bandPoints = band.size();
-    for (int f = 0; f < kFaces; ++f) cutByFace(w, f, field, box, options, stats);
+    reached(0.2);
+    for (int f = 0; f < kFaces; ++f) {
+        cutByFace(w, f, field, box, options, stats);
+        reached(0.2 + 0.1 * (f + 1));
+    }
     const std::size_t cutPoints = w.points.size();
 
     // A triangle lying in a face (all its corners on it) is the cap's: dropped.
@@ -542,6 +623,7 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
             }
     }
 
+    reached(0.8);
     // The six caps are independent: triangulated in parallel, joined (and the first failure
     // taken) in face order.
     std::array<std::vector<Tri>, kFaces> caps;
@@ -623,17 +705,23 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
         result.triangles[numInner + t] = openvdb::Vec3I(
             std::uint32_t(bandIndex[tri[0]]), std::uint32_t(bandIndex[tri[1]]), std::uint32_t(bandIndex[tri[2]]));
     }
+    reached(0.9);
+    flipFlatTriangles(result, numInner);
     if (!options.checkTopology) {
         mesh = std::move(result);
         stats.ok = true;
         return stats;
     }
-    const MeshTopology topology = checkTopology(result);
+    const MeshTopology topology = checkTopology(result, nullptr, progressPart(progress, 0.9, 1.0));
     if (!topology.closedManifold()) {
         stats.failure = "the capped mesh is not closed and manifold (" + std::to_string(topology.boundaryEdges) +
-                        " open edges, " + std::to_string(topology.nonManifoldEdges) + " shared by more than two)";
+                        " open edges, " + std::to_string(topology.nonManifoldEdges) + " shared by more than two, " +
+                        std::to_string(topology.nonManifoldVertices) + " vertices joining separate fans, " +
+                        std::to_string(topology.inconsistentlyOrientedEdges) + " edges oriented against their " +
+                        "neighbour, " + std::to_string(topology.degenerateTriangles) + " triangles repeating a corner)";
         return stats;
     }
+    reached(1.0);
     mesh = std::move(result);
     stats.topology = topology;
     stats.ok = true;

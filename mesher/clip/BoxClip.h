@@ -53,6 +53,15 @@ struct BoxClipStats {
     MeshTopology topology;
 };
 
+/// Flips away the triangles of @a mesh from index @a first on that have lost their area in single
+/// precision (three distinct corners on a line: a sliver of the cut or its cap whose corners
+/// rounded onto one line when written as floats; 9 of 30.6 M triangles on a 60 mm gyroid at
+/// 0.08 mm made the cut fail). The longest edge, with the triangle across it, becomes the edge
+/// from the middle corner to that triangle's far corner: the two triangles cover what they
+/// covered, the mesh stays closed and manifold. A flip is made only when both new triangles have
+/// area and face the way the neighbour faced; up to three rounds. Returns the triangles flipped.
+std::size_t flipFlatTriangles(TriangleMesh& mesh, std::size_t first = 0);
+
 /// Drops the triangles of @a mesh with a corner more than @a margin outside @a box (and the
 /// vertices only they use, the others keeping their order): what a grid evaluated past the box
 /// meshes beyond it, including where its samples end, is not projected or cut for nothing.
@@ -65,7 +74,9 @@ void dropTrianglesOutside(TriangleMesh& mesh, const Box3& box, double margin);
 /// options.maxMove, and only when no triangle around it turns over. Each face's cap is the region its crease polygons
 /// bound, with the box edge between two crease points added where the field at its middle is inside the solid (the
 /// box's corners likewise). The result is checked closed and manifold; otherwise @a mesh is unchanged and the stats say
-/// why. Deterministic: the same bytes for any thread count.
-BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& box, const BoxClipOptions& options);
+/// why. Deterministic: the same bytes for any thread count. @a progress (optional) runs from 0 to
+/// 1, is called from any thread and may throw to cancel (@a mesh is then unchanged).
+BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& box, const BoxClipOptions& options,
+                       const ProgressFn& progress = {});
 
 }  // namespace voxlat

@@ -46,4 +46,12 @@ private:
     std::mutex mMutex;
 };
 
+/// @a fn's progress over the part [@a from, @a to] of [0, 1]: one phase of a function that reports
+/// over [0, 1] (empty when @a fn is).
+inline ProgressFn progressPart(const ProgressFn& fn, double from, double to)
+{
+    if (!fn) return {};
+    return [fn, from, to](double fraction) { fn(from + (to - from) * fraction); };
+}
+
 }  // namespace voxlat

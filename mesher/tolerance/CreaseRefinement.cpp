@@ -425,9 +425,15 @@ void moveOntoSurface(const SurfaceList& list, TriangleMesh& mesh, std::vector<Ve
 
 }  // namespace
 
-RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces, const RefinementOptions& options)
+RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces, const RefinementOptions& options,
+                              const ProgressFn& progress)
 {
     RefinementStats stats;
+    // Each round reports its share at its steps (the same fraction again still checks the cancel).
+    double phase = 0.0;
+    auto check = [&] {
+        if (progress) progress(phase);
+    };
     const SurfaceList list(surfaces, options.level);
     if (mesh.triangles.empty() || list.size() < 1 || list.size() > 32) return stats;
     std::vector<Vec3d> points(mesh.points.size());
@@ -446,27 +452,31 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
     }
 
     {
-        std::vector<std::uint32_t> check;
+        std::vector<std::uint32_t> checked;
         for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
-            if (candidate[t]) check.push_back(std::uint32_t(t));
-        const std::vector<double> sampled = sampleTriangles(list, mesh, check, options.spacing);
-        stats.checked = check.size();
+            if (candidate[t]) checked.push_back(std::uint32_t(t));
+        const std::vector<double> sampled = sampleTriangles(list, mesh, checked, options.spacing);
+        stats.checked = checked.size();
         for (double w : sampled) {
             stats.over += w > options.threshold;
             stats.maxBefore = std::max(stats.maxBefore, w);
         }
     }
+    check();
     moveOntoSurface(list, mesh, points, mask, candidate, options, near, stats);
 
     for (int round = 0;; ++round) {
-        std::vector<std::uint32_t> check;
+        phase = double(round + 1) / double(options.rounds + 2);
+        check();
+        std::vector<std::uint32_t> checked;
         for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
-            if (candidate[t]) check.push_back(std::uint32_t(t));
-        const std::vector<double> sampled = sampleTriangles(list, mesh, check, options.spacing);
+            if (candidate[t]) checked.push_back(std::uint32_t(t));
+        const std::vector<double> sampled = sampleTriangles(list, mesh, checked, options.spacing);
+        check();
         std::vector<std::uint32_t> bad;
-        for (std::size_t k = 0; k < check.size(); ++k) {
-            worst[check[k]] = sampled[k];
-            if (sampled[k] > options.threshold) bad.push_back(check[k]);
+        for (std::size_t k = 0; k < checked.size(); ++k) {
+            worst[checked[k]] = sampled[k];
+            if (sampled[k] > options.threshold) bad.push_back(checked[k]);
         }
         // Bad triangles that tried all three edges are left as they are.
         std::vector<Edge> edges;
@@ -525,6 +535,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
         std::vector<std::uint8_t> found;
         std::vector<Normals> placedNormals;
         placeOnSurface(list, starts, options, placed, found, placedNormals);
+        check();
 
         // The triangles around the split edges, with their edges' indices (-1: not split).
         auto edgeIndex = [&](std::uint32_t a, std::uint32_t b) -> std::ptrdiff_t {
@@ -568,6 +579,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
                 }
             cornerNormals = normalsAt(list, corners, cornerMask);
         }
+        check();
 
         // Each edge takes the first of its points whose split alone leaves every piece of the
         // triangles on either side with area and facing out along a surface at each corner.
@@ -676,6 +688,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
             around = trianglesNear(mesh, points, seeds, std::max(options.maxMove, 1e-6), skip);
         }
         for (;;) {
+            check();
             dropTurned();
             TriangleMesh local;
             local.points = mesh.points;
@@ -788,6 +801,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
         stats.maxAfter = std::max(stats.maxAfter, worst[t]);
         stats.remaining += worst[t] > options.threshold;
     }
+    if (progress) progress(1.0);
     return stats;
 }
 

@@ -69,6 +69,8 @@ struct RefinementStats {
 /// triangle on one surface is the projection's and decimation's business). The mesh stays
 /// closed, manifold and oriented; new vertices are appended in the order of their edges, and
 /// evaluation runs in fixed batches, so the bytes are the same for any thread count.
-RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces, const RefinementOptions& options);
+/// @a progress (optional) runs from 0 to 1 and may throw to cancel.
+RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces, const RefinementOptions& options,
+                              const ProgressFn& progress = {});
 
 }  // namespace voxlat

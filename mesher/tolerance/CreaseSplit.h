@@ -41,7 +41,9 @@ struct CreaseSplitStats {
 /// rounds. The result stays closed, manifold and oriented. A vertex is on a surface when its
 /// first-order distance is within a hundredth of options.maxMove. New vertices are appended in
 /// the order of their edges (sorted vertex pairs); evaluation is in fixed batches, so the same
-/// bytes for any thread count.
-CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surfaces, const ProjectionOptions& options);
+/// bytes for any thread count. @a progress (optional) runs from 0 to 1, is called from any thread
+/// and may throw to cancel.
+CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surfaces, const ProjectionOptions& options,
+                                  const ProgressFn& progress = {});
 
 }  // namespace voxlat

@@ -4,6 +4,7 @@
 #include "fields/shapes/SurfaceDistance.h"
 #include "mesher/checks/MeshCheck.h"
 #include "mesher/checks/TriangleCheck.h"
+#include "mesher/extract/ExtractProgress.h"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -872,7 +873,8 @@ DecimationStats decimateToTolerance(TriangleMesh& mesh, const FieldNode& field, 
     return stats;
 }
 
-MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field, double level, double spacing)
+MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field, double level, double spacing,
+                               const ProgressFn& progress)
 {
     struct Partial {
         double max = 0.0, sum = 0.0, weight = 0.0;
@@ -881,6 +883,7 @@ MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field,
     constexpr std::size_t kBlock = 4096;
     const std::size_t blocks = (mesh.triangles.size() + kBlock - 1) / kBlock;
     std::vector<Partial> partial(blocks);
+    ExtractProgress done(progress, blocks);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 1), [&](const auto& range) {
         std::vector<Vec3d> points, gradients;
         std::vector<double> values, weights;
@@ -934,7 +937,9 @@ MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field,
             }
             p.samples = points.size();
         }
+        done.advance(range.size());
     });
+    done.finish();
     MeshDeviation result;
     double sum = 0.0, weight = 0.0;
     for (const Partial& p : partial) {

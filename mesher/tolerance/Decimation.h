@@ -87,7 +87,9 @@ struct MeshDeviation {
 
 /// Samples every triangle of @a mesh in rows parallel to its longest edge, rows and samples at
 /// most @a spacing apart (mm; corners, edges and interior), and measures the first-order distance |f - level| / |grad
-/// f|. Parallel over fixed blocks of triangles: the same numbers for any thread count.
-MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field, double level, double spacing);
+/// f|. Parallel over fixed blocks of triangles: the same numbers for any thread count. @a progress
+/// (optional) runs from 0 to 1 and may throw to cancel.
+MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field, double level, double spacing,
+                               const ProgressFn& progress = {});
 
 }  // namespace voxlat

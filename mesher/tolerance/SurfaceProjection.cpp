@@ -117,13 +117,15 @@ void newtonChunk(const TriangleMesh& mesh, const FieldNode& field, const Project
 }
 
 /// Values and gradients of @a field at @a points, in fixed batches, in parallel.
+/// @a check (optional) runs once per batch, from any thread, and may throw to cancel.
 void evaluateAll(const FieldNode& field, const std::vector<Vec3d>& points, std::vector<double>& values,
-                 std::vector<Vec3d>& gradients)
+                 std::vector<Vec3d>& gradients, const std::function<void()>& check = {})
 {
     values.resize(points.size());
     gradients.resize(points.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunkCount(points.size()), 1), [&](const auto& range) {
         for (std::size_t c = range.begin(); c != range.end(); ++c) {
+            if (check) check();
             const std::size_t begin = c * kBatchSize, count = std::min(kBatchSize, points.size() - begin);
             field.gradients(std::span<const Vec3d>(points.data() + begin, count),
                             std::span<double>(values.data() + begin, count),
@@ -145,9 +147,20 @@ bool turnedOver(const TriangleMesh& mesh, const std::vector<openvdb::Vec3f>& ori
 
 }  // namespace
 
-CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNode& b, const ProjectionOptions& options)
+CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNode& b, const ProjectionOptions& options,
+                           const ProgressFn& progress)
 {
     CreaseStats stats;
+    // The phases' share of the work is not known ahead: each reports where it starts, and the
+    // batches within a phase report it again (so they can cancel).
+    double phase = 0.0;
+    const std::function<void()> check = [&] {
+        if (progress) progress(phase);
+    };
+    auto begin = [&](double fraction) {
+        phase = fraction;
+        check();
+    };
     const std::size_t n = mesh.points.size();
     if (n == 0) return stats;
     std::vector<Vec3d> points(n);
@@ -157,7 +170,8 @@ CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNo
     const double near = 1e-3 * options.maxMove;
     std::vector<double> va, vb;
     std::vector<Vec3d> ga, gb;
-    evaluateAll(b, points, vb, gb);
+    begin(0.0);
+    evaluateAll(b, points, vb, gb, check);
     std::vector<std::uint32_t> close;
     std::vector<Vec3d> closePoints;
     std::vector<std::uint8_t> side(n, 0);
@@ -169,7 +183,8 @@ CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNo
             closePoints.push_back(points[v]);
         }
     }
-    evaluateAll(a, closePoints, va, ga);
+    begin(0.3);
+    evaluateAll(a, closePoints, va, ga, check);
     for (std::size_t k = 0; k < close.size(); ++k)
         if (distanceEstimate(va[k] - options.level, ga[k]) <= near) side[close[k]] |= 1;
     // Crease edges, each once (the lower index first).
@@ -199,8 +214,9 @@ CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNo
     std::vector<double> ca, cb;
     std::vector<Vec3d> cga, cgb;
     for (int iteration = 0; iteration <= options.maxIterations; ++iteration) {
-        evaluateAll(a, crease, ca, cga);
-        evaluateAll(b, crease, cb, cgb);
+        begin(0.4 + 0.4 * iteration / std::max(1, options.maxIterations));
+        evaluateAll(a, crease, ca, cga, check);
+        evaluateAll(b, crease, cb, cgb, check);
         for (std::size_t k = 0; k < ends.size(); ++k) {
             const double ra = ca[k] - options.level, rb = cb[k] - options.level;
             found[k] = distanceEstimate(ra, cga[k]) <= options.tolerance &&
@@ -238,6 +254,7 @@ CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNo
     // is the original mesh).
     std::vector<std::uint8_t> flipped(mesh.triangles.size());
     for (;;) {
+        begin(0.9);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.triangles.size(), 1 << 14), [&](const auto& r) {
             for (std::size_t t = r.begin(); t != r.end(); ++t)
                 flipped[t] = turnedOver(mesh, original, mesh.triangles[t]);
@@ -256,6 +273,7 @@ CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNo
     }
     for (std::size_t v = 0; v < n; ++v) stats.moved += mesh.points[v] != original[v];
     for (const auto& [p, q] : edges) stats.leftFlat += mesh.points[p] == original[p] && mesh.points[q] == original[q];
+    if (progress) progress(1.0);
     return stats;
 }
 

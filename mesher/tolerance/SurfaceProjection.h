@@ -72,9 +72,10 @@ struct CreaseStats {
 /// equations at once (the least-norm step), at most options.maxMove. A move that turns a triangle
 /// over is undone, in rounds. Vertices are evaluated in fixed batches: the same bytes for any
 /// thread count. @a b is evaluated at every vertex, @a a only near b = level (pass the cheap one
-/// as @a b).
-CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNode& b,
-                           const ProjectionOptions& options);
+/// as @a b). @a progress (optional) runs from 0 to 1, is called from any thread and may throw to
+/// cancel.
+CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNode& b, const ProjectionOptions& options,
+                           const ProgressFn& progress = {});
 
 /// |f - level| / |grad f| at @a points (mm), the first-order distance to the level set, in
 /// batches (parallel, same result for any thread count). A zero gradient gives infinity unless
