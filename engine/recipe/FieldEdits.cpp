@@ -121,6 +121,8 @@ YAML::Node editedSpec(const YAML::Node& spec, const FieldEdit& edit)
 void editField(Recipe& recipe, const std::string& name, const FieldEdit& edit)
 {
     const YAML::Node spec = editedSpec(recipe.fieldIndex.at(name), edit);
+    // An assignment to the handle writes through to the node it shares with `root`: the canonical
+    // recipe (report.json `recipe_canonical`, the hash) shows the solved value.
     recipe.fieldIndex[name] = spec;
     recipe.fieldFacts[name] = readFieldFacts(spec);
     recipe.designs.erase(std::remove_if(recipe.designs.begin(), recipe.designs.end(),
@@ -131,7 +133,12 @@ void editField(Recipe& recipe, const std::string& name, const FieldEdit& edit)
 Recipe trialRecipe(const Recipe& base, const std::string& name, const FieldEdit& edit)
 {
     Recipe r = base;
-    editField(r, name, edit);
+    // A new handle, not an assignment: the copy's handles share their nodes with @a base's (and
+    // its `root`), and an assignment would write the trial's spec into the parent recipe.
+    const YAML::Node spec = editedSpec(base.fieldIndex.at(name), edit);
+    r.fieldIndex.erase(name);
+    r.fieldIndex.emplace(name, spec);
+    r.fieldFacts[name] = readFieldFacts(spec);
     r.designs.clear();  // the trial builds only @a name, whose targets the edit resolved
     r.fieldNames = {name};
     r.result = name;
