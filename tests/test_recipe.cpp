@@ -3,6 +3,7 @@
 #include "engine/jobs/Job.h"
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/Recipe.h"
+#include "engine/recipe/RecipeParams.h"
 
 #include <gtest/gtest.h>
 
@@ -141,4 +142,74 @@ fields:
 result: k
 )";
     EXPECT_EQ(errorOf(text), "");
+}
+
+TEST(Recipe, DesignTargetsAndTrialEditsAreTypedAtLoad)
+{
+    const std::string text = R"(material: form2
+voxel: 0.5
+domain: {box: [[0, 0, 0], [10, 10, 10]]}
+fields:
+  lattice:
+    struts: {cell: x, size: 5}
+    kernel: {gaussian: {sigma: 0.5}}
+    density: 0.2
+    optimize: {sigma: [0.4, 1.2], samples: 4}
+  sheet: {tpms: gyroid, cell: 5, solid: sheet, stiffness: {E_ratio: 0.05, axis: x}}
+result: lattice
+)";
+    Recipe r = parseRecipe(text, "t.yaml", ".");
+    // Both design keys read at load, in file order, with their lines; the ratio is taken of the
+    // material's own modulus.
+    ASSERT_EQ(r.designs.size(), 2u);
+    EXPECT_EQ(r.designs[0].field, "lattice");
+    ASSERT_TRUE(r.designs[0].optimize);
+    EXPECT_EQ(r.designs[0].optimize->lo, 0.4);
+    EXPECT_EQ(r.designs[0].optimize->hi, 1.2);
+    EXPECT_EQ(r.designs[0].optimize->samples, 4);
+    EXPECT_EQ(r.designs[0].optimize->density, 0.2);
+    EXPECT_EQ(r.designs[0].optimize->where.rfind("t.yaml:9:", 0), 0u) << r.designs[0].optimize->where;
+    ASSERT_TRUE(r.designs[1].stiffness);
+    EXPECT_EQ(r.designs[1].stiffness->axis, 0);
+    EXPECT_DOUBLE_EQ(r.designs[1].stiffness->goalMPa, 0.05 * r.material->modulusMPa);
+    // What the pieces advice reads of the lattice, read at load.
+    const FieldFacts& facts = r.fieldFacts.at("lattice");
+    EXPECT_TRUE(facts.densityScalar);
+    ASSERT_TRUE(facts.sigma);
+    EXPECT_EQ(*facts.sigma, 0.5);
+    ASSERT_TRUE(facts.plainBoxCell);
+    EXPECT_EQ(*facts.plainBoxCell, Vec3d(5.0));
+    EXPECT_TRUE(facts.boxFrame);
+
+    // A trial changes its own copy only: the parent's canonical recipe is as loaded, untouched
+    // nodes keep their lines, the design key is gone from the trial.
+    const nlohmann::json before = canonicalRecipe(r);
+    FieldEdit sigma;
+    sigma.sigma = 0.7;
+    const Recipe trial = trialRecipe(r, "lattice", sigma);
+    EXPECT_EQ(canonicalRecipe(r), before);
+    EXPECT_EQ(trial.fieldSpec("lattice")["kernel"]["gaussian"]["sigma"].number(), 0.7);
+    EXPECT_FALSE(trial.fieldSpec("lattice").has("optimize"));
+    EXPECT_TRUE(trial.designs.empty());
+    EXPECT_EQ(*trial.fieldFacts.at("lattice").sigma, 0.7);
+    EXPECT_EQ(trial.fieldSpec("lattice")["density"].where(), r.fieldSpec("lattice")["density"].where());
+    EXPECT_EQ(r.fieldSpec("lattice")["density"].where().rfind("t.yaml:8:", 0), 0u);
+
+    // A solved target is written into the recipe itself (and its canonical form).
+    FieldEdit solved;
+    solved.density = 0.25;
+    editField(r, "sheet", solved);
+    EXPECT_EQ(canonicalRecipe(r)["fields"]["sheet"]["density"], 0.25);
+    EXPECT_FALSE(canonicalRecipe(r)["fields"]["sheet"].contains("stiffness"));
+    ASSERT_EQ(r.designs.size(), 1u);
+    EXPECT_EQ(r.designs[0].field, "lattice");
+
+    // Bad design keys fail at load, at their line, before any job.
+    try {
+        parseRecipe(replace(text, "material: form2\n", ""), "t.yaml", ".");
+        ADD_FAILURE() << "a design target without a material loaded";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("t.yaml:8:"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("needs the material"), std::string::npos) << e.what();
+    }
 }

@@ -1943,8 +1943,8 @@ void Job::writeMaterialCard(const std::filesystem::path& path)
 std::string Job::gradedMaterialCards(const GradedNode& node)
 {
     const std::string where = mRecipe.properties.where + ": export";
-    const RecipeNode spec = mRecipe.fieldSpec(node.name);
-    if (!spec.isMap() || !spec.has("density"))
+    const auto facts = mRecipe.fieldFacts.find(node.name);
+    if (facts == mRecipe.fieldFacts.end() || !facts->second.hasDensity)
         throw InputError(where + ": the graded lattice `" + node.name +
                          "` has no `density:` map to take slab by slab; export the cards of a lattice of one density");
     const int axis = node.axis;
@@ -2002,9 +2002,9 @@ std::string Job::gradedMaterialCards(const GradedNode& node)
     StageProgress progress(mContext, "material cards of " + node.name, std::uint64_t(slabs));
     for (int s = 0; s < slabs; ++s) {
         mContext->checkCancelled();
-        YAML::Node copy = YAML::Clone(spec.yaml());
-        copy["density"] = exactNumber(mean[s]);
-        Recipe uniform = trialRecipe(mRecipe, node.name, copy);
+        FieldEdit slabDensity;
+        slabDensity.density = mean[s];
+        Recipe uniform = trialRecipe(mRecipe, node.name, slabDensity);
         JobContext quiet;
         Job job(std::move(uniform), &quiet);
         const nlohmann::json p = timed("homogenize", [&] { return job.properties(); });
@@ -2092,27 +2092,24 @@ bool Job::unitCellProperties(const RepeatZone& zone)
     // Only a box frame (`struts: {cell, size}`, with `count:` and `origin:` or filling the
     // domain) is laid out by keys this can change; any other frame keeps the error that asks
     // for `properties: {cell}`.
-    const RecipeNode spec = mRecipe.fieldSpec(mRecipe.result);
-    if (!spec.isMap() || !spec.has("struts") || !spec["struts"].isMap()) return false;
-    const RecipeNode frame = spec["struts"];
-    if (!frame.has("cell") || !frame.has("size")) return false;
-    for (const char* other : {"within", "skin", "between", "cylinder", "sphere", "wireframe"})
-        if (frame.has(other)) return false;
+    const auto facts = mRecipe.fieldFacts.find(mRecipe.result);
+    if (facts == mRecipe.fieldFacts.end() || !facts->second.boxFrame) return false;
     // The same cells, enough of them around the frame's first cell that it sees every strut that
     // reaches it (the reach grows a little when a density is solved over the larger frame).
-    YAML::Node copy = YAML::Clone(spec.yaml());
-    YAML::Node count(YAML::NodeType::Sequence), origin(YAML::NodeType::Sequence);
+    std::array<int, 3> count{};
+    std::array<double, 3> origin{};
     int cells = 1;
     for (int a = 0; a < 3; ++a) {
         const double p = zone.period[a];
         const int margin = std::max(1, int(std::ceil(1.25 * (zone.box.min[a] - zone.phase[a]) / p - 1e-9)));
-        count.push_back(2 * margin + 1);
-        origin.push_back(exactNumber(zone.phase[a] - margin * p));
+        count[a] = 2 * margin + 1;
+        origin[a] = zone.phase[a] - margin * p;
         cells *= 2 * margin + 1;
     }
-    copy["struts"]["count"] = count;
-    copy["struts"]["origin"] = origin;
-    Recipe repeated = trialRecipe(mRecipe, mRecipe.result, copy);
+    FieldEdit grown;
+    grown.count = count;
+    grown.origin = origin;
+    Recipe repeated = trialRecipe(mRecipe, mRecipe.result, grown);
     // Its own warnings (a domain the larger frame overhangs) are not about the recipe's part.
     JobContext quiet;
     followCancel(quiet, mContext);

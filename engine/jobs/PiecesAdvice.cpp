@@ -8,62 +8,25 @@
 
 namespace voxlat {
 
-namespace {
-
-/// The node's box cell (mm), or nullopt when its frame is not a plain box of cells.
-std::optional<Vec3d> boxCell(const YAML::Node& struts)
-{
-    if (!struts.IsMap() || !struts["size"]) return std::nullopt;
-    for (auto it = struts.begin(); it != struts.end(); ++it) {
-        const std::string key = it->first.Scalar();
-        if (key != "cell" && key != "size" && key != "origin") return std::nullopt;
-    }
-    const YAML::Node size = struts["size"];
-    try {
-        if (size.IsScalar()) return Vec3d(size.as<double>());
-        if (size.IsSequence() && size.size() == 3)
-            return Vec3d(size[0].as<double>(), size[1].as<double>(), size[2].as<double>());
-    } catch (const YAML::Exception&) {
-    }
-    return std::nullopt;
-}
-
-}  // namespace
-
 std::optional<double> sigmaKeepingOnePiece(const Recipe& recipe, const std::string& name, JobContext* context)
 {
-    const auto found = recipe.fieldIndex.find(name);
-    if (found == recipe.fieldIndex.end() || !recipe.domainBox) return std::nullopt;
-    const YAML::Node spec = found->second;
-    if (!spec.IsMap() || !spec["struts"] || !spec["density"] || !spec["density"].IsScalar() || !spec["kernel"] ||
-        !spec["kernel"].IsMap() || !spec["kernel"]["gaussian"] || !spec["kernel"]["gaussian"]["sigma"] ||
-        !spec["kernel"]["gaussian"]["sigma"].IsScalar())
-        return std::nullopt;
-    const std::optional<Vec3d> cell = boxCell(spec["struts"]);
-    double sigma = 0.0;
-    try {
-        sigma = spec["kernel"]["gaussian"]["sigma"].as<double>();
-    } catch (const YAML::Exception&) {
-        return std::nullopt;
-    }
-    if (!cell || !(sigma > 0.0)) return std::nullopt;
+    // The node's facts, read when the recipe loaded (and again when a design target was solved).
+    const auto found = recipe.fieldFacts.find(name);
+    if (found == recipe.fieldFacts.end() || !recipe.domainBox) return std::nullopt;
+    const FieldFacts& facts = found->second;
+    if (!facts.densityScalar || !facts.sigma || !facts.plainBoxCell) return std::nullopt;
+    const Vec3d cell = *facts.plainBoxCell;
+    const double sigma = *facts.sigma;
+    if (!(sigma > 0.0)) return std::nullopt;
 
     // Two cells each way from the frame's origin: joints inside and struts across cell faces.
-    Vec3d origin = recipe.domainBox->min;
-    if (spec["struts"]["origin"]) {
-        try {
-            const YAML::Node o = spec["struts"]["origin"];
-            origin = Vec3d(o[0].as<double>(), o[1].as<double>(), o[2].as<double>());
-        } catch (const YAML::Exception&) {
-            return std::nullopt;
-        }
-    }
+    const Vec3d origin = facts.plainBoxOrigin ? *facts.plainBoxOrigin : recipe.domainBox->min;
     auto whole = [&](double s) {
         if (context) context->checkCancelled();
-        YAML::Node trial = YAML::Clone(spec);
-        trial["kernel"]["gaussian"]["sigma"] = exactNumber(s);
-        Recipe r = trialRecipe(recipe, name, trial);
-        r.domainBox = Box3{origin, origin + 2.0 * *cell};
+        FieldEdit edit;
+        edit.sigma = s;
+        Recipe r = trialRecipe(recipe, name, edit);
+        r.domainBox = Box3{origin, origin + 2.0 * cell};
         r.allow = {"pieces"};  // counted, not thrown: the trial reads the count
         JobContext quiet;
         followCancel(quiet, context);

@@ -4,7 +4,6 @@
 #include "engine/core/Format.h"
 #include "engine/jobs/Job.h"
 #include "engine/jobs/TrialRecipe.h"
-#include "engine/recipe/DesignTargets.h"
 
 #include <algorithm>
 #include <cmath>
@@ -17,20 +16,8 @@ namespace {
 
 const char* kAxisName[3] = {"x", "y", "z"};
 
-/// A copy of the map @a map without @a drop. Children are shared, not copied (they keep their
-/// recipe lines); only the maps on a path that is edited are new, so the recipe is never changed.
-YAML::Node mapWithout(const YAML::Node& map, const std::vector<std::string>& drop)
-{
-    YAML::Node out(YAML::NodeType::Map);
-    for (auto it = map.begin(); it != map.end(); ++it) {
-        const std::string key = it->first.Scalar();
-        if (std::find(drop.begin(), drop.end(), key) == drop.end()) out[key] = it->second;
-    }
-    return out;
-}
-
-/// One trial: a job on a copy of @a base whose only field (with its inputs) is @a name, given
-/// @a spec, homogenized at the search's resolution.
+/// One trial: a job on a copy of @a base whose only field (with its inputs) is @a name, edited
+/// by the trial's values, homogenized at the search's resolution.
 struct Measured {
     double modulus = 0.0;  ///< along the axis asked for; 0 when the cell falls apart or is empty
     double density = 0.0;  ///< the voxel model's relative density
@@ -47,11 +34,11 @@ struct TrialResolution {
     std::string from;            ///< "given" or "convergence"
 };
 
-Measured measure(const Recipe& base, const std::string& name, const YAML::Node& spec, int axis,
+Measured measure(const Recipe& base, const std::string& name, const FieldEdit& edit, int axis,
                  TrialResolution& resolution, JobContext* parent)
 {
     if (parent) parent->checkCancelled();
-    Recipe r = trialRecipe(base, name, spec);
+    Recipe r = trialRecipe(base, name, edit);
     r.properties.resolution = resolution.voxels;
     r.properties.conductivity = false;
     // The trials' own warnings (loose pieces, a cell with no load path) are about candidates the
@@ -95,35 +82,17 @@ void reportResolution(nlohmann::json& entry, const TrialResolution& r)
     }
 }
 
-void requireMaterial(const Recipe& recipe, const RecipeNode& key, const std::string& what)
-{
-    if (!recipe.material)
-        key.fail(what +
-                 " needs the material the lattice is made of: add `material: form2` (or ti6al4v, 316l, 17-4ph, "
-                 "pa12) or `material: {E: 1.6 GPa, nu: 0.38}` at the top of the recipe");
-}
-
 /// `stiffness:`: Illinois (regula falsi with the stale end halved) on log E against density,
 /// bracketed first by steps of 1.6x from the Gibson-Ashby guess rho = sqrt(E / E_s).
-nlohmann::json solveStiffness(Recipe& recipe, const std::string& name, const RecipeNode& spec, JobContext* context)
+/// @a target was checked at load (parseFieldDesign): a material, a goal below its modulus.
+nlohmann::json solveStiffness(Recipe& recipe, const std::string& name, const StiffnessTarget& target,
+                              JobContext* context)
 {
-    const RecipeNode key = spec["stiffness"];
-    const StiffnessTarget target = parseStiffness(key);
-    for (const char* other : {"density", "level", "radius", "thickness", "wall", "layer"})
-        if (spec.has(other))
-            key.fail(std::string("give either `stiffness:` or `") + other +
-                     ":`, not both (the stiffness solves the density, which sets the " +
-                     (std::string(other) == "density" ? "level" : "size") + ")");
-    if (spec.has("optimize")) key.fail("`optimize:` needs a fixed `density:`; give it instead of `stiffness:`");
-    requireMaterial(recipe, key, "a stiffness target");
+    const StiffnessTarget& key = target;  // its fail() names the `stiffness:` line
     const double Es = recipe.material->modulusMPa;
-    const double goal = target.modulusMPa ? *target.modulusMPa : *target.ratio * Es;
+    const double goal = target.goalMPa;
     const std::string goalText = formatNumber(goal) + " MPa along " + kAxisName[target.axis];
-    if (goal >= Es)
-        key.fail("the target modulus " + goalText + " is not below the solid's own (" + formatNumber(Es) + " MPa, " +
-                 recipe.material->name + "): no lattice of it reaches that");
     TrialResolution resolution = trialResolution(target.resolution, recipe);
-    const YAML::Node base = mapWithout(spec.yaml(), {"stiffness"});
 
     struct Trial {
         double rho, modulus, cellDensity;
@@ -131,9 +100,9 @@ nlohmann::json solveStiffness(Recipe& recipe, const std::string& name, const Rec
     std::vector<Trial> trials;
     StageProgress progress(context, "stiffness of " + name, 16);
     auto f = [&](double rho) {
-        YAML::Node s = mapWithout(base, {});
-        s["density"] = exactNumber(rho);
-        const Measured m = measure(recipe, name, s, target.axis, resolution, context);
+        FieldEdit edit;
+        edit.density = rho;
+        const Measured m = measure(recipe, name, edit, target.axis, resolution, context);
         trials.push_back({rho, m.modulus, m.density});
         progress.add();
         return m.modulus > 0.0 ? std::log(m.modulus / goal) : -std::numeric_limits<double>::infinity();
@@ -191,9 +160,9 @@ nlohmann::json solveStiffness(Recipe& recipe, const std::string& name, const Rec
         auto err = [&](const Trial& t) { return t.modulus > 0 ? std::abs(std::log(t.modulus / goal)) : 1e300; };
         return err(p) < err(q);
     });
-    YAML::Node solved = mapWithout(base, {});
-    solved["density"] = exactNumber(best.rho);
-    recipe.fieldIndex[name] = solved;
+    FieldEdit solved;
+    solved.density = best.rho;
+    editField(recipe, name, solved);
 
     nlohmann::json rows = nlohmann::json::array();
     for (const Trial& t : trials) rows.push_back({{"density", t.rho}, {"E_MPa", t.modulus}});
@@ -234,25 +203,16 @@ nlohmann::json solveStiffness(Recipe& recipe, const std::string& name, const Rec
 constexpr double kTrialDensityTolerance = 0.05;
 
 /// `optimize:`: a coarse sweep of sigma, then golden-section refinement around its best point.
-nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const RecipeNode& spec, JobContext* context)
+/// @a o was checked at load (parseFieldDesign): a struts node with a fixed density, a Gaussian
+/// kernel and a material.
+nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const SigmaOptimization& o, JobContext* context)
 {
-    const RecipeNode key = spec["optimize"];
-    const SigmaOptimization o = parseOptimize(key);
-    if (!spec.has("density") || !spec["density"].isNumber())
-        key.fail("`optimize:` compares joints at a fixed density: give the node `density:` (one number)");
-    if (!spec.has("kernel") || !spec["kernel"].has("gaussian"))
-        key.fail("`optimize:` picks the Gaussian kernel's sigma: give `kernel: {gaussian: {sigma: S}}`");
-    requireMaterial(recipe, key, "`optimize:`");
+    const SigmaOptimization& key = o;  // its fail() names the `optimize:` line
     TrialResolution resolution = trialResolution(o.resolution, recipe);
-    const YAML::Node base = mapWithout(spec.yaml(), {"optimize"});
     auto withSigma = [&](double sigma) {
-        YAML::Node s = mapWithout(base, {});
-        YAML::Node kernel = mapWithout(base["kernel"], {});
-        YAML::Node gaussian = mapWithout(base["kernel"]["gaussian"], {});
-        gaussian["sigma"] = exactNumber(sigma);
-        kernel["gaussian"] = gaussian;
-        s["kernel"] = kernel;
-        return s;
+        FieldEdit edit;
+        edit.sigma = sigma;
+        return edit;
     };
 
     struct Trial {
@@ -263,7 +223,7 @@ nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const Reci
     StageProgress progress(context, "optimizing sigma of " + name, std::uint64_t(o.samples + std::max(0, golden) + 1));
     // A sigma whose cell cannot hold the density asked (a kernel so wide the field is flat: the
     // cell turns solid) is no candidate, however stiff: it counts as carrying nothing.
-    const double density = spec["density"].number();
+    const double density = o.density;
     auto holdsDensity = [&](double cellDensity) {
         return std::abs(cellDensity / density - 1.0) <= kTrialDensityTolerance;
     };
@@ -306,7 +266,7 @@ nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const Reci
         return (holdsDensity(p.cellDensity) ? p.modulus : 0.0) < (holdsDensity(q.cellDensity) ? q.modulus : 0.0);
     });
     if (!holdsDensity(best.cellDensity))
-        throw JobError(key.where() + ": the best sigma found (" + formatNumber(best.sigma) +
+        throw JobError(key.where + ": the best sigma found (" + formatNumber(best.sigma) +
                        " mm) gives a cell of density " + formatNumber(best.cellDensity) + ", not the " +
                        formatNumber(density) + " asked: narrow `sigma:` to kernels about the struts' size");
     std::sort(trials.begin(), trials.end(), [](const Trial& p, const Trial& q) { return p.sigma < q.sigma; });
@@ -314,7 +274,7 @@ nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const Reci
     for (const Trial& t : trials) rows.push_back({{"sigma", t.sigma}, {"E_MPa", t.modulus}});
     nlohmann::json entry{{"sigma", best.sigma},
                          {"axis", kAxisName[o.axis]},
-                         {"density", spec["density"].number()},
+                         {"density", o.density},
                          {"E_MPa", best.modulus},
                          {"E_ratio", best.modulus / recipe.material->modulusMPa},
                          {"cell_relative_density", best.cellDensity},
@@ -326,8 +286,8 @@ nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const Reci
     reportResolution(entry, resolution);
     if (o.baseline) {
         // The Boolean-joint lattice: hard capsules of one radius, solved for the same density.
-        YAML::Node capsule = mapWithout(base, {"radius", "kernel"});
-        capsule["kernel"] = YAML::Node(std::string("capsule"));
+        FieldEdit capsule;
+        capsule.capsule = true;
         const Measured m = measure(recipe, name, capsule, o.axis, resolution, context);
         progress.add();
         entry["capsule_E_MPa"] = m.modulus;
@@ -335,7 +295,7 @@ nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const Reci
         entry["ratio_to_capsule"] = m.modulus > 0.0 ? nlohmann::json(best.modulus / m.modulus) : nlohmann::json();
     }
     progress.finish();
-    recipe.fieldIndex[name] = withSigma(best.sigma);
+    editField(recipe, name, withSigma(best.sigma));
     return entry;
 }
 
@@ -344,19 +304,16 @@ nlohmann::json optimizeSigma(Recipe& recipe, const std::string& name, const Reci
 nlohmann::json resolvePropertyTargets(Recipe& recipe, JobContext* context)
 {
     nlohmann::json report = nlohmann::json::object();
-    for (const std::string& name : recipe.fieldNames) {
-        const RecipeNode spec = recipe.fieldSpec(name);
-        if (!spec.isMap()) continue;
-        if (spec.has("stiffness")) {
-            if (!spec.has("tpms") && !spec.has("struts"))
-                spec["stiffness"].fail("`stiffness:` is a key of `tpms` and `struts` nodes");
-            report[name]["stiffness"] = solveStiffness(recipe, name, spec, context);
-        } else if (spec.has("optimize") && spec["optimize"].isScalar() && spec["optimize"].string() == "off") {
+    // A copy: each resolution edits its field, which takes its entry out of recipe.designs.
+    const std::vector<FieldDesign> designs = recipe.designs;
+    for (const FieldDesign& d : designs) {
+        if (d.stiffness) {
+            report[d.field]["stiffness"] = solveStiffness(recipe, d.field, *d.stiffness, context);
+        } else if (d.optimizeOff) {
             // `--set fields.NAME.optimize=off`: the sigma as written (a sweep of it, say).
-            recipe.fieldIndex[name] = mapWithout(spec.yaml(), {"optimize"});
-        } else if (spec.has("optimize")) {
-            if (!spec.has("struts")) spec["optimize"].fail("`optimize:` is a key of `struts` nodes");
-            report[name]["optimize"] = optimizeSigma(recipe, name, spec, context);
+            editField(recipe, d.field, FieldEdit{});
+        } else if (d.optimize) {
+            report[d.field]["optimize"] = optimizeSigma(recipe, d.field, *d.optimize, context);
         }
     }
     return report;

@@ -1,5 +1,6 @@
 #include "engine/recipe/DesignTargets.h"
 
+#include "engine/core/Format.h"
 #include "engine/recipe/Materials.h"
 
 #include <cmath>
@@ -54,6 +55,7 @@ StiffnessTarget parseStiffness(const RecipeNode& node)
     node.checkKeys(keyNames(stiffnessKeys()));
     StiffnessTarget t;
     t.where = node.where();
+    t.context = node.context();
     if (node.has("E") == node.has("E_ratio"))
         node.fail("give the target modulus either as `E: 40 MPa` or as `E_ratio: 0.05` (E / E_s), one of them");
     if (node.has("E")) t.modulusMPa = parseModulusMPa(node["E"]);
@@ -78,6 +80,7 @@ SigmaOptimization parseOptimize(const RecipeNode& node)
     node.checkKeys(keyNames(optimizeKeys()));
     SigmaOptimization o;
     o.where = node.where();
+    o.context = node.context();
     if (!node.has("sigma")) node.fail("give the range searched: `sigma: [0.4, 1.6]` (mm)");
     const RecipeNode s = node["sigma"];
     if (!s.isSequence() || s.size() != 2) s.fail("expected [lo, hi]: the sigma range searched (mm)");
@@ -98,6 +101,73 @@ SigmaOptimization parseOptimize(const RecipeNode& node)
     }
     if (node.has("baseline")) o.baseline = node["baseline"].boolean();
     return o;
+}
+
+void StiffnessTarget::fail(const std::string& message) const
+{
+    throw InputError(where + ": " + context + ": " + message);
+}
+
+void SigmaOptimization::fail(const std::string& message) const
+{
+    throw InputError(where + ": " + context + ": " + message);
+}
+
+namespace {
+
+void requireMaterial(const std::optional<Material>& material, const RecipeNode& key, const std::string& what)
+{
+    if (!material)
+        key.fail(what +
+                 " needs the material the lattice is made of: add `material: form2` (or ti6al4v, 316l, 17-4ph, "
+                 "pa12) or `material: {E: 1.6 GPa, nu: 0.38}` at the top of the recipe");
+}
+
+}  // namespace
+
+std::optional<FieldDesign> parseFieldDesign(const RecipeNode& spec, const std::string& name,
+                                            const std::optional<Material>& material)
+{
+    if (!spec.isMap()) return std::nullopt;
+    FieldDesign d;
+    d.field = name;
+    if (spec.has("stiffness")) {
+        if (!spec.has("tpms") && !spec.has("struts"))
+            spec["stiffness"].fail("`stiffness:` is a key of `tpms` and `struts` nodes");
+        const RecipeNode key = spec["stiffness"];
+        StiffnessTarget target = parseStiffness(key);
+        for (const char* other : {"density", "level", "radius", "thickness", "wall", "layer"})
+            if (spec.has(other))
+                key.fail(std::string("give either `stiffness:` or `") + other +
+                         ":`, not both (the stiffness solves the density, which sets the " +
+                         (std::string(other) == "density" ? "level" : "size") + ")");
+        if (spec.has("optimize")) key.fail("`optimize:` needs a fixed `density:`; give it instead of `stiffness:`");
+        requireMaterial(material, key, "a stiffness target");
+        const double Es = material->modulusMPa;
+        target.goalMPa = target.modulusMPa ? *target.modulusMPa : *target.ratio * Es;
+        if (target.goalMPa >= Es)
+            key.fail("the target modulus " + formatNumber(target.goalMPa) + " MPa along " +
+                     std::string(1, "xyz"[target.axis]) + " is not below the solid's own (" + formatNumber(Es) +
+                     " MPa, " + material->name + "): no lattice of it reaches that");
+        d.stiffness = std::move(target);
+        return d;
+    }
+    if (!spec.has("optimize")) return std::nullopt;
+    if (spec["optimize"].isScalar() && spec["optimize"].string() == "off") {
+        d.optimizeOff = true;
+        return d;
+    }
+    if (!spec.has("struts")) spec["optimize"].fail("`optimize:` is a key of `struts` nodes");
+    const RecipeNode key = spec["optimize"];
+    SigmaOptimization o = parseOptimize(key);
+    if (!spec.has("density") || !spec["density"].isNumber())
+        key.fail("`optimize:` compares joints at a fixed density: give the node `density:` (one number)");
+    if (!spec.has("kernel") || !spec["kernel"].has("gaussian"))
+        key.fail("`optimize:` picks the Gaussian kernel's sigma: give `kernel: {gaussian: {sigma: S}}`");
+    requireMaterial(material, key, "`optimize:`");
+    o.density = spec["density"].number();
+    d.optimize = std::move(o);
+    return d;
 }
 
 }  // namespace voxlat

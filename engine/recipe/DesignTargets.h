@@ -6,6 +6,7 @@
 #pragma once
 
 #include "engine/recipe/KeySpec.h"
+#include "engine/recipe/Materials.h"
 #include "engine/recipe/RecipeNode.h"
 
 #include <optional>
@@ -23,6 +24,11 @@ struct StiffnessTarget {
     std::optional<int> resolution;     ///< voxels along the cell's longest side during the solve
     double tolerance = 0.01;           ///< relative error of the achieved modulus
     std::string where;                 ///< file:line:col of `stiffness:`
+    std::string context;               ///< the key's description in messages (RecipeNode::context)
+    /// The target modulus in MPa (E, or E_ratio times the material's E_s), set by parseFieldDesign.
+    double goalMPa = 0.0;
+    /// Throws InputError at `stiffness:`, as RecipeNode::fail does.
+    [[noreturn]] void fail(const std::string& message) const;
 };
 
 /// `optimize: {sigma: [0.4, 1.6], axis: z}`: the Gaussian kernel's sigma in that range with the
@@ -35,6 +41,19 @@ struct SigmaOptimization {
     int samples = 5;                ///< the coarse sweep's points before the golden-section refinement
     bool baseline = true;           ///< also homogenize the capsule (Boolean-joint) lattice at the density
     std::string where;              ///< file:line:col of `optimize:`
+    std::string context;            ///< the key's description in messages (RecipeNode::context)
+    double density = 0.0;           ///< the node's fixed `density:`, set by parseFieldDesign
+    /// Throws InputError at `optimize:`, as RecipeNode::fail does.
+    [[noreturn]] void fail(const std::string& message) const;
+};
+
+/// A field's design key, parsed and checked when the recipe loads (Recipe::designs): the job
+/// resolves it (engine/jobs/PropertyDesign) from this, reading no YAML.
+struct FieldDesign {
+    std::string field;                          ///< the field's name
+    std::optional<StiffnessTarget> stiffness;   ///< `stiffness:`
+    std::optional<SigmaOptimization> optimize;  ///< `optimize:` as a map
+    bool optimizeOff = false;                   ///< `optimize: off` (from --set): the sigma as written
 };
 
 /// The keys of a `stiffness:` map.
@@ -46,5 +65,12 @@ const std::vector<KeySpec>& optimizeKeys();
 StiffnessTarget parseStiffness(const RecipeNode& node);
 /// Reads `optimize:`.
 SigmaOptimization parseOptimize(const RecipeNode& node);
+
+/// Reads and checks the design key of the field @a spec (`stiffness:` on a tpms or struts node,
+/// with no density, level or size key beside it and a material below the target; `optimize:` on a
+/// struts node with a fixed density and a Gaussian kernel, or `optimize: off`), with @a material
+/// the recipe's. Empty when the node has neither key. Throws InputError at the key's line.
+std::optional<FieldDesign> parseFieldDesign(const RecipeNode& spec, const std::string& name,
+                                            const std::optional<Material>& material);
 
 }  // namespace voxlat

@@ -208,6 +208,14 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
         }
         refuseCollidingOutputs(r, outputs);
     }
+    // Design keys and the facts trial jobs read, once, here: jobs read no field YAML for them.
+    for (const std::string& field : r.fieldNames) {
+        const YAML::Node& spec = r.fieldIndex.at(field);
+        r.fieldFacts[field] = readFieldFacts(spec);
+        const RecipeNode node(spec, r.source, "field `" + field + "`");
+        if (std::optional<FieldDesign> design = parseFieldDesign(node, field, r.material))
+            r.designs.push_back(std::move(*design));
+    }
     return r;
 }
 

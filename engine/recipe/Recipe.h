@@ -2,6 +2,8 @@
 /// @brief A YAML recipe, loaded and checked: domain, named fields, result, outputs.
 #pragma once
 
+#include "engine/recipe/DesignTargets.h"
+#include "engine/recipe/FieldEdits.h"
 #include "engine/recipe/KeySpec.h"
 #include "engine/recipe/Materials.h"
 #include "engine/recipe/MeshSettings.h"
@@ -54,6 +56,12 @@ struct Recipe {
     std::map<std::string, YAML::Node> params;
     /// The nodes of `fields:` by name (yaml-cpp looks map keys up linearly, converting each).
     std::map<std::string, YAML::Node> fieldIndex;
+    /// The fields' design keys (`stiffness:`, `optimize:`), parsed and checked at load, in file
+    /// order; a job resolves them (engine/jobs/PropertyDesign) and editField removes them.
+    std::vector<FieldDesign> designs;
+    /// What trial jobs need to know of each field's spec (PiecesAdvice, a frame's repeated cell,
+    /// graded material cards), read at load and kept in step by editField.
+    std::map<std::string, FieldFacts> fieldFacts;
 
     /// The spec of field @a name (throws InputError naming the valid names if absent).
     RecipeNode fieldSpec(const std::string& name) const;
@@ -61,6 +69,16 @@ struct Recipe {
     /// A path written in the recipe, resolved against the recipe's folder.
     std::filesystem::path resolve(const std::string& path) const;
 };
+
+/// Replaces field @a name of @a recipe by its spec with @a edit applied (editedSpec), with its
+/// facts read again and its design keys gone from Recipe::designs. The one place after load where
+/// a spec changes: solved design targets are written in through it.
+void editField(Recipe& recipe, const std::string& name, const FieldEdit& edit);
+
+/// A copy of @a base whose only field (with the fields it reads) and result is @a name, edited by
+/// @a edit, with no outputs and no design keys: the job of one trial (a density or sigma search,
+/// a frame's repeated cell, a slab of a graded lattice).
+Recipe trialRecipe(const Recipe& base, const std::string& name, const FieldEdit& edit);
 
 /// The recipe's top-level keys, with their schemas, defaults and meanings.
 const std::vector<KeySpec>& topLevelKeys();
