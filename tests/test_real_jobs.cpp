@@ -216,7 +216,7 @@ TEST(RealJobs, DrainsFollowTheBuildDirection)
                        "outputs: {slices: {printer: sl1s, file: h.sl1s, drain: {diameter: 2, build: [1, 0, 0]}}}\n",
                        dir));
     });
-    EXPECT_NE(message.find("r.yaml:4:"), std::string::npos) << message;
+    EXPECT_NE(message.find("r.yaml:5:"), std::string::npos) << message;
     EXPECT_NE(message.find("built along +z"), std::string::npos) << message;
     message = errorOf([&] {
         Job job(
@@ -225,7 +225,7 @@ TEST(RealJobs, DrainsFollowTheBuildDirection)
                        "result: hollow\n",
                        dir));
     });
-    EXPECT_NE(message.find("r.yaml:3:"), std::string::npos) << message;
+    EXPECT_NE(message.find("r.yaml:4:"), std::string::npos) << message;
     EXPECT_NE(message.find("zero length"), std::string::npos) << message;
 }
 

@@ -701,14 +701,24 @@ void Job::aimLevelsAtMesh()
     const LevelNode& node = *aimed;
     const SolvedDensity solved = mSolvedDensity.at(node.name);
     const double target = *node.density;
+    // The share the marching-cubes mesh of @a grid holds, measured as stage @a stage.
+    auto meshShareOfGrid = [&](const openvdb::FloatGrid& grid, const std::string& stage) {
+        const double volume = timed(stage, [&] {
+            return reporting(mContext, "measuring the mesh's volume", [&](const ProgressFn& progress) {
+                return marchingCubesVolume(grid, 0.0f, mDomain.box.center(), progress);
+            });
+        });
+        return meshShareOf(node, volume);
+    };
+    // The last evaluation's time kept under @a name (the next one is the outputs').
+    auto keepEvaluateTiming = [&](const std::string& name) {
+        if (!mTimings.contains("evaluate")) return;
+        mTimings[name] = mTimings["evaluate"];
+        mTimings.erase("evaluate");
+    };
     SparseStats stats;
     openvdb::FloatGrid::Ptr g = evaluateResult(stats);
-    const double volume = timed("measure the mesh's share", [&] {
-        return reporting(mContext, "measuring the mesh's volume", [&](const ProgressFn& progress) {
-            return marchingCubesVolume(*g, 0.0f, mDomain.box.center(), progress);
-        });
-    });
-    const std::optional<MeshShareMeasure> before = meshShareOf(node, volume);
+    const std::optional<MeshShareMeasure> before = meshShareOfGrid(*g, "measure the mesh's share");
     nlohmann::json aim = {
         {"measure", "the volume the marching-cubes mesh of the recipe's grid encloses, before it is made"},
         {"tolerance", kMeshAimTolerance},
@@ -728,10 +738,7 @@ void Job::aimLevelsAtMesh()
     }
     const double firstIndicator = solved.indicatorLevel + missing / solved.slope;
     node.solid->correct(node.solid->levelFromIndicator(firstIndicator));
-    if (mTimings.contains("evaluate")) {
-        mTimings["evaluate at the solved level"] = mTimings["evaluate"];
-        mTimings.erase("evaluate");
-    }
+    keepEvaluateTiming("evaluate at the solved level");
     g.reset();
     // Checked on the grid at the moved level (the outputs' grid when it holds, so nothing is
     // evaluated in vain): a field too flat about its level for one step along the voxels' slope
@@ -739,12 +746,8 @@ void Job::aimLevelsAtMesh()
     double indicatorLevel = firstIndicator;
     SparseStats movedStats;
     openvdb::FloatGrid::Ptr moved = evaluateResult(movedStats);
-    const double movedVolume = timed("measure the mesh's share at the moved level", [&] {
-        return reporting(mContext, "measuring the mesh's volume again", [&](const ProgressFn& progress) {
-            return marchingCubesVolume(*moved, 0.0f, mDomain.box.center(), progress);
-        });
-    });
-    const std::optional<MeshShareMeasure> after = meshShareOf(node, movedVolume);
+    const std::optional<MeshShareMeasure> after =
+        meshShareOfGrid(*moved, "measure the mesh's share at the moved level");
     int steps = 1;
     if (after) {
         aim["density_from_mesh_at_first_step"] = after->measured;
@@ -755,10 +758,7 @@ void Job::aimLevelsAtMesh()
             indicatorLevel = firstIndicator + stillMissing * secant;
             node.solid->correct(node.solid->levelFromIndicator(indicatorLevel));
             steps = 2;
-            if (mTimings.contains("evaluate")) {
-                mTimings["evaluate at the first step"] = mTimings["evaluate"];
-                mTimings.erase("evaluate");
-            }
+            keepEvaluateTiming("evaluate at the first step");
         }
     }
     if (steps == 1) {
