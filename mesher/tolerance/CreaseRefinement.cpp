@@ -29,12 +29,13 @@ std::size_t chunkCount(std::size_t n)
 /// @a points; with @a normal, the unit gradient of the surface giving it. Fixed batches in
 /// parallel.
 void solidDistance(const SurfaceList& list, const std::vector<Vec3d>& points, std::vector<double>& distance,
-                   std::vector<Vec3d>* normal = nullptr)
+                   std::vector<Vec3d>* normal = nullptr, const std::function<void()>& check = {})
 {
     const std::size_t n = points.size();
     distance.resize(n);
     if (normal) normal->resize(n);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunkCount(n), 1), [&](const auto& range) {
+        if (check) check();
         std::array<double, kBatchSize> v;
         std::array<Vec3d, kBatchSize> g;
         for (std::size_t c = range.begin(); c != range.end(); ++c) {
@@ -79,7 +80,8 @@ std::vector<std::uint32_t> surfaceMasks(const SurfaceList& list, const std::vect
 /// Largest |distance| to the solid over a barycentric grid on each of @a triangles (spacing at
 /// most @a spacing, at least two steps per edge).
 std::vector<double> sampleTriangles(const SurfaceList& list, const TriangleMesh& mesh,
-                                    const std::vector<std::uint32_t>& triangles, double spacing)
+                                    const std::vector<std::uint32_t>& triangles, double spacing,
+                                    const std::function<void()>& check = {})
 {
     std::vector<Vec3d> points;
     std::vector<std::size_t> first(triangles.size() + 1, 0);
@@ -96,7 +98,7 @@ std::vector<double> sampleTriangles(const SurfaceList& list, const TriangleMesh&
     }
     first[triangles.size()] = points.size();
     std::vector<double> distance;
-    solidDistance(list, points, distance);
+    solidDistance(list, points, distance, nullptr, check);
     std::vector<double> worst(triangles.size(), 0.0);
     for (std::size_t k = 0; k < triangles.size(); ++k)
         for (std::size_t i = first[k]; i < first[k + 1]; ++i) worst[k] = std::max(worst[k], std::abs(distance[i]));
@@ -137,7 +139,8 @@ struct Start {
 /// its start; @a target is the point rounded to float, @a normals the unit gradients there of
 /// the surfaces it is on.
 void placeOnSurface(const SurfaceList& list, const std::vector<Start>& starts, const RefinementOptions& o,
-                    std::vector<Vec3d>& target, std::vector<std::uint8_t>& found, std::vector<Normals>& normals)
+                    std::vector<Vec3d>& target, std::vector<std::uint8_t>& found, std::vector<Normals>& normals,
+                    const std::function<void()>& check = {})
 {
     const std::size_t m = starts.size();
     target.assign(m, Vec3d(0.0));
@@ -145,6 +148,7 @@ void placeOnSurface(const SurfaceList& list, const std::vector<Start>& starts, c
     normals.assign(m, Normals{});
     const int numSurfaces = list.size();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunkCount(m), 1), [&](const auto& range) {
+        if (check) check();
         std::vector<Vec3d> x, batch;
         std::vector<std::uint32_t> active, open;
         std::vector<std::vector<double>> values(numSurfaces);
@@ -234,11 +238,12 @@ void placeOnSurface(const SurfaceList& list, const std::vector<Start>& starts, c
 /// The unit normals at @a points of the surfaces each lies on (@a mask), or of the one farthest
 /// out where it lies on none.
 std::vector<Normals> normalsAt(const SurfaceList& list, const std::vector<Vec3d>& points,
-                               const std::vector<std::uint32_t>& mask)
+                               const std::vector<std::uint32_t>& mask, const std::function<void()>& check = {})
 {
     const std::size_t n = points.size();
     std::vector<Normals> out(n);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunkCount(n), 1), [&](const auto& range) {
+        if (check) check();
         std::array<double, kBatchSize> v;
         std::array<Vec3d, kBatchSize> g;
         std::array<double, kBatchSize> most;
@@ -431,9 +436,10 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
     RefinementStats stats;
     // Each round reports its share at its steps (the same fraction again still checks the cancel).
     double phase = 0.0;
-    auto check = [&] {
+    const std::function<void()> check = [&] {
         if (progress) progress(phase);
     };
+    const ProgressFn checkFraction = [&](double) { check(); };
     const SurfaceList list(surfaces, options.level);
     if (mesh.triangles.empty() || list.size() < 1 || list.size() > 32) return stats;
     std::vector<Vec3d> points(mesh.points.size());
@@ -471,7 +477,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
         std::vector<std::uint32_t> checked;
         for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
             if (candidate[t]) checked.push_back(std::uint32_t(t));
-        const std::vector<double> sampled = sampleTriangles(list, mesh, checked, options.spacing);
+        const std::vector<double> sampled = sampleTriangles(list, mesh, checked, options.spacing, check);
         check();
         std::vector<std::uint32_t> bad;
         for (std::size_t k = 0; k < checked.size(); ++k) {
@@ -534,7 +540,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
         std::vector<Vec3d> placed;
         std::vector<std::uint8_t> found;
         std::vector<Normals> placedNormals;
-        placeOnSurface(list, starts, options, placed, found, placedNormals);
+        placeOnSurface(list, starts, options, placed, found, placedNormals, check);
         check();
 
         // The triangles around the split edges, with their edges' indices (-1: not split).
@@ -577,7 +583,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
                     corners.push_back(points[v]);
                     cornerMask.push_back(mask[v]);
                 }
-            cornerNormals = normalsAt(list, corners, cornerMask);
+            cornerNormals = normalsAt(list, corners, cornerMask, check);
         }
         check();
 
@@ -732,7 +738,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
             }
             std::vector<std::uint8_t> tested(parent.size(), 0);
             for (std::size_t t = 0; t < parent.size(); ++t) tested[t] = parent[t] >= 0;
-            for (const auto& [x, y] : selfIntersections(local, tested))
+            for (const auto& [x, y] : selfIntersections(local, tested, nullptr, checkFraction))
                 for (const std::int64_t k : {parent[x], parent[y]})
                     if (k >= 0) dropped = drop(std::size_t(k)) || dropped;
             if (!dropped) break;
