@@ -17,7 +17,7 @@ constexpr std::uint64_t kCrumbSamples = 8;
 
 nlohmann::json vec(const Vec3d& v)
 {
-    return {v[0], v[1], v[2]};
+    return {v[0] + 0.0, v[1] + 0.0, v[2] + 0.0};  // no -0 (a direction negated)
 }
 
 /// "+x" for an axis, else "[x, y, z]".
@@ -103,8 +103,17 @@ nlohmann::json planDrains(const std::vector<DrainRequest>& drains, double voxel,
             // along the part's outward normal (the thinnest wall).
             Vec3d p = trap.lowest;
             const double step = 0.25 * spacing;
-            const double lift = 0.5 * d.diameter + spacing;  // a sideways channel's height above the plate
-            auto raised = [&](const Vec3d& q) { return q + std::max(0.0, plate + lift - q.dot(up)) * up; };
+            // A sideways channel's height: a radius and a sample above the plate (along an axis
+            // the coordinate is set, so +z gives the bytes it always gave).
+            const double height = plate + 0.5 * d.diameter + spacing;
+            auto raised = [&](Vec3d q) {
+                const double h = q.dot(up);
+                if (h >= height) return q;
+                if (!alongAxis) return Vec3d(q + (height - h) * up);
+                for (int a = 0; a < 3; ++a)
+                    if (up[a] != 0.0) q[a] = height * up[a];  // up[a] is +-1
+                return q;
+            };
             const Way* best = nullptr;
             double reach = limit, bestCost = 0.0;
             for (const Way& w : ways) {
