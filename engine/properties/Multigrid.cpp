@@ -59,6 +59,26 @@ inline int axisColour(int x, int n)
     return (n % 2 == 1 && x == n - 1) ? 2 : (x & 1);
 }
 
+/// Sums of K terms over i < n, in fixed blocks of kDotBlock added in block order (the same bits
+/// for any number of threads, and the same as dot() for one term): @a f(i0, i1, s) adds to s[k]
+/// the terms of [i0, i1) (s starts at zero), in order, and may do other work on those entries on
+/// the way.
+template <int K, class F>
+std::array<double, K> blockedSums(std::size_t n, const F& f)
+{
+    const std::size_t blocks = (n + kDotBlock - 1) / kDotBlock;
+    std::vector<std::array<double, K>> part(blocks);
+    tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
+        std::array<double, K> s{};
+        f(b * kDotBlock, std::min(n, (b + 1) * kDotBlock), s);
+        part[b] = s;
+    });
+    std::array<double, K> total{};
+    for (const auto& s : part)
+        for (int k = 0; k < K; ++k) total[k] += s[k];
+    return total;
+}
+
 template <class F>
 void parallelRange(std::size_t begin, std::size_t end, std::size_t grain, const F& f)
 {
@@ -766,18 +786,11 @@ void PeriodicSolver<D>::assemble(const std::vector<double>& fe, Vector& f) const
 template <int D>
 double PeriodicSolver<D>::dot(const Vector& a, const Vector& b) const
 {
-    const std::size_t n = a.size();
-    const std::size_t blocks = (n + kDotBlock - 1) / kDotBlock;
-    std::vector<double> part(blocks, 0.0);
-    tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t k) {
-        const std::size_t i1 = std::min(n, (k + 1) * kDotBlock);
-        double s = 0.0;
-        for (std::size_t i = k * kDotBlock; i < i1; ++i) s += a[i] * b[i];
-        part[k] = s;
-    });
-    double s = 0.0;
-    for (double p : part) s += p;
-    return s;
+    return blockedSums<1>(a.size(), [&](std::size_t i0, std::size_t i1, std::array<double, 1>& s) {
+        double acc = 0.0;
+        for (std::size_t i = i0; i < i1; ++i) acc += a[i] * b[i];
+        s[0] = acc;
+    })[0];
 }
 
 template <int D>
@@ -833,14 +846,17 @@ typename PeriodicSolver<D>::Stats PeriodicSolver<D>::solve(const Vector& f, Vect
         const double pq = dot(p, q);
         if (!(pq > 0.0)) break;  // breakdown: r is (numerically) in the null space
         const double alpha = rz / pq;
-        parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
+        // The update and |r|^2 in one pass (the same sum as dot(r, r)).
+        rnorm = std::sqrt(blockedSums<1>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 1>& s) {
+            double acc = 0.0;
             for (std::size_t i = i0; i < i1; ++i) {
                 x[i] += alpha * p[i];
                 r[i] -= alpha * q[i];
+                acc += r[i] * r[i];
             }
-        });
+            s[0] = acc;
+        })[0]);
         ++stats.iterations;
-        rnorm = std::sqrt(dot(r, r));
         if (progress) {
             const double fraction = std::clamp(std::log(std::max(rnorm / fnorm, 1e-300)) / logTarget, 0.0, 1.0);
             if (!progress(fraction)) throw Cancelled("homogenization cancelled");
@@ -849,8 +865,18 @@ typename PeriodicSolver<D>::Stats PeriodicSolver<D>::solve(const Vector& f, Vect
         precondition();
         // Flexible (Polak-Ribiere) beta = z.(r_new - r_old) / rz_old, r_new - r_old = -alpha q:
         // robust to a preconditioner that is not exactly linear (single precision rounding).
-        const double rzNew = dot(r, z);
-        const double beta = std::max(0.0, -alpha * dot(z, q) / rz);
+        // dot(r, z) and dot(z, q) in one pass.
+        const std::array<double, 2> sums =
+            blockedSums<2>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 2>& s) {
+                double rz = 0.0, zq = 0.0;
+                for (std::size_t i = i0; i < i1; ++i) {
+                    rz += r[i] * z[i];
+                    zq += z[i] * q[i];
+                }
+                s = {rz, zq};
+            });
+        const double rzNew = sums[0];
+        const double beta = std::max(0.0, -alpha * sums[1] / rz);
         rz = rzNew;
         parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
             for (std::size_t i = i0; i < i1; ++i) p[i] = z[i] + beta * p[i];
