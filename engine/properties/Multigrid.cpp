@@ -87,6 +87,42 @@ void parallelRange(std::size_t begin, std::size_t end, std::size_t grain, const 
                       [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
 }
 
+/// A weighted sum of node values of the preconditioner's vectors (restriction, prolongation): for
+/// three unknowns one lane vector (the padding lane stays zero), lane by lane the scalar sum.
+template <int D>
+struct NodeSum {
+    float s[D] = {};
+    void add(float w, const float* v)
+    {
+        for (int k = 0; k < D; ++k) s[k] += w * v[k];
+    }
+    void store(float* out) const
+    {
+        for (int k = 0; k < D; ++k) out[k] = s[k];
+    }
+    void addTo(float* out) const
+    {
+        for (int k = 0; k < D; ++k) out[k] += s[k];
+    }
+};
+template <>
+struct NodeSum<3> {
+    Float4 s = {0.0f, 0.0f, 0.0f, 0.0f};
+    static Float4 load(const float* p)
+    {
+        Float4 v;
+        std::memcpy(&v, p, sizeof v);
+        return v;
+    }
+    void add(float w, const float* v) { s += w * load(v); }
+    void store(float* out) const { std::memcpy(out, &s, sizeof s); }
+    void addTo(float* out) const
+    {
+        const Float4 t = load(out) + s;
+        std::memcpy(out, &t, sizeof t);
+    }
+};
+
 /// Small dense symmetric D x D inverse (the nodal diagonal blocks are positive definite).
 template <int D>
 void invertBlock(const double* a, double* inv)
@@ -722,7 +758,7 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
         for (std::size_t i = i0; i < i1; ++i) {
             int c[3];
             C.coords(C.pointOfNode[i], c);
-            Real s[D] = {};
+            NodeSum<D> s;
             for (const auto& [fz, wz] : L.restrict[2][c[2]]) {
                 if (fz < 0) continue;
                 for (const auto& [fy, wy] : L.restrict[1][c[1]]) {
@@ -731,12 +767,11 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
                         if (fx < 0) continue;
                         const std::int32_t node = L.nodeOfPoint[L.pointIndex(fx, fy, fz)];
                         if (node < 0) continue;
-                        const Real w = Real(wx * wy * wz);
-                        for (int k = 0; k < D; ++k) s[k] += w * r[std::size_t(node) * S + k];
+                        s.add(Real(wx * wy * wz), r + std::size_t(node) * S);
                     }
                 }
             }
-            for (int k = 0; k < D; ++k) bc[i * S + k] = s[k];
+            s.store(bc + i * S);
         }
     });
     Real* xc = C.x.data();
@@ -746,7 +781,7 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
         for (std::size_t i = i0; i < i1; ++i) {
             int c[3];
             L.coords(L.pointOfNode[i], c);
-            Real s[D] = {};
+            NodeSum<D> s;
             for (const auto& [cz, wz] : L.prolong[2][c[2]]) {
                 if (cz < 0) continue;
                 for (const auto& [cy, wy] : L.prolong[1][c[1]]) {
@@ -754,12 +789,11 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
                     for (const auto& [cx, wx] : L.prolong[0][c[0]]) {
                         if (cx < 0) continue;
                         const std::int32_t node = C.nodeOfPoint[C.pointIndex(cx, cy, cz)];
-                        const Real w = Real(wx * wy * wz);
-                        for (int k = 0; k < D; ++k) s[k] += w * xc[std::size_t(node) * S + k];
+                        s.add(Real(wx * wy * wz), xc + std::size_t(node) * S);
                     }
                 }
             }
-            for (int k = 0; k < D; ++k) x[i * S + k] += s[k];
+            s.addTo(x + i * S);
         }
     });
     smooth(L, b, x, false);
