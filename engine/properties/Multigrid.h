@@ -19,8 +19,9 @@ namespace voxlat::homogenization {
 /// scatter) layer by layer: the z layers of voxels are coloured by the parity of z (a third
 /// colour for the last layer of an odd count, which touches the first one periodically), so
 /// layers of one colour share no node and run in parallel without atomics, each layer's voxels
-/// in order, and every node sums its contributions in the same order for any thread count. Dot products sum fixed blocks in a
-/// fixed order. Every result is therefore bit-identical for any number of threads.
+/// in order, and every node sums its contributions in the same order for any thread count. Dot
+/// products sum fixed blocks in a fixed order. Every result is therefore bit-identical for any
+/// number of threads.
 ///
 /// On the finest grid the element product goes through the voxel's mirror symmetry: an 8-point
 /// Walsh-Hadamard transform per unknown block-diagonalises the element matrix into 8 blocks of
