@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <span>
 #include <stdexcept>
 #include <vector>
 
@@ -14,28 +15,47 @@ namespace voxlat {
 
 namespace {
 
-/// Calls @a store(k, values) with the field's values on each z-slice k of the cell, in parallel.
+/// Calls @a store(index, value) with the field's value at every voxel centre of the cell (index
+/// x + nx * (y + ny * z)), in parallel. The cell is cut into blocks of 8 x 8 x 8 voxels, each
+/// evaluated as one regular batch (FieldNode::gridValues: a strut lattice gathers its nearby
+/// struts once a block instead of once a point; a TPMS shares its terms along the axes).
 template <class Store>
-void sampleSlices(const FieldNode& field, const Vec3d& origin, const Vec3d& size, const std::array<int, 3>& counts,
+void sampleBlocks(const FieldNode& field, const Vec3d& origin, const Vec3d& size, const std::array<int, 3>& counts,
                   const std::function<bool(double)>& progress, Store&& store)
 {
-    const double hx = size[0] / counts[0], hy = size[1] / counts[1], hz = size[2] / counts[2];
+    constexpr int kBlock = 8;
+    const double h[3] = {size[0] / counts[0], size[1] / counts[1], size[2] / counts[2]};
+    int blocks[3];
+    for (int a = 0; a < 3; ++a) blocks[a] = (counts[a] + kBlock - 1) / kBlock;
+    const int total = blocks[0] * blocks[1] * blocks[2];
     std::atomic<int> done{0};
     std::atomic<bool> cancelled{false};
-    // One z-slice per task: a batch of nx * ny points, written to its own part of the cell.
-    tbb::parallel_for(0, counts[2], [&](int k) {
+    tbb::parallel_for(0, total, [&](int t) {
         if (cancelled.load()) return;
-        std::vector<Vec3d> points(std::size_t(counts[0]) * counts[1]);
-        std::vector<double> values(points.size());
-        const double z = origin[2] + (k + 0.5) * hz;
-        for (int j = 0; j < counts[1]; ++j)
-            for (int i = 0; i < counts[0]; ++i)
-                points[std::size_t(j) * counts[0] + i] =
-                    Vec3d(origin[0] + (i + 0.5) * hx, origin[1] + (j + 0.5) * hy, z);
-        field.values(points, values);
-        store(k, values);
+        const int b[3] = {t % blocks[0], (t / blocks[0]) % blocks[1], t / (blocks[0] * blocks[1])};
+        GridBatch batch;
+        int first[3], n[3];
+        for (int a = 0; a < 3; ++a) {
+            first[a] = b[a] * kBlock;
+            n[a] = std::min(kBlock, counts[a] - first[a]);
+        }
+        batch.origin = Vec3d(origin[0] + (first[0] + 0.5) * h[0], origin[1] + (first[1] + 0.5) * h[1],
+                             origin[2] + (first[2] + 0.5) * h[2]);
+        batch.spacing = Vec3d(h[0], h[1], h[2]);
+        batch.nx = n[0];
+        batch.ny = n[1];
+        batch.nz = n[2];
+        double values[kBlock * kBlock * kBlock];
+        field.gridValues(batch, std::span<double>(values, batch.size()));
+        for (int i = 0; i < n[0]; ++i)
+            for (int j = 0; j < n[1]; ++j)
+                for (int k = 0; k < n[2]; ++k)
+                    store(std::size_t(first[0] + i) +
+                              std::size_t(counts[0]) *
+                                  (std::size_t(first[1] + j) + std::size_t(counts[1]) * std::size_t(first[2] + k)),
+                          values[(i * n[1] + j) * n[2] + k]);
         const int now = ++done;
-        if (progress && !progress(double(now) / counts[2])) cancelled = true;
+        if (progress && !progress(double(now) / total)) cancelled = true;
     });
     if (cancelled.load()) throw Cancelled("cancelled while sampling the cell");
 }
@@ -59,22 +79,16 @@ VoxelCell sampleCell(const FieldNode& field, const Vec3d& origin, const Vec3d& s
                      const std::function<bool(double)>& progress)
 {
     VoxelCell cell = emptyCell(size, counts);
-    const std::size_t slice = std::size_t(cell.nx) * cell.ny;
-    sampleSlices(field, origin, size, counts, progress, [&](int k, const std::vector<double>& values) {
-        std::uint8_t* out = &cell.solid[std::size_t(k) * slice];
-        for (std::size_t n = 0; n < values.size(); ++n) out[n] = values[n] < 0.0 ? 1 : 0;
-    });
+    sampleBlocks(field, origin, size, counts, progress,
+                 [&](std::size_t n, double value) { cell.solid[n] = value < 0.0 ? 1 : 0; });
     return cell;
 }
 
 std::vector<double> sampleCellValues(const FieldNode& field, const Vec3d& origin, const Vec3d& size,
                                      const std::array<int, 3>& counts, const std::function<bool(double)>& progress)
 {
-    const std::size_t slice = std::size_t(counts[0]) * counts[1];
-    std::vector<double> out(slice * counts[2]);
-    sampleSlices(field, origin, size, counts, progress, [&](int k, const std::vector<double>& values) {
-        std::copy(values.begin(), values.end(), out.begin() + std::ptrdiff_t(std::size_t(k) * slice));
-    });
+    std::vector<double> out(std::size_t(counts[0]) * counts[1] * counts[2]);
+    sampleBlocks(field, origin, size, counts, progress, [&](std::size_t n, double value) { out[n] = value; });
     return out;
 }
 

@@ -2,20 +2,47 @@
 
 #include "engine/core/Errors.h"
 
+#define VOXLAT_MG_ISA baseline
+#include "engine/properties/MultigridKernels.h"
+#undef VOXLAT_MG_ISA
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <type_traits>
 #include <unordered_map>
 
 namespace voxlat::homogenization {
 
+#ifdef VOXLAT_MG_AVX2
+// The same kernels built for AVX2 (MultigridAvx2.cpp, where they are instantiated).
+namespace avx2 {
+template <int D, class T, int St>
+void elementBlocks(const std::int32_t* elemNodes, std::size_t e0, std::size_t e1, const T* blocks,
+                   const typename Lanes<T>::type* columns, const T* xin, T* y);
+template <int D, class T, int St>
+void elementDense(const std::int32_t* elemNodes, const std::int32_t* elemType, const T* table, bool single,
+                  std::size_t e0, std::size_t e1, const T* xin, T* y);
+}  // namespace avx2
+#endif
+
 namespace {
 
-constexpr int kColours = 27;
-constexpr std::size_t kGrain = 256;         // elements per task
+/// Whether the element products run their AVX2 build (the same bits, fewer instructions).
+bool useAvx2()
+{
+#ifdef VOXLAT_MG_AVX2
+    static const bool has = __builtin_cpu_supports("avx2");
+    return has;
+#else
+    return false;
+#endif
+}
+
+constexpr int kColours = 3;
 constexpr std::size_t kDotBlock = 1 << 14;  // fixed blocks: the sum order never depends on threads
 // Chebyshev degree on the finest grid and on the coarse ones: coarse smoothing is cheap, and a
 // third step there saves iterations on thin walls (a 64^3 sheet gyroid: 23 instead of 28).
@@ -25,26 +52,31 @@ constexpr double kChebyshevRatio = 15.0;  // smoothed part of the spectrum: [hi 
 constexpr int kPowerIterations = 15;
 constexpr std::size_t kCoarsestPoints = 64;
 
-/// Four lanes of float or double (GCC/Clang vector extensions; with SSE, double takes two
-/// registers). Lane d holds unknown d of a node; lane 3 is padding.
-typedef float Float4 __attribute__((vector_size(16)));
-typedef double Double4 __attribute__((vector_size(32)));
-template <class T>
-struct Lanes;
-template <>
-struct Lanes<float> {
-    using type = Float4;
-};
-template <>
-struct Lanes<double> {
-    using type = Double4;
-};
-
 /// Colour of a coordinate along an axis of n voxels: its parity, and a third colour for the last
 /// voxel of an odd axis (which shares nodes with voxel 0 through the periodic wrap).
 inline int axisColour(int x, int n)
 {
     return (n % 2 == 1 && x == n - 1) ? 2 : (x & 1);
+}
+
+/// Sums of K terms over i < n, in fixed blocks of kDotBlock added in block order (the same bits
+/// for any number of threads, and the same as dot() for one term): @a f(i0, i1, s) adds to s[k]
+/// the terms of [i0, i1) (s starts at zero), in order, and may do other work on those entries on
+/// the way.
+template <int K, class F>
+std::array<double, K> blockedSums(std::size_t n, const F& f)
+{
+    const std::size_t blocks = (n + kDotBlock - 1) / kDotBlock;
+    std::vector<std::array<double, K>> part(blocks);
+    tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
+        std::array<double, K> s{};
+        f(b * kDotBlock, std::min(n, (b + 1) * kDotBlock), s);
+        part[b] = s;
+    });
+    std::array<double, K> total{};
+    for (const auto& s : part)
+        for (int k = 0; k < K; ++k) total[k] += s[k];
+    return total;
 }
 
 template <class F>
@@ -54,6 +86,42 @@ void parallelRange(std::size_t begin, std::size_t end, std::size_t grain, const 
     tbb::parallel_for(tbb::blocked_range<std::size_t>(begin, end, grain),
                       [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
 }
+
+/// A weighted sum of node values of the preconditioner's vectors (restriction, prolongation): for
+/// three unknowns one lane vector (the padding lane stays zero), lane by lane the scalar sum.
+template <int D>
+struct NodeSum {
+    float s[D] = {};
+    void add(float w, const float* v)
+    {
+        for (int k = 0; k < D; ++k) s[k] += w * v[k];
+    }
+    void store(float* out) const
+    {
+        for (int k = 0; k < D; ++k) out[k] = s[k];
+    }
+    void addTo(float* out) const
+    {
+        for (int k = 0; k < D; ++k) out[k] += s[k];
+    }
+};
+template <>
+struct NodeSum<3> {
+    Float4 s = {0.0f, 0.0f, 0.0f, 0.0f};
+    static Float4 load(const float* p)
+    {
+        Float4 v;
+        std::memcpy(&v, p, sizeof v);
+        return v;
+    }
+    void add(float w, const float* v) { s += w * load(v); }
+    void store(float* out) const { std::memcpy(out, &s, sizeof s); }
+    void addTo(float* out) const
+    {
+        const Float4 t = load(out) + s;
+        std::memcpy(out, &t, sizeof t);
+    }
+};
 
 /// Small dense symmetric D x D inverse (the nodal diagonal blocks are positive definite).
 template <int D>
@@ -102,6 +170,14 @@ struct KeyHash {
 template <int D>
 struct PeriodicSolver<D>::Level {
     static constexpr int kE = 8 * D;
+    /// Values a node takes in the preconditioner's vectors: three unknowns are padded to four
+    /// (the fourth always zero), so a node is one aligned lane vector, loaded and stored whole.
+    static constexpr int S = D == 3 ? 4 : 1;
+    /// A node's entries in diagInv: D rows of S (the padding zero).
+    static constexpr int kDiag = D * S;
+    /// Stride of a node in a vector of T: padded in the preconditioner's precision, not in CG's.
+    template <class T>
+    static constexpr int strideOf = std::is_same_v<T, Real> ? S : D;
     std::array<int, 3> n{};                 ///< voxels (= grid points) per axis
     std::vector<std::int32_t> nodeOfPoint;  ///< grid point -> node, -1 if no element touches it
     std::vector<std::int32_t> pointOfNode;
@@ -110,7 +186,11 @@ struct PeriodicSolver<D>::Level {
     std::vector<std::int32_t> elemType;   ///< per element, index into matrices
     std::vector<double> matrices;         ///< kE * kE per element type; dropped after set-up except on level 0
     std::vector<Real> realMatrices;       ///< the same in the preconditioner's precision
-    std::array<std::size_t, kColours + 1> colourStart{};
+    /// Elements sorted by layer (z), layers by colour: colour c's layers are the ranks
+    /// colourLayer[c] to colourLayer[c + 1] - 1, layer rank l's elements layerStart[l] to
+    /// layerStart[l + 1] - 1.
+    std::array<std::size_t, kColours + 1> colourLayer{};
+    std::vector<std::size_t> layerStart;
     std::vector<double> diag;   ///< D x D nodal diagonal blocks (set-up only)
     std::vector<Real> diagInv;  ///< their inverses
     double hi = 0.0, lo = 0.0;  ///< Chebyshev interval of diag^-1 A
@@ -137,25 +217,28 @@ struct PeriodicSolver<D>::Level {
     /// Elements from (voxel, type) pairs in voxel order: colour sort, node numbering, diagonal.
     void build(const std::vector<std::pair<std::int32_t, std::int32_t>>& voxels)
     {
-        std::array<std::size_t, kColours> count{};
-        std::vector<std::uint8_t> colour(voxels.size());
-        for (std::size_t i = 0; i < voxels.size(); ++i) {
-            int c[3];
-            coords(voxels[i].first, c);
-            colour[i] =
-                std::uint8_t(axisColour(c[0], n[0]) + 3 * (axisColour(c[1], n[1]) + 3 * axisColour(c[2], n[2])));
-            ++count[colour[i]];
+        // Layers of voxels along z, coloured by the parity of z (see axisColour): layers of one
+        // colour share no node. Ranked colour by colour, each colour's layers in z order.
+        const int nz = n[2];
+        std::vector<int> rank(nz);
+        int next = 0;
+        for (int c = 0; c < kColours; ++c) {
+            colourLayer[c] = std::size_t(next);
+            for (int z = 0; z < nz; ++z)
+                if (axisColour(z, nz) == c) rank[z] = next++;
         }
-        colourStart[0] = 0;
-        for (int k = 0; k < kColours; ++k) colourStart[k + 1] = colourStart[k] + count[k];
-        std::array<std::size_t, kColours> fill{};
-        for (int k = 0; k < kColours; ++k) fill[k] = colourStart[k];
+        colourLayer[kColours] = std::size_t(next);
+        const std::size_t perLayer = std::size_t(n[0]) * n[1];
+        layerStart.assign(std::size_t(nz) + 1, 0);
+        for (const auto& v : voxels) ++layerStart[rank[std::size_t(v.first) / perLayer] + 1];
+        for (int l = 0; l < nz; ++l) layerStart[l + 1] += layerStart[l];
+        std::vector<std::size_t> fill(layerStart.begin(), layerStart.end() - 1);
         elemVoxel.resize(voxels.size());
         elemType.resize(voxels.size());
-        for (std::size_t i = 0; i < voxels.size(); ++i) {
-            const std::size_t at = fill[colour[i]]++;
-            elemVoxel[at] = voxels[i].first;
-            elemType[at] = voxels[i].second;
+        for (const auto& v : voxels) {  // in voxel order: each layer's elements stay in voxel order
+            const std::size_t at = fill[rank[std::size_t(v.first) / perLayer]]++;
+            elemVoxel[at] = v.first;
+            elemType[at] = v.second;
         }
         nodeOfPoint.assign(points(), -1);
         for (std::int32_t v : elemVoxel) {
@@ -175,8 +258,7 @@ struct PeriodicSolver<D>::Level {
             coords(elemVoxel[e], c);
             for (int a = 0; a < 8; ++a) elemNodes[8 * e + a] = nodeOfPoint[corner(c, a)];
         }
-        // One value of padding: the lane-vector loops read four values per node of three.
-        for (std::vector<Real>* v : {&b, &x, &r, &d, &t}) v->assign(dofs() + 1, Real(0));
+        for (std::vector<Real>* v : {&b, &x, &r, &d, &t}) v->assign(nodes() * S, Real(0));
     }
 
     std::int32_t corner(const int c[3], int a) const
@@ -201,24 +283,36 @@ struct PeriodicSolver<D>::Level {
                         for (int j = 0; j < D; ++j) blk[i * D + j] += K[(a * D + i) * kE + a2 * D + j];
                 }
         });
-        diagInv.assign(diag.size() + 1, Real(0));  // padded as the work vectors
+        diagInv.assign(nodes() * kDiag, Real(0));  // rows padded as the work vectors
         parallelRange(0, nodes(), 4096, [&](std::size_t b0, std::size_t b1) {
             for (std::size_t i = b0; i < b1; ++i) {
                 double inv[D * D];
                 invertBlock<D>(&diag[i * D * D], inv);
-                for (int k = 0; k < D * D; ++k) diagInv[i * D * D + k] = Real(inv[k]);
+                for (int r = 0; r < D; ++r)
+                    for (int c = 0; c < D; ++c) diagInv[i * kDiag + r * S + c] = Real(inv[r * D + c]);
             }
         });
     }
 
-    /// Runs f(element) over all elements, colour after colour, each colour in parallel.
+    /// Runs f(e0, e1) over ranges of elements, colour after colour, each colour's layers in
+    /// parallel; a range is one or more whole layers of a colour, its elements in order. So every
+    /// node sums its elements' contributions in one order for any number of threads, and a
+    /// thread's elements lie in a few neighbouring layers of nodes (one pass over the vectors
+    /// per colour, in cache).
+    template <class F>
+    void forEachLayerRange(const F& f) const
+    {
+        for (int c = 0; c < kColours; ++c)
+            parallelRange(colourLayer[c], colourLayer[c + 1], 1,
+                          [&](std::size_t l0, std::size_t l1) { f(layerStart[l0], layerStart[l1]); });
+    }
+    /// Runs f(element) over all elements (see forEachLayerRange).
     template <class F>
     void forEachColour(const F& f) const
     {
-        for (int c = 0; c < kColours; ++c)
-            parallelRange(colourStart[c], colourStart[c + 1], kGrain, [&](std::size_t e0, std::size_t e1) {
-                for (std::size_t e = e0; e < e1; ++e) f(e);
-            });
+        forEachLayerRange([&](std::size_t e0, std::size_t e1) {
+            for (std::size_t e = e0; e < e1; ++e) f(e);
+        });
     }
 
     /// The element matrix of a level with one element type, in the basis that block-diagonalises
@@ -294,117 +388,40 @@ struct PeriodicSolver<D>::Level {
         applyWith(realMatrices.data(), realMatrices.size(), realBlocks, realBlockColumns, xin, y);
     }
 
-    /// In place: v[k] = sum_a (-1)^popcount(k & a) v[a], a fixed sequence of butterflies.
-    template <class V>
-    static inline void hadamard(V* v)
-    {
-#pragma GCC unroll 8
-        for (int bit = 1; bit < 8; bit <<= 1)
-#pragma GCC unroll 8
-            for (int a = 0; a < 8; ++a)
-                if (!(a & bit)) {
-                    const V p = v[a], q = v[a | bit];
-                    v[a] = p + q;
-                    v[a | bit] = p - q;
-                }
-    }
-
-    /// The element product through the reflection blocks (see setReflectionBlocks), for a range of
-    /// elements of one colour.
-    template <class T>
-    void applyBlocks(const std::vector<T>& scalarBlocks, const std::vector<typename Lanes<T>::type>& columns,
-                     const T* xin, T* y, std::size_t e0, std::size_t e1) const
-    {
-        using V = typename Lanes<T>::type;
-        if constexpr (D == 1) {
-            T B[8];
-            for (int c = 0; c < 8; ++c) B[c] = scalarBlocks[c];
-            for (std::size_t e = e0; e < e1; ++e) {
-                const std::int32_t* nd = &elemNodes[8 * e];
-                T v[8];
-#pragma GCC unroll 8
-                for (int a = 0; a < 8; ++a) v[a] = xin[nd[a]];
-                hadamard(v);
-#pragma GCC unroll 8
-                for (int c = 0; c < 8; ++c) v[c] *= B[c];
-                hadamard(v);
-#pragma GCC unroll 8
-                for (int a = 0; a < 8; ++a) y[nd[a]] += v[a];
-            }
-        } else {
-            // Component d of node a times (-1)^(bit d of a) before the transform gives, at index c,
-            // the component d of character c directly (the transform of u[a ^ e_d]); the same signs
-            // after the inverse transform undo it. So each character's block acts on one lane vector.
-            V sign[8];
-            for (int a = 0; a < 8; ++a)
-                sign[a] = V{T((a & 1) ? -1 : 1), T((a & 2) ? -1 : 1), T((a & 4) ? -1 : 1), T(0)};
-            const V* B = columns.data();
-            for (std::size_t e = e0; e < e1; ++e) {
-                const std::int32_t* nd = &elemNodes[8 * e];
-                V v[8];
-#pragma GCC unroll 8
-                for (int a = 0; a < 8; ++a) {
-                    const T* p = xin + std::size_t(nd[a]) * 3;
-                    v[a] = V{p[0], p[1], p[2], T(0)} * sign[a];
-                }
-                hadamard(v);
-#pragma GCC unroll 8
-                for (int c = 0; c < 8; ++c) {
-                    const V s = v[c];
-                    v[c] = B[3 * c] * s[0] + B[3 * c + 1] * s[1] + B[3 * c + 2] * s[2];
-                }
-                hadamard(v);
-#pragma GCC unroll 8
-                for (int a = 0; a < 8; ++a) {
-                    const V r = v[a] * sign[a];
-                    T* q = y + std::size_t(nd[a]) * 3;
-                    q[0] += r[0];
-                    q[1] += r[1];
-                    q[2] += r[2];
-                }
-            }
-        }
-    }
-
     template <class T>
     void applyWith(const T* matrixTable, std::size_t tableSize, const std::vector<T>& scalarBlocks,
                    const std::vector<typename Lanes<T>::type>& columns, const T* xin, T* y) const
     {
-        parallelRange(0, dofs(), 8192, [&](std::size_t i0, std::size_t i1) { std::fill(y + i0, y + i1, T(0)); });
+        constexpr int St = strideOf<T>;
+        parallelRange(0, nodes() * St, 8192, [&](std::size_t i0, std::size_t i1) { std::fill(y + i0, y + i1, T(0)); });
         const bool single = tableSize == std::size_t(kE * kE);
-        for (int c = 0; c < kColours; ++c)
-            parallelRange(colourStart[c], colourStart[c + 1], kGrain, [&](std::size_t e0, std::size_t e1) {
-                if (!scalarBlocks.empty()) {
-                    applyBlocks(scalarBlocks, columns, xin, y, e0, e1);
-                    return;
-                }
-                for (std::size_t e = e0; e < e1; ++e) {
-                    const std::int32_t* nd = &elemNodes[8 * e];
-                    const T* K = single ? matrixTable : matrixTable + std::size_t(elemType[e]) * kE * kE;
-                    T ue[kE], ye[kE];
-                    for (int a = 0; a < 8; ++a)
-                        for (int k = 0; k < D; ++k) ue[a * D + k] = xin[std::size_t(nd[a]) * D + k];
-                    for (int i = 0; i < kE; ++i) ye[i] = T(0);
-                    // Column by column (K is symmetric): each step is a vectorizable axpy.
-                    for (int j = 0; j < kE; ++j) {
-                        const T uj = ue[j];
-                        const T* col = K + j * kE;
-                        for (int i = 0; i < kE; ++i) ye[i] += col[i] * uj;
-                    }
-                    for (int a = 0; a < 8; ++a)
-                        for (int k = 0; k < D; ++k) y[std::size_t(nd[a]) * D + k] += ye[a * D + k];
-                }
-            });
+        const std::int32_t* nodes = elemNodes.data();
+        const std::int32_t* types = elemType.data();
+        const bool avx2 = useAvx2();
+        forEachLayerRange([&](std::size_t e0, std::size_t e1) {
+            if (!scalarBlocks.empty()) {
+#ifdef VOXLAT_MG_AVX2
+                if (avx2)
+                    return avx2::elementBlocks<D, T, St>(nodes, e0, e1, scalarBlocks.data(), columns.data(), xin, y);
+#endif
+                return baseline::elementBlocks<D, T, St>(nodes, e0, e1, scalarBlocks.data(), columns.data(), xin, y);
+            }
+#ifdef VOXLAT_MG_AVX2
+            if (avx2) return avx2::elementDense<D, T, St>(nodes, types, matrixTable, single, e0, e1, xin, y);
+#endif
+            baseline::elementDense<D, T, St>(nodes, types, matrixTable, single, e0, e1, xin, y);
+        });
+        (void)avx2;
     }
 
     /// out = diag^-1 in, node by node.
     void applyDiagInv(const Real* in, Real* out, std::size_t i) const
     {
-        const Real* m = &diagInv[i * D * D];
+        const Real* m = &diagInv[i * kDiag];
         for (int r = 0; r < D; ++r) {
             Real s = 0;
-            for (int c = 0; c < D; ++c) s += m[r * D + c] * in[i * D + c];
-            out[i * D + r] = s;
+            for (int c = 0; c < D; ++c) s += m[r * S + c] * in[i * S + c];
+            out[i * S + r] = s;
         }
     }
 };
@@ -563,10 +580,11 @@ void PeriodicSolver<D>::buildHierarchy()
         Level& L = *mLevels[l];
         L.buildDiagonal();
         L.realMatrices.assign(L.matrices.begin(), L.matrices.end());
-        const std::size_t n = L.dofs();
+        constexpr int S = Level::S;
         std::vector<Real>& v = L.x;
         std::vector<Real>& w = L.t;
-        for (std::size_t i = 0; i < n; ++i) v[i] = Real(hashUnit(i));
+        for (std::size_t i = 0; i < L.nodes(); ++i)
+            for (int r = 0; r < D; ++r) v[i * S + r] = Real(hashUnit(i * D + r));
         double lambda = 0.0;
         for (int it = 0; it < kPowerIterations; ++it) {
             L.apply(v.data(), w.data());
@@ -575,15 +593,15 @@ void PeriodicSolver<D>::buildHierarchy()
             for (std::size_t i = 0; i < L.nodes(); ++i)
                 for (int r = 0; r < D; ++r) {
                     double dv = 0.0;
-                    for (int c = 0; c < D; ++c) dv += L.diag[i * D * D + r * D + c] * v[i * D + c];
-                    vdv += v[i * D + r] * dv;
-                    vav += v[i * D + r] * w[i * D + r];
+                    for (int c = 0; c < D; ++c) dv += L.diag[i * D * D + r * D + c] * v[i * S + c];
+                    vdv += v[i * S + r] * dv;
+                    vav += v[i * S + r] * w[i * S + r];
                 }
             lambda = vdv > 0.0 ? vav / vdv : 0.0;
             double norm = 0.0;
             for (std::size_t i = 0; i < L.nodes(); ++i) {
                 L.applyDiagInv(w.data(), v.data(), i);
-                for (int r = 0; r < D; ++r) norm += v[i * D + r] * v[i * D + r];
+                for (int r = 0; r < D; ++r) norm += v[i * S + r] * v[i * S + r];
             }
             norm = std::sqrt(norm);
             if (norm == 0.0) break;
@@ -646,7 +664,7 @@ void PeriodicSolver<D>::coarseSolve(const Level& L, const Real* b, Real* xOut) c
             x[i] = 0.0;
             continue;
         }
-        double s = b[i];
+        double s = b[(i / D) * Level::S + i % D];
         for (std::size_t k = 0; k < i; ++k) s -= A[i * n + k] * x[k];
         x[i] = s / A[i * n + i];
     }
@@ -656,7 +674,7 @@ void PeriodicSolver<D>::coarseSolve(const Level& L, const Real* b, Real* xOut) c
         for (std::size_t k = i + 1; k < n; ++k) s -= A[k * n + i] * x[k];
         x[i] = s / A[i * n + i];
     }
-    for (std::size_t i = 0; i < n; ++i) xOut[i] = Real(x[i]);
+    for (std::size_t i = 0; i < n; ++i) xOut[(i / D) * Level::S + i % D] = Real(x[i]);
 }
 
 template <int D>
@@ -688,23 +706,23 @@ void PeriodicSolver<D>::chebyshevStep(const Level& L, const Real* b, const Real*
     Real* d = L.d.data();
     parallelRange(0, L.nodes(), 2048, [&](std::size_t i0, std::size_t i1) {
         if constexpr (D == 3) {
-            // One node per lane vector. Loads read a fourth value (the next node's, or the padding
-            // at the end of every work vector); stores write three. The diagonal block inverse is
-            // symmetric, so its rows are its columns.
+            // One node per lane vector, its padding lane zero throughout (the diagonal block
+            // inverse's rows are padded with zeros too). The block is symmetric, so its rows are
+            // its columns.
             auto load = [](const Real* p) {
                 Float4 v;
                 std::memcpy(&v, p, sizeof v);
                 return v;
             };
-            auto store = [](Real* p, const Float4& v) { p[0] = v[0], p[1] = v[1], p[2] = v[2]; };
+            auto store = [](Real* p, const Float4& v) { std::memcpy(p, &v, sizeof v); };
             for (std::size_t i = i0; i < i1; ++i) {
-                Float4 r = load(b + 3 * i);
-                if (t) r -= load(t + 3 * i);
-                const Real* m = &L.diagInv[9 * i];
-                Float4 dn = c2 * (load(m) * r[0] + load(m + 3) * r[1] + load(m + 6) * r[2]);
-                if (c1 != Real(0)) dn += c1 * load(d + 3 * i);
-                store(d + 3 * i, dn);
-                store(x + 3 * i, keepX ? load(x + 3 * i) + dn : dn);
+                Float4 r = load(b + 4 * i);
+                if (t) r -= load(t + 4 * i);
+                const Real* m = &L.diagInv[12 * i];
+                Float4 dn = c2 * (load(m) * r[0] + load(m + 4) * r[1] + load(m + 8) * r[2]);
+                if (c1 != Real(0)) dn += c1 * load(d + 4 * i);
+                store(d + 4 * i, dn);
+                store(x + 4 * i, keepX ? load(x + 4 * i) + dn : dn);
             }
         } else {
             for (std::size_t i = i0; i < i1; ++i) {
@@ -731,7 +749,8 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
     // r = b - A x, then restricted to the coarse level (P^T, node by node on the coarse grid).
     L.apply(x, L.t.data());
     Real* r = L.r.data();
-    parallelRange(0, L.dofs(), 8192, [&](std::size_t i0, std::size_t i1) {
+    constexpr int S = Level::S;
+    parallelRange(0, L.nodes() * S, 8192, [&](std::size_t i0, std::size_t i1) {
         for (std::size_t i = i0; i < i1; ++i) r[i] = b[i] - L.t[i];
     });
     Real* bc = C.b.data();
@@ -739,7 +758,7 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
         for (std::size_t i = i0; i < i1; ++i) {
             int c[3];
             C.coords(C.pointOfNode[i], c);
-            Real s[D] = {};
+            NodeSum<D> s;
             for (const auto& [fz, wz] : L.restrict[2][c[2]]) {
                 if (fz < 0) continue;
                 for (const auto& [fy, wy] : L.restrict[1][c[1]]) {
@@ -748,12 +767,11 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
                         if (fx < 0) continue;
                         const std::int32_t node = L.nodeOfPoint[L.pointIndex(fx, fy, fz)];
                         if (node < 0) continue;
-                        const Real w = Real(wx * wy * wz);
-                        for (int k = 0; k < D; ++k) s[k] += w * r[std::size_t(node) * D + k];
+                        s.add(Real(wx * wy * wz), r + std::size_t(node) * S);
                     }
                 }
             }
-            for (int k = 0; k < D; ++k) bc[i * D + k] = s[k];
+            s.store(bc + i * S);
         }
     });
     Real* xc = C.x.data();
@@ -763,7 +781,7 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
         for (std::size_t i = i0; i < i1; ++i) {
             int c[3];
             L.coords(L.pointOfNode[i], c);
-            Real s[D] = {};
+            NodeSum<D> s;
             for (const auto& [cz, wz] : L.prolong[2][c[2]]) {
                 if (cz < 0) continue;
                 for (const auto& [cy, wy] : L.prolong[1][c[1]]) {
@@ -771,12 +789,11 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
                     for (const auto& [cx, wx] : L.prolong[0][c[0]]) {
                         if (cx < 0) continue;
                         const std::int32_t node = C.nodeOfPoint[C.pointIndex(cx, cy, cz)];
-                        const Real w = Real(wx * wy * wz);
-                        for (int k = 0; k < D; ++k) s[k] += w * xc[std::size_t(node) * D + k];
+                        s.add(Real(wx * wy * wz), xc + std::size_t(node) * S);
                     }
                 }
             }
-            for (int k = 0; k < D; ++k) x[i * D + k] += s[k];
+            s.addTo(x + i * S);
         }
     });
     smooth(L, b, x, false);
@@ -803,18 +820,11 @@ void PeriodicSolver<D>::assemble(const std::vector<double>& fe, Vector& f) const
 template <int D>
 double PeriodicSolver<D>::dot(const Vector& a, const Vector& b) const
 {
-    const std::size_t n = a.size();
-    const std::size_t blocks = (n + kDotBlock - 1) / kDotBlock;
-    std::vector<double> part(blocks, 0.0);
-    tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t k) {
-        const std::size_t i1 = std::min(n, (k + 1) * kDotBlock);
-        double s = 0.0;
-        for (std::size_t i = k * kDotBlock; i < i1; ++i) s += a[i] * b[i];
-        part[k] = s;
-    });
-    double s = 0.0;
-    for (double p : part) s += p;
-    return s;
+    return blockedSums<1>(a.size(), [&](std::size_t i0, std::size_t i1, std::array<double, 1>& s) {
+        double acc = 0.0;
+        for (std::size_t i = i0; i < i1; ++i) acc += a[i] * b[i];
+        s[0] = acc;
+    })[0];
 }
 
 template <int D>
@@ -847,12 +857,15 @@ typename PeriodicSolver<D>::Stats PeriodicSolver<D>::solve(const Vector& f, Vect
     Vector r = f, z(n), p(n), q(n);
     const Level& L0 = *mLevels[0];
     auto precondition = [&]() {
-        parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
-            for (std::size_t i = i0; i < i1; ++i) L0.b[i] = Real(r[i]);
+        constexpr int S = Level::S;
+        parallelRange(0, L0.nodes(), 4096, [&](std::size_t i0, std::size_t i1) {
+            for (std::size_t i = i0; i < i1; ++i)
+                for (int k = 0; k < D; ++k) L0.b[i * S + k] = Real(r[i * D + k]);
         });
         vcycle(0, L0.b.data(), L0.x.data());
-        parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
-            for (std::size_t i = i0; i < i1; ++i) z[i] = double(L0.x[i]);
+        parallelRange(0, L0.nodes(), 4096, [&](std::size_t i0, std::size_t i1) {
+            for (std::size_t i = i0; i < i1; ++i)
+                for (int k = 0; k < D; ++k) z[i * D + k] = double(L0.x[i * S + k]);
         });
         // No projection of z onto the complement of translations: its null-space part is
         // harmless (A p ignores it) and the caller projects the solution.
@@ -867,14 +880,17 @@ typename PeriodicSolver<D>::Stats PeriodicSolver<D>::solve(const Vector& f, Vect
         const double pq = dot(p, q);
         if (!(pq > 0.0)) break;  // breakdown: r is (numerically) in the null space
         const double alpha = rz / pq;
-        parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
+        // The update and |r|^2 in one pass (the same sum as dot(r, r)).
+        rnorm = std::sqrt(blockedSums<1>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 1>& s) {
+            double acc = 0.0;
             for (std::size_t i = i0; i < i1; ++i) {
                 x[i] += alpha * p[i];
                 r[i] -= alpha * q[i];
+                acc += r[i] * r[i];
             }
-        });
+            s[0] = acc;
+        })[0]);
         ++stats.iterations;
-        rnorm = std::sqrt(dot(r, r));
         if (progress) {
             const double fraction = std::clamp(std::log(std::max(rnorm / fnorm, 1e-300)) / logTarget, 0.0, 1.0);
             if (!progress(fraction)) throw Cancelled("homogenization cancelled");
@@ -883,8 +899,18 @@ typename PeriodicSolver<D>::Stats PeriodicSolver<D>::solve(const Vector& f, Vect
         precondition();
         // Flexible (Polak-Ribiere) beta = z.(r_new - r_old) / rz_old, r_new - r_old = -alpha q:
         // robust to a preconditioner that is not exactly linear (single precision rounding).
-        const double rzNew = dot(r, z);
-        const double beta = std::max(0.0, -alpha * dot(z, q) / rz);
+        // dot(r, z) and dot(z, q) in one pass.
+        const std::array<double, 2> sums =
+            blockedSums<2>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 2>& s) {
+                double rz = 0.0, zq = 0.0;
+                for (std::size_t i = i0; i < i1; ++i) {
+                    rz += r[i] * z[i];
+                    zq += z[i] * q[i];
+                }
+                s = {rz, zq};
+            });
+        const double rzNew = sums[0];
+        const double beta = std::max(0.0, -alpha * sums[1] / rz);
         rz = rzNew;
         parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
             for (std::size_t i = i0; i < i1; ++i) p[i] = z[i] + beta * p[i];

@@ -16,15 +16,18 @@ namespace voxlat::homogenization {
 ///
 /// Nodes are the grid points touched by a solid voxel, numbered in grid order; unknown d of node
 /// i is entry i*D + d of a vector. The operator is applied element by element (gather, multiply,
-/// scatter) in colour order: voxels are coloured by the parity of their coordinates (a third
-/// colour along an odd axis for the last layer, which touches the first one periodically), so
-/// voxels of one colour share no node and run in parallel without atomics, and every node sums
-/// its contributions in the same order for any thread count. Dot products sum fixed blocks in a
-/// fixed order. Every result is therefore bit-identical for any number of threads.
+/// scatter) layer by layer: the z layers of voxels are coloured by the parity of z (a third
+/// colour for the last layer of an odd count, which touches the first one periodically), so
+/// layers of one colour share no node and run in parallel without atomics, each layer's voxels
+/// in order, and every node sums its contributions in the same order for any thread count. Dot
+/// products sum fixed blocks in a fixed order. Every result is therefore bit-identical for any
+/// number of threads.
 ///
 /// On the finest grid the element product goes through the voxel's mirror symmetry: an 8-point
 /// Walsh-Hadamard transform per unknown block-diagonalises the element matrix into 8 blocks of
-/// D x D (Level::setReflectionBlocks), a quarter of the dense product's flops.
+/// D x D (Level::setReflectionBlocks), a quarter of the dense product's flops. The element
+/// products (MultigridKernels.h) also have an AVX2 build, run where the CPU has AVX2: no FMA, the
+/// same operations lane by lane, the same bits.
 ///
 /// The preconditioner is a multigrid V-cycle, in single precision. Coarse grids halve each axis (ceil(n/2): an odd axis
 /// ends with a one-voxel-wide coarse element); the coarse operators are Galerkin products P^T A P

@@ -1,0 +1,29 @@
+/// @file MultigridAvx2.cpp
+/// The multigrid solver's element products (MultigridKernels.h) built for AVX2, without FMA and
+/// without contraction: the same bits as the baseline build, in fewer instructions. This file
+/// alone is compiled with -mavx2 (engine/CMakeLists.txt); Multigrid.cpp calls it only where the
+/// CPU has AVX2.
+
+#define VOXLAT_MG_ISA avx2
+#include "engine/properties/MultigridKernels.h"
+
+namespace voxlat::homogenization::avx2 {
+
+template void elementBlocks<1, float, 1>(const std::int32_t*, std::size_t, std::size_t, const float*, const Float4*,
+                                         const float*, float*);
+template void elementBlocks<1, double, 1>(const std::int32_t*, std::size_t, std::size_t, const double*, const Double4*,
+                                          const double*, double*);
+template void elementBlocks<3, float, 4>(const std::int32_t*, std::size_t, std::size_t, const float*, const Float4*,
+                                         const float*, float*);
+template void elementBlocks<3, double, 3>(const std::int32_t*, std::size_t, std::size_t, const double*, const Double4*,
+                                          const double*, double*);
+template void elementDense<1, float, 1>(const std::int32_t*, const std::int32_t*, const float*, bool, std::size_t,
+                                        std::size_t, const float*, float*);
+template void elementDense<1, double, 1>(const std::int32_t*, const std::int32_t*, const double*, bool, std::size_t,
+                                         std::size_t, const double*, double*);
+template void elementDense<3, float, 4>(const std::int32_t*, const std::int32_t*, const float*, bool, std::size_t,
+                                        std::size_t, const float*, float*);
+template void elementDense<3, double, 3>(const std::int32_t*, const std::int32_t*, const double*, bool, std::size_t,
+                                         std::size_t, const double*, double*);
+
+}  // namespace voxlat::homogenization::avx2

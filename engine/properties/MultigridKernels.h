@@ -1,0 +1,152 @@
+/// @file MultigridKernels.h
+/// @brief The element products of the periodic multigrid solver (internal to Multigrid.cpp).
+///
+/// Included twice, in namespaces named by VOXLAT_MG_ISA: by Multigrid.cpp for the baseline
+/// instruction set, and by MultigridAvx2.cpp, the one file built for AVX2 (without FMA and
+/// without contraction), which the solver calls where the CPU has AVX2. Each lane makes the
+/// same IEEE operations in the same order in both, so both give the same bits; the wider
+/// registers only take fewer instructions (the double lane vectors and the dense coarse
+/// products). Raw pointers and lane vectors only: no inline library function is instantiated
+/// here that the two builds could share.
+///
+/// No include guard on purpose: each including file defines VOXLAT_MG_ISA first.
+
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+
+#ifndef VOXLAT_MG_ISA
+#error "define VOXLAT_MG_ISA (the kernels' namespace) before including MultigridKernels.h"
+#endif
+
+namespace voxlat::homogenization {
+
+/// Four lanes of float or double (GCC/Clang vector extensions; with SSE, double takes two
+/// registers). Lane d holds unknown d of a node; lane 3 is padding.
+typedef float Float4 __attribute__((vector_size(16)));
+typedef double Double4 __attribute__((vector_size(32)));
+
+template <class T>
+struct Lanes;
+template <>
+struct Lanes<float> {
+    using type = Float4;
+};
+template <>
+struct Lanes<double> {
+    using type = Double4;
+};
+
+namespace VOXLAT_MG_ISA {
+
+/// In place: v[k] = sum_a (-1)^popcount(k & a) v[a], a fixed sequence of butterflies.
+template <class V>
+inline void hadamard(V* v)
+{
+#pragma GCC unroll 8
+    for (int bit = 1; bit < 8; bit <<= 1)
+#pragma GCC unroll 8
+        for (int a = 0; a < 8; ++a)
+            if (!(a & bit)) {
+                const V p = v[a], q = v[a | bit];
+                v[a] = p + q;
+                v[a | bit] = p - q;
+            }
+}
+
+/// y += the element products of elements e0..e1-1 through the reflection blocks (see
+/// Level::setReflectionBlocks in Multigrid.cpp): @a blocks, 8 scalars for D = 1; @a columns,
+/// column j of block c at c * 3 + j for D = 3. A node's values sit at node * St.
+template <int D, class T, int St>
+void elementBlocks(const std::int32_t* elemNodes, std::size_t e0, std::size_t e1, const T* blocks,
+                   const typename Lanes<T>::type* columns, const T* xin, T* y)
+{
+    using V = typename Lanes<T>::type;
+    if constexpr (D == 1) {
+        T B[8];
+        for (int c = 0; c < 8; ++c) B[c] = blocks[c];
+        for (std::size_t e = e0; e < e1; ++e) {
+            const std::int32_t* nd = &elemNodes[8 * e];
+            T v[8];
+#pragma GCC unroll 8
+            for (int a = 0; a < 8; ++a) v[a] = xin[nd[a]];
+            hadamard(v);
+#pragma GCC unroll 8
+            for (int c = 0; c < 8; ++c) v[c] *= B[c];
+            hadamard(v);
+#pragma GCC unroll 8
+            for (int a = 0; a < 8; ++a) y[nd[a]] += v[a];
+        }
+    } else {
+        // Character c's component d is, in the transform of the node values, component d at index
+        // c ^ e_d (a reflection along d also flips component d); each character's block takes
+        // its three components from three lane vectors. The inverse: component d of node a is
+        // the transform of the block products times (-1)^(bit d of a), the same signs undoing
+        // the same permutation.
+        V sign[8];
+        for (int a = 0; a < 8; ++a) sign[a] = V{T((a & 1) ? -1 : 1), T((a & 2) ? -1 : 1), T((a & 4) ? -1 : 1), T(0)};
+        const V* B = columns;
+        for (std::size_t e = e0; e < e1; ++e) {
+            const std::int32_t* nd = &elemNodes[8 * e];
+            V v[8];
+#pragma GCC unroll 8
+            for (int a = 0; a < 8; ++a) {
+                const T* p = xin + std::size_t(nd[a]) * St;
+                if constexpr (St == 4)
+                    std::memcpy(&v[a], p, sizeof(V));  // the padding lane is zero
+                else
+                    v[a] = V{p[0], p[1], p[2], T(0)};
+            }
+            hadamard(v);
+            V w[8];
+#pragma GCC unroll 8
+            for (int c = 0; c < 8; ++c)
+                w[c] = B[3 * c] * v[c ^ 1][0] + B[3 * c + 1] * v[c ^ 2][1] + B[3 * c + 2] * v[c ^ 4][2];
+            hadamard(w);
+#pragma GCC unroll 8
+            for (int a = 0; a < 8; ++a) {
+                const V r = w[a] * sign[a];
+                T* q = y + std::size_t(nd[a]) * St;
+                if constexpr (St == 4) {
+                    V w;
+                    std::memcpy(&w, q, sizeof(V));
+                    w += r;  // lane 3: 0 + 0 (the blocks' columns are zero there)
+                    std::memcpy(q, &w, sizeof(V));
+                } else {
+                    q[0] += r[0];
+                    q[1] += r[1];
+                    q[2] += r[2];
+                }
+            }
+        }
+    }
+}
+
+/// y += the element products of elements e0..e1-1 with their dense (8D)^2 matrices: @a table
+/// holds one per element type (elemType), or the only one when @a single. A node's values sit
+/// at node * St.
+template <int D, class T, int St>
+void elementDense(const std::int32_t* elemNodes, const std::int32_t* elemType, const T* table, bool single,
+                  std::size_t e0, std::size_t e1, const T* xin, T* y)
+{
+    constexpr int kE = 8 * D;
+    for (std::size_t e = e0; e < e1; ++e) {
+        const std::int32_t* nd = &elemNodes[8 * e];
+        const T* K = single ? table : table + std::size_t(elemType[e]) * kE * kE;
+        T ue[kE], ye[kE];
+        for (int a = 0; a < 8; ++a)
+            for (int k = 0; k < D; ++k) ue[a * D + k] = xin[std::size_t(nd[a]) * St + k];
+        for (int i = 0; i < kE; ++i) ye[i] = T(0);
+        // Column by column (K is symmetric): each step is a vectorizable axpy.
+        for (int j = 0; j < kE; ++j) {
+            const T uj = ue[j];
+            const T* col = K + j * kE;
+            for (int i = 0; i < kE; ++i) ye[i] += col[i] * uj;
+        }
+        for (int a = 0; a < 8; ++a)
+            for (int k = 0; k < D; ++k) y[std::size_t(nd[a]) * St + k] += ye[a * D + k];
+    }
+}
+
+}  // namespace VOXLAT_MG_ISA
+}  // namespace voxlat::homogenization
