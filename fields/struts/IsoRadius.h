@@ -28,6 +28,8 @@ public:
     /// rho(F) (capped) and its inverse, F(rho) = P exp(-sign(rho) rho^2 / (2 sigma^2)).
     double radiusOf(double f) const;
     double valueOf(double rho) const;
+    /// radiusOf() of every value in place: the same doubles, several times faster.
+    void radii(std::span<double> values) const;
 
 private:
     FieldPtr mF;
