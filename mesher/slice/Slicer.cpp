@@ -352,7 +352,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     std::vector<double> values, sub;
     std::vector<float> single, cells;  // the values in single precision and their cells, for the tile tests
     RasterCounts counts;
-    int quartersTried = 0, quartersCulled = 0, blocksTried = 0, blocksCulled = 0, blocksSkipped = 0;
+    int quartersTried = 0, quartersCulled = 0, blocksStraddling = 0, blocksSkipped = 0;
     const bool greyEdges = mOptions.supersample > 0 && mOptions.gamma == 1.0;
     const float tolerance = float(mOptions.linearTolerance);
     auto decideWholeTile = [&](const float* single, int stride, const float* cells, float blockCell,
@@ -456,20 +456,17 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         if (mOptions.interrupt) mOptions.interrupt();
         for (int bi = 0; bi < mNx; bi += block) {
             const int bnx = std::min(block, mNx - bi), bny = std::min(block, mNy - bj);
-            // Blocks are bounded while that pays, as their quarters below: in a lattice that fills
-            // the window no block has one sign, and bound() per block was 12 % of slicing W10's
-            // strut plate for nothing. Past 64 blocks of which fewer than one in eight was
-            // decided, one block in eight is still bounded, so a layer whose later blocks cull
-            // (a lattice's edge, empty space) takes bounds again. Counted per layer, in the
-            // layer's own block order, so the bytes do not depend on the threads.
+            // Blocks are bounded while that pays: in a lattice that fills the window no block has
+            // one sign, and bound() per block was 12 % of slicing W10's strut plate for nothing.
+            // After 64 bounded blocks in a row that all straddled, only one block in eight is
+            // bounded; the first of those that is decided (a lattice's edge, empty space) brings
+            // back bounds for every block. A TPMS sheet decides blocks often enough to keep them.
+            // Counted per layer in the layer's own block order: the bytes do not depend on the
+            // threads.
             bool bounded = true;
-            if (mOptions.adaptiveBounds && blocksTried >= 64 && 8 * blocksCulled < blocksTried)
-                bounded = ++blocksSkipped % 8 == 0;
+            if (mOptions.adaptiveBounds && blocksStraddling >= 64) bounded = ++blocksSkipped % 8 == 0;
             const int side = classify(bi, bj, bnx, bny, bounded);
-            if (bounded) {
-                ++blocksTried;
-                blocksCulled += side != 0;
-            }
+            if (bounded) blocksStraddling = side == 0 ? blocksStraddling + 1 : 0;
             counts.blocksUnbounded += !bounded && side == 0;
             if (side != 0 || !bounded) {
                 decideBlock(bi, bj, bnx, bny, side);
