@@ -63,11 +63,11 @@ struct RasterOptions {
     /// Whole tiles eight lanes at a time where the CPU has AVX2 (else four); the bytes are the
     /// same either way, so this only exists to compare the two.
     bool wideTiles = true;
-    /// Within a layer, after 64 bounded blocks in a row that all straddle the surface (a lattice
-    /// filling the window), bound only one block in eight until one of those is decided; false
-    /// bounds every block (to compare: a block left unbounded is evaluated, and its pixels are
-    /// decided from the values as those of every straddling block are).
-    bool adaptiveBounds = true;
+    /// Within a layer, after this many bounded blocks in a row that all straddle the surface (a
+    /// lattice filling the window), only one block in eight is bounded until one of those is
+    /// decided; 0 bounds every block (to compare: a block left unbounded is evaluated, and its
+    /// pixels are decided from the values as those of every straddling block are).
+    int straddlingRun = 256;
     /// Called once per row of 64 x 64 blocks while a layer is made (none: never); it throws to
     /// stop the layer (a job's cancel check), so a layer of a large plate stops promptly.
     std::function<void()> interrupt;
