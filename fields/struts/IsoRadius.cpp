@@ -31,9 +31,10 @@ double IsoRadius::valueOf(double rho) const
 void IsoRadius::radii(std::span<double> values) const
 {
     // radiusOf()'s operations in its order, the same doubles, in three loops over a chunk: the
-    // divisions and the square roots then run in loops of their own (vectorised; the file is built
-    // with -fno-math-errno) and only the logarithm is a call per value. Point by point the call
-    // serialised every division and root behind it (radiusOf was 10 % of slicing W10's plate).
+    // divisions and the square roots run in loops of their own (the file is built with
+    // -fno-math-errno) and only the logarithm is a call per value; point by point the call held
+    // up every division and root behind it. On W10's plate radiusOf and its log were 12.6 % of
+    // slicing, this map and its log 11.5 %: the log calls are most of what is left.
     constexpr std::size_t kChunk = 256;
     double u[kChunk];
     for (std::size_t start = 0; start < values.size(); start += kChunk) {
