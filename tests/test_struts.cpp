@@ -1263,6 +1263,43 @@ TEST(StrutLattice, SparseGridMatchesBruteForce)
     EXPECT_EQ(inside, insideBrute);
 }
 
+TEST(StrutIndex, GatherListsEveryReachingSegmentOnceInAscendingOrder)
+{
+    // gather() against every segment tested by brute force (the distance from the box to the
+    // segment against its reach), on boxes from a pixel's to many bins across: the bins' lists
+    // are merged (a few bins) or sorted (many), and both must give every reaching segment once,
+    // in ascending order.
+    std::mt19937 rng(380);
+    std::uniform_real_distribution<double> coordinate(0.0, 20.0), offset(-1.5, 1.5), reachOf(0.2, 1.0);
+    std::vector<Vec3d> a, b;
+    std::vector<double> reach;
+    for (int n = 0; n < 3000; ++n) {
+        const Vec3d p(coordinate(rng), coordinate(rng), coordinate(rng));
+        a.push_back(p);
+        b.push_back(p + Vec3d(offset(rng), offset(rng), offset(rng)));
+        reach.push_back(reachOf(rng));
+    }
+    const StrutIndex index(a, b, reach);
+    std::uniform_real_distribution<double> size(0.0, 1.0);
+    std::vector<std::uint32_t> got;
+    std::size_t listed = 0, merged = 0, sorted = 0;
+    for (int trial = 0; trial < 300; ++trial) {
+        const double side = trial % 3 == 0 ? 0.02 : trial % 3 == 1 ? 1.5 * size(rng) : 12.0 * size(rng);
+        const Vec3d lo(coordinate(rng) - 1.0, coordinate(rng) - 1.0, coordinate(rng) - 1.0);
+        const Box3 box{lo, lo + Vec3d(side, 0.8 * side, 1.1 * side)};
+        index.gather(box, got);
+        std::vector<std::uint32_t> expected;
+        for (std::uint32_t j = 0; j < a.size(); ++j)
+            if (segmentBoxDistance(a[j], b[j], box) <= reach[j]) expected.push_back(j);
+        ASSERT_EQ(got, expected) << "trial " << trial;
+        listed += got.size();
+        (side > 3.0 ? sorted : merged) += 1;
+    }
+    EXPECT_GT(listed, 3000u);
+    EXPECT_GT(sorted, 20u);
+    EXPECT_GT(merged, 150u);
+}
+
 TEST(StrutIndex, SegmentBoxDistanceIsTheExactMinimum)
 {
     // Against the distance sampled at 20001 points along the segment: never above the sampled
