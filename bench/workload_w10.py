@@ -31,6 +31,12 @@ layers and the full plate extrapolated):
   their sorts 15 %, cellBounds 4 %) cost what the skipped pixels saved. Full plate not measured
   (4 layers took 190 s of wall time at that load): still about 690 s on two free cores by the
   second round's CPU time (target 600 s: missed).
+- 2026-11-29, issue 38 fourth round (branch issue38d: blocks unbounded after 256 straddling in a
+  row, IsoRadius values mapped in batches, bin lists merged; the same .goo bytes). 4 layers of the
+  plate side by side by CPU time at load 6-12, alternating: main 15.8-16.2 s, after 14.5-14.6 s
+  (0.92x), peaks 348-410 MB both; the gyroid sheet's 8 layers 2.2-2.35 s both: struts 12.6x the
+  TPMS per window pixel (main 13.9x in the same run; target 10x: missed); full plate about 635 s
+  on two free cores by the second round's basis (690 s x 0.92; target 600 s: missed).
 Before issue 38 a 20 x 20 x 2 mm window took 32 s for 40 layers and the 2 mm plate did not finish
 in ten minutes (the issue's figures).
 

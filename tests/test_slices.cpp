@@ -9,7 +9,9 @@
 #include "fields/maps/Ramp.h"
 #include "fields/shapes/Boolean.h"
 #include "fields/shapes/BoxField.h"
+#include "fields/shapes/Cylinder.h"
 #include "fields/shapes/Sphere.h"
+#include "fields/struts/IsoRadius.h"
 #include "fields/struts/StrutConvolution.h"
 #include "fields/tpms/TpmsField.h"
 #include "mesher/slice/Slicer.h"
@@ -217,6 +219,63 @@ TEST(Slices, GradedStrutAreaMatchesPointByPointSupersampling)
         EXPECT_LT(maxPixelError, 0.09) << "z " << z;
         EXPECT_GT(reference, 400.0) << "z " << z;
     }
+}
+
+TEST(Slices, UnboundedBlocksWriteTheBytesOfBoundedOnes)
+{
+    // A graded BCC lattice (radii 0.15 -> 0.3 mm from the centre, every strut end weighted on its
+    // own) as the engine builds it (IsoRadius, level at its radius), trimmed by a cylinder along x
+    // that keeps y below about 7 mm: the window's first block rows are all lattice, where no block
+    // has one sign and the slicer stops bounding blocks; the rows past the trim cull again. Every
+    // block bounded (straddlingRun 0) must give the same bytes.
+    const double sigma = 0.2, level = 1.0, cell = 2.0;
+    const Vec3d centre(6.0, 6.0, 1.0);
+    auto weightAt = [&](const Vec3d& p) {
+        const double r = 0.15 + 0.15 * std::min(1.0, (p - centre).length() / 6.0);
+        return gaussianStrutWeight(r, sigma, level);
+    };
+    std::vector<ConvolutionStrut> struts;
+    for (int i = 0; i < 6; ++i)
+        for (int j = 0; j < 6; ++j) {
+            const Vec3d c = cell * Vec3d(i + 0.5, j + 0.5, 0.5);
+            for (int corner = 0; corner < 8; ++corner) {
+                const Vec3d a = cell * Vec3d(i + (corner & 1), j + (corner >> 1 & 1), corner >> 2 & 1);
+                struts.push_back({c, a, sigma, weightAt(c), weightAt(a)});
+            }
+        }
+    auto convolution = std::make_shared<StrutConvolution>(struts);
+    const double peak = gaussianStrutWeight(0.3, sigma, level) * sigma * std::sqrt(2.0 * std::numbers::pi);
+    auto iso = std::make_shared<IsoRadius>(convolution, peak, sigma, 2.0 * convolution->cutoffRadius(0));
+    auto lattice = std::make_shared<LevelSolid>(iso, SolidSide::Below, iso->radiusOf(level));
+    auto trim = std::make_shared<Cylinder>(Vec3d(6.0, -100.0, 1.0), Vec3d(1.0, 0.0, 0.0), 107.0, 100.0);
+    const BooleanField field(BooleanOp::Intersection, {lattice, trim});
+    const Display d = testDisplay(0.015, 800, 800);
+    const Box3 part{Vec3d(0.0), Vec3d(12.0, 12.0, 2.0)};
+    RasterOptions shortRun, everyBlock;
+    shortRun.straddlingRun = 64;  // the window holds 169 blocks
+    everyBlock.straddlingRun = 0;
+    const Slicer adaptive(field, part, 0.0, 0.0, d, shortRun), bounded(field, part, 0.0, 0.0, d, everyBlock);
+#if defined(VOXLAT_SANITIZE)
+    const std::vector<double> layers = {0.525};  // one layer under the sanitizers: the same paths
+#else
+    const std::vector<double> layers = {0.525, 1.375};
+#endif
+    std::uint64_t greyPixels = 0;
+    for (const double z : layers) {
+        LayerImage a, b;
+        RasterStats stats, boundedStats;
+        adaptive.rasterize(z, a, &stats);
+        bounded.rasterize(z, b, &boundedStats);
+        ASSERT_EQ(a.pixels, b.pixels) << "z " << z;
+        EXPECT_GT(stats.blocksUnbounded.load(), 20u) << "z " << z;  // the lattice's rows went unbounded
+        EXPECT_EQ(boundedStats.blocksUnbounded.load(), 0u);
+        // The trimmed rows were culled again (about 40 % of the window lies beyond the trim).
+        EXPECT_LT(double(stats.pixelsEvaluated.load()), 0.8 * double(a.pixels.size())) << "z " << z;
+        EXPECT_LE(boundedStats.pixelsEvaluated.load(), stats.pixelsEvaluated.load());
+        EXPECT_GT(a.exposedPixels(), 0.05 * double(a.pixels.size()));
+        for (std::uint8_t p : a.pixels) greyPixels += p != 0 && p != 255;
+    }
+    EXPECT_GT(greyPixels, 1000u);
 }
 
 TEST(Slices, EightLaneTilesWriteTheSameBytesAsFourLane)

@@ -8,6 +8,7 @@
 #include "engine/jobs/Job.h"
 #include "fields/shapes/Sphere.h"
 #include "fields/struts/GaussianTable.h"
+#include "fields/struts/IsoRadius.h"
 #include "fields/struts/StrutCapsules.h"
 #include "fields/struts/StrutConvolution.h"
 #include "fields/struts/StrutIndex.h"
@@ -18,6 +19,7 @@
 #include <gtest/gtest.h>
 
 #include <tbb/global_control.h>
+#include <array>
 #include <chrono>
 #include <nlohmann/json.hpp>
 
@@ -445,6 +447,70 @@ TEST(GaussianTable, InterpolationErrorWithinItsDocumentedBound)
     EXPECT_LE(worstU, GaussianTable::kErfIntegralError);
     EXPECT_LE(worstG, GaussianTable::kGaussianError);
     EXPECT_GT(worstU, 1e-14);  // interpolated, not exact
+}
+
+TEST(IsoRadius, RadiiAreRadiusOfBitForBit)
+{
+    // IsoRadius::radii (the batched map gridValues and values use) against radiusOf() value by
+    // value, on a graded lattice's plane and volume batches and on the map's edge values.
+    const double sigma = 0.2, level = 1.0;
+    std::vector<ConvolutionStrut> struts;
+    std::mt19937 rng(38);
+    std::uniform_real_distribution<double> coordinate(0.0, 3.0), radius(0.15, 0.3);
+    for (int n = 0; n < 40; ++n) {
+        const Vec3d a(coordinate(rng), coordinate(rng), coordinate(rng)),
+            b(coordinate(rng), coordinate(rng), coordinate(rng));
+        if ((b - a).length() < 0.1) continue;
+        struts.push_back({a, b, sigma, gaussianStrutWeight(radius(rng), sigma, level),
+                          gaussianStrutWeight(radius(rng), sigma, level)});
+    }
+    auto convolution = std::make_shared<StrutConvolution>(struts);
+    const double peak = gaussianStrutWeight(0.3, sigma, level) * sigma * std::sqrt(2.0 * std::numbers::pi);
+    const IsoRadius iso(convolution, peak, sigma, 2.0 * convolution->cutoffRadius(0));
+    auto bits = [](double v) {
+        std::uint64_t u;
+        std::memcpy(&u, &v, sizeof u);
+        return u;
+    };
+    std::size_t compared = 0, capped = 0, negative = 0;
+    for (const auto& [nx, ny, nz] : {std::array{70, 66, 1}, std::array{20, 18, 24}}) {
+        GridBatch g;
+        g.origin = Vec3d(-0.3, -0.2, 1.3);
+        g.spacing = Vec3d(0.051, 0.047, 0.043);
+        g.nx = nx;
+        g.ny = ny;
+        g.nz = nz;
+        std::vector<double> f(g.size()), rho(g.size());
+        convolution->gridValues(g, f);
+        iso.gridValues(g, rho);
+        for (std::size_t n = 0; n < f.size(); ++n) {
+            ASSERT_EQ(bits(rho[n]), bits(iso.radiusOf(f[n]))) << n << " F " << f[n];
+            capped += rho[n] == 2.0 * convolution->cutoffRadius(0);
+            negative += rho[n] < 0.0;
+        }
+        compared += f.size();
+    }
+    EXPECT_GT(capped, 0u);  // both branches of the map ran
+    const double fMin = iso.valueOf(2.0 * convolution->cutoffRadius(0));
+    std::vector<double> edges = {0.0,
+                                 fMin,
+                                 std::nextafter(fMin, 1.0),
+                                 std::nextafter(fMin, 0.0),
+                                 peak,
+                                 std::nextafter(peak, 0.0),
+                                 3.0 * peak,
+                                 1e-300,
+                                 std::numeric_limits<double>::denorm_min(),
+                                 std::numeric_limits<double>::infinity(),
+                                 -1.0};
+    std::vector<double> mapped = edges;
+    iso.radii(mapped);
+    for (std::size_t n = 0; n < edges.size(); ++n) {
+        EXPECT_EQ(bits(mapped[n]), bits(iso.radiusOf(edges[n]))) << "F " << edges[n];
+        negative += mapped[n] < 0.0;
+    }
+    EXPECT_GT(negative, 0u);  // joints above the peak map below zero
+    EXPECT_GT(compared, 10'000u);
 }
 
 TEST(StrutConvolution, GradientMatchesFiniteDifferences)
@@ -1195,6 +1261,43 @@ TEST(StrutLattice, SparseGridMatchesBruteForce)
             }
     EXPECT_EQ(mismatched, 0u);
     EXPECT_EQ(inside, insideBrute);
+}
+
+TEST(StrutIndex, GatherListsEveryReachingSegmentOnceInAscendingOrder)
+{
+    // gather() against every segment tested by brute force (the distance from the box to the
+    // segment against its reach), on boxes from a pixel's to many bins across: the bins' lists
+    // are merged (a few bins) or sorted (many), and both must give every reaching segment once,
+    // in ascending order.
+    std::mt19937 rng(380);
+    std::uniform_real_distribution<double> coordinate(0.0, 20.0), offset(-1.5, 1.5), reachOf(0.2, 1.0);
+    std::vector<Vec3d> a, b;
+    std::vector<double> reach;
+    for (int n = 0; n < 3000; ++n) {
+        const Vec3d p(coordinate(rng), coordinate(rng), coordinate(rng));
+        a.push_back(p);
+        b.push_back(p + Vec3d(offset(rng), offset(rng), offset(rng)));
+        reach.push_back(reachOf(rng));
+    }
+    const StrutIndex index(a, b, reach);
+    std::uniform_real_distribution<double> size(0.0, 1.0);
+    std::vector<std::uint32_t> got;
+    std::size_t listed = 0, merged = 0, sorted = 0;
+    for (int trial = 0; trial < 300; ++trial) {
+        const double side = trial % 3 == 0 ? 0.02 : trial % 3 == 1 ? 1.5 * size(rng) : 12.0 * size(rng);
+        const Vec3d lo(coordinate(rng) - 1.0, coordinate(rng) - 1.0, coordinate(rng) - 1.0);
+        const Box3 box{lo, lo + Vec3d(side, 0.8 * side, 1.1 * side)};
+        index.gather(box, got);
+        std::vector<std::uint32_t> expected;
+        for (std::uint32_t j = 0; j < a.size(); ++j)
+            if (segmentBoxDistance(a[j], b[j], box) <= reach[j]) expected.push_back(j);
+        ASSERT_EQ(got, expected) << "trial " << trial;
+        listed += got.size();
+        (side > 3.0 ? sorted : merged) += 1;
+    }
+    EXPECT_GT(listed, 3000u);
+    EXPECT_GT(sorted, 20u);
+    EXPECT_GT(merged, 150u);
 }
 
 TEST(StrutIndex, SegmentBoxDistanceIsTheExactMinimum)

@@ -1,5 +1,6 @@
 #include "fields/struts/IsoRadius.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <vector>
@@ -27,10 +28,31 @@ double IsoRadius::valueOf(double rho) const
     return mPeak * std::exp(-std::copysign(rho * rho, rho) / (2.0 * mSigma * mSigma));
 }
 
+void IsoRadius::radii(std::span<double> values) const
+{
+    // radiusOf()'s operations in its order, the same doubles, in three loops over a chunk: the
+    // divisions and the square roots run in loops of their own (the file is built with
+    // -fno-math-errno) and only the logarithm is a call per value; point by point the call held
+    // up every division and root behind it. On W10's plate radiusOf and its log were 12.6 % of
+    // slicing, this map and its log 11.5 %: the log calls are most of what is left.
+    constexpr std::size_t kChunk = 256;
+    double u[kChunk];
+    for (std::size_t start = 0; start < values.size(); start += kChunk) {
+        const std::size_t n = std::min(kChunk, values.size() - start);
+        double* f = values.data() + start;
+        for (std::size_t k = 0; k < n; ++k) u[k] = mPeak / (f[k] <= mFMin ? mPeak : f[k]);  // 1 where capped
+        for (std::size_t k = 0; k < n; ++k) u[k] = std::log(u[k]);
+        for (std::size_t k = 0; k < n; ++k) {
+            const double rho = std::min(mRhoMax, std::copysign(mSigma * std::sqrt(2.0 * std::abs(u[k])), u[k]));
+            f[k] = f[k] <= mFMin ? mRhoMax : rho;
+        }
+    }
+}
+
 void IsoRadius::values(std::span<const Vec3d> points, std::span<double> out) const
 {
     mF->values(points, out);
-    for (double& v : out) v = radiusOf(v);
+    radii(out.first(points.size()));
 }
 
 void IsoRadius::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
@@ -48,7 +70,7 @@ void IsoRadius::gradients(std::span<const Vec3d> points, std::span<double> out, 
 void IsoRadius::gridValues(const GridBatch& batch, std::span<double> out) const
 {
     mF->gridValues(batch, out);
-    for (std::size_t n = 0; n < batch.size(); ++n) out[n] = radiusOf(out[n]);
+    radii(out.first(batch.size()));
 }
 
 Interval IsoRadius::bound(const Box3& box) const

@@ -28,6 +28,9 @@ public:
     /// rho(F) (capped) and its inverse, F(rho) = P exp(-sign(rho) rho^2 / (2 sigma^2)).
     double radiusOf(double f) const;
     double valueOf(double rho) const;
+    /// radiusOf() of every value in place, the same doubles (its divisions and square roots in
+    /// loops of their own, apart from the logarithm's calls).
+    void radii(std::span<double> values) const;
 
 private:
     FieldPtr mF;

@@ -134,14 +134,37 @@ void StrutIndex::candidates(const Box3& box, std::vector<std::uint32_t>& out) co
         lo[k] = std::clamp(int(std::floor((box.min[k] - mBounds.min[k]) / mBin)), 0, mDims[k] - 1);
         hi[k] = std::clamp(int(std::floor((box.max[k] - mBounds.min[k]) / mBin)), 0, mDims[k] - 1);
     }
+    // A few bins (a slicer's block, a leaf): each bin's list is ascending without repeats, so
+    // their union is merged list by list (std::set_union keeps one of each index), the same list
+    // as sorting the concatenation and dropping repeats without the sort (most of a block's
+    // gather). Many bins (a large box): the concatenation is sorted, as a merge per bin would
+    // copy the growing list once per bin.
+    const long bins = long(hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1);
+    if (bins > 8) {
+        for (int x = lo[0]; x <= hi[0]; ++x)
+            for (int y = lo[1]; y <= hi[1]; ++y)
+                for (int z = lo[2]; z <= hi[2]; ++z) {
+                    const std::size_t n = (std::size_t(x) * mDims[1] + y) * mDims[2] + z;
+                    out.insert(out.end(), mItems.begin() + mStart[n], mItems.begin() + mStart[n + 1]);
+                }
+        std::sort(out.begin(), out.end());
+        out.erase(std::unique(out.begin(), out.end()), out.end());
+        return;
+    }
+    thread_local std::vector<std::uint32_t> merged;
     for (int x = lo[0]; x <= hi[0]; ++x)
         for (int y = lo[1]; y <= hi[1]; ++y)
             for (int z = lo[2]; z <= hi[2]; ++z) {
                 const std::size_t n = (std::size_t(x) * mDims[1] + y) * mDims[2] + z;
-                out.insert(out.end(), mItems.begin() + mStart[n], mItems.begin() + mStart[n + 1]);
+                const auto first = mItems.begin() + mStart[n], last = mItems.begin() + mStart[n + 1];
+                if (out.empty()) {
+                    out.assign(first, last);
+                    continue;
+                }
+                merged.resize(out.size() + std::size_t(last - first));
+                merged.erase(std::set_union(out.begin(), out.end(), first, last, merged.begin()), merged.end());
+                out.swap(merged);
             }
-    std::sort(out.begin(), out.end());
-    out.erase(std::unique(out.begin(), out.end()), out.end());
 }
 
 void StrutIndex::gather(const Box3& box, std::vector<std::uint32_t>& out) const

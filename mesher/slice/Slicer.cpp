@@ -352,7 +352,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     std::vector<double> values, sub;
     std::vector<float> single, cells;  // the values in single precision and their cells, for the tile tests
     RasterCounts counts;
-    int quartersTried = 0, quartersCulled = 0;
+    int quartersTried = 0, quartersCulled = 0, blocksStraddling = 0, blocksSkipped = 0;
     const bool greyEdges = mOptions.supersample > 0 && mOptions.gamma == 1.0;
     const float tolerance = float(mOptions.linearTolerance);
     auto decideWholeTile = [&](const float* single, int stride, const float* cells, float blockCell,
@@ -374,12 +374,14 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     };
 
     // Classifies the pixel box [i, i + n) x [j, j + m) of the window: -1 inside, +1 outside, 0 both.
-    auto classify = [&](int i, int j, int n, int m) {
+    // Without @a bounded only the part's box decides: 1 outside it, else 0 (no bound() taken).
+    auto classify = [&](int i, int j, int n, int m, bool bounded = true) {
         const double lx = (mI0 + i) * px - mOffsetX, hx = (mI0 + i + n) * px - mOffsetX;
         const double ly = (mJ0 + j) * py - mOffsetY, hy = (mJ0 + j + m) * py - mOffsetY;
         const Box3 box{{std::max(lx, mPart.min.x()), std::max(ly, mPart.min.y()), z},
                        {std::min(hx, mPart.max.x()), std::min(hy, mPart.max.y()), z}};
         if (box.min.x() > box.max.x() || box.min.y() > box.max.y()) return 1;
+        if (!bounded) return 0;
         const Interval b = mField.bound(box);
         if (b.lo > 0.0) return 1;
         const bool whole = lx >= mPart.min.x() && hx <= mPart.max.x() && ly >= mPart.min.y() && hy <= mPart.max.y();
@@ -454,8 +456,21 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         if (mOptions.interrupt) mOptions.interrupt();
         for (int bi = 0; bi < mNx; bi += block) {
             const int bnx = std::min(block, mNx - bi), bny = std::min(block, mNy - bj);
-            const int side = classify(bi, bj, bnx, bny);
-            if (side != 0) {
+            // Blocks are bounded while that pays: in a lattice that fills the window no block has
+            // one sign, and bound() per block was 12 % of slicing W10's strut plate for nothing.
+            // After straddlingRun (256) bounded blocks in a row that all straddled (W10's plate:
+            // 2 % of a layer), only one block in eight is bounded; the first of those that is
+            // decided (a lattice's edge, empty space) brings back bounds for every block. A TPMS
+            // sheet decides blocks often enough to keep them (after 64 in a row, W10's gyroid
+            // sheet evaluated 31 % more pixels). Counted per layer in the layer's own block
+            // order: the bytes do not depend on the threads.
+            bool bounded = true;
+            if (mOptions.straddlingRun > 0 && blocksStraddling >= mOptions.straddlingRun)
+                bounded = ++blocksSkipped % 8 == 0;
+            const int side = classify(bi, bj, bnx, bny, bounded);
+            if (bounded) blocksStraddling = side == 0 ? blocksStraddling + 1 : 0;
+            counts.blocksUnbounded += !bounded && side == 0;
+            if (side != 0 || !bounded) {
                 decideBlock(bi, bj, bnx, bny, side);
                 continue;
             }
@@ -494,6 +509,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         stats->tilesEdge += counts.tilesEdge;
         stats->pixelsEvaluated += counts.pixelsEvaluated;
         stats->pixelsSupersampled += counts.pixelsSupersampled;
+        stats->blocksUnbounded += counts.blocksUnbounded;
     }
 }
 

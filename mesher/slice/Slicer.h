@@ -63,6 +63,11 @@ struct RasterOptions {
     /// Whole tiles eight lanes at a time where the CPU has AVX2 (else four); the bytes are the
     /// same either way, so this only exists to compare the two.
     bool wideTiles = true;
+    /// Within a layer, after this many bounded blocks in a row that all straddle the surface (a
+    /// lattice filling the window), only one block in eight is bounded until one of those is
+    /// decided; 0 bounds every block (to compare: a block left unbounded is evaluated, and its
+    /// pixels are decided from the values as those of every straddling block are).
+    int straddlingRun = 256;
     /// Called once per row of 64 x 64 blocks while a layer is made (none: never); it throws to
     /// stop the layer (a job's cancel check), so a layer of a large plate stops promptly.
     std::function<void()> interrupt;
@@ -124,12 +129,14 @@ private:
 struct RasterStats {
     std::atomic<std::uint64_t> tilesInside{0}, tilesOutside{0}, tilesEdge{0};
     std::atomic<std::uint64_t> pixelsEvaluated{0}, pixelsSupersampled{0};
+    std::atomic<std::uint64_t> blocksUnbounded{0};  ///< blocks evaluated without a bound() first
 };
 
 /// Plain counters of one layer, added to RasterStats once per layer: atomics updated per tile
 /// would bounce their cache line between the threads.
 struct RasterCounts {
     std::uint64_t tilesInside = 0, tilesOutside = 0, tilesEdge = 0, pixelsEvaluated = 0, pixelsSupersampled = 0;
+    std::uint64_t blocksUnbounded = 0;
 };
 
 /// Rasterizes slices of one field (negative inside), clipped to the part box.
