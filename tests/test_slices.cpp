@@ -161,29 +161,40 @@ TEST(Slices, GyroidAreaMatchesFineSupersampling)
     }
 }
 
-TEST(Slices, GradedStrutAreaMatchesPointByPointSupersampling)
+namespace {
+/// A BCC lattice of @a nx x @a ny x @a nz cells of edge @a cell from the origin (every cell's
+/// centre joined to its eight corners), radii graded from 0.15 mm at @a centre to 0.3 mm at
+/// @a reach from it, every strut end weighted on its own for a Gaussian of @a sigma at @a level.
+std::vector<ConvolutionStrut> gradedBccStruts(double cell, double sigma, double level, const Vec3d& centre,
+                                              double reach, int nx, int ny, int nz)
 {
-    // A BCC strut lattice (2 mm cells, sigma 0.2) with radii graded from the centre 0.15 -> 0.3 mm
-    // (every strut end weighted on its own) at the Saturn 4's pitch (19 x 24 um), against 16 x 16
-    // sub-samples per pixel of the field taken point by point (values(): std::erf and std::exp at
-    // each point, no rows, no recurrence, no table): the slicer's plane rows must keep its accuracy.
-    const double sigma = 0.2, level = 1.0, cell = 2.0;
-    const Vec3d centre(3.0, 3.0, 3.0);
     auto weightAt = [&](const Vec3d& p) {
-        const double r = 0.15 + 0.15 * std::min(1.0, (p - centre).length() / 4.0);
+        const double r = 0.15 + 0.15 * std::min(1.0, (p - centre).length() / reach);
         return gaussianStrutWeight(r, sigma, level);
     };
     std::vector<ConvolutionStrut> struts;
-    for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j)
-            for (int k = 0; k < 3; ++k) {
+    for (int i = 0; i < nx; ++i)
+        for (int j = 0; j < ny; ++j)
+            for (int k = 0; k < nz; ++k) {
                 const Vec3d c = cell * Vec3d(i + 0.5, j + 0.5, k + 0.5);
                 for (int corner = 0; corner < 8; ++corner) {
                     const Vec3d a = cell * Vec3d(i + (corner & 1), j + (corner >> 1 & 1), k + (corner >> 2 & 1));
                     struts.push_back({c, a, sigma, weightAt(c), weightAt(a)});
                 }
             }
-    auto convolution = std::make_shared<StrutConvolution>(struts);
+    return struts;
+}
+}  // namespace
+
+TEST(Slices, GradedStrutAreaMatchesPointByPointSupersampling)
+{
+    // A BCC strut lattice (2 mm cells, sigma 0.2) with radii graded from the centre 0.15 -> 0.3 mm
+    // (every strut end weighted on its own) at the Saturn 4's pitch (19 x 24 um), against 16 x 16
+    // sub-samples per pixel of the field taken point by point (values(): std::erf and std::exp at
+    // each point, no rows, no recurrence, no table): the slicer's plane rows must keep its accuracy.
+    const double sigma = 0.2, level = 1.0;
+    auto convolution =
+        std::make_shared<StrutConvolution>(gradedBccStruts(2.0, sigma, level, Vec3d(3.0, 3.0, 3.0), 4.0, 3, 3, 3));
     const LevelSolid solid(convolution, SolidSide::Above, level);
     Display d;
     d.pixelsX = 96;
@@ -228,22 +239,9 @@ TEST(Slices, UnboundedBlocksWriteTheBytesOfBoundedOnes)
     // that keeps y below about 7 mm: the window's first block rows are all lattice, where no block
     // has one sign and the slicer stops bounding blocks; the rows past the trim cull again. Every
     // block bounded (straddlingRun 0) must give the same bytes.
-    const double sigma = 0.2, level = 1.0, cell = 2.0;
-    const Vec3d centre(6.0, 6.0, 1.0);
-    auto weightAt = [&](const Vec3d& p) {
-        const double r = 0.15 + 0.15 * std::min(1.0, (p - centre).length() / 6.0);
-        return gaussianStrutWeight(r, sigma, level);
-    };
-    std::vector<ConvolutionStrut> struts;
-    for (int i = 0; i < 6; ++i)
-        for (int j = 0; j < 6; ++j) {
-            const Vec3d c = cell * Vec3d(i + 0.5, j + 0.5, 0.5);
-            for (int corner = 0; corner < 8; ++corner) {
-                const Vec3d a = cell * Vec3d(i + (corner & 1), j + (corner >> 1 & 1), corner >> 2 & 1);
-                struts.push_back({c, a, sigma, weightAt(c), weightAt(a)});
-            }
-        }
-    auto convolution = std::make_shared<StrutConvolution>(struts);
+    const double sigma = 0.2, level = 1.0;
+    auto convolution =
+        std::make_shared<StrutConvolution>(gradedBccStruts(2.0, sigma, level, Vec3d(6.0, 6.0, 1.0), 6.0, 6, 6, 1));
     const double peak = gaussianStrutWeight(0.3, sigma, level) * sigma * std::sqrt(2.0 * std::numbers::pi);
     auto iso = std::make_shared<IsoRadius>(convolution, peak, sigma, 2.0 * convolution->cutoffRadius(0));
     auto lattice = std::make_shared<LevelSolid>(iso, SolidSide::Below, iso->radiusOf(level));
