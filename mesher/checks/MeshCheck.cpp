@@ -1,5 +1,7 @@
 #include "mesher/checks/MeshCheck.h"
 
+#include "mesher/extract/PhaseProgress.h"
+
 #include "mesher/checks/PairFilter.h"
 
 #include <tbb/blocked_range.h>
@@ -179,16 +181,8 @@ uint32_t findRoot(std::vector<uint32_t>& parent, uint32_t i)
 MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansApart, const ProgressFn& progress)
 {
     MeshTopology result;
-    // Each pass reports where it starts, and its loops report it again every 64 K items (so
-    // they can cancel).
-    double phase = 0.0;
-    auto check = [&](std::size_t i = 0) {
-        if (progress && (i & 0xffff) == 0) progress(phase);
-    };
-    auto begin = [&](double fraction) {
-        phase = fraction;
-        check();
-    };
+    // Each pass reports where it starts, and its loops report it again (so they can cancel).
+    PhaseProgress phases(progress);
     const std::size_t numPoints = mesh.points.size(), numTriangles = mesh.triangles.size();
 
     // Triangles with repeated or invalid indices have no meaningful edges; leave them out of the
@@ -211,7 +205,7 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
         uint32_t* count = cursor.data() + part * numPoints;
         std::size_t numValid = 0, numDegenerate = 0;
         for (std::size_t t = partBegin(part); t < partBegin(part + 1); ++t) {
-            check(t);
+            phases.checkEvery(t);
             const openvdb::Vec3I& tri = mesh.triangles[t];
             if (!valid(tri)) {
                 ++numDegenerate;
@@ -244,11 +238,11 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
     // Left uninitialised (every entry is filled below): the rows are the largest array here, and
     // a fresh one is paged in as it is written.
     const std::unique_ptr<Corner[]> corners(new Corner[first.back()]);
-    begin(0.3);
+    phases.begin(0.3);
     tbb::parallel_for(std::size_t(0), parts, [&](std::size_t part) {
         uint32_t* at = cursor.data() + part * numPoints;
         for (std::size_t t = partBegin(part); t < partBegin(part + 1); ++t) {
-            check(t);
+            phases.checkEvery(t);
             const openvdb::Vec3I& tri = mesh.triangles[t];
             if (!valid(tri)) continue;
             for (int k = 0; k < 3; ++k)
@@ -272,11 +266,11 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
     if (fansApart) fansApart->assign(numPoints, 0);
     const bool everyFanWhole = fansApart && numValid == numTriangles;
 
-    begin(0.6);
+    phases.begin(0.6);
     const Tally tally = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, numPoints, 1024), Tally{},
         [&](const tbb::blocked_range<std::size_t>& range, Tally acc) {
-            check();
+            phases.check();
             std::vector<Spoke> spokes;
             std::vector<uint32_t> nodes, parent;
             std::array<uint8_t, kMaxFastFan> step;
@@ -363,7 +357,7 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
     // Per piece (indexed by its root, the piece's lowest vertex): V - E + F and open edges,
     // gathered at the root. A root is below its other vertices, so in ascending order each
     // vertex is added to its root after its own sum is complete (and roots are not added on).
-    begin(0.9);
+    phases.begin(0.9);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numPoints, 1 << 14), [&](const auto& range) {
         for (std::size_t v = range.begin(); v != range.end(); ++v)
             piece[v].store(findRoot(piece, uint32_t(v)), std::memory_order_relaxed);

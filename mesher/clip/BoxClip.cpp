@@ -1,6 +1,7 @@
 #include "mesher/clip/BoxClip.h"
 
 #include "mesher/checks/MeshCheck.h"
+#include "mesher/extract/PhaseProgress.h"
 
 #include <CGAL/Constrained_Delaunay_triangulation_2.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
@@ -16,6 +17,7 @@
 #include <cmath>
 #include <cstdint>
 #include <deque>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <optional>
@@ -353,11 +355,17 @@ std::size_t flipFlatTriangles(TriangleMesh& mesh, std::size_t first)
         return (b - a).cross(c - a);
     };
     auto key = [](std::uint32_t from, std::uint32_t to) { return std::uint64_t(from) << 32 | to; };
+    constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
+    struct Flat {
+        std::size_t triangle;
+        int longest;                 ///< its longest edge runs from corner `longest` to the next
+        std::size_t across = kNone;  ///< the triangle across that edge
+    };
     std::size_t flipped = 0;
     for (int round = 0; round < 3; ++round) {
-        // Each flat triangle's longest edge, directed as the neighbour across it runs it.
-        std::map<std::uint64_t, std::size_t> wanted;  // edge -> the flat triangle
-        std::vector<std::size_t> flat;
+        // Each flat triangle's longest edge, keyed as the neighbour across it runs it.
+        std::vector<Flat> flats;
+        std::map<std::uint64_t, std::size_t> wanted;  // edge -> index in flats
         for (std::size_t t = first; t < mesh.triangles.size(); ++t) {
             const openvdb::Vec3I& tri = mesh.triangles[t];
             if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] || area2(tri).lengthSqr() != 0.0) continue;
@@ -371,40 +379,34 @@ std::size_t flipFlatTriangles(TriangleMesh& mesh, std::size_t first)
                 }
             }
             if (!(length > 0.0)) continue;  // its corners coincide: no flip helps
-            wanted.emplace(key(tri[(longest + 1) % 3], tri[longest]), t);
-            flat.push_back(t);
+            if (wanted.emplace(key(tri[(longest + 1) % 3], tri[longest]), flats.size()).second)
+                flats.push_back({t, longest});
         }
-        if (flat.empty()) break;
+        if (flats.empty()) break;
         // The neighbours: only triangles with a corner that starts a wanted edge are looked up.
         std::vector<std::uint8_t> starts(mesh.points.size(), 0);
-        for (const auto& [edge, t] : wanted) starts[edge >> 32] = 1;
-        std::map<std::size_t, std::size_t> across;  // flat triangle -> its neighbour
+        for (const auto& [edge, k] : wanted) starts[edge >> 32] = 1;
         for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
             const openvdb::Vec3I& tri = mesh.triangles[t];
             if (!starts[tri[0]] && !starts[tri[1]] && !starts[tri[2]]) continue;
             for (int i = 0; i < 3; ++i)
                 if (const auto it = wanted.find(key(tri[i], tri[(i + 1) % 3])); it != wanted.end())
-                    across.emplace(it->second, t);
+                    flats[it->second].across = t;
         }
         std::vector<std::uint8_t> changed(mesh.triangles.size(), 0);
         std::size_t flips = 0;
-        for (const std::size_t t : flat) {
-            const auto it = across.find(t);
-            if (it == across.end() || changed[t] || changed[it->second]) continue;
-            const std::size_t n = it->second;
+        for (const Flat& f : flats) {
+            const std::size_t t = f.triangle, n = f.across;
+            if (n == kNone || changed[t] || changed[n]) continue;
             const openvdb::Vec3I tri = mesh.triangles[t], other = mesh.triangles[n];
             // The flat triangle (a, b, c) with c on the edge a-b; the neighbour (b, a, d).
-            int e = 0;
-            for (int i = 0; i < 3; ++i)
-                if (wanted.count(key(tri[(i + 1) % 3], tri[i])) && wanted.at(key(tri[(i + 1) % 3], tri[i])) == t) e = i;
-            const std::uint32_t a = tri[e], b = tri[(e + 1) % 3], c = tri[(e + 2) % 3];
+            const std::uint32_t a = tri[f.longest], b = tri[(f.longest + 1) % 3], c = tri[(f.longest + 2) % 3];
             std::uint32_t d = other[0];
             for (int i = 0; i < 3; ++i)
                 if (other[i] != a && other[i] != b) d = other[i];
             const openvdb::Vec3I first1(a, d, c), second1(d, b, c);
             const Vec3d facing = area2(other);
-            const Vec3d n1 = area2(first1), n2 = area2(second1);
-            if (!(n1.dot(facing) > 0.0) || !(n2.dot(facing) > 0.0)) continue;
+            if (!(area2(first1).dot(facing) > 0.0) || !(area2(second1).dot(facing) > 0.0)) continue;
             mesh.triangles[t] = first1;
             mesh.triangles[n] = second1;
             changed[t] = changed[n] = 1;
@@ -440,10 +442,8 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
                        const ProgressFn& progress)
 {
     BoxClipStats stats;
-    auto reached = [&](double fraction) {
-        if (progress) progress(fraction);
-    };
-    reached(0.0);
+    PhaseProgress phases(progress);
+    phases.begin(0.0);
     const std::size_t original = mesh.points.size(), numTriangles = mesh.triangles.size();
     // A point within snap of a face is put onto it (in double), the faces it lies on kept as bits.
     auto snapped = [&](std::size_t i, std::uint8_t& faces) {
@@ -468,7 +468,7 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
             for (int f = 0; f < kFaces; ++f) inside = inside && outside(p, box, f) < 0.0;
             deep[i] = inside;
         }
-        reached(0.0);
+        phases.check();
     });
     // Per fixed block of triangles: how many are inner and the others' indices; the points the
     // inner ones use are flagged (the same flag from any thread).
@@ -490,7 +490,7 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
                 for (int k = 0; k < 3; ++k)
                     std::atomic_ref<std::uint8_t>(keep[tri[k]]).store(1, std::memory_order_relaxed);
             }
-        reached(0.1);
+        phases.check();
     });
     std::partial_sum(innerBefore.begin(), innerBefore.end(), innerBefore.begin());
 
@@ -522,10 +522,10 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
         }
     w.leftOnEdge.assign(band.size(), 0);
     const std::size_t bandPoints = band.size();
-    reached(0.2);
+    phases.begin(0.2);
     for (int f = 0; f < kFaces; ++f) {
         cutByFace(w, f, field, box, options, stats);
-        reached(0.2 + 0.1 * (f + 1));
+        phases.begin(0.2 + 0.1 * (f + 1));
     }
     const std::size_t cutPoints = w.points.size();
 
@@ -623,7 +623,7 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
             }
     }
 
-    reached(0.8);
+    phases.begin(0.8);
     // The six caps are independent: triangulated in parallel, joined (and the first failure
     // taken) in face order.
     std::array<std::vector<Tri>, kFaces> caps;
@@ -705,7 +705,7 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
         result.triangles[numInner + t] = openvdb::Vec3I(
             std::uint32_t(bandIndex[tri[0]]), std::uint32_t(bandIndex[tri[1]]), std::uint32_t(bandIndex[tri[2]]));
     }
-    reached(0.9);
+    phases.begin(0.9);
     flipFlatTriangles(result, numInner);
     if (!options.checkTopology) {
         mesh = std::move(result);
@@ -721,7 +721,7 @@ BoxClipStats clipToBox(TriangleMesh& mesh, const FieldNode& field, const Box3& b
                         "neighbour, " + std::to_string(topology.degenerateTriangles) + " triangles repeating a corner)";
         return stats;
     }
-    reached(1.0);
+    phases.begin(1.0);
     mesh = std::move(result);
     stats.topology = topology;
     stats.ok = true;

@@ -1,5 +1,7 @@
 #include "mesher/tolerance/CreaseRefinement.h"
 
+#include "mesher/extract/PhaseProgress.h"
+
 #include "fields/shapes/SurfaceDistance.h"
 #include "mesher/checks/MeshCheck.h"
 #include "mesher/tolerance/SplitTriangle.h"
@@ -435,11 +437,9 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
 {
     RefinementStats stats;
     // Each round reports its share at its steps (the same fraction again still checks the cancel).
-    double phase = 0.0;
-    const std::function<void()> check = [&] {
-        if (progress) progress(phase);
-    };
-    const ProgressFn checkFraction = [&](double) { check(); };
+    PhaseProgress phases(progress);
+    const std::function<void()> check = phases.checker();
+    const ProgressFn checkFraction = [&](double) { phases.check(); };
     const SurfaceList list(surfaces, options.level);
     if (mesh.triangles.empty() || list.size() < 1 || list.size() > 32) return stats;
     std::vector<Vec3d> points(mesh.points.size());
@@ -472,8 +472,7 @@ RefinementStats refineCreases(TriangleMesh& mesh, const CreaseSurfaces& surfaces
     moveOntoSurface(list, mesh, points, mask, candidate, options, near, stats);
 
     for (int round = 0;; ++round) {
-        phase = double(round + 1) / double(options.rounds + 2);
-        check();
+        phases.begin(double(round + 1) / double(options.rounds + 2));
         std::vector<std::uint32_t> checked;
         for (std::size_t t = 0; t < mesh.triangles.size(); ++t)
             if (candidate[t]) checked.push_back(std::uint32_t(t));

@@ -1,5 +1,7 @@
 #include "mesher/tolerance/CreaseSplit.h"
 
+#include "mesher/extract/PhaseProgress.h"
+
 #include "mesher/checks/MeshCheck.h"
 #include "mesher/tolerance/SplitTriangle.h"
 #include "mesher/tolerance/SurfaceList.h"
@@ -30,15 +32,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
                                   const ProgressFn& progress)
 {
     CreaseSplitStats stats;
-    // Each step reports where it starts; its batches report it again (so they can cancel).
-    double phase = 0.0;
-    auto check = [&] {
-        if (progress) progress(phase);
-    };
-    auto begin = [&](double fraction) {
-        phase = fraction;
-        check();
-    };
+    PhaseProgress phases(progress);
     const SurfaceList list(surfaces, options.level);
     const int numSurfaces = list.size();
     const std::size_t n = mesh.points.size();
@@ -46,7 +40,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
     std::vector<Vec3d> points(n);
     for (std::size_t v = 0; v < n; ++v) points[v] = toDouble(mesh.points[v]);
 
-    begin(0.0);
+    phases.begin(0.0);
     // 1. Which surfaces each vertex lies on (within a hundredth of the move limit: a vertex the
     // projection held back part way still counts).
     const double near = 1e-2 * options.maxMove;
@@ -57,7 +51,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
         for (int s = 0; s < numSurfaces; ++s) {
             tbb::parallel_for(tbb::blocked_range<std::size_t>(0, (n + kBatchSize - 1) / kBatchSize, 1),
                               [&](const auto& range) {
-                                  check();
+                                  phases.check();
                                   for (std::size_t c = range.begin(); c != range.end(); ++c) {
                                       const std::size_t begin = c * kBatchSize, count = std::min(kBatchSize, n - begin);
                                       list.evaluate(s, std::span<const Vec3d>(points.data() + begin, count),
@@ -70,7 +64,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
         }
     }
 
-    begin(0.3);
+    phases.begin(0.3);
     // 2. Crease edges: the ends lie on different surfaces and neither on all of them.
     std::vector<CreaseEdge> edges;
     for (const openvdb::Vec3I& t : mesh.triangles) {
@@ -92,7 +86,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
     stats.creaseEdges = edges.size();
     if (edges.empty()) return stats;
 
-    begin(0.4);
+    phases.begin(0.4);
     // 3. The point on all the edge's surfaces nearest its midpoint: Newton, least-norm steps.
     const std::size_t m = edges.size();
     std::vector<Vec3d> target(m);
@@ -100,7 +94,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, (m + kBatchSize - 1) / kBatchSize, 1), [&](const auto& r) {
         std::vector<Vec3d> x, g(kBatchSize * 3);
         std::vector<double> val(kBatchSize * 3);
-        check();
+        phases.check();
         for (std::size_t c = r.begin(); c != r.end(); ++c) {
             const std::size_t begin = c * kBatchSize, count = std::min(kBatchSize, m - begin);
             x.resize(count);
@@ -172,7 +166,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
         }
     });
 
-    begin(0.6);
+    phases.begin(0.6);
     // 4. Split: each triangle is divided by its split edges; a parent whose pieces would turn
     // over drops its splits (and so its neighbours across them change), in rounds.
     std::vector<std::uint8_t> active(found);
@@ -208,7 +202,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
     std::vector<std::uint8_t> bad(touched.size());
     auto dropTurned = [&] {
         for (;;) {
-            check();
+            phases.check();
             tbb::parallel_for(tbb::blocked_range<std::size_t>(0, touched.size(), 1024), [&](const auto& r) {
                 for (std::size_t k = r.begin(); k != r.end(); ++k) {
                     const std::array<Vec3d, 6> p = positions(k);
@@ -238,7 +232,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
     };
     dropTurned();
 
-    begin(0.7);
+    phases.begin(0.7);
     // 5. No piece may cross another triangle: the pieces of the split parents and the triangles
     // around them are checked, and a parent whose pieces cross drops its splits, in rounds.
     {
@@ -255,7 +249,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
             if (nearSplit[tri[0]] || nearSplit[tri[1]] || nearSplit[tri[2]]) around.push_back(std::uint32_t(t));
         }
         for (;;) {
-            check();
+            phases.check();
             // Dropped splits change their neighbours' pieces: those are checked again first.
             dropTurned();
             TriangleMesh local;
@@ -313,7 +307,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
         }
     }
 
-    begin(0.9);
+    phases.begin(0.9);
     // 6. New vertices in edge order, then the triangles: untouched ones as they were, the others
     // replaced by their pieces in place of the parent (so the order stays deterministic).
     std::vector<std::uint32_t> newVertex(m, 0);

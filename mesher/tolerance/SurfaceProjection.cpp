@@ -1,5 +1,7 @@
 #include "mesher/tolerance/SurfaceProjection.h"
 
+#include "mesher/extract/PhaseProgress.h"
+
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -151,16 +153,8 @@ CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNo
                            const ProgressFn& progress)
 {
     CreaseStats stats;
-    // The phases' share of the work is not known ahead: each reports where it starts, and the
-    // batches within a phase report it again (so they can cancel).
-    double phase = 0.0;
-    const std::function<void()> check = [&] {
-        if (progress) progress(phase);
-    };
-    auto begin = [&](double fraction) {
-        phase = fraction;
-        check();
-    };
+    PhaseProgress phases(progress);
+    const std::function<void()> check = phases.checker();
     const std::size_t n = mesh.points.size();
     if (n == 0) return stats;
     std::vector<Vec3d> points(n);
@@ -170,7 +164,7 @@ CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNo
     const double near = 1e-3 * options.maxMove;
     std::vector<double> va, vb;
     std::vector<Vec3d> ga, gb;
-    begin(0.0);
+    phases.begin(0.0);
     evaluateAll(b, points, vb, gb, check);
     std::vector<std::uint32_t> close;
     std::vector<Vec3d> closePoints;
@@ -183,7 +177,7 @@ CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNo
             closePoints.push_back(points[v]);
         }
     }
-    begin(0.3);
+    phases.begin(0.3);
     evaluateAll(a, closePoints, va, ga, check);
     for (std::size_t k = 0; k < close.size(); ++k)
         if (distanceEstimate(va[k] - options.level, ga[k]) <= near) side[close[k]] |= 1;
@@ -214,7 +208,7 @@ CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNo
     std::vector<double> ca, cb;
     std::vector<Vec3d> cga, cgb;
     for (int iteration = 0; iteration <= options.maxIterations; ++iteration) {
-        begin(0.4 + 0.4 * iteration / std::max(1, options.maxIterations));
+        phases.begin(0.4 + 0.4 * iteration / std::max(1, options.maxIterations));
         evaluateAll(a, crease, ca, cga, check);
         evaluateAll(b, crease, cb, cgb, check);
         for (std::size_t k = 0; k < ends.size(); ++k) {
@@ -254,7 +248,7 @@ CreaseStats sharpenCreases(TriangleMesh& mesh, const FieldNode& a, const FieldNo
     // is the original mesh).
     std::vector<std::uint8_t> flipped(mesh.triangles.size());
     for (;;) {
-        begin(0.9);
+        phases.begin(0.9);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, mesh.triangles.size(), 1 << 14), [&](const auto& r) {
             for (std::size_t t = r.begin(); t != r.end(); ++t)
                 flipped[t] = turnedOver(mesh, original, mesh.triangles[t]);
