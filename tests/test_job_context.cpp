@@ -2,7 +2,9 @@
 #include "TestUtil.h"
 #include "engine/core/Errors.h"
 #include "engine/core/JobContext.h"
+#include "engine/frames/StrutFrames.h"
 #include "engine/jobs/Job.h"
+#include "fields/struts/StrutConvolution.h"
 
 #include <gtest/gtest.h>
 
@@ -97,4 +99,45 @@ TEST(JobContext, CancelFromAnotherThreadStopsTheJob)
     });
     EXPECT_THROW(job.grid(), Cancelled);
     canceller.join();
+}
+
+TEST(JobContext, ACancelledJobStopsWhileItsStrutFrameIsLaid)
+{
+    // A 200 x 110 x 20 mm plate of 2 mm BCC cells: 4.4e5 struts, seconds of frame, symmetry and
+    // strut-table work before the first evaluation (the build stage had no cancel check).
+    test::TempDir dir;
+    JobContext context;
+    context.cancel();
+    EXPECT_THROW(Job(parse("voxel: 0.1\ndomain: {box: [[0, 0, 0], [200, 110, 20]]}\nfields:\n"
+                           "  s: {struts: {cell: bcc, size: 2}, kernel: {gaussian: {sigma: 0.2}}, density: 0.2}\n"
+                           "result: s\noutputs: {mesh: part.stl}\n",
+                           dir),
+                     &context),
+                 Cancelled);
+}
+
+TEST(JobContext, FramesAndStrutTablesCallTheirInterrupter)
+{
+    // The interrupter is called once per row of cells and the first throw stops the frame.
+    int rows = 0;
+    EXPECT_THROW(boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(2.0), {40, 30, 20},
+                          [&] {
+                              if (++rows == 3) throw Cancelled("stop");
+                          }),
+                 Cancelled);
+    EXPECT_EQ(rows, 3);
+    int calls = 0;
+    const Frame whole = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(2.0), {40, 30, 20}, [&] { ++calls; });
+    EXPECT_EQ(calls, 40 * 30);
+    // The strut table: every 2^14 struts and before its index.
+    std::vector<ConvolutionStrut> struts;
+    for (const auto& s : whole.struts) struts.push_back({whole.nodes[s[0]], whole.nodes[s[1]], 0.2, 1.0, 1.0});
+    ASSERT_GT(struts.size(), std::size_t(3) << 14);
+    int checks = 0;
+    EXPECT_THROW(StrutConvolution(struts, 1e-4,
+                                  [&] {
+                                      if (++checks == 3) throw Cancelled("stop");
+                                  }),
+                 Cancelled);
+    EXPECT_EQ(checks, 3);
 }

@@ -85,8 +85,10 @@ private:
 
 /// Samples g at every stride-th voxel centre of the domain, in parallel and in a fixed order.
 /// @a maxStep, when given, receives the largest change of g per voxel seen between neighbouring
-/// samples that are both below 1e30 (inside a mask): an estimate of the widest voxel step.
-std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int stride, double* maxStep = nullptr)
+/// samples that are both below 1e30 (inside a mask): an estimate of the widest voxel step. Stops
+/// (JobContext::checkCancelled) when @a context is cancelled.
+std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int stride, const JobContext* context,
+                                 double* maxStep = nullptr)
 {
     // Every stride-th voxel centre, from the middle of the first stride: min + (i stride + half + 1/2) voxel.
     BlockLattice lattice;
@@ -98,6 +100,8 @@ std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int s
     std::vector<std::vector<float>> perBlock(lattice.blockCount());
     std::vector<double> blockStep(perBlock.size(), 0.0);
     sampleBlocks(g, lattice, [&](std::size_t b, const GridBatch& batch, auto index, std::span<const double> values) {
+        // A plate's coarse pass takes seconds of strut sums: the cancel is checked per block.
+        if (context) context->checkCancelled();
         const openvdb::Coord first(index[0] * stride + stride / 2, index[1] * stride + stride / 2,
                                    index[2] * stride + stride / 2);
         if (maxStep) {
@@ -235,7 +239,8 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
 
     const int stride = std::max(1, int(std::ceil(std::cbrt(double(domain.voxelCount()) / 2.0e6))));
     double coarseStep = 0.0;
-    std::vector<float> samples = coarseSamples(indicator, domain, stride, masked || subVoxel ? &coarseStep : nullptr);
+    std::vector<float> samples =
+        coarseSamples(indicator, domain, stride, context, masked || subVoxel ? &coarseStep : nullptr);
     // Share of the samples inside the mask: the quantiles of the target sit within that share.
     const double share =
         masked ? double(std::count_if(samples.begin(), samples.end(), [](float v) { return v < 1e30f; })) /

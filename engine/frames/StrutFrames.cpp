@@ -28,19 +28,28 @@ Box3 Frame::bounds() const
 
 int FrameBuilder::node(const Vec3d& p)
 {
-    const long x = std::lround(p[0] / mTol), y = std::lround(p[1] / mTol), z = std::lround(p[2] / mTol);
-    // Look in the neighbouring bins too: two equal points may round to adjacent bins.
-    for (long dx = -1; dx <= 1; ++dx)
-        for (long dy = -1; dy <= 1; ++dy)
-            for (long dz = -1; dz <= 1; ++dz) {
-                auto it = mBins.find({x + dx, y + dy, z + dz});
+    // A node within the tolerance of p lies in a bin that [p - tol, p + tol] reaches along each
+    // axis; of several, the first made wins (the same for any order of look-up).
+    const double width = 4.0 * mTol;
+    std::array<long, 3> lo, hi;
+    for (int a = 0; a < 3; ++a) {
+        lo[a] = long(std::floor((p[a] - mTol) / width));
+        hi[a] = long(std::floor((p[a] + mTol) / width));
+    }
+    int found = -1;
+    for (long x = lo[0]; x <= hi[0]; ++x)
+        for (long y = lo[1]; y <= hi[1]; ++y)
+            for (long z = lo[2]; z <= hi[2]; ++z) {
+                const auto it = mBins.find({x, y, z});
                 if (it == mBins.end()) continue;
-                for (int i : it->second)
-                    if ((mFrame.nodes[i] - p).length() <= mTol) return i;
+                for (const int i : it->second)
+                    if ((found < 0 || i < found) && (mFrame.nodes[i] - p).length() <= mTol) found = i;
             }
+    if (found >= 0) return found;
     mFrame.nodes.push_back(p);
     const int i = int(mFrame.nodes.size() - 1);
-    mBins[{x, y, z}].push_back(i);
+    mBins[{long(std::floor(p[0] / width)), long(std::floor(p[1] / width)), long(std::floor(p[2] / width))}].push_back(
+        i);
     return i;
 }
 
@@ -49,7 +58,7 @@ bool FrameBuilder::strut(const Vec3d& a, const Vec3d& b)
     const int i = node(a), j = node(b);
     if (i == j) return false;
     const auto key = std::minmax(i, j);
-    if (!mStruts.emplace(std::pair<int, int>(key.first, key.second), 0).second) return false;
+    if (!mStruts.insert(std::uint64_t(std::uint32_t(key.first)) << 32 | std::uint32_t(key.second)).second) return false;
     mFrame.struts.push_back({key.first, key.second});
     return true;
 }
@@ -76,36 +85,40 @@ void checkStrutCount(const UnitCell& cell, const std::array<int, 3>& counts)
 
 namespace {
 template <typename Map>
-Frame mapCells(const UnitCell& cell, const std::array<int, 3>& counts, double tol, Map&& map)
+Frame mapCells(const UnitCell& cell, const std::array<int, 3>& counts, double tol, const FrameInterrupt& interrupt,
+               Map&& map)
 {
     checkStrutCount(cell, counts);
     FrameBuilder builder(tol);
     for (int i = 0; i < counts[0]; ++i)
-        for (int j = 0; j < counts[1]; ++j)
+        for (int j = 0; j < counts[1]; ++j) {
+            if (interrupt) interrupt();
             for (int k = 0; k < counts[2]; ++k)
                 for (const auto& s : cell.struts) {
                     const Vec3d off(i, j, k);
                     builder.strut(map(cell.nodes[s[0]] + off), map(cell.nodes[s[1]] + off));
                 }
+        }
     return builder.take();
 }
 }  // namespace
 
-Frame boxFrame(const UnitCell& cell, const Vec3d& origin, const Vec3d& cellSize, const std::array<int, 3>& counts)
+Frame boxFrame(const UnitCell& cell, const Vec3d& origin, const Vec3d& cellSize, const std::array<int, 3>& counts,
+               const FrameInterrupt& interrupt)
 {
     const double tol = 1e-6 * std::min({cellSize[0], cellSize[1], cellSize[2]});
-    return mapCells(cell, counts, tol, [&](const Vec3d& u) {
+    return mapCells(cell, counts, tol, interrupt, [&](const Vec3d& u) {
         return Vec3d(origin[0] + u[0] * cellSize[0], origin[1] + u[1] * cellSize[1], origin[2] + u[2] * cellSize[2]);
     });
 }
 
 Frame cylinderFrame(const UnitCell& cell, const Vec3d& base, double innerRadius, double outerRadius, double height,
-                    const std::array<int, 3>& counts)
+                    const std::array<int, 3>& counts, const FrameInterrupt& interrupt)
 {
     const int axial = counts[0], angular = counts[1], radial = counts[2];
     const double tol = 1e-6 * std::min(outerRadius - innerRadius, height) / std::max({axial, angular, radial});
     // Cell coordinates: x radial (count radial), y angular, z axial.
-    return mapCells(cell, {radial, angular, axial}, tol, [&](const Vec3d& u) {
+    return mapCells(cell, {radial, angular, axial}, tol, interrupt, [&](const Vec3d& u) {
         const double r = innerRadius + u[0] / radial * (outerRadius - innerRadius);
         const double theta = u[1] / angular * 2.0 * std::numbers::pi;
         return base + Vec3d(r * std::cos(theta), r * std::sin(theta), u[2] / axial * height);
@@ -113,7 +126,7 @@ Frame cylinderFrame(const UnitCell& cell, const Vec3d& base, double innerRadius,
 }
 
 Frame sphereFrame(const UnitCell& cell, const Vec3d& centre, double innerRadius, double outerRadius,
-                  const std::array<int, 3>& counts)
+                  const std::array<int, 3>& counts, const FrameInterrupt& interrupt)
 {
     const int polar = counts[0], azimuthal = counts[1], radial = counts[2];
     // The smallest spacing is between nodes next to a pole on the inner shell (or the outer one
@@ -123,7 +136,7 @@ Frame sphereFrame(const UnitCell& cell, const Vec3d& centre, double innerRadius,
                                                                     std::sin(std::numbers::pi / azimuthal));
     const double tol = 1e-6 * shortest / std::max({polar, azimuthal, radial});
     // Cell coordinates: x radial (count radial), y azimuthal, z polar.
-    return mapCells(cell, {radial, azimuthal, polar}, tol, [&](const Vec3d& u) {
+    return mapCells(cell, {radial, azimuthal, polar}, tol, interrupt, [&](const Vec3d& u) {
         const double r = innerRadius + u[0] / radial * (outerRadius - innerRadius);
         const double phi = u[1] / azimuthal * 2.0 * std::numbers::pi;
         const double theta = u[2] / polar * std::numbers::pi;
@@ -131,7 +144,8 @@ Frame sphereFrame(const UnitCell& cell, const Vec3d& centre, double innerRadius,
     });
 }
 
-Frame hexGridFrame(const UnitCell& cell, const std::vector<Vec3d>& gridNodes, const std::array<int, 3>& counts)
+Frame hexGridFrame(const UnitCell& cell, const std::vector<Vec3d>& gridNodes, const std::array<int, 3>& counts,
+                   const FrameInterrupt& interrupt)
 {
     const int n0 = counts[0], n1 = counts[1], n2 = counts[2];
     if (gridNodes.size() != std::size_t(n0 + 1) * std::size_t(n1 + 1) * std::size_t(n2 + 1))
@@ -146,7 +160,7 @@ Frame hexGridFrame(const UnitCell& cell, const std::vector<Vec3d>& gridNodes, co
     auto corner = [&](int i, int j, int k) -> const Vec3d& {
         return gridNodes[(std::size_t(i) * (n1 + 1) + j) * (n2 + 1) + k];
     };
-    return mapCells(cell, counts, tol, [&](const Vec3d& u) {
+    return mapCells(cell, counts, tol, interrupt, [&](const Vec3d& u) {
         // The hexahedron holding u (the last one for a node on the far faces) and u within it.
         const int i = std::clamp(int(std::floor(u[0])), 0, n0 - 1);
         const int j = std::clamp(int(std::floor(u[1])), 0, n1 - 1);

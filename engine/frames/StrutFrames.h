@@ -7,10 +7,13 @@
 #include "engine/frames/UnitCells.h"
 
 #include <array>
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <optional>
 #include <tuple>
+#include <unordered_map>
+#include <unordered_set>
 
 namespace voxlat {
 
@@ -43,31 +46,47 @@ public:
     Frame take() { return std::move(mFrame); }
 
 private:
+    struct BinHash {
+        std::size_t operator()(const std::array<long, 3>& k) const noexcept
+        {
+            std::uint64_t h = 0x9e3779b97f4a7c15ULL;
+            for (const long v : k) h = (h ^ std::uint64_t(v)) * 0xff51afd7ed558ccdULL;
+            return std::size_t(h ^ (h >> 32));
+        }
+    };
     double mTol;
     Frame mFrame;
-    std::map<std::tuple<long, long, long>, std::vector<int>> mBins;
-    std::map<std::pair<int, int>, int> mStruts;
+    /// Nodes by bins four tolerances wide: a point looks in the one bin it rounds to, or in two to
+    /// eight when it lies within the tolerance of a bin's face.
+    std::unordered_map<std::array<long, 3>, std::vector<int>, BinHash> mBins;
+    /// Struts by their (lower, higher) node pair packed in 64 bits.
+    std::unordered_set<std::uint64_t> mStruts;
 };
 
 /// Refuses (JobError), before anything is allocated, a frame of @a counts cells of @a cell whose
 /// struts would not fit in half the free memory.
 void checkStrutCount(const UnitCell& cell, const std::array<int, 3>& counts);
 
+/// Called between rows of cells while a frame is laid (a plate holds 10^5-10^6 struts, seconds of
+/// work): it throws to stop (a job's JobContext::checkCancelled), or is empty.
+using FrameInterrupt = std::function<void()>;
+
 /// Cells of size @a cellSize from @a origin, @a counts per axis.
-Frame boxFrame(const UnitCell& cell, const Vec3d& origin, const Vec3d& cellSize, const std::array<int, 3>& counts);
+Frame boxFrame(const UnitCell& cell, const Vec3d& origin, const Vec3d& cellSize, const std::array<int, 3>& counts,
+               const FrameInterrupt& interrupt = {});
 
 /// Cells mapped into a cylinder around the z axis through @a base (its bottom centre): the cell's
 /// x runs radially from @a innerRadius to @a outerRadius, y around the axis, z along it.
 /// @a counts = {axial, angular, radial}. Struts are straight between the mapped nodes.
 Frame cylinderFrame(const UnitCell& cell, const Vec3d& base, double innerRadius, double outerRadius, double height,
-                    const std::array<int, 3>& counts);
+                    const std::array<int, 3>& counts, const FrameInterrupt& interrupt = {});
 
 /// Cells mapped into a spherical shell around @a centre: the cell's x runs radially from
 /// @a innerRadius to @a outerRadius, y around the z axis (azimuth), z from the +z pole to the -z
 /// pole (polar angle). @a counts = {polar, azimuthal, radial}. Nodes that meet at the poles and
 /// at the centre (inner radius 0) merge, and struts that shrink to a point there are dropped.
 Frame sphereFrame(const UnitCell& cell, const Vec3d& centre, double innerRadius, double outerRadius,
-                  const std::array<int, 3>& counts);
+                  const std::array<int, 3>& counts, const FrameInterrupt& interrupt = {});
 
 /// Cells mapped into a structured grid of hexahedra (IntraLattice's conformal frames between
 /// two surfaces): @a gridNodes holds the (counts[0] + 1)(counts[1] + 1)(counts[2] + 1) corners,
@@ -76,7 +95,8 @@ Frame sphereFrame(const UnitCell& cell, const Vec3d& centre, double innerRadius,
 /// trilinear blend of its corners, so cell corners land exactly on grid nodes. Struts are straight
 /// between mapped nodes. Nodes closer than 1e-9 of the grid's size merge (closed or collapsed
 /// surfaces: a seam, an axis, a point) and struts that shrink to a point are dropped.
-Frame hexGridFrame(const UnitCell& cell, const std::vector<Vec3d>& gridNodes, const std::array<int, 3>& counts);
+Frame hexGridFrame(const UnitCell& cell, const std::vector<Vec3d>& gridNodes, const std::array<int, 3>& counts,
+                   const FrameInterrupt& interrupt = {});
 
 /// Uniform cells filling @a region, kept where @a inside says a point is in the design space
 /// (value <= 0): struts with both ends inside are kept whole, struts with one end inside are

@@ -153,8 +153,8 @@ nlohmann::json vec(const Vec3d& v)
 /// slab (eight samples deep) from the box's floor until one is solid; the lowest solid sample's
 /// column is then bisected between it and the void sample below it. The box's floor when the
 /// solid reaches it or none is found. The same for any thread count (the lowest sample is the
-/// first in lattice order among the slab's lowest).
-double lowestSolidZ(const FieldNode& f, const Box3& box, double h)
+/// first in lattice order among the slab's lowest). Stops when @a context is cancelled.
+double lowestSolidZ(const FieldNode& f, const Box3& box, double h, const JobContext& context)
 {
     BlockLattice lattice;
     lattice.base = box.min;
@@ -169,6 +169,7 @@ double lowestSolidZ(const FieldNode& f, const Box3& box, double h)
         sampleBlocks(f, lattice,
                      [&](std::size_t b, const GridBatch& batch, const std::array<int, 3>& first,
                          std::span<const double> values) {
+                         context.checkCancelled();
                          std::size_t n = 0;
                          for (int i = 0; i < batch.nx; ++i)
                              for (int j = 0; j < batch.ny; ++j)
@@ -2179,8 +2180,8 @@ void Job::writeSlices(const SliceSettings& settings, const std::filesystem::path
     const std::optional<Box3> support = mResult->support();
     Box3 part = mRecipe.domainBox ? *mRecipe.domainBox : support ? *support : mDomain.box;
     if (!mRecipe.domainBox)
-        part.min.z() =
-            timed("find the part's floor", [&] { return lowestSolidZ(*mResult, part, 0.5 * mDomain.voxel); });
+        part.min.z() = timed("find the part's floor",
+                             [&] { return lowestSolidZ(*mResult, part, 0.5 * mDomain.voxel, *mContext); });
     const std::string where = mRecipe.domainBox ? mRecipe.node("domain").where() : mRecipe.source->path;
     const SliceResult result = timed("slice " + path.filename().string(), [&] {
         return sliceToFile(*mResult, part, printer, settings, path, where, mContext);

@@ -74,8 +74,9 @@ UnitCell readCell(const FieldBuilder& builder, const RecipeNode& c)
 /// Whether every strut of @a f has a strut of @a f as its @a image (end points equal within 1e-9
 /// of the box's size). A point near the rounding boundary of the comparison can only make a
 /// symmetric frame look asymmetric, which costs time, never accuracy.
+/// @a interrupt is called every 2^16 struts (a plate's frame holds 10^5-10^6).
 template <class Image>
-bool mapsOntoItself(const Frame& f, const Box3& box, Image&& image)
+bool mapsOntoItself(const Frame& f, const Box3& box, const FrameInterrupt& interrupt, Image&& image)
 {
     const double quantum = 1e-9 * std::max(1.0, box.extent().length());
     using Key = std::array<long long, 6>;
@@ -90,29 +91,37 @@ bool mapsOntoItself(const Frame& f, const Box3& box, Image&& image)
         return Key{a[0], a[1], a[2], b[0], b[1], b[2]};
     };
     std::vector<Key> keys;
-    for (const auto& s : f.struts) keys.push_back(key(f.nodes[s[0]], f.nodes[s[1]]));
+    keys.reserve(f.struts.size());
+    for (const auto& s : f.struts) {
+        if ((keys.size() & 0xffff) == 0) interrupt();
+        keys.push_back(key(f.nodes[s[0]], f.nodes[s[1]]));
+    }
     std::sort(keys.begin(), keys.end());
-    for (const auto& s : f.struts)
+    interrupt();
+    for (std::size_t j = 0; j < f.struts.size(); ++j) {
+        if ((j & 0xffff) == 0) interrupt();
+        const auto& s = f.struts[j];
         if (!std::binary_search(keys.begin(), keys.end(), key(image(f.nodes[s[0]]), image(f.nodes[s[1]]))))
             return false;
+    }
     return true;
 }
 
 /// Whether @a f is its own mirror image about the middle of @a box along @a axis.
-bool mirrorSymmetric(const Frame& f, const Box3& box, int axis)
+bool mirrorSymmetric(const Frame& f, const Box3& box, int axis, const FrameInterrupt& interrupt)
 {
     const double mid = box.min[axis] + box.max[axis];
-    return mapsOntoItself(f, box, [&](Vec3d p) {
+    return mapsOntoItself(f, box, interrupt, [&](Vec3d p) {
         p[axis] = mid - p[axis];
         return p;
     });
 }
 
 /// Whether @a f is its own image when x and y are swapped about the corner of @a box.
-bool swapSymmetric(const Frame& f, const Box3& box)
+bool swapSymmetric(const Frame& f, const Box3& box, const FrameInterrupt& interrupt)
 {
     const Vec3d& o = box.min;
-    return mapsOntoItself(f, box,
+    return mapsOntoItself(f, box, interrupt,
                           [&](const Vec3d& p) { return Vec3d(o.x() + p.y() - o.y(), o.y() + p.x() - o.x(), p.z()); });
 }
 
@@ -242,7 +251,7 @@ Frame buildBetweenFrame(FieldBuilder& builder, const RecipeNode& s, const UnitCe
                 grid[(std::size_t(i) * (nv + 1) + j) * (nw + 1) + k] = (1.0 - w) * p + w * q;
             }
         }
-    return hexGridFrame(cell, grid, counts);
+    return hexGridFrame(cell, grid, counts, [&] { builder.context().checkCancelled(); });
 }
 
 /// @a uniform receives the cell and its size when the frame is made of uniform cells.
@@ -252,6 +261,7 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
                  std::optional<UniformCells>& uniform, FieldPtr& region, FieldPtr& within)
 {
     const std::string kind = readFrameLayout(s).key;
+    const FrameInterrupt interrupt = [&builder] { builder.context().checkCancelled(); };
     if (kind == "wireframe") return readWireframe(builder.recipe().resolve(s["wireframe"].string()).string());
     if (!s.has("cell")) s.fail("give `cell:` (a preset such as bcc, or custom lines) or `wireframe:` (a file)");
     const UnitCell cell = readCell(builder, s["cell"]);
@@ -272,7 +282,7 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
             base = Vec3d(centre[0], centre[1], domainBox->min[2]);
         }
         if (!c.has("cells")) c.fail("give `cells: [axial, angular, radial]` (cell counts)");
-        return cylinderFrame(cell, base, inner, outer, height, readCounts(c["cells"]));
+        return cylinderFrame(cell, base, inner, outer, height, readCounts(c["cells"]), interrupt);
     }
     if (kind == "sphere") {
         const RecipeNode c = s["sphere"];
@@ -287,7 +297,7 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
             c["cells"].fail(
                 "a sphere needs at least 2 cells from pole to pole (polar) and 3 around the axis "
                 "(azimuthal), or the shell folds flat");
-        return sphereFrame(cell, centre, inner, outer, counts);
+        return sphereFrame(cell, centre, inner, outer, counts, interrupt);
     }
     if (!s.has("size")) s.fail("give the cell size `size:` in mm (a number or [x, y, z])");
     const Vec3d size = s["size"].scalarOrVec3();
@@ -322,7 +332,7 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
         for (int a = 0; a < 3; ++a)
             counts[a] = int(std::clamp(std::ceil(domainBox->extent()[a] / size[a] - 1e-9), 1.0, 2e9)) + 2;
         uniform = UniformCells{cell, size};
-        Frame f = boxFrame(cell, domainBox->min - size, size, counts);
+        Frame f = boxFrame(cell, domainBox->min - size, size, counts, interrupt);
         f.layoutBox = *domainBox;
         return f;
     }
@@ -344,7 +354,7 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
         }
     }
     uniform = UniformCells{cell, size};
-    return boxFrame(cell, origin, size, counts);
+    return boxFrame(cell, origin, size, counts, interrupt);
 }
 
 /// A frame of (2 margin + 1)^3 of the cells and its middle cell: the middle cell sees every strut
@@ -474,6 +484,7 @@ void recordFrame(FieldBuilder& builder, const std::string& name, const Frame& fr
             return it->second;
         };
         for (std::size_t j = 0; j < frame.struts.size(); ++j) {
+            if ((j & 0xffff) == 0) builder.context().checkCancelled();
             const Vec3d a = frame.nodes[frame.struts[j][0]], b = frame.nodes[frame.struts[j][1]];
             // Liang-Barsky: the parameters of the segment inside the box.
             double t0 = 0.0, t1 = 1.0;
@@ -539,6 +550,7 @@ int radiusGradientAxis(const RecipeNode& spec)
 /// trimmed to (its struts' axes end at its surface, their solid does not yet).
 FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const std::string& name, FieldPtr& within)
 {
+    const FrameInterrupt interrupt = [&builder] { builder.context().checkCancelled(); };
     std::optional<UniformCells> uniform;
     FieldPtr region;
     const std::string withinName = spec["struts"].has("within") && spec["struts"]["within"].isScalar()
@@ -818,7 +830,7 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
         }
         return struts;
     };
-    auto raw = std::make_shared<StrutConvolution>(convolutionStruts(frame, radii), eps);
+    auto raw = std::make_shared<StrutConvolution>(convolutionStruts(frame, radii), eps, interrupt);
     // The solid F >= t is evaluated as IsoRadius(F) <= rho(t) (same solid, same density; a
     // field marching cubes interpolates without bias). P: the largest strut peak.
     double peak = 0.0, sigmaMax = 0.0, rcMax = 0.0;
@@ -852,7 +864,7 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     // too (radii graded along an axis: mirror images across the other axes keep their radii).
     std::array<bool, 3> mirror{};
     if (periodic || partlyPeriodic)
-        for (int a = 0; a < 3; ++a) mirror[a] = a != gradedAxis && mirrorSymmetric(frame, box, a);
+        for (int a = 0; a < 3; ++a) mirror[a] = a != gradedAxis && mirrorSymmetric(frame, box, a, interrupt);
     FieldPtr evaluated = iso;
     if (periodic || partlyPeriodic) evaluated = std::make_shared<PeriodicTiling>(iso, box, period, rcMax, mirror);
     const double t = spec.has("level") ? spec["level"].positiveNumber() : 1.0;
@@ -926,7 +938,7 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
         // each piece and its transpose where swapping x and y keeps the frame (and the radii:
         // graded along z or not at all).
         node.densityMirror = mirror;
-        node.densitySwapXY = (gradedAxis < 0 || gradedAxis == 2) && swapSymmetric(frame, box);
+        node.densitySwapXY = (gradedAxis < 0 || gradedAxis == 2) && swapSymmetric(frame, box, interrupt);
         node.densityIndicator = iso;
         // One period is sampled at a fixed phase, so its lattice does not average over phases
         // as the whole box's incommensurate one does: sample it 1.5 times finer (level within

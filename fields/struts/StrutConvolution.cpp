@@ -9,12 +9,18 @@
 
 namespace voxlat {
 
-StrutConvolution::StrutConvolution(const std::vector<ConvolutionStrut>& struts, double eps) : mEps(eps)
+StrutConvolution::StrutConvolution(const std::vector<ConvolutionStrut>& struts, double eps,
+                                   const std::function<void()>& interrupt)
+    : mEps(eps)
 {
     if (!(eps > 0.0 && eps < 1.0)) throw std::invalid_argument("the convolution cut-off eps must be in (0, 1)");
     std::vector<Vec3d> a, b;
     std::vector<double> reach;
+    for (auto* v : {&a, &b, &mEnd}) v->reserve(struts.size());
+    for (auto* v : {&reach, &mCutoffSqr, &mPeak, &mWMin}) v->reserve(struts.size());
+    mSegments.reserve(struts.size());
     for (const ConvolutionStrut& s : struts) {
+        if (interrupt && (a.size() & 0x3fff) == 0) interrupt();
         if (!(s.sigma > 0.0)) throw std::invalid_argument("sigma must be greater than zero");
         if (!((s.b - s.a).length() > 0.0)) throw std::invalid_argument("a strut has zero length");
         if (!(s.w0 > 0.0 && s.w1 > 0.0)) throw std::invalid_argument("strut weights must be greater than zero");
@@ -28,6 +34,7 @@ StrutConvolution::StrutConvolution(const std::vector<ConvolutionStrut>& struts, 
         b.push_back(s.b);
         reach.push_back(rc);
     }
+    if (interrupt) interrupt();
     mIndex = StrutIndex(a, b, reach);
 }
 

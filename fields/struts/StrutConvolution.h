@@ -6,6 +6,7 @@
 #include "fields/struts/GaussianSegment.h"
 #include "fields/struts/StrutIndex.h"
 
+#include <functional>
 #include <vector>
 
 namespace voxlat {
@@ -24,7 +25,10 @@ struct ConvolutionStrut {
 /// gridValues and bounds agree and results do not depend on threads.
 class StrutConvolution final : public FieldNode {
 public:
-    explicit StrutConvolution(const std::vector<ConvolutionStrut>& struts, double eps = 1e-4);
+    /// @a interrupt, when set, is called every 2^14 struts and before the index is built (a
+    /// plate's 10^5-10^6 struts take seconds): it throws to stop.
+    explicit StrutConvolution(const std::vector<ConvolutionStrut>& struts, double eps = 1e-4,
+                              const std::function<void()>& interrupt = {});
 
     void values(std::span<const Vec3d> points, std::span<double> out) const override;
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
