@@ -61,7 +61,7 @@ std::string formatNotWritten(const std::string& name)
     if (name != "pwsz") return "";
     return "`.pwsz` (the Photon Mono M7 Pro's file) is not written: Anycubic's own slicer stores its layers as "
            "vector outlines (`.pwszImg`, which voxlat does not write), and no public source shows that the M7 Pro "
-           "reads the PW0 bitmap layers voxlat writes in .pm7, .pm7m, .pm4u and .pp1 files "
+           "reads the PW0 bitmap layers voxlat writes in .pm7, .pm7m, .pm4u, .pp1 and .pp1m files "
            "(docs/formats/anycubic-zip.md); slice as .zip or png for a host that takes PNG layers";
 }
 
