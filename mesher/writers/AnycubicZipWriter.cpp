@@ -32,10 +32,10 @@ public:
         closeRow();
         std::uint32_t count = 0;
         std::uint64_t largest = 0;
-        for (std::size_t i = 0; i < mParent.size(); ++i)
+        for (std::uint32_t i = 0; i < mParent.size(); ++i)
             if (mParent[i] == i) {
                 ++count;
-                largest = std::max(largest, mSize[i]);
+                largest = std::max<std::uint64_t>(largest, mSize[i]);
             }
         return {count, largest};
     }
@@ -43,14 +43,14 @@ public:
 private:
     struct Span {
         int a, b;
-        std::size_t label;
+        std::uint32_t label;
     };
-    std::size_t find(std::size_t i)
+    std::uint32_t find(std::uint32_t i)
     {
         while (mParent[i] != i) i = mParent[i] = mParent[mParent[i]];
         return i;
     }
-    void join(std::size_t i, std::size_t j)
+    void join(std::uint32_t i, std::uint32_t j)
     {
         i = find(i), j = find(j);
         if (i == j) return;
@@ -64,9 +64,10 @@ private:
         std::vector<Span> spans;
         spans.reserve(mPending.size());
         for (const auto& [a, b] : mPending) {
-            spans.push_back({a, b, mParent.size()});
-            mParent.push_back(mParent.size());
-            mSize.push_back(std::uint64_t(b - a));
+            const auto label = std::uint32_t(mParent.size());  // a display has < 2^28 pixels
+            spans.push_back({a, b, label});
+            mParent.push_back(label);
+            mSize.push_back(std::uint32_t(b - a));
         }
         if (mPreviousRow == mRow - 1) {
             // Spans [a, b) of adjacent rows touch when a <= b' and a' <= b (a diagonal counts).
@@ -87,8 +88,8 @@ private:
     int mRow = -1, mPreviousRow = -2;
     std::vector<std::pair<int, int>> mPending;
     std::vector<Span> mPrevious;
-    std::vector<std::size_t> mParent;
-    std::vector<std::uint64_t> mSize;
+    std::vector<std::uint32_t> mParent;  ///< 8 bytes a span with mSize
+    std::vector<std::uint32_t> mSize;
 };
 
 }  // namespace
