@@ -248,17 +248,17 @@ def check_refusals(voxlat, tmp):
 def main():
     voxlat = sys.argv[1]
     with tempfile.TemporaryDirectory() as tmp:
-        # The M7's pixels are not square (16.8 x 24.8 um): a 4000 x 2000 window of its pitch.
-        m7 = small_profile(tmp, "photon-mono-m7", "display: {width: 67.2, height: 49.6, pixels_x: 4000, pixels_y: 2000}")
+        # The M7's pixels are not square (16.8 x 24.8 um): a 2000 x 1000 window of its pitch.
+        m7 = small_profile(tmp, "photon-mono-m7", "display: {width: 33.6, height: 24.8, pixels_x: 2000, pixels_y: 1000}")
         check_archive(voxlat, tmp, m7, "pm7",
-                      {"name": "Anycubic Photon Mono M7", "res_x": 4000, "res_y": 2000, "width_mm": 67.2,
-                       "height_mm": 49.6, "machine_z": 230.0, "exposure": 2.0, "bottom_exposure": 30.0,
+                      {"name": "Anycubic Photon Mono M7", "res_x": 2000, "res_y": 1000, "width_mm": 33.6,
+                       "height_mm": 24.8, "machine_z": 230.0, "exposure": 2.0, "bottom_exposure": 30.0,
                        "bottom_layers": 6})
         m4u = small_profile(tmp, "photon-mono-4-ultra",
-                            "display: {width: 51.0, height: 34.0, pixels_x: 3000, pixels_y: 2000}")
+                            "display: {width: 34.0, height: 25.5, pixels_x: 2000, pixels_y: 1500}")
         check_archive(voxlat, tmp, m4u, "pm4u",
-                      {"name": "Anycubic Photon Mono 4 Ultra", "res_x": 3000, "res_y": 2000, "width_mm": 51.0,
-                       "height_mm": 34.0, "machine_z": 165.0, "exposure": 2.0, "bottom_exposure": 30.0,
+                      {"name": "Anycubic Photon Mono 4 Ultra", "res_x": 2000, "res_y": 1500, "width_mm": 34.0,
+                       "height_mm": 25.5, "machine_z": 165.0, "exposure": 2.0, "bottom_exposure": 30.0,
                        "bottom_layers": 6})
         check_refusals(voxlat, tmp)
     if failures:
