@@ -532,6 +532,8 @@ private:
     {
         return layerExposure(index, mBottom, mTransition, mStart->exposureFirstS, mStart->exposureS);
     }
+    /// A pixel pitch in µm to 0.001 µm (16.8, not 16.800030048: 223.642 mm / 13312 pixels).
+    static double micrometres(double mm) { return std::round(mm * 1e6) / 1e3; }
     /// A printer profile's speeds are mm/min; the zip's are mm/s.
     static double perSecond(double mmPerMin) { return mmPerMin / 60.0; }
     static Json stage(const GooMotion& m, int k)
@@ -626,8 +628,8 @@ private:
                      {"key_image_format", "pw0Img"},
                      {"res_x", s.storedWidth},
                      {"res_y", s.storedHeight},
-                     {"xy_pixel", 1000.0 * mWidthMm / s.storedWidth},
-                     {"xy_pixel_y", 1000.0 * mHeightMm / s.storedHeight},
+                     {"xy_pixel", micrometres(mWidthMm / s.storedWidth)},
+                     {"xy_pixel_y", micrometres(mHeightMm / s.storedHeight)},
                      {"rotate_z", 0.0},
                      {"max_samples", 16},
                      {"property", 119},
