@@ -753,7 +753,8 @@ TEST(Slices, TheFormatIsTheRecipesThenTheExtensionsThenTheProfiles)
             EXPECT_TRUE(startsWith(out, std::string("\x06\x01\xFD\x12", 4))) << format;
         else if (format == "cbddlp" || format == "photon")
             EXPECT_TRUE(startsWith(out, std::string("\x19\x00\xFD\x12", 4))) << format;
-        else if (format.starts_with("sl1") || format == "zip")
+        else if (format.starts_with("sl1") || format == "zip" || format.starts_with("pm7") || format == "pm4u" ||
+                 format.starts_with("pp1"))  // Anycubic's zip layout too
             EXPECT_TRUE(startsWith(out, "PK")) << format;
         else  // the Photon Workshop formats
             EXPECT_TRUE(startsWith(out, std::string("ANYCUBIC\0\0\0\0", 12))) << format;

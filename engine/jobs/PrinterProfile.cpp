@@ -159,6 +159,7 @@ PrinterProfile loadPrinterProfile(const std::string& nameOrPath, const std::stri
     p.name = top.has("name") ? top["name"].string() : p.key;
     p.model = top.has("model") ? top["model"].string() : p.key;
     p.format = top.has("format") ? top["format"].string() : "zip";
+    if (const std::string why = formatNotWritten(p.format); !why.empty()) top["format"].fail(why);
     if (const auto formats = sliceFormatNames(); std::find(formats.begin(), formats.end(), p.format) == formats.end())
         top["format"].fail("unknown format `" + p.format + "` (valid: " + joinWords(formats) + ")");
     const RecipeNode display = top["display"];

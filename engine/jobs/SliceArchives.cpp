@@ -4,6 +4,7 @@
 #include "engine/core/Format.h"
 #include "engine/core/Version.h"
 #include "engine/jobs/OutputPaths.h"
+#include "mesher/writers/AnycubicZipWriter.h"
 #include "mesher/writers/AtomicFile.h"
 #include "mesher/writers/BitPlanes.h"
 #include "mesher/writers/CtbWriter.h"
@@ -482,6 +483,292 @@ private:
     double mPrintTime = 0;
 };
 
+/// Anycubic's zip layout (.pm7, .pm7m, .pm4u, .pp1, .pp1m; docs/formats/anycubic-zip.md): each
+/// PW0 layer stored as `layer_images/layer_N.pw0Img` as it comes; after the last, the JSON settings
+/// (machine and resin, the layers' table, the run's estimates, the software), three previews, the
+/// resin per slab and the scene summary. Every layer gets the globals' values (per-layer values
+/// off, as the binary layout: shared/reference/anycubic-format.md §10).
+class AnycubicZipArchive final : public ZipArchive {
+public:
+    AnycubicZipArchive(const fs::path& path, const std::string& where, std::string extension)
+        : ZipArchive(path, "", where), mExtension(std::move(extension))
+    {
+    }
+    LayerEncoding encoding() const override { return LayerEncoding::pw0; }
+    void begin(const SliceStart& s) override
+    {
+        mStart = std::make_unique<SliceStart>(s);
+        const PrinterProfile& p = s.printer;
+        std::tie(mWidthMm, mHeightMm) = storedDisplayMm(p);
+        mBottom = std::min(p.bottomLayers, s.layers);
+        mTransition = std::min(p.transitionLayers, s.layers - mBottom);
+        mScene.reserve(std::size_t(s.layers));
+        mAreas.reserve(std::size_t(s.layers));
+    }
+    void addLayer(int index, const std::string& code) override
+    {
+        const SliceStart& s = *mStart;
+        const double px = mWidthMm / s.storedWidth, py = mHeightMm / s.storedHeight;
+        const Pw0LayerShape shape = pw0LayerShape(code, s.storedWidth, s.storedHeight);
+        AnycubicSceneLayer l;
+        l.zMm = (index + 0.5) * s.layerMm;
+        l.areaMm2 = double(shape.litPixels) * px * py;
+        if (shape.litPixels > 0)
+            l.box = {(shape.col0 - 0.5 * s.storedWidth) * px, (shape.row0 - 0.5 * s.storedHeight) * py,
+                     (shape.col1 - 0.5 * s.storedWidth) * px, (shape.row1 - 0.5 * s.storedHeight) * py};
+        l.pieces = shape.pieces;
+        l.largestPieceMm2 = double(shape.largestPiecePixels) * px * py;
+        mScene.push_back(l);
+        mAreas.push_back(shape.coverage * px * py);
+        const bool bottom = index < mBottom;
+        mPrintTime += exposure(index) + moveTime(bottom ? s.printer.bottomMotion : s.printer.motion);
+        zip().add("layer_images/layer_" + std::to_string(index) + ".pw0Img", code);
+    }
+
+private:
+    using Json = nlohmann::ordered_json;
+
+    double exposure(int index) const
+    {
+        return layerExposure(index, mBottom, mTransition, mStart->exposureFirstS, mStart->exposureS);
+    }
+    /// A pixel pitch in µm to 0.001 µm (16.8, not 16.800030048: 223.642 mm / 13312 pixels).
+    static double micrometres(double mm) { return std::round(mm * 1e6) / 1e3; }
+    /// A printer profile's speeds are mm/min; the zip's are mm/s.
+    static double perSecond(double mmPerMin) { return mmPerMin / 60.0; }
+    static Json stage(const GooMotion& m, int k)
+    {
+        return Json{{"height", m.liftDistance[std::size_t(k)]},
+                    {"up_speed", perSecond(m.liftSpeed[std::size_t(k)])},
+                    {"down_speed", perSecond(m.retractSpeed[std::size_t(k)])}};
+    }
+    /// The one resin of the file: the run's exposures, counts and moves.
+    Json resin() const
+    {
+        const SliceStart& s = *mStart;
+        const GooMotion &b = s.printer.bottomMotion, &n = s.printer.motion;
+        const int aa = s.settings.supersample > 0 ? 16 : 1;
+        const bool twoStages = b.liftDistance[1] > 0 || n.liftDistance[1] > 0;
+        Json property{{"version", "3"},
+                      {"code", "10"},
+                      {"currency", "$"},
+                      {"price", 0.0},
+                      {"type", "Standard resin"},
+                      {"volume", 1000.0},
+                      {"subfunc_code", 0},
+                      {"density", kDensity},
+                      {"target_temperature", 25.0},
+                      {"brand_name", "voxlat"},
+                      {"resin_name", "voxlat"},
+                      {"film_name", "NFEP"},
+                      {"setting_name", "voxlat"},
+                      {"name", kResinName}};
+        Json coefficients = Json::array();
+        for (const auto& [t, x, y] : std::vector<std::array<double, 3>>{{10, 184.27, 1675.8},
+                                                                        {25, 197.78, 1803.2},
+                                                                        {35, 161.19, 1417.3},
+                                                                        {45, 167.31, 1480.9},
+                                                                        {55, 166.76, 1474.1}})
+            coefficients.push_back(Json{{"temperature", t}, {"x_coefficient", x}, {"y_compensation", y}});
+        Json curve{{"zthick_min", 0.01},
+                   {"zthick_max", 0.2},
+                   {"light_intensity", 9000.0},
+                   {"safety_coefficient", 1.6},
+                   {"current_tempcurve_selector", 0},
+                   {"temperature_coefficients", coefficients}};
+        Json ext{{"version", "3"},
+                 {"multi_state_used", twoStages ? 1 : 0},
+                 {"transition_layercount", mTransition},
+                 {"transition_type", 0},
+                 {"multi_state_paras", Json{{"bott_0", stage(b, 0)},
+                                            {"bott_1", stage(b, 1)},
+                                            {"normal_0", stage(n, 0)},
+                                            {"normal_1", stage(n, 1)}}},
+                 {"exposure_compensate", 0.0},
+                 {"intelli_mode", 0},
+                 {"max_acceleration", 2.0},
+                 {"separate_support_exposure_delayed", 0.0},
+                 {"material_scale_coeffs", Json::array()},
+                 {"material_scale_coeffs_mode", 0},
+                 {"material_scale_xyz", Json{{"x", 1.0}, {"y", 1.0}, {"z", 1.0}}}};
+        Json para{{"anti_count", aa},
+                  {"blur_level", 0},
+                  {"bott_layers", mBottom},
+                  {"bott_off_time", b.waitAfterRetract},
+                  {"bott_time", s.exposureFirstS},
+                  {"bott_wait_before_lift", b.waitBeforeLift},
+                  {"bott_time_dual", s.exposureFirstS},
+                  {"exposure_time", s.exposureS},
+                  {"wait_before_lift", n.waitBeforeLift},
+                  {"gray_level", 0},
+                  {"off_time", n.waitAfterRetract},
+                  {"use_indivi_layerpara", 0},
+                  {"use_random_erode", 0},
+                  {"zthick", s.layerMm},
+                  {"zup_height", n.liftDistance[0] + n.liftDistance[1]},
+                  {"zup_speed", perSecond(n.liftSpeed[0])},
+                  {"zdown_speed", perSecond(n.retractSpeed[0])},
+                  {"bott_wait_after_lift", b.waitAfterLift},
+                  {"wait_after_lift", n.waitAfterLift}};
+        return Json{{"version", "2"},
+                    {"property", property},
+                    {"depth_penetration_curve", curve},
+                    {"slice_extpara", ext},
+                    {"slicepara", para}};
+    }
+    /// anycubic_photon_resins.pwsp: the machine and its resin.
+    Json settings() const
+    {
+        const SliceStart& s = *mStart;
+        const PrinterProfile& p = s.printer;
+        const int aa = s.settings.supersample > 0 ? 16 : 1;
+        Json machine{{"version", "3"},
+                     {"name", p.name},
+                     {"key_suffix", mExtension},
+                     {"key_image_format", "pw0Img"},
+                     {"res_x", s.storedWidth},
+                     {"res_y", s.storedHeight},
+                     {"xy_pixel", micrometres(mWidthMm / s.storedWidth)},
+                     {"xy_pixel_y", micrometres(mHeightMm / s.storedHeight)},
+                     {"rotate_z", 0.0},
+                     {"max_samples", 16},
+                     {"property", 119},
+                     {"print_xsize", mWidthMm},
+                     {"print_ysize", mHeightMm},
+                     {"print_zsize", p.maxHeightMm},
+                     {"max_file_version", 518},
+                     {"prev_back_color", {0.0, 0.28, 0.39}},
+                     {"prev_model_color", {0.8, 0.8, 0.8}},
+                     {"prev_supports_color", {0.07, 0.93, 0.93}},
+                     {"prev_image_size", {224, 168}},
+                     {"child_screen",
+                      Json::array({Json{{"x", 0}, {"y", 0}, {"width", s.storedWidth}, {"height", s.storedHeight}}})},
+                     {"prev2_back_color", {0.08, 0.11, 0.16}},
+                     {"prev2_image_size", {336, 252}},
+                     {"raster_segments_capacity", 100000},
+                     {"raster_antialiasing", aa},
+                     {"cloudprev_back_color", {0.0, 0.28, 0.39}},
+                     {"cloudprev_imag_size", {800, 600}},
+                     {"print_platform_zheights", {0.0}}};
+        // The printer's own time estimate (only that): Photon Workshop's constants for the M7 family.
+        Json timing{{"version", "2"},
+                    {"MACHINE_AXIS_STEPS_PER_UNIT", {100.0, 100.0, 3200.0, 94.0}},
+                    {"MACHINE_BLOCK_BUFFER_SIZE", 32},
+                    {"MACHINE_DEFAULT_ACCELERATION", 1000.0},
+                    {"MACHINE_DEFAULT_MINSEGMENTTIME", 20000},
+                    {"MACHINE_DEFAULT_XYJERK", 20.0},
+                    {"MACHINE_DEFAULT_ZJERK", 0.2},
+                    {"MACHINE_GENERATE_FRAME_TIME", 450.0},
+                    {"MACHINE_MAX_ACCELERATION", {1000, 1000, 160, 1000}},
+                    {"MACHINE_MAX_FEEDRATE", {200.0, 200.0, 20.0, 45.0}},
+                    {"MACHINE_MAX_STEP_FREQUENCY", 256000},
+                    {"MACHINE_MINIMUM_PLANNER_SPEED", 0.05},
+                    {"MACHINE_NOR_LAYER_DOWN_HEIGHT_DIV", 0.25},
+                    {"MACHINE_NOR_LAYER_DOWN_SPEED_DIV", 0.5},
+                    {"MACHINE_NOR_LAYER_UP_HEIGHT_DIV", 0.25},
+                    {"MACHINE_NOR_LAYER_UP_SPEED_DIV", 0.5},
+                    {"MACHINE_STEP_MUL", 1},
+                    {"MACHINE_TIME_COMPENSATE", 0.0},
+                    {"MACHINE_TIM_PRES", 30.0},
+                    {"MACHINE_TIM_RCC_CLK", 60.0},
+                    {"FUNCTION", 1},
+                    {"MACHINE_MODE_ACCELERATION", {0, 0, 0, 0}},
+                    {"LAYER_COMPENSATE", {0, 0, 0, 0}},
+                    {"HEIGHT_COMPENSATE", {0, 0, 0, 0}},
+                    {"TIMES_COMPENSATE", {0, 0, 0, 0}}};
+        Json exposureTiming{{"precision_range_branch", {0.0, 5.0, 25.0}},
+                            {"precision_per_volume", 5.0},
+                            {"precision_coeff_value", {0.024, 0.01, -0.2}},
+                            {"energy_coeff", 0.0},
+                            {"machine_exposure_ton", 0.4}};
+        Json external{{"version", "3"},
+                      {"alias", p.name},
+                      {"picture", ""},
+                      {"cloud_property", 0},
+                      {"device_cn_code", ""},
+                      {"factory_resins", Json::array()},
+                      {"user_resins", Json::array({resin()})},
+                      {"active_resins", {kResinName}},
+                      {"firmware_calc_print_time", 1},
+                      {"firmware_calc_print_time_paras", timing},
+                      {"firmware_calc_exp_time_paras", exposureTiming}};
+        return Json{{"version", "3"}, {"machine_type", machine}, {"machine_extern", external}};
+    }
+    void addTail(const SliceSummary& summary) override
+    {
+        const SliceStart& s = *mStart;
+        if (int(mScene.size()) != s.layers) throw std::logic_error("an Anycubic zip got fewer layers than begun");
+        zip().add("anycubic_photon_resins.pwsp", settings().dump(4) + "\n");
+        Json paras = Json::array();
+        for (int i = 0; i < s.layers; ++i) {
+            const GooMotion& m = i < mBottom ? s.printer.bottomMotion : s.printer.motion;
+            paras.push_back(
+                Json{{"exposure_time", exposure(i)},
+                     {"layer_index", i},
+                     {"layer_minheight", std::round(i * s.layerMm * 1e6) / 1e6},  // 0.15, not 0.15000000000000002
+                     {"layer_thickness", s.layerMm},
+                     {"zup_height", m.liftDistance[0] + m.liftDistance[1]},
+                     {"zup_speed", perSecond(m.liftSpeed[0])}});
+        }
+        zip().add("layers_controller.conf", Json{{"count", s.layers}, {"paras", paras}}.dump(4) + "\n");
+        const std::string software = "voxlat " + versionString();
+        Json lcd{
+            {"models_processed_info", Json{{"models", Json::array({Json{{"auto_support", 0},
+                                                                        {"hollow", 0},
+                                                                        {"makeronline_sourceid", -1},
+                                                                        {"manual_support", 0},
+                                                                        {"name", summary.settings.file},
+                                                                        {"punch", 0},
+                                                                        {"source_from", 0}}})},
+                                           {"scene_models_from", 0},
+                                           {"slice_paras_process", 0},
+                                           {"software_version", software}}},
+            {"rerf_function", Json{{"enable", false}, {"model_name", ""}, {"model_type", 1}, {"partition_num", 0}}}};
+        zip().add("lcd_function.json", lcd.dump(4) + "\n");
+        const double ml = summary.volumeMm3 / 1000.0, seconds = std::round(mPrintTime);
+        Json estimate{{"model_layers_count", s.layers}, {"estimated_cost", 0.0},  {"estimated_cost_currency", "$"},
+                      {"estimated_time", seconds},      {"estimated_volume", ml}, {"estimated_weight", ml * kDensity}};
+        Json info{{"model_layers_count", s.layers},
+                  {"cost", 0.0},
+                  {"currency", "$"},
+                  {"print_time", seconds},
+                  {"volume", ml},
+                  {"weight", ml * kDensity},
+                  {"sub_estimated_infos", Json::array({estimate})}};
+        zip().add("print_info.json", info.dump(4) + "\n");
+        zip().add("software_info.conf",
+                  Json{{"mark", "voxlat"}, {"opengl", "none"}, {"os", "voxlat"}, {"Version", versionString()}}.dump(4) +
+                      "\n");
+        const std::array<std::pair<int, int>, 3> previews{{{224, 168}, {336, 252}, {800, 600}}};
+        for (std::size_t k = 0; k < previews.size(); ++k)
+            zip().add("preview_images/preview_" + std::to_string(k) + ".png",
+                      summary.thumbnail(previews[k].first, previews[k].second));
+        zip().add("calc_layer_volumes.data",
+                  anycubicVolumesBytes(anycubicVolumeSlabs(mAreas, s.layerMm, summary.volumeMm3 / 1000.0)));
+        // The part's box: the layers' boxes, from the plate to the top of the last layer.
+        std::array<double, 6> box{0, 0, 0, 0, 0, s.layers * s.layerMm};
+        bool any = false;
+        for (const AnycubicSceneLayer& l : mScene) {
+            if (l.pieces == 0) continue;
+            if (!any) box[0] = l.box[0], box[1] = l.box[1], box[3] = l.box[2], box[4] = l.box[3];
+            box[0] = std::min(box[0], l.box[0]), box[1] = std::min(box[1], l.box[1]);
+            box[3] = std::max(box[3], l.box[2]), box[4] = std::max(box[4], l.box[3]);
+            any = true;
+        }
+        zip().add("scene.slice", anycubicSceneBytes(software, box, mScene));
+    }
+
+    static constexpr double kDensity = 1.1;  ///< g/mL for the weight estimate (no resin is known)
+    static constexpr const char* kResinName = "voxlat";
+    std::string mExtension;
+    std::unique_ptr<SliceStart> mStart;
+    double mWidthMm = 0, mHeightMm = 0;
+    int mBottom = 0, mTransition = 0;
+    std::vector<AnycubicSceneLayer> mScene;
+    std::vector<double> mAreas;  ///< each layer's lit area (mm2, greys in proportion)
+    double mPrintTime = 0;
+};
+
 /// Elegoo's .goo (V3): a placeholder header, the layers as they come, the ending, then the real
 /// header (which needs the previews and totals) written over the placeholder.
 class GooArchive final : public SliceArchive {
@@ -595,6 +882,10 @@ const std::map<std::string, ArchiveFactory>& archiveFactories()
         for (const auto& [format, version] : photonWorkshopVersions())
             table[format] = [version, format = format](const fs::path& p, const std::string& w) {
                 return std::make_unique<PhotonWorkshopArchive>(p, w, version, format == "pws");
+            };
+        for (const char* format : {"pm7", "pm7m", "pm4u", "pp1", "pp1m"})
+            table[format] = [format](const fs::path& p, const std::string& w) {
+                return std::make_unique<AnycubicZipArchive>(p, w, format);
             };
         return table;
     }();

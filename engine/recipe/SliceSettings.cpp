@@ -41,9 +41,28 @@ const std::vector<ArchiveFormatInfo>& archiveFormats()
                 {ext, std::string(".") + ext,
                  std::string("Anycubic Photon Workshop file for the ") + printer +
                      (std::string(ext) == "pws" ? ": bit-plane layers, preview" : ": PW0 layers, preview")});
+        // Anycubic's zip layout (docs/formats/anycubic-zip.md), with PW0 bitmap layers (pw0Img).
+        const std::vector<std::pair<const char*, const char*>> zipped{{"pm7", "Photon Mono M7"},
+                                                                      {"pm7m", "Photon Mono M7 Max"},
+                                                                      {"pm4u", "Photon Mono 4 Ultra"},
+                                                                      {"pp1", "Photon P1"},
+                                                                      {"pp1m", "Photon P1 Max"}};
+        for (const auto& [ext, printer] : zipped)
+            table.push_back({ext, std::string(".") + ext,
+                             std::string("Anycubic Photon Workshop zip for the ") + printer +
+                                 ": JSON settings, PW0 layers (pw0Img), scene summary, previews"});
         return table;
     }();
     return all;
+}
+
+std::string formatNotWritten(const std::string& name)
+{
+    if (name != "pwsz") return "";
+    return "`.pwsz` (the Photon Mono M7 Pro's file) is not written: Anycubic's own slicer stores its layers as "
+           "vector outlines (`.pwszImg`, which voxlat does not write), and no public source shows that the M7 Pro "
+           "reads the PW0 bitmap layers voxlat writes in .pm7, .pm7m, .pm4u, .pp1 and .pp1m files "
+           "(docs/formats/anycubic-zip.md); slice as .zip or png for a host that takes PNG layers";
 }
 
 std::vector<std::string> sliceFormatNames()
@@ -105,6 +124,7 @@ SliceSettings parseSliceSettings(const RecipeNode& spec)
     s.file = spec["file"].string();
     if (spec.has("format")) {
         s.format = spec["format"].string();
+        if (const std::string why = formatNotWritten(s.format); !why.empty()) spec["format"].fail(why);
         const auto formats = sliceFormatNames();
         if (std::find(formats.begin(), formats.end(), s.format) == formats.end())
             spec["format"].fail("unknown format `" + s.format + "` (valid: " + joinWords(formats) + ")");
@@ -117,6 +137,7 @@ SliceSettings parseSliceSettings(const RecipeNode& spec)
                                     [&](const ArchiveFormatInfo& f) { return f.extension == extension; });
     const bool folder = s.format == "png" || s.format == "exr";
     if (!extension.empty() && !folder && named == formats.end()) {
+        if (const std::string why = formatNotWritten(extension.substr(1)); !why.empty()) spec["file"].fail(why);
         std::string known;
         for (const ArchiveFormatInfo& f : formats)
             if (!f.extension.empty()) known += (known.empty() ? "" : " ") + f.extension;

@@ -26,6 +26,9 @@ struct ArchiveFormatInfo {
 const std::vector<ArchiveFormatInfo>& archiveFormats();
 /// The names of archiveFormats().
 std::vector<std::string> sliceFormatNames();
+/// Why a printer's format that is not in the archive table is not written (`pwsz`, the Photon
+/// Mono M7 Pro's vector layers), or "" for any other name. @a name has no leading dot.
+std::string formatNotWritten(const std::string& name);
 
 /// A `slices:` entry, checked.
 struct SliceSettings {

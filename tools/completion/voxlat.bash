@@ -24,7 +24,7 @@ _voxlat()
         COMPREPLY+=($(compgen -f -X '!*.yaml' -- "$cur"))
         return ;;
     --format)
-        COMPREPLY=($(compgen -W "sl1 sl1s zip png exr goo ctb cbddlp photon pwmo pwms pwma pwmx pmsq pwmb px6s pmx2 pm3 pm3m pm3r pm3n pm4n pm5 pm5s m5sp pws pw0 pwx dlp dl2p" -- "$cur"))
+        COMPREPLY=($(compgen -W "sl1 sl1s zip png exr goo ctb cbddlp photon pwmo pwms pwma pwmx pmsq pwmb px6s pmx2 pm3 pm3m pm3r pm3n pm4n pm5 pm5s m5sp pws pw0 pwx dlp dl2p pm7 pm7m pm4u pp1 pp1m" -- "$cur"))
         return ;;
     --aa | --project | --refine | --strict | --preview)
         COMPREPLY=($(compgen -W "on off" -- "$cur"))
