@@ -84,13 +84,14 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
     // Stage 1: cull by bounds, block then leaf. The leaves found are counted as the cull goes, so
     // a job whose surface cannot fit in memory is refused as soon as it is known (a 200 mm box at
     // 0.01 mm ran out of memory after four minutes), not after the whole cull.
+    const std::uint64_t bytesPerLeaf = options.bytesPerLeaf ? options.bytesPerLeaf : kBytesPerLeaf;
     const std::uint64_t maxLeaves =
-        options.maxLeaves ? options.maxLeaves : std::uint64_t(0.7 * double(availableMemoryBytes()) / kBytesPerLeaf);
+        options.maxLeaves ? options.maxLeaves : std::uint64_t(0.7 * double(availableMemoryBytes()) / bytesPerLeaf);
     auto tooMany = [&](std::uint64_t leaves, bool partial) {
         std::ostringstream msg;
-        msg << "this job needs " << (partial ? "more than " : "about ") << (leaves * kBytesPerLeaf >> 20) << " MB for "
+        msg << "this job needs " << (partial ? "more than " : "about ") << (leaves * bytesPerLeaf >> 20) << " MB for "
             << (partial ? "more than " : "") << leaves << " surface leaves, more than the "
-            << (maxLeaves * kBytesPerLeaf >> 20)
+            << (maxLeaves * bytesPerLeaf >> 20)
             << " MB this machine can give: raise `voxel:` (memory grows as 1/voxel^2) or shrink the domain";
         return JobError(msg.str());
     };
@@ -237,6 +238,7 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
             for (const Coord& lo : results[b].insideLeafTiles) s.domainVoxelsBelowZero += tileVoxels(lo, kLeafDim);
         }
         for (const std::uint32_t below : belowPerLeaf) s.domainVoxelsBelowZero += below;
+        s.estimatedBytes = s.leaves * bytesPerLeaf;
         *stats = s;
     }
     return grid;

@@ -28,6 +28,9 @@ struct DensitySolution {
     /// must move to change the share, for a correction aimed at another measure (the mesh's).
     double slope = 0.0;
     std::uint64_t evaluatedLeaves = 0;
+    /// The memory the solve's refusal estimated for its evaluated leaves (with what it keeps of
+    /// each beside the grid), in bytes: `memory_estimate_mb` in report.json.
+    std::uint64_t estimatedBytes = 0;
 };
 
 /// Solves vol{g < level} / vol(domain) = @a target over the domain's voxel centres, as an exact

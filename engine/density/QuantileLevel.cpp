@@ -265,6 +265,10 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         // (below). Evaluating the bracket grown by an estimate of that step up front lets the
         // same grid serve both passes; splitting by the bracket ignores the extra values.
         SparseOptions evaluated = options;
+        // A coverage pass keeps, beside the grid, each band voxel's value and its coverage sample
+        // twice (all of the band's, then the bracket's): 14-16 KB a leaf were measured on a
+        // capsule octet, more than twice a grid's (bench/memory_estimates.py).
+        evaluated.bytesPerLeaf = kBytesPerLeaf + std::uint64_t(512) * (sizeof(float) + 2 * sizeof(CoverageSample));
         if ((masked || subVoxel) && margin < 1.0)
             evaluated.band =
                 Interval(options.band.lo - kStepReserve * coarseStep, options.band.hi + kStepReserve * coarseStep);
@@ -275,9 +279,11 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         BandSplit split;
         if (!masked && !subVoxel) {
             split = streamedSplit(indicator, domain, options, sol.evaluatedLeaves);
+            sol.estimatedBytes = sol.evaluatedLeaves * kBytesPerLeaf;
         } else {
             grid = evaluateSparse(indicator, domain, evaluated);
             sol.evaluatedLeaves = grid->tree().leafCount();
+            sol.estimatedBytes = sol.evaluatedLeaves * evaluated.bytesPerLeaf;
             split = splitByBand(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi));
         }
         const std::uint64_t below = split.below;
@@ -311,6 +317,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             if (!grid) {
                 grid = evaluateSparse(indicator, domain, evaluated);
                 sol.evaluatedLeaves = grid->tree().leafCount();
+                sol.estimatedBytes = sol.evaluatedLeaves * evaluated.bytesPerLeaf;
             }
             // Every evaluated band voxel once (a voxel's step does not depend on the band); the
             // bracket's and the wide band's samples are picked from them, in the same order.

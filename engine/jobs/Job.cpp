@@ -489,6 +489,7 @@ void Job::solveLevels()
             entry["solve_rounds"] = s.rounds;
             entry["density_measure"] = s.coverage ? "sub-voxel coverage" : "voxel count";
             entry["evaluated_leaves"] = s.evaluatedLeaves;
+            entry["memory_estimate_mb"] = double(s.estimatedBytes) / (1024.0 * 1024.0);
             if (!pieces.empty())
                 entry["density_sampling"] =
                     "one period of the interior (" + std::to_string(pieces.size()) + " weighted pieces)";
@@ -637,6 +638,7 @@ void Job::evaluateRecipeGrid(bool keep)
                          {"volume_fraction", double(inside) / double(mDomain.voxelCount())},
                          {"volume_mm3", double(inside) * std::pow(mDomain.voxel, 3)},
                          {"evaluated_leaves", stats.leaves},
+                         {"memory_estimate_mb", double(stats.estimatedBytes) / (1024.0 * 1024.0)},
                          {"inside_tiles", stats.insideTiles}};
     {
         std::vector<SolidBlock> leaves;

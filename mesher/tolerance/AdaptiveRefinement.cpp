@@ -315,7 +315,16 @@ void placeChunkOnSurface(const Solid& solid, const AdaptiveRefinementOptions& o,
                          PlacementTables& tables)
 {
     const std::size_t n = x.size();
-    auto& [start, held, open, batch, g, direction, v, keep] = tables;
+    // Plain references, not a structured binding: lambdas below capture them (clang before 16
+    // cannot capture structured bindings, and the fuzz build uses clang).
+    std::vector<Vec3d>& start = tables.start;
+    std::vector<std::uint8_t>& held = tables.held;
+    std::vector<std::uint32_t>& open = tables.open;
+    std::vector<Vec3d>& batch = tables.batch;
+    std::vector<Vec3d>& g = tables.gradients;
+    std::vector<Vec3d>& direction = tables.direction;
+    std::vector<double>& v = tables.values;
+    std::vector<std::uint8_t>& keep = tables.keep;
     start.assign(x.begin(), x.end());
     held.assign(heldFaces.begin(), heldFaces.end());
     std::fill(found.begin(), found.end(), std::uint8_t(0));
