@@ -61,6 +61,8 @@ moved level reuses the raw values (GridValueMemo) and the coverage solve's band 
 coarse step near its bracket. VOXLAT_W2G_SIZE=25 at load 8-13, main / branch / numpy side by side:
 trimmed 33.78 / 25.98 / 94.23 s (2.79x -> 3.63x), cylinder 108.74 / 99.63 / 210.42 s (1.94x ->
 2.11x), wireframe 389.2 / 412.2 / 1004.3 s (2.58x -> 2.44x: the same leaves both, noise). Same STL bytes. Target 50x each: missed.
+Trimmed at 50 mm, main and branch only (a fair pair at load 5-7): 107.2 s -> 70.6 s wall, 62.6 s ->
+44.8 s CPU, peak 2853 -> 2076 MB (target 1.5 GB: missed); solve 52.3 -> 37.2 s.
 """
 import json
 import math
