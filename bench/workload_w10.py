@@ -37,6 +37,12 @@ layers and the full plate extrapolated):
   (0.92x), peaks 348-410 MB both; the gyroid sheet's 8 layers 2.2-2.35 s both: struts 12.6x the
   TPMS per window pixel (main 13.9x in the same run; target 10x: missed); full plate about 635 s
   on two free cores by the second round's basis (690 s x 0.92; target 600 s: missed).
+- 2026-11-29, issue 38 fifth round (branch issue38e: meshing-path changes only, the slicer
+  untouched). 4 layers of the plate by CPU time at load 10-13, alternating: main 14.58 / 14.47 s,
+  branch 14.43 / 14.44 s (the same .goo bytes); gyroid sheet's 8 layers 2.30 / 2.27 s: struts
+  12.6x (main) and 12.7x (branch) the TPMS per window pixel (target 10x: missed); full plate still
+  about 635 s on two free cores (target 600 s: missed). `voxlat info` 15.3 s (main) and 15.6 s
+  (branch) of CPU, 80-83 s wall at that load.
 Before issue 38 a 20 x 20 x 2 mm window took 32 s for 40 layers and the 2 mm plate did not finish
 in ten minutes (the issue's figures).
 

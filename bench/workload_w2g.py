@@ -56,6 +56,13 @@ agents; ratios of wall times): graded 11.85 s vs 174.6 s (14.7x), trimmed 44.0 s
 solve 28.7 s, evaluate 14.1 s), cylinder 51.8 s vs 256.5 s (5.0x; solve 31.4 s, evaluate 19.4 s);
 peaks 168-349 MB. Target 50x each: missed; the trimmed and cylinder frames spend most of their
 time in the density solve.
+2026-11-29 (issue 38, fifth round, branch issue38e; bench/history.md): the aim's evaluation at a
+moved level reuses the raw values (GridValueMemo) and the coverage solve's band is grown by the
+coarse step near its bracket. VOXLAT_W2G_SIZE=25 at load 8-13, main / branch / numpy side by side:
+trimmed 33.78 / 25.98 / 94.23 s (2.79x -> 3.63x), cylinder 108.74 / 99.63 / 210.42 s (1.94x ->
+2.11x), wireframe 389.2 / 412.2 / 1004.3 s (2.58x -> 2.44x: the same leaves both, noise). Same STL bytes. Target 50x each: missed.
+Trimmed at 50 mm, main and branch only (a fair pair at load 5-7): 107.2 s -> 70.6 s wall, 62.6 s ->
+44.8 s CPU, peak 2853 -> 2076 MB (target 1.5 GB: missed); solve 52.3 -> 37.2 s.
 """
 import json
 import math

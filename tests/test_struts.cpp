@@ -6,6 +6,8 @@
 #include "engine/frames/StrutFrames.h"
 #include "engine/frames/UnitCells.h"
 #include "engine/jobs/Job.h"
+#include "fields/core/GridValueMemo.h"
+#include "fields/levels/LevelSolid.h"
 #include "fields/shapes/Sphere.h"
 #include "fields/struts/GaussianTable.h"
 #include "fields/struts/IsoRadius.h"
@@ -1261,6 +1263,39 @@ TEST(StrutLattice, SparseGridMatchesBruteForce)
             }
     EXPECT_EQ(mismatched, 0u);
     EXPECT_EQ(inside, insideBrute);
+}
+
+TEST(GridValueMemo, AMovedLevelGivesTheGridOfAFreshEvaluation)
+{
+    // The job's aim: the grid at the solved level, the level moved, the grid again. With the
+    // raw field's values kept (whole, or within a budget of a few leaves) the second grid must be
+    // the one a solid built at the moved level gives, bit for bit.
+    const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
+    const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
+    const Domain d = Domain::fromBox(Box3{Vec3d(0), Vec3d(10)}, 0.15);
+    const auto fresh = evaluateSparse(LevelSolid(iso, SolidSide::Below, 0.62), d, SparseOptions{});
+    for (const std::size_t budget : {std::size_t(1) << 30, std::size_t(3 * 4096)}) {
+        const auto memo = std::make_shared<GridValueMemo>(iso);
+        const auto solid = LevelSolid::unsolved(memo, SolidSide::Below);
+        solid->solve(0.55);
+        memo->keep(true, budget);
+        evaluateSparse(*solid, d, SparseOptions{});
+        EXPECT_GT(memo->keptBytes(), 0u);
+        EXPECT_LE(memo->keptBytes(), budget);
+        solid->correct(0.62);
+        const auto moved = evaluateSparse(*solid, d, SparseOptions{});
+        memo->keep(false);
+        EXPECT_EQ(memo->keptBytes(), 0u);
+        ASSERT_EQ(moved->tree().leafCount(), fresh->tree().leafCount());
+        auto acc = moved->getConstAccessor();
+        std::uint64_t mismatched = 0;
+        for (auto leaf = fresh->tree().cbeginLeaf(); leaf; ++leaf)
+            for (int i = 0; i < 512; ++i) {
+                const float a = leaf->getValue(i), b = acc.getValue(leaf->offsetToGlobalCoord(i));
+                mismatched += std::memcmp(&a, &b, sizeof a) != 0;
+            }
+        EXPECT_EQ(mismatched, 0u) << "budget " << budget;
+    }
 }
 
 TEST(StrutIndex, GatherListsEveryReachingSegmentOnceInAscendingOrder)

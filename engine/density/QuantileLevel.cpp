@@ -83,12 +83,18 @@ private:
     const FieldNode& mMask;
 };
 
+/// A cell of the coarse lattice (a sample and its three forward neighbours): the range of its
+/// values and its change per voxel.
+struct CoarseCell {
+    float lo, hi, step;
+};
+
 /// Samples g at every stride-th voxel centre of the domain, in parallel and in a fixed order.
-/// @a maxStep, when given, receives the largest change of g per voxel seen between neighbouring
-/// samples that are both below 1e30 (inside a mask): an estimate of the widest voxel step. Stops
-/// (JobContext::checkCancelled) when @a context is cancelled.
+/// @a cells, when given, receives every cell of neighbouring samples that are all below 1e30
+/// (inside a mask) with its change of g per voxel: stepNear() picks the widest voxel step about a
+/// bracket from them. Stops (JobContext::checkCancelled) when @a context is cancelled.
 std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int stride, const JobContext* context,
-                                 double* maxStep = nullptr)
+                                 std::vector<CoarseCell>* cells = nullptr)
 {
     // Every stride-th voxel centre, from the middle of the first stride: min + (i stride + half + 1/2) voxel.
     BlockLattice lattice;
@@ -98,25 +104,26 @@ std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int s
     lattice.stride = {stride, stride, stride};
     for (int a = 0; a < 3; ++a) lattice.count[a] = (domain.dims[a] + stride - 1) / stride;
     std::vector<std::vector<float>> perBlock(lattice.blockCount());
-    std::vector<double> blockStep(perBlock.size(), 0.0);
+    std::vector<std::vector<CoarseCell>> blockCells(cells ? perBlock.size() : 0);
     sampleBlocks(g, lattice, [&](std::size_t b, const GridBatch& batch, auto index, std::span<const double> values) {
         // A plate's coarse pass takes seconds of strut sums: the cancel is checked per block.
         if (context) context->checkCancelled();
         const openvdb::Coord first(index[0] * stride + stride / 2, index[1] * stride + stride / 2,
                                    index[2] * stride + stride / 2);
-        if (maxStep) {
+        if (cells) {
             // Forward differences within the block (x-major, z fastest, as gridValues fills).
             const int sx = batch.ny * batch.nz, sy = batch.nz;
-            double step = 0.0;
             for (int i = 0; i + 1 < batch.nx; ++i)
                 for (int j = 0; j + 1 < batch.ny; ++j)
                     for (int k = 0; k + 1 < batch.nz; ++k) {
                         const int v = i * sx + j * sy + k;
                         const double c = values[v], dx = values[v + sx], dy = values[v + sy], dz = values[v + 1];
                         if (c > 1e30 || dx > 1e30 || dy > 1e30 || dz > 1e30) continue;
-                        step = std::max(step, (dx - c) * (dx - c) + (dy - c) * (dy - c) + (dz - c) * (dz - c));
+                        const double step =
+                            std::sqrt((dx - c) * (dx - c) + (dy - c) * (dy - c) + (dz - c) * (dz - c)) / stride;
+                        blockCells[b].push_back(
+                            {float(std::min({c, dx, dy, dz})), float(std::max({c, dx, dy, dz})), float(step)});
                     }
-            blockStep[b] = std::sqrt(step) / stride;
         }
         // Drop samples past the domain (the last stride may overhang).
         auto& out = perBlock[b];
@@ -131,8 +138,24 @@ std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int s
     });
     std::vector<float> all;
     for (const auto& block : perBlock) all.insert(all.end(), block.begin(), block.end());
-    if (maxStep) *maxStep = blockStep.empty() ? 0.0 : *std::max_element(blockStep.begin(), blockStep.end());
+    if (cells)
+        for (std::vector<CoarseCell>& block : blockCells) {
+            cells->insert(cells->end(), block.begin(), block.end());
+            std::vector<CoarseCell>().swap(block);
+        }
     return all;
+}
+
+/// The widest change per voxel among the coarse cells whose values meet [lo, hi]: an estimate of
+/// the widest voxel step about a level in that bracket (the coverage pass's band). Cells far
+/// from the bracket (a strut lattice's capped iso-radius, joints) do not widen it; an estimate
+/// too narrow costs a second evaluation, never a different result.
+double stepNear(const std::vector<CoarseCell>& cells, double lo, double hi)
+{
+    float widest = 0.0f;
+    for (const CoarseCell& c : cells)
+        if (!(double(c.hi) < lo) && !(double(c.lo) > hi)) widest = std::max(widest, c.step);
+    return widest;
 }
 
 /// How far beyond the bracket a masked solve evaluates, in coarse estimates of the voxel step:
@@ -238,9 +261,9 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
     const auto wanted = std::uint64_t(std::llround(target * double(sol.domainVoxels)));
 
     const int stride = std::max(1, int(std::ceil(std::cbrt(double(domain.voxelCount()) / 2.0e6))));
-    double coarseStep = 0.0;
+    std::vector<CoarseCell> coarseCells;
     std::vector<float> samples =
-        coarseSamples(indicator, domain, stride, context, masked || subVoxel ? &coarseStep : nullptr);
+        coarseSamples(indicator, domain, stride, context, masked || subVoxel ? &coarseCells : nullptr);
     // Share of the samples inside the mask: the quantiles of the target sit within that share.
     const double share =
         masked ? double(std::count_if(samples.begin(), samples.end(), [](float v) { return v < 1e30f; })) /
@@ -269,6 +292,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         // twice (all of the band's, then the bracket's): 14-16 KB a leaf were measured on a
         // capsule octet, more than twice a grid's (bench/memory_estimates.py).
         evaluated.bytesPerLeaf = kBytesPerLeaf + std::uint64_t(512) * (sizeof(float) + 2 * sizeof(CoverageSample));
+        const double coarseStep = stepNear(coarseCells, lo, hi);
         if ((masked || subVoxel) && margin < 1.0)
             evaluated.band =
                 Interval(options.band.lo - kStepReserve * coarseStep, options.band.hi + kStepReserve * coarseStep);

@@ -19,6 +19,7 @@
 #include "engine/jobs/TrialRecipe.h"
 #include "engine/recipe/RecipeParams.h"
 #include "fields/core/BlockLattice.h"
+#include "fields/core/GridValueMemo.h"
 #include "fields/levels/GradedLevel.h"
 #include "fields/shapes/Boolean.h"
 #include "fields/shapes/BoxField.h"
@@ -719,6 +720,20 @@ void Job::aimLevelsAtMesh()
         mTimings[name] = mTimings["evaluate"];
         mTimings.erase("evaluate");
     };
+    // A moved level is evaluated again on mostly the same leaves: where the solid keeps its raw
+    // field's grid values (GridValueMemo), only the level is applied again. Kept for this
+    // function's evaluations only, within a quarter of the memory available (at most 1 GB).
+    const auto* memo = dynamic_cast<const GridValueMemo*>(node.solid->raw().get());
+    struct KeptWhileAiming {
+        const GridValueMemo* memo;
+        ~KeptWhileAiming()
+        {
+            if (memo) memo->keep(false);
+        }
+    } kept{memo};
+    if (memo)
+        memo->keep(
+            true, std::size_t(std::min<double>(double(std::uint64_t(1) << 30), 0.25 * double(availableMemoryBytes()))));
     SparseStats stats;
     openvdb::FloatGrid::Ptr g = evaluateResult(stats);
     const std::optional<MeshShareMeasure> before = meshShareOfGrid(*g, "measure the mesh's share");

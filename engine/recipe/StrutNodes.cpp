@@ -7,6 +7,7 @@
 #include "engine/recipe/FieldBuilder.h"
 #include "engine/recipe/ScalarMaps.h"
 #include "engine/recipe/SkinNodes.h"
+#include "fields/core/GridValueMemo.h"
 #include "fields/core/Supported.h"
 #include "fields/frames/ParametricSurface.h"
 #include "fields/levels/GradedLevel.h"
@@ -752,7 +753,8 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
             return withinReach(result, rMax + blend + cap);
         }
         const bool solved = node.density || solvedByInfill;
-        node.solid = solved ? LevelSolid::unsolved(raw, SolidSide::Below)
+        // The job's aim may move a solved level: the raw values are kept between its evaluations.
+        node.solid = solved ? LevelSolid::unsolved(std::make_shared<GridValueMemo>(raw), SolidSide::Below)
                             : std::make_shared<LevelSolid>(raw, SolidSide::Below,
                                                            spec.has("level") ? spec["level"].number() : 0.0);
         // A capsule's level is an offset of every radius.
@@ -892,7 +894,9 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
         return withinReach(result, rcMax);
     }
     const bool solved = node.density || solvedByInfill;
-    node.solid = solved ? LevelSolid::unsolved(evaluated, SolidSide::Below)
+    // A solved level may be moved by the job's aim at the mesh's share: the grid's values below
+    // the level are kept between those evaluations (GridValueMemo).
+    node.solid = solved ? LevelSolid::unsolved(std::make_shared<GridValueMemo>(evaluated), SolidSide::Below)
                         : std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
     // The recipe's `level:` is t: the double t whose radiusOf() gives back this level exactly (a
     // neighbour of valueOf()'s when rounding moves it), so the reported t pasted into the recipe
