@@ -25,13 +25,9 @@ from scipy import ndimage
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from check_goo import read_png  # noqa: E402  (the PNG reader of the .goo check: no writer code)
+# The PW0 layer codec is the binary Photon Workshop files' (anycubic-format.md §9.1): one decoder.
+from check_photon_workshop import RECIPE, decode_pw0  # noqa: E402
 
-RECIPE = """domain: {box: [[0, 0, 0], [24, 18, 0.5]]}
-fields:
-  lattice: {tpms: gyroid, cell: 6, solid: sheet, level: 0.5}
-result: lattice
-outputs: {slices: {printer: PRINTER, layer: 0.05, file: FILE}}
-"""
 SOURCE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "data", "printers")
 
 failures = []
@@ -45,29 +41,6 @@ def check(condition, message):
 
 def close(a, b, tol=1e-4):
     return abs(a - b) <= tol * max(1.0, abs(b))
-
-
-def decode_pw0(data, width, height):
-    """§9 (anycubic-format.md §9.1): colour c in the high nibble; c 0 or 15 a big-endian 12-bit
-    run, else a 4-bit run; exactly width x height pixels."""
-    values, lengths = [], []
-    k = 0
-    while k < len(data):
-        c = data[k] >> 4
-        if c in (0, 15):
-            run = ((data[k] & 0x0F) << 8) | data[k + 1]
-            k += 2
-        else:
-            run = data[k] & 0x0F
-            k += 1
-        check(run > 0, "runs are never empty")
-        values.append(c * 17)
-        lengths.append(run)
-    total = sum(lengths)
-    check(total == width * height, f"a layer decodes to {total} pixels, not {width} x {height}")
-    if total != width * height:
-        return None
-    return np.repeat(np.array(values, np.uint8), lengths).reshape(height, width)
 
 
 def small_profile(tmp, name, display):
