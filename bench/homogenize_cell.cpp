@@ -5,7 +5,8 @@
 //
 // CELL: a header line "nx ny nz h E nu", then nx*ny*nz characters '0' or '1' in the order
 // x + nx*(y + ny*z) (whitespace ignored). Prints the effective stiffness C (or, with --thermal,
-// the conductivity K for conductivity E; nu is then ignored) and the bookkeeping as JSON.
+// the conductivity K for conductivity E; nu is then ignored) and the bookkeeping as JSON, with the
+// solve's peak memory above what the process held before it (peak_growth_bytes).
 #include "engine/properties/Homogenization.h"
 
 #include <tbb/global_control.h>
@@ -72,6 +73,25 @@ void printCommon(const Result& r, const std::array<int, N>& iterations, const st
     std::printf("],\n");
 }
 
+/// Reads "Key:   123 kB" from /proc/self/status, in bytes (0 if absent).
+long long statusBytes(const char* key)
+{
+    std::ifstream in("/proc/self/status");
+    std::string line;
+    const std::string k = key;
+    while (std::getline(in, line))
+        if (line.compare(0, k.size(), k) == 0) return std::atoll(line.c_str() + k.size()) * 1024;
+    return 0;
+}
+
+/// Resets the peak resident size to the current one (Linux 4.0 and later), and returns the
+/// current one: the solve's own peak is then VmHWM minus it.
+long long resetPeak()
+{
+    std::ofstream("/proc/self/clear_refs") << "5";
+    return statusBytes("VmRSS:");
+}
+
 }  // namespace
 
 int main(int argc, char** argv)
@@ -105,6 +125,7 @@ int main(int argc, char** argv)
     try {
         double E = 0.0, nu = 0.0;
         const voxlat::VoxelCell cell = readCell(path, E, nu);
+        const long long resident = resetPeak();
         const auto start = std::chrono::steady_clock::now();
         std::printf("{\n");
         if (thermal) {
@@ -112,12 +133,14 @@ int main(int argc, char** argv)
             const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
             printMatrix("K", r.K);
             printCommon(r, r.iterations, r.residual);
+            std::printf("  \"peak_growth_bytes\": %lld,\n", statusBytes("VmHWM:") - resident);
             std::printf("  \"seconds\": %.3f\n}\n", seconds);
         } else {
             const voxlat::ElasticityResult r = voxlat::homogenizeElasticity(cell, {E, nu}, settings);
             const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
             printMatrix("C", r.C);
             printCommon(r, r.iterations, r.residual);
+            std::printf("  \"peak_growth_bytes\": %lld,\n", statusBytes("VmHWM:") - resident);
             std::printf("  \"seconds\": %.3f\n}\n", seconds);
         }
     } catch (const std::exception& e) {

@@ -70,6 +70,9 @@ namespace {
 /// Voxels of margin around the result's box when the recipe gives no domain (room for the
 /// mesher's cap and the blend of a smooth union).
 constexpr int kAutoDomainMargin = 3;
+/// How much coarser the density box is sampled for a trial whose result's level the homogenized
+/// cell solves again (CellLevelTrial): it only places the level near the cell's.
+constexpr double kCoarseLevelFactor = 3.0;
 
 /// A stream buffer that gathers a file's bytes in memory, kWriteChunkBytes at a time, and calls
 /// the write interrupter before each chunk: a .vdb is made in memory (its header's UUID is set
@@ -449,18 +452,24 @@ void Job::solveLevels()
     for (const LevelNode& node : mBuilder.levelNodes()) {
         nlohmann::json entry{{"type", node.description}};
         if (node.density) {
+            // A trial's result whose level the homogenized cell solves again: a coarse solve
+            // places it (CellLevelTrial).
+            const double coarse =
+                CellLevelTrial::active() && node.name == mRecipe.result && !node.densityMask ? kCoarseLevelFactor : 1.0;
             const std::vector<DensityPiece> pieces =
                 node.densityPeriod && node.densityBox && node.densityVoxel
-                    ? periodicPieces(*node.densityBox, *node.densityPeriod, node.densityReach, *node.densityVoxel,
-                                     node.densityMirror, node.densitySwapXY)
+                    ? periodicPieces(*node.densityBox, *node.densityPeriod, node.densityReach,
+                                     *node.densityVoxel * coarse, node.densityMirror, node.densitySwapXY)
                     : std::vector<DensityPiece>{};
             const DensitySolution s = timed("solve " + node.name, [&] {
                 if (!pieces.empty())
                     return solveDensity(node.densityIndicator ? *node.densityIndicator : *node.solid->indicator(),
                                         pieces, *node.density, mContext);
+                const double voxel = node.densityBox && node.densityVoxel ? *node.densityVoxel : mDomain.voxel;
                 return solveDensity(*node.solid->indicator(),
-                                    node.densityBox && node.densityVoxel
-                                        ? Domain::fromBox(*node.densityBox, *node.densityVoxel)
+                                    node.densityBox && (node.densityVoxel || coarse > 1.0)
+                                        ? Domain::fromBox(*node.densityBox, voxel * coarse)
+                                    : coarse > 1.0    ? Domain::fromBox(mDomain.box, voxel * coarse)
                                     : node.densityBox ? mDomain.subDomain(*node.densityBox)
                                                       : mDomain,
                                     *node.density, node.densityMask.get(), node.subVoxelDensity, mContext);

@@ -4,6 +4,7 @@
 #include "engine/core/Format.h"
 #include "engine/core/SystemInfo.h"
 #include "engine/properties/CellSample.h"
+#include "engine/properties/MemoryEstimate.h"
 #include "mesher/extract/TriangleMesh.h"
 #include "mesher/writers/MeshPreview.h"
 
@@ -37,9 +38,12 @@ nlohmann::json matrixJson(const Matrix3& m, double scale = 1.0)
 }
 
 const char* kAxis = "xyz";
-/// Memory of homogenization per voxel of the cell (bytes): measured about 50 at 512 voxels
-/// before the allocation that failed; the solver's vectors for all load cases reach about 150.
-constexpr double kBytesPerCellVoxel = 150.0;
+/// Bytes a voxel of the cell takes while it is sampled: the field's values, their copy the level
+/// solve sorts (with a density target) and the cell's own byte.
+constexpr double kSamplingBytesPerVoxel = 17.0;
+/// The resolution of the voxel model whose share of nodes (MemoryEstimate.h) estimates a larger
+/// one's before it is sampled: a coarser model has more surface, so more nodes a voxel.
+constexpr int kMemoryProbe = 32;
 
 /// The largest relative difference between a cell's density and the density asked, when a level
 /// is solved on the cell (issue 37: 0.5 %).
@@ -230,21 +234,23 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
     };
     HomogenizationSettings solver;
     solver.tolerance = settings.tolerance;
-    // The voxel model, its labels and the solver's vectors (six load cases of three unknowns a
-    // node, the CG and multigrid work vectors): about kBytesPerCellVoxel a voxel. Refused before
-    // sampling when that cannot fit (`resolution: 512` ran out of memory at 6 GB).
-    const auto checkMemory = [&](int n) {
+    const auto voxelsAt = [&](int n) {
         double voxels = 1.0;
         for (int a = 0; a < 3; ++a) voxels *= std::max(1.0, std::round(size[a] / (longest / n)));
-        const double need = voxels * kBytesPerCellVoxel, have = 0.7 * double(availableMemoryBytes());
-        if (need > have)
-            throw JobError(settings.where + ": homogenizing the cell at " + std::to_string(n) + " voxels (" +
-                           formatNumber(voxels) + " voxels) needs about " + formatNumber(std::round(need / 1048576.0)) +
-                           " MB, more than the " + formatNumber(std::round(have / 1048576.0)) +
-                           " MB this machine can give: lower `resolution:` (or `max_resolution:`)");
+        return voxels;
     };
-    const auto solveAt = [&](int n) {
-        checkMemory(n);
+    // A cell whose sampling or solve cannot fit in memory is refused with the estimate, before
+    // the allocation (`resolution: 512` ran out of memory at 6 GB).
+    const double have = 0.7 * double(availableMemoryBytes());
+    const auto refuseMemory = [&](int n, double need) {
+        throw JobError(settings.where + ": homogenizing the cell at " + std::to_string(n) + " voxels (" +
+                       formatNumber(voxelsAt(n)) + " voxels) needs about " +
+                       formatNumber(std::round(need / 1048576.0)) + " MB, more than the " +
+                       formatNumber(std::round(have / 1048576.0)) +
+                       " MB this machine can give: lower `resolution:` (or `max_resolution:`)");
+    };
+    // One voxel model of the cell at n voxels along its longest side (not yet solved).
+    const auto modelAt = [&](int n) {
         Solved s;
         StageProgress sampling(context, "sampling the cell at " + std::to_string(n) + " voxels", 100);
         std::uint64_t reported = 0;
@@ -288,6 +294,23 @@ PropertiesResult computeProperties(const FieldNode& field, const Recipe& recipe,
             s.cell = sampleCell(field, origin, size, s.counts, sampleProgress);
         }
         sampling.finish();
+        return s;
+    };
+    // Before sampling: the sampling's memory, and the solve's as if every grid point were a node;
+    // when that does not fit, the solve's with the node share of a coarse model.
+    const auto checkMemory = [&](int n) {
+        const double voxels = voxelsAt(n), sampling = (target ? kSamplingBytesPerVoxel : 1.0) * voxels;
+        if (sampling > have) refuseMemory(n, sampling);
+        if (homogenizationBytes(voxels, voxels) <= have || n <= kMemoryProbe) return;
+        const Solved probe = modelAt(kMemoryProbe);
+        const double share = double(cellNodes(probe.cell)) / double(probe.cell.solid.size());
+        if (const double need = homogenizationBytes(voxels, share * voxels); need > have) refuseMemory(n, need);
+    };
+    const auto solveAt = [&](int n) {
+        checkMemory(n);
+        Solved s = modelAt(n);
+        // After sampling, the solve's own estimate from the cell's nodes.
+        if (const double need = homogenizationBytes(s.cell); need > have) refuseMemory(s.n, need);
         for (std::uint8_t v : s.cell.solid) s.solid += v;
         if (s.solid == 0) return s;
         StageProgress solving(context, "homogenizing at " + std::to_string(s.n) + " voxels", 1000);

@@ -47,6 +47,7 @@ Measured measure(const Recipe& base, const std::string& name, const FieldEdit& e
     followCancel(quiet, parent);
     Measured m;
     try {
+        const CellLevelTrial trial;
         Job job(std::move(r), &quiet);
         const nlohmann::json& p = job.properties();
         m.modulus = p["E_MPa"][axis].get<double>();
