@@ -59,6 +59,7 @@ domain: {box: [[0, 0, 0], [200, 110, 20]]}
 fields:
   lattice: {struts: {cell: bcc, size: 2}, kernel: {gaussian: {sigma: 0.2}}, density: 0.2}
 result: lattice
+allow: [pieces]
 outputs: {vdb: p.vdb}
 """,
 }

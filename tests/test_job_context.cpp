@@ -1,7 +1,9 @@
 // The caller's job context: progress, warnings and cancellation reach the caller, never the terminal.
 #include "TestUtil.h"
 #include "engine/core/Errors.h"
+#include "engine/core/GridMeasure.h"
 #include "engine/core/JobContext.h"
+#include "engine/density/Coverage.h"
 #include "engine/frames/StrutFrames.h"
 #include "engine/jobs/Job.h"
 #include "fields/struts/StrutConvolution.h"
@@ -12,6 +14,7 @@
 #include <thread>
 
 using namespace voxlat;
+using namespace voxlat::coverage;
 
 namespace {
 
@@ -140,4 +143,33 @@ TEST(JobContext, FramesAndStrutTablesCallTheirInterrupter)
                                   }),
                  Cancelled);
     EXPECT_EQ(checks, 3);
+}
+
+TEST(JobContext, TheDensitySolvesBandPassesCallTheirInterrupter)
+{
+    // The passes a coverage solve makes over its band after the evaluation (a plate's band holds
+    // 10^7 voxels: seconds) call the interrupter, and its throw stops them.
+    openvdb::FloatGrid grid(1.0f);
+    const openvdb::CoordBBox box(openvdb::Coord(0), openvdb::Coord(63));
+    for (auto it = box.begin(); it; ++it) grid.tree().setValue(*it, 0.01f * float((*it).x() - 32));
+    auto throwing = [] { throw Cancelled("stop"); };
+    EXPECT_THROW(splitByBand(grid, box, -0.1f, 0.1f, throwing), Cancelled);
+    EXPECT_THROW(coverageSamples(grid, box, -0.1f, 0.1f, throwing), Cancelled);
+    // Uninterrupted, the same passes give what they give without an interrupter.
+    int calls = 0;
+    const BandSplit split = splitByBand(grid, box, -0.1f, 0.1f, [&] { ++calls; });
+    EXPECT_GT(calls, 0);
+    EXPECT_EQ(split.below, splitByBand(grid, box, -0.1f, 0.1f).below);
+    const std::vector<CoverageSample> samples = coverageSamples(grid, box, -0.1f, 0.1f);
+    ASSERT_FALSE(samples.empty());
+    int steps = 0;
+    const double level = bisectCoverage(
+        samples, double(split.below), double(split.below) + 0.5 * double(samples.size()), -0.1, 0.1, [&] { ++steps; });
+    EXPECT_GT(steps, 0);
+    EXPECT_LE(steps, 60);
+    EXPECT_EQ(level, bisectCoverage(samples, double(split.below), double(split.below) + 0.5 * double(samples.size()),
+                                    -0.1, 0.1));
+    EXPECT_THROW(bisectCoverage(samples, double(split.below), double(split.below) + 0.5 * double(samples.size()), -0.1,
+                                0.1, throwing),
+                 Cancelled);
 }

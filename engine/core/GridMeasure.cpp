@@ -26,13 +26,15 @@ std::uint64_t countTilesBelow(const openvdb::FloatGrid& grid, const openvdb::Coo
 }
 }  // namespace
 
-BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi)
+BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
+                      const std::function<void()>& interrupt)
 {
     std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
     grid.tree().getNodes(leaves);
     std::vector<std::vector<float>> perLeaf(leaves.size());
     std::vector<std::uint64_t> belowPerLeaf(leaves.size(), 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+        if (interrupt) interrupt();
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
             const auto* leaf = leaves[n];
             const openvdb::CoordBBox box = leaf->getNodeBoundingBox();

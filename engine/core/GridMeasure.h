@@ -5,6 +5,7 @@
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 namespace voxlat {
@@ -16,7 +17,9 @@ struct BandSplit {
     std::uint64_t below = 0;
     std::vector<float> band;
 };
-BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi);
+/// @a interrupt, when set, is called per batch of leaves and throws to stop.
+BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
+                      const std::function<void()>& interrupt = {});
 
 /// The voxels of @a region inside a distance field's zero set, each sample's cell counted by how
 /// much of it lies inside: 1/2 - value/@a voxel clamped to [0, 1] (exact for a face parallel to

@@ -34,13 +34,14 @@ namespace {
 /// outside @a around) fall back to one-sided differences.
 template <class Make>
 auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
-                 const openvdb::CoordBBox& around, Make make)
+                 const openvdb::CoordBBox& around, Make make, const std::function<void()>& interrupt)
 {
     using Sample = decltype(make(0.0f, std::array<double, 3>{}));
     std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
     grid.tree().getNodes(leaves);
     std::vector<std::vector<Sample>> perLeaf(leaves.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+        if (interrupt) interrupt();
         auto acc = grid.getConstAccessor();
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
             const float* data = leaves[n]->buffer().data();
@@ -90,11 +91,14 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
 
 /// Band voxels with the length of their per-voxel change, for the linear coverage estimate.
 std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo,
-                                            float hi)
+                                            float hi, const std::function<void()>& interrupt)
 {
-    return bandSamples(grid, region, lo, hi, region, [](float v, const std::array<double, 3>& d) {
-        return CoverageSample{v, float(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))};
-    });
+    return bandSamples(
+        grid, region, lo, hi, region,
+        [](float v, const std::array<double, 3>& d) {
+            return CoverageSample{v, float(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))};
+        },
+        interrupt);
 }
 
 namespace {
@@ -224,7 +228,8 @@ double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
 /// 60 bisection steps. Samples whose coverage is constant (0 or 1) over what is left of the
 /// bracket are set aside as it narrows, so later steps visit only the voxels the level still
 /// cuts; each kept sample contributes exactly what coveredVoxels() would give it.
-double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b)
+double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b,
+                      const std::function<void()>& interrupt)
 {
     auto coverage = [](const CoverageSample& s, double level) {
         return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
@@ -245,6 +250,7 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
     bool linear = false;
     double constant = 0.0, slope = 0.0;
     for (int iteration = 0; iteration < 60; ++iteration) {
+        if (interrupt) interrupt();
         const double mid = 0.5 * (a + b);
         double covered = settled;
         if (linear)

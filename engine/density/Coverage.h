@@ -8,6 +8,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <functional>
 #include <vector>
 
 namespace voxlat::coverage {
@@ -33,9 +34,10 @@ struct PlaneSample {
 double axisChange(float value, float up, bool hasUp, float down, bool hasDown);
 
 /// Band voxels (values in [@a lo, @a hi] inside @a region) with the length of their per-voxel
-/// change, for the linear coverage estimate.
+/// change, for the linear coverage estimate. @a interrupt, when set, is called per batch of
+/// leaves and throws to stop (a plate's band holds 10^7 voxels).
 std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo,
-                                            float hi);
+                                            float hi, const std::function<void()>& interrupt = {});
 
 /// Voxels below @a level counted with sub-voxel coverage: a voxel whose value is within half a
 /// step of the level is partly inside, linearly in the distance (a plane cutting the voxel).
@@ -43,7 +45,9 @@ double coveredVoxels(const std::vector<CoverageSample>& samples, double level);
 
 /// The level in [a, b] at which fullyBelow + coveredVoxels(samples, level) reaches @a wanted
 /// (bisection; samples settled over what is left of the bracket are set aside).
-double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b);
+/// @a interrupt, when set, is called once per step (each a pass over the samples).
+double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b,
+                      const std::function<void()>& interrupt = {});
 
 /// The share of a voxel below @a level, the voxel's field taken as the plane through its value
 /// with its per-axis changes (exact for planes at any orientation).

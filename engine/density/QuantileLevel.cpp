@@ -261,6 +261,11 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
     const auto wanted = std::uint64_t(std::llround(target * double(sol.domainVoxels)));
 
     const int stride = std::max(1, int(std::ceil(std::cbrt(double(domain.voxelCount()) / 2.0e6))));
+    // The passes over the band after its evaluation (a split, the coverage samples, the bisection)
+    // take seconds on a plate: each stops on cancel.
+    const std::function<void()> interrupt = [context] {
+        if (context) context->checkCancelled();
+    };
     std::vector<CoarseCell> coarseCells;
     std::vector<float> samples =
         coarseSamples(indicator, domain, stride, context, masked || subVoxel ? &coarseCells : nullptr);
@@ -308,7 +313,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             grid = evaluateSparse(indicator, domain, evaluated);
             sol.evaluatedLeaves = grid->tree().leafCount();
             sol.estimatedBytes = sol.evaluatedLeaves * evaluated.bytesPerLeaf;
-            split = splitByBand(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi));
+            split = splitByBand(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi), interrupt);
         }
         const std::uint64_t below = split.below;
         std::vector<float>& band = split.band;
@@ -347,7 +352,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             // bracket's and the wide band's samples are picked from them, in the same order.
             const float evaluatedLo = float(evaluated.band.lo), evaluatedHi = float(evaluated.band.hi);
             const std::vector<CoverageSample> evaluatedSamples =
-                coverageSamples(*grid, domain.indexBox(), evaluatedLo, evaluatedHi);
+                coverageSamples(*grid, domain.indexBox(), evaluatedLo, evaluatedHi, interrupt);
             auto within = [&](float lo, float hi) {
                 std::vector<CoverageSample> picked;
                 for (const CoverageSample& c : evaluatedSamples)
@@ -387,8 +392,8 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 } else {
                     const auto wideGrid = covered ? grid : evaluateSparse(indicator, domain, wide);
                     if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
-                    fullyBelow = splitByBand(*wideGrid, domain.indexBox(), wideLo, wideHi).below;
-                    samples = coverageSamples(*wideGrid, domain.indexBox(), wideLo, wideHi);
+                    fullyBelow = splitByBand(*wideGrid, domain.indexBox(), wideLo, wideHi, interrupt).below;
+                    samples = coverageSamples(*wideGrid, domain.indexBox(), wideLo, wideHi, interrupt);
                 }
                 a = wide.band.lo;
                 b = wide.band.hi;
@@ -398,7 +403,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 if (options.band.lo <= -1e30) a = std::min(a == options.band.lo ? 1e300 : a, double(c.value) - c.step);
                 if (options.band.hi >= 1e30) b = std::max(b == 1e30 ? -1e300 : b, double(c.value) + c.step);
             }
-            sol.level = bisectCoverage(samples, double(fullyBelow), double(wanted), a, b);
+            sol.level = bisectCoverage(samples, double(fullyBelow), double(wanted), a, b, interrupt);
             sol.slope = coverageSlope(samples, sol.level, a, b, double(sol.domainVoxels));
             sol.coverage = true;
             sol.achieved = (double(fullyBelow) + coveredVoxels(samples, sol.level)) / double(sol.domainVoxels);
