@@ -34,8 +34,9 @@ BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& 
     std::vector<std::vector<float>> perLeaf(leaves.size());
     std::vector<std::uint64_t> belowPerLeaf(leaves.size(), 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
-        if (interrupt) interrupt();
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
+            // Per 64 leaves: a range of the partitioner can hold half the grid.
+            if (interrupt && n % 64 == 0) interrupt();
             const auto* leaf = leaves[n];
             const openvdb::CoordBBox box = leaf->getNodeBoundingBox();
             if (!box.hasOverlap(region)) continue;

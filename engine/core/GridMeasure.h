@@ -17,7 +17,7 @@ struct BandSplit {
     std::uint64_t below = 0;
     std::vector<float> band;
 };
-/// @a interrupt, when set, is called per batch of leaves and throws to stop.
+/// @a interrupt, when set, is called every 64 leaves and throws to stop.
 BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
                       const std::function<void()>& interrupt = {});
 

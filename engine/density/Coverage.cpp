@@ -41,9 +41,10 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
     grid.tree().getNodes(leaves);
     std::vector<std::vector<Sample>> perLeaf(leaves.size());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
-        if (interrupt) interrupt();
         auto acc = grid.getConstAccessor();
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
+            // Per 64 leaves: a range of the partitioner can hold half the band.
+            if (interrupt && n % 64 == 0) interrupt();
             const float* data = leaves[n]->buffer().data();
             for (int i = 0; i < 512; ++i) {
                 const openvdb::Coord c = leaves[n]->offsetToGlobalCoord(i);

@@ -34,7 +34,7 @@ struct PlaneSample {
 double axisChange(float value, float up, bool hasUp, float down, bool hasDown);
 
 /// Band voxels (values in [@a lo, @a hi] inside @a region) with the length of their per-voxel
-/// change, for the linear coverage estimate. @a interrupt, when set, is called per batch of
+/// change, for the linear coverage estimate. @a interrupt, when set, is called every 64
 /// leaves and throws to stop (a plate's band holds 10^7 voxels).
 std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo,
                                             float hi, const std::function<void()>& interrupt = {});
