@@ -243,7 +243,10 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
     };
     std::vector<Active> active;
     active.reserve(samples.size());
-    for (const CoverageSample& s : samples) active.push_back({s, coverage(s, a), coverage(s, b)});
+    for (const CoverageSample& s : samples) {
+        if (interrupt && (active.size() & 0xfffff) == 0xfffff) interrupt();
+        active.push_back({s, coverage(s, a), coverage(s, b)});
+    }
     std::vector<double> atMid(active.size());
     double settled = fullyBelow;  // whole voxels below every level left in the bracket
     // Once every sample left is partly covered across the whole bracket, the coverage is linear
@@ -257,7 +260,10 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
         if (linear)
             covered += constant + mid * slope;
         else
-            for (std::size_t i = 0; i < active.size(); ++i) covered += atMid[i] = coverage(active[i].s, mid);
+            for (std::size_t i = 0; i < active.size(); ++i) {
+                if (interrupt && (i & 0xfffff) == 0xfffff) interrupt();  // a step over 10^7 samples
+                covered += atMid[i] = coverage(active[i].s, mid);
+            }
         const bool raiseA = covered < wanted;
         (raiseA ? a : b) = mid;
         if (linear) continue;
@@ -265,6 +271,7 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
         std::size_t kept = 0;
         bool ramps = true;
         for (std::size_t i = 0; i < active.size(); ++i) {
+            if (interrupt && (i & 0xfffff) == 0xfffff) interrupt();
             Active t = active[i];
             (raiseA ? t.atA : t.atB) = atMid[i];
             if (t.atA >= 1.0)

@@ -45,7 +45,7 @@ double coveredVoxels(const std::vector<CoverageSample>& samples, double level);
 
 /// The level in [a, b] at which fullyBelow + coveredVoxels(samples, level) reaches @a wanted
 /// (bisection; samples settled over what is left of the bracket are set aside).
-/// @a interrupt, when set, is called once per step (each a pass over the samples).
+/// @a interrupt, when set, is called once per step and every 2^20 samples within one.
 double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b,
                       const std::function<void()>& interrupt = {});
 
