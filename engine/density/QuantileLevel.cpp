@@ -354,9 +354,12 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             const std::vector<CoverageSample> evaluatedSamples =
                 coverageSamples(*grid, domain.indexBox(), evaluatedLo, evaluatedHi, interrupt);
             auto within = [&](float lo, float hi) {
+                auto inside = [&](const CoverageSample& c) { return !(c.value < lo || c.value > hi); };
                 std::vector<CoverageSample> picked;
+                picked.reserve(std::size_t(std::count_if(evaluatedSamples.begin(), evaluatedSamples.end(), inside)));
+                interrupt();
                 for (const CoverageSample& c : evaluatedSamples)
-                    if (!(c.value < lo || c.value > hi)) picked.push_back(c);
+                    if (inside(c)) picked.push_back(c);
                 return picked;
             };
             auto samples = within(float(options.band.lo), float(options.band.hi));
