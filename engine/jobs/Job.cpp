@@ -499,7 +499,9 @@ void Job::solveLevels()
             entry["solve_rounds"] = s.rounds;
             entry["density_measure"] = s.coverage ? "sub-voxel coverage" : "voxel count";
             entry["evaluated_leaves"] = s.evaluatedLeaves;
-            entry["memory_estimate_mb"] = double(s.estimatedBytes) / (1024.0 * 1024.0);
+            // The solve's own refusal estimate (a solve sampled on one period's pieces keeps no grid
+            // of the domain and states none).
+            if (s.estimatedBytes > 0) entry["memory_estimate_mb"] = double(s.estimatedBytes) / (1024.0 * 1024.0);
             if (!pieces.empty())
                 entry["density_sampling"] =
                     "one period of the interior (" + std::to_string(pieces.size()) + " weighted pieces)";
