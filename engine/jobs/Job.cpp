@@ -653,12 +653,20 @@ void Job::evaluateRecipeGrid(bool keep)
                          {"memory_estimate_mb", double(stats.estimatedBytes) / (1024.0 * 1024.0)},
                          {"inside_tiles", stats.insideTiles}};
     {
+        // Gathered into one vector sized once, the cancel checked between the threads' parts.
+        std::size_t total = 0;
+        for (const std::vector<SolidBlock>& part : leafBits) total += part.size();
         std::vector<SolidBlock> leaves;
+        leaves.reserve(total);
         for (std::vector<SolidBlock>& part : leafBits) {
+            mContext->checkCancelled();
             leaves.insert(leaves.end(), part.begin(), part.end());
             std::vector<SolidBlock>().swap(part);
         }
-        checkPieces(solidBlocks(*g, std::move(leaves)));
+        mContext->checkCancelled();
+        std::vector<SolidBlock> blocks = solidBlocks(*g, std::move(leaves));
+        mContext->checkCancelled();
+        checkPieces(blocks);
     }
     if (!mBuilder.gradedNodes().empty())
         timed("measure slabs", [&] {
