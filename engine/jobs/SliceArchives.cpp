@@ -880,7 +880,7 @@ const std::map<std::string, ArchiveFactory>& archiveFactories()
     static const std::map<std::string, ArchiveFactory> all = [] {
         std::map<std::string, ArchiveFactory> table = factories;
         for (const auto& [format, version] : photonWorkshopVersions())
-            table[format] = [version, format = format](const fs::path& p, const std::string& w) {
+            table[format] = [version = version, format = format](const fs::path& p, const std::string& w) {
                 return std::make_unique<PhotonWorkshopArchive>(p, w, version, format == "pws");
             };
         for (const char* format : {"pm7", "pm7m", "pm4u", "pp1", "pp1m"})
