@@ -886,6 +886,10 @@ TEST(StrutFrames, WireframeFilesAndTheirErrors)
     const auto zero = dir.write("zero.csv", "0,0,0,1,0,0\n1,0,0,1,0,0\n");
     EXPECT_NE(message(zero.string()).find("zero.csv:2: zero-length strut"), std::string::npos)
         << message(zero.string());
+    // An index no long can hold (found by fuzz_wireframe: undefined behaviour before).
+    const auto huge = dir.write("huge.csv", "node,0,0,0\nnode,1,0,0\nstrut,0,1222222222222222222222222222222\n");
+    EXPECT_NE(message(huge.string()).find("huge.csv:3: node index 1.22222e+30 is far past any node"), std::string::npos)
+        << message(huge.string());
 }
 
 TEST(StrutLattice, DensityHitsTargetMeasuredOnTheMesh)

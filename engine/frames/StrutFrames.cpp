@@ -3,6 +3,7 @@
 #include "engine/core/InputFiles.h"
 
 #include "engine/core/Errors.h"
+#include "engine/core/Format.h"
 #include "engine/core/SystemInfo.h"
 
 #include <algorithm>
@@ -282,6 +283,11 @@ Frame readWireframe(const std::string& path)
             const double i = num(1), j = num(2);
             if (i != std::floor(i) || j != std::floor(j))
                 throw InputError(where + ": node indices are whole numbers (0-based)");
+            // Past 2^53 a double holds no exact whole number, and a long none past 2^63: refused
+            // before the conversion (a fuzzed row of 1e108 was undefined behaviour).
+            if (!(std::abs(i) < 9.0e15 && std::abs(j) < 9.0e15))
+                throw InputError(where + ": node index " + formatNumber(std::abs(i) < 9.0e15 ? j : i) +
+                                 " is far past any node: indices count the file's `node` rows from 0");
             indexed.emplace_back(long(i), long(j), lineNo);
         } else if (cells.size() == 6 || cells.size() == 8) {
             struts.emplace_back(Vec3d(num(0), num(1), num(2)), Vec3d(num(3), num(4), num(5)), lineNo);
