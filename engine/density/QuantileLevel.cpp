@@ -92,9 +92,9 @@ struct CoarseCell {
 /// Samples g at every stride-th voxel centre of the domain, in parallel and in a fixed order.
 /// @a cells, when given, receives every cell of neighbouring samples that are all below 1e30
 /// (inside a mask) with its change of g per voxel: stepNear() picks the widest voxel step about a
-/// bracket from them. Stops (JobContext::checkCancelled) when @a context is cancelled.
-std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int stride, const JobContext* context,
-                                 std::vector<CoarseCell>* cells = nullptr)
+/// bracket from them. @a interrupt is called per block and throws to stop.
+std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int stride,
+                                 const std::function<void()>& interrupt, std::vector<CoarseCell>* cells = nullptr)
 {
     // Every stride-th voxel centre, from the middle of the first stride: min + (i stride + half + 1/2) voxel.
     BlockLattice lattice;
@@ -107,7 +107,7 @@ std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int s
     std::vector<std::vector<CoarseCell>> blockCells(cells ? perBlock.size() : 0);
     sampleBlocks(g, lattice, [&](std::size_t b, const GridBatch& batch, auto index, std::span<const double> values) {
         // A plate's coarse pass takes seconds of strut sums: the cancel is checked per block.
-        if (context) context->checkCancelled();
+        interrupt();
         const openvdb::Coord first(index[0] * stride + stride / 2, index[1] * stride + stride / 2,
                                    index[2] * stride + stride / 2);
         if (cells) {
@@ -261,14 +261,14 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
     const auto wanted = std::uint64_t(std::llround(target * double(sol.domainVoxels)));
 
     const int stride = std::max(1, int(std::ceil(std::cbrt(double(domain.voxelCount()) / 2.0e6))));
-    // The passes over the band after its evaluation (a split, the coverage samples, the bisection)
-    // take seconds on a plate: each stops on cancel.
+    // The coarse pass and the passes over the band after its evaluation (a split, the coverage
+    // samples, the bisection) take seconds on a plate: each stops on cancel.
     const std::function<void()> interrupt = [context] {
         if (context) context->checkCancelled();
     };
     std::vector<CoarseCell> coarseCells;
     std::vector<float> samples =
-        coarseSamples(indicator, domain, stride, context, masked || subVoxel ? &coarseCells : nullptr);
+        coarseSamples(indicator, domain, stride, interrupt, masked || subVoxel ? &coarseCells : nullptr);
     // Share of the samples inside the mask: the quantiles of the target sit within that share.
     const double share =
         masked ? double(std::count_if(samples.begin(), samples.end(), [](float v) { return v < 1e30f; })) /

@@ -29,6 +29,12 @@ namespace voxlat {
 
 namespace {
 
+/// The job's cancel check, as the interrupter frames and strut tables call.
+FrameInterrupt cancelCheck(const FieldBuilder& builder)
+{
+    return [&builder] { builder.context().checkCancelled(); };
+}
+
 /// The unit cell of `cell:` (a preset name, `{lines: [...]}` or `{obj: file}`), checked.
 UnitCell readCell(const FieldBuilder& builder, const RecipeNode& c)
 {
@@ -252,7 +258,7 @@ Frame buildBetweenFrame(FieldBuilder& builder, const RecipeNode& s, const UnitCe
                 grid[(std::size_t(i) * (nv + 1) + j) * (nw + 1) + k] = (1.0 - w) * p + w * q;
             }
         }
-    return hexGridFrame(cell, grid, counts, [&] { builder.context().checkCancelled(); });
+    return hexGridFrame(cell, grid, counts, cancelCheck(builder));
 }
 
 /// @a uniform receives the cell and its size when the frame is made of uniform cells.
@@ -262,7 +268,7 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
                  std::optional<UniformCells>& uniform, FieldPtr& region, FieldPtr& within)
 {
     const std::string kind = readFrameLayout(s).key;
-    const FrameInterrupt interrupt = [&builder] { builder.context().checkCancelled(); };
+    const FrameInterrupt interrupt = cancelCheck(builder);
     if (kind == "wireframe") return readWireframe(builder.recipe().resolve(s["wireframe"].string()).string());
     if (!s.has("cell")) s.fail("give `cell:` (a preset such as bcc, or custom lines) or `wireframe:` (a file)");
     const UnitCell cell = readCell(builder, s["cell"]);
@@ -551,7 +557,7 @@ int radiusGradientAxis(const RecipeNode& spec)
 /// trimmed to (its struts' axes end at its surface, their solid does not yet).
 FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const std::string& name, FieldPtr& within)
 {
-    const FrameInterrupt interrupt = [&builder] { builder.context().checkCancelled(); };
+    const FrameInterrupt interrupt = cancelCheck(builder);
     std::optional<UniformCells> uniform;
     FieldPtr region;
     const std::string withinName = spec["struts"].has("within") && spec["struts"]["within"].isScalar()
