@@ -219,6 +219,21 @@ TEST(Adversarial, DuplicateKeysSecondDocumentsAndIgnoredSetsAreRefused)
     EXPECT_NE(e.find("p.yaml:2:1"), std::string::npos) << e;
 }
 
+// yaml-cpp 0.7's LoadAll loops for ever (and grows a vector until memory runs out) on streams whose
+// parser yields empty documents without consuming a token (yaml-cpp PR #1319); fuzz_profile found a
+// printer profile doing it. These end with a clear error, or as the one document they hold.
+TEST(Adversarial, StreamsThatLoopedYamlCppsLoadAllEnd)
+{
+    TempDir dir;
+    for (const std::string text : {"\n,\n    ", ",", "# a recipe\n,\n"})
+        EXPECT_THROW((void)parse(text, dir), InputError) << text;
+    // The same through the printer profile loader, where the fuzzer found it.
+    dir.write("p.yaml", "# a profile\n,\n");
+    EXPECT_THROW((void)loadPrinterProfile((dir.path / "p.yaml").string(), "test"), InputError);
+    // One document and empty ones after it still load, and a second one is still refused.
+    EXPECT_NO_THROW((void)parse(std::string(kSmall) + "---\n", dir));
+}
+
 TEST(Adversarial, NonFiniteInputsAreRefusedWithTheirLine)
 {
     TempDir dir;

@@ -2,6 +2,8 @@
 
 #include "fields/core/EditDistance.h"
 
+#include <yaml-cpp/eventhandler.h>
+
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -213,22 +215,68 @@ void checkKeysOnce(const YAML::Node& node, const std::string& name, int depth)
     }
 }
 
+/// Counts a YAML stream's documents without building them, to refuse a second one. yaml-cpp
+/// 0.7's `LoadAll` loops for ever on some malformed streams (a parser that yields an empty document
+/// without consuming a token; fixed upstream in yaml-cpp PR #1319, found here by fuzz_profile): an
+/// empty document ends the walk here, as it does upstream since that fix.
+class DocumentProbe final : public YAML::EventHandler {
+public:
+    YAML::Mark first;      ///< where the current document's content starts
+    bool content = false;  ///< the current document holds more than a null root
+    void OnDocumentStart(const YAML::Mark&) override { content = false; }
+    void OnDocumentEnd() override {}
+    void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
+    void OnAlias(const YAML::Mark& mark, YAML::anchor_t) override { seen(mark); }
+    void OnScalar(const YAML::Mark& mark, const std::string&, YAML::anchor_t, const std::string&) override
+    {
+        seen(mark);
+    }
+    void OnSequenceStart(const YAML::Mark& mark, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override
+    {
+        seen(mark);
+    }
+    void OnSequenceEnd() override {}
+    void OnMapStart(const YAML::Mark& mark, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override
+    {
+        seen(mark);
+    }
+    void OnMapEnd() override {}
+
+private:
+    void seen(const YAML::Mark& mark)
+    {
+        if (!content) first = mark;
+        content = true;
+    }
+};
+
+/// Refuses a stream with a second document that holds anything: a file holds one recipe, and a
+/// second document would be ignored. Throws yaml-cpp's ParserException on a syntax error.
+void checkOneDocument(const std::string& text, const std::string& name)
+{
+    std::istringstream stream(text);
+    YAML::Parser parser(stream);
+    DocumentProbe probe;
+    for (int document = 0; parser.HandleNextDocument(probe); ++document) {
+        if (!probe.content) break;  // an empty document: the end (see DocumentProbe)
+        if (document > 0)
+            throw InputError(name + ":" + markText(probe.first) +
+                             ": a second YAML document (after `---`); a file holds one, the rest would be ignored: "
+                             "remove the `---` or move that part to a file of its own");
+    }
+}
+
 }  // namespace
 
 YAML::Node loadYaml(const std::string& text, const std::string& name)
 {
-    std::vector<YAML::Node> documents;
+    YAML::Node root;
     try {
-        documents = YAML::LoadAll(text);
+        checkOneDocument(text, name);
+        root = YAML::Load(text);
     } catch (const YAML::ParserException& e) {
         throw InputError(name + ":" + markText(e.mark) + ": not valid YAML: " + e.msg);
     }
-    for (std::size_t i = 1; i < documents.size(); ++i)
-        if (documents[i].IsDefined() && !documents[i].IsNull())
-            throw InputError(name + ":" + markText(documents[i].Mark()) +
-                             ": a second YAML document (after `---`); a file holds one, the rest would be ignored: "
-                             "remove the `---` or move that part to a file of its own");
-    const YAML::Node root = documents.empty() ? YAML::Node() : documents.front();
     checkYamlSize(root, name);  // bounds the walk below
     checkKeysOnce(root, name, 0);
     return root;

@@ -52,6 +52,8 @@ seed properties "" "$tiny/properties.yaml" "$tiny/properties2.yaml"
 
 # Leaks inside third-party libraries only (lib3mf's libzip error record), as in `make sanitize`.
 export LSAN_OPTIONS=suppressions=$src/tests/lsan.supp
+# oneTBB's sentinel cast only (tests/ubsan.supp); every other report stops the harness.
+export UBSAN_OPTIONS=suppressions=$src/tests/ubsan.supp:halt_on_error=1:print_stacktrace=1
 status=0
 for harness in recipe equation mesh wireframe values profile properties; do
     mkdir -p "$corpus/$harness" "$findings/$harness"
