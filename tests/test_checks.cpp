@@ -10,6 +10,8 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <atomic>
+#include <functional>
 #include <mutex>
 #include <random>
 
@@ -102,6 +104,31 @@ TEST(Pieces, PiecesAcrossLeavesAndTilesMatchTheirVolumes)
             EXPECT_EQ(again.pieces[i].bounds, all.pieces[i].bounds);
         }
     }
+}
+
+TEST(Pieces, GatheringAndCountingCallTheirInterrupter)
+{
+    // A cancel reaches both passes (issue 42: a 20 mm strut plate spent over a second in them
+    // unchecked): the interrupter is called, a throw from it stops the pass, and the count with an
+    // interrupter that never throws is the count without one.
+    const Domain d = Domain::fromBox(Box3{Vec3d(0), Vec3d(32)}, 0.1);
+    const auto grid = evaluateSparse(Sphere(Vec3d(16), 15.0), d, SparseOptions{});
+    const std::vector<SolidBlock> blocks = solidBlocks(*grid);
+    ASSERT_GT(blocks.size(), 4096u);
+    std::atomic<int> calls{0};
+    const std::function<void()> count = [&] { ++calls; };
+    EXPECT_EQ(solidBlocks(*grid, {}, count).size(), blocks.size());
+    EXPECT_GT(calls.load(), 1);
+    calls = 0;
+    const PieceCount counted = countPieces(blocks, count);
+    EXPECT_GT(calls.load(), int(blocks.size() / 256));  // at least once per run of 256 blocks
+    const PieceCount plain = countPieces(blocks);
+    EXPECT_EQ(counted.solidVoxels, plain.solidVoxels);
+    EXPECT_EQ(counted.pieces.size(), plain.pieces.size());
+    struct Stop {};
+    const std::function<void()> stop = [] { throw Stop{}; };
+    EXPECT_THROW((void)solidBlocks(*grid, {}, stop), Stop);
+    EXPECT_THROW((void)countPieces(blocks, stop), Stop);
 }
 
 TEST(Pieces, LeavesHandedToAVisitorCountAsTheKeptGrid)

@@ -45,12 +45,26 @@ void addCommon(CLI::App* cmd, Common& c)
                     "override a recipe key, e.g. --set voxel=0.2 or --set fields.lattice.density=0.25");
 }
 
+/// A report value as the terminal shows it: numbers to six significant digits (report.json keeps
+/// every digit), arrays as [a, b, c].
+std::string shown(const nlohmann::json& v)
+{
+    if (v.is_number_float()) return voxlat::formatNumber(v.get<double>());
+    if (v.is_string()) return v.get<std::string>();
+    if (v.is_array()) {
+        std::string out = "[";
+        for (std::size_t i = 0; i < v.size(); ++i) out += (i ? ", " : "") + shown(v[i]);
+        return out + "]";
+    }
+    return v.dump();
+}
+
 void printSummary(voxlat::Job& job)
 {
     const auto r = job.report();
     const auto& d = r["domain"];
-    std::cout << "domain  " << d["min"].dump() << " .. " << d["max"].dump() << " mm, voxel " << d["voxel"] << " mm, "
-              << d["dims"].dump() << " = " << d["voxels"] << " voxels\n";
+    std::cout << "domain  " << shown(d["min"]) << " .. " << shown(d["max"]) << " mm, voxel " << shown(d["voxel"])
+              << " mm, " << shown(d["dims"]) << " = " << shown(d["voxels"]) << " voxels\n";
     if (r.contains("fields"))
         for (const auto& [name, f] : r["fields"].items()) {
             // Only the values the report has: a graded lattice has a level per point, not one.
@@ -72,17 +86,19 @@ void printSummary(voxlat::Job& job)
         }
     if (r.contains("result") && r["result"].contains("estimated"))
         std::cout << "result  " << r["result"]["field"].get<std::string>() << ": volume fraction ~"
-                  << r["result"]["volume_fraction"] << " of the domain, ~" << r["result"]["volume_mm3"]
-                  << " mm3 (estimated on a coarser grid: voxel " << r["result"]["estimated"]["voxel"] << " mm, "
-                  << r["result"]["estimated"]["voxels"] << " voxels; --exact counts every voxel)\n";
+                  << shown(r["result"]["volume_fraction"]) << " of the domain, ~" << shown(r["result"]["volume_mm3"])
+                  << " mm3 (estimated on a coarser grid: voxel " << shown(r["result"]["estimated"]["voxel"]) << " mm, "
+                  << shown(r["result"]["estimated"]["voxels"]) << " voxels; --exact counts every voxel)\n";
     else if (r.contains("result"))
         std::cout << "result  " << r["result"]["field"].get<std::string>() << ": volume fraction "
-                  << r["result"]["volume_fraction"] << " of the domain, " << r["result"]["volume_mm3"] << " mm3\n";
+                  << shown(r["result"]["volume_fraction"]) << " of the domain, " << shown(r["result"]["volume_mm3"])
+                  << " mm3\n";
     if (r.contains("mesh")) {
-        std::cout << "mesh    " << r["mesh"]["triangles"] << " triangles, " << r["mesh"]["vertices"] << " vertices";
+        std::cout << "mesh    " << shown(r["mesh"]["triangles"]) << " triangles, " << shown(r["mesh"]["vertices"])
+                  << " vertices";
         if (r["mesh"].contains("deviation"))
-            std::cout << ", within " << r["mesh"]["deviation"]["max_mm"] << " mm of the surface (rms "
-                      << r["mesh"]["deviation"]["rms_mm"] << " mm)";
+            std::cout << ", within " << shown(r["mesh"]["deviation"]["max_mm"]) << " mm of the surface (rms "
+                      << shown(r["mesh"]["deviation"]["rms_mm"]) << " mm)";
         std::cout << "\n";
     }
 }

@@ -28,6 +28,23 @@ constexpr std::uint64_t kZ7 = kZ0 << 7;               // ... with z = 7
 constexpr std::uint64_t kY0 = 0xFFull;                // ... with y = 0
 constexpr std::uint64_t kY7 = kY0 << 56;              // ... with y = 7
 
+/// Calls an optional interrupter every 2^12 steps of a loop (any thread) or now.
+class Every {
+public:
+    explicit Every(const std::function<void()>& interrupt) : mInterrupt(interrupt) {}
+    void step(std::size_t n) const
+    {
+        if (mInterrupt && (n & 4095) == 0) mInterrupt();
+    }
+    void now() const
+    {
+        if (mInterrupt) mInterrupt();
+    }
+
+private:
+    const std::function<void()>& mInterrupt;
+};
+
 bool isEmpty(const Bits& b)
 {
     std::uint64_t any = 0;
@@ -60,16 +77,22 @@ using Block = SolidBlock;
 
 }  // namespace
 
-std::vector<SolidBlock> solidBlocks(const openvdb::FloatGrid& grid, std::vector<SolidBlock> leaves)
+std::vector<SolidBlock> solidBlocks(const openvdb::FloatGrid& grid, std::vector<SolidBlock> leaves,
+                                    const std::function<void()>& interrupt)
 {
+    const Every every(interrupt);
     // As sdfInteriorMask + voxelizeActiveTiles would give, at a fraction of the cost.
     std::vector<const openvdb::FloatTree::LeafNodeType*> own;
     own.reserve(grid.tree().leafCount());
-    for (auto it = grid.tree().cbeginLeaf(); it; ++it) own.push_back(&*it);
+    for (auto it = grid.tree().cbeginLeaf(); it; ++it) {
+        own.push_back(&*it);
+        every.step(own.size());
+    }
     std::vector<Block> blocks = std::move(leaves);
     const std::size_t given = blocks.size();
     blocks.resize(given + own.size());
     tbb::parallel_for(std::size_t(0), own.size(), [&](std::size_t n) {
+        every.step(n);
         blocks[given + n].origin = own[n]->origin();
         belowWords(own[n]->buffer().data(), 0.0f, blocks[given + n].bits.data());
     });
@@ -87,11 +110,14 @@ std::vector<SolidBlock> solidBlocks(const openvdb::FloatGrid& grid, std::vector<
                     b.origin = Coord(x, y, z);
                     b.bits.fill(~0ull);
                     blocks.push_back(b);
+                    every.step(blocks.size());
                 }
     }
+    every.now();
     // Origins are distinct: the order is the same whatever order the blocks came in.
     tbb::parallel_sort(blocks.begin(), blocks.end(),
                        [](const Block& a, const Block& b) { return a.origin < b.origin; });
+    every.now();
     return blocks;
 }
 
@@ -237,8 +263,9 @@ PieceCount countPieces(const openvdb::FloatGrid& grid)
     return countPieces(solidBlocks(grid));
 }
 
-PieceCount countPieces(const std::vector<SolidBlock>& blocks)
+PieceCount countPieces(const std::vector<SolidBlock>& blocks, const std::function<void()>& interrupt)
 {
+    const Every every(interrupt);
     // Each block's parts, found in parallel over fixed runs of blocks and laid out in block order:
     // part ids do not depend on the thread count.
     constexpr std::size_t kRun = 256;
@@ -247,6 +274,7 @@ PieceCount countPieces(const std::vector<SolidBlock>& blocks)
     std::vector<std::vector<int>> runFirst(runs);
     tbb::parallel_for(std::size_t(0), runs, [&](std::size_t r) {
         const std::size_t end = std::min(blocks.size(), (r + 1) * kRun);
+        every.now();
         for (std::size_t n = r * kRun; n < end; ++n) {
             runFirst[r].push_back(int(runParts[r].size()));
             splitBlock(blocks[n], runParts[r]);
@@ -258,6 +286,7 @@ PieceCount countPieces(const std::vector<SolidBlock>& blocks)
         for (std::size_t i = 0; i < runFirst[r].size(); ++i) first[r * kRun + i] = int(parts.size()) + runFirst[r][i];
         parts.insert(parts.end(), runParts[r].begin(), runParts[r].end());
         std::vector<Part>().swap(runParts[r]);
+        every.now();
     }
     first[blocks.size()] = int(parts.size());
     std::vector<int> parent(parts.size());
@@ -266,9 +295,11 @@ PieceCount countPieces(const std::vector<SolidBlock>& blocks)
     // Join parts across the +x, +y and +z faces of every block: the touching pairs are found in
     // parallel over the same runs of blocks, then united in run order (the pieces do not depend
     // on the order of unions, and neither do their ids: see below).
+    every.now();
     const SortedBlockIndex index(blocks);
     std::vector<std::vector<std::pair<int, int>>> runPairs(runs);
     tbb::parallel_for(std::size_t(0), runs, [&](std::size_t r) {
+        every.now();
         const std::size_t end = std::min(blocks.size(), (r + 1) * kRun);
         for (std::size_t n = r * kRun; n < end; ++n) {
             for (int axis = 0; axis < 3; ++axis) {
@@ -283,13 +314,16 @@ PieceCount countPieces(const std::vector<SolidBlock>& blocks)
             }
         }
     });
-    for (const auto& pairs : runPairs)
-        for (const auto& [a, b] : pairs) unite(parent, a, b);
+    for (std::size_t r = 0; r < runs; ++r) {
+        for (const auto& [a, b] : runPairs[r]) unite(parent, a, b);
+        every.now();
+    }
 
     // Sizes and bounds per root, summed over the parts in block order.
     std::vector<int> pieceOf(parent.size(), -1);
     PieceCount result;
     for (std::size_t p = 0; p < parts.size(); ++p) {
+        every.step(p);
         const int root = findRoot(parent, int(p));
         if (pieceOf[root] < 0) {
             pieceOf[root] = int(result.pieces.size());

@@ -8,6 +8,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 namespace voxlat {
@@ -41,9 +42,12 @@ struct SolidBlock {
 /// The solid of @a grid as blocks, sorted by origin, none empty: each leaf's voxels below zero and
 /// every 8^3 block of its tiles below zero, with @a leaves (blocks of leaves evaluated but not
 /// kept in the grid, in any order; empty ones are dropped) in place of leaves of its own.
-std::vector<SolidBlock> solidBlocks(const openvdb::FloatGrid& grid, std::vector<SolidBlock> leaves = {});
+/// @a interrupt, when given, is called every few thousand blocks and may throw to stop.
+std::vector<SolidBlock> solidBlocks(const openvdb::FloatGrid& grid, std::vector<SolidBlock> leaves = {},
+                                    const std::function<void()>& interrupt = {});
 
-/// countPieces() of a solid given as solidBlocks() returns it.
-PieceCount countPieces(const std::vector<SolidBlock>& blocks);
+/// countPieces() of a solid given as solidBlocks() returns it. @a interrupt, when given, is called
+/// every few thousand blocks or parts (from any thread) and may throw to stop.
+PieceCount countPieces(const std::vector<SolidBlock>& blocks, const std::function<void()>& interrupt = {});
 
 }  // namespace voxlat

@@ -664,7 +664,7 @@ void Job::evaluateRecipeGrid(bool keep)
             std::vector<SolidBlock>().swap(part);
         }
         mContext->checkCancelled();
-        std::vector<SolidBlock> blocks = solidBlocks(*g, std::move(leaves));
+        std::vector<SolidBlock> blocks = solidBlocks(*g, std::move(leaves), [&] { mContext->checkCancelled(); });
         mContext->checkCancelled();
         checkPieces(blocks);
     }
@@ -1548,7 +1548,8 @@ constexpr double kCrumbWarningMm3 = 1.0;
 
 void Job::checkPieces(const std::vector<SolidBlock>& blocks)
 {
-    const PieceCount count = timed("count pieces", [&] { return countPieces(blocks); });
+    const PieceCount count =
+        timed("count pieces", [&] { return countPieces(blocks, [&] { mContext->checkCancelled(); }); });
     const double voxelVolume = std::pow(mDomain.voxel, 3);
     auto describe = [&](const Piece& p) {
         const Vec3d lo = mDomain.worldOf(p.bounds.min()), hi = mDomain.worldOf(p.bounds.max());

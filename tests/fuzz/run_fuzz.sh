@@ -41,6 +41,26 @@ printf '0.1,0.2,0.3\n0.4,0.5,0.6\n' >"$tiny/values.csv"
 seed mesh 00 "$src"/data/meshes/*.stl
 seed mesh 01 "$tiny/tet.ply"
 seed mesh 02 "$tiny/tet.obj"
+# A 3MF tetrahedron (zip, content types, relationships, model), for the reader behind libzip.
+/usr/bin/python3 - "$tiny/tet.3mf" <<'PY'
+import sys, zipfile
+model = ('<?xml version="1.0" encoding="UTF-8"?><model unit="millimeter" xml:lang="en-US" '
+         'xmlns="http://schemas.microsoft.com/3dmanufacturing/core/2015/02"><resources><object id="1" '
+         'type="model"><mesh><vertices><vertex x="0" y="0" z="0"/><vertex x="1" y="0" z="0"/><vertex x="0" '
+         'y="1" z="0"/><vertex x="0" y="0" z="1"/></vertices><triangles><triangle v1="0" v2="2" v3="1"/>'
+         '<triangle v1="0" v2="1" v3="3"/><triangle v1="0" v2="3" v3="2"/><triangle v1="1" v2="2" v3="3"/>'
+         '</triangles></mesh></object></resources><build><item objectid="1"/></build></model>')
+with zipfile.ZipFile(sys.argv[1], "w", zipfile.ZIP_DEFLATED) as z:
+    z.writestr("[Content_Types].xml", '<?xml version="1.0" encoding="UTF-8"?><Types xmlns="http://schemas.'
+               'openxmlformats.org/package/2006/content-types"><Default Extension="rels" ContentType="application/'
+               'vnd.openxmlformats-package.relationships+xml"/><Default Extension="model" ContentType="application/'
+               'vnd.ms-package.3dmanufacturing-3dmodel+xml"/></Types>')
+    z.writestr("_rels/.rels", '<?xml version="1.0" encoding="UTF-8"?><Relationships xmlns="http://schemas.'
+               'openxmlformats.org/package/2006/relationships"><Relationship Target="/3D/3dmodel.model" Id="rel0" '
+               'Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/></Relationships>')
+    z.writestr("3D/3dmodel.model", model)
+PY
+seed mesh 03 "$tiny/tet.3mf"
 seed wireframe 01 "$src"/data/recipes/*.csv "$tiny/frame.csv"
 seed wireframe 00 "$tiny/cell.obj"
 seed values 00 "$tiny/values.csv"
