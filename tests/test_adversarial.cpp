@@ -290,6 +290,7 @@ TEST(Adversarial, ResultsThatCannotBeRightFailTheirCheck)
                   dir));
     });
     EXPECT_NE(e.find("from the origin"), std::string::npos) << e;
+    EXPECT_NE(e.find("r.yaml:2:"), std::string::npos) << e;  // at the recipe's `domain:`
     EXPECT_NE(e.find(formatNumber(kMaxVoxelsFromOrigin)), std::string::npos) << e;
 }
 

@@ -323,15 +323,16 @@ Job::Job(Recipe recipe, JobContext* context)
     try {
         mDomain = domainOf(mRecipe, *mResult);
     } catch (const InputError& e) {
-        if (mRecipe.root["voxel"]) mRecipe.node("voxel").fail(e.what());
-        throw;
+        const std::string message = e.what();
+        if (message.rfind(mRecipe.source->path + ":", 0) == 0) throw;  // placed already
+        throw InputError(mRecipe.voxelWhere + ": voxel: " + message);  // the voxel against the part's box
     }
     if (double(mDomain.voxelCount()) > kMaxDomainVoxels) {
         const std::string message = "the domain holds " + formatNumber(double(mDomain.voxelCount())) +
                                     " voxels, more than the " + formatNumber(kMaxDomainVoxels) +
                                     " a job can cull in reasonable memory: raise `voxel:` or shrink the domain";
         // A job this machine cannot run (exit 3), said before any allocation.
-        throw JobError((mRecipe.root["voxel"] ? mRecipe.node("voxel").where() : mRecipe.source->path) + ": " + message);
+        throw JobError(mRecipe.voxelWhere + ": " + message);
     }
     // Grids, meshes and slices keep coordinates in single precision (24 bits): a part far from
     // the origin against its voxel loses its shape (at 1e9 mm every vertex had one x). Refused
@@ -340,9 +341,8 @@ Job::Job(Recipe recipe, JobContext* context)
         double far = 0.0;
         for (int a = 0; a < 3; ++a) far = std::max({far, std::abs(mDomain.box.min[a]), std::abs(mDomain.box.max[a])});
         if (far > kMaxVoxelsFromOrigin * mDomain.voxel)
-            throw InputError((mRecipe.root["domain"] ? mRecipe.node("domain").where() : mRecipe.source->path) +
-                             ": the part lies " + formatNumber(far) + " mm from the origin, more than " +
-                             formatNumber(kMaxVoxelsFromOrigin) + " voxels (" +
+            throw InputError(mRecipe.domainWhere + ": the part lies " + formatNumber(far) +
+                             " mm from the origin, more than " + formatNumber(kMaxVoxelsFromOrigin) + " voxels (" +
                              formatNumber(kMaxVoxelsFromOrigin * mDomain.voxel) +
                              " mm at this voxel): single-precision vertices would lose its shape; model it near the "
                              "origin and move it in the slicer or CAD tool");

@@ -120,6 +120,8 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
     const RecipeNode top(root, r.source, "recipe");
     top.checkKeys(kTopKeys);
     if (top.has("voxel")) r.voxel = top["voxel"].positiveNumber();
+    r.voxelWhere = top.has("voxel") ? top["voxel"].where() : r.source->path;
+    r.domainWhere = top.has("domain") ? top["domain"].where() : r.source->path;
     if (top.has("domain")) {
         const RecipeNode domain = top["domain"];
         domain.checkKeys({"box"});

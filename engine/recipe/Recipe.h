@@ -43,6 +43,9 @@ struct Recipe {
 
     double voxel = 0.1;
     std::optional<Box3> domainBox;
+    /// Where `voxel:` and `domain:` are written ("file:line", or the file when the recipe does not
+    /// give them), for the messages a job places there after it has built the fields.
+    std::string voxelWhere, domainWhere;
     std::string result;
     std::vector<std::string> fieldNames;  ///< in file order
     std::vector<OutputSpec> outputs;

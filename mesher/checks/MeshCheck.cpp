@@ -626,7 +626,9 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
 {
     const std::size_t n = mesh.triangles.size();
     if (n < 2) return {};
-    if (progress) progress(0.0);
+    // The binning below reports 0 from every grain and serial loop, so a cancel stops it too.
+    PhaseProgress phases(progress);
+    phases.begin(0.0);
     // Bounds of the triangles' corners only: callers pass a few triangles of a large mesh's points.
     // Each triangle's bounds are kept (as the points' floats, exactly) for its cells below: its
     // corners are read once. The edge lengths are summed per fixed block, the blocks' sums in
@@ -638,6 +640,7 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
     std::vector<openvdb::BBoxd> grainBoxes(numGrains);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numGrains, 1), [&](const auto& r) {
         for (std::size_t g = r.begin(); g != r.end(); ++g) {
+            phases.check();
             openvdb::BBoxd b;
             double sum = 0.0;
             for (std::size_t t = g * kGrain; t < std::min(n, (g + 1) * kGrain); ++t) {
@@ -682,6 +685,7 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
     const std::size_t entries = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, n, kGrain), std::size_t(0),
         [&](const tbb::blocked_range<std::size_t>& r, std::size_t sum) {
+            phases.check();
             for (std::size_t t = r.begin(); t != r.end(); ++t) {
                 TriangleCells& tc = cells[t];
                 const openvdb::Vec3d lo(tc.min[0], tc.min[1], tc.min[2]), hi(tc.max[0], tc.max[1], tc.max[2]);
@@ -723,18 +727,21 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
         // where it is used.
         std::vector<std::atomic<uint32_t>> count(numCells);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const auto& r) {
+            phases.check();
             for (std::size_t t = r.begin(); t != r.end(); ++t)
                 forCells(cells[t], [&](std::size_t c) { count[c].fetch_add(1, std::memory_order_relaxed); });
         });
         std::vector<std::size_t> start(numCells + 1);
         start[0] = 0;
         for (std::size_t c = 0; c < numCells; ++c) {
+            phases.checkEvery(c);
             const uint32_t k = count[c].load(std::memory_order_relaxed);
             start[c + 1] = start[c] + k;
             if (k >= 2) occupied.push_back(c);
         }
         members.resize(start.back());
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, n, kGrain), [&](const auto& r) {
+            phases.check();
             for (std::size_t t = r.begin(); t != r.end(); ++t)
                 forCells(cells[t], [&](std::size_t c) {
                     members[start[c + 1] - count[c].fetch_sub(1, std::memory_order_relaxed)] = uint32_t(t);
@@ -748,9 +755,13 @@ std::vector<std::pair<uint32_t, uint32_t>> selfIntersections(const TriangleMesh&
     } else {
         std::vector<std::pair<std::size_t, uint32_t>> list;
         list.reserve(entries);
-        for (std::size_t t = 0; t < n; ++t)
+        for (std::size_t t = 0; t < n; ++t) {
+            phases.checkEvery(t);
             forCells(cells[t], [&](std::size_t c) { list.emplace_back(c, uint32_t(t)); });
+        }
+        phases.check();
         std::sort(list.begin(), list.end());
+        phases.check();
         members.resize(list.size());
         for (std::size_t e = 0; e < list.size(); ++e) members[e] = list[e].second;
         for (std::size_t e = 0; e < list.size();) {

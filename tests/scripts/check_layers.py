@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
 """The build's layering rule, checked on every #include: a folder may include only from itself and
-from the folders below it (docs/architecture.md). A new folder must be added here, with its place."""
+from the folders below it (docs/architecture.md). A new folder must be added here, with its place.
+Also: jobs receive the recipe's settings parsed (typed structs); no file of engine/jobs/ reads a
+recipe's YAML node (printer profiles, files of their own, are loaded in PrinterProfile.cpp)."""
 import pathlib
 import re
 import sys
@@ -38,6 +40,8 @@ ALLOWED = {
                                     "engine/recipe"],
 }
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
+YAML_READ = re.compile(r"\bYAML::|\bRecipeNode\b|\.root\[")
+YAML_LOADERS = {"engine/jobs/PrinterProfile.cpp"}
 
 
 def folder_of(path: str) -> str:
@@ -60,6 +64,11 @@ def main() -> int:
                 target = folder_of(inc)
                 if target != own and target not in ALLOWED[own] and target in ALLOWED:
                     bad.append(f"{rel}: includes {inc}, but {own} may include only from {', '.join(ALLOWED[own]) or 'itself'}")
+            if own == "engine/jobs" and rel not in YAML_LOADERS:
+                for n, line in enumerate(f.read_text().splitlines(), 1):
+                    if YAML_READ.search(line.split("//")[0]):
+                        bad.append(f"{rel}:{n}: reads the recipe's YAML in a job; parse it at load into a typed "
+                                   "struct (engine/recipe/) and read that")
     print("\n".join(bad) if bad else "layers: every #include points down")
     return 1 if bad else 0
 
