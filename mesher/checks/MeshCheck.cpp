@@ -224,6 +224,7 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
     // Per vertex its row's length, and each part's counts turned into its start within the row.
     std::vector<std::size_t> first(numPoints + 1, 0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numPoints, 1 << 14), [&](const auto& range) {
+        phases.check();
         for (std::size_t v = range.begin(); v != range.end(); ++v) {
             uint32_t running = 0;
             for (std::size_t part = 0; part < parts; ++part) {
@@ -234,7 +235,9 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
             first[v + 1] = running;
         }
     });
+    phases.check();
     std::partial_sum(first.begin(), first.end(), first.begin());
+    phases.check();
     // Left uninitialised (every entry is filled below): the rows are the largest array here, and
     // a fresh one is paged in as it is written.
     const std::unique_ptr<Corner[]> corners(new Corner[first.back()]);
@@ -254,6 +257,7 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
     // Pieces: vertices joined by the edges, united at each edge's lower end in the pass below.
     std::vector<std::atomic<uint32_t>> piece(numPoints);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numPoints, 1 << 16), [&](const auto& range) {
+        phases.check();
         for (std::size_t v = range.begin(); v != range.end(); ++v)
             piece[v].store(uint32_t(v), std::memory_order_relaxed);
     });
@@ -359,10 +363,12 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
     // vertex is added to its root after its own sum is complete (and roots are not added on).
     phases.begin(0.9);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numPoints, 1 << 14), [&](const auto& range) {
+        phases.check();
         for (std::size_t v = range.begin(); v != range.end(); ++v)
             piece[v].store(findRoot(piece, uint32_t(v)), std::memory_order_relaxed);
     });
     for (std::size_t v = 0; v < numPoints; ++v) {
+        phases.checkEvery(v);
         if (first[v] == first[v + 1]) continue;
         const uint32_t root = piece[v].load(std::memory_order_relaxed);
         if (root == v) {
@@ -373,6 +379,7 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<uint8_t>* fansA
         ownedBad[root] |= ownedBad[v];
     }
     for (std::size_t v = 0; v < numPoints; ++v) {
+        phases.checkEvery(v);
         if (first[v] == first[v + 1] || piece[v].load(std::memory_order_relaxed) != v || ownedBad[v]) continue;
         ++result.closedPieces;
         result.genus += int(1 - ownedChi[v] / 2);
