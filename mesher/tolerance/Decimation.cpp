@@ -887,7 +887,7 @@ MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field,
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 1), [&](const auto& range) {
         std::vector<Vec3d> points, gradients;
         std::vector<double> values, weights;
-        for (std::size_t b = range.begin(); b != range.end(); ++b) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b, done.advance()) {
             points.clear();
             weights.clear();
             const std::size_t end = std::min(mesh.triangles.size(), (b + 1) * kBlock);
@@ -937,7 +937,6 @@ MeshDeviation measureDeviation(const TriangleMesh& mesh, const FieldNode& field,
             }
             p.samples = points.size();
         }
-        done.advance(range.size());
     });
     done.finish();
     MeshDeviation result;
