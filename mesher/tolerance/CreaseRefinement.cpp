@@ -37,10 +37,10 @@ void solidDistance(const SurfaceList& list, const std::vector<Vec3d>& points, st
     distance.resize(n);
     if (normal) normal->resize(n);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunkCount(n), 1), [&](const auto& range) {
-        if (check) check();
         std::array<double, kBatchSize> v;
         std::array<Vec3d, kBatchSize> g;
         for (std::size_t c = range.begin(); c != range.end(); ++c) {
+            if (check) check();  // per batch: a range may hold many
             const std::size_t begin = c * kBatchSize, count = std::min(kBatchSize, n - begin);
             const std::span<const Vec3d> p(points.data() + begin, count);
             for (int s = 0; s < list.size(); ++s) {
@@ -150,12 +150,12 @@ void placeOnSurface(const SurfaceList& list, const std::vector<Start>& starts, c
     normals.assign(m, Normals{});
     const int numSurfaces = list.size();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunkCount(m), 1), [&](const auto& range) {
-        if (check) check();
         std::vector<Vec3d> x, batch;
         std::vector<std::uint32_t> active, open;
         std::vector<std::vector<double>> values(numSurfaces);
         std::vector<std::vector<Vec3d>> grads(numSurfaces);
         for (std::size_t c = range.begin(); c != range.end(); ++c) {
+            if (check) check();  // per batch: a range may hold many
             const std::size_t begin = c * kBatchSize, count = std::min(kBatchSize, m - begin);
             x.resize(count);
             active.resize(count);
@@ -245,12 +245,12 @@ std::vector<Normals> normalsAt(const SurfaceList& list, const std::vector<Vec3d>
     const std::size_t n = points.size();
     std::vector<Normals> out(n);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunkCount(n), 1), [&](const auto& range) {
-        if (check) check();
         std::array<double, kBatchSize> v;
         std::array<Vec3d, kBatchSize> g;
         std::array<double, kBatchSize> most;
         std::array<Vec3d, kBatchSize> mostNormal;
         for (std::size_t c = range.begin(); c != range.end(); ++c) {
+            if (check) check();  // per batch: a range may hold many
             const std::size_t begin = c * kBatchSize, count = std::min(kBatchSize, n - begin);
             for (int s = 0; s < list.size(); ++s) {
                 list.evaluate(s, std::span<const Vec3d>(points.data() + begin, count),

@@ -16,6 +16,7 @@
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <numeric>
@@ -150,10 +151,16 @@ public:
         mRefusedCount.assign(nv, 0);
     }
 
-    void run(DecimationStats& stats)
+    /// Collapses until no candidate is left; @a check (optional) is called every 16 vertices
+    /// queued and candidates taken, and may throw to stop.
+    void run(DecimationStats& stats, const std::function<void()>& check = {})
     {
-        for (std::uint32_t v = 0; v < mPoints.size(); ++v) queueVertex(v);
-        while (!mHeap.empty()) {
+        for (std::uint32_t v = 0; v < mPoints.size(); ++v) {
+            if (check && (v & 15) == 0) check();
+            queueVertex(v);
+        }
+        for (std::size_t taken = 0; !mHeap.empty(); ++taken) {
+            if (check && (taken & 15) == 0) check();
             const Entry top = mHeap.top();
             mHeap.pop();
             const std::uint32_t v = std::get<1>(top), w = std::get<3>(top);
@@ -550,6 +557,13 @@ struct BlockProgress {
     std::size_t total = 1, done = 0;
     int percent = -1;
     std::mutex mutex;
+    /// Reports the current percent again (so a cancel can stop a block in its middle).
+    void check()
+    {
+        if (!fn) return;
+        std::lock_guard<std::mutex> lock(mutex);
+        fn(0.01 * std::max(percent, 0));
+    }
     void add(std::size_t units)
     {
         if (!fn) return;
@@ -574,7 +588,7 @@ struct BlockResult {
 /// kept; returns what is left.
 BlockResult decimateBlock(const TriangleMesh& mesh, const std::vector<std::uint32_t>& ids,
                           const std::vector<std::uint8_t>& locked, const std::vector<double>& vertexDistance,
-                          const FieldNode& field, const DecimationOptions& options)
+                          const FieldNode& field, const DecimationOptions& options, const std::function<void()>& check)
 {
     BlockResult result;
     std::vector<std::uint32_t> vertices;
@@ -612,7 +626,7 @@ BlockResult decimateBlock(const TriangleMesh& mesh, const std::vector<std::uint3
     DecimationStats stats;
     FieldDecimater decimater(std::move(points), std::move(triangles), std::move(keep), std::move(distance), field,
                              options);
-    decimater.run(stats);
+    decimater.run(stats, check);
     result.collapses = stats.collapses;
     result.refused = stats.refused;
     for (const auto& t : decimater.triangles())
@@ -682,8 +696,9 @@ bool decimatePass(TriangleMesh& mesh, std::vector<double>& vertexDistance, std::
                                          locked[tri[1]] == cache->locked[tri[1]] &&
                                          locked[tri[2]] == cache->locked[tri[2]];
                               });
-            results[b] =
-                same ? cache->results[b] : decimateBlock(mesh, blocks[b], locked, vertexDistance, field, options);
+            results[b] = same ? cache->results[b]
+                              : decimateBlock(mesh, blocks[b], locked, vertexDistance, field, options,
+                                              [&] { progress.check(); });
             progress.add(blocks[b].size());
         }
     });
