@@ -345,3 +345,31 @@ TEST(Density, ASolidIsSolvedOnceAndNeverUsedBefore)
     LevelSolid fixed(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(6)), SolidSide::Below, 0.1);
     EXPECT_THROW(fixed.solve(0.2), std::logic_error);
 }
+
+TEST(Job, AnEstimatedVolumeStatesItsDifferenceFromACountAtTwiceTheVoxel)
+{
+    // `voxlat info` above its voxel budget: the volume counted at a coarser voxel, checked here
+    // against the sphere's analytic volume, with the difference from a second count at twice
+    // that voxel (report.json's `result.estimated`).
+    const std::string text =
+        "voxel: 0.05\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
+        "  s: {sphere: {radius: 4, center: [5, 5, 5]}}\nresult: s\n";
+    voxlat::Job job(voxlat::parseRecipe(text, "r.yaml", "."));
+    ASSERT_TRUE(job.measureVolume(std::uint64_t(1) << 18));  // 8e6 voxels over a budget of 2.6e5
+    const nlohmann::json report = job.report();
+    const nlohmann::json& r = report["result"];
+    const nlohmann::json& e = r["estimated"];
+    const double sphere = 4.0 / 3.0 * std::numbers::pi * 64.0;
+    EXPECT_GT(e["voxel"].get<double>(), 0.05);
+    EXPECT_DOUBLE_EQ(e["check_voxel"].get<double>(), 2.0 * e["voxel"].get<double>());
+    EXPECT_NEAR(r["volume_mm3"].get<double>(), sphere, 0.01 * sphere);
+    EXPECT_NEAR(e["check_volume_mm3"].get<double>(), sphere, 0.03 * sphere);
+    EXPECT_NEAR(e["difference_mm3"].get<double>(),
+                std::abs(r["volume_mm3"].get<double>() - e["check_volume_mm3"].get<double>()), 1e-9);
+    // The exact count (no budget) has no estimate.
+    voxlat::Job exact(voxlat::parseRecipe(text, "r.yaml", "."));
+    EXPECT_FALSE(exact.measureVolume(std::numeric_limits<std::uint64_t>::max()));
+    const nlohmann::json counted = exact.report();
+    EXPECT_FALSE(counted["result"].contains("estimated"));
+    EXPECT_NEAR(counted["result"]["volume_mm3"].get<double>(), sphere, 0.002 * sphere);
+}

@@ -106,7 +106,9 @@ void printSummary(voxlat::Job& job)
         std::cout << "result  " << r["result"]["field"].get<std::string>() << ": volume fraction ~"
                   << shown(r["result"]["volume_fraction"]) << " of the domain, ~" << shown(r["result"]["volume_mm3"])
                   << " mm3 (estimated on a coarser grid: voxel " << shown(r["result"]["estimated"]["voxel"]) << " mm, "
-                  << shown(r["result"]["estimated"]["voxels"]) << " voxels; --exact counts every voxel)\n";
+                  << shown(r["result"]["estimated"]["voxels"]) << " voxels; "
+                  << shown(r["result"]["estimated"]["difference_mm3"]) << " mm3 from a count at "
+                  << shown(r["result"]["estimated"]["check_voxel"]) << " mm; --exact counts every voxel)\n";
     else if (r.contains("result"))
         std::cout << "result  " << r["result"]["field"].get<std::string>() << ": volume fraction "
                   << shown(r["result"]["volume_fraction"]) << " of the domain, " << shown(r["result"]["volume_mm3"])

@@ -600,20 +600,35 @@ bool Job::measureVolume(std::uint64_t maxVoxels)
         factor *= 1.01;
         coarse = Domain::fromBox(mDomain.box, mDomain.voxel * factor);
     }
-    SparseStats stats;
-    timed("estimate volume", [&] {
-        SparseOptions options;
-        options.clipToDomain = true;
-        options.stage = "estimating the volume of " + mRecipe.result;
-        options.context = mContext;
-        options.leafVisitor = [](const openvdb::Coord&, const float*) {};  // counted, not kept
-        return evaluateSparse(*mResult, coarse, options, &stats);
-    });
-    const double fraction = double(stats.domainVoxelsBelowZero) / double(coarse.voxelCount());
+    // Counted at that voxel and at twice it (an eighth of the voxels and of the time): the two
+    // counts' difference is reported as a measure of how settled the count is. It is not a bound:
+    // against --exact, the shipped gyroid's estimate is 30 mm3 off with a difference of 12.6, the
+    // BCC convolution's 173 off with 320 (docs/recipes.md).
+    auto count = [&](const Domain& d, const std::string& stage) {
+        SparseStats stats;
+        timed(stage, [&] {
+            SparseOptions options;
+            options.clipToDomain = true;
+            options.stage = "estimating the volume of " + mRecipe.result;
+            options.context = mContext;
+            options.leafVisitor = [](const openvdb::Coord&, const float*) {};  // counted, not kept
+            return evaluateSparse(*mResult, d, options, &stats);
+        });
+        return double(stats.domainVoxelsBelowZero) / double(d.voxelCount());
+    };
+    const double fraction = count(coarse, "estimate volume");
+    const Domain check = Domain::fromBox(mDomain.box, 2.0 * coarse.voxel);
+    const double checkFraction = count(check, "estimate volume (check)");
+    const double volume = double(mDomain.voxelCount()) * std::pow(mDomain.voxel, 3);
     mReport["result"] = {{"field", mRecipe.result},
                          {"volume_fraction", fraction},
-                         {"volume_mm3", fraction * double(mDomain.voxelCount()) * std::pow(mDomain.voxel, 3)},
-                         {"estimated", {{"voxel", coarse.voxel}, {"voxels", coarse.voxelCount()}}}};
+                         {"volume_mm3", fraction * volume},
+                         {"estimated",
+                          {{"voxel", coarse.voxel},
+                           {"voxels", coarse.voxelCount()},
+                           {"check_voxel", check.voxel},
+                           {"check_volume_mm3", checkFraction * volume},
+                           {"difference_mm3", std::abs(fraction - checkFraction) * volume}}}};
     return true;
 }
 
