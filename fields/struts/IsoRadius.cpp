@@ -41,7 +41,9 @@ void IsoRadius::radii(std::span<double> values) const
         const std::size_t n = std::min(kChunk, values.size() - start);
         double* f = values.data() + start;
         for (std::size_t k = 0; k < n; ++k) u[k] = mPeak / (f[k] <= mFMin ? mPeak : f[k]);  // 1 where capped
-        for (std::size_t k = 0; k < n; ++k) u[k] = std::log(u[k]);
+        // log(1) = 0 exactly: capped values (F = 0 far from the struts, or left out by
+        // planeValues) take no call.
+        for (std::size_t k = 0; k < n; ++k) u[k] = u[k] == 1.0 ? 0.0 : std::log(u[k]);
         for (std::size_t k = 0; k < n; ++k) {
             const double rho = std::min(mRhoMax, std::copysign(mSigma * std::sqrt(2.0 * std::abs(u[k])), u[k]));
             f[k] = f[k] <= mFMin ? mRhoMax : rho;
@@ -71,6 +73,23 @@ void IsoRadius::gridValues(const GridBatch& batch, std::span<double> out) const
 {
     mF->gridValues(batch, out);
     radii(out.first(batch.size()));
+}
+
+void IsoRadius::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                            std::span<signed char> side) const
+{
+    const auto* bands = dynamic_cast<const PlaneBands*>(mF.get());
+    const std::size_t tiles = PlaneTiles::of(plane, tile).size();
+    if (!bands || !(band.lo <= band.hi) || !(band.hi < mRhoMax)) {
+        gridValues(plane, out);
+        std::fill(side.begin(), side.begin() + tiles, static_cast<signed char>(0));
+        return;
+    }
+    // rho > hi where F < F(hi + d), rho < lo where F > F(lo - d).
+    const double d = 1e-9 * (mSigma + std::abs(band.lo) + std::abs(band.hi));
+    bands->planeValues(plane, tile, Interval{valueOf(band.hi + d), valueOf(band.lo - d)}, out, side);
+    for (std::size_t t = 0; t < tiles; ++t) side[t] = static_cast<signed char>(-side[t]);
+    radii(out.first(plane.size()));
 }
 
 Interval IsoRadius::bound(const Box3& box) const

@@ -68,6 +68,11 @@ struct RasterOptions {
     /// decided; 0 bounds every block (to compare: a block left unbounded is evaluated, and its
     /// pixels are decided from the values as those of every straddling block are).
     int straddlingRun = 256;
+    /// A block of whole tiles within the part's box takes its values from the field's
+    /// PlaneBands::planeValues where it has them (a strut lattice proves the tiles far from its
+    /// struts outside and leaves their values out); off: gridValues for every pixel (to compare:
+    /// the bytes are the same where the proven tiles' pixels would have been 0 anyway).
+    bool planeBands = true;
     /// Called once per row of 64 x 64 blocks while a layer is made (none: never); it throws to
     /// stop the layer (a job's cancel check), so a layer of a large plate stops promptly.
     std::function<void()> interrupt;
