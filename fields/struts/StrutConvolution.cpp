@@ -539,6 +539,11 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
     const double stepX = tile * dx, stepY = tile * dy;
     const double cx0 = plane.origin.x() + (0.5 + 0.5 * tile) * dx, cy0 = plane.origin.y() + (0.5 + 0.5 * tile) * dy;
     const double halfX = 0.5 * stepX, halfY = 0.5 * stepY, halfDiagonal = std::sqrt(halfX * halfX + halfY * halfY);
+    // Per strut and tile of its reach, its peak times the kernel at the least distance from the
+    // footprint, at least the centre's distance less the half diagonal. (The distance to the
+    // footprint itself, segmentBoxDistance, for the tiles this leaves open proved 13 % more of the
+    // window outside but cost more than it saved: 16.0 s against 12.8 s of CPU on W10's 4 layers.)
+    // The sums made by evaluate() stay within 2.5e-5 of the peaks counted of the exact field's.
     for (const std::uint32_t j : cand) {
         const GaussianSegment& s = mSegments[j];
         const double rc = std::sqrt(mCutoffSqr[j]);
@@ -561,15 +566,13 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
                 peaks[t] += mPeak[j];
             }
     }
-    // The sums made by evaluate() stay within 2.5e-5 of the peaks counted of the exact field's.
     columnTiles.assign(std::size_t(plane.nx), 0);
     bool any = false;
     for (int a = 0; a < tiles.nx; ++a) {
         std::uint64_t open = 0;
         for (int b = 0; b < tiles.ny; ++b) {
             const std::size_t t = std::size_t(a) * tiles.ny + b;
-            const double most = upper[t] * (1.0 + 1e-12) + 2.5e-5 * peaks[t];
-            side[t] = static_cast<signed char>(most < band.lo ? -1 : 0);
+            side[t] = static_cast<signed char>(upper[t] * (1.0 + 1e-12) + 2.5e-5 * peaks[t] < band.lo ? -1 : 0);
             if (side[t] == 0) open |= std::uint64_t(1) << b;
         }
         // Tile column a's points and their halo: columns a tile .. (a + 1) tile + 1.
