@@ -1,7 +1,9 @@
 #include "fields/struts/IsoRadius.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
 #include <vector>
 
@@ -89,7 +91,32 @@ void IsoRadius::planeValues(const GridBatch& plane, int tile, Interval band, std
     const double d = 1e-9 * (mSigma + std::abs(band.lo) + std::abs(band.hi));
     bands->planeValues(plane, tile, Interval{valueOf(band.hi + d), valueOf(band.lo - d)}, out, side);
     for (std::size_t t = 0; t < tiles; ++t) side[t] = static_cast<signed char>(-side[t]);
-    radii(out.first(plane.size()));
+    // Only the points the open tiles read are mapped (each open tile's points and its one-point
+    // halo: runs of tiles along each column); the others mean nothing and take rhoMax.
+    const PlaneTiles grid = PlaneTiles::of(plane, tile);
+    if (grid.nx == 0 || grid.ny > 64 || plane.ny < 2) {
+        radii(out.first(plane.size()));
+        return;
+    }
+    for (int i = 0; i < plane.nx; ++i) {
+        std::uint64_t open = 0;
+        for (int a = std::max(0, (i - 1) / tile - 1); a <= std::min(grid.nx - 1, i / tile); ++a)
+            if (i >= a * tile && i <= (a + 1) * tile + 1)
+                for (int b = 0; b < grid.ny; ++b) open |= std::uint64_t(side[std::size_t(a) * grid.ny + b] == 0) << b;
+        double* column = out.data() + std::size_t(i) * plane.ny;
+        int done = 0;  // points below this are mapped or filled
+        while (open != 0) {
+            const int b0 = std::countr_zero(open);
+            const std::uint64_t from = open >> b0;
+            const int b1 = b0 + (from == ~std::uint64_t(0) ? 64 : std::countr_zero(~from)) - 1;
+            open = b1 >= 63 ? 0 : open & ~((std::uint64_t(2) << b1) - 1);
+            const int lo = b0 * tile, hi = std::min(plane.ny - 1, (b1 + 1) * tile + 1);
+            std::fill(column + done, column + std::max(done, lo), mRhoMax);
+            if (hi >= std::max(done, lo)) radii(std::span<double>(column + std::max(done, lo), column + hi + 1));
+            done = std::max(done, hi + 1);
+        }
+        std::fill(column + done, column + plane.ny, mRhoMax);
+    }
 }
 
 Interval IsoRadius::bound(const Box3& box) const
