@@ -108,9 +108,10 @@ void LevelSolid::planeValues(const GridBatch& plane, int tile, Interval band, st
                              std::span<signed char> side) const
 {
     requireSolved();
-    const auto* bands = dynamic_cast<const PlaneBands*>(mRaw.get());
+    // A sheet first: no cast (a cross-cast per slicer block cost a TPMS sheet's slices 5 %).
+    const auto* bands = mSide == SolidSide::Band ? nullptr : dynamic_cast<const PlaneBands*>(mRaw.get());
     const std::size_t tiles = PlaneTiles::of(plane, tile).size();
-    if (!bands || mSide == SolidSide::Band) {
+    if (!bands) {
         gridValues(plane, out);
         std::fill(side.begin(), side.begin() + tiles, static_cast<signed char>(0));
         return;

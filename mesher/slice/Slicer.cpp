@@ -353,6 +353,8 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     std::vector<double> values, sub;
     std::vector<float> single, cells;    // the values in single precision and their cells, for the tile tests
     std::vector<signed char> tileSides;  // a block's tiles the field decided (PlaneBands)
+    // Cast once per layer, not per block: a cross-cast costs about what a small block's values do.
+    const auto* bands = mOptions.planeBands ? dynamic_cast<const PlaneBands*>(&mField) : nullptr;
     RasterCounts counts;
     int quartersTried = 0, quartersCulled = 0, blocksStraddling = 0, blocksSkipped = 0;
     const bool greyEdges = mOptions.supersample > 0 && mOptions.gamma == 1.0;
@@ -416,13 +418,13 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         // leaves them out); the tiles it decides are filled as a culled block's, the others take
         // the passes below with the same values as gridValues'.
         const int ntx = bnx / tile, nty = bny / tile;
-        bool banded = mOptions.planeBands && tile == kLanes && bnx % tile == 0 && bny % tile == 0;
+        bool banded = bands && tile == kLanes && bnx % tile == 0 && bny % tile == 0;
         for (int a = 0; banded && a < ntx; ++a) banded = mTileColumnsIn[bi + a * tile] != 0;
         for (int b = 0; banded && b < nty; ++b) banded = mTileRowsIn[bj + b * tile] != 0;
         int decidedTiles = 0;
         if (banded) {
             tileSides.resize(std::size_t(ntx) * nty);
-            planeValuesOf(mField, grid, tile, Interval{0.0, 0.0}, values, tileSides);
+            bands->planeValues(grid, tile, Interval{0.0, 0.0}, values, tileSides);
             for (const signed char side : tileSides) decidedTiles += side != 0;
         } else {
             mField.gridValues(grid, values);
