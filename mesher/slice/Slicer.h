@@ -16,7 +16,9 @@
 /// (gamma 0: a threshold at coverage 1/2, as PrusaSlicer's gamma_correction).
 ///
 /// Cost: blocks of 64 x 64 pixels (and their 32 x 32 quarters, while that culls anything) are
-/// culled by bound(); the rest is evaluated as one grid batch per block, and each whole 8 x 8 tile
+/// culled by bound(); the rest is evaluated as one grid batch per block (a block of whole tiles
+/// within the part's box through PlaneBands where the field has it: the tiles it proves on one
+/// side are filled, only the others and their halo evaluated), and each whole 8 x 8 tile
 /// is decided by four- or eight-lane single-precision passes (the whole tile at once where it is
 /// surely on one side, first against the block's largest cell difference, lane by lane, then its
 /// own; else per pixel: sure, far from the linearised edge, or its coverage, computed for the
