@@ -43,6 +43,15 @@ layers and the full plate extrapolated):
   12.6x (main) and 12.7x (branch) the TPMS per window pixel (target 10x: missed); full plate still
   about 635 s on two free cores (target 600 s: missed). `voxlat info` 15.3 s (main) and 15.6 s
   (branch) of CPU, 80-83 s wall at that load.
+- 2026-11-29, issue 38 sixth round (branch issue38f: tiles proven outside by per-strut bounds
+  and left out, PlaneBands; columns beyond a strut's reach of the plane skipped; radii only where
+  read; the same .goo bytes). 4 layers of the plate by CPU time, alternating, two runs (load 6-9,
+  10-12): main 14.61 / 15.03 and 14.99 / 14.66 s, branch 13.05 / 12.85 and 12.48 / 12.35 s
+  (0.87x, 0.84x); 87.2 M of 193.0 M window pixels summed; the gyroid sheet's 8 layers main
+  2.31-2.38 s, branch 2.44-2.56 s: struts 12.6x (main) and 10.0-10.4x (branch; 10.6-11.0x against
+  main's TPMS runs) the TPMS per window pixel (target 10x: at the edge, missed against main's);
+  full plate about 535-555 s on two free cores (635 s x 0.84-0.87; target 600 s: met by
+  extrapolation).
 Before issue 38 a 20 x 20 x 2 mm window took 32 s for 40 layers and the 2 mm plate did not finish
 in ten minutes (the issue's figures).
 

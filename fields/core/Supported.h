@@ -4,6 +4,7 @@
 #pragma once
 
 #include "fields/core/FieldNode.h"
+#include "fields/core/PlaneBands.h"
 
 #include <functional>
 
@@ -12,7 +13,7 @@ namespace voxlat {
 /// The child's values, gradients, bounds and period as they are; support() is @a box. The caller
 /// guarantees the child is positive outside @a box, and that its solid repeats inside @a zone
 /// when one is given (a frame of identical cells: repeatZone()).
-class SupportedField final : public FieldNode {
+class SupportedField final : public FieldNode, public PlaneBands {
 public:
     /// @a zone is asked when repeatZone() is (a solved level may set how far the solid reaches).
     SupportedField(FieldPtr child, const Box3& box, std::function<std::optional<RepeatZone>()> zone = {})
@@ -36,6 +37,11 @@ public:
         mChild->gridValuesShifted(batch, shift, plus, minus);
     }
     Interval bound(const Box3& box) const override { return mChild->bound(box); }
+    void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                     std::span<signed char> side) const override
+    {
+        planeValuesOf(*mChild, plane, tile, band, out, side);
+    }
     std::optional<Box3> support() const override { return mBox; }
     double period(int axis) const override { return mChild->period(axis); }
     std::optional<RepeatZone> repeatZone() const override { return mZone ? mZone() : mChild->repeatZone(); }

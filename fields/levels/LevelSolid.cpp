@@ -104,6 +104,30 @@ void LevelSolid::gridValues(const GridBatch& batch, std::span<double> out) const
     applySideInPlace(mSide, out, mLevel);
 }
 
+void LevelSolid::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                             std::span<signed char> side) const
+{
+    requireSolved();
+    // A sheet first: no cast (a cross-cast per slicer block cost a TPMS sheet's slices 5 %).
+    const auto* bands = mSide == SolidSide::Band ? nullptr : dynamic_cast<const PlaneBands*>(mRaw.get());
+    const std::size_t tiles = PlaneTiles::of(plane, tile).size();
+    if (!bands) {
+        gridValues(plane, out);
+        std::fill(side.begin(), side.begin() + tiles, static_cast<signed char>(0));
+        return;
+    }
+    // raw - level > hi where raw > hi + level (level - raw > hi where raw < level - hi), with a
+    // margin for the subtraction's rounding.
+    const double slack = 1e-12 * (std::abs(mLevel) + std::abs(band.lo) + std::abs(band.hi) + 1.0);
+    const bool below = mSide == SolidSide::Below;
+    const Interval raw = below ? Interval{band.lo + mLevel - slack, band.hi + mLevel + slack}
+                               : Interval{mLevel - band.hi - slack, mLevel - band.lo + slack};
+    bands->planeValues(plane, tile, raw, out, side);
+    if (!below)
+        for (std::size_t t = 0; t < tiles; ++t) side[t] = static_cast<signed char>(-side[t]);
+    applySideInPlace(mSide, out.first(plane.size()), mLevel);
+}
+
 Interval LevelSolid::bound(const Box3& box) const
 {
     requireSolved();

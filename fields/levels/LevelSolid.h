@@ -3,6 +3,7 @@
 #pragma once
 
 #include "fields/core/FieldNode.h"
+#include "fields/core/PlaneBands.h"
 #include "fields/core/SolidSide.h"
 
 namespace voxlat {
@@ -14,7 +15,7 @@ namespace voxlat {
 /// finds is made with unsolved() and given its level once, by solve(), before anything evaluates
 /// it: the order build -> solve -> evaluate is enforced (evaluating an unsolved solid, reading its
 /// level or solving it twice throws std::logic_error, a bug in the caller, never a user error).
-class LevelSolid final : public FieldNode {
+class LevelSolid final : public FieldNode, public PlaneBands {
 public:
     /// A solid at a known level, immutable from the start.
     LevelSolid(FieldPtr raw, SolidSide side, double level);
@@ -25,6 +26,10 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    /// The raw field's planeValues with the band moved by the level (a network or a level above;
+    /// a sheet and raw fields without them take gridValues, every tile 0).
+    void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                     std::span<signed char> side) const override;
     double period(int axis) const override { return mRaw->period(axis); }
 
     /// The level in the node's own units (c for a network, t for a sheet or a convolution).

@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <array>
+#include <span>
 #include <stdexcept>
+#include <vector>
 
 namespace voxlat {
 
@@ -58,19 +60,22 @@ void BooleanField::gradients(std::span<const Vec3d> points, std::span<double> ou
 
 void BooleanField::gridValues(const GridBatch& batch, std::span<double> out) const
 {
-    if (batch.size() > kBatchSize) {
-        FieldNode::gridValues(batch, out);
-        return;
-    }
-    mOperands[0]->gridValues(batch, out);
-    std::array<double, kBatchSize> buf;
+    // Up to a leaf on the stack, larger batches (a slicer's 66 x 66 block) on the heap: every
+    // operand keeps its grid path. Those went point by point until 2026-11 (a strut lattice's
+    // std::erf per point and strut in every trimmed or infilled lattice's slices: most of the
+    // drained bracket's 521 s). A buffer per call, not per thread: operands may be booleans too.
     const std::size_t n = batch.size();
+    std::array<double, kBatchSize> small;
+    std::vector<double> large;
+    if (n > kBatchSize) large.resize(n);
+    const std::span<double> buf = n > kBatchSize ? std::span<double>(large) : std::span<double>(small.data(), n);
+    mOperands[0]->gridValues(batch, out);
     // combine() without gradients, one loop per case (the same arithmetic, so the same values).
     const double sa = mOp == BooleanOp::Union ? 1.0 : -1.0;
     const double sb = mOp == BooleanOp::Intersection ? -1.0 : 1.0;
     const double k = mBlend;
     for (std::size_t o = 1; o < mOperands.size(); ++o) {
-        mOperands[o]->gridValues(batch, std::span<double>(buf.data(), n));
+        mOperands[o]->gridValues(batch, buf);
         if (k > 0.0) {
             for (std::size_t i = 0; i < n; ++i) {
                 const double x = sa * out[i], y = sb * buf[i];

@@ -1,7 +1,9 @@
 #include "fields/struts/IsoRadius.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
 #include <vector>
 
@@ -41,7 +43,9 @@ void IsoRadius::radii(std::span<double> values) const
         const std::size_t n = std::min(kChunk, values.size() - start);
         double* f = values.data() + start;
         for (std::size_t k = 0; k < n; ++k) u[k] = mPeak / (f[k] <= mFMin ? mPeak : f[k]);  // 1 where capped
-        for (std::size_t k = 0; k < n; ++k) u[k] = std::log(u[k]);
+        // log(1) = 0 exactly: capped values (F = 0 far from the struts, or left out by
+        // planeValues) take no call.
+        for (std::size_t k = 0; k < n; ++k) u[k] = u[k] == 1.0 ? 0.0 : std::log(u[k]);
         for (std::size_t k = 0; k < n; ++k) {
             const double rho = std::min(mRhoMax, std::copysign(mSigma * std::sqrt(2.0 * std::abs(u[k])), u[k]));
             f[k] = f[k] <= mFMin ? mRhoMax : rho;
@@ -71,6 +75,48 @@ void IsoRadius::gridValues(const GridBatch& batch, std::span<double> out) const
 {
     mF->gridValues(batch, out);
     radii(out.first(batch.size()));
+}
+
+void IsoRadius::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                            std::span<signed char> side) const
+{
+    const auto* bands = dynamic_cast<const PlaneBands*>(mF.get());
+    const std::size_t tiles = PlaneTiles::of(plane, tile).size();
+    if (!bands || !(band.lo <= band.hi) || !(band.hi < mRhoMax)) {
+        gridValues(plane, out);
+        std::fill(side.begin(), side.begin() + tiles, static_cast<signed char>(0));
+        return;
+    }
+    // rho > hi where F < F(hi + d), rho < lo where F > F(lo - d).
+    const double d = 1e-9 * (mSigma + std::abs(band.lo) + std::abs(band.hi));
+    bands->planeValues(plane, tile, Interval{valueOf(band.hi + d), valueOf(band.lo - d)}, out, side);
+    for (std::size_t t = 0; t < tiles; ++t) side[t] = static_cast<signed char>(-side[t]);
+    // Only the points the open tiles read are mapped (each open tile's points and its one-point
+    // halo: runs of tiles along each column); the others mean nothing and take rhoMax.
+    const PlaneTiles grid = PlaneTiles::of(plane, tile);
+    if (grid.nx == 0 || grid.ny > 64 || plane.ny < 2) {
+        radii(out.first(plane.size()));
+        return;
+    }
+    for (int i = 0; i < plane.nx; ++i) {
+        std::uint64_t open = 0;
+        for (int a = std::max(0, (i - 1) / tile - 1); a <= std::min(grid.nx - 1, i / tile); ++a)
+            if (i >= a * tile && i <= (a + 1) * tile + 1)
+                for (int b = 0; b < grid.ny; ++b) open |= std::uint64_t(side[std::size_t(a) * grid.ny + b] == 0) << b;
+        double* column = out.data() + std::size_t(i) * plane.ny;
+        int done = 0;  // points below this are mapped or filled
+        while (open != 0) {
+            const int b0 = std::countr_zero(open);
+            const std::uint64_t from = open >> b0;
+            const int b1 = b0 + (from == ~std::uint64_t(0) ? 64 : std::countr_zero(~from)) - 1;
+            open = b1 >= 63 ? 0 : open & ~((std::uint64_t(2) << b1) - 1);
+            const int lo = b0 * tile, hi = std::min(plane.ny - 1, (b1 + 1) * tile + 1);
+            std::fill(column + done, column + std::max(done, lo), mRhoMax);
+            if (hi >= std::max(done, lo)) radii(std::span<double>(column + std::max(done, lo), column + hi + 1));
+            done = std::max(done, hi + 1);
+        }
+        std::fill(column + done, column + plane.ny, mRhoMax);
+    }
 }
 
 Interval IsoRadius::bound(const Box3& box) const

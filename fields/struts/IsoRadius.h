@@ -13,10 +13,11 @@
 #pragma once
 
 #include "fields/core/FieldNode.h"
+#include "fields/core/PlaneBands.h"
 
 namespace voxlat {
 
-class IsoRadius final : public FieldNode {
+class IsoRadius final : public FieldNode, public PlaneBands {
 public:
     IsoRadius(FieldPtr convolution, double peak, double sigma, double rhoMax);
 
@@ -24,6 +25,10 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    /// The convolution's planeValues with the band mapped to F (rho is decreasing, so the sides
+    /// swap), widened by 1e-9 of sigma against rounding; gridValues when it has none.
+    void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                     std::span<signed char> side) const override;
 
     /// rho(F) (capped) and its inverse, F(rho) = P exp(-sign(rho) rho^2 / (2 sigma^2)).
     double radiusOf(double f) const;

@@ -3,6 +3,7 @@
 #include "fields/struts/StrutRows.h"
 
 #include <algorithm>
+#include <bit>
 #include <limits>
 #include <numbers>
 #include <stdexcept>
@@ -143,6 +144,59 @@ void capsuleRowRange(const Vec3d& D, double dz, const Vec3d& u, double length, d
     }
 }
 
+/// The part of the plane z = @a z within @a reach of the segment @a s lies within [xLo, xHi] x
+/// [yLo, yHi]: a point of the plane within reach of the segment is within reach of a segment point
+/// q with |q.z - z| < reach, so within reach in x and in y of that part of the segment. False when
+/// that part is empty (the segment stays farther than reach from the plane).
+bool planeSpan(const GaussianSegment& s, double reach, double z, double& xLo, double& xHi, double& yLo, double& yHi)
+{
+    const double dz = z - s.a.z();
+    double h0 = 0.0, h1 = s.length;
+    if (s.u.z() != 0.0) {
+        double t0 = (dz - reach) / s.u.z(), t1 = (dz + reach) / s.u.z();
+        if (t0 > t1) std::swap(t0, t1);
+        h0 = std::max(h0, t0);
+        h1 = std::min(h1, t1);
+        if (!(h0 <= h1)) return false;
+    } else if (!(std::abs(dz) < reach)) {
+        return false;
+    }
+    auto span = [&](int axis, double& lo, double& hi) {
+        const double e0 = s.a[axis] + h0 * s.u[axis], e1 = s.a[axis] + h1 * s.u[axis];
+        lo = std::min(e0, e1) - reach;
+        hi = std::max(e0, e1) + reach;
+    };
+    span(0, xLo, xHi);
+    span(1, yLo, yHi);
+    return true;
+}
+
+/// The reach of a cut-off radius @a rc for planeSpan: a margin of 1e-6 rc, far above any
+/// rounding, so every point left out by it fails the exact cut-off test.
+double cutoffReach(double rc)
+{
+    return rc * (1.0 + 1e-6) + 1e-12;
+}
+
+/// The columns (x index i) of a plane batch (nz = 1) that may hold points within @a rc of the
+/// segment @a s (planeSpan); false when none may.
+bool planeColumns(const GaussianSegment& s, double rc, const GridBatch& batch, int& iFirst, int& iLast)
+{
+    double xLo, xHi, yLo, yHi;
+    if (!planeSpan(s, cutoffReach(rc), batch.origin.z(), xLo, xHi, yLo, yHi)) return false;
+    const double by0 = batch.origin.y(), by1 = batch.origin.y() + (batch.ny - 1) * batch.spacing.y();
+    if (yHi < std::min(by0, by1) || yLo > std::max(by0, by1)) return false;
+    const double ox = batch.origin.x(), dx = batch.spacing.x();
+    if (!(dx > 0.0)) {
+        iFirst = 0;
+        iLast = batch.nx - 1;
+        return ox >= xLo && ox <= xHi;
+    }
+    iFirst = int(std::clamp(std::ceil((xLo - ox) / dx), 0.0, double(batch.nx)));
+    iLast = int(std::clamp(std::floor((xHi - ox) / dx), -1.0, double(batch.nx - 1)));
+    return iFirst <= iLast;
+}
+
 /// The cubic Taylor polynomial of J(h) = w0 I0(h) + k I1(h) (GaussianSegment) about @a h:
 /// c = {J, J', J'' / 2, J''' / 6}. With e0 = g(h), eL = g(L - h), g(t) = exp(-t^2 / 2 sigma^2):
 /// I0' = e0 - eL, I1' = I0 - L eL, e0' = -h / sigma^2 e0, eL' = (L - h) / sigma^2 eL,
@@ -194,9 +248,15 @@ void rowGaussians(double r0, double b, double c, double inv2s2, double q, double
 
 void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out) const
 {
-    constexpr int kShortRow = 16;  // the longest rows counted as a pixel's sub-samples
     thread_local std::vector<std::uint32_t> cand;
     mIndex.gather(batch.bounds(), cand);
+    evaluate(batch, out, cand, nullptr, 0);
+}
+
+void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, const std::vector<std::uint32_t>& cand,
+                                const std::uint64_t* columnTiles, int tile) const
+{
+    constexpr int kShortRow = 16;  // the longest rows counted as a pixel's sub-samples
     std::fill(out.begin(), out.begin() + batch.size(), 0.0);
     // Rows run along z (k, the fastest index). A plane of points (nz = 1, a slicer's layer) has
     // rows of one point, where the row machinery below costs more than the point: there the rows
@@ -234,6 +294,12 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
     for (const std::uint32_t j : cand) {
         const GaussianSegment& s = mSegments[j];
         const double rc2 = mCutoffSqr[j];
+        // A plane batch (a slicer's layer) sees a strut only near where it crosses the plane:
+        // the columns beyond its reach there are left out before their rows' ranges are sought
+        // (the gather's bins hold every strut whose box meets the batch's, most of them not
+        // within reach of the plane). Their points would all fail the cut-off test: the same sums.
+        int iFirst = 0, iLast = nx - 1;
+        if (batch.nz == 1 && !planeColumns(s, std::sqrt(rc2), batch, iFirst, iLast)) continue;
         const double sigma = s.sigma, invSigma = 1.0 / sigma, inv2s2 = 0.5 / (sigma * sigma);
         const double length = s.length, w0 = s.w0, slope = s.slope, s2 = sigma * sigma;
         const Vec3d sa = seen(s.a), u = seen(s.u);
@@ -261,6 +327,10 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
         rows.resize(std::size_t(nx) * ny);
         for (int i = 0; i < nx; ++i) {
             const double px = d0.x() + i * dx;
+            if (i < iFirst || i > iLast || (columnTiles && columnTiles[i] == 0)) {
+                for (int jj = 0; jj < ny; ++jj) rows[std::size_t(i) * ny + jj] = RowRange{1, 0, 0, 0.0};
+                continue;
+            }
             for (int jj = 0; jj < ny; ++jj) {
                 const double py = d0.y() + jj * dy;
                 RowRange& r = rows[std::size_t(i) * ny + jj];
@@ -368,6 +438,15 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                 const RowRange& range = rows[std::size_t(i) * ny + jj];
                 const int kLo = range.kLo, kHi = range.kHi;
                 if (kLo > kHi) continue;
+                // A plane's needed points (planeValues): the runs of tiles its column needs, each
+                // with its one-point halo; rows that meet none take no Gaussians.
+                std::uint64_t needed = columnTiles ? columnTiles[i] : 0;
+                if (columnTiles) {
+                    const int bLo = std::max(0, (kLo - 2) / tile), bHi = std::min(63, kHi / tile);
+                    const std::uint64_t reach = (bHi == 63 ? ~std::uint64_t(0) : (std::uint64_t(1) << (bHi + 1)) - 1) &
+                                                ~((std::uint64_t(1) << bLo) - 1);
+                    if ((needed & reach) == 0) continue;
+                }
                 const double py = d0.y() + jj * dy;
                 const double hRow = px * u.x() + py * u.y() + d0.z() * u.z();
                 const double qRow = px * px + py * py;
@@ -390,28 +469,121 @@ void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out)
                         gauss[k] = std::exp(-r2 * inv2s2);
                     }
                 }
-                if (taylor) {
-                    if (avx2)
-                        addStrutRowTaylorAvx2(constants, row, coefficients, hc, g, out.data() + n);
-                    else
-                        addStrutRowTaylorScalar(constants, row, coefficients, hc, g, out.data() + n);
-                } else if (tabled) {
+                double tw[4] = {0.0, 0.0, 0.0, 0.0};
+                if (tabled) {
                     const double t = range.tau, t2 = t * t, t3 = t2 * t;
-                    const StrutRowTable table{
-                        nodeValue.data(), nodeSlope.data(), range.n0 - nodeLo, 2 * t3 - 3 * t2 + 1, t3 - 2 * t2 + t,
-                        -2 * t3 + 3 * t2, t3 - t2};
-                    if (avx2)
-                        addStrutRowTabledAvx2(constants, row, table, g, out.data() + n);
-                    else
-                        addStrutRowTabledScalar(constants, row, table, g, out.data() + n);
-                } else if (avx2) {
-                    addStrutRowAvx2(constants, row, g, out.data() + n);
-                } else {
-                    addStrutRowScalar(constants, row, g, out.data() + n);
+                    tw[0] = 2 * t3 - 3 * t2 + 1;
+                    tw[1] = t3 - 2 * t2 + t;
+                    tw[2] = -2 * t3 + 3 * t2;
+                    tw[3] = t3 - t2;
+                }
+                // The points k = part.kLo..part.kHi of the row: each point's sum does not depend on
+                // which others are made.
+                auto add = [&](const StrutRow& part) {
+                    if (taylor) {
+                        if (avx2)
+                            addStrutRowTaylorAvx2(constants, part, coefficients, hc, g, out.data() + n);
+                        else
+                            addStrutRowTaylorScalar(constants, part, coefficients, hc, g, out.data() + n);
+                    } else if (tabled) {
+                        const StrutRowTable table{
+                            nodeValue.data(), nodeSlope.data(), range.n0 - nodeLo, tw[0], tw[1], tw[2], tw[3]};
+                        if (avx2)
+                            addStrutRowTabledAvx2(constants, part, table, g, out.data() + n);
+                        else
+                            addStrutRowTabledScalar(constants, part, table, g, out.data() + n);
+                    } else if (avx2) {
+                        addStrutRowAvx2(constants, part, g, out.data() + n);
+                    } else {
+                        addStrutRowScalar(constants, part, g, out.data() + n);
+                    }
+                };
+                if (!columnTiles) {
+                    add(row);
+                    continue;
+                }
+                // Runs of needed tiles b0..b1: points b0 tile .. (b1 + 1) tile + 1.
+                while (needed != 0) {
+                    const int b0 = std::countr_zero(needed);
+                    const std::uint64_t from = needed >> b0;
+                    const int b1 = b0 + (from == ~std::uint64_t(0) ? 64 : std::countr_zero(~from)) - 1;
+                    needed = b1 >= 63 ? 0 : needed & ~((std::uint64_t(2) << b1) - 1);
+                    StrutRow part = row;
+                    part.kLo = std::max(kLo, b0 * tile);
+                    part.kHi = std::min(kHi, (b1 + 1) * tile + 1);
+                    if (part.kLo <= part.kHi) add(part);
                 }
             }
         }
     }
+}
+
+void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                                   std::span<signed char> side) const
+{
+    const PlaneTiles tiles = PlaneTiles::of(plane, tile);
+    const bool seenAlongY = plane.ny > 1;  // evaluate() runs a plane's rows along y
+    if (tiles.nx == 0 || tiles.ny > 64 || !seenAlongY || !(plane.spacing.x() > 0.0) || !(plane.spacing.y() > 0.0)) {
+        gridValues(plane, out);
+        std::fill(side.begin(), side.begin() + tiles.size(), static_cast<signed char>(0));
+        return;
+    }
+    thread_local std::vector<std::uint32_t> cand;
+    thread_local std::vector<double> upper, peaks;
+    thread_local std::vector<std::uint64_t> columnTiles;
+    mIndex.gather(plane.bounds(), cand);
+    upper.assign(tiles.size(), 0.0);
+    peaks.assign(tiles.size(), 0.0);
+    // Tile (a, b)'s footprint: its points' cells, tile spacings wide, centred at cx0 + a tile dx.
+    const double dx = plane.spacing.x(), dy = plane.spacing.y(), z = plane.origin.z();
+    const double stepX = tile * dx, stepY = tile * dy;
+    const double cx0 = plane.origin.x() + (0.5 + 0.5 * tile) * dx, cy0 = plane.origin.y() + (0.5 + 0.5 * tile) * dy;
+    const double halfX = 0.5 * stepX, halfY = 0.5 * stepY, halfDiagonal = std::sqrt(halfX * halfX + halfY * halfY);
+    // Per strut and tile of its reach, its peak times the kernel at the least distance from the
+    // footprint, at least the centre's distance less the half diagonal. (The distance to the
+    // footprint itself, segmentBoxDistance, for the tiles this leaves open proved 13 % more of the
+    // window outside but cost more than it saved: 16.0 s against 12.8 s of CPU on W10's 4 layers.)
+    // The sums made by evaluate() stay within 2.5e-5 of the peaks counted of the exact field's.
+    for (const std::uint32_t j : cand) {
+        const GaussianSegment& s = mSegments[j];
+        const double rc = std::sqrt(mCutoffSqr[j]);
+        double xLo, xHi, yLo, yHi;
+        if (!planeSpan(s, cutoffReach(rc), z, xLo, xHi, yLo, yHi)) continue;
+        const int a0 = int(std::clamp(std::ceil((xLo - halfX - cx0) / stepX), 0.0, double(tiles.nx)));
+        const int a1 = int(std::clamp(std::floor((xHi + halfX - cx0) / stepX), -1.0, double(tiles.nx - 1)));
+        const int b0 = int(std::clamp(std::ceil((yLo - halfY - cy0) / stepY), 0.0, double(tiles.ny)));
+        const int b1 = int(std::clamp(std::floor((yHi + halfY - cy0) / stepY), -1.0, double(tiles.ny - 1)));
+        const double inv2s2 = 0.5 / (s.sigma * s.sigma), margin = 1e-9 * rc;
+        for (int a = a0; a <= a1; ++a)
+            for (int b = b0; b <= b1; ++b) {
+                const Vec3d centre(cx0 + a * stepX, cy0 + b * stepY, z);
+                // Every point of the footprint lies at least this far from the segment.
+                const double d = std::sqrt(pointSegmentDistanceSqr(centre, s.a, mEnd[j])) - halfDiagonal - margin;
+                if (d >= rc) continue;  // beyond the cut-off everywhere: nothing added there
+                const std::size_t t = std::size_t(a) * tiles.ny + b;
+                const double near = std::max(0.0, d);
+                upper[t] += mPeak[j] * std::exp(-near * near * inv2s2);
+                peaks[t] += mPeak[j];
+            }
+    }
+    columnTiles.assign(std::size_t(plane.nx), 0);
+    bool any = false;
+    for (int a = 0; a < tiles.nx; ++a) {
+        std::uint64_t open = 0;
+        for (int b = 0; b < tiles.ny; ++b) {
+            const std::size_t t = std::size_t(a) * tiles.ny + b;
+            side[t] = static_cast<signed char>(upper[t] * (1.0 + 1e-12) + 2.5e-5 * peaks[t] < band.lo ? -1 : 0);
+            if (side[t] == 0) open |= std::uint64_t(1) << b;
+        }
+        // Tile column a's points and their halo: columns a tile .. (a + 1) tile + 1.
+        for (int i = a * tile; i <= (a + 1) * tile + 1; ++i) columnTiles[i] |= open;
+        any = any || open != 0;
+    }
+    if (!any) {
+        std::fill(out.begin(), out.begin() + plane.size(), 0.0);
+        return;
+    }
+    evaluate(plane, out, cand, columnTiles.data(), tile);
 }
 
 Interval StrutConvolution::bound(const Box3& box) const

@@ -10,6 +10,7 @@
 #include <tmmintrin.h>
 #endif
 
+#include "fields/core/PlaneBands.h"
 #include "mesher/slice/SliceTiles.h"
 #include "mesher/slice/SliceTilesAvx2.h"
 
@@ -350,7 +351,10 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     const double px = mDisplay.pitchX(), py = mDisplay.pitchY();
     const int tile = std::max(2, mOptions.tile), block = 8 * tile;
     std::vector<double> values, sub;
-    std::vector<float> single, cells;  // the values in single precision and their cells, for the tile tests
+    std::vector<float> single, cells;    // the values in single precision and their cells, for the tile tests
+    std::vector<signed char> tileSides;  // a block's tiles the field decided (PlaneBands)
+    // Cast once per layer, not per block: a cross-cast costs about what a small block's values do.
+    const auto* bands = mOptions.planeBands ? dynamic_cast<const PlaneBands*>(&mField) : nullptr;
     RasterCounts counts;
     int quartersTried = 0, quartersCulled = 0, blocksStraddling = 0, blocksSkipped = 0;
     const bool greyEdges = mOptions.supersample > 0 && mOptions.gamma == 1.0;
@@ -409,8 +413,23 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         grid.ny = bny + 2;
         grid.nz = 1;
         values.resize(grid.size());
-        mField.gridValues(grid, values);
-        counts.pixelsEvaluated += std::uint64_t(bnx) * bny;
+        // A block of whole tiles within the part's box asks the field for its values where they
+        // can matter (PlaneBands: a strut lattice proves the tiles far from its struts outside and
+        // leaves them out); the tiles it decides are filled as a culled block's, the others take
+        // the passes below with the same values as gridValues'.
+        const int ntx = bnx / tile, nty = bny / tile;
+        bool banded = bands && tile == kLanes && bnx % tile == 0 && bny % tile == 0;
+        for (int a = 0; banded && a < ntx; ++a) banded = mTileColumnsIn[bi + a * tile] != 0;
+        for (int b = 0; banded && b < nty; ++b) banded = mTileRowsIn[bj + b * tile] != 0;
+        int decidedTiles = 0;
+        if (banded) {
+            tileSides.resize(std::size_t(ntx) * nty);
+            bands->planeValues(grid, tile, Interval{0.0, 0.0}, values, tileSides);
+            for (const signed char side : tileSides) decidedTiles += side != 0;
+        } else {
+            mField.gridValues(grid, values);
+        }
+        counts.pixelsEvaluated += std::uint64_t(bnx) * bny - std::uint64_t(decidedTiles) * tile * tile;
         // Single precision and the largest difference between the four corners of each grid cell
         // (both axes and both diagonals), for the tile passes.
         const int cy = grid.ny - 1;
@@ -418,6 +437,8 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         cells.resize(std::size_t(grid.nx - 1) * cy);
         float blockCell = 0.0f;
         const bool finite = prepareBlock(values.data(), grid.nx, grid.ny, single.data(), cells.data(), blockCell);
+        // Values left out (decided tiles) mean nothing: each tile's own cells decide.
+        if (decidedTiles > 0) blockCell = std::numeric_limits<float>::infinity();
         // Whole 8 x 8 tiles within the part's box go straight to the tile pass; edgeTile (which
         // repeats it) only takes the others and those with pixels to sub-sample. The same tests
         // as edgeTile's, per row and column of the window (made by the constructor).
@@ -425,6 +446,14 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         for (int tj = bj; tj < bj + bny; tj += tile)
             for (int ti = bi; ti < bi + bnx; ti += tile) {
                 const int tnx = std::min(tile, bi + bnx - ti), tny = std::min(tile, bj + bny - tj);
+                if (decidedTiles > 0) {
+                    const int side = tileSides[std::size_t((ti - bi) / tile) * nty + (tj - bj) / tile];
+                    if (side != 0) {
+                        fill(ti, tj, tnx, tny, side < 0 ? 255 : 0);
+                        ++(side < 0 ? counts.tilesInside : counts.tilesOutside);
+                        continue;
+                    }
+                }
                 const std::size_t at = std::size_t(ti - bi) * grid.ny + (tj - bj);
                 const std::size_t cellAt = std::size_t(ti - bi) * cy + (tj - bj);
                 const bool whole =

@@ -16,7 +16,9 @@
 /// (gamma 0: a threshold at coverage 1/2, as PrusaSlicer's gamma_correction).
 ///
 /// Cost: blocks of 64 x 64 pixels (and their 32 x 32 quarters, while that culls anything) are
-/// culled by bound(); the rest is evaluated as one grid batch per block, and each whole 8 x 8 tile
+/// culled by bound(); the rest is evaluated as one grid batch per block (a block of whole tiles
+/// within the part's box through PlaneBands where the field has it: the tiles it proves on one
+/// side are filled, only the others and their halo evaluated), and each whole 8 x 8 tile
 /// is decided by four- or eight-lane single-precision passes (the whole tile at once where it is
 /// surely on one side, first against the block's largest cell difference, lane by lane, then its
 /// own; else per pixel: sure, far from the linearised edge, or its coverage, computed for the
@@ -68,6 +70,11 @@ struct RasterOptions {
     /// decided; 0 bounds every block (to compare: a block left unbounded is evaluated, and its
     /// pixels are decided from the values as those of every straddling block are).
     int straddlingRun = 256;
+    /// A block of whole tiles within the part's box takes its values from the field's
+    /// PlaneBands::planeValues where it has them (a strut lattice proves the tiles far from its
+    /// struts outside and leaves their values out); off: gridValues for every pixel (to compare:
+    /// the bytes are the same where the proven tiles' pixels would have been 0 anyway).
+    bool planeBands = true;
     /// Called once per row of 64 x 64 blocks while a layer is made (none: never); it throws to
     /// stop the layer (a job's cancel check), so a layer of a large plate stops promptly.
     std::function<void()> interrupt;
