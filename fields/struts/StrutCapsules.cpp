@@ -70,7 +70,14 @@ double StrutCapsules::pointValue(const Vec3d& p, const std::vector<std::uint32_t
     Vec3d gAcc(0.0);
     for (const std::uint32_t j : cand) {
         const CapsuleStrut& s = mStruts[j];
-        if (pointSegmentDistanceSqr(p, s.a, s.b) >= mReachSqr[j]) continue;
+        const double segment2 = pointSegmentDistanceSqr(p, s.a, s.b);
+        if (segment2 >= mReachSqr[j]) continue;
+        // A hard union's value needs no strut that cannot come below it: a round cone lies in
+        // the capsule of its larger radius, so its distance is at least the segment's minus that
+        // radius. Skipped only past a margin far above the rounding of either distance (1e-9 mm),
+        // so the minimum is the one every strut's own distance gives, to the bit.
+        if (mBlend == 0.0 && !grad && std::sqrt(segment2) - mRMax[j] > acc + 1e-9 * (1.0 + std::abs(acc) + mRMax[j]))
+            continue;
         Vec3d g;
         const double d = roundConeDistance(p, s, grad ? &g : nullptr);
         if (mBlend > 0.0) {
