@@ -2167,6 +2167,9 @@ bool Job::unitCellProperties(const RepeatZone& zone)
     JobContext quiet;
     followCancel(quiet, mContext);
     mContext->checkCancelled();
+    // Only its properties are asked of it, and its cell solves its own level on its voxel model
+    // when the lattice has a density: its density box is solved coarse (CellLevelTrial).
+    const CellLevelTrial trial;
     Job job(std::move(repeated), &quiet);
     nlohmann::json report = timed("homogenize", [&] { return job.properties(); });
     report["cell"]["from"] = "the frame's cell, repeated (the infinite lattice of that cell)";
