@@ -679,9 +679,8 @@ void Job::evaluateRecipeGrid(bool keep)
             std::vector<SolidBlock>().swap(part);
         }
         mContext->checkCancelled();
-        std::vector<SolidBlock> blocks = solidBlocks(*g, std::move(leaves), [&] { mContext->checkCancelled(); });
-        mContext->checkCancelled();
-        checkPieces(blocks);
+        // solidBlocks checks the cancel to its last step (after its sort), checkPieces from its first.
+        checkPieces(solidBlocks(*g, std::move(leaves), [&] { mContext->checkCancelled(); }));
     }
     if (!mBuilder.gradedNodes().empty())
         timed("measure slabs", [&] {
