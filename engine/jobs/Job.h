@@ -144,12 +144,15 @@ private:
         std::string region;
     };
     std::optional<MeshShareMeasure> meshShareOf(const LevelNode& node, double meshVolume);
-    /// Before the first mesh (a raw marching-cubes one, the default) is made: the one solved
-    /// lattice's share as that mesh will hold it, measured from the recipe's grid at the solved
-    /// level (marchingCubesVolume()); more than kMeshAimTolerance off its target, its level is
-    /// moved by the solve's slope so the mesh holds the target, and the grid is evaluated again
-    /// (`mesh_aim` in report.json). Else the grid is kept for the outputs. Once.
-    void aimLevelsAtMesh();
+    /// Before the first mesh (made with @a options) is made: the one solved lattice's share as
+    /// that mesh will hold it, measured from the recipe's grid at the solved level: a raw
+    /// marching-cubes mesh's (marchingCubesVolume()); a projected one's as that mesh's with its
+    /// vertices moved onto the surface (projectedVolume(), sampled on large grids); a BCC one's
+    /// from the BCC mesh of the grid. More than kMeshAimTolerance off its target, the level is
+    /// moved by the solve's slope (the finished mesh's offset from marching cubes' kept) so the
+    /// mesh holds the target, and the grid is evaluated again (`mesh_aim` in report.json). Else
+    /// the grid is kept for the outputs. Once.
+    void aimLevelsAtMesh(const MeshOptions& options);
     /// The recipe's grid as evaluateRecipeGrid() evaluates it (clipped to the domain), with the
     /// evaluator's counts in @a stats; @a leafVisitor, when set, takes each leaf instead of the grid.
     openvdb::FloatGrid::Ptr evaluateResult(SparseStats& stats,

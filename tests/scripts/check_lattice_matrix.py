@@ -48,6 +48,7 @@ MAP_GUARD = 0.03
 REPORT_AGREEMENT = 0.005
 failures = []
 failed_runs_all = set()
+COUNTS = {"density_runs": 0}  # the kind x placement runs, each solved for TARGET
 
 
 def check(condition, message):
@@ -140,6 +141,18 @@ SLICED = {"tpms-network", "tpms-sheet", "expr"}
 BOX_EDGE = {"struts-capsule": 10, "points": 10}
 
 
+# Meshes made otherwise than raw marching cubes, each aimed at its own share (`mesh_aim`'s
+# finished mesh): vertices projected onto the surface, a tolerance (projected, refined), the BCC
+# extractor. Run for the placements where they differ most: a smooth result cut by the box, an
+# infill's creases, a strut lattice trimmed by a part.
+MESH_VARIANTS = {
+    ("tpms-network", "box"): ["project: on", "tolerance: 0.05", "extractor: bcc"],
+    ("tpms-network", "infill-skin"): ["project: on", "tolerance: 0.05"],
+    ("struts-gaussian", "box"): ["project: on", "extractor: bcc"],
+    ("struts-capsule", "within"): ["project: on"],
+}
+
+
 # The other ways of sizing a lattice, the other frames, and the properties output: each run is
 # (name, fields and result, outputs, what to check). Box domains of 12 mm keep them quick.
 BOX12 = "domain: {box: [[0, 0, 0], [12, 12, 12]]}"
@@ -223,6 +236,85 @@ def run(voxlat, text, folder, name):
     return p, out, path, time.time() - start
 
 
+def check_run(voxlat, folder, kind, family, placement, variant, only, mesh_path, part_volume, skin_volume,
+              over_target):
+    """One kind x placement run, its mesh made with the `variant` keys (none: raw marching cubes),
+    checked; returns the number of runs made (0 or 1)."""
+    name = "%s-%s" % (kind, placement) + ("-" + variant.split(":")[0] if variant else "")
+    if only and only not in name:
+        return 0
+    outputs = ["mesh: " + ("{file: m.stl, %s}" % variant if variant else "m.stl")]
+    if placement == "box" and family == "struts":
+        outputs.append("frame: m.csv")
+    # Slices where the slicer is quick (a point or capsule field costs a minute a part
+    # here); every kind's drained mesh and its trap search are checked all the same.
+    sliced = placement == "infill-drain" and kind in SLICED
+    if sliced:
+        outputs.append("slices: {printer: sl1s, layer: 1.0, file: m.sl1s}")
+    text, region = recipe(kind, placement, outputs, mesh_path)
+    p, out, path, seconds = run(voxlat, text, folder, name)
+    print("%-32s exit %d  %.1f s" % (name, p.returncode, seconds), flush=True)
+    if not check(p.returncode == 0, "%s: exit %d: %s" % (name, p.returncode, p.stderr.strip()[-400:])):
+        return 1
+    report = json.load(open(os.path.join(out, "report.json")))
+    expected = {"report.json", "report.html", "m.stl", "m.stl.preview.png"}
+    if "frame: m.csv" in outputs:
+        expected.add("m.csv")
+    if sliced:
+        expected |= {"m.sl1s", "m.sl1s.preview.png"}
+    check(set(os.listdir(out)) == expected,
+          "%s: --out holds %s, expected %s" % (name, sorted(os.listdir(out)), sorted(expected)))
+    closed, volume, triangles = mesh_facts(os.path.join(out, "m.stl"))
+    check(closed, "%s: the mesh is not closed and manifold" % name)
+    if region == "box":
+        # Over the domain as meshed (snapped to whole voxels: 19.95 mm at 0.15 mm).
+        extent = np.array(report["domain"]["max"]) - np.array(report["domain"]["min"])
+        measured = volume / float(np.prod(extent))
+    elif region == "part":
+        measured = volume / part_volume
+    else:
+        measured = (volume - skin_volume) / (part_volume - skin_volume)
+    error = abs(measured / TARGET - 1)
+    COUNTS["density_runs"] += 1
+    if error > TARGET_TOLERANCE:
+        over_target.append("%s %.4f" % (name, measured))
+    check(error <= KNOWN_MISSES.get(name, GUARD),
+          "%s: density measured from the mesh over the %s is %.4f, target %.2f" %
+          (name, region, measured, TARGET))
+    fields = report["fields"]
+    solved = [f for f in fields.values() if "target_density" in f]
+    check(len(solved) == 1 and "density_measured_on" in solved[0],
+          "%s: report.json does not say where the density is measured" % name)
+    print("    density %.4f over the %s (%s), %d triangles" %
+          (measured, region, solved[0].get("density_measured_on", "?") if solved else "?", triangles))
+    # The job reads the same share back from its mesh (`density_from_mesh`, its skin as
+    # the part less the core's voxels): it agrees with this independent measure, and a
+    # run off its target by more than 1 % is not silent.
+    from_mesh = solved[0].get("density_from_mesh") if len(solved) == 1 else None
+    if check(from_mesh is not None, "%s: report.json has no density_from_mesh" % name):
+        check(abs(from_mesh / measured - 1) <= REPORT_AGREEMENT,
+              "%s: report.json's density_from_mesh %.4f, measured here %.4f" % (name, from_mesh, measured))
+        warned = any(w.get("code") == "density_from_mesh" for w in report.get("warnings", []))
+        check(warned == (abs(from_mesh / TARGET - 1) > TARGET_TOLERANCE),
+              "%s: density_from_mesh %.4f, the warning %s" %
+              (name, from_mesh, "given" if warned else "missing"))
+    if "frame: m.csv" in outputs:
+        rows = np.loadtxt(os.path.join(out, "m.csv"), delimiter=",", skiprows=1, ndmin=2)
+        ends = rows[:, :6].reshape(-1, 3)
+        check(len(rows) > 0 and ends.min() >= -1e-6 and ends.max() <= BOX_EDGE.get(kind, 20) + 1e-6,
+              "%s: the frame export has struts outside the domain box" % name)
+    if placement == "infill-drain":
+        drain = report.get("drain", {}).get("filled", {})
+        check(len(drain.get("holes", [])) >= 1 and drain.get("traps_left") == 0,
+              "%s: drain: %s" % (name, json.dumps(drain)[:300]))
+    if sliced:
+        printability = report["slices"][0].get("printability", {})
+        check(printability.get("resin_traps_above_crumb", 1) == 0,
+              "%s: the slices still hold resin traps: %s" %
+              (name, json.dumps(printability.get("resin_traps", []))[:300]))
+    return 1
+
+
 def main():
     voxlat, source = sys.argv[1], sys.argv[2]
     only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv else ""
@@ -240,7 +332,6 @@ def main():
     part_closed, part_volume, _ = mesh_facts(mesh_path)
     check(part_closed, "bracket.stl is not closed")
     runs = 0
-    density_runs = 0  # the kind x placement runs, each solved for TARGET
     over_target = []
     start = time.time()
     with tempfile.TemporaryDirectory() as folder:
@@ -252,83 +343,13 @@ def main():
         _, skin_volume, _ = mesh_facts(os.path.join(out, "s.stl"))
         for kind, (node, family) in KINDS.items():
             for placement in ("box", "within", "infill", "infill-skin", "infill-drain"):
-                name = "%s-%s" % (kind, placement)
                 if placement == "within" and family != "struts":
                     continue  # `within:` is a strut frame's key; other lattices fill a part as an infill
                 if placement not in PLACED_ONLY.get(kind, (placement,)):
                     continue
-                if only and only not in name:
-                    continue
-                outputs = ["mesh: m.stl"]
-                if placement == "box" and family == "struts":
-                    outputs.append("frame: m.csv")
-                # Slices where the slicer is quick (a point or capsule field costs a minute a part
-                # here); every kind's drained mesh and its trap search are checked all the same.
-                sliced = placement == "infill-drain" and kind in SLICED
-                if sliced:
-                    outputs.append("slices: {printer: sl1s, layer: 1.0, file: m.sl1s}")
-                text, region = recipe(kind, placement, outputs, mesh_path)
-                p, out, path, seconds = run(voxlat, text, folder, name)
-                runs += 1
-                print("%-32s exit %d  %.1f s" % (name, p.returncode, seconds), flush=True)
-                if not check(p.returncode == 0, "%s: exit %d: %s" % (name, p.returncode, p.stderr.strip()[-400:])):
-                    continue
-                report = json.load(open(os.path.join(out, "report.json")))
-                expected = {"report.json", "report.html", "m.stl", "m.stl.preview.png"}
-                if "frame: m.csv" in outputs:
-                    expected.add("m.csv")
-                if sliced:
-                    expected |= {"m.sl1s", "m.sl1s.preview.png"}
-                check(set(os.listdir(out)) == expected,
-                      "%s: --out holds %s, expected %s" % (name, sorted(os.listdir(out)), sorted(expected)))
-                closed, volume, triangles = mesh_facts(os.path.join(out, "m.stl"))
-                check(closed, "%s: the mesh is not closed and manifold" % name)
-                if region == "box":
-                    # Over the domain as meshed (snapped to whole voxels: 19.95 mm at 0.15 mm).
-                    extent = np.array(report["domain"]["max"]) - np.array(report["domain"]["min"])
-                    measured = volume / float(np.prod(extent))
-                elif region == "part":
-                    measured = volume / part_volume
-                else:
-                    measured = (volume - skin_volume) / (part_volume - skin_volume)
-                error = abs(measured / TARGET - 1)
-                density_runs += 1
-                if error > TARGET_TOLERANCE:
-                    over_target.append("%s %.4f" % (name, measured))
-                check(error <= KNOWN_MISSES.get(name, GUARD),
-                      "%s: density measured from the mesh over the %s is %.4f, target %.2f" %
-                      (name, region, measured, TARGET))
-                fields = report["fields"]
-                solved = [f for f in fields.values() if "target_density" in f]
-                check(len(solved) == 1 and "density_measured_on" in solved[0],
-                      "%s: report.json does not say where the density is measured" % name)
-                print("    density %.4f over the %s (%s), %d triangles" %
-                      (measured, region, solved[0].get("density_measured_on", "?") if solved else "?", triangles))
-                # The job reads the same share back from its mesh (`density_from_mesh`, its skin as
-                # the part less the core's voxels): it agrees with this independent measure, and a
-                # run off its target by more than 1 % is not silent.
-                from_mesh = solved[0].get("density_from_mesh") if len(solved) == 1 else None
-                if check(from_mesh is not None, "%s: report.json has no density_from_mesh" % name):
-                    check(abs(from_mesh / measured - 1) <= REPORT_AGREEMENT,
-                          "%s: report.json's density_from_mesh %.4f, measured here %.4f" % (name, from_mesh, measured))
-                    warned = any(w.get("code") == "density_from_mesh" for w in report.get("warnings", []))
-                    check(warned == (abs(from_mesh / TARGET - 1) > TARGET_TOLERANCE),
-                          "%s: density_from_mesh %.4f, the warning %s" %
-                          (name, from_mesh, "given" if warned else "missing"))
-                if "frame: m.csv" in outputs:
-                    rows = np.loadtxt(os.path.join(out, "m.csv"), delimiter=",", skiprows=1, ndmin=2)
-                    ends = rows[:, :6].reshape(-1, 3)
-                    check(len(rows) > 0 and ends.min() >= -1e-6 and ends.max() <= BOX_EDGE.get(kind, 20) + 1e-6,
-                          "%s: the frame export has struts outside the domain box" % name)
-                if placement == "infill-drain":
-                    drain = report.get("drain", {}).get("filled", {})
-                    check(len(drain.get("holes", [])) >= 1 and drain.get("traps_left") == 0,
-                          "%s: drain: %s" % (name, json.dumps(drain)[:300]))
-                if sliced:
-                    printability = report["slices"][0].get("printability", {})
-                    check(printability.get("resin_traps_above_crumb", 1) == 0,
-                          "%s: the slices still hold resin traps: %s" %
-                          (name, json.dumps(printability.get("resin_traps", []))[:300]))
+                for variant in [""] + MESH_VARIANTS.get((kind, placement), []):
+                    runs += check_run(voxlat, folder, kind, family, placement, variant, only, mesh_path,
+                                      part_volume, skin_volume, over_target)
         for name, body, outputs, checks in EXTRA_RUNS:
             if only and only not in name:
                 continue
@@ -377,7 +398,7 @@ def main():
                       "%s: the properties JSON has no stiffness: %s" % (name, text[:200]))
     print("%d runs in %.0f s" % (runs, time.time() - start))
     print("density within %g %% of the target (from the mesh): %d of %d runs; over: %s" %
-          (100 * TARGET_TOLERANCE, density_runs - len(over_target), density_runs, ", ".join(over_target) or "none"))
+          (100 * TARGET_TOLERANCE, COUNTS["density_runs"] - len(over_target), COUNTS["density_runs"], ", ".join(over_target) or "none"))
     if failures:
         print("%d failed:" % len(failures))
         for f in failures:
