@@ -489,14 +489,34 @@ TEST(RealJobs, TheLevelIsAimedAtTheMeshSoTheMeshHoldsTheDensity)
         const auto& f = finished["fields"]["g"];
         ASSERT_TRUE(f.contains("mesh_aim")) << mesh << f.dump(1);
         const auto& aim = f["mesh_aim"];
-        EXPECT_EQ(aim["measure"].get<std::string>().find("marching-cubes mesh of the recipe's grid"),
-                  std::string::npos)
+        EXPECT_EQ(aim["measure"].get<std::string>().find("marching-cubes mesh of the recipe's grid"), std::string::npos)
             << mesh << aim.dump(1);
         EXPECT_TRUE(aim["moved"].get<bool>()) << mesh << aim.dump(1);
         EXPECT_NEAR(f["density_from_mesh"].get<double>(), share, 1e-6) << mesh;
         EXPECT_NEAR(share, 0.3, 0.01 * 0.3) << mesh << aim.dump(1);
         for (const auto& w : finished.value("warnings", nlohmann::json::array()))
             EXPECT_NE(w["code"], "density_from_mesh") << mesh << w.dump();
+    }
+}
+
+TEST(RealJobs, TwoLatticesInOneMeshSayTheirShareIsNotMeasuredFromIt)
+{
+    // The mesh of a union holds both lattices: neither's share of its region can be read from
+    // it. report.json says so for each (with what `achieved_density` is), and gives no number.
+    TempDir dir;
+    Job job(
+        recipeText("voxel: 0.5\ndomain: {box: [[0, 0, 0], [12, 12, 12]]}\nfields:\n"
+                   "  a: {tpms: gyroid, cell: 6, density: 0.15}\n"
+                   "  b: {tpms: schwarz-p, cell: 6, density: 0.15}\n"
+                   "  both: {union: [a, b]}\nresult: both\noutputs: {mesh: m.stl}\n",
+                   dir));
+    job.writeOutputs(dir.path / "out", false, false);
+    const nlohmann::json report = job.report();
+    for (const char* name : {"a", "b"}) {
+        const auto& f = report["fields"][name];
+        EXPECT_FALSE(f.contains("density_from_mesh")) << f.dump(1);
+        ASSERT_TRUE(f.contains("density_from_mesh_not_measured")) << f.dump(1);
+        EXPECT_NE(f["density_from_mesh_not_measured"].get<std::string>().find("voxels"), std::string::npos);
     }
 }
 
