@@ -153,6 +153,11 @@ private:
     /// mesh holds the target, and the grid is evaluated again (`mesh_aim` in report.json). Else
     /// the grid is kept for the outputs. Once.
     void aimLevelsAtMesh(const MeshOptions& options);
+    /// A projected mesh @a m of a result with creases (or cut by the domain box without the box
+    /// cut) made sharp: crease vertices onto both surfaces, edges across split, straying triangles
+    /// refined (CreaseSplit, CreaseRefinement); their counts into @a report.
+    void sharpenMeshCreases(TriangleMesh& m, const MeshOptions& options, double meshVoxel, const ProjectionOptions& po,
+                            nlohmann::json& report);
     /// The recipe's grid as evaluateRecipeGrid() evaluates it (clipped to the domain), with the
     /// evaluator's counts in @a stats; @a leafVisitor, when set, takes each leaf instead of the grid.
     openvdb::FloatGrid::Ptr evaluateResult(SparseStats& stats,
