@@ -1,9 +1,12 @@
 #include "fields/shapes/MeshDistance.h"
 
+#include "fields/core/Scratch.h"
+
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace voxlat {
@@ -122,7 +125,7 @@ void MeshDistance::gridValues(const GridBatch& batch, std::span<double> out) con
         return;
     }
     if (!onSamples) {
-        FieldNode::gridValues(batch, out);
+        interpolateGrid(batch, out);
         return;
     }
     const openvdb::Coord base(int(std::round(first[0])), int(std::round(first[1])), int(std::round(first[2])));
@@ -156,6 +159,100 @@ void MeshDistance::gridValues(const GridBatch& batch, std::span<double> out) con
                         }
                 }
             }
+}
+
+void MeshDistance::gatherSamples(const openvdb::Coord& lo, const openvdb::Coord& hi, double* dst) const
+{
+    // Layout [x][y][z] over the index box [lo, hi]; a leaf's values from its buffer (active or
+    // not, as getValue), elsewhere a tile's or the background's value.
+    using Leaf = openvdb::FloatTree::LeafNodeType;
+    const int sz = hi.z() - lo.z() + 1, sy = hi.y() - lo.y() + 1;
+    auto acc = mGrid->getConstAccessor();
+    const openvdb::Coord leafLo = lo & ~(Leaf::DIM - 1), leafHi = hi & ~(Leaf::DIM - 1);
+    for (int lx = leafLo.x(); lx <= leafHi.x(); lx += Leaf::DIM)
+        for (int ly = leafLo.y(); ly <= leafHi.y(); ly += Leaf::DIM)
+            for (int lz = leafLo.z(); lz <= leafHi.z(); lz += Leaf::DIM) {
+                const openvdb::Coord leafOrigin(lx, ly, lz);
+                const openvdb::Coord a = openvdb::Coord::maxComponent(leafOrigin, lo);
+                const openvdb::Coord b = openvdb::Coord::minComponent(leafOrigin.offsetBy(Leaf::DIM - 1), hi);
+                const Leaf* leaf = acc.probeConstLeaf(leafOrigin);
+                const double value = leaf ? 0.0 : double(acc.getValue(leafOrigin));
+                for (int x = a.x(); x <= b.x(); ++x)
+                    for (int y = a.y(); y <= b.y(); ++y) {
+                        double* row = dst + (std::size_t(x - lo.x()) * sy + (y - lo.y())) * sz - lo.z();
+                        if (leaf) {
+                            const float* src = leaf->buffer().data() + Leaf::coordToOffset(openvdb::Coord(x, y, a.z()));
+                            for (int z = a.z(); z <= b.z(); ++z) row[z] = double(src[z - a.z()]);
+                        } else {
+                            for (int z = a.z(); z <= b.z(); ++z) row[z] = value;
+                        }
+                    }
+            }
+}
+
+void MeshDistance::interpolateGrid(const GridBatch& batch, std::span<double> out) const
+{
+    // sample() per point, separated by axis: the points' index coordinates per axis (the same
+    // expressions as batch.point() and sample(), so the same doubles), the samples of the index
+    // box the stencils cover gathered once, interpolated along z per (x, y) sample, then along y
+    // per (x sample, row), then along x per point. Each value is sample()'s own arithmetic in its
+    // own order: the same doubles as the point path.
+    const int n[3] = {batch.nx, batch.ny, batch.nz};
+    // Per axis and point: its cell's first sample (a whole number) and its fraction.
+    ScratchLease axes(2 * std::size_t(n[0] + n[1] + n[2]));
+    double* frac[3];
+    double* cell[3];
+    int lo[3], hi[3];
+    {
+        double* f = axes.data();
+        for (int a = 0; a < 3; ++a) {
+            frac[a] = f;
+            cell[a] = f + n[a];
+            f += 2 * n[a];
+            lo[a] = std::numeric_limits<int>::max();
+            hi[a] = std::numeric_limits<int>::lowest();
+            for (int m = 0; m < n[a]; ++m) {
+                const double x = (batch.origin[a] + m * batch.spacing[a] - mOrigin[a]) / mVoxel;
+                const int i0 = int(std::floor(x));
+                frac[a][m] = x - i0;
+                cell[a][m] = i0;
+                lo[a] = std::min(lo[a], i0);
+                hi[a] = std::max(hi[a], i0 + 1);
+            }
+        }
+    }
+    const std::size_t dx = std::size_t(hi[0] - lo[0]) + 1, dy = std::size_t(hi[1] - lo[1]) + 1,
+                      dz = std::size_t(hi[2] - lo[2]) + 1;
+    // Sparse points (a coarse pass between the grid's samples): point by point.
+    if (dx * dy * dz > 4 * batch.size() + 64) {
+        FieldNode::gridValues(batch, out);
+        return;
+    }
+    ScratchLease samples(dx * dy * dz + dx * dy + dx * std::size_t(n[1]));
+    double* v = samples.data();
+    double* e = v + dx * dy * dz;  // along z: [x][y]
+    double* f = e + dx * dy;       // then along y: [x][row]
+    gatherSamples(openvdb::Coord(lo[0], lo[1], lo[2]), openvdb::Coord(hi[0], hi[1], hi[2]), v);
+    for (int k = 0; k < n[2]; ++k) {
+        const int z = int(cell[2][k]) - lo[2];
+        const double fz = frac[2][k];
+        for (std::size_t xy = 0; xy < dx * dy; ++xy) {
+            const double* s = v + xy * dz + z;
+            e[xy] = s[0] + fz * (s[1] - s[0]);
+        }
+        for (std::size_t x = 0; x < dx; ++x)
+            for (int j = 0; j < n[1]; ++j) {
+                const double* s = e + x * dy + (int(cell[1][j]) - lo[1]);
+                f[x * n[1] + j] = s[0] + frac[1][j] * (s[1] - s[0]);
+            }
+        for (int i = 0; i < n[0]; ++i) {
+            const double* f0 = f + std::size_t(int(cell[0][i]) - lo[0]) * n[1];
+            const double* f1 = f0 + n[1];
+            const double fx = frac[0][i];
+            double* dst = out.data() + std::size_t(i) * n[1] * n[2] + k;
+            for (int j = 0; j < n[1]; ++j) dst[std::size_t(j) * n[2]] = f0[j] + fx * (f1[j] - f0[j]);
+        }
+    }
 }
 
 Interval MeshDistance::bound(const Box3& box) const

@@ -44,6 +44,10 @@ private:
     /// Value (and gradient when @a grad is set) at @a p.
     template <typename Accessor>
     double sample(Accessor& acc, const Vec3d& p, Vec3d* grad) const;
+    /// The samples of the index box [lo, hi] as doubles, [x][y][z] order.
+    void gatherSamples(const openvdb::Coord& lo, const openvdb::Coord& hi, double* dst) const;
+    /// gridValues between the samples: sample()'s interpolation, separated by axis.
+    void interpolateGrid(const GridBatch& batch, std::span<double> out) const;
 
     openvdb::FloatGrid::ConstPtr mGrid;
     std::optional<Box3> mSupport;
