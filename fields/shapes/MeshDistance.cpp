@@ -102,6 +102,11 @@ void MeshDistance::gradients(std::span<const Vec3d> points, std::span<double> ou
 
 void MeshDistance::gridValues(const GridBatch& batch, std::span<double> out) const
 {
+    if (!lookUpGrid(batch, out)) interpolateGrid(batch, out, nullptr);
+}
+
+bool MeshDistance::lookUpGrid(const GridBatch& batch, std::span<double> out) const
+{
     const Vec3d first = (batch.origin - mOrigin) / mVoxel;
     bool onSamples = true;
     for (int a = 0; a < 3; ++a) onSamples = onSamples && std::abs(first[a] - std::round(first[a])) <= 1e-6;
@@ -122,12 +127,9 @@ void MeshDistance::gridValues(const GridBatch& batch, std::span<double> out) con
             for (int j = 0; j < batch.ny; ++j)
                 for (int k = 0; k < batch.nz; ++k, ++n)
                     out[n] = acc.getValue(base.offsetBy(i * step, j * step, k * step));
-        return;
+        return true;
     }
-    if (!onSamples) {
-        interpolateGrid(batch, out);
-        return;
-    }
+    if (!onSamples) return false;
     const openvdb::Coord base(int(std::round(first[0])), int(std::round(first[1])), int(std::round(first[2])));
     const openvdb::Coord last = base.offsetBy(batch.nx - 1, batch.ny - 1, batch.nz - 1);
     auto acc = mGrid->getConstAccessor();
@@ -159,6 +161,7 @@ void MeshDistance::gridValues(const GridBatch& batch, std::span<double> out) con
                         }
                 }
             }
+    return true;
 }
 
 void MeshDistance::gatherSamples(const openvdb::Coord& lo, const openvdb::Coord& hi, double* dst) const
@@ -190,7 +193,7 @@ void MeshDistance::gatherSamples(const openvdb::Coord& lo, const openvdb::Coord&
             }
 }
 
-void MeshDistance::interpolateGrid(const GridBatch& batch, std::span<double> out) const
+bool MeshDistance::interpolateGrid(const GridBatch& batch, std::span<double> out, const PlaneDecision* decide) const
 {
     // sample() per point, separated by axis: the points' index coordinates per axis (the same
     // expressions as batch.point() and sample(), so the same doubles), the samples of the index
@@ -226,13 +229,45 @@ void MeshDistance::interpolateGrid(const GridBatch& batch, std::span<double> out
     // Sparse points (a coarse pass between the grid's samples): point by point.
     if (dx * dy * dz > 4 * batch.size() + 64) {
         FieldNode::gridValues(batch, out);
-        return;
+        return false;
     }
     ScratchLease samples(dx * dy * dz + dx * dy + dx * std::size_t(n[1]));
     double* v = samples.data();
     double* e = v + dx * dy * dz;  // along z: [x][y]
     double* f = e + dx * dy;       // then along y: [x][row]
     gatherSamples(openvdb::Coord(lo[0], lo[1], lo[2]), openvdb::Coord(hi[0], hi[1], hi[2]), v);
+    if (decide) {
+        // A plane's tiles: the interpolant over a footprint stays within the samples of the cells
+        // it covers (by rounding, within 1e-12 of their magnitude).
+        const PlaneTiles tiles = PlaneTiles::of(batch, decide->tile);
+        auto span = [&](int a, double from, double to, int& i0, int& i1) {
+            i0 = std::clamp(int(std::floor((from - mOrigin[a]) / mVoxel)), lo[a], hi[a]);
+            i1 = std::clamp(int(std::floor((to - mOrigin[a]) / mVoxel)) + 1, lo[a], hi[a]);
+        };
+        const int z0 = int(cell[2][0]) - lo[2];
+        for (int a = 0; a < tiles.nx; ++a)
+            for (int b = 0; b < tiles.ny; ++b) {
+                const std::size_t t = std::size_t(a) * tiles.ny + b;
+                decide->side[t] = 0;
+                if (needOf(decide->need, t) != TileNeed::Decide) continue;
+                const Box3 foot = tiles.footprint(batch, a, b);
+                int x0, x1, y0, y1;
+                span(0, foot.min.x(), foot.max.x(), x0, x1);
+                span(1, foot.min.y(), foot.max.y(), y0, y1);
+                double vlo = std::numeric_limits<double>::infinity(), vhi = -vlo;
+                for (int x = x0; x <= x1; ++x)
+                    for (int y = y0; y <= y1; ++y)
+                        for (int z = z0; z <= z0 + 1; ++z) {
+                            const double w = v[(std::size_t(x - lo[0]) * dy + (y - lo[1])) * dz + z];
+                            vlo = std::min(vlo, w);
+                            vhi = std::max(vhi, w);
+                        }
+                const double slack = 1e-12 * (std::max(std::abs(vlo), std::abs(vhi)) + finiteScale(decide->band));
+                decide->side[t] = static_cast<signed char>(vlo > decide->band.hi + slack   ? 1
+                                                           : vhi < decide->band.lo - slack ? -1
+                                                                                           : 0);
+            }
+    }
     for (int k = 0; k < n[2]; ++k) {
         const int z = int(cell[2][k]) - lo[2];
         const double fz = frac[2][k];
@@ -253,6 +288,18 @@ void MeshDistance::interpolateGrid(const GridBatch& batch, std::span<double> out
             for (int j = 0; j < n[1]; ++j) dst[std::size_t(j) * n[2]] = f0[j] + fx * (f1[j] - f0[j]);
         }
     }
+    return true;
+}
+
+void MeshDistance::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                               std::span<signed char> side, std::span<const TileNeed> need) const
+{
+    // Every value is made (a few operations a point); only the sides are new.
+    const std::size_t tiles = PlaneTiles::of(plane, tile).size();
+    const PlaneDecision decide{tile, band, side, need};
+    const bool decidable = tiles > 0 && plane.spacing.x() > 0.0 && plane.spacing.y() > 0.0;
+    if (lookUpGrid(plane, out) || !interpolateGrid(plane, out, decidable ? &decide : nullptr) || !decidable)
+        std::fill(side.begin(), side.begin() + tiles, static_cast<signed char>(0));
 }
 
 Interval MeshDistance::bound(const Box3& box) const
