@@ -5,6 +5,8 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -22,6 +24,8 @@ int blockOf(int i)
 MeshDistance::MeshDistance(openvdb::FloatGrid::ConstPtr grid, std::optional<Box3> support)
     : mGrid(std::move(grid)), mSupport(support)
 {
+    static std::atomic<std::uint64_t> made{0};
+    mId = ++made;
     const auto& xform = mGrid->transform();
     if (!xform.isLinear() || !xform.hasUniformScale())
         throw std::invalid_argument("MeshDistance needs a grid with a uniform linear transform");
@@ -102,7 +106,7 @@ void MeshDistance::gradients(std::span<const Vec3d> points, std::span<double> ou
 
 void MeshDistance::gridValues(const GridBatch& batch, std::span<double> out) const
 {
-    if (!lookUpGrid(batch, out)) interpolateGrid(batch, out, nullptr);
+    if (!lookUpGrid(batch, out)) interpolateGrid(batch, out, 0, nullptr);
 }
 
 bool MeshDistance::lookUpGrid(const GridBatch& batch, std::span<double> out) const
@@ -193,7 +197,7 @@ void MeshDistance::gatherSamples(const openvdb::Coord& lo, const openvdb::Coord&
             }
 }
 
-bool MeshDistance::interpolateGrid(const GridBatch& batch, std::span<double> out, const PlaneDecision* decide) const
+bool MeshDistance::interpolateGrid(const GridBatch& batch, std::span<double> out, int tile, Interval* tileRange) const
 {
     // sample() per point, separated by axis: the points' index coordinates per axis (the same
     // expressions as batch.point() and sample(), so the same doubles), the samples of the index
@@ -236,10 +240,10 @@ bool MeshDistance::interpolateGrid(const GridBatch& batch, std::span<double> out
     double* e = v + dx * dy * dz;  // along z: [x][y]
     double* f = e + dx * dy;       // then along y: [x][row]
     gatherSamples(openvdb::Coord(lo[0], lo[1], lo[2]), openvdb::Coord(hi[0], hi[1], hi[2]), v);
-    if (decide) {
+    if (tileRange) {
         // A plane's tiles: the interpolant over a footprint stays within the samples of the cells
-        // it covers (by rounding, within 1e-12 of their magnitude).
-        const PlaneTiles tiles = PlaneTiles::of(batch, decide->tile);
+        // it covers.
+        const PlaneTiles tiles = PlaneTiles::of(batch, tile);
         auto span = [&](int a, double from, double to, int& i0, int& i1) {
             i0 = std::clamp(int(std::floor((from - mOrigin[a]) / mVoxel)), lo[a], hi[a]);
             i1 = std::clamp(int(std::floor((to - mOrigin[a]) / mVoxel)) + 1, lo[a], hi[a]);
@@ -247,9 +251,6 @@ bool MeshDistance::interpolateGrid(const GridBatch& batch, std::span<double> out
         const int z0 = int(cell[2][0]) - lo[2];
         for (int a = 0; a < tiles.nx; ++a)
             for (int b = 0; b < tiles.ny; ++b) {
-                const std::size_t t = std::size_t(a) * tiles.ny + b;
-                decide->side[t] = 0;
-                if (needOf(decide->need, t) != TileNeed::Decide) continue;
                 const Box3 foot = tiles.footprint(batch, a, b);
                 int x0, x1, y0, y1;
                 span(0, foot.min.x(), foot.max.x(), x0, x1);
@@ -262,10 +263,7 @@ bool MeshDistance::interpolateGrid(const GridBatch& batch, std::span<double> out
                             vlo = std::min(vlo, w);
                             vhi = std::max(vhi, w);
                         }
-                const double slack = 1e-12 * (std::max(std::abs(vlo), std::abs(vhi)) + finiteScale(decide->band));
-                decide->side[t] = static_cast<signed char>(vlo > decide->band.hi + slack   ? 1
-                                                           : vhi < decide->band.lo - slack ? -1
-                                                                                           : 0);
+                tileRange[std::size_t(a) * tiles.ny + b] = Interval{vlo, vhi};
             }
     }
     for (int k = 0; k < n[2]; ++k) {
@@ -294,12 +292,49 @@ bool MeshDistance::interpolateGrid(const GridBatch& batch, std::span<double> out
 void MeshDistance::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
                                std::span<signed char> side, std::span<const TileNeed> need) const
 {
-    // Every value is made (a few operations a point); only the sides are new.
-    const std::size_t tiles = PlaneTiles::of(plane, tile).size();
-    const PlaneDecision decide{tile, band, side, need};
+    const std::size_t tiles = PlaneTiles::of(plane, tile).size(), n = plane.size();
     const bool decidable = tiles > 0 && plane.spacing.x() > 0.0 && plane.spacing.y() > 0.0;
-    if (lookUpGrid(plane, out) || !interpolateGrid(plane, out, decidable ? &decide : nullptr) || !decidable)
-        std::fill(side.begin(), side.begin() + tiles, static_cast<signed char>(0));
+    std::fill(side.begin(), side.begin() + tiles, static_cast<signed char>(0));
+    if (lookUpGrid(plane, out)) return;
+    if (!decidable) {
+        interpolateGrid(plane, out, 0, nullptr);
+        return;
+    }
+    // A part is read several times per plane (an infill's skin, its core, and again where a
+    // boolean asks for exact values): the thread's last plane of this grid is kept, its values
+    // and each tile's range of samples (which do not depend on the band).
+    struct Memo {
+        std::uint64_t id = 0;
+        double key[6] = {};
+        int nx = 0, ny = 0, tile = 0;
+        bool interpolated = false;
+        std::vector<double> values;
+        std::vector<Interval> ranges;
+    };
+    thread_local Memo memo;
+    const double key[6] = {plane.origin.x(),  plane.origin.y(),  plane.origin.z(),
+                           plane.spacing.x(), plane.spacing.y(), plane.spacing.z()};
+    if (!(memo.id == mId && std::equal(key, key + 6, memo.key) && memo.nx == plane.nx && memo.ny == plane.ny &&
+          memo.tile == tile)) {
+        memo.id = 0;  // not valid while it is made (an exception leaves it so)
+        memo.values.resize(n);
+        memo.ranges.resize(tiles);
+        memo.interpolated = interpolateGrid(plane, memo.values, tile, memo.ranges.data());
+        std::copy(key, key + 6, memo.key);
+        memo.nx = plane.nx;
+        memo.ny = plane.ny;
+        memo.tile = tile;
+        memo.id = mId;
+    }
+    std::copy(memo.values.begin(), memo.values.end(), out.begin());
+    if (!memo.interpolated) return;
+    for (std::size_t t = 0; t < tiles; ++t) {
+        if (needOf(need, t) != TileNeed::Decide) continue;
+        // By rounding the interpolant stays within 1e-12 of its samples' magnitude.
+        const Interval r = memo.ranges[t];
+        const double slack = 1e-12 * (std::max(std::abs(r.lo), std::abs(r.hi)) + finiteScale(band));
+        side[t] = static_cast<signed char>(r.lo > band.hi + slack ? 1 : r.hi < band.lo - slack ? -1 : 0);
+    }
 }
 
 Interval MeshDistance::bound(const Box3& box) const

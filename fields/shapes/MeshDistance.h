@@ -7,6 +7,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <cstdint>
 #include <optional>
 #include <vector>
 
@@ -36,7 +37,8 @@ public:
     /// passes) are looked up, not interpolated.
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
-    /// gridValues with each tile's side from the samples its footprint's cells interpolate.
+    /// gridValues with each tile's side from the samples its footprint's cells interpolate; the
+    /// thread's last plane is kept (a part read several times per plane).
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
                      std::span<signed char> side, std::span<const TileNeed> need) const override;
     bool planeCheap() const override { return true; }
@@ -54,19 +56,14 @@ private:
     /// gridValues' paths for blocks on the grid's samples (every sample, or every n-th): false
     /// when the points fall between samples (nothing written).
     bool lookUpGrid(const GridBatch& batch, std::span<double> out) const;
-    /// What planeValues asks of interpolateGrid besides the values: its tiles' sides.
-    struct PlaneDecision {
-        int tile;
-        Interval band;
-        std::span<signed char> side;
-        std::span<const TileNeed> need;
-    };
-    /// gridValues between the samples: sample()'s interpolation, separated by axis, and with
-    /// @a decide a plane's tiles' sides; false when the points are too sparse for it (then the
-    /// point path gave the values and no side is set).
-    bool interpolateGrid(const GridBatch& batch, std::span<double> out, const PlaneDecision* decide) const;
+    /// gridValues between the samples: sample()'s interpolation, separated by axis; with
+    /// @a tileRange a plane's tiles' (of @a tile points) ranges of the samples their footprints
+    /// interpolate. False when the points are too sparse for it (the point path gave the values;
+    /// no range is set).
+    bool interpolateGrid(const GridBatch& batch, std::span<double> out, int tile, Interval* tileRange) const;
 
     openvdb::FloatGrid::ConstPtr mGrid;
+    std::uint64_t mId = 0;  ///< this grid's number among all made (planeValues' per-thread memo)
     std::optional<Box3> mSupport;
     double mVoxel = 1.0;
     Vec3d mOrigin{0.0};  ///< world position of index (0, 0, 0)
