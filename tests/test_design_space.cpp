@@ -146,6 +146,44 @@ TEST(MeshDistance, CubeMatchesAnalyticDistanceWithinHalfAVoxel)
     ASSERT_TRUE(PartField(std::make_shared<MeshDesignSpace>(asPart(cubeMesh(-4, 4)), "c", o)).support());
 }
 
+TEST(MeshDistance, GridValuesBetweenSamplesAreThePointPathsDoubles)
+{
+    // Blocks whose points fall between the grid's samples (a slicer's plane at the printer's
+    // pitch, a pixel's sub-samples, a leaf off the samples, a coarse pass) interpolate by axis:
+    // every value must be the point path's own double.
+    const double voxel = 0.2;
+    MeshSpaceOptions o;
+    o.voxel = voxel;
+    MeshDesignSpace space(asPart(sphereMesh(3.0, 3)), "sphere", o);
+    space.requireInteriorBand(1.0);
+    const auto d = space.distance();
+    std::vector<GridBatch> batches;
+    auto add = [&](Vec3d origin, Vec3d spacing, int nx, int ny, int nz) {
+        GridBatch g;
+        g.origin = origin;
+        g.spacing = spacing;
+        g.nx = nx;
+        g.ny = ny;
+        g.nz = nz;
+        batches.push_back(g);
+    };
+    add(Vec3d(-3.7, -2.93, 0.4371), Vec3d(0.019, 0.024, 1.0), 66, 66, 1);        // a slicer's block, across the surface
+    add(Vec3d(2.91, -0.013, -1.02), Vec3d(0.019 / 8, 0.024 / 8, 1.0), 8, 8, 1);  // one pixel's sub-samples
+    add(Vec3d(-1.03, 2.117, 1.5), Vec3d(0.07, 0.07, 0.07), 8, 8, 8);             // a leaf off the samples
+    add(Vec3d(-4.1, -4.1, -4.1), Vec3d(1.05, 0.93, 1.1), 8, 9, 7);               // sparse: the point path itself
+    add(Vec3d(-9.5, 7.25, -0.3), Vec3d(0.05, 0.05, 0.05), 5, 6, 3);              // beyond the band (background)
+    for (const GridBatch& g : batches) {
+        std::vector<double> grid(g.size()), points(g.size());
+        std::vector<Vec3d> p;
+        for (int i = 0; i < g.nx; ++i)
+            for (int j = 0; j < g.ny; ++j)
+                for (int k = 0; k < g.nz; ++k) p.push_back(g.point(i, j, k));
+        d->gridValues(g, grid);
+        d->values(p, points);
+        for (std::size_t n = 0; n < p.size(); ++n) ASSERT_EQ(grid[n], points[n]) << p[n];
+    }
+}
+
 TEST(MeshDesignSpace, BracketVolumeFromGridMatchesMesh)
 {
     MeshSpaceOptions o;

@@ -11,7 +11,10 @@
 #include "fields/shapes/Boolean.h"
 #include "fields/shapes/BoxField.h"
 #include "fields/shapes/Cylinder.h"
+#include "fields/shapes/DrainChannels.h"
+#include "fields/shapes/MeshDistance.h"
 #include "fields/shapes/Sphere.h"
+#include "fields/shapes/Unary.h"
 #include "fields/struts/IsoRadius.h"
 #include "fields/struts/StrutConvolution.h"
 #include "fields/tpms/TpmsField.h"
@@ -22,6 +25,7 @@
 #include "mesher/writers/SliceWriters.h"
 
 #include <gtest/gtest.h>
+#include <openvdb/tools/LevelSetSphere.h>
 #include <tbb/global_control.h>
 #include <zip.h>
 #include <nlohmann/json.hpp>
@@ -185,6 +189,84 @@ std::vector<ConvolutionStrut> gradedBccStruts(double cell, double sigma, double 
             }
     return struts;
 }
+
+/// Tiles of planeValuesOf()'s planes by what they were found.
+struct PlaneCounts {
+    int above = 0, below = 0, open = 0, skipped = 0;
+};
+
+/// planeValuesOf(@a field) on 66 x 66 planes at the Saturn 4's pitch (19 x 24 um) at @a origins,
+/// band {0, 0}, with @a need (empty: every tile Decide): the values of every open tile not skipped
+/// and of its halo are gridValues' own, bit for bit, an Exact tile is open, and every tile proven
+/// on a side is on it at 4 x 4 sub-samples of each of its pixels, taken point by point (values()).
+void checkPlanes(const FieldNode& field, std::initializer_list<Vec3d> origins, PlaneCounts& counts,
+                 std::span<const TileNeed> need = {})
+{
+    const double px = 0.019, py = 0.024;
+    GridBatch plane;
+    plane.spacing = Vec3d(px, py, 1.0);
+    plane.nx = plane.ny = 66;
+    plane.nz = 1;
+    std::vector<double> banded(plane.size()), plain(plane.size()), exact(16);
+    std::vector<signed char> side(64);
+    std::vector<Vec3d> points(16);
+    for (const Vec3d& origin : origins) {
+        plane.origin = origin;
+        planeValuesOf(field, plane, 8, Interval{0.0, 0.0}, banded, side, need);
+        field.gridValues(plane, plain);
+        for (int a = 0; a < 8; ++a)
+            for (int b = 0; b < 8; ++b) {
+                const int t = a * 8 + b;
+                if (needOf(need, t) == TileNeed::Skip) {
+                    ++counts.skipped;
+                    continue;
+                }
+                if (needOf(need, t) == TileNeed::Exact) ASSERT_EQ(side[t], 0) << "tile " << a << ", " << b;
+                if (side[t] == 0) {
+                    ++counts.open;
+                    for (int i = 8 * a; i <= 8 * a + 9; ++i)
+                        for (int j = 8 * b; j <= 8 * b + 9; ++j)
+                            ASSERT_EQ(banded[std::size_t(i) * 66 + j], plain[std::size_t(i) * 66 + j])
+                                << "origin " << origin << " tile " << a << ", " << b << " point " << i << ", " << j;
+                    continue;
+                }
+                ++(side[t] > 0 ? counts.above : counts.below);
+                for (int i = 8 * a + 1; i <= 8 * a + 8; ++i)
+                    for (int j = 8 * b + 1; j <= 8 * b + 8; ++j) {
+                        for (int k = 0; k < 16; ++k)
+                            points[k] =
+                                plane.point(i, j, 0) +
+                                Vec3d(((k / 4) + 0.5) / 4 - 0.5, ((k % 4) + 0.5) / 4 - 0.5, 0.0) * Vec3d(px, py, 0.0);
+                        field.values(points, exact);
+                        for (const double v : exact)
+                            ASSERT_TRUE(side[t] > 0 ? v > 0.0 : v < 0.0)
+                                << "origin " << origin << " tile " << a << ", " << b << " side " << int(side[t]);
+                    }
+            }
+    }
+}
+
+/// Layers of @a field (a 6 mm part at the Saturn 4's pitch) at @a zs are the same bytes with the
+/// slicer's PlaneBands on and off, with at most @a share of the pixels evaluated and some exposed.
+void expectSameLayersWithPlaneBands(const FieldNode& field, std::initializer_list<double> zs, double share)
+{
+    const double px = 0.019, py = 0.024;
+    Display d = testDisplay(px, 160, 128);
+    d.heightMm = py * d.pixelsY;
+    const Box3 part{Vec3d(0.0), Vec3d(6.0)};
+    RasterOptions off;
+    off.planeBands = false;
+    const Slicer withBands(field, part, -1.7, -1.7, d, RasterOptions{}), without(field, part, -1.7, -1.7, d, off);
+    for (const double z : zs) {
+        LayerImage a, b;
+        RasterStats stats, allStats;
+        withBands.rasterize(z, a, &stats);
+        without.rasterize(z, b, &allStats);
+        ASSERT_EQ(a.pixels, b.pixels) << "z " << z;
+        EXPECT_LT(double(stats.pixelsEvaluated.load()), share * double(allStats.pixelsEvaluated.load())) << "z " << z;
+        EXPECT_GT(a.exposedPixels(), 0.05 * double(a.pixels.size())) << "z " << z;
+    }
+}
 }  // namespace
 
 TEST(Slices, GradedStrutAreaMatchesPointByPointSupersampling)
@@ -292,60 +374,59 @@ TEST(Slices, StrutPlanesLeaveOutOnlyTilesProvenOutside)
     const double peak = gaussianStrutWeight(0.3, sigma, level) * sigma * std::sqrt(2.0 * std::numbers::pi);
     auto iso = std::make_shared<IsoRadius>(convolution, peak, sigma, 2.0 * convolution->cutoffRadius(0));
     const LevelSolid lattice(iso, SolidSide::Below, iso->radiusOf(level));
-    const double px = 0.019, py = 0.024;
-    GridBatch plane;
-    plane.spacing = Vec3d(px, py, 1.0);
-    plane.nx = plane.ny = 66;
-    plane.nz = 1;
-    std::vector<double> banded(plane.size()), plain(plane.size()), exact(16);
-    std::vector<signed char> side(64);
-    std::vector<Vec3d> points(16);
-    int proven = 0, open = 0;
-    for (const Vec3d& origin : {Vec3d(2.1, 2.3, 1.025), Vec3d(3.3, 2.9, 3.475), Vec3d(1.7, 3.6, 2.0)}) {
-        plane.origin = origin;
-        planeValuesOf(lattice, plane, 8, Interval{0.0, 0.0}, banded, side);
-        lattice.gridValues(plane, plain);
-        for (int a = 0; a < 8; ++a)
-            for (int b = 0; b < 8; ++b) {
-                ASSERT_GE(side[a * 8 + b], 0);  // no tile proven inside
-                if (side[a * 8 + b] == 0) {
-                    ++open;
-                    for (int i = 8 * a; i <= 8 * a + 9; ++i)
-                        for (int j = 8 * b; j <= 8 * b + 9; ++j)
-                            ASSERT_EQ(banded[std::size_t(i) * 66 + j], plain[std::size_t(i) * 66 + j])
-                                << "tile " << a << ", " << b << " point " << i << ", " << j;
-                    continue;
-                }
-                ++proven;
-                for (int i = 8 * a + 1; i <= 8 * a + 8; ++i)
-                    for (int j = 8 * b + 1; j <= 8 * b + 8; ++j) {
-                        for (int k = 0; k < 16; ++k)
-                            points[k] =
-                                plane.point(i, j, 0) +
-                                Vec3d(((k / 4) + 0.5) / 4 - 0.5, ((k % 4) + 0.5) / 4 - 0.5, 0.0) * Vec3d(px, py, 0.0);
-                        lattice.values(points, exact);
-                        for (const double v : exact) ASSERT_GT(v, 0.0) << "tile " << a << ", " << b;
-                    }
-            }
+    PlaneCounts counts;
+    checkPlanes(lattice, {Vec3d(2.1, 2.3, 1.025), Vec3d(3.3, 2.9, 3.475), Vec3d(1.7, 3.6, 2.0)}, counts);
+    EXPECT_EQ(counts.below, 0);   // no tile proven inside
+    EXPECT_GT(counts.above, 40);  // of 192 tiles
+    EXPECT_GT(counts.open, 40);
+    expectSameLayersWithPlaneBands(lattice, {1.025, 3.475}, 0.8);
+}
+
+TEST(Slices, InfillBooleansPassTheirTilesDown)
+{
+    // An infill's field as the engine builds it (issue 38): a part's distance grid (a sphere's
+    // level set, 0.1 mm samples), its core 0.8 mm in, the graded lattice of the test above in the
+    // core, the skin, their union; again with a 0.2 mm blend kept inside the part; again drained
+    // by a 1 mm channel. The booleans pass the planes' tiles down (the cheap distance grid first):
+    // checkPlanes' checks with tiles proven on both sides, with Skip and Exact tiles asked, and
+    // whole layers the same bytes with and without, with fewer pixels evaluated.
+    const double sigma = 0.2, level = 1.0;
+    auto convolution =
+        std::make_shared<StrutConvolution>(gradedBccStruts(2.0, sigma, level, Vec3d(3.0, 3.0, 3.0), 4.0, 3, 3, 3));
+    const double peak = gaussianStrutWeight(0.3, sigma, level) * sigma * std::sqrt(2.0 * std::numbers::pi);
+    auto iso = std::make_shared<IsoRadius>(convolution, peak, sigma, 2.0 * convolution->cutoffRadius(0));
+    auto lattice = std::make_shared<LevelSolid>(iso, SolidSide::Below, iso->radiusOf(level));
+    auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(2.6f, openvdb::Vec3f(3.0f), 0.1f, 12.0f);
+    auto part = std::make_shared<MeshDistance>(grid, Box3{Vec3d(0.3), Vec3d(5.7)});
+    auto core = std::make_shared<UnaryField>(part, UnaryOp::Offset, 0.8);
+    auto latticeInCore = std::make_shared<BooleanField>(BooleanOp::Intersection, std::vector<FieldPtr>{lattice, core});
+    auto skin = std::make_shared<BooleanField>(BooleanOp::Difference, std::vector<FieldPtr>{part, core});
+    auto joined = std::make_shared<BooleanField>(BooleanOp::Union, std::vector<FieldPtr>{skin, latticeInCore});
+    auto blended = std::make_shared<BooleanField>(
+        BooleanOp::Intersection,
+        std::vector<FieldPtr>{
+            std::make_shared<BooleanField>(BooleanOp::Union, std::vector<FieldPtr>{skin, latticeInCore}, 0.2), part});
+    auto drained = std::make_shared<DrainedSolid>(joined);
+    drained->setChannels({DrainChannel{Vec3d(3.0, 3.0, 3.0), Vec3d(3.0, 3.0, 6.5), 1.0}});
+    const std::initializer_list<Vec3d> origins{Vec3d(0.3, 2.3, 3.025), Vec3d(2.4, 2.3, 5.0), Vec3d(3.3, 2.9, 3.475),
+                                               Vec3d(4.5, 1.1, 2.6)};
+    for (const FieldNode* field :
+         {static_cast<const FieldNode*>(joined.get()), static_cast<const FieldNode*>(blended.get()),
+          static_cast<const FieldNode*>(drained.get())}) {
+        PlaneCounts counts;
+        checkPlanes(*field, origins, counts);
+        EXPECT_GT(counts.above, 15);  // of 256 tiles (22-24): in the core between struts
+        EXPECT_GT(counts.below, 40);  // in the skin (68-110)
+        EXPECT_GT(counts.open, 30);
     }
-    EXPECT_GT(proven, 40);  // of 192 tiles
-    EXPECT_GT(open, 40);
-    // Whole layers: the same bytes either way.
-    Display d = testDisplay(px, 160, 128);
-    d.heightMm = py * d.pixelsY;
-    const Box3 part{Vec3d(0.0), Vec3d(6.0)};
-    RasterOptions off;
-    off.planeBands = false;
-    const Slicer withBands(lattice, part, -1.7, -1.7, d, RasterOptions{}), without(lattice, part, -1.7, -1.7, d, off);
-    for (const double z : {1.025, 3.475}) {
-        LayerImage a, b;
-        RasterStats stats, allStats;
-        withBands.rasterize(z, a, &stats);
-        without.rasterize(z, b, &allStats);
-        ASSERT_EQ(a.pixels, b.pixels) << "z " << z;
-        EXPECT_LT(double(stats.pixelsEvaluated.load()), 0.8 * double(allStats.pixelsEvaluated.load())) << "z " << z;
-        EXPECT_GT(a.exposedPixels(), 0.05 * double(a.pixels.size())) << "z " << z;
-    }
+    std::vector<TileNeed> need(64);
+    for (std::size_t t = 0; t < need.size(); ++t)
+        need[t] = t % 3 == 0 ? TileNeed::Skip : t % 5 == 0 ? TileNeed::Exact : TileNeed::Decide;
+    PlaneCounts asked;
+    checkPlanes(*drained, origins, asked, need);
+    EXPECT_GT(asked.above + asked.below, 20);
+    expectSameLayersWithPlaneBands(*drained, {2.6, 5.0}, 0.9);
+    expectSameLayersWithPlaneBands(*blended, {3.475}, 0.9);
 }
 
 TEST(Slices, EightLaneTilesWriteTheSameBytesAsFourLane)

@@ -86,7 +86,7 @@ private:
 };
 
 /// The field of a part: the design space's distance, converted on first use.
-class PartField final : public FieldNode {
+class PartField final : public FieldNode, public PlaneBands {
 public:
     explicit PartField(std::shared_ptr<MeshDesignSpace> space) : mSpace(std::move(space)) {}
 
@@ -103,6 +103,12 @@ public:
         mSpace->distance()->gridValues(batch, out);
     }
     Interval bound(const Box3& box) const override { return mSpace->distance()->bound(box); }
+    void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                     std::span<signed char> side, std::span<const TileNeed> need) const override
+    {
+        planeValuesOf(*mSpace->distance(), plane, tile, band, out, side, need);
+    }
+    bool planeCheap() const override { return true; }
     /// Known from the mesh alone: its box grown by a voxel (interpolation reaches that far).
     std::optional<Box3> support() const override;
 

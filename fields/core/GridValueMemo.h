@@ -4,6 +4,7 @@
 #pragma once
 
 #include "fields/core/FieldNode.h"
+#include "fields/core/PlaneBands.h"
 
 #include <array>
 #include <atomic>
@@ -22,7 +23,7 @@ namespace voxlat {
 /// operand's gridValues gives the same values for the same batch. A density-solved solid sits
 /// above it (LevelSolid(GridValueMemo(raw))): the job moves the level between evaluations of the
 /// same leaves, and only the level's subtraction is redone. Off, it is a plain pass-through.
-class GridValueMemo final : public FieldNode {
+class GridValueMemo final : public FieldNode, public PlaneBands {
 public:
     explicit GridValueMemo(FieldPtr operand) : mOperand(std::move(operand)) {}
 
@@ -42,6 +43,19 @@ public:
         mOperand->gridValuesShifted(batch, shift, plus, minus);
     }
     Interval bound(const Box3& box) const override { return mOperand->bound(box); }
+    /// The operand's planeValues (a slicer's planes are never kept); while keeping, gridValues
+    /// with every tile 0.
+    void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                     std::span<signed char> side, std::span<const TileNeed> need) const override
+    {
+        if (!mShards) {
+            planeValuesOf(*mOperand, plane, tile, band, out, side, need);
+            return;
+        }
+        gridValues(plane, out);
+        std::fill(side.begin(), side.begin() + PlaneTiles::of(plane, tile).size(), static_cast<signed char>(0));
+    }
+    bool planeCheap() const override { return planeCheapOf(*mOperand); }
     std::optional<Box3> support() const override { return mOperand->support(); }
     double period(int axis) const override { return mOperand->period(axis); }
     std::optional<RepeatZone> repeatZone() const override { return mOperand->repeatZone(); }

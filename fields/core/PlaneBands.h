@@ -10,7 +10,9 @@
 #include "fields/core/FieldNode.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
+#include <span>
 
 namespace voxlat {
 
@@ -33,18 +35,51 @@ struct PlaneTiles {
         return t;
     }
     std::size_t size() const { return std::size_t(nx) * ny; }
+    /// Tile (a, b)'s footprint in @a plane: its points' cells, half a spacing around each.
+    Box3 footprint(const GridBatch& plane, int a, int b) const
+    {
+        const Vec3d lo = plane.point(1 + a * tile, 1 + b * tile, 0),
+                    hi = plane.point((a + 1) * tile, (b + 1) * tile, 0);
+        const Vec3d half(0.5 * plane.spacing.x(), 0.5 * plane.spacing.y(), 0.0);
+        return {lo - half, hi + half};
+    }
 };
+
+/// What a caller needs of one tile of a plane batch (planeValues' @a need).
+enum class TileNeed : std::uint8_t {
+    Decide,  ///< its side when the node proves one (values left out), else its values
+    Exact,   ///< its values (and its halo's), side 0, even where a side could be proven
+    Skip,    ///< nothing: neither values nor side (another operand decided it)
+};
+
+/// @a need's entry for tile @a t (an empty @a need: every tile Decide).
+inline TileNeed needOf(std::span<const TileNeed> need, std::size_t t)
+{
+    return need.empty() ? TileNeed::Decide : need[t];
+}
+
+/// |band.lo| + |band.hi| over the finite ends: the scale of a band's rounding slack.
+inline double finiteScale(Interval band)
+{
+    return (std::isfinite(band.lo) ? std::abs(band.lo) : 0.0) + (std::isfinite(band.hi) ? std::abs(band.hi) : 0.0);
+}
 
 /// A node that can leave out the tiles of a plane batch it proves on one side of a band.
 class PlaneBands {
 public:
     /// Values of the plane batch @a plane (PlaneTiles::of(plane, tile) has tiles) with the side of
     /// each tile at side[a * tiles.ny + b]: +1 when every value over the tile's footprint is proven
-    /// above band.hi, -1 below band.lo, else 0. The values of the 0 tiles and of the points around
-    /// them (the 3 x 3 neighbourhood of each of their points) are gridValues' own, the same doubles;
-    /// the others are finite and mean nothing.
+    /// above band.hi, -1 below band.lo, else 0 (band ends may be infinite: no side there). @a need
+    /// (empty: every tile Decide) says per tile what the caller needs: a Skip tile's side is 0 and
+    /// means nothing, an Exact tile's side is 0. The values of the tiles with side 0 that are not
+    /// skipped, and of the points around them (the 3 x 3 neighbourhood of each of their points),
+    /// are gridValues' own, the same doubles; the others are finite and mean nothing.
     virtual void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
-                             std::span<signed char> side) const = 0;
+                             std::span<signed char> side, std::span<const TileNeed> need) const = 0;
+    /// Whether deciding a plane's tiles costs little next to a strut lattice's sums (a distance
+    /// grid, a primitive): a boolean asks such operands first, so the costly ones skip the tiles
+    /// the cheap ones decide.
+    virtual bool planeCheap() const { return false; }
 
 protected:
     ~PlaneBands() = default;
@@ -52,14 +87,32 @@ protected:
 
 /// @a field's PlaneBands::planeValues when it has them, else its gridValues with every tile 0.
 inline void planeValuesOf(const FieldNode& field, const GridBatch& plane, int tile, Interval band,
-                          std::span<double> out, std::span<signed char> side)
+                          std::span<double> out, std::span<signed char> side, std::span<const TileNeed> need = {})
 {
     if (const auto* bands = dynamic_cast<const PlaneBands*>(&field)) {
-        bands->planeValues(plane, tile, band, out, side);
+        bands->planeValues(plane, tile, band, out, side, need);
         return;
     }
     field.gridValues(plane, out);
     std::fill(side.begin(), side.begin() + PlaneTiles::of(plane, tile).size(), static_cast<signed char>(0));
+}
+
+/// Whether a plane's tiles are cheap to decide for @a field (PlaneBands::planeCheap; a node
+/// without PlaneBands decides nothing, so its place in a boolean's order does not matter).
+inline bool planeCheapOf(const FieldNode& field)
+{
+    const auto* bands = dynamic_cast<const PlaneBands*>(&field);
+    return !bands || bands->planeCheap();
+}
+
+/// Copies tile (a, b)'s points and their one-point halo from @a from to @a to (plane layout).
+inline void copyTileWithHalo(const GridBatch& plane, int tile, int a, int b, const double* from, double* to)
+{
+    const int j0 = b * tile, j1 = std::min(plane.ny - 1, (b + 1) * tile + 1);
+    for (int i = a * tile; i <= std::min(plane.nx - 1, (a + 1) * tile + 1); ++i) {
+        const std::size_t row = std::size_t(i) * plane.ny;
+        std::copy(from + row + j0, from + row + j1 + 1, to + row + j0);
+    }
 }
 
 }  // namespace voxlat

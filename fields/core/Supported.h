@@ -38,10 +38,11 @@ public:
     }
     Interval bound(const Box3& box) const override { return mChild->bound(box); }
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
-                     std::span<signed char> side) const override
+                     std::span<signed char> side, std::span<const TileNeed> need) const override
     {
-        planeValuesOf(*mChild, plane, tile, band, out, side);
+        planeValuesOf(*mChild, plane, tile, band, out, side, need);
     }
+    bool planeCheap() const override { return planeCheapOf(*mChild); }
     std::optional<Box3> support() const override { return mBox; }
     double period(int axis) const override { return mChild->period(axis); }
     std::optional<RepeatZone> repeatZone() const override { return mZone ? mZone() : mChild->repeatZone(); }

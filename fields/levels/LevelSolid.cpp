@@ -105,7 +105,7 @@ void LevelSolid::gridValues(const GridBatch& batch, std::span<double> out) const
 }
 
 void LevelSolid::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
-                             std::span<signed char> side) const
+                             std::span<signed char> side, std::span<const TileNeed> need) const
 {
     requireSolved();
     // A sheet first: no cast (a cross-cast per slicer block cost a TPMS sheet's slices 5 %).
@@ -118,14 +118,19 @@ void LevelSolid::planeValues(const GridBatch& plane, int tile, Interval band, st
     }
     // raw - level > hi where raw > hi + level (level - raw > hi where raw < level - hi), with a
     // margin for the subtraction's rounding.
-    const double slack = 1e-12 * (std::abs(mLevel) + std::abs(band.lo) + std::abs(band.hi) + 1.0);
+    const double slack = 1e-12 * (std::abs(mLevel) + finiteScale(band) + 1.0);
     const bool below = mSide == SolidSide::Below;
     const Interval raw = below ? Interval{band.lo + mLevel - slack, band.hi + mLevel + slack}
                                : Interval{mLevel - band.hi - slack, mLevel - band.lo + slack};
-    bands->planeValues(plane, tile, raw, out, side);
+    bands->planeValues(plane, tile, raw, out, side, need);
     if (!below)
         for (std::size_t t = 0; t < tiles; ++t) side[t] = static_cast<signed char>(-side[t]);
     applySideInPlace(mSide, out.first(plane.size()), mLevel);
+}
+
+bool LevelSolid::planeCheap() const
+{
+    return mSide == SolidSide::Band || planeCheapOf(*mRaw);
 }
 
 Interval LevelSolid::bound(const Box3& box) const

@@ -29,7 +29,8 @@ public:
     /// The raw field's planeValues with the band moved by the level (a network or a level above;
     /// a sheet and raw fields without them take gridValues, every tile 0).
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
-                     std::span<signed char> side) const override;
+                     std::span<signed char> side, std::span<const TileNeed> need) const override;
+    bool planeCheap() const override;
     double period(int axis) const override { return mRaw->period(axis); }
 
     /// The level in the node's own units (c for a network, t for a sheet or a convolution).

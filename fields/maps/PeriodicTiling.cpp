@@ -279,6 +279,17 @@ void PeriodicTiling::fillBlock(Table& t, std::size_t bx, std::size_t by, std::si
             for (int k = 0; k < l2; ++k) brick[(i * 8 + j) * 8 + k] = block[n++];
 }
 
+void PeriodicTiling::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                                 std::span<signed char> side, std::span<const TileNeed> need) const
+{
+    if (plane.nx < 2 || plane.ny < 2 || plane.nz < 2) {
+        planeValuesOf(*mChild, plane, tile, band, out, side, need);
+        return;
+    }
+    gridValues(plane, out);
+    std::fill(side.begin(), side.begin() + PlaneTiles::of(plane, tile).size(), static_cast<signed char>(0));
+}
+
 void PeriodicTiling::gridValues(const GridBatch& batch, std::span<double> out) const
 {
     // A single sample along an axis says nothing about the grid's spacing there (a slice's

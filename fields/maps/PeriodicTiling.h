@@ -3,6 +3,7 @@
 #pragma once
 
 #include "fields/core/FieldNode.h"
+#include "fields/core/PlaneBands.h"
 
 #include <array>
 #include <memory>
@@ -36,7 +37,7 @@ namespace voxlat {
 /// child's bound of the box moved into the first period (boxes deep inside repeat, so a sparse
 /// evaluation bounds each distinct leaf once), snapped outwards to 1e-6 mm so the bound depends
 /// only on the box and not on which thread asked first.
-class PeriodicTiling final : public FieldNode {
+class PeriodicTiling final : public FieldNode, public PlaneBands {
 public:
     PeriodicTiling(FieldPtr child, const Box3& box, const Vec3d& period, double reach, std::array<bool, 3> mirror = {});
     ~PeriodicTiling() override;
@@ -45,6 +46,10 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    /// A plane is one sample thick, so gridValues takes it from the child: so do these.
+    void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                     std::span<signed char> side, std::span<const TileNeed> need) const override;
+    bool planeCheap() const override { return planeCheapOf(*mChild); }
     std::optional<Box3> support() const override { return mChild->support(); }
 
     /// Values held in tables so far (grids whose spacing divides the period; for tests).

@@ -1,5 +1,7 @@
 #include "fields/shapes/Boolean.h"
 
+#include "fields/core/Scratch.h"
+
 #include <algorithm>
 #include <array>
 #include <span>
@@ -70,25 +72,114 @@ void BooleanField::gridValues(const GridBatch& batch, std::span<double> out) con
     if (n > kBatchSize) large.resize(n);
     const std::span<double> buf = n > kBatchSize ? std::span<double>(large) : std::span<double>(small.data(), n);
     mOperands[0]->gridValues(batch, out);
+    for (std::size_t o = 1; o < mOperands.size(); ++o) {
+        mOperands[o]->gridValues(batch, buf);
+        fold(out.data(), buf.data(), n);
+    }
+}
+
+void BooleanField::fold(double* out, const double* b, std::size_t n) const
+{
     // combine() without gradients, one loop per case (the same arithmetic, so the same values).
     const double sa = mOp == BooleanOp::Union ? 1.0 : -1.0;
     const double sb = mOp == BooleanOp::Intersection ? -1.0 : 1.0;
     const double k = mBlend;
-    for (std::size_t o = 1; o < mOperands.size(); ++o) {
-        mOperands[o]->gridValues(batch, buf);
-        if (k > 0.0) {
-            for (std::size_t i = 0; i < n; ++i) {
-                const double x = sa * out[i], y = sb * buf[i];
-                const double h = std::clamp(0.5 + 0.5 * (y - x) / k, 0.0, 1.0);
-                out[i] = sa * (y + h * (x - y) - k * h * (1.0 - h));
-            }
-        } else {
-            for (std::size_t i = 0; i < n; ++i) {
-                const double x = sa * out[i], y = sb * buf[i];
-                out[i] = sa * (x <= y ? x : y);
-            }
+    if (k > 0.0) {
+        for (std::size_t i = 0; i < n; ++i) {
+            const double x = sa * out[i], y = sb * b[i];
+            const double h = std::clamp(0.5 + 0.5 * (y - x) / k, 0.0, 1.0);
+            out[i] = sa * (y + h * (x - y) - k * h * (1.0 - h));
+        }
+    } else {
+        for (std::size_t i = 0; i < n; ++i) {
+            const double x = sa * out[i], y = sb * b[i];
+            out[i] = sa * (x <= y ? x : y);
         }
     }
+}
+
+void BooleanField::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                               std::span<signed char> side, std::span<const TileNeed> need) const
+{
+    const PlaneTiles tiles = PlaneTiles::of(plane, tile);
+    const std::size_t count = mOperands.size(), nt = tiles.size(), n = plane.size();
+    if (nt == 0) {
+        gridValues(plane, out);
+        return;
+    }
+    // The side one operand decides alone: a union is below band.lo where any operand is (the
+    // smooth minimum is never above the hard one), an intersection or a difference above band.hi
+    // (a difference's later operands negated). The other side needs every operand on it, by the
+    // blends' reach more: each fold's smooth minimum is at most r / 4 below the hard one. A slack
+    // for the blend's rounding on both ends.
+    const signed char decisive = mOp == BooleanOp::Union ? -1 : 1;
+    const double slack = mBlend > 0.0 ? 1e-12 * (finiteScale(band) + mBlend + 1.0) : 0.0;
+    const double reach = mBlend > 0.0 ? double(count - 1) * 0.25 * mBlend + slack : 0.0;
+    const Interval wide =
+        decisive < 0 ? Interval{band.lo - slack, band.hi + reach} : Interval{band.lo - reach, band.hi + slack};
+    auto negated = [&](std::size_t o) { return mOp == BooleanOp::Difference && o > 0; };
+    // Operand 0's values in out, the others' in scratch; the cheap operands first.
+    ScratchLease scratch((count - 1) * n);
+    auto valuesOf = [&](std::size_t o) { return o == 0 ? out.data() : scratch.data() + (o - 1) * n; };
+    std::vector<std::size_t> order;
+    for (std::size_t o = 0; o < count; ++o)
+        if (planeCheapOf(*mOperands[o])) order.push_back(o);
+    for (std::size_t o = 0; o < count; ++o)
+        if (!planeCheapOf(*mOperands[o])) order.push_back(o);
+    std::vector<signed char> sides(count * nt, 0);  // per operand, oriented as the result
+    std::vector<TileNeed> needs(nt);
+    std::vector<unsigned char> decided(nt, 0);
+    for (const std::size_t o : order) {
+        for (std::size_t t = 0; t < nt; ++t) {
+            const TileNeed caller = needOf(need, t);
+            needs[t] = caller == TileNeed::Decide && decided[t] ? TileNeed::Skip : caller;
+        }
+        const Interval b = negated(o) ? Interval{-wide.hi, -wide.lo} : wide;
+        signed char* s = sides.data() + o * nt;
+        planeValuesOf(*mOperands[o], plane, tile, b, std::span<double>(valuesOf(o), n), std::span<signed char>(s, nt),
+                      needs);
+        for (std::size_t t = 0; t < nt; ++t) {
+            if (needs[t] == TileNeed::Skip) s[t] = 0;
+            if (negated(o)) s[t] = static_cast<signed char>(-s[t]);
+            if (s[t] == decisive) decided[t] = 1;
+        }
+    }
+    // The result's sides; an open tile needs every operand's values there.
+    std::vector<std::size_t> again(count, 0);
+    for (std::size_t t = 0; t < nt; ++t) {
+        side[t] = 0;
+        if (needOf(need, t) == TileNeed::Skip) continue;
+        if (decided[t]) {
+            side[t] = decisive;
+            continue;
+        }
+        bool all = true;
+        for (std::size_t o = 0; o < count; ++o) all = all && sides[o * nt + t] == -decisive;
+        if (all) {
+            side[t] = static_cast<signed char>(-decisive);
+            continue;
+        }
+        for (std::size_t o = 0; o < count; ++o) again[o] += sides[o * nt + t] != 0;
+    }
+    ScratchLease redone(n);
+    std::vector<signed char> ignored(nt);
+    for (std::size_t o = 0; o < count; ++o) {
+        if (again[o] == 0) continue;
+        for (std::size_t t = 0; t < nt; ++t)
+            needs[t] = side[t] == 0 && needOf(need, t) != TileNeed::Skip && sides[o * nt + t] != 0 ? TileNeed::Exact
+                                                                                                   : TileNeed::Skip;
+        const Interval b = negated(o) ? Interval{-wide.hi, -wide.lo} : wide;
+        planeValuesOf(*mOperands[o], plane, tile, b, std::span<double>(redone.data(), n), ignored, needs);
+        for (std::size_t t = 0; t < nt; ++t)
+            if (needs[t] == TileNeed::Exact)
+                copyTileWithHalo(plane, tile, int(t / tiles.ny), int(t % tiles.ny), redone.data(), valuesOf(o));
+    }
+    for (std::size_t o = 1; o < count; ++o) fold(out.data(), valuesOf(o), n);
+}
+
+bool BooleanField::planeCheap() const
+{
+    return std::all_of(mOperands.begin(), mOperands.end(), [](const FieldPtr& o) { return planeCheapOf(*o); });
 }
 
 double BooleanField::period(int axis) const

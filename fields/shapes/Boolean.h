@@ -3,6 +3,7 @@
 #pragma once
 
 #include "fields/core/FieldNode.h"
+#include "fields/core/PlaneBands.h"
 
 #include <vector>
 
@@ -13,7 +14,7 @@ enum class BooleanOp { Union, Intersection, Difference };
 /// Folds the operands left to right: union = min, intersection = max, difference = max(a, -b).
 /// With blend radius r > 0 the polynomial smooth minimum replaces min (smin(a, b) >= min - r/4),
 /// rounding the joint with a fillet of about radius r when the operands are distance-like.
-class BooleanField final : public FieldNode {
+class BooleanField final : public FieldNode, public PlaneBands {
 public:
     BooleanField(BooleanOp op, std::vector<FieldPtr> operands, double blendRadius = 0.0);
 
@@ -21,6 +22,14 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    /// The operands' planeValues, the cheap ones first (planeCheap): a tile one operand proves on
+    /// the side that decides (a union's below, an intersection's or a difference's above) is
+    /// skipped by the operands after it; one every operand proves on the other side (by the
+    /// blends' reach, (operands - 1) r / 4, more) is decided too; the operands that proved a side
+    /// of a tile left open are asked its values again. The values combined as gridValues'.
+    void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                     std::span<signed char> side, std::span<const TileNeed> need) const override;
+    bool planeCheap() const override;
     /// Intersection: the overlap of the operands' boxes; union: their hull (grown by the blend
     /// radius, which assumes distance-like operands); difference: the first operand's box.
     std::optional<Box3> support() const override;
@@ -35,6 +44,8 @@ public:
 private:
     /// Combines accumulated value a (gradient ga) with operand b (gradient gb) in place.
     void combine(double& a, Vec3d* ga, double b, const Vec3d* gb) const;
+    /// Folds operand @a o's values @a b (n of them) into @a out, as gridValues does.
+    void fold(double* out, const double* b, std::size_t n) const;
 
     BooleanOp mOp;
     std::vector<FieldPtr> mOperands;

@@ -79,6 +79,41 @@ void DrainedSolid::gridValues(const GridBatch& batch, std::span<double> out) con
 {
     requireSet();
     mSolid->gridValues(batch, out);
+    cutGrid(batch, out);
+}
+
+void DrainedSolid::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                               std::span<signed char> side, std::span<const TileNeed> need) const
+{
+    requireSet();
+    const PlaneTiles tiles = PlaneTiles::of(plane, tile);
+    planeValuesOf(*mSolid, plane, tile, band, out, side, need);
+    // max(solid, -channel) is below band.lo where the solid is and every channel is above -lo.
+    const double slack = 1e-12 * (finiteScale(band) + 1.0);
+    std::vector<TileNeed> again;
+    for (std::size_t t = 0; t < tiles.size(); ++t) {
+        if (side[t] >= 0 || mCylinders.empty()) continue;
+        const Box3 foot = tiles.footprint(plane, int(t / tiles.ny), int(t % tiles.ny));
+        if (std::all_of(mCylinders.begin(), mCylinders.end(),
+                        [&](const Cylinder& c) { return c.bound(foot).lo > slack - band.lo; }))
+            continue;
+        if (again.empty()) again.assign(tiles.size(), TileNeed::Skip);
+        again[t] = TileNeed::Exact;
+        side[t] = 0;
+    }
+    if (!again.empty()) {
+        std::vector<double> redone(plane.size());
+        std::vector<signed char> ignored(tiles.size());
+        planeValuesOf(*mSolid, plane, tile, band, redone, ignored, again);
+        for (std::size_t t = 0; t < tiles.size(); ++t)
+            if (again[t] == TileNeed::Exact)
+                copyTileWithHalo(plane, tile, int(t / tiles.ny), int(t % tiles.ny), redone.data(), out.data());
+    }
+    cutGrid(plane, out);
+}
+
+void DrainedSolid::cutGrid(const GridBatch& batch, std::span<double> out) const
+{
     if (mCylinders.empty()) return;
     const Box3 box = batch.bounds();
     const double lowest = *std::min_element(out.begin(), out.begin() + std::ptrdiff_t(batch.size()));

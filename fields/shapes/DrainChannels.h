@@ -3,6 +3,7 @@
 /// solid's own levels are known (they open the resin traps the solid encloses).
 #pragma once
 
+#include "fields/core/PlaneBands.h"
 #include "fields/shapes/Cylinder.h"
 
 #include <vector>
@@ -19,7 +20,7 @@ struct DrainChannel {
 /// mesh and slices of it both have the holes). Like LevelSolid it is made before its numbers are
 /// known: setChannels() gives the channels once, before anything evaluates it (an empty list is
 /// valid: nothing to drain). Evaluating it before then throws std::logic_error (a caller's bug).
-class DrainedSolid final : public FieldNode {
+class DrainedSolid final : public FieldNode, public PlaneBands {
 public:
     explicit DrainedSolid(FieldPtr solid);
 
@@ -35,6 +36,12 @@ public:
     /// The solid's fast block path, then the channels that reach the block.
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    /// The solid's planeValues, then the channels as gridValues cuts them: a tile the solid
+    /// proves above stays above; one it proves below stays below where every channel's bound
+    /// over the tile is too, else its values are asked again.
+    void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                     std::span<signed char> side, std::span<const TileNeed> need) const override;
+    bool planeCheap() const override { return planeCheapOf(*mSolid); }
     std::optional<Box3> support() const override { return mSolid->support(); }
     // No period: the channels sit where the traps are, not cell by cell.
 
@@ -42,6 +49,8 @@ private:
     void requireSet() const;
     /// Cuts the channels whose bound over @a box can change a value at @a points (values in @a out).
     void cut(const Box3& box, std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const;
+    /// The channels cut from a block's solid values (gridValues' second half).
+    void cutGrid(const GridBatch& batch, std::span<double> out) const;
 
     FieldPtr mSolid;
     std::vector<DrainChannel> mChannels;

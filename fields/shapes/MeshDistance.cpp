@@ -1,9 +1,14 @@
 #include "fields/shapes/MeshDistance.h"
 
+#include "fields/core/Scratch.h"
+
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
+#include <atomic>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace voxlat {
@@ -19,6 +24,8 @@ int blockOf(int i)
 MeshDistance::MeshDistance(openvdb::FloatGrid::ConstPtr grid, std::optional<Box3> support)
     : mGrid(std::move(grid)), mSupport(support)
 {
+    static std::atomic<std::uint64_t> made{0};
+    mId = ++made;
     const auto& xform = mGrid->transform();
     if (!xform.isLinear() || !xform.hasUniformScale())
         throw std::invalid_argument("MeshDistance needs a grid with a uniform linear transform");
@@ -99,6 +106,11 @@ void MeshDistance::gradients(std::span<const Vec3d> points, std::span<double> ou
 
 void MeshDistance::gridValues(const GridBatch& batch, std::span<double> out) const
 {
+    if (!lookUpGrid(batch, out)) interpolateGrid(batch, out, 0, nullptr);
+}
+
+bool MeshDistance::lookUpGrid(const GridBatch& batch, std::span<double> out) const
+{
     const Vec3d first = (batch.origin - mOrigin) / mVoxel;
     bool onSamples = true;
     for (int a = 0; a < 3; ++a) onSamples = onSamples && std::abs(first[a] - std::round(first[a])) <= 1e-6;
@@ -119,12 +131,9 @@ void MeshDistance::gridValues(const GridBatch& batch, std::span<double> out) con
             for (int j = 0; j < batch.ny; ++j)
                 for (int k = 0; k < batch.nz; ++k, ++n)
                     out[n] = acc.getValue(base.offsetBy(i * step, j * step, k * step));
-        return;
+        return true;
     }
-    if (!onSamples) {
-        FieldNode::gridValues(batch, out);
-        return;
-    }
+    if (!onSamples) return false;
     const openvdb::Coord base(int(std::round(first[0])), int(std::round(first[1])), int(std::round(first[2])));
     const openvdb::Coord last = base.offsetBy(batch.nx - 1, batch.ny - 1, batch.nz - 1);
     auto acc = mGrid->getConstAccessor();
@@ -156,6 +165,176 @@ void MeshDistance::gridValues(const GridBatch& batch, std::span<double> out) con
                         }
                 }
             }
+    return true;
+}
+
+void MeshDistance::gatherSamples(const openvdb::Coord& lo, const openvdb::Coord& hi, double* dst) const
+{
+    // Layout [x][y][z] over the index box [lo, hi]; a leaf's values from its buffer (active or
+    // not, as getValue), elsewhere a tile's or the background's value.
+    using Leaf = openvdb::FloatTree::LeafNodeType;
+    const int sz = hi.z() - lo.z() + 1, sy = hi.y() - lo.y() + 1;
+    auto acc = mGrid->getConstAccessor();
+    const openvdb::Coord leafLo = lo & ~(Leaf::DIM - 1), leafHi = hi & ~(Leaf::DIM - 1);
+    for (int lx = leafLo.x(); lx <= leafHi.x(); lx += Leaf::DIM)
+        for (int ly = leafLo.y(); ly <= leafHi.y(); ly += Leaf::DIM)
+            for (int lz = leafLo.z(); lz <= leafHi.z(); lz += Leaf::DIM) {
+                const openvdb::Coord leafOrigin(lx, ly, lz);
+                const openvdb::Coord a = openvdb::Coord::maxComponent(leafOrigin, lo);
+                const openvdb::Coord b = openvdb::Coord::minComponent(leafOrigin.offsetBy(Leaf::DIM - 1), hi);
+                const Leaf* leaf = acc.probeConstLeaf(leafOrigin);
+                const double value = leaf ? 0.0 : double(acc.getValue(leafOrigin));
+                for (int x = a.x(); x <= b.x(); ++x)
+                    for (int y = a.y(); y <= b.y(); ++y) {
+                        double* row = dst + (std::size_t(x - lo.x()) * sy + (y - lo.y())) * sz - lo.z();
+                        if (leaf) {
+                            const float* src = leaf->buffer().data() + Leaf::coordToOffset(openvdb::Coord(x, y, a.z()));
+                            for (int z = a.z(); z <= b.z(); ++z) row[z] = double(src[z - a.z()]);
+                        } else {
+                            for (int z = a.z(); z <= b.z(); ++z) row[z] = value;
+                        }
+                    }
+            }
+}
+
+bool MeshDistance::interpolateGrid(const GridBatch& batch, std::span<double> out, int tile, Interval* tileRange) const
+{
+    // sample() per point, separated by axis: the points' index coordinates per axis (the same
+    // expressions as batch.point() and sample(), so the same doubles), the samples of the index
+    // box the stencils cover gathered once, interpolated along z per (x, y) sample, then along y
+    // per (x sample, row), then along x per point. Each value is sample()'s own arithmetic in its
+    // own order: the same doubles as the point path.
+    const int n[3] = {batch.nx, batch.ny, batch.nz};
+    // Per axis and point: its cell's first sample (a whole number) and its fraction.
+    ScratchLease axes(2 * std::size_t(n[0] + n[1] + n[2]));
+    double* frac[3];
+    double* cell[3];
+    int lo[3], hi[3];
+    {
+        double* f = axes.data();
+        for (int a = 0; a < 3; ++a) {
+            frac[a] = f;
+            cell[a] = f + n[a];
+            f += 2 * n[a];
+            lo[a] = std::numeric_limits<int>::max();
+            hi[a] = std::numeric_limits<int>::lowest();
+            for (int m = 0; m < n[a]; ++m) {
+                const double x = (batch.origin[a] + m * batch.spacing[a] - mOrigin[a]) / mVoxel;
+                const int i0 = int(std::floor(x));
+                frac[a][m] = x - i0;
+                cell[a][m] = i0;
+                lo[a] = std::min(lo[a], i0);
+                hi[a] = std::max(hi[a], i0 + 1);
+            }
+        }
+    }
+    const std::size_t dx = std::size_t(hi[0] - lo[0]) + 1, dy = std::size_t(hi[1] - lo[1]) + 1,
+                      dz = std::size_t(hi[2] - lo[2]) + 1;
+    // Sparse points (a coarse pass between the grid's samples): point by point.
+    if (dx * dy * dz > 4 * batch.size() + 64) {
+        FieldNode::gridValues(batch, out);
+        return false;
+    }
+    ScratchLease samples(dx * dy * dz + dx * dy + dx * std::size_t(n[1]));
+    double* v = samples.data();
+    double* e = v + dx * dy * dz;  // along z: [x][y]
+    double* f = e + dx * dy;       // then along y: [x][row]
+    gatherSamples(openvdb::Coord(lo[0], lo[1], lo[2]), openvdb::Coord(hi[0], hi[1], hi[2]), v);
+    if (tileRange) {
+        // A plane's tiles: the interpolant over a footprint stays within the samples of the cells
+        // it covers.
+        const PlaneTiles tiles = PlaneTiles::of(batch, tile);
+        auto span = [&](int a, double from, double to, int& i0, int& i1) {
+            i0 = std::clamp(int(std::floor((from - mOrigin[a]) / mVoxel)), lo[a], hi[a]);
+            i1 = std::clamp(int(std::floor((to - mOrigin[a]) / mVoxel)) + 1, lo[a], hi[a]);
+        };
+        const int z0 = int(cell[2][0]) - lo[2];
+        for (int a = 0; a < tiles.nx; ++a)
+            for (int b = 0; b < tiles.ny; ++b) {
+                const Box3 foot = tiles.footprint(batch, a, b);
+                int x0, x1, y0, y1;
+                span(0, foot.min.x(), foot.max.x(), x0, x1);
+                span(1, foot.min.y(), foot.max.y(), y0, y1);
+                double vlo = std::numeric_limits<double>::infinity(), vhi = -vlo;
+                for (int x = x0; x <= x1; ++x)
+                    for (int y = y0; y <= y1; ++y)
+                        for (int z = z0; z <= z0 + 1; ++z) {
+                            const double w = v[(std::size_t(x - lo[0]) * dy + (y - lo[1])) * dz + z];
+                            vlo = std::min(vlo, w);
+                            vhi = std::max(vhi, w);
+                        }
+                tileRange[std::size_t(a) * tiles.ny + b] = Interval{vlo, vhi};
+            }
+    }
+    for (int k = 0; k < n[2]; ++k) {
+        const int z = int(cell[2][k]) - lo[2];
+        const double fz = frac[2][k];
+        for (std::size_t xy = 0; xy < dx * dy; ++xy) {
+            const double* s = v + xy * dz + z;
+            e[xy] = s[0] + fz * (s[1] - s[0]);
+        }
+        for (std::size_t x = 0; x < dx; ++x)
+            for (int j = 0; j < n[1]; ++j) {
+                const double* s = e + x * dy + (int(cell[1][j]) - lo[1]);
+                f[x * n[1] + j] = s[0] + frac[1][j] * (s[1] - s[0]);
+            }
+        for (int i = 0; i < n[0]; ++i) {
+            const double* f0 = f + std::size_t(int(cell[0][i]) - lo[0]) * n[1];
+            const double* f1 = f0 + n[1];
+            const double fx = frac[0][i];
+            double* dst = out.data() + std::size_t(i) * n[1] * n[2] + k;
+            for (int j = 0; j < n[1]; ++j) dst[std::size_t(j) * n[2]] = f0[j] + fx * (f1[j] - f0[j]);
+        }
+    }
+    return true;
+}
+
+void MeshDistance::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                               std::span<signed char> side, std::span<const TileNeed> need) const
+{
+    const std::size_t tiles = PlaneTiles::of(plane, tile).size(), n = plane.size();
+    const bool decidable = tiles > 0 && plane.spacing.x() > 0.0 && plane.spacing.y() > 0.0;
+    std::fill(side.begin(), side.begin() + tiles, static_cast<signed char>(0));
+    if (lookUpGrid(plane, out)) return;
+    if (!decidable) {
+        interpolateGrid(plane, out, 0, nullptr);
+        return;
+    }
+    // A part is read several times per plane (an infill's skin, its core, and again where a
+    // boolean asks for exact values): the thread's last plane of this grid is kept, its values
+    // and each tile's range of samples (which do not depend on the band).
+    struct Memo {
+        std::uint64_t id = 0;
+        double key[6] = {};
+        int nx = 0, ny = 0, tile = 0;
+        bool interpolated = false;
+        std::vector<double> values;
+        std::vector<Interval> ranges;
+    };
+    thread_local Memo memo;
+    const double key[6] = {plane.origin.x(),  plane.origin.y(),  plane.origin.z(),
+                           plane.spacing.x(), plane.spacing.y(), plane.spacing.z()};
+    if (!(memo.id == mId && std::equal(key, key + 6, memo.key) && memo.nx == plane.nx && memo.ny == plane.ny &&
+          memo.tile == tile)) {
+        memo.id = 0;  // not valid while it is made (an exception leaves it so)
+        memo.values.resize(n);
+        memo.ranges.resize(tiles);
+        memo.interpolated = interpolateGrid(plane, memo.values, tile, memo.ranges.data());
+        std::copy(key, key + 6, memo.key);
+        memo.nx = plane.nx;
+        memo.ny = plane.ny;
+        memo.tile = tile;
+        memo.id = mId;
+    }
+    std::copy(memo.values.begin(), memo.values.end(), out.begin());
+    if (!memo.interpolated) return;
+    for (std::size_t t = 0; t < tiles; ++t) {
+        if (needOf(need, t) != TileNeed::Decide) continue;
+        // By rounding the interpolant stays within 1e-12 of its samples' magnitude.
+        const Interval r = memo.ranges[t];
+        const double slack = 1e-12 * (std::max(std::abs(r.lo), std::abs(r.hi)) + finiteScale(band));
+        side[t] = static_cast<signed char>(r.lo > band.hi + slack ? 1 : r.hi < band.lo - slack ? -1 : 0);
+    }
 }
 
 Interval MeshDistance::bound(const Box3& box) const

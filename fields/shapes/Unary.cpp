@@ -59,6 +59,28 @@ void UnaryField::gridValues(const GridBatch& batch, std::span<double> out) const
     }
 }
 
+void UnaryField::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                             std::span<signed char> side, std::span<const TileNeed> need) const
+{
+    const std::size_t tiles = PlaneTiles::of(plane, tile).size();
+    if (mOp == UnaryOp::Abs) {
+        gridValues(plane, out);
+        std::fill(side.begin(), side.begin() + tiles, static_cast<signed char>(0));
+        return;
+    }
+    if (mOp == UnaryOp::Negate) {
+        planeValuesOf(*mChild, plane, tile, Interval{-band.hi, -band.lo}, out, side, need);
+        for (std::size_t t = 0; t < tiles; ++t) side[t] = static_cast<signed char>(-side[t]);
+        for (double& v : out.first(plane.size())) v = -v;
+        return;
+    }
+    // v + offset > hi where v > hi - offset, with a margin for the addition's rounding.
+    const double slack = 1e-12 * (std::abs(mOffset) + finiteScale(band) + 1.0);
+    planeValuesOf(*mChild, plane, tile, Interval{band.lo - mOffset - slack, band.hi - mOffset + slack}, out, side,
+                  need);
+    for (double& v : out.first(plane.size())) v += mOffset;
+}
+
 Interval UnaryField::bound(const Box3& box) const
 {
     const Interval b = mChild->bound(box);

@@ -4,6 +4,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <stdexcept>
 #include <vector>
 
@@ -78,18 +79,20 @@ void IsoRadius::gridValues(const GridBatch& batch, std::span<double> out) const
 }
 
 void IsoRadius::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
-                            std::span<signed char> side) const
+                            std::span<signed char> side, std::span<const TileNeed> need) const
 {
     const auto* bands = dynamic_cast<const PlaneBands*>(mF.get());
     const std::size_t tiles = PlaneTiles::of(plane, tile).size();
-    if (!bands || !(band.lo <= band.hi) || !(band.hi < mRhoMax)) {
+    if (!bands || !(band.lo <= band.hi)) {
         gridValues(plane, out);
         std::fill(side.begin(), side.begin() + tiles, static_cast<signed char>(0));
         return;
     }
-    // rho > hi where F < F(hi + d), rho < lo where F > F(lo - d).
-    const double d = 1e-9 * (mSigma + std::abs(band.lo) + std::abs(band.hi));
-    bands->planeValues(plane, tile, Interval{valueOf(band.hi + d), valueOf(band.lo - d)}, out, side);
+    // rho > hi where F < F(hi + d) (never for hi at or past the cap: rho stops there), rho < lo
+    // where F > F(lo - d) (F(-inf) = inf: never).
+    const double d = 1e-9 * (mSigma + finiteScale(band));
+    const double fLo = band.hi < mRhoMax ? valueOf(band.hi + d) : -std::numeric_limits<double>::infinity();
+    bands->planeValues(plane, tile, Interval{fLo, valueOf(band.lo - d)}, out, side, need);
     for (std::size_t t = 0; t < tiles; ++t) side[t] = static_cast<signed char>(-side[t]);
     // Only the points the open tiles read are mapped (each open tile's points and its one-point
     // halo: runs of tiles along each column); the others mean nothing and take rhoMax.
@@ -102,7 +105,10 @@ void IsoRadius::planeValues(const GridBatch& plane, int tile, Interval band, std
         std::uint64_t open = 0;
         for (int a = std::max(0, (i - 1) / tile - 1); a <= std::min(grid.nx - 1, i / tile); ++a)
             if (i >= a * tile && i <= (a + 1) * tile + 1)
-                for (int b = 0; b < grid.ny; ++b) open |= std::uint64_t(side[std::size_t(a) * grid.ny + b] == 0) << b;
+                for (int b = 0; b < grid.ny; ++b) {
+                    const std::size_t t = std::size_t(a) * grid.ny + b;
+                    open |= std::uint64_t(side[t] == 0 && needOf(need, t) != TileNeed::Skip) << b;
+                }
         double* column = out.data() + std::size_t(i) * plane.ny;
         int done = 0;  // points below this are mapped or filled
         while (open != 0) {

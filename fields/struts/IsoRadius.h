@@ -28,7 +28,7 @@ public:
     /// The convolution's planeValues with the band mapped to F (rho is decreasing, so the sides
     /// swap), widened by 1e-9 of sigma against rounding; gridValues when it has none.
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
-                     std::span<signed char> side) const override;
+                     std::span<signed char> side, std::span<const TileNeed> need) const override;
 
     /// rho(F) (capped) and its inverse, F(rho) = P exp(-sign(rho) rho^2 / (2 sigma^2)).
     double radiusOf(double f) const;

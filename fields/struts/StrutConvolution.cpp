@@ -519,7 +519,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
 }
 
 void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
-                                   std::span<signed char> side) const
+                                   std::span<signed char> side, std::span<const TileNeed> need) const
 {
     const PlaneTiles tiles = PlaneTiles::of(plane, tile);
     const bool seenAlongY = plane.ny > 1;  // evaluate() runs a plane's rows along y
@@ -572,8 +572,10 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         std::uint64_t open = 0;
         for (int b = 0; b < tiles.ny; ++b) {
             const std::size_t t = std::size_t(a) * tiles.ny + b;
-            side[t] = static_cast<signed char>(upper[t] * (1.0 + 1e-12) + 2.5e-5 * peaks[t] < band.lo ? -1 : 0);
-            if (side[t] == 0) open |= std::uint64_t(1) << b;
+            const TileNeed needed = needOf(need, t);
+            side[t] = static_cast<signed char>(
+                needed == TileNeed::Decide && upper[t] * (1.0 + 1e-12) + 2.5e-5 * peaks[t] < band.lo ? -1 : 0);
+            if (side[t] == 0 && needed != TileNeed::Skip) open |= std::uint64_t(1) << b;
         }
         // Tile column a's points and their halo: columns a tile .. (a + 1) tile + 1.
         for (int i = a * tile; i <= (a + 1) * tile + 1; ++i) columnTiles[i] |= open;

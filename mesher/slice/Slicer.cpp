@@ -424,7 +424,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         int decidedTiles = 0;
         if (banded) {
             tileSides.resize(std::size_t(ntx) * nty);
-            bands->planeValues(grid, tile, Interval{0.0, 0.0}, values, tileSides);
+            bands->planeValues(grid, tile, Interval{0.0, 0.0}, values, tileSides, {});
             for (const signed char side : tileSides) decidedTiles += side != 0;
         } else {
             mField.gridValues(grid, values);
