@@ -104,27 +104,40 @@ void homogenize(const VoxelCell& cell, const std::vector<double>& ke, const std:
         scale = std::sqrt(fe2 * double(topology.keptVoxels));
     };
 
+    // Every load case's system at once (one V-cycle serves them all, each case the bits it gets
+    // alone). In a fully solid cell the nodal loads cancel: what is left is rounding, and the
+    // fluctuation is zero.
     std::array<std::vector<double>, N> chi;
-    int done = 0;
+    std::vector<std::vector<double>> loads, fluctuations;
+    std::vector<int> system;
     for (int v = 0; v < N; ++v) {
         if (!solved[v]) continue;
         std::vector<double> F;
         double scale = 0.0;
         load(v, F, scale);
-        // In a fully solid cell the nodal loads cancel: what is left is rounding, and the
-        // fluctuation is zero.
         if (std::sqrt(solver.dot(F, F)) <= 1e-12 * scale) {
             chi[v].assign(solver.dofs(), 0.0);
-        } else {
-            std::function<bool(double)> progress;
-            if (settings.progress) progress = [&](double f) { return settings.progress((done + f) / cases); };
-            const auto stats = solver.solve(F, chi[v], settings.tolerance, settings.maxIterations, progress);
-            iterations[v] = stats.iterations;
+            continue;
+        }
+        loads.push_back(std::move(F));
+        system.push_back(v);
+    }
+    if (!system.empty()) {
+        std::function<bool(double)> progress;
+        if (settings.progress)
+            progress = [&](double f) {
+                return settings.progress((double(cases) - double(system.size()) * (1.0 - f)) / cases);
+            };
+        const auto stats = solver.solve(loads, fluctuations, settings.tolerance, settings.maxIterations, progress);
+        loads.clear();
+        for (std::size_t k = 0; k < system.size(); ++k) {
+            const int v = system[k];
+            iterations[v] = stats[k].iterations;
+            chi[v] = std::move(fluctuations[k]);
             solver.removeTranslations(chi[v]);
         }
-        ++done;
-        if (settings.progress && !settings.progress(double(done) / cases)) throw Cancelled("homogenization cancelled");
     }
+    if (settings.progress && !settings.progress(1.0)) throw Cancelled("homogenization cancelled");
 
     // C_ij |Y| = sum_e (u0_i - chi_i)^T ke (u0_j - chi_j)
     //          = Ns Ve C0_ij - chi_i.F_j - chi_j.F_i + chi_i.K chi_j,

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
 #include <type_traits>
 #include <unordered_map>
 
@@ -22,10 +23,10 @@ namespace voxlat::homogenization {
 namespace avx2 {
 template <int D, class T, int St>
 void elementBlocks(const std::int32_t* elemNodes, std::size_t e0, std::size_t e1, const T* blocks,
-                   const typename Lanes<T>::type* columns, const T* xin, T* y);
+                   const typename Lanes<T>::type* columns, const T* xin, T* y, int R);
 template <int D, class T, int St>
 void elementDense(const std::int32_t* elemNodes, const std::int32_t* elemType, const T* table, bool single,
-                  std::size_t e0, std::size_t e1, const T* xin, T* y);
+                  std::size_t e0, std::size_t e1, const T* xin, T* y, int R);
 }  // namespace avx2
 #endif
 
@@ -87,41 +88,9 @@ void parallelRange(std::size_t begin, std::size_t end, std::size_t grain, const 
                       [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
 }
 
-/// A weighted sum of node values of the preconditioner's vectors (restriction, prolongation): for
-/// three unknowns one lane vector (the padding lane stays zero), lane by lane the scalar sum.
-template <int D>
-struct NodeSum {
-    float s[D] = {};
-    void add(float w, const float* v)
-    {
-        for (int k = 0; k < D; ++k) s[k] += w * v[k];
-    }
-    void store(float* out) const
-    {
-        for (int k = 0; k < D; ++k) out[k] = s[k];
-    }
-    void addTo(float* out) const
-    {
-        for (int k = 0; k < D; ++k) out[k] += s[k];
-    }
-};
-template <>
-struct NodeSum<3> {
-    Float4 s = {0.0f, 0.0f, 0.0f, 0.0f};
-    static Float4 load(const float* p)
-    {
-        Float4 v;
-        std::memcpy(&v, p, sizeof v);
-        return v;
-    }
-    void add(float w, const float* v) { s += w * load(v); }
-    void store(float* out) const { std::memcpy(out, &s, sizeof s); }
-    void addTo(float* out) const
-    {
-        const Float4 t = load(out) + s;
-        std::memcpy(out, &t, sizeof t);
-    }
-};
+/// Right-hand sides the preconditioner takes at once (the elastic load cases; see
+/// PeriodicSolver::solve).
+constexpr int kMaxLanes = 6;
 
 /// Small dense symmetric D x D inverse (the nodal diagonal blocks are positive definite).
 template <int D>
@@ -198,7 +167,16 @@ struct PeriodicSolver<D>::Level {
     /// coarse coordinate -> (fine coordinate, weight) x3 (count -1 means unused).
     std::array<std::vector<std::array<std::pair<int, double>, 2>>, 3> prolong;
     std::array<std::vector<std::array<std::pair<int, double>, 3>>, 3> restrict;
+    /// Work vectors of the preconditioner: node i's right-hand side q at (i * R + q) * S for R
+    /// right-hand sides (sized for `lanes` of them).
     mutable std::vector<Real> b, x, r, d, t;
+    mutable int lanes = 1;
+    void reserveLanes(int R) const
+    {
+        if (R <= lanes) return;
+        for (std::vector<Real>* v : {&b, &x, &r, &d, &t}) v->assign(nodes() * S * std::size_t(R), Real(0));
+        lanes = R;
+    }
 
     std::size_t nodes() const { return pointOfNode.size(); }
     std::size_t dofs() const { return pointOfNode.size() * D; }
@@ -380,20 +358,21 @@ struct PeriodicSolver<D>::Level {
     /// y = A x in double (the operator CG solves with; level 0 only).
     void apply(const double* xin, double* y) const
     {
-        applyWith(matrices.data(), matrices.size(), blocks, blockColumns, xin, y);
+        applyWith(matrices.data(), matrices.size(), blocks, blockColumns, xin, y, 1);
     }
-    /// y = A x in the preconditioner's precision.
-    void apply(const Real* xin, Real* y) const
+    /// y = A x in the preconditioner's precision, for @a R right-hand sides at once.
+    void apply(const Real* xin, Real* y, int R = 1) const
     {
-        applyWith(realMatrices.data(), realMatrices.size(), realBlocks, realBlockColumns, xin, y);
+        applyWith(realMatrices.data(), realMatrices.size(), realBlocks, realBlockColumns, xin, y, R);
     }
 
     template <class T>
     void applyWith(const T* matrixTable, std::size_t tableSize, const std::vector<T>& scalarBlocks,
-                   const std::vector<typename Lanes<T>::type>& columns, const T* xin, T* y) const
+                   const std::vector<typename Lanes<T>::type>& columns, const T* xin, T* y, int R) const
     {
         constexpr int St = strideOf<T>;
-        parallelRange(0, nodes() * St, 8192, [&](std::size_t i0, std::size_t i1) { std::fill(y + i0, y + i1, T(0)); });
+        parallelRange(0, nodes() * St * std::size_t(R), 8192,
+                      [&](std::size_t i0, std::size_t i1) { std::fill(y + i0, y + i1, T(0)); });
         const bool single = tableSize == std::size_t(kE * kE);
         const std::int32_t* nodes = elemNodes.data();
         const std::int32_t* types = elemType.data();
@@ -402,14 +381,14 @@ struct PeriodicSolver<D>::Level {
             if (!scalarBlocks.empty()) {
 #ifdef VOXLAT_MG_AVX2
                 if (avx2)
-                    return avx2::elementBlocks<D, T, St>(nodes, e0, e1, scalarBlocks.data(), columns.data(), xin, y);
+                    return avx2::elementBlocks<D, T, St>(nodes, e0, e1, scalarBlocks.data(), columns.data(), xin, y, R);
 #endif
-                return baseline::elementBlocks<D, T, St>(nodes, e0, e1, scalarBlocks.data(), columns.data(), xin, y);
+                return baseline::elementBlocks<D, T, St>(nodes, e0, e1, scalarBlocks.data(), columns.data(), xin, y, R);
             }
 #ifdef VOXLAT_MG_AVX2
-            if (avx2) return avx2::elementDense<D, T, St>(nodes, types, matrixTable, single, e0, e1, xin, y);
+            if (avx2) return avx2::elementDense<D, T, St>(nodes, types, matrixTable, single, e0, e1, xin, y, R);
 #endif
-            baseline::elementDense<D, T, St>(nodes, types, matrixTable, single, e0, e1, xin, y);
+            baseline::elementDense<D, T, St>(nodes, types, matrixTable, single, e0, e1, xin, y, R);
         });
         (void)avx2;
     }
@@ -654,31 +633,36 @@ void PeriodicSolver<D>::buildHierarchy()
 }
 
 template <int D>
-void PeriodicSolver<D>::coarseSolve(const Level& L, const Real* b, Real* xOut) const
+void PeriodicSolver<D>::coarseSolve(const Level& L, const Real* b, Real* xOut, int R) const
 {
     const std::size_t n = L.dofs();
     const double* A = mCoarseFactor.data();
+    constexpr int S = Level::S;
+    // Right-hand side q's unknown i at (i / D) * S * R + q * S + i % D.
+    auto at = [&](std::size_t i, int q) { return (i / D) * S * std::size_t(R) + std::size_t(q) * S + i % D; };
     std::vector<double> x(n);
-    for (std::size_t i = 0; i < n; ++i) {  // L y = b
-        if (mCoarseDropped[i]) {
-            x[i] = 0.0;
-            continue;
+    for (int q = 0; q < R; ++q) {
+        for (std::size_t i = 0; i < n; ++i) {  // L y = b
+            if (mCoarseDropped[i]) {
+                x[i] = 0.0;
+                continue;
+            }
+            double s = b[at(i, q)];
+            for (std::size_t k = 0; k < i; ++k) s -= A[i * n + k] * x[k];
+            x[i] = s / A[i * n + i];
         }
-        double s = b[(i / D) * Level::S + i % D];
-        for (std::size_t k = 0; k < i; ++k) s -= A[i * n + k] * x[k];
-        x[i] = s / A[i * n + i];
+        for (std::size_t i = n; i-- > 0;) {  // L^T x = y
+            if (mCoarseDropped[i]) continue;
+            double s = x[i];
+            for (std::size_t k = i + 1; k < n; ++k) s -= A[k * n + i] * x[k];
+            x[i] = s / A[i * n + i];
+        }
+        for (std::size_t i = 0; i < n; ++i) xOut[at(i, q)] = Real(x[i]);
     }
-    for (std::size_t i = n; i-- > 0;) {  // L^T x = y
-        if (mCoarseDropped[i]) continue;
-        double s = x[i];
-        for (std::size_t k = i + 1; k < n; ++k) s -= A[k * n + i] * x[k];
-        x[i] = s / A[i * n + i];
-    }
-    for (std::size_t i = 0; i < n; ++i) xOut[(i / D) * Level::S + i % D] = Real(x[i]);
 }
 
 template <int D>
-void PeriodicSolver<D>::smooth(const Level& L, const Real* b, Real* x, bool zeroStart) const
+void PeriodicSolver<D>::smooth(const Level& L, const Real* b, Real* x, bool zeroStart, int R) const
 {
     // Chebyshev iteration on diag^-1 A over [lo, hi] (Saad, Iterative Methods, alg. 12.1). With a
     // zero start it is a fixed symmetric polynomial in diag^-1 A times diag^-1: the same operator
@@ -687,28 +671,28 @@ void PeriodicSolver<D>::smooth(const Level& L, const Real* b, Real* x, bool zero
     const double sigma = theta / delta;
     double rho = 1.0 / sigma;
     Real* t = L.t.data();
-    if (!zeroStart) L.apply(x, t);
+    if (!zeroStart) L.apply(x, t, R);
     // d = c1 d + c2 diag^-1 (b - t), x = x + d (t and the old x, d are zero on a zero start).
-    chebyshevStep(L, b, zeroStart ? nullptr : t, x, Real(0), Real(1.0 / theta), !zeroStart);
+    chebyshevStep(L, b, zeroStart ? nullptr : t, x, Real(0), Real(1.0 / theta), !zeroStart, R);
     const int degree = &L == mLevels[0].get() ? kFineDegree : kCoarseDegree;
     for (int step = 1; step < degree; ++step) {
-        L.apply(x, t);
+        L.apply(x, t, R);
         const double rhoNew = 1.0 / (2.0 * sigma - rho);
-        chebyshevStep(L, b, t, x, Real(rhoNew * rho), Real(2.0 * rhoNew / delta), true);
+        chebyshevStep(L, b, t, x, Real(rhoNew * rho), Real(2.0 * rhoNew / delta), true, R);
         rho = rhoNew;
     }
 }
 
 template <int D>
 void PeriodicSolver<D>::chebyshevStep(const Level& L, const Real* b, const Real* t, Real* x, Real c1, Real c2,
-                                      bool keepX) const
+                                      bool keepX, int R) const
 {
     Real* d = L.d.data();
     parallelRange(0, L.nodes(), 2048, [&](std::size_t i0, std::size_t i1) {
         if constexpr (D == 3) {
             // One node per lane vector, its padding lane zero throughout (the diagonal block
             // inverse's rows are padded with zeros too). The block is symmetric, so its rows are
-            // its columns.
+            // its columns; loaded once for every right-hand side.
             auto load = [](const Real* p) {
                 Float4 v;
                 std::memcpy(&v, p, sizeof v);
@@ -716,49 +700,60 @@ void PeriodicSolver<D>::chebyshevStep(const Level& L, const Real* b, const Real*
             };
             auto store = [](Real* p, const Float4& v) { std::memcpy(p, &v, sizeof v); };
             for (std::size_t i = i0; i < i1; ++i) {
-                Float4 r = load(b + 4 * i);
-                if (t) r -= load(t + 4 * i);
                 const Real* m = &L.diagInv[12 * i];
-                Float4 dn = c2 * (load(m) * r[0] + load(m + 4) * r[1] + load(m + 8) * r[2]);
-                if (c1 != Real(0)) dn += c1 * load(d + 4 * i);
-                store(d + 4 * i, dn);
-                store(x + 4 * i, keepX ? load(x + 4 * i) + dn : dn);
+                const Float4 m0 = load(m), m1 = load(m + 4), m2 = load(m + 8);
+                for (int q = 0; q < R; ++q) {
+                    const std::size_t o = 4 * (i * R + q);
+                    Float4 r = load(b + o);
+                    if (t) r -= load(t + o);
+                    Float4 dn = c2 * (m0 * r[0] + m1 * r[1] + m2 * r[2]);
+                    if (c1 != Real(0)) dn += c1 * load(d + o);
+                    store(d + o, dn);
+                    store(x + o, keepX ? load(x + o) + dn : dn);
+                }
             }
         } else {
-            for (std::size_t i = i0; i < i1; ++i) {
-                const Real r = t ? b[i] - t[i] : b[i];
-                Real dn = c2 * (L.diagInv[i] * r);
-                if (c1 != Real(0)) dn += c1 * d[i];
-                d[i] = dn;
-                x[i] = keepX ? x[i] + dn : dn;
-            }
+            for (std::size_t i = i0; i < i1; ++i)
+                for (int q = 0; q < R; ++q) {
+                    const std::size_t o = i * R + q;
+                    const Real r = t ? b[o] - t[o] : b[o];
+                    Real dn = c2 * (L.diagInv[i] * r);
+                    if (c1 != Real(0)) dn += c1 * d[o];
+                    d[o] = dn;
+                    x[o] = keepX ? x[o] + dn : dn;
+                }
         }
     });
 }
 
 template <int D>
-void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
+void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x, int R) const
 {
     const Level& L = *mLevels[level];
     if (level + 1 == mLevels.size()) {
-        coarseSolve(L, b, x);
+        coarseSolve(L, b, x, R);
         return;
     }
     const Level& C = *mLevels[level + 1];
-    smooth(L, b, x, true);
+    smooth(L, b, x, true, R);
     // r = b - A x, then restricted to the coarse level (P^T, node by node on the coarse grid).
-    L.apply(x, L.t.data());
+    L.apply(x, L.t.data(), R);
     Real* r = L.r.data();
     constexpr int S = Level::S;
-    parallelRange(0, L.nodes() * S, 8192, [&](std::size_t i0, std::size_t i1) {
+    const std::size_t width = S * std::size_t(R);  // a node's values, every right-hand side
+    parallelRange(0, L.nodes() * width, 8192, [&](std::size_t i0, std::size_t i1) {
         for (std::size_t i = i0; i < i1; ++i) r[i] = b[i] - L.t[i];
     });
+    // A node's weighted sum, per value: s[j] += w v[j] from zero, in the order of the terms.
+    auto addTo = [width](Real* s, Real w, const Real* v) {
+        for (std::size_t j = 0; j < width; ++j) s[j] += w * v[j];
+    };
     Real* bc = C.b.data();
     parallelRange(0, C.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
         for (std::size_t i = i0; i < i1; ++i) {
             int c[3];
             C.coords(C.pointOfNode[i], c);
-            NodeSum<D> s;
+            Real s[kMaxLanes * 4] = {};  // width <= kMaxLanes * S
             for (const auto& [fz, wz] : L.restrict[2][c[2]]) {
                 if (fz < 0) continue;
                 for (const auto& [fy, wy] : L.restrict[1][c[1]]) {
@@ -767,21 +762,21 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
                         if (fx < 0) continue;
                         const std::int32_t node = L.nodeOfPoint[L.pointIndex(fx, fy, fz)];
                         if (node < 0) continue;
-                        s.add(Real(wx * wy * wz), r + std::size_t(node) * S);
+                        addTo(s, Real(wx * wy * wz), r + std::size_t(node) * width);
                     }
                 }
             }
-            s.store(bc + i * S);
+            std::memcpy(bc + i * width, s, width * sizeof(Real));
         }
     });
     Real* xc = C.x.data();
-    vcycle(level + 1, bc, xc);
+    vcycle(level + 1, bc, xc, R);
     // x += P xc, node by node on the fine grid.
     parallelRange(0, L.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
         for (std::size_t i = i0; i < i1; ++i) {
             int c[3];
             L.coords(L.pointOfNode[i], c);
-            NodeSum<D> s;
+            Real s[kMaxLanes * 4] = {};  // width <= kMaxLanes * S
             for (const auto& [cz, wz] : L.prolong[2][c[2]]) {
                 if (cz < 0) continue;
                 for (const auto& [cy, wy] : L.prolong[1][c[1]]) {
@@ -789,14 +784,15 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
                     for (const auto& [cx, wx] : L.prolong[0][c[0]]) {
                         if (cx < 0) continue;
                         const std::int32_t node = C.nodeOfPoint[C.pointIndex(cx, cy, cz)];
-                        s.add(Real(wx * wy * wz), xc + std::size_t(node) * S);
+                        addTo(s, Real(wx * wy * wz), xc + std::size_t(node) * width);
                     }
                 }
             }
-            s.addTo(x + i * S);
+            Real* out = x + i * width;
+            for (std::size_t j = 0; j < width; ++j) out[j] += s[j];
         }
     });
-    smooth(L, b, x, false);
+    smooth(L, b, x, false, R);
 }
 
 template <int D>
@@ -845,78 +841,119 @@ void PeriodicSolver<D>::removeTranslations(Vector& v) const
 }
 
 template <int D>
-typename PeriodicSolver<D>::Stats PeriodicSolver<D>::solve(const Vector& f, Vector& x, double tolerance,
-                                                           int maxIterations,
-                                                           const std::function<bool(double)>& progress) const
+std::vector<typename PeriodicSolver<D>::Stats> PeriodicSolver<D>::solve(
+    std::vector<Vector>& f, std::vector<Vector>& x, double tolerance, int maxIterations,
+    const std::function<bool(double)>& progress) const
 {
     const std::size_t n = dofs();
-    Stats stats;
-    x.assign(n, 0.0);
-    const double fnorm = std::sqrt(dot(f, f));
-    if (fnorm == 0.0) return stats;
-    Vector r = f, z(n), p(n), q(n);
+    const std::size_t systems = f.size();
+    if (systems > std::size_t(kMaxLanes)) throw std::logic_error("PeriodicSolver::solve: too many right-hand sides");
+    std::vector<Stats> stats(systems);
+    x.assign(systems, Vector());
+    // Per system: r (f itself), z, p, q, rz, |f|, |r|; active while it iterates.
+    std::vector<Vector>& r = f;
+    std::vector<Vector> z(systems), p(systems), q(systems);
+    std::vector<double> rz(systems, 0.0), alpha(systems, 0.0), fnorm(systems, 0.0), rnorm(systems, 0.0);
+    std::vector<double> fraction(systems, 1.0);  // of the way to the tolerance (log scale); 1 when stopped
+    std::vector<std::size_t> active;
+    for (std::size_t k = 0; k < systems; ++k) {
+        x[k].assign(n, 0.0);
+        fnorm[k] = std::sqrt(dot(f[k], f[k]));
+        if (fnorm[k] == 0.0) continue;
+        rnorm[k] = fnorm[k];
+        fraction[k] = 0.0;
+        z[k].assign(n, 0.0);
+        p[k].assign(n, 0.0);
+        q[k].assign(n, 0.0);
+        active.push_back(k);
+    }
     const Level& L0 = *mLevels[0];
+    // z = M^-1 r for every active system at once: system active[q] is right-hand side q of the
+    // V-cycle, which gives each the bits it gives alone.
     auto precondition = [&]() {
         constexpr int S = Level::S;
+        const int R = int(active.size());
+        for (const auto& level : mLevels) level->reserveLanes(R);
         parallelRange(0, L0.nodes(), 4096, [&](std::size_t i0, std::size_t i1) {
-            for (std::size_t i = i0; i < i1; ++i)
-                for (int k = 0; k < D; ++k) L0.b[i * S + k] = Real(r[i * D + k]);
+            for (int h = 0; h < R; ++h) {
+                const double* rk = r[active[h]].data();
+                for (std::size_t i = i0; i < i1; ++i)
+                    for (int k = 0; k < D; ++k) L0.b[(i * R + h) * S + k] = Real(rk[i * D + k]);
+            }
         });
-        vcycle(0, L0.b.data(), L0.x.data());
+        vcycle(0, L0.b.data(), L0.x.data(), R);
         parallelRange(0, L0.nodes(), 4096, [&](std::size_t i0, std::size_t i1) {
-            for (std::size_t i = i0; i < i1; ++i)
-                for (int k = 0; k < D; ++k) z[i * D + k] = double(L0.x[i * S + k]);
+            for (int h = 0; h < R; ++h) {
+                double* zk = z[active[h]].data();
+                for (std::size_t i = i0; i < i1; ++i)
+                    for (int k = 0; k < D; ++k) zk[i * D + k] = double(L0.x[(i * R + h) * S + k]);
+            }
         });
         // No projection of z onto the complement of translations: its null-space part is
         // harmless (A p ignores it) and the caller projects the solution.
     };
+    if (active.empty()) return stats;
     precondition();
-    p = z;
-    double rz = dot(r, z);
-    double rnorm = fnorm;
-    const double logTarget = std::log(std::max(tolerance, 1e-300));
-    while (stats.iterations < maxIterations) {
-        apply(p, q);
-        const double pq = dot(p, q);
-        if (!(pq > 0.0)) break;  // breakdown: r is (numerically) in the null space
-        const double alpha = rz / pq;
-        // The update and |r|^2 in one pass (the same sum as dot(r, r)).
-        rnorm = std::sqrt(blockedSums<1>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 1>& s) {
-            double acc = 0.0;
-            for (std::size_t i = i0; i < i1; ++i) {
-                x[i] += alpha * p[i];
-                r[i] -= alpha * q[i];
-                acc += r[i] * r[i];
-            }
-            s[0] = acc;
-        })[0]);
-        ++stats.iterations;
-        if (progress) {
-            const double fraction = std::clamp(std::log(std::max(rnorm / fnorm, 1e-300)) / logTarget, 0.0, 1.0);
-            if (!progress(fraction)) throw Cancelled("homogenization cancelled");
-        }
-        if (rnorm <= tolerance * fnorm) break;
-        precondition();
-        // Flexible (Polak-Ribiere) beta = z.(r_new - r_old) / rz_old, r_new - r_old = -alpha q:
-        // robust to a preconditioner that is not exactly linear (single precision rounding).
-        // dot(r, z) and dot(z, q) in one pass.
-        const std::array<double, 2> sums =
-            blockedSums<2>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 2>& s) {
-                double rz = 0.0, zq = 0.0;
-                for (std::size_t i = i0; i < i1; ++i) {
-                    rz += r[i] * z[i];
-                    zq += z[i] * q[i];
-                }
-                s = {rz, zq};
-            });
-        const double rzNew = sums[0];
-        const double beta = std::max(0.0, -alpha * sums[1] / rz);
-        rz = rzNew;
-        parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
-            for (std::size_t i = i0; i < i1; ++i) p[i] = z[i] + beta * p[i];
-        });
+    for (std::size_t k : active) {
+        p[k] = z[k];
+        rz[k] = dot(r[k], z[k]);
     }
-    stats.relativeResidual = rnorm / fnorm;
+    const double logTarget = std::log(std::max(tolerance, 1e-300));
+    while (!active.empty() && maxIterations > 0) {
+        std::vector<std::size_t> going;
+        for (std::size_t k : active) {
+            Vector &xk = x[k], &rk = r[k], &pk = p[k], &qk = q[k];
+            apply(pk, qk);
+            const double pq = dot(pk, qk);
+            fraction[k] = 1.0;
+            if (!(pq > 0.0)) continue;  // breakdown: r is (numerically) in the null space
+            const double a = alpha[k] = rz[k] / pq;
+            // The update and |r|^2 in one pass (the same sum as dot(r, r)).
+            rnorm[k] = std::sqrt(blockedSums<1>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 1>& s) {
+                double acc = 0.0;
+                for (std::size_t i = i0; i < i1; ++i) {
+                    xk[i] += a * pk[i];
+                    rk[i] -= a * qk[i];
+                    acc += rk[i] * rk[i];
+                }
+                s[0] = acc;
+            })[0]);
+            ++stats[k].iterations;
+            if (rnorm[k] <= tolerance * fnorm[k] || stats[k].iterations >= maxIterations) continue;
+            fraction[k] = std::clamp(std::log(std::max(rnorm[k] / fnorm[k], 1e-300)) / logTarget, 0.0, 1.0);
+            going.push_back(k);
+        }
+        if (progress) {
+            double sum = 0.0;
+            for (const double v : fraction) sum += v;
+            if (!progress(sum / double(systems))) throw Cancelled("homogenization cancelled");
+        }
+        active = std::move(going);
+        if (active.empty()) break;
+        precondition();
+        for (std::size_t k : active) {
+            const Vector &rk = r[k], &zk = z[k], &qk = q[k];
+            Vector& pk = p[k];
+            // Flexible (Polak-Ribiere) beta = z.(r_new - r_old) / rz_old, r_new - r_old = -alpha q:
+            // robust to a preconditioner that is not exactly linear (single precision rounding).
+            // dot(r, z) and dot(z, q) in one pass.
+            const std::array<double, 2> sums =
+                blockedSums<2>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 2>& s) {
+                    double rzs = 0.0, zq = 0.0;
+                    for (std::size_t i = i0; i < i1; ++i) {
+                        rzs += rk[i] * zk[i];
+                        zq += zk[i] * qk[i];
+                    }
+                    s = {rzs, zq};
+                });
+            const double beta = std::max(0.0, -alpha[k] * sums[1] / rz[k]);
+            rz[k] = sums[0];
+            parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
+                for (std::size_t i = i0; i < i1; ++i) pk[i] = zk[i] + beta * pk[i];
+            });
+        }
+    }
+    for (std::size_t k = 0; k < systems; ++k) stats[k].relativeResidual = fnorm[k] > 0.0 ? rnorm[k] / fnorm[k] : 0.0;
     return stats;
 }
 

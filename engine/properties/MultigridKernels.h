@@ -70,26 +70,32 @@ inline void hadamard(V* v)
 
 /// y += the element products of elements e0..e1-1 through the reflection blocks (see
 /// Level::setReflectionBlocks in Multigrid.cpp): @a blocks, 8 scalars for D = 1; @a columns,
-/// column j of block c at c * 3 + j for D = 3. A node's values sit at node * St.
+/// column j of block c at c * 3 + j for D = 3. The vectors hold @a R right-hand sides: right-hand
+/// side q of a node at node * St * R + q * St. Every right-hand side takes the same operations in
+/// the same order as alone (R = 1); two at a time for single precision with three unknowns, in
+/// one eight-lane vector (two nodes' four lanes), lane by lane the four-lane product.
 template <int D, class T, int St>
 void elementBlocks(const std::int32_t* elemNodes, std::size_t e0, std::size_t e1, const T* blocks,
-                   const typename Lanes<T>::type* columns, const T* xin, T* y)
+                   const typename Lanes<T>::type* columns, const T* xin, T* y, int R)
 {
     using V = typename Lanes<T>::type;
+    const std::size_t stride = std::size_t(St) * std::size_t(R);
     if constexpr (D == 1) {
         T B[8];
         for (int c = 0; c < 8; ++c) B[c] = blocks[c];
         for (std::size_t e = e0; e < e1; ++e) {
             const std::int32_t* nd = &elemNodes[8 * e];
-            T v[8];
+            for (int q = 0; q < R; ++q) {
+                T v[8];
 #pragma GCC unroll 8
-            for (int a = 0; a < 8; ++a) v[a] = xin[nd[a]];
-            hadamard(v);
+                for (int a = 0; a < 8; ++a) v[a] = xin[std::size_t(nd[a]) * stride + q];
+                hadamard(v);
 #pragma GCC unroll 8
-            for (int c = 0; c < 8; ++c) v[c] *= B[c];
-            hadamard(v);
+                for (int c = 0; c < 8; ++c) v[c] *= B[c];
+                hadamard(v);
 #pragma GCC unroll 8
-            for (int a = 0; a < 8; ++a) y[nd[a]] += v[a];
+                for (int a = 0; a < 8; ++a) y[std::size_t(nd[a]) * stride + q] += v[a];
+            }
         }
     } else {
         // Character c's component d is, in the transform of the node values, component d at index
@@ -100,48 +106,88 @@ void elementBlocks(const std::int32_t* elemNodes, std::size_t e0, std::size_t e1
         V sign[8];
         for (int a = 0; a < 8; ++a) sign[a] = V{T((a & 1) ? -1 : 1), T((a & 2) ? -1 : 1), T((a & 4) ? -1 : 1), T(0)};
         const V* B = columns;
+        constexpr bool kPairs = St == 4 && sizeof(T) == 4;
+        using P = typename Lanes8<T>::type;
+        P sign2[8], B2[24];
+        if constexpr (kPairs) {
+            for (int a = 0; a < 8; ++a)
+                sign2[a] =
+                    P{sign[a][0], sign[a][1], sign[a][2], sign[a][3], sign[a][0], sign[a][1], sign[a][2], sign[a][3]};
+            for (int k = 0; k < 24; ++k)
+                B2[k] = P{B[k][0], B[k][1], B[k][2], B[k][3], B[k][0], B[k][1], B[k][2], B[k][3]};
+        }
         for (std::size_t e = e0; e < e1; ++e) {
             const std::int32_t* nd = &elemNodes[8 * e];
-            V v[8];
+            int q = 0;
+            if constexpr (kPairs) {
+                // Two right-hand sides: lanes 0-3 and 4-7, each the four-lane product below (a
+                // component broadcast within its half).
+                for (; q + 2 <= R; q += 2) {
+                    P v[8];
 #pragma GCC unroll 8
-            for (int a = 0; a < 8; ++a) {
-                const T* p = xin + std::size_t(nd[a]) * St;
-                if constexpr (St == 4)
-                    std::memcpy(&v[a], p, sizeof(V));  // the padding lane is zero
-                else
-                    v[a] = V{p[0], p[1], p[2], T(0)};
+                    for (int a = 0; a < 8; ++a)
+                        std::memcpy(&v[a], xin + std::size_t(nd[a]) * stride + q * 4, sizeof(P));
+                    hadamard(v);
+                    P w[8];
+#pragma GCC unroll 8
+                    for (int c = 0; c < 8; ++c) {
+                        const P x0 = __builtin_shufflevector(v[c ^ 1], v[c ^ 1], 0, 0, 0, 0, 4, 4, 4, 4);
+                        const P x1 = __builtin_shufflevector(v[c ^ 2], v[c ^ 2], 1, 1, 1, 1, 5, 5, 5, 5);
+                        const P x2 = __builtin_shufflevector(v[c ^ 4], v[c ^ 4], 2, 2, 2, 2, 6, 6, 6, 6);
+                        w[c] = B2[3 * c] * x0 + B2[3 * c + 1] * x1 + B2[3 * c + 2] * x2;
+                    }
+                    hadamard(w);
+#pragma GCC unroll 8
+                    for (int a = 0; a < 8; ++a) {
+                        const P r = w[a] * sign2[a];
+                        T* out = y + std::size_t(nd[a]) * stride + q * 4;
+                        P o;
+                        std::memcpy(&o, out, sizeof o);
+                        o += r;
+                        std::memcpy(out, &o, sizeof o);
+                    }
+                }
             }
-            hadamard(v);
-            V w[8];
+            for (; q < R; ++q) {
+                V v[8];
 #pragma GCC unroll 8
-            for (int c = 0; c < 8; ++c)
-                w[c] = B[3 * c] * v[c ^ 1][0] + B[3 * c + 1] * v[c ^ 2][1] + B[3 * c + 2] * v[c ^ 4][2];
-            hadamard(w);
+                for (int a = 0; a < 8; ++a) {
+                    const T* p = xin + std::size_t(nd[a]) * stride + q * St;
+                    if constexpr (St == 4)
+                        std::memcpy(&v[a], p, sizeof(V));  // the padding lane is zero
+                    else
+                        v[a] = V{p[0], p[1], p[2], T(0)};
+                }
+                hadamard(v);
+                V w[8];
 #pragma GCC unroll 8
-            for (int a = 0; a < 8; ++a) {
-                const V r = w[a] * sign[a];
-                T* q = y + std::size_t(nd[a]) * St;
-                if constexpr (St == 4) {
-                    V w;
-                    std::memcpy(&w, q, sizeof(V));
-                    w += r;  // lane 3: 0 + 0 (the blocks' columns are zero there)
-                    std::memcpy(q, &w, sizeof(V));
-                } else {
-                    q[0] += r[0];
-                    q[1] += r[1];
-                    q[2] += r[2];
+                for (int c = 0; c < 8; ++c)
+                    w[c] = B[3 * c] * v[c ^ 1][0] + B[3 * c + 1] * v[c ^ 2][1] + B[3 * c + 2] * v[c ^ 4][2];
+                hadamard(w);
+#pragma GCC unroll 8
+                for (int a = 0; a < 8; ++a) {
+                    const V r = w[a] * sign[a];
+                    T* out = y + std::size_t(nd[a]) * stride + q * St;
+                    if constexpr (St == 4) {
+                        V o;
+                        std::memcpy(&o, out, sizeof(V));
+                        o += r;  // lane 3: 0 + 0 (the blocks' columns are zero there)
+                        std::memcpy(out, &o, sizeof(V));
+                    } else {
+                        out[0] += r[0];
+                        out[1] += r[1];
+                        out[2] += r[2];
+                    }
                 }
             }
         }
     }
 }
 
-/// y += the element products of elements e0..e1-1 with their dense (8D)^2 matrices: @a table
-/// holds one per element type (elemType), or the only one when @a single. A node's values sit
-/// at node * St.
-template <int D, class T, int St>
-void elementDense(const std::int32_t* elemNodes, const std::int32_t* elemType, const T* table, bool single,
-                  std::size_t e0, std::size_t e1, const T* xin, T* y)
+/// y += one element's dense product @a K for right-hand sides q .. q + M - 1 (see elementDense):
+/// each column of K loaded once for all M.
+template <int M, int D, class T, int St>
+inline void denseProduct(const std::int32_t* nd, const T* K, const T* xin, T* y, std::size_t stride, int q)
 {
     constexpr int kE = 8 * D;
     // The element vector as whole lane vectors of eight (kE = 8 or 24), the loops unrolled: lane
@@ -150,33 +196,56 @@ void elementDense(const std::int32_t* elemNodes, const std::int32_t* elemType, c
     // search test's time under ASan/UBSan).
     using W = typename Lanes8<T>::type;
     constexpr int kW = kE / 8;
+    T ue[M][kE];
+#pragma GCC unroll 2
+    for (int h = 0; h < M; ++h)
+#pragma GCC unroll 8
+        for (int a = 0; a < 8; ++a)
+#pragma GCC unroll 3
+            for (int k = 0; k < D; ++k) ue[h][a * D + k] = xin[std::size_t(nd[a]) * stride + (q + h) * St + k];
+    W ye[M][kW];
+#pragma GCC unroll 2
+    for (int h = 0; h < M; ++h)
+#pragma GCC unroll 3
+        for (int i = 0; i < kW; ++i) ye[h][i] = W{};
+            // Column by column (K is symmetric): each step an axpy on whole lane vectors.
+#pragma GCC unroll 24
+    for (int j = 0; j < kE; ++j) {
+        const T* col = K + j * kE;
+        W c[kW];
+#pragma GCC unroll 3
+        for (int i = 0; i < kW; ++i) std::memcpy(&c[i], col + 8 * i, sizeof(W));
+#pragma GCC unroll 2
+        for (int h = 0; h < M; ++h) {
+            const T u = ue[h][j];
+#pragma GCC unroll 3
+            for (int i = 0; i < kW; ++i) ye[h][i] += c[i] * u;
+        }
+    }
+#pragma GCC unroll 2
+    for (int h = 0; h < M; ++h)
+#pragma GCC unroll 8
+        for (int a = 0; a < 8; ++a)
+#pragma GCC unroll 3
+            for (int k = 0; k < D; ++k)
+                y[std::size_t(nd[a]) * stride + (q + h) * St + k] += ye[h][(a * D + k) / 8][(a * D + k) % 8];
+}
+
+/// y += the element products of elements e0..e1-1 with their dense (8D)^2 matrices: @a table
+/// holds one per element type (elemType), or the only one when @a single. @a R right-hand sides,
+/// laid out as in elementBlocks; a column of the matrix is loaded once for two of them.
+template <int D, class T, int St>
+void elementDense(const std::int32_t* elemNodes, const std::int32_t* elemType, const T* table, bool single,
+                  std::size_t e0, std::size_t e1, const T* xin, T* y, int R)
+{
+    constexpr int kE = 8 * D;
+    const std::size_t stride = std::size_t(St) * std::size_t(R);
     for (std::size_t e = e0; e < e1; ++e) {
         const std::int32_t* nd = &elemNodes[8 * e];
         const T* K = single ? table : table + std::size_t(elemType[e]) * kE * kE;
-        T ue[kE];
-#pragma GCC unroll 8
-        for (int a = 0; a < 8; ++a)
-#pragma GCC unroll 3
-            for (int k = 0; k < D; ++k) ue[a * D + k] = xin[std::size_t(nd[a]) * St + k];
-        W ye[kW];
-#pragma GCC unroll 3
-        for (int i = 0; i < kW; ++i) ye[i] = W{};
-            // Column by column (K is symmetric): each step an axpy on whole lane vectors.
-#pragma GCC unroll 24
-        for (int j = 0; j < kE; ++j) {
-            const T uj = ue[j];
-            const T* col = K + j * kE;
-#pragma GCC unroll 3
-            for (int i = 0; i < kW; ++i) {
-                W c;
-                std::memcpy(&c, col + 8 * i, sizeof c);
-                ye[i] += c * uj;
-            }
-        }
-#pragma GCC unroll 8
-        for (int a = 0; a < 8; ++a)
-#pragma GCC unroll 3
-            for (int k = 0; k < D; ++k) y[std::size_t(nd[a]) * St + k] += ye[(a * D + k) / 8][(a * D + k) % 8];
+        int q = 0;
+        for (; q + 2 <= R; q += 2) denseProduct<2, D, T, St>(nd, K, xin, y, stride, q);
+        if (q < R) denseProduct<1, D, T, St>(nd, K, xin, y, stride, q);
     }
 }
 
