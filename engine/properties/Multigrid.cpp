@@ -26,7 +26,8 @@ void elementBlocks(const std::int32_t* elemNodes, std::size_t e0, std::size_t e1
                    const typename Lanes<T>::type* columns, const T* xin, T* y, int R);
 template <int D, class T, int St>
 void elementDense(const std::int32_t* elemNodes, const std::int32_t* elemType, const T* table, bool single,
-                  std::size_t e0, std::size_t e1, const T* xin, T* y, int R);
+                  std::int32_t blockType, const T* blocks, const typename Lanes<T>::type* columns, std::size_t e0,
+                  std::size_t e1, const T* xin, T* y, int R);
 }  // namespace avx2
 #endif
 
@@ -293,8 +294,10 @@ struct PeriodicSolver<D>::Level {
         });
     }
 
-    /// The element matrix of a level with one element type, in the basis that block-diagonalises
-    /// it, when it does (see setReflectionBlocks); empty otherwise.
+    /// The level's most common element type (on the finest level the only one; on a coarse level
+    /// the voxel whose eight children are full, most of a solid's inside), in the basis that
+    /// block-diagonalises its matrix, when it does (see setReflectionBlocks): its type, -1 if none.
+    std::int32_t blockType = -1;
     std::vector<double> blocks;
     std::vector<Real> realBlocks;
     /// For D = 3: column j of block c as lanes, at c * 3 + j.
@@ -311,12 +314,20 @@ struct PeriodicSolver<D>::Level {
     /// flops of the dense 24 x 24 product. Kept only if the matrix really is block diagonal.
     void setReflectionBlocks()
     {
-        if (matrices.size() != std::size_t(kE * kE)) return;
+        const std::size_t types = matrices.size() / std::size_t(kE * kE);
+        if (types == 0) return;
+        std::int32_t common = 0;
+        if (types > 1) {
+            std::vector<std::size_t> count(types, 0);
+            for (std::int32_t t : elemType) ++count[std::size_t(t)];
+            common = std::int32_t(std::max_element(count.begin(), count.end()) - count.begin());
+        }
+        const double* K = &matrices[std::size_t(common) * kE * kE];
         auto sign = [](int k, int a) { return (__builtin_popcount(unsigned(k & a)) & 1) ? -1.0 : 1.0; };
         // M = T K T / 64, entry ((k, d), (k2, d2)).
         std::vector<double> M(kE * kE, 0.0);
         double top = 0.0;
-        for (double v : matrices) top = std::max(top, std::abs(v));
+        for (int i = 0; i < kE * kE; ++i) top = std::max(top, std::abs(K[i]));
         for (int k = 0; k < 8; ++k)
             for (int d = 0; d < D; ++d)
                 for (int k2 = 0; k2 < 8; ++k2)
@@ -324,7 +335,7 @@ struct PeriodicSolver<D>::Level {
                         double s = 0.0;
                         for (int a = 0; a < 8; ++a)
                             for (int a2 = 0; a2 < 8; ++a2)
-                                s += sign(k, a) * matrices[(a * D + d) * kE + a2 * D + d2] * sign(k2, a2);
+                                s += sign(k, a) * K[(a * D + d) * kE + a2 * D + d2] * sign(k2, a2);
                         M[(k * D + d) * kE + k2 * D + d2] = s / 64.0;
                     }
         auto character = [](int k, int d) { return D == 1 ? k : (k ^ (1 << d)); };
@@ -344,6 +355,7 @@ struct PeriodicSolver<D>::Level {
                         }
                         blocks[(c * D + d) * D + d2] = v;
                     }
+        blockType = common;
         realBlocks.assign(blocks.begin(), blocks.end());
         if constexpr (D == 3) {
             for (int c = 0; c < 8; ++c)
@@ -377,18 +389,23 @@ struct PeriodicSolver<D>::Level {
         const std::int32_t* nodes = elemNodes.data();
         const std::int32_t* types = elemType.data();
         const bool avx2 = useAvx2();
+        const std::int32_t blocked = scalarBlocks.empty() ? -1 : blockType;
+        const T* blockData = scalarBlocks.empty() ? nullptr : scalarBlocks.data();
+        const typename Lanes<T>::type* columnData = columns.empty() ? nullptr : columns.data();
         forEachLayerRange([&](std::size_t e0, std::size_t e1) {
-            if (!scalarBlocks.empty()) {
+            if (single && blocked == 0) {  // every element through the blocks
 #ifdef VOXLAT_MG_AVX2
-                if (avx2)
-                    return avx2::elementBlocks<D, T, St>(nodes, e0, e1, scalarBlocks.data(), columns.data(), xin, y, R);
+                if (avx2) return avx2::elementBlocks<D, T, St>(nodes, e0, e1, blockData, columnData, xin, y, R);
 #endif
-                return baseline::elementBlocks<D, T, St>(nodes, e0, e1, scalarBlocks.data(), columns.data(), xin, y, R);
+                return baseline::elementBlocks<D, T, St>(nodes, e0, e1, blockData, columnData, xin, y, R);
             }
 #ifdef VOXLAT_MG_AVX2
-            if (avx2) return avx2::elementDense<D, T, St>(nodes, types, matrixTable, single, e0, e1, xin, y, R);
+            if (avx2)
+                return avx2::elementDense<D, T, St>(nodes, types, matrixTable, single, blocked, blockData, columnData,
+                                                    e0, e1, xin, y, R);
 #endif
-            baseline::elementDense<D, T, St>(nodes, types, matrixTable, single, e0, e1, xin, y, R);
+            baseline::elementDense<D, T, St>(nodes, types, matrixTable, single, blocked, blockData, columnData, e0, e1,
+                                             xin, y, R);
         });
         (void)avx2;
     }
@@ -551,6 +568,7 @@ void PeriodicSolver<D>::buildHierarchy()
                 for (int j = i + 1; j < kE; ++j) G[i * kE + j] = G[j * kE + i] = 0.5 * (G[i * kE + j] + G[j * kE + i]);
         });
         C->build(voxels);
+        C->setReflectionBlocks();
         mLevels.push_back(std::move(C));
     }
 

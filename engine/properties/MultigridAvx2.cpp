@@ -17,13 +17,17 @@ template void elementBlocks<3, float, 4>(const std::int32_t*, std::size_t, std::
                                          const float*, float*, int);
 template void elementBlocks<3, double, 3>(const std::int32_t*, std::size_t, std::size_t, const double*, const Double4*,
                                           const double*, double*, int);
-template void elementDense<1, float, 1>(const std::int32_t*, const std::int32_t*, const float*, bool, std::size_t,
-                                        std::size_t, const float*, float*, int);
-template void elementDense<1, double, 1>(const std::int32_t*, const std::int32_t*, const double*, bool, std::size_t,
-                                         std::size_t, const double*, double*, int);
-template void elementDense<3, float, 4>(const std::int32_t*, const std::int32_t*, const float*, bool, std::size_t,
-                                        std::size_t, const float*, float*, int);
-template void elementDense<3, double, 3>(const std::int32_t*, const std::int32_t*, const double*, bool, std::size_t,
-                                         std::size_t, const double*, double*, int);
+template void elementDense<1, float, 1>(const std::int32_t*, const std::int32_t*, const float*, bool, std::int32_t,
+                                        const float*, const Float4*, std::size_t, std::size_t, const float*, float*,
+                                        int);
+template void elementDense<1, double, 1>(const std::int32_t*, const std::int32_t*, const double*, bool, std::int32_t,
+                                         const double*, const Double4*, std::size_t, std::size_t, const double*,
+                                         double*, int);
+template void elementDense<3, float, 4>(const std::int32_t*, const std::int32_t*, const float*, bool, std::int32_t,
+                                        const float*, const Float4*, std::size_t, std::size_t, const float*, float*,
+                                        int);
+template void elementDense<3, double, 3>(const std::int32_t*, const std::int32_t*, const double*, bool, std::int32_t,
+                                         const double*, const Double4*, std::size_t, std::size_t, const double*,
+                                         double*, int);
 
 }  // namespace voxlat::homogenization::avx2

@@ -68,56 +68,64 @@ inline void hadamard(V* v)
             }
 }
 
-/// y += the element products of elements e0..e1-1 through the reflection blocks (see
-/// Level::setReflectionBlocks in Multigrid.cpp): @a blocks, 8 scalars for D = 1; @a columns,
-/// column j of block c at c * 3 + j for D = 3. The vectors hold @a R right-hand sides: right-hand
-/// side q of a node at node * St * R + q * St. Every right-hand side takes the same operations in
-/// the same order as alone (R = 1); two at a time for single precision with three unknowns, in
-/// one eight-lane vector (two nodes' four lanes), lane by lane the four-lane product.
+/// One element's product through the reflection blocks (see Level::setReflectionBlocks in
+/// Multigrid.cpp): @a blocks, 8 scalars for D = 1; @a columns, column j of block c at c * 3 + j
+/// for D = 3. The vectors hold R right-hand sides: right-hand side q of a node at
+/// node * St * R + q * St. Every right-hand side takes the same operations in the same order as
+/// alone (R = 1); two at a time for single precision with three unknowns, in one eight-lane
+/// vector (two nodes' four lanes), lane by lane the four-lane product. Made once per range of
+/// elements (a local: its lane vectors stay in registers).
 template <int D, class T, int St>
-void elementBlocks(const std::int32_t* elemNodes, std::size_t e0, std::size_t e1, const T* blocks,
-                   const typename Lanes<T>::type* columns, const T* xin, T* y, int R)
-{
+struct BlockProduct {
     using V = typename Lanes<T>::type;
-    const std::size_t stride = std::size_t(St) * std::size_t(R);
-    if constexpr (D == 1) {
-        T B[8];
-        for (int c = 0; c < 8; ++c) B[c] = blocks[c];
-        for (std::size_t e = e0; e < e1; ++e) {
-            const std::int32_t* nd = &elemNodes[8 * e];
+    using P = typename Lanes8<T>::type;
+    static constexpr bool kPairs = D == 3 && St == 4 && sizeof(T) == 4;
+    T B1[8];
+    V sign[8], B[24];
+    P sign2[8], B2[24];
+
+    /// Null @a blocks and @a columns: not used (no element goes through blocks).
+    BlockProduct(const T* blocks, const V* columns)
+    {
+        if (!blocks || !columns) return;
+        if constexpr (D == 1) {
+            for (int c = 0; c < 8; ++c) B1[c] = blocks[c];
+        } else {
+            for (int a = 0; a < 8; ++a)
+                sign[a] = V{T((a & 1) ? -1 : 1), T((a & 2) ? -1 : 1), T((a & 4) ? -1 : 1), T(0)};
+            for (int k = 0; k < 24; ++k) B[k] = columns[k];
+            if constexpr (kPairs) {
+                for (int a = 0; a < 8; ++a)
+                    sign2[a] = P{sign[a][0], sign[a][1], sign[a][2], sign[a][3],
+                                 sign[a][0], sign[a][1], sign[a][2], sign[a][3]};
+                for (int k = 0; k < 24; ++k)
+                    B2[k] = P{B[k][0], B[k][1], B[k][2], B[k][3], B[k][0], B[k][1], B[k][2], B[k][3]};
+            }
+        }
+    }
+
+    /// y += the product of the element with nodes @a nd, every right-hand side.
+    [[gnu::always_inline]] inline void operator()(const std::int32_t* nd, const T* xin, T* y, std::size_t stride,
+                                                  int R) const
+    {
+        if constexpr (D == 1) {
             for (int q = 0; q < R; ++q) {
                 T v[8];
 #pragma GCC unroll 8
                 for (int a = 0; a < 8; ++a) v[a] = xin[std::size_t(nd[a]) * stride + q];
                 hadamard(v);
 #pragma GCC unroll 8
-                for (int c = 0; c < 8; ++c) v[c] *= B[c];
+                for (int c = 0; c < 8; ++c) v[c] *= B1[c];
                 hadamard(v);
 #pragma GCC unroll 8
                 for (int a = 0; a < 8; ++a) y[std::size_t(nd[a]) * stride + q] += v[a];
             }
-        }
-    } else {
-        // Character c's component d is, in the transform of the node values, component d at index
-        // c ^ e_d (a reflection along d also flips component d); each character's block takes
-        // its three components from three lane vectors. The inverse: component d of node a is
-        // the transform of the block products times (-1)^(bit d of a), the same signs undoing
-        // the same permutation.
-        V sign[8];
-        for (int a = 0; a < 8; ++a) sign[a] = V{T((a & 1) ? -1 : 1), T((a & 2) ? -1 : 1), T((a & 4) ? -1 : 1), T(0)};
-        const V* B = columns;
-        constexpr bool kPairs = St == 4 && sizeof(T) == 4;
-        using P = typename Lanes8<T>::type;
-        P sign2[8], B2[24];
-        if constexpr (kPairs) {
-            for (int a = 0; a < 8; ++a)
-                sign2[a] =
-                    P{sign[a][0], sign[a][1], sign[a][2], sign[a][3], sign[a][0], sign[a][1], sign[a][2], sign[a][3]};
-            for (int k = 0; k < 24; ++k)
-                B2[k] = P{B[k][0], B[k][1], B[k][2], B[k][3], B[k][0], B[k][1], B[k][2], B[k][3]};
-        }
-        for (std::size_t e = e0; e < e1; ++e) {
-            const std::int32_t* nd = &elemNodes[8 * e];
+        } else {
+            // Character c's component d is, in the transform of the node values, component d at
+            // index c ^ e_d (a reflection along d also flips component d); each character's block
+            // takes its three components from three lane vectors. The inverse: component d of
+            // node a is the transform of the block products times (-1)^(bit d of a), the same
+            // signs undoing the same permutation.
             int q = 0;
             if constexpr (kPairs) {
                 // Two right-hand sides: lanes 0-3 and 4-7, each the four-lane product below (a
@@ -182,6 +190,17 @@ void elementBlocks(const std::int32_t* elemNodes, std::size_t e0, std::size_t e1
             }
         }
     }
+};
+
+/// y += the element products of elements e0..e1-1 through the reflection blocks (BlockProduct),
+/// for @a R right-hand sides.
+template <int D, class T, int St>
+void elementBlocks(const std::int32_t* elemNodes, std::size_t e0, std::size_t e1, const T* blocks,
+                   const typename Lanes<T>::type* columns, const T* xin, T* y, int R)
+{
+    const BlockProduct<D, T, St> product(blocks, columns);
+    const std::size_t stride = std::size_t(St) * std::size_t(R);
+    for (std::size_t e = e0; e < e1; ++e) product(&elemNodes[8 * e], xin, y, stride, R);
 }
 
 /// y += one element's dense product @a K for right-hand sides q .. q + M - 1 (see elementDense):
@@ -232,17 +251,26 @@ inline void denseProduct(const std::int32_t* nd, const T* K, const T* xin, T* y,
 }
 
 /// y += the element products of elements e0..e1-1 with their dense (8D)^2 matrices: @a table
-/// holds one per element type (elemType), or the only one when @a single. @a R right-hand sides,
-/// laid out as in elementBlocks; a column of the matrix is loaded once for two of them.
+/// holds one per element type (elemType), or the only one when @a single; elements of type
+/// @a blockType (none if negative) go through its reflection blocks @a blocks / @a columns
+/// instead (BlockProduct). @a R right-hand sides, laid out as in BlockProduct; a column of a
+/// matrix is loaded once for two of them.
 template <int D, class T, int St>
 void elementDense(const std::int32_t* elemNodes, const std::int32_t* elemType, const T* table, bool single,
-                  std::size_t e0, std::size_t e1, const T* xin, T* y, int R)
+                  std::int32_t blockType, const T* blocks, const typename Lanes<T>::type* columns, std::size_t e0,
+                  std::size_t e1, const T* xin, T* y, int R)
 {
     constexpr int kE = 8 * D;
     const std::size_t stride = std::size_t(St) * std::size_t(R);
+    const BlockProduct<D, T, St> product(blockType >= 0 ? blocks : nullptr, blockType >= 0 ? columns : nullptr);
     for (std::size_t e = e0; e < e1; ++e) {
         const std::int32_t* nd = &elemNodes[8 * e];
-        const T* K = single ? table : table + std::size_t(elemType[e]) * kE * kE;
+        const std::int32_t type = single ? 0 : elemType[e];
+        if (type == blockType) {
+            product(nd, xin, y, stride, R);
+            continue;
+        }
+        const T* K = table + std::size_t(type) * kE * kE;
         int q = 0;
         for (; q + 2 <= R; q += 2) denseProduct<2, D, T, St>(nd, K, xin, y, stride, q);
         if (q < R) denseProduct<1, D, T, St>(nd, K, xin, y, stride, q);
