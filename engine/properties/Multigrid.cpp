@@ -170,12 +170,12 @@ struct PeriodicSolver<D>::Level {
     std::array<std::vector<std::array<std::pair<int, double>, 3>>, 3> restrict;
     /// Work vectors of the preconditioner: node i's right-hand side q at (i * R + q) * S for R
     /// right-hand sides (sized for `lanes` of them).
-    mutable std::vector<Real> b, x, r, d, t;
+    mutable std::vector<Real> b, x, d, t;
     mutable int lanes = 1;
     void reserveLanes(int R) const
     {
         if (R <= lanes) return;
-        for (std::vector<Real>* v : {&b, &x, &r, &d, &t}) v->assign(nodes() * S * std::size_t(R), Real(0));
+        for (std::vector<Real>* v : {&b, &x, &d, &t}) v->assign(nodes() * S * std::size_t(R), Real(0));
         lanes = R;
     }
 
@@ -237,7 +237,7 @@ struct PeriodicSolver<D>::Level {
             coords(elemVoxel[e], c);
             for (int a = 0; a < 8; ++a) elemNodes[8 * e + a] = nodeOfPoint[corner(c, a)];
         }
-        for (std::vector<Real>* v : {&b, &x, &r, &d, &t}) v->assign(nodes() * S, Real(0));
+        for (std::vector<Real>* v : {&b, &x, &d, &t}) v->assign(nodes() * S, Real(0));
     }
 
     std::int32_t corner(const int c[3], int a) const
@@ -689,58 +689,89 @@ void PeriodicSolver<D>::smooth(const Level& L, const Real* b, Real* x, bool zero
     const double sigma = theta / delta;
     double rho = 1.0 / sigma;
     Real* t = L.t.data();
+    Real* d = L.d.data();
+    const int degree = &L == mLevels[0].get() ? kFineDegree : kCoarseDegree;
     if (!zeroStart) L.apply(x, t, R);
     // d = c1 d + c2 diag^-1 (b - t), x = x + d (t and the old x, d are zero on a zero start).
-    chebyshevStep(L, b, zeroStart ? nullptr : t, x, Real(0), Real(1.0 / theta), !zeroStart, R);
-    const int degree = &L == mLevels[0].get() ? kFineDegree : kCoarseDegree;
+    // The direction is stored only for a next step; after a zero start it is x itself.
+    chebyshevStep(L, b, zeroStart ? nullptr : t, x, nullptr, zeroStart || degree == 1 ? nullptr : d, Real(0),
+                  Real(1.0 / theta), !zeroStart, R);
     for (int step = 1; step < degree; ++step) {
         L.apply(x, t, R);
         const double rhoNew = 1.0 / (2.0 * sigma - rho);
-        chebyshevStep(L, b, t, x, Real(rhoNew * rho), Real(2.0 * rhoNew / delta), true, R);
+        chebyshevStep(L, b, t, x, step == 1 && zeroStart ? x : d, step + 1 < degree ? d : nullptr, Real(rhoNew * rho),
+                      Real(2.0 * rhoNew / delta), true, R);
         rho = rhoNew;
     }
 }
 
-template <int D>
-void PeriodicSolver<D>::chebyshevStep(const Level& L, const Real* b, const Real* t, Real* x, Real c1, Real c2,
-                                      bool keepX, int R) const
+namespace {
+
+/// Calls f with std::bool_constant for each flag.
+template <class F>
+void withFlags(bool a, bool b, bool c, bool d, const F& f)
 {
-    Real* d = L.d.data();
-    parallelRange(0, L.nodes(), 2048, [&](std::size_t i0, std::size_t i1) {
-        if constexpr (D == 3) {
-            // One node per lane vector, its padding lane zero throughout (the diagonal block
-            // inverse's rows are padded with zeros too). The block is symmetric, so its rows are
-            // its columns; loaded once for every right-hand side.
-            auto load = [](const Real* p) {
-                Float4 v;
-                std::memcpy(&v, p, sizeof v);
-                return v;
-            };
-            auto store = [](Real* p, const Float4& v) { std::memcpy(p, &v, sizeof v); };
-            for (std::size_t i = i0; i < i1; ++i) {
-                const Real* m = &L.diagInv[12 * i];
-                const Float4 m0 = load(m), m1 = load(m + 4), m2 = load(m + 8);
-                for (int q = 0; q < R; ++q) {
-                    const std::size_t o = 4 * (i * R + q);
-                    Float4 r = load(b + o);
-                    if (t) r -= load(t + o);
-                    Float4 dn = c2 * (m0 * r[0] + m1 * r[1] + m2 * r[2]);
-                    if (c1 != Real(0)) dn += c1 * load(d + o);
-                    store(d + o, dn);
-                    store(x + o, keepX ? load(x + o) + dn : dn);
+    auto pick = [](bool v, const auto& g) {
+        if (v)
+            g(std::true_type{});
+        else
+            g(std::false_type{});
+    };
+    pick(a,
+         [&](auto A) { pick(b, [&](auto B) { pick(c, [&](auto C) { pick(d, [&](auto E) { f(A, B, C, E); }); }); }); });
+}
+
+}  // namespace
+
+template <int D>
+void PeriodicSolver<D>::chebyshevStep(const Level& L, const Real* b, const Real* t, Real* x, const Real* dIn,
+                                      Real* dOut, Real c1, Real c2, bool keepX, int R) const
+{
+    const Real* diagInv = L.diagInv.data();
+    withFlags(t != nullptr, dIn != nullptr, dOut != nullptr, keepX, [&](auto kT, auto kIn, auto kOut, auto kKeep) {
+        parallelRange(0, L.nodes(), 2048, [=](std::size_t i0, std::size_t i1) {
+            if constexpr (D == 3) {
+                // One node per lane vector, its padding lane zero throughout (the diagonal block
+                // inverse's rows are padded with zeros too). The block is symmetric, so its rows
+                // are its columns; loaded once for every right-hand side.
+                auto load = [](const Real* p) {
+                    Float4 v;
+                    std::memcpy(&v, p, sizeof v);
+                    return v;
+                };
+                auto store = [](Real* p, const Float4& v) { std::memcpy(p, &v, sizeof v); };
+                for (std::size_t i = i0; i < i1; ++i) {
+                    const Real* m = diagInv + 12 * i;
+                    const Float4 m0 = load(m), m1 = load(m + 4), m2 = load(m + 8);
+                    for (int q = 0; q < R; ++q) {
+                        const std::size_t o = 4 * (i * R + q);
+                        Float4 r = load(b + o);
+                        if constexpr (kT) r -= load(t + o);
+                        Float4 dn = c2 * (m0 * r[0] + m1 * r[1] + m2 * r[2]);
+                        if constexpr (kIn) dn += c1 * load(dIn + o);
+                        if constexpr (kOut) store(dOut + o, dn);
+                        if constexpr (kKeep)
+                            store(x + o, load(x + o) + dn);
+                        else
+                            store(x + o, dn);
+                    }
                 }
+            } else {
+                for (std::size_t i = i0; i < i1; ++i)
+                    for (int q = 0; q < R; ++q) {
+                        const std::size_t o = i * R + q;
+                        Real r = b[o];
+                        if constexpr (kT) r = b[o] - t[o];
+                        Real dn = c2 * (diagInv[i] * r);
+                        if constexpr (kIn) dn += c1 * dIn[o];
+                        if constexpr (kOut) dOut[o] = dn;
+                        if constexpr (kKeep)
+                            x[o] = x[o] + dn;
+                        else
+                            x[o] = dn;
+                    }
             }
-        } else {
-            for (std::size_t i = i0; i < i1; ++i)
-                for (int q = 0; q < R; ++q) {
-                    const std::size_t o = i * R + q;
-                    const Real r = t ? b[o] - t[o] : b[o];
-                    Real dn = c2 * (L.diagInv[i] * r);
-                    if (c1 != Real(0)) dn += c1 * d[o];
-                    d[o] = dn;
-                    x[o] = keepX ? x[o] + dn : dn;
-                }
-        }
+        });
     });
 }
 
@@ -756,15 +787,16 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x, int R)
     smooth(L, b, x, true, R);
     // r = b - A x, then restricted to the coarse level (P^T, node by node on the coarse grid).
     L.apply(x, L.t.data(), R);
-    Real* r = L.r.data();
+    // r = b - t, per value, is formed where the restriction reads it (the same float rounding).
+    const Real* t = L.t.data();
     constexpr int S = Level::S;
     const std::size_t width = S * std::size_t(R);  // a node's values, every right-hand side
-    parallelRange(0, L.nodes() * width, 8192, [&](std::size_t i0, std::size_t i1) {
-        for (std::size_t i = i0; i < i1; ++i) r[i] = b[i] - L.t[i];
-    });
     // A node's weighted sum, per value: s[j] += w v[j] from zero, in the order of the terms.
     auto addTo = [width](Real* s, Real w, const Real* v) {
         for (std::size_t j = 0; j < width; ++j) s[j] += w * v[j];
+    };
+    auto addResidualTo = [width](Real* s, Real w, const Real* bv, const Real* tv) {
+        for (std::size_t j = 0; j < width; ++j) s[j] += w * (bv[j] - tv[j]);
     };
     Real* bc = C.b.data();
     parallelRange(0, C.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
@@ -780,7 +812,8 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x, int R)
                         if (fx < 0) continue;
                         const std::int32_t node = L.nodeOfPoint[L.pointIndex(fx, fy, fz)];
                         if (node < 0) continue;
-                        addTo(s, Real(wx * wy * wz), r + std::size_t(node) * width);
+                        addResidualTo(s, Real(wx * wy * wz), b + std::size_t(node) * width,
+                                      t + std::size_t(node) * width);
                     }
                 }
             }

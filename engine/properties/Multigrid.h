@@ -94,8 +94,10 @@ private:
     // (i * R + q) * S (see Level).
     void vcycle(std::size_t level, const Real* b, Real* x, int R) const;
     void smooth(const Level& L, const Real* b, Real* x, bool zeroStart, int R) const;
-    void chebyshevStep(const Level& L, const Real* b, const Real* t, Real* x, Real c1, Real c2, bool keepX,
-                       int R) const;
+    /// d = c1 dIn + c2 diag^-1 (b - t) (no dIn: c1 unused; no t: b), stored in dOut if given;
+    /// x = x + d, or d without keepX.
+    void chebyshevStep(const Level& L, const Real* b, const Real* t, Real* x, const Real* dIn, Real* dOut, Real c1,
+                       Real c2, bool keepX, int R) const;
     void coarseSolve(const Level& L, const Real* b, Real* x, int R) const;
 
     std::vector<std::unique_ptr<Level>> mLevels;
