@@ -11,6 +11,8 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace voxlat {
 
@@ -155,10 +157,17 @@ void homogenize(const VoxelCell& cell, const std::vector<double>& ke, const std:
             for (std::size_t i = 0; i < r.size(); ++i) r[i] = F[i] - Kchi[i];
             residual[j] = std::sqrt(solver.dot(r, r)) / fnorm;
         }
-        for (int i = 0; i < N; ++i) {
+        std::vector<std::pair<const std::vector<double>*, const std::vector<double>*>> pairs;
+        for (int i = 0; i < N; ++i)
+            if (solved[i]) {
+                pairs.push_back({&chi[i], &F});
+                pairs.push_back({&chi[i], &Kchi});
+            }
+        const std::vector<double> sums = solver.dots(pairs);
+        for (int i = 0, k = 0; i < N; ++i) {
             if (!solved[i]) continue;
-            chiF[i][j] = solver.dot(chi[i], F);
-            chiKchi[i][j] = solver.dot(chi[i], Kchi);
+            chiF[i][j] = sums[k++];
+            chiKchi[i][j] = sums[k++];
         }
     }
     const double cellVolume = voxels * cell.hx * cell.hy * cell.hz;

@@ -875,6 +875,39 @@ double PeriodicSolver<D>::dot(const Vector& a, const Vector& b) const
 }
 
 template <int D>
+std::vector<double> PeriodicSolver<D>::dots(const std::vector<std::pair<const Vector*, const Vector*>>& pairs) const
+{
+    std::vector<double> total(pairs.size(), 0.0);
+    if (pairs.empty()) return total;
+    const std::size_t n = pairs[0].first->size();
+    // Four sums at a time, each its own chain in dot()'s order and blocks (independent chains
+    // overlap where one chain waits on its additions).
+    constexpr int kChains = 4;
+    for (std::size_t k0 = 0; k0 < pairs.size(); k0 += kChains) {
+        const double* a[kChains];
+        const double* b[kChains];
+        for (int c = 0; c < kChains; ++c) {
+            const auto& pr = pairs[std::min(k0 + c, pairs.size() - 1)];
+            a[c] = pr.first->data();
+            b[c] = pr.second->data();
+        }
+        const std::array<double, kChains> sums =
+            blockedSums<kChains>(n, [&](std::size_t i0, std::size_t i1, std::array<double, kChains>& s) {
+                double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+                for (std::size_t i = i0; i < i1; ++i) {
+                    s0 += a[0][i] * b[0][i];
+                    s1 += a[1][i] * b[1][i];
+                    s2 += a[2][i] * b[2][i];
+                    s3 += a[3][i] * b[3][i];
+                }
+                s = {s0, s1, s2, s3};
+            });
+        for (int c = 0; c < kChains && k0 + c < pairs.size(); ++c) total[k0 + c] = sums[c];
+    }
+    return total;
+}
+
+template <int D>
 void PeriodicSolver<D>::removeTranslations(Vector& v) const
 {
     std::vector<double> sum(std::size_t(mComponents) * D, 0.0);

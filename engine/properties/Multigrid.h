@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <utility>
 #include <vector>
 
 namespace voxlat::homogenization {
@@ -66,6 +67,9 @@ public:
     void assemble(const std::vector<double>& fe, Vector& f) const;
     /// Deterministic dot product.
     double dot(const Vector& a, const Vector& b) const;
+    /// Several dot products in one pass: entry k is dot(*pairs[k].first, *pairs[k].second), bit
+    /// for bit.
+    std::vector<double> dots(const std::vector<std::pair<const Vector*, const Vector*>>& pairs) const;
     /// Removes from @a v, per component and per unknown, its mean over the component's nodes.
     void removeTranslations(Vector& v) const;
 
