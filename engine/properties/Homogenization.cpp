@@ -106,37 +106,43 @@ void homogenize(const VoxelCell& cell, const std::vector<double>& ke, const std:
         scale = std::sqrt(fe2 * double(topology.keptVoxels));
     };
 
-    // Every load case's system at once (one V-cycle serves them all, each case the bits it gets
+    // The load cases' systems in batches (one V-cycle serves a batch, each case the bits it gets
     // alone). In a fully solid cell the nodal loads cancel: what is left is rounding, and the
     // fluctuation is zero.
     std::array<std::vector<double>, N> chi;
-    std::vector<std::vector<double>> loads, fluctuations;
-    std::vector<int> system;
-    for (int v = 0; v < N; ++v) {
-        if (!solved[v]) continue;
-        std::vector<double> F;
-        double scale = 0.0;
-        load(v, F, scale);
-        if (std::sqrt(solver.dot(F, F)) <= 1e-12 * scale) {
-            chi[v].assign(solver.dofs(), 0.0);
-            continue;
+    // Every case in one batch: the fastest (W8's 64^3 gyroid, one thread: 0.60 s of CPU against
+    // 0.64 s in batches of 3 and 0.70 s of 2), at about twice the memory of one case at a time.
+    const int batch = N;
+    int done = 0;
+    for (int v0 = 0; v0 < N;) {
+        std::vector<std::vector<double>> loads, fluctuations;
+        std::vector<int> system;
+        int v = v0;
+        for (; v < N && int(system.size()) < batch; ++v) {
+            if (!solved[v]) continue;
+            std::vector<double> F;
+            double scale = 0.0;
+            load(v, F, scale);
+            ++done;
+            if (std::sqrt(solver.dot(F, F)) <= 1e-12 * scale) {
+                chi[v].assign(solver.dofs(), 0.0);
+                continue;
+            }
+            loads.push_back(std::move(F));
+            system.push_back(v);
         }
-        loads.push_back(std::move(F));
-        system.push_back(v);
-    }
-    if (!system.empty()) {
+        v0 = v;
+        if (system.empty()) continue;
         std::function<bool(double)> progress;
         if (settings.progress)
             progress = [&](double f) {
-                return settings.progress((double(cases) - double(system.size()) * (1.0 - f)) / cases);
+                return settings.progress((double(done) - double(system.size()) * (1.0 - f)) / cases);
             };
         const auto stats = solver.solve(loads, fluctuations, settings.tolerance, settings.maxIterations, progress);
-        loads.clear();
         for (std::size_t k = 0; k < system.size(); ++k) {
-            const int v = system[k];
-            iterations[v] = stats[k].iterations;
-            chi[v] = std::move(fluctuations[k]);
-            solver.removeTranslations(chi[v]);
+            iterations[system[k]] = stats[k].iterations;
+            chi[system[k]] = std::move(fluctuations[k]);
+            solver.removeTranslations(chi[system[k]]);
         }
     }
     if (settings.progress && !settings.progress(1.0)) throw Cancelled("homogenization cancelled");

@@ -721,6 +721,29 @@ void withFlags(bool a, bool b, bool c, bool d, const F& f)
          [&](auto A) { pick(b, [&](auto B) { pick(c, [&](auto C) { pick(d, [&](auto E) { f(A, B, C, E); }); }); }); });
 }
 
+/// Calls f with std::integral_constant<int, R> for R = 1 .. kMaxLanes.
+template <class F>
+void withLanes(int R, const F& f)
+{
+    switch (R) {
+        case 1:
+            return f(std::integral_constant<int, 1>{});
+        case 2:
+            return f(std::integral_constant<int, 2>{});
+        case 3:
+            return f(std::integral_constant<int, 3>{});
+        case 4:
+            return f(std::integral_constant<int, 4>{});
+        case 5:
+            return f(std::integral_constant<int, 5>{});
+        case 6:
+            return f(std::integral_constant<int, 6>{});
+        default:
+            throw std::logic_error("PeriodicSolver: more right-hand sides than kMaxLanes");
+    }
+}
+static_assert(kMaxLanes == 6, "withLanes covers 1 .. kMaxLanes");
+
 }  // namespace
 
 template <int D>
@@ -776,6 +799,65 @@ void PeriodicSolver<D>::chebyshevStep(const Level& L, const Real* b, const Real*
 }
 
 template <int D>
+template <int W>
+void PeriodicSolver<D>::restrictResidual(const Level& L, const Level& C, const Real* b, const Real* t, Real* bc) const
+{
+    // bc = P^T (b - t), node by node on the coarse grid; W values a node (every right-hand side).
+    parallelRange(0, C.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
+        for (std::size_t i = i0; i < i1; ++i) {
+            int c[3];
+            C.coords(C.pointOfNode[i], c);
+            Real s[W] = {};
+            for (const auto& [fz, wz] : L.restrict[2][c[2]]) {
+                if (fz < 0) continue;
+                for (const auto& [fy, wy] : L.restrict[1][c[1]]) {
+                    if (fy < 0) continue;
+                    for (const auto& [fx, wx] : L.restrict[0][c[0]]) {
+                        if (fx < 0) continue;
+                        const std::int32_t node = L.nodeOfPoint[L.pointIndex(fx, fy, fz)];
+                        if (node < 0) continue;
+                        const Real w = Real(wx * wy * wz);
+                        const Real* bv = b + std::size_t(node) * W;
+                        const Real* tv = t + std::size_t(node) * W;
+                        for (int j = 0; j < W; ++j) s[j] += w * (bv[j] - tv[j]);
+                    }
+                }
+            }
+            std::memcpy(bc + i * W, s, sizeof s);
+        }
+    });
+}
+
+template <int D>
+template <int W>
+void PeriodicSolver<D>::prolongAdd(const Level& L, const Level& C, const Real* xc, Real* x) const
+{
+    // x += P xc, node by node on the fine grid; W values a node.
+    parallelRange(0, L.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
+        for (std::size_t i = i0; i < i1; ++i) {
+            int c[3];
+            L.coords(L.pointOfNode[i], c);
+            Real s[W] = {};
+            for (const auto& [cz, wz] : L.prolong[2][c[2]]) {
+                if (cz < 0) continue;
+                for (const auto& [cy, wy] : L.prolong[1][c[1]]) {
+                    if (cy < 0) continue;
+                    for (const auto& [cx, wx] : L.prolong[0][c[0]]) {
+                        if (cx < 0) continue;
+                        const std::int32_t node = C.nodeOfPoint[C.pointIndex(cx, cy, cz)];
+                        const Real w = Real(wx * wy * wz);
+                        const Real* v = xc + std::size_t(node) * W;
+                        for (int j = 0; j < W; ++j) s[j] += w * v[j];
+                    }
+                }
+            }
+            Real* out = x + i * W;
+            for (int j = 0; j < W; ++j) out[j] += s[j];
+        }
+    });
+}
+
+template <int D>
 void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x, int R) const
 {
     const Level& L = *mLevels[level];
@@ -788,61 +870,13 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x, int R)
     // r = b - A x, then restricted to the coarse level (P^T, node by node on the coarse grid).
     L.apply(x, L.t.data(), R);
     // r = b - t, per value, is formed where the restriction reads it (the same float rounding).
+    // A node's weighted sums, per value: s[j] += w v[j] from zero, in the order of the terms.
     const Real* t = L.t.data();
-    constexpr int S = Level::S;
-    const std::size_t width = S * std::size_t(R);  // a node's values, every right-hand side
-    // A node's weighted sum, per value: s[j] += w v[j] from zero, in the order of the terms.
-    auto addTo = [width](Real* s, Real w, const Real* v) {
-        for (std::size_t j = 0; j < width; ++j) s[j] += w * v[j];
-    };
-    auto addResidualTo = [width](Real* s, Real w, const Real* bv, const Real* tv) {
-        for (std::size_t j = 0; j < width; ++j) s[j] += w * (bv[j] - tv[j]);
-    };
     Real* bc = C.b.data();
-    parallelRange(0, C.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
-        for (std::size_t i = i0; i < i1; ++i) {
-            int c[3];
-            C.coords(C.pointOfNode[i], c);
-            Real s[kMaxLanes * 4] = {};  // width <= kMaxLanes * S
-            for (const auto& [fz, wz] : L.restrict[2][c[2]]) {
-                if (fz < 0) continue;
-                for (const auto& [fy, wy] : L.restrict[1][c[1]]) {
-                    if (fy < 0) continue;
-                    for (const auto& [fx, wx] : L.restrict[0][c[0]]) {
-                        if (fx < 0) continue;
-                        const std::int32_t node = L.nodeOfPoint[L.pointIndex(fx, fy, fz)];
-                        if (node < 0) continue;
-                        addResidualTo(s, Real(wx * wy * wz), b + std::size_t(node) * width,
-                                      t + std::size_t(node) * width);
-                    }
-                }
-            }
-            std::memcpy(bc + i * width, s, width * sizeof(Real));
-        }
-    });
+    withLanes(R, [&](auto lanes) { restrictResidual<decltype(lanes)::value * Level::S>(L, C, b, t, bc); });
     Real* xc = C.x.data();
     vcycle(level + 1, bc, xc, R);
-    // x += P xc, node by node on the fine grid.
-    parallelRange(0, L.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
-        for (std::size_t i = i0; i < i1; ++i) {
-            int c[3];
-            L.coords(L.pointOfNode[i], c);
-            Real s[kMaxLanes * 4] = {};  // width <= kMaxLanes * S
-            for (const auto& [cz, wz] : L.prolong[2][c[2]]) {
-                if (cz < 0) continue;
-                for (const auto& [cy, wy] : L.prolong[1][c[1]]) {
-                    if (cy < 0) continue;
-                    for (const auto& [cx, wx] : L.prolong[0][c[0]]) {
-                        if (cx < 0) continue;
-                        const std::int32_t node = C.nodeOfPoint[C.pointIndex(cx, cy, cz)];
-                        addTo(s, Real(wx * wy * wz), xc + std::size_t(node) * width);
-                    }
-                }
-            }
-            Real* out = x + i * width;
-            for (std::size_t j = 0; j < width; ++j) out[j] += s[j];
-        }
-    });
+    withLanes(R, [&](auto lanes) { prolongAdd<decltype(lanes)::value * Level::S>(L, C, xc, x); });
     smooth(L, b, x, false, R);
 }
 
@@ -934,9 +968,12 @@ std::vector<typename PeriodicSolver<D>::Stats> PeriodicSolver<D>::solve(
     if (systems > std::size_t(kMaxLanes)) throw std::logic_error("PeriodicSolver::solve: too many right-hand sides");
     std::vector<Stats> stats(systems);
     x.assign(systems, Vector());
-    // Per system: r (f itself), z, p, q, rz, |f|, |r|; active while it iterates.
+    // Per system: r (f itself), p, q, rz, |f|, |r|; active while it iterates. z = M^-1 r is read
+    // where the V-cycle left it (doubles of floats: exact), right-hand side lane[k] of lanes.
     std::vector<Vector>& r = f;
-    std::vector<Vector> z(systems), p(systems), q(systems);
+    std::vector<Vector> p(systems), q(systems);
+    std::vector<int> lane(systems, 0);
+    int lanes = 0;
     std::vector<double> rz(systems, 0.0), alpha(systems, 0.0), fnorm(systems, 0.0), rnorm(systems, 0.0);
     std::vector<double> fraction(systems, 1.0);  // of the way to the tolerance (log scale); 1 when stopped
     std::vector<std::size_t> active;
@@ -946,7 +983,6 @@ std::vector<typename PeriodicSolver<D>::Stats> PeriodicSolver<D>::solve(
         if (fnorm[k] == 0.0) continue;
         rnorm[k] = fnorm[k];
         fraction[k] = 0.0;
-        z[k].assign(n, 0.0);
         p[k].assign(n, 0.0);
         q[k].assign(n, 0.0);
         active.push_back(k);
@@ -954,9 +990,10 @@ std::vector<typename PeriodicSolver<D>::Stats> PeriodicSolver<D>::solve(
     const Level& L0 = *mLevels[0];
     // z = M^-1 r for every active system at once: system active[q] is right-hand side q of the
     // V-cycle, which gives each the bits it gives alone.
+    constexpr int S = Level::S;
     auto precondition = [&]() {
-        constexpr int S = Level::S;
-        const int R = int(active.size());
+        const int R = lanes = int(active.size());
+        for (int h = 0; h < R; ++h) lane[active[h]] = h;
         for (const auto& level : mLevels) level->reserveLanes(R);
         parallelRange(0, L0.nodes(), 4096, [&](std::size_t i0, std::size_t i1) {
             for (int h = 0; h < R; ++h) {
@@ -966,21 +1003,36 @@ std::vector<typename PeriodicSolver<D>::Stats> PeriodicSolver<D>::solve(
             }
         });
         vcycle(0, L0.b.data(), L0.x.data(), R);
-        parallelRange(0, L0.nodes(), 4096, [&](std::size_t i0, std::size_t i1) {
-            for (int h = 0; h < R; ++h) {
-                double* zk = z[active[h]].data();
-                for (std::size_t i = i0; i < i1; ++i)
-                    for (int k = 0; k < D; ++k) zk[i * D + k] = double(L0.x[(i * R + h) * S + k]);
-            }
-        });
         // No projection of z onto the complement of translations: its null-space part is
         // harmless (A p ignores it) and the caller projects the solution.
+    };
+    // Runs f(i, z_i) over entries i0 .. i1 - 1 of system k's z, in order.
+    auto forZ = [&](std::size_t k, std::size_t i0, std::size_t i1, const auto& f) {
+        const Real* z = L0.x.data() + std::size_t(lane[k]) * S;
+        const std::size_t stride = std::size_t(lanes) * S;
+        std::size_t node = i0 / D;
+        int d = int(i0 % D);
+        for (std::size_t i = i0; i < i1; ++i) {
+            f(i, double(z[node * stride + std::size_t(d)]));
+            if (++d == D) {
+                d = 0;
+                ++node;
+            }
+        }
     };
     if (active.empty()) return stats;
     precondition();
     for (std::size_t k : active) {
-        p[k] = z[k];
-        rz[k] = dot(r[k], z[k]);
+        // p = z, and rz = dot(r, z).
+        Vector &pk = p[k], &rk = r[k];
+        rz[k] = blockedSums<1>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 1>& s) {
+            double acc = 0.0;
+            forZ(k, i0, i1, [&](std::size_t i, double zi) {
+                pk[i] = zi;
+                acc += rk[i] * zi;
+            });
+            s[0] = acc;
+        })[0];
     }
     const double logTarget = std::log(std::max(tolerance, 1e-300));
     while (!active.empty() && maxIterations > 0) {
@@ -1016,7 +1068,7 @@ std::vector<typename PeriodicSolver<D>::Stats> PeriodicSolver<D>::solve(
         if (active.empty()) break;
         precondition();
         for (std::size_t k : active) {
-            const Vector &rk = r[k], &zk = z[k], &qk = q[k];
+            const Vector &rk = r[k], &qk = q[k];
             Vector& pk = p[k];
             // Flexible (Polak-Ribiere) beta = z.(r_new - r_old) / rz_old, r_new - r_old = -alpha q:
             // robust to a preconditioner that is not exactly linear (single precision rounding).
@@ -1024,16 +1076,16 @@ std::vector<typename PeriodicSolver<D>::Stats> PeriodicSolver<D>::solve(
             const std::array<double, 2> sums =
                 blockedSums<2>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 2>& s) {
                     double rzs = 0.0, zq = 0.0;
-                    for (std::size_t i = i0; i < i1; ++i) {
-                        rzs += rk[i] * zk[i];
-                        zq += zk[i] * qk[i];
-                    }
+                    forZ(k, i0, i1, [&](std::size_t i, double zi) {
+                        rzs += rk[i] * zi;
+                        zq += zi * qk[i];
+                    });
                     s = {rzs, zq};
                 });
             const double beta = std::max(0.0, -alpha[k] * sums[1] / rz[k]);
             rz[k] = sums[0];
             parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
-                for (std::size_t i = i0; i < i1; ++i) pk[i] = zk[i] + beta * pk[i];
+                forZ(k, i0, i1, [&](std::size_t i, double zi) { pk[i] = zi + beta * pk[i]; });
             });
         }
     }

@@ -103,6 +103,11 @@ private:
     void chebyshevStep(const Level& L, const Real* b, const Real* t, Real* x, const Real* dIn, Real* dOut, Real c1,
                        Real c2, bool keepX, int R) const;
     void coarseSolve(const Level& L, const Real* b, Real* x, int R) const;
+    /// The transfers with W values a node (every right-hand side): bc = P^T (b - t), x += P xc.
+    template <int W>
+    void restrictResidual(const Level& L, const Level& C, const Real* b, const Real* t, Real* bc) const;
+    template <int W>
+    void prolongAdd(const Level& L, const Level& C, const Real* xc, Real* x) const;
 
     std::vector<std::unique_ptr<Level>> mLevels;
     std::vector<std::int32_t> mNodeComponent;
