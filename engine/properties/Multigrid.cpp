@@ -28,6 +28,9 @@ template <int D, class T, int St>
 void elementDense(const std::int32_t* elemNodes, const std::int32_t* elemType, const T* table, bool single,
                   std::int32_t blockType, const T* blocks, const typename Lanes<T>::type* columns, std::size_t e0,
                   std::size_t e1, const T* xin, T* y, int R);
+template <bool kT, bool kIn, bool kOut, bool kKeep>
+void chebyshevNodes(const float* diagInv, std::size_t i0, std::size_t i1, int R, const float* b, const float* t,
+                    const float* dIn, float* dOut, float* x, float c1, float c2);
 }  // namespace avx2
 #endif
 
@@ -751,34 +754,18 @@ void PeriodicSolver<D>::chebyshevStep(const Level& L, const Real* b, const Real*
                                       Real* dOut, Real c1, Real c2, bool keepX, int R) const
 {
     const Real* diagInv = L.diagInv.data();
+    const bool avx2 = useAvx2();
+    (void)avx2;
     withFlags(t != nullptr, dIn != nullptr, dOut != nullptr, keepX, [&](auto kT, auto kIn, auto kOut, auto kKeep) {
         parallelRange(0, L.nodes(), 2048, [=](std::size_t i0, std::size_t i1) {
             if constexpr (D == 3) {
-                // One node per lane vector, its padding lane zero throughout (the diagonal block
-                // inverse's rows are padded with zeros too). The block is symmetric, so its rows
-                // are its columns; loaded once for every right-hand side.
-                auto load = [](const Real* p) {
-                    Float4 v;
-                    std::memcpy(&v, p, sizeof v);
-                    return v;
-                };
-                auto store = [](Real* p, const Float4& v) { std::memcpy(p, &v, sizeof v); };
-                for (std::size_t i = i0; i < i1; ++i) {
-                    const Real* m = diagInv + 12 * i;
-                    const Float4 m0 = load(m), m1 = load(m + 4), m2 = load(m + 8);
-                    for (int q = 0; q < R; ++q) {
-                        const std::size_t o = 4 * (i * R + q);
-                        Float4 r = load(b + o);
-                        if constexpr (kT) r -= load(t + o);
-                        Float4 dn = c2 * (m0 * r[0] + m1 * r[1] + m2 * r[2]);
-                        if constexpr (kIn) dn += c1 * load(dIn + o);
-                        if constexpr (kOut) store(dOut + o, dn);
-                        if constexpr (kKeep)
-                            store(x + o, load(x + o) + dn);
-                        else
-                            store(x + o, dn);
-                    }
-                }
+                constexpr bool T_ = decltype(kT)::value, In = decltype(kIn)::value, Out = decltype(kOut)::value,
+                               Keep = decltype(kKeep)::value;
+#ifdef VOXLAT_MG_AVX2
+                if (avx2)
+                    return avx2::chebyshevNodes<T_, In, Out, Keep>(diagInv, i0, i1, R, b, t, dIn, dOut, x, c1, c2);
+#endif
+                baseline::chebyshevNodes<T_, In, Out, Keep>(diagInv, i0, i1, R, b, t, dIn, dOut, x, c1, c2);
             } else {
                 for (std::size_t i = i0; i < i1; ++i)
                     for (int q = 0; q < R; ++q) {

@@ -30,4 +30,26 @@ template void elementDense<3, double, 3>(const std::int32_t*, const std::int32_t
                                          const double*, const Double4*, std::size_t, std::size_t, const double*,
                                          double*, int);
 
+// Every combination of chebyshevNodes' flags.
+#define VOXLAT_CHEBYSHEV(a, b, c, d)                                                                                  \
+    template void chebyshevNodes<a, b, c, d>(const float*, std::size_t, std::size_t, int, const float*, const float*, \
+                                             const float*, float*, float*, float, float);
+VOXLAT_CHEBYSHEV(false, false, false, false)
+VOXLAT_CHEBYSHEV(false, false, false, true)
+VOXLAT_CHEBYSHEV(false, false, true, false)
+VOXLAT_CHEBYSHEV(false, false, true, true)
+VOXLAT_CHEBYSHEV(false, true, false, false)
+VOXLAT_CHEBYSHEV(false, true, false, true)
+VOXLAT_CHEBYSHEV(false, true, true, false)
+VOXLAT_CHEBYSHEV(false, true, true, true)
+VOXLAT_CHEBYSHEV(true, false, false, false)
+VOXLAT_CHEBYSHEV(true, false, false, true)
+VOXLAT_CHEBYSHEV(true, false, true, false)
+VOXLAT_CHEBYSHEV(true, false, true, true)
+VOXLAT_CHEBYSHEV(true, true, false, false)
+VOXLAT_CHEBYSHEV(true, true, false, true)
+VOXLAT_CHEBYSHEV(true, true, true, false)
+VOXLAT_CHEBYSHEV(true, true, true, true)
+#undef VOXLAT_CHEBYSHEV
+
 }  // namespace voxlat::homogenization::avx2

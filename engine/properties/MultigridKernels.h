@@ -84,13 +84,14 @@ struct BlockProduct {
     V sign[8], B[24];
     P sign2[8], B2[24];
 
-    /// Null @a blocks and @a columns: not used (no element goes through blocks).
+    /// Null @a blocks (D = 1) or @a columns (D = 3): not used (no element goes through blocks).
     BlockProduct(const T* blocks, const V* columns)
     {
-        if (!blocks || !columns) return;
         if constexpr (D == 1) {
+            if (!blocks) return;
             for (int c = 0; c < 8; ++c) B1[c] = blocks[c];
         } else {
+            if (!columns) return;
             for (int a = 0; a < 8; ++a)
                 sign[a] = V{T((a & 1) ? -1 : 1), T((a & 2) ? -1 : 1), T((a & 4) ? -1 : 1), T(0)};
             for (int k = 0; k < 24; ++k) B[k] = columns[k];
@@ -274,6 +275,67 @@ void elementDense(const std::int32_t* elemNodes, const std::int32_t* elemType, c
         int q = 0;
         for (; q + 2 <= R; q += 2) denseProduct<2, D, T, St>(nd, K, xin, y, stride, q);
         if (q < R) denseProduct<1, D, T, St>(nd, K, xin, y, stride, q);
+    }
+}
+
+/// The Chebyshev update of nodes i0..i1-1 with three unknowns (PeriodicSolver::chebyshevStep):
+/// per right-hand side, d = c1 dIn + c2 diag^-1 (b - t) (without kIn: no c1 term; without kT:
+/// b), stored in dOut with kOut; x = x + d with kKeep, else d. Nodes hold R right-hand sides of
+/// four lanes (the fourth zero), diagInv a node's three padded rows (its symmetric block: rows
+/// are columns). Two right-hand sides at a time in eight lanes, each half lane by lane the four-
+/// lane update.
+template <bool kT, bool kIn, bool kOut, bool kKeep>
+void chebyshevNodes(const float* diagInv, std::size_t i0, std::size_t i1, int R, const float* b, const float* t,
+                    const float* dIn, float* dOut, float* x, float c1, float c2)
+{
+    auto load4 = [](const float* p) {
+        Float4 v;
+        std::memcpy(&v, p, sizeof v);
+        return v;
+    };
+    auto load8 = [](const float* p) {
+        Float8 v;
+        std::memcpy(&v, p, sizeof v);
+        return v;
+    };
+    for (std::size_t i = i0; i < i1; ++i) {
+        const float* m = diagInv + 12 * i;
+        const Float4 m0 = load4(m), m1 = load4(m + 4), m2 = load4(m + 8);
+        const Float8 M0 = __builtin_shufflevector(m0, m0, 0, 1, 2, 3, 0, 1, 2, 3);
+        const Float8 M1 = __builtin_shufflevector(m1, m1, 0, 1, 2, 3, 0, 1, 2, 3);
+        const Float8 M2 = __builtin_shufflevector(m2, m2, 0, 1, 2, 3, 0, 1, 2, 3);
+        int q = 0;
+        for (; q + 2 <= R; q += 2) {
+            const std::size_t o = 4 * (i * std::size_t(R) + std::size_t(q));
+            Float8 r = load8(b + o);
+            if constexpr (kT) r -= load8(t + o);
+            const Float8 r0 = __builtin_shufflevector(r, r, 0, 0, 0, 0, 4, 4, 4, 4);
+            const Float8 r1 = __builtin_shufflevector(r, r, 1, 1, 1, 1, 5, 5, 5, 5);
+            const Float8 r2 = __builtin_shufflevector(r, r, 2, 2, 2, 2, 6, 6, 6, 6);
+            Float8 dn = c2 * (M0 * r0 + M1 * r1 + M2 * r2);
+            if constexpr (kIn) dn += c1 * load8(dIn + o);
+            if constexpr (kOut) std::memcpy(dOut + o, &dn, sizeof dn);
+            if constexpr (kKeep) {
+                const Float8 xn = load8(x + o) + dn;
+                std::memcpy(x + o, &xn, sizeof xn);
+            } else {
+                std::memcpy(x + o, &dn, sizeof dn);
+            }
+        }
+        for (; q < R; ++q) {
+            const std::size_t o = 4 * (i * std::size_t(R) + std::size_t(q));
+            Float4 r = load4(b + o);
+            if constexpr (kT) r -= load4(t + o);
+            Float4 dn = c2 * (m0 * r[0] + m1 * r[1] + m2 * r[2]);
+            if constexpr (kIn) dn += c1 * load4(dIn + o);
+            if constexpr (kOut) std::memcpy(dOut + o, &dn, sizeof dn);
+            if constexpr (kKeep) {
+                const Float4 xn = load4(x + o) + dn;
+                std::memcpy(x + o, &xn, sizeof xn);
+            } else {
+                std::memcpy(x + o, &dn, sizeof dn);
+            }
+        }
     }
 }
 
