@@ -1161,7 +1161,7 @@ TEST(Properties, TheMemoryEstimateBoundsTheSolvesPeakAndRefusesWhatCannotFit)
         EXPECT_LE(estimate, 2.0 * measured) << share;
     }
     // A resolution whose solve cannot fit: exit 3 with the estimate and the limit, before the
-    // cell is sampled at it (a dense gyroid at 512 voxels: about 600 bytes a voxel).
+    // cell is sampled at it (a dense gyroid at 512 voxels: about 1450 bytes a voxel).
     const double need = homogenizationBytes(512.0 * 512.0 * 512.0, 0.5 * 512.0 * 512.0 * 512.0);
     if (need > 0.7 * double(availableMemoryBytes())) {
         int status = 0;

@@ -11,6 +11,8 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace voxlat {
 
@@ -104,27 +106,46 @@ void homogenize(const VoxelCell& cell, const std::vector<double>& ke, const std:
         scale = std::sqrt(fe2 * double(topology.keptVoxels));
     };
 
+    // The load cases' systems in batches (one V-cycle serves a batch, each case the bits it gets
+    // alone). In a fully solid cell the nodal loads cancel: what is left is rounding, and the
+    // fluctuation is zero.
     std::array<std::vector<double>, N> chi;
+    // Every case in one batch: the fastest (W8's 64^3 gyroid, one thread: 0.60 s of CPU against
+    // 0.64 s in batches of 3 and 0.70 s of 2), at about twice the memory of one case at a time.
+    const int batch = N;
     int done = 0;
-    for (int v = 0; v < N; ++v) {
-        if (!solved[v]) continue;
-        std::vector<double> F;
-        double scale = 0.0;
-        load(v, F, scale);
-        // In a fully solid cell the nodal loads cancel: what is left is rounding, and the
-        // fluctuation is zero.
-        if (std::sqrt(solver.dot(F, F)) <= 1e-12 * scale) {
-            chi[v].assign(solver.dofs(), 0.0);
-        } else {
-            std::function<bool(double)> progress;
-            if (settings.progress) progress = [&](double f) { return settings.progress((done + f) / cases); };
-            const auto stats = solver.solve(F, chi[v], settings.tolerance, settings.maxIterations, progress);
-            iterations[v] = stats.iterations;
-            solver.removeTranslations(chi[v]);
+    for (int v0 = 0; v0 < N;) {
+        std::vector<std::vector<double>> loads, fluctuations;
+        std::vector<int> system;
+        int v = v0;
+        for (; v < N && int(system.size()) < batch; ++v) {
+            if (!solved[v]) continue;
+            std::vector<double> F;
+            double scale = 0.0;
+            load(v, F, scale);
+            ++done;
+            if (std::sqrt(solver.dot(F, F)) <= 1e-12 * scale) {
+                chi[v].assign(solver.dofs(), 0.0);
+                continue;
+            }
+            loads.push_back(std::move(F));
+            system.push_back(v);
         }
-        ++done;
-        if (settings.progress && !settings.progress(double(done) / cases)) throw Cancelled("homogenization cancelled");
+        v0 = v;
+        if (system.empty()) continue;
+        std::function<bool(double)> progress;
+        if (settings.progress)
+            progress = [&](double f) {
+                return settings.progress((double(done) - double(system.size()) * (1.0 - f)) / cases);
+            };
+        const auto stats = solver.solve(loads, fluctuations, settings.tolerance, settings.maxIterations, progress);
+        for (std::size_t k = 0; k < system.size(); ++k) {
+            iterations[system[k]] = stats[k].iterations;
+            chi[system[k]] = std::move(fluctuations[k]);
+            solver.removeTranslations(chi[system[k]]);
+        }
     }
+    if (settings.progress && !settings.progress(1.0)) throw Cancelled("homogenization cancelled");
 
     // C_ij |Y| = sum_e (u0_i - chi_i)^T ke (u0_j - chi_j)
     //          = Ns Ve C0_ij - chi_i.F_j - chi_j.F_i + chi_i.K chi_j,
@@ -142,10 +163,17 @@ void homogenize(const VoxelCell& cell, const std::vector<double>& ke, const std:
             for (std::size_t i = 0; i < r.size(); ++i) r[i] = F[i] - Kchi[i];
             residual[j] = std::sqrt(solver.dot(r, r)) / fnorm;
         }
-        for (int i = 0; i < N; ++i) {
+        std::vector<std::pair<const std::vector<double>*, const std::vector<double>*>> pairs;
+        for (int i = 0; i < N; ++i)
+            if (solved[i]) {
+                pairs.push_back({&chi[i], &F});
+                pairs.push_back({&chi[i], &Kchi});
+            }
+        const std::vector<double> sums = solver.dots(pairs);
+        for (int i = 0, k = 0; i < N; ++i) {
             if (!solved[i]) continue;
-            chiF[i][j] = solver.dot(chi[i], F);
-            chiKchi[i][j] = solver.dot(chi[i], Kchi);
+            chiF[i][j] = sums[k++];
+            chiKchi[i][j] = sums[k++];
         }
     }
     const double cellVolume = voxels * cell.hx * cell.hy * cell.hz;

@@ -28,7 +28,7 @@ std::int64_t cellNodes(const VoxelCell& cell)
 
 double homogenizationBytes(double voxels, double nodes)
 {
-    constexpr double kPerNode = 600.0, kPerVoxel = 16.0, kFixed = 4.0 * 1048576.0;
+    constexpr double kPerNode = 1450.0, kPerVoxel = 16.0, kFixed = 4.0 * 1048576.0;
     return kFixed + kPerNode * nodes + kPerVoxel * voxels;
 }
 

@@ -15,12 +15,13 @@ namespace voxlat {
 std::int64_t cellNodes(const VoxelCell& cell);
 
 /// The peak bytes homogenizeElasticity() (and the conductivity after it) holds above the cell it
-/// is given, for a cell of @a voxels voxels whose model has @a nodes nodes: per node the six load
-/// cases' solutions, CG's vectors, the preconditioner's padded single-precision vectors and
-/// diagonal blocks, the element lists of every multigrid level (about 600 bytes); per voxel the
-/// component labels and the grid-to-node map (16 bytes); and 4 MB for the dense coarsest level and
-/// the threads' buffers. Measured (gyroid networks at 20 % and 80 % solid, 32, 48 and 64 voxels a
-/// side): the estimate is 1.25 to 1.5 times the measured peak.
+/// is given, for a cell of @a voxels voxels whose model has @a nodes nodes: per node the load
+/// cases' solutions and CG's vectors, for all six cases at once (they are solved together), the
+/// preconditioner's padded single-precision vectors for six right-hand sides (large ones on 2 MB
+/// pages) and its diagonal blocks, the element lists of every multigrid level (about 1450
+/// bytes); per voxel the component labels and the grid-to-node map (16 bytes); and 4 MB for the
+/// dense coarsest level and the threads' buffers. Measured (gyroid networks at 20, 50 and 80 %
+/// solid, 32, 40, 64 and 96 voxels a side): the estimate is 1.09 to 1.33 times the measured peak.
 double homogenizationBytes(double voxels, double nodes);
 
 /// homogenizationBytes() of @a cell.

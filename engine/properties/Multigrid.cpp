@@ -2,6 +2,10 @@
 
 #include "engine/core/Errors.h"
 
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
 #define VOXLAT_MG_ISA baseline
 #include "engine/properties/MultigridKernels.h"
 #undef VOXLAT_MG_ISA
@@ -12,6 +16,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <new>
+#include <stdexcept>
 #include <type_traits>
 #include <unordered_map>
 
@@ -22,10 +28,14 @@ namespace voxlat::homogenization {
 namespace avx2 {
 template <int D, class T, int St>
 void elementBlocks(const std::int32_t* elemNodes, std::size_t e0, std::size_t e1, const T* blocks,
-                   const typename Lanes<T>::type* columns, const T* xin, T* y);
+                   const typename Lanes<T>::type* columns, const T* xin, T* y, int R);
 template <int D, class T, int St>
 void elementDense(const std::int32_t* elemNodes, const std::int32_t* elemType, const T* table, bool single,
-                  std::size_t e0, std::size_t e1, const T* xin, T* y);
+                  std::int32_t blockType, const T* blocks, const typename Lanes<T>::type* columns, std::size_t e0,
+                  std::size_t e1, const T* xin, T* y, int R);
+template <bool kT, bool kIn, bool kOut, bool kKeep>
+void chebyshevNodes(const float* diagInv, std::size_t i0, std::size_t i1, int R, const float* b, const float* t,
+                    const float* dIn, float* dOut, float* x, float c1, float c2);
 }  // namespace avx2
 #endif
 
@@ -87,39 +97,49 @@ void parallelRange(std::size_t begin, std::size_t end, std::size_t grain, const 
                       [&](const tbb::blocked_range<std::size_t>& r) { f(r.begin(), r.end()); });
 }
 
-/// A weighted sum of node values of the preconditioner's vectors (restriction, prolongation): for
-/// three unknowns one lane vector (the padding lane stays zero), lane by lane the scalar sum.
-template <int D>
-struct NodeSum {
-    float s[D] = {};
-    void add(float w, const float* v)
+/// Right-hand sides the preconditioner takes at once (the elastic load cases; see
+/// PeriodicSolver::solve).
+constexpr int kMaxLanes = 6;
+
+/// Allocates large blocks on 2 MB boundaries and asks Linux for transparent huge pages there
+/// (MADV_HUGEPAGE): the preconditioner's work vectors, megabytes each, then take one page fault
+/// and one TLB entry per 2 MB instead of per 4 kB.
+template <class T>
+struct HugePages {
+    using value_type = T;
+    HugePages() = default;
+    template <class U>
+    HugePages(const HugePages<U>&)
     {
-        for (int k = 0; k < D; ++k) s[k] += w * v[k];
     }
-    void store(float* out) const
+    static constexpr std::size_t kHuge = std::size_t(2) << 20;
+    T* allocate(std::size_t n)
     {
-        for (int k = 0; k < D; ++k) out[k] = s[k];
+        const std::size_t bytes = n * sizeof(T);
+        if (bytes < kHuge) return static_cast<T*>(::operator new(bytes));
+        const std::size_t rounded = (bytes + kHuge - 1) / kHuge * kHuge;
+        void* p = ::operator new(rounded, std::align_val_t(kHuge));
+#ifdef MADV_HUGEPAGE
+        madvise(p, rounded, MADV_HUGEPAGE);
+#endif
+        return static_cast<T*>(p);
     }
-    void addTo(float* out) const
+    void deallocate(T* p, std::size_t n)
     {
-        for (int k = 0; k < D; ++k) out[k] += s[k];
+        if (n * sizeof(T) < kHuge)
+            ::operator delete(p);
+        else
+            ::operator delete(p, std::align_val_t(kHuge));
     }
-};
-template <>
-struct NodeSum<3> {
-    Float4 s = {0.0f, 0.0f, 0.0f, 0.0f};
-    static Float4 load(const float* p)
+    template <class U>
+    bool operator==(const HugePages<U>&) const
     {
-        Float4 v;
-        std::memcpy(&v, p, sizeof v);
-        return v;
+        return true;
     }
-    void add(float w, const float* v) { s += w * load(v); }
-    void store(float* out) const { std::memcpy(out, &s, sizeof s); }
-    void addTo(float* out) const
+    template <class U>
+    bool operator!=(const HugePages<U>&) const
     {
-        const Float4 t = load(out) + s;
-        std::memcpy(out, &t, sizeof t);
+        return false;
     }
 };
 
@@ -198,7 +218,16 @@ struct PeriodicSolver<D>::Level {
     /// coarse coordinate -> (fine coordinate, weight) x3 (count -1 means unused).
     std::array<std::vector<std::array<std::pair<int, double>, 2>>, 3> prolong;
     std::array<std::vector<std::array<std::pair<int, double>, 3>>, 3> restrict;
-    mutable std::vector<Real> b, x, r, d, t;
+    /// Work vectors of the preconditioner: node i's right-hand side q at (i * R + q) * S for R
+    /// right-hand sides (sized for `lanes` of them).
+    mutable std::vector<Real, HugePages<Real>> b, x, d, t;
+    mutable int lanes = 1;
+    void reserveLanes(int R) const
+    {
+        if (R <= lanes) return;
+        for (auto* v : {&b, &x, &d, &t}) v->assign(nodes() * S * std::size_t(R), Real(0));
+        lanes = R;
+    }
 
     std::size_t nodes() const { return pointOfNode.size(); }
     std::size_t dofs() const { return pointOfNode.size() * D; }
@@ -258,7 +287,7 @@ struct PeriodicSolver<D>::Level {
             coords(elemVoxel[e], c);
             for (int a = 0; a < 8; ++a) elemNodes[8 * e + a] = nodeOfPoint[corner(c, a)];
         }
-        for (std::vector<Real>* v : {&b, &x, &r, &d, &t}) v->assign(nodes() * S, Real(0));
+        for (auto* v : {&b, &x, &d, &t}) v->assign(nodes() * S, Real(0));
     }
 
     std::int32_t corner(const int c[3], int a) const
@@ -315,8 +344,10 @@ struct PeriodicSolver<D>::Level {
         });
     }
 
-    /// The element matrix of a level with one element type, in the basis that block-diagonalises
-    /// it, when it does (see setReflectionBlocks); empty otherwise.
+    /// The level's most common element type (on the finest level the only one; on a coarse level
+    /// the voxel whose eight children are full, most of a solid's inside), in the basis that
+    /// block-diagonalises its matrix, when it does (see setReflectionBlocks): its type, -1 if none.
+    std::int32_t blockType = -1;
     std::vector<double> blocks;
     std::vector<Real> realBlocks;
     /// For D = 3: column j of block c as lanes, at c * 3 + j.
@@ -333,12 +364,20 @@ struct PeriodicSolver<D>::Level {
     /// flops of the dense 24 x 24 product. Kept only if the matrix really is block diagonal.
     void setReflectionBlocks()
     {
-        if (matrices.size() != std::size_t(kE * kE)) return;
+        const std::size_t types = matrices.size() / std::size_t(kE * kE);
+        if (types == 0) return;
+        std::int32_t common = 0;
+        if (types > 1) {
+            std::vector<std::size_t> count(types, 0);
+            for (std::int32_t t : elemType) ++count[std::size_t(t)];
+            common = std::int32_t(std::max_element(count.begin(), count.end()) - count.begin());
+        }
+        const double* K = &matrices[std::size_t(common) * kE * kE];
         auto sign = [](int k, int a) { return (__builtin_popcount(unsigned(k & a)) & 1) ? -1.0 : 1.0; };
         // M = T K T / 64, entry ((k, d), (k2, d2)).
         std::vector<double> M(kE * kE, 0.0);
         double top = 0.0;
-        for (double v : matrices) top = std::max(top, std::abs(v));
+        for (int i = 0; i < kE * kE; ++i) top = std::max(top, std::abs(K[i]));
         for (int k = 0; k < 8; ++k)
             for (int d = 0; d < D; ++d)
                 for (int k2 = 0; k2 < 8; ++k2)
@@ -346,7 +385,7 @@ struct PeriodicSolver<D>::Level {
                         double s = 0.0;
                         for (int a = 0; a < 8; ++a)
                             for (int a2 = 0; a2 < 8; ++a2)
-                                s += sign(k, a) * matrices[(a * D + d) * kE + a2 * D + d2] * sign(k2, a2);
+                                s += sign(k, a) * K[(a * D + d) * kE + a2 * D + d2] * sign(k2, a2);
                         M[(k * D + d) * kE + k2 * D + d2] = s / 64.0;
                     }
         auto character = [](int k, int d) { return D == 1 ? k : (k ^ (1 << d)); };
@@ -366,6 +405,7 @@ struct PeriodicSolver<D>::Level {
                         }
                         blocks[(c * D + d) * D + d2] = v;
                     }
+        blockType = common;
         realBlocks.assign(blocks.begin(), blocks.end());
         if constexpr (D == 3) {
             for (int c = 0; c < 8; ++c)
@@ -380,36 +420,42 @@ struct PeriodicSolver<D>::Level {
     /// y = A x in double (the operator CG solves with; level 0 only).
     void apply(const double* xin, double* y) const
     {
-        applyWith(matrices.data(), matrices.size(), blocks, blockColumns, xin, y);
+        applyWith(matrices.data(), matrices.size(), blocks, blockColumns, xin, y, 1);
     }
-    /// y = A x in the preconditioner's precision.
-    void apply(const Real* xin, Real* y) const
+    /// y = A x in the preconditioner's precision, for @a R right-hand sides at once.
+    void apply(const Real* xin, Real* y, int R = 1) const
     {
-        applyWith(realMatrices.data(), realMatrices.size(), realBlocks, realBlockColumns, xin, y);
+        applyWith(realMatrices.data(), realMatrices.size(), realBlocks, realBlockColumns, xin, y, R);
     }
 
     template <class T>
     void applyWith(const T* matrixTable, std::size_t tableSize, const std::vector<T>& scalarBlocks,
-                   const std::vector<typename Lanes<T>::type>& columns, const T* xin, T* y) const
+                   const std::vector<typename Lanes<T>::type>& columns, const T* xin, T* y, int R) const
     {
         constexpr int St = strideOf<T>;
-        parallelRange(0, nodes() * St, 8192, [&](std::size_t i0, std::size_t i1) { std::fill(y + i0, y + i1, T(0)); });
+        parallelRange(0, nodes() * St * std::size_t(R), 8192,
+                      [&](std::size_t i0, std::size_t i1) { std::fill(y + i0, y + i1, T(0)); });
         const bool single = tableSize == std::size_t(kE * kE);
         const std::int32_t* nodes = elemNodes.data();
         const std::int32_t* types = elemType.data();
         const bool avx2 = useAvx2();
+        const std::int32_t blocked = scalarBlocks.empty() ? -1 : blockType;
+        const T* blockData = scalarBlocks.empty() ? nullptr : scalarBlocks.data();
+        const typename Lanes<T>::type* columnData = columns.empty() ? nullptr : columns.data();
         forEachLayerRange([&](std::size_t e0, std::size_t e1) {
-            if (!scalarBlocks.empty()) {
+            if (single && blocked == 0) {  // every element through the blocks
 #ifdef VOXLAT_MG_AVX2
-                if (avx2)
-                    return avx2::elementBlocks<D, T, St>(nodes, e0, e1, scalarBlocks.data(), columns.data(), xin, y);
+                if (avx2) return avx2::elementBlocks<D, T, St>(nodes, e0, e1, blockData, columnData, xin, y, R);
 #endif
-                return baseline::elementBlocks<D, T, St>(nodes, e0, e1, scalarBlocks.data(), columns.data(), xin, y);
+                return baseline::elementBlocks<D, T, St>(nodes, e0, e1, blockData, columnData, xin, y, R);
             }
 #ifdef VOXLAT_MG_AVX2
-            if (avx2) return avx2::elementDense<D, T, St>(nodes, types, matrixTable, single, e0, e1, xin, y);
+            if (avx2)
+                return avx2::elementDense<D, T, St>(nodes, types, matrixTable, single, blocked, blockData, columnData,
+                                                    e0, e1, xin, y, R);
 #endif
-            baseline::elementDense<D, T, St>(nodes, types, matrixTable, single, e0, e1, xin, y);
+            baseline::elementDense<D, T, St>(nodes, types, matrixTable, single, blocked, blockData, columnData, e0, e1,
+                                             xin, y, R);
         });
         (void)avx2;
     }
@@ -572,6 +618,7 @@ void PeriodicSolver<D>::buildHierarchy()
                 for (int j = i + 1; j < kE; ++j) G[i * kE + j] = G[j * kE + i] = 0.5 * (G[i * kE + j] + G[j * kE + i]);
         });
         C->build(voxels);
+        C->setReflectionBlocks();
         mLevels.push_back(std::move(C));
     }
 
@@ -581,8 +628,8 @@ void PeriodicSolver<D>::buildHierarchy()
         L.buildDiagonal();
         L.realMatrices.assign(L.matrices.begin(), L.matrices.end());
         constexpr int S = Level::S;
-        std::vector<Real>& v = L.x;
-        std::vector<Real>& w = L.t;
+        auto& v = L.x;
+        auto& w = L.t;
         for (std::size_t i = 0; i < L.nodes(); ++i)
             for (int r = 0; r < D; ++r) v[i * S + r] = Real(hashUnit(i * D + r));
         double lambda = 0.0;
@@ -654,31 +701,36 @@ void PeriodicSolver<D>::buildHierarchy()
 }
 
 template <int D>
-void PeriodicSolver<D>::coarseSolve(const Level& L, const Real* b, Real* xOut) const
+void PeriodicSolver<D>::coarseSolve(const Level& L, const Real* b, Real* xOut, int R) const
 {
     const std::size_t n = L.dofs();
     const double* A = mCoarseFactor.data();
+    constexpr int S = Level::S;
+    // Right-hand side q's unknown i at (i / D) * S * R + q * S + i % D.
+    auto at = [&](std::size_t i, int q) { return (i / D) * S * std::size_t(R) + std::size_t(q) * S + i % D; };
     std::vector<double> x(n);
-    for (std::size_t i = 0; i < n; ++i) {  // L y = b
-        if (mCoarseDropped[i]) {
-            x[i] = 0.0;
-            continue;
+    for (int q = 0; q < R; ++q) {
+        for (std::size_t i = 0; i < n; ++i) {  // L y = b
+            if (mCoarseDropped[i]) {
+                x[i] = 0.0;
+                continue;
+            }
+            double s = b[at(i, q)];
+            for (std::size_t k = 0; k < i; ++k) s -= A[i * n + k] * x[k];
+            x[i] = s / A[i * n + i];
         }
-        double s = b[(i / D) * Level::S + i % D];
-        for (std::size_t k = 0; k < i; ++k) s -= A[i * n + k] * x[k];
-        x[i] = s / A[i * n + i];
+        for (std::size_t i = n; i-- > 0;) {  // L^T x = y
+            if (mCoarseDropped[i]) continue;
+            double s = x[i];
+            for (std::size_t k = i + 1; k < n; ++k) s -= A[k * n + i] * x[k];
+            x[i] = s / A[i * n + i];
+        }
+        for (std::size_t i = 0; i < n; ++i) xOut[at(i, q)] = Real(x[i]);
     }
-    for (std::size_t i = n; i-- > 0;) {  // L^T x = y
-        if (mCoarseDropped[i]) continue;
-        double s = x[i];
-        for (std::size_t k = i + 1; k < n; ++k) s -= A[k * n + i] * x[k];
-        x[i] = s / A[i * n + i];
-    }
-    for (std::size_t i = 0; i < n; ++i) xOut[(i / D) * Level::S + i % D] = Real(x[i]);
 }
 
 template <int D>
-void PeriodicSolver<D>::smooth(const Level& L, const Real* b, Real* x, bool zeroStart) const
+void PeriodicSolver<D>::smooth(const Level& L, const Real* b, Real* x, bool zeroStart, int R) const
 {
     // Chebyshev iteration on diag^-1 A over [lo, hi] (Saad, Iterative Methods, alg. 12.1). With a
     // zero start it is a fixed symmetric polynomial in diag^-1 A times diag^-1: the same operator
@@ -687,78 +739,109 @@ void PeriodicSolver<D>::smooth(const Level& L, const Real* b, Real* x, bool zero
     const double sigma = theta / delta;
     double rho = 1.0 / sigma;
     Real* t = L.t.data();
-    if (!zeroStart) L.apply(x, t);
-    // d = c1 d + c2 diag^-1 (b - t), x = x + d (t and the old x, d are zero on a zero start).
-    chebyshevStep(L, b, zeroStart ? nullptr : t, x, Real(0), Real(1.0 / theta), !zeroStart);
+    Real* d = L.d.data();
     const int degree = &L == mLevels[0].get() ? kFineDegree : kCoarseDegree;
+    if (!zeroStart) L.apply(x, t, R);
+    // d = c1 d + c2 diag^-1 (b - t), x = x + d (t and the old x, d are zero on a zero start).
+    // The direction is stored only for a next step; after a zero start it is x itself.
+    chebyshevStep(L, b, zeroStart ? nullptr : t, x, nullptr, zeroStart || degree == 1 ? nullptr : d, Real(0),
+                  Real(1.0 / theta), !zeroStart, R);
     for (int step = 1; step < degree; ++step) {
-        L.apply(x, t);
+        L.apply(x, t, R);
         const double rhoNew = 1.0 / (2.0 * sigma - rho);
-        chebyshevStep(L, b, t, x, Real(rhoNew * rho), Real(2.0 * rhoNew / delta), true);
+        chebyshevStep(L, b, t, x, step == 1 && zeroStart ? x : d, step + 1 < degree ? d : nullptr, Real(rhoNew * rho),
+                      Real(2.0 * rhoNew / delta), true, R);
         rho = rhoNew;
     }
 }
 
-template <int D>
-void PeriodicSolver<D>::chebyshevStep(const Level& L, const Real* b, const Real* t, Real* x, Real c1, Real c2,
-                                      bool keepX) const
+namespace {
+
+/// Calls f with std::bool_constant for each flag.
+template <class F>
+void withFlags(bool a, bool b, bool c, bool d, const F& f)
 {
-    Real* d = L.d.data();
-    parallelRange(0, L.nodes(), 2048, [&](std::size_t i0, std::size_t i1) {
-        if constexpr (D == 3) {
-            // One node per lane vector, its padding lane zero throughout (the diagonal block
-            // inverse's rows are padded with zeros too). The block is symmetric, so its rows are
-            // its columns.
-            auto load = [](const Real* p) {
-                Float4 v;
-                std::memcpy(&v, p, sizeof v);
-                return v;
-            };
-            auto store = [](Real* p, const Float4& v) { std::memcpy(p, &v, sizeof v); };
-            for (std::size_t i = i0; i < i1; ++i) {
-                Float4 r = load(b + 4 * i);
-                if (t) r -= load(t + 4 * i);
-                const Real* m = &L.diagInv[12 * i];
-                Float4 dn = c2 * (load(m) * r[0] + load(m + 4) * r[1] + load(m + 8) * r[2]);
-                if (c1 != Real(0)) dn += c1 * load(d + 4 * i);
-                store(d + 4 * i, dn);
-                store(x + 4 * i, keepX ? load(x + 4 * i) + dn : dn);
+    auto pick = [](bool v, const auto& g) {
+        if (v)
+            g(std::true_type{});
+        else
+            g(std::false_type{});
+    };
+    pick(a,
+         [&](auto A) { pick(b, [&](auto B) { pick(c, [&](auto C) { pick(d, [&](auto E) { f(A, B, C, E); }); }); }); });
+}
+
+/// Calls f with std::integral_constant<int, R> for R = 1 .. kMaxLanes.
+template <class F>
+void withLanes(int R, const F& f)
+{
+    switch (R) {
+        case 1:
+            return f(std::integral_constant<int, 1>{});
+        case 2:
+            return f(std::integral_constant<int, 2>{});
+        case 3:
+            return f(std::integral_constant<int, 3>{});
+        case 4:
+            return f(std::integral_constant<int, 4>{});
+        case 5:
+            return f(std::integral_constant<int, 5>{});
+        case 6:
+            return f(std::integral_constant<int, 6>{});
+        default:
+            throw std::logic_error("PeriodicSolver: more right-hand sides than kMaxLanes");
+    }
+}
+static_assert(kMaxLanes == 6, "withLanes covers 1 .. kMaxLanes");
+
+}  // namespace
+
+template <int D>
+void PeriodicSolver<D>::chebyshevStep(const Level& L, const Real* b, const Real* t, Real* x, const Real* dIn,
+                                      Real* dOut, Real c1, Real c2, bool keepX, int R) const
+{
+    const Real* diagInv = L.diagInv.data();
+    const bool avx2 = useAvx2();
+    (void)avx2;
+    withFlags(t != nullptr, dIn != nullptr, dOut != nullptr, keepX, [&](auto kT, auto kIn, auto kOut, auto kKeep) {
+        parallelRange(0, L.nodes(), 2048, [=](std::size_t i0, std::size_t i1) {
+            if constexpr (D == 3) {
+                constexpr bool T_ = decltype(kT)::value, In = decltype(kIn)::value, Out = decltype(kOut)::value,
+                               Keep = decltype(kKeep)::value;
+#ifdef VOXLAT_MG_AVX2
+                if (avx2)
+                    return avx2::chebyshevNodes<T_, In, Out, Keep>(diagInv, i0, i1, R, b, t, dIn, dOut, x, c1, c2);
+#endif
+                baseline::chebyshevNodes<T_, In, Out, Keep>(diagInv, i0, i1, R, b, t, dIn, dOut, x, c1, c2);
+            } else {
+                for (std::size_t i = i0; i < i1; ++i)
+                    for (int q = 0; q < R; ++q) {
+                        const std::size_t o = i * R + q;
+                        Real r = b[o];
+                        if constexpr (kT) r = b[o] - t[o];
+                        Real dn = c2 * (diagInv[i] * r);
+                        if constexpr (kIn) dn += c1 * dIn[o];
+                        if constexpr (kOut) dOut[o] = dn;
+                        if constexpr (kKeep)
+                            x[o] = x[o] + dn;
+                        else
+                            x[o] = dn;
+                    }
             }
-        } else {
-            for (std::size_t i = i0; i < i1; ++i) {
-                const Real r = t ? b[i] - t[i] : b[i];
-                Real dn = c2 * (L.diagInv[i] * r);
-                if (c1 != Real(0)) dn += c1 * d[i];
-                d[i] = dn;
-                x[i] = keepX ? x[i] + dn : dn;
-            }
-        }
+        });
     });
 }
 
 template <int D>
-void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
+template <int W>
+void PeriodicSolver<D>::restrictResidual(const Level& L, const Level& C, const Real* b, const Real* t, Real* bc) const
 {
-    const Level& L = *mLevels[level];
-    if (level + 1 == mLevels.size()) {
-        coarseSolve(L, b, x);
-        return;
-    }
-    const Level& C = *mLevels[level + 1];
-    smooth(L, b, x, true);
-    // r = b - A x, then restricted to the coarse level (P^T, node by node on the coarse grid).
-    L.apply(x, L.t.data());
-    Real* r = L.r.data();
-    constexpr int S = Level::S;
-    parallelRange(0, L.nodes() * S, 8192, [&](std::size_t i0, std::size_t i1) {
-        for (std::size_t i = i0; i < i1; ++i) r[i] = b[i] - L.t[i];
-    });
-    Real* bc = C.b.data();
+    // bc = P^T (b - t), node by node on the coarse grid; W values a node (every right-hand side).
     parallelRange(0, C.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
         for (std::size_t i = i0; i < i1; ++i) {
             int c[3];
             C.coords(C.pointOfNode[i], c);
-            NodeSum<D> s;
+            Real s[W] = {};
             for (const auto& [fz, wz] : L.restrict[2][c[2]]) {
                 if (fz < 0) continue;
                 for (const auto& [fy, wy] : L.restrict[1][c[1]]) {
@@ -767,21 +850,28 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
                         if (fx < 0) continue;
                         const std::int32_t node = L.nodeOfPoint[L.pointIndex(fx, fy, fz)];
                         if (node < 0) continue;
-                        s.add(Real(wx * wy * wz), r + std::size_t(node) * S);
+                        const Real w = Real(wx * wy * wz);
+                        const Real* bv = b + std::size_t(node) * W;
+                        const Real* tv = t + std::size_t(node) * W;
+                        for (int j = 0; j < W; ++j) s[j] += w * (bv[j] - tv[j]);
                     }
                 }
             }
-            s.store(bc + i * S);
+            std::memcpy(bc + i * W, s, sizeof s);
         }
     });
-    Real* xc = C.x.data();
-    vcycle(level + 1, bc, xc);
-    // x += P xc, node by node on the fine grid.
+}
+
+template <int D>
+template <int W>
+void PeriodicSolver<D>::prolongAdd(const Level& L, const Level& C, const Real* xc, Real* x) const
+{
+    // x += P xc, node by node on the fine grid; W values a node.
     parallelRange(0, L.nodes(), 1024, [&](std::size_t i0, std::size_t i1) {
         for (std::size_t i = i0; i < i1; ++i) {
             int c[3];
             L.coords(L.pointOfNode[i], c);
-            NodeSum<D> s;
+            Real s[W] = {};
             for (const auto& [cz, wz] : L.prolong[2][c[2]]) {
                 if (cz < 0) continue;
                 for (const auto& [cy, wy] : L.prolong[1][c[1]]) {
@@ -789,14 +879,39 @@ void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x) const
                     for (const auto& [cx, wx] : L.prolong[0][c[0]]) {
                         if (cx < 0) continue;
                         const std::int32_t node = C.nodeOfPoint[C.pointIndex(cx, cy, cz)];
-                        s.add(Real(wx * wy * wz), xc + std::size_t(node) * S);
+                        const Real w = Real(wx * wy * wz);
+                        const Real* v = xc + std::size_t(node) * W;
+                        for (int j = 0; j < W; ++j) s[j] += w * v[j];
                     }
                 }
             }
-            s.addTo(x + i * S);
+            Real* out = x + i * W;
+            for (int j = 0; j < W; ++j) out[j] += s[j];
         }
     });
-    smooth(L, b, x, false);
+}
+
+template <int D>
+void PeriodicSolver<D>::vcycle(std::size_t level, const Real* b, Real* x, int R) const
+{
+    const Level& L = *mLevels[level];
+    if (level + 1 == mLevels.size()) {
+        coarseSolve(L, b, x, R);
+        return;
+    }
+    const Level& C = *mLevels[level + 1];
+    smooth(L, b, x, true, R);
+    // r = b - A x, then restricted to the coarse level (P^T, node by node on the coarse grid).
+    L.apply(x, L.t.data(), R);
+    // r = b - t, per value, is formed where the restriction reads it (the same float rounding).
+    // A node's weighted sums, per value: s[j] += w v[j] from zero, in the order of the terms.
+    const Real* t = L.t.data();
+    Real* bc = C.b.data();
+    withLanes(R, [&](auto lanes) { restrictResidual<decltype(lanes)::value * Level::S>(L, C, b, t, bc); });
+    Real* xc = C.x.data();
+    vcycle(level + 1, bc, xc, R);
+    withLanes(R, [&](auto lanes) { prolongAdd<decltype(lanes)::value * Level::S>(L, C, xc, x); });
+    smooth(L, b, x, false, R);
 }
 
 template <int D>
@@ -828,6 +943,39 @@ double PeriodicSolver<D>::dot(const Vector& a, const Vector& b) const
 }
 
 template <int D>
+std::vector<double> PeriodicSolver<D>::dots(const std::vector<std::pair<const Vector*, const Vector*>>& pairs) const
+{
+    std::vector<double> total(pairs.size(), 0.0);
+    if (pairs.empty()) return total;
+    const std::size_t n = pairs[0].first->size();
+    // Four sums at a time, each its own chain in dot()'s order and blocks (independent chains
+    // overlap where one chain waits on its additions).
+    constexpr int kChains = 4;
+    for (std::size_t k0 = 0; k0 < pairs.size(); k0 += kChains) {
+        const double* a[kChains];
+        const double* b[kChains];
+        for (int c = 0; c < kChains; ++c) {
+            const auto& pr = pairs[std::min(k0 + c, pairs.size() - 1)];
+            a[c] = pr.first->data();
+            b[c] = pr.second->data();
+        }
+        const std::array<double, kChains> sums =
+            blockedSums<kChains>(n, [&](std::size_t i0, std::size_t i1, std::array<double, kChains>& s) {
+                double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+                for (std::size_t i = i0; i < i1; ++i) {
+                    s0 += a[0][i] * b[0][i];
+                    s1 += a[1][i] * b[1][i];
+                    s2 += a[2][i] * b[2][i];
+                    s3 += a[3][i] * b[3][i];
+                }
+                s = {s0, s1, s2, s3};
+            });
+        for (int c = 0; c < kChains && k0 + c < pairs.size(); ++c) total[k0 + c] = sums[c];
+    }
+    return total;
+}
+
+template <int D>
 void PeriodicSolver<D>::removeTranslations(Vector& v) const
 {
     std::vector<double> sum(std::size_t(mComponents) * D, 0.0);
@@ -845,78 +993,137 @@ void PeriodicSolver<D>::removeTranslations(Vector& v) const
 }
 
 template <int D>
-typename PeriodicSolver<D>::Stats PeriodicSolver<D>::solve(const Vector& f, Vector& x, double tolerance,
-                                                           int maxIterations,
-                                                           const std::function<bool(double)>& progress) const
+std::vector<typename PeriodicSolver<D>::Stats> PeriodicSolver<D>::solve(
+    std::vector<Vector>& f, std::vector<Vector>& x, double tolerance, int maxIterations,
+    const std::function<bool(double)>& progress) const
 {
     const std::size_t n = dofs();
-    Stats stats;
-    x.assign(n, 0.0);
-    const double fnorm = std::sqrt(dot(f, f));
-    if (fnorm == 0.0) return stats;
-    Vector r = f, z(n), p(n), q(n);
+    const std::size_t systems = f.size();
+    if (systems > std::size_t(kMaxLanes)) throw std::logic_error("PeriodicSolver::solve: too many right-hand sides");
+    std::vector<Stats> stats(systems);
+    x.assign(systems, Vector());
+    // Per system: r (f itself), p, q, rz, |f|, |r|; active while it iterates. z = M^-1 r is read
+    // where the V-cycle left it (doubles of floats: exact), right-hand side lane[k] of lanes.
+    std::vector<Vector>& r = f;
+    std::vector<Vector> p(systems), q(systems);
+    std::vector<int> lane(systems, 0);
+    int lanes = 0;
+    std::vector<double> rz(systems, 0.0), alpha(systems, 0.0), fnorm(systems, 0.0), rnorm(systems, 0.0);
+    std::vector<double> fraction(systems, 1.0);  // of the way to the tolerance (log scale); 1 when stopped
+    std::vector<std::size_t> active;
+    for (std::size_t k = 0; k < systems; ++k) {
+        x[k].assign(n, 0.0);
+        fnorm[k] = std::sqrt(dot(f[k], f[k]));
+        if (fnorm[k] == 0.0) continue;
+        rnorm[k] = fnorm[k];
+        fraction[k] = 0.0;
+        p[k].assign(n, 0.0);
+        q[k].assign(n, 0.0);
+        active.push_back(k);
+    }
     const Level& L0 = *mLevels[0];
+    // z = M^-1 r for every active system at once: system active[q] is right-hand side q of the
+    // V-cycle, which gives each the bits it gives alone.
+    constexpr int S = Level::S;
     auto precondition = [&]() {
-        constexpr int S = Level::S;
+        const int R = lanes = int(active.size());
+        for (int h = 0; h < R; ++h) lane[active[h]] = h;
+        for (const auto& level : mLevels) level->reserveLanes(R);
         parallelRange(0, L0.nodes(), 4096, [&](std::size_t i0, std::size_t i1) {
-            for (std::size_t i = i0; i < i1; ++i)
-                for (int k = 0; k < D; ++k) L0.b[i * S + k] = Real(r[i * D + k]);
+            for (int h = 0; h < R; ++h) {
+                const double* rk = r[active[h]].data();
+                for (std::size_t i = i0; i < i1; ++i)
+                    for (int k = 0; k < D; ++k) L0.b[(i * R + h) * S + k] = Real(rk[i * D + k]);
+            }
         });
-        vcycle(0, L0.b.data(), L0.x.data());
-        parallelRange(0, L0.nodes(), 4096, [&](std::size_t i0, std::size_t i1) {
-            for (std::size_t i = i0; i < i1; ++i)
-                for (int k = 0; k < D; ++k) z[i * D + k] = double(L0.x[i * S + k]);
-        });
+        vcycle(0, L0.b.data(), L0.x.data(), R);
         // No projection of z onto the complement of translations: its null-space part is
         // harmless (A p ignores it) and the caller projects the solution.
     };
-    precondition();
-    p = z;
-    double rz = dot(r, z);
-    double rnorm = fnorm;
-    const double logTarget = std::log(std::max(tolerance, 1e-300));
-    while (stats.iterations < maxIterations) {
-        apply(p, q);
-        const double pq = dot(p, q);
-        if (!(pq > 0.0)) break;  // breakdown: r is (numerically) in the null space
-        const double alpha = rz / pq;
-        // The update and |r|^2 in one pass (the same sum as dot(r, r)).
-        rnorm = std::sqrt(blockedSums<1>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 1>& s) {
-            double acc = 0.0;
-            for (std::size_t i = i0; i < i1; ++i) {
-                x[i] += alpha * p[i];
-                r[i] -= alpha * q[i];
-                acc += r[i] * r[i];
+    // Runs f(i, z_i) over entries i0 .. i1 - 1 of system k's z, in order.
+    auto forZ = [&](std::size_t k, std::size_t i0, std::size_t i1, const auto& f) {
+        const Real* z = L0.x.data() + std::size_t(lane[k]) * S;
+        const std::size_t stride = std::size_t(lanes) * S;
+        std::size_t node = i0 / D;
+        int d = int(i0 % D);
+        for (std::size_t i = i0; i < i1; ++i) {
+            f(i, double(z[node * stride + std::size_t(d)]));
+            if (++d == D) {
+                d = 0;
+                ++node;
             }
-            s[0] = acc;
-        })[0]);
-        ++stats.iterations;
-        if (progress) {
-            const double fraction = std::clamp(std::log(std::max(rnorm / fnorm, 1e-300)) / logTarget, 0.0, 1.0);
-            if (!progress(fraction)) throw Cancelled("homogenization cancelled");
         }
-        if (rnorm <= tolerance * fnorm) break;
-        precondition();
-        // Flexible (Polak-Ribiere) beta = z.(r_new - r_old) / rz_old, r_new - r_old = -alpha q:
-        // robust to a preconditioner that is not exactly linear (single precision rounding).
-        // dot(r, z) and dot(z, q) in one pass.
-        const std::array<double, 2> sums =
-            blockedSums<2>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 2>& s) {
-                double rz = 0.0, zq = 0.0;
-                for (std::size_t i = i0; i < i1; ++i) {
-                    rz += r[i] * z[i];
-                    zq += z[i] * q[i];
-                }
-                s = {rz, zq};
+    };
+    if (active.empty()) return stats;
+    precondition();
+    for (std::size_t k : active) {
+        // p = z, and rz = dot(r, z).
+        Vector &pk = p[k], &rk = r[k];
+        rz[k] = blockedSums<1>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 1>& s) {
+            double acc = 0.0;
+            forZ(k, i0, i1, [&](std::size_t i, double zi) {
+                pk[i] = zi;
+                acc += rk[i] * zi;
             });
-        const double rzNew = sums[0];
-        const double beta = std::max(0.0, -alpha * sums[1] / rz);
-        rz = rzNew;
-        parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
-            for (std::size_t i = i0; i < i1; ++i) p[i] = z[i] + beta * p[i];
-        });
+            s[0] = acc;
+        })[0];
     }
-    stats.relativeResidual = rnorm / fnorm;
+    const double logTarget = std::log(std::max(tolerance, 1e-300));
+    while (!active.empty() && maxIterations > 0) {
+        std::vector<std::size_t> going;
+        for (std::size_t k : active) {
+            Vector &xk = x[k], &rk = r[k], &pk = p[k], &qk = q[k];
+            apply(pk, qk);
+            const double pq = dot(pk, qk);
+            fraction[k] = 1.0;
+            if (!(pq > 0.0)) continue;  // breakdown: r is (numerically) in the null space
+            const double a = alpha[k] = rz[k] / pq;
+            // The update and |r|^2 in one pass (the same sum as dot(r, r)).
+            rnorm[k] = std::sqrt(blockedSums<1>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 1>& s) {
+                double acc = 0.0;
+                for (std::size_t i = i0; i < i1; ++i) {
+                    xk[i] += a * pk[i];
+                    rk[i] -= a * qk[i];
+                    acc += rk[i] * rk[i];
+                }
+                s[0] = acc;
+            })[0]);
+            ++stats[k].iterations;
+            if (rnorm[k] <= tolerance * fnorm[k] || stats[k].iterations >= maxIterations) continue;
+            fraction[k] = std::clamp(std::log(std::max(rnorm[k] / fnorm[k], 1e-300)) / logTarget, 0.0, 1.0);
+            going.push_back(k);
+        }
+        if (progress) {
+            double sum = 0.0;
+            for (const double v : fraction) sum += v;
+            if (!progress(sum / double(systems))) throw Cancelled("homogenization cancelled");
+        }
+        active = std::move(going);
+        if (active.empty()) break;
+        precondition();
+        for (std::size_t k : active) {
+            const Vector &rk = r[k], &qk = q[k];
+            Vector& pk = p[k];
+            // Flexible (Polak-Ribiere) beta = z.(r_new - r_old) / rz_old, r_new - r_old = -alpha q:
+            // robust to a preconditioner that is not exactly linear (single precision rounding).
+            // dot(r, z) and dot(z, q) in one pass.
+            const std::array<double, 2> sums =
+                blockedSums<2>(n, [&](std::size_t i0, std::size_t i1, std::array<double, 2>& s) {
+                    double rzs = 0.0, zq = 0.0;
+                    forZ(k, i0, i1, [&](std::size_t i, double zi) {
+                        rzs += rk[i] * zi;
+                        zq += zi * qk[i];
+                    });
+                    s = {rzs, zq};
+                });
+            const double beta = std::max(0.0, -alpha[k] * sums[1] / rz[k]);
+            rz[k] = sums[0];
+            parallelRange(0, n, 8192, [&](std::size_t i0, std::size_t i1) {
+                forZ(k, i0, i1, [&](std::size_t i, double zi) { pk[i] = zi + beta * pk[i]; });
+            });
+        }
+    }
+    for (std::size_t k = 0; k < systems; ++k) stats[k].relativeResidual = fnorm[k] > 0.0 ? rnorm[k] / fnorm[k] : 0.0;
     return stats;
 }
 

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <utility>
 #include <vector>
 
 namespace voxlat::homogenization {
@@ -66,6 +67,9 @@ public:
     void assemble(const std::vector<double>& fe, Vector& f) const;
     /// Deterministic dot product.
     double dot(const Vector& a, const Vector& b) const;
+    /// Several dot products in one pass: entry k is dot(*pairs[k].first, *pairs[k].second), bit
+    /// for bit.
+    std::vector<double> dots(const std::vector<std::pair<const Vector*, const Vector*>>& pairs) const;
     /// Removes from @a v, per component and per unknown, its mean over the component's nodes.
     void removeTranslations(Vector& v) const;
 
@@ -73,11 +77,14 @@ public:
         int iterations = 0;
         double relativeResidual = 0.0;  ///< of the CG recurrence; the caller checks the true one
     };
-    /// Solves A x = f (x starts at 0) until |r| <= tolerance |f|. @a progress receives the fraction
-    /// of the way to the tolerance (log scale) after each iteration; false cancels (throws
-    /// voxlat::Cancelled).
-    Stats solve(const Vector& f, Vector& x, double tolerance, int maxIterations,
-                const std::function<bool(double)>& progress) const;
+    /// Solves A x_k = f_k for several right-hand sides (at most 6; each x_k starts at 0), each
+    /// until |r_k| <= tolerance |f_k|, by CG in lockstep: one V-cycle serves every system still
+    /// iterating, each of them a right-hand side of its own that takes the same operations as
+    /// alone, so every system's iterates are the bits it would get solved by itself. @a f is
+    /// used up (it holds the residuals). @a progress receives the mean fraction of the way to
+    /// the tolerance (log scale) after each iteration; false cancels (throws voxlat::Cancelled).
+    std::vector<Stats> solve(std::vector<Vector>& f, std::vector<Vector>& x, double tolerance, int maxIterations,
+                             const std::function<bool(double)>& progress) const;
 
 private:
     /// Precision of the preconditioner. Single: twice the SIMD width and half the memory traffic
@@ -87,10 +94,20 @@ private:
     using Real = float;
     struct Level;
     void buildHierarchy();
-    void vcycle(std::size_t level, const Real* b, Real* x) const;
-    void smooth(const Level& L, const Real* b, Real* x, bool zeroStart) const;
-    void chebyshevStep(const Level& L, const Real* b, const Real* t, Real* x, Real c1, Real c2, bool keepX) const;
-    void coarseSolve(const Level& L, const Real* b, Real* x) const;
+    // The preconditioner on R right-hand sides at once: right-hand side q of node i at
+    // (i * R + q) * S (see Level).
+    void vcycle(std::size_t level, const Real* b, Real* x, int R) const;
+    void smooth(const Level& L, const Real* b, Real* x, bool zeroStart, int R) const;
+    /// d = c1 dIn + c2 diag^-1 (b - t) (no dIn: c1 unused; no t: b), stored in dOut if given;
+    /// x = x + d, or d without keepX.
+    void chebyshevStep(const Level& L, const Real* b, const Real* t, Real* x, const Real* dIn, Real* dOut, Real c1,
+                       Real c2, bool keepX, int R) const;
+    void coarseSolve(const Level& L, const Real* b, Real* x, int R) const;
+    /// The transfers with W values a node (every right-hand side): bc = P^T (b - t), x += P xc.
+    template <int W>
+    void restrictResidual(const Level& L, const Level& C, const Real* b, const Real* t, Real* bc) const;
+    template <int W>
+    void prolongAdd(const Level& L, const Level& C, const Real* xc, Real* x) const;
 
     std::vector<std::unique_ptr<Level>> mLevels;
     std::vector<std::int32_t> mNodeComponent;
