@@ -1006,3 +1006,24 @@ TEST_F(Mesher, StreamedStlLeavesNothingWhenInterrupted)
     }
     EXPECT_EQ(dir.entries(), 0u);
 }
+
+TEST(MeshCheck, CoincidentVerticesAreCountedThoughTheMeshIsManifoldByIndex)
+{
+    // Two tetrahedra apart by index that touch at one point: closed and manifold by index, but
+    // read by position (an STL) the point joins them. Every vertex of a group but the first
+    // counts; a vertex at -0 and one at +0 are one position.
+    TriangleMesh mesh;
+    const std::vector<openvdb::Vec3f> a{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    for (const openvdb::Vec3f& p : a) mesh.points.push_back(p);
+    for (const openvdb::Vec3f& p : a) mesh.points.push_back(openvdb::Vec3f(-0.0f, -0.0f, 0.0f) - p);
+    for (std::uint32_t o : {0u, 4u}) {
+        mesh.triangles.emplace_back(o + 0, o + 2, o + 1);
+        mesh.triangles.emplace_back(o + 0, o + 1, o + 3);
+        mesh.triangles.emplace_back(o + 0, o + 3, o + 2);
+        mesh.triangles.emplace_back(o + 1, o + 2, o + 3);
+    }
+    EXPECT_TRUE(checkTopology(mesh).closedManifold());
+    EXPECT_EQ(countCoincidentVertices(mesh), 1u);
+    mesh.points[4] = openvdb::Vec3f(2.0f, 2.0f, 2.0f);
+    EXPECT_EQ(countCoincidentVertices(mesh), 0u);
+}

@@ -1232,7 +1232,17 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
             return reporting(mContext, "checking the mesh's topology",
                              [&](const ProgressFn& progress) { return checkTopology(m, nullptr, progress); });
         });
-        report["closed_manifold"] = t.closedManifold();
+        // Crease splits can put a vertex where another is: apart by index, one point in the file.
+        const std::size_t coincident = countCoincidentVertices(m);
+        report["coincident_vertices"] = coincident;
+        if (coincident > 0)
+            mContext->warn("mesh_coincident_vertices",
+                           std::to_string(coincident) +
+                               " vertices of the mesh lie exactly on another vertex: read by position (an STL) the "
+                               "mesh is not manifold there (edges shared by four triangles); mesh with `project: off` "
+                               "or another `voxel:`",
+                           {{"vertices", coincident}});
+        report["closed_manifold"] = t.closedManifold() && coincident == 0;
         report["euler_characteristic"] = t.eulerCharacteristic;
         report["pieces"] = t.pieces;
         report["closed_pieces"] = t.closedPieces;

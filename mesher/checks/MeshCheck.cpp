@@ -902,4 +902,15 @@ std::size_t countSelfIntersections(const TriangleMesh& mesh, const std::vector<s
     return selfIntersections(mesh, {}, &fansApart, progress).size();
 }
 
+std::size_t countCoincidentVertices(const TriangleMesh& mesh)
+{
+    std::vector<std::array<float, 3>> points(mesh.points.size());
+    for (std::size_t i = 0; i < points.size(); ++i)
+        points[i] = {mesh.points[i][0], mesh.points[i][1], mesh.points[i][2]};
+    std::sort(points.begin(), points.end());
+    std::size_t coincident = 0;
+    for (std::size_t i = 1; i < points.size(); ++i) coincident += points[i] == points[i - 1];
+    return coincident;
+}
+
 }  // namespace voxlat

@@ -61,6 +61,12 @@ MeshTopology checkTopology(const TriangleMesh& mesh, std::vector<std::uint8_t>* 
 /// tested, each pair once (in the lowest cell both boxes cover); parallel over fixed cell
 /// blocks, integer counts, so the same result for any thread count. @a progress (optional) runs
 /// from 0 to 1 and may throw to cancel.
+/// Vertices of @a mesh that lie at the same position (the same float bits) as another vertex,
+/// counting every vertex of such a group but the first. Read by position (an STL has no
+/// indices), the edges at such a point are shared by more than two triangles: a mesh closed and
+/// manifold by index is not so by position.
+std::size_t countCoincidentVertices(const TriangleMesh& mesh);
+
 std::size_t countSelfIntersections(const TriangleMesh& mesh, const ProgressFn& progress = {});
 /// The same with the fans' certificate from checkTopology() (for this mesh as it is).
 std::size_t countSelfIntersections(const TriangleMesh& mesh, const std::vector<std::uint8_t>& fansApart,
