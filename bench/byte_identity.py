@@ -43,6 +43,9 @@ def run_recipe(voxlat: str, recipe: pathlib.Path) -> dict:
             report.pop(key, None)
         for entry in report.get("slices", []):
             entry.pop("voxlat_version", None)  # slices.json and the report name the version
+            # How many finished layers waited for the writer at most: the threads' timing (3 or 4
+            # on the drained bracket), a run's measure like peak_memory_mb.
+            entry.pop("max_layers_held", None)
         # The temporary folder and the source tree (printer profiles) differ between checkouts.
         text = json.dumps(report, sort_keys=True).replace(out, "OUT").replace(str(ROOT), "ROOT")
         hashes["report.json (minus run-dependent keys)"] = sha(text.encode())
