@@ -806,22 +806,8 @@ void Job::aimLevelsAtMesh(const MeshOptions& options)
         double volume = 0.0;
         if (projected) {
             const ProjectedVolume pv = timed(stage, [&] {
-                // On a grid of voxel `estimateVoxel` from the box's corner, two voxels past it.
-                Domain d;
-                d.voxel = estimateVoxel;
-                d.box.min = mDomain.box.min;
-                for (int a = 0; a < 3; ++a) {
-                    d.dims[a] = std::max(1, int(std::ceil(mDomain.box.extent()[a] / estimateVoxel - 1e-9)));
-                    d.box.max[a] = d.box.min[a] + d.dims[a] * estimateVoxel;
-                }
-                SparseOptions so;
-                so.margin = 2;
-                so.stage = "evaluating " + mRecipe.result + " past the domain box";
-                so.context = mContext;
-                const openvdb::FloatGrid::Ptr past = evaluateSparse(*mResult, d, so);
-                ProjectionOptions po;
-                po.maxMove = 0.5 * estimateVoxel;
-                po.tolerance = 1e-4 * mDomain.voxel;
+                const openvdb::FloatGrid::Ptr past = evaluatePastTheBox(estimateVoxel);
+                const ProjectionOptions po = projectionAt(estimateVoxel);
                 const std::uint64_t every = std::max<std::uint64_t>(
                     1, (past->tree().leafCount() * kTrianglesPerLeaf) / kProjectedSampleTriangles);
                 return reporting(mContext, "measuring the projected mesh's volume", [&](const ProgressFn& progress) {
@@ -846,9 +832,7 @@ void Job::aimLevelsAtMesh(const MeshOptions& options)
                     TriangleMesh mesh = reporting(mContext, "meshing to measure", [&](const ProgressFn& progress) {
                         return marchingCubes(*m.grid, 0.0f, progress);
                     });
-                    ProjectionOptions po;
-                    po.maxMove = 0.5 * mDomain.voxel;
-                    po.tolerance = 1e-4 * mDomain.voxel;
+                    const ProjectionOptions po = projectionAt(mDomain.voxel);
                     reporting(mContext, "projecting vertices to measure", [&](const ProgressFn& progress) {
                         return projectToSurface(mesh, *surfaceField(), po, progress);
                     });
@@ -1136,9 +1120,7 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
     TriangleMesh& m = *v->mesh;
     nlohmann::json& report = v->report;
     if (!extraction.is_null()) report["extraction"] = extraction;
-    ProjectionOptions po;
-    po.maxMove = 0.5 * meshVoxel;
-    po.tolerance = 1e-4 * mDomain.voxel;
+    const ProjectionOptions po = projectionAt(meshVoxel);
     if (options.project) {
         const FieldPtr field = surfaceField();
         const ProjectionStats s = isProjected ? projected : timed("project vertices", [&] {
@@ -1317,12 +1299,8 @@ bool Job::smoothResult()
     return operands.size() == 1;
 }
 
-std::unique_ptr<TriangleMesh> Job::clippedMesh(double h, ProjectionStats& projection,
-                                               std::optional<BoxClipStats>& boxCut, bool checkCut)
+openvdb::FloatGrid::Ptr Job::evaluatePastTheBox(double h)
 {
-    solveLevels();
-    // A grid of voxel h from the domain box's corner, covering the box and two voxels past it
-    // (unclipped: the surface runs on past the faces, where the cut below meets it).
     Domain d;
     d.voxel = h;
     d.box.min = mDomain.box.min;
@@ -1330,13 +1308,21 @@ std::unique_ptr<TriangleMesh> Job::clippedMesh(double h, ProjectionStats& projec
         d.dims[a] = int(std::ceil(mDomain.box.extent()[a] / h - 1e-9));
         d.box.max[a] = d.box.min[a] + d.dims[a] * h;
     }
+    SparseOptions so;
+    so.margin = 2;
+    so.stage = "evaluating " + mRecipe.result + (h == mDomain.voxel ? "" : " at " + formatNumber(h) + " mm") +
+               " past the domain box";
+    so.context = mContext;
+    return evaluateSparse(*mResult, d, so);
+}
+
+std::unique_ptr<TriangleMesh> Job::clippedMesh(double h, ProjectionStats& projection,
+                                               std::optional<BoxClipStats>& boxCut, bool checkCut)
+{
+    solveLevels();
     auto mesh = timed(h == mDomain.voxel ? "mesh" : "mesh (coarse)", [&] {
-        SparseOptions so;
-        so.margin = 2;
-        so.stage = "evaluating " + mRecipe.result + (h == mDomain.voxel ? "" : " at " + formatNumber(h) + " mm") +
-                   " past the domain box";
-        so.context = mContext;
-        const openvdb::FloatGrid::Ptr g = evaluateSparse(*mResult, d, so);
+        // Unclipped: the surface runs on past the faces, where the cut below meets it.
+        const openvdb::FloatGrid::Ptr g = evaluatePastTheBox(h);
         StageProgress progress(mContext, "meshing at " + formatNumber(h) + " mm", 1000);
         std::atomic<std::uint64_t> last{0};
         auto m = std::make_unique<TriangleMesh>(marchingCubes(*g, 0.0f, feed(progress, last)));
@@ -1344,9 +1330,7 @@ std::unique_ptr<TriangleMesh> Job::clippedMesh(double h, ProjectionStats& projec
         dropTrianglesOutside(*m, mDomain.box, h);
         return m;
     });
-    ProjectionOptions po;
-    po.maxMove = 0.5 * h;
-    po.tolerance = 1e-4 * mDomain.voxel;
+    const ProjectionOptions po = projectionAt(h);
     projection = timed("project vertices", [&] {
         return reporting(mContext, "projecting vertices onto the surface",
                          [&](const ProgressFn& progress) { return projectToSurface(*mesh, *mResult, po, progress); });
@@ -1405,10 +1389,7 @@ std::optional<double> Job::probeChordError(double h)
         so.context = mContext;
         const openvdb::FloatGrid::Ptr g = evaluateSparse(*mResult, d, so);
         TriangleMesh mesh = marchingCubes(*g, 0.0f, {});
-        ProjectionOptions po;
-        po.maxMove = 0.5 * h;
-        po.tolerance = 1e-4 * mDomain.voxel;
-        projectToSurface(mesh, *mResult, po, {});
+        projectToSurface(mesh, *mResult, projectionAt(h), {});
         // Only triangles two voxels inside the probe: its faces end the mesh, they are no crease.
         return interiorChordError(mesh, *distanceField(), d.box, 2.0 * h, 0.5 * h);
     });

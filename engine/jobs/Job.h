@@ -229,6 +229,18 @@ private:
     /// (@a boxCut); null when the cut could not be closed (boxCut->failure says why). Without
     /// @a checkCut, the capped mesh's topology is left to the caller to check (boxCut->topology
     /// is empty).
+    /// The result on a grid of voxel @a h from the domain box's corner, covering the box and two
+    /// voxels past it, unclipped (what a mesh cut by the box's faces, or its estimate, starts from).
+    openvdb::FloatGrid::Ptr evaluatePastTheBox(double h);
+    /// Newton projection for vertices of a grid of voxel @a h: at most half a voxel, converged
+    /// to 1e-4 of the recipe's voxel.
+    ProjectionOptions projectionAt(double h) const
+    {
+        ProjectionOptions po;
+        po.maxMove = 0.5 * h;
+        po.tolerance = 1e-4 * mDomain.voxel;
+        return po;
+    }
     std::unique_ptr<TriangleMesh> clippedMesh(double h, ProjectionStats& projection,
                                               std::optional<BoxClipStats>& boxCut, bool checkCut = true);
     /// Refuses (InputError, naming where the tolerance was given) a mesh tolerance of half the

@@ -20,6 +20,7 @@ struct Corner {
 struct Polygon {
     std::array<Corner, 12> c;
     int n = 0;
+    bool cut = false;  ///< a face of the box cut the triangle
 };
 
 /// Sutherland-Hodgman against the half-space sign * (x[axis] - at) <= 0; new corners lie on the
@@ -27,6 +28,7 @@ struct Polygon {
 void clipAgainst(Polygon& poly, int axis, double at, double sign)
 {
     Polygon out;
+    out.cut = true;  // called only when a corner lies beyond the plane
     for (int i = 0; i < poly.n; ++i) {
         const Corner& a = poly.c[i];
         const Corner& b = poly.c[(i + 1) % poly.n];
@@ -100,15 +102,21 @@ void addTerms(const Polygon& poly, const Box3& box, BoxSums& sums)
     }
 }
 
-/// The volume @a poly sweeps as its triangle's corners move by @a d (each corner's move is the
-/// weighted sum of the triangle's): ((N + N') / 2) . (mean move) per fan triangle.
+/// How far corner @a c of a clipped triangle moves when the triangle's corners move by @a d: the
+/// weighted sum of their moves.
+Vec3d move(const Corner& c, const std::array<Vec3d, 3>& d)
+{
+    return c.w[0] * d[0] + c.w[1] * d[1] + c.w[2] * d[2];
+}
+
+/// The volume @a poly sweeps as its triangle's corners move by @a d: ((N + N') / 2) . (mean
+/// move) per fan triangle.
 double swept(const Polygon& poly, const std::array<Vec3d, 3>& d)
 {
-    auto move = [&](const Corner& c) { return c.w[0] * d[0] + c.w[1] * d[1] + c.w[2] * d[2]; };
     double sum = 0.0;
     for (int i = 1; i + 1 < poly.n; ++i) {
         const Corner &a = poly.c[0], &b = poly.c[i], &c = poly.c[i + 1];
-        const Vec3d ma = move(a), mb = move(b), mc = move(c);
+        const Vec3d ma = move(a, d), mb = move(b, d), mc = move(c, d);
         const Vec3d before = 0.5 * (b.p - a.p).cross(c.p - a.p);
         const Vec3d after = 0.5 * ((b.p + mb) - (a.p + ma)).cross((c.p + mc) - (a.p + ma));
         sum += (0.5 * (before + after)).dot(ma + mb + mc) / 3.0;
@@ -119,7 +127,7 @@ double swept(const Polygon& poly, const std::array<Vec3d, 3>& d)
 /// The area of @a poly with its corners moved as in swept().
 double area(const Polygon& poly, const std::array<Vec3d, 3>& d)
 {
-    auto at = [&](const Corner& c) { return c.p + c.w[0] * d[0] + c.w[1] * d[1] + c.w[2] * d[2]; };
+    auto at = [&](const Corner& c) { return c.p + move(c, d); };
     Vec3d sum(0.0);
     for (int i = 1; i + 1 < poly.n; ++i)
         sum += 0.5 * (at(poly.c[i]) - at(poly.c[0])).cross(at(poly.c[i + 1]) - at(poly.c[0]));
@@ -134,6 +142,22 @@ struct ChunkSums {
     double cutChord = 0.0;     ///< between the projected cut triangles and the surface
     double sampleChord = 0.0;  ///< between the projected sampled triangles and the surface
     std::uint64_t triangles = 0, cut = 0, inside = 0, sampled = 0;
+
+    ChunkSums& operator+=(const ChunkSums& s)
+    {
+        box.surface += s.box.surface;
+        box.section += s.box.section;
+        box.edge += s.box.edge;
+        cutSwept += s.cutSwept;
+        sampleSwept += s.sampleSwept;
+        cutChord += s.cutChord;
+        sampleChord += s.sampleChord;
+        triangles += s.triangles;
+        cut += s.cut;
+        inside += s.inside;
+        sampled += s.sampled;
+        return *this;
+    }
 };
 
 }  // namespace
@@ -162,8 +186,7 @@ ProjectedVolume projectedVolumeInBox(const openvdb::FloatGrid& grid, const Field
             if (poly.n == 0) continue;
             ++sums.triangles;
             addTerms(poly, box, sums.box);
-            bool cut = poly.n != 3;
-            for (int k = 0; k < poly.n && !cut; ++k) cut = poly.c[k].w != Vec3d(k == 0, k == 1, k == 2);
+            const bool cut = poly.cut;
             if (cut) {
                 ++sums.cut;
             } else if (sums.inside++ % sampleEvery != 0) {
@@ -202,20 +225,7 @@ ProjectedVolume projectedVolumeInBox(const openvdb::FloatGrid& grid, const Field
         }
         slots[slot] = sums;
     };
-    stream.write = [&](std::size_t, std::size_t slot) {
-        const ChunkSums& s = slots[slot];
-        total.box.surface += s.box.surface;
-        total.box.section += s.box.section;
-        total.box.edge += s.box.edge;
-        total.cutSwept += s.cutSwept;
-        total.sampleSwept += s.sampleSwept;
-        total.cutChord += s.cutChord;
-        total.sampleChord += s.sampleChord;
-        total.triangles += s.triangles;
-        total.cut += s.cut;
-        total.inside += s.inside;
-        total.sampled += s.sampled;
-    };
+    stream.write = [&](std::size_t, std::size_t slot) { total += slots[slot]; };
     marchingCubesStreamed(grid, 0.0f, stream, std::move(progress));
     // The corner (x_max, y_max, z_max): inside or not by the field there.
     const double corner = field.value(box.max) < options.level ? 1.0 : 0.0;
