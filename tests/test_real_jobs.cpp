@@ -520,6 +520,12 @@ TEST(RealJobs, ADrainedInfillsProjectedMeshIsAimedAtItsSharpenedCreases)
         << g["mesh_aim"].dump(1);
     ASSERT_TRUE(g.contains("density_from_mesh")) << g.dump(1);
     EXPECT_NEAR(g["density_from_mesh"].get<double>(), 0.2, 0.01 * 0.2) << g["mesh_aim"].dump(1);
+    // Its creases split and its vertices projected, the mesh is one surface: closed and
+    // manifold by position too (no split point on another vertex), no two triangles crossing.
+    const auto& mesh = report["mesh"];
+    EXPECT_TRUE(mesh["closed_manifold"].get<bool>()) << mesh.dump(1);
+    EXPECT_EQ(mesh["coincident_vertices"].get<std::size_t>(), 0u);
+    EXPECT_EQ(mesh["self_intersections"].get<std::size_t>(), 0u);
 }
 
 TEST(RealJobs, TwoLatticesInOneMeshSayTheirShareIsNotMeasuredFromIt)

@@ -1062,7 +1062,8 @@ void Job::sharpenMeshCreases(TriangleMesh& m, const MeshOptions& options, double
         {"edges_across", c.creaseEdges},
         {"vertices_moved_onto_both", c.moved},
         {"edges_split", split.split},
-        {"edges_left_flat", split.leftFlat}};
+        {"edges_left_flat", split.leftFlat},
+        {"edges_left_flat_at_a_vertex", split.coincident}};
 }
 
 Job::MeshVariant& Job::variant(const MeshOptions& options)
@@ -1129,6 +1130,7 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         });
         report["projection"] = {{"vertices_moved", s.moved},
                                 {"vertices_held_back", s.heldBack},
+                                {"vertices_held_back_for_crossings", s.heldBackForCrossings},
                                 {"vertices_at_half_voxel_limit", s.limited},
                                 {"vertex_deviation_before", deviationJson(s.maxBefore, s.rmsBefore)},
                                 {"vertex_deviation_after", deviationJson(s.maxAfter, s.rmsAfter)}};
@@ -1389,7 +1391,9 @@ std::optional<double> Job::probeChordError(double h)
         so.context = mContext;
         const openvdb::FloatGrid::Ptr g = evaluateSparse(*mResult, d, so);
         TriangleMesh mesh = marchingCubes(*g, 0.0f, {});
-        projectToSurface(mesh, *mResult, projectionAt(h), {});
+        ProjectionOptions po = projectionAt(h);
+        po.holdBackCrossings = false;  // measured only
+        projectToSurface(mesh, *mResult, po, {});
         // Only triangles two voxels inside the probe: its faces end the mesh, they are no crease.
         return interiorChordError(mesh, *distanceField(), d.box, 2.0 * h, 0.5 * h);
     });

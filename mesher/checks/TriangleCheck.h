@@ -5,6 +5,7 @@
 #pragma once
 
 #include "fields/core/FieldNode.h"
+#include "mesher/extract/TriangleMesh.h"
 
 #include <openvdb/Types.h>
 
@@ -25,7 +26,7 @@ double quadraticBound(const std::array<double, 3>& s, const std::array<double, 3
 /// @a a: the face's plane as a float (a box at 5.6 mm has its faces' points at 5.5999999).
 inline bool onBoxPlane(double x, const Box3& box, int a)
 {
-    return x == double(float(box.min[a])) || x == double(float(box.max[a]));
+    return x == roundedToFloat(box.min[a]) || x == roundedToFloat(box.max[a]);
 }
 
 /// Whether the triangle with corners @a p lies on a face of @a box (every corner on the face's

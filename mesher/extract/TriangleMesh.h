@@ -48,4 +48,21 @@ inline openvdb::Vec3f toFloat(const openvdb::Vec3d& p)
     return {float(p.x()), float(p.y()), float(p.z())};
 }
 
+/// @a x rounded to single precision, as a mesh stores it. GCC 12.2 at -O2 and above drops the
+/// rounding of double(float(x)) when it vectorises two such components together (x and y of a
+/// point: toDouble(toFloat(p)) gave p back unrounded); the empty asm keeps the float.
+inline double roundedToFloat(double x)
+{
+    float f = float(x);
+    asm("" : "+x"(f));
+    return double(f);
+}
+
+/// @a p as a mesh stores it (each component rounded to single precision), in double: what the
+/// checks of a point about to be stored must see.
+inline openvdb::Vec3d asStored(const openvdb::Vec3d& p)
+{
+    return {roundedToFloat(p.x()), roundedToFloat(p.y()), roundedToFloat(p.z())};
+}
+
 }  // namespace voxlat

@@ -390,7 +390,7 @@ void placeChunkOnSurface(const Solid& solid, const AdaptiveRefinementOptions& o,
             if (keep[j]) open[kept++] = open[j];
         open.resize(kept);
     }
-    for (Vec3d& p : x) p = toDouble(toFloat(p));
+    for (Vec3d& p : x) p = asStored(p);
 }
 
 /// placeChunkOnSurface() over @a x in chunks: each point's Newton steps are its own, and a
@@ -840,7 +840,7 @@ AdaptiveRefinementStats refineToTolerance(TriangleMesh& mesh, const FieldNode& f
             for (std::size_t e = 0; e < m; ++e)
                 if (std::popcount(unsigned(held[e])) >= 2) {
                     onEdge.push_back(std::uint32_t(e));
-                    middle.push_back(toDouble(toFloat(target[e])));
+                    middle.push_back(asStored(target[e]));
                 }
             const std::vector<double> middleDistance = solid.distances(middle);
             std::vector<std::uint8_t> found;

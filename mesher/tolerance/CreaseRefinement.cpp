@@ -232,7 +232,7 @@ void placeOnSurface(const SurfaceList& list, const std::vector<Start>& starts, c
                 }
                 open.resize(kept);
             }
-            for (std::size_t k = 0; k < count; ++k) target[begin + k] = toDouble(toFloat(x[k]));
+            for (std::size_t k = 0; k < count; ++k) target[begin + k] = asStored(x[k]);
         }
     });
 }
@@ -418,7 +418,7 @@ void moveOntoSurface(const SurfaceList& list, TriangleMesh& mesh, std::vector<Ve
     std::vector<std::uint32_t> done;
     for (std::size_t k = 0; k < movers.size(); ++k)
         if (moved[k]) {
-            const Vec3d p = toDouble(toFloat(position(movers[k])));
+            const Vec3d p = asStored(position(movers[k]));
             points[movers[k]] = p;
             mesh.points[movers[k]] = toFloat(p);
             done.push_back(movers[k]);

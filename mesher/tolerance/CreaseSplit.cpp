@@ -141,8 +141,7 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
                         found[begin + k] = inside && (x[k] - mid).length() <= options.maxMove;
                         // Rounded as it will be stored, so the checks below see the triangles
                         // as written (two edges' corner points may round to one position).
-                        const openvdb::Vec3f stored(float(x[k].x()), float(x[k].y()), float(x[k].z()));
-                        target[begin + k] = toDouble(stored);
+                        target[begin + k] = asStored(x[k]);
                         continue;
                     }
                     if (iteration == options.maxIterations) continue;
@@ -170,6 +169,24 @@ CreaseSplitStats splitCreaseEdges(TriangleMesh& mesh, const CreaseSurfaces& surf
     // 4. Split: each triangle is divided by its split edges; a parent whose pieces would turn
     // over drops its splits (and so its neighbours across them change), in rounds.
     std::vector<std::uint8_t> active(found);
+    // A split point stored at the position of a vertex (one already on the crease) or of another
+    // edge's split point (two edges meeting at a corner of three surfaces) would make two vertices
+    // at one position: read by position (an STL), four triangles at an edge. The later one is dropped.
+    {
+        auto key = [](const Vec3d& p) { return std::array<double, 3>{p.x(), p.y(), p.z()}; };
+        std::vector<std::pair<std::array<double, 3>, std::uint32_t>> split;
+        for (std::size_t e = 0; e < m; ++e)
+            if (active[e]) split.emplace_back(key(target[e]), std::uint32_t(e));
+        std::sort(split.begin(), split.end());
+        for (std::size_t i = 1; i < split.size(); ++i)
+            if (split[i].first == split[i - 1].first) active[std::max(split[i].second, split[i - 1].second)] = 0;
+        for (std::size_t v = 0; v < n && !split.empty(); ++v) {
+            const auto k = key(points[v]);
+            auto it = std::lower_bound(split.begin(), split.end(), std::make_pair(k, std::uint32_t(0)));
+            for (; it != split.end() && it->first == k; ++it) active[it->second] = 0;
+        }
+        for (std::size_t e = 0; e < m; ++e) stats.coincident += found[e] && !active[e];
+    }
     auto edgeIndex = [&](std::uint32_t a, std::uint32_t b) -> std::ptrdiff_t {
         const std::uint32_t p = std::min(a, b), q = std::max(a, b);
         const auto it = std::lower_bound(

@@ -202,7 +202,9 @@ ProjectedVolume projectedVolumeInBox(const openvdb::FloatGrid& grid, const Field
         if (!polygons.empty()) {
             // Moves in double from the float corners the mesh gives.
             std::vector<openvdb::Vec3f> before = moved.points;
-            projectToSurface(moved, field, options);
+            ProjectionOptions loose = options;
+            loose.holdBackCrossings = false;  // a soup: its triangles share no corner
+            projectToSurface(moved, field, loose);
             // Each projected triangle's centre: its distance to the surface along the gradient.
             std::vector<Vec3d> centres(polygons.size()), gradients(polygons.size());
             std::vector<double> values(polygons.size());

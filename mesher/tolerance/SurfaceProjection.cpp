@@ -1,5 +1,6 @@
 #include "mesher/tolerance/SurfaceProjection.h"
 
+#include "mesher/checks/MeshCheck.h"
 #include "mesher/extract/PhaseProgress.h"
 
 #include <tbb/blocked_range.h>
@@ -324,6 +325,26 @@ ProjectionStats projectToSurface(TriangleMesh& mesh, const FieldNode& field, con
     });
     const std::size_t numTriangles = mesh.triangles.size();
     std::vector<std::uint8_t> flipped(numTriangles);
+    // The triangles whose corners moved since the last crossing check (first: every one that moved).
+    std::vector<std::uint8_t> crossTested(numTriangles, 0);
+    std::vector<std::uint8_t> vertexChanged(n, 0);
+    std::vector<std::uint8_t> heldForCrossing(n, 0);
+    auto markTested = [&] {
+        bool any = false;
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numTriangles, 1 << 14), [&](const auto& range) {
+            for (std::size_t t = range.begin(); t != range.end(); ++t) {
+                const openvdb::Vec3I& tri = mesh.triangles[t];
+                crossTested[t] = vertexChanged[tri[0]] | vertexChanged[tri[1]] | vertexChanged[tri[2]];
+            }
+        });
+        for (std::size_t t = 0; t < numTriangles && !any; ++t) any = crossTested[t];
+        std::fill(vertexChanged.begin(), vertexChanged.end(), std::uint8_t(0));
+        return any;
+    };
+    if (options.holdBackCrossings)
+        for (std::size_t v = 0; v < n; ++v) vertexChanged[v] = mesh.points[v] != original[v];
+    // The crossing check reports at the end of the Newton pass's progress (a cancel stops it).
+    const ProgressFn atEnd = progress ? ProgressFn([&](double) { progress(1.0); }) : ProgressFn();
     for (;;) {
         ++stats.flipRounds;
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, numTriangles, 1 << 14), [&](const auto& range) {
@@ -347,12 +368,28 @@ ProjectionStats projectToSurface(TriangleMesh& mesh, const FieldNode& field, con
                 if (holdBack[v] < 2 && mesh.points[v] != original[v]) changed.push_back(v);
             }
         }
+        bool forCrossings = false;
+        if (changed.empty() && options.holdBackCrossings && markTested()) {
+            // No triangle flips: the triangles that moved are checked for crossings.
+            for (const auto& [s, t] : selfIntersections(mesh, crossTested, nullptr, atEnd))
+                for (const std::uint32_t tri : {s, t})
+                    for (int i = 0; i < 3; ++i) {
+                        const std::uint32_t v = mesh.triangles[tri][i];
+                        if (holdBack[v] < 2 && mesh.points[v] != original[v]) changed.push_back(v);
+                    }
+            forCrossings = true;
+        }
         std::sort(changed.begin(), changed.end());
         changed.erase(std::unique(changed.begin(), changed.end()), changed.end());
         if (changed.empty()) break;
         for (std::uint32_t v : changed) {
             ++holdBack[v];
             mesh.points[v] = placed(v);
+            vertexChanged[v] = options.holdBackCrossings;
+            if (forCrossings && !heldForCrossing[v]) {
+                heldForCrossing[v] = 1;
+                ++stats.heldBackForCrossings;
+            }
         }
     }
 

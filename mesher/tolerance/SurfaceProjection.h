@@ -1,6 +1,6 @@
 /// @file SurfaceProjection.h
 /// @brief Moves a mesh's vertices onto a field's level set by Newton steps along the field's
-/// analytic gradient, without letting any triangle flip.
+/// analytic gradient, without letting any triangle flip or two triangles cross.
 ///
 /// Marching cubes places a vertex where the straight line between two voxel centres crosses the
 /// level, which is off the true surface wherever the field bends within a voxel (up to a few
@@ -26,6 +26,10 @@ struct ProjectionOptions {
     double tolerance = 1e-6;
     /// Newton steps per vertex at most.
     int maxIterations = 12;
+    /// projectToSurface(): hold back the moves that make two triangles cross (a mesh that is
+    /// written out); off for a soup of loose triangles (whose neighbours share no vertex) or a
+    /// mesh only measured.
+    bool holdBackCrossings = true;
 };
 
 /// What a projection did, for report.json and tests. Distances are first-order estimates
@@ -36,8 +40,11 @@ struct ProjectionStats {
     std::size_t moved = 0;
     /// Vertices whose Newton path reached the maxMove limit.
     std::size_t limited = 0;
-    /// Vertices moved only half way or not at all because a full move flipped a triangle.
+    /// Vertices moved only half way or not at all because a full move flipped a triangle or
+    /// made two triangles cross.
     std::size_t heldBack = 0;
+    /// Of those, vertices held back because two triangles crossed after the moves.
+    std::size_t heldBackForCrossings = 0;
     /// Rounds of the flip check (1 when no move had to be held back).
     int flipRounds = 0;
     double maxBefore = 0.0, rmsBefore = 0.0;
@@ -48,7 +55,11 @@ struct ProjectionStats {
 /// p <- p - (f(p) - level) grad f / |grad f|^2, kept within options.maxMove of the start, the
 /// best iterate kept. A triangle whose normal would turn by 90 degrees or more (or vanish) holds
 /// its vertices back: first to half their move, then to where they were, in rounds until no
-/// triangle flips. Vertices are evaluated in fixed batches of kBatchSize in parallel, so the
+/// triangle flips. With options.holdBackCrossings, two triangles that cross once no triangle
+/// flips (MeshCheck's selfIntersections(), on the triangles whose corners moved) hold their
+/// moved vertices back alike, in rounds, so the projection adds no crossing to the mesh (near a
+/// sharp crease of a boolean, tiny moves of marching cubes' slivers fold them into each other).
+/// Vertices are evaluated in fixed batches of kBatchSize in parallel, so the
 /// result is the same for any thread count. @a progress (optional) runs from 0 to 1 and may
 /// throw to cancel.
 ProjectionStats projectToSurface(TriangleMesh& mesh, const FieldNode& field, const ProjectionOptions& options,
