@@ -1131,6 +1131,8 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         report["projection"] = {{"vertices_moved", s.moved},
                                 {"vertices_held_back", s.heldBack},
                                 {"vertices_held_back_for_crossings", s.heldBackForCrossings},
+                                {"crossing_pairs_not_held_back",
+                                 mCrossingsUnheld ? nlohmann::json(*mCrossingsUnheld) : nlohmann::json(nullptr)},
                                 {"vertices_at_half_voxel_limit", s.limited},
                                 {"vertex_deviation_before", deviationJson(s.maxBefore, s.rmsBefore)},
                                 {"vertex_deviation_after", deviationJson(s.maxAfter, s.rmsAfter)}};
@@ -1184,6 +1186,21 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
                            "the mesh could not be decimated (a triangle repeats a corner); it is written "
                            "as marching cubes made it");
     }
+    // Projection and decimation move vertices and join triangles: check that no two cross.
+    std::size_t crossing = 0;
+    if (!options.raw()) {
+        crossing = crossingPairs ? *crossingPairs : timed("check self-intersections", [&] {
+            return reporting(mContext, "checking self-intersections",
+                             [&](const ProgressFn& progress) { return countSelfIntersections(m, progress); });
+        });
+        if (crossing > 0 && options.project && !mCrossingsUnheld) {
+            // Near a sharp crease (a skinned infill's lattice meeting its skin) marching cubes
+            // leaves slivers that the projection's small moves fold into each other: the mesh is
+            // made again with those moves held back.
+            mCrossingsUnheld = crossing;
+            return variant(options);
+        }
+    }
     if (!options.raw()) {
         // Measured on every triangle, so the numbers hold for the file as written. A refined mesh
         // was: the refinement's check of each triangle it leaves is the measure (W9: 0.5 s less,
@@ -1231,11 +1248,6 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
         report["pieces"] = t.pieces;
         report["closed_pieces"] = t.closedPieces;
         report["genus"] = t.genus;
-        // Projection and decimation move vertices and join triangles: check that no two cross.
-        const std::size_t crossing = crossingPairs ? *crossingPairs : timed("check self-intersections", [&] {
-            return reporting(mContext, "checking self-intersections",
-                             [&](const ProgressFn& progress) { return countSelfIntersections(m, progress); });
-        });
         report["self_intersections"] = crossing;
         if (crossing > 0)
             mContext->warn("mesh_self_intersections",

@@ -233,14 +233,20 @@ private:
     /// voxels past it, unclipped (what a mesh cut by the box's faces, or its estimate, starts from).
     openvdb::FloatGrid::Ptr evaluatePastTheBox(double h);
     /// Newton projection for vertices of a grid of voxel @a h: at most half a voxel, converged
-    /// to 1e-4 of the recipe's voxel.
+    /// to 1e-4 of the recipe's voxel; moves that make triangles cross held back once a mesh of
+    /// this job was found crossing (mCrossingsUnheld).
     ProjectionOptions projectionAt(double h) const
     {
         ProjectionOptions po;
         po.maxMove = 0.5 * h;
         po.tolerance = 1e-4 * mDomain.voxel;
+        po.holdBackCrossings = mCrossingsUnheld.has_value();
         return po;
     }
+    /// The crossing pairs of the first projected mesh found crossing, made without holding the
+    /// projection's crossing moves back (that check costs several times the projection, so it
+    /// runs only once a mesh needs it; variant() then makes that mesh again).
+    std::optional<std::size_t> mCrossingsUnheld;
     std::unique_ptr<TriangleMesh> clippedMesh(double h, ProjectionStats& projection,
                                               std::optional<BoxClipStats>& boxCut, bool checkCut = true);
     /// Refuses (InputError, naming where the tolerance was given) a mesh tolerance of half the

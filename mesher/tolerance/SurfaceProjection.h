@@ -26,10 +26,11 @@ struct ProjectionOptions {
     double tolerance = 1e-6;
     /// Newton steps per vertex at most.
     int maxIterations = 12;
-    /// projectToSurface(): hold back the moves that make two triangles cross (a mesh that is
-    /// written out); off for a soup of loose triangles (whose neighbours share no vertex) or a
-    /// mesh only measured.
-    bool holdBackCrossings = true;
+    /// projectToSurface(): hold back the moves that make two triangles cross. It checks every
+    /// moved triangle for crossings, about seven times the projection's own time (a 1.3 M
+    /// triangle gyroid: 0.9 s against 0.12 s), so a caller asks for it when a mesh made without
+    /// it was found crossing. Meaningless for a soup of loose triangles (they share no corner).
+    bool holdBackCrossings = false;
 };
 
 /// What a projection did, for report.json and tests. Distances are first-order estimates
