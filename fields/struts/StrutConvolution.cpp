@@ -271,20 +271,6 @@ private:
     double mValue[kSize];
 };
 
-/// Narrows [kFirst, kLast] to the points of the runs of tiles @a needed (bit b: tile b of @a tile
-/// points, points b tile .. (b + 1) tile + 1 with its one-point halo) between its first and last
-/// tile: the points a plane's row adds (evaluate()); empty (kFirst > kLast) when none.
-inline void neededSpan(std::uint64_t needed, int tile, int& kFirst, int& kLast)
-{
-    if (needed == 0) {
-        kFirst = 1;
-        kLast = 0;
-        return;
-    }
-    kFirst = std::max(kFirst, std::countr_zero(needed) * tile);
-    kLast = std::min(kLast, (64 - std::countl_zero(needed)) * tile + 1);
-}
-
 }  // namespace
 
 void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out) const
@@ -429,12 +415,8 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     const double at = (hRow - h0) / hz;
                     r.n0 = int(std::floor(at));
                     r.tau = at - r.n0;
-                    // Nodes only for the points the row will add (a plane's needed runs).
-                    int kFirst = r.kLo, kLast = r.kHi;
-                    if (columnTiles) neededSpan(columnTiles[i], tile, kFirst, kLast);
-                    if (kFirst > kLast) continue;
-                    nLo = std::min(nLo, r.n0 + kFirst);
-                    nHi = std::max(nHi, r.n0 + kLast + 1);
+                    nLo = std::min(nLo, r.n0 + r.kLo);
+                    nHi = std::max(nHi, r.n0 + r.kHi + 1);
                 }
             if (nHi >= 0) {
                 nodeLo = nLo;
@@ -503,13 +485,10 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 // otherwise every point takes its own exponential.
                 const double* g = gauss.data();
                 if (std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0) {
-                    // From kLo as ever (the same doubles), up to the last point the row adds.
-                    int kFirst = kLo, kLast = kHi;
-                    if (columnTiles) neededSpan(columnTiles[i], tile, kFirst, kLast);
                     if (acrossColumns)
                         g = columnGauss;
                     else
-                        rowGaussians(r0, b, c, inv2s2, q, q16, kLo, std::max(kLo, kLast), gauss.data());
+                        rowGaussians(r0, b, c, inv2s2, q, q16, kLo, kHi, gauss.data());
                 } else {
                     for (int k = kLo; k <= kHi; ++k) {
                         double h, r2;
