@@ -346,11 +346,11 @@ TEST(Density, ASolidIsSolvedOnceAndNeverUsedBefore)
     EXPECT_THROW(fixed.solve(0.2), std::logic_error);
 }
 
-TEST(Job, AnEstimatedVolumeStatesItsDifferenceFromACountAtTwiceTheVoxel)
+TEST(Job, AnEstimatedVolumeStatesItsStandardError)
 {
-    // `voxlat info` above its voxel budget: the volume counted at a coarser voxel, checked here
-    // against the sphere's analytic volume, with the difference from a second count at twice
-    // that voxel (report.json's `result.estimated`).
+    // `voxlat info` above its voxel budget: the volume estimated from random points, one per cell
+    // (report.json's `result.estimated`), checked against the sphere's analytic volume and its
+    // stated standard error; the same points give the same estimate again.
     const std::string text =
         "voxel: 0.05\ndomain: {box: [[0, 0, 0], [10, 10, 10]]}\nfields:\n"
         "  s: {sphere: {radius: 4, center: [5, 5, 5]}}\nresult: s\n";
@@ -360,12 +360,17 @@ TEST(Job, AnEstimatedVolumeStatesItsDifferenceFromACountAtTwiceTheVoxel)
     const nlohmann::json& r = report["result"];
     const nlohmann::json& e = r["estimated"];
     const double sphere = 4.0 / 3.0 * std::numbers::pi * 64.0;
-    EXPECT_GT(e["voxel"].get<double>(), 0.05);
-    EXPECT_DOUBLE_EQ(e["check_voxel"].get<double>(), 2.0 * e["voxel"].get<double>());
-    EXPECT_NEAR(r["volume_mm3"].get<double>(), sphere, 0.01 * sphere);
-    EXPECT_NEAR(e["check_volume_mm3"].get<double>(), sphere, 0.03 * sphere);
-    EXPECT_NEAR(e["difference_mm3"].get<double>(),
-                std::abs(r["volume_mm3"].get<double>() - e["check_volume_mm3"].get<double>()), 1e-9);
+    const double error = e["standard_error_mm3"].get<double>(), points = e["points"].get<double>();
+    EXPECT_NEAR(points, double(1 << 14), 0.1 * double(1 << 14));
+    EXPECT_GT(error, 0.0);
+    // One point per cell: far below the error of as many independent points (only the cells the
+    // sphere's surface crosses vary), and the estimate within four of its standard errors.
+    const double p = sphere / 1000.0;
+    EXPECT_LT(error, 0.7 * std::sqrt(p * (1.0 - p) / points) * 1000.0);
+    EXPECT_NEAR(r["volume_mm3"].get<double>(), sphere, 4.0 * error);
+    voxlat::Job again(voxlat::parseRecipe(text, "r.yaml", "."));
+    ASSERT_TRUE(again.measureVolume(std::uint64_t(1) << 18));
+    EXPECT_EQ(again.report()["result"]["volume_mm3"].get<double>(), r["volume_mm3"].get<double>());
     // The exact count (no budget) has no estimate.
     voxlat::Job exact(voxlat::parseRecipe(text, "r.yaml", "."));
     EXPECT_FALSE(exact.measureVolume(std::numeric_limits<std::uint64_t>::max()));

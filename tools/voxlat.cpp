@@ -105,10 +105,10 @@ void printSummary(voxlat::Job& job)
     if (r.contains("result") && r["result"].contains("estimated"))
         std::cout << "result  " << r["result"]["field"].get<std::string>() << ": volume fraction ~"
                   << shown(r["result"]["volume_fraction"]) << " of the domain, ~" << shown(r["result"]["volume_mm3"])
-                  << " mm3 (estimated on a coarser grid: voxel " << shown(r["result"]["estimated"]["voxel"]) << " mm, "
-                  << shown(r["result"]["estimated"]["voxels"]) << " voxels; "
-                  << shown(r["result"]["estimated"]["difference_mm3"]) << " mm3 from a count at "
-                  << shown(r["result"]["estimated"]["check_voxel"]) << " mm; --exact counts every voxel)\n";
+                  << " mm3 +- " << shown(2.0 * r["result"]["estimated"]["standard_error_mm3"].get<double>())
+                  << " (an estimate, not a bound: " << shown(r["result"]["estimated"]["points"])
+                  << " random points, one in each cell of a grid over the domain; +- two standard errors; "
+                     "--exact counts every voxel)\n";
     else if (r.contains("result"))
         std::cout << "result  " << r["result"]["field"].get<std::string>() << ": volume fraction "
                   << shown(r["result"]["volume_fraction"]) << " of the domain, " << shown(r["result"]["volume_mm3"])
@@ -434,7 +434,7 @@ int main(int argc, char** argv)
     addCommon(info, infoArgs);
     info->add_flag("--exact", infoExact,
                    "count the volume on the recipe's grid even when the domain has more than 2^24 voxels "
-                   "(else estimated on a coarser grid)");
+                   "(else estimated from 2^20 random points, with its standard error)");
     auto* sampleCmd = app.add_subcommand("sample", "read `x y z` lines on stdin, print the field value per line");
     addCommon(sampleCmd, sampleArgs);
     sampleCmd->add_option("--field", sampleField, "field to sample (default: the result)");
@@ -592,8 +592,8 @@ int main(int argc, char** argv)
             printSummary(job);
         } else if (*info) {
             voxlat::Job& job = newJob(voxlat::loadRecipe(infoArgs.recipe, infoArgs.sets), &context);
-            // Above kInfoVoxels voxels the volume is estimated on a coarser grid (said in the
-            // output) unless --exact asks for every voxel.
+            // Above kInfoVoxels voxels the volume is estimated from kInfoVoxels / 16 random points
+            // (said in the output) unless --exact asks for every voxel.
             constexpr std::uint64_t kInfoVoxels = std::uint64_t(1) << 24;
             job.measureVolume(infoExact ? std::numeric_limits<std::uint64_t>::max() : kInfoVoxels);
             printSummary(job);

@@ -48,10 +48,10 @@ public:
     /// again if a tolerance mesh freed it, see setGridReleasable()).
     const openvdb::FloatGrid& grid();
     /// Estimates the result's volume without evaluating the recipe's grid when the domain has more
-    /// than @a maxVoxels voxels: the result is counted on the domain's box at a coarser voxel (the
-    /// smallest whole-grid voxel with at most @a maxVoxels voxels), and `report.json`'s `result`
-    /// says so (`estimated`: the voxel and voxel count used). Smaller domains take grid() (exact
-    /// count, pieces). Returns whether the volume was estimated.
+    /// than @a maxVoxels voxels: from maxVoxels / 16 random points, one in each cell of a grid over
+    /// the domain's box (sampleVolume()), and `report.json`'s `result` says so (`estimated`: the
+    /// method, the points, the standard error). Smaller domains take grid() (exact count, pieces).
+    /// Returns whether the volume was estimated.
     bool measureVolume(std::uint64_t maxVoxels);
     /// Whether a tolerance mesh made on a coarser grid may go without the recipe's grid once its
     /// pieces are counted (nothing after it reads the grid): it keeps only the solid's bits while
