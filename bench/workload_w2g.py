@@ -65,6 +65,13 @@ trimmed 33.78 / 25.98 / 94.23 s (2.79x -> 3.63x), cylinder 108.74 / 99.63 / 210.
 2.11x), wireframe 389.2 / 412.2 / 1004.3 s (2.58x -> 2.44x: the same leaves both, noise). Same STL bytes. Target 50x each: missed.
 Trimmed at 50 mm, main and branch only (a fair pair at load 5-7): 107.2 s -> 70.6 s wall, 62.6 s ->
 44.8 s CPU, peak 2853 -> 2076 MB (target 1.5 GB: missed); solve 52.3 -> 37.2 s.
+2026-11-30 (issue 38, eighth round, branch issue38h; bench/history.md): the centred case added; the
+solve's wider band reads its first pass's leaves, a solve on the recipe's lattice keeps its raw
+values for the grid, rows load table nodes without gathers, centred radii fold like linear ones.
+VOXLAT_W2G_SIZE=25 at load 3.6-7.0, main / branch / numpy side by side: graded 0.96 / 0.99 / 23.58 s
+(24.4x / 23.7x), centred 16.88 / 3.79 / 23.75 s (1.41x -> 6.27x), trimmed 9.86 / 7.34 / 22.67 s
+(2.30x -> 3.09x), wireframe 85.9 / 93.6 / 135.9 s (1.58x / 1.45x: load; -10 % CPU in an A/B),
+cylinder 44.27 / 27.68 / 48.20 s (1.09x -> 1.74x). Target 50x each: missed.
 """
 import json
 import math
