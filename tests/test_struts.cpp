@@ -1304,6 +1304,35 @@ TEST(GridValueMemo, AMovedLevelGivesTheGridOfAFreshEvaluation)
     }
 }
 
+TEST(GridValueMemo, ASolveOnTheRecipesLatticeHandsTheGridItsValues)
+{
+    // A lattice `within:` a part is solved on the recipe's own voxels, and the solve's raw values
+    // serve the aim's grid (Job::solveLevels, mKeepSolvedValues). The grid the mesh is made from
+    // must be the one a job given the reported level (no solve, nothing kept) evaluates, bit for bit.
+    const TempDir dir;
+    const std::string head =
+        "voxel: 0.15\ndomain: {box: [[0, 0, 0], [12, 12, 12]]}\nfields:\n"
+        "  lattice: {struts: {cell: bcc, size: 4, within: {cylinder: {center: [6, 6, 6], radius: 5.5, height: 12}}}, "
+        "kernel: {gaussian: {sigma: 0.4}}, radius: {gradient: linear, min: 0.3, max: 0.5, axis: z}, ";
+    Job solved(parseRecipe(head + "density: 0.2}\nresult: lattice\nallow: [pieces]\n", "solved.yaml", "."));
+    solved.writeMesh(dir.path / "solved.stl", MeshOptions{});
+    std::ostringstream level;
+    level.precision(17);
+    level << solved.report()["fields"]["lattice"]["level"].get<double>();
+    Job given(parseRecipe(head + "level: " + level.str() + "}\nresult: lattice\nallow: [pieces]\n", "given.yaml", "."));
+    const openvdb::FloatGrid &a = solved.grid(), &b = given.grid();
+    ASSERT_EQ(a.tree().leafCount(), b.tree().leafCount());
+    auto acc = b.getConstAccessor();
+    std::uint64_t mismatched = 0;
+    for (auto leaf = a.tree().cbeginLeaf(); leaf; ++leaf)
+        for (int i = 0; i < 512; ++i) {
+            const float x = leaf->getValue(i), y = acc.getValue(leaf->offsetToGlobalCoord(i));
+            mismatched += std::memcmp(&x, &y, sizeof x) != 0;
+        }
+    EXPECT_EQ(mismatched, 0u);
+    EXPECT_GT(a.tree().leafCount(), 100u);
+}
+
 TEST(GridLeavesReused, AWiderBandGivesTheGridOfAFreshEvaluation)
 {
     // The density solve's second pass over a wider band (solveDensity): the leaves the first pass

@@ -787,16 +787,16 @@ void Job::aimLevelsAtMesh(const MeshOptions& options)
             if (memo) memo->keep(false);
         }
     } kept{memo};
-    // The solve's values, kept on the recipe's lattice, are taken over as they are.
-    const auto solvedValues = std::find(mSolvedValues.begin(), mSolvedValues.end(), memo);
-    if (memo && solvedValues != mSolvedValues.end())
-        mSolvedValues.erase(solvedValues);
-    else if (memo)
-        memo->keep(true, memoBudget());
     // A projected mesh of a smooth result is estimated past the box (projectedVolumeInBox()); one
     // with creases of its own (an infill: the lattice meets the skin, the part's edges) is made
     // as the finished mesh is, creases sharpened (the estimate's chamfers: 2.7 % at 0.25 mm).
     const bool projected = options.project && options.extractor == MeshExtractor::MarchingCubes && smoothResult();
+    // The solve's values, kept on the recipe's lattice, are taken over as they are when the aim
+    // evaluates that lattice (not the grid past the box a projected mesh is estimated on).
+    const auto solvedValues = std::find(mSolvedValues.begin(), mSolvedValues.end(), memo);
+    const bool takenOver = memo && solvedValues != mSolvedValues.end();
+    if (takenOver) mSolvedValues.erase(solvedValues);
+    if (memo && (!takenOver || projected)) memo->keep(true, memoBudget());  // keep() starts empty
     const bool creased = options.project && options.extractor == MeshExtractor::MarchingCubes && !projected;
     // A projected mesh's share is estimated at twice the recipe's voxel (an eighth of the grid and
     // of the time: W9's estimate took 2.2 s at 0.1 mm) where the thinnest feature still spans
