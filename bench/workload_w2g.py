@@ -5,6 +5,8 @@ the method's cost depends on the struts, not on their weights):
 
 - graded: the W2 frame (BCC 5 mm, sigma 0.5, 20 %, 50 mm cube, 0.1 mm) with
   `radius: {gradient: linear, min: 0.3, max: 0.7, axis: z}` (target >= 50x, peak <= 1.5 GB);
+- centred: the same frame with radii graded from the centre outwards, as issue 38 words it
+  (`radius: {gradient: centred, min: 0.3, max: 0.7}`: |2u - 1| along x; target >= 50x);
 - trimmed: the same BCC cells `within:` a cylinder (radius 25, the cube's height), struts cut at
   its surface (IntraLattice's rule, min_length 0.5 mm, as voxlat's clippedFrame);
 - cylinder: a cylinder frame of BCC cells (radius 25, inner 10, height 50; 10 axial, 24 angular,
@@ -63,6 +65,13 @@ trimmed 33.78 / 25.98 / 94.23 s (2.79x -> 3.63x), cylinder 108.74 / 99.63 / 210.
 2.11x), wireframe 389.2 / 412.2 / 1004.3 s (2.58x -> 2.44x: the same leaves both, noise). Same STL bytes. Target 50x each: missed.
 Trimmed at 50 mm, main and branch only (a fair pair at load 5-7): 107.2 s -> 70.6 s wall, 62.6 s ->
 44.8 s CPU, peak 2853 -> 2076 MB (target 1.5 GB: missed); solve 52.3 -> 37.2 s.
+2026-11-30 (issue 38, eighth round, branch issue38h; bench/history.md): the centred case added; the
+solve's wider band reads its first pass's leaves, a solve on the recipe's lattice keeps its raw
+values for the grid, rows load table nodes without gathers, centred radii fold like linear ones.
+VOXLAT_W2G_SIZE=25 at load 3.6-7.0, main / branch / numpy side by side: graded 0.96 / 0.99 / 23.58 s
+(24.4x / 23.7x), centred 16.88 / 3.79 / 23.75 s (1.41x -> 6.27x), trimmed 9.86 / 7.34 / 22.67 s
+(2.30x -> 3.09x), wireframe 85.9 / 93.6 / 135.9 s (1.58x / 1.45x: load; -10 % CPU in an A/B),
+cylinder 44.27 / 27.68 / 48.20 s (1.09x -> 1.74x). Target 50x each: missed.
 """
 import json
 import math
@@ -160,18 +169,26 @@ def cylinder_bcc(radius, inner, height, cells, base):
     return struts
 
 
-def weights(struts, zlo, zhi):
-    """Per strut: the weight of voxlat's linear z gradient at the strut's middle."""
+LINEAR_Z = f"{{gradient: linear, min: {RMIN}, max: {RMAX}, axis: z}}"
+# The issue's wording: radii graded from the centre outwards (`centred`: |2u - 1| along x, u running
+# 0 to 1 over the frame's box).
+CENTRED = f"{{gradient: centred, min: {RMIN}, max: {RMAX}}}"
+
+
+def weights(struts, lo, hi, centred=False):
+    """Per strut: the weight of voxlat's radius gradient at the strut's middle (linear along z, or
+    centred along x)."""
     out = []
+    axis = 0 if centred else 2
     for a, b in struts:
-        r = RMIN + (0.5 * (a[2] + b[2]) - zlo) / (zhi - zlo) * (RMAX - RMIN)
+        u = (0.5 * (a[axis] + b[axis]) - lo[axis]) / (hi[axis] - lo[axis])
+        r = RMIN + (abs(2 * u - 1) if centred else u) * (RMAX - RMIN)
         out.append(math.exp(r * r / (2 * SIGMA * SIGMA)) / (SIGMA * math.sqrt(2 * math.pi)))
     return np.array(out)
 
 
-def case(voxlat, tmp, name, struts_yaml, box, struts, target):
+def case(voxlat, tmp, name, struts_yaml, box, struts, target, radius=LINEAR_Z):
     lo, hi = box
-    radius = f"{{gradient: linear, min: {RMIN}, max: {RMAX}, axis: z}}"
     recipe = tmp / f"{name}.yaml"
     recipe.write_text(f"voxel: 0.1\ndomain: {{box: [{list(lo)}, {list(hi)}]}}\nfields:\n"
                       f"  lattice: {{struts: {struts_yaml}, kernel: {{gaussian: {{sigma: {SIGMA}}}}}, radius: {radius}, "
@@ -180,7 +197,9 @@ def case(voxlat, tmp, name, struts_yaml, box, struts, target):
     report = json.loads((tmp / name / "report.json").read_text())
     frame = np.array([[a, b] for a, b in struts])
     np.save(tmp / f"{name}-frame.npy", frame)
-    np.save(tmp / f"{name}-w.npy", weights(struts, min(frame[:, :, 2].min(), lo[2]), max(frame[:, :, 2].max(), lo[2])))
+    flo = [min(frame[:, :, a].min(), lo[a]) for a in range(3)]
+    fhi = [max(frame[:, :, a].max(), lo[a]) for a in range(3)]
+    np.save(tmp / f"{name}-w.npy", weights(struts, flo, fhi, radius == CENTRED))
     t_r, m_r, out_r = measure([PYTHON, ROOT / "bench/reference/w2_numpy_convolution.py", "--frame",
                                tmp / f"{name}-frame.npy", "--weights", tmp / f"{name}-w.npy", "--box",
                                *lo, *hi, "--out", tmp / f"{name}-ref.stl"])
@@ -201,7 +220,7 @@ def case(voxlat, tmp, name, struts_yaml, box, struts, target):
 def run(voxlat, tmp):
     size = float(os.environ.get("VOXLAT_W2G_SIZE", "50"))
     # VOXLAT_W2G_CASES=graded (a comma list) runs only those cases.
-    only = set(os.environ.get("VOXLAT_W2G_CASES", "graded,trimmed,cylinder,wireframe").split(","))
+    only = set(os.environ.get("VOXLAT_W2G_CASES", "graded,centred,trimmed,cylinder,wireframe").split(","))
     n = int(round(size / CELL))
     print(f"  load average before: {os.getloadavg()[0]:.2f}")
     out = {}
@@ -209,6 +228,9 @@ def run(voxlat, tmp):
     if "graded" in only:
         out["graded"] = case(voxlat, tmp, "graded", f"{{cell: bcc, size: {CELL:g}}}", box,
                              bcc_struts(box[0], (n, n, n), CELL), 50)
+    if "centred" in only:
+        out["centred"] = case(voxlat, tmp, "centred", f"{{cell: bcc, size: {CELL:g}}}", box,
+                              bcc_struts(box[0], (n, n, n), CELL), 50, radius=CENTRED)
     c, rad = (0.5 * size, 0.5 * size, 0.5 * size), 0.5 * size
     bcc = bcc_struts(box[0], (n, n, n), CELL)
     if "trimmed" in only:

@@ -411,3 +411,23 @@ TEST(DensityPieces, RadiiGradedAlongAnAxisHitTheTargetOnTheMesh)
     EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.01 * 0.20);
     EXPECT_TRUE(checkTopology(mesh).closedManifold());
 }
+
+TEST(DensityPieces, RadiiGradedFromTheCentreHitTheTargetOnTheMesh)
+{
+    // Radii graded from the centre along x (|2u - 1|: x alone sets them) are tabled one period
+    // deep across y and z like a linear gradient (the tables' values are the field's:
+    // PeriodicTiling.PeriodZeroAlongAnAxisTablesItAsItIs), and the density measured on pieces
+    // that fold y and z: the mesh must hold the target.
+    Job job(
+        parseRecipe("voxel: 0.1\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\nfields:\n"
+                    "  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, "
+                    "radius: {gradient: centred, min: 0.4, max: 0.6}, density: 0.20}\n"
+                    "result: lattice\n",
+                    "centred.yaml", "."));
+    job.solveLevels();
+    // BCC mirrors along y and z: four segments each, one along x; no x-y swap (x is graded).
+    EXPECT_EQ(job.report()["fields"]["lattice"]["density_sampling"], "one period of the interior (16 weighted pieces)");
+    const TriangleMesh& mesh = job.mesh();
+    EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.01 * 0.20);
+    EXPECT_TRUE(checkTopology(mesh).closedManifold());
+}

@@ -1,6 +1,7 @@
 // Strut lattices: the closed-form segment integral against quadrature, its cut-off bound, the
 // convolution and capsule nodes (gradients, bounds, fast path), unit cells, frames, recipes.
 #include "TestUtil.h"
+#include "engine/core/GridLeavesReused.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/density/DensitySolver.h"
 #include "engine/frames/StrutFrames.h"
@@ -22,6 +23,7 @@
 
 #include <tbb/global_control.h>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <nlohmann/json.hpp>
 
@@ -1300,6 +1302,85 @@ TEST(GridValueMemo, AMovedLevelGivesTheGridOfAFreshEvaluation)
             }
         EXPECT_EQ(mismatched, 0u) << "budget " << budget;
     }
+}
+
+TEST(GridValueMemo, ASolveOnTheRecipesLatticeHandsTheGridItsValues)
+{
+    // A lattice `within:` a part is solved on the recipe's own voxels, and the solve's raw values
+    // serve the aim's grid (Job::solveLevels, mKeepSolvedValues). The grid the mesh is made from
+    // must be the one a job given the reported level (no solve, nothing kept) evaluates, bit for bit.
+    const TempDir dir;
+    const std::string head =
+        "voxel: 0.15\ndomain: {box: [[0, 0, 0], [12, 12, 12]]}\nfields:\n"
+        "  lattice: {struts: {cell: bcc, size: 4, within: {cylinder: {center: [6, 6, 6], radius: 5.5, height: 12}}}, "
+        "kernel: {gaussian: {sigma: 0.4}}, radius: {gradient: linear, min: 0.3, max: 0.5, axis: z}, ";
+    Job solved(parseRecipe(head + "density: 0.2}\nresult: lattice\nallow: [pieces]\n", "solved.yaml", "."));
+    solved.writeMesh(dir.path / "solved.stl", MeshOptions{});
+    std::ostringstream level;
+    level.precision(17);
+    level << solved.report()["fields"]["lattice"]["level"].get<double>();
+    Job given(parseRecipe(head + "level: " + level.str() + "}\nresult: lattice\nallow: [pieces]\n", "given.yaml", "."));
+    const openvdb::FloatGrid &a = solved.grid(), &b = given.grid();
+    ASSERT_EQ(a.tree().leafCount(), b.tree().leafCount());
+    auto acc = b.getConstAccessor();
+    std::uint64_t mismatched = 0;
+    for (auto leaf = a.tree().cbeginLeaf(); leaf; ++leaf)
+        for (int i = 0; i < 512; ++i) {
+            const float x = leaf->getValue(i), y = acc.getValue(leaf->offsetToGlobalCoord(i));
+            mismatched += std::memcmp(&x, &y, sizeof x) != 0;
+        }
+    EXPECT_EQ(mismatched, 0u);
+    EXPECT_GT(a.tree().leafCount(), 100u);
+}
+
+TEST(GridLeavesReused, AWiderBandGivesTheGridOfAFreshEvaluation)
+{
+    // The density solve's second pass over a wider band (solveDensity): the leaves the first pass
+    // evaluated are read from its grid, the others evaluated. The grid must be the one a fresh
+    // evaluation of the wider band gives, bit for bit, and only the new leaves evaluated.
+    const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
+    const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
+    struct Counted final : FieldNode {
+        const FieldNode& f;
+        mutable std::atomic<int> batches{0};
+        explicit Counted(const FieldNode& field) : f(field) {}
+        void values(std::span<const Vec3d> p, std::span<double> out) const override { f.values(p, out); }
+        void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
+        {
+            f.gradients(p, out, g);
+        }
+        void gridValues(const GridBatch& batch, std::span<double> out) const override
+        {
+            ++batches;
+            f.gridValues(batch, out);
+        }
+        Interval bound(const Box3& box) const override { return f.bound(box); }
+    };
+    // A corner off the voxel lattice's multiples, so that origins are not round numbers.
+    const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
+    SparseOptions narrow, wide;
+    narrow.margin = wide.margin = 0;
+    narrow.band = Interval(0.58, 0.64);
+    wide.band = Interval(0.45, 0.80);
+    const auto first = evaluateSparse(*iso, d, narrow);
+    const auto fresh = evaluateSparse(*iso, d, wide);
+    const Counted counted(*iso);
+    const auto reused = evaluateSparse(GridLeavesReused(counted, *first, d), d, wide);
+    ASSERT_EQ(reused->tree().leafCount(), fresh->tree().leafCount());
+    std::uint64_t inBoth = 0;
+    auto acc = reused->getConstAccessor();
+    auto firstAcc = first->getConstAccessor();
+    std::uint64_t mismatched = 0;
+    for (auto leaf = fresh->tree().cbeginLeaf(); leaf; ++leaf) {
+        inBoth += firstAcc.probeConstLeaf(leaf->origin()) != nullptr;
+        for (int i = 0; i < 512; ++i) {
+            const float a = leaf->getValue(i), b = acc.getValue(leaf->offsetToGlobalCoord(i));
+            mismatched += std::memcmp(&a, &b, sizeof a) != 0;
+        }
+    }
+    EXPECT_EQ(mismatched, 0u);
+    EXPECT_GT(inBoth, 100u);
+    EXPECT_EQ(std::uint64_t(counted.batches.load()), fresh->tree().leafCount() - inBoth);
 }
 
 TEST(StrutIndex, GatherListsEveryReachingSegmentOnceInAscendingOrder)

@@ -1,6 +1,7 @@
 #include "engine/density/DensitySolver.h"
 
 #include "engine/core/Errors.h"
+#include "engine/core/GridLeavesReused.h"
 #include "engine/core/GridMeasure.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/density/Coverage.h"
@@ -393,7 +394,8 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                     fullyBelow = below + belowWide - belowBracket;
                     samples = within(wideLo, wideHi);
                 } else {
-                    const auto wideGrid = covered ? grid : evaluateSparse(indicator, domain, wide);
+                    const auto wideGrid =
+                        covered ? grid : evaluateSparse(GridLeavesReused(indicator, *grid, domain), domain, wide);
                     if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
                     fullyBelow = splitByBand(*wideGrid, domain.indexBox(), wideLo, wideHi, interrupt).below;
                     samples = coverageSamples(*wideGrid, domain.indexBox(), wideLo, wideHi, interrupt);

@@ -76,6 +76,13 @@ constexpr int kAutoDomainMargin = 3;
 /// cell solves again (CellLevelTrial): it only places the level near the cell's.
 constexpr double kCoarseLevelFactor = 3.0;
 
+/// The bytes a GridValueMemo may keep of a solved lattice's raw values: a quarter of the memory
+/// available, at most 1 GB.
+std::size_t memoBudget()
+{
+    return std::size_t(std::min<double>(double(std::uint64_t(1) << 30), 0.25 * double(availableMemoryBytes())));
+}
+
 /// A stream buffer that gathers a file's bytes in memory, kWriteChunkBytes at a time, and calls
 /// the write interrupter before each chunk: a .vdb is made in memory (its header's UUID is set
 /// before the file is written), which takes seconds for a large grid; a cancel stops it.
@@ -463,6 +470,15 @@ void Job::solveLevels()
                     ? periodicPieces(*node.densityBox, *node.densityPeriod, node.densityReach,
                                      *node.densityVoxel * coarse, node.densityMirror, node.densitySwapXY)
                     : std::vector<DensityPiece>{};
+            // A solve on the recipe's own lattice evaluates the band's leaves as the grid will:
+            // asked by the aim (mKeepSolvedValues), the raw field's values are kept for it
+            // (GridValueMemo, the same doubles), so each band leaf is evaluated once.
+            const bool recipeLattice = pieces.empty() && coarse == 1.0 && !node.densityBox;
+            if (const auto* memo = dynamic_cast<const GridValueMemo*>(node.solid->raw().get());
+                memo && recipeLattice && mKeepSolvedValues && node.solid->indicator().get() == memo) {
+                memo->keep(true, memoBudget());
+                mSolvedValues.push_back(memo);
+            }
             const DensitySolution s = timed("solve " + node.name, [&] {
                 if (!pieces.empty())
                     return solveDensity(node.densityIndicator ? *node.densityIndicator : *node.solid->indicator(),
@@ -700,8 +716,16 @@ openvdb::FloatGrid::Ptr Job::evaluateResult(SparseStats& stats,
         options.stage = "evaluating " + mRecipe.result;
         options.context = mContext;
         options.leafVisitor = std::move(leafVisitor);
-        return evaluateSparse(*mResult, mDomain, options, &stats);
+        openvdb::FloatGrid::Ptr grid = evaluateSparse(*mResult, mDomain, options, &stats);
+        releaseSolvedValues();  // the grid they were kept for is made
+        return grid;
     });
+}
+
+void Job::releaseSolvedValues()
+{
+    for (const GridValueMemo* memo : mSolvedValues) memo->keep(false);
+    mSolvedValues.clear();
 }
 
 namespace {
@@ -719,7 +743,9 @@ void Job::aimLevelsAtMesh(const MeshOptions& options)
 {
     if (mMeshAimed) return;
     mMeshAimed = true;
+    mKeepSolvedValues = !mSolved;
     solveLevels();
+    mKeepSolvedValues = false;
     if (!mMeshes.empty() || mGrid || mReport.contains("pieces")) return;  // made at the solved level already
     const LevelNode* aimed = nullptr;
     int candidates = 0;
@@ -749,13 +775,16 @@ void Job::aimLevelsAtMesh(const MeshOptions& options)
             if (memo) memo->keep(false);
         }
     } kept{memo};
-    if (memo)
-        memo->keep(
-            true, std::size_t(std::min<double>(double(std::uint64_t(1) << 30), 0.25 * double(availableMemoryBytes()))));
     // A projected mesh of a smooth result is estimated past the box (projectedVolumeInBox()); one
     // with creases of its own (an infill: the lattice meets the skin, the part's edges) is made
     // as the finished mesh is, creases sharpened (the estimate's chamfers: 2.7 % at 0.25 mm).
     const bool projected = options.project && options.extractor == MeshExtractor::MarchingCubes && smoothResult();
+    // The solve's values, kept on the recipe's lattice, are taken over as they are when the aim
+    // evaluates that lattice (not the grid past the box a projected mesh is estimated on).
+    const auto solvedValues = std::find(mSolvedValues.begin(), mSolvedValues.end(), memo);
+    const bool takenOver = memo && solvedValues != mSolvedValues.end();
+    if (takenOver) mSolvedValues.erase(solvedValues);
+    if (memo && (!takenOver || projected)) memo->keep(true, memoBudget());  // keep() starts empty
     const bool creased = options.project && options.extractor == MeshExtractor::MarchingCubes && !projected;
     // A projected mesh's share is estimated at twice the recipe's voxel (an eighth of the grid and
     // of the time: W9's estimate took 2.2 s at 0.1 mm) where the thinnest feature still spans
@@ -1303,6 +1332,7 @@ bool Job::smoothResult()
 
 openvdb::FloatGrid::Ptr Job::evaluatePastTheBox(double h)
 {
+    releaseSolvedValues();  // kept for the recipe's lattice, not this one
     Domain d;
     d.voxel = h;
     d.box.min = mDomain.box.min;
@@ -1752,6 +1782,7 @@ void Job::writeMesh(const std::filesystem::path& path, const MeshOptions& option
     if (!OutputTransaction::current()) own.emplace(writeInterrupter());
     aimLevelsAtMesh(options);
     MeshVariant& v = variant(options);
+    releaseSolvedValues();  // a mesh that did not read the recipe's grid leaves them unused
     if (v.mesh->triangles.empty())
         throw JobError(mRecipe.source->path + ": the result `" + mRecipe.result +
                        "` has no surface in the domain: the mesh would be empty (check the domain, the density or "
@@ -1993,6 +2024,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
         } else if (out.kind == "frame") {
             writeFrameFile(path);
         }
+        releaseSolvedValues();  // an output that read no recipe grid leaves them unused
     }
     if (materialCard) writeMaterialCard(*materialCard);
     // A picture of what was meshed, next to the first mesh, so the part can be checked by eye.

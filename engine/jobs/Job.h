@@ -27,6 +27,8 @@
 
 namespace voxlat {
 
+class GridValueMemo;
+
 /// Runs a recipe stage by stage; each stage runs once, on first need, and records its time in
 /// the report. Every file it writes appears whole or not at all.
 class Job {
@@ -273,6 +275,13 @@ private:
     };
     std::map<std::string, SolvedDensity> mSolvedDensity;
     bool mMeshAimed = false;
+    /// Set by aimLevelsAtMesh() around its solveLevels(): a density solve on the recipe's own
+    /// lattice then keeps its raw field's leaf values (GridValueMemo) for the grid evaluated next.
+    bool mKeepSolvedValues = false;
+    /// The memos a solve switched on (mKeepSolvedValues), freed by releaseSolvedValues() after the
+    /// next evaluation of the result, or by the aim that takes them over.
+    std::vector<const GridValueMemo*> mSolvedValues;
+    void releaseSolvedValues();
     /// aimLevelsAtMesh()'s grid at the final level and its counts, taken by evaluateRecipeGrid().
     openvdb::FloatGrid::Ptr mAimGrid;
     SparseStats mAimStats;

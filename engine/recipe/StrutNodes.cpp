@@ -543,13 +543,14 @@ std::function<double(const Vec3d&)> gradedLevelAt(const FieldPtr& graded)
     };
 }
 
-/// The axis of a `radius: {gradient: linear, axis: A}` (the radii depend on that coordinate
-/// only), or -1 for any other radius.
+/// The axis of a `radius: {gradient: linear, axis: A}` or `{gradient: centred, axis: A}` (the
+/// radii depend on that coordinate only), or -1 for any other radius.
 int radiusGradientAxis(const RecipeNode& spec)
 {
     if (!spec.has("radius") || !spec["radius"].isMap()) return -1;
     const RecipeNode r = spec["radius"];
-    if (!r.has("gradient") || r["gradient"].string() != "linear") return -1;
+    // Linear and centred (|2u - 1|) radii depend on the one coordinate; the others' on two or three.
+    if (!r.has("gradient") || (r["gradient"].string() != "linear" && r["gradient"].string() != "centred")) return -1;
     return r.has("axis") ? r["axis"].string()[0] - 'x' : 0;
 }
 
@@ -860,7 +861,7 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     // faces are beyond the cut-off: evaluate one cell of the interior and tile it.
     const bool sameStruts = (!radii || spec["radius"].isNumber()) && !g["sigma"].isSequence();
     const bool periodic = uniform && !spec["struts"].has("within") && sameStruts && !graded;
-    // Radii graded linearly along one axis depend on that coordinate only: the box's cells still
+    // Radii graded along one axis (linear or centred) depend on that coordinate only: the box's cells still
     // repeat along the other two axes, so the field is tabled one period deep across them and
     // as it is along the graded axis (period 0 there).
     const int gradedAxis = radiusGradientAxis(spec);

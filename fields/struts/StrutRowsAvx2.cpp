@@ -26,20 +26,13 @@ inline __m256d copySign(__m256d magnitude, __m256d sign)
     return _mm256_or_pd(_mm256_andnot_pd(bit, magnitude), _mm256_and_pd(bit, sign));
 }
 
-/// nodes[index] in four lanes (the masked form with every lane on: the unmasked intrinsic leaves
-/// GCC warning about its undefined source).
-inline __m256d gather(const double* nodes, __m128i index)
-{
-    return _mm256_mask_i32gather_pd(_mm256_setzero_pd(), nodes, index, _mm256_castsi256_pd(_mm256_set1_epi64x(-1)), 8);
-}
-
 /// GaussianTable::evaluate (withGaussian) or erfIntegral in four lanes.
 template <bool withGaussian>
 inline void tableLanes(const double* nodes, __m256d y, __m256d& u, __m256d& g)
 {
     const __m256d a = absOf(y);
     // Lanes at or beyond the table's end (or NaN) take U = sign * sqrt(pi / 2), g = 0; they
-    // interpolate at 0 meanwhile so that every gather stays inside the table.
+    // interpolate at 0 meanwhile so that every load stays inside the table.
     const __m256d inside = _mm256_cmp_pd(a, _mm256_set1_pd(GaussianTable::kEnd), _CMP_LT_OQ);
     const __m256d s = _mm256_mul_pd(_mm256_and_pd(inside, a), _mm256_set1_pd(double(GaussianTable::kPerUnit)));
     const __m128i i = _mm256_cvttpd_epi32(s);
@@ -52,16 +45,26 @@ inline void tableLanes(const double* nodes, __m256d y, __m256d& u, __m256d& g)
     const __m256d h10 = _mm256_mul_pd(_mm256_add_pd(_mm256_sub_pd(t3, _mm256_mul_pd(two, t2)), t), delta);
     const __m256d h01 = _mm256_add_pd(_mm256_mul_pd(_mm256_set1_pd(-2.0), t3), _mm256_mul_pd(three, t2));
     const __m256d h11 = _mm256_mul_pd(_mm256_sub_pd(t3, t2), delta);
-    // Node i is nodes[3 i .. 3 i + 2] = (U, g, g'); node i + 1 follows it.
-    const __m128i p = _mm_mullo_epi32(i, _mm_set1_epi32(3));
-    const __m256d pu = gather(nodes, p), pg = gather(nodes + 1, p);
-    const __m256d qu = gather(nodes + 3, p), qg = gather(nodes + 4, p);
+    // Node i is nodes[3 i .. 3 i + 2] = (U, g, g'); node i + 1 follows it. Each lane's two nodes
+    // are six consecutive doubles, loaded as four and two and transposed into one vector per
+    // value (four gathers of four cost more on the machines measured).
+    alignas(16) int at[4];
+    _mm_store_si128(reinterpret_cast<__m128i*>(at), _mm_mullo_epi32(i, _mm_set1_epi32(3)));
+    const __m256d a0 = _mm256_loadu_pd(nodes + at[0]), a1 = _mm256_loadu_pd(nodes + at[1]);
+    const __m256d a2 = _mm256_loadu_pd(nodes + at[2]), a3 = _mm256_loadu_pd(nodes + at[3]);
+    const __m256d lo01 = _mm256_unpacklo_pd(a0, a1), hi01 = _mm256_unpackhi_pd(a0, a1);
+    const __m256d lo23 = _mm256_unpacklo_pd(a2, a3), hi23 = _mm256_unpackhi_pd(a2, a3);
+    const __m256d pu = _mm256_permute2f128_pd(lo01, lo23, 0x20), pg = _mm256_permute2f128_pd(hi01, hi23, 0x20);
+    const __m256d qu = _mm256_permute2f128_pd(hi01, hi23, 0x31);
+    const __m256d b02 = _mm256_set_m128d(_mm_loadu_pd(nodes + at[2] + 4), _mm_loadu_pd(nodes + at[0] + 4));
+    const __m256d b13 = _mm256_set_m128d(_mm_loadu_pd(nodes + at[3] + 4), _mm_loadu_pd(nodes + at[1] + 4));
+    const __m256d qg = _mm256_unpacklo_pd(b02, b13);
     const __m256d sum = _mm256_add_pd(
         _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(h00, pu), _mm256_mul_pd(h10, pg)), _mm256_mul_pd(h01, qu)),
         _mm256_mul_pd(h11, qg));
     u = copySign(_mm256_blendv_pd(_mm256_set1_pd(GaussianTable::kHalfRootTwoPi), sum, inside), y);
     if constexpr (withGaussian) {
-        const __m256d pd = gather(nodes + 2, p), qd = gather(nodes + 5, p);
+        const __m256d pd = _mm256_permute2f128_pd(lo01, lo23, 0x31), qd = _mm256_unpackhi_pd(b02, b13);
         const __m256d gs = _mm256_add_pd(
             _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(h00, pg), _mm256_mul_pd(h10, pd)), _mm256_mul_pd(h01, qg)),
             _mm256_mul_pd(h11, qd));
