@@ -329,10 +329,11 @@ TEST(SurfaceProjection, NoTwoTrianglesCrossAfterTheMoves)
     const Vec3d centre(6.0);
     const FieldPtr outer = std::make_shared<Sphere>(centre, 5.0);
     const FieldPtr inner = std::make_shared<Sphere>(centre, 4.0);
-    const FieldPtr lattice = std::make_shared<LevelSolid>(
-        std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(3.0)), SolidSide::Below, -0.9);
+    const FieldPtr lattice =
+        std::make_shared<LevelSolid>(std::make_shared<TpmsField>(TpmsType::Gyroid, Vec3d(3.0)), SolidSide::Below, -0.9);
     const FieldPtr skin = std::make_shared<BooleanField>(BooleanOp::Difference, std::vector<FieldPtr>{outer, inner});
-    const FieldPtr core = std::make_shared<BooleanField>(BooleanOp::Intersection, std::vector<FieldPtr>{lattice, inner});
+    const FieldPtr core =
+        std::make_shared<BooleanField>(BooleanOp::Intersection, std::vector<FieldPtr>{lattice, inner});
     const FieldPtr field = std::make_shared<BooleanField>(BooleanOp::Union, std::vector<FieldPtr>{skin, core});
     const TriangleMesh raw = marchingCubesOf(*field, Domain::fromBox(Box3{Vec3d(0.0), Vec3d(12.0)}, voxel));
     ASSERT_TRUE(selfIntersections(raw).empty());
