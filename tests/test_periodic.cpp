@@ -394,22 +394,32 @@ TEST(DensityPieces, AxisThatDoesNotRepeatIsOneSegment)
     EXPECT_TRUE(periodicPieces(b.box, Vec3d(4.0, 2.0, 0.0), b.reach, 0.2).empty());
 }
 
-TEST(DensityPieces, RadiiGradedAlongAnAxisHitTheTargetOnTheMesh)
+namespace {
+/// A 15 mm box of BCC struts (5 mm cells, sigma 0.5) whose radii are graded by @a radius, solved
+/// for a density of 0.2: report.json says it measured @a sampling, and the mesh holds the target.
+void expectGradedStrutsHitTheTarget(const std::string& radius, const std::string& sampling)
 {
-    // Radii graded linearly along z: tabled and measured one period deep across x and y.
     Job job(
         parseRecipe("voxel: 0.1\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\nfields:\n"
                     "  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, "
-                    "radius: {gradient: linear, min: 0.4, max: 0.6, axis: z}, density: 0.20}\n"
-                    "result: lattice\n",
+                    "radius: " +
+                        radius + ", density: 0.20}\nresult: lattice\n",
                     "graded.yaml", "."));
     job.solveLevels();
-    // BCC mirrors along x and y (the radii depend on z only): four segments each (the face zone,
-    // halves and middles of the period), one along z; x and y swapped: 10 of the 16 pairs.
-    EXPECT_EQ(job.report()["fields"]["lattice"]["density_sampling"], "one period of the interior (10 weighted pieces)");
+    EXPECT_EQ(job.report()["fields"]["lattice"]["density_sampling"], sampling);
     const TriangleMesh& mesh = job.mesh();
     EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.01 * 0.20);
     EXPECT_TRUE(checkTopology(mesh).closedManifold());
+}
+}  // namespace
+
+TEST(DensityPieces, RadiiGradedAlongAnAxisHitTheTargetOnTheMesh)
+{
+    // Radii graded linearly along z: tabled and measured one period deep across x and y.
+    // BCC mirrors along x and y (the radii depend on z only): four segments each (the face zone,
+    // halves and middles of the period), one along z; x and y swapped: 10 of the 16 pairs.
+    expectGradedStrutsHitTheTarget("{gradient: linear, min: 0.4, max: 0.6, axis: z}",
+                                   "one period of the interior (10 weighted pieces)");
 }
 
 TEST(DensityPieces, RadiiGradedFromTheCentreHitTheTargetOnTheMesh)
@@ -417,17 +427,8 @@ TEST(DensityPieces, RadiiGradedFromTheCentreHitTheTargetOnTheMesh)
     // Radii graded from the centre along x (|2u - 1|: x alone sets them) are tabled one period
     // deep across y and z like a linear gradient (the tables' values are the field's:
     // PeriodicTiling.PeriodZeroAlongAnAxisTablesItAsItIs), and the density measured on pieces
-    // that fold y and z: the mesh must hold the target.
-    Job job(
-        parseRecipe("voxel: 0.1\ndomain: {box: [[0, 0, 0], [15, 15, 15]]}\nfields:\n"
-                    "  lattice: {struts: {cell: bcc, size: 5}, kernel: {gaussian: {sigma: 0.5}}, "
-                    "radius: {gradient: centred, min: 0.4, max: 0.6}, density: 0.20}\n"
-                    "result: lattice\n",
-                    "centred.yaml", "."));
-    job.solveLevels();
-    // BCC mirrors along y and z: four segments each, one along x; no x-y swap (x is graded).
-    EXPECT_EQ(job.report()["fields"]["lattice"]["density_sampling"], "one period of the interior (16 weighted pieces)");
-    const TriangleMesh& mesh = job.mesh();
-    EXPECT_NEAR(mesh.volume() / (15.0 * 15.0 * 15.0), 0.20, 0.01 * 0.20);
-    EXPECT_TRUE(checkTopology(mesh).closedManifold());
+    // that fold y and z: the mesh must hold the target. BCC mirrors along y and z: four segments
+    // each, one along x; no x-y swap (x is graded).
+    expectGradedStrutsHitTheTarget("{gradient: centred, min: 0.4, max: 0.6}",
+                                   "one period of the interior (16 weighted pieces)");
 }
