@@ -190,6 +190,19 @@ std::vector<ConvolutionStrut> gradedBccStruts(double cell, double sigma, double 
     return struts;
 }
 
+/// gradedBccStruts() (2 mm cells, sigma 0.2, level 1) as the engine builds a strut lattice: the
+/// convolution re-expressed as an isolated strut's radius (IsoRadius), the solid below the
+/// level's radius.
+std::shared_ptr<LevelSolid> gradedStrutLattice(const Vec3d& centre, double reach, int nx, int ny, int nz)
+{
+    const double sigma = 0.2, level = 1.0;
+    auto convolution =
+        std::make_shared<StrutConvolution>(gradedBccStruts(2.0, sigma, level, centre, reach, nx, ny, nz));
+    const double peak = gaussianStrutWeight(0.3, sigma, level) * sigma * std::sqrt(2.0 * std::numbers::pi);
+    auto iso = std::make_shared<IsoRadius>(convolution, peak, sigma, 2.0 * convolution->cutoffRadius(0));
+    return std::make_shared<LevelSolid>(iso, SolidSide::Below, iso->radiusOf(level));
+}
+
 /// Tiles of planeValuesOf()'s planes by what they were found.
 struct PlaneCounts {
     int above = 0, below = 0, open = 0, skipped = 0;
@@ -322,12 +335,7 @@ TEST(Slices, UnboundedBlocksWriteTheBytesOfBoundedOnes)
     // that keeps y below about 7 mm: the window's first block rows are all lattice, where no block
     // has one sign and the slicer stops bounding blocks; the rows past the trim cull again. Every
     // block bounded (straddlingRun 0) must give the same bytes.
-    const double sigma = 0.2, level = 1.0;
-    auto convolution =
-        std::make_shared<StrutConvolution>(gradedBccStruts(2.0, sigma, level, Vec3d(6.0, 6.0, 1.0), 6.0, 6, 6, 1));
-    const double peak = gaussianStrutWeight(0.3, sigma, level) * sigma * std::sqrt(2.0 * std::numbers::pi);
-    auto iso = std::make_shared<IsoRadius>(convolution, peak, sigma, 2.0 * convolution->cutoffRadius(0));
-    auto lattice = std::make_shared<LevelSolid>(iso, SolidSide::Below, iso->radiusOf(level));
+    auto lattice = gradedStrutLattice(Vec3d(6.0, 6.0, 1.0), 6.0, 6, 6, 1);
     auto trim = std::make_shared<Cylinder>(Vec3d(6.0, -100.0, 1.0), Vec3d(1.0, 0.0, 0.0), 107.0, 100.0);
     const BooleanField field(BooleanOp::Intersection, {lattice, trim});
     const Display d = testDisplay(0.015, 800, 800);
@@ -368,18 +376,13 @@ TEST(Slices, StrutPlanesLeaveOutOnlyTilesProvenOutside)
     // outside is outside at 4 x 4 sub-samples of each of its pixels, taken point by point
     // (values(): std::erf and std::exp at each point); (2) whole layers are the same bytes with
     // and without it, with far fewer pixels evaluated.
-    const double sigma = 0.2, level = 1.0;
-    auto convolution =
-        std::make_shared<StrutConvolution>(gradedBccStruts(2.0, sigma, level, Vec3d(3.0, 3.0, 3.0), 4.0, 3, 3, 3));
-    const double peak = gaussianStrutWeight(0.3, sigma, level) * sigma * std::sqrt(2.0 * std::numbers::pi);
-    auto iso = std::make_shared<IsoRadius>(convolution, peak, sigma, 2.0 * convolution->cutoffRadius(0));
-    const LevelSolid lattice(iso, SolidSide::Below, iso->radiusOf(level));
+    const auto lattice = gradedStrutLattice(Vec3d(3.0), 4.0, 3, 3, 3);
     PlaneCounts counts;
-    checkPlanes(lattice, {Vec3d(2.1, 2.3, 1.025), Vec3d(3.3, 2.9, 3.475), Vec3d(1.7, 3.6, 2.0)}, counts);
+    checkPlanes(*lattice, {Vec3d(2.1, 2.3, 1.025), Vec3d(3.3, 2.9, 3.475), Vec3d(1.7, 3.6, 2.0)}, counts);
     EXPECT_EQ(counts.below, 0);   // no tile proven inside
     EXPECT_GT(counts.above, 40);  // of 192 tiles
     EXPECT_GT(counts.open, 40);
-    expectSameLayersWithPlaneBands(lattice, {1.025, 3.475}, 0.8);
+    expectSameLayersWithPlaneBands(*lattice, {1.025, 3.475}, 0.8);
 }
 
 TEST(Slices, InfillBooleansPassTheirTilesDown)
@@ -390,12 +393,7 @@ TEST(Slices, InfillBooleansPassTheirTilesDown)
     // by a 1 mm channel. The booleans pass the planes' tiles down (the cheap distance grid first):
     // checkPlanes' checks with tiles proven on both sides, with Skip and Exact tiles asked, and
     // whole layers the same bytes with and without, with fewer pixels evaluated.
-    const double sigma = 0.2, level = 1.0;
-    auto convolution =
-        std::make_shared<StrutConvolution>(gradedBccStruts(2.0, sigma, level, Vec3d(3.0, 3.0, 3.0), 4.0, 3, 3, 3));
-    const double peak = gaussianStrutWeight(0.3, sigma, level) * sigma * std::sqrt(2.0 * std::numbers::pi);
-    auto iso = std::make_shared<IsoRadius>(convolution, peak, sigma, 2.0 * convolution->cutoffRadius(0));
-    auto lattice = std::make_shared<LevelSolid>(iso, SolidSide::Below, iso->radiusOf(level));
+    auto lattice = gradedStrutLattice(Vec3d(3.0), 4.0, 3, 3, 3);
     auto grid = openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(2.6f, openvdb::Vec3f(3.0f), 0.1f, 12.0f);
     auto part = std::make_shared<MeshDistance>(grid, Box3{Vec3d(0.3), Vec3d(5.7)});
     auto core = std::make_shared<UnaryField>(part, UnaryOp::Offset, 0.8);
