@@ -655,11 +655,15 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
         const double dxx = v(a + 2, b + 1) + v(a, b + 1) - 2.0 * f, dyy = v(a + 1, b + 2) + v(a + 1, b) - 2.0 * f;
         const double dxy = 0.25 * (v(a + 2, b + 2) - v(a + 2, b) - v(a, b + 2) + v(a, b));
         const double gradient = std::abs(gx) + std::abs(gy);
-        const double bend = std::abs(dxx) + std::abs(dyy) + 2.0 * std::abs(dxy);
-        const bool linear = !partial && std::isfinite(f) && bend <= mOptions.linearTolerance * gradient;
+        const double gm = std::sqrt(gx * gx + gy * gy);
+        const bool bends =
+            !partial && std::isfinite(f) && bendsLittle(gx, gy, dxx, dyy, dxy, gm, mOptions.linearTolerance);
+        const bool linear =
+            bends && beyondQuadratic(v(a, b + 1), v(a, b), v(a, b + 2), f, v(a + 1, b), v(a + 1, b + 2),
+                                     v(a + 2, b + 1), v(a + 2, b), v(a + 2, b + 2)) <= mOptions.linearTolerance * gm;
         // The linearised edge misses the pixel (|f| > (|gx| + |gy|) / 2, with a margin for rounding):
         // the coverage below would be exactly 0 or 1 and no chord would bend it, so skip it.
-        if (linear && std::abs(f) > 0.5 * gradient * (1.0 + 1e-9)) {
+        if (bends && std::abs(f) > 0.5 * gradient * (1.0 + 1e-9)) {
             pixel = f < 0.0 ? 255 : 0;
             continue;
         }

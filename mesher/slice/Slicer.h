@@ -11,8 +11,9 @@
 /// boundary may pass through it (a sign change, or |f| no larger than the largest difference to a
 /// neighbour, which for a locally linear field is a sure test) gets the exact area of the
 /// linearised edge (value and central-difference gradient) in the pixel plus a second-order
-/// curvature correction; where the field bends too much within the pixel, or the part's box cuts
-/// it, an s x s grid of sub-samples is counted instead. The grey level is 255 * coverage^gamma
+/// curvature correction, where the edge bends little and the 3x3 values are nearly a quadratic
+/// (bendsLittle, beyondQuadratic in SliceTiles.h); elsewhere, or where the part's box cuts it, an
+/// s x s grid of sub-samples is counted instead. The grey level is 255 * coverage^gamma
 /// (gamma 0: a threshold at coverage 1/2, as PrusaSlicer's gamma_correction).
 ///
 /// Cost: blocks of 64 x 64 pixels (and their 32 x 32 quarters, while that culls anything) are
@@ -58,8 +59,10 @@ struct Display {
 struct RasterOptions {
     int supersample = 8;  ///< sub-samples per axis in an edge pixel; 0 = no anti-aliasing (centre test)
     double gamma = 1.0;   ///< grey = 255 * coverage^gamma; 0 = binary threshold at coverage 1/2
-    /// Edge pixels use the linearised edge when the field's second differences are at most this
-    /// share of its first differences (so the edge bends by a small part of a pixel); else sub-samples.
+    /// Edge pixels use the linearised edge when the field's second differences across and along
+    /// the edge, and the changes of its second differences over the 3x3 values, are each at most
+    /// this share of the gradient's length (the edge bends by a small part of a pixel and no crease
+    /// lies within a pixel of it); else sub-samples. 0 sub-samples every edge pixel.
     double linearTolerance = 0.25;
     int tile = 8;  ///< tile side in pixels for culling by bound() (blocks of 8 x 8 tiles first)
     /// Whole tiles eight lanes at a time where the CPU has AVX2 (else four); the bytes are the
