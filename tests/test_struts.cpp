@@ -69,6 +69,19 @@ std::vector<ConvolutionStrut> bccStruts(double sigma, int cells = 2)
     return s;
 }
 
+/// Voxels of @a a's leaves whose float differs, bit for bit, from @a b's value there.
+std::uint64_t mismatchedVoxels(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b)
+{
+    auto acc = b.getConstAccessor();
+    std::uint64_t mismatched = 0;
+    for (auto leaf = a.tree().cbeginLeaf(); leaf; ++leaf)
+        for (int i = 0; i < 512; ++i) {
+            const float x = leaf->getValue(i), y = acc.getValue(leaf->offsetToGlobalCoord(i));
+            mismatched += std::memcmp(&x, &y, sizeof x) != 0;
+        }
+    return mismatched;
+}
+
 std::string runRecipe(const TempDir& dir, const std::string& text, int* status, const std::string& extra = "")
 {
     const auto recipe = dir.write("recipe.yaml", text);
@@ -1293,14 +1306,7 @@ TEST(GridValueMemo, AMovedLevelGivesTheGridOfAFreshEvaluation)
         memo->keep(false);
         EXPECT_EQ(memo->keptBytes(), 0u);
         ASSERT_EQ(moved->tree().leafCount(), fresh->tree().leafCount());
-        auto acc = moved->getConstAccessor();
-        std::uint64_t mismatched = 0;
-        for (auto leaf = fresh->tree().cbeginLeaf(); leaf; ++leaf)
-            for (int i = 0; i < 512; ++i) {
-                const float a = leaf->getValue(i), b = acc.getValue(leaf->offsetToGlobalCoord(i));
-                mismatched += std::memcmp(&a, &b, sizeof a) != 0;
-            }
-        EXPECT_EQ(mismatched, 0u) << "budget " << budget;
+        EXPECT_EQ(mismatchedVoxels(*fresh, *moved), 0u) << "budget " << budget;
     }
 }
 
@@ -1322,14 +1328,7 @@ TEST(GridValueMemo, ASolveOnTheRecipesLatticeHandsTheGridItsValues)
     Job given(parseRecipe(head + "level: " + level.str() + "}\nresult: lattice\nallow: [pieces]\n", "given.yaml", "."));
     const openvdb::FloatGrid &a = solved.grid(), &b = given.grid();
     ASSERT_EQ(a.tree().leafCount(), b.tree().leafCount());
-    auto acc = b.getConstAccessor();
-    std::uint64_t mismatched = 0;
-    for (auto leaf = a.tree().cbeginLeaf(); leaf; ++leaf)
-        for (int i = 0; i < 512; ++i) {
-            const float x = leaf->getValue(i), y = acc.getValue(leaf->offsetToGlobalCoord(i));
-            mismatched += std::memcmp(&x, &y, sizeof x) != 0;
-        }
-    EXPECT_EQ(mismatched, 0u);
+    EXPECT_EQ(mismatchedVoxels(a, b), 0u);
     EXPECT_GT(a.tree().leafCount(), 100u);
 }
 
@@ -1432,14 +1431,7 @@ TEST(GridValueMemo, AFrameBoxSolvedOnTheJobsVoxelsHandsTheGridItsValues)
         for (Job* job : {solved.get(), single.get()}) {
             const openvdb::FloatGrid &a = job->grid(), &b = fresh.grid();
             ASSERT_EQ(a.tree().leafCount(), b.tree().leafCount());
-            auto acc = b.getConstAccessor();
-            std::uint64_t mismatched = 0;
-            for (auto leaf = a.tree().cbeginLeaf(); leaf; ++leaf)
-                for (int i = 0; i < 512; ++i) {
-                    const float x = leaf->getValue(i), y = acc.getValue(leaf->offsetToGlobalCoord(i));
-                    mismatched += std::memcmp(&x, &y, sizeof x) != 0;
-                }
-            EXPECT_EQ(mismatched, 0u) << domain;
+            EXPECT_EQ(mismatchedVoxels(a, b), 0u) << domain;
             EXPECT_GT(a.tree().leafCount(), 100u);
         }
         EXPECT_NEAR(bruteForceShare(*solved->field("lattice"), Box3{Vec3d(0.0), Vec3d(8.0)}, 80), 0.20, 0.005 * 0.20)
