@@ -39,16 +39,34 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
     using Sample = decltype(make(0.0f, std::array<double, 3>{}));
     std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
     grid.tree().getNodes(leaves);
-    std::vector<std::vector<Sample>> perLeaf(leaves.size());
+    auto inBand = [&](const float* data, int i, const openvdb::Coord& c) {
+        return !(data[i] < lo || data[i] > hi) && region.isInside(c);
+    };
+    // Two passes: each leaf's count of band voxels, then the samples written in place at the
+    // leaf's offset (leaf order, as before). Per-leaf vectors joined afterwards held the band
+    // twice at once: a plate's solve peaked there.
+    std::vector<std::size_t> offset(leaves.size() + 1, 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+        for (std::size_t n = range.begin(); n != range.end(); ++n) {
+            if (interrupt && n % 64 == 0) interrupt();
+            const float* data = leaves[n]->buffer().data();
+            std::size_t count = 0;
+            for (int i = 0; i < 512; ++i) count += inBand(data, i, leaves[n]->offsetToGlobalCoord(i));
+            offset[n + 1] = count;
+        }
+    });
+    for (std::size_t n = 0; n < leaves.size(); ++n) offset[n + 1] += offset[n];
+    std::vector<Sample> all(offset.back());
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
         auto acc = grid.getConstAccessor();
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
             // Per 64 leaves: a range of the partitioner can hold half the band.
             if (interrupt && n % 64 == 0) interrupt();
             const float* data = leaves[n]->buffer().data();
+            std::size_t at = offset[n];
             for (int i = 0; i < 512; ++i) {
                 const openvdb::Coord c = leaves[n]->offsetToGlobalCoord(i);
-                if (data[i] < lo || data[i] > hi || !region.isInside(c)) continue;
+                if (!inBand(data, i, c)) continue;
                 std::array<double, 3> change{};
                 for (int a = 0; a < 3; ++a) {
                     openvdb::Coord up = c, down = c;
@@ -79,21 +97,10 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
                     }
                     change[a] = axisChange(data[i], upValue, hasUp, downValue, hasDown);
                 }
-                perLeaf[n].push_back(make(data[i], change));
+                all[at++] = make(data[i], change);
             }
         }
     });
-    // Joined in leaf order into one vector sized once (grown by insertion, a plate's 10^7 samples
-    // were copied again and again: seconds, and no cancel check).
-    std::size_t total = 0;
-    for (const auto& v : perLeaf) total += v.size();
-    std::vector<Sample> all;
-    all.reserve(total);
-    for (std::size_t n = 0; n < perLeaf.size(); ++n) {
-        if (interrupt && n % 4096 == 0) interrupt();
-        all.insert(all.end(), perLeaf[n].begin(), perLeaf[n].end());
-        std::vector<Sample>().swap(perLeaf[n]);
-    }
     return all;
 }
 
@@ -237,26 +244,17 @@ double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
 /// The level in [a, b] at which fullyBelow + coveredVoxels(samples, level) reaches @a wanted, by
 /// 60 bisection steps. Samples whose coverage is constant (0 or 1) over what is left of the
 /// bracket are set aside as it narrows, so later steps visit only the voxels the level still
-/// cuts; each kept sample contributes exactly what coveredVoxels() would give it.
+/// cuts; each kept sample contributes exactly what coveredVoxels() would give it. A sample's
+/// coverage at the bracket's ends is computed again where it is needed, not carried along: the
+/// same doubles (the same function of the same two numbers), and 8 bytes a sample instead of 32
+/// (a plate's band holds 10^7-10^8 samples: the solve's peak).
 double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b,
                       const std::function<void()>& interrupt)
 {
     auto coverage = [](const CoverageSample& s, double level) {
         return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
     };
-    // Each sample's coverage at both ends of the bracket, carried along: the end that moves takes
-    // the coverage at the midpoint just summed, so each step computes one coverage per sample.
-    struct Active {
-        CoverageSample s;
-        double atA, atB;
-    };
-    std::vector<Active> active;
-    active.reserve(samples.size());
-    for (const CoverageSample& s : samples) {
-        if (interrupt && (active.size() & 0xfffff) == 0xfffff) interrupt();
-        active.push_back({s, coverage(s, a), coverage(s, b)});
-    }
-    std::vector<double> atMid(active.size());
+    std::vector<CoverageSample> active(samples.begin(), samples.end());
     double settled = fullyBelow;  // whole voxels below every level left in the bracket
     // Once every sample left is partly covered across the whole bracket, the coverage is linear
     // there: settled + constant + level * slope, and the remaining steps cost nothing.
@@ -271,7 +269,7 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
         else
             for (std::size_t i = 0; i < active.size(); ++i) {
                 if (interrupt && (i & 0xfffff) == 0xfffff) interrupt();  // a step over 10^7 samples
-                covered += atMid[i] = coverage(active[i].s, mid);
+                covered += coverage(active[i], mid);
             }
         const bool raiseA = covered < wanted;
         (raiseA ? a : b) = mid;
@@ -281,22 +279,23 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
         bool ramps = true;
         for (std::size_t i = 0; i < active.size(); ++i) {
             if (interrupt && (i & 0xfffff) == 0xfffff) interrupt();
-            Active t = active[i];
-            (raiseA ? t.atA : t.atB) = atMid[i];
-            if (t.atA >= 1.0)
+            const CoverageSample s = active[i];
+            const double atA = coverage(s, a), atB = coverage(s, b);
+            if (atA >= 1.0)
                 settled += 1.0;
-            else if (t.atB > 0.0) {
-                active[kept++] = t;
-                ramps = ramps && t.s.step > 0.0f && t.atA > 0.0 && t.atB < 1.0;
+            else if (atB > 0.0) {
+                active[kept++] = s;
+                ramps = ramps && s.step > 0.0f && atA > 0.0 && atB < 1.0;
             }
         }
         active.resize(kept);
         if (ramps) {
             linear = true;
-            for (const Active& t : active) {
-                constant += 0.5 - double(t.s.value) / t.s.step;
-                slope += 1.0 / t.s.step;
+            for (const CoverageSample& s : active) {
+                constant += 0.5 - double(s.value) / s.step;
+                slope += 1.0 / s.step;
             }
+            std::vector<CoverageSample>().swap(active);
         }
     }
     return 0.5 * (a + b);

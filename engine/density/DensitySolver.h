@@ -45,9 +45,13 @@ struct DensitySolution {
 /// With a @a mask the density is relative to the space the mask encloses: the denominator is the
 /// number of domain voxels whose centre has mask < 0, the numerator those that are also inside
 /// the solid. Regions whose mask bound is wholly positive are never evaluated.
+///
+/// @a marginVoxels more voxels past the domain on every side are measured as well (the domain's voxel
+/// lattice continued, so the leaves are the domain's): a frame whose box pokes out of the job's
+/// domain is measured on the job's voxels, the box as the mask.
 DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target,
                              const FieldNode* mask = nullptr, bool subVoxel = false,
-                             const JobContext* context = nullptr);
+                             const JobContext* context = nullptr, int marginVoxels = 0);
 
 /// A part of a measuring region, sampled on its own domain and counted @a weight times.
 struct DensityPiece {

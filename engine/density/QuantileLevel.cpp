@@ -197,10 +197,9 @@ double coverageSlope(const std::vector<CoverageSample>& samples, double level, d
 /// splitByBand of the grid evaluateSparse(@a g, @a domain, @a options) would give, measured on
 /// each leaf as it is evaluated instead of on a grid. The count and the band's values (a multiset:
 /// the level taken from it does not depend on their order) are those of splitByBand.
-BandSplit streamedSplit(const FieldNode& g, const Domain& domain, const SparseOptions& options,
-                        std::uint64_t& evaluatedLeaves)
+BandSplit streamedSplit(const FieldNode& g, const Domain& domain, const openvdb::CoordBBox& region,
+                        const SparseOptions& options, std::uint64_t& evaluatedLeaves)
 {
-    const openvdb::CoordBBox region = domain.indexBox();
     const float lo = float(options.band.lo), hi = float(options.band.hi);
     struct Local {
         std::uint64_t below = 0;
@@ -239,20 +238,23 @@ BandSplit streamedSplit(const FieldNode& g, const Domain& domain, const SparseOp
 }  // namespace
 
 DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain, double target, const FieldNode* mask,
-                             bool subVoxel, const JobContext* context)
+                             bool subVoxel, const JobContext* context, int marginVoxels)
 {
     DensitySolution sol;
-    sol.domainVoxels = domain.voxelCount();
+    // The voxels measured: the domain's, and @a marginVoxels more on every side (their centres
+    // domain.worldOf() of indices past the domain's, so the leaves are the domain's).
+    const openvdb::CoordBBox region(openvdb::Coord(-marginVoxels), domain.dims - openvdb::Coord(1 - marginVoxels));
+    sol.domainVoxels = std::uint64_t(region.volume());
     std::unique_ptr<MaskedIndicator> masked;
     if (mask) {
         masked = std::make_unique<MaskedIndicator>(rawIndicator, *mask);
         SparseOptions options;
         options.context = context;
-        options.margin = 0;
+        options.margin = marginVoxels;
         options.stage = "measuring the density's space";
         const openvdb::FloatGrid::Ptr maskGrid = evaluateSparse(*mask, domain, options);
-        sol.domainVoxels = countBelow(*maskGrid, domain.indexBox(), 0.0f);
-        sol.maskCoverageVoxels = distanceCoverage(*maskGrid, domain.indexBox(), domain.voxel);
+        sol.domainVoxels = countBelow(*maskGrid, region, 0.0f);
+        sol.maskCoverageVoxels = distanceCoverage(*maskGrid, region, domain.voxel);
         if (sol.domainVoxels == 0)
             throw JobError(
                 "the space the density is measured in has no voxel inside the domain: check the "
@@ -261,7 +263,12 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
     const FieldNode& indicator = masked ? *masked : rawIndicator;
     const auto wanted = std::uint64_t(std::llround(target * double(sol.domainVoxels)));
 
-    const int stride = std::max(1, int(std::ceil(std::cbrt(double(domain.voxelCount()) / 2.0e6))));
+    // The coarse pass (a bracket and step estimates only) samples the region as a domain of its own.
+    Domain coarseDomain = domain;
+    coarseDomain.box.min -= Vec3d(marginVoxels * domain.voxel);
+    coarseDomain.box.max += Vec3d(marginVoxels * domain.voxel);
+    coarseDomain.dims += openvdb::Coord(2 * marginVoxels);
+    const int stride = std::max(1, int(std::ceil(std::cbrt(double(coarseDomain.voxelCount()) / 2.0e6))));
     // The coarse pass and the passes over the band after its evaluation (a split, the coverage
     // samples, the bisection) take seconds on a plate: each stops on cancel.
     const std::function<void()> interrupt = [context] {
@@ -269,7 +276,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
     };
     std::vector<CoarseCell> coarseCells;
     std::vector<float> samples =
-        coarseSamples(indicator, domain, stride, interrupt, masked || subVoxel ? &coarseCells : nullptr);
+        coarseSamples(indicator, coarseDomain, stride, interrupt, masked || subVoxel ? &coarseCells : nullptr);
     // Share of the samples inside the mask: the quantiles of the target sit within that share.
     const double share =
         masked ? double(std::count_if(samples.begin(), samples.end(), [](float v) { return v < 1e30f; })) /
@@ -286,7 +293,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         SparseOptions options;
         options.context = context;
         options.band = Interval(std::max(lo, -1e30), std::min(hi, 1e30));
-        options.margin = 0;
+        options.margin = marginVoxels;
         options.insideValue = -std::numeric_limits<float>::max();
         options.outsideValue = std::numeric_limits<float>::max();
         options.stage = "solving density";
@@ -308,13 +315,13 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         openvdb::FloatGrid::Ptr grid;
         BandSplit split;
         if (!masked && !subVoxel) {
-            split = streamedSplit(indicator, domain, options, sol.evaluatedLeaves);
+            split = streamedSplit(indicator, domain, region, options, sol.evaluatedLeaves);
             sol.estimatedBytes = sol.evaluatedLeaves * kBytesPerLeaf;
         } else {
             grid = evaluateSparse(indicator, domain, evaluated);
             sol.evaluatedLeaves = grid->tree().leafCount();
             sol.estimatedBytes = sol.evaluatedLeaves * evaluated.bytesPerLeaf;
-            split = splitByBand(*grid, domain.indexBox(), float(options.band.lo), float(options.band.hi), interrupt);
+            split = splitByBand(*grid, region, float(options.band.lo), float(options.band.hi), interrupt);
         }
         const std::uint64_t below = split.below;
         std::vector<float>& band = split.band;
@@ -352,8 +359,8 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             // Every evaluated band voxel once (a voxel's step does not depend on the band); the
             // bracket's and the wide band's samples are picked from them, in the same order.
             const float evaluatedLo = float(evaluated.band.lo), evaluatedHi = float(evaluated.band.hi);
-            const std::vector<CoverageSample> evaluatedSamples =
-                coverageSamples(*grid, domain.indexBox(), evaluatedLo, evaluatedHi, interrupt);
+            std::vector<CoverageSample> evaluatedSamples =
+                coverageSamples(*grid, region, evaluatedLo, evaluatedHi, interrupt);
             auto within = [&](float lo, float hi) {
                 auto inside = [&](const CoverageSample& c) { return !(c.value < lo || c.value > hi); };
                 std::vector<CoverageSample> picked;
@@ -383,6 +390,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 const bool covered = evaluated.band.lo <= wide.band.lo && wide.band.hi <= evaluated.band.hi;
                 const float wideLo = float(wide.band.lo), wideHi = float(wide.band.hi);
                 if (covered && evaluatedLo <= wideLo && wideHi <= evaluatedHi) {
+                    grid.reset();  // every sample needed is in evaluatedSamples
                     // Below the wide band: those below the bracket, moved by the voxels between the
                     // two low ends, which the evaluated band holds.
                     const float bracketLo = float(options.band.lo);
@@ -397,12 +405,17 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                     const auto wideGrid =
                         covered ? grid : evaluateSparse(GridLeavesReused(indicator, *grid, domain), domain, wide);
                     if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
-                    fullyBelow = splitByBand(*wideGrid, domain.indexBox(), wideLo, wideHi, interrupt).below;
-                    samples = coverageSamples(*wideGrid, domain.indexBox(), wideLo, wideHi, interrupt);
+                    fullyBelow = splitByBand(*wideGrid, region, wideLo, wideHi, interrupt).below;
+                    samples = coverageSamples(*wideGrid, region, wideLo, wideHi, interrupt);
                 }
                 a = wide.band.lo;
                 b = wide.band.hi;
             }
+            // The bisection reads the samples alone: the grid, the band's values and the evaluated
+            // band's samples are freed first (a plate's solve peaked with all of them held).
+            std::vector<CoverageSample>().swap(evaluatedSamples);
+            std::vector<float>().swap(band);
+            grid.reset();
             // An open bracket (a target within 1 % of 0 or 1): bisect over the values present.
             for (const CoverageSample& c : samples) {
                 if (options.band.lo <= -1e30) a = std::min(a == options.band.lo ? 1e300 : a, double(c.value) - c.step);

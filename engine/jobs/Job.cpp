@@ -470,10 +470,42 @@ void Job::solveLevels()
                     ? periodicPieces(*node.densityBox, *node.densityPeriod, node.densityReach,
                                      *node.densityVoxel * coarse, node.densityMirror, node.densitySwapXY)
                     : std::vector<DensityPiece>{};
+            // A frame box measured on the job's own voxels (densityOnJobVoxels): the box with its
+            // faces moved to the nearest faces of the job's voxels (at most half a voxel: no voxel
+            // centre on a face, where a face through a plane of centres counted that plane whole,
+            // 1 % of an 8 mm box), as a mask of the job's domain where it leaves out some of the
+            // domain's voxels, the domain's lattice continued past its faces where the box pokes
+            // out (a wireframe's moved nodes): boxMargin voxels.
+            std::optional<Box3> jobVoxelBox;
+            if (pieces.empty() && coarse == 1.0 && node.densityBox && !node.densityMask && node.densityOnJobVoxels) {
+                Box3 snapped;
+                bool empty = false;
+                for (int a = 0; a < 3; ++a) {
+                    // Halves rounded up on both sides (std::round's ties away from zero would widen a
+                    // box whose faces lie on planes of centres either side of the domain's corner).
+                    const double lo = std::floor((node.densityBox->min[a] - mDomain.box.min[a]) / mDomain.voxel + 0.5);
+                    const double hi = std::floor((node.densityBox->max[a] - mDomain.box.min[a]) / mDomain.voxel + 0.5);
+                    empty = empty || !(hi > lo);
+                    snapped.min[a] = mDomain.box.min[a] + lo * mDomain.voxel;
+                    snapped.max[a] = mDomain.box.min[a] + hi * mDomain.voxel;
+                }
+                if (!empty) jobVoxelBox = snapped;
+            }
+            const bool onJobVoxels = jobVoxelBox.has_value();
+            int boxMargin = 0;
+            bool wholeDomain = onJobVoxels;
+            for (int a = 0; a < 3 && onJobVoxels; ++a) {
+                const int lo = int(std::lround((jobVoxelBox->min[a] - mDomain.box.min[a]) / mDomain.voxel));
+                const int hi = int(std::lround((jobVoxelBox->max[a] - mDomain.box.min[a]) / mDomain.voxel));
+                boxMargin = std::max({boxMargin, -lo, hi - mDomain.dims[a]});
+                wholeDomain = wholeDomain && lo <= 0 && hi >= mDomain.dims[a];
+            }
+            const std::unique_ptr<BoxField> boxMask =
+                onJobVoxels && !wholeDomain ? std::make_unique<BoxField>(*jobVoxelBox) : nullptr;
             // A solve on the recipe's own lattice evaluates the band's leaves as the grid will:
-            // asked by the aim (mKeepSolvedValues), the raw field's values are kept for it
+            // asked by a mesh (mKeepSolvedValues), the raw field's values are kept for it
             // (GridValueMemo, the same doubles), so each band leaf is evaluated once.
-            const bool recipeLattice = pieces.empty() && coarse == 1.0 && !node.densityBox;
+            const bool recipeLattice = pieces.empty() && coarse == 1.0 && (!node.densityBox || onJobVoxels);
             if (const auto* memo = dynamic_cast<const GridValueMemo*>(node.solid->raw().get());
                 memo && recipeLattice && mKeepSolvedValues && node.solid->indicator().get() == memo) {
                 memo->keep(true, memoBudget());
@@ -483,6 +515,9 @@ void Job::solveLevels()
                 if (!pieces.empty())
                     return solveDensity(node.densityIndicator ? *node.densityIndicator : *node.solid->indicator(),
                                         pieces, *node.density, mContext);
+                if (onJobVoxels)
+                    return solveDensity(*node.solid->indicator(), mDomain, *node.density, boxMask.get(),
+                                        node.subVoxelDensity, mContext, boxMargin);
                 const double voxel = node.densityBox && node.densityVoxel ? *node.densityVoxel : mDomain.voxel;
                 return solveDensity(*node.solid->indicator(),
                                     node.densityBox && (node.densityVoxel || coarse > 1.0)

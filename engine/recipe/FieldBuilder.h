@@ -47,6 +47,11 @@ struct LevelNode {
     /// Measure the density on its own voxel lattice over densityBox (a spacing incommensurate
     /// with a lattice's cells, so periodic features do not alias with the voxels).
     std::optional<double> densityVoxel{};
+    /// Measure the density over densityBox on the job's own voxels instead (the box a mask of the
+    /// job's domain, when it lies within it): the solve's leaves are then the grid's, and a
+    /// GridValueMemo under the solid hands the grid their values (each band leaf evaluated once).
+    /// Set where the job's voxel resolves the field well enough (a Gaussian lattice's sigma).
+    bool densityOnJobVoxels = false;
     /// The solid repeats with this period deeper than densityReach inside densityBox (a box frame
     /// of identical cells): the density is measured on one period of the interior, weighted
     /// (periodicPieces()), instead of the whole box.

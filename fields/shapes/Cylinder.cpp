@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <vector>
 
 namespace voxlat {
 
@@ -38,6 +39,47 @@ double Cylinder::distance(const Vec3d& p, Vec3d* gradient) const
 void Cylinder::values(std::span<const Vec3d> points, std::span<double> out) const
 {
     for (std::size_t n = 0; n < points.size(); ++n) out[n] = distance(points[n], nullptr);
+}
+
+void Cylinder::gridValues(const GridBatch& batch, std::span<double> out) const
+{
+    int along = -1;
+    for (int a = 0; a < 3; ++a)
+        if (mAxis[a] == 1.0 && mAxis[(a + 1) % 3] == 0.0 && mAxis[(a + 2) % 3] == 0.0) along = a;
+    if (along < 0) {
+        FieldNode::gridValues(batch, out);
+        return;
+    }
+    // distance() with a unit axis e_a: h = d . e_a is d_a (the other products are zeros), the
+    // radial part is d with d_a replaced by 0, and its length sqrt(x x + y y + z z) adds that zero
+    // in its place: the same doubles, from the same coordinates batch.point() gives.
+    thread_local std::vector<double> d[3], qh, qr;
+    const int n[3] = {batch.nx, batch.ny, batch.nz};
+    for (int a = 0; a < 3; ++a) {
+        d[a].resize(std::size_t(n[a]));
+        for (int i = 0; i < n[a]; ++i) d[a][std::size_t(i)] = (batch.origin[a] + i * batch.spacing[a]) - mCenter[a];
+    }
+    qh.resize(std::size_t(n[along]));
+    for (int i = 0; i < n[along]; ++i) qh[std::size_t(i)] = std::abs(d[along][std::size_t(i)]) - mHalfHeight;
+    // The radial term over the plane of the two other axes (b < c), index b * n[c] + c.
+    const int b = along == 0 ? 1 : 0, c = along == 2 ? 1 : 2;
+    qr.resize(std::size_t(n[b]) * std::size_t(n[c]));
+    for (int i = 0; i < n[b]; ++i)
+        for (int j = 0; j < n[c]; ++j) {
+            const double u = d[b][std::size_t(i)], v = d[c][std::size_t(j)];
+            // (u u + 0) + v v, 0 + u u + v v and u u + v v + 0 are all u u + v v exactly.
+            const double r = std::sqrt(u * u + v * v);
+            qr[std::size_t(i) * std::size_t(n[c]) + std::size_t(j)] = r - mRadius;
+        }
+    std::size_t m = 0;
+    int idx[3];
+    for (idx[0] = 0; idx[0] < batch.nx; ++idx[0])
+        for (idx[1] = 0; idx[1] < batch.ny; ++idx[1])
+            for (idx[2] = 0; idx[2] < batch.nz; ++idx[2], ++m) {
+                const double h = qh[std::size_t(idx[along])];
+                const double q = qr[std::size_t(idx[b]) * std::size_t(n[c]) + std::size_t(idx[c])];
+                out[m] = q > 0 && h > 0 ? std::sqrt(q * q + h * h) : q > h ? q : h;
+            }
 }
 
 void Cylinder::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const

@@ -13,6 +13,10 @@ public:
 
     void values(std::span<const Vec3d> points, std::span<double> out) const override;
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
+    /// values() at every point of @a batch, bit for bit. A cylinder along x, y or z (a `within:`
+    /// mask, an infill's part) takes its axial term per index along the axis and its radial one per
+    /// column across it: a square root per column, not per point; other axes go point by point.
+    void gridValues(const GridBatch& batch, std::span<double> out) const override;
     /// Distance fields are 1-Lipschitz: value(centre) +- box radius.
     Interval bound(const Box3& box) const override;
     std::optional<Box3> support() const override;
