@@ -477,29 +477,27 @@ void Job::solveLevels()
             // domain's voxels, the domain's lattice continued past its faces where the box pokes
             // out (a wireframe's moved nodes): boxMargin voxels.
             std::optional<Box3> jobVoxelBox;
+            int boxMargin = 0;
+            bool wholeDomain = true;
             if (pieces.empty() && coarse == 1.0 && node.densityBox && !node.densityMask && node.densityOnJobVoxels) {
                 Box3 snapped;
                 bool empty = false;
                 for (int a = 0; a < 3; ++a) {
                     // Halves rounded up on both sides (std::round's ties away from zero would widen a
                     // box whose faces lie on planes of centres either side of the domain's corner).
-                    const double lo = std::floor((node.densityBox->min[a] - mDomain.box.min[a]) / mDomain.voxel + 0.5);
-                    const double hi = std::floor((node.densityBox->max[a] - mDomain.box.min[a]) / mDomain.voxel + 0.5);
+                    const int lo =
+                        int(std::floor((node.densityBox->min[a] - mDomain.box.min[a]) / mDomain.voxel + 0.5));
+                    const int hi =
+                        int(std::floor((node.densityBox->max[a] - mDomain.box.min[a]) / mDomain.voxel + 0.5));
                     empty = empty || !(hi > lo);
                     snapped.min[a] = mDomain.box.min[a] + lo * mDomain.voxel;
                     snapped.max[a] = mDomain.box.min[a] + hi * mDomain.voxel;
+                    boxMargin = std::max({boxMargin, -lo, hi - mDomain.dims[a]});
+                    wholeDomain = wholeDomain && lo <= 0 && hi >= mDomain.dims[a];
                 }
                 if (!empty) jobVoxelBox = snapped;
             }
             const bool onJobVoxels = jobVoxelBox.has_value();
-            int boxMargin = 0;
-            bool wholeDomain = onJobVoxels;
-            for (int a = 0; a < 3 && onJobVoxels; ++a) {
-                const int lo = int(std::lround((jobVoxelBox->min[a] - mDomain.box.min[a]) / mDomain.voxel));
-                const int hi = int(std::lround((jobVoxelBox->max[a] - mDomain.box.min[a]) / mDomain.voxel));
-                boxMargin = std::max({boxMargin, -lo, hi - mDomain.dims[a]});
-                wholeDomain = wholeDomain && lo <= 0 && hi >= mDomain.dims[a];
-            }
             const std::unique_ptr<BoxField> boxMask =
                 onJobVoxels && !wholeDomain ? std::make_unique<BoxField>(*jobVoxelBox) : nullptr;
             // A solve on the recipe's own lattice evaluates the band's leaves as the grid will:

@@ -381,15 +381,14 @@ inline int decideFullTile(const float* values, int stride, const float* cells, f
             const V dxy = 0.25f * (L::load(right + b + 1) - L::load(right + b - 1) - L::load(left + b + 1) +
                                    L::load(left + b - 1));
             const V gradient = absLanes(gx) + absLanes(gy);
-            const V lu = L::load(left + b + 1), ld = L::load(left + b - 1);
-            const V ru = L::load(right + b + 1), rd = L::load(right + b - 1);
             const V gm = L::sqrt(gx * gx + gy * gy);
             const M bends = bendsLittle(gx, gy, dxx, dyy, dxy, gm, linearTolerance);
-            const M linear = bends & (beyondQuadratic(l, ld, lu, f, down, up, r, rd, ru) <= linearTolerance * gm);
             const M far = bends & (absLanes(f) > margin * gradient);
             M sure = boundSure | far;
             if (greyEdges && L::bits(~sure) != 0) {
                 // The 3x3 test: no sign change and |f| above every difference to a neighbour.
+                const V lu = L::load(left + b + 1), ld = L::load(left + b - 1);
+                const V ru = L::load(right + b + 1), rd = L::load(right + b - 1);
                 const V maxDiff = maxLanes(maxLanes(maxLanes(absLanes(l - f), absLanes(r - f)),
                                                     maxLanes(absLanes(up - f), absLanes(down - f))),
                                            maxLanes(maxLanes(absLanes(lu - f), absLanes(ld - f)),
@@ -399,6 +398,7 @@ inline int decideFullTile(const float* values, int stride, const float* cells, f
                                      ((down < 0.0f) ^ negative) | ((lu < 0.0f) ^ negative) | ((ld < 0.0f) ^ negative) |
                                      ((ru < 0.0f) ^ negative) | ((rd < 0.0f) ^ negative));
                 sure |= sameSign & (absLanes(f) > maxDiff);
+                const M linear = bends & (beyondQuadratic(l, ld, lu, f, down, up, r, rd, ru) <= linearTolerance * gm);
                 const unsigned grey = L::bits(~sure & linear);
                 if (grey != 0) {
                     // Packed for edgeCoverage below, so its vectors are full (a row holds a few).

@@ -658,9 +658,6 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
         const double gm = std::sqrt(gx * gx + gy * gy);
         const bool bends =
             !partial && std::isfinite(f) && bendsLittle(gx, gy, dxx, dyy, dxy, gm, mOptions.linearTolerance);
-        const bool linear =
-            bends && beyondQuadratic(v(a, b + 1), v(a, b), v(a, b + 2), f, v(a + 1, b), v(a + 1, b + 2),
-                                     v(a + 2, b + 1), v(a + 2, b), v(a + 2, b + 2)) <= mOptions.linearTolerance * gm;
         // The linearised edge misses the pixel (|f| > (|gx| + |gy|) / 2, with a margin for rounding):
         // the coverage below would be exactly 0 or 1 and no chord would bend it, so skip it.
         if (bends && std::abs(f) > 0.5 * gradient * (1.0 + 1e-9)) {
@@ -681,6 +678,9 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
             pixel = f < 0.0 ? 255 : 0;
             continue;
         }
+        const bool linear =
+            bends && beyondQuadratic(v(a, b + 1), v(a, b), v(a, b + 2), f, v(a + 1, b), v(a + 1, b + 2),
+                                     v(a + 2, b + 1), v(a + 2, b), v(a + 2, b + 2)) <= mOptions.linearTolerance * gm;
         if (linear) {
             // The tile passes' formula, one lane used.
             auto lane = [](double v) { return Quad{} + float(v); };
