@@ -52,14 +52,11 @@ inline int runCommand(const std::string& command, std::string* output = nullptr)
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
-inline std::string voxlatBinary()
-{
-    return VOXLAT_BINARY;
-}
-inline std::filesystem::path sourceDir()
-{
-    return VOXLAT_SOURCE_DIR;
-}
+/// The `voxlat` program of this build (tests/TestPaths.cpp: the only test source that names the
+/// build's paths, so the others compile alike in every checkout and hit a shared compiler cache).
+std::string voxlatBinary();
+/// The checkout the tests read data from.
+std::filesystem::path sourceDir();
 
 inline std::string readFile(const std::filesystem::path& p)
 {

@@ -749,6 +749,36 @@ TEST_F(Mesher, StlRoundTrip)
     EXPECT_NEAR(tet.volume(), 1.0 / 6.0, 1e-9);
 }
 
+TEST_F(Mesher, AWithdrawnFileOfATransactionIsNeverRenamed)
+{
+    // A file written ahead of its turn and then withdrawn (a mesh measured as it is written at a
+    // level that then moves) leaves no temporary, and only the file written after it reaches its
+    // path; the other files of the transaction are untouched.
+    TempDir dir;
+    const std::string path = dir.file("mesh.stl"), other = dir.file("report.json");
+    {
+        OutputTransaction transaction;
+        auto write = [](const std::string& p, const std::string& bytes) {
+            AtomicFile file(p);
+            file.stream() << bytes;
+            file.commit();
+            return file.tempPath();
+        };
+        const std::string first = write(path, "at the solved level");
+        write(other, "report");
+        EXPECT_EQ(dir.entries(), 2u);
+        transaction.withdraw(path);
+        EXPECT_FALSE(fs::exists(first));
+        EXPECT_EQ(dir.entries(), 1u);
+        write(path, "at the moved level");
+        EXPECT_FALSE(fs::exists(path));
+        transaction.commit();
+    }
+    EXPECT_EQ(readBytes(path), "at the moved level");
+    EXPECT_EQ(readBytes(other), "report");
+    EXPECT_EQ(dir.entries(), 2u);
+}
+
 TEST_F(Mesher, AtomicFileLeavesNothingUnlessCommitted)
 {
     TempDir dir;

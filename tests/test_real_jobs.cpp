@@ -499,6 +499,44 @@ TEST(RealJobs, TheLevelIsAimedAtTheMeshSoTheMeshHoldsTheDensity)
     }
 }
 
+TEST(RealJobs, AStreamedStlIsMeasuredAsItIsWrittenAndHasTheLevelOfAMeshHeldWhole)
+{
+    // A raw STL that is the mesh's only use is written as it is made, and the aim measures its
+    // share from that writing (not from a marching-cubes pass of its own): at a level that stays
+    // (0.1 mm) the file is meshed once; at one that moves (0.5 mm) the file written at the solved
+    // level is withdrawn and written again. Either way the level and the file's bytes are those
+    // of the same recipe meshed whole (Job::writeMesh(): the aim's own marching-cubes volume).
+    for (const double voxel : {0.1, 0.5}) {
+        const std::string text = "voxel: " + std::to_string(voxel) +
+                                 "\ndomain: {box: [[0, 0, 0], [12, 12, 12]]}\nfields:\n  g: {tpms: gyroid, "
+                                 "cell: 6, density: 0.3}\nresult: g\noutputs: {mesh: g.stl}\n";
+        TempDir streamedDir, wholeDir;
+        Job streamed(recipeText(text, streamedDir));
+        streamed.writeOutputs(streamedDir.path / "out", false, false);
+        Job whole(recipeText(text, wholeDir));
+        std::filesystem::create_directories(wholeDir.path / "out");
+        whole.writeMesh(wholeDir.path / "out" / "g.stl");
+        const nlohmann::json s = streamed.report(), w = whole.report();
+        const auto& aim = s["fields"]["g"]["mesh_aim"];
+        EXPECT_NE(aim["measure"].get<std::string>().find("as its STL is written"), std::string::npos) << aim.dump(1);
+        EXPECT_EQ(aim["moved"], w["fields"]["g"]["mesh_aim"]["moved"]) << voxel;
+        EXPECT_EQ(aim["moved"].get<bool>(), voxel > 0.2) << aim.dump(1);
+        EXPECT_EQ(s["fields"]["g"]["level"].get<double>(), w["fields"]["g"]["level"].get<double>()) << voxel;
+        EXPECT_EQ(aim["density_from_mesh_at_solved_level"].get<double>(),
+                  w["fields"]["g"]["mesh_aim"]["density_from_mesh_at_solved_level"].get<double>());
+        EXPECT_TRUE(readFile(streamedDir.path / "out" / "g.stl") == readFile(wholeDir.path / "out" / "g.stl"))
+            << voxel << ": the streamed file differs from the mesh held whole";
+        // Meshed once when the level stays; a withdrawn file leaves no temporary behind.
+        EXPECT_EQ(s["timings_s"].contains("measure the mesh's share"), aim["moved"].get<bool>())
+            << s["timings_s"].dump(1);
+        std::vector<std::string> files;
+        for (const auto& e : std::filesystem::directory_iterator(streamedDir.path / "out"))
+            files.push_back(e.path().filename().string());
+        std::sort(files.begin(), files.end());
+        EXPECT_EQ(files, (std::vector<std::string>{"g.stl", "report.json"})) << voxel;
+    }
+}
+
 TEST(RealJobs, ADrainedInfillsProjectedMeshIsAimedAtItsSharpenedCreases)
 {
     // A gyroid infill of the bracket with a 1 mm skin and a drain: the part less its channels has

@@ -772,7 +772,7 @@ constexpr std::uint64_t kProjectedSampleTriangles = 50000;
 constexpr std::uint64_t kTrianglesPerLeaf = 100;
 }  // namespace
 
-void Job::aimLevelsAtMesh(const MeshOptions& options)
+void Job::aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::path* streamTo)
 {
     if (mMeshAimed) return;
     mMeshAimed = true;
@@ -819,6 +819,9 @@ void Job::aimLevelsAtMesh(const MeshOptions& options)
     if (takenOver) mSolvedValues.erase(solvedValues);
     if (memo && (!takenOver || projected)) memo->keep(true, memoBudget());  // keep() starts empty
     const bool creased = options.project && options.extractor == MeshExtractor::MarchingCubes && !projected;
+    // The first mesh's file measured as it is written (the same triangles marchingCubesVolume()
+    // sums): only a raw marching-cubes mesh of the recipe's grid.
+    const bool streamed = streamTo && !options.project && options.extractor == MeshExtractor::MarchingCubes;
     // A projected mesh's share is estimated at twice the recipe's voxel (an eighth of the grid and
     // of the time: W9's estimate took 2.2 s at 0.1 mm) where the thinnest feature still spans
     // three of those voxels, else at the recipe's voxel; so is a lattice in a part, whose sharp
@@ -832,8 +835,9 @@ void Job::aimLevelsAtMesh(const MeshOptions& options)
             if (mDomain.dims[a] < 32) estimateVoxel = mDomain.voxel;  // too few voxels to halve
     }
     nlohmann::json aim = {
-        {"measure", creased ? "the volume the projected mesh of the recipe's grid encloses with its creases "
-                              "sharpened, made as the finished mesh is (before decimation)"
+        {"measure", streamed ? "the volume the marching-cubes mesh of the recipe's grid encloses, as its STL is written"
+                    : creased ? "the volume the projected mesh of the recipe's grid encloses with its creases "
+                                "sharpened, made as the finished mesh is (before decimation)"
                     : projected
                         ? "the solid within the domain box bounded by the marching-cubes mesh of the field "
                           "evaluated past the box, with its vertices projected onto the surface (estimated "
@@ -846,6 +850,16 @@ void Job::aimLevelsAtMesh(const MeshOptions& options)
     // The share the first mesh will hold at the level as it stands, and the recipe's grid it was
     // measured on (the outputs' grid if the level stays). A projected mesh's is estimated on a
     // grid of its own that runs past the box (freed at once): it holds no grid for the outputs.
+    // A file written at a level the aim then moves is not the output: withdrawn from the open
+    // transaction, its time kept as the measure's.
+    auto withdrawStreamed = [&] {
+        if (!mStreamedAim) return;
+        OutputTransaction::current()->withdraw(mStreamedAim->path.string());
+        const std::string written = "mesh into " + mStreamedAim->path.filename().string();
+        mTimings[mStreamedAim->stage] = mTimings[written];
+        mTimings.erase(written);
+        mStreamedAim.reset();
+    };
     struct Measured {
         std::optional<MeshShareMeasure> share;
         openvdb::FloatGrid::Ptr grid;
@@ -877,6 +891,12 @@ void Job::aimLevelsAtMesh(const MeshOptions& options)
                                {"true_surface_mm3", pv.surface}};
         } else {
             m.grid = evaluateResult(m.stats);
+            if (streamed) {
+                withdrawStreamed();
+                mStreamedAim = StreamedAim{*streamTo, streamStl(*m.grid, *streamTo), stage};
+                m.share = meshShareOf(node, mStreamedAim->made.measures.volume);
+                return m;
+            }
             volume = timed(stage, [&] {
                 if (creased) {
                     TriangleMesh mesh = reporting(mContext, "meshing to measure", [&](const ProgressFn& progress) {
@@ -940,6 +960,8 @@ void Job::aimLevelsAtMesh(const MeshOptions& options)
     if (steps == 1) {
         mAimGrid = std::move(after.grid);  // the outputs' grid
         mAimStats = after.stats;
+    } else {
+        withdrawStreamed();  // written at the first step
     }
     after.grid.reset();  // at two steps: evaluated again at the final level by the first output that needs it
     nlohmann::json& entry = mReport["fields"][node.name];
@@ -1849,18 +1871,29 @@ void Job::warnStaleTemporaries(const std::vector<std::filesystem::path>& paths) 
                            {{"file", stale}});
 }
 
-void Job::writeStlWhileMeshing(const std::filesystem::path& path)
+StreamedStl Job::streamStl(const openvdb::FloatGrid& g, const std::filesystem::path& path)
 {
     checkReplaceable(path, mRecipe.source->path + ": mesh output");
-    const openvdb::FloatGrid& g = grid();
-    auto v = std::make_unique<MeshVariant>();
     const std::string name = path.filename().string();
-    const StreamedStl made = timed("mesh into " + name, [&] {
+    return timed("mesh into " + name, [&] {
         StageProgress progress(mContext, "meshing into " + name, 1000);
         std::atomic<std::uint64_t> last{0};
         // Volume terms about the domain's centre: near every triangle, so the sums keep their digits.
         return writeMarchingCubesStl(g, 0.0f, path.string(), mDomain.box.center(), feed(progress, last));
     });
+}
+
+void Job::writeStlWhileMeshing(const std::filesystem::path& path)
+{
+    const openvdb::FloatGrid& g = grid();
+    auto v = std::make_unique<MeshVariant>();
+    StreamedStl made;
+    if (mStreamedAim && mStreamedAim->path == path) {
+        made = mStreamedAim->made;  // written by aimLevelsAtMesh() at this level
+        mStreamedAim.reset();
+    } else {
+        made = streamStl(g, path);
+    }
     v->measures = made.measures;
     const StreamedMeshCounts& counts = made.counts;
     if (counts.triangles == 0)
@@ -1992,12 +2025,6 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
     OutputTransaction transaction(writeInterrupter());
     const auto firstMesh = std::find_if(mRecipe.outputs.begin(), mRecipe.outputs.end(),
                                         [](const OutputSpec& o) { return o.kind == "mesh"; });
-    // The first mesh is the one whose share of its region `density:` is held to: its level is aimed
-    // at it before any output is made, so every output has the same level.
-    if (firstMesh != mRecipe.outputs.end()) {
-        const MeshOptions options = meshOptions(*firstMesh);
-        aimLevelsAtMesh(options);
-    }
     // A raw marching-cubes STL whose mesh nothing else uses (no other output with the same mesh
     // settings, not the preview's) is written as it is made: the mesh is never held.
     auto onlyUse = [&](std::size_t n) {
@@ -2011,6 +2038,13 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
             if (m != n && mRecipe.outputs[m].kind == "mesh" && meshOptions(mRecipe.outputs[m]) == options) return false;
         return std::none_of(mMeshes.begin(), mMeshes.end(), [&](const auto& v) { return v->options == options; });
     };
+    // The first mesh is the one whose share of its region `density:` is held to: its level is aimed
+    // at it before any output is made, so every output has the same level (a streamed STL
+    // is measured as it is written: aimLevelsAtMesh()).
+    if (firstMesh != mRecipe.outputs.end()) {
+        const std::size_t first = std::size_t(firstMesh - mRecipe.outputs.begin());
+        aimLevelsAtMesh(meshOptions(*firstMesh), onlyUse(first) ? &paths[first] : nullptr);
+    }
     // Whether an output after the n-th may read the recipe's grid: a VDB, or a mesh made otherwise
     // (the preview's mesh is the first one's, held by then).
     auto gridNeededAfter = [&](std::size_t n) {

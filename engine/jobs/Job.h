@@ -154,7 +154,23 @@ private:
     /// moved by the solve's slope (the finished mesh's offset from marching cubes' kept) so the
     /// mesh holds the target, and the grid is evaluated again (`mesh_aim` in report.json). Else
     /// the grid is kept for the outputs. Once.
-    void aimLevelsAtMesh(const MeshOptions& options);
+    ///
+    /// With @a streamTo (the first mesh is a raw marching-cubes STL whose mesh nothing else uses,
+    /// written as it is made: writeStlWhileMeshing()), that file is written as the share is
+    /// measured, from the same triangles: at a level that stays, the output is then already
+    /// written (mStreamedAim) and the grid is meshed once, not twice; a file at a level that
+    /// moves is withdrawn from the open OutputTransaction and written again.
+    void aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::path* streamTo = nullptr);
+    /// The binary STL of the grid @a g's marching-cubes mesh written to @a path as it is made,
+    /// timed and with progress under the output's name.
+    StreamedStl streamStl(const openvdb::FloatGrid& g, const std::filesystem::path& path);
+    /// An STL aimLevelsAtMesh() wrote at the final level, taken by writeStlWhileMeshing().
+    struct StreamedAim {
+        std::filesystem::path path;
+        StreamedStl made;
+        std::string stage;  ///< the aim's stage it measured
+    };
+    std::optional<StreamedAim> mStreamedAim;
     /// A projected mesh @a m of a result with creases (or cut by the domain box without the box
     /// cut) made sharp: crease vertices onto both surfaces, edges across split, straying triangles
     /// refined (CreaseSplit, CreaseRefinement); their counts into @a report.

@@ -332,7 +332,18 @@ void AtomicFile::commit()
 
 namespace {
 thread_local OutputTransaction* tCurrentTransaction = nullptr;
+
+/// Removes a transaction's temporary file or folder (with what it holds) that is not to be renamed.
+void removeHeldTemporary(const std::string& temp, bool folder)
+{
+    std::error_code ec;
+    if (folder)
+        std::filesystem::remove_all(temp, ec);
+    else
+        std::filesystem::remove(temp, ec);
+    unregisterTemporary(temp);
 }
+}  // namespace
 
 OutputTransaction::OutputTransaction(WriteInterrupter interrupter)
     : mOuter(tCurrentTransaction), mInterrupter(std::move(interrupter))
@@ -345,14 +356,7 @@ OutputTransaction::~OutputTransaction()
 {
     tCurrentTransaction = mOuter;
     if (mCommitted) return;
-    for (const Rename& r : mRenames) {
-        std::error_code ec;
-        if (r.folder)
-            std::filesystem::remove_all(r.temp, ec);
-        else
-            std::filesystem::remove(r.temp, ec);
-        unregisterTemporary(r.temp);
-    }
+    for (const Rename& r : mRenames) removeHeldTemporary(r.temp, r.folder);
 }
 
 OutputTransaction* OutputTransaction::current()
@@ -363,6 +367,15 @@ OutputTransaction* OutputTransaction::current()
 void OutputTransaction::add(std::string temp, std::string path, bool folder)
 {
     mRenames.push_back({std::move(temp), std::move(path), folder});
+}
+
+void OutputTransaction::withdraw(const std::string& path)
+{
+    std::erase_if(mRenames, [&](const Rename& r) {
+        if (r.path != path) return false;
+        removeHeldTemporary(r.temp, r.folder);
+        return true;
+    });
 }
 
 void OutputTransaction::commit()

@@ -116,6 +116,9 @@ public:
     /// Holds back the rename of @a temp onto @a path (a file, or a folder when @a folder: an
     /// empty folder at @a path is replaced).
     void add(std::string temp, std::string path, bool folder);
+    /// Drops every held-back rename onto @a path and removes its temporary: a file written ahead
+    /// of its turn (a mesh measured as it is written) that is to be written again.
+    void withdraw(const std::string& path);
 
     /// Performs every held-back rename. Throws OutputError naming the path if one fails.
     void commit();
