@@ -356,21 +356,13 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 sol.evaluatedLeaves = grid->tree().leafCount();
                 sol.estimatedBytes = sol.evaluatedLeaves * evaluated.bytesPerLeaf;
             }
-            // Every evaluated band voxel once (a voxel's step does not depend on the band); the
-            // bracket's and the wide band's samples are picked from them, in the same order.
+            // The bracket's samples now and the wide band's below, each walked from the grid: a
+            // voxel's sample does not depend on the band, so they are the evaluated band's samples
+            // picked in order, without those (a 50 mm frame's 0.3 GB) held beside the grid and the
+            // raw values kept for it.
+            std::vector<float>().swap(band);  // the count's values: not read past here
             const float evaluatedLo = float(evaluated.band.lo), evaluatedHi = float(evaluated.band.hi);
-            std::vector<CoverageSample> evaluatedSamples =
-                coverageSamples(*grid, region, evaluatedLo, evaluatedHi, interrupt);
-            auto within = [&](float lo, float hi) {
-                auto inside = [&](const CoverageSample& c) { return !(c.value < lo || c.value > hi); };
-                std::vector<CoverageSample> picked;
-                picked.reserve(std::size_t(std::count_if(evaluatedSamples.begin(), evaluatedSamples.end(), inside)));
-                interrupt();
-                for (const CoverageSample& c : evaluatedSamples)
-                    if (inside(c)) picked.push_back(c);
-                return picked;
-            };
-            auto samples = within(float(options.band.lo), float(options.band.hi));
+            auto samples = coverageSamples(*grid, region, float(options.band.lo), float(options.band.hi), interrupt);
             double a = options.band.lo, b = std::min(options.band.hi, 1e30);
             std::uint64_t fullyBelow = below;
             // The bracket (a share of the voxels) can be far narrower than a voxel's change, and
@@ -390,18 +382,14 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 const bool covered = evaluated.band.lo <= wide.band.lo && wide.band.hi <= evaluated.band.hi;
                 const float wideLo = float(wide.band.lo), wideHi = float(wide.band.hi);
                 if (covered && evaluatedLo <= wideLo && wideHi <= evaluatedHi) {
-                    grid.reset();  // every sample needed is in evaluatedSamples
-                    // Below the wide band: those below the bracket, moved by the voxels between the
-                    // two low ends, which the evaluated band holds.
-                    const float bracketLo = float(options.band.lo);
-                    std::uint64_t belowWide = 0, belowBracket = 0;
-                    for (const CoverageSample& c : evaluatedSamples) {
-                        belowWide += c.value < wideLo;
-                        belowBracket += c.value < bracketLo;
-                    }
-                    fullyBelow = below + belowWide - belowBracket;
-                    samples = within(wideLo, wideHi);
+                    // Every voxel valued in the wide band is in one of the grid's leaves (tiles hold
+                    // +-FLT_MAX): below it, the region's voxels below its low end, tiles included.
+                    std::vector<CoverageSample>().swap(samples);
+                    fullyBelow = countBelow(*grid, region, wideLo);
+                    samples = coverageSamples(*grid, region, wideLo, wideHi, interrupt);
+                    grid.reset();
                 } else {
+                    std::vector<CoverageSample>().swap(samples);
                     const auto wideGrid =
                         covered ? grid : evaluateSparse(GridLeavesReused(indicator, *grid, domain), domain, wide);
                     if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
@@ -411,10 +399,8 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 a = wide.band.lo;
                 b = wide.band.hi;
             }
-            // The bisection reads the samples alone: the grid, the band's values and the evaluated
-            // band's samples are freed first (a plate's solve peaked with all of them held).
-            std::vector<CoverageSample>().swap(evaluatedSamples);
-            std::vector<float>().swap(band);
+            // The bisection reads the samples alone: the grid is freed first (a plate's solve
+            // peaked with the grid, the band's values and its samples held).
             grid.reset();
             // An open bracket (a target within 1 % of 0 or 1): bisect over the values present.
             for (const CoverageSample& c : samples) {
