@@ -7,6 +7,7 @@
 #include "fields/struts/GaussianTable.h"
 
 #include <algorithm>
+#include <limits>
 
 namespace voxlat {
 
@@ -23,6 +24,9 @@ struct StrutRowConstants {
 struct StrutRow {
     double x, y, z0, dz;
     int kLo, kHi;
+    /// Points inLo..inHi lie within the strut's cut-off (proven by provenWithinCutoff): the tabled
+    /// loops add them without their test (the same sums). Empty (inLo > inHi) unless proven.
+    int inLo = 1, inHi = 0;
 };
 
 /// Whether the point at (dx, dy, dz) from the strut's start is within its cut-off, with @a h its
@@ -35,6 +39,44 @@ inline bool withinCutoff(const StrutRowConstants& s, double dx, double dy, doubl
     const double r2 = std::max(0.0, lengthSqr - h * h);
     const double beyond = h < 0.0 ? h : (h > s.length ? h - s.length : 0.0);
     return r2 + beyond * beyond < s.cutoffSqr;
+}
+
+/// The squared distance from the point at (dx, dy, dz) from the strut's start to the segment, as
+/// withinCutoff computes it.
+inline double cutoffDistanceSqr(const StrutRowConstants& s, double dx, double dy, double dz)
+{
+    const double h = dx * s.ux + dy * s.uy + dz * s.uz;
+    const double lengthSqr = dx * dx + dy * dy + dz * dz;
+    const double r2 = std::max(0.0, lengthSqr - h * h);
+    const double beyond = h < 0.0 ? h : (h > s.length ? h - s.length : 0.0);
+    return r2 + beyond * beyond;
+}
+
+/// A bound on how far cutoffDistanceSqr's value for any point of a row lies from the exact squared
+/// distance of the exact point to the segment, where every point and the segment lie within
+/// @a reach of the strut's start and every coordinate (the rows' and the strut's) within @a coord
+/// of zero: the coordinates' roundings (about 7 eps (coord + reach) per point) move the distance
+/// squared by at most about 14 eps reach (coord + reach), the arithmetic (h, |d|^2, their
+/// difference, the overhang) by about 30 eps reach^2; 64 eps (reach^2 + coord reach) holds both.
+inline double cutoffRoundoff(double reach, double coord)
+{
+    return 64.0 * std::numeric_limits<double>::epsilon() * (reach * reach + coord * reach);
+}
+
+/// Whether every point k = inLo..inHi of @a row (inLo <= inHi) passes withinCutoff's test. Along
+/// a row the exact squared distance to the segment is convex in k (the squared distance of a
+/// point moving on a line to a convex set), so it is at most its larger end value in between. The
+/// ends' computed distances are below (1 - 1e-7) of the cut-off squared, and @a roundoff bounds
+/// how far any computed distance of this row lies from the exact one (the points' coordinates and
+/// the arithmetic: the caller's bound, at most half the 1e-7 margin), so every point's computed
+/// distance in between is below the cut-off squared.
+inline bool provenWithinCutoff(const StrutRowConstants& s, const StrutRow& row, int inLo, int inHi, double roundoff)
+{
+    const double limit = s.cutoffSqr * (1.0 - 1e-7);
+    if (!(2.0 * roundoff < s.cutoffSqr * 1e-7)) return false;
+    const double dx = row.x - s.ax, dy = row.y - s.ay;
+    return cutoffDistanceSqr(s, dx, dy, (row.z0 + inLo * row.dz) - s.az) < limit &&
+           cutoffDistanceSqr(s, dx, dy, (row.z0 + inHi * row.dz) - s.az) < limit;
 }
 
 /// Adds gauss[k] * J(h_k) to out[k] for every point of @a row within the strut's cut-off, where
@@ -62,14 +104,18 @@ inline void addStrutRowScalar(const StrutRowConstants& s, const StrutRow& row, c
 
 /// addStrutRowScalar with J(h) from its cubic Taylor polynomial @a c about @a hc instead of the
 /// table (a pixel's sub-samples: StrutConvolution::gridValues states the bound): the same points
-/// pass the cut-off.
+/// pass the cut-off (the row's proven points inLo..inHi take no test).
 inline void addStrutRowTaylorScalar(const StrutRowConstants& s, const StrutRow& row, const double c[4], double hc,
                                     const double* gauss, double* out)
 {
     const double dx = row.x - s.ax, dy = row.y - s.ay;
     for (int k = row.kLo; k <= row.kHi; ++k) {
         double h;
-        if (!withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
+        const double dz = (row.z0 + k * row.dz) - s.az;
+        if (k >= row.inLo && k <= row.inHi)
+            h = dx * s.ux + dy * s.uy + dz * s.uz;  // proven within: withinCutoff's h without its test
+        else if (!withinCutoff(s, dx, dy, dz, h))
+            continue;
         const double d = h - hc;
         out[k] += gauss[k] * (c[0] + d * (c[1] + d * (c[2] + d * c[3])));
     }
@@ -90,14 +136,16 @@ struct StrutRowTable {
     double w00, w10, w01, w11;
 };
 
-/// addStrutRowScalar with J(h_k) from @a table (the same points pass the same cut-off test).
+/// addStrutRowScalar with J(h_k) from @a table (the same points pass the same cut-off test; the
+/// row's proven points inLo..inHi take none).
 inline void addStrutRowTabledScalar(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
                                     const double* gauss, double* out)
 {
     const double dx = row.x - s.ax, dy = row.y - s.ay;
     for (int k = row.kLo; k <= row.kHi; ++k) {
         double h;
-        if (!withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
+        const bool inside = k >= row.inLo && k <= row.inHi;
+        if (!inside && !withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
         const int n = table.n0 + k;
         const double j0 = ((table.w00 * table.value[n] + table.w10 * table.slope[n]) + table.w01 * table.value[n + 1]) +
                           table.w11 * table.slope[n + 1];
