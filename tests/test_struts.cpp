@@ -546,6 +546,56 @@ TEST(StrutRows, ProvenPointsPassTheCutoffTestAndAddTheSameDoubles)
     RecordProperty("proven", std::to_string(proven));
 }
 
+TEST(StrutRows, CapsuleRangesHoldEveryPointWithinTheCutoff)
+{
+    // capsuleRowRange (plain root formulas, divisions once per strut) widened as
+    // StrutConvolution widens it (rc^2 by 1e-9, a step either side) holds every point of the row
+    // that passes withinCutoff, on random struts and rows (grazing ones, struts nearly along the
+    // rows, 60 mm struts, coordinates 150 mm off); the four-lane form gives the same doubles.
+    std::mt19937_64 rng(20261131);
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    std::uint64_t within = 0;
+    for (int trial = 0; trial < 20000; ++trial) {
+        const double offset = trial % 3 == 0 ? 150.0 : 0.0;
+        const Vec3d a(offset + unit(rng), offset + unit(rng), unit(rng));
+        Vec3d dir(unit(rng), unit(rng), unit(rng));
+        if (trial % 13 == 0) dir = Vec3d(0.01 * unit(rng), 0.01 * unit(rng), 1.0);  // nearly along the rows
+        dir.normalize();
+        const double sigma = 0.05 + 0.5 * std::abs(unit(rng));
+        const double length = trial % 11 == 0 ? 60.0 : 0.1 + 3.0 * std::abs(unit(rng));
+        const double rc = gaussianCutoffRadius(sigma, 1e-4), rc2 = rc * rc;
+        const double dz = 0.005 + 0.05 * std::abs(unit(rng));
+        if (!(dz * dz - std::pow(dz * dir.z(), 2) > 1e-9 * dz * dz)) continue;  // StrutConvolution's `ranged`
+        const CapsuleRows capsule(dir.x(), dir.y(), dir.z(), length, dz, rc2 * (1.0 + 1e-9) + 1e-300);
+        const StrutRowConstants c{a.x(), a.y(),       a.z(),         dir.x(), dir.y(), dir.z(), length,
+                                  sigma, 1.0 / sigma, sigma * sigma, 1.0,     0.0,     rc2};
+        const int nz = 16 + int(rng() % 60);
+        const Vec3d near =
+            a + std::abs(unit(rng)) * std::min(length, 3.0) * dir + 1.1 * rc * Vec3d(unit(rng), unit(rng), unit(rng));
+        double x[4], lo[4], hi[4];
+        const double y = near.y() - a.y(), z = near.z() - 0.5 * nz * dz - a.z();
+        for (int l = 0; l < 4; ++l) x[l] = near.x() - a.x() + 0.3 * rc * l * unit(rng);
+        if (hasAvx2Rows()) capsuleRowRangesAvx2(capsule, x, y, z, lo, hi);
+        for (int l = 0; l < 4; ++l) {
+            double tLo, tHi;
+            capsuleRowRange(capsule, x[l], y, z, tLo, tHi);
+            if (hasAvx2Rows()) {
+                ASSERT_EQ(std::memcmp(&tLo, &lo[l], sizeof tLo), 0) << trial;
+                ASSERT_EQ(std::memcmp(&tHi, &hi[l], sizeof tHi), 0) << trial;
+            }
+            for (int k = 0; k < nz; ++k) {
+                double h;
+                if (!withinCutoff(c, x[l], y, z + k * dz, h)) continue;
+                ++within;
+                ASSERT_LE(tLo, tHi) << trial;
+                ASSERT_GE(k, std::floor(tLo) - 1.0) << trial;
+                ASSERT_LE(k, std::ceil(tHi) + 1.0) << trial;
+            }
+        }
+    }
+    EXPECT_GT(within, 100000u);
+}
+
 TEST(GaussianTable, InterpolationErrorWithinItsDocumentedBound)
 {
     const GaussianTable& t = GaussianTable::instance();

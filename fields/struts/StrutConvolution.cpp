@@ -82,67 +82,6 @@ void StrutConvolution::gradients(std::span<const Vec3d> points, std::span<double
 
 namespace {
 
-/// The constants of capsuleRowRange for one strut (unit direction @a u, @a length), rows of step
-/// @a dz along z and the cut-off radius squared @a rc2; cc = dz^2 - (dz u_z)^2 > 0 (rows not
-/// parallel to the strut).
-struct CapsuleRows {
-    Vec3d u;
-    double length, rc2, dz, hz, cc, invDz, halfInvCc, invHz;
-    CapsuleRows(const Vec3d& dir, double len, double step, double radiusSqr)
-        : u(dir),
-          length(len),
-          rc2(radiusSqr),
-          dz(step),
-          hz(step * dir.z()),
-          cc(step * step - hz * hz),
-          invDz(1.0 / step),
-          halfInvCc(cc > 0.0 ? 0.5 / cc : 0.0),
-          invHz(hz != 0.0 ? 1.0 / hz : 0.0)
-    {
-    }
-};
-
-/// A real interval [lo, hi] (empty: lo > hi) holding the k where the row D + k e, e = (0, 0, dz),
-/// comes within rc of the segment from the origin along u (the union of the cylinder's part inside
-/// the slab 0 <= h <= length and the two end balls; a capsule is convex, so the union is one
-/// interval). Only a filter (every point in and about it still takes the exact cut-off test), so
-/// the roots come from the plain formulas with the divisions taken once per strut: their rounding
-/// moves an end by far less than the step its callers widen it by (the caller's rc2 is widened by
-/// 1e-9 of itself against the near-tangent rows).
-void capsuleRowRange(const CapsuleRows& k, const Vec3d& D, double& lo, double& hi)
-{
-    lo = std::numeric_limits<double>::infinity();
-    hi = -std::numeric_limits<double>::infinity();
-    // End balls: (d.z + k dz)^2 < rc^2 - d.x^2 - d.y^2, d = D - h u.
-    for (const double h : {0.0, k.length}) {
-        const double dx = D.x() - h * k.u.x(), dy = D.y() - h * k.u.y(), dz = D.z() - h * k.u.z();
-        const double w = k.rc2 - dx * dx - dy * dy;
-        if (!(w > 0.0)) continue;
-        const double root = std::sqrt(w);
-        const double a = (-dz - root) * k.invDz, b = (-dz + root) * k.invDz;
-        lo = std::min(lo, std::min(a, b));
-        hi = std::max(hi, std::max(a, b));
-    }
-    // Cylinder: r^2(k) = |D + k e|^2 - h(k)^2 < rc^2, h(k) = D.u + k dz u_z: cc k^2 + B k + C < 0.
-    const double h0 = D.dot(k.u);
-    const double B = 2.0 * (D.z() * k.dz - h0 * k.hz), C = D.lengthSqr() - h0 * h0 - k.rc2;
-    const double disc = B * B - 4.0 * k.cc * C;
-    if (!(disc > 0.0)) return;
-    const double root = std::sqrt(disc);
-    double a = (-B - root) * k.halfInvCc, b = (-B + root) * k.halfInvCc;
-    if (k.hz != 0.0) {
-        double s0 = -h0 * k.invHz, s1 = (k.length - h0) * k.invHz;
-        if (s0 > s1) std::swap(s0, s1);
-        a = std::max(a, s0);
-        b = std::min(b, s1);
-    } else if (!(h0 >= 0.0 && h0 <= k.length)) {
-        return;
-    }
-    if (a > b) return;
-    lo = std::min(lo, a);
-    hi = std::max(hi, b);
-}
-
 /// The part of the plane z = @a z within @a reach of the segment @a s lies within [xLo, xHi] x
 /// [yLo, yHi]: a point of the plane within reach of the segment is within reach of a segment point
 /// q with |q.z - z| < reach, so within reach in x and in y of that part of the segment. False when
@@ -312,6 +251,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         int inLo = 1, inHi = 0;  ///< points at least a step inside the capsule's range (to prove)
     };
     thread_local std::vector<RowRange> rows;
+    thread_local std::vector<double> rangeLo, rangeHi;
     const bool avx2 = hasAvx2Rows();
     const double dx = spacing.x(), dy = spacing.y(), dz = spacing.z();
     // Strut-outer, point-inner: each point still sums its struts in ascending index order. Along
@@ -367,7 +307,19 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         // The analytic range is only a filter: points within a step of its ends, and all points
         // between, still take the exact cut-off test, so the same points count as before.
         const double rcWide2 = rc2 * (1.0 + 1e-9) + 1e-300;
-        const CapsuleRows capsule(u, length, dz, rcWide2);
+        const CapsuleRows capsule(u.x(), u.y(), u.z(), length, dz, rcWide2);
+        // A plane's rows (one per column): their ranges four columns at a time.
+        const bool vectorRanges = avx2 && ranged && !shortRows && ny == 1 && iFirst <= iLast;
+        if (vectorRanges) {
+            const std::size_t count = std::size_t(iLast - iFirst + 1);
+            rangeLo.resize(count + 4);
+            rangeHi.resize(count + 4);
+            for (std::size_t m = 0; m < count; m += 4) {
+                double x[4];
+                for (int l = 0; l < 4; ++l) x[l] = d0.x() + (iFirst + int(m) + l) * dx;
+                capsuleRowRangesAvx2(capsule, x, d0.y(), d0.z(), rangeLo.data() + m, rangeHi.data() + m);
+            }
+        }
         // Pass 1: each row's range of points (kLo > kHi: none).
         rows.resize(std::size_t(nx) * ny);
         for (int i = 0; i < nx; ++i) {
@@ -388,7 +340,12 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     // cheaper than the row's range.
                 } else if (ranged) {
                     double tLo, tHi;
-                    capsuleRowRange(capsule, Vec3d(px, py, d0.z()), tLo, tHi);
+                    if (vectorRanges) {
+                        tLo = rangeLo[std::size_t(i - iFirst)];
+                        tHi = rangeHi[std::size_t(i - iFirst)];
+                    } else {
+                        capsuleRowRange(capsule, px, py, d0.z(), tLo, tHi);
+                    }
                     if (!(tLo <= tHi)) {
                         r.kLo = 1;
                         r.kHi = 0;

@@ -7,7 +7,9 @@
 #include "fields/struts/GaussianTable.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
+#include <utility>
 
 namespace voxlat {
 
@@ -78,6 +80,71 @@ inline bool provenWithinCutoff(const StrutRowConstants& s, const StrutRow& row, 
     return cutoffDistanceSqr(s, dx, dy, (row.z0 + inLo * row.dz) - s.az) < limit &&
            cutoffDistanceSqr(s, dx, dy, (row.z0 + inHi * row.dz) - s.az) < limit;
 }
+
+/// The constants of capsuleRowRange for one strut (unit direction (ux, uy, uz), @a length), rows of
+/// step @a dz along z and the cut-off radius squared @a rc2; cc = dz^2 - (dz u_z)^2 > 0 (rows not
+/// parallel to the strut).
+struct CapsuleRows {
+    double ux, uy, uz, length, rc2, dz, hz, cc, invDz, halfInvCc, invHz;
+    CapsuleRows(double dirX, double dirY, double dirZ, double len, double step, double radiusSqr)
+        : ux(dirX),
+          uy(dirY),
+          uz(dirZ),
+          length(len),
+          rc2(radiusSqr),
+          dz(step),
+          hz(step * dirZ),
+          cc(step * step - hz * hz),
+          invDz(1.0 / step),
+          halfInvCc(cc > 0.0 ? 0.5 / cc : 0.0),
+          invHz(hz != 0.0 ? 1.0 / hz : 0.0)
+    {
+    }
+};
+
+/// A real interval [lo, hi] (empty: lo > hi) holding the k where the row (x, y, z + k dz), given
+/// from the strut's start, comes within rc of the segment (the union of the cylinder's part inside
+/// the slab 0 <= h <= length and the two end balls; a capsule is convex, so the union is one
+/// interval). Only a filter (every point in and about it still takes the exact cut-off test), so
+/// the roots come from the plain formulas with the divisions taken once per strut: their rounding
+/// moves an end by far less than the step its callers widen it by (the caller's rc2 is widened by
+/// 1e-9 of itself against the near-tangent rows).
+inline void capsuleRowRange(const CapsuleRows& k, double x, double y, double z, double& lo, double& hi)
+{
+    lo = std::numeric_limits<double>::infinity();
+    hi = -std::numeric_limits<double>::infinity();
+    // End balls: (d.z + k dz)^2 < rc^2 - d.x^2 - d.y^2, d = D - h u.
+    for (const double h : {0.0, k.length}) {
+        const double dx = x - h * k.ux, dy = y - h * k.uy, dz = z - h * k.uz;
+        const double w = k.rc2 - dx * dx - dy * dy;
+        if (!(w > 0.0)) continue;
+        const double root = std::sqrt(w);
+        const double a = (-dz - root) * k.invDz, b = (-dz + root) * k.invDz;
+        lo = std::min(lo, std::min(a, b));
+        hi = std::max(hi, std::max(a, b));
+    }
+    // Cylinder: r^2(k) = |D + k e|^2 - h(k)^2 < rc^2, h(k) = D.u + k dz u_z: cc k^2 + B k + C < 0.
+    const double h0 = x * k.ux + y * k.uy + z * k.uz;
+    const double B = 2.0 * (z * k.dz - h0 * k.hz), C = x * x + y * y + z * z - h0 * h0 - k.rc2;
+    const double disc = B * B - 4.0 * k.cc * C;
+    if (!(disc > 0.0)) return;
+    const double root = std::sqrt(disc);
+    double a = (-B - root) * k.halfInvCc, b = (-B + root) * k.halfInvCc;
+    if (k.hz != 0.0) {
+        double s0 = -h0 * k.invHz, s1 = (k.length - h0) * k.invHz;
+        if (s0 > s1) std::swap(s0, s1);
+        a = std::max(a, s0);
+        b = std::min(b, s1);
+    } else if (!(h0 >= 0.0 && h0 <= k.length)) {
+        return;
+    }
+    if (a > b) return;
+    lo = std::min(lo, a);
+    hi = std::max(hi, b);
+}
+
+/// capsuleRowRange of four rows (x[l], y, z), l = 0..3, in four lanes; the same doubles.
+void capsuleRowRangesAvx2(const CapsuleRows& k, const double x[4], double y, double z, double lo[4], double hi[4]);
 
 /// Adds gauss[k] * J(h_k) to out[k] for every point of @a row within the strut's cut-off, where
 /// h_k is the point's coordinate along the strut and J the weighted erf integral (GaussianTable).

@@ -5,6 +5,8 @@
 
 #include "fields/struts/StrutRows.h"
 
+#include <limits>
+
 #ifdef VOXLAT_AVX2_ROWS
 #include <immintrin.h>
 #endif
@@ -262,6 +264,66 @@ void strutRowNodesAvx2(const StrutRowConstants& s, double h0, double step, int f
     }
 }
 
+void capsuleRowRangesAvx2(const CapsuleRows& k, const double x[4], double y, double z, double lo[4], double hi[4])
+{
+    const __m256d xs = _mm256_loadu_pd(x), ys = _mm256_set1_pd(y), zs = _mm256_set1_pd(z), zero = _mm256_setzero_pd();
+    const __m256d ux = _mm256_set1_pd(k.ux), uy = _mm256_set1_pd(k.uy), uz = _mm256_set1_pd(k.uz);
+    const __m256d rc2 = _mm256_set1_pd(k.rc2), invDz = _mm256_set1_pd(k.invDz);
+    __m256d low = _mm256_set1_pd(std::numeric_limits<double>::infinity());
+    __m256d high = _mm256_set1_pd(-std::numeric_limits<double>::infinity());
+    // End balls (lanes where w > 0 merge their interval).
+    for (const double h : {0.0, k.length}) {
+        const __m256d hv = _mm256_set1_pd(h);
+        const __m256d dx = _mm256_sub_pd(xs, _mm256_mul_pd(hv, ux)), dy = _mm256_sub_pd(ys, _mm256_mul_pd(hv, uy)),
+                      dz = _mm256_sub_pd(zs, _mm256_mul_pd(hv, uz));
+        const __m256d w = _mm256_sub_pd(_mm256_sub_pd(rc2, _mm256_mul_pd(dx, dx)), _mm256_mul_pd(dy, dy));
+        const __m256d inside = _mm256_cmp_pd(w, zero, _CMP_GT_OQ);
+        if (_mm256_movemask_pd(inside) == 0) continue;
+        const __m256d root = _mm256_sqrt_pd(_mm256_max_pd(w, zero));
+        const __m256d negDz = _mm256_sub_pd(zero, dz);
+        const __m256d a = _mm256_mul_pd(_mm256_sub_pd(negDz, root), invDz),
+                      b = _mm256_mul_pd(_mm256_add_pd(negDz, root), invDz);
+        // std::min(lo, std::min(a, b)): min(x, y) = y < x ? y : x, as _mm256_min_pd(y, x) gives.
+        const __m256d ab0 = _mm256_min_pd(b, a), ab1 = _mm256_max_pd(b, a);
+        low = _mm256_blendv_pd(low, _mm256_min_pd(ab0, low), inside);
+        high = _mm256_blendv_pd(high, _mm256_max_pd(ab1, high), inside);
+    }
+    // Cylinder.
+    const __m256d h0 =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(xs, ux), _mm256_mul_pd(ys, uy)), _mm256_mul_pd(zs, uz));
+    const __m256d B = _mm256_mul_pd(_mm256_set1_pd(2.0), _mm256_sub_pd(_mm256_mul_pd(zs, _mm256_set1_pd(k.dz)),
+                                                                       _mm256_mul_pd(h0, _mm256_set1_pd(k.hz))));
+    const __m256d C = _mm256_sub_pd(
+        _mm256_sub_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(xs, xs), _mm256_mul_pd(ys, ys)), _mm256_mul_pd(zs, zs)),
+                      _mm256_mul_pd(h0, h0)),
+        rc2);
+    const __m256d disc = _mm256_sub_pd(_mm256_mul_pd(B, B), _mm256_mul_pd(_mm256_set1_pd(4.0 * k.cc), C));
+    __m256d valid = _mm256_cmp_pd(disc, zero, _CMP_GT_OQ);
+    if (_mm256_movemask_pd(valid) != 0) {
+        const __m256d root = _mm256_sqrt_pd(_mm256_max_pd(disc, zero)), half = _mm256_set1_pd(k.halfInvCc);
+        const __m256d negB = _mm256_sub_pd(zero, B);
+        __m256d a = _mm256_mul_pd(_mm256_sub_pd(negB, root), half), b = _mm256_mul_pd(_mm256_add_pd(negB, root), half);
+        if (k.hz != 0.0) {
+            const __m256d invHz = _mm256_set1_pd(k.invHz);
+            const __m256d s0 = _mm256_mul_pd(_mm256_sub_pd(zero, h0), invHz),
+                          s1 = _mm256_mul_pd(_mm256_sub_pd(_mm256_set1_pd(k.length), h0), invHz);
+            // if (s0 > s1) swap: the lesser and the greater.
+            const __m256d swap = _mm256_cmp_pd(s0, s1, _CMP_GT_OQ);
+            const __m256d first = _mm256_blendv_pd(s0, s1, swap), second = _mm256_blendv_pd(s1, s0, swap);
+            a = _mm256_max_pd(first, a);   // std::max(a, first)
+            b = _mm256_min_pd(second, b);  // std::min(b, second)
+        } else {
+            valid = _mm256_and_pd(valid, _mm256_and_pd(_mm256_cmp_pd(h0, zero, _CMP_GE_OQ),
+                                                       _mm256_cmp_pd(h0, _mm256_set1_pd(k.length), _CMP_LE_OQ)));
+        }
+        valid = _mm256_and_pd(valid, _mm256_cmp_pd(a, b, _CMP_LE_OQ));
+        low = _mm256_blendv_pd(low, _mm256_min_pd(a, low), valid);
+        high = _mm256_blendv_pd(high, _mm256_max_pd(b, high), valid);
+    }
+    _mm256_storeu_pd(lo, low);
+    _mm256_storeu_pd(hi, high);
+}
+
 void addStrutRowAvx2(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
 {
     if (s.slope == 0.0)
@@ -304,6 +366,11 @@ void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, cons
 void addStrutRowAvx2(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
 {
     addStrutRowScalar(s, row, gauss, out);
+}
+
+void capsuleRowRangesAvx2(const CapsuleRows& k, const double x[4], double y, double z, double lo[4], double hi[4])
+{
+    for (int l = 0; l < 4; ++l) capsuleRowRange(k, x[l], y, z, lo[l], hi[l]);
 }
 
 bool hasAvx2Rows()
