@@ -287,17 +287,19 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         const double hc = (centre - s.a).dot(s.u);
         if (taylor) taylorOfJ(s, hc, coefficients);
         const bool shortRows = taylor && nz <= kShortRow;
+        // The rounding bound of the proofs below (cutoffRoundoff): every point and the strut lie
+        // within reach of the strut's start, every coordinate within coord of zero.
+        const double reach = (centre - s.a).length() + halfExtent.length() + length;
+        double coord = 0.0;
+        for (int axis = 0; axis < 3; ++axis)
+            coord = std::max({coord, std::abs(box.min[axis]), std::abs(box.max[axis]), std::abs(s.a[axis]),
+                              std::abs(mEnd[j][axis])});
+        const double roundoff = cutoffRoundoff(reach, coord);
         // A pixel's sub-samples (short rows) wholly within the strut's cut-off take no test: the
         // centre's distance, with the rounding bound of cutoffRoundoff on it and on every point's,
         // plus the half diagonal, below (1 - 1e-7) of the cut-off.
         bool wholeInside = false;
         if (shortRows) {
-            const double reach = (centre - s.a).length() + halfExtent.length() + length;
-            double coord = 0.0;
-            for (int axis = 0; axis < 3; ++axis)
-                coord = std::max({coord, std::abs(box.min[axis]), std::abs(box.max[axis]), std::abs(s.a[axis]),
-                                  std::abs(mEnd[j][axis])});
-            const double roundoff = cutoffRoundoff(reach, coord);
             double hCentre, r2Centre;
             const double farthest =
                 std::sqrt(s.distanceSqr(centre, hCentre, r2Centre) + roundoff) + halfExtent.length();
@@ -378,14 +380,6 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         const double spread = std::abs(dx * u.x()) * (nx - 1) + std::abs(dy * u.y()) * (ny - 1);
         const bool tabled = !taylor && ranged && nz >= 16 && hz != 0.0 && std::abs(hz) <= 0.1 * sigma &&
                             spread <= 8.0 * nz * std::abs(hz);
-        // provenWithinCutoff's rounding bound for this strut and batch: every point and the
-        // strut lie within reach of the strut's start, every coordinate within coord of zero.
-        const double reach = (centre - s.a).length() + halfExtent.length() + length;
-        double coord = 0.0;
-        for (int axis = 0; axis < 3; ++axis)
-            coord = std::max({coord, std::abs(box.min[axis]), std::abs(box.max[axis]), std::abs(s.a[axis]),
-                              std::abs(mEnd[j][axis])});
-        const double roundoff = cutoffRoundoff(reach, coord);
         int nodeLo = 0;
         if (tabled) {
             // h at a row's point 0 is hRow (below); nodes h0 + n hz, with h0 one node past the
