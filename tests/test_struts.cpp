@@ -449,6 +449,153 @@ TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
     EXPECT_GT(lanesAdded, lanesCompared / 8);
 }
 
+TEST(StrutRows, ProvenPointsPassTheCutoffTestAndAddTheSameDoubles)
+{
+    // provenWithinCutoff (a tabled row's points inside the capsule added without their test):
+    // on random struts and rows (short and 60 mm struts, coordinates near zero and 150 mm off,
+    // rows grazing the cut-off), whenever it proves a run of points, every one of them passes
+    // withinCutoff; runs holding a point that fails are never proven; the interior of a row's
+    // passing run is proven in most rows. Both tabled loops add the same doubles with the run
+    // proven as without it.
+    std::mt19937_64 rng(20261130);
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    std::uint64_t proven = 0, interiors = 0, refused = 0;
+    for (int trial = 0; trial < 20000; ++trial) {
+        const double offset = trial % 3 == 0 ? 150.0 : 0.0;
+        const Vec3d a(offset + unit(rng), offset + unit(rng), unit(rng));
+        Vec3d dir(unit(rng), unit(rng), unit(rng));
+        dir.normalize();
+        const double sigma = 0.05 + 0.5 * std::abs(unit(rng));
+        const double length = trial % 11 == 0 ? 60.0 : 0.1 + 3.0 * std::abs(unit(rng));
+        const double rc = gaussianCutoffRadius(sigma, 1e-4);
+        const StrutRowConstants c{a.x(), a.y(),       a.z(),         dir.x(), dir.y(), dir.z(), length,
+                                  sigma, 1.0 / sigma, sigma * sigma, 1.0,     0.0,     rc * rc};
+        const int nz = 16 + int(rng() % 60);
+        // The row passes the strut's line at a random distance up to 1.1 rc (grazing rows too).
+        const double along = std::abs(unit(rng)) * std::min(length, 3.0);
+        Vec3d side = dir.cross(Vec3d(0.3, 0.5, 0.81));
+        side.normalize();
+        const Vec3d near = a + along * dir + 1.1 * rc * std::abs(unit(rng)) * side;
+        const double dz = 0.005 + 0.05 * std::abs(unit(rng));
+        StrutRow row{near.x(), near.y(), near.z() - 0.5 * nz * dz, dz, 0, nz - 1};
+        std::vector<char> passes(static_cast<std::size_t>(nz));
+        int first = nz, last = -1;
+        for (int k = 0; k < nz; ++k) {
+            double h;
+            passes[std::size_t(k)] = withinCutoff(c, row.x - c.ax, row.y - c.ay, (row.z0 + k * row.dz) - c.az, h);
+            if (passes[std::size_t(k)]) first = std::min(first, k), last = k;
+        }
+        const Vec3d lo(row.x, row.y, row.z0), hi(row.x, row.y, row.z0 + (nz - 1) * dz);
+        const double reach = (0.5 * (lo + hi) - a).length() + 0.5 * (hi - lo).length() + length;
+        double coord = 0.0;
+        for (int axis = 0; axis < 3; ++axis)
+            coord = std::max(
+                {coord, std::abs(lo[axis]), std::abs(hi[axis]), std::abs(a[axis]), std::abs((a + length * dir)[axis])});
+        const double roundoff = cutoffRoundoff(reach, coord);
+        // Candidate runs: the passing run's interior, the run itself, random runs.
+        std::vector<std::array<int, 2>> runs = {{first + 1, last - 1}, {first, last}};
+        for (int m = 0; m < 4; ++m) {
+            const int p = int(rng() % nz), q = p + int(rng() % (nz - p));
+            runs.push_back({p, q});
+        }
+        for (const auto& [p, q] : runs) {
+            if (p > q || p < 0 || q >= nz) continue;
+            bool all = true;
+            for (int k = p; k <= q; ++k) all = all && passes[std::size_t(k)];
+            if (!provenWithinCutoff(c, row, p, q, roundoff)) {
+                refused += !all;
+                continue;
+            }
+            ASSERT_TRUE(all) << "trial " << trial << " run " << p << ".." << q;
+            ++proven;
+            interiors += p == first + 1 && q == last - 1;
+        }
+        if (!(first + 1 <= last - 1 && provenWithinCutoff(c, row, first + 1, last - 1, roundoff))) continue;
+        // The tabled loops with the run proven: the same doubles as without it.
+        std::vector<double> value(std::size_t(nz + 8)), slope(value.size());
+        for (std::size_t m = 0; m < value.size(); ++m) {
+            value[m] = std::abs(unit(rng));
+            slope[m] = 0.1 * unit(rng);
+        }
+        const double t = 0.5 * (unit(rng) + 1.0), t2 = t * t, t3 = t2 * t;
+        const StrutRowTable table{value.data(),    slope.data(),     0,      2 * t3 - 3 * t2 + 1,
+                                  t3 - 2 * t2 + t, -2 * t3 + 3 * t2, t3 - t2};
+        std::vector<double> gauss(static_cast<std::size_t>(nz)), plain(static_cast<std::size_t>(nz) + 4);
+        for (double& g : gauss) g = std::abs(unit(rng));
+        for (double& v : plain) v = std::abs(unit(rng));
+        std::vector<double> scalar = plain, lanes = plain, lanesPlain = plain;
+        StrutRow inside = row;
+        inside.kLo = int(rng() % nz);
+        inside.kHi = inside.kLo + int(rng() % (nz - inside.kLo));
+        StrutRow tested = inside;
+        inside.inLo = first + 1;
+        inside.inHi = last - 1;
+        addStrutRowTabledScalar(c, tested, table, gauss.data(), plain.data());
+        addStrutRowTabledScalar(c, inside, table, gauss.data(), scalar.data());
+        ASSERT_EQ(std::memcmp(plain.data(), scalar.data(), plain.size() * sizeof(double)), 0) << trial;
+        if (hasAvx2Rows()) {
+            addStrutRowTabledAvx2(c, tested, table, gauss.data(), lanesPlain.data());
+            addStrutRowTabledAvx2(c, inside, table, gauss.data(), lanes.data());
+            ASSERT_EQ(std::memcmp(plain.data(), lanesPlain.data(), plain.size() * sizeof(double)), 0) << trial;
+            ASSERT_EQ(std::memcmp(plain.data(), lanes.data(), plain.size() * sizeof(double)), 0) << trial;
+        }
+    }
+    EXPECT_GT(proven, 5000u);
+    EXPECT_GT(interiors, 4000u);
+    EXPECT_GT(refused, 1000u);  // runs holding failing points were offered, and refused
+    RecordProperty("proven", std::to_string(proven));
+}
+
+TEST(StrutRows, CapsuleRangesHoldEveryPointWithinTheCutoff)
+{
+    // capsuleRowRange (plain root formulas, divisions once per strut) widened as
+    // StrutConvolution widens it (rc^2 by 1e-9, a step either side) holds every point of the row
+    // that passes withinCutoff, on random struts and rows (grazing ones, struts nearly along the
+    // rows, 60 mm struts, coordinates 150 mm off); the four-lane form gives the same doubles.
+    std::mt19937_64 rng(20261131);
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    std::uint64_t within = 0;
+    for (int trial = 0; trial < 20000; ++trial) {
+        const double offset = trial % 3 == 0 ? 150.0 : 0.0;
+        const Vec3d a(offset + unit(rng), offset + unit(rng), unit(rng));
+        Vec3d dir(unit(rng), unit(rng), unit(rng));
+        if (trial % 13 == 0) dir = Vec3d(0.01 * unit(rng), 0.01 * unit(rng), 1.0);  // nearly along the rows
+        dir.normalize();
+        const double sigma = 0.05 + 0.5 * std::abs(unit(rng));
+        const double length = trial % 11 == 0 ? 60.0 : 0.1 + 3.0 * std::abs(unit(rng));
+        const double rc = gaussianCutoffRadius(sigma, 1e-4), rc2 = rc * rc;
+        const double dz = 0.005 + 0.05 * std::abs(unit(rng));
+        if (!(dz * dz - std::pow(dz * dir.z(), 2) > 1e-9 * dz * dz)) continue;  // StrutConvolution's `ranged`
+        const CapsuleRows capsule(dir.x(), dir.y(), dir.z(), length, dz, rc2 * (1.0 + 1e-9) + 1e-300);
+        const StrutRowConstants c{a.x(), a.y(),       a.z(),         dir.x(), dir.y(), dir.z(), length,
+                                  sigma, 1.0 / sigma, sigma * sigma, 1.0,     0.0,     rc2};
+        const int nz = 16 + int(rng() % 60);
+        const Vec3d near =
+            a + std::abs(unit(rng)) * std::min(length, 3.0) * dir + 1.1 * rc * Vec3d(unit(rng), unit(rng), unit(rng));
+        double x[4], lo[4], hi[4];
+        const double y = near.y() - a.y(), z = near.z() - 0.5 * nz * dz - a.z();
+        for (int l = 0; l < 4; ++l) x[l] = near.x() - a.x() + 0.3 * rc * l * unit(rng);
+        if (hasAvx2Rows()) capsuleRowRangesAvx2(capsule, x, y, z, lo, hi);
+        for (int l = 0; l < 4; ++l) {
+            double tLo, tHi;
+            capsuleRowRange(capsule, x[l], y, z, tLo, tHi);
+            if (hasAvx2Rows()) {
+                ASSERT_EQ(std::memcmp(&tLo, &lo[l], sizeof tLo), 0) << trial;
+                ASSERT_EQ(std::memcmp(&tHi, &hi[l], sizeof tHi), 0) << trial;
+            }
+            for (int k = 0; k < nz; ++k) {
+                double h;
+                if (!withinCutoff(c, x[l], y, z + k * dz, h)) continue;
+                ++within;
+                ASSERT_LE(tLo, tHi) << trial;
+                ASSERT_GE(k, std::floor(tLo) - 1.0) << trial;
+                ASSERT_LE(k, std::ceil(tHi) + 1.0) << trial;
+            }
+        }
+    }
+    EXPECT_GT(within, 100000u);
+}
+
 TEST(GaussianTable, InterpolationErrorWithinItsDocumentedBound)
 {
     const GaussianTable& t = GaussianTable::instance();

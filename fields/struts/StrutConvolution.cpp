@@ -82,68 +82,6 @@ void StrutConvolution::gradients(std::span<const Vec3d> points, std::span<double
 
 namespace {
 
-/// Adds to [lo, hi] the t with q(t) = a t^2 + b t + c < 0 (a >= 0); false if none.
-bool quadraticBelowZero(double a, double b, double c, double& lo, double& hi)
-{
-    if (a <= 0.0) {
-        // Linear or constant: a row parallel to the strut (the callers guard the degenerate case).
-        if (b == 0.0) {
-            if (c >= 0.0) return false;
-            lo = -std::numeric_limits<double>::infinity();
-            hi = std::numeric_limits<double>::infinity();
-            return true;
-        }
-        const double t = -c / b;
-        lo = b > 0.0 ? -std::numeric_limits<double>::infinity() : t;
-        hi = b > 0.0 ? t : std::numeric_limits<double>::infinity();
-        return true;
-    }
-    const double disc = b * b - 4.0 * a * c;
-    if (disc <= 0.0) return false;
-    const double root = std::sqrt(disc);
-    // The stable pair of roots (no cancellation between -b and the root).
-    const double qq = -0.5 * (b + std::copysign(root, b));
-    double t1 = qq / a, t2 = qq != 0.0 ? c / qq : t1;
-    if (t1 > t2) std::swap(t1, t2);
-    lo = t1;
-    hi = t2;
-    return true;
-}
-
-/// The range of k (a real interval, possibly empty: lo > hi) where the row D + k e, e = (0, 0,
-/// dz), comes within @a rc of the segment from the origin along @a u of @a length: the union of
-/// the cylinder's part inside the slab 0 <= h <= length and the two end balls (a capsule is
-/// convex, so the union is one interval).
-void capsuleRowRange(const Vec3d& D, double dz, const Vec3d& u, double length, double rc2, double& lo, double& hi)
-{
-    lo = std::numeric_limits<double>::infinity();
-    hi = -std::numeric_limits<double>::infinity();
-    auto merge = [&](double a, double b) {
-        if (a > b) return;
-        lo = std::min(lo, a);
-        hi = std::max(hi, b);
-    };
-    // End balls: |D + k e - C|^2 < rc^2.
-    for (const double h : {0.0, length}) {
-        const Vec3d d = D - h * u;
-        double a, b;
-        if (quadraticBelowZero(dz * dz, 2.0 * d.z() * dz, d.lengthSqr() - rc2, a, b)) merge(a, b);
-    }
-    // Cylinder: r^2(k) = |D + k e|^2 - h(k)^2, h(k) = D.u + k dz u_z.
-    const double h0 = D.dot(u), hz = dz * u.z();
-    const double c = dz * dz - hz * hz;
-    double a, b;
-    if (quadraticBelowZero(c, 2.0 * (D.z() * dz - h0 * hz), D.lengthSqr() - h0 * h0 - rc2, a, b)) {
-        if (hz != 0.0) {
-            double s0 = -h0 / hz, s1 = (length - h0) / hz;
-            if (s0 > s1) std::swap(s0, s1);
-            merge(std::max(a, s0), std::min(b, s1));
-        } else if (h0 >= 0.0 && h0 <= length) {
-            merge(a, b);
-        }
-    }
-}
-
 /// The part of the plane z = @a z within @a reach of the segment @a s lies within [xLo, xHi] x
 /// [yLo, yHi]: a point of the plane within reach of the segment is within reach of a segment point
 /// q with |q.z - z| < reach, so within reach in x and in y of that part of the segment. False when
@@ -310,8 +248,10 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
     struct RowRange {
         int kLo, kHi, n0;
         double tau;
+        int inLo = 1, inHi = 0;  ///< points at least a step inside the capsule's range (to prove)
     };
     thread_local std::vector<RowRange> rows;
+    thread_local std::vector<double> rangeLo, rangeHi;
     const bool avx2 = hasAvx2Rows();
     const double dx = spacing.x(), dy = spacing.y(), dz = spacing.z();
     // Strut-outer, point-inner: each point still sums its struts in ascending index order. Along
@@ -347,9 +287,41 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         const double hc = (centre - s.a).dot(s.u);
         if (taylor) taylorOfJ(s, hc, coefficients);
         const bool shortRows = taylor && nz <= kShortRow;
+        // The rounding bound of the proofs below (cutoffRoundoff): every point and the strut lie
+        // within reach of the strut's start, every coordinate within coord of zero.
+        const double reach = (centre - s.a).length() + halfExtent.length() + length;
+        double coord = 0.0;
+        for (int axis = 0; axis < 3; ++axis)
+            coord = std::max({coord, std::abs(box.min[axis]), std::abs(box.max[axis]), std::abs(s.a[axis]),
+                              std::abs(mEnd[j][axis])});
+        const double roundoff = cutoffRoundoff(reach, coord);
+        // A pixel's sub-samples (short rows) wholly within the strut's cut-off take no test: the
+        // centre's distance, with the rounding bound of cutoffRoundoff on it and on every point's,
+        // plus the half diagonal, below (1 - 1e-7) of the cut-off.
+        bool wholeInside = false;
+        if (shortRows) {
+            double hCentre, r2Centre;
+            const double farthest =
+                std::sqrt(s.distanceSqr(centre, hCentre, r2Centre) + roundoff) + halfExtent.length();
+            wholeInside =
+                2.0 * roundoff < rc2 * 1e-7 && farthest * farthest * (1.0 + 1e-12) + roundoff < rc2 * (1.0 - 1e-7);
+        }
         // The analytic range is only a filter: points within a step of its ends, and all points
         // between, still take the exact cut-off test, so the same points count as before.
         const double rcWide2 = rc2 * (1.0 + 1e-9) + 1e-300;
+        const CapsuleRows capsule(u.x(), u.y(), u.z(), length, dz, rcWide2);
+        // A plane's rows (one per column): their ranges four columns at a time.
+        const bool vectorRanges = avx2 && ranged && !shortRows && ny == 1 && iFirst <= iLast;
+        if (vectorRanges) {
+            const std::size_t count = std::size_t(iLast - iFirst + 1);
+            rangeLo.resize(count + 4);
+            rangeHi.resize(count + 4);
+            for (std::size_t m = 0; m < count; m += 4) {
+                double x[4];
+                for (int l = 0; l < 4; ++l) x[l] = d0.x() + (iFirst + int(m) + l) * dx;
+                capsuleRowRangesAvx2(capsule, x, d0.y(), d0.z(), rangeLo.data() + m, rangeHi.data() + m);
+            }
+        }
         // Pass 1: each row's range of points (kLo > kHi: none).
         rows.resize(std::size_t(nx) * ny);
         for (int i = 0; i < nx; ++i) {
@@ -363,12 +335,19 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 RowRange& r = rows[std::size_t(i) * ny + jj];
                 r.kLo = 0;
                 r.kHi = nz - 1;
+                r.inLo = 1;
+                r.inHi = 0;
                 if (shortRows) {
                     // A few points per row (a pixel's sub-samples): their own cut-off tests are
                     // cheaper than the row's range.
                 } else if (ranged) {
                     double tLo, tHi;
-                    capsuleRowRange(Vec3d(px, py, d0.z()), dz, u, length, rcWide2, tLo, tHi);
+                    if (vectorRanges) {
+                        tLo = rangeLo[std::size_t(i - iFirst)];
+                        tHi = rangeHi[std::size_t(i - iFirst)];
+                    } else {
+                        capsuleRowRange(capsule, px, py, d0.z(), tLo, tHi);
+                    }
                     if (!(tLo <= tHi)) {
                         r.kLo = 1;
                         r.kHi = 0;
@@ -376,6 +355,8 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     }
                     r.kLo = int(std::clamp(std::floor(std::max(tLo, -1.0)) - 1.0, 0.0, double(nz)));
                     r.kHi = int(std::min(double(nz - 1), std::ceil(std::min(tHi, double(nz))) + 1.0));
+                    r.inLo = int(std::clamp(std::ceil(std::max(tLo, -2.0)) + 1.0, 0.0, double(nz)));
+                    r.inHi = int(std::clamp(std::floor(std::min(tHi, double(nz + 1))) - 1.0, -1.0, double(nz - 1)));
                 } else {
                     // Skip rows whose every point is beyond the cut-off (centre distance test).
                     const double rowHalf = 0.5 * (nz - 1) * dz;
@@ -453,8 +434,81 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 step *= across;
             }
         }
-        std::size_t n = 0;
-        for (int i = 0; i < nx; ++i) {
+        // Long rows of a plane batch (one row per column) take their Gaussians' four-lane seeds
+        // (rowGaussiansFrom's lanes and steps at a start k0 shared by the strut's rows: the first
+        // point of any of them) from recurrences across the columns, not from two exponentials
+        // and a chain of products per row. Lane l holds E_l = exp(-r2(i, k0 + l) / 2 sigma^2), its
+        // row step P_l = exp(-(r2(i, k0 + l + 4) - r2(i, k0 + l)) / 2 sigma^2) and its column step
+        // S_l = exp(-(r2(i + 1, k0 + l) - r2(i, k0 + l)) / 2 sigma^2); r2 is quadratic in i and k
+        // with a constant cross term, so E_l(i + 1) = E_l(i) S_l(i), S_l(i + 1) = S_l(i) Qx and
+        // P_l(i + 1) = P_l(i) T^4 (Qx = exp(-2 dx^2 (1 - u_x^2) / 2 sigma^2), T = exp(2 dx u_x hz /
+        // 2 sigma^2)). The seeds are taken afresh every kSeedSpan columns, so each carries at
+        // most about kSeedSpan^2 / 2 + 2 kSeedSpan roundings more than a row's own (a few 1e-14
+        // relative; rowGaussiansFrom's recurrences then start at k0, not at the row's first
+        // point). Only where r2 / 2 sigma^2 stays below 600 over the rows' rectangle (r2 is
+        // convex: its corners), so no Gaussian a row reads underflows.
+        constexpr int kSeedSpan = 16;
+        bool seeded = false;
+        int k0 = 0, seedBase = -1, seedAt = -1;
+        double seedE[4] = {}, seedS[4] = {}, seedP[4] = {}, seedQx = 0.0, seedT4 = 0.0;
+        int kSeedEnd = nz - 1;
+        if (!acrossColumns && ny == 1 && batch.nz == 1) {
+            // k0 and the seeds' columns come from the batch and the strut alone (the part of the
+            // plane within reach of the strut, planeSpan; a grid of columns from iFirst), never
+            // from which rows a band needs: planeValues gives gridValues' doubles.
+            double xLo, xHi, yLo, yHi;
+            if (planeSpan(s, cutoffReach(std::sqrt(rc2)), batch.origin.z(), xLo, xHi, yLo, yHi)) {
+                const double oy = batch.origin.y(), sy = batch.spacing.y();
+                k0 = int(std::clamp(std::floor((yLo - oy) / sy) - 1.0, 0.0, double(nz - 1)));
+                kSeedEnd = int(std::clamp(std::ceil((yHi - oy) / sy) + 1.0, double(k0), double(nz - 1)));
+                auto r2At = [&](int i, int k) {
+                    const double x = d0.x() + i * dx, y = d0.y(), zz = d0.z() + k * dz;
+                    const double h = x * u.x() + y * u.y() + zz * u.z();
+                    return x * x + y * y + zz * zz - h * h;
+                };
+                const double worst = std::max(std::max(r2At(iFirst, k0), r2At(iFirst, kSeedEnd + 4)),
+                                              std::max(r2At(iLast, k0), r2At(iLast, kSeedEnd + 4)));
+                seeded = worst * inv2s2 < 600.0;
+                seedQx = std::exp(-2.0 * dx * dx * (1.0 - u.x() * u.x()) * inv2s2);
+                seedT4 = std::exp(8.0 * hz * dx * u.x() * inv2s2);
+            }
+        }
+        // The lanes and steps of column i (columns are visited in increasing order).
+        auto seedsAt = [&](int i) {
+            const int base = iFirst + (i - iFirst) / kSeedSpan * kSeedSpan;
+            if (seedBase != base) {
+                const double x = d0.x() + base * dx;
+                const double hRow = x * u.x() + d0.y() * u.y() + d0.z() * u.z();
+                const double r0 = x * x + d0.y() * d0.y() + d0.z() * d0.z() - hRow * hRow;
+                const double b = 2.0 * (d0.z() * dz - hRow * hz) + c;
+                const double kk = k0;
+                // rowGaussiansFrom's lanes and steps at k0.
+                double ratios[7];
+                ratios[0] = std::exp(-(b + 2.0 * c * kk) * inv2s2);
+                for (int m = 1; m < 7; ++m) ratios[m] = ratios[m - 1] * q;
+                seedE[0] = std::exp(-(r0 + kk * (b - c) + kk * kk * c) * inv2s2);
+                for (int l = 1; l < 4; ++l) seedE[l] = seedE[l - 1] * ratios[l - 1];
+                for (int l = 0; l < 4; ++l) seedP[l] = ((ratios[l] * ratios[l + 1]) * ratios[l + 2]) * ratios[l + 3];
+                // S_l = S_0 T^l: D_l = D_0 - 2 l hz dx u_x.
+                const double across =
+                    2.0 * dx * (x - u.x() * hRow) + dx * dx * (1.0 - u.x() * u.x()) - 2.0 * hz * dx * u.x() * kk;
+                const double t = std::exp(2.0 * hz * dx * u.x() * inv2s2);
+                seedS[0] = std::exp(-across * inv2s2);
+                for (int l = 1; l < 4; ++l) seedS[l] = seedS[l - 1] * t;
+                seedBase = seedAt = base;
+            }
+            for (; seedAt < i; ++seedAt)
+                for (int l = 0; l < 4; ++l) {
+                    seedE[l] *= seedS[l];
+                    seedS[l] *= seedQx;
+                    seedP[l] *= seedT4;
+                }
+        };
+        // Columns beyond the strut's reach have no row (only the columns' Gaussians across
+        // them step through every column).
+        const int iBegin = acrossColumns ? 0 : iFirst, iEnd = acrossColumns ? nx - 1 : iLast;
+        for (int i = iBegin; i <= iEnd; ++i) {
+            std::size_t n = std::size_t(i) * ny * nz;
             const double px = d0.x() + i * dx;
             if (acrossColumns && i > 0)
                 for (int k = 0; k < nz; ++k) {
@@ -463,7 +517,10 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 }
             for (int jj = 0; jj < ny; ++jj, n += nz) {
                 const RowRange& range = rows[std::size_t(i) * ny + jj];
-                const int kLo = range.kLo, kHi = range.kHi;
+                // Seeded rows start and end within the strut's reach of the plane (k0..kSeedEnd):
+                // the points outside it fail the cut-off test.
+                const int kLo = seeded ? std::max(range.kLo, k0) : range.kLo;
+                const int kHi = seeded ? std::min(range.kHi, kSeedEnd) : range.kHi;
                 if (kLo > kHi) continue;
                 // A plane's needed points (planeValues): the runs of tiles its column needs, each
                 // with its one-point halo; rows that meet none take no Gaussians.
@@ -480,15 +537,33 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 const double r0 = qRow + d0.z() * d0.z() - hRow * hRow;
                 const double b = 2.0 * (d0.z() * dz - hRow * hz) + c;  // r^2(1) - r^2(0)
                 const Vec3d rowStart = pointAt(i, jj, 0);
-                const StrutRow row{rowStart.x(), rowStart.y(), rowStart.z(), dz, kLo, kHi};
+                StrutRow row{rowStart.x(), rowStart.y(), rowStart.z(), dz, kLo, kHi};
+                if (wholeInside) {
+                    row.inLo = kLo;
+                    row.inHi = kHi;
+                }
+                // A tabled row's points a step or more inside the capsule's range skip their
+                // cut-off test where both ends of that run are proven within it.
+                if (tabled && range.inLo <= range.inHi &&
+                    provenWithinCutoff(constants, row, range.inLo, range.inHi, roundoff)) {
+                    row.inLo = range.inLo;
+                    row.inHi = range.inHi;
+                }
                 // The recurrence's factors stay well inside double range for ordinary batches;
                 // otherwise every point takes its own exponential.
                 const double* g = gauss.data();
                 if (std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0) {
-                    if (acrossColumns)
+                    if (acrossColumns) {
                         g = columnGauss;
-                    else
+                    } else if (seeded) {
+                        seedsAt(i);
+                        if (avx2)
+                            fillGaussiansAvx2(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0);
+                        else
+                            fillGaussiansScalar(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0);
+                    } else {
                         rowGaussians(r0, b, c, inv2s2, q, q16, kLo, kHi, gauss.data());
+                    }
                 } else {
                     for (int k = kLo; k <= kHi; ++k) {
                         double h, r2;

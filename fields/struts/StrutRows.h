@@ -7,6 +7,9 @@
 #include "fields/struts/GaussianTable.h"
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
+#include <utility>
 
 namespace voxlat {
 
@@ -23,6 +26,9 @@ struct StrutRowConstants {
 struct StrutRow {
     double x, y, z0, dz;
     int kLo, kHi;
+    /// Points inLo..inHi lie within the strut's cut-off (proven by provenWithinCutoff): the tabled
+    /// loops add them without their test (the same sums). Empty (inLo > inHi) unless proven.
+    int inLo = 1, inHi = 0;
 };
 
 /// Whether the point at (dx, dy, dz) from the strut's start is within its cut-off, with @a h its
@@ -36,6 +42,109 @@ inline bool withinCutoff(const StrutRowConstants& s, double dx, double dy, doubl
     const double beyond = h < 0.0 ? h : (h > s.length ? h - s.length : 0.0);
     return r2 + beyond * beyond < s.cutoffSqr;
 }
+
+/// The squared distance from the point at (dx, dy, dz) from the strut's start to the segment, as
+/// withinCutoff computes it.
+inline double cutoffDistanceSqr(const StrutRowConstants& s, double dx, double dy, double dz)
+{
+    const double h = dx * s.ux + dy * s.uy + dz * s.uz;
+    const double lengthSqr = dx * dx + dy * dy + dz * dz;
+    const double r2 = std::max(0.0, lengthSqr - h * h);
+    const double beyond = h < 0.0 ? h : (h > s.length ? h - s.length : 0.0);
+    return r2 + beyond * beyond;
+}
+
+/// A bound on how far cutoffDistanceSqr's value for any point of a row lies from the exact squared
+/// distance of the exact point to the segment, where every point and the segment lie within
+/// @a reach of the strut's start and every coordinate (the rows' and the strut's) within @a coord
+/// of zero: the coordinates' roundings (about 7 eps (coord + reach) per point) move the distance
+/// squared by at most about 14 eps reach (coord + reach), the arithmetic (h, |d|^2, their
+/// difference, the overhang) by about 30 eps reach^2; 64 eps (reach^2 + coord reach) holds both.
+inline double cutoffRoundoff(double reach, double coord)
+{
+    return 64.0 * std::numeric_limits<double>::epsilon() * (reach * reach + coord * reach);
+}
+
+/// Whether every point k = inLo..inHi of @a row (inLo <= inHi) passes withinCutoff's test. Along
+/// a row the exact squared distance to the segment is convex in k (the squared distance of a
+/// point moving on a line to a convex set), so it is at most its larger end value in between. The
+/// ends' computed distances are below (1 - 1e-7) of the cut-off squared, and @a roundoff bounds
+/// how far any computed distance of this row lies from the exact one (the points' coordinates and
+/// the arithmetic: the caller's bound, at most half the 1e-7 margin), so every point's computed
+/// distance in between is below the cut-off squared.
+inline bool provenWithinCutoff(const StrutRowConstants& s, const StrutRow& row, int inLo, int inHi, double roundoff)
+{
+    const double limit = s.cutoffSqr * (1.0 - 1e-7);
+    if (!(2.0 * roundoff < s.cutoffSqr * 1e-7)) return false;
+    const double dx = row.x - s.ax, dy = row.y - s.ay;
+    return cutoffDistanceSqr(s, dx, dy, (row.z0 + inLo * row.dz) - s.az) < limit &&
+           cutoffDistanceSqr(s, dx, dy, (row.z0 + inHi * row.dz) - s.az) < limit;
+}
+
+/// The constants of capsuleRowRange for one strut (unit direction (ux, uy, uz), @a length), rows of
+/// step @a dz along z and the cut-off radius squared @a rc2; cc = dz^2 - (dz u_z)^2 > 0 (rows not
+/// parallel to the strut).
+struct CapsuleRows {
+    double ux, uy, uz, length, rc2, dz, hz, cc, invDz, halfInvCc, invHz;
+    CapsuleRows(double dirX, double dirY, double dirZ, double len, double step, double radiusSqr)
+        : ux(dirX),
+          uy(dirY),
+          uz(dirZ),
+          length(len),
+          rc2(radiusSqr),
+          dz(step),
+          hz(step * dirZ),
+          cc(step * step - hz * hz),
+          invDz(1.0 / step),
+          halfInvCc(cc > 0.0 ? 0.5 / cc : 0.0),
+          invHz(hz != 0.0 ? 1.0 / hz : 0.0)
+    {
+    }
+};
+
+/// A real interval [lo, hi] (empty: lo > hi) holding the k where the row (x, y, z + k dz), given
+/// from the strut's start, comes within rc of the segment (the union of the cylinder's part inside
+/// the slab 0 <= h <= length and the two end balls; a capsule is convex, so the union is one
+/// interval). Only a filter (every point in and about it still takes the exact cut-off test), so
+/// the roots come from the plain formulas with the divisions taken once per strut: their rounding
+/// moves an end by far less than the step its callers widen it by (the caller's rc2 is widened by
+/// 1e-9 of itself against the near-tangent rows).
+inline void capsuleRowRange(const CapsuleRows& k, double x, double y, double z, double& lo, double& hi)
+{
+    lo = std::numeric_limits<double>::infinity();
+    hi = -std::numeric_limits<double>::infinity();
+    // End balls: (d.z + k dz)^2 < rc^2 - d.x^2 - d.y^2, d = D - h u.
+    for (const double h : {0.0, k.length}) {
+        const double dx = x - h * k.ux, dy = y - h * k.uy, dz = z - h * k.uz;
+        const double w = k.rc2 - dx * dx - dy * dy;
+        if (!(w > 0.0)) continue;
+        const double root = std::sqrt(w);
+        const double a = (-dz - root) * k.invDz, b = (-dz + root) * k.invDz;
+        lo = std::min(lo, std::min(a, b));
+        hi = std::max(hi, std::max(a, b));
+    }
+    // Cylinder: r^2(k) = |D + k e|^2 - h(k)^2 < rc^2, h(k) = D.u + k dz u_z: cc k^2 + B k + C < 0.
+    const double h0 = x * k.ux + y * k.uy + z * k.uz;
+    const double B = 2.0 * (z * k.dz - h0 * k.hz), C = x * x + y * y + z * z - h0 * h0 - k.rc2;
+    const double disc = B * B - 4.0 * k.cc * C;
+    if (!(disc > 0.0)) return;
+    const double root = std::sqrt(disc);
+    double a = (-B - root) * k.halfInvCc, b = (-B + root) * k.halfInvCc;
+    if (k.hz != 0.0) {
+        double s0 = -h0 * k.invHz, s1 = (k.length - h0) * k.invHz;
+        if (s0 > s1) std::swap(s0, s1);
+        a = std::max(a, s0);
+        b = std::min(b, s1);
+    } else if (!(h0 >= 0.0 && h0 <= k.length)) {
+        return;
+    }
+    if (a > b) return;
+    lo = std::min(lo, a);
+    hi = std::max(hi, b);
+}
+
+/// capsuleRowRange of four rows (x[l], y, z), l = 0..3, in four lanes; the same doubles.
+void capsuleRowRangesAvx2(const CapsuleRows& k, const double x[4], double y, double z, double lo[4], double hi[4]);
 
 /// Adds gauss[k] * J(h_k) to out[k] for every point of @a row within the strut's cut-off, where
 /// h_k is the point's coordinate along the strut and J the weighted erf integral (GaussianTable).
@@ -62,14 +171,18 @@ inline void addStrutRowScalar(const StrutRowConstants& s, const StrutRow& row, c
 
 /// addStrutRowScalar with J(h) from its cubic Taylor polynomial @a c about @a hc instead of the
 /// table (a pixel's sub-samples: StrutConvolution::gridValues states the bound): the same points
-/// pass the cut-off.
+/// pass the cut-off (the row's proven points inLo..inHi take no test).
 inline void addStrutRowTaylorScalar(const StrutRowConstants& s, const StrutRow& row, const double c[4], double hc,
                                     const double* gauss, double* out)
 {
     const double dx = row.x - s.ax, dy = row.y - s.ay;
     for (int k = row.kLo; k <= row.kHi; ++k) {
         double h;
-        if (!withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
+        const double dz = (row.z0 + k * row.dz) - s.az;
+        if (k >= row.inLo && k <= row.inHi)
+            h = dx * s.ux + dy * s.uy + dz * s.uz;  // proven within: withinCutoff's h without its test
+        else if (!withinCutoff(s, dx, dy, dz, h))
+            continue;
         const double d = h - hc;
         out[k] += gauss[k] * (c[0] + d * (c[1] + d * (c[2] + d * c[3])));
     }
@@ -90,14 +203,16 @@ struct StrutRowTable {
     double w00, w10, w01, w11;
 };
 
-/// addStrutRowScalar with J(h_k) from @a table (the same points pass the same cut-off test).
+/// addStrutRowScalar with J(h_k) from @a table (the same points pass the same cut-off test; the
+/// row's proven points inLo..inHi take none).
 inline void addStrutRowTabledScalar(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
                                     const double* gauss, double* out)
 {
     const double dx = row.x - s.ax, dy = row.y - s.ay;
     for (int k = row.kLo; k <= row.kHi; ++k) {
         double h;
-        if (!withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
+        const bool inside = k >= row.inLo && k <= row.inHi;
+        if (!inside && !withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
         const int n = table.n0 + k;
         const double j0 = ((table.w00 * table.value[n] + table.w10 * table.slope[n]) + table.w01 * table.value[n + 1]) +
                           table.w11 * table.slope[n + 1];

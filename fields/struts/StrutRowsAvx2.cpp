@@ -5,6 +5,8 @@
 
 #include "fields/struts/StrutRows.h"
 
+#include <limits>
+
 #ifdef VOXLAT_AVX2_ROWS
 #include <immintrin.h>
 #endif
@@ -72,6 +74,25 @@ inline void tableLanes(const double* nodes, __m256d y, __m256d& u, __m256d& g)
     }
 }
 
+/// out[0..3] += gauss[0..3] * j0 in the lanes @a within (the others keep their sums); lanes past
+/// the row (@a lanes < 4) are neither read nor written. Whole groups take plain loads and stores:
+/// a masked store is microcoded on the Zen 1 EPYC measured (about ten times a store), and most of
+/// a row's groups are whole. The same doubles either way.
+inline void accumulate(double* out, const double* gauss, __m256d j0, __m256d within, int lanes, __m256i live)
+{
+    if (lanes == 4) {
+        const __m256d before = _mm256_loadu_pd(out);
+        const __m256d added = _mm256_add_pd(before, _mm256_mul_pd(_mm256_loadu_pd(gauss), j0));
+        _mm256_storeu_pd(out, _mm256_blendv_pd(before, added, within));
+        return;
+    }
+    const __m256d before = _mm256_maskload_pd(out, live);
+    const __m256d added = _mm256_add_pd(before, _mm256_mul_pd(_mm256_maskload_pd(gauss, live), j0));
+    alignas(32) double sum[4];
+    _mm256_store_pd(sum, _mm256_blendv_pd(before, added, within));
+    for (int l = 0; l < lanes; ++l) out[l] = sum[l];
+}
+
 template <bool graded>
 void addRow(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
 {
@@ -112,10 +133,7 @@ void addRow(const StrutRowConstants& s, const StrutRow& row, const double* gauss
         } else {
             j0 = _mm256_mul_pd(w0Sigma, _mm256_add_pd(uL, uA));
         }
-        // Lanes past the row are neither read nor written; lanes beyond the cut-off keep their sums.
-        const __m256d before = _mm256_maskload_pd(out + k, live);
-        const __m256d added = _mm256_add_pd(before, _mm256_mul_pd(_mm256_maskload_pd(gauss + k, live), j0));
-        _mm256_maskstore_pd(out + k, live, _mm256_blendv_pd(before, added, within));
+        accumulate(out + k, gauss + k, j0, within, lanes, live);
     }
 }
 
@@ -132,7 +150,22 @@ void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, cons
     const __m256d length = _mm256_set1_pd(s.length), cutoff = _mm256_set1_pd(s.cutoffSqr), zero = _mm256_setzero_pd();
     const __m256d w00 = _mm256_set1_pd(table.w00), w10 = _mm256_set1_pd(table.w10), w01 = _mm256_set1_pd(table.w01),
                   w11 = _mm256_set1_pd(table.w11);
+    // Lanes past the row read nodes the table holds (its caller sizes it with a margin).
+    auto tabled = [&](int k) {
+        const int n = table.n0 + k;
+        return _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(w00, _mm256_loadu_pd(table.value + n)),
+                                                         _mm256_mul_pd(w10, _mm256_loadu_pd(table.slope + n))),
+                                           _mm256_mul_pd(w01, _mm256_loadu_pd(table.value + n + 1))),
+                             _mm256_mul_pd(w11, _mm256_loadu_pd(table.slope + n + 1)));
+    };
+    const int inHi = std::min(row.inHi, row.kHi);
     for (int k = row.kLo; k <= row.kHi; k += 4) {
+        if (k >= row.inLo && k + 3 <= inHi) {
+            // Four points proven within the cut-off: no test (the same sums).
+            const __m256d before = _mm256_loadu_pd(out + k);
+            _mm256_storeu_pd(out + k, _mm256_add_pd(before, _mm256_mul_pd(_mm256_loadu_pd(gauss + k), tabled(k))));
+            continue;
+        }
         const int lanes = std::min(4, row.kHi - k + 1);
         const __m256i live = _mm256_cmpgt_epi64(_mm256_set1_epi64x(lanes), _mm256_setr_epi64x(0, 1, 2, 3));
         const __m256d kk = _mm256_setr_pd(double(k), double(k + 1), double(k + 2), double(k + 3));
@@ -146,16 +179,7 @@ void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, cons
         const __m256d dist2 = _mm256_add_pd(r2, _mm256_mul_pd(beyond, beyond));
         const __m256d within = _mm256_and_pd(_mm256_castsi256_pd(live), _mm256_cmp_pd(dist2, cutoff, _CMP_LT_OQ));
         if (_mm256_movemask_pd(within) == 0) continue;
-        // Lanes past the row read nodes the table holds (its caller sizes it with a margin).
-        const int n = table.n0 + k;
-        const __m256d j0 =
-            _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(w00, _mm256_loadu_pd(table.value + n)),
-                                                      _mm256_mul_pd(w10, _mm256_loadu_pd(table.slope + n))),
-                                        _mm256_mul_pd(w01, _mm256_loadu_pd(table.value + n + 1))),
-                          _mm256_mul_pd(w11, _mm256_loadu_pd(table.slope + n + 1)));
-        const __m256d before = _mm256_maskload_pd(out + k, live);
-        const __m256d added = _mm256_add_pd(before, _mm256_mul_pd(_mm256_maskload_pd(gauss + k, live), j0));
-        _mm256_maskstore_pd(out + k, live, _mm256_blendv_pd(before, added, within));
+        accumulate(out + k, gauss + k, tabled(k), within, lanes, live);
     }
 }
 
@@ -170,7 +194,22 @@ void addStrutRowTaylorAvx2(const StrutRowConstants& s, const StrutRow& row, cons
     const __m256d length = _mm256_set1_pd(s.length), cutoff = _mm256_set1_pd(s.cutoffSqr), zero = _mm256_setzero_pd();
     const __m256d c0 = _mm256_set1_pd(c[0]), c1 = _mm256_set1_pd(c[1]), c2 = _mm256_set1_pd(c[2]),
                   c3 = _mm256_set1_pd(c[3]), centre = _mm256_set1_pd(hc);
+    auto taylor = [&](__m256d h) {
+        const __m256d d = _mm256_sub_pd(h, centre);
+        return _mm256_add_pd(
+            c0, _mm256_mul_pd(d, _mm256_add_pd(c1, _mm256_mul_pd(d, _mm256_add_pd(c2, _mm256_mul_pd(d, c3))))));
+    };
+    const int inHi = std::min(row.inHi, row.kHi);
     for (int k = row.kLo; k <= row.kHi; k += 4) {
+        if (k >= row.inLo && k + 3 <= inHi) {
+            // Four points proven within the cut-off: no test (the same sums).
+            const __m256d kk = _mm256_setr_pd(double(k), double(k + 1), double(k + 2), double(k + 3));
+            const __m256d dz = _mm256_sub_pd(_mm256_add_pd(z0, _mm256_mul_pd(kk, stepZ)), az);
+            const __m256d before = _mm256_loadu_pd(out + k);
+            const __m256d j0 = taylor(_mm256_add_pd(hxy, _mm256_mul_pd(dz, uz)));
+            _mm256_storeu_pd(out + k, _mm256_add_pd(before, _mm256_mul_pd(_mm256_loadu_pd(gauss + k), j0)));
+            continue;
+        }
         const int lanes = std::min(4, row.kHi - k + 1);
         const __m256i live = _mm256_cmpgt_epi64(_mm256_set1_epi64x(lanes), _mm256_setr_epi64x(0, 1, 2, 3));
         const __m256d kk = _mm256_setr_pd(double(k), double(k + 1), double(k + 2), double(k + 3));
@@ -184,12 +223,7 @@ void addStrutRowTaylorAvx2(const StrutRowConstants& s, const StrutRow& row, cons
         const __m256d dist2 = _mm256_add_pd(r2, _mm256_mul_pd(beyond, beyond));
         const __m256d within = _mm256_and_pd(_mm256_castsi256_pd(live), _mm256_cmp_pd(dist2, cutoff, _CMP_LT_OQ));
         if (_mm256_movemask_pd(within) == 0) continue;
-        const __m256d d = _mm256_sub_pd(h, centre);
-        const __m256d j0 = _mm256_add_pd(
-            c0, _mm256_mul_pd(d, _mm256_add_pd(c1, _mm256_mul_pd(d, _mm256_add_pd(c2, _mm256_mul_pd(d, c3))))));
-        const __m256d before = _mm256_maskload_pd(out + k, live);
-        const __m256d added = _mm256_add_pd(before, _mm256_mul_pd(_mm256_maskload_pd(gauss + k, live), j0));
-        _mm256_maskstore_pd(out + k, live, _mm256_blendv_pd(before, added, within));
+        accumulate(out + k, gauss + k, taylor(h), within, lanes, live);
     }
 }
 
@@ -228,6 +262,66 @@ void strutRowNodesAvx2(const StrutRowConstants& s, double h0, double step, int f
         _mm256_storeu_pd(value + m, j);
         _mm256_storeu_pd(slope + m, dj);
     }
+}
+
+void capsuleRowRangesAvx2(const CapsuleRows& k, const double x[4], double y, double z, double lo[4], double hi[4])
+{
+    const __m256d xs = _mm256_loadu_pd(x), ys = _mm256_set1_pd(y), zs = _mm256_set1_pd(z), zero = _mm256_setzero_pd();
+    const __m256d ux = _mm256_set1_pd(k.ux), uy = _mm256_set1_pd(k.uy), uz = _mm256_set1_pd(k.uz);
+    const __m256d rc2 = _mm256_set1_pd(k.rc2), invDz = _mm256_set1_pd(k.invDz);
+    __m256d low = _mm256_set1_pd(std::numeric_limits<double>::infinity());
+    __m256d high = _mm256_set1_pd(-std::numeric_limits<double>::infinity());
+    // End balls (lanes where w > 0 merge their interval).
+    for (const double h : {0.0, k.length}) {
+        const __m256d hv = _mm256_set1_pd(h);
+        const __m256d dx = _mm256_sub_pd(xs, _mm256_mul_pd(hv, ux)), dy = _mm256_sub_pd(ys, _mm256_mul_pd(hv, uy)),
+                      dz = _mm256_sub_pd(zs, _mm256_mul_pd(hv, uz));
+        const __m256d w = _mm256_sub_pd(_mm256_sub_pd(rc2, _mm256_mul_pd(dx, dx)), _mm256_mul_pd(dy, dy));
+        const __m256d inside = _mm256_cmp_pd(w, zero, _CMP_GT_OQ);
+        if (_mm256_movemask_pd(inside) == 0) continue;
+        const __m256d root = _mm256_sqrt_pd(_mm256_max_pd(w, zero));
+        const __m256d negDz = _mm256_sub_pd(zero, dz);
+        const __m256d a = _mm256_mul_pd(_mm256_sub_pd(negDz, root), invDz),
+                      b = _mm256_mul_pd(_mm256_add_pd(negDz, root), invDz);
+        // std::min(lo, std::min(a, b)): min(x, y) = y < x ? y : x, as _mm256_min_pd(y, x) gives.
+        const __m256d ab0 = _mm256_min_pd(b, a), ab1 = _mm256_max_pd(b, a);
+        low = _mm256_blendv_pd(low, _mm256_min_pd(ab0, low), inside);
+        high = _mm256_blendv_pd(high, _mm256_max_pd(ab1, high), inside);
+    }
+    // Cylinder.
+    const __m256d h0 =
+        _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(xs, ux), _mm256_mul_pd(ys, uy)), _mm256_mul_pd(zs, uz));
+    const __m256d B = _mm256_mul_pd(_mm256_set1_pd(2.0), _mm256_sub_pd(_mm256_mul_pd(zs, _mm256_set1_pd(k.dz)),
+                                                                       _mm256_mul_pd(h0, _mm256_set1_pd(k.hz))));
+    const __m256d C = _mm256_sub_pd(
+        _mm256_sub_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(xs, xs), _mm256_mul_pd(ys, ys)), _mm256_mul_pd(zs, zs)),
+                      _mm256_mul_pd(h0, h0)),
+        rc2);
+    const __m256d disc = _mm256_sub_pd(_mm256_mul_pd(B, B), _mm256_mul_pd(_mm256_set1_pd(4.0 * k.cc), C));
+    __m256d valid = _mm256_cmp_pd(disc, zero, _CMP_GT_OQ);
+    if (_mm256_movemask_pd(valid) != 0) {
+        const __m256d root = _mm256_sqrt_pd(_mm256_max_pd(disc, zero)), half = _mm256_set1_pd(k.halfInvCc);
+        const __m256d negB = _mm256_sub_pd(zero, B);
+        __m256d a = _mm256_mul_pd(_mm256_sub_pd(negB, root), half), b = _mm256_mul_pd(_mm256_add_pd(negB, root), half);
+        if (k.hz != 0.0) {
+            const __m256d invHz = _mm256_set1_pd(k.invHz);
+            const __m256d s0 = _mm256_mul_pd(_mm256_sub_pd(zero, h0), invHz),
+                          s1 = _mm256_mul_pd(_mm256_sub_pd(_mm256_set1_pd(k.length), h0), invHz);
+            // if (s0 > s1) swap: the lesser and the greater.
+            const __m256d swap = _mm256_cmp_pd(s0, s1, _CMP_GT_OQ);
+            const __m256d first = _mm256_blendv_pd(s0, s1, swap), second = _mm256_blendv_pd(s1, s0, swap);
+            a = _mm256_max_pd(first, a);   // std::max(a, first)
+            b = _mm256_min_pd(second, b);  // std::min(b, second)
+        } else {
+            valid = _mm256_and_pd(valid, _mm256_and_pd(_mm256_cmp_pd(h0, zero, _CMP_GE_OQ),
+                                                       _mm256_cmp_pd(h0, _mm256_set1_pd(k.length), _CMP_LE_OQ)));
+        }
+        valid = _mm256_and_pd(valid, _mm256_cmp_pd(a, b, _CMP_LE_OQ));
+        low = _mm256_blendv_pd(low, _mm256_min_pd(a, low), valid);
+        high = _mm256_blendv_pd(high, _mm256_max_pd(b, high), valid);
+    }
+    _mm256_storeu_pd(lo, low);
+    _mm256_storeu_pd(hi, high);
 }
 
 void addStrutRowAvx2(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
@@ -272,6 +366,11 @@ void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, cons
 void addStrutRowAvx2(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
 {
     addStrutRowScalar(s, row, gauss, out);
+}
+
+void capsuleRowRangesAvx2(const CapsuleRows& k, const double x[4], double y, double z, double lo[4], double hi[4])
+{
+    for (int l = 0; l < 4; ++l) capsuleRowRange(k, x[l], y, z, lo[l], hi[l]);
 }
 
 bool hasAvx2Rows()
