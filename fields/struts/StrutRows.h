@@ -31,27 +31,23 @@ struct StrutRow {
     int inLo = 1, inHi = 0;
 };
 
-/// Whether the point at (dx, dy, dz) from the strut's start is within its cut-off, with @a h its
-/// coordinate along the strut (GaussianSegment::distanceSqr's operations in its order: the same
-/// doubles wherever it is inlined).
-inline bool withinCutoff(const StrutRowConstants& s, double dx, double dy, double dz, double& h)
+/// The squared distance from the point at (dx, dy, dz) from the strut's start to the segment, with
+/// @a h its coordinate along the strut (GaussianSegment::distanceSqr's operations in its order: the
+/// same doubles wherever it is inlined).
+inline double cutoffDistanceSqr(const StrutRowConstants& s, double dx, double dy, double dz, double& h)
 {
     h = dx * s.ux + dy * s.uy + dz * s.uz;
     const double lengthSqr = dx * dx + dy * dy + dz * dz;
     const double r2 = std::max(0.0, lengthSqr - h * h);
     const double beyond = h < 0.0 ? h : (h > s.length ? h - s.length : 0.0);
-    return r2 + beyond * beyond < s.cutoffSqr;
+    return r2 + beyond * beyond;
 }
 
-/// The squared distance from the point at (dx, dy, dz) from the strut's start to the segment, as
-/// withinCutoff computes it.
-inline double cutoffDistanceSqr(const StrutRowConstants& s, double dx, double dy, double dz)
+/// Whether the point at (dx, dy, dz) from the strut's start is within its cut-off, with @a h its
+/// coordinate along the strut.
+inline bool withinCutoff(const StrutRowConstants& s, double dx, double dy, double dz, double& h)
 {
-    const double h = dx * s.ux + dy * s.uy + dz * s.uz;
-    const double lengthSqr = dx * dx + dy * dy + dz * dz;
-    const double r2 = std::max(0.0, lengthSqr - h * h);
-    const double beyond = h < 0.0 ? h : (h > s.length ? h - s.length : 0.0);
-    return r2 + beyond * beyond;
+    return cutoffDistanceSqr(s, dx, dy, dz, h) < s.cutoffSqr;
 }
 
 /// A bound on how far cutoffDistanceSqr's value for any point of a row lies from the exact squared
@@ -77,8 +73,9 @@ inline bool provenWithinCutoff(const StrutRowConstants& s, const StrutRow& row, 
     const double limit = s.cutoffSqr * (1.0 - 1e-7);
     if (!(2.0 * roundoff < s.cutoffSqr * 1e-7)) return false;
     const double dx = row.x - s.ax, dy = row.y - s.ay;
-    return cutoffDistanceSqr(s, dx, dy, (row.z0 + inLo * row.dz) - s.az) < limit &&
-           cutoffDistanceSqr(s, dx, dy, (row.z0 + inHi * row.dz) - s.az) < limit;
+    double h;
+    return cutoffDistanceSqr(s, dx, dy, (row.z0 + inLo * row.dz) - s.az, h) < limit &&
+           cutoffDistanceSqr(s, dx, dy, (row.z0 + inHi * row.dz) - s.az, h) < limit;
 }
 
 /// The constants of capsuleRowRange for one strut (unit direction (ux, uy, uz), @a length), rows of
