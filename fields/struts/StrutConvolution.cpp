@@ -8,6 +8,10 @@
 #include <numbers>
 #include <stdexcept>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace voxlat {
 
 StrutConvolution::StrutConvolution(const std::vector<ConvolutionStrut>& struts, double eps,
@@ -182,6 +186,27 @@ void rowGaussians(double r0, double b, double c, double inv2s2, double q, double
                      q16, kLo, kHi, gauss);
 }
 
+/// Two doubles (GCC/Clang vector extensions) for planeValues' tile bounds, and the scalar
+/// operations it takes on them lane by lane: the same doubles as the scalar code.
+using Lanes2 = double __attribute__((vector_size(16)));
+
+/// std::clamp(v, 0, hi) per lane.
+inline Lanes2 clampLanes(Lanes2 v, double hi)
+{
+    const Lanes2 low = v < 0.0 ? Lanes2{} : v;
+    return hi < v ? Lanes2{} + hi : low;
+}
+
+/// std::sqrt per lane (IEEE square roots, correctly rounded either way).
+inline Lanes2 sqrtLanes(Lanes2 v)
+{
+#if defined(__SSE2__)
+    return Lanes2(_mm_sqrt_pd(__m128d(v)));
+#else
+    return Lanes2{std::sqrt(v[0]), std::sqrt(v[1])};
+#endif
+}
+
 /// exp(-x) from above for x >= 0: the exponential at x rounded down to a 256th (and 1e-9 more),
 /// so at most 0.4 % above it (std::exp past x = 12, beyond the cut-offs of eps >= 6e-6). A tile's
 /// bound needs one per strut and tile: a call of std::exp each was most of planeValues' own time.
@@ -251,6 +276,15 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         int inLo = 1, inHi = 0;  ///< points at least a step inside the capsule's range (to prove)
     };
     thread_local std::vector<RowRange> rows;
+    // The tiles (bits of columnTiles) that a row's points kLo..kHi or their one-point halo meet:
+    // tiles (kLo - 2) / tile .. kHi / tile, with shifts for a tile of a power of two (a division
+    // per row and strut was a visible share of the rows' set-up).
+    const int tileShift = tile > 0 && (tile & (tile - 1)) == 0 ? std::countr_zero(unsigned(tile)) : -1;
+    auto tilesMet = [tile, tileShift](int kLo, int kHi) {
+        const int bLo = std::max(0, tileShift >= 0 ? (kLo - 2) >> tileShift : (kLo - 2) / tile);
+        const int bHi = std::min(63, tileShift >= 0 ? kHi >> tileShift : kHi / tile);
+        return (bHi == 63 ? ~std::uint64_t(0) : (std::uint64_t(1) << (bHi + 1)) - 1) & ~((std::uint64_t(1) << bLo) - 1);
+    };
     thread_local std::vector<double> rangeLo, rangeHi;
     const bool avx2 = hasAvx2Rows();
     const double dx = spacing.x(), dy = spacing.y(), dz = spacing.z();
@@ -322,9 +356,10 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 capsuleRowRangesAvx2(capsule, x, d0.y(), d0.z(), rangeLo.data() + m, rangeHi.data() + m);
             }
         }
-        // Pass 1: each row's range of points (kLo > kHi: none).
+        // Pass 1: each row's range of points (kLo > kHi: none). Only the columns iFirst..iLast
+        // are read after it, but by the short rows' Gaussians across every column.
         rows.resize(std::size_t(nx) * ny);
-        for (int i = 0; i < nx; ++i) {
+        for (int i = shortRows ? 0 : iFirst; i <= (shortRows ? nx - 1 : iLast); ++i) {
             const double px = d0.x() + i * dx;
             if (i < iFirst || i > iLast || (columnTiles && columnTiles[i] == 0)) {
                 for (int jj = 0; jj < ny; ++jj) rows[std::size_t(i) * ny + jj] = RowRange{1, 0, 0, 0.0};
@@ -367,6 +402,13 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                         r.kHi = 0;
                     }
                 }
+                // A plane's row that meets none of the tiles its column needs is made by nobody
+                // (pass 2 tests the part of it within the strut's reach of the plane, inside this
+                // range): it takes no nodes of the table either.
+                if (columnTiles && r.kLo <= r.kHi && (columnTiles[i] & tilesMet(r.kLo, r.kHi)) == 0) {
+                    r.kLo = 1;
+                    r.kHi = 0;
+                }
             }
         }
         // Long rows along which h advances by at most 0.1 sigma per point take J(h) from a table of
@@ -388,7 +430,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
             const double hLast = hFirst + (nx - 1) * dx * u.x() + (ny - 1) * dy * u.y();
             const double h0 = (hz > 0.0 ? std::min(hFirst, hLast) : std::max(hFirst, hLast)) - hz;
             int nLo = std::numeric_limits<int>::max(), nHi = -1;
-            for (int i = 0; i < nx; ++i)
+            for (int i = iFirst; i <= iLast; ++i)
                 for (int jj = 0; jj < ny; ++jj) {
                     RowRange& r = rows[std::size_t(i) * ny + jj];
                     if (r.kLo > r.kHi) continue;
@@ -525,12 +567,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 // A plane's needed points (planeValues): the runs of tiles its column needs, each
                 // with its one-point halo; rows that meet none take no Gaussians.
                 std::uint64_t needed = columnTiles ? columnTiles[i] : 0;
-                if (columnTiles) {
-                    const int bLo = std::max(0, (kLo - 2) / tile), bHi = std::min(63, kHi / tile);
-                    const std::uint64_t reach = (bHi == 63 ? ~std::uint64_t(0) : (std::uint64_t(1) << (bHi + 1)) - 1) &
-                                                ~((std::uint64_t(1) << bLo) - 1);
-                    if ((needed & reach) == 0) continue;
-                }
+                if (columnTiles && (needed & tilesMet(kLo, kHi)) == 0) continue;
                 const double py = d0.y() + jj * dy;
                 const double hRow = px * u.x() + py * u.y() + d0.z() * u.z();
                 const double qRow = px * px + py * py;
@@ -687,7 +724,30 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         bool reaches = false;
         for (int a = a0; a <= a1; ++a) {
             const double ex = cx0 + a * stepX - s.a.x();
-            for (int b = b0; b <= b1; ++b) {
+            const std::size_t row = std::size_t(a) * tiles.ny;
+            // Tile b's bound (a centre within far of the strut): its peak times the kernel at the
+            // least distance @a near, in strut order per tile.
+            auto add = [&](int b, double near) {
+                upper[row + b] += mPeak[j] * expUpper(near * near * inv2s2);
+                peaks[row + b] += mPeak[j];
+            };
+            int b = b0;
+            // Two tiles at a time: the operations below per lane, in their order (the same
+            // doubles), without a branch per tile on which of them the strut reaches.
+            for (; b < b1; b += 2) {
+                const Lanes2 ey = cy0 + Lanes2{double(b), double(b + 1)} * stepY - s.a.y();
+                const Lanes2 h = clampLanes(ex * ux + ey * uy + ez * uz, length);
+                const Lanes2 rx = ex - h * ux, ry = ey - h * uy, rz = ez - h * uz;
+                const Lanes2 dSqr = rx * rx + ry * ry + rz * rz;
+                const auto inHalo = dSqr < farHaloSqr, within = dSqr < farSqr;
+                reaches = reaches || inHalo[0] || inHalo[1];
+                if (!(within[0] || within[1])) continue;
+                const Lanes2 root = sqrtLanes(dSqr) - halfDiagonal - margin;
+                const Lanes2 near = 0.0 < root ? root : Lanes2{};
+                if (within[0]) add(b, near[0]);
+                if (within[1]) add(b + 1, near[1]);
+            }
+            for (; b <= b1; ++b) {
                 const double ey = cy0 + b * stepY - s.a.y();
                 // The centre's distance to the segment (its nearest point a + h u, h clamped):
                 // rounding far below the margin.
@@ -697,10 +757,7 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
                 reaches = reaches || dSqr < farHaloSqr;
                 if (dSqr >= farSqr) continue;  // beyond the cut-off everywhere: nothing added there
                 // Every point of the footprint lies at least this far from the segment.
-                const double near = std::max(0.0, std::sqrt(dSqr) - halfDiagonal - margin);
-                const std::size_t t = std::size_t(a) * tiles.ny + b;
-                upper[t] += mPeak[j] * expUpper(near * near * inv2s2);
-                peaks[t] += mPeak[j];
+                add(b, std::max(0.0, std::sqrt(dSqr) - halfDiagonal - margin));
             }
         }
         if (reaches) cand[kept++] = j;

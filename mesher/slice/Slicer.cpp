@@ -353,6 +353,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     std::vector<double> values, sub;
     std::vector<float> single, cells;    // the values in single precision and their cells, for the tile tests
     std::vector<signed char> tileSides;  // a block's tiles the field decided (PlaneBands)
+    std::vector<TileNeed> tileNeeds;     // and what it asked of them (empty: every tile Decide)
     // Cast once per layer, not per block: a cross-cast costs about what a small block's values do.
     const auto* bands = mOptions.planeBands ? dynamic_cast<const PlaneBands*>(&mField) : nullptr;
     RasterCounts counts;
@@ -413,18 +414,28 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         grid.ny = bny + 2;
         grid.nz = 1;
         values.resize(grid.size());
-        // A block of whole tiles within the part's box asks the field for its values where they
-        // can matter (PlaneBands: a strut lattice proves the tiles far from its struts outside and
-        // leaves them out); the tiles it decides are filled as a culled block's, the others take
-        // the passes below with the same values as gridValues'.
+        // A block of whole tiles asks the field for its values where they can matter (PlaneBands:
+        // a strut lattice proves the tiles far from its struts outside and leaves them out); the
+        // tiles it decides are filled as a culled block's, the others take the passes below with
+        // the same values as gridValues'.
         const int ntx = bnx / tile, nty = bny / tile;
-        bool banded = bands && tile == kLanes && bnx % tile == 0 && bny % tile == 0;
-        for (int a = 0; banded && a < ntx; ++a) banded = mTileColumnsIn[bi + a * tile] != 0;
-        for (int b = 0; banded && b < nty; ++b) banded = mTileRowsIn[bj + b * tile] != 0;
+        // The tiles the part's box cuts (the window's rim) ask for their values (TileNeed::Exact)
+        // and take edgeTile's per-pixel rules as before; the block's other tiles may be decided.
+        const bool banded = bands && tile == kLanes && bnx % tile == 0 && bny % tile == 0;
         int decidedTiles = 0;
         if (banded) {
+            bool rim = false;
+            for (int a = 0; a < ntx; ++a) rim = rim || !mTileColumnsIn[bi + a * tile];
+            for (int b = 0; b < nty; ++b) rim = rim || !mTileRowsIn[bj + b * tile];
+            tileNeeds.clear();
+            if (rim)
+                for (int a = 0; a < ntx; ++a)
+                    for (int b = 0; b < nty; ++b)
+                        tileNeeds.push_back(mTileColumnsIn[bi + a * tile] && mTileRowsIn[bj + b * tile]
+                                                ? TileNeed::Decide
+                                                : TileNeed::Exact);
             tileSides.resize(std::size_t(ntx) * nty);
-            bands->planeValues(grid, tile, Interval{0.0, 0.0}, values, tileSides, {});
+            bands->planeValues(grid, tile, Interval{0.0, 0.0}, values, tileSides, tileNeeds);
             for (const signed char side : tileSides) decidedTiles += side != 0;
         } else {
             mField.gridValues(grid, values);
@@ -560,6 +571,30 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
     const double slackX = 1e-9 * px, slackY = 1e-9 * py;
     const int s = std::max(1, mOptions.supersample);
     std::uint64_t supersampled = 0;
+    // The s x s sub-samples of the pixel whose low corner is (lx, ly), and how many of them lie
+    // within the part's box (the same coordinates the count below tests).
+    auto subSamples = [&](double lx, double ly) {
+        GridBatch g;
+        g.origin = Vec3d(lx + 0.5 * px / s, ly + 0.5 * py / s, z);
+        g.spacing = Vec3d(px / s, py / s, 1.0);
+        g.nx = s;
+        g.ny = s;
+        g.nz = 1;
+        return g;
+    };
+    auto boxedSubSamples = [&](double lx, double ly) {
+        const GridBatch g = subSamples(lx, ly);
+        int columns = 0, rows = 0;
+        for (int sa = 0; sa < s; ++sa) {
+            const double sx = g.origin.x() + sa * g.spacing.x();
+            columns += sx >= mPart.min.x() && sx <= mPart.max.x();
+        }
+        for (int sb = 0; sb < s; ++sb) {
+            const double sy = g.origin.y() + sb * g.spacing.y();
+            rows += sy >= mPart.min.y() && sy <= mPart.max.y();
+        }
+        return columns * rows;
+    };
 
     // Fast pass: every difference between a pixel's centre and one of its eight neighbours lies in
     // one of the four cells around it, so a pixel with |f| above their largest difference has no
@@ -674,9 +709,19 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
                 maxDiff = std::max(maxDiff, std::abs(g - f));
                 signChange |= (g < 0.0) != (f < 0.0);
             }
-        if (!partial && !signChange && !(std::abs(f) <= maxDiff)) {
-            pixel = f < 0.0 ? 255 : 0;
-            continue;
+        if (!signChange && !(std::abs(f) <= maxDiff)) {
+            if (!partial) {
+                pixel = f < 0.0 ? 255 : 0;
+                continue;
+            }
+            // A pixel the part's box cuts, on one side by the same test (its values finite): its
+            // sub-samples within the box would all count (inside) or none would (outside), so the
+            // count is that of the sub-samples within the box, without the field's values there.
+            // On a plate of struts these are most of the sub-sampled pixels (its whole rim).
+            if (finite) {
+                pixel = f < 0.0 ? mLevels[boxedSubSamples(lx, ly)] : 0;
+                continue;
+            }
         }
         const bool linear =
             bends && beyondQuadratic(v(a, b + 1), v(a, b), v(a, b + 2), f, v(a + 1, b), v(a + 1, b + 2),
@@ -694,12 +739,7 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
             continue;
         }
         ++supersampled;
-        GridBatch g;
-        g.origin = Vec3d(lx + 0.5 * px / s, ly + 0.5 * py / s, z);
-        g.spacing = Vec3d(px / s, py / s, 1.0);
-        g.nx = s;
-        g.ny = s;
-        g.nz = 1;
+        const GridBatch g = subSamples(lx, ly);
         sub.resize(g.size());
         mField.gridValues(g, sub);
         int inside = 0;

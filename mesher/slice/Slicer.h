@@ -13,18 +13,20 @@
 /// linearised edge (value and central-difference gradient) in the pixel plus a second-order
 /// curvature correction, where the edge bends little and the 3x3 values are nearly a quadratic
 /// (bendsLittle, beyondQuadratic in SliceTiles.h); elsewhere, or where the part's box cuts it, an
-/// s x s grid of sub-samples is counted instead. The grey level is 255 * coverage^gamma
-/// (gamma 0: a threshold at coverage 1/2, as PrusaSlicer's gamma_correction).
+/// s x s grid of sub-samples is counted instead (a pixel the box cuts that the 3x3 test puts on
+/// one side counts its sub-samples within the box, or none, without evaluating them: most of a
+/// plate's rim). The grey level is 255 * coverage^gamma (gamma 0: a threshold at coverage 1/2, as
+/// PrusaSlicer's gamma_correction).
 ///
 /// Cost: blocks of 64 x 64 pixels (and their 32 x 32 quarters, while that culls anything) are
 /// culled by bound(); the rest is evaluated as one grid batch per block (a block of whole tiles
-/// within the part's box through PlaneBands where the field has it: the tiles it proves on one
-/// side are filled, only the others and their halo evaluated), and each whole 8 x 8 tile
-/// is decided by four- or eight-lane single-precision passes (the whole tile at once where it is
-/// surely on one side, first against the block's largest cell difference, lane by lane, then its
-/// own; else per pixel: sure, far from the linearised edge, or its coverage, computed for the
-/// grey pixels packed into full vectors), so the scalar code only sees the pixels that need
-/// sub-samples and the tiles the part's box cuts.
+/// through PlaneBands where the field has it, exact values asked only for the tiles the part's box
+/// cuts: the tiles it proves on one side are filled, only the others and their halo evaluated),
+/// and each whole 8 x 8 tile is decided by four- or eight-lane single-precision passes (the whole
+/// tile at once where it is surely on one side, first against the block's largest cell
+/// difference, lane by lane, then its own; else per pixel: sure, far from the linearised edge, or
+/// its coverage, computed for the grey pixels packed into full vectors), so the scalar code only
+/// sees the pixels that need sub-samples and the tiles the part's box cuts.
 #pragma once
 
 #include "fields/core/FieldNode.h"
@@ -73,10 +75,11 @@ struct RasterOptions {
     /// decided; 0 bounds every block (to compare: a block left unbounded is evaluated, and its
     /// pixels are decided from the values as those of every straddling block are).
     int straddlingRun = 256;
-    /// A block of whole tiles within the part's box takes its values from the field's
-    /// PlaneBands::planeValues where it has them (a strut lattice proves the tiles far from its
-    /// struts outside and leaves their values out); off: gridValues for every pixel (to compare:
-    /// the bytes are the same where the proven tiles' pixels would have been 0 anyway).
+    /// A block of whole tiles takes its values from the field's PlaneBands::planeValues where it
+    /// has them (a strut lattice proves the tiles far from its struts outside and leaves their
+    /// values out; the tiles the part's box cuts are asked exactly); off: gridValues for every
+    /// pixel (to compare: the bytes are the same where the proven tiles' pixels would have been 0
+    /// anyway).
     bool planeBands = true;
     /// Called once per row of 64 x 64 blocks while a layer is made (none: never); it throws to
     /// stop the layer (a job's cancel check), so a layer of a large plate stops promptly.
