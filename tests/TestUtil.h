@@ -1,6 +1,7 @@
 // Helpers shared by the engine and command-line tests.
 #pragma once
 
+#include "TestPaths.h"
 #include "engine/recipe/Recipe.h"
 #include "mesher/extract/TriangleMesh.h"
 
@@ -52,11 +53,15 @@ inline int runCommand(const std::string& command, std::string* output = nullptr)
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
-/// The `voxlat` program of this build (tests/TestPaths.cpp: the only test source that names the
-/// build's paths, so the others compile alike in every checkout and hit a shared compiler cache).
-std::string voxlatBinary();
-/// The checkout the tests read data from.
-std::filesystem::path sourceDir();
+/// Under the sanitizers (`make sanitize`: ASan + UBSan, most code at -O0, several times slower)
+/// the heavy tests run smaller instances of the same code paths: coarser cells, fewer resolutions,
+/// fewer trials. Assertions of numerical accuracy that need the full instance run in the Release
+/// build only.
+#ifdef VOXLAT_SANITIZE
+inline constexpr bool kSanitized = true;
+#else
+inline constexpr bool kSanitized = false;
+#endif
 
 inline std::string readFile(const std::filesystem::path& p)
 {

@@ -26,16 +26,6 @@ using namespace voxlat::test;
 
 namespace {
 
-/// Under the sanitizers (ASan + UBSan at -O1, about six times slower) the heavy tests run smaller
-/// instances of the same code paths: coarser cells, fewer resolutions. Their numerical accuracy
-/// assertions (against references, limits, exponents) need the full instances and run in the
-/// Release build only.
-#ifdef VOXLAT_SANITIZE
-constexpr bool kSanitized = true;
-#else
-constexpr bool kSanitized = false;
-#endif
-
 /// 3 x 3 x 3 X cells of 10 mm in Form 2, up to the fields. The homogenized cell does not depend on
 /// the job's voxel (its level is solved on its own voxel model: the same bytes at 0.25 mm and 1 mm),
 /// so a 1 mm voxel keeps the frame's own level solve short (the capsule cell at 24 voxels: 2.5 s of

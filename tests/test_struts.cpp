@@ -1317,10 +1317,13 @@ TEST(StrutRecipes, ALatticeThatFallsApartIsCountedOnTheGrid)
         r.replace(r.find("sigma: 0.8"), 10, "sigma: " + std::to_string(s));
         return r;
     };
-    const std::string whole = runRecipe(dir, withSigma(sigma) + "outputs: {mesh: a.stl}\n", &status);
-    EXPECT_EQ(status, 0) << whole;
-    runRecipe(dir, withSigma(sigma + 0.05) + "outputs: {mesh: a.stl}\n", &status);
-    EXPECT_EQ(status, 3) << "sigma " << sigma + 0.05 << " should fall apart";
+    // (Two more runs of the trials' path: in the release build only, not under the sanitizers.)
+    if (!kSanitized) {
+        const std::string whole = runRecipe(dir, withSigma(sigma) + "outputs: {mesh: a.stl}\n", &status);
+        EXPECT_EQ(status, 0) << whole;
+        runRecipe(dir, withSigma(sigma + 0.05) + "outputs: {mesh: a.stl}\n", &status);
+        EXPECT_EQ(status, 3) << "sigma " << sigma + 0.05 << " should fall apart";
+    }
     // `allow: [pieces]` (a plate of separate parts) turns it into a warning; counts in report.json.
     const std::string allowed = runRecipe(dir, broken + "outputs: {mesh: a.stl}\nallow: [pieces]\n", &status);
     EXPECT_EQ(status, 0) << allowed;
