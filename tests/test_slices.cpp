@@ -234,7 +234,9 @@ void checkPlanes(const FieldNode& field, std::initializer_list<Vec3d> origins, P
                     ++counts.skipped;
                     continue;
                 }
-                if (needOf(need, t) == TileNeed::Exact) ASSERT_EQ(side[t], 0) << "tile " << a << ", " << b;
+                if (needOf(need, t) == TileNeed::Exact) {
+                    ASSERT_EQ(side[t], 0) << "tile " << a << ", " << b;
+                }
                 if (side[t] == 0) {
                     ++counts.open;
                     for (int i = 8 * a; i <= 8 * a + 9; ++i)
