@@ -582,17 +582,20 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
         g.nz = 1;
         return g;
     };
+    // Whether sub-sample column @a sa (row @a sb) of @a g lies within the part's box.
+    auto columnIn = [&](const GridBatch& g, int sa) {
+        const double sx = g.origin.x() + sa * g.spacing.x();
+        return sx >= mPart.min.x() && sx <= mPart.max.x();
+    };
+    auto rowIn = [&](const GridBatch& g, int sb) {
+        const double sy = g.origin.y() + sb * g.spacing.y();
+        return sy >= mPart.min.y() && sy <= mPart.max.y();
+    };
     auto boxedSubSamples = [&](double lx, double ly) {
         const GridBatch g = subSamples(lx, ly);
         int columns = 0, rows = 0;
-        for (int sa = 0; sa < s; ++sa) {
-            const double sx = g.origin.x() + sa * g.spacing.x();
-            columns += sx >= mPart.min.x() && sx <= mPart.max.x();
-        }
-        for (int sb = 0; sb < s; ++sb) {
-            const double sy = g.origin.y() + sb * g.spacing.y();
-            rows += sy >= mPart.min.y() && sy <= mPart.max.y();
-        }
+        for (int sa = 0; sa < s; ++sa) columns += columnIn(g, sa);
+        for (int sb = 0; sb < s; ++sb) rows += rowIn(g, sb);
         return columns * rows;
     };
 
@@ -744,12 +747,8 @@ int Slicer::edgeTile(double z, int ti, int tj, int tnx, int tny, LayerImage& out
         mField.gridValues(g, sub);
         int inside = 0;
         for (int sa = 0; sa < s; ++sa) {
-            const double sx = g.origin.x() + sa * g.spacing.x();
-            const bool xIn = sx >= mPart.min.x() && sx <= mPart.max.x();
-            for (int sb = 0; sb < s; ++sb) {
-                const double sy = g.origin.y() + sb * g.spacing.y();
-                inside += xIn && sy >= mPart.min.y() && sy <= mPart.max.y() && sub[std::size_t(sa) * s + sb] < 0.0;
-            }
+            const bool xIn = columnIn(g, sa);
+            for (int sb = 0; sb < s; ++sb) inside += xIn && rowIn(g, sb) && sub[std::size_t(sa) * s + sb] < 0.0;
         }
         pixel = mLevels[inside];
     }
