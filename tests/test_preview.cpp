@@ -13,6 +13,8 @@
 #include <tbb/global_control.h>
 
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <numbers>
 #include <regex>
 
@@ -92,7 +94,23 @@ TEST(Preview, ReportPageInlinesTheReportMeshAndScripts)
     const nlohmann::json meshBack = nlohmann::json::parse(page.substr(m, page.find("</script>", m) - m));
     EXPECT_EQ(meshBack["vertices"], 4);
     EXPECT_EQ(meshBack["triangles"], 4);
-    EXPECT_EQ(meshBack["points"].get<std::string>().size(), 64u);
+    const std::string digits = meshBack["points"].get<std::string>();
+    ASSERT_EQ(digits.size(), 64u);
+    // Decoded by hand, the digits are the points' floats in order.
+    const std::string alphabet = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    std::vector<unsigned char> bytes;
+    for (std::size_t i = 0; i < digits.size(); i += 4) {
+        std::uint32_t word = 0;
+        for (int k = 0; k < 4; ++k) word = (word << 6) | std::uint32_t(alphabet.find(digits[i + std::size_t(k)]));
+        for (int k = 2; k >= 0; --k) bytes.push_back(static_cast<unsigned char>((word >> (8 * k)) & 0xFF));
+    }
+    ASSERT_EQ(bytes.size(), 48u);
+    for (std::size_t v = 0; v < 4; ++v)
+        for (int c = 0; c < 3; ++c) {
+            float f;
+            std::memcpy(&f, bytes.data() + 12 * v + 4 * std::size_t(c), sizeof f);
+            EXPECT_EQ(f, mesh.points[v][c]) << "point " << v << " coordinate " << c;
+        }
     EXPECT_NE(page.find("<title>voxlat report: a&lt;/script&gt;&lt;b&gt;.yaml</title>"), std::string::npos)
         << "the title is escaped";
 }

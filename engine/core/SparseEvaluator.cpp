@@ -29,6 +29,31 @@ constexpr int kBlockDim = 128;  // children of a level-1 internal node: a level-
 
 enum class Side { Inside, Outside, Straddle };
 
+/// A leaf's 512 values as floats into @a data; returns whether any value is not finite and, with
+/// @a countBelow, adds the floats below zero to @a below. Branch-free integer tests (an exponent
+/// of all ones: infinity or NaN), so the loops vectorise; built for AVX2 too and picked at load
+/// time (conversions and comparisons: the same floats and counts either way).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+bool leafFloats(const double* __restrict values, float* __restrict data, bool countBelow, std::uint32_t& below)
+{
+    constexpr std::uint64_t kExponent = 0x7FF0000000000000ull;
+    std::uint64_t nonFiniteSeen = 0;
+    for (int i = 0; i < 512; ++i) {
+        std::uint64_t bits;
+        std::memcpy(&bits, &values[i], sizeof bits);
+        nonFiniteSeen |= std::uint64_t((bits & kExponent) == kExponent);
+        data[i] = float(values[i]);
+    }
+    if (countBelow) {
+        std::uint32_t count = 0;
+        for (int i = 0; i < 512; ++i) count += data[i] < 0.0f;
+        below += count;
+    }
+    return nonFiniteSeen != 0;
+}
+
 /// World box of the voxel centres in [lo, lo + size) grown by one voxel on every side.
 Box3 grownBox(const Domain& d, const Coord& lo, int size)
 {
@@ -178,27 +203,17 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                     leaf->buffer().allocate();
                     data = leaf->buffer().data();
                 }
-                // Branch-free integer tests (an exponent of all ones: infinity or NaN), so the
-                // loop vectorises; the rare non-finite leaf is searched afterwards.
-                constexpr std::uint64_t kExponent = 0x7FF0000000000000ull;
-                std::uint64_t nonFiniteSeen = 0;
-                for (int i = 0; i < 512; ++i) {
-                    std::uint64_t bits;
-                    std::memcpy(&bits, &values[i], sizeof bits);
-                    nonFiniteSeen |= std::uint64_t((bits & kExponent) == kExponent);
-                    data[i] = float(values[i]);
-                }
-                if (nonFiniteSeen) [[unlikely]] {
+                // The rare non-finite leaf is searched afterwards.
+                const CoordBBox leafBox(lo, lo + Coord(kLeafDim - 1));
+                const bool wholeInDomain = domainIndex.isInside(leafBox);
+                std::uint32_t below = 0;
+                if (leafFloats(values.data(), data, wholeInDomain, below)) [[unlikely]] {
                     std::lock_guard<std::mutex> lock(badMutex);
                     for (int i = 0; i < 512; ++i)
                         if (!std::isfinite(values[i]) && !nonFinite.exchange(true))
                             badPoint = batch.point(i >> 6, (i >> 3) & 7, i & 7);
                 }
-                const CoordBBox leafBox(lo, lo + Coord(kLeafDim - 1));
-                std::uint32_t below = 0;
-                if (domainIndex.isInside(leafBox)) {
-                    for (int i = 0; i < 512; ++i) below += data[i] < 0.0f;
-                } else if (domainIndex.hasOverlap(leafBox)) {
+                if (!wholeInDomain && domainIndex.hasOverlap(leafBox)) {
                     for (int i = 0; i < 512; ++i)
                         below += data[i] < 0.0f && domainIndex.isInside(lo + Coord(i >> 6, (i >> 3) & 7, i & 7));
                 }

@@ -269,6 +269,74 @@ void gyroidSlice(const TrigTerms<double>* tx, int nx, const double* ys, const do
         }
     }
 }
+
+/// One box of surface @a kType, @a nx x @a ny x @a nz values (z innermost, its terms as four
+/// arrays), each through @a map.
+template <TpmsType kType, class Map>
+[[gnu::always_inline]] inline void tpmsBoxOf(const TrigTerms<double>* __restrict tx, int nx,
+                                             const TrigTerms<double>* __restrict ty, int ny,
+                                             const double* __restrict zs, const double* __restrict zc,
+                                             const double* __restrict zs2, const double* __restrict zc2, int nz,
+                                             const Map& map, double* __restrict out)
+{
+    for (int i = 0; i < nx; ++i)
+        for (int j = 0; j < ny; ++j, out += nz)
+            for (int k = 0; k < nz; ++k)
+                out[k] = map(tpmsEquation(kType, tx[i], ty[j], TrigTerms<double>{zs[k], zc[k], zs2[k], zc2[k]}));
+}
+
+template <TpmsType kType>
+[[gnu::always_inline]] inline void tpmsBoxAtLevel(int kind, double level, const TrigTerms<double>* tx, int nx,
+                                                  const TrigTerms<double>* ty, int ny, const double* zs,
+                                                  const double* zc, const double* zs2, const double* zc2, int nz,
+                                                  double* out)
+{
+    switch (kind) {
+        case 0:
+            tpmsBoxOf<kType>(tx, nx, ty, ny, zs, zc, zs2, zc2, nz, NoLevel{level}, out);
+            break;
+        case 1:
+            tpmsBoxOf<kType>(tx, nx, ty, ny, zs, zc, zs2, zc2, nz, BelowLevel{level}, out);
+            break;
+        case 2:
+            tpmsBoxOf<kType>(tx, nx, ty, ny, zs, zc, zs2, zc2, nz, BandLevel{level}, out);
+            break;
+        default:
+            tpmsBoxOf<kType>(tx, nx, ty, ny, zs, zc, zs2, zc2, nz, AboveLevel{level}, out);
+            break;
+    }
+}
+
+/// A box of any of the nine surfaces with a level of kind @a kind (as gyroidSlice): the mesher's
+/// and the density solve's leaves. Built for AVX2 too (four doubles a vector) and picked at load
+/// time; no FMA either way, so the same doubles as the scalar expressions.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void tpmsBox(TpmsType type, int kind, double level, const TrigTerms<double>* tx, int nx, const TrigTerms<double>* ty,
+             int ny, const double* zs, const double* zc, const double* zs2, const double* zc2, int nz, double* out)
+{
+    switch (type) {
+        case TpmsType::Gyroid:
+            return tpmsBoxAtLevel<TpmsType::Gyroid>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
+        case TpmsType::SchwarzP:
+            return tpmsBoxAtLevel<TpmsType::SchwarzP>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
+        case TpmsType::SchwarzD:
+            return tpmsBoxAtLevel<TpmsType::SchwarzD>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
+        case TpmsType::IWP:
+            return tpmsBoxAtLevel<TpmsType::IWP>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
+        case TpmsType::Neovius:
+            return tpmsBoxAtLevel<TpmsType::Neovius>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
+        case TpmsType::FischerKochS:
+            return tpmsBoxAtLevel<TpmsType::FischerKochS>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
+        case TpmsType::Lidinoid:
+            return tpmsBoxAtLevel<TpmsType::Lidinoid>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
+        case TpmsType::SplitP:
+            return tpmsBoxAtLevel<TpmsType::SplitP>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
+        case TpmsType::FRD:
+            return tpmsBoxAtLevel<TpmsType::FRD>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
+    }
+}
 }  // namespace
 
 void TpmsField::gridValues(const GridBatch& batch, std::span<double> out) const
@@ -307,8 +375,9 @@ void TpmsField::gridValuesMapped(const GridBatch& batch, std::span<double> out, 
         cachedAxisTerms(1, mWave[1], batch.origin[1], batch.spacing[1], batch.ny, scratch.data());
     const TrigTerms<double>* tz =
         cachedAxisTerms(2, mWave[2], batch.origin[2], batch.spacing[2], batch.nz, scratch.data());
-    // The surface type is fixed per call: one loop nest per type lets the compiler inline the
-    // equation (no switch per point); a single z (slices) drops the innermost loop.
+    // The surface type is fixed per call: one loop nest per type (tpmsBox, and the slices below)
+    // lets the compiler inline the equation (no switch per point); a single z (slices) drops the
+    // innermost loop.
     // The innermost axis's terms as four arrays (structure of arrays), so the inner loop reads
     // each term contiguously and vectorises.
     const bool slices = batch.nz == 1;
@@ -322,18 +391,16 @@ void TpmsField::gridValuesMapped(const GridBatch& batch, std::span<double> out, 
                     out.data());
         return;
     }
+    if (!slices) {
+        tpmsBox(mType, Map::kKind, map.level, tx, batch.nx, ty, batch.ny, is.data(), ic.data(), is2.data(), ic2.data(),
+                innerCount, out.data());
+        return;
+    }
     auto fill = [&]<TpmsType kType>() {
         double* o = out.data();
-        if (slices) {
-            for (int i = 0; i < batch.nx; ++i, o += innerCount)
-                for (int j = 0; j < innerCount; ++j)
-                    o[j] = map(tpmsEquation(kType, tx[i], TrigTerms<double>{is[j], ic[j], is2[j], ic2[j]}, tz[0]));
-            return;
-        }
-        for (int i = 0; i < batch.nx; ++i)
-            for (int j = 0; j < batch.ny; ++j, o += innerCount)
-                for (int k = 0; k < innerCount; ++k)
-                    o[k] = map(tpmsEquation(kType, tx[i], ty[j], TrigTerms<double>{is[k], ic[k], is2[k], ic2[k]}));
+        for (int i = 0; i < batch.nx; ++i, o += innerCount)
+            for (int j = 0; j < innerCount; ++j)
+                o[j] = map(tpmsEquation(kType, tx[i], TrigTerms<double>{is[j], ic[j], is2[j], ic2[j]}, tz[0]));
     };
     // clang-format misreads this switch after the template lambda and would spread it over 27 lines.
     // clang-format off

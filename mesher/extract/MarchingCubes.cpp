@@ -78,18 +78,6 @@ constexpr std::array<EdgeStep, 12> kEdgeSteps = [] {
     return steps;
 }();
 
-/// Per edge, where a leaf's owned vertex of that edge sits in its mask-bit numbering
-/// ((axis * 8 + x) * 64 + (y << 3 | z)) relative to the cube's minimum voxel (x << 6 | y << 3 | z),
-/// for cubes whose edges all lie in the leaf.
-constexpr std::array<int, 12> kEdgeOwnOffset = [] {
-    std::array<int, 12> offsets{};
-    for (int e = 0; e < 12; ++e) {
-        const EdgeStep& s = kEdgeSteps[std::size_t(e)];
-        offsets[std::size_t(e)] = s.axis * 512 + (s.dx << 6) + (s.dy << 3) + s.dz;
-    }
-    return offsets;
-}();
-
 /// The four corners of face @a face in cyclic order around it.
 constexpr std::array<int, 4> faceCorners(int face)
 {
@@ -354,6 +342,25 @@ using Coord = openvdb::Coord;
 
 constexpr int kDim = 9;         // a block plus one layer from the +x/+y/+z neighbours
 constexpr int kMaskWords = 24;  // 3 axes x 8 words of 64 bits; word = axis * 8 + x, bit = y * 8 + z
+
+/// Where the Stream pass keeps the vertex of the edge along @a axis from voxel (x, y, z) of a
+/// block, each coordinate in [0, 8]: the block's own vertices and those its +x/+y/+z neighbours
+/// own on its far faces, so every cube of a leaf reads its corners from one table.
+constexpr int blockVertexSlot(int axis, int x, int y, int z)
+{
+    return ((axis * kDim + x) * kDim + y) * kDim + z;
+}
+constexpr int kBlockVertexSlots = 3 * kDim * kDim * kDim;
+
+/// Per edge, its blockVertexSlot() relative to that of the cube's minimum voxel along x.
+constexpr std::array<int, 12> kEdgeSlotOffset = [] {
+    std::array<int, 12> offsets{};
+    for (int e = 0; e < 12; ++e) {
+        const EdgeStep& s = kEdgeSteps[std::size_t(e)];
+        offsets[std::size_t(e)] = blockVertexSlot(s.axis, s.dx, s.dy, s.dz);
+    }
+    return offsets;
+}();
 
 /// Offset from a block's origin to the origin of its neighbour s (bit 0: +x, bit 1: +y, bit 2: +z).
 Coord neighbourOffset(int s)
@@ -772,10 +779,23 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, Corn
     insideRows(nb, n, rows);
 
     BlockCounts counts;
+    // All 9^3 voxels on one side (a block inside or outside, or a tile block away from the
+    // surface): no edge crosses, so no vertex, cube or triangle.
+    unsigned anyInside = 0, allInside = 0x1FF;
+    for (const std::uint16_t r : rows) anyInside |= r, allInside &= r;
+    if (anyInside == 0 || allInside == 0x1FF) {
+        if constexpr (Counts) {
+            if (isLeaf) mask.fill(0);
+            if constexpr (P == Pass::Count)
+                if (isLeaf) mEdgeRanks[b].fill(0);
+            mCounts[b] = counts;
+        }
+        return;
+    }
     // Pass 2: global index of each vertex this leaf owns, by mask bit (word * 64 + bit). Only
     // written and read for set bits; a per-thread scratch, never a per-voxel array for the grid.
     std::uint32_t ownIndex[P == Pass::Emit ? kMaskWords * 64 : 1];
-    openvdb::Vec3f ownPosition[P == Pass::Stream ? kMaskWords * 64 : 1];
+    openvdb::Vec3f position9[P == Pass::Stream ? kBlockVertexSlots : 1];  // by blockVertexSlot()
     if (isLeaf) {
         if constexpr (Counts) {
             mask.fill(0);
@@ -798,13 +818,56 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, Corn
             counts.edgeVertices = total;
         }
         if constexpr (P == Pass::Stream) {
-            // Each owned vertex's position once; cubes read them by mask bit.
+            // Each vertex a cube of the leaf can use, once: the owned ones by mask bit, then
+            // those the upper neighbours own on the far faces (x, y or z = 8), where a
+            // neighbour is a leaf. The latter from the same two values and integer offsets as
+            // their owner computes them: the same bits.
+            auto put = [&](int axis, int x, int y, int z) {
+                position9[blockVertexSlot(axis, x, y, z)] =
+                    openvdb::Vec3f(indexToWorld(edgePoint(n, block.origin, x, y, z, axis)));
+            };
             for (int w = 0; w < kMaskWords; ++w) {
                 const int axis = w >> 3, x = w & 7;
                 for (std::uint64_t bits = mask[w]; bits; bits &= bits - 1) {
                     const int bit = std::countr_zero(bits);
-                    ownPosition[w * 64 + bit] =
-                        openvdb::Vec3f(indexToWorld(edgePoint(n, block.origin, x, bit >> 3, bit & 7, axis)));
+                    put(axis, x, bit >> 3, bit & 7);
+                }
+            }
+            if (available & 0xFE) {
+                auto along = [&](int axis, int x, int y, unsigned zBits) {
+                    for (; zBits; zBits &= zBits - 1) put(axis, x, y, std::countr_zero(zBits));
+                };
+                // Which z of a column (x, y) have a leaf for owner: bits 0-7 the column's
+                // sub-block @a sxy, bit 8 the one above it.
+                auto owned = [&](int sxy) {
+                    return (((available >> sxy) & 1) ? 0xFFu : 0u) | (((available >> (sxy | 4)) & 1) ? 0x100u : 0u);
+                };
+                // The plane z = 8 over the block's own columns (owner: +z): edges along x and y.
+                if (available & 0x10) {
+                    unsigned top[kDim];  // bit y: voxel (x, y, 8) inside
+                    for (int x = 0; x < kDim; ++x) {
+                        unsigned t = 0;
+                        for (int y = 0; y < kDim; ++y) t |= ((unsigned(rows[x * kDim + y]) >> 8) & 1u) << y;
+                        top[x] = t;
+                    }
+                    for (int x = 0; x < 8; ++x) {
+                        for (unsigned b = (top[x] ^ top[x + 1]) & 0xFF; b; b &= b - 1)
+                            put(0, x, std::countr_zero(b), 8);
+                        for (unsigned b = (top[x] ^ (top[x] >> 1)) & 0xFF; b; b &= b - 1)
+                            put(1, x, std::countr_zero(b), 8);
+                    }
+                }
+                // The face y = 8 (x < 8): edges along x and z; the face x = 8: along y and z.
+                const unsigned ownedY = owned(2), ownedX = owned(1), ownedXY = owned(3);
+                for (int x = 0; x < 8; ++x) {
+                    const unsigned r = rows[x * kDim + 8];
+                    along(0, x, 8, (r ^ rows[(x + 1) * kDim + 8]) & ownedY);
+                    along(2, x, 8, (r ^ (r >> 1)) & ownedY & 0xFF);
+                }
+                for (int y = 0; y < kDim; ++y) {
+                    const unsigned r = rows[8 * kDim + y];
+                    if (y < 8) along(1, 8, y, (r ^ rows[8 * kDim + y + 1]) & ownedX);
+                    along(2, 8, y, (r ^ (r >> 1)) & (y < 8 ? ownedX : ownedXY) & 0xFF);
                 }
             }
         }
@@ -866,14 +929,14 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, Corn
                     counts.centroids += entry.numCentroids;
                 }
                 if constexpr (P == Pass::Stream) {
-                    // Most cubes (all but the block's upper shell) have every edge in the leaf
-                    // and no loop centroid: their corners come straight from the owned positions.
-                    if (isLeaf && x < 7 && y < 7 && z < 7 && entry.numCentroids == 0) {
-                        const openvdb::Vec3f* own = ownPosition + ((x << 6) | (y << 3) | z);
+                    // A leaf's cubes without a loop centroid (nearly all) take their corners
+                    // straight from the block's table of vertices.
+                    if (isLeaf && entry.numCentroids == 0) {
+                        const openvdb::Vec3f* own = position9 + blockVertexSlot(0, x, y, z);
                         for (int t = 0; t < entry.numTriangles; ++t) {
                             const std::uint8_t* tri = entry.triangles[t];
-                            corners->push(own[kEdgeOwnOffset[tri[0]]], own[kEdgeOwnOffset[tri[1]]],
-                                          own[kEdgeOwnOffset[tri[2]]]);
+                            corners->push(own[kEdgeSlotOffset[tri[0]]], own[kEdgeSlotOffset[tri[1]]],
+                                          own[kEdgeSlotOffset[tri[2]]]);
                         }
                         continue;
                     }
@@ -884,8 +947,8 @@ void Mesher::processBlock(std::size_t b, Accessor& acc, TriangleMesh* mesh, Corn
                         const int e = std::countr_zero(bits);
                         const EdgeStep& step = kEdgeSteps[std::size_t(e)];
                         const int axis = step.axis, ox = x + step.dx, oy = y + step.dy, oz = z + step.dz;
-                        if (isLeaf && (ox | oy | oz) < 8)
-                            position[e] = ownPosition[(axis * 8 + ox) * 64 + ((oy << 3) | oz)];
+                        if (isLeaf)
+                            position[e] = position9[blockVertexSlot(axis, ox, oy, oz)];
                         else
                             position[e] = openvdb::Vec3f(indexToWorld(edgePoint(n, block.origin, ox, oy, oz, axis)));
                     }

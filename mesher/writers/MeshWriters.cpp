@@ -309,12 +309,14 @@ void formatFacets(std::size_t count, const Corners& triangle, char* p, const ope
                 sum->area += length[i];
                 sum->volume += volume[i];
             }
+            // The corners as given (floats), not converted back from the doubles: the same values.
+            const auto [a, b, c] = triangle(start + std::size_t(i));
             float facet[12];
             for (int k = 0; k < 3; ++k) {
                 facet[k] = normal[k * kFacetBatch + i];
-                facet[3 + k] = float(coords[k * kFacetBatch + i]);
-                facet[6 + k] = float(coords[(3 + k) * kFacetBatch + i]);
-                facet[9 + k] = float(coords[(6 + k) * kFacetBatch + i]);
+                facet[3 + k] = a[k];
+                facet[6 + k] = b[k];
+                facet[9 + k] = c[k];
             }
             putF32s(p, facet);
             p[48] = p[49] = 0;
