@@ -379,11 +379,27 @@ class BlockMap {
 public:
     explicit BlockMap(std::size_t expected) { rehash(std::bit_ceil(std::max<std::size_t>(64, 2 * expected))); }
 
+    /// A map whose blocks all have their origins in [@a lo, @a hi]: a plain array over that box
+    /// from the start when it is small enough (as densify() would make it), so inserting costs no
+    /// hashing and no probes into a table of megabytes.
+    BlockMap(std::size_t expected, const Coord& lo, const Coord& hi)
+    {
+        const Coord dims = ((hi - lo) >> 3) + Coord(1);
+        const std::uint64_t volume = std::uint64_t(dims.x()) * std::uint64_t(dims.y()) * std::uint64_t(dims.z());
+        if (volume > (std::uint64_t(1) << 24) || volume > 16 * std::uint64_t(expected)) {
+            rehash(std::bit_ceil(std::max<std::size_t>(64, 2 * expected)));
+            return;
+        }
+        mDenseOrigin = lo;
+        mDenseDims = dims;
+        mDense.assign(volume, -1);
+    }
+
     /// Switches find() to a dense array over the blocks inserted so far, if their box is small
     /// enough. Nothing may be inserted afterwards.
     void densify()
     {
-        if (mSize == 0) return;
+        if (mSize == 0 || !mDense.empty()) return;
         Coord lo(std::numeric_limits<int>::max()), hi(std::numeric_limits<int>::min());
         for (const Entry& e : mEntries) {
             if (e.index < 0) continue;
@@ -420,6 +436,11 @@ public:
     /// Inserts @a origin -> @a index unless present; returns the index stored for @a origin.
     int32_t insert(const Coord& origin, int32_t index)
     {
+        if (!mDense.empty()) {
+            int32_t& stored = mDense[denseSlot(origin)];
+            if (stored < 0) stored = index;
+            return stored;
+        }
         if (2 * (mSize + 1) > mEntries.size()) rehash(2 * mEntries.size());
         for (std::size_t i = slot(origin);; i = (i + 1) & mMask) {
             Entry& e = mEntries[i];
@@ -637,9 +658,20 @@ private:
 
 void Mesher::collectBlocks()
 {
-    for (auto it = mTree.cbeginLeaf(); it; ++it) mBlocks.push_back({it->origin(), it.getLeaf()});
+    mBlocks.reserve(2 * std::size_t(mTree.leafCount()));
+    Coord lo(std::numeric_limits<int>::max()), hi(std::numeric_limits<int>::min());
+    for (auto it = mTree.cbeginLeaf(); it; ++it) {
+        mBlocks.push_back({it->origin(), it.getLeaf()});
+        lo.minComponent(it->origin());
+        hi.maxComponent(it->origin());
+    }
     mNumLeaves = mBlocks.size();
-    mMap = std::make_unique<BlockMap>(mNumLeaves + mNumLeaves / 4);
+    if (mNumLeaves == 0) {
+        mMap = std::make_unique<BlockMap>(0);
+        return;
+    }
+    // The blocks below leaves reach one block lower on each axis.
+    mMap = std::make_unique<BlockMap>(mNumLeaves + mNumLeaves / 4, lo - Coord(int(LeafType::DIM)), hi);
     for (std::size_t i = 0; i < mNumLeaves; ++i) mMap->insert(mBlocks[i].origin, int32_t(i));
     // A cube whose minimum corner is a tile voxel can still reach into a leaf above it. Give the
     // blocks below leaves an owner too, appended in leaf order so the result stays deterministic.
