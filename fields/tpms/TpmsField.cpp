@@ -270,40 +270,49 @@ void gyroidSlice(const TrigTerms<double>* tx, int nx, const double* ys, const do
     }
 }
 
-/// One box of surface @a kType, @a nx x @a ny x @a nz values (z innermost, its terms as four
-/// arrays), each through @a map.
+/// A box of terms: @a nx x @a ny x @a nz values (z innermost, its terms as four arrays) into out.
+struct BoxTerms {
+    const TrigTerms<double>* tx;
+    int nx;
+    const TrigTerms<double>* ty;
+    int ny;
+    const double *zs, *zc, *zs2, *zc2;
+    int nz;
+    double* out;
+};
+
+/// One box of surface @a kType, each value through @a map (restrict parameters: GCC vectorises
+/// the rows without tests of overlap).
 template <TpmsType kType, class Map>
-[[gnu::always_inline]] inline void tpmsBoxOf(const TrigTerms<double>* __restrict tx, int nx,
-                                             const TrigTerms<double>* __restrict ty, int ny,
-                                             const double* __restrict zs, const double* __restrict zc,
-                                             const double* __restrict zs2, const double* __restrict zc2, int nz,
-                                             const Map& map, double* __restrict out)
+[[gnu::always_inline]] inline void tpmsRows(const TrigTerms<double>* __restrict tx, int nx,
+                                            const TrigTerms<double>* __restrict ty, int ny, const double* __restrict zs,
+                                            const double* __restrict zc, const double* __restrict zs2,
+                                            const double* __restrict zc2, int nz, const Map& map,
+                                            double* __restrict out)
 {
     for (int i = 0; i < nx; ++i)
         for (int j = 0; j < ny; ++j, out += nz)
             for (int k = 0; k < nz; ++k)
                 out[k] = map(tpmsEquation(kType, tx[i], ty[j], TrigTerms<double>{zs[k], zc[k], zs2[k], zc2[k]}));
 }
+template <TpmsType kType, class Map>
+[[gnu::always_inline]] inline void tpmsBoxOf(const BoxTerms& b, const Map& map)
+{
+    tpmsRows<kType>(b.tx, b.nx, b.ty, b.ny, b.zs, b.zc, b.zs2, b.zc2, b.nz, map, b.out);
+}
 
 template <TpmsType kType>
-[[gnu::always_inline]] inline void tpmsBoxAtLevel(int kind, double level, const TrigTerms<double>* tx, int nx,
-                                                  const TrigTerms<double>* ty, int ny, const double* zs,
-                                                  const double* zc, const double* zs2, const double* zc2, int nz,
-                                                  double* out)
+[[gnu::always_inline]] inline void tpmsBoxAtLevel(int kind, double level, const BoxTerms& box)
 {
     switch (kind) {
         case 0:
-            tpmsBoxOf<kType>(tx, nx, ty, ny, zs, zc, zs2, zc2, nz, NoLevel{level}, out);
-            break;
+            return tpmsBoxOf<kType>(box, NoLevel{level});
         case 1:
-            tpmsBoxOf<kType>(tx, nx, ty, ny, zs, zc, zs2, zc2, nz, BelowLevel{level}, out);
-            break;
+            return tpmsBoxOf<kType>(box, BelowLevel{level});
         case 2:
-            tpmsBoxOf<kType>(tx, nx, ty, ny, zs, zc, zs2, zc2, nz, BandLevel{level}, out);
-            break;
+            return tpmsBoxOf<kType>(box, BandLevel{level});
         default:
-            tpmsBoxOf<kType>(tx, nx, ty, ny, zs, zc, zs2, zc2, nz, AboveLevel{level}, out);
-            break;
+            return tpmsBoxOf<kType>(box, AboveLevel{level});
     }
 }
 
@@ -313,29 +322,21 @@ template <TpmsType kType>
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 __attribute__((target_clones("avx2", "default")))
 #endif
-void tpmsBox(TpmsType type, int kind, double level, const TrigTerms<double>* tx, int nx, const TrigTerms<double>* ty,
-             int ny, const double* zs, const double* zc, const double* zs2, const double* zc2, int nz, double* out)
+void tpmsBox(TpmsType type, int kind, double level, const BoxTerms& box)
 {
+    // clang-format off
     switch (type) {
-        case TpmsType::Gyroid:
-            return tpmsBoxAtLevel<TpmsType::Gyroid>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
-        case TpmsType::SchwarzP:
-            return tpmsBoxAtLevel<TpmsType::SchwarzP>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
-        case TpmsType::SchwarzD:
-            return tpmsBoxAtLevel<TpmsType::SchwarzD>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
-        case TpmsType::IWP:
-            return tpmsBoxAtLevel<TpmsType::IWP>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
-        case TpmsType::Neovius:
-            return tpmsBoxAtLevel<TpmsType::Neovius>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
-        case TpmsType::FischerKochS:
-            return tpmsBoxAtLevel<TpmsType::FischerKochS>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
-        case TpmsType::Lidinoid:
-            return tpmsBoxAtLevel<TpmsType::Lidinoid>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
-        case TpmsType::SplitP:
-            return tpmsBoxAtLevel<TpmsType::SplitP>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
-        case TpmsType::FRD:
-            return tpmsBoxAtLevel<TpmsType::FRD>(kind, level, tx, nx, ty, ny, zs, zc, zs2, zc2, nz, out);
+    case TpmsType::Gyroid: return tpmsBoxAtLevel<TpmsType::Gyroid>(kind, level, box);
+    case TpmsType::SchwarzP: return tpmsBoxAtLevel<TpmsType::SchwarzP>(kind, level, box);
+    case TpmsType::SchwarzD: return tpmsBoxAtLevel<TpmsType::SchwarzD>(kind, level, box);
+    case TpmsType::IWP: return tpmsBoxAtLevel<TpmsType::IWP>(kind, level, box);
+    case TpmsType::Neovius: return tpmsBoxAtLevel<TpmsType::Neovius>(kind, level, box);
+    case TpmsType::FischerKochS: return tpmsBoxAtLevel<TpmsType::FischerKochS>(kind, level, box);
+    case TpmsType::Lidinoid: return tpmsBoxAtLevel<TpmsType::Lidinoid>(kind, level, box);
+    case TpmsType::SplitP: return tpmsBoxAtLevel<TpmsType::SplitP>(kind, level, box);
+    case TpmsType::FRD: return tpmsBoxAtLevel<TpmsType::FRD>(kind, level, box);
     }
+    // clang-format on
 }
 }  // namespace
 
@@ -392,8 +393,9 @@ void TpmsField::gridValuesMapped(const GridBatch& batch, std::span<double> out, 
         return;
     }
     if (!slices) {
-        tpmsBox(mType, Map::kKind, map.level, tx, batch.nx, ty, batch.ny, is.data(), ic.data(), is2.data(), ic2.data(),
-                innerCount, out.data());
+        tpmsBox(
+            mType, Map::kKind, map.level,
+            BoxTerms{tx, batch.nx, ty, batch.ny, is.data(), ic.data(), is2.data(), ic2.data(), innerCount, out.data()});
         return;
     }
     auto fill = [&]<TpmsType kType>() {
