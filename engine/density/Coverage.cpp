@@ -17,16 +17,6 @@ constexpr int kLeafShift[3] = {6, 3, 0};
 
 }  // namespace
 
-/// A sample's change along one axis: the central difference, one-sided where a neighbour is
-/// absent (not evaluated, or outside a density mask), 0 with neither.
-double axisChange(float value, float up, bool hasUp, float down, bool hasDown)
-{
-    if (hasUp && hasDown) return 0.5 * (up - down);
-    if (hasUp) return up - value;
-    if (hasDown) return value - down;
-    return 0.0;
-}
-
 namespace {
 
 /// Band voxels with their per-voxel change along each axis (make(value, d) builds a sample), for
