@@ -15,6 +15,7 @@
 #include <atomic>
 #include <bit>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <mutex>
@@ -724,8 +725,18 @@ void Mesher::insideRows(const Neighbours& nb, const Neighbourhood& n, std::uint1
         const int sx = x >> 3, lx = x & 7;
         const std::uint64_t low = row(sx, lx), lowY = row(sx | 2, lx);
         const std::uint64_t high = row(sx | 4, lx), highY = row(sx | 6, lx);
-        for (int y = 0; y < 8; ++y)
-            rows[x * kDim + y] = std::uint16_t(((low >> (8 * y)) & 0xFF) | (((high >> (8 * y)) & 1) << 8));
+        // Byte y of a word is row y's bits: as bytes (little-endian), the eight rows vectorise.
+        std::uint8_t lowBytes[8], highBytes[8];
+        if constexpr (std::endian::native == std::endian::little) {
+            std::memcpy(lowBytes, &low, 8);
+            std::memcpy(highBytes, &high, 8);
+        } else {
+            for (int y = 0; y < 8; ++y) {
+                lowBytes[y] = std::uint8_t(low >> (8 * y));
+                highBytes[y] = std::uint8_t(high >> (8 * y));
+            }
+        }
+        for (int y = 0; y < 8; ++y) rows[x * kDim + y] = std::uint16_t(lowBytes[y] | ((highBytes[y] & 1u) << 8));
         rows[x * kDim + 8] = std::uint16_t((lowY & 0xFF) | ((highY & 1) << 8));
     }
 }
