@@ -1460,6 +1460,82 @@ TEST(GridValueMemo, AMovedLevelGivesTheGridOfAFreshEvaluation)
     }
 }
 
+TEST(GridValueMemo, DroppingTheValuesOutsideALevelBandKeepsEveryLeafAGridInItReads)
+{
+    // The density solve evaluates a band wider than the one its level ends in, and tells the job
+    // that band (solveDensity's levelWithin), which drops the kept values a grid at such a level
+    // does not read (GridValueMemo::dropOutside). A grid at any level in the band (its ends
+    // included) must then evaluate nothing again and be a fresh evaluation's bit for bit; one
+    // outside it evaluates the dropped leaves again, the same values.
+    const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
+    const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
+    struct Counted final : FieldNode {
+        FieldPtr f;
+        mutable std::atomic<int> batches{0};
+        explicit Counted(FieldPtr field) : f(std::move(field)) {}
+        void values(std::span<const Vec3d> p, std::span<double> out) const override { f->values(p, out); }
+        void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
+        {
+            f->gradients(p, out, g);
+        }
+        void gridValues(const GridBatch& batch, std::span<double> out) const override
+        {
+            ++batches;
+            f->gridValues(batch, out);
+        }
+        Interval bound(const Box3& box) const override { return f->bound(box); }
+    };
+    const auto counted = std::make_shared<Counted>(iso);
+    // A corner off the voxel lattice's multiples, so that origins are not round numbers.
+    const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
+    const Interval band(0.58, 0.64);
+    for (const double level : {0.58, 0.61, 0.64, 0.83}) {
+        const auto memo = std::make_shared<GridValueMemo>(counted);
+        memo->keep(true, std::size_t(1) << 30);
+        SparseOptions solve;
+        solve.band = Interval(0.40, 0.85);
+        const auto solved = evaluateSparse(*memo, d, solve);
+        const std::size_t before = memo->keptBytes();
+        ASSERT_EQ(before, solved->tree().leafCount() * 512 * sizeof(double));
+        memo->dropOutside(band);
+        const std::size_t after = memo->keptBytes();
+        EXPECT_GT(after, 0u);
+        EXPECT_LT(after, before);  // the wide band's edges: leaves no grid in the band reads
+        EXPECT_EQ(after % (512 * sizeof(double)), 0u);
+        const auto solid = LevelSolid::unsolved(memo, SolidSide::Below);
+        solid->solve(level);
+        counted->batches = 0;
+        const auto grid = evaluateSparse(*solid, d, SparseOptions{});
+        const int evaluatedAgain = counted->batches.load();
+        memo->keep(false);
+        const auto fresh = evaluateSparse(LevelSolid(iso, SolidSide::Below, level), d, SparseOptions{});
+        ASSERT_EQ(grid->tree().leafCount(), fresh->tree().leafCount()) << level;
+        EXPECT_EQ(mismatchedVoxels(*fresh, *grid), 0u) << level;
+        if (band.contains(level))
+            EXPECT_EQ(evaluatedAgain, 0) << level;
+        else
+            EXPECT_GT(evaluatedAgain, 0) << level;
+    }
+}
+
+TEST(GridValueMemo, TheSolveTellsTheBandItsLevelLiesIn)
+{
+    // solveDensity's levelWithin: called once, before the coverage pass, with a band holding the
+    // level it returns; the level the same as without it.
+    const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
+    const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
+    const Domain d = Domain::fromBox(Box3{Vec3d(0.0), Vec3d(10.0)}, 0.13);
+    int calls = 0;
+    Interval told;
+    const DensitySolution s =
+        solveDensity(*iso, d, 0.2, nullptr, true, nullptr, 0, [&](Interval levels) { ++calls, told = levels; });
+    const DensitySolution plain = solveDensity(*iso, d, 0.2, nullptr, true);
+    EXPECT_EQ(calls, 1);
+    EXPECT_TRUE(s.coverage);
+    EXPECT_TRUE(told.contains(s.level)) << told.lo << " " << s.level << " " << told.hi;
+    EXPECT_EQ(s.level, plain.level);
+}
+
 TEST(GridValueMemo, ASolveOnTheRecipesLatticeHandsTheGridItsValues)
 {
     // A lattice `within:` a part is solved on the recipe's own voxels, and the solve's raw values

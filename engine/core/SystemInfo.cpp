@@ -3,6 +3,10 @@
 #include <fstream>
 #include <string>
 
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
+
 namespace voxlat {
 
 namespace {
@@ -26,6 +30,13 @@ std::uint64_t availableMemoryBytes()
 {
     const std::uint64_t available = readKiloBytes("/proc/meminfo", "MemAvailable:");
     return available ? available : (std::uint64_t(4) << 30);
+}
+
+void releaseFreedMemory()
+{
+#if defined(__GLIBC__)
+    ::malloc_trim(0);
+#endif
 }
 
 }  // namespace voxlat

@@ -7,6 +7,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <span>
 #include <vector>
@@ -49,9 +50,16 @@ struct DensitySolution {
 /// @a marginVoxels more voxels past the domain on every side are measured as well (the domain's voxel
 /// lattice continued, so the leaves are the domain's): a frame whose box pokes out of the job's
 /// domain is measured on the job's voxels, the box as the mask.
+///
+/// @a levelWithin, when set, is called (at most once) with an interval the level will lie in,
+/// as soon as the solve knows one narrower than the band it evaluated: before its coverage pass,
+/// with the band that pass bisects in. A caller keeping the indicator's values for a grid at
+/// the level (GridValueMemo::dropOutside()) drops those that grid cannot read before that pass
+/// allocates its samples.
 DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target,
                              const FieldNode* mask = nullptr, bool subVoxel = false,
-                             const JobContext* context = nullptr, int marginVoxels = 0);
+                             const JobContext* context = nullptr, int marginVoxels = 0,
+                             const std::function<void(Interval)>& levelWithin = {});
 
 /// A part of a measuring region, sampled on its own domain and counted @a weight times.
 struct DensityPiece {

@@ -11,6 +11,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <memory_resource>
 #include <mutex>
 #include <unordered_map>
 #include <vector>
@@ -23,6 +24,7 @@ namespace voxlat {
 /// operand's gridValues gives the same values for the same batch. A density-solved solid sits
 /// above it (LevelSolid(GridValueMemo(raw))): the job moves the level between evaluations of the
 /// same leaves, and only the level's subtraction is redone. Off, it is a plain pass-through.
+/// The values are kept in large blocks, which keep(false) frees whole.
 class GridValueMemo final : public FieldNode, public PlaneBands {
 public:
     explicit GridValueMemo(FieldPtr operand) : mOperand(std::move(operand)) {}
@@ -65,6 +67,13 @@ public:
     void keep(bool on, std::size_t maxBytes = 0) const;
     /// Bytes of values kept now.
     std::size_t keptBytes() const;
+    /// Drops the kept batches a grid of a level in @a levels would not read, and frees their
+    /// memory: those whose operand bound over the batch's box grown by one spacing (as
+    /// evaluateSparse() culls a leaf) misses @a levels. The batches kept and their values are
+    /// unchanged; a dropped batch asked again is evaluated again (the same values). For a density
+    /// solve that has bracketed its level (solveDensity()'s @a levelWithin): its band was
+    /// evaluated wider. Called between evaluations, never during one.
+    void dropOutside(Interval levels) const;
 
 private:
     struct Key {
@@ -76,10 +85,28 @@ private:
         std::size_t operator()(const Key& k) const;
     };
     static constexpr int kShards = 64;
+    /// Doubles per block of kept values (256 KB: 64 leaves' batches).
+    static constexpr std::size_t kBlockDoubles = std::size_t(1) << 15;
+    /// A shard's values sit in blocks of kBlockDoubles and its map's nodes in a pool of large
+    /// blocks, not one small allocation each: a batch's 4 KB and its node, allocated between the
+    /// grid's leaves (evaluated in the same loop), left each leaf freed with the grid in a hole
+    /// no page fits in, so the solve's freed grid could not go back to the system (a 50 mm
+    /// frame: 0.4 GB). Blocks of one size, not growing ones: a shard's last block is partly
+    /// used, and 64 of them growing past a megabyte held 0.1 GB more.
     struct Shard {
         std::mutex mutex;
-        std::unordered_map<Key, std::vector<double>, KeyHash> values;
+        std::pmr::monotonic_buffer_resource nodes{std::size_t(1) << 16};
+        std::pmr::unordered_map<Key, const double*, KeyHash> values{&nodes};  ///< into blocks
+        std::vector<std::unique_ptr<double[]>> blocks;
+        double* next = nullptr;  ///< the last block's first unused double
+        std::size_t left = 0;    ///< doubles unused in the last block
     };
+
+    /// Whether a grid at a level in @a levels may read the batch @a k (kept @a values): its
+    /// values or else its bound over the box evaluateSparse() culls it by meet @a levels.
+    bool readAt(const Key& k, const double* values, Interval levels) const;
+    /// Room for @a n doubles in @a shard's blocks (its mutex held).
+    static double* place(Shard& shard, std::size_t n);
 
     FieldPtr mOperand;
     mutable std::unique_ptr<std::array<Shard, kShards>> mShards;  ///< set while keeping
