@@ -7,6 +7,7 @@
 #include "engine/recipe/SliceSettings.h"
 #include "fields/core/PlaneBands.h"
 #include "fields/levels/LevelSolid.h"
+#include "fields/maps/PeriodicTiling.h"
 #include "fields/maps/Ramp.h"
 #include "fields/shapes/Boolean.h"
 #include "fields/shapes/BoxField.h"
@@ -32,8 +33,10 @@
 
 #include <array>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <numbers>
+#include <random>
 #include <sstream>
 
 using namespace voxlat;
@@ -168,15 +171,12 @@ TEST(Slices, GyroidAreaMatchesFineSupersampling)
 
 namespace {
 /// A BCC lattice of @a nx x @a ny x @a nz cells of edge @a cell from the origin (every cell's
-/// centre joined to its eight corners), radii graded from 0.15 mm at @a centre to 0.3 mm at
-/// @a reach from it, every strut end weighted on its own for a Gaussian of @a sigma at @a level.
-std::vector<ConvolutionStrut> gradedBccStruts(double cell, double sigma, double level, const Vec3d& centre,
-                                              double reach, int nx, int ny, int nz)
+/// centre joined to its eight corners), each strut end of radius @a radiusAt(end) weighted on its
+/// own for a Gaussian of @a sigma at @a level.
+std::vector<ConvolutionStrut> bccStruts(double cell, double sigma, double level,
+                                        const std::function<double(const Vec3d&)>& radiusAt, int nx, int ny, int nz)
 {
-    auto weightAt = [&](const Vec3d& p) {
-        const double r = 0.15 + 0.15 * std::min(1.0, (p - centre).length() / reach);
-        return gaussianStrutWeight(r, sigma, level);
-    };
+    auto weightAt = [&](const Vec3d& p) { return gaussianStrutWeight(radiusAt(p), sigma, level); };
     std::vector<ConvolutionStrut> struts;
     for (int i = 0; i < nx; ++i)
         for (int j = 0; j < ny; ++j)
@@ -188,6 +188,15 @@ std::vector<ConvolutionStrut> gradedBccStruts(double cell, double sigma, double 
                 }
             }
     return struts;
+}
+
+/// bccStruts() with radii graded from 0.15 mm at @a centre to 0.3 mm at @a reach from it.
+std::vector<ConvolutionStrut> gradedBccStruts(double cell, double sigma, double level, const Vec3d& centre,
+                                              double reach, int nx, int ny, int nz)
+{
+    return bccStruts(
+        cell, sigma, level, [&](const Vec3d& p) { return 0.15 + 0.15 * std::min(1.0, (p - centre).length() / reach); },
+        nx, ny, nz);
 }
 
 /// gradedBccStruts() (2 mm cells, sigma 0.2, level 1) as the engine builds a strut lattice: the
@@ -731,6 +740,129 @@ outputs: {slices: {printer: saturn4, layer: 0.1, file: struts.goo, reuse: off, p
     const std::string one = readFile(dir.path / "t1" / "struts.goo");
     EXPECT_GT(one.size(), 195477u);
     EXPECT_TRUE(one == readFile(dir.path / "t3" / "struts.goo"));  // not EXPECT_EQ: binary
+}
+
+namespace {
+/// Layers of @a field sliced within @a box on @a d (offset @a offset) with the slicer's repeat
+/// copies on and off: at most 2 pixels apart by one grey level (measured: 0), every copied pixel
+/// counted, and some exposed.
+void expectCopiesComputed(const FieldNode& field, const Box3& box, const Display& d, double offset)
+{
+    RasterOptions off;
+    off.repeatRows = false;
+    const Slicer copying(field, box, offset, offset, d, RasterOptions{}), computing(field, box, offset, offset, d, off);
+    EXPECT_EQ(computing.rowPeriod() + computing.columnPeriod(), 0);
+    const std::uint64_t copies = std::uint64_t(copying.copyEnd() - copying.copyBegin()) * copying.nx() +
+                                 std::uint64_t(copying.columnCopyEnd() - copying.columnCopyBegin()) *
+                                     (copying.ny() - (copying.copyEnd() - copying.copyBegin()));
+    EXPECT_GT(copies, 0u);
+    for (const double z : {0.5, 1.025}) {
+        LayerImage a, b;
+        RasterStats copied, computed;
+        copying.rasterize(z, a, &copied);
+        computing.rasterize(z, b, &computed);
+        ASSERT_EQ(a.pixels.size(), b.pixels.size());
+        EXPECT_EQ(copied.pixelsCopied.load(), copies);
+        EXPECT_EQ(computed.pixelsCopied.load(), 0u);
+        std::size_t differing = 0, large = 0;
+        for (std::size_t k = 0; k < a.pixels.size(); ++k) {
+            differing += a.pixels[k] != b.pixels[k];
+            large += std::abs(int(a.pixels[k]) - int(b.pixels[k])) > 1;
+        }
+        EXPECT_LE(differing, 2u) << "z " << z;  // measured: 0
+        EXPECT_EQ(large, 0u) << "z " << z;
+        EXPECT_GT(a.exposedPixels(), 0.05 * double(a.pixels.size())) << "z " << z;
+    }
+}
+}  // namespace
+
+TEST(Slices, RowsAPeriodApartAreCopiedWhereTheStrutsRepeat)
+{
+    // A box of BCC cells (2 mm, sigma 0.2) with radii graded from the middle of x outwards, 0.15
+    // -> 0.3 mm (as W10's `radius: {gradient: centred}`), tabled as the engine does
+    // (PeriodicTiling: period 0 along the graded x). It repeats along y between the faces' zones:
+    // at the Saturn 4's 24 um rows, 250 rows span three cells, and the rows that far apart inside
+    // the zone are copied. The copied layer must be the computed one (the same plane up to the
+    // rounding of the struts' coordinates), and the field itself must repeat there, point by point.
+    const double sigma = 0.2, level = 1.0, cell = 2.0;
+    const int nx = 3, ny = 7, nz = 1;
+    const double width = nx * cell;
+    auto convolution = std::make_shared<StrutConvolution>(bccStruts(
+        cell, sigma, level, [&](const Vec3d& p) { return 0.15 + 0.15 * std::abs(2.0 * p.x() / width - 1.0); }, nx, ny,
+        nz));
+    const double reach = convolution->cutoffRadius(0);
+    const double peak = gaussianStrutWeight(0.3, sigma, level) * sigma * std::sqrt(2.0 * std::numbers::pi);
+    auto iso = std::make_shared<IsoRadius>(convolution, peak, sigma, 2.0 * reach);
+    const Box3 box{Vec3d(0.0), Vec3d(width, ny * cell, nz * cell)};
+    auto tiled = std::make_shared<PeriodicTiling>(iso, box, Vec3d(0.0, cell, cell), reach);
+    const LevelSolid solid(tiled, SolidSide::Below, iso->radiusOf(level));
+    ASSERT_EQ(solid.axisRepeat(0).period, 0.0);  // graded along x
+    const AxisRepeat repeat = solid.axisRepeat(1);
+    ASSERT_EQ(repeat.period, cell);
+    EXPECT_DOUBLE_EQ(repeat.lo, reach);
+    EXPECT_DOUBLE_EQ(repeat.hi, ny * cell - reach);
+
+    // The convolution repeats where the zone says, point by point (std::erf and std::exp per
+    // point): 2000 points p and p + (0, 2, 0) with both in [lo, hi] along y, anywhere along x and z.
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> ux(-0.5, width + 0.5), uy(repeat.lo, repeat.hi - cell), uz(-0.5, 2.5);
+    double worst = 0.0;
+    for (int k = 0; k < 2000; ++k) {
+        const Vec3d p(ux(rng), uy(rng), uz(rng));
+        worst = std::max(worst, std::abs(convolution->value(p + Vec3d(0.0, cell, 0.0)) - convolution->value(p)));
+    }
+    EXPECT_LT(worst, 1e-12 * peak);
+    // ... and not at the faces: a node on the y face has half the struts of a node one cell in.
+    EXPECT_GT(std::abs(convolution->value(Vec3d(2.0, 0.0, 0.0)) - convolution->value(Vec3d(2.0, cell, 0.0))),
+              0.1 * peak);
+
+    Display d;
+    d.pixelsX = 340;
+    d.pixelsY = 600;
+    d.widthMm = 0.019 * d.pixelsX;
+    d.heightMm = 0.024 * d.pixelsY;
+    RasterOptions off;
+    off.repeatRows = false;
+    const Slicer copying(solid, box, 0.2, 0.2, d, RasterOptions{}), computing(solid, box, 0.2, 0.2, d, off);
+    EXPECT_EQ(copying.rowPeriod(), 250);
+    EXPECT_EQ(computing.rowPeriod(), 0);
+    // Rows copied: those whose 3 x 3 neighbourhoods and the source's lie at least the cut-off
+    // inside the box's y faces, a pixel more (half a pixel each side for the footprint).
+    const double py = d.pitchY();
+    for (const int b : {copying.copyBegin(), copying.copyEnd() - 1}) {
+        EXPECT_GE(copying.yOf(copying.j0() + b - 250 - 1) - 0.5 * py, repeat.lo) << b;
+        EXPECT_LE(copying.yOf(copying.j0() + b + 1) + 0.5 * py, repeat.hi) << b;
+    }
+    EXPECT_LT(copying.yOf(copying.j0() + copying.copyBegin() - 250 - 2) - 0.5 * py, repeat.lo);
+    EXPECT_GT(copying.yOf(copying.j0() + copying.copyEnd() + 1) + 0.5 * py, repeat.hi);
+    EXPECT_GT(copying.copyEnd() - copying.copyBegin(), 80);
+    expectCopiesComputed(solid, box, d, 0.2);
+    EXPECT_EQ(copying.columnPeriod(), 0);  // graded along x
+
+    // Radii graded along y: no repeat along y, every row computed.
+    auto yGraded = std::make_shared<StrutConvolution>(bccStruts(
+        cell, sigma, level, [&](const Vec3d& p) { return 0.15 + 0.01 * p.y(); }, nx, ny, nz));
+    const PeriodicTiling yTiled(yGraded, box, Vec3d(cell, 0.0, cell), reach);
+    EXPECT_EQ(Slicer(yTiled, box, 0.2, 0.2, d, RasterOptions{}).rowPeriod(), 0);
+
+    // Identical cells repeat along x and y: at a 20 x 25 um pitch 100 columns and 80 rows span
+    // one cell; the columns of the rows not copied whole are copied too.
+    auto same = std::make_shared<StrutConvolution>(bccStruts(
+        cell, sigma, level, [](const Vec3d&) { return 0.2; }, 5, 5, nz));
+    const Box3 square{Vec3d(0.0), Vec3d(5 * cell, 5 * cell, nz * cell)};
+    const LevelSolid identical(std::make_shared<PeriodicTiling>(same, square, Vec3d(cell), reach), SolidSide::Above,
+                               level);
+    Display e;
+    e.pixelsX = 520;
+    e.pixelsY = 416;
+    e.widthMm = 0.02 * e.pixelsX;
+    e.heightMm = 0.025 * e.pixelsY;
+    const Slicer both(identical, square, 0.2, 0.2, e, RasterOptions{});
+    EXPECT_EQ(both.columnPeriod(), 100);
+    EXPECT_EQ(both.rowPeriod(), 80);
+    EXPECT_GT(both.columnCopyEnd() - both.columnCopyBegin(), 100);
+    EXPECT_GT(both.copyEnd() - both.copyBegin(), 80);
+    expectCopiesComputed(identical, square, e, 0.2);
 }
 
 /// Pixels of two PNG images that differ at all, and by more than one grey level.

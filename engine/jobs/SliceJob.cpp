@@ -592,6 +592,9 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
         {"inside", stats.tilesInside.load()}, {"outside", stats.tilesOutside.load()}, {"edge", stats.tilesEdge.load()}};
     result.report["pixels_evaluated"] = stats.pixelsEvaluated.load();
     result.report["pixels_supersampled"] = stats.pixelsSupersampled.load();
+    result.report["rows_per_y_period"] = slicer.rowPeriod();
+    result.report["columns_per_x_period"] = slicer.columnPeriod();
+    result.report["pixels_copied"] = stats.pixelsCopied.load();
     result.report["pixels_total"] = double(count) * slicer.nx() * slicer.ny();
     if (checks) result.report["printability"] = printability.report();
     return result;

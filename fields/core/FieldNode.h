@@ -12,6 +12,7 @@
 
 #include <openvdb/math/Vec3.h>
 
+#include <cmath>
 #include <cstddef>
 #include <limits>
 #include <memory>
@@ -41,6 +42,17 @@ struct RepeatZone {
     Vec3d period{0.0};
     Box3 box;
     Vec3d phase{0.0};  ///< a corner of one cell (the frame's origin)
+};
+
+/// Where a field's values repeat along one axis, though perhaps not everywhere: value(p + period
+/// e_axis) = value(p), up to rounding, for every p with lo <= p[axis] and p[axis] + period <= hi
+/// (whatever its other coordinates). A box frame of identical cells repeats along an axis between
+/// its faces' zones (the faces out of the kernel's reach), also when its radii are graded along
+/// another axis.
+struct AxisRepeat {
+    double period = 0.0;  ///< 0: no repeat known
+    double lo = -std::numeric_limits<double>::infinity();
+    double hi = std::numeric_limits<double>::infinity();
 };
 
 /// A regular block of sample points origin + (i*spacing.x, j*spacing.y, k*spacing.z) for
@@ -102,6 +114,15 @@ public:
         return kNoPeriod;
     }
     static constexpr double kNoPeriod = 0.0;
+
+    /// Where the values repeat along @a axis (AxisRepeat): by default everywhere with period()
+    /// when that is a finite length, else nowhere. The slicer copies pixel rows a whole number of
+    /// periods apart within a layer.
+    virtual AxisRepeat axisRepeat(int axis) const
+    {
+        const double p = period(axis);
+        return p > 0.0 && std::isfinite(p) ? AxisRepeat{p} : AxisRepeat{};
+    }
 
     /// Where the solid repeats though the field has no period (RepeatZone); none by default.
     /// Lattice properties take their cell from it when period() gives none.

@@ -60,6 +60,7 @@ public:
     bool planeCheap() const override { return planeCheapOf(*mOperand); }
     std::optional<Box3> support() const override { return mOperand->support(); }
     double period(int axis) const override { return mOperand->period(axis); }
+    AxisRepeat axisRepeat(int axis) const override { return mOperand->axisRepeat(axis); }
     std::optional<RepeatZone> repeatZone() const override { return mOperand->repeatZone(); }
 
     /// Starts keeping batches' values (at most @a maxBytes of them), or stops and frees them.

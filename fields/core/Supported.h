@@ -45,6 +45,7 @@ public:
     bool planeCheap() const override { return planeCheapOf(*mChild); }
     std::optional<Box3> support() const override { return mBox; }
     double period(int axis) const override { return mChild->period(axis); }
+    AxisRepeat axisRepeat(int axis) const override { return mChild->axisRepeat(axis); }
     std::optional<RepeatZone> repeatZone() const override { return mZone ? mZone() : mChild->repeatZone(); }
 
     const FieldPtr& child() const { return mChild; }

@@ -32,6 +32,7 @@ public:
                      std::span<signed char> side, std::span<const TileNeed> need) const override;
     bool planeCheap() const override;
     double period(int axis) const override { return mRaw->period(axis); }
+    AxisRepeat axisRepeat(int axis) const override { return mRaw->axisRepeat(axis); }
 
     /// The level in the node's own units (c for a network, t for a sheet or a convolution).
     double level() const

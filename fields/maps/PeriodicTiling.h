@@ -51,6 +51,13 @@ public:
                      std::span<signed char> side, std::span<const TileNeed> need) const override;
     bool planeCheap() const override { return planeCheapOf(*mChild); }
     std::optional<Box3> support() const override { return mChild->support(); }
+    /// Along an axis with a period: that period between the faces' zones (at least @a reach
+    /// inside the box), as the constructor's contract says; else none.
+    AxisRepeat axisRepeat(int axis) const override
+    {
+        if (!(mPeriod[axis] > 0.0)) return {};
+        return {mPeriod[axis], mBox.min[axis] + mReach, mBox.max[axis] - mReach};
+    }
 
     /// Values held in tables so far (grids whose spacing divides the period; for tests).
     std::size_t tabledValues() const;

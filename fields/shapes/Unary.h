@@ -24,6 +24,7 @@ public:
                      std::span<signed char> side, std::span<const TileNeed> need) const override;
     bool planeCheap() const override { return planeCheapOf(*mChild); }
     double period(int axis) const override { return mChild->period(axis); }
+    AxisRepeat axisRepeat(int axis) const override { return mChild->axisRepeat(axis); }
     /// A positive offset only shrinks the solid: the child's box. Other maps: unbounded.
     std::optional<Box3> support() const override;
 

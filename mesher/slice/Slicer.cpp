@@ -283,6 +283,39 @@ void StoredRows::makeStrip(int strip)
     }
 }
 
+namespace {
+
+/// Along one axis of the window (@a n pixels of @a pitch from pixel @a first, part coordinate
+/// (first + a + 1/2) pitch - @a offset; @a inside says which lie wholly within the part's box):
+/// the fewest pixels @a period whose length spans a whole number of @a repeat's periods (to 1e-9
+/// relative), and the pixels [@a begin, @a end) that show the pixel @a period before them: the
+/// pixel, its neighbours and their footprints lie in the repeat, and so do those of the pixel a
+/// period before, both within the part's box. None (all 0) when the field does not repeat.
+void repeatSpan(const AxisRepeat& repeat, double pitch, int first, double offset,
+                const std::vector<std::uint8_t>& inside, int& period, int& begin, int& end)
+{
+    period = begin = end = 0;
+    const int n = int(inside.size());
+    if (!(repeat.period > 0.0 && std::isfinite(repeat.period))) return;
+    for (int p = 1; p < n && period == 0; ++p) {
+        const double periods = p * pitch / repeat.period;
+        if (periods >= 0.5 && std::abs(periods - std::round(periods)) <= 1e-9 * periods) period = p;
+    }
+    if (period == 0) return;
+    const double slack = 1e-9 * repeat.period;
+    auto at = [&](int a) { return (double(first + a) + 0.5) * pitch - offset; };
+    begin = n;
+    for (int a = period; a < n; ++a) {
+        const bool copies = inside[a] && inside[a - period] && at(a - period - 1) - 0.5 * pitch >= repeat.lo + slack &&
+                            at(a + 1) + 0.5 * pitch <= repeat.hi - slack;
+        if (copies && begin == n) begin = a;
+        if (copies) end = a + 1;
+    }
+    if (end <= begin) begin = end = 0;
+}
+
+}  // namespace
+
 Slicer::Slicer(const FieldNode& field, const Box3& part, double offsetX, double offsetY, const Display& display,
                const RasterOptions& options)
     : mField(field),
@@ -317,6 +350,11 @@ Slicer::Slicer(const FieldNode& field, const Box3& part, double offsetX, double 
     for (int b = 0; b < mNy; ++b) {
         const double y = (double(mJ0 + b) + 0.5) * py - mOffsetY;
         rowIn[b] = y - 0.5 * py >= part.min.y() - slackY && y + 0.5 * py <= part.max.y() + slackY;
+    }
+    // Rows (columns) a whole number of y- (x-) periods apart (RasterOptions::repeatRows).
+    if (options.repeatRows) {
+        repeatSpan(field.axisRepeat(0), px, mI0, mOffsetX, columnIn, mColumnPeriod, mColumnCopyBegin, mColumnCopyEnd);
+        repeatSpan(field.axisRepeat(1), py, mJ0, mOffsetY, rowIn, mRowPeriod, mCopyBegin, mCopyEnd);
     }
     mTileColumnsIn.assign(std::size_t(mNx), 0);
     mTileRowsIn.assign(std::size_t(mNy), 0);
@@ -491,11 +529,11 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     };
     // Blocks of 8 x 8 tiles, culled by their quarters (4 x 4 tiles): a block whose quarters all
     // straddle the surface is evaluated as one batch (per-axis terms shared by twice the pixels per
-    // side), otherwise quarter by quarter as the culling allows.
-    for (int bj = 0; bj < mNy; bj += block) {
-        if (mOptions.interrupt) mOptions.interrupt();
-        for (int bi = 0; bi < mNx; bi += block) {
-            const int bnx = std::min(block, mNx - bi), bny = std::min(block, mNy - bj);
+    // side), otherwise quarter by quarter as the culling allows. Rows [rowBegin, rowEnd) of the window.
+    // Columns [colBegin, colEnd) of the rows [bj, bj + bny).
+    auto rasterBlocks = [&](int bj, int bny, int colBegin, int colEnd) {
+        for (int bi = colBegin; bi < colEnd; bi += block) {
+            const int bnx = std::min(block, colEnd - bi);
             // Blocks are bounded while that pays: in a lattice that fills the window no block has
             // one sign, and bound() per block was 12 % of slicing W10's strut plate for nothing.
             // After straddlingRun (256) bounded blocks in a row that all straddled (W10's plate:
@@ -542,7 +580,35 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
                     decideBlock(qi, qj, std::min(half, bi + bnx - qi), std::min(half, bj + bny - qj),
                                 quarterSide[quarters++]);
         }
-    }
+    };
+    // Rows [rowBegin, rowEnd) of the window, in rows of blocks. Columns a whole number of
+    // x-periods apart show the same pixels (the constructor found them): the columns left of the
+    // copied ones are made first, then each copied column from the one a period left of it
+    // (made or copied before it), then the columns to the right.
+    auto rasterRows = [&](int rowBegin, int rowEnd) {
+        for (int bj = rowBegin; bj < rowEnd; bj += block) {
+            if (mOptions.interrupt) mOptions.interrupt();
+            const int bny = std::min(block, rowEnd - bj);
+            rasterBlocks(bj, bny, 0, mColumnCopyBegin);
+            for (int b = bj; b < bj + bny; ++b) {
+                std::uint8_t* row = &out.pixels[std::size_t(b) * mNx];
+                for (int a = mColumnCopyBegin; a < mColumnCopyEnd; a += mColumnPeriod)
+                    std::memcpy(row + a, row + a - mColumnPeriod,
+                                std::size_t(std::min(mColumnPeriod, mColumnCopyEnd - a)));
+            }
+            counts.pixelsCopied += std::uint64_t(mColumnCopyEnd - mColumnCopyBegin) * std::uint64_t(bny);
+            rasterBlocks(bj, bny, mColumnCopyEnd, mNx);
+        }
+    };
+    // Rows a whole number of y-periods apart show the same pixels (the constructor found them):
+    // the rows above the copied ones are made first, then each copied row from the row a period
+    // above it (made or copied before it), then the rows below.
+    rasterRows(0, mCopyBegin);
+    for (int b = mCopyBegin; b < mCopyEnd; ++b)
+        std::memcpy(&out.pixels[std::size_t(b) * mNx], &out.pixels[std::size_t(b - mRowPeriod) * mNx],
+                    std::size_t(mNx));
+    counts.pixelsCopied += std::uint64_t(mCopyEnd - mCopyBegin) * std::uint64_t(mNx);
+    rasterRows(mCopyEnd, mNy);
     if (stats) {
         stats->tilesInside += counts.tilesInside;
         stats->tilesOutside += counts.tilesOutside;
@@ -550,6 +616,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         stats->pixelsEvaluated += counts.pixelsEvaluated;
         stats->pixelsSupersampled += counts.pixelsSupersampled;
         stats->blocksUnbounded += counts.blocksUnbounded;
+        stats->pixelsCopied += counts.pixelsCopied;
     }
 }
 
