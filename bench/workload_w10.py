@@ -1,6 +1,7 @@
 """W10: a build plate of struts. The ELEGOO Saturn 4 (11520 x 5120 pixels, 19 x 24 um), a
 200 x 110 x 20 mm BCC strut lattice (2 mm cells, Gaussian kernel sigma 0.2, radii graded from the
-centre 0.15 -> 0.3 mm: every strut's weight differs, so no layer or cell repeats) sliced to .goo
+centre 0.15 -> 0.3 mm, `radius: {gradient: centred}`: |2u - 1| along x, so the struts' weights
+differ along x and repeat along y and z, every 2 mm) sliced to .goo
 with the printability checks on. Targets: <= 10 min and <= 2 GB on the 2-core machine, and the
 struts' pixel rate within 10x of a TPMS's on the same window (a gyroid sheet sliced here alongside,
 every layer computed: W4's figure).
@@ -103,7 +104,7 @@ voxel: 0.05
 domain: {{box: [[0, 0, 0], [200, 110, {h}]]}}
 fields:
   lattice: {{struts: {{cell: bcc, size: 2}}, kernel: {{gaussian: {{sigma: 0.2}}}},
-            radius: {{gradient: centred, min: 0.15, max: 0.3}}}}
+            radius: {{gradient: {gradient}, min: 0.15, max: 0.3}}}}
 result: lattice
 outputs: {{slices: {{printer: saturn4, layer: 0.05, file: w10.goo, reuse: off}}{frame}}}
 """
@@ -129,8 +130,13 @@ def slice_case(voxlat, tmp, name, text):
 
 def run(voxlat, tmp):
     h = float(os.environ.get("VOXLAT_W10_HEIGHT", str(FULL_HEIGHT)))
+    # VOXLAT_W10_GRADIENT=spherical: the general case, radii graded by the distance from the
+    # plate's centre in 3-D, so nothing repeats along any axis (no row, column or layer copied).
+    gradient = os.environ.get("VOXLAT_W10_GRADIENT", "centred")
+    if gradient != "centred":
+        print(f"  radii graded `{gradient}` (the general case), not W10's `centred`")
     print(f"  load average before: {os.getloadavg()[0]:.2f}; stack {h:g} mm of the {FULL_HEIGHT:g} mm plate")
-    t_s, mb_s, s = slice_case(voxlat, tmp, "struts", STRUTS.format(h=h, frame=""))
+    t_s, mb_s, s = slice_case(voxlat, tmp, "struts", STRUTS.format(h=h, frame="", gradient=gradient))
     t_t, mb_t, st = slice_case(voxlat, tmp, "tpms", TPMS.format(h=h))
     layers, window = s["layers"], s["pixels_total"]
     row(f"voxlat struts, {layers} layers", t_s, mb_s)
@@ -144,13 +150,15 @@ def run(voxlat, tmp):
     print(f"  full 20 mm plate: {full:.0f} s ({how}; target <= 600 s: {verdict(full <= 600)}); "
           f"peak {mb_s:.0f} MB (target <= 2048 MB: {verdict(mb_s <= 2048)})")
     print(f"  exposed volume {s['exposed_volume_mm3']:.1f} mm3; {s['pixels_evaluated'] / window:.1%} of window "
-          f"pixels evaluated from the field")
+          f"pixels evaluated from the field, {s.get('pixels_copied', 0) / window:.1%} copied a period apart "
+          f"({s.get('rows_per_y_period', 0)} rows, {s.get('columns_per_x_period', 0)} columns per period); TPMS "
+          f"{st['pixels_evaluated'] / st['pixels_total']:.1%} evaluated, {st.get('pixels_copied', 0) / st['pixels_total']:.1%} copied")
     out = {"struts_s": t_s, "struts_mb": mb_s, "layers": layers, "height_mm": h, "full_plate_s": full,
            "struts_window_pixels_per_s": rate_s, "tpms_s": t_t, "tpms_window_pixels_per_s": rate_t,
            "tpms_over_struts": ratio}
     if os.environ.get("VOXLAT_W10_INFO", "1") != "0":
         recipe = tmp / "info.yaml"
-        recipe.write_text(STRUTS.format(h=FULL_HEIGHT, frame=""))
+        recipe.write_text(STRUTS.format(h=FULL_HEIGHT, frame="", gradient=gradient))
         t_i, mb_i, text = measure([voxlat, "-q", "info", recipe])
         row("voxlat info (the full 20 mm plate)", t_i, mb_i)
         print("  " + "\n  ".join(line for line in text.strip().splitlines() if line.startswith("result")))
@@ -225,7 +233,7 @@ def area_check(voxlat, tmp):
     """Layer areas of W10's .goo on sampled layers and patches against 16 x 16 supersampling."""
     name = "area"
     recipe = tmp / f"{name}.yaml"
-    recipe.write_text(STRUTS.format(h=2.0, frame=", frame: w10-frame.csv"))
+    recipe.write_text(STRUTS.format(h=2.0, frame=", frame: w10-frame.csv", gradient=os.environ.get("VOXLAT_W10_GRADIENT", "centred")))
     t, mb, _ = measure([voxlat, "-q", "run", recipe, "--out", tmp / name, "--no-preview"])
     report = json.loads((tmp / name / "report.json").read_text())
     s = report["slices"][0]

@@ -191,6 +191,26 @@ void LayerImage::storedWindow(const Display& display, std::vector<std::uint8_t>&
         copy(0, iDone, jDone, ny);  // bottom strip
         return;
     }
+    // Landscape: each source row is a stored row, copied whole or reversed (mirrored x: the
+    // Saturn 4), 16 bytes at a time where SSSE3 is there (a byte loop with a step of -1 ran at
+    // about 0.4 GB/s: 13 % of slicing W10's plate once most rows were copied a period apart).
+    if (!display.portrait && (di == 1 || di == -1)) {
+        for (int j = 0; j < ny; ++j) {
+            const std::uint8_t* src = &pixels[std::size_t(j) * nx];
+            std::uint8_t* dst = out.data() + origin + dj * j;
+            if (di == 1) {
+                std::memcpy(dst, src, std::size_t(nx));
+                continue;
+            }
+            int i = 0;
+#if defined(__SSSE3__)
+            for (; i + 16 <= nx; i += 16)
+                store16(dst - i, _mm_loadu_si128(reinterpret_cast<const __m128i*>(src + i)), true);
+#endif
+            for (; i < nx; ++i) dst[-i] = src[i];
+        }
+        return;
+    }
     constexpr int kBlock = 64;
     for (int jb0 = 0; jb0 < ny; jb0 += kBlock)
         for (int ib0 = 0; ib0 < nx; ib0 += kBlock)
