@@ -14,7 +14,8 @@ namespace voxlat {
 /// @a mesh with its vertices merged per cell of a cubic grid (each cell's vertices replaced by
 /// their mean) and the triangles that collapse dropped, the cell grown in steps of a fifth (from
 /// an estimate made from the mean edge length) until at most @a maxTriangles triangles are left.
-/// Orientation is kept; the result is the same for any thread count (serial).
+/// Orientation is kept; the result is the same for any thread count (two cells of that sequence
+/// are tried at once, the first within the budget kept).
 TriangleMesh clusterDecimate(const TriangleMesh& mesh, std::size_t maxTriangles);
 
 }  // namespace voxlat
