@@ -39,6 +39,34 @@ std::vector<std::vector<double>> readCsvRows(const std::filesystem::path& p, std
 
 }  // namespace
 
+TEST(FrameExport, GradedRadiiStayWithinMinAndMaxPastTheDomain)
+{
+    // 2 mm cells laid past a 0.2 mm thin domain: their far nodes lie 10 box heights away. Radii
+    // graded over the box (u, v, w in [0, 1]) must stay within [min, max] at every strut end,
+    // and the slice of such a plate must show its struts.
+    TempDir dir;
+    for (const std::string preset : {"spherical", "centred", "cylindrical", "linear"}) {
+        const std::string recipe =
+            "voxel: 0.05\ndomain: {box: [[0, 0, 0], [8, 14, 0.2]]}\nfields:\n"
+            "  lattice: {struts: {cell: bcc, size: 2}, kernel: capsule, radius: {gradient: " +
+            preset +
+            ", min: 0.15, max: 0.3, axis: z}}\nresult: lattice\n"
+            "outputs: {frame: frame.csv}\n";
+        std::string log;
+        ASSERT_EQ(runIn(dir, preset + ".yaml", recipe, preset, &log), 0) << log;
+        std::string header;
+        const auto rows = readCsvRows(dir.path / preset / "frame.csv", header);
+        ASSERT_GT(rows.size(), 100u) << preset;
+        double lo = 1e9, hi = 0.0;
+        for (const auto& row : rows) {
+            lo = std::min({lo, row[6], row[7]});
+            hi = std::max({hi, row[6], row[7]});
+        }
+        EXPECT_GE(lo, 0.15 - 1e-12) << preset;
+        EXPECT_LE(hi, 0.3 + 1e-12) << preset;
+    }
+}
+
 TEST(FrameExport, CsvReadBackAsAWireframeGivesTheSameMesh)
 {
     TempDir dir;

@@ -865,6 +865,67 @@ TEST(Slices, RowsAPeriodApartAreCopiedWhereTheStrutsRepeat)
     expectCopiesComputed(identical, square, e, 0.2);
 }
 
+TEST(Slices, RowCopiesAcrossKindsAndPlacements)
+{
+    // Which results copy rows a period apart on the Saturn 4 (24 um rows: 2 mm cells repeat
+    // every 250 rows), as report.json tells it: box frames of identical or x-graded struts and a
+    // bare TPMS do; radii graded by the distance from a point, a frame `within:` a part and a
+    // TPMS cut by a shape repeat nowhere the slicer can prove, and copy nothing. Every pixel
+    // copied is counted, and the exposed volume of a result that copies is the one of the same
+    // plane's pixels (checked against the computed rows in Slices.RowsAPeriodApartAreCopiedWhereTheStrutsRepeat).
+    struct Case {
+        const char* name;
+        const char* fields;
+        int rows;
+    };
+    const Case cases[] = {
+        {"centred",
+         "lattice: {struts: {cell: bcc, size: 2}, kernel: {gaussian: {sigma: 0.2}}, radius: {gradient: centred, min: "
+         "0.15, max: 0.3}}",
+         250},
+        {"identical", "lattice: {struts: {cell: bcc, size: 2}, kernel: {gaussian: {sigma: 0.2}}, radius: 0.25}", 250},
+        {"spherical",
+         "lattice: {struts: {cell: bcc, size: 2}, kernel: {gaussian: {sigma: 0.2}}, radius: {gradient: spherical, min: "
+         "0.15, max: 0.3}}",
+         0},
+        {"within",
+         "part: {cylinder: {radius: 4, height: 40, axis: [0, 1, 0], center: [4, 7, 0]}}\n  lattice: {struts: {cell: bcc, size: "
+         "2, within: part}, kernel: {gaussian: {sigma: 0.2}}, radius: 0.25}",
+         0},
+        {"gyroid", "lattice: {tpms: gyroid, cell: 2, solid: sheet, level: 0.3}", 250},
+        {"gyroid-cut",
+         "shape: {cylinder: {radius: 4, height: 40, axis: [0, 1, 0], center: [4, 7, 0]}}\n  gyroid: {tpms: gyroid, cell: 2, "
+         "solid: sheet, level: 0.3}\n  lattice: {intersection: [gyroid, shape]}",
+         0},
+    };
+    TempDir dir;
+    for (const Case& c : cases) {
+        const std::string fields = c.fields;
+        const auto recipe = dir.write(std::string(c.name) + ".yaml",
+                                      "domain: {box: [[0, 0, 0], [8, 14, 0.2]]}\nfields:\n  " + fields +
+                                          "\nresult: lattice\noutputs: {slices: {printer: saturn4, layer: 0.1, file: "
+                                          "s.goo, reuse: off, preview: off}}\n");
+        const auto out = dir.path / c.name;
+        ASSERT_EQ(
+            runCommand(voxlatBinary() + " -q run " + recipe.string() + " --out " + out.string() + " --no-preview"), 0)
+            << c.name;
+        const auto report = nlohmann::json::parse(readFile(out / "report.json"));
+        const auto& s = report["slices"][0];
+        EXPECT_EQ(s["rows_per_y_period"].get<int>(), c.rows) << c.name;
+        EXPECT_EQ(s["columns_per_x_period"].get<int>(), 0) << c.name;  // 2 mm cells: 2000 columns, wider than 8 mm
+        const double copied = s["pixels_copied"].get<double>(), total = s["pixels_total"].get<double>();
+        if (c.rows > 0) {
+            // Rows copied: those a period (6 mm) and the struts' cut-off (about 1 mm) from the
+            // faces, so about a third of the 14 mm; a TPMS from its 250th row on.
+            EXPECT_GT(copied, 0.2 * total) << c.name;
+            EXPECT_LT(copied, 0.6 * total) << c.name;
+        } else {
+            EXPECT_EQ(copied, 0.0) << c.name;
+        }
+        EXPECT_GT(s["exposed_volume_mm3"].get<double>(), 0.5) << c.name;
+    }
+}
+
 /// Pixels of two PNG images that differ at all, and by more than one grey level.
 std::pair<std::size_t, std::size_t> pixelsDiffering(const std::string& a, const std::string& b)
 {
