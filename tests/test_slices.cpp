@@ -889,12 +889,14 @@ TEST(Slices, RowCopiesAcrossKindsAndPlacements)
          "0.15, max: 0.3}}",
          0},
         {"within",
-         "part: {cylinder: {radius: 4, height: 40, axis: [0, 1, 0], center: [4, 7, 0]}}\n  lattice: {struts: {cell: bcc, size: "
+         "part: {cylinder: {radius: 4, height: 40, axis: [0, 1, 0], center: [4, 7, 0]}}\n  lattice: {struts: {cell: "
+         "bcc, size: "
          "2, within: part}, kernel: {gaussian: {sigma: 0.2}}, radius: 0.25}",
          0},
         {"gyroid", "lattice: {tpms: gyroid, cell: 2, solid: sheet, level: 0.3}", 250},
         {"gyroid-cut",
-         "shape: {cylinder: {radius: 4, height: 40, axis: [0, 1, 0], center: [4, 7, 0]}}\n  gyroid: {tpms: gyroid, cell: 2, "
+         "shape: {cylinder: {radius: 4, height: 40, axis: [0, 1, 0], center: [4, 7, 0]}}\n  gyroid: {tpms: gyroid, "
+         "cell: 2, "
          "solid: sheet, level: 0.3}\n  lattice: {intersection: [gyroid, shape]}",
          0},
     };
