@@ -549,8 +549,8 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     };
     // Blocks of 8 x 8 tiles, culled by their quarters (4 x 4 tiles): a block whose quarters all
     // straddle the surface is evaluated as one batch (per-axis terms shared by twice the pixels per
-    // side), otherwise quarter by quarter as the culling allows. Rows [rowBegin, rowEnd) of the window.
-    // Columns [colBegin, colEnd) of the rows [bj, bj + bny).
+    // side), otherwise quarter by quarter as the culling allows: here columns [colBegin, colEnd) of
+    // the window's rows [bj, bj + bny).
     auto rasterBlocks = [&](int bj, int bny, int colBegin, int colEnd) {
         for (int bi = colBegin; bi < colEnd; bi += block) {
             const int bnx = std::min(block, colEnd - bi);
