@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <iterator>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -38,6 +39,10 @@ struct TempDir {
         std::ofstream(path / name) << text;
         return path / name;
     }
+    /// The path of @a name in the folder, as a string.
+    std::string file(const std::string& name) const { return (path / name).string(); }
+    /// How many files and folders the folder holds.
+    std::size_t entries() const { return std::size_t(std::distance(std::filesystem::directory_iterator(path), {})); }
 };
 
 /// Runs a shell command, returning its exit status and capturing stdout+stderr.

@@ -19,7 +19,7 @@
 using namespace voxlat::test;
 
 namespace {
-const char* kSmall = R"(voxel: 0.25
+const char* kCliRecipe = R"(voxel: 0.25
 domain: {box: [[0, 0, 0], [12, 12, 12]]}
 fields:
   lattice: {tpms: gyroid, cell: 6, solid: network, density: 0.30}
@@ -31,7 +31,7 @@ outputs: {mesh: [part.stl, part.ply], vdb: part.vdb}
 TEST(Cli, RunWritesOutputsAndReport)
 {
     TempDir dir;
-    const auto recipe = dir.write("small.yaml", kSmall);
+    const auto recipe = dir.write("small.yaml", kCliRecipe);
     std::string out;
     ASSERT_EQ(runCommand(voxlatBinary() + " run " + recipe.string() + " --out " + (dir.path / "out").string(), &out), 0)
         << out;
@@ -49,7 +49,7 @@ TEST(Cli, RunWritesOutputsAndReport)
 TEST(Cli, SameBytesForAnyThreadCount)
 {
     TempDir dir;
-    const auto recipe = dir.write("small.yaml", kSmall);
+    const auto recipe = dir.write("small.yaml", kCliRecipe);
     const auto output = [&](int threads) {
         std::ostringstream name;
         name << "t" << threads << ".stl";
@@ -70,7 +70,7 @@ TEST(Cli, SameBytesForAnyThreadCount)
 TEST(Cli, BadInputExitsNonZeroAndWritesNothing)
 {
     TempDir dir;
-    std::string text = kSmall;
+    std::string text = kCliRecipe;
     text.replace(text.find("density: 0.30"), 13, "density: 1.5");
     const auto recipe = dir.write("bad.yaml", text);
     std::string out;
@@ -79,7 +79,7 @@ TEST(Cli, BadInputExitsNonZeroAndWritesNothing)
     EXPECT_NE(out.find("bad.yaml:4:"), std::string::npos) << out;
     EXPECT_FALSE(std::filesystem::exists(dir.path / "out"));
     // Too much memory: refused before any output appears.
-    std::string hugeText = kSmall;
+    std::string hugeText = kCliRecipe;
     hugeText.replace(hugeText.find("voxel: 0.25"), 11, "voxel: 0.0005");
     const auto huge = dir.write("huge.yaml", hugeText);
     EXPECT_EQ(runCommand(voxlatBinary() + " -q run " + huge.string() + " --out " + (dir.path / "out2").string(), &out),
@@ -146,7 +146,7 @@ TEST(Cli, VersionComesFromTheBuildAndLandsInTheReport)
     ASSERT_EQ(out.rfind("voxlat ", 0), 0u) << out;
     const std::string version = out.substr(7, out.find_first_of("\r\n") - 7);
     EXPECT_EQ(std::count(version.begin(), version.end(), '.'), 2) << version;
-    const auto recipe = dir.write("small.yaml", kSmall);
+    const auto recipe = dir.write("small.yaml", kCliRecipe);
     // (0.5 mm: at 1 mm, six voxels a cell, the level aimed at the mesh parts a corner crumb.)
     ASSERT_EQ(runCommand(voxlatBinary() + " -q run " + recipe.string() + " --set voxel=0.5 --no-preview --out " +
                          (dir.path / "out").string()),
@@ -189,7 +189,7 @@ outputs: {mesh: part.stl}
 TEST(Cli, GlobalOptionsAfterTheSubcommandAreTheSame)
 {
     TempDir dir;
-    const auto recipe = dir.write("small.yaml", kSmall);
+    const auto recipe = dir.write("small.yaml", kCliRecipe);
     std::string out;
     ASSERT_EQ(runCommand(voxlatBinary() + " mesh " + recipe.string() + " --threads 1 -q -o " +
                              (dir.path / "after.stl").string(),
@@ -420,7 +420,7 @@ TEST(Cli, MessagesNeverQuoteAnotherFilesText)
 TEST(Cli, WriteFailuresSayWhyAndExit3)
 {
     TempDir dir;
-    const auto recipe = dir.write("small.yaml", kSmall);
+    const auto recipe = dir.write("small.yaml", kCliRecipe);
     std::string out;
     // /sys refuses new folders even to root: the folder cannot be made, and the reason is given.
     EXPECT_EQ(runCommand(voxlatBinary() + " -q run " + recipe.string() + " --out /sys/kernel/voxlat-test", &out), 3)
@@ -489,7 +489,7 @@ TEST(Cli, OutputsStayInsideTheOutputFolderAndReplaceOnlyFiles)
 {
     TempDir dir;
     auto withOutputs = [&](const std::string& outputs) {
-        std::string text = kSmall;
+        std::string text = kCliRecipe;
         text.replace(text.find("outputs: {mesh: [part.stl, part.ply], vdb: part.vdb}"), 52, "outputs: " + outputs);
         return dir.write("r.yaml", text);
     };
@@ -586,7 +586,7 @@ TEST(Cli, VdbOutputIsTheSameBytesForTheSameRecipe)
 {
     // OpenVDB stamps a random UUID in every file; voxlat derives it from the recipe instead.
     TempDir dir;
-    const auto recipe = dir.write("small.yaml", kSmall);
+    const auto recipe = dir.write("small.yaml", kCliRecipe);
     for (const char* out : {"a", "b"})
         ASSERT_EQ(runCommand(voxlatBinary() + " -q --threads " + (out[0] == 'a' ? "1" : "3") + " run " +
                              recipe.string() + " --set voxel=0.5 --no-preview --out " + (dir.path / out).string()),
@@ -615,7 +615,7 @@ TEST(Cli, AbsurdVoxelsAreRefusedAtOnceWithTheLine)
     for (const auto& [voxel, box, needle, code] :
          {std::tuple<std::string, std::string, std::string, int>{"1e-9", "10", "a grid can index", 2},
           {"0.01", "1000", "a job can cull", 3}}) {
-        std::string text = kSmall;
+        std::string text = kCliRecipe;
         text.replace(text.find("0.25"), 4, voxel);
         text.replace(text.find("[12, 12, 12]"), 12, "[" + box + ", " + box + ", " + box + "]");
         const auto recipe = dir.write("r.yaml", text);

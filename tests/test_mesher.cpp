@@ -1,5 +1,6 @@
 // Tests of the mesher: marching cubes topology and determinism, mesh checks, writers.
 
+#include "TestUtil.h"
 #include "mesher/checks/MeshCheck.h"
 #include "mesher/extract/MarchingCubes.h"
 #include "mesher/writers/AtomicFile.h"
@@ -37,24 +38,7 @@ using FloatGrid = openvdb::FloatGrid;
 
 namespace fs = std::filesystem;
 
-/// A fresh directory per test, removed afterwards.
-class TempDir {
-public:
-    TempDir()
-    {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        mPath = fs::temp_directory_path() /
-                ("voxlat_mesher_" + std::string(info->name()) + "_" + std::to_string(::getpid()));
-        fs::remove_all(mPath);
-        fs::create_directories(mPath);
-    }
-    ~TempDir() { fs::remove_all(mPath); }
-    std::string file(const std::string& name) const { return (mPath / name).string(); }
-    std::size_t entries() const { return std::size_t(std::distance(fs::directory_iterator(mPath), {})); }
-
-private:
-    fs::path mPath;
-};
+using voxlat::test::TempDir;
 
 std::string readBytes(const std::string& path)
 {

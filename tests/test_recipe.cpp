@@ -1,4 +1,5 @@
 // Recipe loading: every bad input gives one message naming the file, the line and the fix.
+#include "RecipeErrors.h"
 #include "TestUtil.h"
 #include "engine/jobs/Job.h"
 #include "engine/recipe/FieldBuilder.h"
@@ -8,6 +9,7 @@
 #include <gtest/gtest.h>
 
 using namespace voxlat;
+using voxlat::test::errorOf;
 
 namespace {
 
@@ -19,18 +21,6 @@ fields:
 result: lattice
 outputs: {mesh: part.stl}
 )";
-
-/// Loads recipe text and returns the InputError message ("" if it loaded and built).
-std::string errorOf(const std::string& text, const std::vector<std::string>& sets = {})
-{
-    try {
-        const Recipe r = parseRecipe(text, "bad.yaml", ".", sets);
-        Job job(r);
-        return "";
-    } catch (const InputError& e) {
-        return e.what();
-    }
-}
 
 std::string replace(std::string text, const std::string& from, const std::string& to)
 {

@@ -2,6 +2,7 @@
 // the canonical hashed copy, the JSON Schema against the node table and docs/recipes.md, and
 // every ```yaml example of the docs run as a recipe (blocks tagged ```yaml <kind>, such as
 // `printer-profile`, show other file formats and are left out).
+#include "RecipeErrors.h"
 #include "TestUtil.h"
 #include "engine/jobs/Job.h"
 #include "engine/recipe/ExprNodes.h"
@@ -38,18 +39,6 @@ result: shaped
 outputs: {mesh: "${name}_${cell}.stl"}
 allow: [pieces]
 )";
-
-/// The InputError message of loading and building @a text ("" if it works).
-std::string errorOf(const std::string& text, const std::vector<std::string>& sets = {},
-                    const std::filesystem::path& folder = ".")
-{
-    try {
-        Job job(parseRecipe(text, "bad.yaml", folder, sets));
-        return "";
-    } catch (const InputError& e) {
-        return e.what();
-    }
-}
 
 std::string recipeWith(const std::string& fields, const std::string& result = "f")
 {

@@ -1,4 +1,5 @@
 #include "engine/checks/Pieces.h"
+#include "engine/checks/UnionFind.h"
 
 #include "mesher/extract/SignWords.h"
 
@@ -191,12 +192,6 @@ bool touches(const Bits& a, const Bits& b, int axis)
         any |= axis == 1 ? ((a[std::size_t(x)] & kY7) >> 56) & b[std::size_t(x)] & kY0
                          : ((a[std::size_t(x)] & kZ7) >> 7) & b[std::size_t(x)] & kZ0;
     return any != 0;
-}
-
-int findRoot(std::vector<int>& parent, int i)
-{
-    while (parent[i] != i) i = parent[i] = parent[parent[i]];
-    return i;
 }
 
 void unite(std::vector<int>& parent, int a, int b)

@@ -1,4 +1,5 @@
 #include "engine/checks/Printability.h"
+#include "engine/checks/UnionFind.h"
 
 #include "engine/core/Format.h"
 
@@ -57,15 +58,6 @@ inline Word nextPixel(const Word* bits, int w, int words)
 inline Word previousPixel(const Word* bits, int w)
 {
     return (bits[w] << 1) | (w > 0 ? bits[w - 1] >> 63 : Word(0));
-}
-
-int findRoot(std::vector<int>& parent, int a)
-{
-    while (parent[a] != a) {
-        parent[a] = parent[parent[a]];
-        a = parent[a];
-    }
-    return a;
 }
 
 /// Joins runs of consecutive rows that touch (@a diagonal: 8-connected, else 4-connected) and

@@ -15,7 +15,7 @@ namespace {
 /// Cavities smaller than this many samples are crumbs of the sampling, not traps worth a hole.
 constexpr std::uint64_t kCrumbSamples = 8;
 
-nlohmann::json vec(const Vec3d& v)
+nlohmann::json xyzJson(const Vec3d& v)
 {
     return {v[0] + 0.0, v[1] + 0.0, v[2] + 0.0};  // no -0 (a direction negated)
 }
@@ -147,8 +147,8 @@ nlohmann::json planDrains(const std::vector<DrainRequest>& drains, double voxel,
             // From half a sample inside the cavity to a radius and a sample past the part's surface.
             DrainChannel c{p - 0.5 * spacing * dir, p + (reach + 0.5 * d.diameter + spacing) * dir, d.diameter};
             channels.push_back(c);
-            holes.push_back({{"position", vec(c.from)},
-                             {"direction", vec(dir)},
+            holes.push_back({{"position", xyzJson(c.from)},
+                             {"direction", xyzJson(dir)},
                              {"length_mm", (c.to - c.from).length()},
                              {"through_wall_mm", reach},
                              {"placed", placed},
@@ -167,7 +167,7 @@ nlohmann::json planDrains(const std::vector<DrainRequest>& drains, double voxel,
         double found = 0.0;
         for (const Trap& t : traps) found += t.volumeMm3;
         out[d.name] = {{"diameter_mm", d.diameter},
-                       {"build_direction", vec(up)},
+                       {"build_direction", xyzJson(up)},
                        {"search_spacing_mm", spacing},
                        {"traps_found", traps.size() - crumbs},
                        {"trap_volume_mm3", found},

@@ -36,11 +36,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string number(double v)
-{
-    return formatNumber10(v);
-}
-
 /// A small top view of the part: the highest exposed layer per cell, shaded, for thumbnails.
 struct HeightMap {
     int w = 0, h = 0, step = 1;
@@ -275,8 +270,8 @@ void reportPrintability(const PrintabilityCheck& check, const SliceSettings& set
     if (check.islandCount() > 0) {
         const std::string message =
             name + ": " + std::to_string(check.islandCount()) + " island(s), " +
-            number(found["island_area_mm2"].get<double>()) + " mm^2 in all, the largest " +
-            number(found["largest_island_mm2"].get<double>()) + " mm^2, cure onto nothing (" +
+            formatNumber10(found["island_area_mm2"].get<double>()) + " mm^2 in all, the largest " +
+            formatNumber10(found["largest_island_mm2"].get<double>()) + " mm^2, cure onto nothing (" +
             check.describeIslands(3) +
             "); they will drop into the vat or print as loose debris: add supports there, turn the part so the "
             "region grows from the layers below, or check that the lattice connects (report.json "
@@ -290,19 +285,20 @@ void reportPrintability(const PrintabilityCheck& check, const SliceSettings& set
     if (traps > 0 && context) {
         const nlohmann::json& first = found["resin_traps"][0];
         const std::int64_t crumbs = check.trapCount() - traps;
-        context->warn("resin_traps",
-                      name + ": " + std::to_string(traps) + " closed cavit" + (traps == 1 ? "y holds " : "ies hold ") +
-                          number(found["resin_trap_volume_mm3"].get<double>()) +
-                          " mm^3 of uncured resin (the largest: " + number(first["volume_mm3"].get<double>()) +
-                          " mm^3, a drain hole at x " + number(first["x"].get<double>()) + ", y " +
-                          number(first["y"].get<double>()) + ", z " + number(first["z"].get<double>()) +
-                          " reaches it after " + number(first["drain_mm"].get<double>()) + " mm" +
-                          (crumbs > 0 ? "; " + std::to_string(crumbs) + " crumbs below " +
-                                            number(found["resin_trap_crumb_mm3"].get<double>()) + " mm^3 not counted"
-                                      : std::string()) +
-                          "); they cause suction (cupping) and leak later: add drain holes (`drain: {diameter: "
-                          "2}` on an infill or shell; report.json `printability.resin_traps`)",
-                      {{"resin_traps", traps}, {"largest_mm3", first["volume_mm3"]}});
+        context->warn(
+            "resin_traps",
+            name + ": " + std::to_string(traps) + " closed cavit" + (traps == 1 ? "y holds " : "ies hold ") +
+                formatNumber10(found["resin_trap_volume_mm3"].get<double>()) +
+                " mm^3 of uncured resin (the largest: " + formatNumber10(first["volume_mm3"].get<double>()) +
+                " mm^3, a drain hole at x " + formatNumber10(first["x"].get<double>()) + ", y " +
+                formatNumber10(first["y"].get<double>()) + ", z " + formatNumber10(first["z"].get<double>()) +
+                " reaches it after " + formatNumber10(first["drain_mm"].get<double>()) + " mm" +
+                (crumbs > 0 ? "; " + std::to_string(crumbs) + " crumbs below " +
+                                  formatNumber10(found["resin_trap_crumb_mm3"].get<double>()) + " mm^3 not counted"
+                            : std::string()) +
+                "); they cause suction (cupping) and leak later: add drain holes (`drain: {diameter: "
+                "2}` on an infill or shell; report.json `printability.resin_traps`)",
+            {{"resin_traps", traps}, {"largest_mm3", first["volume_mm3"]}});
     }
     if (check.thinPixelCount() > 0 && context) {
         const nlohmann::json& first = found["thin"]["first"][0];
@@ -310,8 +306,8 @@ void reportPrintability(const PrintabilityCheck& check, const SliceSettings& set
                       name + ": " + std::to_string(check.thinPixelCount()) + " exposed pixels in " +
                           std::to_string(found["thin"]["layers"].get<std::int64_t>()) +
                           " layers belong to features less than 2 pixels across (first: layer " +
-                          std::to_string(first["layer"].get<int>()) + " at x " + number(first["x"].get<double>()) +
-                          ", y " + number(first["y"].get<double>()) +
+                          std::to_string(first["layer"].get<int>()) + " at x " +
+                          formatNumber10(first["x"].get<double>()) + ", y " + formatNumber10(first["y"].get<double>()) +
                           "); the printer may not form them: thicken the walls or struts (report.json "
                           "`printability.thin`)",
                       {{"thin_pixels", check.thinPixelCount()}});
@@ -329,12 +325,12 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
     const double height = part.max.z() - part.min.z();
     const std::string printerRef = "printer `" + printer.key + "` (" + printer.file + ")";
     if (height > printer.maxHeightMm + 1e-9)
-        throw InputError(partWhere + ": the part is " + number(height) + " mm tall, taller than the " +
-                         number(printer.maxHeightMm) + " mm build height (`max_height` at " + printer.maxHeightWhere +
-                         ") of " + printerRef + "; lower the domain or split the part");
+        throw InputError(partWhere + ": the part is " + formatNumber10(height) + " mm tall, taller than the " +
+                         formatNumber10(printer.maxHeightMm) + " mm build height (`max_height` at " +
+                         printer.maxHeightWhere + ") of " + printerRef + "; lower the domain or split the part");
     if (layer > height)
-        throw InputError(settings.printerWhere + ": the layer height " + number(layer) +
-                         " mm is larger than the part (" + number(height) +
+        throw InputError(settings.printerWhere + ": the layer height " + formatNumber10(layer) +
+                         " mm is larger than the part (" + formatNumber10(height) +
                          " mm tall); set `layer:` below the part height");
     const int count = int(std::floor(height / layer - 0.5 + 1e-9)) + 1;
     const std::string format = sliceFormatOf(settings, printer, path);
@@ -355,10 +351,11 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
     if (context) options.interrupt = [context] { context->checkCancelled(); };
     const Slicer slicer(field, part, px - centre.x(), py - centre.y(), display, options);
     if (!slicer.fitsDisplay())
-        throw InputError(partWhere + ": the part (" + number(part.extent().x()) + " x " + number(part.extent().y()) +
-                         " mm, centred at " + number(px) + ", " + number(py) + ") does not fit the " +
-                         number(printer.widthMm) + " x " + number(printer.heightMm) + " mm display (`display`) of " +
-                         printerRef + "; shrink the domain, move it with `position:` or pick a larger printer");
+        throw InputError(partWhere + ": the part (" + formatNumber10(part.extent().x()) + " x " +
+                         formatNumber10(part.extent().y()) + " mm, centred at " + formatNumber10(px) + ", " +
+                         formatNumber10(py) + ") does not fit the " + formatNumber10(printer.widthMm) + " x " +
+                         formatNumber10(printer.heightMm) + " mm display (`display`) of " + printerRef +
+                         "; shrink the domain, move it with `position:` or pick a larger printer");
 
     const std::unique_ptr<SliceArchive> archive = openSliceArchive(format, path, settings.printerWhere);
     const double exposure = settings.exposure.value_or(printer.exposureS);

@@ -16,7 +16,7 @@ namespace voxlat {
 
 namespace {
 
-std::string number(double v)
+std::string shortNumber(double v)
 {
     std::ostringstream s;
     s << v;
@@ -46,8 +46,8 @@ ScalarMap readRamp(FieldBuilder& builder, const RecipeNode& r)
     }
     map.field = std::make_shared<RampField>(axis, start, end, from, to);
     map.axis = axis;
-    map.description = "ramp along " + std::string(1, "xyz"[axis]) + " from " + number(from) + " at " + number(start) +
-                      " mm to " + number(to) + " at " + number(end) + " mm";
+    map.description = "ramp along " + std::string(1, "xyz"[axis]) + " from " + shortNumber(from) + " at " +
+                      shortNumber(start) + " mm to " + shortNumber(to) + " at " + shortNumber(end) + " mm";
     return map;
 }
 
@@ -58,7 +58,8 @@ ScalarMap readDistanceRamp(FieldBuilder& builder, const RecipeNode& r, const std
     const FieldPtr source = builder.operand(r["field"], name + "/distance");
     const double from = r["from"].number(), to = r["to"].number(), over = r["over"].positiveNumber();
     map.field = std::make_shared<RampField>(source, 0.0, over, from, to);
-    map.description = "from " + number(from) + " at the surface to " + number(to) + " at " + number(over) + " mm";
+    map.description =
+        "from " + shortNumber(from) + " at the surface to " + shortNumber(to) + " at " + shortNumber(over) + " mm";
     return map;
 }
 
@@ -68,7 +69,7 @@ ScalarMap readScalarMap(FieldBuilder& builder, const RecipeNode& node, const std
     if (node.isNumber()) {
         map.constant = node.number();
         map.field = std::make_shared<ConstantField>(*map.constant);
-        map.description = number(*map.constant);
+        map.description = shortNumber(*map.constant);
         return map;
     }
     if (node.isScalar()) {
@@ -146,10 +147,11 @@ void checkScalarRange(const FieldBuilder& builder, const ScalarMap& map, const R
 {
     auto outside = [&](double v) { return open ? !(v > lo && v < hi) : !(v >= lo && v <= hi); };
     std::ostringstream rangeText;  // a stream: GCC 12 flags `const char* + std::string` here (-Wrestrict)
-    rangeText << (open ? "(" : "[") << number(lo) << ", " << number(hi) << (open ? ")" : "]");
+    rangeText << (open ? "(" : "[") << shortNumber(lo) << ", " << shortNumber(hi) << (open ? ")" : "]");
     const std::string range = rangeText.str();
     if (map.constant) {
-        if (outside(*map.constant)) node.fail(what + " must lie in " + range + ", got " + number(*map.constant) + fix);
+        if (outside(*map.constant))
+            node.fail(what + " must lie in " + range + ", got " + shortNumber(*map.constant) + fix);
         return;
     }
     const auto& box = builder.recipe().domainBox;
@@ -158,15 +160,17 @@ void checkScalarRange(const FieldBuilder& builder, const ScalarMap& map, const R
     const Interval b = map.field->bound(*box);
     if (map.axis && (outside(b.lo) || outside(b.hi)))
         node.fail(what + " must lie in " + range + " over the domain, but the ramp reaches " +
-                  number(outside(b.lo) ? b.lo : b.hi) + fix);
+                  shortNumber(outside(b.lo) ? b.lo : b.hi) + fix);
     const SampledRange s = sampleRange(*map.field, *box);
-    auto at = [](const Vec3d& p) { return " at (" + number(p[0]) + ", " + number(p[1]) + ", " + number(p[2]) + ")"; };
+    auto at = [](const Vec3d& p) {
+        return " at (" + shortNumber(p[0]) + ", " + shortNumber(p[1]) + ", " + shortNumber(p[2]) + ")";
+    };
     if (outside(s.lo))
-        node.fail(what + " must lie in " + range + " over the domain, but it reaches " + number(s.lo) + at(s.where_lo) +
-                  fix);
+        node.fail(what + " must lie in " + range + " over the domain, but it reaches " + shortNumber(s.lo) +
+                  at(s.where_lo) + fix);
     if (outside(s.hi))
-        node.fail(what + " must lie in " + range + " over the domain, but it reaches " + number(s.hi) + at(s.where_hi) +
-                  fix);
+        node.fail(what + " must lie in " + range + " over the domain, but it reaches " + shortNumber(s.hi) +
+                  at(s.where_hi) + fix);
 }
 
 FieldPtr readValueGrid(const std::filesystem::path& path, const std::string& shown)

@@ -10,11 +10,6 @@ namespace {
 
 constexpr double kInside = 1e-9;  // slack on local coordinates for points on a shared face
 
-double triple(const Vec3d& a, const Vec3d& b, const Vec3d& c)
-{
-    return a.dot(b.cross(c));
-}
-
 }  // namespace
 
 SkinCells::SkinCells(std::vector<Vec3d> corners, std::vector<std::array<int, 8>> hexes, std::vector<char> outer,

@@ -10,6 +10,12 @@
 
 namespace voxlat {
 
+/// The triple product a . (b x c): six times the signed volume of the tetrahedron (0, a, b, c).
+inline double triple(const Vec3d& a, const Vec3d& b, const Vec3d& c)
+{
+    return a.dot(b.cross(c));
+}
+
 /// A set of hexahedra, each the trilinear image of the unit cube: x(u, v, w) = sum_i N_i(u, v, w)
 /// c_i over its eight corners, corner i at (u, v, w) = (i & 1, (i >> 1) & 1, (i >> 2) & 1). In a
 /// skin frame u and v run along the surface and w inward, one layer of cells per unit of w.

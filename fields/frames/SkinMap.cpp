@@ -6,10 +6,6 @@
 namespace voxlat {
 
 namespace {
-double triple(const Vec3d& a, const Vec3d& b, const Vec3d& c)
-{
-    return a.dot(b.cross(c));
-}
 }  // namespace
 
 SkinMapField::SkinMapField(FieldPtr child, std::shared_ptr<const SkinCells> cells, const Vec3d& cellSize,

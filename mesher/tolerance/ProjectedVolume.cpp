@@ -11,14 +11,14 @@ namespace voxlat {
 namespace {
 
 /// A corner of a clipped triangle: its place and its barycentric weights in the triangle.
-struct Corner {
+struct ClippedCorner {
     Vec3d p;
     Vec3d w;
 };
 
 /// A convex polygon: a triangle clipped by up to six planes has at most nine corners.
 struct Polygon {
-    std::array<Corner, 12> c;
+    std::array<ClippedCorner, 12> c;
     int n = 0;
     bool cut = false;  ///< a face of the box cut the triangle
 };
@@ -30,13 +30,13 @@ void clipAgainst(Polygon& poly, int axis, double at, double sign)
     Polygon out;
     out.cut = true;  // called only when a corner lies beyond the plane
     for (int i = 0; i < poly.n; ++i) {
-        const Corner& a = poly.c[i];
-        const Corner& b = poly.c[(i + 1) % poly.n];
+        const ClippedCorner& a = poly.c[i];
+        const ClippedCorner& b = poly.c[(i + 1) % poly.n];
         const double da = sign * (a.p[axis] - at), db = sign * (b.p[axis] - at);
         if (da <= 0.0) out.c[out.n++] = a;
         if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)) {
             const double t = da / (da - db);
-            Corner m{a.p + t * (b.p - a.p), a.w + t * (b.w - a.w)};
+            ClippedCorner m{a.p + t * (b.p - a.p), a.w + t * (b.w - a.w)};
             m.p[axis] = at;
             out.c[out.n++] = m;
         }
@@ -104,7 +104,7 @@ void addTerms(const Polygon& poly, const Box3& box, BoxSums& sums)
 
 /// How far corner @a c of a clipped triangle moves when the triangle's corners move by @a d: the
 /// weighted sum of their moves.
-Vec3d move(const Corner& c, const std::array<Vec3d, 3>& d)
+Vec3d move(const ClippedCorner& c, const std::array<Vec3d, 3>& d)
 {
     return c.w[0] * d[0] + c.w[1] * d[1] + c.w[2] * d[2];
 }
@@ -115,7 +115,7 @@ double swept(const Polygon& poly, const std::array<Vec3d, 3>& d)
 {
     double sum = 0.0;
     for (int i = 1; i + 1 < poly.n; ++i) {
-        const Corner &a = poly.c[0], &b = poly.c[i], &c = poly.c[i + 1];
+        const ClippedCorner &a = poly.c[0], &b = poly.c[i], &c = poly.c[i + 1];
         const Vec3d ma = move(a, d), mb = move(b, d), mc = move(c, d);
         const Vec3d before = 0.5 * (b.p - a.p).cross(c.p - a.p);
         const Vec3d after = 0.5 * ((b.p + mb) - (a.p + ma)).cross((c.p + mc) - (a.p + ma));
@@ -127,7 +127,7 @@ double swept(const Polygon& poly, const std::array<Vec3d, 3>& d)
 /// The area of @a poly with its corners moved as in swept().
 double area(const Polygon& poly, const std::array<Vec3d, 3>& d)
 {
-    auto at = [&](const Corner& c) { return c.p + move(c, d); };
+    auto at = [&](const ClippedCorner& c) { return c.p + move(c, d); };
     Vec3d sum(0.0);
     for (int i = 1; i + 1 < poly.n; ++i)
         sum += 0.5 * (at(poly.c[i]) - at(poly.c[0])).cross(at(poly.c[i + 1]) - at(poly.c[0]));

@@ -19,7 +19,9 @@ the command line at a coarse voxel, each run checked independently of the code t
   check (a different, 2D code path) finds no trap above its crumb size.
 - Every output is present and nothing else is left in --out.
 
-usage: check_lattice_matrix.py VOXLAT_BINARY SOURCE_DIR [--only SUBSTRING]
+usage: check_lattice_matrix.py VOXLAT_BINARY SOURCE_DIR [--only SUBSTRING] [--shard K/N]
+
+--shard K/N runs the K-th of N shares of the runs (0 <= K < N; ctest runs the shares side by side)
 """
 import json
 import os
@@ -60,32 +62,48 @@ def check(condition, message):
 
 
 def read_stl(path):
-    """Triangles (n x 3 x 3 float64) of a binary STL."""
+    """Vertices (n x 3 x 3 float32) of a binary STL's triangles."""
     with open(path, "rb") as f:
         data = f.read()
     n = struct.unpack_from("<I", data, 80)[0]
     rec = np.dtype([("normal", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")])
-    tri = np.frombuffer(data, dtype=rec, count=n, offset=84)
-    return tri["v"].astype(np.float64)
+    return np.frombuffer(data, dtype=rec, count=n, offset=84)["v"]
+
+
+def vertex_index(v):
+    """The index of each corner of the triangles @v (n x 3 x 3 float32) among the distinct
+    positions, corners being the same vertex when their coordinates are equal (as np.unique with
+    axis=0 gives, without its row sort: one lexsort of the coordinates' bits, -0.0 read as +0.0),
+    and the number of distinct positions."""
+    bits = (v.reshape(-1, 3) + np.float32(0)).view(np.uint32)
+    xy = (bits[:, 0].astype(np.uint64) << np.uint64(32)) | bits[:, 1]
+    order = np.lexsort((bits[:, 2], xy))
+    xs, zs = xy[order], bits[order, 2]
+    first = np.empty(len(order), dtype=bool)
+    first[0] = True
+    first[1:] = (xs[1:] != xs[:-1]) | (zs[1:] != zs[:-1])
+    ids = np.cumsum(first) - 1
+    index = np.empty(len(order), dtype=np.int64)
+    index[order] = ids
+    return index.reshape(-1, 3), int(ids[-1]) + 1
 
 
 def mesh_facts(path):
     """(closed and manifold, volume mm^3, triangles) of a binary STL, from its bytes alone."""
-    t = read_stl(path)
-    if len(t) == 0:
+    v = read_stl(path)
+    if len(v) == 0:
         return False, 0.0, 0
-    verts, index = np.unique(t.reshape(-1, 3), axis=0, return_inverse=True)
-    f = index.reshape(-1, 3)
-    directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    f, count = vertex_index(v)
     # Closed and manifold: every directed edge once, and its reverse once.
-    keys = directed[:, 0].astype(np.int64) * len(verts) + directed[:, 1]
-    rev = directed[:, 1].astype(np.int64) * len(verts) + directed[:, 0]
-    unique_once = len(np.unique(keys)) == len(keys)
-    closed = unique_once and np.array_equal(np.sort(keys), np.sort(rev))
+    tail = np.concatenate([f[:, 0], f[:, 1], f[:, 2]])
+    head = np.concatenate([f[:, 1], f[:, 2], f[:, 0]])
+    keys = np.sort(tail * count + head)
+    closed = not np.any(keys[1:] == keys[:-1]) and np.array_equal(keys, np.sort(head * count + tail))
+    t = v.astype(np.float64)
     c = t.mean(axis=(0, 1))
     a, b, d = t[:, 0] - c, t[:, 1] - c, t[:, 2] - c
     volume = float(np.einsum("ij,ij->i", a, np.cross(b, d)).sum() / 6.0)
-    return closed, volume, len(t)
+    return bool(closed), volume, len(t)
 
 
 def schema_lattices(voxlat):
@@ -237,12 +255,12 @@ def run(voxlat, text, folder, name):
     return p, out, path, time.time() - start
 
 
-def check_run(voxlat, folder, kind, family, placement, variant, only, mesh_path, part_volume, skin_volume,
+def check_run(voxlat, folder, kind, family, placement, variant, pick, mesh_path, part_volume, skin_volume,
               over_target):
     """One kind x placement run, its mesh made with the `variant` keys (none: raw marching cubes),
     checked; returns the number of runs made (0 or 1)."""
     name = "%s-%s" % (kind, placement) + ("-" + variant.split(":")[0] if variant else "")
-    if only and only not in name:
+    if not pick(name):
         return 0
     outputs = ["mesh: " + ("{file: m.stl, %s}" % variant if variant else "m.stl")]
     if placement == "box" and family == "struts":
@@ -324,6 +342,15 @@ def check_run(voxlat, folder, kind, family, placement, variant, only, mesh_path,
 def main():
     voxlat, source = sys.argv[1], sys.argv[2]
     only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv else ""
+    shard, shards = map(int, (sys.argv[sys.argv.index("--shard") + 1] if "--shard" in sys.argv else "0/1").split("/"))
+    candidates = []
+
+    def pick(name):
+        """Whether this process runs @name: it holds --only's text, and it is this shard's (the
+        runs dealt round-robin in their order here: every run is in exactly one shard)."""
+        candidates.append(name)
+        return only in name and (len(candidates) - 1) % shards == shard
+
     mesh_path = os.path.abspath(os.path.join(source, "data", "meshes", "bracket.stl"))
     covered = {family for _, family in KINDS.values()}
     lattices = schema_lattices(voxlat)
@@ -354,10 +381,10 @@ def main():
                 if placement not in PLACED_ONLY.get(kind, (placement,)):
                     continue
                 for variant in [""] + MESH_VARIANTS.get((kind, placement), []):
-                    runs += check_run(voxlat, folder, kind, family, placement, variant, only, mesh_path,
+                    runs += check_run(voxlat, folder, kind, family, placement, variant, pick, mesh_path,
                                       part_volume, skin_volume, over_target)
         for name, body, outputs, checks in EXTRA_RUNS:
-            if only and only not in name:
+            if not pick(name):
                 continue
             text = "voxel: %g\n%s\noutputs: {%s}\n" % (VOXEL, body % {"part": mesh_path}, ", ".join(outputs))
             p, out, path, seconds = run(voxlat, text, folder, name)
