@@ -456,15 +456,14 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     // Decides the pixel box of a block already classified as @a side: fills it (255 inside, 0
     // outside) or evaluates it as one batch.
     // Stacks of whole blocks one above another, each evaluated as one plane batch (see
-    // decideBlock); kept per thread, as a layer's blocks ask for them row after row.
+    // decideBlock), one slot per column of blocks, held while the layer's rows of blocks are made
+    // (this call's own: a field's evaluation may run another layer on this thread).
     struct BlockStack {
         int bi = -1, bj = 0, rows = 0;  ///< window column and row of its first block, rows held
         std::vector<double> values;     ///< (block + 2) x (rows + 2), as a plane batch's
         std::vector<signed char> sides;
     };
-    thread_local std::vector<BlockStack> stacks;
-    stacks.resize(std::size_t(mNx / block + 1));
-    for (BlockStack& stack : stacks) stack.bi = -1;
+    std::vector<BlockStack> stacks(std::size_t(mNx / block + 1));
     const int stackBlocks = std::clamp(mOptions.stackBlocks, 1, 8);
     int rowLimit = mNy;      // rows [.., rowLimit) are made by the current rasterRows call
     bool stackable = false;  // the block being decided may make a stack (rasterBlocks)
