@@ -669,7 +669,9 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
     }
     thread_local std::vector<std::uint32_t> cand;
     thread_local std::vector<double> upper, peaks;
-    thread_local std::vector<std::uint64_t> columnTiles;
+    thread_local std::vector<std::uint64_t> columnTiles, openTiles;
+    thread_local std::vector<int> reach;
+    reach.clear();
     // The struts whose bins meet the block, kept where their reach of the plane meets it (the
     // test evaluate() makes first, planeSpan): a superset of gather()'s, whose exact distance
     // tests cost more than the struts they leave out (those add nothing at any point here).
@@ -721,8 +723,11 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         const double farHalo = rc + haloDiagonal + margin, farHaloSqr = farHalo * farHalo * (1.0 + 1e-12);
         const double ux = s.u.x(), uy = s.u.y(), uz = s.u.z(), length = s.length;
         const double ez = z - s.a.z();
-        bool reaches = false;
+        // The box of tiles whose footprint grown by a spacing the strut reaches: columns
+        // reachA0..reachA1, rows reachB0..reachB1.
+        int reachA0 = tiles.nx, reachA1 = -1, reachB0 = tiles.ny, reachB1 = -1;
         for (int a = a0; a <= a1; ++a) {
+            bool column = false;  // the strut reaches a tile of column a
             const double ex = cx0 + a * stepX - s.a.x();
             const std::size_t row = std::size_t(a) * tiles.ny;
             // Tile b's bound (a centre within far of the strut): its peak times the kernel at the
@@ -740,7 +745,11 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
                 const Lanes2 rx = ex - h * ux, ry = ey - h * uy, rz = ez - h * uz;
                 const Lanes2 dSqr = rx * rx + ry * ry + rz * rz;
                 const auto inHalo = dSqr < farHaloSqr, within = dSqr < farSqr;
-                reaches = reaches || inHalo[0] || inHalo[1];
+                if (inHalo[0] || inHalo[1]) {
+                    column = true;
+                    reachB0 = std::min(reachB0, inHalo[0] ? b : b + 1);
+                    reachB1 = std::max(reachB1, inHalo[1] ? b + 1 : b);
+                }
                 if (!(within[0] || within[1])) continue;
                 const Lanes2 root = sqrtLanes(dSqr) - halfDiagonal - margin;
                 const Lanes2 near = 0.0 < root ? root : Lanes2{};
@@ -754,16 +763,28 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
                 const double h = std::clamp(ex * ux + ey * uy + ez * uz, 0.0, length);
                 const double rx = ex - h * ux, ry = ey - h * uy, rz = ez - h * uz;
                 const double dSqr = rx * rx + ry * ry + rz * rz;
-                reaches = reaches || dSqr < farHaloSqr;
+                if (dSqr < farHaloSqr) {
+                    column = true;
+                    reachB0 = std::min(reachB0, b);
+                    reachB1 = std::max(reachB1, b);
+                }
                 if (dSqr >= farSqr) continue;  // beyond the cut-off everywhere: nothing added there
                 // Every point of the footprint lies at least this far from the segment.
                 add(b, std::max(0.0, std::sqrt(dSqr) - halfDiagonal - margin));
             }
+            if (column) {
+                reachA0 = std::min(reachA0, a);
+                reachA1 = a;
+            }
         }
-        if (reaches) cand[kept++] = j;
+        if (reachA1 >= 0) {
+            cand[kept++] = j;
+            reach.insert(reach.end(), {reachA0, reachA1, reachB0, reachB1});
+        }
     }
     cand.resize(kept);
     columnTiles.assign(std::size_t(plane.nx), 0);
+    openTiles.assign(std::size_t(tiles.nx), 0);
     bool any = false;
     for (int a = 0; a < tiles.nx; ++a) {
         std::uint64_t open = 0;
@@ -774,6 +795,7 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
                 needed == TileNeed::Decide && upper[t] * (1.0 + 1e-12) + 2.5e-5 * peaks[t] < band.lo ? -1 : 0);
             if (side[t] == 0 && needed != TileNeed::Skip) open |= std::uint64_t(1) << b;
         }
+        openTiles[std::size_t(a)] = open;
         // Tile column a's points and their halo: columns a tile .. (a + 1) tile + 1.
         for (int i = a * tile; i <= (a + 1) * tile + 1; ++i) columnTiles[i] |= open;
         any = any || open != 0;
@@ -782,6 +804,20 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         std::fill(out.begin(), out.begin() + plane.size(), 0.0);
         return;
     }
+    // A strut that reaches no open tile's footprint grown by a spacing adds nothing to any point
+    // evaluate() makes (each lies in an open tile or its one-point halo): it is left out before
+    // its rows' ranges are sought (on W10's plate, struts whose reach of the plane lies where
+    // every tile is proven outside). Tested on the box of tiles it reaches, a superset.
+    kept = 0;
+    for (std::size_t n = 0; n < cand.size(); ++n) {
+        const int* r = &reach[4 * n];
+        const std::uint64_t bits =
+            (r[3] >= 63 ? ~std::uint64_t(0) : (std::uint64_t(2) << r[3]) - 1) & ~((std::uint64_t(1) << r[2]) - 1);
+        bool meets = false;
+        for (int a = r[0]; a <= r[1] && !meets; ++a) meets = (openTiles[std::size_t(a)] & bits) != 0;
+        if (meets) cand[kept++] = cand[n];
+    }
+    cand.resize(kept);
     evaluate(plane, out, cand, columnTiles.data(), tile);
 }
 

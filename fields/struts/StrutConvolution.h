@@ -46,8 +46,9 @@ public:
     /// times the kernel at the least distance from the tile's centre less its half diagonal, plus
     /// 2.5e-5 of the peaks counted: the table and Taylor paths' error) proves the tiles below
     /// band.lo (-1), and only the other tiles and their halo are evaluated (the same doubles as
-    /// gridValues; the rest are 0). No tile is proven above band.hi. Skipped tiles are left out
-    /// and Exact ones evaluated (@a need).
+    /// gridValues; the rest are 0; struts that reach no open tile are left out, as they add
+    /// nothing there). No tile is proven above band.hi. Skipped tiles are left out and Exact
+    /// ones evaluated (@a need).
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
                      std::span<signed char> side, std::span<const TileNeed> need) const override;
 

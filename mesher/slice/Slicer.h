@@ -88,6 +88,13 @@ struct RasterOptions {
     /// (the same plane up to the rounding of the struts' coordinates). The same for columns
     /// along x (19 um: 2000 columns, 19 cells). off: compute every pixel.
     bool repeatRows = true;
+    /// Where a layer has stopped bounding blocks (straddlingRun), whole 64 x 64 blocks within the
+    /// part's box are evaluated in stacks of up to this many blocks one above another, one plane
+    /// batch each (PlaneBands fields: a strut's rows along y are set up once per stack instead of
+    /// once per block). 1: every block alone. The same points; their values differ by rounding
+    /// (their coordinates, the Gaussians' recurrences over longer rows; the same bytes on every
+    /// W10 case measured). At most 8 (64 tiles a column).
+    int stackBlocks = 8;
     /// Called once per row of 64 x 64 blocks while a layer is made (none: never); it throws to
     /// stop the layer (a job's cancel check), so a layer of a large plate stops promptly.
     std::function<void()> interrupt;
