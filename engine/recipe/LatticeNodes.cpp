@@ -1,4 +1,5 @@
 // Recipe node types for lattices: `tpms`.
+#include "engine/core/Format.h"
 #include "engine/recipe/DesignTargets.h"
 #include "engine/recipe/ExprNodes.h"
 #include "engine/recipe/FieldBuilder.h"
@@ -20,13 +21,6 @@
 namespace voxlat {
 
 namespace {
-
-std::string mm(double v)
-{
-    std::ostringstream s;
-    s << v;
-    return s.str();
-}
 
 /// The largest |grad f| over one cell of @a tpms where f is near zero (its mid-surface), from a
 /// 32^3 lattice of points: a sheet |f| <= t is thinnest, about 2t / |grad f| across, there.
@@ -89,7 +83,8 @@ ShiftSpec readShiftSpec(FieldBuilder& builder, const RecipeNode& spec, const std
         checkScalarRange(builder, map, node, 0.0, 1e300, false, "the " + key + " thickness (mm)",
                          "; thicknesses are zero or more millimetres");
         if (map.constant && !(*map.constant > 0.0))
-            node.fail("the " + key + " thickness must be greater than zero (millimetres), got " + mm(*map.constant));
+            node.fail("the " + key + " thickness must be greater than zero (millimetres), got " +
+                      formatNumber(*map.constant));
         double top = map.constant ? *map.constant : 0.0;
         if (!map.constant && builder.recipe().domainBox) top = sampleRange(*map.field, *builder.recipe().domainBox).hi;
         largest = std::max(largest, top);
@@ -113,8 +108,8 @@ ShiftSpec readShiftSpec(FieldBuilder& builder, const RecipeNode& spec, const std
                 shift.direction = b.vec3();
                 if (!(shift.direction.length() > 0.0))
                     b.fail("the build direction has zero length; give a direction such as [0, 0, 1]");
-                description += ", build [" + mm(shift.direction[0]) + ", " + mm(shift.direction[1]) + ", " +
-                               mm(shift.direction[2]) + "]";
+                description += ", build [" + formatNumber(shift.direction[0]) + ", " +
+                               formatNumber(shift.direction[1]) + ", " + formatNumber(shift.direction[2]) + "]";
             } else if (b.isSequence()) {
                 if (b.size() != 3) b.fail("expected [x, y, z]: three numbers or fields");
                 for (std::size_t i = 0; i < 3; ++i)
@@ -379,7 +374,7 @@ FieldPtr networkOffset(FieldBuilder& builder, const RecipeNode& spec, FieldPtr r
     shift.uniform = std::make_shared<ConstantField>(m);
     shift.oneSided = true;
     shift.label = "field `" + name + "`";
-    description = ", offset " + mm(m) + " mm (gradient shift)";
+    description = ", offset " + formatNumber(m) + " mm (gradient shift)";
     return std::make_shared<GradientShift>(std::move(raw), std::move(shift));
 }
 

@@ -1,5 +1,6 @@
 #include "engine/recipe/ScalarMaps.h"
 
+#include "engine/core/Format.h"
 #include "engine/core/InputFiles.h"
 
 #include "fields/core/Constant.h"
@@ -15,13 +16,6 @@
 namespace voxlat {
 
 namespace {
-
-std::string shortNumber(double v)
-{
-    std::ostringstream s;
-    s << v;
-    return s.str();
-}
 
 }  // namespace
 
@@ -46,8 +40,8 @@ ScalarMap readRamp(FieldBuilder& builder, const RecipeNode& r)
     }
     map.field = std::make_shared<RampField>(axis, start, end, from, to);
     map.axis = axis;
-    map.description = "ramp along " + std::string(1, "xyz"[axis]) + " from " + shortNumber(from) + " at " +
-                      shortNumber(start) + " mm to " + shortNumber(to) + " at " + shortNumber(end) + " mm";
+    map.description = "ramp along " + std::string(1, "xyz"[axis]) + " from " + formatNumber(from) + " at " +
+                      formatNumber(start) + " mm to " + formatNumber(to) + " at " + formatNumber(end) + " mm";
     return map;
 }
 
@@ -59,7 +53,7 @@ ScalarMap readDistanceRamp(FieldBuilder& builder, const RecipeNode& r, const std
     const double from = r["from"].number(), to = r["to"].number(), over = r["over"].positiveNumber();
     map.field = std::make_shared<RampField>(source, 0.0, over, from, to);
     map.description =
-        "from " + shortNumber(from) + " at the surface to " + shortNumber(to) + " at " + shortNumber(over) + " mm";
+        "from " + formatNumber(from) + " at the surface to " + formatNumber(to) + " at " + formatNumber(over) + " mm";
     return map;
 }
 
@@ -69,7 +63,7 @@ ScalarMap readScalarMap(FieldBuilder& builder, const RecipeNode& node, const std
     if (node.isNumber()) {
         map.constant = node.number();
         map.field = std::make_shared<ConstantField>(*map.constant);
-        map.description = shortNumber(*map.constant);
+        map.description = formatNumber(*map.constant);
         return map;
     }
     if (node.isScalar()) {
@@ -147,11 +141,11 @@ void checkScalarRange(const FieldBuilder& builder, const ScalarMap& map, const R
 {
     auto outside = [&](double v) { return open ? !(v > lo && v < hi) : !(v >= lo && v <= hi); };
     std::ostringstream rangeText;  // a stream: GCC 12 flags `const char* + std::string` here (-Wrestrict)
-    rangeText << (open ? "(" : "[") << shortNumber(lo) << ", " << shortNumber(hi) << (open ? ")" : "]");
+    rangeText << (open ? "(" : "[") << formatNumber(lo) << ", " << formatNumber(hi) << (open ? ")" : "]");
     const std::string range = rangeText.str();
     if (map.constant) {
         if (outside(*map.constant))
-            node.fail(what + " must lie in " + range + ", got " + shortNumber(*map.constant) + fix);
+            node.fail(what + " must lie in " + range + ", got " + formatNumber(*map.constant) + fix);
         return;
     }
     const auto& box = builder.recipe().domainBox;
@@ -160,16 +154,16 @@ void checkScalarRange(const FieldBuilder& builder, const ScalarMap& map, const R
     const Interval b = map.field->bound(*box);
     if (map.axis && (outside(b.lo) || outside(b.hi)))
         node.fail(what + " must lie in " + range + " over the domain, but the ramp reaches " +
-                  shortNumber(outside(b.lo) ? b.lo : b.hi) + fix);
+                  formatNumber(outside(b.lo) ? b.lo : b.hi) + fix);
     const SampledRange s = sampleRange(*map.field, *box);
     auto at = [](const Vec3d& p) {
-        return " at (" + shortNumber(p[0]) + ", " + shortNumber(p[1]) + ", " + shortNumber(p[2]) + ")";
+        return " at (" + formatNumber(p[0]) + ", " + formatNumber(p[1]) + ", " + formatNumber(p[2]) + ")";
     };
     if (outside(s.lo))
-        node.fail(what + " must lie in " + range + " over the domain, but it reaches " + shortNumber(s.lo) +
+        node.fail(what + " must lie in " + range + " over the domain, but it reaches " + formatNumber(s.lo) +
                   at(s.where_lo) + fix);
     if (outside(s.hi))
-        node.fail(what + " must lie in " + range + " over the domain, but it reaches " + shortNumber(s.hi) +
+        node.fail(what + " must lie in " + range + " over the domain, but it reaches " + formatNumber(s.hi) +
                   at(s.where_hi) + fix);
 }
 

@@ -23,6 +23,7 @@ usage: check_lattice_matrix.py VOXLAT_BINARY SOURCE_DIR [--only SUBSTRING] [--sh
 
 --shard K/N runs the K-th of N shares of the runs (0 <= K < N; ctest runs the shares side by side)
 """
+import itertools
 import json
 import os
 import struct
@@ -343,13 +344,12 @@ def main():
     voxlat, source = sys.argv[1], sys.argv[2]
     only = sys.argv[sys.argv.index("--only") + 1] if "--only" in sys.argv else ""
     shard, shards = map(int, (sys.argv[sys.argv.index("--shard") + 1] if "--shard" in sys.argv else "0/1").split("/"))
-    candidates = []
+    dealt = itertools.count()
 
     def pick(name):
         """Whether this process runs @name: it holds --only's text, and it is this shard's (the
         runs dealt round-robin in their order here: every run is in exactly one shard)."""
-        candidates.append(name)
-        return only in name and (len(candidates) - 1) % shards == shard
+        return next(dealt) % shards == shard and only in name
 
     mesh_path = os.path.abspath(os.path.join(source, "data", "meshes", "bracket.stl"))
     covered = {family for _, family in KINDS.values()}
