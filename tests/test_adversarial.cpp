@@ -451,6 +451,36 @@ TEST(Adversarial, ALongWriteChecksItsInterrupterEveryChunkAndKeepsTheOldFile)
     EXPECT_EQ(calls, 3);
     EXPECT_LE(written, 3 * kWriteChunkBytes + 1000);
     EXPECT_EQ(readFile(path), "old");
+
+    // Writes larger than a chunk (a streamed STL's) skip the buffer: every byte still lands in
+    // order, and the interrupter is still called once per full chunk.
+    {
+        const std::size_t c = kWriteChunkBytes;
+        std::string expected;
+        std::uint32_t state = 38;
+        auto bytes = [&](std::size_t n) {
+            std::string s(n, '\0');
+            for (char& ch : s) ch = char((state = state * 1664525u + 1013904223u) >> 24);
+            return s;
+        };
+        int chunkCalls = 0;
+        const auto big = dir.path / "large.bin";
+        {
+            OutputTransaction transaction([&] { ++chunkCalls; });
+            AtomicFile file(big.string());
+            for (const std::size_t n : {std::size_t(10), 3 * c + 5, std::size_t(7), 2 * c, c, std::size_t(1)}) {
+                const std::string s = bytes(n);
+                file.stream().write(s.data(), std::streamsize(s.size()));
+                expected += s;
+            }
+            file.commit();
+            transaction.commit();
+        }
+        const std::string written = readFile(big);
+        EXPECT_EQ(written.size(), expected.size());
+        EXPECT_TRUE(written == expected) << "the bytes differ";
+        EXPECT_EQ(std::size_t(chunkCalls), expected.size() / c);
+    }
     EXPECT_EQ(temporariesUnder(dir.path), std::vector<std::string>{});
 
     // Each mesh format (STL formatted in parallel, OBJ and PLY through OpenMesh, 3MF packed by

@@ -123,10 +123,21 @@ protected:
 
     std::streamsize xsputn(const char* s, std::streamsize n) override
     {
+        const auto chunk = std::streamsize(mBytes.size());
         for (std::streamsize left = n; left > 0;) {
             const std::streamsize room = epptr() - pptr();
             if (room == 0) {
                 flushChunk();
+                continue;
+            }
+            if (pptr() == pbase() && left >= chunk) {
+                // Nothing buffered and a whole chunk to go: written from the caller's bytes (a
+                // streamed STL passes hundreds of MB), the same chunks and interrupter calls as
+                // through the buffer, without copying them into it first.
+                if (mInterrupter) mInterrupter();
+                put(s, std::size_t(chunk));
+                s += chunk;
+                left -= chunk;
                 continue;
             }
             const std::streamsize take = std::min(room, left);
