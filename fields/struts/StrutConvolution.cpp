@@ -636,9 +636,9 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     } else if (seeded) {
                         seedsAt(i);
                         if (avx2)
-                            fillGaussiansAvx2(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0);
+                            fillGaussiansAvx2(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0, kLo - k0);
                         else
-                            fillGaussiansScalar(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0);
+                            fillGaussiansScalar(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0, kLo - k0);
                     } else {
                         rowGaussians(r0, b, c, inv2s2, q, q16, kLo, kHi, gauss.data());
                     }
