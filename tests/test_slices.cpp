@@ -447,22 +447,69 @@ TEST(Slices, UnboundedBlocksWriteTheBytesOfBoundedOnes)
     EXPECT_GT(greyPixels, 1000u);
 }
 
-TEST(Slices, StrutPlanesLeaveOutOnlyTilesProvenOutside)
+TEST(Slices, StrutPlanesLeaveOutOnlyTilesProvenOnOneSide)
 {
     // A graded BCC lattice (radii 0.15 -> 0.3 mm from the centre) as the engine builds it
     // (IsoRadius, the level at its radius) at the Saturn 4's pitch (19 x 24 um). The plane's tiles
-    // the struts' bounds prove outside are left out (PlaneBands): (1) on one block, the values of
-    // the other tiles and of their halo are gridValues' own, bit for bit, and every tile proven
-    // outside is outside at 4 x 4 sub-samples of each of its pixels, taken point by point
-    // (values(): std::erf and std::exp at each point); (2) whole layers are the same bytes with
-    // and without it, with far fewer pixels evaluated.
+    // the struts' bounds prove outside, or inside (a lower bound per strut near the tile), are left
+    // out (PlaneBands): (1) on one block, the values of the other tiles and of their halo are
+    // gridValues' own, bit for bit, and every tile proven on a side is on it at 4 x 4 sub-samples
+    // of each of its pixels, taken point by point (values(): std::erf and std::exp at each point);
+    // (2) whole layers are the same bytes with and without it, with far fewer pixels evaluated.
     const auto lattice = gradedStrutLattice(Vec3d(3.0), 4.0, 3, 3, 3);
     PlaneCounts counts;
-    checkPlanes(*lattice, {Vec3d(2.1, 2.3, 1.025), Vec3d(3.3, 2.9, 3.475), Vec3d(1.7, 3.6, 2.0)}, counts);
-    EXPECT_EQ(counts.below, 0);   // no tile proven inside
-    EXPECT_GT(counts.above, 40);  // of 192 tiles
+    checkPlanes(*lattice,
+                {Vec3d(2.1, 2.3, 1.025), Vec3d(3.3, 2.9, 3.475), Vec3d(1.7, 3.6, 2.0), Vec3d(0.45, 0.4, 0.975),
+                 Vec3d(2.4, 2.4, 3.0)},
+                counts);
+    // Of 320 tiles, measured: 45 proven inside, 100 outside, 175 open.
+    EXPECT_GT(counts.below, 30);
+    EXPECT_GT(counts.above, 60);
     EXPECT_GT(counts.open, 40);
     expectSameLayersWithPlaneBands(*lattice, {1.025, 3.475}, 0.8);
+}
+
+/// A lattice's PlaneBands that counts the planes it is asked for.
+class CountedPlanes final : public FieldNode, public PlaneBands {
+public:
+    explicit CountedPlanes(FieldPtr field) : mField(std::move(field)) {}
+    void values(std::span<const Vec3d> points, std::span<double> out) const override { mField->values(points, out); }
+    void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override
+    {
+        mField->gradients(points, out, grad);
+    }
+    void gridValues(const GridBatch& batch, std::span<double> out) const override { mField->gridValues(batch, out); }
+    Interval bound(const Box3& box) const override { return mField->bound(box); }
+    void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
+                     std::span<signed char> side, std::span<const TileNeed> need) const override
+    {
+        ++calls;
+        planeValuesOf(*mField, plane, tile, band, out, side, need);
+    }
+    mutable int calls = 0;
+
+private:
+    FieldPtr mField;
+};
+
+TEST(Slices, ALatticeTrimmedByAShapeWithoutBandsIsAskedForItsPlanesOnce)
+{
+    // The graded lattice within a cylinder, which proves no tile on a side (no PlaneBands): the
+    // lattice's tiles proven inside cannot decide the intersection, so the boolean does not ask
+    // the lattice for that side (else those tiles' values would be asked of it a second time).
+    // checkPlanes' checks hold, some tiles are proven outside, and each plane asks the lattice once.
+    auto lattice = std::make_shared<CountedPlanes>(gradedStrutLattice(Vec3d(3.0), 4.0, 3, 3, 3));
+    auto cylinder = std::make_shared<Cylinder>(Vec3d(3.0, 3.0, 3.0), Vec3d(0.0, 0.0, 1.0), 1.2, 6.0);
+    const BooleanField trimmed(BooleanOp::Intersection, std::vector<FieldPtr>{lattice, cylinder});
+    PlaneCounts counts;
+    checkPlanes(trimmed, {Vec3d(2.1, 2.3, 1.025), Vec3d(2.4, 2.4, 3.0)}, counts);
+    EXPECT_EQ(lattice->calls, 2);
+    EXPECT_GT(counts.above, 30);  // of 128 tiles, outside: 43 measured
+    EXPECT_EQ(counts.below, 0);
+    // The lattice alone proves tiles of the same planes inside.
+    PlaneCounts alone;
+    checkPlanes(*lattice, {Vec3d(2.1, 2.3, 1.025), Vec3d(2.4, 2.4, 3.0)}, alone);
+    EXPECT_GT(alone.below, 10);  // measured: 18
 }
 
 TEST(Slices, StackedBlocksWriteTheBytesOfBlocksAlone)

@@ -413,6 +413,19 @@ TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
         fillGaussiansScalar(lanes0, steps0, q16, count, gaussS.data());
         fillGaussiansAvx2(lanes0, steps0, q16, count, gaussV.data());
         ASSERT_EQ(std::memcmp(gaussS.data(), gaussV.data(), std::size_t(count) * sizeof(double)), 0) << trial;
+        // From a later point on (the groups before it stepped through, not written): the same
+        // doubles from the group holding it on, in both forms, and nothing written before it.
+        {
+            const int from = int(rng() % std::uint64_t(count + 4)), kept = std::min(count, from / 4 * 4);
+            std::vector<double> laterS(gaussS.size(), -1.0), laterV(gaussS.size(), -1.0);
+            fillGaussiansScalar(lanes0, steps0, q16, count, laterS.data(), from);
+            fillGaussiansAvx2(lanes0, steps0, q16, count, laterV.data(), from);
+            ASSERT_EQ(
+                std::memcmp(laterS.data() + kept, gaussS.data() + kept, std::size_t(count - kept) * sizeof(double)), 0)
+                << trial;
+            ASSERT_EQ(std::memcmp(laterV.data(), laterS.data(), laterS.size() * sizeof(double)), 0) << trial;
+            for (int k = 0; k < kept; ++k) ASSERT_EQ(laterS[std::size_t(k)], -1.0) << trial;
+        }
         // The sub-samples' rows (J from a cubic Taylor polynomial) in both forms.
         {
             const double poly[4] = {unit(rng), unit(rng), unit(rng), unit(rng)};

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <array>
+#include <limits>
 #include <span>
 #include <stdexcept>
 #include <vector>
@@ -129,12 +130,28 @@ void BooleanField::planeValues(const GridBatch& plane, int tile, Interval band, 
     std::vector<signed char> sides(count * nt, 0);  // per operand, oriented as the result
     std::vector<TileNeed> needs(nt);
     std::vector<unsigned char> decided(nt, 0);
+    // Tiles every operand before this one proved on the other side (-decisive): only there can
+    // this one's proof of that side decide the result. Where there are none, that side is not
+    // asked of it (its band's end infinite): proven, it would decide nothing and its values would
+    // be asked again below (a strut lattice's tiles proven inside a trimming cylinder, whose
+    // sides are never proven, were a second evaluation of its struts). The same sides and values.
+    std::vector<unsigned char> otherSide(nt, 1);
     for (const std::size_t o : order) {
+        bool useful = false;
         for (std::size_t t = 0; t < nt; ++t) {
             const TileNeed caller = needOf(need, t);
             needs[t] = caller == TileNeed::Decide && decided[t] ? TileNeed::Skip : caller;
+            useful = useful || (needs[t] == TileNeed::Decide && otherSide[t]);
         }
-        const Interval b = negated(o) ? Interval{-wide.hi, -wide.lo} : wide;
+        Interval oneSided = wide;
+        if (!useful) {
+            const double inf = std::numeric_limits<double>::infinity();
+            if (decisive < 0)
+                oneSided.hi = inf;
+            else
+                oneSided.lo = -inf;
+        }
+        const Interval b = negated(o) ? Interval{-oneSided.hi, -oneSided.lo} : oneSided;
         signed char* s = sides.data() + o * nt;
         planeValuesOf(*mOperands[o], plane, tile, b, std::span<double>(valuesOf(o), n), std::span<signed char>(s, nt),
                       needs);
@@ -142,6 +159,7 @@ void BooleanField::planeValues(const GridBatch& plane, int tile, Interval band, 
             if (needs[t] == TileNeed::Skip) s[t] = 0;
             if (negated(o)) s[t] = static_cast<signed char>(-s[t]);
             if (s[t] == decisive) decided[t] = 1;
+            if (s[t] != -decisive) otherSide[t] = 0;
         }
     }
     // The result's sides; an open tile needs every operand's values there.

@@ -234,6 +234,47 @@ private:
     double mValue[kSize];
 };
 
+/// Lower bounds of erf(x) and exp(-x) from tables, for planeValues' inside proofs: erf at the
+/// node at or nearer zero than |x| (erf is odd and increasing; 1/128 apart, so at most 0.9 % of a
+/// unit below it), exp at the node at or above x (1/256 apart: at most 0.4 % below it), each
+/// table value 1e-12 below the library's. A tile's lower bound needs one erf pair and one
+/// exponential per strut and tile near the strut: the library's calls cost more than the pixels
+/// the proofs saved.
+class LowerTables {
+public:
+    static const LowerTables& instance()
+    {
+        static const LowerTables tables;
+        return tables;
+    }
+    double erfBelow(double x) const
+    {
+        const double at = std::abs(x) * kErfSteps;
+        if (x >= 0.0) return mErf[at < double(kErfSize - 1) ? std::size_t(at) : std::size_t(kErfSize - 1)];
+        if (!(at < double(kErfSize - 1))) return -1.0;
+        return -mErfAbove[std::size_t(at)];  // -erf at the node at or beyond |x|
+    }
+    double expBelow(double x) const  ///< a lower bound of exp(-x), x >= 0
+    {
+        const double at = x * kExpSteps;
+        if (!(at < double(kExpSize - 1))) return 0.0;
+        return mExp[std::size_t(at)];  // the node above x: exp there
+    }
+
+private:
+    static constexpr int kErfSteps = 128, kErfSize = 6 * kErfSteps + 1;
+    static constexpr int kExpSteps = 256, kExpSize = 12 * kExpSteps + 1;
+    LowerTables()
+    {
+        for (int k = 0; k < kErfSize; ++k) {
+            mErf[std::size_t(k)] = std::erf(double(k) / kErfSteps) * (1.0 - 1e-12);
+            mErfAbove[std::size_t(k)] = std::min(1.0, std::erf(double(k + 1) / kErfSteps) * (1.0 + 1e-12));
+        }
+        for (int k = 0; k < kExpSize; ++k) mExp[std::size_t(k)] = std::exp(-double(k + 1) / kExpSteps) * (1.0 - 1e-12);
+    }
+    double mErf[kErfSize], mErfAbove[kErfSize], mExp[kExpSize];
+};
+
 }  // namespace
 
 void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out) const
@@ -595,9 +636,9 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     } else if (seeded) {
                         seedsAt(i);
                         if (avx2)
-                            fillGaussiansAvx2(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0);
+                            fillGaussiansAvx2(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0, kLo - k0);
                         else
-                            fillGaussiansScalar(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0);
+                            fillGaussiansScalar(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0, kLo - k0);
                     } else {
                         rowGaussians(r0, b, c, inv2s2, q, q16, kLo, kHi, gauss.data());
                     }
@@ -668,7 +709,7 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         return;
     }
     thread_local std::vector<std::uint32_t> cand;
-    thread_local std::vector<double> upper, peaks;
+    thread_local std::vector<double> upper, lower, peaks;
     thread_local std::vector<std::uint64_t> columnTiles, openTiles;
     thread_local std::vector<int> reach;
     reach.clear();
@@ -691,12 +732,16 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
     }
     cand.resize(kept);
     upper.assign(tiles.size(), 0.0);
+    lower.assign(tiles.size(), 0.0);
     peaks.assign(tiles.size(), 0.0);
+    // Tiles are proven inside (above band.hi) only where a band's upper end is finite.
+    const bool proveInside = std::isfinite(band.hi);
     // Tile (a, b)'s footprint: its points' cells, tile spacings wide, centred at cx0 + a tile dx.
     const double stepX = tile * dx, stepY = tile * dy;
     const double cx0 = plane.origin.x() + (0.5 + 0.5 * tile) * dx, cy0 = plane.origin.y() + (0.5 + 0.5 * tile) * dy;
     const double halfX = 0.5 * stepX, halfY = 0.5 * stepY, halfDiagonal = std::sqrt(halfX * halfX + halfY * halfY);
     const ExpUpperTable& expUpper = ExpUpperTable::instance();
+    const LowerTables& lowerTables = LowerTables::instance();
     // Per strut and tile of its reach, its peak times the kernel at the least distance from the
     // footprint, at least the centre's distance less the half diagonal (the kernel taken from a
     // table at or above it: expUpper). (The distance to the footprint itself, segmentBoxDistance,
@@ -723,6 +768,28 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         const double farHalo = rc + haloDiagonal + margin, farHaloSqr = farHalo * farHalo * (1.0 + 1e-12);
         const double ux = s.u.x(), uy = s.u.y(), uz = s.u.z(), length = s.length;
         const double ez = z - s.a.z();
+        // A centre nearer than inner has every point of its footprint within the cut-off (the
+        // distance to the segment is 1-Lipschitz; 1e-7 of rc^2 far above the test's rounding):
+        // the strut adds at least its lower bound there (tileLower), so a tile may be proven inside.
+        const double innerRoot = std::min(rc * (1.0 - 1e-7), 2.5 * s.sigma) - halfDiagonal - margin;
+        const double innerSqr = proveInside && innerRoot > 0.0 ? innerRoot * innerRoot * (1.0 - 1e-12) : -1.0;
+        // The strut's least contribution over a footprint centred at e from its start (tileLower):
+        // wMin times the unit-weight closed form at the line distance plus the half diagonal and at
+        // the footprint's h farthest from the middle (I0 falls away from L / 2), as bound() takes it.
+        const double spreadH = halfX * std::abs(ux) + halfY * std::abs(uy);
+        const double invS2 = 1.0 / (s.sigma * std::numbers::sqrt2);
+        auto tileLower = [&](double ex, double ey) {
+            const double h = ex * ux + ey * uy + ez * uz;
+            // The line's distance squared loses up to a few ulps of |e|^2 to cancellation: 1e-12 of
+            // it more is above every rounding.
+            const double eSqr = ex * ex + ey * ey + ez * ez;
+            const double rMax = std::sqrt(std::max(0.0, eSqr - h * h) + 1e-12 * eSqr) + halfDiagonal + margin;
+            const double hLo = h - spreadH, hHi = h + spreadH;
+            const double hFar = std::abs(hLo - 0.5 * length) > std::abs(hHi - 0.5 * length) ? hLo : hHi;
+            const double i0 = s.sigma * std::sqrt(std::numbers::pi / 2.0) *
+                              (lowerTables.erfBelow((length - hFar) * invS2) + lowerTables.erfBelow(hFar * invS2));
+            return i0 > 0.0 ? mWMin[j] * i0 * lowerTables.expBelow(rMax * rMax * inv2s2) * (1.0 - 1e-9) : 0.0;
+        };
         // The box of tiles whose footprint grown by a spacing the strut reaches: columns
         // reachA0..reachA1, rows reachB0..reachB1.
         int reachA0 = tiles.nx, reachA1 = -1, reachB0 = tiles.ny, reachB1 = -1;
@@ -751,7 +818,11 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
                     reachB1 = std::max(reachB1, inHalo[1] ? b + 1 : b);
                 }
                 if (!(within[0] || within[1])) continue;
-                const Lanes2 root = sqrtLanes(dSqr) - halfDiagonal - margin;
+                if (dSqr[0] < innerSqr) lower[row + b] += tileLower(ex, ey[0]);
+                if (dSqr[1] < innerSqr) lower[row + b + 1] += tileLower(ex, ey[1]);
+                const Lanes2 d = sqrtLanes(dSqr);
+                const Lanes2 spread = (halfX * (rx < 0.0 ? -rx : rx) + halfY * (ry < 0.0 ? -ry : ry)) / d;
+                const Lanes2 root = d - (spread < halfDiagonal ? spread : Lanes2{} + halfDiagonal) - margin;
                 const Lanes2 near = 0.0 < root ? root : Lanes2{};
                 if (within[0]) add(b, near[0]);
                 if (within[1]) add(b + 1, near[1]);
@@ -769,8 +840,12 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
                     reachB1 = std::max(reachB1, b);
                 }
                 if (dSqr >= farSqr) continue;  // beyond the cut-off everywhere: nothing added there
+                if (dSqr < innerSqr) lower[row + b] += tileLower(ex, ey);
                 // Every point of the footprint lies at least this far from the segment.
-                add(b, std::max(0.0, std::sqrt(dSqr) - halfDiagonal - margin));
+                const double d = std::sqrt(dSqr);
+                const double spread = std::min(halfDiagonal, (halfX * std::abs(rx) + halfY * std::abs(ry)) / d);
+                const double root = d - spread - margin;
+                add(b, 0.0 < root ? root : 0.0);
             }
             if (column) {
                 reachA0 = std::min(reachA0, a);
@@ -791,8 +866,11 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         for (int b = 0; b < tiles.ny; ++b) {
             const std::size_t t = std::size_t(a) * tiles.ny + b;
             const TileNeed needed = needOf(need, t);
-            side[t] = static_cast<signed char>(
-                needed == TileNeed::Decide && upper[t] * (1.0 + 1e-12) + 2.5e-5 * peaks[t] < band.lo ? -1 : 0);
+            side[t] =
+                static_cast<signed char>(needed != TileNeed::Decide                                              ? 0
+                                         : upper[t] * (1.0 + 1e-12) + 2.5e-5 * peaks[t] < band.lo                ? -1
+                                         : proveInside && lower[t] * (1.0 - 1e-12) - 2.5e-5 * peaks[t] > band.hi ? 1
+                                                                                                                 : 0);
             if (side[t] == 0 && needed != TileNeed::Skip) open |= std::uint64_t(1) << b;
         }
         openTiles[std::size_t(a)] = open;

@@ -247,20 +247,23 @@ void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, cons
 
 /// gauss[k + l] for k = 0, 4, 8, .. < count and l = 0..3: lane l starts at lanes[l] and is
 /// multiplied by steps[l] after each store, steps[l] by @a q16 (four interleaved geometric
-/// recurrences; writes count rounded up to four).
-inline void fillGaussiansScalar(const double lanes[4], const double steps[4], double q16, int count, double* gauss)
+/// recurrences; writes count rounded up to four). Groups wholly before @a from are stepped
+/// through without being written: the same doubles from the first group holding @a from on.
+inline void fillGaussiansScalar(const double lanes[4], const double steps[4], double q16, int count, double* gauss,
+                                int from = 0)
 {
     double e[4] = {lanes[0], lanes[1], lanes[2], lanes[3]}, r[4] = {steps[0], steps[1], steps[2], steps[3]};
     for (int k = 0; k < count; k += 4)
         for (int l = 0; l < 4; ++l) {
-            gauss[k + l] = e[l];
+            if (k + 4 > from) gauss[k + l] = e[l];
             e[l] *= r[l];
             r[l] *= q16;
         }
 }
 
 /// fillGaussiansScalar with four lanes; the same doubles.
-void fillGaussiansAvx2(const double lanes[4], const double steps[4], double q16, int count, double* gauss);
+void fillGaussiansAvx2(const double lanes[4], const double steps[4], double q16, int count, double* gauss,
+                       int from = 0);
 
 /// addStrutRowScalar with four lanes; the same doubles. Defined only where VOXLAT_AVX2_ROWS is
 /// (x86-64 builds); call it only when hasAvx2Rows() says the CPU has AVX2.

@@ -227,11 +227,16 @@ void addStrutRowTaylorAvx2(const StrutRowConstants& s, const StrutRow& row, cons
     }
 }
 
-void fillGaussiansAvx2(const double lanes[4], const double steps[4], double q16, int count, double* gauss)
+void fillGaussiansAvx2(const double lanes[4], const double steps[4], double q16, int count, double* gauss, int from)
 {
     __m256d e = _mm256_loadu_pd(lanes), r = _mm256_loadu_pd(steps);
     const __m256d q = _mm256_set1_pd(q16);
-    for (int k = 0; k < count; k += 4) {
+    int k = 0;
+    for (; k < count && k + 4 <= from; k += 4) {
+        e = _mm256_mul_pd(e, r);
+        r = _mm256_mul_pd(r, q);
+    }
+    for (; k < count; k += 4) {
         _mm256_storeu_pd(gauss + k, e);
         e = _mm256_mul_pd(e, r);
         r = _mm256_mul_pd(r, q);
@@ -346,9 +351,9 @@ void addStrutRowTaylorAvx2(const StrutRowConstants& s, const StrutRow& row, cons
     addStrutRowTaylorScalar(s, row, c, hc, gauss, out);
 }
 
-void fillGaussiansAvx2(const double lanes[4], const double steps[4], double q16, int count, double* gauss)
+void fillGaussiansAvx2(const double lanes[4], const double steps[4], double q16, int count, double* gauss, int from)
 {
-    fillGaussiansScalar(lanes, steps, q16, count, gauss);
+    fillGaussiansScalar(lanes, steps, q16, count, gauss, from);
 }
 
 void strutRowNodesAvx2(const StrutRowConstants& s, double h0, double step, int first, int count, double* value,
