@@ -76,7 +76,8 @@ cylinder 44.27 / 27.68 / 48.20 s (1.09x -> 1.74x). Target 50x each: missed.
 evaluated and solved in stacks of eight leaves along z, row tables for struts steep to the rows.
 VOXLAT_W2G_SIZE=25 at load 3.0-3.5, branch / main (numpy in each run): trimmed 1.92 / 3.01 s (4.3x /
 3.3x), wireframe 8.48 / 18.10 s (6.0x / 3.0x), cylinder 3.37 / 5.57 s (5.4x / 3.0x); graded and
-centred the same code (5.9-8.9x, the load). Target 50x each: missed.
+centred the same code (5.9-8.9x, the load); at load 2.0-1.2: trimmed 0.96 / 1.36 s (8.3x / 5.7x),
+wireframe 4.38 / 8.87 s (12.6x / 5.9x), cylinder 1.94 / 3.07 s (8.8x / 5.6x). Target 50x each: missed.
 """
 import json
 import math
