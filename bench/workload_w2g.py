@@ -72,6 +72,12 @@ VOXLAT_W2G_SIZE=25 at load 3.6-7.0, main / branch / numpy side by side: graded 0
 (24.4x / 23.7x), centred 16.88 / 3.79 / 23.75 s (1.41x -> 6.27x), trimmed 9.86 / 7.34 / 22.67 s
 (2.30x -> 3.09x), wireframe 85.9 / 93.6 / 135.9 s (1.58x / 1.45x: load; -10 % CPU in an A/B),
 cylinder 44.27 / 27.68 / 48.20 s (1.09x -> 1.74x). Target 50x each: missed.
+2026-12-01 (issue 38, seventeenth round, branch issue38u; bench/history.md): general frames
+evaluated and solved in stacks of eight leaves along z, row tables for struts steep to the rows.
+VOXLAT_W2G_SIZE=25 at load 3.0-3.5, branch / main (numpy in each run): trimmed 1.92 / 3.01 s (4.3x /
+3.3x), wireframe 8.48 / 18.10 s (6.0x / 3.0x), cylinder 3.37 / 5.57 s (5.4x / 3.0x); graded and
+centred the same code (5.9-8.9x, the load); at load 2.0-1.2: trimmed 0.96 / 1.36 s (8.3x / 5.7x),
+wireframe 4.38 / 8.87 s (12.6x / 5.9x), cylinder 1.94 / 3.07 s (8.8x / 5.6x). Target 50x each: missed.
 """
 import json
 import math

@@ -29,6 +29,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <limits>
 #include <numbers>
 #include <random>
@@ -247,6 +248,120 @@ TEST(StrutConvolution, GridValuesMatchValuesWithinTheTableBound)
     EXPECT_GT(worst, 0.0);  // the fast path really is a different computation
 }
 
+TEST(StrutConvolution, StackedLeavesStayWithinTheTableBoundOfTheirLeaves)
+{
+    // A stack of leaves along z (SparseOptions::stackLeaves: 8 x 8 x 8m points, rows of 8m
+    // points, tabled where m >= 2) against each leaf evaluated alone (rows of 8, no row table) and
+    // against values() (std::erf / std::exp per point): the difference is the row table's error,
+    // at most 0.0128 (delta / sigma)^4 <= 1.28e-6 of the peak of each strut within reach, plus
+    // GaussianTable's and rounding. A jittered BCC frame (no two struts alike, as a wireframe),
+    // graded weights, sigma 0.5 at 0.1 mm, and a coarser 0.137 mm; and struts in random
+    // directions, so that h grows along x and falls along y for some (a block's rows then reach
+    // past the hRow of its first and last rows: the row table's nodes of negative index, which
+    // went unmade and gave 1e226 before).
+    std::mt19937 rng(38);
+    std::vector<ConvolutionStrut> struts;
+    const Frame frame = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(2.2), {3, 3, 3});
+    std::vector<Vec3d> nodes = frame.nodes;
+    for (Vec3d& n : nodes) n += randomVec(rng, -0.22, 0.22);
+    for (std::size_t e = 0; e < frame.struts.size(); ++e)
+        struts.push_back({nodes[frame.struts[e][0]], nodes[frame.struts[e][1]], 0.5, 1.0 + 0.01 * double(e % 17),
+                          1.3 - 0.02 * double(e % 11)});
+    for (int e = 0; e < 150; ++e) {
+        const Vec3d a = randomVec(rng, 0.0, 6.6), b = a + randomVec(rng, -1.5, 1.5);
+        struts.push_back({a, b, 0.5, 0.8 + 0.01 * (e % 13), 1.1});
+    }
+    const StrutConvolution f(struts);
+    std::vector<Vec3d> origins{Vec3d(0.05, 0.05, 0.05), Vec3d(2.33, 1.1, -0.35), Vec3d(3.7, 4.15, 0.9)};
+    for (int o = 0; o < 9; ++o) origins.push_back(randomVec(rng, -0.5, 5.5));
+    double worstLeaf = 0.0, worstPoint = 0.0;
+    std::uint64_t compared = 0;
+    for (const double voxel : {0.1, 0.137})
+        for (const Vec3d& origin : origins)
+            for (const int stack : {2, 4, 8}) {
+                GridBatch batch;
+                batch.origin = origin;
+                batch.spacing = Vec3d(voxel);
+                batch.nz = 8 * stack;
+                std::vector<double> stacked(batch.size());
+                f.gridValues(batch, stacked);
+                for (int m = 0; m < stack; ++m) {
+                    GridBatch leaf = batch;
+                    leaf.nz = 8;
+                    leaf.origin[2] = origin[2] + 8 * m * voxel;
+                    std::vector<double> alone(512), exact(512);
+                    f.gridValues(leaf, alone);
+                    std::vector<Vec3d> pts;
+                    for (int i = 0; i < 8; ++i)
+                        for (int j = 0; j < 8; ++j)
+                            for (int k = 0; k < 8; ++k) pts.push_back(leaf.point(i, j, k));
+                    f.values(pts, exact);
+                    for (int n = 0; n < 512; ++n) {
+                        const double v = stacked[std::size_t(((n >> 3) * batch.nz) + 8 * m + (n & 7))];
+                        double bound = 1e-9 * (1.0 + exact[std::size_t(n)]);
+                        for (std::size_t j = 0; j < f.strutCount(); ++j) {
+                            double h, r2;
+                            if (f.segment(j).distanceSqr(pts[std::size_t(n)], h, r2) < std::pow(f.cutoffRadius(j), 2))
+                                bound += 1.28e-6 * f.peak(j);
+                        }
+                        ASSERT_NEAR(v, exact[std::size_t(n)], bound) << voxel << " " << stack << " " << m << " " << n;
+                        ASSERT_NEAR(v, alone[std::size_t(n)], bound) << voxel << " " << stack << " " << m << " " << n;
+                        worstLeaf = std::max(worstLeaf, std::abs(v - alone[std::size_t(n)]));
+                        worstPoint = std::max(worstPoint, std::abs(v - exact[std::size_t(n)]));
+                        ++compared;
+                    }
+                }
+            }
+    EXPECT_EQ(compared, 2u * 12u * (2u + 4u + 8u) * 512u);
+    // The case a wireframe met: a block that the second strut's cut-off cap touches at its corner
+    // of least x, greatest y and least z, after a strut that fills the block's table first.
+    {
+        const StrutConvolution two({{Vec3d(19.8424, 7.40674, 21.7117), Vec3d(18.6375, 8.25368, 22.8669), 0.5, 1.0, 1.0},
+                                    {Vec3d(17.9135, 9.17027, 21.707), Vec3d(16.7296, 10.4775, 20.997), 0.5, 1.0, 1.0}});
+        GridBatch batch;
+        batch.origin = Vec3d(19.25, 7.25, 22.45);
+        batch.spacing = Vec3d(0.1);
+        batch.nz = 32;
+        std::vector<double> stacked(batch.size()), exact(batch.size());
+        two.gridValues(batch, stacked);
+        std::vector<Vec3d> pts;
+        for (int i = 0; i < batch.nx; ++i)
+            for (int k = 0; k < batch.ny; ++k)
+                for (int l = 0; l < batch.nz; ++l) pts.push_back(batch.point(i, k, l));
+        two.values(pts, exact);
+        for (std::size_t n = 0; n < pts.size(); ++n)
+            ASSERT_NEAR(stacked[n], exact[n], 1.28e-6 * (two.peak(0) + two.peak(1)) + 1e-9 * (1.0 + exact[n])) << n;
+    }
+    // Each random strut alone, in stacks of four anywhere its reach meets them (blocks that its
+    // cut-off's cap touches at a corner among them): the one strut's table error.
+    for (std::size_t j = frame.struts.size(); j < struts.size(); ++j) {
+        const StrutConvolution one({struts[j]});
+        const double reach = one.cutoffRadius(0);
+        Vec3d lo, hi;
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(struts[j].a[a], struts[j].b[a]) - reach - (a == 2 ? 3.1 : 0.7);
+            hi[a] = std::max(struts[j].a[a], struts[j].b[a]) + reach;
+        }
+        for (int o = 0; o < 20; ++o) {
+            GridBatch batch;
+            for (int a = 0; a < 3; ++a) batch.origin[a] = std::uniform_real_distribution<double>(lo[a], hi[a])(rng);
+            batch.spacing = Vec3d(0.1);
+            batch.nz = 32;
+            std::vector<double> stacked(batch.size()), exact(batch.size());
+            one.gridValues(batch, stacked);
+            std::vector<Vec3d> pts;
+            for (int i = 0; i < batch.nx; ++i)
+                for (int k = 0; k < batch.ny; ++k)
+                    for (int l = 0; l < batch.nz; ++l) pts.push_back(batch.point(i, k, l));
+            one.values(pts, exact);
+            for (std::size_t n = 0; n < pts.size(); ++n)
+                ASSERT_NEAR(stacked[n], exact[n], 1.28e-6 * one.peak(0) + 1e-9 * (1.0 + exact[n])) << j << " " << n;
+        }
+    }
+    EXPECT_GT(worstLeaf, 0.0);  // the stacks' rows are tabled: a different computation
+    std::printf("stacked against leaves alone: worst %.3g; against values(): worst %.3g\n", worstLeaf, worstPoint);
+}
+
 TEST(StrutConvolution, PixelRowsStayWithinTheirTableBound)
 {
     // A slicer's block at a printer's pitch (W10: sigma 0.2, pixels 19 x 24 um, 66 x 66 with the
@@ -456,6 +571,28 @@ TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
         addStrutRowTabledScalar(c, row, table, gauss.data(), scalar.data());
         addStrutRowTabledAvx2(c, row, table, gauss.data(), lanes.data());
         ASSERT_EQ(std::memcmp(scalar.data(), lanes.data(), scalar.size() * sizeof(double)), 0) << "trial " << trial;
+        // A table in phases (the next nodes in a table of their own): both forms read them alike,
+        // and the next nodes one past value's (a single phase) read as without them.
+        {
+            std::vector<double> nextValue(value.size()), nextSlope(value.size());
+            for (std::size_t m = 0; m < value.size(); ++m) {
+                nextValue[m] = std::abs(unit(rng));
+                nextSlope[m] = 0.1 * unit(rng);
+            }
+            StrutRowTable phased = table;
+            phased.nextValue = nextValue.data();
+            phased.nextSlope = nextSlope.data();
+            std::vector<double> phasedS = before, phasedV = before;
+            addStrutRowTabledScalar(c, row, phased, gauss.data(), phasedS.data());
+            addStrutRowTabledAvx2(c, row, phased, gauss.data(), phasedV.data());
+            ASSERT_EQ(std::memcmp(phasedS.data(), phasedV.data(), phasedS.size() * sizeof(double)), 0) << trial;
+            StrutRowTable one = table;
+            one.nextValue = value.data() + 1;
+            one.nextSlope = slope.data() + 1;
+            std::vector<double> oneS = before;
+            addStrutRowTabledScalar(c, row, one, gauss.data(), oneS.data());
+            ASSERT_EQ(std::memcmp(oneS.data(), scalar.data(), oneS.size() * sizeof(double)), 0) << trial;
+        }
         lanesCompared += std::uint64_t(kHi - kLo + 1);
         for (int k = kLo; k <= kHi; ++k) lanesAdded += scalar[k] != before[k] ? 1 : 0;
     }
@@ -1531,6 +1668,69 @@ TEST(GridValueMemo, DroppingTheValuesOutsideALevelBandKeepsEveryLeafAGridInItRea
     }
 }
 
+TEST(GridValueMemo, AStacksLeavesAreDroppedOneByOneAndServedToGridsThatDoNotReadThem)
+{
+    // As DroppingTheValuesOutsideALevelBandKeepsEveryLeafAGridInItReads, in stacks of eight leaves
+    // along z (SparseOptions::stackLeaves): the drop decides each leaf of a stack alone (a stack
+    // holding one leaf near the band keeps only what a grid in the band may read), a grid at a
+    // level in the band evaluates nothing again (its stacks' dropped leaves are unread by it) and
+    // is a fresh evaluation's in the same stacks bit for bit; one outside the band evaluates again.
+    const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
+    const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
+    struct Counted final : FieldNode {
+        FieldPtr f;
+        mutable std::atomic<int> batches{0};
+        explicit Counted(FieldPtr field) : f(std::move(field)) {}
+        void values(std::span<const Vec3d> p, std::span<double> out) const override { f->values(p, out); }
+        void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
+        {
+            f->gradients(p, out, g);
+        }
+        void gridValues(const GridBatch& batch, std::span<double> out) const override
+        {
+            ++batches;
+            f->gridValues(batch, out);
+        }
+        Interval bound(const Box3& box) const override { return f->bound(box); }
+    };
+    const auto counted = std::make_shared<Counted>(iso);
+    const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
+    const Interval band(0.58, 0.64);
+    for (const double level : {0.58, 0.61, 0.64, 0.83}) {
+        const auto memo = std::make_shared<GridValueMemo>(counted);
+        memo->keep(true, std::size_t(1) << 30);
+        SparseOptions solve;
+        solve.band = Interval(0.40, 0.85);
+        solve.stackLeaves = 8;
+        SparseStats stats;
+        evaluateSparse(*memo, d, solve, &stats);
+        const std::size_t before = memo->keptBytes();
+        ASSERT_EQ(before, stats.stackedLeaves * 512 * sizeof(double));
+        memo->dropOutside(band);
+        const std::size_t after = memo->keptBytes();
+        EXPECT_GT(after, 0u);
+        EXPECT_EQ(after % (512 * sizeof(double)), 0u);
+        // Leaf by leaf: fewer than the leaves the solve itself needed (a stack's whole drop would
+        // keep at least those, and more).
+        EXPECT_LT(after, stats.leaves * 512 * sizeof(double));
+        const auto solid = LevelSolid::unsolved(memo, SolidSide::Below);
+        solid->solve(level);
+        counted->batches = 0;
+        SparseOptions stacked;
+        stacked.stackLeaves = 8;
+        const auto grid = evaluateSparse(*solid, d, stacked);
+        const int evaluatedAgain = counted->batches.load();
+        memo->keep(false);
+        const auto fresh = evaluateSparse(LevelSolid(iso, SolidSide::Below, level), d, stacked);
+        ASSERT_EQ(grid->tree().leafCount(), fresh->tree().leafCount()) << level;
+        EXPECT_EQ(mismatchedVoxels(*fresh, *grid), 0u) << level;
+        if (band.contains(level))
+            EXPECT_EQ(evaluatedAgain, 0) << level;
+        else
+            EXPECT_GT(evaluatedAgain, 0) << level;
+    }
+}
+
 TEST(GridValueMemo, TheSolveTellsTheBandItsLevelLiesIn)
 {
     // solveDensity's levelWithin: called once, before the coverage pass, with a band holding the
@@ -1726,6 +1926,120 @@ TEST(GridLeavesReused, AWiderBandGivesTheGridOfAFreshEvaluation)
     EXPECT_EQ(mismatched, 0u);
     EXPECT_GT(inBoth, 100u);
     EXPECT_EQ(std::uint64_t(counted.batches.load()), fresh->tree().leafCount() - inBoth);
+}
+
+TEST(SparseEvaluator, StackedLeavesAreTheLeavesAloneWithinTheTableBound)
+{
+    // evaluateSparse in stacks of leaves along z (SparseOptions::stackLeaves) against one batch
+    // per leaf, on a jittered frame (nothing repeats) and a domain whose corner is off the voxel
+    // lattice's multiples, with a margin (leaves of negative index): the same leaves, each value
+    // within the row table's bound (1.28e-6 of the peak of each strut within reach, the float's
+    // rounding on top); the same floats for one and two threads; and a visited evaluation hands
+    // its visitor the grid's floats.
+    std::mt19937 rng(7);
+    const Frame frame = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(1.6), {3, 3, 3});
+    std::vector<Vec3d> nodes = frame.nodes;
+    for (Vec3d& n : nodes) n += randomVec(rng, -0.16, 0.16);
+    std::vector<ConvolutionStrut> struts;
+    for (std::size_t e = 0; e < frame.struts.size(); ++e)
+        struts.push_back({nodes[frame.struts[e][0]], nodes[frame.struts[e][1]], 0.4, 1.0, 0.7 + 0.02 * double(e % 9)});
+    const StrutConvolution f(struts);
+    const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, -0.23), Vec3d(4.43, 4.91, 4.57)}, 0.1);
+    SparseOptions options;
+    options.margin = 3;
+    options.band = Interval(0.9, 1.4);
+    options.insideValue = -std::numeric_limits<float>::max();
+    options.outsideValue = std::numeric_limits<float>::max();
+    SparseStats aloneStats, stackedStats;
+    const auto alone = evaluateSparse(f, d, options, &aloneStats);
+    SparseOptions stacked = options;
+    stacked.stackLeaves = 8;
+    const auto grid = evaluateSparse(f, d, stacked, &stackedStats);
+    ASSERT_EQ(grid->tree().leafCount(), alone->tree().leafCount());
+    EXPECT_GT(grid->tree().leafCount(), 200u);
+    EXPECT_EQ(stackedStats.leaves, aloneStats.leaves);
+    EXPECT_EQ(stackedStats.stackedLeaves % 8, 0u);
+    EXPECT_GE(stackedStats.stackedLeaves, stackedStats.leaves);
+    EXPECT_EQ(stackedStats.domainVoxelsBelowZero, aloneStats.domainVoxelsBelowZero);
+    auto acc = grid->getConstAccessor();
+    double worst = 0.0;
+    std::uint64_t differing = 0;
+    for (auto leaf = alone->tree().cbeginLeaf(); leaf; ++leaf) {
+        ASSERT_NE(acc.probeConstLeaf(leaf->origin()), nullptr);
+        for (int i = 0; i < 512; ++i) {
+            const openvdb::Coord ijk = leaf->offsetToGlobalCoord(i);
+            const double a = leaf->getValue(i), b = acc.getValue(ijk);
+            const Vec3d p = d.worldOf(ijk);
+            double peaks = 0.0;
+            for (std::size_t j = 0; j < f.strutCount(); ++j) {
+                double h, r2;
+                if (f.segment(j).distanceSqr(p, h, r2) < std::pow(f.cutoffRadius(j), 2)) peaks += f.peak(j);
+            }
+            ASSERT_NEAR(b, a, 1.28e-6 * peaks + 2.4e-7 * std::abs(a) + 1e-12) << ijk;
+            worst = std::max(worst, std::abs(a - b));
+            differing += a != b;
+        }
+    }
+    EXPECT_GT(differing, 0u);  // the stacks' rows are tabled: not the same computation
+    std::printf("stacked leaves: %llu of %llu floats differ, by at most %.3g\n", (unsigned long long)differing,
+                (unsigned long long)(alone->tree().leafCount() * 512), worst);
+    for (const int threads : {1, 2}) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        const auto again = evaluateSparse(f, d, stacked);
+        EXPECT_EQ(mismatchedVoxels(*again, *grid), 0u) << threads;
+        EXPECT_EQ(again->tree().leafCount(), grid->tree().leafCount()) << threads;
+    }
+    std::atomic<std::uint64_t> visited{0}, mismatched{0};
+    SparseOptions visiting = stacked;
+    visiting.leafVisitor = [&](const openvdb::Coord& origin, const float* values) {
+        const auto* leaf = grid->tree().probeConstLeaf(origin);
+        ++visited;
+        if (!leaf || std::memcmp(leaf->buffer().data(), values, 512 * sizeof(float)) != 0) ++mismatched;
+    };
+    evaluateSparse(f, d, visiting);
+    EXPECT_EQ(visited.load(), grid->tree().leafCount());
+    EXPECT_EQ(mismatched.load(), 0u);
+}
+
+TEST(GridLeavesReused, AWiderBandInStacksGivesTheGridOfAFreshEvaluation)
+{
+    // As AWiderBandGivesTheGridOfAFreshEvaluation, in stacks of four leaves along z: a stack whose
+    // every leaf the first grid holds is read from it, the others evaluated whole (the stack's
+    // values are its own whichever leaves a band needs).
+    const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
+    const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
+    struct Counted final : FieldNode {
+        const FieldNode& f;
+        mutable std::atomic<int> batches{0};
+        explicit Counted(const FieldNode& field) : f(field) {}
+        void values(std::span<const Vec3d> p, std::span<double> out) const override { f.values(p, out); }
+        void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
+        {
+            f.gradients(p, out, g);
+        }
+        void gridValues(const GridBatch& batch, std::span<double> out) const override
+        {
+            ++batches;
+            f.gridValues(batch, out);
+        }
+        Interval bound(const Box3& box) const override { return f.bound(box); }
+    };
+    const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
+    SparseOptions narrow, wide;
+    narrow.margin = wide.margin = 0;
+    narrow.stackLeaves = wide.stackLeaves = 4;
+    narrow.band = Interval(0.58, 0.64);
+    wide.band = Interval(0.45, 0.80);
+    SparseStats firstStats, freshStats;
+    const auto first = evaluateSparse(*iso, d, narrow, &firstStats);
+    const auto fresh = evaluateSparse(*iso, d, wide, &freshStats);
+    const Counted counted(*iso);
+    const auto reused = evaluateSparse(GridLeavesReused(counted, *first, d), d, wide);
+    ASSERT_EQ(reused->tree().leafCount(), fresh->tree().leafCount());
+    EXPECT_EQ(mismatchedVoxels(*fresh, *reused), 0u);
+    // Stacks read whole from the first grid take no batch: fewer batches than the wide band's stacks.
+    EXPECT_LT(std::uint64_t(counted.batches.load()), freshStats.stackedLeaves / 4);
+    EXPECT_GT(std::uint64_t(counted.batches.load()), 0u);
 }
 
 TEST(StrutIndex, GatherListsEveryReachingSegmentOnceInAscendingOrder)

@@ -7,6 +7,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <span>
@@ -19,7 +20,8 @@ namespace voxlat {
 /// for options o without clipToDomain, those floats are what the evaluator would store again (a
 /// float widened to a double and narrowed back is the same float): another evaluateSparse()
 /// over this field on @a domain gives the grid a fresh evaluation of @a field gives. Everything
-/// else goes to @a field. @a field, @a grid and @a domain must outlive it.
+/// else goes to @a field. A stack of leaves along z (SparseOptions::stackLeaves) whose every leaf
+/// the grid holds is read the same way. @a field, @a grid and @a domain must outlive it.
 class GridLeavesReused final : public FieldNode {
 public:
     GridLeavesReused(const FieldNode& field, const openvdb::FloatGrid& grid, const Domain& domain)
@@ -34,10 +36,31 @@ public:
     }
     void gridValues(const GridBatch& batch, std::span<double> out) const override
     {
-        if (const LeafT* leaf = leafOf(batch)) {
-            const float* data = leaf->buffer().data();
-            for (std::size_t i = 0; i < LeafT::SIZE; ++i) out[i] = double(data[i]);
-            return;
+        // A stack of leaves (SparseOptions::stackLeaves: 8 x 8 x 8m points) whose every leaf the
+        // grid holds reads them all; a stack missing one is evaluated whole (its values are the
+        // stack's alone, so the leaves read and those evaluated agree).
+        constexpr int n = int(LeafT::DIM);
+        const int count = batch.nz % n == 0 ? batch.nz / n : 0;
+        std::array<const LeafT*, 16> leaves{};
+        if (count >= 1 && count <= 16) {
+            GridBatch leafBatch = batch;
+            leafBatch.nz = n;
+            openvdb::Coord first;
+            bool all = leafIndex(leafBatch, first);
+            for (int m = 0; m < count && all; ++m) {
+                leaves[std::size_t(m)] = leafAt(first + openvdb::Coord(0, 0, m * n));
+                all = leaves[std::size_t(m)] != nullptr;
+            }
+            if (all) {
+                for (int m = 0; m < count; ++m) {
+                    const float* data = leaves[std::size_t(m)]->buffer().data();
+                    for (int ij = 0; ij < n * n; ++ij)
+                        for (int k = 0; k < n; ++k)
+                            out[std::size_t(ij) * batch.nz + std::size_t(m * n + k)] =
+                                double(data[std::size_t(ij) * n + std::size_t(k)]);
+                }
+                return;
+            }
         }
         mField.gridValues(batch, out);
     }
@@ -46,15 +69,20 @@ public:
 private:
     using LeafT = openvdb::FloatGrid::TreeType::LeafNodeType;
 
-    /// The grid's leaf that @a batch is, or null.
-    const LeafT* leafOf(const GridBatch& batch) const
+    /// The index of the leaf whose batch evaluateSparse() makes as @a batch (8^3 points, the
+    /// voxel's spacing, origin domain.worldOf() of a leaf's origin bit for bit) into @a ijk;
+    /// false when it is no leaf's batch.
+    bool leafIndex(const GridBatch& batch, openvdb::Coord& ijk) const
     {
         constexpr int n = int(LeafT::DIM);
-        if (batch.nx != n || batch.ny != n || batch.nz != n || batch.spacing != Vec3d(mDomain.voxel)) return nullptr;
-        openvdb::Coord ijk;
+        if (batch.nx != n || batch.ny != n || batch.nz != n || batch.spacing != Vec3d(mDomain.voxel)) return false;
         for (int a = 0; a < 3; ++a)
             ijk[a] = int(std::lround((batch.origin[a] - mDomain.box.min[a]) / mDomain.voxel - 0.5));
-        if (((ijk.x() | ijk.y() | ijk.z()) & (n - 1)) != 0 || mDomain.worldOf(ijk) != batch.origin) return nullptr;
+        return ((ijk.x() | ijk.y() | ijk.z()) & (n - 1)) == 0 && mDomain.worldOf(ijk) == batch.origin;
+    }
+    /// The grid's leaf at @a ijk with values, or null.
+    const LeafT* leafAt(const openvdb::Coord& ijk) const
+    {
         const LeafT* leaf = mGrid.tree().probeConstLeaf(ijk);
         return leaf && leaf->buffer().data() ? leaf : nullptr;
     }

@@ -14,6 +14,7 @@
 #include <memory>
 #include <mutex>
 #include <sstream>
+#include <stdexcept>
 #include <vector>
 
 namespace voxlat {
@@ -170,7 +171,26 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
     s.leaves = leafOrigins.size();
     if (s.leaves > maxLeaves) throw tooMany(s.leaves, false);
 
-    // Stage 2: evaluate each straddling leaf as one batch.
+    // Stage 2: evaluate each straddling leaf as one batch, or each stack of them (stackLeaves).
+    // A stack's leaves are consecutive in leafOrigins: the cull walks z innermost within a block,
+    // and a stack (at most 128 voxels tall, aligned) lies within one block.
+    const int stack = options.stackLeaves;
+    if (stack < 1 || stack > kBlockDim / kLeafDim || (stack & (stack - 1)) != 0)
+        throw std::invalid_argument("evaluateSparse: stackLeaves must be 1, 2, 4, 8 or 16");
+    const int stackDim = kLeafDim * stack;
+    auto stackOf = [stackDim](const Coord& lo) { return Coord(lo.x(), lo.y(), floorTo(lo.z(), stackDim)); };
+    struct Run {
+        std::size_t first, count;  ///< leaves [first, first + count) of leafOrigins
+    };
+    std::vector<Run> runs;
+    runs.reserve(stack == 1 ? leafOrigins.size() : leafOrigins.size() / 2 + 1);
+    for (std::size_t n = 0; n < leafOrigins.size(); ++n) {
+        if (!runs.empty() && stack > 1 && stackOf(leafOrigins[runs.back().first]) == stackOf(leafOrigins[n]))
+            ++runs.back().count;
+        else
+            runs.push_back({n, 1});
+    }
+    if (stack > 1) s.stackedLeaves = std::uint64_t(runs.size()) * std::uint64_t(stack);
     // Owned until the tree takes them: a cancelled or failed evaluation frees what it made.
     std::vector<std::unique_ptr<LeafT>> leaves(options.leafVisitor ? 0 : leafOrigins.size());
     // Per leaf, so the total is an integer sum in leaf order whatever the thread count.
@@ -181,49 +201,78 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
     Vec3d badPoint(0.0);
     {
         StageProgress progress(options.context, options.stage, leafOrigins.size());
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leafOrigins.size(), 16), [&](const auto& range) {
+        const std::size_t grain = std::size_t(std::max(1, 16 / stack));
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, runs.size(), grain), [&](const auto& range) {
             std::array<double, 512> values, clipped;
             std::array<float, 512> visited;
-            for (std::size_t n = range.begin(); n != range.end(); ++n) {
-                const Coord& lo = leafOrigins[n];
-                GridBatch batch;
-                batch.origin = domain.worldOf(lo);
-                batch.spacing = Vec3d(domain.voxel);
-                field.gridValues(batch, values);
-                if (clip && !deepInside.isInside(CoordBBox(lo, lo + Coord(kLeafDim - 1)))) {
-                    clip->gridValues(batch, clipped);
-                    for (int i = 0; i < 512; ++i) values[i] = std::max(values[i], clipped[i]);
+            // This task's own (a field that waits on work of its own may run another task here).
+            std::vector<double> stacked(stack > 1 ? std::size_t(512) * std::size_t(stack) : 0);
+            std::size_t made = 0;
+            for (std::size_t r = range.begin(); r != range.end(); ++r) {
+                const Run& run = runs[r];
+                GridBatch stackBatch;
+                if (stack > 1) {
+                    // The whole stack, whichever of its leaves are needed.
+                    stackBatch.origin = domain.worldOf(stackOf(leafOrigins[run.first]));
+                    stackBatch.spacing = Vec3d(domain.voxel);
+                    stackBatch.nz = stackDim;
+                    // The stack's leaves not needed here: their values are not read.
+                    std::uint32_t needed = 0;
+                    for (std::size_t n = run.first; n != run.first + run.count; ++n)
+                        needed |= std::uint32_t(1) << ((leafOrigins[n].z() - stackOf(leafOrigins[n]).z()) / kLeafDim);
+                    stackBatch.unread = ((std::uint32_t(1) << stack) - 1u) & ~needed;
+                    field.gridValues(stackBatch, stacked);
                 }
-                std::unique_ptr<LeafT> leaf;
-                float* data = visited.data();
-                if (!options.leafVisitor) {
-                    // Allocated, not filled: every value is written just below (a fill would
-                    // write the 2 KB twice).
-                    leaf = std::make_unique<LeafT>(openvdb::PartialCreate(), lo, options.outsideValue, true);
-                    leaf->buffer().allocate();
-                    data = leaf->buffer().data();
+                for (std::size_t n = run.first; n != run.first + run.count; ++n) {
+                    const Coord& lo = leafOrigins[n];
+                    GridBatch batch;
+                    batch.origin = domain.worldOf(lo);
+                    batch.spacing = Vec3d(domain.voxel);
+                    if (stack > 1) {
+                        // Rows of the stack (x-major, z fastest): the leaf's eight points of each.
+                        const int k0 = lo.z() - stackOf(lo).z();
+                        for (int ij = 0; ij < 64; ++ij)
+                            std::memcpy(&values[std::size_t(ij) * 8], &stacked[std::size_t(ij) * stackDim + k0],
+                                        8 * sizeof(double));
+                    } else {
+                        field.gridValues(batch, values);
+                    }
+                    if (clip && !deepInside.isInside(CoordBBox(lo, lo + Coord(kLeafDim - 1)))) {
+                        clip->gridValues(batch, clipped);
+                        for (int i = 0; i < 512; ++i) values[i] = std::max(values[i], clipped[i]);
+                    }
+                    std::unique_ptr<LeafT> leaf;
+                    float* data = visited.data();
+                    if (!options.leafVisitor) {
+                        // Allocated, not filled: every value is written just below (a fill would
+                        // write the 2 KB twice).
+                        leaf = std::make_unique<LeafT>(openvdb::PartialCreate(), lo, options.outsideValue, true);
+                        leaf->buffer().allocate();
+                        data = leaf->buffer().data();
+                    }
+                    // The rare non-finite leaf is searched afterwards.
+                    const CoordBBox leafBox(lo, lo + Coord(kLeafDim - 1));
+                    const bool wholeInDomain = domainIndex.isInside(leafBox);
+                    std::uint32_t below = 0;
+                    if (leafFloats(values.data(), data, wholeInDomain, below)) [[unlikely]] {
+                        std::lock_guard<std::mutex> lock(badMutex);
+                        for (int i = 0; i < 512; ++i)
+                            if (!std::isfinite(values[i]) && !nonFinite.exchange(true))
+                                badPoint = batch.point(i >> 6, (i >> 3) & 7, i & 7);
+                    }
+                    if (!wholeInDomain && domainIndex.hasOverlap(leafBox)) {
+                        for (int i = 0; i < 512; ++i)
+                            below += data[i] < 0.0f && domainIndex.isInside(lo + Coord(i >> 6, (i >> 3) & 7, i & 7));
+                    }
+                    belowPerLeaf[n] = below;
+                    if (options.leafVisitor)
+                        options.leafVisitor(lo, data);
+                    else
+                        leaves[n] = std::move(leaf);
                 }
-                // The rare non-finite leaf is searched afterwards.
-                const CoordBBox leafBox(lo, lo + Coord(kLeafDim - 1));
-                const bool wholeInDomain = domainIndex.isInside(leafBox);
-                std::uint32_t below = 0;
-                if (leafFloats(values.data(), data, wholeInDomain, below)) [[unlikely]] {
-                    std::lock_guard<std::mutex> lock(badMutex);
-                    for (int i = 0; i < 512; ++i)
-                        if (!std::isfinite(values[i]) && !nonFinite.exchange(true))
-                            badPoint = batch.point(i >> 6, (i >> 3) & 7, i & 7);
-                }
-                if (!wholeInDomain && domainIndex.hasOverlap(leafBox)) {
-                    for (int i = 0; i < 512; ++i)
-                        below += data[i] < 0.0f && domainIndex.isInside(lo + Coord(i >> 6, (i >> 3) & 7, i & 7));
-                }
-                belowPerLeaf[n] = below;
-                if (options.leafVisitor)
-                    options.leafVisitor(lo, data);
-                else
-                    leaves[n] = std::move(leaf);
+                made += run.count;
             }
-            progress.add(range.size());
+            progress.add(made);
         });
     }
     if (nonFinite) {

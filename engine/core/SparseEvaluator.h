@@ -37,12 +37,23 @@ struct SparseOptions {
     /// and the grid returned holds the tiles only. For measures that need the values once (the
     /// density solve's count): no leaf is allocated, nothing is walked twice.
     std::function<void(const openvdb::Coord& origin, const float* values)> leafVisitor = nullptr;
+    /// Leaves evaluated together along z, as one batch of 8 x 8 x (8 stackLeaves) points: a stack
+    /// holds the leaves whose index z lies in [s, s + 8 stackLeaves) for s a multiple of
+    /// 8 stackLeaves, its batch's origin domain.worldOf() of its first point. A stack is made whole
+    /// when any of its leaves is needed (the others are dropped), so a leaf's values depend on its
+    /// stack alone, whatever band, margin or thread asks for it: two evaluations with the same
+    /// stackLeaves hand a field the same batches (what GridValueMemo's contract needs). Longer rows
+    /// share a strut row's set-up (a convolution lattice's rows of 8 points are mostly set-up).
+    /// 1, 2, 4, 8 or 16 (a stack stays within one 128^3 block); 1: one batch per leaf. The clip
+    /// (clipToDomain) is applied per leaf, as without stacks.
+    int stackLeaves = 1;
     std::string stage = "evaluating field";
     const JobContext* context = nullptr;  ///< progress and cancellation (none: silent)
 };
 
 struct SparseStats {
-    std::uint64_t leaves = 0;          ///< evaluated 8^3 leaves
+    std::uint64_t leaves = 0;          ///< evaluated 8^3 leaves (kept in the grid or visited)
+    std::uint64_t stackedLeaves = 0;   ///< leaves made in stacks (stackLeaves > 1), the dropped ones too
     std::uint64_t estimatedBytes = 0;  ///< leaves times the options' bytes per leaf: the memory estimate
     std::uint64_t insideTiles = 0;     ///< inside tiles (any level)
     std::uint64_t culledBoxes = 0;     ///< boxes skipped as outside

@@ -56,10 +56,13 @@ struct DensitySolution {
 /// with the band that pass bisects in. A caller keeping the indicator's values for a grid at
 /// the level (GridValueMemo::dropOutside()) drops those that grid cannot read before that pass
 /// allocates its samples.
+///
+/// @a stackLeaves: the indicator's leaves are evaluated in stacks along z (SparseOptions::stackLeaves),
+/// as a grid of the same stacks will ask for them (a GridValueMemo then serves its batches).
 DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target,
                              const FieldNode* mask = nullptr, bool subVoxel = false,
                              const JobContext* context = nullptr, int marginVoxels = 0,
-                             const std::function<void(Interval)>& levelWithin = {});
+                             const std::function<void(Interval)>& levelWithin = {}, int stackLeaves = 1);
 
 /// A part of a measuring region, sampled on its own domain and counted @a weight times.
 struct DensityPiece {

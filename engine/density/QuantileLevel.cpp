@@ -55,14 +55,14 @@ public:
     }
     void gridValues(const GridBatch& batch, std::span<double> out) const override
     {
-        if (batch.size() > kBatchSize) {
-            FieldNode::gridValues(batch, out);
-            return;
-        }
-        // The mask first: a batch wholly outside it needs no g.
-        std::array<double, kBatchSize> m;
-        mMask.gridValues(batch, std::span<double>(m.data(), batch.size()));
-        if (std::none_of(m.begin(), m.begin() + batch.size(), [](double v) { return float(v) < 0.0f; })) {
+        // The mask first: a batch wholly outside it needs no g. (A stack of leaves, more than
+        // kBatchSize points, takes the mask's values in a vector of its own.)
+        std::array<double, kBatchSize> small;
+        std::vector<double> large(batch.size() > kBatchSize ? batch.size() : 0);
+        const std::span<double> m =
+            batch.size() > kBatchSize ? std::span<double>(large) : std::span<double>(small.data(), batch.size());
+        mMask.gridValues(batch, m);
+        if (std::none_of(m.begin(), m.end(), [](double v) { return float(v) < 0.0f; })) {
             std::fill(out.begin(), out.begin() + batch.size(), kOutsideMask);
             return;
         }
@@ -240,7 +240,7 @@ BandSplit streamedSplit(const FieldNode& g, const Domain& domain, const openvdb:
 
 DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain, double target, const FieldNode* mask,
                              bool subVoxel, const JobContext* context, int marginVoxels,
-                             const std::function<void(Interval)>& levelWithin)
+                             const std::function<void(Interval)>& levelWithin, int stackLeaves)
 {
     DensitySolution sol;
     // The voxels measured: the domain's, and @a marginVoxels more on every side (their centres
@@ -299,6 +299,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         options.insideValue = -std::numeric_limits<float>::max();
         options.outsideValue = std::numeric_limits<float>::max();
         options.stage = "solving density";
+        options.stackLeaves = stackLeaves;
         // A coverage solve (masked or sub-voxel) measures in a band of the widest voxel step about the level
         // (below). Evaluating the bracket grown by an estimate of that step up front lets the
         // same grid serve both passes; splitting by the bracket ignores the extra values.

@@ -459,6 +459,8 @@ void Job::solveLevels()
     if (mSolved) return;
     nlohmann::json fields = nlohmann::json::object();
     for (const LevelNode& node : mBuilder.levelNodes()) {
+        // The result's grids in the stacks its lattices ask for, their levels solved or given.
+        mStackLeaves = std::max(mStackLeaves, node.stackLeaves);
         nlohmann::json entry{{"type", node.description}};
         if (node.density) {
             // A trial's result whose level the homogenized cell solves again: a coarse solve
@@ -508,8 +510,11 @@ void Job::solveLevels()
             // does not read are dropped (a 50 mm trimmed frame: a fifth of them, 0.17 GB, before
             // the solve's coverage pass, its peak).
             std::function<void(Interval)> levelWithin;
-            if (const auto* memo = dynamic_cast<const GridValueMemo*>(node.solid->raw().get());
-                memo && recipeLattice && mKeepSolvedValues && node.solid->indicator().get() == memo) {
+            const auto* memo = dynamic_cast<const GridValueMemo*>(node.solid->raw().get());
+            // Solved on the recipe's lattice in the stacks the result's grids are evaluated in:
+            // those then ask the memo for the solve's batches.
+            const int stackLeaves = recipeLattice ? node.stackLeaves : 1;
+            if (memo && recipeLattice && mKeepSolvedValues && node.solid->indicator().get() == memo) {
                 memo->keep(true, memoBudget());
                 mSolvedValues.push_back(memo);
                 levelWithin = [memo](Interval levels) {
@@ -523,7 +528,7 @@ void Job::solveLevels()
                                         pieces, *node.density, mContext);
                 if (onJobVoxels)
                     return solveDensity(*node.solid->indicator(), mDomain, *node.density, boxMask.get(),
-                                        node.subVoxelDensity, mContext, boxMargin, levelWithin);
+                                        node.subVoxelDensity, mContext, boxMargin, levelWithin, stackLeaves);
                 const double voxel = node.densityBox && node.densityVoxel ? *node.densityVoxel : mDomain.voxel;
                 return solveDensity(*node.solid->indicator(),
                                     node.densityBox && (node.densityVoxel || coarse > 1.0)
@@ -532,7 +537,7 @@ void Job::solveLevels()
                                     : node.densityBox ? mDomain.subDomain(*node.densityBox)
                                                       : mDomain,
                                     *node.density, node.densityMask.get(), node.subVoxelDensity, mContext, 0,
-                                    levelWithin);
+                                    levelWithin, recipeLattice && !node.densityBox ? stackLeaves : 1);
             });
             if (node.densityMask) entry["density_measured_in"] = node.densityOf;
             // The region's volume: the mask's voxels, or the box the density is measured over.
@@ -758,6 +763,7 @@ openvdb::FloatGrid::Ptr Job::evaluateResult(SparseStats& stats,
         options.stage = "evaluating " + mRecipe.result;
         options.context = mContext;
         options.leafVisitor = std::move(leafVisitor);
+        options.stackLeaves = mStackLeaves;
         openvdb::FloatGrid::Ptr grid = evaluateSparse(*mResult, mDomain, options, &stats);
         releaseSolvedValues();  // the grid they were kept for is made
         return grid;

@@ -297,6 +297,11 @@ private:
     /// The memos a solve switched on (mKeepSolvedValues), freed by releaseSolvedValues() after the
     /// next evaluation of the result, or by the aim that takes them over.
     std::vector<const GridValueMemo*> mSolvedValues;
+    /// Leaves per stack along z in the result's evaluations on the job's domain (SparseOptions::
+    /// stackLeaves): the largest its level nodes ask for (LevelNode::stackLeaves), set by
+    /// solveLevels(); a solve on the recipe's lattice uses the same stacks, so the grid asks its
+    /// memo for the batches the solve made.
+    int mStackLeaves = 1;
     void releaseSolvedValues();
     /// aimLevelsAtMesh()'s grid at the final level and its counts, taken by evaluateRecipeGrid().
     openvdb::FloatGrid::Ptr mAimGrid;

@@ -52,6 +52,11 @@ struct LevelNode {
     /// GridValueMemo under the solid hands the grid their values (each band leaf evaluated once).
     /// Set where the job's voxel resolves the field well enough (a Gaussian lattice's sigma).
     bool densityOnJobVoxels = false;
+    /// Leaves per stack along z in which the job evaluates its grids of the domain and solves this
+    /// level on the recipe's lattice (SparseOptions::stackLeaves): set by a Gaussian strut lattice
+    /// evaluated strut by strut (nothing tiled), whether its level is solved or given, so that a
+    /// solved job and one given the solved level evaluate the same batches.
+    int stackLeaves = 1;
     /// The solid repeats with this period deeper than densityReach inside densityBox (a box frame
     /// of identical cells): the density is measured on one period of the interior, weighted
     /// (periodicPieces()), instead of the whole box.

@@ -14,6 +14,7 @@
 
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -62,6 +63,11 @@ struct GridBatch {
     Vec3d origin{0.0};
     Vec3d spacing{1.0};
     int nx = 8, ny = 8, nz = 8;
+    /// A stack of leaves (8 x 8 x 8m points, SparseOptions::stackLeaves): bit m set when the
+    /// caller will not read leaf m's values (the points with k in [8m, 8m + 8)); a node may leave
+    /// them unset (GridValueMemo serves a stack from the leaves it kept). 0: every value is read.
+    /// Nodes that pass the batch on pass this on; a batch of another layout made from it clears it.
+    std::uint32_t unread = 0;
 
     std::size_t size() const { return std::size_t(nx) * ny * nz; }
     Vec3d point(int i, int j, int k) const

@@ -16,6 +16,30 @@ std::size_t GridValueMemo::KeyHash::operator()(const Key& k) const
     return std::size_t(h);
 }
 
+std::size_t GridValueMemo::BoxKeyHash::operator()(const BoxKey& k) const
+{
+    std::uint64_t h = 0x9E3779B97F4A7C15ull;
+    auto mix = [&h](std::uint64_t v) { h ^= v + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2); };
+    for (const double v : {k.x0, k.y0, k.z0, k.x1, k.y1, k.z1}) mix(std::bit_cast<std::uint64_t>(v));
+    return std::size_t(h);
+}
+
+Interval GridValueMemo::bound(const Box3& box) const
+{
+    if (!mShards) return mOperand->bound(box);
+    const BoxKey key{box.min.x(), box.min.y(), box.min.z(), box.max.x(), box.max.y(), box.max.z()};
+    Shard& shard = (*mShards)[(BoxKeyHash{}(key) >> 7) % kShards];
+    {
+        std::lock_guard<std::mutex> lock(shard.mutex);
+        const auto found = shard.bounds.find(key);
+        if (found != shard.bounds.end()) return found->second;
+    }
+    const Interval b = mOperand->bound(box);
+    std::lock_guard<std::mutex> lock(shard.mutex);
+    shard.bounds.emplace(key, b);
+    return b;
+}
+
 void GridValueMemo::keep(bool on, std::size_t maxBytes) const
 {
     mShards.reset();
@@ -40,15 +64,31 @@ void GridValueMemo::gridValues(const GridBatch& batch, std::span<double> out) co
     const std::size_t hash = KeyHash{}(key);
     Shard& shard = (*mShards)[(hash >> 7) % kShards];
     const std::size_t n = batch.size();
+    bool partial = false;  // kept with leaves dropped that this caller reads
     {
         std::lock_guard<std::mutex> lock(shard.mutex);
         const auto found = shard.values.find(key);
         if (found != shard.values.end()) {
-            std::copy(found->second, found->second + n, out.begin());
-            return;
+            const Kept& kept = found->second;
+            if (kept.dropped == 0) {
+                std::copy(kept.values, kept.values + n, out.begin());
+                return;
+            }
+            if ((kept.dropped & ~batch.unread) == 0) {
+                // The leaves kept, each to its rows; the dropped ones are not read.
+                const double* from = kept.values;
+                for (int m = 0; m < batch.nz / 8; ++m) {
+                    if (kept.dropped >> m & 1u) continue;
+                    for (std::size_t ij = 0; ij < 64; ++ij, from += 8)
+                        std::copy(from, from + 8, out.begin() + std::ptrdiff_t(ij * std::size_t(batch.nz) + 8 * m));
+                }
+                return;
+            }
+            partial = true;
         }
     }
     mOperand->gridValues(batch, out);
+    if (partial) return;  // the same values as the leaves kept: those stay as they are
     const std::size_t bytes = n * sizeof(double);
     if (mBytes.fetch_add(bytes) + bytes > mMaxBytes) {
         mBytes.fetch_sub(bytes);
@@ -61,7 +101,7 @@ void GridValueMemo::gridValues(const GridBatch& batch, std::span<double> out) co
     }
     double* kept = place(shard, n);
     std::copy(out.begin(), out.begin() + std::ptrdiff_t(n), kept);
-    shard.values.emplace(key, kept);
+    shard.values.emplace(key, Kept{kept, 0});
 }
 
 void GridValueMemo::dropOutside(Interval levels) const
@@ -79,17 +119,73 @@ void GridValueMemo::dropOutside(Interval levels) const
         std::size_t dropped = 0;
         for (auto it = shard.values.begin(); it != shard.values.end();) {
             const Key& k = it->first;
+            Kept& kept = it->second;
+            if (isStack(k)) {
+                // Leaf by leaf: the stack's kept leaves that a grid in the band may read stay.
+                const int leaves = k.nz / 8;
+                const std::uint32_t all = leaves == 32 ? ~std::uint32_t(0) : (std::uint32_t(1) << leaves) - 1;
+                const std::uint32_t gone = unreadLeaves(k, kept, levels);
+                const int before = leaves - std::popcount(kept.dropped), after = leaves - std::popcount(gone);
+                dropped += std::size_t(before - after) * 512 * sizeof(double);
+                if (gone == all) {
+                    it = shard.values.erase(it);
+                    continue;
+                }
+                const std::size_t n = std::size_t(after) * 512;
+                double* to = place(shard, n);
+                if (gone == 0) {
+                    std::copy(kept.values, kept.values + n, to);
+                } else {
+                    // Leaf m's rows: in the batch's layout, or in turn when some were dropped before.
+                    const double* from = kept.values;
+                    double* at = to;
+                    for (int m = 0; m < leaves; ++m) {
+                        const bool was = !(kept.dropped >> m & 1u), stays = !(gone >> m & 1u);
+                        for (std::size_t ij = 0; ij < 64; ++ij) {
+                            const double* row =
+                                kept.dropped == 0 ? kept.values + ij * std::size_t(k.nz) + 8 * std::size_t(m) : from;
+                            if (kept.dropped != 0 && was) from += 8;
+                            if (was && stays) at = std::copy(row, row + 8, at);
+                        }
+                    }
+                }
+                kept.values = to;
+                kept.dropped = gone;
+                ++it;
+                continue;
+            }
             const std::size_t n = std::size_t(k.nx) * std::size_t(k.ny) * std::size_t(k.nz);
-            if (!readAt(k, it->second, levels)) {
+            if (!readAt(k, kept.values, levels)) {
                 dropped += n * sizeof(double);
                 it = shard.values.erase(it);
                 continue;
             }
-            it->second = std::copy(it->second, it->second + n, place(shard, n)) - n;
+            kept.values = std::copy(kept.values, kept.values + n, place(shard, n)) - n;
             ++it;
         }
         mBytes.fetch_sub(dropped);
     });
+}
+
+std::uint32_t GridValueMemo::unreadLeaves(const Key& k, const Kept& kept, Interval levels) const
+{
+    std::uint32_t gone = kept.dropped;
+    const double* from = kept.values;
+    for (int m = 0; m < k.nz / 8; ++m) {
+        if (kept.dropped >> m & 1u) continue;
+        double leaf[512];
+        for (std::size_t ij = 0; ij < 64; ++ij) {
+            const double* row = kept.dropped == 0 ? kept.values + ij * std::size_t(k.nz) + 8 * std::size_t(m) : from;
+            if (kept.dropped != 0) from += 8;
+            std::copy(row, row + 8, leaf + 8 * ij);
+        }
+        // The leaf's own batch: its first point k = 8m of the stack.
+        Key leafKey = k;
+        leafKey.oz = k.oz + (8 * m) * k.sz;
+        leafKey.nz = 8;
+        if (!readAt(leafKey, leaf, levels)) gone |= std::uint32_t(1) << m;
+    }
+    return gone;
 }
 
 bool GridValueMemo::readAt(const Key& k, const double* values, Interval levels) const

@@ -44,7 +44,10 @@ public:
     {
         mOperand->gridValuesShifted(batch, shift, plus, minus);
     }
-    Interval bound(const Box3& box) const override { return mOperand->bound(box); }
+    /// The operand's bound; while keeping, each box's is kept too and a box asked again (the
+    /// cull of every evaluation of the grid at a moved level: the same leaf boxes, bit for bit)
+    /// is answered from memory, the same interval.
+    Interval bound(const Box3& box) const override;
     /// The operand's planeValues (a slicer's planes are never kept); while keeping, gridValues
     /// with every tile 0.
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
@@ -71,7 +74,10 @@ public:
     /// Drops the kept batches a grid of a level in @a levels would not read, and frees their
     /// memory: those whose operand bound over the batch's box grown by one spacing (as
     /// evaluateSparse() culls a leaf) misses @a levels. The batches kept and their values are
-    /// unchanged; a dropped batch asked again is evaluated again (the same values). For a density
+    /// unchanged; a dropped batch asked again is evaluated again (the same values). A stack of
+    /// leaves (8 x 8 x 8m, SparseOptions::stackLeaves) is decided leaf by leaf: its leaves a grid
+    /// in @a levels cannot read are dropped, and the stack is served from the others to a caller
+    /// that reads none of the dropped ones (GridBatch::unread), else evaluated again. For a density
     /// solve that has bracketed its level (solveDensity()'s @a levelWithin): its band was
     /// evaluated wider. Called between evaluations, never during one.
     void dropOutside(Interval levels) const;
@@ -94,10 +100,24 @@ private:
     /// no page fits in, so the solve's freed grid could not go back to the system (a 50 mm
     /// frame: 0.4 GB). Blocks of one size, not growing ones: a shard's last block is partly
     /// used, and 64 of them growing past a megabyte held 0.1 GB more.
+    /// A batch's kept values: all of them in its layout (dropped 0), or a stack's leaves not
+    /// dropped (bit m of dropped: leaf m's values are gone), each as its 64 rows of 8 in turn.
+    struct Kept {
+        const double* values = nullptr;
+        std::uint32_t dropped = 0;
+    };
+    struct BoxKey {
+        double x0, y0, z0, x1, y1, z1;
+        bool operator==(const BoxKey&) const = default;
+    };
+    struct BoxKeyHash {
+        std::size_t operator()(const BoxKey& k) const;
+    };
     struct Shard {
         std::mutex mutex;
         std::pmr::monotonic_buffer_resource nodes{std::size_t(1) << 16};
-        std::pmr::unordered_map<Key, const double*, KeyHash> values{&nodes};  ///< into blocks
+        std::pmr::unordered_map<Key, Kept, KeyHash> values{&nodes};            ///< into blocks
+        std::pmr::unordered_map<BoxKey, Interval, BoxKeyHash> bounds{&nodes};  ///< the operand's bounds
         std::vector<std::unique_ptr<double[]>> blocks;
         double* next = nullptr;  ///< the last block's first unused double
         std::size_t left = 0;    ///< doubles unused in the last block
@@ -106,6 +126,11 @@ private:
     /// Whether a grid at a level in @a levels may read the batch @a k (kept @a values): its
     /// values or else its bound over the box evaluateSparse() culls it by meet @a levels.
     bool readAt(const Key& k, const double* values, Interval levels) const;
+    /// The leaves of stack @a k whose values no grid at a level in @a levels reads (bit m: leaf
+    /// m; readAt() of each leaf, its values gathered from @a kept), @a kept's dropped among them.
+    std::uint32_t unreadLeaves(const Key& k, const Kept& kept, Interval levels) const;
+    /// Whether @a k is a stack of leaves (8 x 8 x 8m points, m from 2 to 32).
+    static bool isStack(const Key& k) { return k.nx == 8 && k.ny == 8 && k.nz % 8 == 0 && k.nz >= 16 && k.nz <= 256; }
     /// Room for @a n doubles in @a shard's blocks (its mutex held).
     static double* place(Shard& shard, std::size_t n);
 

@@ -314,6 +314,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
     struct RowRange {
         int kLo, kHi, n0;
         double tau;
+        int phase = 0;           ///< the row's phase of a table of several nodes per step (below)
         int inLo = 1, inHi = 0;  ///< points at least a step inside the capsule's range (to prove)
     };
     thread_local std::vector<RowRange> rows;
@@ -385,16 +386,22 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         // between, still take the exact cut-off test, so the same points count as before.
         const double rcWide2 = rc2 * (1.0 + 1e-9) + 1e-300;
         const CapsuleRows capsule(u.x(), u.y(), u.z(), length, dz, rcWide2);
-        // A plane's rows (one per column): their ranges four columns at a time.
-        const bool vectorRanges = avx2 && ranged && !shortRows && ny == 1 && iFirst <= iLast;
+        // A plane's rows (one per column), a block's (a row per column and y): their ranges four
+        // columns at a time (the same doubles), at column i - iFirst of row jj's run of columns.
+        const bool vectorRanges = avx2 && ranged && !shortRows && iFirst <= iLast;
+        const std::size_t rangeRun = std::size_t(iLast - iFirst + 1) + 4;
         if (vectorRanges) {
             const std::size_t count = std::size_t(iLast - iFirst + 1);
-            rangeLo.resize(count + 4);
-            rangeHi.resize(count + 4);
-            for (std::size_t m = 0; m < count; m += 4) {
-                double x[4];
-                for (int l = 0; l < 4; ++l) x[l] = d0.x() + (iFirst + int(m) + l) * dx;
-                capsuleRowRangesAvx2(capsule, x, d0.y(), d0.z(), rangeLo.data() + m, rangeHi.data() + m);
+            rangeLo.resize(rangeRun * std::size_t(ny));
+            rangeHi.resize(rangeRun * std::size_t(ny));
+            for (int jj = 0; jj < ny; ++jj) {
+                const double py = ny == 1 ? d0.y() : d0.y() + jj * dy;
+                for (std::size_t m = 0; m < count; m += 4) {
+                    double x[4];
+                    for (int l = 0; l < 4; ++l) x[l] = d0.x() + (iFirst + int(m) + l) * dx;
+                    capsuleRowRangesAvx2(capsule, x, py, d0.z(), rangeLo.data() + jj * rangeRun + m,
+                                         rangeHi.data() + jj * rangeRun + m);
+                }
             }
         }
         // Pass 1: each row's range of points (kLo > kHi: none). Only the columns iFirst..iLast
@@ -419,8 +426,8 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 } else if (ranged) {
                     double tLo, tHi;
                     if (vectorRanges) {
-                        tLo = rangeLo[std::size_t(i - iFirst)];
-                        tHi = rangeHi[std::size_t(i - iFirst)];
+                        tLo = rangeLo[std::size_t(jj) * rangeRun + std::size_t(i - iFirst)];
+                        tHi = rangeHi[std::size_t(jj) * rangeRun + std::size_t(i - iFirst)];
                     } else {
                         capsuleRowRange(capsule, px, py, d0.z(), tLo, tHi);
                     }
@@ -460,13 +467,26 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         // peak (|J''''| as above): 1.3e-6 of it at delta = 0.1 sigma.
         // The table spans the batch's range of h: at most eight rows' worth of nodes (struts nearly
         // across the rows, whose h barely steps along them, keep the per-point look-ups).
+        // A block's rows (not a plane's: a slicer's bytes stay) along which h steps by more than
+        // 0.1 sigma take a table of m = ceil(|hz| / 0.1 sigma) nodes per step (at most 4): delta =
+        // hz / m <= 0.1 sigma, the same bound. Point k of a row then sits at node n0 + m k + tau,
+        // so the nodes are kept in m phases (phase p: the nodes whose index is p modulo m), a
+        // row reads its own phase and the next one's, each in order. (Struts at 35 degrees or more
+        // from the rows, a BCC cell's diagonals along z at sigma = 5 voxels, were all untabled.)
         const double spread = std::abs(dx * u.x()) * (nx - 1) + std::abs(dy * u.y()) * (ny - 1);
-        const bool tabled = !taylor && ranged && nz >= 16 && hz != 0.0 && std::abs(hz) <= 0.1 * sigma &&
+        const int phases = batch.nz > 1 && hz != 0.0 && std::abs(hz) <= 0.4 * sigma
+                               ? std::max(1, int(std::ceil(std::abs(hz) / (0.1 * sigma))))
+                               : 1;
+        const bool tabled = !taylor && ranged && nz >= 16 && hz != 0.0 && std::abs(hz) <= 0.1 * sigma * phases &&
                             spread <= 8.0 * nz * std::abs(hz);
         int nodeLo = 0;
+        std::size_t phaseStride = 0;
         if (tabled) {
             // h at a row's point 0 is hRow (below); nodes h0 + n hz, with h0 one node past the
-            // batch's extreme hRow, so every row's n0 + tau is at least about 1.
+            // hRow of the batch's first or last row: a plane's rows (one per column) then all have
+            // n0 + tau of at least about 1. A block's rows (ny > 1) whose hRow grows along one of
+            // x and y and falls along the other reach past both: their n0 may be negative, and
+            // the table spans whichever nodes the rows read (nLo..nHi), of any sign.
             const double hFirst = d0.x() * u.x() + d0.y() * u.y() + d0.z() * u.z();
             const double hLast = hFirst + (nx - 1) * dx * u.x() + (ny - 1) * dy * u.y();
             const double h0 = (hz > 0.0 ? std::min(hFirst, hLast) : std::max(hFirst, hLast)) - hz;
@@ -476,22 +496,41 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     RowRange& r = rows[std::size_t(i) * ny + jj];
                     if (r.kLo > r.kHi) continue;
                     const double hRow = (d0.x() + i * dx) * u.x() + (d0.y() + jj * dy) * u.y() + d0.z() * u.z();
-                    const double at = (hRow - h0) / hz;
-                    r.n0 = int(std::floor(at));
-                    r.tau = at - r.n0;
+                    if (phases == 1) {
+                        const double at = (hRow - h0) / hz;
+                        r.n0 = int(std::floor(at));
+                        r.tau = at - r.n0;
+                        r.phase = 0;
+                    } else {
+                        // Node n = m q + p of step hz / m: phase p, index q.
+                        const double at = (hRow - h0) / (hz / phases);
+                        const int n = int(std::floor(at));
+                        r.tau = at - n;
+                        r.phase = ((n % phases) + phases) % phases;
+                        r.n0 = (n - r.phase) / phases;
+                    }
                     nLo = std::min(nLo, r.n0 + r.kLo);
                     nHi = std::max(nHi, r.n0 + r.kHi + 1);
                 }
-            if (nHi >= 0) {
+            if (nLo <= nHi) {
                 nodeLo = nLo;
                 const std::size_t count = std::size_t(nHi - nLo + 1);
                 // Margin: the four-lane loop reads up to four nodes past a row's last point.
-                nodeValue.assign(count + 8, 0.0);
-                nodeSlope.assign(count + 8, 0.0);
-                if (avx2)
-                    strutRowNodesAvx2(constants, h0, hz, nLo, int(count), nodeValue.data(), nodeSlope.data());
-                else
-                    strutRowNodesScalar(constants, h0, hz, nLo, int(count), nodeValue.data(), nodeSlope.data());
+                phaseStride = count + 8;
+                nodeValue.assign(phaseStride * std::size_t(phases), 0.0);
+                nodeSlope.assign(phaseStride * std::size_t(phases), 0.0);
+                for (int p = 0; p < phases; ++p) {
+                    // Phase p's nodes h0 + (m q + p) hz / m, q = nLo.., with slopes of their step hz / m.
+                    const double from = phases == 1 ? h0 : h0 + p * (hz / phases);
+                    double* value = nodeValue.data() + std::size_t(p) * phaseStride;
+                    double* slope = nodeSlope.data() + std::size_t(p) * phaseStride;
+                    if (avx2)
+                        strutRowNodesAvx2(constants, from, hz, nLo, int(count), value, slope);
+                    else
+                        strutRowNodesScalar(constants, from, hz, nLo, int(count), value, slope);
+                    if (phases > 1)
+                        for (std::size_t m = 0; m < count; ++m) slope[m] /= phases;
+                }
             }
         }
         // Pass 2: the rows' Gaussians and J. Short rows (a pixel's sub-samples, every row whole,
@@ -666,8 +705,19 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                         else
                             addStrutRowTaylorScalar(constants, part, coefficients, hc, g, out.data() + n);
                     } else if (tabled) {
-                        const StrutRowTable table{
-                            nodeValue.data(), nodeSlope.data(), range.n0 - nodeLo, tw[0], tw[1], tw[2], tw[3]};
+                        // The row's phase, and the next one's nodes (phase 0's from one index on, after
+                        // the last phase; one table: value + 1).
+                        const std::size_t at = std::size_t(range.phase) * phaseStride;
+                        const std::size_t next = range.phase + 1 < phases ? at + phaseStride : 1;
+                        const StrutRowTable table{nodeValue.data() + at,
+                                                  nodeSlope.data() + at,
+                                                  range.n0 - nodeLo,
+                                                  tw[0],
+                                                  tw[1],
+                                                  tw[2],
+                                                  tw[3],
+                                                  nodeValue.data() + next,
+                                                  nodeSlope.data() + next};
                         if (avx2)
                             addStrutRowTabledAvx2(constants, part, table, g, out.data() + n);
                         else

@@ -192,12 +192,17 @@ void addStrutRowTaylorAvx2(const StrutRowConstants& s, const StrutRow& row, cons
 /// J(h) of one strut tabled along the rows of a batch: nodes h_n = h0 + n delta, delta the step of
 /// h from one point of a row to the next, holding J(h_n) and delta J'(h_n); the point k of a row
 /// whose h(0) lies at node n0 + tau takes the cubic Hermite polynomial between nodes n0 + k and
-/// n0 + k + 1 at tau, whose weights (w00, w10, w01, w11) are the row's constants.
+/// n0 + k + 1 at tau, whose weights (w00, w10, w01, w11) are the row's constants. With
+/// @a nextValue and @a nextSlope set, the node after value[n] is nextValue[n] (not value[n + 1]):
+/// a table of m nodes per step of h (delta the step over m) kept in m phases, each node's
+/// successor in the next phase.
 struct StrutRowTable {
     const double* value;  ///< J(h_n)
     const double* slope;  ///< delta J'(h_n)
     int n0;               ///< node of the row's point 0
     double w00, w10, w01, w11;
+    const double* nextValue = nullptr;  ///< the nodes after value's (null: value + 1)
+    const double* nextSlope = nullptr;  ///< the nodes after slope's (null: slope + 1)
 };
 
 /// addStrutRowScalar with J(h_k) from @a table (the same points pass the same cut-off test; the
@@ -206,13 +211,15 @@ inline void addStrutRowTabledScalar(const StrutRowConstants& s, const StrutRow& 
                                     const double* gauss, double* out)
 {
     const double dx = row.x - s.ax, dy = row.y - s.ay;
+    const double* nextValue = table.nextValue ? table.nextValue : table.value + 1;
+    const double* nextSlope = table.nextSlope ? table.nextSlope : table.slope + 1;
     for (int k = row.kLo; k <= row.kHi; ++k) {
         double h;
         const bool inside = k >= row.inLo && k <= row.inHi;
         if (!inside && !withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
         const int n = table.n0 + k;
-        const double j0 = ((table.w00 * table.value[n] + table.w10 * table.slope[n]) + table.w01 * table.value[n + 1]) +
-                          table.w11 * table.slope[n + 1];
+        const double j0 = ((table.w00 * table.value[n] + table.w10 * table.slope[n]) + table.w01 * nextValue[n]) +
+                          table.w11 * nextSlope[n];
         out[k] += gauss[k] * j0;
     }
 }

@@ -151,12 +151,14 @@ void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, cons
     const __m256d w00 = _mm256_set1_pd(table.w00), w10 = _mm256_set1_pd(table.w10), w01 = _mm256_set1_pd(table.w01),
                   w11 = _mm256_set1_pd(table.w11);
     // Lanes past the row read nodes the table holds (its caller sizes it with a margin).
+    const double* nextValue = table.nextValue ? table.nextValue : table.value + 1;
+    const double* nextSlope = table.nextSlope ? table.nextSlope : table.slope + 1;
     auto tabled = [&](int k) {
         const int n = table.n0 + k;
         return _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(w00, _mm256_loadu_pd(table.value + n)),
                                                          _mm256_mul_pd(w10, _mm256_loadu_pd(table.slope + n))),
-                                           _mm256_mul_pd(w01, _mm256_loadu_pd(table.value + n + 1))),
-                             _mm256_mul_pd(w11, _mm256_loadu_pd(table.slope + n + 1)));
+                                           _mm256_mul_pd(w01, _mm256_loadu_pd(nextValue + n))),
+                             _mm256_mul_pd(w11, _mm256_loadu_pd(nextSlope + n)));
     };
     const int inHi = std::min(row.inHi, row.kHi);
     for (int k = row.kLo; k <= row.kHi; k += 4) {
