@@ -243,7 +243,7 @@ def run(voxlat, tmp):
         out["trimmed"] = case(voxlat, tmp, "trimmed",
                               f"{{cell: bcc, size: {CELL:g}, within: {{cylinder: {{center: {list(c)}, radius: {rad:g}, "
                               f"height: {size:g}}}}}}}", box,
-                              trimmed(bcc, lambda p: cylinder_sdf(p, c, rad, size), 0.1 * CELL), None)
+                              trimmed(bcc, lambda p: cylinder_sdf(p, c, rad, size), 0.1 * CELL), 50)
     s = size / 50.0
     cyl = dict(radius=25 * s, inner=10 * s, height=50 * s, cells=(max(1, n), 24, 3))
     cbox = ((-26 * s, -26 * s, 0.0), (26 * s, 26 * s, 50 * s))
@@ -262,6 +262,6 @@ def run(voxlat, tmp):
                                f"{{cell: bcc, cylinder: {{radius: {cyl['radius']:g}, inner: {cyl['inner']:g}, "
                                f"height: {cyl['height']:g}, cells: {list(cyl['cells'])}}}}}", cbox,
                                cylinder_bcc(cyl["radius"], cyl["inner"], cyl["height"], cyl["cells"], (0.0, 0.0, 0.0)),
-                               None)
+                               50)
     print(f"  load average after: {os.getloadavg()[0]:.2f}")
     return out

@@ -1,6 +1,7 @@
 // The `voxlat` command end to end: outputs, report, errors with no partial files, sampling.
 #include "TestUtil.h"
 #include "mesher/writers/AtomicFile.h"
+#include "tools/HugePages.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/io/File.h>
@@ -14,6 +15,7 @@
 #include <csignal>
 #include <fstream>
 #include <numbers>
+#include <optional>
 #include <thread>
 
 using namespace voxlat::test;
@@ -65,6 +67,59 @@ TEST(Cli, SameBytesForAnyThreadCount)
     EXPECT_GT(one.size(), 10000u);
     EXPECT_EQ(one, readFile(dir.path / "t2.stl"));
     EXPECT_EQ(one, readFile(dir.path / "t3.stl"));
+}
+
+TEST(Cli, HugePagesAreAskedForUnlessRefusedAndChangeNoByte)
+{
+    // tools/HugePages.h: the launcher asks glibc for huge pages through GLIBC_TUNABLES, appended to
+    // the caller's own tunables and put back as they were; VOXLAT_NO_HUGEPAGES or a hugetlb
+    // tunable of the caller's own leaves everything as it is; the outputs are the same bytes.
+    const auto saved = [](const char* name) -> std::optional<std::string> {
+        const char* v = std::getenv(name);
+        return v ? std::optional<std::string>(v) : std::nullopt;
+    };
+    const auto put = [](const char* name, const std::optional<std::string>& v) {
+        if (v)
+            ::setenv(name, v->c_str(), 1);
+        else
+            ::unsetenv(name);
+    };
+    const auto tunables = saved("GLIBC_TUNABLES"), refused = saved("VOXLAT_NO_HUGEPAGES");
+    ::unsetenv("GLIBC_TUNABLES");
+    ::unsetenv("VOXLAT_NO_HUGEPAGES");
+    std::string previous;
+    bool hadPrevious = true;
+    ASSERT_TRUE(voxlat::requestHugePages(previous, hadPrevious));
+    EXPECT_FALSE(hadPrevious);
+    EXPECT_STREQ(std::getenv("GLIBC_TUNABLES"), "glibc.malloc.hugetlb=1");
+    voxlat::restoreTunables(previous, hadPrevious);
+    EXPECT_EQ(std::getenv("GLIBC_TUNABLES"), nullptr);
+    ::setenv("GLIBC_TUNABLES", "glibc.malloc.arena_max=2", 1);
+    ASSERT_TRUE(voxlat::requestHugePages(previous, hadPrevious));
+    EXPECT_STREQ(std::getenv("GLIBC_TUNABLES"), "glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1");
+    voxlat::restoreTunables(previous, hadPrevious);
+    EXPECT_STREQ(std::getenv("GLIBC_TUNABLES"), "glibc.malloc.arena_max=2");
+    ::setenv("GLIBC_TUNABLES", "glibc.malloc.hugetlb=0", 1);
+    EXPECT_FALSE(voxlat::requestHugePages(previous, hadPrevious));
+    EXPECT_STREQ(std::getenv("GLIBC_TUNABLES"), "glibc.malloc.hugetlb=0");
+    ::unsetenv("GLIBC_TUNABLES");
+    ::setenv("VOXLAT_NO_HUGEPAGES", "1", 1);
+    EXPECT_FALSE(voxlat::requestHugePages(previous, hadPrevious));
+    EXPECT_EQ(std::getenv("GLIBC_TUNABLES"), nullptr);
+    put("GLIBC_TUNABLES", tunables);
+    put("VOXLAT_NO_HUGEPAGES", refused);
+
+    TempDir dir;
+    const auto recipe = dir.write("small.yaml", kCliRecipe);
+    ASSERT_EQ(runCommand("env -u VOXLAT_NO_HUGEPAGES " + voxlatBinary() + " mesh " + recipe.string() + " -o " +
+                         (dir.path / "huge.stl").string()),
+              0);
+    ASSERT_EQ(runCommand("env VOXLAT_NO_HUGEPAGES=1 " + voxlatBinary() + " mesh " + recipe.string() + " -o " +
+                         (dir.path / "small.stl").string()),
+              0);
+    const std::string small = readFile(dir.path / "small.stl");
+    EXPECT_GT(small.size(), 10000u);
+    EXPECT_EQ(small, readFile(dir.path / "huge.stl"));
 }
 
 TEST(Cli, BadInputExitsNonZeroAndWritesNothing)
