@@ -92,6 +92,24 @@ std::string runRecipe(const TempDir& dir, const std::string& text, int* status, 
     return out;
 }
 
+/// A field that counts the grid batches asked of it (which leaves a pass evaluated again).
+struct CountedBatches final : FieldNode {
+    FieldPtr f;
+    mutable std::atomic<int> batches{0};
+    explicit CountedBatches(FieldPtr field) : f(std::move(field)) {}
+    void values(std::span<const Vec3d> p, std::span<double> out) const override { f->values(p, out); }
+    void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
+    {
+        f->gradients(p, out, g);
+    }
+    void gridValues(const GridBatch& batch, std::span<double> out) const override
+    {
+        ++batches;
+        f->gridValues(batch, out);
+    }
+    Interval bound(const Box3& box) const override { return f->bound(box); }
+};
+
 }  // namespace
 
 TEST(GaussianSegment, ClosedFormMatchesQuadrature)
@@ -1619,23 +1637,7 @@ TEST(GridValueMemo, DroppingTheValuesOutsideALevelBandKeepsEveryLeafAGridInItRea
     // outside it evaluates the dropped leaves again, the same values.
     const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
     const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
-    struct Counted final : FieldNode {
-        FieldPtr f;
-        mutable std::atomic<int> batches{0};
-        explicit Counted(FieldPtr field) : f(std::move(field)) {}
-        void values(std::span<const Vec3d> p, std::span<double> out) const override { f->values(p, out); }
-        void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
-        {
-            f->gradients(p, out, g);
-        }
-        void gridValues(const GridBatch& batch, std::span<double> out) const override
-        {
-            ++batches;
-            f->gridValues(batch, out);
-        }
-        Interval bound(const Box3& box) const override { return f->bound(box); }
-    };
-    const auto counted = std::make_shared<Counted>(iso);
+    const auto counted = std::make_shared<CountedBatches>(iso);
     // A corner off the voxel lattice's multiples, so that origins are not round numbers.
     const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
     const Interval band(0.58, 0.64);
@@ -1677,23 +1679,7 @@ TEST(GridValueMemo, AStacksLeavesAreDroppedOneByOneAndServedToGridsThatDoNotRead
     // is a fresh evaluation's in the same stacks bit for bit; one outside the band evaluates again.
     const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
     const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
-    struct Counted final : FieldNode {
-        FieldPtr f;
-        mutable std::atomic<int> batches{0};
-        explicit Counted(FieldPtr field) : f(std::move(field)) {}
-        void values(std::span<const Vec3d> p, std::span<double> out) const override { f->values(p, out); }
-        void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
-        {
-            f->gradients(p, out, g);
-        }
-        void gridValues(const GridBatch& batch, std::span<double> out) const override
-        {
-            ++batches;
-            f->gridValues(batch, out);
-        }
-        Interval bound(const Box3& box) const override { return f->bound(box); }
-    };
-    const auto counted = std::make_shared<Counted>(iso);
+    const auto counted = std::make_shared<CountedBatches>(iso);
     const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
     const Interval band(0.58, 0.64);
     for (const double level : {0.58, 0.61, 0.64, 0.83}) {
@@ -1885,22 +1871,6 @@ TEST(GridLeavesReused, AWiderBandGivesTheGridOfAFreshEvaluation)
     // evaluation of the wider band gives, bit for bit, and only the new leaves evaluated.
     const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
     const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
-    struct Counted final : FieldNode {
-        const FieldNode& f;
-        mutable std::atomic<int> batches{0};
-        explicit Counted(const FieldNode& field) : f(field) {}
-        void values(std::span<const Vec3d> p, std::span<double> out) const override { f.values(p, out); }
-        void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
-        {
-            f.gradients(p, out, g);
-        }
-        void gridValues(const GridBatch& batch, std::span<double> out) const override
-        {
-            ++batches;
-            f.gridValues(batch, out);
-        }
-        Interval bound(const Box3& box) const override { return f.bound(box); }
-    };
     // A corner off the voxel lattice's multiples, so that origins are not round numbers.
     const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
     SparseOptions narrow, wide;
@@ -1909,7 +1879,7 @@ TEST(GridLeavesReused, AWiderBandGivesTheGridOfAFreshEvaluation)
     wide.band = Interval(0.45, 0.80);
     const auto first = evaluateSparse(*iso, d, narrow);
     const auto fresh = evaluateSparse(*iso, d, wide);
-    const Counted counted(*iso);
+    const CountedBatches counted(iso);
     const auto reused = evaluateSparse(GridLeavesReused(counted, *first, d), d, wide);
     ASSERT_EQ(reused->tree().leafCount(), fresh->tree().leafCount());
     std::uint64_t inBoth = 0;
@@ -2008,22 +1978,6 @@ TEST(GridLeavesReused, AWiderBandInStacksGivesTheGridOfAFreshEvaluation)
     // values are its own whichever leaves a band needs).
     const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
     const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
-    struct Counted final : FieldNode {
-        const FieldNode& f;
-        mutable std::atomic<int> batches{0};
-        explicit Counted(const FieldNode& field) : f(field) {}
-        void values(std::span<const Vec3d> p, std::span<double> out) const override { f.values(p, out); }
-        void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
-        {
-            f.gradients(p, out, g);
-        }
-        void gridValues(const GridBatch& batch, std::span<double> out) const override
-        {
-            ++batches;
-            f.gridValues(batch, out);
-        }
-        Interval bound(const Box3& box) const override { return f.bound(box); }
-    };
     const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
     SparseOptions narrow, wide;
     narrow.margin = wide.margin = 0;
@@ -2033,7 +1987,7 @@ TEST(GridLeavesReused, AWiderBandInStacksGivesTheGridOfAFreshEvaluation)
     SparseStats firstStats, freshStats;
     const auto first = evaluateSparse(*iso, d, narrow, &firstStats);
     const auto fresh = evaluateSparse(*iso, d, wide, &freshStats);
-    const Counted counted(*iso);
+    const CountedBatches counted(iso);
     const auto reused = evaluateSparse(GridLeavesReused(counted, *first, d), d, wide);
     ASSERT_EQ(reused->tree().leafCount(), fresh->tree().leafCount());
     EXPECT_EQ(mismatchedVoxels(*fresh, *reused), 0u);

@@ -76,11 +76,12 @@ void GridValueMemo::gridValues(const GridBatch& batch, std::span<double> out) co
             }
             if ((kept.dropped & ~batch.unread) == 0) {
                 // The leaves kept, each to its rows; the dropped ones are not read.
-                const double* from = kept.values;
                 for (int m = 0; m < batch.nz / 8; ++m) {
                     if (kept.dropped >> m & 1u) continue;
-                    for (std::size_t ij = 0; ij < 64; ++ij, from += 8)
-                        std::copy(from, from + 8, out.begin() + std::ptrdiff_t(ij * std::size_t(batch.nz) + 8 * m));
+                    for (std::size_t ij = 0; ij < 64; ++ij) {
+                        const double* row = keptRow(key, kept, m, ij);
+                        std::copy(row, row + 8, out.begin() + std::ptrdiff_t(ij * std::size_t(batch.nz) + 8 * m));
+                    }
                 }
                 return;
             }
@@ -136,18 +137,13 @@ void GridValueMemo::dropOutside(Interval levels) const
                 if (gone == 0) {
                     std::copy(kept.values, kept.values + n, to);
                 } else {
-                    // Leaf m's rows: in the batch's layout, or in turn when some were dropped before.
-                    const double* from = kept.values;
                     double* at = to;
-                    for (int m = 0; m < leaves; ++m) {
-                        const bool was = !(kept.dropped >> m & 1u), stays = !(gone >> m & 1u);
-                        for (std::size_t ij = 0; ij < 64; ++ij) {
-                            const double* row =
-                                kept.dropped == 0 ? kept.values + ij * std::size_t(k.nz) + 8 * std::size_t(m) : from;
-                            if (kept.dropped != 0 && was) from += 8;
-                            if (was && stays) at = std::copy(row, row + 8, at);
-                        }
-                    }
+                    for (int m = 0; m < leaves; ++m)
+                        if (!(gone >> m & 1u))
+                            for (std::size_t ij = 0; ij < 64; ++ij) {
+                                const double* row = keptRow(k, kept, m, ij);
+                                at = std::copy(row, row + 8, at);
+                            }
                 }
                 kept.values = to;
                 kept.dropped = gone;
@@ -170,13 +166,11 @@ void GridValueMemo::dropOutside(Interval levels) const
 std::uint32_t GridValueMemo::unreadLeaves(const Key& k, const Kept& kept, Interval levels) const
 {
     std::uint32_t gone = kept.dropped;
-    const double* from = kept.values;
     for (int m = 0; m < k.nz / 8; ++m) {
         if (kept.dropped >> m & 1u) continue;
         double leaf[512];
         for (std::size_t ij = 0; ij < 64; ++ij) {
-            const double* row = kept.dropped == 0 ? kept.values + ij * std::size_t(k.nz) + 8 * std::size_t(m) : from;
-            if (kept.dropped != 0) from += 8;
+            const double* row = keptRow(k, kept, m, ij);
             std::copy(row, row + 8, leaf + 8 * ij);
         }
         // The leaf's own batch: its first point k = 8m of the stack.

@@ -8,6 +8,7 @@
 
 #include <array>
 #include <atomic>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -129,6 +130,14 @@ private:
     /// The leaves of stack @a k whose values no grid at a level in @a levels reads (bit m: leaf
     /// m; readAt() of each leaf, its values gathered from @a kept), @a kept's dropped among them.
     std::uint32_t unreadLeaves(const Key& k, const Kept& kept, Interval levels) const;
+    /// Row @a ij (its 8 values along z) of leaf @a m of stack @a k as @a kept holds it (leaf m not
+    /// dropped): in the batch's layout, or among the kept leaves' rows in turn once some are dropped.
+    static const double* keptRow(const Key& k, const Kept& kept, int m, std::size_t ij)
+    {
+        if (kept.dropped == 0) return kept.values + ij * std::size_t(k.nz) + 8 * std::size_t(m);
+        const int before = std::popcount(kept.dropped & ((std::uint32_t(1) << m) - 1u));
+        return kept.values + (std::size_t(m - before) * 64 + ij) * 8;
+    }
     /// Whether @a k is a stack of leaves (8 x 8 x 8m points, m from 2 to 32).
     static bool isStack(const Key& k) { return k.nx == 8 && k.ny == 8 && k.nz % 8 == 0 && k.nz >= 16 && k.nz <= 256; }
     /// Room for @a n doubles in @a shard's blocks (its mutex held).
