@@ -1628,82 +1628,46 @@ TEST(GridValueMemo, AMovedLevelGivesTheGridOfAFreshEvaluation)
     }
 }
 
-TEST(GridValueMemo, DroppingTheValuesOutsideALevelBandKeepsEveryLeafAGridInItReads)
+namespace {
+/// GridValueMemo::dropOutside after a solve over a wide band, its leaves evaluated @a stack to a
+/// batch along z (SparseOptions::stackLeaves): a grid at a level in the narrow band evaluates
+/// nothing again and is a fresh evaluation's (in the same stacks) bit for bit; one outside it
+/// evaluates again.
+void expectDropKeepsWhatAGridInTheBandReads(int stack)
 {
-    // The density solve evaluates a band wider than the one its level ends in, and tells the job
-    // that band (solveDensity's levelWithin), which drops the kept values a grid at such a level
-    // does not read (GridValueMemo::dropOutside). A grid at any level in the band (its ends
-    // included) must then evaluate nothing again and be a fresh evaluation's bit for bit; one
-    // outside it evaluates the dropped leaves again, the same values.
     const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
     const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
     const auto counted = std::make_shared<CountedBatches>(iso);
     // A corner off the voxel lattice's multiples, so that origins are not round numbers.
     const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
     const Interval band(0.58, 0.64);
+    SparseOptions stacked;
+    stacked.stackLeaves = stack;
     for (const double level : {0.58, 0.61, 0.64, 0.83}) {
         const auto memo = std::make_shared<GridValueMemo>(counted);
         memo->keep(true, std::size_t(1) << 30);
-        SparseOptions solve;
+        SparseOptions solve = stacked;
         solve.band = Interval(0.40, 0.85);
-        const auto solved = evaluateSparse(*memo, d, solve);
-        const std::size_t before = memo->keptBytes();
-        ASSERT_EQ(before, solved->tree().leafCount() * 512 * sizeof(double));
-        memo->dropOutside(band);
-        const std::size_t after = memo->keptBytes();
-        EXPECT_GT(after, 0u);
-        EXPECT_LT(after, before);  // the wide band's edges: leaves no grid in the band reads
-        EXPECT_EQ(after % (512 * sizeof(double)), 0u);
-        const auto solid = LevelSolid::unsolved(memo, SolidSide::Below);
-        solid->solve(level);
-        counted->batches = 0;
-        const auto grid = evaluateSparse(*solid, d, SparseOptions{});
-        const int evaluatedAgain = counted->batches.load();
-        memo->keep(false);
-        const auto fresh = evaluateSparse(LevelSolid(iso, SolidSide::Below, level), d, SparseOptions{});
-        ASSERT_EQ(grid->tree().leafCount(), fresh->tree().leafCount()) << level;
-        EXPECT_EQ(mismatchedVoxels(*fresh, *grid), 0u) << level;
-        if (band.contains(level))
-            EXPECT_EQ(evaluatedAgain, 0) << level;
-        else
-            EXPECT_GT(evaluatedAgain, 0) << level;
-    }
-}
-
-TEST(GridValueMemo, AStacksLeavesAreDroppedOneByOneAndServedToGridsThatDoNotReadThem)
-{
-    // As DroppingTheValuesOutsideALevelBandKeepsEveryLeafAGridInItReads, in stacks of eight leaves
-    // along z (SparseOptions::stackLeaves): the drop decides each leaf of a stack alone (a stack
-    // holding one leaf near the band keeps only what a grid in the band may read), a grid at a
-    // level in the band evaluates nothing again (its stacks' dropped leaves are unread by it) and
-    // is a fresh evaluation's in the same stacks bit for bit; one outside the band evaluates again.
-    const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
-    const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
-    const auto counted = std::make_shared<CountedBatches>(iso);
-    const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
-    const Interval band(0.58, 0.64);
-    for (const double level : {0.58, 0.61, 0.64, 0.83}) {
-        const auto memo = std::make_shared<GridValueMemo>(counted);
-        memo->keep(true, std::size_t(1) << 30);
-        SparseOptions solve;
-        solve.band = Interval(0.40, 0.85);
-        solve.stackLeaves = 8;
         SparseStats stats;
-        evaluateSparse(*memo, d, solve, &stats);
+        const auto solved = evaluateSparse(*memo, d, solve, &stats);
         const std::size_t before = memo->keptBytes();
-        ASSERT_EQ(before, stats.stackedLeaves * 512 * sizeof(double));
+        if (stack == 1)
+            ASSERT_EQ(before, solved->tree().leafCount() * 512 * sizeof(double));
+        else
+            ASSERT_EQ(before, stats.stackedLeaves * 512 * sizeof(double));
         memo->dropOutside(band);
         const std::size_t after = memo->keptBytes();
         EXPECT_GT(after, 0u);
         EXPECT_EQ(after % (512 * sizeof(double)), 0u);
-        // Leaf by leaf: fewer than the leaves the solve itself needed (a stack's whole drop would
-        // keep at least those, and more).
-        EXPECT_LT(after, stats.leaves * 512 * sizeof(double));
+        if (stack == 1)
+            EXPECT_LT(after, before);  // the wide band's edges: leaves no grid in the band reads
+        else
+            // Leaf by leaf: fewer than the leaves the solve itself needed (a stack's whole drop
+            // would keep at least those, and more).
+            EXPECT_LT(after, stats.leaves * 512 * sizeof(double));
         const auto solid = LevelSolid::unsolved(memo, SolidSide::Below);
         solid->solve(level);
         counted->batches = 0;
-        SparseOptions stacked;
-        stacked.stackLeaves = 8;
         const auto grid = evaluateSparse(*solid, d, stacked);
         const int evaluatedAgain = counted->batches.load();
         memo->keep(false);
@@ -1715,6 +1679,27 @@ TEST(GridValueMemo, AStacksLeavesAreDroppedOneByOneAndServedToGridsThatDoNotRead
         else
             EXPECT_GT(evaluatedAgain, 0) << level;
     }
+}
+}  // namespace
+
+TEST(GridValueMemo, DroppingTheValuesOutsideALevelBandKeepsEveryLeafAGridInItReads)
+{
+    // The density solve evaluates a band wider than the one its level ends in, and tells the job
+    // that band (solveDensity's levelWithin), which drops the kept values a grid at such a level
+    // does not read (GridValueMemo::dropOutside). A grid at any level in the band (its ends
+    // included) must then evaluate nothing again and be a fresh evaluation's bit for bit; one
+    // outside it evaluates the dropped leaves again, the same values.
+    expectDropKeepsWhatAGridInTheBandReads(1);
+}
+
+TEST(GridValueMemo, AStacksLeavesAreDroppedOneByOneAndServedToGridsThatDoNotReadThem)
+{
+    // The same in stacks of eight leaves along z (SparseOptions::stackLeaves): the drop decides
+    // each leaf of a stack alone (a stack holding one leaf near the band keeps only what a grid in
+    // the band may read), a grid at a level in the band evaluates nothing again (its stacks'
+    // dropped leaves are unread by it) and is a fresh evaluation's in the same stacks bit for
+    // bit; one outside the band evaluates again.
+    expectDropKeepsWhatAGridInTheBandReads(8);
 }
 
 TEST(GridValueMemo, TheSolveTellsTheBandItsLevelLiesIn)
