@@ -58,13 +58,17 @@ View makeView(const TriangleMesh& mesh, int size)
     return v;
 }
 
-/// Rasterises triangles [begin, end) with projected vertices @a screen into @a buffer.
-void rasterise(const TriangleMesh& mesh, const std::vector<Vec3d>& screen, int size, std::size_t begin, std::size_t end,
+/// Rasterises triangles [begin, end) of @a mesh seen in @a view into @a buffer. The corners are
+/// projected as each triangle is met, not into an array of every point first: a 50 mm lattice's
+/// 9.4 million points made 226 MB of fresh pages for a picture.
+void rasterise(const TriangleMesh& mesh, const View& view, std::size_t begin, std::size_t end,
                std::vector<Sample>& buffer)
 {
+    const int size = view.size;
     for (std::size_t t = begin; t < end; ++t) {
         const openvdb::Vec3I& tri = mesh.triangles[t];
-        const Vec3d &a = screen[tri[0]], &b = screen[tri[1]], &c = screen[tri[2]];
+        const Vec3d a = view.project(mesh.points[tri[0]]), b = view.project(mesh.points[tri[1]]),
+                    c = view.project(mesh.points[tri[2]]);
         // Only pixel centres (x + 0.5) inside the triangle's bounds: most triangles of a fine
         // mesh are smaller than a pixel and cover no centre at all, so test that first.
         const int x0 = std::max(0, int(std::ceil(std::min({a.x(), b.x(), c.x()}) - 0.5)));
@@ -97,17 +101,13 @@ std::string renderMeshPreview(const TriangleMesh& mesh, int size)
     std::vector<Sample> depth(std::size_t(size) * size);
     if (!mesh.triangles.empty()) {
         const View view = makeView(mesh, size);
-        std::vector<Vec3d> screen(mesh.points.size());
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, screen.size()), [&](const auto& r) {
-            for (std::size_t i = r.begin(); i != r.end(); ++i) screen[i] = view.project(mesh.points[i]);
-        });
         // Fixed chunks, one depth buffer each, merged in chunk order: the same for any thread count.
         constexpr std::size_t kChunks = 4;
         std::vector<std::vector<Sample>> partial(kChunks);
         const std::size_t n = mesh.triangles.size();
         tbb::parallel_for(std::size_t(0), kChunks, [&](std::size_t c) {
             partial[c].assign(depth.size(), Sample{});
-            rasterise(mesh, screen, size, c * n / kChunks, (c + 1) * n / kChunks, partial[c]);
+            rasterise(mesh, view, c * n / kChunks, (c + 1) * n / kChunks, partial[c]);
         });
         for (const auto& p : partial)
             for (std::size_t i = 0; i < depth.size(); ++i)
