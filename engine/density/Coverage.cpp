@@ -1,5 +1,6 @@
 #include "engine/density/Coverage.h"
 
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
@@ -19,19 +20,63 @@ constexpr int kLeafShift[3] = {6, 3, 0};
 
 namespace {
 
+using Leaf = openvdb::FloatTree::LeafNodeType;
+
+/// Calls emit(value, change) for each band voxel of @a leaf (values in [@a lo, @a hi] inside
+/// @a region), in offset order, with its per-voxel change along each axis. Neighbours that were
+/// not evaluated (tiles, background, outside @a around) fall back to one-sided differences.
+template <class Emit>
+void leafBand(const Leaf& leaf, openvdb::FloatGrid::ConstAccessor& acc, float lo, float hi,
+              const openvdb::CoordBBox& region, const openvdb::CoordBBox& around, Emit&& emit)
+{
+    const float* data = leaf.buffer().data();
+    for (int i = 0; i < 512; ++i) {
+        if (data[i] < lo || data[i] > hi) continue;
+        const openvdb::Coord c = leaf.offsetToGlobalCoord(i);
+        if (!region.isInside(c)) continue;
+        std::array<double, 3> change{};
+        for (int a = 0; a < 3; ++a) {
+            openvdb::Coord up = c, down = c;
+            up[a] += 1;
+            down[a] -= 1;
+            // Neighbours inside the leaf are read from its buffer; others through the
+            // accessor. Neighbours outside a density mask hold kOutsideMask: not a neighbour.
+            const int local = (i >> kLeafShift[a]) & 7;
+            float upValue = 0.0f, downValue = 0.0f;
+            bool hasUp = around.isInside(up), hasDown = around.isInside(down);
+            if (hasUp) {
+                if (local < 7)
+                    upValue = data[i + kLeafStride[a]];
+                else if (acc.probeConstLeaf(up))
+                    upValue = acc.getValue(up);
+                else
+                    hasUp = false;
+                hasUp = hasUp && upValue < 1e30f;
+            }
+            if (hasDown) {
+                if (local > 0)
+                    downValue = data[i - kLeafStride[a]];
+                else if (acc.probeConstLeaf(down))
+                    downValue = acc.getValue(down);
+                else
+                    hasDown = false;
+                hasDown = hasDown && downValue < 1e30f;
+            }
+            change[a] = axisChange(data[i], upValue, hasUp, downValue, hasDown);
+        }
+        emit(data[i], change);
+    }
+}
+
 /// Band voxels with their per-voxel change along each axis (make(value, d) builds a sample), for
-/// the sub-voxel coverage estimates. Neighbours that were not evaluated (tiles, background,
-/// outside @a around) fall back to one-sided differences.
+/// the sub-voxel coverage estimates, in leaf order (leafBand()).
 template <class Make>
 auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
                  const openvdb::CoordBBox& around, Make make, const std::function<void()>& interrupt)
 {
     using Sample = decltype(make(0.0f, std::array<double, 3>{}));
-    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    std::vector<const Leaf*> leaves;
     grid.tree().getNodes(leaves);
-    auto inBand = [&](const float* data, int i, const openvdb::Coord& c) {
-        return !(data[i] < lo || data[i] > hi) && region.isInside(c);
-    };
     // Two passes: each leaf's count of band voxels, then the samples written in place at the
     // leaf's offset (leaf order, as before). Per-leaf vectors joined afterwards held the band
     // twice at once: a plate's solve peaked there.
@@ -41,7 +86,8 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
             if (interrupt && n % 64 == 0) interrupt();
             const float* data = leaves[n]->buffer().data();
             std::size_t count = 0;
-            for (int i = 0; i < 512; ++i) count += inBand(data, i, leaves[n]->offsetToGlobalCoord(i));
+            for (int i = 0; i < 512; ++i)
+                count += !(data[i] < lo || data[i] > hi) && region.isInside(leaves[n]->offsetToGlobalCoord(i));
             offset[n + 1] = count;
         }
     });
@@ -52,46 +98,24 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
             // Per 64 leaves: a range of the partitioner can hold half the band.
             if (interrupt && n % 64 == 0) interrupt();
-            const float* data = leaves[n]->buffer().data();
             std::size_t at = offset[n];
-            for (int i = 0; i < 512; ++i) {
-                const openvdb::Coord c = leaves[n]->offsetToGlobalCoord(i);
-                if (!inBand(data, i, c)) continue;
-                std::array<double, 3> change{};
-                for (int a = 0; a < 3; ++a) {
-                    openvdb::Coord up = c, down = c;
-                    up[a] += 1;
-                    down[a] -= 1;
-                    // Neighbours inside the leaf are read from its buffer; others through the
-                    // accessor. Neighbours outside a density mask hold kOutsideMask: not a neighbour.
-                    const int local = (i >> kLeafShift[a]) & 7;
-                    float upValue = 0.0f, downValue = 0.0f;
-                    bool hasUp = around.isInside(up), hasDown = around.isInside(down);
-                    if (hasUp) {
-                        if (local < 7)
-                            upValue = data[i + kLeafStride[a]];
-                        else if (acc.probeConstLeaf(up))
-                            upValue = acc.getValue(up);
-                        else
-                            hasUp = false;
-                        hasUp = hasUp && upValue < 1e30f;
-                    }
-                    if (hasDown) {
-                        if (local > 0)
-                            downValue = data[i - kLeafStride[a]];
-                        else if (acc.probeConstLeaf(down))
-                            downValue = acc.getValue(down);
-                        else
-                            hasDown = false;
-                        hasDown = hasDown && downValue < 1e30f;
-                    }
-                    change[a] = axisChange(data[i], upValue, hasUp, downValue, hasDown);
-                }
-                all[at++] = make(data[i], change);
-            }
+            leafBand(*leaves[n], acc, lo, hi, region, around,
+                     [&](float v, const std::array<double, 3>& change) { all[at++] = make(v, change); });
         }
     });
     return all;
+}
+
+/// A coverage sample's step: the length of its per-voxel change.
+CoverageSample coverageSample(float v, const std::array<double, 3>& d)
+{
+    return CoverageSample{v, float(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))};
+}
+
+/// The share of sample @a s below @a level (coveredVoxels()' term).
+double sampleCoverage(const CoverageSample& s, double level)
+{
+    return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
 }
 
 }  // namespace
@@ -100,12 +124,29 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
 std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo,
                                             float hi, const std::function<void()>& interrupt)
 {
-    return bandSamples(
-        grid, region, lo, hi, region,
-        [](float v, const std::array<double, 3>& d) {
-            return CoverageSample{v, float(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))};
+    return bandSamples(grid, region, lo, hi, region, coverageSample, interrupt);
+}
+
+float widestCoverageStep(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
+                         const std::function<void()>& interrupt)
+{
+    std::vector<const Leaf*> leaves;
+    grid.tree().getNodes(leaves);
+    // A maximum: the same whatever the order the leaves are met in.
+    return tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, leaves.size()), 0.0f,
+        [&](const tbb::blocked_range<std::size_t>& range, float widest) {
+            auto acc = grid.getConstAccessor();
+            for (std::size_t n = range.begin(); n != range.end(); ++n) {
+                if (interrupt && n % 64 == 0) interrupt();
+                leafBand(*leaves[n], acc, lo, hi, region, region, [&](float v, const std::array<double, 3>& d) {
+                    const float step = coverageSample(v, d).step;
+                    if (step < 1e29f) widest = std::max(widest, step);
+                });
+            }
+            return widest;
         },
-        interrupt);
+        [](float x, float y) { return std::max(x, y); });
 }
 
 namespace {
@@ -222,12 +263,7 @@ double solvePlaneCoverage(std::vector<PlaneSample> active, double settled, doubl
 double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
 {
     double covered = 0.0;
-    for (const CoverageSample& s : samples) {
-        if (s.step > 0.0f)
-            covered += std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0);
-        else
-            covered += s.value < level;
-    }
+    for (const CoverageSample& s : samples) covered += sampleCoverage(s, level);
     return covered;
 }
 
@@ -241,9 +277,7 @@ double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
 double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b,
                       const std::function<void()>& interrupt)
 {
-    auto coverage = [](const CoverageSample& s, double level) {
-        return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
-    };
+    const auto coverage = sampleCoverage;
     std::vector<CoverageSample> active(samples.begin(), samples.end());
     double settled = fullyBelow;  // whole voxels below every level left in the bracket
     // Once every sample left is partly covered across the whole bracket, the coverage is linear

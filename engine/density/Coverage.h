@@ -8,6 +8,7 @@
 
 #include <openvdb/openvdb.h>
 
+#include <cstdint>
 #include <functional>
 #include <vector>
 
@@ -45,6 +46,12 @@ inline double axisChange(float value, float up, bool hasUp, float down, bool has
 /// leaves and throws to stop (a plate's band holds 10^7 voxels).
 std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo,
                                             float hi, const std::function<void()>& interrupt = {});
+
+/// The largest step coverageSamples() would give a band voxel (below 1e29), without keeping the
+/// samples: what decides how far the band is widened, read from a grid whose band's samples
+/// would be held beside it (a 50 mm wireframe: 63 MB) only to be dropped.
+float widestCoverageStep(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
+                         const std::function<void()>& interrupt = {});
 
 /// Voxels below @a level counted with sub-voxel coverage: a voxel whose value is within half a
 /// step of the level is partly inside, linearly in the distance (a plane cutting the voxel).

@@ -359,13 +359,13 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 sol.evaluatedLeaves = grid->tree().leafCount();
                 sol.estimatedBytes = sol.evaluatedLeaves * evaluated.bytesPerLeaf;
             }
-            // The bracket's samples now and the wide band's below, each walked from the grid: a
-            // voxel's sample does not depend on the band, so they are the evaluated band's samples
-            // picked in order, without those (a 50 mm frame's 0.3 GB) held beside the grid and the
-            // raw values kept for it.
+            // The wide band's samples below, walked from the grid: a voxel's sample does not
+            // depend on the band, so they are the evaluated band's samples picked in order,
+            // without those (a 50 mm frame's 0.3 GB) held beside the grid and the raw values kept
+            // for it. Of the bracket's, only their widest step is needed first: not held.
             std::vector<float>().swap(band);  // the count's values: not read past here
             const float evaluatedLo = float(evaluated.band.lo), evaluatedHi = float(evaluated.band.hi);
-            auto samples = coverageSamples(*grid, region, float(options.band.lo), float(options.band.hi), interrupt);
+            std::vector<CoverageSample> samples;
             double a = options.band.lo, b = std::min(options.band.hi, 1e30);
             std::uint64_t fullyBelow = below;
             // The bracket (a share of the voxels) can be far narrower than a voxel's change, and
@@ -374,9 +374,8 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             // struts, a distance field, in a 30 mm box: the bracket is a tenth of a step wide,
             // and the level stopped at its end holding 0.0974 by this measure for 0.1 asked while
             // the solid held 0.103.) Widen the band to the largest step either side and measure again.
-            float widest = 0.0f;
-            for (const CoverageSample& c : samples)
-                if (c.step < 1e29f) widest = std::max(widest, c.step);
+            const float widest =
+                widestCoverageStep(*grid, region, float(options.band.lo), float(options.band.hi), interrupt);
             if (widest > 0.0f && widest < 1e29f) {
                 SparseOptions wide = options;
                 wide.band = Interval(sol.level - widest, sol.level + widest);
@@ -389,12 +388,10 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 if (covered && evaluatedLo <= wideLo && wideHi <= evaluatedHi) {
                     // Every voxel valued in the wide band is in one of the grid's leaves (tiles hold
                     // +-FLT_MAX): below it, the region's voxels below its low end, tiles included.
-                    std::vector<CoverageSample>().swap(samples);
                     fullyBelow = countBelow(*grid, region, wideLo);
                     samples = coverageSamples(*grid, region, wideLo, wideHi, interrupt);
                     grid.reset();
                 } else {
-                    std::vector<CoverageSample>().swap(samples);
                     const auto wideGrid =
                         covered ? grid : evaluateSparse(GridLeavesReused(indicator, *grid, domain), domain, wide);
                     if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
@@ -403,6 +400,8 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 }
                 a = wide.band.lo;
                 b = wide.band.hi;
+            } else {
+                samples = coverageSamples(*grid, region, float(options.band.lo), float(options.band.hi), interrupt);
             }
             // The bisection reads the samples alone: the grid is freed first (a plate's solve
             // peaked with the grid, the band's values and its samples held), and its leaves'
