@@ -930,6 +930,7 @@ TEST_F(Mesher, StreamedStlHasTheBytesOfTheIndexedMesh)
         {"gyroid", makeGyroid(72, 0.1, 2.3)},
         {"random", makeRandom(7, 3, 0.0f, false)},
         {"violated", violated}};
+    std::size_t chunks = 0;
     for (const auto& [name, grid] : grids) {
         MarchingCubesStats indexedStats, streamedStats;
         const TriangleMesh mesh = marchingCubes(*grid, 0.0f, {}, &indexedStats);
@@ -943,6 +944,13 @@ TEST_F(Mesher, StreamedStlHasTheBytesOfTheIndexedMesh)
         EXPECT_EQ(counts.vertices, mesh.points.size()) << name;
         EXPECT_EQ(streamedStats.droppedCubes, indexedStats.droppedCubes) << name;
         EXPECT_EQ(streamedStats.skippedEdges, indexedStats.skippedEdges) << name;
+        // The held mesh summed in the streamed chunks: the volume pass's double, bit for bit.
+        EXPECT_EQ(streamedStats.chunkTriangleEnds, indexedStats.chunkTriangleEnds) << name;
+        ASSERT_FALSE(indexedStats.chunkTriangleEnds.empty()) << name;
+        EXPECT_EQ(indexedStats.chunkTriangleEnds.back(), mesh.triangles.size()) << name;
+        chunks = std::max(chunks, indexedStats.chunkTriangleEnds.size());
+        const Vec3d about = grid->indexToWorld(Vec3d(3.0, -2.0, 1.0));
+        EXPECT_EQ(marchingCubesVolume(mesh, indexedStats, about), marchingCubesVolume(*grid, 0.0f, about)) << name;
         const std::string reference = readBytes(dir.file(name + ".stl"));
         EXPECT_TRUE(readBytes(dir.file(name + "-1.stl")) == reference) << name;
         EXPECT_TRUE(readBytes(dir.file(name + "-2.stl")) == reference) << name;
@@ -953,6 +961,7 @@ TEST_F(Mesher, StreamedStlHasTheBytesOfTheIndexedMesh)
         EXPECT_NEAR(streamed.area, indexed.area, 1e-9 * indexed.area) << name;
     }
     EXPECT_EQ(dir.entries(), 3 * grids.size());  // no temporary left behind
+    EXPECT_GT(chunks, 1u);                       // a mesh of several streamed chunks
 }
 
 namespace {

@@ -884,6 +884,7 @@ void Job::aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::pat
         std::optional<MeshShareMeasure> share;
         openvdb::FloatGrid::Ptr grid;
         SparseStats stats;
+        std::unique_ptr<TriangleMesh> mesh;  ///< the raw marching-cubes mesh of @a grid, when made
     };
     auto measure = [&](const std::string& stage) {
         Measured m;
@@ -933,7 +934,12 @@ void Job::aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::pat
                 return reporting(mContext, "measuring the mesh's volume", [&](const ProgressFn& progress) {
                     if (options.extractor == MeshExtractor::Bcc)
                         return bccTetrahedra(*m.grid, *surfaceField(), 0.0f, progress).volume();
-                    return marchingCubesVolume(*m.grid, 0.0f, mDomain.box.center(), progress);
+                    // The mesh the outputs are made from (variant() takes it if the level stays:
+                    // most aims keep it), its volume summed as a streamed STL's is (the same
+                    // double): one marching-cubes pass, not a volume pass and then the mesh's.
+                    MarchingCubesStats stats;
+                    m.mesh = std::make_unique<TriangleMesh>(marchingCubes(*m.grid, 0.0f, progress, &stats));
+                    return marchingCubesVolume(*m.mesh, stats, mDomain.box.center());
                 });
             });
         }
@@ -952,12 +958,14 @@ void Job::aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::pat
         mReport["fields"][node.name]["mesh_aim"] = aim;
         mAimGrid = std::move(before.grid);  // the outputs' grid: nothing moved
         mAimStats = before.stats;
+        mAimMesh = std::move(before.mesh);
         return;
     }
     const double firstIndicator = solved.indicatorLevel + missing / solved.slope;
     node.solid->correct(node.solid->levelFromIndicator(firstIndicator));
     keepEvaluateTiming("evaluate at the solved level");
     before.grid.reset();
+    before.mesh.reset();
     // Checked at the moved level (on the outputs' grid when it holds, so nothing is evaluated in
     // vain): a field too flat about its level for one step along the voxels' slope (a points
     // infill: -3 % after one) takes a secant step through the two measured shares.
@@ -980,10 +988,12 @@ void Job::aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::pat
     if (steps == 1) {
         mAimGrid = std::move(after.grid);  // the outputs' grid
         mAimStats = after.stats;
+        mAimMesh = std::move(after.mesh);
     } else {
         withdrawStreamed();  // written at the first step
     }
     after.grid.reset();  // at two steps: evaluated again at the final level by the first output that needs it
+    after.mesh.reset();
     nlohmann::json& entry = mReport["fields"][node.name];
     const double level = node.solid->level();
     aim["moved"] = true;
@@ -1203,6 +1213,8 @@ Job::MeshVariant& Job::variant(const MeshOptions& options)
                 return std::make_unique<TriangleMesh>(bccTetrahedra(grid(), *field, 0.0f, progress));
             });
         });
+    } else if (mAimMesh) {
+        v->mesh = std::move(mAimMesh);  // made from this grid by the aim's measure
     } else {
         v->mesh = timed("mesh", [&] {
             return reporting(mContext, "meshing", [&](const ProgressFn& progress) {

@@ -306,6 +306,9 @@ private:
     /// aimLevelsAtMesh()'s grid at the final level and its counts, taken by evaluateRecipeGrid().
     openvdb::FloatGrid::Ptr mAimGrid;
     SparseStats mAimStats;
+    /// The raw marching-cubes mesh of the grid at the final level, made by aimLevelsAtMesh()'s
+    /// measure, taken by variant() for the first mesh made from that grid.
+    std::unique_ptr<TriangleMesh> mAimMesh;
     std::array<std::array<double, 6>, 6> mPropertiesStiffness{};
     /// properties() of a box frame too small to hold a whole repeating cell (@a zone): the frame's
     /// cell homogenized in a frame of enough of them; false when the frame is not a box frame.

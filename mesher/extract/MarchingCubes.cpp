@@ -575,6 +575,10 @@ private:
 /// mesh, or emit triangles as corner positions (no indices).
 enum class Pass { Count, Emit, Stream };
 
+/// Consecutive blocks per chunk of the streamed pass (marchingCubesStreamed()): what each
+/// consumer call sees, whatever the thread count.
+constexpr std::size_t kChunkBlocks = 256;
+
 class Mesher {
 public:
     Mesher(const openvdb::FloatGrid& grid, float iso) : mGrid(grid), mTree(grid.tree()), mIso(iso), mTable(caseTable())
@@ -1081,6 +1085,11 @@ void Mesher::fillStats(MarchingCubesStats& stats)
     }
     std::sort(mSkipped.begin(), mSkipped.end());
     stats.skippedEdges = std::size_t(std::unique(mSkipped.begin(), mSkipped.end()) - mSkipped.begin());
+    std::uint64_t triangles = 0;
+    for (std::size_t b = 0; b < mBlocks.size(); ++b) {
+        triangles += mCounts[b].triangles;
+        if ((b + 1) % kChunkBlocks == 0 || b + 1 == mBlocks.size()) stats.chunkTriangleEnds.push_back(triangles);
+    }
 }
 
 TriangleMesh Mesher::run(ProgressFn progressFn, MarchingCubesStats& stats)
@@ -1121,7 +1130,6 @@ StreamedMeshCounts Mesher::runStreamed(const TriangleStream& stream, ProgressFn 
 
     // One pass: chunks of a fixed number of consecutive blocks (so what each consumer call sees
     // does not depend on threads), counted and emitted as they go.
-    constexpr std::size_t kChunkBlocks = 256;
     const std::size_t chunks = (numBlocks + kChunkBlocks - 1) / kChunkBlocks;
     const std::size_t slots = std::max<std::size_t>(1, stream.slots);
     std::vector<CornerBuffer> buffers(slots);
@@ -1182,6 +1190,19 @@ StreamedMeshCounts marchingCubesStreamed(const openvdb::FloatGrid& grid, float i
     return counts;
 }
 
+namespace {
+
+/// Six times the signed volume of the tetrahedron of corners @a p, @a q, @a r and @a reference.
+inline double tetrahedron(const openvdb::Vec3f& p, const openvdb::Vec3f& q, const openvdb::Vec3f& r,
+                          const openvdb::Vec3d& reference)
+{
+    const openvdb::Vec3d a = openvdb::Vec3d(p) - reference, b = openvdb::Vec3d(q) - reference,
+                         c = openvdb::Vec3d(r) - reference;
+    return a.dot(b.cross(c));
+}
+
+}  // namespace
+
 double marchingCubesVolume(const openvdb::FloatGrid& grid, float isoValue, const openvdb::Vec3d& reference,
                            ProgressFn progress)
 {
@@ -1190,15 +1211,28 @@ double marchingCubesVolume(const openvdb::FloatGrid& grid, float isoValue, const
     double total = 0.0;
     stream.format = [&](std::size_t, std::size_t slot, std::span<const TriangleCorners> triangles) {
         double sum = 0.0;
-        for (const TriangleCorners& t : triangles) {
-            const openvdb::Vec3d a = openvdb::Vec3d(t[0]) - reference, b = openvdb::Vec3d(t[1]) - reference,
-                                 c = openvdb::Vec3d(t[2]) - reference;
-            sum += a.dot(b.cross(c));
-        }
+        for (const TriangleCorners& t : triangles) sum += tetrahedron(t[0], t[1], t[2], reference);
         slotVolume[slot] = sum;
     };
     stream.write = [&](std::size_t, std::size_t slot) { total += slotVolume[slot]; };
     marchingCubesStreamed(grid, isoValue, stream, std::move(progress));
+    return total / 6.0;
+}
+
+double marchingCubesVolume(const TriangleMesh& mesh, const MarchingCubesStats& stats, const openvdb::Vec3d& reference)
+{
+    const std::vector<std::uint64_t>& ends = stats.chunkTriangleEnds;
+    std::vector<double> chunkVolume(ends.size(), 0.0);
+    tbb::parallel_for(std::size_t(0), ends.size(), [&](std::size_t chunk) {
+        double sum = 0.0;
+        for (std::uint64_t n = chunk == 0 ? 0 : ends[chunk - 1]; n < ends[chunk]; ++n) {
+            const openvdb::Vec3I& t = mesh.triangles[n];
+            sum += tetrahedron(mesh.points[t[0]], mesh.points[t[1]], mesh.points[t[2]], reference);
+        }
+        chunkVolume[chunk] = sum;
+    });
+    double total = 0.0;
+    for (const double v : chunkVolume) total += v;
     return total / 6.0;
 }
 

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <functional>
 #include <span>
+#include <vector>
 
 namespace voxlat {
 
@@ -40,6 +41,9 @@ struct MarchingCubesStats {
     std::size_t skippedEdges = 0;
     /// Cubes left untriangulated because they touch a skipped edge (the mesh then has holes).
     std::size_t droppedCubes = 0;
+    /// The triangles emitted up to the end of each chunk of consecutive blocks that
+    /// marchingCubesStreamed() delivers at once (its chunks' ends in the mesh's triangle order).
+    std::vector<std::uint64_t> chunkTriangleEnds;
 };
 
 /// Extract the isosurface of @a grid at @a isoValue as an indexed triangle mesh in world space.
@@ -89,6 +93,11 @@ StreamedMeshCounts marchingCubesStreamed(const openvdb::FloatGrid& grid, float i
 /// volume a file of that mesh holds (up to the rounding of its sums).
 double marchingCubesVolume(const openvdb::FloatGrid& grid, float isoValue, const openvdb::Vec3d& reference,
                            ProgressFn progress = {});
+
+/// marchingCubesVolume() of the grid @a mesh was made from by marchingCubes(), which gave @a stats:
+/// the same tetrahedra summed in the same chunks in the same order, so the same double, without
+/// a second pass over the grid (a job that holds the mesh measures its share from it).
+double marchingCubesVolume(const TriangleMesh& mesh, const MarchingCubesStats& stats, const openvdb::Vec3d& reference);
 
 /// Facts about the precomputed case table, for tests and reports.
 struct MarchingCubesTableInfo {
