@@ -934,6 +934,9 @@ void Job::aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::pat
                 return reporting(mContext, "measuring the mesh's volume", [&](const ProgressFn& progress) {
                     if (options.extractor == MeshExtractor::Bcc)
                         return bccTetrahedra(*m.grid, *surfaceField(), 0.0f, progress).volume();
+                    // A memo's kept values are held until the aim ends: its mesh is made after them
+                    // (the 50 mm trimmed frame peaked at 1.59 GB against 1.48 with the mesh beside them).
+                    if (memo) return marchingCubesVolume(*m.grid, 0.0f, mDomain.box.center(), progress);
                     // The mesh the outputs are made from (variant() takes it if the level stays:
                     // most aims keep it), its volume summed as a streamed STL's is (the same
                     // double): one marching-cubes pass, not a volume pass and then the mesh's.
