@@ -646,8 +646,17 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 if (kLo > kHi) continue;
                 // A plane's needed points (planeValues): the runs of tiles its column needs, each
                 // with its one-point halo; rows that meet none take no Gaussians.
-                std::uint64_t needed = columnTiles ? columnTiles[i] : 0;
-                if (columnTiles && (needed & tilesMet(kLo, kHi)) == 0) continue;
+                std::uint64_t needed = columnTiles ? columnTiles[i] & tilesMet(kLo, kHi) : 0;
+                if (columnTiles && needed == 0) continue;
+                // The points the row's needed runs hold lie within fillLo..fillHi (the first run's
+                // start, the last run's end): only those take Gaussians. The runs outside the
+                // row's tiles (tilesMet) would hold none of its points, so they are left out of
+                // needed: the same parts as before, without walking the column's other runs.
+                int fillLo = kLo, fillHi = kHi;
+                if (columnTiles) {
+                    fillLo = std::max(kLo, std::countr_zero(needed) * tile);
+                    fillHi = std::min(kHi, (64 - std::countl_zero(needed)) * tile + 1);
+                }
                 const double py = d0.y() + jj * dy;
                 const double hRow = px * u.x() + py * u.y() + d0.z() * u.z();
                 const double qRow = px * px + py * py;
@@ -674,15 +683,18 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                         g = columnGauss;
                     } else if (seeded) {
                         seedsAt(i);
+                        // The recurrences stepped from k0, written from fillLo's group: the same
+                        // doubles at every point read.
                         if (avx2)
-                            fillGaussiansAvx2(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0, kLo - k0);
+                            fillGaussiansAvx2(seedE, seedP, q16, fillHi - k0 + 1, gauss.data() + k0, fillLo - k0);
                         else
-                            fillGaussiansScalar(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0, kLo - k0);
+                            fillGaussiansScalar(seedE, seedP, q16, fillHi - k0 + 1, gauss.data() + k0, fillLo - k0);
                     } else {
-                        rowGaussians(r0, b, c, inv2s2, q, q16, kLo, kHi, gauss.data());
+                        // Started at kLo (its doubles hang on it), stopped at fillHi.
+                        rowGaussians(r0, b, c, inv2s2, q, q16, kLo, fillHi, gauss.data());
                     }
                 } else {
-                    for (int k = kLo; k <= kHi; ++k) {
+                    for (int k = fillLo; k <= fillHi; ++k) {
                         double h, r2;
                         s.distanceSqr(seen(pointAt(i, jj, k)), h, r2);
                         gauss[k] = std::exp(-r2 * inv2s2);
