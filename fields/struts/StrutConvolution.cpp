@@ -509,8 +509,18 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                         r.phase = ((n % phases) + phases) % phases;
                         r.n0 = (n - r.phase) / phases;
                     }
-                    nLo = std::min(nLo, r.n0 + r.kLo);
-                    nHi = std::max(nHi, r.n0 + r.kHi + 1);
+                    // A plane's row reads nodes only at the points of its needed runs (pass 2:
+                    // within the first run's start and the last one's end, fillLo..fillHi there,
+                    // whose tiles are a subset of these): the nodes past them are not made. A
+                    // node's value hangs on its index alone (h0 + n hz), not on the table's span.
+                    int needLo = r.kLo, needHi = r.kHi;
+                    if (columnTiles) {
+                        const std::uint64_t m = columnTiles[i] & tilesMet(r.kLo, r.kHi);
+                        needLo = std::max(r.kLo, std::countr_zero(m) * tile);
+                        needHi = std::min(r.kHi, (64 - std::countl_zero(m)) * tile + 1);
+                    }
+                    nLo = std::min(nLo, r.n0 + needLo);
+                    nHi = std::max(nHi, r.n0 + needHi + 1);
                 }
             if (nLo <= nHi) {
                 nodeLo = nLo;
