@@ -1,7 +1,8 @@
 /// @file IsoRadiusAvx2.cpp
 /// IsoRadius's map in four lanes. This file alone is built for AVX2 and FMA. Its logarithm is
-/// glibc's (sysdeps/ieee754/dbl-64/e_log.c, from Arm's optimized-routines, MIT licence) as the
-/// library builds it for CPUs with FMA (__log_fma): log x = k ln2 + log c + log1p(z / c - 1) with
+/// glibc's (sysdeps/ieee754/dbl-64/e_log.c, which came from Arm's optimized-routines) as the
+/// library builds it for CPUs with FMA (__log_fma, glibc 2.36; table and coefficients read
+/// from its __log_data): log x = k ln2 + log c + log1p(z / c - 1) with
 /// x = 2^k z, c and 1 / c from a 128-entry table indexed by z's leading mantissa bits, and the
 /// same fused multiply-adds in the same order, so each lane gives the library's double. The
 /// library picks that variant where the CPU has AVX2 and FMA; hasIsoRadiiAvx2() checks the
