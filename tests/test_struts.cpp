@@ -8,12 +8,14 @@
 #include "engine/frames/UnitCells.h"
 #include "engine/jobs/Job.h"
 #include "engine/recipe/FieldBuilder.h"
+#include "fields/core/Constant.h"
 #include "fields/core/GridValueMemo.h"
 #include "fields/levels/LevelSolid.h"
 #include "fields/maps/PeriodicTiling.h"
 #include "fields/shapes/Sphere.h"
 #include "fields/struts/GaussianTable.h"
 #include "fields/struts/IsoRadius.h"
+#include "fields/struts/IsoRadiusAvx2.h"
 #include "fields/struts/StrutCapsules.h"
 #include "fields/struts/StrutConvolution.h"
 #include "fields/struts/StrutIndex.h"
@@ -506,6 +508,47 @@ TEST(StrutRows, FourLanesAddTheSameDoublesAsTheScalarLoop)
     }
     // The comparison covered points within the cut-off (not only skipped ones).
     EXPECT_GT(lanesAdded, lanesCompared / 4);
+}
+
+TEST(IsoRadius, FourLaneRadiiAreTheScalarMapsDoubles)
+{
+    // IsoRadius::radii four values at a time (its logarithm glibc's algorithm in lanes) against
+    // radiusOf() value by value (std::log): bit for bit, on F at random magnitudes about the peak
+    // (P / F from 1e-3 to 1e12, so every interval of the log's table and many exponents), F near
+    // P (the library's other path), at and below the cap, 0, subnormal, infinite and NaN, and
+    // spans whose length is no multiple of four.
+    if (!hasIsoRadiiAvx2()) GTEST_SKIP() << "no AVX2 and FMA, or a C library whose log differs: the scalar map runs";
+    const double sigma = 0.2, peak = 3.08022, rhoMax = 1.72;
+    const IsoRadius iso(std::make_shared<ConstantField>(0.0), peak, sigma, rhoMax);
+    std::mt19937_64 rng(20261201);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    std::vector<double> f;
+    for (int n = 0; n < 400000; ++n) f.push_back(peak * std::pow(10.0, 3.0 - 15.0 * unit(rng)));
+    for (int n = 0; n < 20000; ++n) f.push_back(peak * (1.0 + 0.2 * (unit(rng) - 0.5)));
+    const double fMin = iso.valueOf(rhoMax);
+    for (const double v :
+         {0.0, 1e-310, fMin, std::nextafter(fMin, 0.0), std::nextafter(fMin, 1.0), peak, std::nextafter(peak, 0.0),
+          std::nextafter(peak, 10.0), peak * (1.0 - 0x1p-4), peak * (1.0 + 0x1.09p-4),
+          std::numeric_limits<double>::infinity(), std::numeric_limits<double>::quiet_NaN(), 1e300})
+        f.push_back(v);
+    std::uint64_t compared = 0;
+    for (std::size_t start = 0; start < f.size(); start += 997) {
+        const std::size_t n = std::min<std::size_t>(start % 7 + 1 + (start % 5 == 0 ? 600 : 0), f.size() - start);
+        std::vector<double> lanes(f.begin() + std::ptrdiff_t(start), f.begin() + std::ptrdiff_t(start + n));
+        iso.radii(lanes);
+        for (std::size_t k = 0; k < n; ++k, ++compared) {
+            const double expected = iso.radiusOf(f[start + k]);
+            ASSERT_EQ(std::memcmp(&expected, &lanes[k], sizeof(double)), 0)
+                << "F = " << f[start + k] << ": " << lanes[k] << " against " << expected;
+        }
+    }
+    std::vector<double> all = f;
+    iso.radii(all);
+    for (std::size_t k = 0; k < f.size(); ++k, ++compared) {
+        const double expected = iso.radiusOf(f[k]);
+        ASSERT_EQ(std::memcmp(&expected, &all[k], sizeof(double)), 0) << "F = " << f[k];
+    }
+    EXPECT_GT(compared, 420000u);
 }
 
 TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)

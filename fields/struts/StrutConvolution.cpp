@@ -314,8 +314,9 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
     struct RowRange {
         int kLo, kHi, n0;
         double tau;
-        int phase = 0;           ///< the row's phase of a table of several nodes per step (below)
-        int inLo = 1, inHi = 0;  ///< points at least a step inside the capsule's range (to prove)
+        int phase = 0;             ///< the row's phase of a table of several nodes per step (below)
+        int inLo = 1, inHi = 0;    ///< points at least a step inside the capsule's range (to prove)
+        std::uint64_t needed = 0;  ///< a plane's row: its column's needed tiles that the row meets
     };
     thread_local std::vector<RowRange> rows;
     // The tiles (bits of columnTiles) that a row's points kLo..kHi or their one-point halo meet:
@@ -453,9 +454,12 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 // A plane's row that meets none of the tiles its column needs is made by nobody
                 // (pass 2 tests the part of it within the strut's reach of the plane, inside this
                 // range): it takes no nodes of the table either.
-                if (columnTiles && r.kLo <= r.kHi && (columnTiles[i] & tilesMet(r.kLo, r.kHi)) == 0) {
-                    r.kLo = 1;
-                    r.kHi = 0;
+                if (columnTiles && r.kLo <= r.kHi) {
+                    r.needed = columnTiles[i] & tilesMet(r.kLo, r.kHi);
+                    if (r.needed == 0) {
+                        r.kLo = 1;
+                        r.kHi = 0;
+                    }
                 }
             }
         }
@@ -509,8 +513,17 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                         r.phase = ((n % phases) + phases) % phases;
                         r.n0 = (n - r.phase) / phases;
                     }
-                    nLo = std::min(nLo, r.n0 + r.kLo);
-                    nHi = std::max(nHi, r.n0 + r.kHi + 1);
+                    // A plane's row reads nodes only at the points of its needed runs (pass 2:
+                    // within the first run's start and the last one's end, fillLo..fillHi there,
+                    // whose tiles are a subset of these): the nodes past them are not made. A
+                    // node's value hangs on its index alone (h0 + n hz), not on the table's span.
+                    int needLo = r.kLo, needHi = r.kHi;
+                    if (columnTiles) {
+                        needLo = std::max(r.kLo, std::countr_zero(r.needed) * tile);
+                        needHi = std::min(r.kHi, (64 - std::countl_zero(r.needed)) * tile + 1);
+                    }
+                    nLo = std::min(nLo, r.n0 + needLo);
+                    nHi = std::max(nHi, r.n0 + needHi + 1);
                 }
             if (nLo <= nHi) {
                 nodeLo = nLo;
@@ -646,12 +659,24 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 if (kLo > kHi) continue;
                 // A plane's needed points (planeValues): the runs of tiles its column needs, each
                 // with its one-point halo; rows that meet none take no Gaussians.
-                std::uint64_t needed = columnTiles ? columnTiles[i] : 0;
-                if (columnTiles && (needed & tilesMet(kLo, kHi)) == 0) continue;
+                // (Pass 1 kept the column's needed tiles that the row's range meets: only a seeded
+                // row cut to the strut's reach of the plane masks them again.)
+                std::uint64_t needed = 0;
+                if (columnTiles) {
+                    needed = kLo == range.kLo && kHi == range.kHi ? range.needed : range.needed & tilesMet(kLo, kHi);
+                    if (needed == 0) continue;
+                }
+                // The points the row's needed runs hold lie within fillLo..fillHi (the first run's
+                // start, the last run's end): only those take Gaussians. The runs outside the
+                // row's tiles (tilesMet) would hold none of its points, so they are left out of
+                // needed: the same parts as before, without walking the column's other runs.
+                int fillLo = kLo, fillHi = kHi;
+                if (columnTiles) {
+                    fillLo = std::max(kLo, std::countr_zero(needed) * tile);
+                    fillHi = std::min(kHi, (64 - std::countl_zero(needed)) * tile + 1);
+                }
                 const double py = d0.y() + jj * dy;
                 const double hRow = px * u.x() + py * u.y() + d0.z() * u.z();
-                const double qRow = px * px + py * py;
-                const double r0 = qRow + d0.z() * d0.z() - hRow * hRow;
                 const double b = 2.0 * (d0.z() * dz - hRow * hz) + c;  // r^2(1) - r^2(0)
                 const Vec3d rowStart = pointAt(i, jj, 0);
                 StrutRow row{rowStart.x(), rowStart.y(), rowStart.z(), dz, kLo, kHi};
@@ -661,7 +686,10 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 }
                 // A tabled row's points a step or more inside the capsule's range skip their
                 // cut-off test where both ends of that run are proven within it.
+                // (Only where the points read hold a group of four within that run: the four-lane
+                // loop skips tests for whole groups alone, and a point passes its test anyway.)
                 if (tabled && range.inLo <= range.inHi &&
+                    std::min(range.inHi, fillHi) - std::max(range.inLo, fillLo) >= 3 &&
                     provenWithinCutoff(constants, row, range.inLo, range.inHi, roundoff)) {
                     row.inLo = range.inLo;
                     row.inHi = range.inHi;
@@ -674,15 +702,19 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                         g = columnGauss;
                     } else if (seeded) {
                         seedsAt(i);
+                        // The recurrences stepped from k0, written from fillLo's group: the same
+                        // doubles at every point read.
                         if (avx2)
-                            fillGaussiansAvx2(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0, kLo - k0);
+                            fillGaussiansAvx2(seedE, seedP, q16, fillHi - k0 + 1, gauss.data() + k0, fillLo - k0);
                         else
-                            fillGaussiansScalar(seedE, seedP, q16, kHi - k0 + 1, gauss.data() + k0, kLo - k0);
+                            fillGaussiansScalar(seedE, seedP, q16, fillHi - k0 + 1, gauss.data() + k0, fillLo - k0);
                     } else {
-                        rowGaussians(r0, b, c, inv2s2, q, q16, kLo, kHi, gauss.data());
+                        // Started at kLo (its doubles hang on it), stopped at fillHi.
+                        const double r0 = (px * px + py * py) + d0.z() * d0.z() - hRow * hRow;
+                        rowGaussians(r0, b, c, inv2s2, q, q16, kLo, fillHi, gauss.data());
                     }
                 } else {
-                    for (int k = kLo; k <= kHi; ++k) {
+                    for (int k = fillLo; k <= fillHi; ++k) {
                         double h, r2;
                         s.distanceSqr(seen(pointAt(i, jj, k)), h, r2);
                         gauss[k] = std::exp(-r2 * inv2s2);
