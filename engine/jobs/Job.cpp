@@ -864,7 +864,9 @@ void Job::aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::pat
                           "from a sample of its triangles; a mesh to a tolerance keeps chords of the same order)"
                     : options.extractor == MeshExtractor::Bcc
                         ? "the volume the bcc tetrahedra of the recipe's grid enclose, before they are written"
-                        : "the volume the marching-cubes mesh of the recipe's grid encloses, before it is made"},
+                    : memo ? "the volume the marching-cubes mesh of the recipe's grid encloses, before it is made"
+                           : "the volume the marching-cubes mesh of the recipe's grid encloses: the mesh the outputs "
+                             "are made from while the level stays"},
         {"tolerance", kMeshAimTolerance},
         {"solved_level", node.recipeLevel ? node.recipeLevel(node.solid->level()) : node.solid->level()}};
     // The share the first mesh will hold at the level as it stands, and the recipe's grid it was
