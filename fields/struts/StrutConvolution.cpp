@@ -952,14 +952,18 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
 Interval StrutConvolution::bound(const Box3& box) const
 {
     thread_local std::vector<std::uint32_t> cand;
-    mIndex.gather(box, cand);
+    thread_local std::vector<double> boxDistance;
+    // Each strut's distance to the box, the gather's own where its test took one (a strut near
+    // the edge of its reach took it twice, a tenth of the wireframe's solve in segmentBoxDistance).
+    mIndex.gather(box, cand, &boxDistance);
     double lo = 0.0, hi = 0.0;
     const Vec3d c = box.center();
     const double radius = box.radius();
-    for (const std::uint32_t j : cand) {
+    for (std::size_t n = 0; n < cand.size(); ++n) {
+        const std::uint32_t j = cand[n];
         const GaussianSegment& s = mSegments[j];
         const double sigma = s.sigma;
-        const double dMin = segmentBoxDistance(s.a, mEnd[j], box);
+        const double dMin = boxDistance[n];
         hi += gaussianSegmentUpperBound(dMin, sigma, mPeak[j] / (sigma * kSqrtTwoPi));
         // A positive lower bound only where the whole box lies within the cut-off.
         double h, r2;

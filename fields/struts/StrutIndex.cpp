@@ -176,9 +176,10 @@ void StrutIndex::candidates(const Box3& box, std::vector<std::uint32_t>& out) co
             }
 }
 
-void StrutIndex::gather(const Box3& box, std::vector<std::uint32_t>& out) const
+void StrutIndex::gather(const Box3& box, std::vector<std::uint32_t>& out, std::vector<double>* boxDistance) const
 {
     candidates(box, out);
+    if (boxDistance) boxDistance->clear();
     const Vec3d c = box.center();
     const double radius = box.radius();
     std::size_t kept = 0;
@@ -187,7 +188,12 @@ void StrutIndex::gather(const Box3& box, std::vector<std::uint32_t>& out) const
         // Cheap accept / reject by the centre distance first; the exact test only near the edge.
         const double dc = std::sqrt(pointSegmentDistanceSqr(c, mA[j], mB[j]));
         if (dc - radius > reach) continue;
-        if (dc > reach && segmentBoxDistance(mA[j], mB[j], box) > reach) continue;
+        double d = -1.0;  // the box distance, once taken
+        if (dc > reach) {
+            d = segmentBoxDistance(mA[j], mB[j], box);
+            if (d > reach) continue;
+        }
+        if (boxDistance) boxDistance->push_back(d >= 0.0 ? d : segmentBoxDistance(mA[j], mB[j], box));
         out[kept++] = j;
     }
     out.resize(kept);
