@@ -626,6 +626,22 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     seedP[l] *= seedT4;
                 }
         };
+        // A block's long rows (a stack of leaves: ny > 1, rows along z of 16 points or more) take
+        // their Gaussians' four-lane seeds from recurrences across y within a column of rows, as a
+        // plane's do across x: lane l at k0 + l (k0 the column's first point of any row) holds E_l,
+        // its row step P_l and its step across y S_l; r2 is quadratic in jj and k with a constant
+        // cross term, so E_l(jj + 1) = E_l(jj) S_l(jj), S_l(jj + 1) = S_l(jj) Qy and P_l(jj + 1) =
+        // P_l(jj) Ty^4 (Qy = exp(-2 dy^2 (1 - u_y^2) / 2 sigma^2), Ty = exp(2 dy u_y hz / 2 sigma^2)).
+        // Three exponentials per column and three per strut, not two per row: at most ny - 1 steps
+        // across y and (nz / 4) along a row, a few 1e-15 relative. Only where r2 / 2 sigma^2 stays
+        // below 600 over the column's rows (r2 is convex: its corners), so no Gaussian underflows.
+        const bool blockSeeds = !acrossColumns && !seeded && ny > 1 && batch.nz >= 16;
+        double ySeedQ = 0.0, ySeedT4 = 0.0, ySeedT = 0.0;
+        if (blockSeeds) {
+            ySeedQ = std::exp(-2.0 * dy * dy * (1.0 - u.y() * u.y()) * inv2s2);
+            ySeedT = std::exp(2.0 * hz * dy * u.y() * inv2s2);
+            ySeedT4 = std::exp(8.0 * hz * dy * u.y() * inv2s2);
+        }
         // Columns beyond the strut's reach have no row (only the columns' Gaussians across
         // them step through every column).
         const int iBegin = acrossColumns ? 0 : iFirst, iEnd = acrossColumns ? nx - 1 : iLast;
@@ -637,6 +653,47 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     columnGauss[k] *= columnStep[k];
                     columnStep[k] *= columnQ;
                 }
+            // The column's seeds (blockSeeds), at its row colRow.
+            bool columnSeeded = false;
+            int colK0 = 0, colRow = 0;
+            double colE[4] = {}, colS[4] = {}, colP[4] = {};
+            if (blockSeeds) {
+                int kFirst = nz, kLast = -1;
+                for (int jj = 0; jj < ny; ++jj) {
+                    const RowRange& range = rows[std::size_t(i) * ny + jj];
+                    if (range.kLo > range.kHi) continue;
+                    kFirst = std::min(kFirst, range.kLo);
+                    kLast = std::max(kLast, range.kHi);
+                }
+                auto r2At = [&](int jj, int k) {
+                    const double y = d0.y() + jj * dy, zz = d0.z() + k * dz;
+                    const double h = px * u.x() + y * u.y() + zz * u.z();
+                    return px * px + y * y + zz * zz - h * h;
+                };
+                if (kFirst <= kLast && std::max(std::max(r2At(0, kFirst), r2At(0, kLast + 4)),
+                                                std::max(r2At(ny - 1, kFirst), r2At(ny - 1, kLast + 4))) *
+                                               inv2s2 <
+                                           600.0) {
+                    // rowGaussiansFrom's lanes and steps at (jj, k) = (0, kFirst).
+                    const double hRow = px * u.x() + d0.y() * u.y() + d0.z() * u.z();
+                    const double r0 = px * px + d0.y() * d0.y() + d0.z() * d0.z() - hRow * hRow;
+                    const double b = 2.0 * (d0.z() * dz - hRow * hz) + c;
+                    const double kk = kFirst;
+                    double ratios[7];
+                    ratios[0] = std::exp(-(b + 2.0 * c * kk) * inv2s2);
+                    for (int m = 1; m < 7; ++m) ratios[m] = ratios[m - 1] * q;
+                    colE[0] = std::exp(-(r0 + kk * (b - c) + kk * kk * c) * inv2s2);
+                    for (int l = 1; l < 4; ++l) colE[l] = colE[l - 1] * ratios[l - 1];
+                    for (int l = 0; l < 4; ++l) colP[l] = ((ratios[l] * ratios[l + 1]) * ratios[l + 2]) * ratios[l + 3];
+                    // S_l = S_0 Ty^l: D_l = D_0 - 2 l hz dy u_y.
+                    const double across = 2.0 * dy * (d0.y() - u.y() * hRow) + dy * dy * (1.0 - u.y() * u.y()) -
+                                          2.0 * hz * dy * u.y() * kk;
+                    colS[0] = std::exp(-across * inv2s2);
+                    for (int l = 1; l < 4; ++l) colS[l] = colS[l - 1] * ySeedT;
+                    colK0 = kFirst;
+                    columnSeeded = true;
+                }
+            }
             for (int jj = 0; jj < ny; ++jj, n += nz) {
                 const RowRange& range = rows[std::size_t(i) * ny + jj];
                 // Seeded rows start and end within the strut's reach of the plane (k0..kSeedEnd):
@@ -672,6 +729,17 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 if (std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0) {
                     if (acrossColumns) {
                         g = columnGauss;
+                    } else if (columnSeeded) {
+                        for (; colRow < jj; ++colRow)
+                            for (int l = 0; l < 4; ++l) {
+                                colE[l] *= colS[l];
+                                colS[l] *= ySeedQ;
+                                colP[l] *= ySeedT4;
+                            }
+                        if (avx2)
+                            fillGaussiansAvx2(colE, colP, q16, kHi - colK0 + 1, gauss.data() + colK0, kLo - colK0);
+                        else
+                            fillGaussiansScalar(colE, colP, q16, kHi - colK0 + 1, gauss.data() + colK0, kLo - colK0);
                     } else if (seeded) {
                         seedsAt(i);
                         if (avx2)
