@@ -506,8 +506,11 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                         const double at = (hRow - h0) / (hz / phases);
                         const int n = int(std::floor(at));
                         r.tau = at - n;
-                        r.phase = ((n % phases) + phases) % phases;
-                        r.n0 = (n - r.phase) / phases;
+                        // q = floor(n / m), p = n - m q, for m = 2, 3 or 4: a shift or a division
+                        // by a constant (a multiply), not two divisions per row.
+                        const int index = phases == 2 ? n >> 1 : phases == 4 ? n >> 2 : n >= 0 ? n / 3 : -((2 - n) / 3);
+                        r.phase = n - phases * index;
+                        r.n0 = index;
                     }
                     nLo = std::min(nLo, r.n0 + r.kLo);
                     nHi = std::max(nHi, r.n0 + r.kHi + 1);
@@ -717,8 +720,12 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     row.inHi = kHi;
                 }
                 // A tabled row's points a step or more inside the capsule's range skip their
-                // cut-off test where both ends of that run are proven within it.
-                if (tabled && range.inLo <= range.inHi &&
+                // cut-off test where both ends of that run are proven within it. Only runs of
+                // kProvenRun points or more: the proof (two distances, scalar) costs about what
+                // the four-lane tests of three groups do, and skips only tests that pass (the
+                // same sums either way).
+                constexpr int kProvenRun = 16;
+                if (tabled && range.inHi - range.inLo + 1 >= kProvenRun &&
                     provenWithinCutoff(constants, row, range.inLo, range.inHi, roundoff)) {
                     row.inLo = range.inLo;
                     row.inHi = range.inHi;
