@@ -10,7 +10,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
+#include <random>
 
 using namespace voxlat;
 using namespace voxlat::coverage;
@@ -50,5 +52,66 @@ TEST(Coverage, ANarrowerBandsSamplesAreTheWiderBandsPickedInOrder)
         EXPECT_EQ(std::memcmp(narrow.data(), picked.data(), narrow.size() * sizeof(CoverageSample)), 0) << nlo;
         EXPECT_EQ(countBelow(*grid, region, nlo), countBelow(*grid, region, lo) + between) << nlo;
         EXPECT_GT(between + narrow.size(), 0u);
+    }
+}
+
+TEST(Coverage, BisectionReadsTheSamplesWithoutACopyAndFindsTheSameLevel)
+{
+    // bisectCoverage against the bisection it replaced (a copy of every sample compacted in
+    // place), written out here: the same level bit for bit, on samples with ramps of many widths
+    // and value ties (step 0); and the level found covers what was wanted to within a sample.
+    auto coverage = [](const CoverageSample& s, double level) {
+        return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
+    };
+    auto copied = [&](const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a,
+                      double b) {
+        std::vector<CoverageSample> active(samples.begin(), samples.end());
+        double settled = fullyBelow, constant = 0.0, slope = 0.0;
+        bool linear = false;
+        for (int iteration = 0; iteration < 60; ++iteration) {
+            const double mid = 0.5 * (a + b);
+            double covered = settled;
+            if (linear)
+                covered += constant + mid * slope;
+            else
+                for (const CoverageSample& s : active) covered += coverage(s, mid);
+            (covered < wanted ? a : b) = mid;
+            if (linear) continue;
+            std::size_t kept = 0;
+            bool ramps = true;
+            for (std::size_t i = 0; i < active.size(); ++i) {
+                const CoverageSample s = active[i];
+                const double atA = coverage(s, a), atB = coverage(s, b);
+                if (atA >= 1.0)
+                    settled += 1.0;
+                else if (atB > 0.0) {
+                    active[kept++] = s;
+                    ramps = ramps && s.step > 0.0f && atA > 0.0 && atB < 1.0;
+                }
+            }
+            active.resize(kept);
+            if (ramps) {
+                linear = true;
+                for (const CoverageSample& s : active) {
+                    constant += 0.5 - double(s.value) / s.step;
+                    slope += 1.0 / s.step;
+                }
+                active.clear();
+            }
+        }
+        return 0.5 * (a + b);
+    };
+    std::mt19937 rng(38);
+    std::uniform_real_distribution<double> value(-1.0, 1.0), width(0.0, 0.3), share(0.05, 0.95);
+    for (int trial = 0; trial < 40; ++trial) {
+        std::vector<CoverageSample> samples(std::size_t(2000 + 500 * trial));
+        for (CoverageSample& s : samples) {
+            s.value = float(value(rng));
+            s.step = trial % 4 == 0 || rng() % 7 == 0 ? 0.0f : float(width(rng));
+        }
+        const double below = double(rng() % 1000), wanted = below + share(rng) * double(samples.size());
+        const double level = bisectCoverage(samples, below, wanted, -1.5, 1.5);
+        EXPECT_EQ(level, copied(samples, below, wanted, -1.5, 1.5)) << "trial " << trial;
+        EXPECT_NEAR(below + coveredVoxels(samples, level), wanted, 1.0 + 1e-6) << "trial " << trial;
     }
 }
