@@ -5,6 +5,7 @@
 #include "engine/density/Coverage.h"
 #include "engine/frames/StrutFrames.h"
 #include "engine/frames/UnitCells.h"
+#include "fields/core/BlockLattice.h"
 #include "fields/struts/IsoRadius.h"
 #include "fields/struts/StrutConvolution.h"
 
@@ -12,6 +13,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <mutex>
 #include <random>
 
 using namespace voxlat;
@@ -113,5 +115,55 @@ TEST(Coverage, BisectionReadsTheSamplesWithoutACopyAndFindsTheSameLevel)
         const double level = bisectCoverage(samples, below, wanted, -1.5, 1.5);
         EXPECT_EQ(level, copied(samples, below, wanted, -1.5, 1.5)) << "trial " << trial;
         EXPECT_NEAR(below + coveredVoxels(samples, level), wanted, 1.0 + 1e-6) << "trial " << trial;
+    }
+}
+
+TEST(Coverage, CoarseBlocksOfAnyDepthVisitEveryLatticePointOnce)
+{
+    // The coarse pass samples a convolution lattice's region in blocks 64 samples tall
+    // (BlockLattice::depth): every lattice point is visited once, at its own position, whatever
+    // the depth, and the blocks' batches are 8 x 8 x depth at most.
+    struct Linear final : FieldNode {
+        void values(std::span<const Vec3d> points, std::span<double> out) const override
+        {
+            for (std::size_t n = 0; n < points.size(); ++n)
+                out[n] = points[n].x() + 2.0 * points[n].y() + 3.0 * points[n].z();
+        }
+        void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override
+        {
+            values(points, out);
+            for (Vec3d& g : grad.first(points.size())) g = Vec3d(1.0, 2.0, 3.0);
+        }
+        Interval bound(const Box3&) const override { return {-1e300, 1e300}; }
+    } field;
+    for (const int depth : {8, 64}) {
+        BlockLattice lattice;
+        lattice.base = Vec3d(-1.25, 0.5, 3.0);
+        lattice.step = Vec3d(0.1);
+        lattice.offset = Vec3d(1.5);
+        lattice.stride = {2, 2, 2};
+        lattice.count = {13, 9, 150};
+        lattice.depth = depth;
+        std::vector<int> visits(std::size_t(13 * 9 * 150), 0);
+        std::mutex mutex;
+        double worst = 0.0;
+        sampleBlocks(field, lattice, [&](std::size_t, const GridBatch& batch, auto first, std::span<const double> v) {
+            std::lock_guard<std::mutex> lock(mutex);
+            ASSERT_LE(batch.nx, 8);
+            ASSERT_LE(batch.ny, 8);
+            ASSERT_LE(batch.nz, depth);
+            std::size_t n = 0;
+            for (int i = 0; i < batch.nx; ++i)
+                for (int j = 0; j < batch.ny; ++j)
+                    for (int k = 0; k < batch.nz; ++k, ++n) {
+                        const int x = first[0] + i, y = first[1] + j, z = first[2] + k;
+                        ++visits[(std::size_t(x) * 9 + y) * 150 + z];
+                        const Vec3d p =
+                            lattice.base + Vec3d((x * 2 + 1.5) * 0.1, (y * 2 + 1.5) * 0.1, (z * 2 + 1.5) * 0.1);
+                        worst = std::max(worst, std::abs(v[n] - (p.x() + 2.0 * p.y() + 3.0 * p.z())));
+                    }
+        });
+        EXPECT_EQ(std::count(visits.begin(), visits.end(), 1), std::ptrdiff_t(visits.size())) << depth;
+        EXPECT_LT(worst, 1e-12) << depth;
     }
 }
