@@ -5,12 +5,16 @@
 #include "engine/density/Coverage.h"
 #include "engine/frames/StrutFrames.h"
 #include "engine/frames/UnitCells.h"
+#include "fields/core/BlockLattice.h"
 #include "fields/struts/IsoRadius.h"
 #include "fields/struts/StrutConvolution.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
+#include <mutex>
+#include <random>
 
 using namespace voxlat;
 using namespace voxlat::coverage;
@@ -50,5 +54,116 @@ TEST(Coverage, ANarrowerBandsSamplesAreTheWiderBandsPickedInOrder)
         EXPECT_EQ(std::memcmp(narrow.data(), picked.data(), narrow.size() * sizeof(CoverageSample)), 0) << nlo;
         EXPECT_EQ(countBelow(*grid, region, nlo), countBelow(*grid, region, lo) + between) << nlo;
         EXPECT_GT(between + narrow.size(), 0u);
+    }
+}
+
+TEST(Coverage, BisectionReadsTheSamplesWithoutACopyAndFindsTheSameLevel)
+{
+    // bisectCoverage against the bisection it replaced (a copy of every sample compacted in
+    // place), written out here: the same level bit for bit, on samples with ramps of many widths
+    // and value ties (step 0); and the level found covers what was wanted to within a sample.
+    auto coverage = [](const CoverageSample& s, double level) {
+        return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
+    };
+    auto copied = [&](const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a,
+                      double b) {
+        std::vector<CoverageSample> active(samples.begin(), samples.end());
+        double settled = fullyBelow, constant = 0.0, slope = 0.0;
+        bool linear = false;
+        for (int iteration = 0; iteration < 60; ++iteration) {
+            const double mid = 0.5 * (a + b);
+            double covered = settled;
+            if (linear)
+                covered += constant + mid * slope;
+            else
+                for (const CoverageSample& s : active) covered += coverage(s, mid);
+            (covered < wanted ? a : b) = mid;
+            if (linear) continue;
+            std::size_t kept = 0;
+            bool ramps = true;
+            for (std::size_t i = 0; i < active.size(); ++i) {
+                const CoverageSample s = active[i];
+                const double atA = coverage(s, a), atB = coverage(s, b);
+                if (atA >= 1.0)
+                    settled += 1.0;
+                else if (atB > 0.0) {
+                    active[kept++] = s;
+                    ramps = ramps && s.step > 0.0f && atA > 0.0 && atB < 1.0;
+                }
+            }
+            active.resize(kept);
+            if (ramps) {
+                linear = true;
+                for (const CoverageSample& s : active) {
+                    constant += 0.5 - double(s.value) / s.step;
+                    slope += 1.0 / s.step;
+                }
+                active.clear();
+            }
+        }
+        return 0.5 * (a + b);
+    };
+    std::mt19937 rng(38);
+    std::uniform_real_distribution<double> value(-1.0, 1.0), width(0.0, 0.3), share(0.05, 0.95);
+    for (int trial = 0; trial < 40; ++trial) {
+        std::vector<CoverageSample> samples(std::size_t(2000 + 500 * trial));
+        for (CoverageSample& s : samples) {
+            s.value = float(value(rng));
+            s.step = trial % 4 == 0 || rng() % 7 == 0 ? 0.0f : float(width(rng));
+        }
+        const double below = double(rng() % 1000), wanted = below + share(rng) * double(samples.size());
+        const double level = bisectCoverage(samples, below, wanted, -1.5, 1.5);
+        EXPECT_EQ(level, copied(samples, below, wanted, -1.5, 1.5)) << "trial " << trial;
+        EXPECT_NEAR(below + coveredVoxels(samples, level), wanted, 1.0 + 1e-6) << "trial " << trial;
+    }
+}
+
+TEST(Coverage, CoarseBlocksOfAnyDepthVisitEveryLatticePointOnce)
+{
+    // The coarse pass samples a convolution lattice's region in blocks 64 samples tall
+    // (BlockLattice::depth): every lattice point is visited once, at its own position, whatever
+    // the depth, and the blocks' batches are 8 x 8 x depth at most.
+    struct Linear final : FieldNode {
+        void values(std::span<const Vec3d> points, std::span<double> out) const override
+        {
+            for (std::size_t n = 0; n < points.size(); ++n)
+                out[n] = points[n].x() + 2.0 * points[n].y() + 3.0 * points[n].z();
+        }
+        void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override
+        {
+            values(points, out);
+            for (Vec3d& g : grad.first(points.size())) g = Vec3d(1.0, 2.0, 3.0);
+        }
+        Interval bound(const Box3&) const override { return {-1e300, 1e300}; }
+    } field;
+    for (const int depth : {8, 64}) {
+        BlockLattice lattice;
+        lattice.base = Vec3d(-1.25, 0.5, 3.0);
+        lattice.step = Vec3d(0.1);
+        lattice.offset = Vec3d(1.5);
+        lattice.stride = {2, 2, 2};
+        lattice.count = {13, 9, 150};
+        lattice.depth = depth;
+        std::vector<int> visits(std::size_t(13 * 9 * 150), 0);
+        std::mutex mutex;
+        double worst = 0.0;
+        sampleBlocks(field, lattice, [&](std::size_t, const GridBatch& batch, auto first, std::span<const double> v) {
+            std::lock_guard<std::mutex> lock(mutex);
+            ASSERT_LE(batch.nx, 8);
+            ASSERT_LE(batch.ny, 8);
+            ASSERT_LE(batch.nz, depth);
+            std::size_t n = 0;
+            for (int i = 0; i < batch.nx; ++i)
+                for (int j = 0; j < batch.ny; ++j)
+                    for (int k = 0; k < batch.nz; ++k, ++n) {
+                        const int x = first[0] + i, y = first[1] + j, z = first[2] + k;
+                        ++visits[(std::size_t(x) * 9 + y) * 150 + z];
+                        const Vec3d p =
+                            lattice.base + Vec3d((x * 2 + 1.5) * 0.1, (y * 2 + 1.5) * 0.1, (z * 2 + 1.5) * 0.1);
+                        worst = std::max(worst, std::abs(v[n] - (p.x() + 2.0 * p.y() + 3.0 * p.z())));
+                    }
+        });
+        EXPECT_EQ(std::count(visits.begin(), visits.end(), 1), std::ptrdiff_t(visits.size())) << depth;
+        EXPECT_LT(worst, 1e-12) << depth;
     }
 }

@@ -2093,6 +2093,15 @@ TEST(StrutIndex, GatherListsEveryReachingSegmentOnceInAscendingOrder)
         for (std::uint32_t j = 0; j < a.size(); ++j)
             if (segmentBoxDistance(a[j], b[j], box) <= reach[j]) expected.push_back(j);
         ASSERT_EQ(got, expected) << "trial " << trial;
+        // With the box distances: the same list, and each kept segment's segmentBoxDistance
+        // bit for bit (StrutConvolution::bound sums its upper bounds from them).
+        std::vector<std::uint32_t> again;
+        std::vector<double> distance{-7.0};
+        index.gather(box, again, &distance);
+        ASSERT_EQ(again, expected) << "trial " << trial;
+        ASSERT_EQ(distance.size(), again.size()) << "trial " << trial;
+        for (std::size_t n = 0; n < again.size(); ++n)
+            ASSERT_EQ(distance[n], segmentBoxDistance(a[again[n]], b[again[n]], box)) << "trial " << trial;
         listed += got.size();
         (side > 3.0 ? sorted : merged) += 1;
     }

@@ -278,7 +278,12 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
                       const std::function<void()>& interrupt)
 {
     const auto coverage = sampleCoverage;
-    std::vector<CoverageSample> active(samples.begin(), samples.end());
+    // The first step reads @a samples themselves and keeps in @a active only those the level
+    // still cuts: no copy of every sample (each of its pages written, and held beside the
+    // samples). Its room is reserved, not written: only the pages the kept samples fill are
+    // touched.
+    std::vector<CoverageSample> active;
+    bool first = true;
     double settled = fullyBelow;  // whole voxels below every level left in the bracket
     // Once every sample left is partly covered across the whole bracket, the coverage is linear
     // there: settled + constant + level * slope, and the remaining steps cost nothing.
@@ -288,12 +293,13 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
         if (interrupt) interrupt();
         const double mid = 0.5 * (a + b);
         double covered = settled;
+        const std::vector<CoverageSample>& left = first ? samples : active;  // the samples still cut
         if (linear)
             covered += constant + mid * slope;
         else
-            for (std::size_t i = 0; i < active.size(); ++i) {
+            for (std::size_t i = 0; i < left.size(); ++i) {
                 if (interrupt && (i & 0xfffff) == 0xfffff) interrupt();  // a step over 10^7 samples
-                covered += coverage(active[i], mid);
+                covered += coverage(left[i], mid);
             }
         const bool raiseA = covered < wanted;
         (raiseA ? a : b) = mid;
@@ -301,18 +307,24 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
         // Coverage is monotone in the level: full at a means full on [a, b], empty at b empty.
         std::size_t kept = 0;
         bool ramps = true;
-        for (std::size_t i = 0; i < active.size(); ++i) {
+        if (first) active.reserve(samples.size());
+        for (std::size_t i = 0; i < left.size(); ++i) {
             if (interrupt && (i & 0xfffff) == 0xfffff) interrupt();
-            const CoverageSample s = active[i];
+            const CoverageSample s = left[i];
             const double atA = coverage(s, a), atB = coverage(s, b);
             if (atA >= 1.0)
                 settled += 1.0;
             else if (atB > 0.0) {
-                active[kept++] = s;
+                if (first)
+                    active.push_back(s);
+                else
+                    active[kept] = s;
+                ++kept;
                 ramps = ramps && s.step > 0.0f && atA > 0.0 && atB < 1.0;
             }
         }
         active.resize(kept);
+        first = false;
         if (ramps) {
             linear = true;
             for (const CoverageSample& s : active) {

@@ -94,9 +94,11 @@ struct CoarseCell {
 /// Samples g at every stride-th voxel centre of the domain, in parallel and in a fixed order.
 /// @a cells, when given, receives every cell of neighbouring samples that are all below 1e30
 /// (inside a mask) with its change of g per voxel: stepNear() picks the widest voxel step about a
-/// bracket from them. @a interrupt is called per block and throws to stop.
+/// bracket from them. @a interrupt is called per block and throws to stop. Blocks are 8 x 8 x
+/// @a depth samples (BlockLattice::depth).
 std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int stride,
-                                 const std::function<void()>& interrupt, std::vector<CoarseCell>* cells = nullptr)
+                                 const std::function<void()>& interrupt, std::vector<CoarseCell>* cells = nullptr,
+                                 int depth = 8)
 {
     // Every stride-th voxel centre, from the middle of the first stride: min + (i stride + half + 1/2) voxel.
     BlockLattice lattice;
@@ -104,6 +106,7 @@ std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int s
     lattice.step = Vec3d(domain.voxel);
     lattice.offset = Vec3d(stride / 2 + 0.5);
     lattice.stride = {stride, stride, stride};
+    lattice.depth = depth;
     for (int a = 0; a < 3; ++a) lattice.count[a] = (domain.dims[a] + stride - 1) / stride;
     std::vector<std::vector<float>> perBlock(lattice.blockCount());
     std::vector<std::vector<CoarseCell>> blockCells(cells ? perBlock.size() : 0);
@@ -277,8 +280,12 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         if (context) context->checkCancelled();
     };
     std::vector<CoarseCell> coarseCells;
-    std::vector<float> samples =
-        coarseSamples(indicator, coarseDomain, stride, interrupt, masked || subVoxel ? &coarseCells : nullptr);
+    // An indicator evaluated in stacks (a convolution lattice that nothing tiles) is sampled in
+    // blocks 64 samples tall: rows of 64 share a strut's row set-up that rows of 8 repeated eight
+    // times (the coarse pass was a ninth of the 25 mm wireframe's run). Its samples move within
+    // the rows' table bound; they only bracket the level and estimate the step near it.
+    std::vector<float> samples = coarseSamples(indicator, coarseDomain, stride, interrupt,
+                                               masked || subVoxel ? &coarseCells : nullptr, stackLeaves > 1 ? 64 : 8);
     // Share of the samples inside the mask: the quantiles of the target sit within that share.
     const double share =
         masked ? double(std::count_if(samples.begin(), samples.end(), [](float v) { return v < 1e30f; })) /

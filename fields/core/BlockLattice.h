@@ -11,6 +11,7 @@
 #include <array>
 #include <cstddef>
 #include <span>
+#include <vector>
 
 namespace voxlat {
 
@@ -23,9 +24,15 @@ struct BlockLattice {
     Vec3d offset{0.0};
     std::array<int, 3> stride{1, 1, 1};
     std::array<int, 3> count{0, 0, 0};
+    /// Points of a block along z (8 x 8 x depth): 8, or a multiple of 8 for long rows along z (a
+    /// convolution lattice's rows of 8 points are mostly their set-up).
+    int depth = 8;
 
     /// Blocks along each axis (the last one cut at the lattice's far face).
-    std::array<int, 3> blocks() const { return {(count[0] + 7) / 8, (count[1] + 7) / 8, (count[2] + 7) / 8}; }
+    std::array<int, 3> blocks() const
+    {
+        return {(count[0] + 7) / 8, (count[1] + 7) / 8, (count[2] + depth - 1) / depth};
+    }
     std::size_t blockCount() const
     {
         const auto b = blocks();
@@ -35,7 +42,7 @@ struct BlockLattice {
     std::array<int, 3> firstIndex(std::size_t b) const
     {
         const auto n = blocks();
-        return {int(b / (std::size_t(n[1]) * n[2])) * 8, int((b / n[2]) % n[1]) * 8, int(b % n[2]) * 8};
+        return {int(b / (std::size_t(n[1]) * n[2])) * 8, int((b / n[2]) % n[1]) * 8, int(b % n[2]) * depth};
     }
     /// Block @a b as a batch for FieldNode::gridValues().
     GridBatch batch(std::size_t b) const
@@ -48,7 +55,7 @@ struct BlockLattice {
         }
         g.nx = std::min(8, count[0] - first[0]);
         g.ny = std::min(8, count[1] - first[1]);
-        g.nz = std::min(8, count[2] - first[2]);
+        g.nz = std::min(depth, count[2] - first[2]);
         return g;
     }
 };
@@ -61,7 +68,7 @@ template <typename Fn>
 void sampleBlocks(const FieldNode& field, const BlockLattice& lattice, Fn&& fn)
 {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, lattice.blockCount()), [&](const auto& range) {
-        std::array<double, 512> values;
+        std::vector<double> values(std::size_t(64) * std::size_t(lattice.depth));
         for (std::size_t b = range.begin(); b != range.end(); ++b) {
             const GridBatch batch = lattice.batch(b);
             const std::span<double> out(values.data(), batch.size());

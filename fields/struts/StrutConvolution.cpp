@@ -510,8 +510,11 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                         const double at = (hRow - h0) / (hz / phases);
                         const int n = int(std::floor(at));
                         r.tau = at - n;
-                        r.phase = ((n % phases) + phases) % phases;
-                        r.n0 = (n - r.phase) / phases;
+                        // q = floor(n / m), p = n - m q, for m = 2, 3 or 4: a shift or a division
+                        // by a constant (a multiply), not two divisions per row.
+                        const int index = phases == 2 ? n >> 1 : phases == 4 ? n >> 2 : n >= 0 ? n / 3 : -((2 - n) / 3);
+                        r.phase = n - phases * index;
+                        r.n0 = index;
                     }
                     // A plane's row reads nodes only at the points of its needed runs (pass 2:
                     // within the first run's start and the last one's end, fillLo..fillHi there,
@@ -639,6 +642,22 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     seedP[l] *= seedT4;
                 }
         };
+        // A block's long rows (a stack of leaves: ny > 1, rows along z of 16 points or more) take
+        // their Gaussians' four-lane seeds from recurrences across y within a column of rows, as a
+        // plane's do across x: lane l at k0 + l (k0 the column's first point of any row) holds E_l,
+        // its row step P_l and its step across y S_l; r2 is quadratic in jj and k with a constant
+        // cross term, so E_l(jj + 1) = E_l(jj) S_l(jj), S_l(jj + 1) = S_l(jj) Qy and P_l(jj + 1) =
+        // P_l(jj) Ty^4 (Qy = exp(-2 dy^2 (1 - u_y^2) / 2 sigma^2), Ty = exp(2 dy u_y hz / 2 sigma^2)).
+        // Three exponentials per column and three per strut, not two per row: at most ny - 1 steps
+        // across y and (nz / 4) along a row, a few 1e-15 relative. Only where r2 / 2 sigma^2 stays
+        // below 600 over the column's rows (r2 is convex: its corners), so no Gaussian underflows.
+        const bool blockSeeds = !acrossColumns && !seeded && ny > 1 && batch.nz >= 16;
+        double ySeedQ = 0.0, ySeedT4 = 0.0, ySeedT = 0.0;
+        if (blockSeeds) {
+            ySeedQ = std::exp(-2.0 * dy * dy * (1.0 - u.y() * u.y()) * inv2s2);
+            ySeedT = std::exp(2.0 * hz * dy * u.y() * inv2s2);
+            ySeedT4 = std::exp(8.0 * hz * dy * u.y() * inv2s2);
+        }
         // Columns beyond the strut's reach have no row (only the columns' Gaussians across
         // them step through every column).
         const int iBegin = acrossColumns ? 0 : iFirst, iEnd = acrossColumns ? nx - 1 : iLast;
@@ -650,6 +669,47 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     columnGauss[k] *= columnStep[k];
                     columnStep[k] *= columnQ;
                 }
+            // The column's seeds (blockSeeds), at its row colRow.
+            bool columnSeeded = false;
+            int colK0 = 0, colRow = 0;
+            double colE[4] = {}, colS[4] = {}, colP[4] = {};
+            if (blockSeeds) {
+                int kFirst = nz, kLast = -1;
+                for (int jj = 0; jj < ny; ++jj) {
+                    const RowRange& range = rows[std::size_t(i) * ny + jj];
+                    if (range.kLo > range.kHi) continue;
+                    kFirst = std::min(kFirst, range.kLo);
+                    kLast = std::max(kLast, range.kHi);
+                }
+                auto r2At = [&](int jj, int k) {
+                    const double y = d0.y() + jj * dy, zz = d0.z() + k * dz;
+                    const double h = px * u.x() + y * u.y() + zz * u.z();
+                    return px * px + y * y + zz * zz - h * h;
+                };
+                if (kFirst <= kLast && std::max(std::max(r2At(0, kFirst), r2At(0, kLast + 4)),
+                                                std::max(r2At(ny - 1, kFirst), r2At(ny - 1, kLast + 4))) *
+                                               inv2s2 <
+                                           600.0) {
+                    // rowGaussiansFrom's lanes and steps at (jj, k) = (0, kFirst).
+                    const double hRow = px * u.x() + d0.y() * u.y() + d0.z() * u.z();
+                    const double r0 = px * px + d0.y() * d0.y() + d0.z() * d0.z() - hRow * hRow;
+                    const double b = 2.0 * (d0.z() * dz - hRow * hz) + c;
+                    const double kk = kFirst;
+                    double ratios[7];
+                    ratios[0] = std::exp(-(b + 2.0 * c * kk) * inv2s2);
+                    for (int m = 1; m < 7; ++m) ratios[m] = ratios[m - 1] * q;
+                    colE[0] = std::exp(-(r0 + kk * (b - c) + kk * kk * c) * inv2s2);
+                    for (int l = 1; l < 4; ++l) colE[l] = colE[l - 1] * ratios[l - 1];
+                    for (int l = 0; l < 4; ++l) colP[l] = ((ratios[l] * ratios[l + 1]) * ratios[l + 2]) * ratios[l + 3];
+                    // S_l = S_0 Ty^l: D_l = D_0 - 2 l hz dy u_y.
+                    const double across = 2.0 * dy * (d0.y() - u.y() * hRow) + dy * dy * (1.0 - u.y() * u.y()) -
+                                          2.0 * hz * dy * u.y() * kk;
+                    colS[0] = std::exp(-across * inv2s2);
+                    for (int l = 1; l < 4; ++l) colS[l] = colS[l - 1] * ySeedT;
+                    colK0 = kFirst;
+                    columnSeeded = true;
+                }
+            }
             for (int jj = 0; jj < ny; ++jj, n += nz) {
                 const RowRange& range = rows[std::size_t(i) * ny + jj];
                 // Seeded rows start and end within the strut's reach of the plane (k0..kSeedEnd):
@@ -685,11 +745,13 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     row.inHi = kHi;
                 }
                 // A tabled row's points a step or more inside the capsule's range skip their
-                // cut-off test where both ends of that run are proven within it.
-                // (Only where the points read hold a group of four within that run: the four-lane
-                // loop skips tests for whole groups alone, and a point passes its test anyway.)
+                // cut-off test where both ends of that run are proven within it. Only runs of
+                // kProvenRun points or more among the points read: the proof (two distances,
+                // scalar) costs about what the four-lane tests of three groups do, and skips only
+                // tests that pass (the same sums either way).
+                constexpr int kProvenRun = 16;
                 if (tabled && range.inLo <= range.inHi &&
-                    std::min(range.inHi, fillHi) - std::max(range.inLo, fillLo) >= 3 &&
+                    std::min(range.inHi, fillHi) - std::max(range.inLo, fillLo) + 1 >= kProvenRun &&
                     provenWithinCutoff(constants, row, range.inLo, range.inHi, roundoff)) {
                     row.inLo = range.inLo;
                     row.inHi = range.inHi;
@@ -700,6 +762,17 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 if (std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0) {
                     if (acrossColumns) {
                         g = columnGauss;
+                    } else if (columnSeeded) {
+                        for (; colRow < jj; ++colRow)
+                            for (int l = 0; l < 4; ++l) {
+                                colE[l] *= colS[l];
+                                colS[l] *= ySeedQ;
+                                colP[l] *= ySeedT4;
+                            }
+                        if (avx2)
+                            fillGaussiansAvx2(colE, colP, q16, kHi - colK0 + 1, gauss.data() + colK0, kLo - colK0);
+                        else
+                            fillGaussiansScalar(colE, colP, q16, kHi - colK0 + 1, gauss.data() + colK0, kLo - colK0);
                     } else if (seeded) {
                         seedsAt(i);
                         // The recurrences stepped from k0, written from fillLo's group: the same
@@ -984,14 +1057,18 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
 Interval StrutConvolution::bound(const Box3& box) const
 {
     thread_local std::vector<std::uint32_t> cand;
-    mIndex.gather(box, cand);
+    thread_local std::vector<double> boxDistance;
+    // Each strut's distance to the box, the gather's own where its test took one (a strut near
+    // the edge of its reach took it twice, a tenth of the wireframe's solve in segmentBoxDistance).
+    mIndex.gather(box, cand, &boxDistance);
     double lo = 0.0, hi = 0.0;
     const Vec3d c = box.center();
     const double radius = box.radius();
-    for (const std::uint32_t j : cand) {
+    for (std::size_t n = 0; n < cand.size(); ++n) {
+        const std::uint32_t j = cand[n];
         const GaussianSegment& s = mSegments[j];
         const double sigma = s.sigma;
-        const double dMin = segmentBoxDistance(s.a, mEnd[j], box);
+        const double dMin = boxDistance[n];
         hi += gaussianSegmentUpperBound(dMin, sigma, mPeak[j] / (sigma * kSqrtTwoPi));
         // A positive lower bound only where the whole box lies within the cut-off.
         double h, r2;

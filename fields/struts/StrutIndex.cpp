@@ -23,14 +23,15 @@ double pointSegmentDistanceSqr(const Vec3d& p, const Vec3d& a, const Vec3d& b)
 }
 
 namespace {
-double pointBoxDistance(const Vec3d& p, const Box3& box)
+/// The squared distance from @a p to @a box.
+double pointBoxDistanceSqr(const Vec3d& p, const Box3& box)
 {
     double s = 0.0;
     for (int a = 0; a < 3; ++a) {
         const double d = std::max({box.min[a] - p[a], 0.0, p[a] - box.max[a]});
         s += d * d;
     }
-    return std::sqrt(s);
+    return s;
 }
 }  // namespace
 
@@ -54,7 +55,10 @@ double segmentBoxDistance(const Vec3d& a, const Vec3d& b, const Box3& box)
     }
     for (int i = 1; i < n; ++i)  // insertion sort: at most eight values
         for (int j = i; j > 0 && ts[j] < ts[j - 1]; --j) std::swap(ts[j], ts[j - 1]);
-    double best = std::min(pointBoxDistance(a, box), pointBoxDistance(b, box));
+    // The candidates' squared distances, and one square root of their least: sqrt is monotone and
+    // correctly rounded, so sqrt(min) is the min of the square roots bit for bit (one root per
+    // call instead of one per candidate: the solve's cull takes one call per strut and leaf).
+    double best = std::min(pointBoxDistanceSqr(a, box), pointBoxDistanceSqr(b, box));
     for (int i = 0; i + 1 < n && best > 0.0; ++i) {
         const double t0 = ts[i], t1 = ts[i + 1];
         if (!(t1 > t0)) continue;
@@ -68,14 +72,14 @@ double segmentBoxDistance(const Vec3d& a, const Vec3d& b, const Box3& box)
             A += ab[k] * ab[k];
             B += 2.0 * (a[k] - face) * ab[k];
         }
-        best = std::min(best, pointBoxDistance(a + t1 * ab, box));
+        best = std::min(best, pointBoxDistanceSqr(a + t1 * ab, box));
         if (A > 0.0) {
             const double t = std::clamp(-B / (2.0 * A), t0, t1);
-            best = std::min(best, pointBoxDistance(a + t * ab, box));
+            best = std::min(best, pointBoxDistanceSqr(a + t * ab, box));
         }
     }
     // Rounding in the candidates' positions: a hair below, so the result stays a lower bound.
-    return std::max(0.0, best - 1e-12 * (ab.length() + box.radius() + 1.0));
+    return std::max(0.0, std::sqrt(best) - 1e-12 * (ab.length() + box.radius() + 1.0));
 }
 
 double segmentBoxMaxDistance(const Vec3d& a, const Vec3d& b, const Box3& box)
@@ -176,9 +180,10 @@ void StrutIndex::candidates(const Box3& box, std::vector<std::uint32_t>& out) co
             }
 }
 
-void StrutIndex::gather(const Box3& box, std::vector<std::uint32_t>& out) const
+void StrutIndex::gather(const Box3& box, std::vector<std::uint32_t>& out, std::vector<double>* boxDistance) const
 {
     candidates(box, out);
+    if (boxDistance) boxDistance->clear();
     const Vec3d c = box.center();
     const double radius = box.radius();
     std::size_t kept = 0;
@@ -187,7 +192,12 @@ void StrutIndex::gather(const Box3& box, std::vector<std::uint32_t>& out) const
         // Cheap accept / reject by the centre distance first; the exact test only near the edge.
         const double dc = std::sqrt(pointSegmentDistanceSqr(c, mA[j], mB[j]));
         if (dc - radius > reach) continue;
-        if (dc > reach && segmentBoxDistance(mA[j], mB[j], box) > reach) continue;
+        double d = -1.0;  // the box distance, once taken
+        if (dc > reach) {
+            d = segmentBoxDistance(mA[j], mB[j], box);
+            if (d > reach) continue;
+        }
+        if (boxDistance) boxDistance->push_back(d >= 0.0 ? d : segmentBoxDistance(mA[j], mB[j], box));
         out[kept++] = j;
     }
     out.resize(kept);

@@ -28,8 +28,10 @@ public:
     StrutIndex() = default;
     StrutIndex(const std::vector<Vec3d>& a, const std::vector<Vec3d>& b, const std::vector<double>& reach);
 
-    /// Replaces @a out with the segments whose reach capsule meets @a box, ascending.
-    void gather(const Box3& box, std::vector<std::uint32_t>& out) const;
+    /// Replaces @a out with the segments whose reach capsule meets @a box, ascending. With
+    /// @a boxDistance, also replaces it with segmentBoxDistance() of each segment kept to @a box
+    /// (the same doubles; the test's own where it took one, so none is taken twice).
+    void gather(const Box3& box, std::vector<std::uint32_t>& out, std::vector<double>* boxDistance = nullptr) const;
     /// Replaces @a out with the segments whose bins overlap @a box, ascending (a superset of
     /// gather(); no distance test).
     void candidates(const Box3& box, std::vector<std::uint32_t>& out) const;
