@@ -920,7 +920,21 @@ void Job::aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::pat
                 m.share = meshShareOf(node, mStreamedAim->made.measures.volume);
                 return m;
             }
+            // The mesh the outputs are made from (variant() takes it if the level stays: most aims
+            // keep it), its volume summed as a streamed STL's is (the same double): one
+            // marching-cubes pass, not a volume pass and then the mesh's. Not while a memo's kept
+            // values are held (until the aim ends): that mesh is made after them (the 50 mm
+            // trimmed frame peaked at 1.59 GB against 1.48 with the mesh beside them).
+            const bool heldMesh = !creased && options.extractor == MeshExtractor::MarchingCubes && !memo;
+            MarchingCubesStats meshed;
+            if (heldMesh)
+                m.mesh = timed("mesh", [&] {
+                    return reporting(mContext, "meshing", [&](const ProgressFn& progress) {
+                        return std::make_unique<TriangleMesh>(marchingCubes(*m.grid, 0.0f, progress, &meshed));
+                    });
+                });
             volume = timed(stage, [&] {
+                if (heldMesh) return marchingCubesVolume(*m.mesh, meshed, mDomain.box.center());
                 if (creased) {
                     TriangleMesh mesh = reporting(mContext, "meshing to measure", [&](const ProgressFn& progress) {
                         return marchingCubes(*m.grid, 0.0f, progress);
@@ -936,15 +950,7 @@ void Job::aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::pat
                 return reporting(mContext, "measuring the mesh's volume", [&](const ProgressFn& progress) {
                     if (options.extractor == MeshExtractor::Bcc)
                         return bccTetrahedra(*m.grid, *surfaceField(), 0.0f, progress).volume();
-                    // A memo's kept values are held until the aim ends: its mesh is made after them
-                    // (the 50 mm trimmed frame peaked at 1.59 GB against 1.48 with the mesh beside them).
-                    if (memo) return marchingCubesVolume(*m.grid, 0.0f, mDomain.box.center(), progress);
-                    // The mesh the outputs are made from (variant() takes it if the level stays:
-                    // most aims keep it), its volume summed as a streamed STL's is (the same
-                    // double): one marching-cubes pass, not a volume pass and then the mesh's.
-                    MarchingCubesStats stats;
-                    m.mesh = std::make_unique<TriangleMesh>(marchingCubes(*m.grid, 0.0f, progress, &stats));
-                    return marchingCubesVolume(*m.mesh, stats, mDomain.box.center());
+                    return marchingCubesVolume(*m.grid, 0.0f, mDomain.box.center(), progress);
                 });
             });
         }
