@@ -697,9 +697,23 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 // The recurrence's factors stay well inside double range for ordinary batches;
                 // otherwise every point takes its own exponential.
                 const double* g = gauss.data();
+                // A seeded tabled row (AVX2) takes its Gaussians from the seeds' lanes as its
+                // kernel steps them (addStrutRowTabledSeededAvx2): the doubles the fill below
+                // would write, without the array.
+                bool fused = false;
+                GaussianLanes fusedLanes;
                 if (std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0) {
                     if (acrossColumns) {
                         g = columnGauss;
+                    } else if (seeded && tabled && avx2) {
+                        seedsAt(i);
+                        fused = true;
+                        for (int l = 0; l < 4; ++l) {
+                            fusedLanes.e[l] = seedE[l];
+                            fusedLanes.r[l] = seedP[l];
+                        }
+                        fusedLanes.q16 = q16;
+                        fusedLanes.k = k0;
                     } else if (seeded) {
                         seedsAt(i);
                         // The recurrences stepped from k0, written from fillLo's group: the same
@@ -750,7 +764,9 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                                                   tw[3],
                                                   nodeValue.data() + next,
                                                   nodeSlope.data() + next};
-                        if (avx2)
+                        if (fused)
+                            addStrutRowTabledSeededAvx2(constants, part, table, fusedLanes, out.data() + n);
+                        else if (avx2)
                             addStrutRowTabledAvx2(constants, part, table, g, out.data() + n);
                         else
                             addStrutRowTabledScalar(constants, part, table, g, out.data() + n);
