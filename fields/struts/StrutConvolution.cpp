@@ -530,8 +530,11 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 const std::size_t count = std::size_t(nHi - nLo + 1);
                 // Margin: the four-lane loop reads up to four nodes past a row's last point.
                 phaseStride = count + 8;
-                nodeValue.assign(phaseStride * std::size_t(phases), 0.0);
-                nodeSlope.assign(phaseStride * std::size_t(phases), 0.0);
+                // Only the margin past the nodes made is zeroed (the nodes are all written below):
+                // the same table as zeroing it all first.
+                nodeValue.resize(phaseStride * std::size_t(phases));
+                nodeSlope.resize(phaseStride * std::size_t(phases));
+                const std::size_t written = avx2 ? (count + 3) / 4 * 4 : count;
                 for (int p = 0; p < phases; ++p) {
                     // Phase p's nodes h0 + (m q + p) hz / m, q = nLo.., with slopes of their step hz / m.
                     const double from = phases == 1 ? h0 : h0 + p * (hz / phases);
@@ -543,6 +546,8 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                         strutRowNodesScalar(constants, from, hz, nLo, int(count), value, slope);
                     if (phases > 1)
                         for (std::size_t m = 0; m < count; ++m) slope[m] /= phases;
+                    std::fill(value + written, value + phaseStride, 0.0);
+                    std::fill(slope + written, slope + phaseStride, 0.0);
                 }
             }
         }
