@@ -662,6 +662,82 @@ TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
     EXPECT_GT(lanesAdded, lanesCompared / 8);
 }
 
+TEST(StrutRows, SeededTabledRowsAddTheFilledRowsDoubles)
+{
+    // A seeded tabled row takes its Gaussians from the recurrences' lanes as it steps them
+    // (addStrutRowTabledSeeded*), not from fillGaussians' array: the same sums, bit for bit, in
+    // both forms, over a row's parts (runs of points, in order) from any start of the lanes.
+    if (!hasAvx2Rows()) GTEST_SKIP() << "this CPU (or build) has no AVX2 row loop to compare";
+    std::mt19937_64 rng(20261201);
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    std::uint64_t added = 0, compared = 0;
+    for (int trial = 0; trial < 20000; ++trial) {
+        const Vec3d a(unit(rng), unit(rng), unit(rng));
+        Vec3d dir(unit(rng), unit(rng), unit(rng));
+        dir.normalize();
+        const double sigma = 0.05 + 0.5 * std::abs(unit(rng)), length = 0.1 + 3.0 * std::abs(unit(rng));
+        const double rc = gaussianCutoffRadius(sigma, 1e-4);
+        const StrutRowConstants c{a.x(), a.y(),       a.z(),         dir.x(), dir.y(), dir.z(), length,
+                                  sigma, 1.0 / sigma, sigma * sigma, 1.0,     0.0,     rc * rc};
+        const int nz = 16 + int(rng() % 80);
+        const int k0 = int(rng() % std::uint64_t(nz / 2));
+        const double lanes0[4] = {std::abs(unit(rng)), std::abs(unit(rng)), std::abs(unit(rng)), std::abs(unit(rng))};
+        const double steps0[4] = {1.0 + 0.1 * unit(rng), 1.0 + 0.1 * unit(rng), 1.0 + 0.1 * unit(rng),
+                                  1.0 + 0.1 * unit(rng)};
+        const double q16 = 1.0 + 0.01 * unit(rng);
+        const double x = 0.3 * unit(rng), y = 0.3 * unit(rng), z0 = unit(rng) - 1.0,
+                     dz = 0.01 + 0.05 * std::abs(unit(rng));
+        // Parts: up to three runs within k0..nz - 1, in order, gaps between them.
+        std::vector<StrutRow> parts;
+        for (int from = k0 + int(rng() % 4); from < nz && parts.size() < 3;) {
+            const int kHi = std::min(nz - 1, from + int(rng() % 30));
+            StrutRow part{x, y, z0, dz, from, kHi};
+            if (rng() % 2) {
+                part.inLo = from + int(rng() % 6);
+                part.inHi = kHi - int(rng() % 6);
+            }
+            parts.push_back(part);
+            from = kHi + 1 + int(rng() % 8);
+        }
+        const int n0 = int(rng() % 5);
+        std::vector<double> value(std::size_t(n0 + nz + 8)), slope(value.size());
+        for (std::size_t m = 0; m < value.size(); ++m) {
+            value[m] = std::abs(unit(rng));
+            slope[m] = 0.1 * unit(rng);
+        }
+        const double t = 0.5 * (unit(rng) + 1.0), t2 = t * t, t3 = t2 * t;
+        const StrutRowTable table{value.data(),    slope.data(),     n0,     2 * t3 - 3 * t2 + 1,
+                                  t3 - 2 * t2 + t, -2 * t3 + 3 * t2, t3 - t2};
+        std::vector<double> gauss(std::size_t(nz) + 4);
+        fillGaussiansScalar(lanes0, steps0, q16, nz - k0, gauss.data() + k0);
+        std::vector<double> before(static_cast<std::size_t>(nz));
+        for (double& v : before) v = trial % 2 ? std::abs(unit(rng)) : 0.0;
+        std::vector<double> filledS = before, filledV = before, seededS = before, seededV = before;
+        GaussianLanes lanesS{}, lanesV{};
+        for (int l = 0; l < 4; ++l) {
+            lanesS.e[l] = lanesV.e[l] = lanes0[l];
+            lanesS.r[l] = lanesV.r[l] = steps0[l];
+        }
+        lanesS.q16 = lanesV.q16 = q16;
+        lanesS.k = lanesV.k = k0;
+        for (const StrutRow& part : parts) {
+            addStrutRowTabledScalar(c, part, table, gauss.data(), filledS.data());
+            addStrutRowTabledAvx2(c, part, table, gauss.data(), filledV.data());
+            addStrutRowTabledSeededScalar(c, part, table, lanesS, seededS.data());
+            addStrutRowTabledSeededAvx2(c, part, table, lanesV, seededV.data());
+            ASSERT_LE(lanesV.k, part.kHi) << trial;
+            ASSERT_LE(lanesS.k, part.kHi) << trial;
+        }
+        ASSERT_EQ(std::memcmp(filledS.data(), seededS.data(), before.size() * sizeof(double)), 0) << trial;
+        ASSERT_EQ(std::memcmp(filledV.data(), seededV.data(), before.size() * sizeof(double)), 0) << trial;
+        for (int k = 0; k < nz; ++k) {
+            ++compared;
+            added += seededV[std::size_t(k)] != before[std::size_t(k)] ? 1 : 0;
+        }
+    }
+    EXPECT_GT(added, compared / 8);
+}
+
 TEST(StrutRows, ProvenPointsPassTheCutoffTestAndAddTheSameDoubles)
 {
     // provenWithinCutoff (a tabled row's points inside the capsule added without their test):

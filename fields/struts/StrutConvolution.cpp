@@ -533,8 +533,11 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 const std::size_t count = std::size_t(nHi - nLo + 1);
                 // Margin: the four-lane loop reads up to four nodes past a row's last point.
                 phaseStride = count + 8;
-                nodeValue.assign(phaseStride * std::size_t(phases), 0.0);
-                nodeSlope.assign(phaseStride * std::size_t(phases), 0.0);
+                // Only the margin past the nodes made is zeroed (the nodes are all written below):
+                // the same table as zeroing it all first.
+                nodeValue.resize(phaseStride * std::size_t(phases));
+                nodeSlope.resize(phaseStride * std::size_t(phases));
+                const std::size_t written = avx2 ? (count + 3) / 4 * 4 : count;
                 for (int p = 0; p < phases; ++p) {
                     // Phase p's nodes h0 + (m q + p) hz / m, q = nLo.., with slopes of their step hz / m.
                     const double from = phases == 1 ? h0 : h0 + p * (hz / phases);
@@ -546,6 +549,8 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                         strutRowNodesScalar(constants, from, hz, nLo, int(count), value, slope);
                     if (phases > 1)
                         for (std::size_t m = 0; m < count; ++m) slope[m] /= phases;
+                    std::fill(value + written, value + phaseStride, 0.0);
+                    std::fill(slope + written, slope + phaseStride, 0.0);
                 }
             }
         }
@@ -759,6 +764,11 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 // The recurrence's factors stay well inside double range for ordinary batches;
                 // otherwise every point takes its own exponential.
                 const double* g = gauss.data();
+                // A seeded tabled row (AVX2) takes its Gaussians from the seeds' lanes as its
+                // kernel steps them (addStrutRowTabledSeededAvx2): the doubles the fill below
+                // would write, without the array.
+                bool fused = false;
+                GaussianLanes fusedLanes;
                 if (std::abs(b * inv2s2) < 200.0 && std::abs(c * inv2s2) * nz < 200.0) {
                     if (acrossColumns) {
                         g = columnGauss;
@@ -773,6 +783,15 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                             fillGaussiansAvx2(colE, colP, q16, kHi - colK0 + 1, gauss.data() + colK0, kLo - colK0);
                         else
                             fillGaussiansScalar(colE, colP, q16, kHi - colK0 + 1, gauss.data() + colK0, kLo - colK0);
+                    } else if (seeded && tabled && avx2) {
+                        seedsAt(i);
+                        fused = true;
+                        for (int l = 0; l < 4; ++l) {
+                            fusedLanes.e[l] = seedE[l];
+                            fusedLanes.r[l] = seedP[l];
+                        }
+                        fusedLanes.q16 = q16;
+                        fusedLanes.k = k0;
                     } else if (seeded) {
                         seedsAt(i);
                         // The recurrences stepped from k0, written from fillLo's group: the same
@@ -803,7 +822,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 }
                 // The points k = part.kLo..part.kHi of the row: each point's sum does not depend on
                 // which others are made.
-                auto add = [&](const StrutRow& part) {
+                auto add = [&](const StrutRow& part) __attribute__((always_inline)) {
                     if (taylor) {
                         if (avx2)
                             addStrutRowTaylorAvx2(constants, part, coefficients, hc, g, out.data() + n);
@@ -823,7 +842,9 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                                                   tw[3],
                                                   nodeValue.data() + next,
                                                   nodeSlope.data() + next};
-                        if (avx2)
+                        if (fused)
+                            addStrutRowTabledSeededAvx2(constants, part, table, fusedLanes, out.data() + n);
+                        else if (avx2)
                             addStrutRowTabledAvx2(constants, part, table, g, out.data() + n);
                         else
                             addStrutRowTabledScalar(constants, part, table, g, out.data() + n);

@@ -268,6 +268,48 @@ inline void fillGaussiansScalar(const double lanes[4], const double steps[4], do
         }
 }
 
+/// fillGaussians' four recurrences between groups: e[l] is the Gaussian at point k + l, r[l] its
+/// lane's step (e[l] is multiplied by r[l], r[l] by q16, from one group to the next). k only grows.
+struct GaussianLanes {
+    double e[4], r[4];
+    double q16;
+    int k;
+    void step()
+    {
+        for (int l = 0; l < 4; ++l) {
+            e[l] *= r[l];
+            r[l] *= q16;
+        }
+        k += 4;
+    }
+};
+
+/// addStrutRowTabledScalar with the row's Gaussians taken from @a lanes as they are stepped (the
+/// doubles fillGaussiansScalar writes from the same lanes), not from an array: @a lanes is stepped
+/// on to the group of the row's last point (row.kLo must not lie before lanes.k). The same sums.
+inline void addStrutRowTabledSeededScalar(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                                          GaussianLanes& lanes, double* out)
+{
+    const double dx = row.x - s.ax, dy = row.y - s.ay;
+    const double* nextValue = table.nextValue ? table.nextValue : table.value + 1;
+    const double* nextSlope = table.nextSlope ? table.nextSlope : table.slope + 1;
+    for (int k = row.kLo; k <= row.kHi; ++k) {
+        while (lanes.k + 4 <= k) lanes.step();
+        double h;
+        const bool inside = k >= row.inLo && k <= row.inHi;
+        if (!inside && !withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
+        const int n = table.n0 + k;
+        const double j0 = ((table.w00 * table.value[n] + table.w10 * table.slope[n]) + table.w01 * nextValue[n]) +
+                          table.w11 * nextSlope[n];
+        out[k] += lanes.e[k - lanes.k] * j0;
+    }
+}
+
+/// addStrutRowTabledSeededScalar with four lanes; the same doubles (it may leave @a lanes a group
+/// earlier: at the group of its last group of four's first point).
+void addStrutRowTabledSeededAvx2(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                                 GaussianLanes& lanes, double* out);
+
 /// fillGaussiansScalar with four lanes; the same doubles.
 void fillGaussiansAvx2(const double lanes[4], const double steps[4], double q16, int count, double* gauss,
                        int from = 0);

@@ -185,6 +185,88 @@ void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, cons
     }
 }
 
+void addStrutRowTabledSeededAvx2(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                                 GaussianLanes& lanes, double* out)
+{
+    __m256d e = _mm256_loadu_pd(lanes.e), r = _mm256_loadu_pd(lanes.r);
+    const __m256d q = _mm256_set1_pd(lanes.q16);
+    while (lanes.k + 4 <= row.kLo) {  // GaussianLanes::step in lanes
+        e = _mm256_mul_pd(e, r);
+        r = _mm256_mul_pd(r, q);
+        lanes.k += 4;
+    }
+    const double dxs = row.x - s.ax, dys = row.y - s.ay;
+    const __m256d hxy = _mm256_set1_pd(dxs * s.ux + dys * s.uy);
+    const __m256d lxy = _mm256_set1_pd(dxs * dxs + dys * dys);
+    const __m256d uz = _mm256_set1_pd(s.uz), az = _mm256_set1_pd(s.az), z0 = _mm256_set1_pd(row.z0),
+                  stepZ = _mm256_set1_pd(row.dz);
+    const __m256d length = _mm256_set1_pd(s.length), cutoff = _mm256_set1_pd(s.cutoffSqr), zero = _mm256_setzero_pd();
+    const __m256d w00 = _mm256_set1_pd(table.w00), w10 = _mm256_set1_pd(table.w10), w01 = _mm256_set1_pd(table.w01),
+                  w11 = _mm256_set1_pd(table.w11);
+    const double* nextValue = table.nextValue ? table.nextValue : table.value + 1;
+    const double* nextSlope = table.nextSlope ? table.nextSlope : table.slope + 1;
+    auto tabled = [&](int k) {
+        const int n = table.n0 + k;
+        return _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(w00, _mm256_loadu_pd(table.value + n)),
+                                                         _mm256_mul_pd(w10, _mm256_loadu_pd(table.slope + n))),
+                                           _mm256_mul_pd(w01, _mm256_loadu_pd(nextValue + n))),
+                             _mm256_mul_pd(w11, _mm256_loadu_pd(nextSlope + n)));
+    };
+    // The row's groups start at kLo, the recurrences' groups at lanes.k: a row's group k holds
+    // lanes shift..3 of the recurrences' group and lanes 0..shift-1 of the next one (the same
+    // bits, moved: the doubles fillGaussians writes at k..k + 3).
+    alignas(32) static constexpr int kRotate[4][8] = {
+        {0, 1, 2, 3, 4, 5, 6, 7}, {2, 3, 4, 5, 6, 7, 0, 1}, {4, 5, 6, 7, 0, 1, 2, 3}, {6, 7, 0, 1, 2, 3, 4, 5}};
+    const int shift = row.kLo - lanes.k;
+    const __m256i rotate = _mm256_load_si256(reinterpret_cast<const __m256i*>(kRotate[shift]));
+    const __m256d fromThis =
+        _mm256_castsi256_pd(_mm256_cmpgt_epi64(_mm256_set1_epi64x(4 - shift), _mm256_setr_epi64x(0, 1, 2, 3)));
+    const int inHi = std::min(row.inHi, row.kHi);
+    for (int k = row.kLo; k <= row.kHi; k += 4) {
+        const __m256d next = _mm256_mul_pd(e, r);
+        const __m256d gauss =
+            _mm256_blendv_pd(_mm256_castps_pd(_mm256_permutevar8x32_ps(_mm256_castpd_ps(next), rotate)),
+                             _mm256_castps_pd(_mm256_permutevar8x32_ps(_mm256_castpd_ps(e), rotate)), fromThis);
+        if (k + 4 <= row.kHi) {
+            e = next;
+            r = _mm256_mul_pd(r, q);
+            lanes.k += 4;
+        }
+        if (k >= row.inLo && k + 3 <= inHi) {
+            // Four points proven within the cut-off: no test (the same sums).
+            const __m256d before = _mm256_loadu_pd(out + k);
+            _mm256_storeu_pd(out + k, _mm256_add_pd(before, _mm256_mul_pd(gauss, tabled(k))));
+            continue;
+        }
+        const int count = std::min(4, row.kHi - k + 1);
+        const __m256i live = _mm256_cmpgt_epi64(_mm256_set1_epi64x(count), _mm256_setr_epi64x(0, 1, 2, 3));
+        const __m256d kk = _mm256_setr_pd(double(k), double(k + 1), double(k + 2), double(k + 3));
+        const __m256d dz = _mm256_sub_pd(_mm256_add_pd(z0, _mm256_mul_pd(kk, stepZ)), az);
+        const __m256d h = _mm256_add_pd(hxy, _mm256_mul_pd(dz, uz));
+        const __m256d r2 =
+            _mm256_max_pd(_mm256_sub_pd(_mm256_add_pd(lxy, _mm256_mul_pd(dz, dz)), _mm256_mul_pd(h, h)), zero);
+        const __m256d beyond =
+            _mm256_blendv_pd(_mm256_and_pd(_mm256_cmp_pd(h, length, _CMP_GT_OQ), _mm256_sub_pd(h, length)), h,
+                             _mm256_cmp_pd(h, zero, _CMP_LT_OQ));
+        const __m256d dist2 = _mm256_add_pd(r2, _mm256_mul_pd(beyond, beyond));
+        const __m256d within = _mm256_and_pd(_mm256_castsi256_pd(live), _mm256_cmp_pd(dist2, cutoff, _CMP_LT_OQ));
+        if (_mm256_movemask_pd(within) == 0) continue;
+        const __m256d j0 = tabled(k);
+        if (count == 4) {
+            const __m256d before = _mm256_loadu_pd(out + k);
+            _mm256_storeu_pd(out + k,
+                             _mm256_blendv_pd(before, _mm256_add_pd(before, _mm256_mul_pd(gauss, j0)), within));
+        } else {
+            const __m256d before = _mm256_maskload_pd(out + k, live);
+            alignas(32) double sum[4];
+            _mm256_store_pd(sum, _mm256_blendv_pd(before, _mm256_add_pd(before, _mm256_mul_pd(gauss, j0)), within));
+            for (int l = 0; l < count; ++l) out[k + l] = sum[l];
+        }
+    }
+    _mm256_storeu_pd(lanes.e, e);
+    _mm256_storeu_pd(lanes.r, r);
+}
+
 void addStrutRowTaylorAvx2(const StrutRowConstants& s, const StrutRow& row, const double c[4], double hc,
                            const double* gauss, double* out)
 {
@@ -362,6 +444,12 @@ void strutRowNodesAvx2(const StrutRowConstants& s, double h0, double step, int f
                        double* slope)
 {
     strutRowNodesScalar(s, h0, step, first, count, value, slope);
+}
+
+void addStrutRowTabledSeededAvx2(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                                 GaussianLanes& lanes, double* out)
+{
+    addStrutRowTabledSeededScalar(s, row, table, lanes, out);
 }
 
 void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
