@@ -822,7 +822,8 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 }
                 // The points k = part.kLo..part.kHi of the row: each point's sum does not depend on
                 // which others are made.
-                auto add = [&](const StrutRow& part) __attribute__((always_inline)) {
+                auto add = [&](const StrutRow& part) __attribute__((always_inline))
+                {
                     if (taylor) {
                         if (avx2)
                             addStrutRowTaylorAvx2(constants, part, coefficients, hc, g, out.data() + n);
