@@ -144,3 +144,21 @@ TEST(Preview, ReportPageInlinesTheReportMeshAndScripts)
     EXPECT_NE(page.find("<title>voxlat report: a&lt;/script&gt;&lt;b&gt;.yaml</title>"), std::string::npos)
         << "the title is escaped";
 }
+
+TEST(Preview, TheReportPagesCoarseGridDividesARepeatingResultsPeriods)
+{
+    // 500^3 voxels: 7.8125 of them a coarse voxel keeps the page's grid within 2^18 voxels.
+    EXPECT_DOUBLE_EQ(pageGridFactor(125000000, {}), 7.8125);
+    // A lattice repeating every 50 voxels along x and y: 10, the first whole number from 7.8125
+    // that divides 50, so the coarse grid folds into the lattice's one-period table.
+    EXPECT_DOUBLE_EQ(pageGridFactor(125000000, {50.0, 50.0}), 10.0);
+    EXPECT_DOUBLE_EQ(pageGridFactor(125000000, {48.0}), 8.0);
+    // No divisor up to twice the factor (a prime period), or periods that disagree: as before.
+    EXPECT_DOUBLE_EQ(pageGridFactor(125000000, {47.0}), 7.8125);
+    EXPECT_DOUBLE_EQ(pageGridFactor(125000000, {50.0, 9.0}), 7.8125);
+    // A small domain is meshed at its own voxel.
+    EXPECT_DOUBLE_EQ(pageGridFactor(1000, {50.0}), 1.0);
+    // A factor from the budget's up keeps the coarse grid within its 2^18 voxels.
+    for (const double f : {pageGridFactor(125000000, {50.0}), pageGridFactor(125000000, {48.0})})
+        EXPECT_LE(125000000.0 / (f * f * f), double(1 << 18));
+}

@@ -2168,7 +2168,15 @@ TriangleMesh Job::pageMesh()
     // No mesh held (slices only, or a mesh streamed to its file): the result on a coarse grid of
     // the domain, at most 2^18 voxels (64^3: a picture).
     solveLevels();
-    const double factor = std::max(1.0, std::cbrt(double(mDomain.voxelCount()) / double(1 << 18)));
+    // A result that repeats (a tiled lattice) is read from its one-period table where the coarse
+    // voxel divides each period, else evaluated point by point (W2g's 50 mm frames: 0.10 s
+    // against 0.05 s, a fifteenth of the run).
+    std::vector<double> periods;
+    for (int a = 0; a < 3; ++a) {
+        const double p = std::max(mResult->period(a), mResult->axisRepeat(a).period) / mDomain.voxel;
+        if (p > 0.0) periods.push_back(p);
+    }
+    const double factor = pageGridFactor(mDomain.voxelCount(), periods);
     const Domain coarse = Domain::fromBox(mDomain.box, mDomain.voxel * factor);
     SparseOptions options;
     options.clipToDomain = true;

@@ -3,6 +3,8 @@
 #include "engine/jobs/DataFolder.h"
 #include "mesher/writers/AtomicFile.h"
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -139,6 +141,19 @@ std::string reportPage(const nlohmann::json& report, const TriangleMesh& mesh, c
     for (const std::string& script : scripts) html << "<script>\n" << scriptSafe(script) << "\n</script>\n";
     html << "</body>\n</html>\n";
     return html.str();
+}
+
+double pageGridFactor(std::uint64_t voxelCount, const std::vector<double>& periods)
+{
+    const double factor = std::max(1.0, std::cbrt(double(voxelCount) / double(1 << 18)));
+    if (periods.empty() || !(factor > 1.0)) return factor;
+    for (int f = int(std::ceil(factor)); f <= int(2.0 * factor); ++f)
+        if (std::all_of(periods.begin(), periods.end(), [f](double p) {
+                const double cells = p / f;
+                return cells >= 1.0 && std::abs(cells - std::round(cells)) <= 1e-9 * cells;
+            }))
+            return f;
+    return factor;
 }
 
 }  // namespace voxlat

@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -37,5 +38,12 @@ struct PageColouring {
 /// @a colouring, when given, colours the mesh by its values (one per vertex).
 std::string reportPage(const nlohmann::json& report, const TriangleMesh& mesh, const std::vector<std::string>& scripts,
                        const PageColouring* colouring = nullptr);
+
+/// How many of the job's voxels make one voxel of the coarse grid report.html's mesh is made on
+/// when no mesh is held: enough for at most 2^18 voxels of a domain of @a voxelCount, or, where
+/// the result repeats every @a periods voxels along some axes (a tiled lattice), the smallest
+/// whole number from that up to twice it that divides every period, so the coarse grid is
+/// read from the lattice's one-period table instead of evaluated point by point.
+double pageGridFactor(std::uint64_t voxelCount, const std::vector<double>& periods);
 
 }  // namespace voxlat
