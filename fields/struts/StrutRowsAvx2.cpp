@@ -93,26 +93,35 @@ inline void accumulate(double* out, const double* gauss, __m256d j0, __m256d wit
     for (int l = 0; l < lanes; ++l) out[l] = sum[l];
 }
 
-template <bool graded>
-void addRow(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
-{
-    const double* nodes = GaussianTable::instance().nodeData();
-    const double dxs = row.x - s.ax, dys = row.y - s.ay;
-    // The parts of h and |d|^2 that do not change along the row, summed first as the scalar does.
-    const __m256d hxy = _mm256_set1_pd(dxs * s.ux + dys * s.uy);
-    const __m256d lxy = _mm256_set1_pd(dxs * dxs + dys * dys);
-    const __m256d uz = _mm256_set1_pd(s.uz), az = _mm256_set1_pd(s.az), z0 = _mm256_set1_pd(row.z0),
-                  stepZ = _mm256_set1_pd(row.dz);
-    const __m256d length = _mm256_set1_pd(s.length), invSigma = _mm256_set1_pd(s.invSigma),
-                  cutoff = _mm256_set1_pd(s.cutoffSqr), zero = _mm256_setzero_pd();
-    const __m256d w0 = _mm256_set1_pd(s.w0), slope = _mm256_set1_pd(s.slope), sigma = _mm256_set1_pd(s.sigma);
-    const __m256d w0Sigma = _mm256_set1_pd(s.w0 * s.sigma), slopeS2 = _mm256_set1_pd(s.slope * s.s2);
-    for (int k = row.kLo; k <= row.kHi; k += 4) {
-        const int lanes = std::min(4, row.kHi - k + 1);
-        const __m256i live = _mm256_cmpgt_epi64(_mm256_set1_epi64x(lanes), _mm256_setr_epi64x(0, 1, 2, 3));
+/// A row's points four at a time against the strut's cut-off: each group's position along the
+/// axis (h) and the lanes within the cut-off, summed in the scalar loop's order.
+struct RowCutoff {
+    __m256d hxy, lxy, uz, az, z0, stepZ, length, cutoff, zero;
+    RowCutoff(const StrutRowConstants& s, const StrutRow& row)
+    {
+        const double dxs = row.x - s.ax, dys = row.y - s.ay;
+        // The parts of h and |d|^2 that do not change along the row, summed first as the scalar does.
+        hxy = _mm256_set1_pd(dxs * s.ux + dys * s.uy);
+        lxy = _mm256_set1_pd(dxs * dxs + dys * dys);
+        uz = _mm256_set1_pd(s.uz);
+        az = _mm256_set1_pd(s.az);
+        z0 = _mm256_set1_pd(row.z0);
+        stepZ = _mm256_set1_pd(row.dz);
+        length = _mm256_set1_pd(s.length);
+        cutoff = _mm256_set1_pd(s.cutoffSqr);
+        zero = _mm256_setzero_pd();
+    }
+    /// The offset along z of points k..k + 3 from the strut's start.
+    __m256d dz(int k) const
+    {
         const __m256d kk = _mm256_setr_pd(double(k), double(k + 1), double(k + 2), double(k + 3));
-        const __m256d dz = _mm256_sub_pd(_mm256_add_pd(z0, _mm256_mul_pd(kk, stepZ)), az);
-        const __m256d h = _mm256_add_pd(hxy, _mm256_mul_pd(dz, uz));
+        return _mm256_sub_pd(_mm256_add_pd(z0, _mm256_mul_pd(kk, stepZ)), az);
+    }
+    /// Points k..k + 3's h (the position along the axis).
+    __m256d h(__m256d dz) const { return _mm256_add_pd(hxy, _mm256_mul_pd(dz, uz)); }
+    /// The lanes of @a live whose points (offset @a dz, position @a h) are within the cut-off.
+    __m256d within(__m256d dz, __m256d h, __m256i live) const
+    {
         const __m256d r2 =
             _mm256_max_pd(_mm256_sub_pd(_mm256_add_pd(lxy, _mm256_mul_pd(dz, dz)), _mm256_mul_pd(h, h)), zero);
         // beyond = h < 0 ? h : (h > L ? h - L : 0)
@@ -120,7 +129,55 @@ void addRow(const StrutRowConstants& s, const StrutRow& row, const double* gauss
             _mm256_blendv_pd(_mm256_and_pd(_mm256_cmp_pd(h, length, _CMP_GT_OQ), _mm256_sub_pd(h, length)), h,
                              _mm256_cmp_pd(h, zero, _CMP_LT_OQ));
         const __m256d dist2 = _mm256_add_pd(r2, _mm256_mul_pd(beyond, beyond));
-        const __m256d within = _mm256_and_pd(_mm256_castsi256_pd(live), _mm256_cmp_pd(dist2, cutoff, _CMP_LT_OQ));
+        return _mm256_and_pd(_mm256_castsi256_pd(live), _mm256_cmp_pd(dist2, cutoff, _CMP_LT_OQ));
+    }
+};
+
+/// The live lanes of a group of @a lanes points (at most 4).
+inline __m256i liveLanes(int lanes)
+{
+    return _mm256_cmpgt_epi64(_mm256_set1_epi64x(lanes), _mm256_setr_epi64x(0, 1, 2, 3));
+}
+
+/// A tabled row's J0 at points k..k + 3: the two phases' nodes and slopes weighted (Hermite).
+struct TabledLanes {
+    const StrutRowTable& table;
+    __m256d w00, w10, w01, w11;
+    const double *nextValue, *nextSlope;
+    explicit TabledLanes(const StrutRowTable& t)
+        : table(t),
+          w00(_mm256_set1_pd(t.w00)),
+          w10(_mm256_set1_pd(t.w10)),
+          w01(_mm256_set1_pd(t.w01)),
+          w11(_mm256_set1_pd(t.w11)),
+          // Lanes past the row read nodes the table holds (its caller sizes it with a margin).
+          nextValue(t.nextValue ? t.nextValue : t.value + 1),
+          nextSlope(t.nextSlope ? t.nextSlope : t.slope + 1)
+    {
+    }
+    __m256d operator()(int k) const
+    {
+        const int n = table.n0 + k;
+        return _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(w00, _mm256_loadu_pd(table.value + n)),
+                                                         _mm256_mul_pd(w10, _mm256_loadu_pd(table.slope + n))),
+                                           _mm256_mul_pd(w01, _mm256_loadu_pd(nextValue + n))),
+                             _mm256_mul_pd(w11, _mm256_loadu_pd(nextSlope + n)));
+    }
+};
+
+template <bool graded>
+void addRow(const StrutRowConstants& s, const StrutRow& row, const double* gauss, double* out)
+{
+    const double* nodes = GaussianTable::instance().nodeData();
+    const RowCutoff cut(s, row);
+    const __m256d length = cut.length, invSigma = _mm256_set1_pd(s.invSigma);
+    const __m256d w0 = _mm256_set1_pd(s.w0), slope = _mm256_set1_pd(s.slope), sigma = _mm256_set1_pd(s.sigma);
+    const __m256d w0Sigma = _mm256_set1_pd(s.w0 * s.sigma), slopeS2 = _mm256_set1_pd(s.slope * s.s2);
+    for (int k = row.kLo; k <= row.kHi; k += 4) {
+        const int lanes = std::min(4, row.kHi - k + 1);
+        const __m256i live = liveLanes(lanes);
+        const __m256d dz = cut.dz(k), h = cut.h(dz);
+        const __m256d within = cut.within(dz, h, live);
         if (_mm256_movemask_pd(within) == 0) continue;
         __m256d uL, gL, uA, gA;
         tableLanes<graded>(nodes, _mm256_mul_pd(_mm256_sub_pd(length, h), invSigma), uL, gL);
@@ -142,24 +199,8 @@ void addRow(const StrutRowConstants& s, const StrutRow& row, const double* gauss
 void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
                            const double* gauss, double* out)
 {
-    const double dxs = row.x - s.ax, dys = row.y - s.ay;
-    const __m256d hxy = _mm256_set1_pd(dxs * s.ux + dys * s.uy);
-    const __m256d lxy = _mm256_set1_pd(dxs * dxs + dys * dys);
-    const __m256d uz = _mm256_set1_pd(s.uz), az = _mm256_set1_pd(s.az), z0 = _mm256_set1_pd(row.z0),
-                  stepZ = _mm256_set1_pd(row.dz);
-    const __m256d length = _mm256_set1_pd(s.length), cutoff = _mm256_set1_pd(s.cutoffSqr), zero = _mm256_setzero_pd();
-    const __m256d w00 = _mm256_set1_pd(table.w00), w10 = _mm256_set1_pd(table.w10), w01 = _mm256_set1_pd(table.w01),
-                  w11 = _mm256_set1_pd(table.w11);
-    // Lanes past the row read nodes the table holds (its caller sizes it with a margin).
-    const double* nextValue = table.nextValue ? table.nextValue : table.value + 1;
-    const double* nextSlope = table.nextSlope ? table.nextSlope : table.slope + 1;
-    auto tabled = [&](int k) {
-        const int n = table.n0 + k;
-        return _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(w00, _mm256_loadu_pd(table.value + n)),
-                                                         _mm256_mul_pd(w10, _mm256_loadu_pd(table.slope + n))),
-                                           _mm256_mul_pd(w01, _mm256_loadu_pd(nextValue + n))),
-                             _mm256_mul_pd(w11, _mm256_loadu_pd(nextSlope + n)));
-    };
+    const RowCutoff cut(s, row);
+    const TabledLanes tabled(table);
     const int inHi = std::min(row.inHi, row.kHi);
     for (int k = row.kLo; k <= row.kHi; k += 4) {
         if (k >= row.inLo && k + 3 <= inHi) {
@@ -169,17 +210,9 @@ void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, cons
             continue;
         }
         const int lanes = std::min(4, row.kHi - k + 1);
-        const __m256i live = _mm256_cmpgt_epi64(_mm256_set1_epi64x(lanes), _mm256_setr_epi64x(0, 1, 2, 3));
-        const __m256d kk = _mm256_setr_pd(double(k), double(k + 1), double(k + 2), double(k + 3));
-        const __m256d dz = _mm256_sub_pd(_mm256_add_pd(z0, _mm256_mul_pd(kk, stepZ)), az);
-        const __m256d h = _mm256_add_pd(hxy, _mm256_mul_pd(dz, uz));
-        const __m256d r2 =
-            _mm256_max_pd(_mm256_sub_pd(_mm256_add_pd(lxy, _mm256_mul_pd(dz, dz)), _mm256_mul_pd(h, h)), zero);
-        const __m256d beyond =
-            _mm256_blendv_pd(_mm256_and_pd(_mm256_cmp_pd(h, length, _CMP_GT_OQ), _mm256_sub_pd(h, length)), h,
-                             _mm256_cmp_pd(h, zero, _CMP_LT_OQ));
-        const __m256d dist2 = _mm256_add_pd(r2, _mm256_mul_pd(beyond, beyond));
-        const __m256d within = _mm256_and_pd(_mm256_castsi256_pd(live), _mm256_cmp_pd(dist2, cutoff, _CMP_LT_OQ));
+        const __m256i live = liveLanes(lanes);
+        const __m256d dz = cut.dz(k);
+        const __m256d within = cut.within(dz, cut.h(dz), live);
         if (_mm256_movemask_pd(within) == 0) continue;
         accumulate(out + k, gauss + k, tabled(k), within, lanes, live);
     }
@@ -195,23 +228,8 @@ void addStrutRowTabledSeededAvx2(const StrutRowConstants& s, const StrutRow& row
         r = _mm256_mul_pd(r, q);
         lanes.k += 4;
     }
-    const double dxs = row.x - s.ax, dys = row.y - s.ay;
-    const __m256d hxy = _mm256_set1_pd(dxs * s.ux + dys * s.uy);
-    const __m256d lxy = _mm256_set1_pd(dxs * dxs + dys * dys);
-    const __m256d uz = _mm256_set1_pd(s.uz), az = _mm256_set1_pd(s.az), z0 = _mm256_set1_pd(row.z0),
-                  stepZ = _mm256_set1_pd(row.dz);
-    const __m256d length = _mm256_set1_pd(s.length), cutoff = _mm256_set1_pd(s.cutoffSqr), zero = _mm256_setzero_pd();
-    const __m256d w00 = _mm256_set1_pd(table.w00), w10 = _mm256_set1_pd(table.w10), w01 = _mm256_set1_pd(table.w01),
-                  w11 = _mm256_set1_pd(table.w11);
-    const double* nextValue = table.nextValue ? table.nextValue : table.value + 1;
-    const double* nextSlope = table.nextSlope ? table.nextSlope : table.slope + 1;
-    auto tabled = [&](int k) {
-        const int n = table.n0 + k;
-        return _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(w00, _mm256_loadu_pd(table.value + n)),
-                                                         _mm256_mul_pd(w10, _mm256_loadu_pd(table.slope + n))),
-                                           _mm256_mul_pd(w01, _mm256_loadu_pd(nextValue + n))),
-                             _mm256_mul_pd(w11, _mm256_loadu_pd(nextSlope + n)));
-    };
+    const RowCutoff cut(s, row);
+    const TabledLanes tabled(table);
     // The row's groups start at kLo, the recurrences' groups at lanes.k: a row's group k holds
     // lanes shift..3 of the recurrences' group and lanes 0..shift-1 of the next one (the same
     // bits, moved: the doubles fillGaussians writes at k..k + 3).
@@ -239,17 +257,9 @@ void addStrutRowTabledSeededAvx2(const StrutRowConstants& s, const StrutRow& row
             continue;
         }
         const int count = std::min(4, row.kHi - k + 1);
-        const __m256i live = _mm256_cmpgt_epi64(_mm256_set1_epi64x(count), _mm256_setr_epi64x(0, 1, 2, 3));
-        const __m256d kk = _mm256_setr_pd(double(k), double(k + 1), double(k + 2), double(k + 3));
-        const __m256d dz = _mm256_sub_pd(_mm256_add_pd(z0, _mm256_mul_pd(kk, stepZ)), az);
-        const __m256d h = _mm256_add_pd(hxy, _mm256_mul_pd(dz, uz));
-        const __m256d r2 =
-            _mm256_max_pd(_mm256_sub_pd(_mm256_add_pd(lxy, _mm256_mul_pd(dz, dz)), _mm256_mul_pd(h, h)), zero);
-        const __m256d beyond =
-            _mm256_blendv_pd(_mm256_and_pd(_mm256_cmp_pd(h, length, _CMP_GT_OQ), _mm256_sub_pd(h, length)), h,
-                             _mm256_cmp_pd(h, zero, _CMP_LT_OQ));
-        const __m256d dist2 = _mm256_add_pd(r2, _mm256_mul_pd(beyond, beyond));
-        const __m256d within = _mm256_and_pd(_mm256_castsi256_pd(live), _mm256_cmp_pd(dist2, cutoff, _CMP_LT_OQ));
+        const __m256i live = liveLanes(count);
+        const __m256d dz = cut.dz(k);
+        const __m256d within = cut.within(dz, cut.h(dz), live);
         if (_mm256_movemask_pd(within) == 0) continue;
         const __m256d j0 = tabled(k);
         if (count == 4) {
@@ -270,12 +280,7 @@ void addStrutRowTabledSeededAvx2(const StrutRowConstants& s, const StrutRow& row
 void addStrutRowTaylorAvx2(const StrutRowConstants& s, const StrutRow& row, const double c[4], double hc,
                            const double* gauss, double* out)
 {
-    const double dxs = row.x - s.ax, dys = row.y - s.ay;
-    const __m256d hxy = _mm256_set1_pd(dxs * s.ux + dys * s.uy);
-    const __m256d lxy = _mm256_set1_pd(dxs * dxs + dys * dys);
-    const __m256d uz = _mm256_set1_pd(s.uz), az = _mm256_set1_pd(s.az), z0 = _mm256_set1_pd(row.z0),
-                  stepZ = _mm256_set1_pd(row.dz);
-    const __m256d length = _mm256_set1_pd(s.length), cutoff = _mm256_set1_pd(s.cutoffSqr), zero = _mm256_setzero_pd();
+    const RowCutoff cut(s, row);
     const __m256d c0 = _mm256_set1_pd(c[0]), c1 = _mm256_set1_pd(c[1]), c2 = _mm256_set1_pd(c[2]),
                   c3 = _mm256_set1_pd(c[3]), centre = _mm256_set1_pd(hc);
     auto taylor = [&](__m256d h) {
@@ -287,25 +292,15 @@ void addStrutRowTaylorAvx2(const StrutRowConstants& s, const StrutRow& row, cons
     for (int k = row.kLo; k <= row.kHi; k += 4) {
         if (k >= row.inLo && k + 3 <= inHi) {
             // Four points proven within the cut-off: no test (the same sums).
-            const __m256d kk = _mm256_setr_pd(double(k), double(k + 1), double(k + 2), double(k + 3));
-            const __m256d dz = _mm256_sub_pd(_mm256_add_pd(z0, _mm256_mul_pd(kk, stepZ)), az);
             const __m256d before = _mm256_loadu_pd(out + k);
-            const __m256d j0 = taylor(_mm256_add_pd(hxy, _mm256_mul_pd(dz, uz)));
+            const __m256d j0 = taylor(cut.h(cut.dz(k)));
             _mm256_storeu_pd(out + k, _mm256_add_pd(before, _mm256_mul_pd(_mm256_loadu_pd(gauss + k), j0)));
             continue;
         }
         const int lanes = std::min(4, row.kHi - k + 1);
-        const __m256i live = _mm256_cmpgt_epi64(_mm256_set1_epi64x(lanes), _mm256_setr_epi64x(0, 1, 2, 3));
-        const __m256d kk = _mm256_setr_pd(double(k), double(k + 1), double(k + 2), double(k + 3));
-        const __m256d dz = _mm256_sub_pd(_mm256_add_pd(z0, _mm256_mul_pd(kk, stepZ)), az);
-        const __m256d h = _mm256_add_pd(hxy, _mm256_mul_pd(dz, uz));
-        const __m256d r2 =
-            _mm256_max_pd(_mm256_sub_pd(_mm256_add_pd(lxy, _mm256_mul_pd(dz, dz)), _mm256_mul_pd(h, h)), zero);
-        const __m256d beyond =
-            _mm256_blendv_pd(_mm256_and_pd(_mm256_cmp_pd(h, length, _CMP_GT_OQ), _mm256_sub_pd(h, length)), h,
-                             _mm256_cmp_pd(h, zero, _CMP_LT_OQ));
-        const __m256d dist2 = _mm256_add_pd(r2, _mm256_mul_pd(beyond, beyond));
-        const __m256d within = _mm256_and_pd(_mm256_castsi256_pd(live), _mm256_cmp_pd(dist2, cutoff, _CMP_LT_OQ));
+        const __m256i live = liveLanes(lanes);
+        const __m256d dz = cut.dz(k), h = cut.h(dz);
+        const __m256d within = cut.within(dz, h, live);
         if (_mm256_movemask_pd(within) == 0) continue;
         accumulate(out + k, gauss + k, taylor(h), within, lanes, live);
     }
