@@ -551,6 +551,24 @@ TEST(IsoRadius, FourLaneRadiiAreTheScalarMapsDoubles)
     EXPECT_GT(compared, 420000u);
 }
 
+namespace {
+
+/// A strut of unit weight from @a rng: start and direction in [-1, 1]^3, sigma 0.05-0.55, length
+/// 0.1-3.1, cut off where its Gaussian falls below 1e-4 (the tabled row tests' struts).
+StrutRowConstants randomUnitStrut(std::mt19937_64& rng)
+{
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    const Vec3d a(unit(rng), unit(rng), unit(rng));
+    Vec3d dir(unit(rng), unit(rng), unit(rng));
+    dir.normalize();
+    const double sigma = 0.05 + 0.5 * std::abs(unit(rng)), length = 0.1 + 3.0 * std::abs(unit(rng));
+    const double rc = gaussianCutoffRadius(sigma, 1e-4);
+    return {a.x(), a.y(),       a.z(),         dir.x(), dir.y(), dir.z(), length,
+            sigma, 1.0 / sigma, sigma * sigma, 1.0,     0.0,     rc * rc};
+}
+
+}  // namespace
+
 TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
 {
     // The rows that take J from a strut's own table (addStrutRowTabled*, strutRowNodes*): both
@@ -560,13 +578,7 @@ TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
     std::uniform_real_distribution<double> unit(-1.0, 1.0);
     std::uint64_t lanesAdded = 0, lanesCompared = 0;
     for (int trial = 0; trial < 20000; ++trial) {
-        const Vec3d a(unit(rng), unit(rng), unit(rng));
-        Vec3d dir(unit(rng), unit(rng), unit(rng));
-        dir.normalize();
-        const double sigma = 0.05 + 0.5 * std::abs(unit(rng)), length = 0.1 + 3.0 * std::abs(unit(rng));
-        const double rc = gaussianCutoffRadius(sigma, 1e-4);
-        const StrutRowConstants c{a.x(), a.y(),       a.z(),         dir.x(), dir.y(), dir.z(), length,
-                                  sigma, 1.0 / sigma, sigma * sigma, 1.0,     0.0,     rc * rc};
+        const StrutRowConstants c = randomUnitStrut(rng);
         const int nz = 16 + int(rng() % 60);
         const int kLo = int(rng() % nz), kHi = kLo + int(rng() % (nz - kLo));
         const StrutRow row{
@@ -672,13 +684,7 @@ TEST(StrutRows, SeededTabledRowsAddTheFilledRowsDoubles)
     std::uniform_real_distribution<double> unit(-1.0, 1.0);
     std::uint64_t added = 0, compared = 0;
     for (int trial = 0; trial < 20000; ++trial) {
-        const Vec3d a(unit(rng), unit(rng), unit(rng));
-        Vec3d dir(unit(rng), unit(rng), unit(rng));
-        dir.normalize();
-        const double sigma = 0.05 + 0.5 * std::abs(unit(rng)), length = 0.1 + 3.0 * std::abs(unit(rng));
-        const double rc = gaussianCutoffRadius(sigma, 1e-4);
-        const StrutRowConstants c{a.x(), a.y(),       a.z(),         dir.x(), dir.y(), dir.z(), length,
-                                  sigma, 1.0 / sigma, sigma * sigma, 1.0,     0.0,     rc * rc};
+        const StrutRowConstants c = randomUnitStrut(rng);
         const int nz = 16 + int(rng() % 80);
         const int k0 = int(rng() % std::uint64_t(nz / 2));
         const double lanes0[4] = {std::abs(unit(rng)), std::abs(unit(rng)), std::abs(unit(rng)), std::abs(unit(rng))};

@@ -203,6 +203,14 @@ struct StrutRowTable {
     double w00, w10, w01, w11;
     const double* nextValue = nullptr;  ///< the nodes after value's (null: value + 1)
     const double* nextSlope = nullptr;  ///< the nodes after slope's (null: slope + 1)
+    /// J at the row's point @a k: its node's and the next phase's values and slopes weighted.
+    double at(int k) const
+    {
+        const int n = n0 + k;
+        const double* v1 = nextValue ? nextValue : value + 1;
+        const double* s1 = nextSlope ? nextSlope : slope + 1;
+        return ((w00 * value[n] + w10 * slope[n]) + w01 * v1[n]) + w11 * s1[n];
+    }
 };
 
 /// addStrutRowScalar with J(h_k) from @a table (the same points pass the same cut-off test; the
@@ -211,15 +219,11 @@ inline void addStrutRowTabledScalar(const StrutRowConstants& s, const StrutRow& 
                                     const double* gauss, double* out)
 {
     const double dx = row.x - s.ax, dy = row.y - s.ay;
-    const double* nextValue = table.nextValue ? table.nextValue : table.value + 1;
-    const double* nextSlope = table.nextSlope ? table.nextSlope : table.slope + 1;
     for (int k = row.kLo; k <= row.kHi; ++k) {
         double h;
         const bool inside = k >= row.inLo && k <= row.inHi;
         if (!inside && !withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
-        const int n = table.n0 + k;
-        const double j0 = ((table.w00 * table.value[n] + table.w10 * table.slope[n]) + table.w01 * nextValue[n]) +
-                          table.w11 * nextSlope[n];
+        const double j0 = table.at(k);
         out[k] += gauss[k] * j0;
     }
 }
@@ -291,16 +295,12 @@ inline void addStrutRowTabledSeededScalar(const StrutRowConstants& s, const Stru
                                           GaussianLanes& lanes, double* out)
 {
     const double dx = row.x - s.ax, dy = row.y - s.ay;
-    const double* nextValue = table.nextValue ? table.nextValue : table.value + 1;
-    const double* nextSlope = table.nextSlope ? table.nextSlope : table.slope + 1;
     for (int k = row.kLo; k <= row.kHi; ++k) {
         while (lanes.k + 4 <= k) lanes.step();
         double h;
         const bool inside = k >= row.inLo && k <= row.inHi;
         if (!inside && !withinCutoff(s, dx, dy, (row.z0 + k * row.dz) - s.az, h)) continue;
-        const int n = table.n0 + k;
-        const double j0 = ((table.w00 * table.value[n] + table.w10 * table.slope[n]) + table.w01 * nextValue[n]) +
-                          table.w11 * nextSlope[n];
+        const double j0 = table.at(k);
         out[k] += lanes.e[k - lanes.k] * j0;
     }
 }
