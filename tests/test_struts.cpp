@@ -10,6 +10,7 @@
 #include "engine/recipe/FieldBuilder.h"
 #include "fields/core/Constant.h"
 #include "fields/core/GridValueMemo.h"
+#include "fields/core/MappedBlock.h"
 #include "fields/levels/LevelSolid.h"
 #include "fields/maps/PeriodicTiling.h"
 #include "fields/shapes/Sphere.h"
@@ -1727,6 +1728,37 @@ TEST(StrutLattice, SparseGridMatchesBruteForce)
             }
     EXPECT_EQ(mismatched, 0u);
     EXPECT_EQ(inside, insideBrute);
+}
+
+TEST(MappedBlock, IsWholeHugePagesOnTheirBoundaryAndMovesItsMemory)
+{
+    // The memo's blocks: mapped on their own in whole 2 MB pages, so malloc_trim never cuts
+    // them (GridValueMemo's values read again after a solve's freed grid was given back).
+    MappedBlock empty;
+    EXPECT_EQ(empty.data(), nullptr);
+    EXPECT_EQ(MappedBlock(0).size(), 0u);
+    for (const std::size_t bytes : {std::size_t(1), MappedBlock::kHugePage, MappedBlock::kHugePage + 8}) {
+        MappedBlock block(bytes);
+        ASSERT_NE(block.data(), nullptr);
+        EXPECT_EQ(reinterpret_cast<std::uintptr_t>(block.data()) % MappedBlock::kHugePage, 0u);
+        EXPECT_EQ(block.size() % MappedBlock::kHugePage, 0u);
+        EXPECT_GE(block.size(), bytes);
+        EXPECT_LT(block.size(), bytes + MappedBlock::kHugePage);
+        // Every byte of it is ours: written and read back at both ends.
+        auto* bytesOf = static_cast<unsigned char*>(block.data());
+        bytesOf[0] = 17;
+        bytesOf[block.size() - 1] = 42;
+        MappedBlock moved(std::move(block));
+        EXPECT_EQ(block.data(), nullptr);
+        EXPECT_EQ(block.size(), 0u);
+        ASSERT_EQ(moved.data(), bytesOf);
+        EXPECT_EQ(bytesOf[0], 17);
+        EXPECT_EQ(bytesOf[moved.size() - 1], 42);
+        MappedBlock assigned;
+        assigned = std::move(moved);
+        EXPECT_EQ(assigned.data(), bytesOf);
+        EXPECT_EQ(moved.data(), nullptr);
+    }
 }
 
 TEST(GridValueMemo, AMovedLevelGivesTheGridOfAFreshEvaluation)

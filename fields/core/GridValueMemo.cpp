@@ -113,7 +113,7 @@ void GridValueMemo::dropOutside(Interval levels) const
     tbb::parallel_for(0, kShards, [&](int s) {
         Shard& shard = (*mShards)[std::size_t(s)];
         std::lock_guard<std::mutex> lock(shard.mutex);
-        std::vector<std::unique_ptr<double[]>> old;
+        std::vector<MappedBlock> old;
         old.swap(shard.blocks);
         shard.next = nullptr;
         shard.left = 0;
@@ -200,8 +200,8 @@ double* GridValueMemo::place(Shard& shard, std::size_t n)
 {
     if (shard.left < n) {
         const std::size_t size = std::max(kBlockDoubles, n);
-        shard.blocks.push_back(std::make_unique_for_overwrite<double[]>(size));
-        shard.next = shard.blocks.back().get();
+        shard.blocks.emplace_back(size * sizeof(double));
+        shard.next = static_cast<double*>(shard.blocks.back().data());
         shard.left = size;
     }
     double* at = shard.next;

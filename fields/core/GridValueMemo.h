@@ -4,6 +4,7 @@
 #pragma once
 
 #include "fields/core/FieldNode.h"
+#include "fields/core/MappedBlock.h"
 #include "fields/core/PlaneBands.h"
 
 #include <array>
@@ -93,8 +94,8 @@ private:
         std::size_t operator()(const Key& k) const;
     };
     static constexpr int kShards = 64;
-    /// Doubles per block of kept values (256 KB: 64 leaves' batches).
-    static constexpr std::size_t kBlockDoubles = std::size_t(1) << 15;
+    /// Doubles per block of kept values (2 MB, a huge page: 512 leaves' batches).
+    static constexpr std::size_t kBlockDoubles = MappedBlock::kHugePage / sizeof(double);
     /// A shard's values sit in blocks of kBlockDoubles and its map's nodes in a pool of large
     /// blocks, not one small allocation each: a batch's 4 KB and its node, allocated between the
     /// grid's leaves (evaluated in the same loop), left each leaf freed with the grid in a hole
@@ -119,7 +120,7 @@ private:
         std::pmr::monotonic_buffer_resource nodes{std::size_t(1) << 16};
         std::pmr::unordered_map<Key, Kept, KeyHash> values{&nodes};            ///< into blocks
         std::pmr::unordered_map<BoxKey, Interval, BoxKeyHash> bounds{&nodes};  ///< the operand's bounds
-        std::vector<std::unique_ptr<double[]>> blocks;
+        std::vector<MappedBlock> blocks;
         double* next = nullptr;  ///< the last block's first unused double
         std::size_t left = 0;    ///< doubles unused in the last block
     };
