@@ -10,6 +10,7 @@
 #include "fields/struts/StrutConvolution.h"
 
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <cstring>
@@ -103,18 +104,29 @@ TEST(Coverage, BisectionReadsTheSamplesWithoutACopyAndFindsTheSameLevel)
         }
         return 0.5 * (a + b);
     };
+    // Trials of up to 40 parallel blocks of 8192 samples, whole and partial; voxels below counted
+    // in whole numbers (small, and past 2^40: the parallel sum's bound is then wide) or not (the
+    // ones then added one by one); bisected on one thread and on two.
     std::mt19937 rng(38);
     std::uniform_real_distribution<double> value(-1.0, 1.0), width(0.0, 0.3), share(0.05, 0.95);
-    for (int trial = 0; trial < 40; ++trial) {
-        std::vector<CoverageSample> samples(std::size_t(2000 + 500 * trial));
+    for (int trial = 0; trial < 48; ++trial) {
+        const std::size_t n = trial < 40 ? std::size_t(2000 + 500 * trial) : std::size_t(8192 * (trial - 35) - 7);
+        std::vector<CoverageSample> samples(n);
         for (CoverageSample& s : samples) {
             s.value = float(value(rng));
             s.step = trial % 4 == 0 || rng() % 7 == 0 ? 0.0f : float(width(rng));
         }
-        const double below = double(rng() % 1000), wanted = below + share(rng) * double(samples.size());
-        const double level = bisectCoverage(samples, below, wanted, -1.5, 1.5);
-        EXPECT_EQ(level, copied(samples, below, wanted, -1.5, 1.5)) << "trial " << trial;
-        EXPECT_NEAR(below + coveredVoxels(samples, level), wanted, 1.0 + 1e-6) << "trial " << trial;
+        double below = double(rng() % 1000);
+        if (trial % 3 == 1) below += 0x1p40;
+        if (trial % 5 == 2) below += 0.375;
+        const double wanted = below + share(rng) * double(samples.size());
+        const double reference = copied(samples, below, wanted, -1.5, 1.5);
+        for (int threads : {1, 2}) {
+            tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+            const double level = bisectCoverage(samples, below, wanted, -1.5, 1.5);
+            EXPECT_EQ(level, reference) << "trial " << trial << ", " << threads << " threads";
+            EXPECT_NEAR(below + coveredVoxels(samples, level), wanted, 1.0 + 1e-6) << "trial " << trial;
+        }
     }
 }
 

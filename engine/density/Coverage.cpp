@@ -7,6 +7,7 @@
 #include <array>
 #include <cmath>
 #include <functional>
+#include <memory>
 
 namespace voxlat::coverage {
 
@@ -267,22 +268,138 @@ double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
     return covered;
 }
 
+namespace {
+
+/// Samples per block of the bisection's parallel passes: fixed, so the blocks, and what each
+/// pass finds in them, are the same for any thread count.
+constexpr std::size_t kBisectBlock = std::size_t(1) << 13;
+/// Blocks between two calls of the bisection's interrupt (2^20 samples).
+constexpr std::size_t kInterruptBlocks = (std::size_t(1) << 20) / kBisectBlock;
+
+/// Samples held in blocks of kBisectBlock: block k's are the first count[k] from
+/// base + k * kBisectBlock. Read block after block, they are the samples in their order.
+struct BlockedSamples {
+    const CoverageSample* base = nullptr;
+    std::vector<std::uint32_t> count;
+
+    const CoverageSample* block(std::size_t k) const { return base + k * kBisectBlock; }
+    std::size_t size() const
+    {
+        std::size_t n = 0;
+        for (std::uint32_t c : count) n += c;
+        return n;
+    }
+};
+
+/// @a samples as blocks, each full but the last.
+BlockedSamples wholeBlocks(const CoverageSample* samples, std::size_t n)
+{
+    BlockedSamples blocks{samples, std::vector<std::uint32_t>((n + kBisectBlock - 1) / kBisectBlock)};
+    for (std::size_t k = 0; k < blocks.count.size(); ++k)
+        blocks.count[k] = std::uint32_t(std::min(kBisectBlock, n - k * kBisectBlock));
+    return blocks;
+}
+
+/// Calls @a body(k) for every block in parallel, @a interrupt every kInterruptBlocks blocks.
+template <class Body>
+void forEachBlock(std::size_t blocks, const std::function<void()>& interrupt, Body&& body)
+{
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 1), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t k = r.begin(); k != r.end(); ++k) {
+            if (interrupt && k % kInterruptBlocks == kInterruptBlocks - 1) interrupt();
+            body(k);
+        }
+    });
+}
+
+/// Whether @a settled plus the coverage at @a level of each of @a blocks' samples, added one by
+/// one in their order, is below @a wanted: the serial sum's answer, for any thread count. The
+/// sum is taken in parallel in another order; two sums of the same n non-negative terms differ
+/// by at most 2 gamma_(n-1) times the terms' total (Higham, Accuracy and Stability of Numerical
+/// Algorithms, 2nd ed., 4.2), so only a parallel sum that close to @a wanted leaves the answer
+/// open, and the sum is then taken again in order.
+bool coveredBelow(const BlockedSamples& blocks, double settled, double level, double wanted,
+                  const std::function<void()>& interrupt)
+{
+    const std::size_t nBlocks = blocks.count.size();
+    const double sum = tbb::parallel_deterministic_reduce(
+        tbb::blocked_range<std::size_t>(0, nBlocks, 1), 0.0,
+        [&](const tbb::blocked_range<std::size_t>& r, double total) {
+            for (std::size_t k = r.begin(); k != r.end(); ++k) {
+                if (interrupt && k % kInterruptBlocks == kInterruptBlocks - 1) interrupt();
+                const CoverageSample* s = blocks.block(k);
+                const std::size_t n = blocks.count[k];
+                double part[4] = {0.0, 0.0, 0.0, 0.0};  // four chains: the additions overlap
+                std::size_t i = 0;
+                for (; i + 4 <= n; i += 4)
+                    for (std::size_t j = 0; j < 4; ++j) part[j] += sampleCoverage(s[i + j], level);
+                for (; i < n; ++i) part[i % 4] += sampleCoverage(s[i], level);
+                total += (part[0] + part[1]) + (part[2] + part[3]);
+            }
+            return total;
+        },
+        std::plus<>());
+    const double terms = double(blocks.size()) + 1.0;  // settled among them
+    // Twice gamma_n (n u / (1 - n u), u = 2^-53) with room to spare, times a bound of the terms'
+    // total: every coverage is at most 1.
+    const double bound = 4.0 * terms * std::ldexp(1.0, -53) * (std::abs(settled) + terms);
+    if (settled + sum < wanted - bound) return true;
+    if (settled + sum > wanted + bound) return false;
+    double covered = settled;
+    for (std::size_t k = 0; k < nBlocks; ++k) {
+        if (interrupt && k % kInterruptBlocks == kInterruptBlocks - 1) interrupt();
+        const CoverageSample* s = blocks.block(k);
+        for (std::size_t i = 0; i < blocks.count[k]; ++i) covered += sampleCoverage(s[i], level);
+    }
+    return covered < wanted;
+}
+
+/// What the bisection's pass over one block found: its samples still cut by a level in (a, b),
+/// those whose coverage is full at a, and whether every one still cut ramps across [a, b].
+struct BlockFilter {
+    std::uint32_t kept = 0;
+    std::uint32_t settled = 0;
+    bool ramps = true;
+};
+
+/// Block @a k's samples of @a from sorted over [a, b]: @a keep(i, s) is called in order for the
+/// i-th sample the level still cuts.
+template <class Keep>
+BlockFilter filterBlock(const BlockedSamples& from, std::size_t k, double a, double b, Keep&& keep)
+{
+    BlockFilter f;
+    const CoverageSample* s = from.block(k);
+    for (std::size_t i = 0; i < from.count[k]; ++i) {
+        const double atA = sampleCoverage(s[i], a), atB = sampleCoverage(s[i], b);
+        if (atA >= 1.0)
+            ++f.settled;
+        else if (atB > 0.0) {
+            keep(f.kept++, i);
+            f.ramps = f.ramps && s[i].step > 0.0f && atA > 0.0 && atB < 1.0;
+        }
+    }
+    return f;
+}
+
+}  // namespace
+
 /// The level in [a, b] at which fullyBelow + coveredVoxels(samples, level) reaches @a wanted, by
 /// 60 bisection steps. Samples whose coverage is constant (0 or 1) over what is left of the
 /// bracket are set aside as it narrows, so later steps visit only the voxels the level still
 /// cuts; each kept sample contributes exactly what coveredVoxels() would give it. A sample's
 /// coverage at the bracket's ends is computed again where it is needed, not carried along: the
 /// same doubles (the same function of the same two numbers), and 8 bytes a sample instead of 32
-/// (a plate's band holds 10^7-10^8 samples: the solve's peak).
+/// (a plate's band holds 10^7-10^8 samples: the solve's peak). Each step's passes run in
+/// parallel over fixed blocks of samples and give the serial bisection's steps (coveredBelow()):
+/// the same level, bit for bit, for any thread count.
 double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b,
                       const std::function<void()>& interrupt)
 {
-    const auto coverage = sampleCoverage;
     // The first step reads @a samples themselves and keeps in @a active only those the level
     // still cuts: no copy of every sample (each of its pages written, and held beside the
-    // samples). Its room is reserved, not written: only the pages the kept samples fill are
-    // touched.
-    std::vector<CoverageSample> active;
+    // samples). Later steps move the samples kept to the front of their block.
+    std::unique_ptr<CoverageSample[]> active;
+    BlockedSamples left = wholeBlocks(samples.data(), samples.size());  // the samples still cut
     bool first = true;
     double settled = fullyBelow;  // whole voxels below every level left in the bracket
     // Once every sample left is partly covered across the whole bracket, the coverage is linear
@@ -292,46 +409,63 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
     for (int iteration = 0; iteration < 60; ++iteration) {
         if (interrupt) interrupt();
         const double mid = 0.5 * (a + b);
-        double covered = settled;
-        const std::vector<CoverageSample>& left = first ? samples : active;  // the samples still cut
-        if (linear)
-            covered += constant + mid * slope;
-        else
-            for (std::size_t i = 0; i < left.size(); ++i) {
-                if (interrupt && (i & 0xfffff) == 0xfffff) interrupt();  // a step over 10^7 samples
-                covered += coverage(left[i], mid);
-            }
-        const bool raiseA = covered < wanted;
+        const bool raiseA =
+            linear ? settled + (constant + mid * slope) < wanted : coveredBelow(left, settled, mid, wanted, interrupt);
         (raiseA ? a : b) = mid;
         if (linear) continue;
         // Coverage is monotone in the level: full at a means full on [a, b], empty at b empty.
-        std::size_t kept = 0;
-        bool ramps = true;
-        if (first) active.reserve(samples.size());
-        for (std::size_t i = 0; i < left.size(); ++i) {
-            if (interrupt && (i & 0xfffff) == 0xfffff) interrupt();
-            const CoverageSample s = left[i];
-            const double atA = coverage(s, a), atB = coverage(s, b);
-            if (atA >= 1.0)
-                settled += 1.0;
-            else if (atB > 0.0) {
-                if (first)
-                    active.push_back(s);
-                else
-                    active[kept] = s;
-                ++kept;
-                ramps = ramps && s.step > 0.0f && atA > 0.0 && atB < 1.0;
-            }
+        const std::size_t nBlocks = left.count.size();
+        std::vector<BlockFilter> found(nBlocks);
+        if (first) {
+            // Which samples are kept, then each block's written at its place in one array.
+            std::vector<std::uint64_t> kept((samples.size() + 63) / 64);
+            forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
+                std::uint64_t* bits = kept.data() + k * (kBisectBlock / 64);
+                found[k] =
+                    filterBlock(left, k, a, b, [&](std::uint32_t, std::size_t i) { bits[i / 64] |= 1ull << (i % 64); });
+            });
+            std::vector<std::size_t> at(nBlocks + 1, 0);
+            for (std::size_t k = 0; k < nBlocks; ++k) at[k + 1] = at[k] + found[k].kept;
+            active = std::make_unique_for_overwrite<CoverageSample[]>(at[nBlocks]);
+            forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
+                const std::uint64_t* bits = kept.data() + k * (kBisectBlock / 64);
+                const CoverageSample* s = left.block(k);
+                CoverageSample* to = active.get() + at[k];
+                for (std::size_t i = 0; i < left.count[k]; ++i)
+                    if (bits[i / 64] >> (i % 64) & 1u) *to++ = s[i];
+            });
+            left = wholeBlocks(active.get(), at[nBlocks]);
+            first = false;
+        } else {
+            CoverageSample* base = active.get();
+            forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
+                CoverageSample* s = base + k * kBisectBlock;
+                found[k] = filterBlock(left, k, a, b, [&](std::uint32_t to, std::size_t i) { s[to] = s[i]; });
+                left.count[k] = found[k].kept;
+            });
         }
-        active.resize(kept);
-        first = false;
+        // Each block's whole voxels: ones added one by one, as the serial pass does (exactly a
+        // count added at once while the sum is a whole number below 2^53).
+        std::size_t nowSettled = 0;
+        bool ramps = true;
+        for (const BlockFilter& f : found) {
+            nowSettled += f.settled;
+            ramps = ramps && f.ramps;
+        }
+        if (settled == std::floor(settled) && std::abs(settled) + double(nowSettled) < 0x1p53)
+            settled += double(nowSettled);
+        else
+            for (std::size_t i = 0; i < nowSettled; ++i) settled += 1.0;
         if (ramps) {
             linear = true;
-            for (const CoverageSample& s : active) {
-                constant += 0.5 - double(s.value) / s.step;
-                slope += 1.0 / s.step;
-            }
-            std::vector<CoverageSample>().swap(active);
+            for (std::size_t k = 0; k < left.count.size(); ++k)
+                for (std::size_t i = 0; i < left.count[k]; ++i) {
+                    const CoverageSample& s = left.block(k)[i];
+                    constant += 0.5 - double(s.value) / s.step;
+                    slope += 1.0 / s.step;
+                }
+            left = BlockedSamples{};
+            active.reset();
         }
     }
     return 0.5 * (a + b);
