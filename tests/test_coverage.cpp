@@ -104,7 +104,7 @@ TEST(Coverage, BisectionReadsTheSamplesWithoutACopyAndFindsTheSameLevel)
         }
         return 0.5 * (a + b);
     };
-    // Trials of up to 40 parallel blocks of 8192 samples, whole and partial; voxels below counted
+    // Trials of up to 12 parallel blocks of 8192 samples, whole and partial; voxels below counted
     // in whole numbers (small, and past 2^40: the parallel sum's bound is then wide) or not (the
     // ones then added one by one); bisected on one thread and on two.
     std::mt19937 rng(38);

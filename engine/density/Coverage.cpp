@@ -289,7 +289,21 @@ struct BlockedSamples {
         for (std::uint32_t c : count) n += c;
         return n;
     }
+    /// Calls @a f(sample) for every sample in their order, @a interrupt every kInterruptBlocks
+    /// blocks.
+    template <class F>
+    void inOrder(const std::function<void()>& interrupt, F&& f) const;
 };
+
+template <class F>
+void BlockedSamples::inOrder(const std::function<void()>& interrupt, F&& f) const
+{
+    for (std::size_t k = 0; k < count.size(); ++k) {
+        if (interrupt && k % kInterruptBlocks == kInterruptBlocks - 1) interrupt();
+        const CoverageSample* s = block(k);
+        for (std::size_t i = 0; i < count[k]; ++i) f(s[i]);
+    }
+}
 
 /// @a samples as blocks, each full but the last.
 BlockedSamples wholeBlocks(const CoverageSample* samples, std::size_t n)
@@ -346,11 +360,7 @@ bool coveredBelow(const BlockedSamples& blocks, double settled, double level, do
     if (settled + sum < wanted - bound) return true;
     if (settled + sum > wanted + bound) return false;
     double covered = settled;
-    for (std::size_t k = 0; k < nBlocks; ++k) {
-        if (interrupt && k % kInterruptBlocks == kInterruptBlocks - 1) interrupt();
-        const CoverageSample* s = blocks.block(k);
-        for (std::size_t i = 0; i < blocks.count[k]; ++i) covered += sampleCoverage(s[i], level);
-    }
+    blocks.inOrder(interrupt, [&](const CoverageSample& s) { covered += sampleCoverage(s, level); });
     return covered < wanted;
 }
 
@@ -458,12 +468,10 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
             for (std::size_t i = 0; i < nowSettled; ++i) settled += 1.0;
         if (ramps) {
             linear = true;
-            for (std::size_t k = 0; k < left.count.size(); ++k)
-                for (std::size_t i = 0; i < left.count[k]; ++i) {
-                    const CoverageSample& s = left.block(k)[i];
-                    constant += 0.5 - double(s.value) / s.step;
-                    slope += 1.0 / s.step;
-                }
+            left.inOrder(interrupt, [&](const CoverageSample& s) {
+                constant += 0.5 - double(s.value) / s.step;
+                slope += 1.0 / s.step;
+            });
             left = BlockedSamples{};
             active.reset();
         }

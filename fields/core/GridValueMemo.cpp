@@ -142,6 +142,7 @@ void GridValueMemo::dropOutside(Interval levels) const
             const Key* key;
             Kept* kept;
             std::uint32_t gone;  ///< a stack's leaves no longer kept (its dropped among them)
+            std::size_t n;       ///< its values kept
             std::size_t block, offset;
         };
         std::vector<Move> moves;
@@ -150,6 +151,7 @@ void GridValueMemo::dropOutside(Interval levels) const
             const Key& k = it->first;
             Kept& kept = it->second;
             std::uint32_t gone = 0;
+            std::size_t n = std::size_t(k.nx) * std::size_t(k.ny) * std::size_t(k.nz);
             if (isStack(k)) {
                 // Leaf by leaf: the stack's kept leaves that a grid in the band may read stay.
                 const int leaves = k.nz / 8;
@@ -160,14 +162,15 @@ void GridValueMemo::dropOutside(Interval levels) const
                     it = shard.values.erase(it);
                     continue;
                 }
+                n = std::size_t(leaves - std::popcount(gone)) * 512;
             } else if (!readAt(k, kept.values, levels)) {
-                dropped += std::size_t(k.nx) * std::size_t(k.ny) * std::size_t(k.nz) * sizeof(double);
+                dropped += n * sizeof(double);
                 it = shard.values.erase(it);
                 continue;
             }
             const auto holder =
                 std::prev(std::upper_bound(bases.begin(), bases.end(), std::make_pair(kept.values, ~std::size_t(0))));
-            moves.push_back({&k, &kept, gone, holder->second, std::size_t(kept.values - holder->first)});
+            moves.push_back({&k, &kept, gone, n, holder->second, std::size_t(kept.values - holder->first)});
             ++it;
         }
         std::sort(moves.begin(), moves.end(), [](const Move& a, const Move& b) {
@@ -180,9 +183,7 @@ void GridValueMemo::dropOutside(Interval levels) const
         for (const Move& m : moves) {
             const Key& k = *m.key;
             Kept& kept = *m.kept;
-            const bool stack = isStack(k);
-            const std::size_t n = stack ? std::size_t(k.nz / 8 - std::popcount(m.gone)) * 512
-                                        : std::size_t(k.nx) * std::size_t(k.ny) * std::size_t(k.nz);
+            const std::size_t n = m.n;
             if (left < n) {  // the next block: one the batch lay in or before (never past the last)
                 ++block;
                 next = static_cast<double*>(shard.blocks[block].data());
@@ -191,7 +192,7 @@ void GridValueMemo::dropOutside(Interval levels) const
             double* to = next;
             next += n;
             left -= n;
-            if (stack && m.gone != kept.dropped) {
+            if (isStack(k) && m.gone != kept.dropped) {
                 // Its kept leaves' rows in turn: gathered first, as the batch's own layout
                 // interleaves them (moved in place, a row would overwrite one not yet read).
                 gathered.resize(n);

@@ -76,14 +76,16 @@ public:
     /// Bytes of memory mapped for them now (whole blocks).
     std::size_t mappedBytes() const;
     /// Drops the kept batches a grid of a level in @a levels would not read, and frees their
-    /// memory (the batches kept are moved to the front of their shard's blocks, in the order they
-    /// lie there, and the blocks left empty are unmapped: no fresh pages are written): those whose operand bound over
-    /// the batch's box grown by one spacing (as evaluateSparse() culls a leaf) misses @a levels. The batches kept and
-    /// their values are unchanged; a dropped batch asked again is evaluated again (the same values). A stack of leaves
-    /// (8 x 8 x 8m, SparseOptions::stackLeaves) is decided leaf by leaf: its leaves a grid in @a levels cannot read are
-    /// dropped, and the stack is served from the others to a caller that reads none of the dropped ones
-    /// (GridBatch::unread), else evaluated again. For a density solve that has bracketed its level (solveDensity()'s @a
-    /// levelWithin): its band was evaluated wider. Called between evaluations, never during one.
+    /// memory: those whose operand bound over the batch's box grown by one spacing (as
+    /// evaluateSparse() culls a leaf) misses @a levels. The batches kept and their values are
+    /// unchanged; a dropped batch asked again is evaluated again (the same values). A stack of
+    /// leaves (8 x 8 x 8m, SparseOptions::stackLeaves) is decided leaf by leaf: its leaves a grid
+    /// in @a levels cannot read are dropped, and the stack is served from the others to a caller
+    /// that reads none of the dropped ones (GridBatch::unread), else evaluated again. The values
+    /// kept are moved to the front of their shard's blocks, in the order they lie there, and the
+    /// blocks left empty are unmapped: no fresh pages are written. For a density solve that has
+    /// bracketed its level (solveDensity()'s @a levelWithin): its band was evaluated wider.
+    /// Called between evaluations, never during one.
     void dropOutside(Interval levels) const;
 
 private:
