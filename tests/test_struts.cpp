@@ -2,6 +2,7 @@
 // convolution and capsule nodes (gradients, bounds, fast path), unit cells, frames, recipes.
 #include "TestUtil.h"
 #include "engine/core/GridLeavesReused.h"
+#include "engine/core/KeptGridLeaves.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/density/DensitySolver.h"
 #include "engine/frames/StrutFrames.h"
@@ -1761,6 +1762,40 @@ TEST(MappedBlock, IsWholeHugePagesOnTheirBoundaryAndMovesItsMemory)
     }
 }
 
+TEST(GridValueMemo, GivesTheOperandsGridValuesRoundedToFloatKeptOrNot)
+{
+    // Each batch's values are the operand's rounded to float (the grid's precision): passed
+    // through, kept, served from the store, and over the budget (not kept) alike.
+    const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
+    const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
+    std::vector<GridBatch> batches;
+    for (int b = 0; b < 6; ++b) {
+        GridBatch batch;
+        batch.origin = Vec3d(0.37 * b, 1.1 + 0.23 * b, 0.05 * b);
+        batch.spacing = Vec3d(0.13);
+        batch.nz = b % 2 == 0 ? 8 : 16;
+        batches.push_back(batch);
+    }
+    const auto memo = std::make_shared<GridValueMemo>(iso);
+    std::size_t rounded = 0;
+    // Off, then keeping with room for two batches' values, then each batch asked again.
+    for (const int pass : {0, 1, 2}) {
+        if (pass == 1) memo->keep(true, 2 * 1024 * sizeof(float));
+        for (const GridBatch& batch : batches) {
+            std::vector<double> expected(batch.size()), got(batch.size());
+            iso->gridValues(batch, expected);
+            memo->gridValues(batch, got);
+            for (std::size_t k = 0; k < got.size(); ++k) {
+                ASSERT_EQ(got[k], double(static_cast<float>(expected[k]))) << "pass " << pass << " value " << k;
+                rounded += got[k] != expected[k];
+            }
+        }
+    }
+    EXPECT_GT(memo->keptBytes(), 0u);
+    EXPECT_LE(memo->keptBytes(), 2 * 1024 * sizeof(float));
+    EXPECT_GT(rounded, 0u);  // the operand's doubles are not floats already
+}
+
 TEST(GridValueMemo, AMovedLevelGivesTheGridOfAFreshEvaluation)
 {
     // The job's aim: the grid at the solved level, the level moved, the grid again. With the
@@ -1769,7 +1804,9 @@ TEST(GridValueMemo, AMovedLevelGivesTheGridOfAFreshEvaluation)
     const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
     const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
     const Domain d = Domain::fromBox(Box3{Vec3d(0), Vec3d(10)}, 0.15);
-    const auto fresh = evaluateSparse(LevelSolid(iso, SolidSide::Below, 0.62), d, SparseOptions{});
+    // A fresh memo (not keeping): the operand's values rounded to float, as the kept ones are.
+    const auto fresh =
+        evaluateSparse(LevelSolid(std::make_shared<GridValueMemo>(iso), SolidSide::Below, 0.62), d, SparseOptions{});
     for (const std::size_t budget : {std::size_t(1) << 30, std::size_t(3 * 4096)}) {
         const auto memo = std::make_shared<GridValueMemo>(iso);
         const auto solid = LevelSolid::unsolved(memo, SolidSide::Below);
@@ -1811,9 +1848,9 @@ void expectDropKeepsWhatAGridInTheBandReads(int stack)
         const auto solved = evaluateSparse(*memo, d, solve, &stats);
         const std::size_t before = memo->keptBytes();
         if (stack == 1)
-            ASSERT_EQ(before, solved->tree().leafCount() * 512 * sizeof(double));
+            ASSERT_EQ(before, solved->tree().leafCount() * 512 * sizeof(float));
         else
-            ASSERT_EQ(before, stats.stackedLeaves * 512 * sizeof(double));
+            ASSERT_EQ(before, stats.stackedLeaves * 512 * sizeof(float));
         // Twice, the band narrowed: the second drop moves batches (and stacks with leaves
         // already dropped) that the first kept.
         memo->dropOutside(Interval(band.lo - 0.1, band.hi + 0.1));
@@ -1822,20 +1859,21 @@ void expectDropKeepsWhatAGridInTheBandReads(int stack)
         EXPECT_GT(after, 0u);
         // The values kept lie in the blocks still mapped.
         EXPECT_GE(memo->mappedBytes(), after);
-        EXPECT_EQ(after % (512 * sizeof(double)), 0u);
+        EXPECT_EQ(after % (512 * sizeof(float)), 0u);
         if (stack == 1)
             EXPECT_LT(after, before);  // the wide band's edges: leaves no grid in the band reads
         else
             // Leaf by leaf: fewer than the leaves the solve itself needed (a stack's whole drop
             // would keep at least those, and more).
-            EXPECT_LT(after, stats.leaves * 512 * sizeof(double));
+            EXPECT_LT(after, stats.leaves * 512 * sizeof(float));
         const auto solid = LevelSolid::unsolved(memo, SolidSide::Below);
         solid->solve(level);
         counted->batches = 0;
         const auto grid = evaluateSparse(*solid, d, stacked);
         const int evaluatedAgain = counted->batches.load();
         memo->keep(false);
-        const auto fresh = evaluateSparse(LevelSolid(iso, SolidSide::Below, level), d, stacked);
+        const auto fresh =
+            evaluateSparse(LevelSolid(std::make_shared<GridValueMemo>(iso), SolidSide::Below, level), d, stacked);
         ASSERT_EQ(grid->tree().leafCount(), fresh->tree().leafCount()) << level;
         EXPECT_EQ(mismatchedVoxels(*fresh, *grid), 0u) << level;
         if (band.contains(level))
@@ -1882,6 +1920,95 @@ TEST(GridValueMemo, TheSolveTellsTheBandItsLevelLiesIn)
     EXPECT_TRUE(s.coverage);
     EXPECT_TRUE(told.contains(s.level)) << told.lo << " " << s.level << " " << told.hi;
     EXPECT_EQ(s.level, plain.level);
+}
+
+namespace {
+/// solveDensity's keepGrid: a coverage solve (in stacks, as the job's; with @a mask or without)
+/// hands over the grid of the memo's values it measured, once; the memo keeps it
+/// (KeptGridLeaves) and nothing of its own. A grid of the solve's region at the solved level
+/// then evaluates again only the stacks of leaves the mask cut (none without one), and with the
+/// mesher's margin (leaves past the region, evaluated) is a fresh evaluation's (a memo not
+/// keeping: the same rounding) bit for bit; after the drop to the band the level lies in, a
+/// grid at a level outside that band evaluates again, still the fresh grid. The level is the
+/// one a solve keeping nothing finds.
+void expectTheHandedGridServesTheGridAtTheLevel(const FieldNode* mask)
+{
+    const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
+    const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
+    const auto counted = std::make_shared<CountedBatches>(iso);
+    const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
+    SparseOptions stacked;
+    stacked.stackLeaves = 8;
+    SparseOptions region = stacked;
+    region.margin = 0;
+    const auto memo = std::make_shared<GridValueMemo>(counted);
+    memo->keep(true, 0);
+    int handed = 0;
+    std::size_t heldLeaves = 0;
+    Interval told;
+    const DensitySolution s = solveDensity(
+        *memo, d, 0.2, mask, true, nullptr, 0, [&](Interval levels) { told = levels; }, 8,
+        [&](openvdb::FloatGrid::Ptr grid) {
+            ++handed;
+            heldLeaves = grid->tree().leafCount();
+            memo->keepLeaves(std::make_unique<KeptGridLeaves>(std::move(grid), d), std::size_t(1) << 30);
+        });
+    const DensitySolution plain =
+        solveDensity(*std::make_shared<GridValueMemo>(iso), d, 0.2, mask, true, nullptr, 0, {}, 8);
+    ASSERT_EQ(handed, 1);
+    EXPECT_GT(heldLeaves, 100u);
+    EXPECT_EQ(memo->keptBytes(), 0u);
+    EXPECT_EQ(s.level, plain.level);
+    auto fresh = [&](double level) {
+        return evaluateSparse(LevelSolid(std::make_shared<GridValueMemo>(iso), SolidSide::Below, level), d, stacked);
+    };
+    const auto solid = LevelSolid::unsolved(memo, SolidSide::Below);
+    solid->solve(s.level);
+    counted->batches = 0;
+    const auto inRegion = evaluateSparse(*solid, d, region);
+    // Each leaf not wholly inside the mask costs at most one stack's evaluation.
+    int cut = 0, inside = 0;
+    for (auto leaf = inRegion->tree().cbeginLeaf(); leaf; ++leaf) {
+        const Box3 box{d.worldOf(leaf->origin()), d.worldOf(leaf->origin() + openvdb::Coord(7))};
+        (!mask || float(mask->bound(box).hi) < 0.0f ? inside : cut) += 1;
+    }
+    EXPECT_GT(inside, 100);
+    EXPECT_LE(counted->batches.load(), cut);
+    const auto atLevel = evaluateSparse(*solid, d, stacked);
+    const auto expected = fresh(s.level);
+    ASSERT_EQ(atLevel->tree().leafCount(), expected->tree().leafCount());
+    EXPECT_EQ(mismatchedVoxels(*expected, *atLevel), 0u);
+    // The band's drop: a grid at its ends reads held leaves only; one far outside evaluates.
+    memo->dropOutside(told);
+    for (const double level : {told.lo, told.hi, told.hi + 0.3}) {
+        const auto moved = LevelSolid::unsolved(memo, SolidSide::Below);
+        moved->solve(level);
+        counted->batches = 0;
+        evaluateSparse(*moved, d, region);
+        if (!told.contains(level))
+            EXPECT_GT(counted->batches.load(), 0) << level;
+        else if (!mask)
+            EXPECT_EQ(counted->batches.load(), 0) << level;
+        const auto grid = evaluateSparse(*moved, d, stacked);
+        const auto want = fresh(level);
+        ASSERT_EQ(grid->tree().leafCount(), want->tree().leafCount()) << level;
+        EXPECT_EQ(mismatchedVoxels(*want, *grid), 0u) << level;
+    }
+    memo->keep(false);
+}
+}  // namespace
+
+TEST(GridValueMemo, AnUnmaskedSolveHandsItsGridOverAndTheGridAtTheLevelReadsIt)
+{
+    expectTheHandedGridServesTheGridAtTheLevel(nullptr);
+}
+
+TEST(GridValueMemo, AMaskedSolveHandsOverTheLeavesWhollyInsideItsMask)
+{
+    // The leaves with a voxel outside the mask hold the mask's value, not the memo's: they are
+    // left out of the grid handed over, and evaluated again.
+    const Sphere mask(Vec3d(4.8, 5.0, 4.0), 3.7);
+    expectTheHandedGridServesTheGridAtTheLevel(&mask);
 }
 
 TEST(GridValueMemo, ASolveOnTheRecipesLatticeHandsTheGridItsValues)
@@ -2013,15 +2140,17 @@ TEST(StrutLattice, DensityOnTheJobsVoxelsHoldsByBruteForce)
 TEST(GridValueMemo, AFrameBoxSolvedOnTheJobsVoxelsHandsTheGridItsValues)
 {
     // A wireframe's box [0, 8]^3 in a domain wider than it (the box a mask of the job's domain),
-    // and in one it pokes out of by 0.25 and 0.22 mm (the domain's lattice continued past its
-    // faces): the density is solved on the job's voxels, and its raw values serve the grid. The
+    // in one it pokes out of by 0.25 and 0.22 mm (the domain's lattice continued past its
+    // faces), and in one it pokes out of on every side (no mask: the solve's grid is handed to
+    // the memo): the density is solved on the job's voxels, and its raw values serve the grid. The
     // grid the mesh is made from must be the one a job given the reported level evaluates, bit
     // for bit; the level and grid the same for one thread and two; and the solid's share of the
     // box, by brute force, within 0.5 % of the target.
     const TempDir dir;
     const std::string csv = bccWireframe(dir, 4.0, 2);
     for (const std::string domain :
-         {"[[-1.05, -0.5, -0.3], [9.25, 8.5, 8.4]]", "[[0.25, -0.5, -0.3], [9.25, 8.5, 7.78]]"}) {
+         {"[[-1.05, -0.5, -0.3], [9.25, 8.5, 8.4]]", "[[0.25, -0.5, -0.3], [9.25, 8.5, 7.78]]",
+          "[[0.25, 0.3, 0.2], [7.75, 7.8, 7.7]]"}) {
         const std::string head = "voxel: 0.1\ndomain: {box: " + domain +
                                  "}\nfields:\n  lattice: {struts: {wireframe: " + csv +
                                  "}, kernel: {gaussian: {sigma: 0.4}}, ";

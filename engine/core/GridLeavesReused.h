@@ -7,12 +7,42 @@
 
 #include <openvdb/openvdb.h>
 
+#include <tbb/parallel_for.h>
+
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <span>
+#include <vector>
 
 namespace voxlat {
+
+/// The index of the first leaf of @a batch as evaluateSparse() on @a domain makes it (8 x 8 x 8m
+/// points: a leaf, or a stack of m leaves along z; spacing the voxel; origin domain.worldOf() of
+/// a leaf's origin bit for bit) into @a ijk; false when it is no leaf's or stack's batch.
+inline bool gridLeafOrigin(const Domain& domain, const GridBatch& batch, openvdb::Coord& ijk)
+{
+    constexpr int n = int(openvdb::FloatGrid::TreeType::LeafNodeType::DIM);
+    if (batch.nx != n || batch.ny != n || batch.nz % n != 0 || batch.spacing != Vec3d(domain.voxel)) return false;
+    for (int a = 0; a < 3; ++a) ijk[a] = int(std::lround((batch.origin[a] - domain.box.min[a]) / domain.voxel - 0.5));
+    return ((ijk.x() | ijk.y() | ijk.z()) & (n - 1)) == 0 && domain.worldOf(ijk) == batch.origin;
+}
+
+/// Replaces each leaf of @a grid for which @a drop(leaf) is true (decided in parallel) by a
+/// leaf-sized inactive tile of the background value, freeing it.
+template <class Drop>
+void tileLeavesWhere(openvdb::FloatGrid& grid, Drop drop)
+{
+    std::vector<const openvdb::FloatGrid::TreeType::LeafNodeType*> leaves;
+    grid.tree().getNodes(leaves);
+    std::vector<std::uint8_t> dropped(leaves.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+        for (std::size_t n = range.begin(); n != range.end(); ++n) dropped[n] = drop(*leaves[n]);
+    });
+    for (std::size_t n = 0; n < leaves.size(); ++n)
+        if (dropped[n]) grid.tree().addTile(1, leaves[n]->origin(), grid.background(), false);
+}
 
 /// @a field, except that a batch which is one of @a grid's leaves, as evaluateSparse() on
 /// @a domain makes its batches (8^3 points, spacing the voxel, origin domain.worldOf(leaf origin)
@@ -43,10 +73,8 @@ public:
         const int count = batch.nz % n == 0 ? batch.nz / n : 0;
         std::array<const LeafT*, 16> leaves{};
         if (count >= 1 && count <= 16) {
-            GridBatch leafBatch = batch;
-            leafBatch.nz = n;
             openvdb::Coord first;
-            bool all = leafIndex(leafBatch, first);
+            bool all = gridLeafOrigin(mDomain, batch, first);
             for (int m = 0; m < count && all; ++m) {
                 leaves[std::size_t(m)] = leafAt(first + openvdb::Coord(0, 0, m * n));
                 all = leaves[std::size_t(m)] != nullptr;
@@ -69,17 +97,6 @@ public:
 private:
     using LeafT = openvdb::FloatGrid::TreeType::LeafNodeType;
 
-    /// The index of the leaf whose batch evaluateSparse() makes as @a batch (8^3 points, the
-    /// voxel's spacing, origin domain.worldOf() of a leaf's origin bit for bit) into @a ijk;
-    /// false when it is no leaf's batch.
-    bool leafIndex(const GridBatch& batch, openvdb::Coord& ijk) const
-    {
-        constexpr int n = int(LeafT::DIM);
-        if (batch.nx != n || batch.ny != n || batch.nz != n || batch.spacing != Vec3d(mDomain.voxel)) return false;
-        for (int a = 0; a < 3; ++a)
-            ijk[a] = int(std::lround((batch.origin[a] - mDomain.box.min[a]) / mDomain.voxel - 0.5));
-        return ((ijk.x() | ijk.y() | ijk.z()) & (n - 1)) == 0 && mDomain.worldOf(ijk) == batch.origin;
-    }
     /// The grid's leaf at @a ijk with values, or null.
     const LeafT* leafAt(const openvdb::Coord& ijk) const
     {

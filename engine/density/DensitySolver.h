@@ -5,6 +5,8 @@
 #include "engine/core/Domain.h"
 #include "engine/core/JobContext.h"
 
+#include <openvdb/openvdb.h>
+
 #include <array>
 #include <cstdint>
 #include <functional>
@@ -59,10 +61,18 @@ struct DensitySolution {
 ///
 /// @a stackLeaves: the indicator's leaves are evaluated in stacks along z (SparseOptions::stackLeaves),
 /// as a grid of the same stacks will ask for them (a GridValueMemo then serves its batches).
+///
+/// @a keepGrid, when set, is handed (at most once) the grid its coverage pass measured, after
+/// that pass has taken its samples, in place of freeing it: leaves of evaluateSparse(indicator,
+/// domain, o) for options o of the solve (band, stacks, no clipToDomain), those with a voxel
+/// outside @a mask left out (tiles). A caller keeping the indicator's values
+/// (GridValueMemo::keepLeaves()) keeps this grid instead of a second copy of them. A solve with a
+/// mask or subVoxel always gets there.
 DensitySolution solveDensity(const FieldNode& indicator, const Domain& domain, double target,
                              const FieldNode* mask = nullptr, bool subVoxel = false,
                              const JobContext* context = nullptr, int marginVoxels = 0,
-                             const std::function<void(Interval)>& levelWithin = {}, int stackLeaves = 1);
+                             const std::function<void(Interval)>& levelWithin = {}, int stackLeaves = 1,
+                             const std::function<void(openvdb::FloatGrid::Ptr)>& keepGrid = {});
 
 /// A part of a measuring region, sampled on its own domain and counted @a weight times.
 struct DensityPiece {

@@ -243,7 +243,8 @@ BandSplit streamedSplit(const FieldNode& g, const Domain& domain, const openvdb:
 
 DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain, double target, const FieldNode* mask,
                              bool subVoxel, const JobContext* context, int marginVoxels,
-                             const std::function<void(Interval)>& levelWithin, int stackLeaves)
+                             const std::function<void(Interval)>& levelWithin, int stackLeaves,
+                             const std::function<void(openvdb::FloatGrid::Ptr)>& keepGrid)
 {
     DensitySolution sol;
     // The voxels measured: the domain's, and @a marginVoxels more on every side (their centres
@@ -397,13 +398,14 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                     // +-FLT_MAX): below it, the region's voxels below its low end, tiles included.
                     fullyBelow = countBelow(*grid, region, wideLo);
                     samples = coverageSamples(*grid, region, wideLo, wideHi, interrupt);
-                    grid.reset();
                 } else {
-                    const auto wideGrid =
+                    auto wideGrid =
                         covered ? grid : evaluateSparse(GridLeavesReused(indicator, *grid, domain), domain, wide);
                     if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
                     fullyBelow = splitByBand(*wideGrid, region, wideLo, wideHi, interrupt).below;
                     samples = coverageSamples(*wideGrid, region, wideLo, wideHi, interrupt);
+                    // The grid the samples came from is the one handed over below.
+                    grid = std::move(wideGrid);
                 }
                 a = wide.band.lo;
                 b = wide.band.hi;
@@ -415,8 +417,20 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             // memory given back: the bisection's copy of the samples is one block, which the
             // leaves' small blocks freed into the heaps cannot hold (a 50 mm frame's solve peaked
             // there, the freed grid's 0.4 GB resident beside it).
-            grid.reset();
-            releaseFreedMemory();
+            if (keepGrid) {
+                // Handed over: no heap trim, which would split the huge pages of its leaves
+                // (each 4 KB page then faults again on its next first read). Masked, only the
+                // leaves wholly inside the mask hold the indicator's own values.
+                if (masked)
+                    tileLeavesWhere(*grid, [](const auto& leaf) {
+                        const float* data = leaf.buffer().data();
+                        return std::any_of(data, data + 512, [](float v) { return v == float(kOutsideMask); });
+                    });
+                keepGrid(std::move(grid));
+            } else {
+                grid.reset();
+                releaseFreedMemory();
+            }
             // An open bracket (a target within 1 % of 0 or 1): bisect over the values present.
             for (const CoverageSample& c : samples) {
                 if (options.band.lo <= -1e30) a = std::min(a == options.band.lo ? 1e300 : a, double(c.value) - c.step);

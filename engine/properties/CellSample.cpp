@@ -45,6 +45,7 @@ void sampleBlocks(const FieldNode& field, const Vec3d& origin, const Vec3d& size
         batch.nx = n[0];
         batch.ny = n[1];
         batch.nz = n[2];
+        batch.exact = true;  // a quantile of these values sets the cell's level
         double values[kBlock * kBlock * kBlock];
         field.gridValues(batch, std::span<double>(values, batch.size()));
         for (int i = 0; i < n[0]; ++i)

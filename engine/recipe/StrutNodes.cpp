@@ -770,8 +770,11 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
         }
         const bool solved = node.density || solvedByInfill;
         // The job's aim may move a solved level: the raw values are kept between its evaluations.
-        node.solid = solved ? LevelSolid::unsolved(std::make_shared<GridValueMemo>(raw), SolidSide::Below)
-                            : std::make_shared<LevelSolid>(raw, SolidSide::Below,
+        // A level given is read through a memo too (never keeping), which rounds the grid's values
+        // as a solved one's: the reported level pasted back gives the same grid.
+        const auto memo = std::make_shared<GridValueMemo>(raw);
+        node.solid = solved ? LevelSolid::unsolved(memo, SolidSide::Below)
+                            : std::make_shared<LevelSolid>(memo, SolidSide::Below,
                                                            spec.has("level") ? spec["level"].number() : 0.0);
         // A capsule's level is an offset of every radius.
         double rMin = std::numeric_limits<double>::infinity();
@@ -923,9 +926,11 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     // 50 mm frame: 0.6 GB of kept doubles, a fifth of the run zeroing their fresh pages, read by
     // no second evaluation).
     const bool tiled = evaluated != iso;
-    node.solid =
-        solved ? LevelSolid::unsolved(tiled ? evaluated : std::make_shared<GridValueMemo>(evaluated), SolidSide::Below)
-               : std::make_shared<LevelSolid>(evaluated, SolidSide::Below, iso->radiusOf(t));
+    // A level given is read through a memo too (never keeping), which rounds the grid's values as
+    // a solved one's: the reported level pasted back gives the same grid.
+    const FieldPtr values = tiled ? evaluated : std::make_shared<GridValueMemo>(evaluated);
+    node.solid = solved ? LevelSolid::unsolved(values, SolidSide::Below)
+                        : std::make_shared<LevelSolid>(values, SolidSide::Below, iso->radiusOf(t));
     // The recipe's `level:` is t: the double t whose radiusOf() gives back this level exactly (a
     // neighbour of valueOf()'s when rounding moves it), so the reported t pasted into the recipe
     // builds the same solid, bit for bit.

@@ -68,6 +68,10 @@ struct GridBatch {
     /// them unset (GridValueMemo serves a stack from the leaves it kept). 0: every value is read.
     /// Nodes that pass the batch on pass this on; a batch of another layout made from it clears it.
     std::uint32_t unread = 0;
+    /// The caller needs the values as exact as the nodes make them: a cell's quantile, where
+    /// values that differ in their last bits (mirror images) must stay apart. GridValueMemo then
+    /// passes the operand's doubles through unrounded and unkept. Passed on like unread.
+    bool exact = false;
 
     std::size_t size() const { return std::size_t(nx) * ny * nz; }
     Vec3d point(int i, int j, int k) const

@@ -6,6 +6,7 @@
 #include <bit>
 #include <cstring>
 #include <iterator>
+#include <stdexcept>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -47,10 +48,38 @@ Interval GridValueMemo::bound(const Box3& box) const
 
 void GridValueMemo::keep(bool on, std::size_t maxBytes) const
 {
+    mLeaves.reset();
     mShards.reset();
     mBytes = 0;
     mMaxBytes = maxBytes;
     if (on) mShards = std::make_unique<std::array<Shard, kShards>>();
+}
+
+void GridValueMemo::keepLeaves(std::unique_ptr<KeptLeaves> leaves, std::size_t maxBytes) const
+{
+    if (!mShards) throw std::logic_error("GridValueMemo::keepLeaves: the memo is not keeping");
+    mLeaves = std::move(leaves);
+    mMaxBytes = maxBytes;
+}
+
+bool GridValueMemo::fromLeaves(const GridBatch& batch, std::span<double> out) const
+{
+    if (batch.nx != 8 || batch.ny != 8 || batch.nz % 8 != 0 || batch.nz / 8 > 32) return false;
+    const int count = batch.nz / 8;
+    std::array<const float*, 32> leaves{};
+    for (int m = 0; m < count; ++m) {
+        if (batch.unread >> m & 1u) continue;
+        leaves[std::size_t(m)] = mLeaves->leaf(batch, m);
+        if (!leaves[std::size_t(m)]) return false;
+    }
+    for (int m = 0; m < count; ++m) {
+        const float* data = leaves[std::size_t(m)];
+        if (!data) continue;
+        for (std::size_t ij = 0; ij < 64; ++ij)
+            std::copy(data + 8 * ij, data + 8 * ij + 8,
+                      out.begin() + std::ptrdiff_t(ij * std::size_t(batch.nz) + 8 * m));
+    }
+    return true;
 }
 
 std::size_t GridValueMemo::keptBytes() const
@@ -69,12 +98,26 @@ std::size_t GridValueMemo::mappedBytes() const
     return bytes;
 }
 
+namespace {
+/// The operand's values as the memo gives them: rounded to float.
+void roundToFloat(std::span<double> values)
+{
+    for (double& v : values) v = double(static_cast<float>(v));
+}
+}  // namespace
+
 void GridValueMemo::gridValues(const GridBatch& batch, std::span<double> out) const
 {
-    if (!mShards) {
+    if (batch.exact) {
         mOperand->gridValues(batch, out);
         return;
     }
+    if (!mShards) {
+        mOperand->gridValues(batch, out);
+        roundToFloat(out.first(batch.size()));
+        return;
+    }
+    if (mLeaves && fromLeaves(batch, out)) return;
     const Key key{batch.origin.x(),  batch.origin.y(), batch.origin.z(), batch.spacing.x(), batch.spacing.y(),
                   batch.spacing.z(), batch.nx,         batch.ny,         batch.nz};
     const std::size_t hash = KeyHash{}(key);
@@ -95,7 +138,7 @@ void GridValueMemo::gridValues(const GridBatch& batch, std::span<double> out) co
                 for (int m = 0; m < batch.nz / 8; ++m) {
                     if (kept.dropped >> m & 1u) continue;
                     for (std::size_t ij = 0; ij < 64; ++ij) {
-                        const double* row = keptRow(key, kept, m, ij);
+                        const float* row = keptRow(key, kept, m, ij);
                         std::copy(row, row + 8, out.begin() + std::ptrdiff_t(ij * std::size_t(batch.nz) + 8 * m));
                     }
                 }
@@ -105,8 +148,9 @@ void GridValueMemo::gridValues(const GridBatch& batch, std::span<double> out) co
         }
     }
     mOperand->gridValues(batch, out);
+    roundToFloat(out.first(n));
     if (partial) return;  // the same values as the leaves kept: those stay as they are
-    const std::size_t bytes = n * sizeof(double);
+    const std::size_t bytes = n * sizeof(float);
     if (mBytes.fetch_add(bytes) + bytes > mMaxBytes) {
         mBytes.fetch_sub(bytes);
         return;
@@ -116,14 +160,20 @@ void GridValueMemo::gridValues(const GridBatch& batch, std::span<double> out) co
         mBytes.fetch_sub(bytes);
         return;
     }
-    double* kept = place(shard, n);
-    std::copy(out.begin(), out.begin() + std::ptrdiff_t(n), kept);
+    float* kept = place(shard, n);
+    std::transform(out.begin(), out.begin() + std::ptrdiff_t(n), kept, [](double v) { return static_cast<float>(v); });
     shard.values.emplace(key, Kept{kept, 0});
 }
 
 void GridValueMemo::dropOutside(Interval levels) const
 {
     if (!mShards) return;
+    if (mLeaves)
+        mLeaves->dropIf([&](const GridBatch& leaf, const float* values) {
+            const Key k{leaf.origin.x(),  leaf.origin.y(), leaf.origin.z(), leaf.spacing.x(), leaf.spacing.y(),
+                        leaf.spacing.z(), leaf.nx,         leaf.ny,         leaf.nz};
+            return !readAt(k, values, levels);
+        });
     // Shard by shard (each decided alone: the same batches kept for any thread count), the kept
     // values moved to the front of the shard's own blocks in the order they lie in them: each
     // batch then starts no later than it did (the same packing, of the same batches or fewer,
@@ -134,9 +184,9 @@ void GridValueMemo::dropOutside(Interval levels) const
         Shard& shard = (*mShards)[std::size_t(s)];
         std::lock_guard<std::mutex> lock(shard.mutex);
         // The blocks by address, to find which one holds a batch's values.
-        std::vector<std::pair<const double*, std::size_t>> bases;
+        std::vector<std::pair<const float*, std::size_t>> bases;
         for (std::size_t b = 0; b < shard.blocks.size(); ++b)
-            bases.emplace_back(static_cast<const double*>(shard.blocks[b].data()), b);
+            bases.emplace_back(static_cast<const float*>(shard.blocks[b].data()), b);
         std::sort(bases.begin(), bases.end());
         struct Move {
             const Key* key;
@@ -157,14 +207,14 @@ void GridValueMemo::dropOutside(Interval levels) const
                 const int leaves = k.nz / 8;
                 const std::uint32_t all = leaves == 32 ? ~std::uint32_t(0) : (std::uint32_t(1) << leaves) - 1;
                 gone = unreadLeaves(k, kept, levels);
-                dropped += std::size_t(std::popcount(gone) - std::popcount(kept.dropped)) * 512 * sizeof(double);
+                dropped += std::size_t(std::popcount(gone) - std::popcount(kept.dropped)) * 512 * sizeof(float);
                 if (gone == all) {
                     it = shard.values.erase(it);
                     continue;
                 }
                 n = std::size_t(leaves - std::popcount(gone)) * 512;
             } else if (!readAt(k, kept.values, levels)) {
-                dropped += n * sizeof(double);
+                dropped += n * sizeof(float);
                 it = shard.values.erase(it);
                 continue;
             }
@@ -177,36 +227,36 @@ void GridValueMemo::dropOutside(Interval levels) const
             return std::tie(a.block, a.offset) < std::tie(b.block, b.offset);
         });
         std::size_t block = 0;
-        double* next = shard.blocks.empty() ? nullptr : static_cast<double*>(shard.blocks[0].data());
-        std::size_t left = shard.blocks.empty() ? 0 : shard.blocks[0].size() / sizeof(double);
-        std::vector<double> gathered;  // a stack's rows as it will hold them, when that changes
+        float* next = shard.blocks.empty() ? nullptr : static_cast<float*>(shard.blocks[0].data());
+        std::size_t left = shard.blocks.empty() ? 0 : shard.blocks[0].size() / sizeof(float);
+        std::vector<float> gathered;  // a stack's rows as it will hold them, when that changes
         for (const Move& m : moves) {
             const Key& k = *m.key;
             Kept& kept = *m.kept;
             const std::size_t n = m.n;
             if (left < n) {  // the next block: one the batch lay in or before (never past the last)
                 ++block;
-                next = static_cast<double*>(shard.blocks[block].data());
-                left = shard.blocks[block].size() / sizeof(double);
+                next = static_cast<float*>(shard.blocks[block].data());
+                left = shard.blocks[block].size() / sizeof(float);
             }
-            double* to = next;
+            float* to = next;
             next += n;
             left -= n;
             if (isStack(k) && m.gone != kept.dropped) {
                 // Its kept leaves' rows in turn: gathered first, as the batch's own layout
                 // interleaves them (moved in place, a row would overwrite one not yet read).
                 gathered.resize(n);
-                double* at = gathered.data();
+                float* at = gathered.data();
                 for (int leaf = 0; leaf < k.nz / 8; ++leaf)
                     if (!(m.gone >> leaf & 1u))
                         for (std::size_t ij = 0; ij < 64; ++ij) {
-                            const double* row = keptRow(k, kept, leaf, ij);
+                            const float* row = keptRow(k, kept, leaf, ij);
                             at = std::copy(row, row + 8, at);
                         }
                 std::copy(gathered.begin(), gathered.end(), to);
                 kept.dropped = m.gone;
             } else if (to != kept.values) {
-                std::memmove(to, kept.values, n * sizeof(double));
+                std::memmove(to, kept.values, n * sizeof(float));
             }
             kept.values = to;
         }
@@ -223,9 +273,9 @@ std::uint32_t GridValueMemo::unreadLeaves(const Key& k, const Kept& kept, Interv
     std::uint32_t gone = kept.dropped;
     for (int m = 0; m < k.nz / 8; ++m) {
         if (kept.dropped >> m & 1u) continue;
-        double leaf[512];
+        float leaf[512];
         for (std::size_t ij = 0; ij < 64; ++ij) {
-            const double* row = keptRow(k, kept, m, ij);
+            const float* row = keptRow(k, kept, m, ij);
             std::copy(row, row + 8, leaf + 8 * ij);
         }
         // The leaf's own batch: its first point k = 8m of the stack.
@@ -237,7 +287,7 @@ std::uint32_t GridValueMemo::unreadLeaves(const Key& k, const Kept& kept, Interv
     return gone;
 }
 
-bool GridValueMemo::readAt(const Key& k, const double* values, Interval levels) const
+bool GridValueMemo::readAt(const Key& k, const float* values, Interval levels) const
 {
     // A value in the band: the bound, which holds it, meets the band too. Decided without the
     // bound, which costs a twentieth of the batch's evaluation on a wireframe.
@@ -251,15 +301,15 @@ bool GridValueMemo::readAt(const Key& k, const double* values, Interval levels) 
     return !(b.hi < levels.lo || b.lo > levels.hi);
 }
 
-double* GridValueMemo::place(Shard& shard, std::size_t n)
+float* GridValueMemo::place(Shard& shard, std::size_t n)
 {
     if (shard.left < n) {
-        const std::size_t size = std::max(kBlockDoubles, n);
-        shard.blocks.emplace_back(size * sizeof(double));
-        shard.next = static_cast<double*>(shard.blocks.back().data());
+        const std::size_t size = std::max(kBlockValues, n);
+        shard.blocks.emplace_back(size * sizeof(float));
+        shard.next = static_cast<float*>(shard.blocks.back().data());
         shard.left = size;
     }
-    double* at = shard.next;
+    float* at = shard.next;
     shard.next += n;
     shard.left -= n;
     return at;

@@ -12,6 +12,7 @@
 #include <bit>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <memory_resource>
 #include <mutex>
@@ -20,13 +21,34 @@
 
 namespace voxlat {
 
-/// Passes everything to its operand. While keeping (keep(true)), each gridValues() batch's
-/// values are stored, up to a byte budget, and a batch equal to a stored one (same origin,
-/// spacing and size) is copied from the store instead of evaluated: the same doubles, since an
-/// operand's gridValues gives the same values for the same batch. A density-solved solid sits
-/// above it (LevelSolid(GridValueMemo(raw))): the job moves the level between evaluations of the
-/// same leaves, and only the level's subtraction is redone. Off, it is a plain pass-through.
-/// The values are kept in large blocks, which keep(false) frees whole.
+/// Whole leaves of a GridValueMemo's own grid values (8 x 8 x 8 points at a grid's spacing,
+/// x-major, z fastest, as floats) held by someone else: a density solve's grid of the memo's
+/// values (engine: KeptGridLeaves), handed over instead of freed. Its leaves' values are the
+/// memo's for the batches they were evaluated in (a stack of leaves' own batch).
+class KeptLeaves {
+public:
+    virtual ~KeptLeaves() = default;
+    /// The 512 values of leaf @a m (its points k in [8m, 8m + 8)) of @a batch (8 x 8 x 8n points
+    /// on the grid the leaves were evaluated on), or null: not held, or @a batch not on that grid.
+    virtual const float* leaf(const GridBatch& batch, int m) const = 0;
+    /// Frees the leaves for which @a unread (the leaf's batch, its values) is true; @a unread is
+    /// called from several threads.
+    virtual void dropIf(const std::function<bool(const GridBatch&, const float*)>& unread) = 0;
+};
+
+/// Passes everything to its operand, except that gridValues() gives the operand's grid values
+/// rounded to float (the precision of the grid they end in), keeping or not. While keeping
+/// (keep(true)), each gridValues() batch's values are stored as floats, up to a byte budget, and
+/// a batch equal to a stored one (same origin, spacing and size) is copied from the store instead
+/// of evaluated: the same values, since an operand's gridValues gives the same values for the same
+/// batch, and whether a batch was kept (the budget, the order threads came in) changes nothing. A
+/// density-solved solid sits above it (LevelSolid(GridValueMemo(raw))): the job moves the level
+/// between evaluations of the same leaves, and only the level's subtraction is redone. Kept as
+/// floats, a 50 mm wireframe's values take 0.5 GB instead of 1 GB. values(), gradients(), the
+/// slicer's planes and batches asked GridBatch::exact (a cell's quantile, where rounding merges
+/// mirror images' values: a capsule X cell then missed its density at 34 voxels) are the
+/// operand's own. The values are kept in large blocks, which
+/// keep(false) frees whole.
 class GridValueMemo final : public FieldNode, public PlaneBands {
 public:
     explicit GridValueMemo(FieldPtr operand) : mOperand(std::move(operand)) {}
@@ -68,10 +90,16 @@ public:
     AxisRepeat axisRepeat(int axis) const override { return mOperand->axisRepeat(axis); }
     std::optional<RepeatZone> repeatZone() const override { return mOperand->repeatZone(); }
 
-    /// Starts keeping batches' values (at most @a maxBytes of them), or stops and frees them.
-    /// Called between evaluations, never during one.
+    /// Starts keeping batches' values (at most @a maxBytes of them), or stops and frees them
+    /// (and the leaves keepLeaves() gave). Called between evaluations, never during one.
     void keep(bool on, std::size_t maxBytes = 0) const;
-    /// Bytes of values kept now.
+    /// While keeping: serves batches from @a leaves as well (a batch whose every leaf read is
+    /// held there takes those values), and keeps other batches' values up to @a maxBytes from
+    /// now on. A density solve's grid of this memo's values, handed over (a 50 mm wireframe:
+    /// 0.55 GB), so that the same values are not held twice while the solve measures them.
+    /// Called between evaluations, never during one.
+    void keepLeaves(std::unique_ptr<KeptLeaves> leaves, std::size_t maxBytes) const;
+    /// Bytes of values kept now in the memo's own blocks (not counting keepLeaves()').
     std::size_t keptBytes() const;
     /// Bytes of memory mapped for them now (whole blocks).
     std::size_t mappedBytes() const;
@@ -85,6 +113,7 @@ public:
     /// kept are moved to the front of their shard's blocks, in the order they lie there, and the
     /// blocks left empty are unmapped: no fresh pages are written. For a density solve that has
     /// bracketed its level (solveDensity()'s @a levelWithin): its band was evaluated wider.
+    /// The leaves keepLeaves() gave are dropped by the same rule, leaf by leaf.
     /// Called between evaluations, never during one.
     void dropOutside(Interval levels) const;
 
@@ -98,8 +127,8 @@ private:
         std::size_t operator()(const Key& k) const;
     };
     static constexpr int kShards = 64;
-    /// Doubles per block of kept values (2 MB, a huge page: 512 leaves' batches).
-    static constexpr std::size_t kBlockDoubles = MappedBlock::kHugePage / sizeof(double);
+    /// Values per block of kept values (2 MB, a huge page: 1024 leaves' batches).
+    static constexpr std::size_t kBlockValues = MappedBlock::kHugePage / sizeof(float);
     /// A shard's values sit in blocks of kBlockDoubles and its map's nodes in a pool of large
     /// blocks, not one small allocation each: a batch's 4 KB and its node, allocated between the
     /// grid's leaves (evaluated in the same loop), left each leaf freed with the grid in a hole
@@ -109,7 +138,7 @@ private:
     /// A batch's kept values: all of them in its layout (dropped 0), or a stack's leaves not
     /// dropped (bit m of dropped: leaf m's values are gone), each as its 64 rows of 8 in turn.
     struct Kept {
-        const double* values = nullptr;
+        const float* values = nullptr;
         std::uint32_t dropped = 0;
     };
     struct BoxKey {
@@ -125,19 +154,19 @@ private:
         std::pmr::unordered_map<Key, Kept, KeyHash> values{&nodes};            ///< into blocks
         std::pmr::unordered_map<BoxKey, Interval, BoxKeyHash> bounds{&nodes};  ///< the operand's bounds
         std::vector<MappedBlock> blocks;
-        double* next = nullptr;  ///< the last block's first unused double
-        std::size_t left = 0;    ///< doubles unused in the last block
+        float* next = nullptr;  ///< the last block's first unused value
+        std::size_t left = 0;   ///< values unused in the last block
     };
 
     /// Whether a grid at a level in @a levels may read the batch @a k (kept @a values): its
     /// values or else its bound over the box evaluateSparse() culls it by meet @a levels.
-    bool readAt(const Key& k, const double* values, Interval levels) const;
+    bool readAt(const Key& k, const float* values, Interval levels) const;
     /// The leaves of stack @a k whose values no grid at a level in @a levels reads (bit m: leaf
     /// m; readAt() of each leaf, its values gathered from @a kept), @a kept's dropped among them.
     std::uint32_t unreadLeaves(const Key& k, const Kept& kept, Interval levels) const;
     /// Row @a ij (its 8 values along z) of leaf @a m of stack @a k as @a kept holds it (leaf m not
     /// dropped): in the batch's layout, or among the kept leaves' rows in turn once some are dropped.
-    static const double* keptRow(const Key& k, const Kept& kept, int m, std::size_t ij)
+    static const float* keptRow(const Key& k, const Kept& kept, int m, std::size_t ij)
     {
         if (kept.dropped == 0) return kept.values + ij * std::size_t(k.nz) + 8 * std::size_t(m);
         const int before = std::popcount(kept.dropped & ((std::uint32_t(1) << m) - 1u));
@@ -145,11 +174,15 @@ private:
     }
     /// Whether @a k is a stack of leaves (8 x 8 x 8m points, m from 2 to 32).
     static bool isStack(const Key& k) { return k.nx == 8 && k.ny == 8 && k.nz % 8 == 0 && k.nz >= 16 && k.nz <= 256; }
-    /// Room for @a n doubles in @a shard's blocks (its mutex held).
-    static double* place(Shard& shard, std::size_t n);
+    /// Room for @a n values in @a shard's blocks (its mutex held).
+    static float* place(Shard& shard, std::size_t n);
+    /// Copies @a batch's values from mLeaves when it holds every leaf of the batch its caller
+    /// reads; false (nothing written) otherwise.
+    bool fromLeaves(const GridBatch& batch, std::span<double> out) const;
 
     FieldPtr mOperand;
     mutable std::unique_ptr<std::array<Shard, kShards>> mShards;  ///< set while keeping
+    mutable std::unique_ptr<KeptLeaves> mLeaves;                  ///< keepLeaves()', while keeping
     mutable std::size_t mMaxBytes = 0;
     mutable std::atomic<std::size_t> mBytes{0};
 };
