@@ -78,6 +78,10 @@ VOXLAT_W2G_SIZE=25 at load 3.0-3.5, branch / main (numpy in each run): trimmed 1
 3.3x), wireframe 8.48 / 18.10 s (6.0x / 3.0x), cylinder 3.37 / 5.57 s (5.4x / 3.0x); graded and
 centred the same code (5.9-8.9x, the load); at load 2.0-1.2: trimmed 0.96 / 1.36 s (8.3x / 5.7x),
 wireframe 4.38 / 8.87 s (12.6x / 5.9x), cylinder 1.94 / 3.07 s (8.8x / 5.6x). Target 50x each: missed.
+2026-12-02 (issue 38, twenty-first round; bench/history.md): the memo's values as floats and the
+solve's grid kept for the mesh. At 50 mm, quiet: graded 119.9x, centred 110.3x, trimmed 35.0x (988 MB),
+wireframe 36.2x (1225 MB), cylinder 28.1x (871 MB): peak 1.5 GB met on every frame, 50x missed on
+trimmed, wireframe and cylinder.
 """
 import json
 import math
