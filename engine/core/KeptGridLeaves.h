@@ -8,8 +8,10 @@
 
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <functional>
 #include <memory>
+#include <span>
 
 namespace voxlat {
 
@@ -21,12 +23,15 @@ class KeptGridLeaves final : public KeptLeaves {
 public:
     KeptGridLeaves(openvdb::FloatGrid::Ptr grid, const Domain& domain) : mGrid(std::move(grid)), mDomain(domain) {}
 
-    const float* leaf(const GridBatch& batch, int m) const override
+    void leaves(const GridBatch& batch, std::span<const float*> values) const override
     {
+        std::fill(values.begin(), values.end(), nullptr);
         openvdb::Coord first;
-        if (!gridLeafOrigin(mDomain, batch, first)) return nullptr;
-        const LeafT* leaf = mGrid->tree().probeConstLeaf(first + openvdb::Coord(0, 0, int(LeafT::DIM) * m));
-        return leaf ? leaf->buffer().data() : nullptr;
+        if (!gridLeafOrigin(mDomain, batch, first)) return;
+        for (std::size_t m = 0; m < values.size(); ++m)
+            if (const LeafT* leaf =
+                    mGrid->tree().probeConstLeaf(first + openvdb::Coord(0, 0, int(LeafT::DIM) * int(m))))
+                values[m] = leaf->buffer().data();
     }
 
     void dropIf(const std::function<bool(const GridBatch&, const float*)>& unread) override

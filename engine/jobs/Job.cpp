@@ -525,7 +525,7 @@ void Job::solveLevels()
             // wireframe: 0.55 GB each).
             std::function<void(openvdb::FloatGrid::Ptr)> keepGrid;
             const bool masked = onJobVoxels ? bool(boxMask) : bool(node.densityMask);
-            auto lastBand = std::make_shared<std::optional<Interval>>();
+            std::optional<Interval> lastBand;  // levelWithin's, for the grid handed over after it
             if (memo && recipeLattice && mKeepSolvedValues && node.solid->indicator().get() == memo) {
                 const bool gridHandedOver = masked || node.subVoxelDensity;
                 memo->keep(true, gridHandedOver ? 0 : memoBudget());
@@ -534,14 +534,14 @@ void Job::solveLevels()
                 // them, which would split the huge pages of the values kept (every later first read
                 // of one of their 4 KB pages then faults in the guest's host: a trimmed 50 mm
                 // frame 8.1-8.6 s without, 8.7-9.9 s with; 20 MB more at its peak).
-                levelWithin = [memo, lastBand](Interval levels) {
-                    *lastBand = levels;
+                levelWithin = [memo, &lastBand](Interval levels) {
+                    lastBand = levels;
                     memo->dropOutside(levels);
                 };
                 if (gridHandedOver)
-                    keepGrid = [memo, lastBand, this](openvdb::FloatGrid::Ptr grid) {
+                    keepGrid = [memo, &lastBand, this](openvdb::FloatGrid::Ptr grid) {
                         memo->keepLeaves(std::make_unique<KeptGridLeaves>(std::move(grid), mDomain), memoBudget());
-                        if (*lastBand) memo->dropOutside(**lastBand);
+                        if (lastBand) memo->dropOutside(*lastBand);
                     };
             }
             const DensitySolution s = timed("solve " + node.name, [&] {

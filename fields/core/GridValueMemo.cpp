@@ -67,18 +67,12 @@ bool GridValueMemo::fromLeaves(const GridBatch& batch, std::span<double> out) co
     if (batch.nx != 8 || batch.ny != 8 || batch.nz % 8 != 0 || batch.nz / 8 > 32) return false;
     const int count = batch.nz / 8;
     std::array<const float*, 32> leaves{};
-    for (int m = 0; m < count; ++m) {
-        if (batch.unread >> m & 1u) continue;
-        leaves[std::size_t(m)] = mLeaves->leaf(batch, m);
-        if (!leaves[std::size_t(m)]) return false;
-    }
-    for (int m = 0; m < count; ++m) {
-        const float* data = leaves[std::size_t(m)];
-        if (!data) continue;
-        for (std::size_t ij = 0; ij < 64; ++ij)
-            std::copy(data + 8 * ij, data + 8 * ij + 8,
-                      out.begin() + std::ptrdiff_t(ij * std::size_t(batch.nz) + 8 * m));
-    }
+    mLeaves->leaves(batch, std::span<const float*>(leaves.data(), std::size_t(count)));
+    for (int m = 0; m < count; ++m)
+        if (!(batch.unread >> m & 1u) && !leaves[std::size_t(m)]) return false;
+    for (int m = 0; m < count; ++m)
+        if (!(batch.unread >> m & 1u))
+            putLeaf(out, batch.nz, m, [data = leaves[std::size_t(m)]](std::size_t ij) { return data + 8 * ij; });
     return true;
 }
 
@@ -118,8 +112,7 @@ void GridValueMemo::gridValues(const GridBatch& batch, std::span<double> out) co
         return;
     }
     if (mLeaves && fromLeaves(batch, out)) return;
-    const Key key{batch.origin.x(),  batch.origin.y(), batch.origin.z(), batch.spacing.x(), batch.spacing.y(),
-                  batch.spacing.z(), batch.nx,         batch.ny,         batch.nz};
+    const Key key = keyOf(batch);
     const std::size_t hash = KeyHash{}(key);
     Shard& shard = (*mShards)[(hash >> 7) % kShards];
     const std::size_t n = batch.size();
@@ -137,10 +130,7 @@ void GridValueMemo::gridValues(const GridBatch& batch, std::span<double> out) co
                 // The leaves kept, each to its rows; the dropped ones are not read.
                 for (int m = 0; m < batch.nz / 8; ++m) {
                     if (kept.dropped >> m & 1u) continue;
-                    for (std::size_t ij = 0; ij < 64; ++ij) {
-                        const float* row = keptRow(key, kept, m, ij);
-                        std::copy(row, row + 8, out.begin() + std::ptrdiff_t(ij * std::size_t(batch.nz) + 8 * m));
-                    }
+                    putLeaf(out, batch.nz, m, [&](std::size_t ij) { return keptRow(key, kept, m, ij); });
                 }
                 return;
             }
@@ -169,11 +159,8 @@ void GridValueMemo::dropOutside(Interval levels) const
 {
     if (!mShards) return;
     if (mLeaves)
-        mLeaves->dropIf([&](const GridBatch& leaf, const float* values) {
-            const Key k{leaf.origin.x(),  leaf.origin.y(), leaf.origin.z(), leaf.spacing.x(), leaf.spacing.y(),
-                        leaf.spacing.z(), leaf.nx,         leaf.ny,         leaf.nz};
-            return !readAt(k, values, levels);
-        });
+        mLeaves->dropIf(
+            [&](const GridBatch& leaf, const float* values) { return !readAt(keyOf(leaf), values, levels); });
     // Shard by shard (each decided alone: the same batches kept for any thread count), the kept
     // values moved to the front of the shard's own blocks in the order they lie in them: each
     // batch then starts no later than it did (the same packing, of the same batches or fewer,

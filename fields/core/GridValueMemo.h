@@ -7,6 +7,7 @@
 #include "fields/core/MappedBlock.h"
 #include "fields/core/PlaneBands.h"
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <bit>
@@ -16,6 +17,7 @@
 #include <memory>
 #include <memory_resource>
 #include <mutex>
+#include <span>
 #include <unordered_map>
 #include <vector>
 
@@ -28,9 +30,10 @@ namespace voxlat {
 class KeptLeaves {
 public:
     virtual ~KeptLeaves() = default;
-    /// The 512 values of leaf @a m (its points k in [8m, 8m + 8)) of @a batch (8 x 8 x 8n points
-    /// on the grid the leaves were evaluated on), or null: not held, or @a batch not on that grid.
-    virtual const float* leaf(const GridBatch& batch, int m) const = 0;
+    /// Per leaf m of @a batch (8 x 8 x 8n points on the grid the leaves were evaluated on; its
+    /// points k in [8m, 8m + 8)), into @a values[m]: its 512 values, or null when not held. All
+    /// null when @a batch is not on that grid.
+    virtual void leaves(const GridBatch& batch, std::span<const float*> values) const = 0;
     /// Frees the leaves for which @a unread (the leaf's batch, its values) is true; @a unread is
     /// called from several threads.
     virtual void dropIf(const std::function<bool(const GridBatch&, const float*)>& unread) = 0;
@@ -179,6 +182,22 @@ private:
     /// Copies @a batch's values from mLeaves when it holds every leaf of the batch its caller
     /// reads; false (nothing written) otherwise.
     bool fromLeaves(const GridBatch& batch, std::span<double> out) const;
+    /// The key of @a batch's values.
+    static Key keyOf(const GridBatch& batch)
+    {
+        return {batch.origin.x(),  batch.origin.y(), batch.origin.z(), batch.spacing.x(), batch.spacing.y(),
+                batch.spacing.z(), batch.nx,         batch.ny,         batch.nz};
+    }
+    /// Writes leaf @a m of a stack @a nz points tall into @a out (the stack's layout), its rows
+    /// of 8 values row(ij) for ij in [0, 64).
+    template <class Row>
+    static void putLeaf(std::span<double> out, int nz, int m, Row row)
+    {
+        for (std::size_t ij = 0; ij < 64; ++ij) {
+            const float* r = row(ij);
+            std::copy(r, r + 8, out.begin() + std::ptrdiff_t(ij * std::size_t(nz) + 8 * std::size_t(m)));
+        }
+    }
 
     FieldPtr mOperand;
     mutable std::unique_ptr<std::array<Shard, kShards>> mShards;  ///< set while keeping
