@@ -10,12 +10,15 @@
 #include "fields/maps/PeriodicTiling.h"
 #include "fields/struts/IsoRadius.h"
 #include "fields/struts/StrutConvolution.h"
+#include "fields/struts/StrutIndex.h"
+#include "fields/struts/TiledInterior.h"
 #include "mesher/checks/MeshCheck.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
 #include <cstring>
+#include <map>
 #include <random>
 
 using namespace voxlat;
@@ -431,4 +434,107 @@ TEST(DensityPieces, RadiiGradedFromTheCentreHitTheTargetOnTheMesh)
     // each, one along x; no x-y swap (x is graded).
     expectGradedStrutsHitTheTarget("{gradient: centred, min: 0.4, max: 0.6}",
                                    "one period of the interior (16 weighted pieces)");
+}
+
+TEST(TiledInterior, ATrimmedFrameReadsItsUntrimmedTableOnlyBeyondTheReachOfWhatTheTrimChanged)
+{
+    // 8^3 BCC cells of 2 mm trimmed to a ball (the struts across its surface cut there), sigma
+    // 0.25: deeper inside than the cut-off from every strut the trim removed or cut, the trimmed
+    // frame's field is the untrimmed box frame's, read from that frame's table of one period.
+    const double sigma = 0.25;
+    const Vec3d centre(8.0, 8.2, 7.9);
+    const double radius = 7.0;
+    const Box3 fill{Vec3d(0.0), Vec3d(16.0)};
+    const UnitCell cell = presetUnitCell("bcc");
+    const Frame trimmed = clippedFrame(
+        cell, fill, Vec3d(2.0), [&](const Vec3d& p) { return (p - centre).length() - radius; }, 0.2);
+    const Frame untrimmed = clippedFrame(
+        cell, fill, Vec3d(2.0), [](const Vec3d&) { return -1.0; }, 0.0);
+    // The struts one frame holds and the other does not, by their ends (either order).
+    auto ends = [](const Frame& f, std::size_t j) {
+        Vec3d a = f.nodes[f.struts[j][0]], b = f.nodes[f.struts[j][1]];
+        if (std::lexicographical_compare(b.asPointer(), b.asPointer() + 3, a.asPointer(), a.asPointer() + 3))
+            std::swap(a, b);
+        return std::array<double, 6>{a[0], a[1], a[2], b[0], b[1], b[2]};
+    };
+    std::map<std::array<double, 6>, int> count;
+    for (std::size_t j = 0; j < trimmed.struts.size(); ++j) count[ends(trimmed, j)] += 1;
+    for (std::size_t j = 0; j < untrimmed.struts.size(); ++j) count[ends(untrimmed, j)] += 2;
+    std::vector<std::array<Vec3d, 2>> differing;
+    for (const auto& [e, c] : count)
+        if (c != 3) differing.push_back({Vec3d(e[0], e[1], e[2]), Vec3d(e[3], e[4], e[5])});
+    // Some struts are cut or removed, and a good share of them are left as they were.
+    ASSERT_GT(differing.size(), 50u);
+    ASSERT_LT(differing.size(), untrimmed.struts.size());
+    auto convolution = [&](const Frame& f) {
+        std::vector<ConvolutionStrut> struts;
+        for (const auto& e : f.struts) struts.push_back({f.nodes[e[0]], f.nodes[e[1]], sigma, 1.0, 1.0});
+        return std::make_shared<StrutConvolution>(struts);
+    };
+    const auto rawTrimmed = convolution(trimmed), rawUntrimmed = convolution(untrimmed);
+    const double reach = rawUntrimmed->cutoffRadius(0), peak = rawUntrimmed->peak(0);
+    const auto exact = std::make_shared<IsoRadius>(rawTrimmed, peak, sigma, 2.0 * reach);
+    const auto same = std::make_shared<IsoRadius>(rawUntrimmed, peak, sigma, 2.0 * reach);
+    const auto table = std::make_shared<PeriodicTiling>(same, untrimmed.box(), Vec3d(2.0), reach,
+                                                        std::array<bool, 3>{true, true, true});
+    const TiledInterior tiled(exact, table, differing, reach);
+
+    // Every leaf and every stack of eight leaves (runs of far and near leaves in one batch) of a
+    // domain past the frame (and past the differing struts' reach, where nothing is marked): the
+    // trimmed frame's own values, up to rounding.
+    const Domain d = Domain::fromBox(Box3{Vec3d(-1.0), Vec3d(17.0)}, 0.1);
+    std::vector<double> a(8 * 8 * 64), b(a.size());
+    double worst = 0.0;
+    int farLeaves = 0, nearLeaves = 0, mixedStacks = 0;
+    for (const int depth : {8, 64})
+        for (int x = -8; x < d.dims.x() + 8; x += 8)
+            for (int y = -8; y < d.dims.y() + 8; y += 8)
+                for (int z = -8; z < d.dims.z() + 8; z += depth) {
+                    GridBatch batch;
+                    batch.origin = d.worldOf(openvdb::Coord(x, y, z));
+                    batch.spacing = Vec3d(d.voxel);
+                    batch.nz = depth;
+                    tiled.gridValues(batch, std::span<double>(a.data(), batch.size()));
+                    exact->gridValues(batch, std::span<double>(b.data(), batch.size()));
+                    for (std::size_t i = 0; i < batch.size(); ++i) worst = std::max(worst, std::abs(a[i] - b[i]));
+                    if (depth == 8) {
+                        (tiled.far(batch.bounds()) ? farLeaves : nearLeaves) += 1;
+                        continue;
+                    }
+                    int far = 0;
+                    for (int m = 0; m < 8; ++m) {
+                        GridBatch leaf = batch;
+                        leaf.origin[2] += 8 * m * d.voxel;
+                        leaf.nz = 8;
+                        far += tiled.far(leaf.bounds()) ? 1 : 0;
+                    }
+                    mixedStacks += far > 0 && far < 8 ? 1 : 0;
+                }
+    EXPECT_LT(worst, 1e-9);
+    // Both ways were taken, in the same stacks too.
+    EXPECT_GT(farLeaves, 1000);
+    EXPECT_GT(nearLeaves, 1000);
+    EXPECT_GT(mixedStacks, 50);
+    EXPECT_GT(table->tabledValues(), 0u);
+
+    // A leaf called far is farther than the reach from every differing strut at each of its
+    // points (every other point along each axis, brute force).
+    int checked = 0;
+    for (int x = -8; x < d.dims.x() + 8; x += 8)
+        for (int y = -8; y < d.dims.y() + 8; y += 8)
+            for (int z = -8; z < d.dims.z() + 8; z += 8) {
+                GridBatch leaf;
+                leaf.origin = d.worldOf(openvdb::Coord(x, y, z));
+                leaf.spacing = Vec3d(d.voxel);
+                if (!tiled.far(leaf.bounds()) || (x + y + z) % 3 != 0) continue;
+                ++checked;
+                double nearest = std::numeric_limits<double>::infinity();
+                for (int i = 0; i < 8; i += 2)
+                    for (int j = 0; j < 8; j += 2)
+                        for (int k = 0; k < 8; k += 2)
+                            for (const auto& [s0, s1] : differing)
+                                nearest = std::min(nearest, pointSegmentDistanceSqr(leaf.point(i, j, k), s0, s1));
+                ASSERT_GT(std::sqrt(nearest), reach) << "leaf at " << x << " " << y << " " << z;
+            }
+    EXPECT_GT(checked, 100);
 }

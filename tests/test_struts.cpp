@@ -22,6 +22,7 @@
 #include "fields/struts/StrutConvolution.h"
 #include "fields/struts/StrutIndex.h"
 #include "fields/struts/StrutRows.h"
+#include "fields/struts/TiledInterior.h"
 #include "mesher/checks/MeshCheck.h"
 #include "mesher/extract/MarchingCubes.h"
 
@@ -2068,6 +2069,66 @@ TEST(GridValueMemo, OnlyALatticeCostlyToEvaluateAgainKeepsItsValues)
         ASSERT_EQ(a.tree().leafCount(), b.tree().leafCount()) << "trimmed " << trimmed;
         EXPECT_EQ(mismatchedVoxels(a, b), 0u) << "trimmed " << trimmed;
         EXPECT_GT(a.tree().leafCount(), 100u);
+    }
+}
+
+TEST(StrutLattice, AFrameTrimmedWithinASolidTablesItsInteriorWhereItsCellsRepeat)
+{
+    // A frame trimmed `within:` a solid reads its interior from the untrimmed box frame's table
+    // (TiledInterior) where that frame's cells repeat: one radius, or radii graded along one axis
+    // (the same preset over the trimmed frame's box, so a strut both frames hold has the same
+    // radii). Radii that differ strut by strut (a list, a field of x, y and z) have no such
+    // table. Either way the grid's values are the trimmed struts' own, up to rounding, over every
+    // stack of leaves of the domain, and the density solved on them holds on the mesh.
+    const std::string head =
+        "voxel: 0.15\ndomain: {box: [[0, 0, 0], [12, 12, 12]]}\nfields:\n"
+        "  lattice: {struts: {cell: bcc, size: 4, within: {sphere: {center: [6, 6.2, 5.9], radius: 5.6}}}, "
+        "kernel: {gaussian: {sigma: 0.4}}, ";
+    const std::vector<std::pair<std::string, bool>> radii = {
+        {"0.45", true},
+        {"{gradient: linear, min: 0.3, max: 0.5, axis: z}", true},
+        {"{gradient: centred, min: 0.3, max: 0.5, axis: y}", true},
+        {"{gradient: spherical, min: 0.3, max: 0.5}", false},
+        {"{expr: \"0.3 + 0.01 * x\"}", false},
+    };
+    for (const auto& [radius, tabled] : radii) {
+        const std::string recipe = head + "radius: " + radius + ", density: 0.2}\nresult: lattice\nallow: [pieces]\n";
+        const Recipe parsed = parseRecipe(recipe, "trimmed.yaml", ".");
+        FieldBuilder builder(parsed, JobContext::silent());
+        builder.buildAll();
+        ASSERT_EQ(builder.levelNodes().size(), 1u);
+        const auto* memo = dynamic_cast<const GridValueMemo*>(builder.levelNodes().front().solid->raw().get());
+        ASSERT_NE(memo, nullptr) << radius;
+        const FieldNode& field = *memo->operand();
+        EXPECT_EQ(dynamic_cast<const TiledInterior*>(&field) != nullptr, tabled) << radius;
+        const Domain d = Domain::fromBox(Box3{Vec3d(0.0), Vec3d(12.0)}, 0.15);
+        std::vector<double> grid(8 * 8 * 64), exact(grid.size());
+        std::vector<Vec3d> points(grid.size());
+        double worst = 0.0;
+        for (int x = 0; x < d.dims.x(); x += 8)
+            for (int y = 0; y < d.dims.y(); y += 8)
+                for (int z = 0; z < d.dims.z(); z += 64) {
+                    GridBatch batch;
+                    batch.origin = d.worldOf(openvdb::Coord(x, y, z));
+                    batch.spacing = Vec3d(d.voxel);
+                    batch.nz = 64;
+                    field.gridValues(batch, grid);
+                    std::size_t n = 0;
+                    for (int i = 0; i < 8; ++i)
+                        for (int j = 0; j < 8; ++j)
+                            for (int k = 0; k < 64; ++k) points[n++] = batch.point(i, j, k);
+                    field.values(points, exact);  // strut by strut, std::erf per point
+                    for (std::size_t i = 0; i < n; ++i) worst = std::max(worst, std::abs(grid[i] - exact[i]));
+                }
+        EXPECT_LT(worst, 1e-8) << radius;
+        if (!tabled) continue;
+        Job job(parseRecipe(recipe, "trimmed.yaml", "."));
+        const TriangleMesh& mesh = job.mesh();
+        EXPECT_TRUE(checkTopology(mesh).closedManifold()) << radius;
+        // The sphere's share: its mesh against the ball's volume (the voxels' sphere is the
+        // ball's to about a voxel's share of its surface).
+        const double ball = 4.0 / 3.0 * std::numbers::pi * std::pow(5.6, 3);
+        EXPECT_NEAR(mesh.volume() / ball, 0.2, 0.02 * 0.2) << radius;
     }
 }
 

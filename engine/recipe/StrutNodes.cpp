@@ -16,6 +16,7 @@
 #include "fields/struts/IsoRadius.h"
 #include "fields/struts/StrutCapsules.h"
 #include "fields/struts/StrutConvolution.h"
+#include "fields/struts/TiledInterior.h"
 
 #include <algorithm>
 #include <cmath>
@@ -152,6 +153,9 @@ std::array<int, 3> readCounts(const RecipeNode& n)
 struct UniformCells {
     UnitCell cell;
     Vec3d size{0.0};
+    /// A frame trimmed `within:` a solid: the box its cells fill from its minimum corner (the
+    /// untrimmed frame's cells), before the trim.
+    std::optional<Box3> fill{};
 };
 
 /// The ways a frame is laid out: the key that selects each and the keys it uses. Any other key
@@ -324,7 +328,7 @@ Frame buildFrame(FieldBuilder& builder, const RecipeNode& s, const std::string& 
                 "bounded solid (a part or a shape)");
         const double minLength =
             s.has("min_length") ? s["min_length"].number() : 0.1 * std::min({size[0], size[1], size[2]});
-        uniform = UniformCells{cell, size};
+        uniform = UniformCells{cell, size, *fill};
         return clippedFrame(
             cell, *fill, size, [&](const Vec3d& p) { return solid->value(p); }, minLength);
     }
@@ -561,6 +565,62 @@ int radiusGradientAxis(const RecipeNode& spec)
     // Linear and centred (|2u - 1|) radii depend on the one coordinate; the others' on two or three.
     if (!r.has("gradient") || (r["gradient"].string() != "linear" && r["gradient"].string() != "centred")) return -1;
     return r.has("axis") ? r["axis"].string()[0] - 'x' : 0;
+}
+
+/// The untrimmed box frame a frame trimmed `within:` a solid was cut from, with its radii, and the
+/// struts that differ between the two (TiledInterior's `differing`).
+struct UntrimmedFrame {
+    Frame frame;
+    std::optional<std::vector<std::array<double, 2>>> radii;
+    std::vector<std::array<Vec3d, 2>> differing;
+};
+
+/// The untrimmed frame of @a trimmed (laid `within:` a solid over @a uniform's fill box, with
+/// @a radii), when its cells repeat: one radius, or radii graded along one axis (given by the
+/// same preset, over the trimmed frame's box, so that a strut both frames hold has the same
+/// radii in both). None when the trim leaves under a quarter of the untrimmed struts as they
+/// were (little interior to table).
+std::optional<UntrimmedFrame> untrimmedFrame(FieldBuilder& builder, const RecipeNode& spec, const std::string& name,
+                                             const Frame& trimmed, const UniformCells& uniform,
+                                             const std::optional<std::vector<std::array<double, 2>>>& radii)
+{
+    if (!uniform.fill) return std::nullopt;
+    UntrimmedFrame u;
+    u.frame = clippedFrame(
+        uniform.cell, *uniform.fill, uniform.size, [](const Vec3d&) { return -1.0; }, 0.0);
+    if (radii) {
+        Frame scoped = u.frame;
+        scoped.layoutBox = trimmed.box();  // the radius gradient's box: the trimmed frame's
+        u.radii = readRadii(builder, spec["radius"], scoped, name);
+    }
+    // A strut by its ends (the lesser first) and its radii in that order.
+    using Key = std::array<double, 6>;
+    auto keyOf = [](const Frame& f, const std::optional<std::vector<std::array<double, 2>>>& r, std::size_t j) {
+        Vec3d a = f.nodes[f.struts[j][0]], b = f.nodes[f.struts[j][1]];
+        std::array<double, 2> ra = r ? (*r)[j] : std::array<double, 2>{0.0, 0.0};
+        if (std::lexicographical_compare(b.asPointer(), b.asPointer() + 3, a.asPointer(), a.asPointer() + 3)) {
+            std::swap(a, b);
+            std::swap(ra[0], ra[1]);
+        }
+        return std::make_pair(Key{a[0], a[1], a[2], b[0], b[1], b[2]}, ra);
+    };
+    std::map<Key, std::pair<std::array<double, 2>, bool>> kept;  // trimmed struts: radii, matched
+    for (std::size_t j = 0; j < trimmed.struts.size(); ++j) {
+        const auto [key, r] = keyOf(trimmed, radii, j);
+        kept.emplace(key, std::make_pair(r, false));
+    }
+    for (std::size_t j = 0; j < u.frame.struts.size(); ++j) {
+        const auto [key, r] = keyOf(u.frame, u.radii, j);
+        const auto it = kept.find(key);
+        if (it != kept.end() && it->second.first == r)
+            it->second.second = true;
+        else
+            u.differing.push_back({Vec3d(key[0], key[1], key[2]), Vec3d(key[3], key[4], key[5])});
+    }
+    for (const auto& [key, value] : kept)
+        if (!value.second) u.differing.push_back({Vec3d(key[0], key[1], key[2]), Vec3d(key[3], key[4], key[5])});
+    if (4 * (u.frame.struts.size() + kept.size() - u.differing.size()) < 2 * u.frame.struts.size()) return std::nullopt;
+    return u;
 }
 
 /// A strut lattice as its frame lays it out; @a within receives the solid a `within:` frame is
@@ -838,7 +898,7 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
             ConvolutionStrut s;
             s.a = f.nodes[f.struts[j][0]];
             s.b = f.nodes[f.struts[j][1]];
-            s.sigma = graded ? sigma.front() : sigma[j];
+            s.sigma = graded || !sn.isSequence() ? sigma.front() : sigma[j];  // one sigma: any frame
             if (r) {
                 s.w0 = gaussianStrutWeight((*r)[j][0], s.sigma, 1.0);
                 s.w1 = gaussianStrutWeight((*r)[j][1], s.sigma, 1.0);
@@ -888,12 +948,36 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
         for (int a = 0; a < 3; ++a) mirror[a] = a != gradedAxis && mirrorSymmetric(frame, box, a, interrupt);
     FieldPtr evaluated = iso;
     if (periodic || partlyPeriodic) evaluated = std::make_shared<PeriodicTiling>(iso, box, period, rcMax, mirror);
+    // A frame trimmed `within:` a solid is, deeper inside the solid than the kernel's reach from
+    // every strut the trim removed or cut, the untrimmed box frame: its values there come from
+    // that frame's tabled period (the same struts and weights, the same peak and cap), the rest
+    // strut by strut (TiledInterior).
+    std::optional<UntrimmedFrame> untrimmed;
+    if (uniform && uniform->fill && !graded && !g["sigma"].isSequence() && (sameStruts || gradedAxis >= 0))
+        untrimmed = untrimmedFrame(builder, spec, name, frame, *uniform, radii);
+    if (untrimmed) {
+        auto rawUntrimmed =
+            std::make_shared<StrutConvolution>(convolutionStruts(untrimmed->frame, untrimmed->radii), eps, interrupt);
+        double reach = rcMax;
+        for (std::size_t j = 0; j < untrimmed->frame.struts.size(); ++j)
+            reach = std::max(reach, rawUntrimmed->cutoffRadius(j));
+        const auto same = std::make_shared<IsoRadius>(rawUntrimmed, peak, sigmaMax, 2.0 * rcMax);
+        const Box3 untrimmedBox = untrimmed->frame.box();
+        Vec3d untrimmedPeriod = uniform->size;
+        if (gradedAxis >= 0) untrimmedPeriod[gradedAxis] = 0.0;
+        std::array<bool, 3> untrimmedMirror{};
+        for (int a = 0; a < 3; ++a)
+            untrimmedMirror[a] = a != gradedAxis && mirrorSymmetric(untrimmed->frame, untrimmedBox, a, interrupt);
+        evaluated = std::make_shared<TiledInterior>(
+            iso, std::make_shared<PeriodicTiling>(same, untrimmedBox, untrimmedPeriod, reach, untrimmedMirror),
+            untrimmed->differing, reach);
+    }
     // Evaluated strut by strut: in stacks of eight leaves along z (rows of 64 points: a strut row's
     // set-up, its table and the struts' gather shared by eight leaves). W2g's frames at 25 mm, user
     // + sys CPU, stacks of 4, 8 and 16 leaves: the wireframe 10.4, 9.3 and 8.4 s (16.3 s one leaf
     // at a time), the cylinder frame 3.6, 3.2 and 3.3 s (5.4 s); the wireframe's peak +10, +27 and
     // +69 MB (before the memo dropped a stack's leaves one by one).
-    if (evaluated == iso) node.stackLeaves = 8;
+    if (!(periodic || partlyPeriodic)) node.stackLeaves = 8;
     const double t = spec.has("level") ? spec["level"].positiveNumber() : 1.0;
     {
         std::ostringstream d;
@@ -925,7 +1009,7 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     // again, they cost more than they save, and most aims keep the solved level (W2g's graded
     // 50 mm frame: 0.6 GB of kept doubles, a fifth of the run zeroing their fresh pages, read by
     // no second evaluation).
-    const bool tiled = evaluated != iso;
+    const bool tiled = periodic || partlyPeriodic;
     // A level given is read through a memo too (never keeping), which rounds the grid's values as
     // a solved one's: the reported level pasted back gives the same grid.
     const FieldPtr values = tiled ? evaluated : std::make_shared<GridValueMemo>(evaluated);

@@ -55,6 +55,8 @@ public:
 class GridValueMemo final : public FieldNode, public PlaneBands {
 public:
     explicit GridValueMemo(FieldPtr operand) : mOperand(std::move(operand)) {}
+    /// The field whose values it keeps.
+    const FieldPtr& operand() const { return mOperand; }
 
     void values(std::span<const Vec3d> points, std::span<double> out) const override { mOperand->values(points, out); }
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override
