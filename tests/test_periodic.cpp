@@ -477,7 +477,7 @@ TEST(TiledInterior, ATrimmedFrameReadsItsUntrimmedTableOnlyBeyondTheReachOfWhatT
     const auto same = std::make_shared<IsoRadius>(rawUntrimmed, peak, sigma, 2.0 * reach);
     const auto table = std::make_shared<PeriodicTiling>(same, untrimmed.box(), Vec3d(2.0), reach,
                                                         std::array<bool, 3>{true, true, true});
-    const TiledInterior tiled(exact, table, differing, reach);
+    const TiledInterior tiled(exact, [=] { return TiledInterior::Parts{table, differing, reach}; });
 
     // Every leaf and every stack of eight leaves (runs of far and near leaves in one batch) of a
     // domain past the frame (and past the differing struts' reach, where nothing is marked): the

@@ -401,6 +401,61 @@ FieldPtr buildGradedStruts(FieldBuilder& builder, const RecipeNode& spec, const 
     return graded;
 }
 
+/// A `radius: {gradient: ...}` preset, read once.
+struct RadiusGradient {
+    std::string preset;
+    double lo = 0.0, hi = 0.0;
+    int axis = 0;
+};
+
+RadiusGradient readRadiusGradient(const RecipeNode& r)
+{
+    r.checkKeys({"gradient", "min", "max", "axis"});
+    RadiusGradient g;
+    g.preset = r["gradient"].string();
+    const std::vector<std::string> presets = {"linear", "centred", "cylindrical", "spherical"};
+    if (std::find(presets.begin(), presets.end(), g.preset) == presets.end())
+        r["gradient"].fail("unknown gradient `" + g.preset + "` (presets: " + joinWords(presets) +
+                           "); for radii from an equation give `radius: {expr: \"" + g.preset +
+                           "\"}` in mm, with u, v, w in [0, 1] over the frame's box as IntraLattice has them");
+    auto positive = [](const RecipeNode& node) {
+        const double v = node.number();
+        if (!(v > 0.0)) node.fail("a radius must be greater than zero (millimetres)");
+        return v;
+    };
+    g.lo = positive(r["min"]);
+    g.hi = positive(r["max"]);
+    if (r.has("axis")) g.axis = r["axis"].axis();
+    return g;
+}
+
+/// The radii of @a frame's strut ends from the gradient @a g, with u, v, w over @a box.
+std::vector<std::array<double, 2>> gradientRadii(const RadiusGradient& grad, const Frame& frame, const Box3& box)
+{
+    const std::string& preset = grad.preset;
+    const int axis = grad.axis;
+    // u, v, w over the frame's box, held to [0, 1]: the nodes of cells laid past the domain (a
+    // domain thinner than a cell) take the radius of the nearest point of the box, so every
+    // radius lies within [min, max] (unclamped, a 0.2 mm domain of 2 mm cells gave ends 10 times
+    // past the box radii of 1.7 mm, and nothing was exposed).
+    auto g = [&](const Vec3d& p) {
+        Vec3d u;
+        for (int a = 0; a < 3; ++a)
+            u[a] = box.extent()[a] > 0 ? std::clamp((p[a] - box.min[a]) / box.extent()[a], 0.0, 1.0) : 0.0;
+        if (preset == "linear") return std::abs(u[axis]);
+        if (preset == "centred") return std::abs(2 * u[axis] - 1);
+        if (preset == "cylindrical") {
+            const int b = (axis + 1) % 3, c = (axis + 2) % 3;
+            return std::sqrt(sqr(2 * u[b] - 1) + sqr(2 * u[c] - 1)) / std::sqrt(2.0);
+        }
+        return std::sqrt(sqr(2 * u[0] - 1) + sqr(2 * u[1] - 1) + sqr(2 * u[2] - 1)) / std::sqrt(3.0);
+    };
+    std::vector<std::array<double, 2>> radii(frame.struts.size());
+    for (std::size_t j = 0; j < frame.struts.size(); ++j)
+        for (int e = 0; e < 2; ++e) radii[j][e] = grad.lo + g(frame.nodes[frame.struts[j][e]]) * (grad.hi - grad.lo);
+    return radii;
+}
+
 /// Radius at each end of each strut from `radius:` (a number, a list, a gradient preset, or any
 /// field: a name or an inline node, evaluated at the strut ends with u, v, w over the frame's box).
 std::vector<std::array<double, 2>> readRadii(FieldBuilder& builder, const RecipeNode& r, const Frame& frame,
@@ -453,36 +508,7 @@ std::vector<std::array<double, 2>> readRadii(FieldBuilder& builder, const Recipe
         }
         return radii;
     }
-    r.checkKeys({"gradient", "min", "max", "axis"});
-    const std::string preset = r["gradient"].string();
-    const std::vector<std::string> presets = {"linear", "centred", "cylindrical", "spherical"};
-    if (std::find(presets.begin(), presets.end(), preset) == presets.end())
-        r["gradient"].fail("unknown gradient `" + preset + "` (presets: " + joinWords(presets) +
-                           "); for radii from an equation give `radius: {expr: \"" + preset +
-                           "\"}` in mm, with u, v, w in [0, 1] over the frame's box as IntraLattice has them");
-    const double lo = positive(r["min"]), hi = positive(r["max"]);
-    int axis = 0;
-    if (r.has("axis")) axis = r["axis"].axis();
-    const Box3 box = frame.box();
-    // u, v, w over the frame's box, held to [0, 1]: the nodes of cells laid past the domain (a
-    // domain thinner than a cell) take the radius of the nearest point of the box, so every
-    // radius lies within [min, max] (unclamped, a 0.2 mm domain of 2 mm cells gave ends 10 times
-    // past the box radii of 1.7 mm, and nothing was exposed).
-    auto g = [&](const Vec3d& p) {
-        Vec3d u;
-        for (int a = 0; a < 3; ++a)
-            u[a] = box.extent()[a] > 0 ? std::clamp((p[a] - box.min[a]) / box.extent()[a], 0.0, 1.0) : 0.0;
-        if (preset == "linear") return std::abs(u[axis]);
-        if (preset == "centred") return std::abs(2 * u[axis] - 1);
-        if (preset == "cylindrical") {
-            const int b = (axis + 1) % 3, c = (axis + 2) % 3;
-            return std::sqrt(sqr(2 * u[b] - 1) + sqr(2 * u[c] - 1)) / std::sqrt(2.0);
-        }
-        return std::sqrt(sqr(2 * u[0] - 1) + sqr(2 * u[1] - 1) + sqr(2 * u[2] - 1)) / std::sqrt(3.0);
-    };
-    for (std::size_t j = 0; j < n; ++j)
-        for (int e = 0; e < 2; ++e) radii[j][e] = lo + g(frame.nodes[frame.struts[j][e]]) * (hi - lo);
-    return radii;
+    return gradientRadii(readRadiusGradient(r), frame, frame.box());
 }
 
 /// Records @a frame for frame outputs (`outputs: {frame: F}`): @a endRadius(j, e, level) is
@@ -567,60 +593,48 @@ int radiusGradientAxis(const RecipeNode& spec)
     return r.has("axis") ? r["axis"].string()[0] - 'x' : 0;
 }
 
-/// The untrimmed box frame a frame trimmed `within:` a solid was cut from, with its radii, and the
-/// struts that differ between the two (TiledInterior's `differing`).
-struct UntrimmedFrame {
-    Frame frame;
-    std::optional<std::vector<std::array<double, 2>>> radii;
-    std::vector<std::array<Vec3d, 2>> differing;
-};
-
-/// The untrimmed frame of @a trimmed (laid `within:` a solid over @a uniform's fill box, with
-/// @a radii), when its cells repeat: one radius, or radii graded along one axis (given by the
-/// same preset, over the trimmed frame's box, so that a strut both frames hold has the same
-/// radii in both). None when the trim leaves under a quarter of the untrimmed struts as they
-/// were (little interior to table).
-std::optional<UntrimmedFrame> untrimmedFrame(FieldBuilder& builder, const RecipeNode& spec, const std::string& name,
-                                             const Frame& trimmed, const UniformCells& uniform,
-                                             const std::optional<std::vector<std::array<double, 2>>>& radii)
+/// The struts one of two frames holds and the other does not, by their ends (either order) and
+/// their radii (@a ra and @a rb: per strut, or null for none), as segments; none when fewer than
+/// a quarter of @a b's struts are also @a a's as they are (little for a table to serve).
+std::optional<std::vector<std::array<Vec3d, 2>>> differingStruts(const Frame& a,
+                                                                 const std::vector<std::array<double, 2>>* ra,
+                                                                 const Frame& b,
+                                                                 const std::vector<std::array<double, 2>>* rb)
 {
-    if (!uniform.fill) return std::nullopt;
-    UntrimmedFrame u;
-    u.frame = clippedFrame(
-        uniform.cell, *uniform.fill, uniform.size, [](const Vec3d&) { return -1.0; }, 0.0);
-    if (radii) {
-        Frame scoped = u.frame;
-        scoped.layoutBox = trimmed.box();  // the radius gradient's box: the trimmed frame's
-        u.radii = readRadii(builder, spec["radius"], scoped, name);
-    }
-    // A strut by its ends (the lesser first) and its radii in that order.
-    using Key = std::array<double, 6>;
-    auto keyOf = [](const Frame& f, const std::optional<std::vector<std::array<double, 2>>>& r, std::size_t j) {
-        Vec3d a = f.nodes[f.struts[j][0]], b = f.nodes[f.struts[j][1]];
-        std::array<double, 2> ra = r ? (*r)[j] : std::array<double, 2>{0.0, 0.0};
-        if (std::lexicographical_compare(b.asPointer(), b.asPointer() + 3, a.asPointer(), a.asPointer() + 3)) {
-            std::swap(a, b);
-            std::swap(ra[0], ra[1]);
+    // A strut as its ends (the lesser first) and its radii in that order, and its frame.
+    using Key = std::array<double, 8>;
+    std::vector<std::pair<Key, int>> all;
+    all.reserve(a.struts.size() + b.struts.size());
+    auto add = [&all](const Frame& f, const std::vector<std::array<double, 2>>* r, int which) {
+        for (std::size_t j = 0; j < f.struts.size(); ++j) {
+            Vec3d p = f.nodes[f.struts[j][0]], q = f.nodes[f.struts[j][1]];
+            std::array<double, 2> e = r ? (*r)[j] : std::array<double, 2>{0.0, 0.0};
+            if (std::lexicographical_compare(q.asPointer(), q.asPointer() + 3, p.asPointer(), p.asPointer() + 3)) {
+                std::swap(p, q);
+                std::swap(e[0], e[1]);
+            }
+            all.push_back({Key{p[0], p[1], p[2], q[0], q[1], q[2], e[0], e[1]}, which});
         }
-        return std::make_pair(Key{a[0], a[1], a[2], b[0], b[1], b[2]}, ra);
     };
-    std::map<Key, std::pair<std::array<double, 2>, bool>> kept;  // trimmed struts: radii, matched
-    for (std::size_t j = 0; j < trimmed.struts.size(); ++j) {
-        const auto [key, r] = keyOf(trimmed, radii, j);
-        kept.emplace(key, std::make_pair(r, false));
+    add(a, ra, 0);
+    add(b, rb, 1);
+    std::sort(all.begin(), all.end());
+    std::vector<std::array<Vec3d, 2>> differing;
+    std::size_t same = 0;
+    for (std::size_t i = 0; i < all.size();) {
+        std::size_t e = i + 1;
+        while (e < all.size() && all[e].first == all[i].first) ++e;
+        const bool both = all[i].second == 0 && all[e - 1].second == 1;
+        if (both) {
+            ++same;
+        } else {
+            const Key& k = all[i].first;
+            differing.push_back({Vec3d(k[0], k[1], k[2]), Vec3d(k[3], k[4], k[5])});
+        }
+        i = e;
     }
-    for (std::size_t j = 0; j < u.frame.struts.size(); ++j) {
-        const auto [key, r] = keyOf(u.frame, u.radii, j);
-        const auto it = kept.find(key);
-        if (it != kept.end() && it->second.first == r)
-            it->second.second = true;
-        else
-            u.differing.push_back({Vec3d(key[0], key[1], key[2]), Vec3d(key[3], key[4], key[5])});
-    }
-    for (const auto& [key, value] : kept)
-        if (!value.second) u.differing.push_back({Vec3d(key[0], key[1], key[2]), Vec3d(key[3], key[4], key[5])});
-    if (4 * (u.frame.struts.size() + kept.size() - u.differing.size()) < 2 * u.frame.struts.size()) return std::nullopt;
-    return u;
+    if (4 * same < b.struts.size()) return std::nullopt;
+    return differing;
 }
 
 /// A strut lattice as its frame lays it out; @a within receives the solid a `within:` frame is
@@ -898,7 +912,7 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
             ConvolutionStrut s;
             s.a = f.nodes[f.struts[j][0]];
             s.b = f.nodes[f.struts[j][1]];
-            s.sigma = graded || !sn.isSequence() ? sigma.front() : sigma[j];  // one sigma: any frame
+            s.sigma = graded ? sigma.front() : sigma[j];
             if (r) {
                 s.w0 = gaussianStrutWeight((*r)[j][0], s.sigma, 1.0);
                 s.w1 = gaussianStrutWeight((*r)[j][1], s.sigma, 1.0);
@@ -952,25 +966,56 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     // every strut the trim removed or cut, the untrimmed box frame: its values there come from
     // that frame's tabled period (the same struts and weights, the same peak and cap), the rest
     // strut by strut (TiledInterior).
-    std::optional<UntrimmedFrame> untrimmed;
-    if (uniform && uniform->fill && !graded && !g["sigma"].isSequence() && (sameStruts || gradedAxis >= 0))
-        untrimmed = untrimmedFrame(builder, spec, name, frame, *uniform, radii);
-    if (untrimmed) {
-        auto rawUntrimmed =
-            std::make_shared<StrutConvolution>(convolutionStruts(untrimmed->frame, untrimmed->radii), eps, interrupt);
-        double reach = rcMax;
-        for (std::size_t j = 0; j < untrimmed->frame.struts.size(); ++j)
-            reach = std::max(reach, rawUntrimmed->cutoffRadius(j));
-        const auto same = std::make_shared<IsoRadius>(rawUntrimmed, peak, sigmaMax, 2.0 * rcMax);
-        const Box3 untrimmedBox = untrimmed->frame.box();
-        Vec3d untrimmedPeriod = uniform->size;
-        if (gradedAxis >= 0) untrimmedPeriod[gradedAxis] = 0.0;
-        std::array<bool, 3> untrimmedMirror{};
-        for (int a = 0; a < 3; ++a)
-            untrimmedMirror[a] = a != gradedAxis && mirrorSymmetric(untrimmed->frame, untrimmedBox, a, interrupt);
-        evaluated = std::make_shared<TiledInterior>(
-            iso, std::make_shared<PeriodicTiling>(same, untrimmedBox, untrimmedPeriod, reach, untrimmedMirror),
-            untrimmed->differing, reach);
+    if (uniform && uniform->fill && !graded && !sn.isSequence() && (sameStruts || gradedAxis >= 0)) {
+        // The untrimmed frame's radii: the one radius, or the gradient over the trimmed frame's
+        // box (so a strut both frames hold has the same radii in both).
+        std::optional<double> oneRadius;
+        std::optional<RadiusGradient> gradient;
+        if (radii && spec["radius"].isNumber())
+            oneRadius = spec["radius"].number();
+        else if (radii)
+            gradient = readRadiusGradient(spec["radius"]);
+        using Radii = std::vector<std::array<double, 2>>;
+        // Made on the first grid batch (TiledInterior): slices and point queries never pay.
+        auto parts = [trimmed = std::make_shared<const Frame>(frame),
+                      trimmedRadii = radii ? std::make_shared<const Radii>(*radii) : nullptr, cells = *uniform,
+                      oneRadius, gradient, sigma0 = sigma.front(), eps, peak, sigmaMax, rcMax, gradedAxis, interrupt] {
+            TiledInterior::Parts parts;
+            const Frame untrimmed = clippedFrame(
+                cells.cell, *cells.fill, cells.size, [](const Vec3d&) { return -1.0; }, 0.0);
+            std::optional<Radii> untrimmedRadii;
+            if (oneRadius)
+                untrimmedRadii.emplace(untrimmed.struts.size(), std::array<double, 2>{*oneRadius, *oneRadius});
+            if (gradient) untrimmedRadii = gradientRadii(*gradient, untrimmed, trimmed->box());
+            auto differing =
+                differingStruts(*trimmed, trimmedRadii.get(), untrimmed, untrimmedRadii ? &*untrimmedRadii : nullptr);
+            if (!differing) return parts;
+            std::vector<ConvolutionStrut> struts(untrimmed.struts.size());
+            for (std::size_t j = 0; j < struts.size(); ++j) {
+                ConvolutionStrut& c = struts[j];
+                c.a = untrimmed.nodes[untrimmed.struts[j][0]];
+                c.b = untrimmed.nodes[untrimmed.struts[j][1]];
+                c.sigma = sigma0;
+                if (untrimmedRadii) {
+                    c.w0 = gaussianStrutWeight((*untrimmedRadii)[j][0], sigma0, 1.0);
+                    c.w1 = gaussianStrutWeight((*untrimmedRadii)[j][1], sigma0, 1.0);
+                }
+            }
+            auto raw = std::make_shared<StrutConvolution>(struts, eps, interrupt);
+            parts.reach = rcMax;
+            for (std::size_t j = 0; j < struts.size(); ++j) parts.reach = std::max(parts.reach, raw->cutoffRadius(j));
+            // The trimmed frame's peak and cap: both measure levels alike.
+            const auto same = std::make_shared<IsoRadius>(raw, peak, sigmaMax, 2.0 * rcMax);
+            const Box3 box = untrimmed.box();
+            Vec3d period = cells.size;
+            if (gradedAxis >= 0) period[gradedAxis] = 0.0;
+            std::array<bool, 3> mirror{};
+            for (int a = 0; a < 3; ++a) mirror[a] = a != gradedAxis && mirrorSymmetric(untrimmed, box, a, interrupt);
+            parts.same = std::make_shared<PeriodicTiling>(same, box, period, parts.reach, mirror);
+            parts.differing = std::move(*differing);
+            return parts;
+        };
+        evaluated = std::make_shared<TiledInterior>(iso, std::move(parts));
     }
     // Evaluated strut by strut: in stacks of eight leaves along z (rows of 64 points: a strut row's
     // set-up, its table and the struts' gather shared by eight leaves). W2g's frames at 25 mm, user
