@@ -16,7 +16,9 @@
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
 
+#include <atomic>
 #include <cstring>
 #include <map>
 #include <random>
@@ -537,4 +539,39 @@ TEST(TiledInterior, ATrimmedFrameReadsItsUntrimmedTableOnlyBeyondTheReachOfWhatT
                 ASSERT_GT(std::sqrt(nearest), reach) << "leaf at " << x << " " << y << " " << z;
             }
     EXPECT_GT(checked, 100);
+}
+
+TEST(TiledInterior, MakesItsPartsOnceOnTheFirstGridBatchMoreThanOneSampleThick)
+{
+    // Slices (batches one sample thick) and point queries read the exact field and never make
+    // the parts (an untrimmed frame and its table: seconds on a build plate); the first grid
+    // batch makes them once, whichever threads ask at the same time.
+    const BccBox b = bccBox(4, 2.0, 0.25);
+    std::atomic<int> made{0};
+    const TiledInterior tiled(b.iso, [&] {
+        ++made;
+        return TiledInterior::Parts{b.iso, {{Vec3d(0.0), Vec3d(1.0)}}, b.reach};
+    });
+    std::vector<double> out(512);
+    const std::vector<Vec3d> points = {Vec3d(1.0, 2.0, 3.0), Vec3d(4.0, 4.0, 4.0)};
+    tiled.values(points, std::span<double>(out.data(), points.size()));
+    GridBatch plane;
+    plane.origin = Vec3d(0.05);
+    plane.spacing = Vec3d(0.1);
+    plane.nx = plane.ny = 10;
+    plane.nz = 1;
+    tiled.gridValues(plane, std::span<double>(out.data(), plane.size()));
+    std::vector<signed char> side(1);
+    tiled.planeValues(plane, 8, Interval{-0.1, 0.1}, std::span<double>(out.data(), plane.size()), side, {});
+    EXPECT_EQ(made.load(), 0);
+    tbb::parallel_for(0, 64, [&](int m) {
+        GridBatch leaf;
+        leaf.origin = Vec3d(0.05 + 0.8 * (m % 8), 0.05 + 0.8 * (m / 8), 0.05);
+        leaf.spacing = Vec3d(0.1);
+        std::vector<double> values(512), exact(512);
+        tiled.gridValues(leaf, values);
+        b.iso->gridValues(leaf, exact);
+        EXPECT_EQ(values, exact);  // the same field on both sides here: the same doubles
+    });
+    EXPECT_EQ(made.load(), 1);
 }
