@@ -593,6 +593,38 @@ int radiusGradientAxis(const RecipeNode& spec)
     return r.has("axis") ? r["axis"].string()[0] - 'x' : 0;
 }
 
+/// Strut @a j of @a f as a convolution strut of @a sigma, its end weights from its radii @a r
+/// (w = exp(R^2 / 2 sigma^2) / (sigma sqrt(2 pi)): radius R at level 1), or 1 without.
+ConvolutionStrut convolutionStrut(const Frame& f, std::size_t j, double sigma, const std::array<double, 2>* r)
+{
+    ConvolutionStrut s;
+    s.a = f.nodes[f.struts[j][0]];
+    s.b = f.nodes[f.struts[j][1]];
+    s.sigma = sigma;
+    if (r) {
+        s.w0 = gaussianStrutWeight((*r)[0], sigma, 1.0);
+        s.w1 = gaussianStrutWeight((*r)[1], sigma, 1.0);
+    }
+    return s;
+}
+
+/// The period of a box frame of cells of @a size: none along @a gradedAxis (radii graded along it;
+/// -1 for none).
+Vec3d framePeriod(Vec3d size, int gradedAxis)
+{
+    if (gradedAxis >= 0) size[gradedAxis] = 0.0;
+    return size;
+}
+
+/// Per axis, whether @a f is its own mirror image about the middle of @a box; never along
+/// @a gradedAxis (radii graded along it; -1 for none).
+std::array<bool, 3> frameMirrors(const Frame& f, const Box3& box, int gradedAxis, const FrameInterrupt& interrupt)
+{
+    std::array<bool, 3> mirror{};
+    for (int a = 0; a < 3; ++a) mirror[a] = a != gradedAxis && mirrorSymmetric(f, box, a, interrupt);
+    return mirror;
+}
+
 /// The struts one of two frames holds and the other does not, by their ends (either order) and
 /// their radii (@a ra and @a rb: per strut, or null for none), as segments; none when fewer than
 /// a quarter of @a b's struts are also @a a's as they are (little for a table to serve).
@@ -909,18 +941,12 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     auto convolutionStruts = [&](const Frame& f, const std::optional<std::vector<std::array<double, 2>>>& r) {
         std::vector<ConvolutionStrut> struts;
         for (std::size_t j = 0; j < f.struts.size(); ++j) {
-            ConvolutionStrut s;
-            s.a = f.nodes[f.struts[j][0]];
-            s.b = f.nodes[f.struts[j][1]];
-            s.sigma = graded ? sigma.front() : sigma[j];
-            if (r) {
-                s.w0 = gaussianStrutWeight((*r)[j][0], s.sigma, 1.0);
-                s.w1 = gaussianStrutWeight((*r)[j][1], s.sigma, 1.0);
-                if (!std::isfinite(s.w0) || !std::isfinite(s.w1))
-                    spec["radius"].fail("radius " + std::to_string(std::max((*r)[j][0], (*r)[j][1])) +
-                                        " is too large for sigma " + std::to_string(s.sigma) +
-                                        " (the weight exp(R^2 / 2 sigma^2) overflows): raise sigma");
-            }
+            const ConvolutionStrut s =
+                convolutionStrut(f, j, graded ? sigma.front() : sigma[j], r ? &(*r)[j] : nullptr);
+            if (!std::isfinite(s.w0) || !std::isfinite(s.w1))  // weights of 1 without radii
+                spec["radius"].fail("radius " + std::to_string(std::max((*r)[j][0], (*r)[j][1])) +
+                                    " is too large for sigma " + std::to_string(s.sigma) +
+                                    " (the weight exp(R^2 / 2 sigma^2) overflows): raise sigma");
             struts.push_back(s);
         }
         return struts;
@@ -953,13 +979,11 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     const int gradedAxis = radiusGradientAxis(spec);
     const bool partlyPeriodic = uniform && !spec["struts"].has("within") && !graded && !sameStruts &&
                                 !g["sigma"].isSequence() && gradedAxis >= 0;
-    Vec3d period = uniform ? uniform->size : Vec3d(0.0);
-    if (partlyPeriodic) period[gradedAxis] = 0.0;
+    const Vec3d period = uniform ? framePeriod(uniform->size, gradedAxis) : Vec3d(0.0);
     // Identical struts (same sigma and radius) whose frame is its own mirror image: the field is
     // too (radii graded along an axis: mirror images across the other axes keep their radii).
     std::array<bool, 3> mirror{};
-    if (periodic || partlyPeriodic)
-        for (int a = 0; a < 3; ++a) mirror[a] = a != gradedAxis && mirrorSymmetric(frame, box, a, interrupt);
+    if (periodic || partlyPeriodic) mirror = frameMirrors(frame, box, gradedAxis, interrupt);
     FieldPtr evaluated = iso;
     if (periodic || partlyPeriodic) evaluated = std::make_shared<PeriodicTiling>(iso, box, period, rcMax, mirror);
     // A frame trimmed `within:` a solid is, deeper inside the solid than the kernel's reach from
@@ -991,27 +1015,16 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
                 differingStruts(*trimmed, trimmedRadii.get(), untrimmed, untrimmedRadii ? &*untrimmedRadii : nullptr);
             if (!differing) return parts;
             std::vector<ConvolutionStrut> struts(untrimmed.struts.size());
-            for (std::size_t j = 0; j < struts.size(); ++j) {
-                ConvolutionStrut& c = struts[j];
-                c.a = untrimmed.nodes[untrimmed.struts[j][0]];
-                c.b = untrimmed.nodes[untrimmed.struts[j][1]];
-                c.sigma = sigma0;
-                if (untrimmedRadii) {
-                    c.w0 = gaussianStrutWeight((*untrimmedRadii)[j][0], sigma0, 1.0);
-                    c.w1 = gaussianStrutWeight((*untrimmedRadii)[j][1], sigma0, 1.0);
-                }
-            }
+            for (std::size_t j = 0; j < struts.size(); ++j)
+                struts[j] = convolutionStrut(untrimmed, j, sigma0, untrimmedRadii ? &(*untrimmedRadii)[j] : nullptr);
             auto raw = std::make_shared<StrutConvolution>(struts, eps, interrupt);
             parts.reach = rcMax;
             for (std::size_t j = 0; j < struts.size(); ++j) parts.reach = std::max(parts.reach, raw->cutoffRadius(j));
             // The trimmed frame's peak and cap: both measure levels alike.
             const auto same = std::make_shared<IsoRadius>(raw, peak, sigmaMax, 2.0 * rcMax);
             const Box3 box = untrimmed.box();
-            Vec3d period = cells.size;
-            if (gradedAxis >= 0) period[gradedAxis] = 0.0;
-            std::array<bool, 3> mirror{};
-            for (int a = 0; a < 3; ++a) mirror[a] = a != gradedAxis && mirrorSymmetric(untrimmed, box, a, interrupt);
-            parts.same = std::make_shared<PeriodicTiling>(same, box, period, parts.reach, mirror);
+            parts.same = std::make_shared<PeriodicTiling>(same, box, framePeriod(cells.size, gradedAxis), parts.reach,
+                                                          frameMirrors(untrimmed, box, gradedAxis, interrupt));
             parts.differing = std::move(*differing);
             return parts;
         };

@@ -1,5 +1,6 @@
 #include "fields/struts/TiledInterior.h"
 
+#include "fields/core/Scratch.h"
 #include "fields/struts/StrutIndex.h"
 
 #include <oneapi/tbb/parallel_for.h>
@@ -152,7 +153,8 @@ void TiledInterior::gridValues(const GridBatch& batch, std::span<double> out) co
         return;
     }
     // Runs of leaves alike, each from its field as a sub-stack.
-    std::vector<double> part;
+    // The sub-stacks' values in a per-thread scratch buffer (not allocated per batch).
+    const ScratchLease scratch(batch.size());
     for (int m = 0; m < pieces;) {
         const bool isFar = farLeaves >> m & 1u;
         int e = m + 1;
@@ -161,7 +163,7 @@ void TiledInterior::gridValues(const GridBatch& batch, std::span<double> out) co
         sub.origin[2] += double(m * depth) * batch.spacing[2];
         sub.nz = (e - m) * depth;
         sub.unread = batch.unread >> m & ((e - m) == 32 ? ~0u : (1u << (e - m)) - 1u);
-        part.resize(sub.size());
+        const std::span<double> part(scratch.data(), sub.size());
         (isFar ? same : mExact)->gridValues(sub, part);
         for (int i = 0; i < batch.nx; ++i)
             for (int j = 0; j < batch.ny; ++j)
