@@ -13,6 +13,8 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <array>
+#include <cstdio>
 #include <cstring>
 #include <mutex>
 #include <random>
@@ -58,57 +60,87 @@ TEST(Coverage, ANarrowerBandsSamplesAreTheWiderBandsPickedInOrder)
     }
 }
 
-TEST(Coverage, BisectionReadsTheSamplesWithoutACopyAndFindsTheSameLevel)
+TEST(Coverage, SamplesAreEachBandVoxelsCentralDifferencesReadVoxelByVoxel)
 {
-    // bisectCoverage against the bisection it replaced (a copy of every sample compacted in
-    // place), written out here: the same level bit for bit, on samples with ramps of many widths
-    // and value ties (step 0); and the level found covers what was wanted to within a sample.
+    // coverageSamples (and widestCoverageStep) against every voxel read through the grid one by
+    // one: a band voxel inside the region, its change along each axis the central difference,
+    // one-sided where a neighbour is outside the region, in no leaf, or masked (1e30 and up).
+    // Leaves wholly inside the region take a faster path (neighbours from the neighbouring
+    // leaves' buffers): the grid mixes those with leaves cut by the region, leaves with no
+    // neighbour leaf on some faces, and masked voxels.
+    openvdb::FloatGrid grid(std::numeric_limits<float>::max());
+    auto acc = grid.getAccessor();
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> noise(-0.05f, 0.05f);
+    for (int x = -8; x < 40; ++x)
+        for (int y = -8; y < 32; ++y)
+            for (int z = -8; z < 24; ++z) {
+                // Holes of whole leaves: the leaf at (16, 8, 8) and the row x in [32, 40) at y < 0.
+                if ((x >= 16 && x < 24 && y >= 8 && y < 16 && z >= 8 && z < 16) || (x >= 32 && y < 0)) continue;
+                float v = 0.02f * float(x) + 0.03f * float(y) - 0.025f * float(z) + noise(rng);
+                if (rng() % 97 == 0) v = 1e30f;  // masked
+                acc.setValue(openvdb::Coord(x, y, z), v);
+            }
+    const openvdb::CoordBBox region(openvdb::Coord(-3, -5, -2), openvdb::Coord(35, 27, 21));
+    const float lo = -0.3f, hi = 0.6f;
+    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    grid.tree().getNodes(leaves);
+    std::vector<CoverageSample> reference;
+    float widest = 0.0f;
+    for (const auto* leaf : leaves)
+        for (int i = 0; i < 512; ++i) {
+            const openvdb::Coord c = leaf->offsetToGlobalCoord(i);
+            const float v = leaf->getValue(i);
+            if (v < lo || v > hi || !region.isInside(c)) continue;
+            std::array<double, 3> d{};
+            for (int a = 0; a < 3; ++a) {
+                openvdb::Coord up = c, down = c;
+                up[a] += 1;
+                down[a] -= 1;
+                float upValue = 0.0f, downValue = 0.0f;
+                const bool hasUp =
+                    region.isInside(up) && acc.probeConstLeaf(up) && (upValue = acc.getValue(up)) < 1e30f;
+                const bool hasDown =
+                    region.isInside(down) && acc.probeConstLeaf(down) && (downValue = acc.getValue(down)) < 1e30f;
+                d[a] = axisChange(v, upValue, hasUp, downValue, hasDown);
+            }
+            reference.push_back({v, float(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))});
+            widest = std::max(widest, reference.back().step);
+        }
+    const std::vector<CoverageSample> samples = coverageSamples(grid, region, lo, hi);
+    ASSERT_GT(reference.size(), 10000u);
+    ASSERT_EQ(samples.size(), reference.size());
+    EXPECT_EQ(std::memcmp(samples.data(), reference.data(), samples.size() * sizeof(CoverageSample)), 0);
+    EXPECT_EQ(widestCoverageStep(grid, region, lo, hi), widest);
+}
+
+TEST(Coverage, BisectionSetsAsideSamplesWithoutABreakpointInItsBracketAndFindsTheLevel)
+{
+    // bisectCoverage against a plain serial bisection of the coverage sum, written out here (every
+    // sample summed at every step, in order): the same level to within 1e-12 of the bracket, on
+    // samples with ramps of many widths and value ties (step 0); the level found covers what was
+    // wanted to within a sample (a tie's jump) and the coverage sum crosses `wanted` there; and the
+    // level is the same double on one thread and on two.
     auto coverage = [](const CoverageSample& s, double level) {
         return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
     };
-    auto copied = [&](const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a,
-                      double b) {
-        std::vector<CoverageSample> active(samples.begin(), samples.end());
-        double settled = fullyBelow, constant = 0.0, slope = 0.0;
-        bool linear = false;
+    auto serialSum = [&](const std::vector<CoverageSample>& samples, double level) {
+        double covered = 0.0;
+        for (const CoverageSample& s : samples) covered += coverage(s, level);
+        return covered;
+    };
+    auto plain = [&](const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b) {
         for (int iteration = 0; iteration < 60; ++iteration) {
             const double mid = 0.5 * (a + b);
-            double covered = settled;
-            if (linear)
-                covered += constant + mid * slope;
-            else
-                for (const CoverageSample& s : active) covered += coverage(s, mid);
-            (covered < wanted ? a : b) = mid;
-            if (linear) continue;
-            std::size_t kept = 0;
-            bool ramps = true;
-            for (std::size_t i = 0; i < active.size(); ++i) {
-                const CoverageSample s = active[i];
-                const double atA = coverage(s, a), atB = coverage(s, b);
-                if (atA >= 1.0)
-                    settled += 1.0;
-                else if (atB > 0.0) {
-                    active[kept++] = s;
-                    ramps = ramps && s.step > 0.0f && atA > 0.0 && atB < 1.0;
-                }
-            }
-            active.resize(kept);
-            if (ramps) {
-                linear = true;
-                for (const CoverageSample& s : active) {
-                    constant += 0.5 - double(s.value) / s.step;
-                    slope += 1.0 / s.step;
-                }
-                active.clear();
-            }
+            (fullyBelow + serialSum(samples, mid) < wanted ? a : b) = mid;
         }
         return 0.5 * (a + b);
     };
     // Trials of up to 12 parallel blocks of 8192 samples, whole and partial; voxels below counted
-    // in whole numbers (small, and past 2^40: the parallel sum's bound is then wide) or not (the
-    // ones then added one by one); bisected on one thread and on two.
+    // in whole numbers (small, and past 2^40) or not; bisected on one thread and on two.
     std::mt19937 rng(38);
     std::uniform_real_distribution<double> value(-1.0, 1.0), width(0.0, 0.3), share(0.05, 0.95);
+    double worst = 0.0;
     for (int trial = 0; trial < 48; ++trial) {
         const std::size_t n = trial < 40 ? std::size_t(2000 + 500 * trial) : std::size_t(8192 * (trial - 35) - 7);
         std::vector<CoverageSample> samples(n);
@@ -120,14 +152,30 @@ TEST(Coverage, BisectionReadsTheSamplesWithoutACopyAndFindsTheSameLevel)
         if (trial % 3 == 1) below += 0x1p40;
         if (trial % 5 == 2) below += 0.375;
         const double wanted = below + share(rng) * double(samples.size());
-        const double reference = copied(samples, below, wanted, -1.5, 1.5);
+        const double reference = plain(samples, below, wanted, -1.5, 1.5);
+        double first = 0.0;
         for (int threads : {1, 2}) {
             tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
             const double level = bisectCoverage(samples, below, wanted, -1.5, 1.5);
-            EXPECT_EQ(level, reference) << "trial " << trial << ", " << threads << " threads";
+            if (threads == 1) first = level;
+            EXPECT_EQ(level, first) << "trial " << trial;
+            worst = std::max(worst, std::abs(level - reference));
+            EXPECT_LE(std::abs(level - reference), 3e-12) << "trial " << trial << ", " << threads << " threads";
             EXPECT_NEAR(below + coveredVoxels(samples, level), wanted, 1.0 + 1e-6) << "trial " << trial;
+            // The sum crosses `wanted` at the level (rounding of a sum near 2^40 allowed).
+            const double slack = 1e-9 * (below + double(n));
+            EXPECT_LE(below + serialSum(samples, level - 1e-9), wanted + slack) << "trial " << trial;
+            EXPECT_GE(below + serialSum(samples, level + 1e-9), wanted - slack) << "trial " << trial;
+            // The one-pass sums at several levels are the one-level sums.
+            const std::array<double, 2> levels{level - 0.1, level + 0.1};
+            std::array<double, 2> both{};
+            coveredVoxels(samples, levels, both);
+            EXPECT_EQ(both[0], coveredVoxels(samples, levels[0]));
+            EXPECT_EQ(both[1], coveredVoxels(samples, levels[1]));
+            EXPECT_NEAR(both[1], serialSum(samples, levels[1]), 1e-9 * double(n));
         }
     }
+    std::printf("worst |level - plain bisection| %.3g\n", worst);
 }
 
 TEST(Coverage, CoarseBlocksOfAnyDepthVisitEveryLatticePointOnce)

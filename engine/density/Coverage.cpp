@@ -31,6 +31,48 @@ void leafBand(const Leaf& leaf, openvdb::FloatGrid::ConstAccessor& acc, float lo
               const openvdb::CoordBBox& region, const openvdb::CoordBBox& around, Emit&& emit)
 {
     const float* data = leaf.buffer().data();
+    const openvdb::CoordBBox box(leaf.origin(), leaf.origin() + openvdb::Coord(7));
+    const openvdb::CoordBBox grown(box.min() - openvdb::Coord(1), box.max() + openvdb::Coord(1));
+    if (region.isInside(box) && around.isInside(grown)) {
+        // The common case: every voxel in the region and every neighbour around. A neighbour
+        // past the leaf's face is read from the neighbouring leaf's buffer, found once per face
+        // (the same value the accessor gives), none where no leaf is.
+        const float* next[3][2];
+        for (int a = 0; a < 3; ++a) {
+            openvdb::Coord down = box.min(), up = box.min();
+            down[a] -= 1;
+            up[a] += 8;
+            const Leaf* below = acc.probeConstLeaf(down);
+            const Leaf* above = acc.probeConstLeaf(up);
+            next[a][0] = below ? below->buffer().data() : nullptr;
+            next[a][1] = above ? above->buffer().data() : nullptr;
+        }
+        for (int i = 0; i < 512; ++i) {
+            if (data[i] < lo || data[i] > hi) continue;
+            std::array<double, 3> change{};
+            for (int a = 0; a < 3; ++a) {
+                const int local = (i >> kLeafShift[a]) & 7, stride = kLeafStride[a];
+                float upValue = 0.0f, downValue = 0.0f;
+                bool hasUp = true, hasDown = true;
+                if (local < 7)
+                    upValue = data[i + stride];
+                else if (next[a][1])
+                    upValue = next[a][1][i - 7 * stride];
+                else
+                    hasUp = false;
+                if (local > 0)
+                    downValue = data[i - stride];
+                else if (next[a][0])
+                    downValue = next[a][0][i + 7 * stride];
+                else
+                    hasDown = false;
+                change[a] =
+                    axisChange(data[i], upValue, hasUp && upValue < 1e30f, downValue, hasDown && downValue < 1e30f);
+            }
+            emit(data[i], change);
+        }
+        return;
+    }
     for (int i = 0; i < 512; ++i) {
         if (data[i] < lo || data[i] > hi) continue;
         const openvdb::Coord c = leaf.offsetToGlobalCoord(i);
@@ -87,8 +129,12 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
             if (interrupt && n % 64 == 0) interrupt();
             const float* data = leaves[n]->buffer().data();
             std::size_t count = 0;
-            for (int i = 0; i < 512; ++i)
-                count += !(data[i] < lo || data[i] > hi) && region.isInside(leaves[n]->offsetToGlobalCoord(i));
+            const openvdb::Coord origin = leaves[n]->origin();
+            if (region.isInside(openvdb::CoordBBox(origin, origin + openvdb::Coord(7))))
+                for (int i = 0; i < 512; ++i) count += !(data[i] < lo || data[i] > hi);
+            else
+                for (int i = 0; i < 512; ++i)
+                    count += !(data[i] < lo || data[i] > hi) && region.isInside(leaves[n]->offsetToGlobalCoord(i));
             offset[n + 1] = count;
         }
     });
@@ -125,7 +171,9 @@ double sampleCoverage(const CoverageSample& s, double level)
 std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo,
                                             float hi, const std::function<void()>& interrupt)
 {
-    return bandSamples(grid, region, lo, hi, region, coverageSample, interrupt);
+    return bandSamples(
+        grid, region, lo, hi, region, [](float v, const std::array<double, 3>& d) { return coverageSample(v, d); },
+        interrupt);
 }
 
 float widestCoverageStep(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
@@ -259,51 +307,22 @@ double solvePlaneCoverage(std::vector<PlaneSample> active, double settled, doubl
     return level;
 }
 
-/// Voxels below @a level counted with sub-voxel coverage: a voxel whose value is within half a
-/// step of the level is partly inside, linearly in the distance (a plane cutting the voxel).
-double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
-{
-    double covered = 0.0;
-    for (const CoverageSample& s : samples) covered += sampleCoverage(s, level);
-    return covered;
-}
-
 namespace {
 
-/// Samples per block of the bisection's parallel passes: fixed, so the blocks, and what each
-/// pass finds in them, are the same for any thread count.
+/// Samples per block of the coverage sums' parallel passes: fixed, so the blocks, what each pass
+/// finds in them and the order their sums are added in are the same for any thread count.
 constexpr std::size_t kBisectBlock = std::size_t(1) << 13;
-/// Blocks between two calls of the bisection's interrupt (2^20 samples).
+/// Blocks between two calls of the interrupt (2^20 samples).
 constexpr std::size_t kInterruptBlocks = (std::size_t(1) << 20) / kBisectBlock;
 
 /// Samples held in blocks of kBisectBlock: block k's are the first count[k] from
-/// base + k * kBisectBlock. Read block after block, they are the samples in their order.
+/// base + k * kBisectBlock.
 struct BlockedSamples {
     const CoverageSample* base = nullptr;
     std::vector<std::uint32_t> count;
 
     const CoverageSample* block(std::size_t k) const { return base + k * kBisectBlock; }
-    std::size_t size() const
-    {
-        std::size_t n = 0;
-        for (std::uint32_t c : count) n += c;
-        return n;
-    }
-    /// Calls @a f(sample) for every sample in their order, @a interrupt every kInterruptBlocks
-    /// blocks.
-    template <class F>
-    void inOrder(const std::function<void()>& interrupt, F&& f) const;
 };
-
-template <class F>
-void BlockedSamples::inOrder(const std::function<void()>& interrupt, F&& f) const
-{
-    for (std::size_t k = 0; k < count.size(); ++k) {
-        if (interrupt && k % kInterruptBlocks == kInterruptBlocks - 1) interrupt();
-        const CoverageSample* s = block(k);
-        for (std::size_t i = 0; i < count[k]; ++i) f(s[i]);
-    }
-}
 
 /// @a samples as blocks, each full but the last.
 BlockedSamples wholeBlocks(const CoverageSample* samples, std::size_t n)
@@ -326,66 +345,59 @@ void forEachBlock(std::size_t blocks, const std::function<void()>& interrupt, Bo
     });
 }
 
-/// Whether @a settled plus the coverage at @a level of each of @a blocks' samples, added one by
-/// one in their order, is below @a wanted: the serial sum's answer, for any thread count. The
-/// sum is taken in parallel in another order; two sums of the same n non-negative terms differ
-/// by at most 2 gamma_(n-1) times the terms' total (Higham, Accuracy and Stability of Numerical
-/// Algorithms, 2nd ed., 4.2), so only a parallel sum that close to @a wanted leaves the answer
-/// open, and the sum is then taken again in order.
-bool coveredBelow(const BlockedSamples& blocks, double settled, double level, double wanted,
-                  const std::function<void()>& interrupt)
+/// The coverage at @a level of @a n samples from @a s, in four chains (the additions overlap).
+double blockCoverage(const CoverageSample* s, std::size_t n, double level)
 {
-    const std::size_t nBlocks = blocks.count.size();
-    const double sum = tbb::parallel_deterministic_reduce(
-        tbb::blocked_range<std::size_t>(0, nBlocks, 1), 0.0,
-        [&](const tbb::blocked_range<std::size_t>& r, double total) {
-            for (std::size_t k = r.begin(); k != r.end(); ++k) {
-                if (interrupt && k % kInterruptBlocks == kInterruptBlocks - 1) interrupt();
-                const CoverageSample* s = blocks.block(k);
-                const std::size_t n = blocks.count[k];
-                double part[4] = {0.0, 0.0, 0.0, 0.0};  // four chains: the additions overlap
-                std::size_t i = 0;
-                for (; i + 4 <= n; i += 4)
-                    for (std::size_t j = 0; j < 4; ++j) part[j] += sampleCoverage(s[i + j], level);
-                for (; i < n; ++i) part[i % 4] += sampleCoverage(s[i], level);
-                total += (part[0] + part[1]) + (part[2] + part[3]);
-            }
-            return total;
-        },
-        std::plus<>());
-    const double terms = double(blocks.size()) + 1.0;  // settled among them
-    // Twice gamma_n (n u / (1 - n u), u = 2^-53) with room to spare, times a bound of the terms'
-    // total: every coverage is at most 1.
-    const double bound = 4.0 * terms * std::ldexp(1.0, -53) * (std::abs(settled) + terms);
-    if (settled + sum < wanted - bound) return true;
-    if (settled + sum > wanted + bound) return false;
-    double covered = settled;
-    blocks.inOrder(interrupt, [&](const CoverageSample& s) { covered += sampleCoverage(s, level); });
-    return covered < wanted;
+    double part[4] = {0.0, 0.0, 0.0, 0.0};
+    std::size_t i = 0;
+    for (; i + 4 <= n; i += 4)
+        for (std::size_t j = 0; j < 4; ++j) part[j] += sampleCoverage(s[i + j], level);
+    for (; i < n; ++i) part[i % 4] += sampleCoverage(s[i], level);
+    return (part[0] + part[1]) + (part[2] + part[3]);
 }
 
-/// What the bisection's pass over one block found: its samples still cut by a level in (a, b),
-/// those whose coverage is full at a, and whether every one still cut ramps across [a, b].
-struct BlockFilter {
+/// What one step of the bisection found in one block, against the bracket [a, b] it then held:
+/// its samples whose coverage is full over the bracket (settled), those whose coverage is linear
+/// across it (their constant and slope: 0.5 - value / step and 1 / step), and those with a
+/// breakpoint inside it (kept, and their coverage at the step's level). Samples empty over the
+/// bracket are dropped.
+struct BlockStep {
     std::uint32_t kept = 0;
     std::uint32_t settled = 0;
-    bool ramps = true;
+    double constant = 0.0, slope = 0.0;
+    double cut = 0.0;
 };
 
-/// Block @a k's samples of @a from sorted over [a, b]: @a keep(i, s) is called in order for the
-/// i-th sample the level still cuts.
+/// Block @a k of @a from sorted over [@a a, @a b] by each sample's breakpoints (value -+ half its
+/// step: where its coverage leaves 0 and reaches 1; a step of 0 jumps at its value, covered below
+/// a level above it), its kept samples' coverage taken at @a mid: @a keep(j, i) is called in order
+/// for the i-th sample, the j-th kept. A division only for the samples kept.
 template <class Keep>
-BlockFilter filterBlock(const BlockedSamples& from, std::size_t k, double a, double b, Keep&& keep)
+BlockStep stepBlock(const BlockedSamples& from, std::size_t k, double a, double b, double mid, Keep&& keep)
 {
-    BlockFilter f;
+    BlockStep f;
     const CoverageSample* s = from.block(k);
     for (std::size_t i = 0; i < from.count[k]; ++i) {
-        const double atA = sampleCoverage(s[i], a), atB = sampleCoverage(s[i], b);
-        if (atA >= 1.0)
+        const double value = s[i].value, half = 0.5 * double(s[i].step);
+        if (half > 0.0) {
+            const double start = value - half, end = value + half;
+            if (end <= a) {
+                ++f.settled;
+            } else if (start >= b) {
+                continue;
+            } else if (start < a && end > b) {
+                const double inverse = 1.0 / s[i].step;
+                f.constant += 0.5 - value * inverse;
+                f.slope += inverse;
+            } else {
+                keep(f.kept++, i);
+                f.cut += sampleCoverage(s[i], mid);
+            }
+        } else if (value < a) {
             ++f.settled;
-        else if (atB > 0.0) {
+        } else if (value < b) {
             keep(f.kept++, i);
-            f.ramps = f.ramps && s[i].step > 0.0f && atA > 0.0 && atB < 1.0;
+            f.cut += double(value < mid);
         }
     }
     return f;
@@ -393,88 +405,110 @@ BlockFilter filterBlock(const BlockedSamples& from, std::size_t k, double a, dou
 
 }  // namespace
 
+double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
+{
+    double covered = 0.0;
+    coveredVoxels(samples, std::span<const double>(&level, 1), std::span<double>(&covered, 1));
+    return covered;
+}
+
+void coveredVoxels(const std::vector<CoverageSample>& samples, std::span<const double> levels, std::span<double> out)
+{
+    const BlockedSamples blocks = wholeBlocks(samples.data(), samples.size());
+    const std::size_t nLevels = levels.size();
+    std::vector<double> sums(blocks.count.size() * nLevels);
+    forEachBlock(blocks.count.size(), {}, [&](std::size_t k) {
+        for (std::size_t l = 0; l < nLevels; ++l)
+            sums[k * nLevels + l] = blockCoverage(blocks.block(k), blocks.count[k], levels[l]);
+    });
+    std::fill(out.begin(), out.begin() + nLevels, 0.0);
+    for (std::size_t k = 0; k < blocks.count.size(); ++k)
+        for (std::size_t l = 0; l < nLevels; ++l) out[l] += sums[k * nLevels + l];
+}
+
 /// The level in [a, b] at which fullyBelow + coveredVoxels(samples, level) reaches @a wanted, by
-/// 60 bisection steps. Samples whose coverage is constant (0 or 1) over what is left of the
-/// bracket are set aside as it narrows, so later steps visit only the voxels the level still
-/// cuts; each kept sample contributes exactly what coveredVoxels() would give it. A sample's
-/// coverage at the bracket's ends is computed again where it is needed, not carried along: the
-/// same doubles (the same function of the same two numbers), and 8 bytes a sample instead of 32
-/// (a plate's band holds 10^7-10^8 samples: the solve's peak). Each step's passes run in
-/// parallel over fixed blocks of samples and give the serial bisection's steps (coveredBelow()):
-/// the same level, bit for bit, for any thread count.
+/// 60 bisection steps. The coverage is piecewise linear in the level, with breakpoints at each
+/// sample's value -+ half its step. As the bracket narrows, each step sets aside the samples
+/// without a breakpoint inside it: those full across it (counted), those empty (dropped) and
+/// those linear across it (their constants and slopes summed): later steps visit only the
+/// samples whose breakpoints are still inside the bracket, a share that halves with it. Each
+/// step's pass runs in parallel over fixed blocks and adds the blocks' sums in their order: the
+/// same level, bit for bit, for any thread count. The first pass serves the first two steps
+/// (three levels at once); the next reads the samples in place and copies only those it keeps (a plate's band holds
+/// 10^7-10^8 samples: the solve's peak).
 double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b,
                       const std::function<void()>& interrupt)
 {
-    // The first step reads @a samples themselves and keeps in @a active only those the level
-    // still cuts: no copy of every sample (each of its pages written, and held beside the
-    // samples). Later steps move the samples kept to the front of their block.
     std::unique_ptr<CoverageSample[]> active;
     BlockedSamples left = wholeBlocks(samples.data(), samples.size());  // the samples still cut
-    bool first = true;
-    double settled = fullyBelow;  // whole voxels below every level left in the bracket
-    // Once every sample left is partly covered across the whole bracket, the coverage is linear
-    // there: settled + constant + level * slope, and the remaining steps cost nothing.
-    bool linear = false;
-    double constant = 0.0, slope = 0.0;
+    double settled = fullyBelow;         // whole voxels below every level left in the bracket
+    double constant = 0.0, slope = 0.0;  // the samples linear across the bracket
+    std::vector<BlockStep> found;
+    double nextCut[2] = {0.0, 0.0}, previousMid = 0.0;  // the first pass's sums for the second step
     for (int iteration = 0; iteration < 60; ++iteration) {
         if (interrupt) interrupt();
         const double mid = 0.5 * (a + b);
-        const bool raiseA =
-            linear ? settled + (constant + mid * slope) < wanted : coveredBelow(left, settled, mid, wanted, interrupt);
-        (raiseA ? a : b) = mid;
-        if (linear) continue;
-        // Coverage is monotone in the level: full at a means full on [a, b], empty at b empty.
         const std::size_t nBlocks = left.count.size();
-        std::vector<BlockFilter> found(nBlocks);
-        if (first) {
-            // Which samples are kept, then each block's written at its place in one array.
-            std::vector<std::uint64_t> kept((samples.size() + 63) / 64);
+        double cut = 0.0;
+        if (iteration == 0) {
+            // The whole band brackets the level: nearly every sample has a breakpoint inside
+            // it and the next bracket's half too. One pass takes their coverage at the middle
+            // and at both middles the next step may take, with nothing set aside or copied.
+            const std::array<double, 3> levels{mid, 0.5 * (a + mid), 0.5 * (mid + b)};
+            std::vector<double> sums(nBlocks * 3);
             forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
-                std::uint64_t* bits = kept.data() + k * (kBisectBlock / 64);
-                found[k] =
-                    filterBlock(left, k, a, b, [&](std::uint32_t, std::size_t i) { bits[i / 64] |= 1ull << (i % 64); });
+                for (std::size_t l = 0; l < 3; ++l)
+                    sums[k * 3 + l] = blockCoverage(left.block(k), left.count[k], levels[l]);
             });
-            std::vector<std::size_t> at(nBlocks + 1, 0);
-            for (std::size_t k = 0; k < nBlocks; ++k) at[k + 1] = at[k] + found[k].kept;
-            active = std::make_unique_for_overwrite<CoverageSample[]>(at[nBlocks]);
-            forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
-                const std::uint64_t* bits = kept.data() + k * (kBisectBlock / 64);
-                const CoverageSample* s = left.block(k);
-                CoverageSample* to = active.get() + at[k];
-                for (std::size_t i = 0; i < left.count[k]; ++i)
-                    if (bits[i / 64] >> (i % 64) & 1u) *to++ = s[i];
-            });
-            left = wholeBlocks(active.get(), at[nBlocks]);
-            first = false;
-        } else {
-            CoverageSample* base = active.get();
-            forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
-                CoverageSample* s = base + k * kBisectBlock;
-                found[k] = filterBlock(left, k, a, b, [&](std::uint32_t to, std::size_t i) { s[to] = s[i]; });
-                left.count[k] = found[k].kept;
-            });
-        }
-        // Each block's whole voxels: ones added one by one, as the serial pass does (exactly a
-        // count added at once while the sum is a whole number below 2^53).
-        std::size_t nowSettled = 0;
-        bool ramps = true;
-        for (const BlockFilter& f : found) {
-            nowSettled += f.settled;
-            ramps = ramps && f.ramps;
-        }
-        if (settled == std::floor(settled) && std::abs(settled) + double(nowSettled) < 0x1p53)
+            for (std::size_t k = 0; k < nBlocks; ++k)
+                for (std::size_t l = 0; l < 3; ++l) (l == 0 ? cut : nextCut[l - 1]) += sums[k * 3 + l];
+        } else if (iteration == 1) {
+            cut = nextCut[mid < previousMid ? 0 : 1];
+        } else if (nBlocks > 0) {
+            found.assign(nBlocks, BlockStep{});
+            if (!active) {
+                // Which samples are kept, then each block's written at its place in one array.
+                std::vector<std::uint64_t> kept((samples.size() + 63) / 64);
+                forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
+                    std::uint64_t* bits = kept.data() + k * (kBisectBlock / 64);
+                    found[k] = stepBlock(left, k, a, b, mid,
+                                         [&](std::uint32_t, std::size_t i) { bits[i / 64] |= 1ull << (i % 64); });
+                });
+                std::vector<std::size_t> at(nBlocks + 1, 0);
+                for (std::size_t k = 0; k < nBlocks; ++k) at[k + 1] = at[k] + found[k].kept;
+                active = std::make_unique_for_overwrite<CoverageSample[]>(at[nBlocks]);
+                forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
+                    const std::uint64_t* bits = kept.data() + k * (kBisectBlock / 64);
+                    const CoverageSample* s = left.block(k);
+                    CoverageSample* to = active.get() + at[k];
+                    for (std::size_t i = 0; i < left.count[k]; ++i)
+                        if (bits[i / 64] >> (i % 64) & 1u) *to++ = s[i];
+                });
+                left = wholeBlocks(active.get(), at[nBlocks]);
+            } else {
+                // Kept samples move to the front of their block; blocks left empty are dropped.
+                CoverageSample* base = active.get();
+                forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
+                    CoverageSample* s = base + k * kBisectBlock;
+                    found[k] = stepBlock(left, k, a, b, mid, [&](std::uint32_t to, std::size_t i) { s[to] = s[i]; });
+                    left.count[k] = found[k].kept;
+                });
+            }
+            std::size_t nowSettled = 0;
+            for (const BlockStep& f : found) {
+                nowSettled += f.settled;
+                constant += f.constant;
+                slope += f.slope;
+                cut += f.cut;
+            }
             settled += double(nowSettled);
-        else
-            for (std::size_t i = 0; i < nowSettled; ++i) settled += 1.0;
-        if (ramps) {
-            linear = true;
-            left.inOrder(interrupt, [&](const CoverageSample& s) {
-                constant += 0.5 - double(s.value) / s.step;
-                slope += 1.0 / s.step;
-            });
-            left = BlockedSamples{};
-            active.reset();
+            if (std::all_of(found.begin(), found.end(), [](const BlockStep& f) { return f.kept == 0; })) {
+                left = BlockedSamples{};
+                active.reset();
+            }
         }
+        (settled + (constant + mid * slope) + cut < wanted ? a : b) = mid;
+        previousMid = mid;
     }
     return 0.5 * (a + b);
 }

@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <span>
 #include <vector>
 
 namespace voxlat::coverage {
@@ -55,10 +56,16 @@ float widestCoverageStep(const openvdb::FloatGrid& grid, const openvdb::CoordBBo
 
 /// Voxels below @a level counted with sub-voxel coverage: a voxel whose value is within half a
 /// step of the level is partly inside, linearly in the distance (a plane cutting the voxel).
+/// Summed in parallel over fixed blocks: the same double for any thread count.
 double coveredVoxels(const std::vector<CoverageSample>& samples, double level);
 
+/// coveredVoxels() at each of @a levels into @a out (as many), one pass over the samples for all.
+void coveredVoxels(const std::vector<CoverageSample>& samples, std::span<const double> levels, std::span<double> out);
+
 /// The level in [a, b] at which fullyBelow + coveredVoxels(samples, level) reaches @a wanted
-/// (bisection; samples settled over what is left of the bracket are set aside).
+/// (bisection; samples full, empty or linear over what is left of the bracket are set aside, so
+/// each step visits only the samples with a breakpoint inside it; the same level for any thread
+/// count).
 /// @a interrupt, when set, is called once per step and every 2^20 samples within one.
 double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b,
                       const std::function<void()>& interrupt = {});

@@ -190,12 +190,17 @@ double countSlope(std::vector<float>& band, std::size_t m, std::size_t k, double
     return width > 0.0 ? double(hi - lo) / total / width : 0.0;
 }
 
-/// d covered share / d level by coverage over [level - d, level + d], d a quarter of [a, b].
-double coverageSlope(const std::vector<CoverageSample>& samples, double level, double a, double b, double total)
+/// The voxels covered at @a level, and d covered share / d level by coverage over
+/// [level - d, level + d], d a quarter of [a, b] (0 for an open bracket): one pass over the samples.
+std::pair<double, double> coveredAndSlope(const std::vector<CoverageSample>& samples, double level, double a, double b,
+                                          double total)
 {
     const double d = 0.25 * (std::min(b, 1e30) - std::max(a, -1e30));
-    if (!(d > 0.0) || d > 1e29) return 0.0;
-    return (coveredVoxels(samples, level + d) - coveredVoxels(samples, level - d)) / (2.0 * d) / total;
+    if (!(d > 0.0) || d > 1e29) return {coveredVoxels(samples, level), 0.0};
+    const std::array<double, 3> levels{level - d, level, level + d};
+    std::array<double, 3> covered{};
+    coveredVoxels(samples, levels, covered);
+    return {covered[1], (covered[2] - covered[0]) / (2.0 * d) / total};
 }
 
 /// splitByBand of the grid evaluateSparse(@a g, @a domain, @a options) would give, measured on
@@ -437,9 +442,10 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 if (options.band.hi >= 1e30) b = std::max(b == 1e30 ? -1e300 : b, double(c.value) + c.step);
             }
             sol.level = bisectCoverage(samples, double(fullyBelow), double(wanted), a, b, interrupt);
-            sol.slope = coverageSlope(samples, sol.level, a, b, double(sol.domainVoxels));
+            const auto [covered, slope] = coveredAndSlope(samples, sol.level, a, b, double(sol.domainVoxels));
+            sol.slope = slope;
             sol.coverage = true;
-            sol.achieved = (double(fullyBelow) + coveredVoxels(samples, sol.level)) / double(sol.domainVoxels);
+            sol.achieved = (double(fullyBelow) + covered) / double(sol.domainVoxels);
         }
         return sol;
     }
