@@ -1,11 +1,14 @@
 // The density solve's coverage samples: what solveDensity's coverage pass relies on when it walks
 // the grid once per band instead of picking the bands' samples from the evaluated band's.
 #include "engine/core/GridMeasure.h"
+#include "engine/core/KeptGridLeaves.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/density/Coverage.h"
 #include "engine/frames/StrutFrames.h"
 #include "engine/frames/UnitCells.h"
 #include "fields/core/BlockLattice.h"
+#include "fields/core/GridValueMemo.h"
+#include "fields/levels/LevelSolid.h"
 #include "fields/struts/IsoRadius.h"
 #include "fields/struts/StrutConvolution.h"
 
@@ -14,10 +17,12 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cstdio>
 #include <cstring>
 #include <mutex>
 #include <random>
+#include <string>
 
 using namespace voxlat;
 using namespace voxlat::coverage;
@@ -114,6 +119,139 @@ TEST(Coverage, SamplesAreEachBandVoxelsCentralDifferencesReadVoxelByVoxel)
     EXPECT_EQ(widestCoverageStep(grid, region, lo, hi), widest);
 }
 
+namespace {
+/// A field passed through, its bound() calls counted (meets() passed on).
+struct CountedBounds final : FieldNode {
+    FieldPtr f;
+    mutable std::atomic<int> bounds{0};
+    explicit CountedBounds(FieldPtr field) : f(std::move(field)) {}
+    void values(std::span<const Vec3d> p, std::span<double> out) const override { f->values(p, out); }
+    void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
+    {
+        f->gradients(p, out, g);
+    }
+    void gridValues(const GridBatch& batch, std::span<double> out) const override { f->gridValues(batch, out); }
+    Interval bound(const Box3& box) const override
+    {
+        ++bounds;
+        return f->bound(box);
+    }
+    bool meets(const Box3& box, const Interval& band) const override { return f->meets(box, band); }
+};
+
+/// Same leaves (topology) and the same bits in every one.
+void expectSameGrid(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b, const std::string& what)
+{
+    EXPECT_TRUE(a.tree().hasSameTopology(b.tree())) << what;
+    ASSERT_EQ(a.tree().leafCount(), b.tree().leafCount()) << what;
+    auto acc = b.getConstAccessor();
+    std::uint64_t mismatched = 0;
+    for (auto leaf = a.tree().cbeginLeaf(); leaf; ++leaf)
+        for (int i = 0; i < 512; ++i) {
+            const float x = leaf->getValue(i), y = acc.getValue(leaf->offsetToGlobalCoord(i));
+            mismatched += std::memcmp(&x, &y, sizeof x) != 0;
+        }
+    EXPECT_EQ(mismatched, 0u) << what;
+    // Tiles: the same sign everywhere the domain's index box reaches.
+    const openvdb::CoordBBox box = a.evalActiveVoxelBoundingBox();
+    EXPECT_EQ(countBelow(a, box, 0.6f), countBelow(b, box, 0.6f)) << what;
+}
+}  // namespace
+
+TEST(Coverage, KnownValuesProveLeavesStraddlingWithoutTheirBoundsAndFindTheSameGrid)
+{
+    // A strut lattice's iso-radius evaluated sparsely with and without values known in advance:
+    // the coarse samples a density solve takes (KnownSamples, every third voxel, past the domain
+    // by the margin; proving a band met or, wholeBand, spanned), and a grid of the field's values
+    // held by a memo under a level (FieldNode::meets() through LevelSolid, GridValueMemo,
+    // KeptGridLeaves; with the domain's clip). The grids are the same, bit for bit, tiles
+    // included, and far fewer bounds are taken.
+    const Frame f = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(4.0), {2, 2, 2});
+    std::vector<ConvolutionStrut> struts;
+    for (const auto& e : f.struts) struts.push_back({f.nodes[e[0]], f.nodes[e[1]], 0.4, 1.0, 1.3});
+    const auto raw = std::make_shared<StrutConvolution>(struts);
+    const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.4, 2.0 * raw->cutoffRadius(0));
+    const Domain d = Domain::fromBox(Box3{Vec3d(-0.33, -0.27, -0.41), Vec3d(8.37, 8.21, 8.13)}, 0.1);
+    SparseOptions options;
+    options.band = Interval(0.45, 0.62);
+    options.margin = 2;
+    options.insideValue = -std::numeric_limits<float>::max();
+    options.outsideValue = std::numeric_limits<float>::max();
+
+    KnownSamples known;
+    known.stride = 3;
+    known.origin = openvdb::Coord(known.stride / 2 - options.margin);
+    std::vector<Vec3d> points;
+    for (int a = 0; a < 3; ++a) known.count[a] = (d.dims[a] + 2 * options.margin + known.stride - 1) / known.stride;
+    for (int i = 0; i < known.count[0]; ++i)
+        for (int j = 0; j < known.count[1]; ++j)
+            for (int k = 0; k < known.count[2]; ++k)
+                points.push_back(
+                    d.worldOf(known.origin + openvdb::Coord(i * known.stride, j * known.stride, k * known.stride)));
+    std::vector<double> v(points.size());
+    iso->values(points, v);
+    known.values.assign(v.begin(), v.end());
+
+    const auto counted = std::make_shared<CountedBounds>(iso);
+    const auto plain = evaluateSparse(*counted, d, options);
+    const int allBounds = counted->bounds.exchange(0);
+    ASSERT_GT(plain->tree().leafCount(), 500u);
+    SparseOptions withKnown = options;
+    withKnown.known = &known;
+    expectSameGrid(*plain, *evaluateSparse(*counted, d, withKnown), "band met");
+    const int metBounds = counted->bounds.exchange(0);
+    known.wholeBand = true;
+    expectSameGrid(*plain, *evaluateSparse(*counted, d, withKnown), "band spanned");
+    const int spannedBounds = counted->bounds.exchange(0);
+    EXPECT_LT(metBounds, allBounds * 3 / 4);
+    EXPECT_LT(spannedBounds, allBounds);
+    EXPECT_LE(metBounds, spannedBounds);
+
+    // KnownSamples::meets against the samples in the box enumerated one by one.
+    std::mt19937 rng(11);
+    std::uniform_int_distribution<int> corner(-4, 90), size(0, 12);
+    for (int trial = 0; trial < 2000; ++trial) {
+        const openvdb::Coord lo(corner(rng), corner(rng), corner(rng));
+        const openvdb::CoordBBox box(lo, lo + openvdb::Coord(size(rng), size(rng), size(rng)));
+        for (const bool whole : {false, true}) {
+            known.wholeBand = whole;
+            const Interval asked = whole ? Interval(options.band.hi, options.band.lo) : options.band;
+            BandMet met(asked);
+            bool expected = false;
+            for (int i = 0; i < known.count[0]; ++i)
+                for (int j = 0; j < known.count[1]; ++j)
+                    for (int k = 0; k < known.count[2]; ++k)
+                        if (box.isInside(known.origin +
+                                         openvdb::Coord(i * known.stride, j * known.stride, k * known.stride)))
+                            expected =
+                                met.add(known.values[(std::size_t(i) * known.count[1] + j) * known.count[2] + k]) ||
+                                expected;
+            EXPECT_EQ(known.meets(box, asked), expected) << "trial " << trial;
+        }
+    }
+
+    // A level above a memo holding a grid of its values (as a density solve hands it over), with
+    // the domain's clip, at levels within the grid's band: the grid a memo holding nothing gives.
+    SparseOptions region = options;
+    region.band = Interval(0.4, 0.7);
+    auto grid = evaluateSparse(*std::make_shared<GridValueMemo>(iso), d, region);
+    const auto counter = std::make_shared<CountedBounds>(iso);
+    const auto memo = std::make_shared<GridValueMemo>(counter);
+    memo->keep(true, 0);
+    memo->keepLeaves(std::make_unique<KeptGridLeaves>(std::move(grid), d), std::size_t(1) << 30);
+    SparseOptions clipped;
+    clipped.clipToDomain = true;
+    for (const double level : {0.45, 0.55, 0.65}) {
+        const auto fresh = std::make_shared<CountedBounds>(iso);
+        const auto expected =
+            evaluateSparse(LevelSolid(std::make_shared<GridValueMemo>(fresh), SolidSide::Below, level), d, clipped);
+        counter->bounds = 0;
+        const auto held = evaluateSparse(LevelSolid(memo, SolidSide::Below, level), d, clipped);
+        expectSameGrid(*expected, *held, "held, level " + std::to_string(level));
+        EXPECT_LT(counter->bounds.load(), fresh->bounds.load() * 3 / 4) << level;
+    }
+}
+
 TEST(Coverage, BisectionSetsAsideSamplesWithoutABreakpointInItsBracketAndFindsTheLevel)
 {
     // bisectCoverage against a plain serial bisection of the coverage sum, written out here (every
@@ -156,14 +294,20 @@ TEST(Coverage, BisectionSetsAsideSamplesWithoutABreakpointInItsBracketAndFindsTh
         double first = 0.0;
         for (int threads : {1, 2}) {
             tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
-            const double level = bisectCoverage(samples, below, wanted, -1.5, 1.5);
+            const CoverageLevel found = bisectCoverage(samples, below, wanted, -1.5, 1.5);
+            const double level = found.level;
             if (threads == 1) first = level;
+            // What it covers there and its slope over the bracket's middle half [-0.75, 0.75],
+            // against the serial sums.
+            const double slack = 1e-9 * (below + double(n));
+            EXPECT_NEAR(found.covered, below + serialSum(samples, level), slack) << "trial " << trial;
+            EXPECT_NEAR(found.slope, (serialSum(samples, 0.75) - serialSum(samples, -0.75)) / 1.5, 1e-9 * double(n))
+                << "trial " << trial;
             EXPECT_EQ(level, first) << "trial " << trial;
             worst = std::max(worst, std::abs(level - reference));
             EXPECT_LE(std::abs(level - reference), 3e-12) << "trial " << trial << ", " << threads << " threads";
             EXPECT_NEAR(below + coveredVoxels(samples, level), wanted, 1.0 + 1e-6) << "trial " << trial;
             // The sum crosses `wanted` at the level (rounding of a sum near 2^40 allowed).
-            const double slack = 1e-9 * (below + double(n));
             EXPECT_LE(below + serialSum(samples, level - 1e-9), wanted + slack) << "trial " << trial;
             EXPECT_GE(below + serialSum(samples, level + 1e-9), wanted - slack) << "trial " << trial;
             // The one-pass sums at several levels are the one-level sums.

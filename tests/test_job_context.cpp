@@ -163,12 +163,14 @@ TEST(JobContext, TheDensitySolvesBandPassesCallTheirInterrupter)
     const std::vector<CoverageSample> samples = coverageSamples(grid, box, -0.1f, 0.1f);
     ASSERT_FALSE(samples.empty());
     int steps = 0;
-    const double level = bisectCoverage(
-        samples, double(split.below), double(split.below) + 0.5 * double(samples.size()), -0.1, 0.1, [&] { ++steps; });
+    const double level = bisectCoverage(samples, double(split.below),
+                                        double(split.below) + 0.5 * double(samples.size()), -0.1, 0.1, [&] { ++steps; })
+                             .level;
     EXPECT_GT(steps, 0);
     EXPECT_LE(steps, 60);
     EXPECT_EQ(level, bisectCoverage(samples, double(split.below), double(split.below) + 0.5 * double(samples.size()),
-                                    -0.1, 0.1));
+                                    -0.1, 0.1)
+                         .level);
     EXPECT_THROW(bisectCoverage(samples, double(split.below), double(split.below) + 0.5 * double(samples.size()), -0.1,
                                 0.1, throwing),
                  Cancelled);

@@ -4,11 +4,13 @@
 
 #include "engine/core/Domain.h"
 #include "engine/core/GridLeavesReused.h"
+#include "engine/core/SparseEvaluator.h"
 #include "fields/core/GridValueMemo.h"
 
 #include <openvdb/openvdb.h>
 
 #include <algorithm>
+#include <cmath>
 #include <functional>
 #include <memory>
 #include <span>
@@ -45,6 +47,20 @@ public:
             batch.spacing = Vec3d(mDomain.voxel);
             return unread(batch, data);
         });
+    }
+
+    /// The held voxels whose centres lie inside @a box (KnownSamples' test on them).
+    bool meets(const Box3& box, const Interval& band) const override
+    {
+        // Voxel centres min + (c + 1/2) voxel inside the box, a hair within it.
+        openvdb::Coord lo, hi;
+        for (int a = 0; a < 3; ++a) {
+            const double margin = 1e-9 * (std::abs(box.min[a]) + std::abs(box.max[a]) + mDomain.voxel);
+            lo[a] = int(std::ceil((box.min[a] + margin - mDomain.box.min[a]) / mDomain.voxel - 0.5));
+            hi[a] = int(std::floor((box.max[a] - margin - mDomain.box.min[a]) / mDomain.voxel - 0.5));
+            if (lo[a] > hi[a]) return false;
+        }
+        return heldValuesMeet(*mGrid, openvdb::CoordBBox(lo, hi), band);
     }
 
 private:

@@ -64,11 +64,20 @@ Box3 grownBox(const Domain& d, const Coord& lo, int size)
 }
 
 Side classify(const FieldNode& f, const BoxField* clip, const Domain& d, const Coord& lo, int size,
-              const Interval& band)
+              const Interval& band, const KnownSamples* known)
 {
     // A band that takes every value needs no bound (they cost more than some evaluations).
     if (band.lo <= -1e30 && band.hi >= 1e30) return Side::Straddle;
     const Box3 box = grownBox(d, lo, size);
+    // Values known inside the box that meet the band: its bound would meet it too (the samples'
+    // voxel centres half a voxel within the grown box the bound is taken over). With the clip,
+    // max(field, clip): a value at least band.lo stays so, and one at most band.hi stays so
+    // where the clip's bound is at most band.hi.
+    if ((!clip || clip->bound(box).hi <= band.hi) &&
+        ((known &&
+          known->meets(CoordBBox(lo, lo + Coord(size - 1)), known->wholeBand ? Interval(band.hi, band.lo) : band)) ||
+         f.meets(box, band)))
+        return Side::Straddle;
     Interval b = f.bound(box);
     if (clip) b = max(b, clip->bound(box));
     if (b.hi < band.lo) return Side::Inside;
@@ -89,6 +98,50 @@ struct BlockResult {
 };
 
 }  // namespace
+
+bool heldValuesMeet(const openvdb::FloatGrid& grid, const CoordBBox& voxels, const Interval& band)
+{
+    using LeafT = openvdb::FloatGrid::TreeType::LeafNodeType;
+    BandMet met(band);
+    const auto& tree = grid.tree();
+    // Leaf by leaf over the box: each leaf's part of it, read from its buffer.
+    const Coord first(voxels.min().x() & ~7, voxels.min().y() & ~7, voxels.min().z() & ~7);
+    for (int x = first.x(); x <= voxels.max().x(); x += 8)
+        for (int y = first.y(); y <= voxels.max().y(); y += 8)
+            for (int z = first.z(); z <= voxels.max().z(); z += 8) {
+                const LeafT* leaf = tree.probeConstLeaf(Coord(x, y, z));
+                if (!leaf || !leaf->buffer().data()) continue;
+                const CoordBBox part(Coord::maxComponent(voxels.min(), Coord(x, y, z)),
+                                     Coord::minComponent(voxels.max(), Coord(x + 7, y + 7, z + 7)));
+                const float* data = leaf->buffer().data();
+                for (int i = part.min().x(); i <= part.max().x(); ++i)
+                    for (int j = part.min().y(); j <= part.max().y(); ++j)
+                        for (int k = part.min().z(); k <= part.max().z(); ++k)
+                            if (met.add(data[((i & 7) << 6) | ((j & 7) << 3) | (k & 7)])) return true;
+            }
+    return false;
+}
+
+bool KnownSamples::meets(const CoordBBox& voxels, const Interval& band) const
+{
+    if (stride < 1 || values.empty()) return false;
+    // The samples' index range within the box: ceil and floor of (voxel - origin) / stride.
+    int first[3], last[3];
+    for (int a = 0; a < 3; ++a) {
+        const int lo = voxels.min()[a] - origin[a], hi = voxels.max()[a] - origin[a];
+        first[a] = std::max(0, lo >= 0 ? (lo + stride - 1) / stride : -((-lo) / stride));
+        last[a] = std::min(count[a] - 1, hi >= 0 ? hi / stride : -((-hi + stride - 1) / stride));
+        if (first[a] > last[a]) return false;
+    }
+    BandMet met(band, error);
+    for (int i = first[0]; i <= last[0]; ++i)
+        for (int j = first[1]; j <= last[1]; ++j) {
+            const float* row = values.data() + (std::size_t(i) * count[1] + j) * std::size_t(count[2]);
+            for (int k = first[2]; k <= last[2]; ++k)
+                if (met.add(row[k])) return true;
+        }
+    return false;
+}
 
 openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& domain, const SparseOptions& options,
                                        SparseStats* stats)
@@ -130,7 +183,8 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1), [&](const auto& range) {
             for (std::size_t b = range.begin(); b != range.end(); ++b) {
                 BlockResult& r = results[b];
-                const Side side = classify(field, clip.get(), domain, blocks[b], kBlockDim, options.band);
+                const Side side =
+                    classify(field, clip.get(), domain, blocks[b], kBlockDim, options.band, options.known);
                 if (side == Side::Inside) r.insideTile = true;
                 if (side != Side::Straddle) {
                     r.culled += side == Side::Outside;
@@ -143,7 +197,7 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                         for (int z = leafRange.min().z(); z <= leafRange.max().z(); z += kLeafDim) {
                             const Coord lo(x, y, z);
                             if (!region.hasOverlap(CoordBBox(lo, lo + Coord(kLeafDim - 1)))) continue;
-                            switch (classify(field, clip.get(), domain, lo, kLeafDim, options.band)) {
+                            switch (classify(field, clip.get(), domain, lo, kLeafDim, options.band, options.known)) {
                                 case Side::Inside:
                                     r.insideLeafTiles.push_back(lo);
                                     break;

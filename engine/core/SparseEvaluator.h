@@ -7,11 +7,64 @@
 
 #include <openvdb/openvdb.h>
 
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <vector>
 
 namespace voxlat {
+
+/// The test behind the cull's proofs from values known at points of a box (KnownSamples,
+/// FieldNode::meets()): fed the values one by one, it holds once one is at least @a band's low end
+/// and one at most its high end, each by a slack of @a error plus 1e-6 relative (rounding, values
+/// held as floats). Values of +-1e30 and beyond (masks' outside values, tiles) prove nothing.
+class BandMet {
+public:
+    explicit BandMet(const Interval& band, double error = 0.0) : mBand(band), mError(error) {}
+    /// Takes one value; true once the values taken prove the band met.
+    bool add(double v)
+    {
+        if (!(std::abs(v) < 1e30)) return false;
+        const double slack = mError + 1e-6 * (1.0 + std::abs(v));
+        mLow = mLow || v - slack >= mBand.lo;
+        mHigh = mHigh || v + slack <= mBand.hi;
+        return mLow && mHigh;
+    }
+
+private:
+    Interval mBand;
+    double mError;
+    bool mLow = false, mHigh = false;
+};
+
+/// Whether the values of @a grid's leaves at the voxels in @a voxels prove @a band met (BandMet):
+/// FieldNode::meets() for a node holding a grid of its values (KeptGridLeaves).
+bool heldValuesMeet(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& voxels, const Interval& band);
+
+/// A field's values already known at every stride-th voxel (a density solve's coarse pass): sample
+/// (i, j, k) is the value at the voxel centre of index origin + stride (i, j, k), within @a error
+/// of what the field's bound() encloses. They prove a box straddles a band without its bound: any
+/// enclosure of the field over a box holds the values at the samples inside it, so when one of
+/// them is at least the band's low end and one at most its high end (the same one or two), the
+/// enclosure meets the band. The cull then skips the bound, and finds the same leaves.
+struct KnownSamples {
+    openvdb::Coord origin{0, 0, 0};
+    int stride = 1;
+    openvdb::Coord count{0, 0, 0};  ///< samples along each axis
+    std::vector<float> values;      ///< x-major, z fastest (count.x() count.y() count.z())
+    double error = 0.0;             ///< on top of a relative 1e-6 (rounding, float samples)
+    /// Prove only boxes whose samples span the whole band (one at most its low end, one at least
+    /// its high end), so that they meet every level in it: a later pass at a level within the
+    /// band, from a grid of the same values (FieldNode::meets()), proves them again, and the
+    /// bounds this pass does take are those it asks for (a memo keeps them).
+    bool wholeBand = false;
+
+    /// Whether the samples at voxel indices within @a voxels prove that any enclosure of the
+    /// field over those voxels' centres meets @a band. Samples of +-1e30 and beyond (masks'
+    /// outside values) prove nothing.
+    bool meets(const openvdb::CoordBBox& voxels, const Interval& band) const;
+};
 
 /// What to evaluate and what to skip.
 struct SparseOptions {
@@ -49,6 +102,9 @@ struct SparseOptions {
     int stackLeaves = 1;
     std::string stage = "evaluating field";
     const JobContext* context = nullptr;  ///< progress and cancellation (none: silent)
+    /// Values known in advance (KnownSamples): boxes they prove straddling the band are taken
+    /// without a bound (not with clipToDomain). Not owned; the grid is the same with or without.
+    const KnownSamples* known = nullptr;
 };
 
 struct SparseStats {

@@ -345,15 +345,23 @@ void forEachBlock(std::size_t blocks, const std::function<void()>& interrupt, Bo
     });
 }
 
-/// The coverage at @a level of @a n samples from @a s, in four chains (the additions overlap).
-double blockCoverage(const CoverageSample* s, std::size_t n, double level)
+/// The coverage of @a n samples from @a s at each of @a nLevels (at most 4) @a levels, into
+/// @a out: one division per sample whatever the levels (the ramp's 1 / step taken once), two
+/// chains of additions per level (they overlap). The same doubles for any thread count.
+void blockCoverage(const CoverageSample* s, std::size_t n, const double* levels, std::size_t nLevels, double* out)
 {
-    double part[4] = {0.0, 0.0, 0.0, 0.0};
-    std::size_t i = 0;
-    for (; i + 4 <= n; i += 4)
-        for (std::size_t j = 0; j < 4; ++j) part[j] += sampleCoverage(s[i + j], level);
-    for (; i < n; ++i) part[i % 4] += sampleCoverage(s[i], level);
-    return (part[0] + part[1]) + (part[2] + part[3]);
+    double part[4][2] = {};
+    for (std::size_t i = 0; i < n; ++i) {
+        const double value = s[i].value;
+        if (s[i].step > 0.0f) {
+            const double inverse = 1.0 / s[i].step;
+            for (std::size_t l = 0; l < nLevels; ++l)
+                part[l][i & 1] += std::clamp(0.5 + (levels[l] - value) * inverse, 0.0, 1.0);
+        } else {
+            for (std::size_t l = 0; l < nLevels; ++l) part[l][i & 1] += double(value < levels[l]);
+        }
+    }
+    for (std::size_t l = 0; l < nLevels; ++l) out[l] = part[l][0] + part[l][1];
 }
 
 /// What one step of the bisection found in one block, against the bracket [a, b] it then held:
@@ -417,10 +425,14 @@ void coveredVoxels(const std::vector<CoverageSample>& samples, std::span<const d
     const BlockedSamples blocks = wholeBlocks(samples.data(), samples.size());
     const std::size_t nLevels = levels.size();
     std::vector<double> sums(blocks.count.size() * nLevels);
-    forEachBlock(blocks.count.size(), {}, [&](std::size_t k) {
-        for (std::size_t l = 0; l < nLevels; ++l)
-            sums[k * nLevels + l] = blockCoverage(blocks.block(k), blocks.count[k], levels[l]);
-    });
+    for (std::size_t first = 0; first < nLevels; first += 4) {
+        const std::size_t count = std::min<std::size_t>(4, nLevels - first);
+        forEachBlock(blocks.count.size(), {}, [&](std::size_t k) {
+            double found[4];
+            blockCoverage(blocks.block(k), blocks.count[k], levels.data() + first, count, found);
+            for (std::size_t l = 0; l < count; ++l) sums[k * nLevels + first + l] = found[l];
+        });
+    }
     std::fill(out.begin(), out.begin() + nLevels, 0.0);
     for (std::size_t k = 0; k < blocks.count.size(); ++k)
         for (std::size_t l = 0; l < nLevels; ++l) out[l] += sums[k * nLevels + l];
@@ -431,16 +443,17 @@ void coveredVoxels(const std::vector<CoverageSample>& samples, std::span<const d
 /// sample's value -+ half its step. As the bracket narrows, each step sets aside the samples
 /// without a breakpoint inside it: those full across it (counted), those empty (dropped) and
 /// those linear across it (their constants and slopes summed): later steps visit only the
-/// samples whose breakpoints are still inside the bracket, a share that halves with it. Each
-/// step's pass runs in parallel over fixed blocks and adds the blocks' sums in their order: the
-/// same level, bit for bit, for any thread count. The first pass serves the first two steps
-/// (three levels at once); the next reads the samples in place and copies only those it keeps (a plate's band holds
-/// 10^7-10^8 samples: the solve's peak).
-double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b,
-                      const std::function<void()>& interrupt)
+/// samples whose breakpoints are still inside the bracket, a share that halves with it, moved to
+/// the front of their block of @a samples (owned here: no copy). Each step's pass runs in
+/// parallel over fixed blocks and adds the blocks' sums in their order: the same level, bit for
+/// bit, for any thread count. The first pass serves the first two steps (three levels at once)
+/// and gives the slope over the bracket's middle half.
+CoverageLevel bisectCoverage(std::vector<CoverageSample> samples, double fullyBelow, double wanted, double a, double b,
+                             const std::function<void()>& interrupt)
 {
-    std::unique_ptr<CoverageSample[]> active;
+    CoverageLevel result;
     BlockedSamples left = wholeBlocks(samples.data(), samples.size());  // the samples still cut
+    CoverageSample* base = samples.data();
     double settled = fullyBelow;         // whole voxels below every level left in the bracket
     double constant = 0.0, slope = 0.0;  // the samples linear across the bracket
     std::vector<BlockStep> found;
@@ -453,47 +466,26 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
         if (iteration == 0) {
             // The whole band brackets the level: nearly every sample has a breakpoint inside
             // it and the next bracket's half too. One pass takes their coverage at the middle
-            // and at both middles the next step may take, with nothing set aside or copied.
+            // and at both middles the next step may take, with nothing set aside or moved.
             const std::array<double, 3> levels{mid, 0.5 * (a + mid), 0.5 * (mid + b)};
             std::vector<double> sums(nBlocks * 3);
             forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
-                for (std::size_t l = 0; l < 3; ++l)
-                    sums[k * 3 + l] = blockCoverage(left.block(k), left.count[k], levels[l]);
+                blockCoverage(left.block(k), left.count[k], levels.data(), 3, sums.data() + k * 3);
             });
             for (std::size_t k = 0; k < nBlocks; ++k)
                 for (std::size_t l = 0; l < 3; ++l) (l == 0 ? cut : nextCut[l - 1]) += sums[k * 3 + l];
+            const double width = levels[2] - levels[1];
+            if (width > 0.0 && width < 1e29) result.slope = (nextCut[1] - nextCut[0]) / width;
         } else if (iteration == 1) {
             cut = nextCut[mid < previousMid ? 0 : 1];
         } else if (nBlocks > 0) {
+            // Kept samples move to the front of their block.
             found.assign(nBlocks, BlockStep{});
-            if (!active) {
-                // Which samples are kept, then each block's written at its place in one array.
-                std::vector<std::uint64_t> kept((samples.size() + 63) / 64);
-                forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
-                    std::uint64_t* bits = kept.data() + k * (kBisectBlock / 64);
-                    found[k] = stepBlock(left, k, a, b, mid,
-                                         [&](std::uint32_t, std::size_t i) { bits[i / 64] |= 1ull << (i % 64); });
-                });
-                std::vector<std::size_t> at(nBlocks + 1, 0);
-                for (std::size_t k = 0; k < nBlocks; ++k) at[k + 1] = at[k] + found[k].kept;
-                active = std::make_unique_for_overwrite<CoverageSample[]>(at[nBlocks]);
-                forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
-                    const std::uint64_t* bits = kept.data() + k * (kBisectBlock / 64);
-                    const CoverageSample* s = left.block(k);
-                    CoverageSample* to = active.get() + at[k];
-                    for (std::size_t i = 0; i < left.count[k]; ++i)
-                        if (bits[i / 64] >> (i % 64) & 1u) *to++ = s[i];
-                });
-                left = wholeBlocks(active.get(), at[nBlocks]);
-            } else {
-                // Kept samples move to the front of their block; blocks left empty are dropped.
-                CoverageSample* base = active.get();
-                forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
-                    CoverageSample* s = base + k * kBisectBlock;
-                    found[k] = stepBlock(left, k, a, b, mid, [&](std::uint32_t to, std::size_t i) { s[to] = s[i]; });
-                    left.count[k] = found[k].kept;
-                });
-            }
+            forEachBlock(nBlocks, interrupt, [&](std::size_t k) {
+                CoverageSample* s = base + k * kBisectBlock;
+                found[k] = stepBlock(left, k, a, b, mid, [&](std::uint32_t to, std::size_t i) { s[to] = s[i]; });
+                left.count[k] = found[k].kept;
+            });
             std::size_t nowSettled = 0;
             for (const BlockStep& f : found) {
                 nowSettled += f.settled;
@@ -502,15 +494,21 @@ double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBe
                 cut += f.cut;
             }
             settled += double(nowSettled);
-            if (std::all_of(found.begin(), found.end(), [](const BlockStep& f) { return f.kept == 0; })) {
+            if (std::all_of(found.begin(), found.end(), [](const BlockStep& f) { return f.kept == 0; }))
                 left = BlockedSamples{};
-                active.reset();
-            }
         }
         (settled + (constant + mid * slope) + cut < wanted ? a : b) = mid;
         previousMid = mid;
     }
-    return 0.5 * (a + b);
+    result.level = 0.5 * (a + b);
+    // The coverage at the level: what is set aside, and the samples still kept (few by now).
+    result.covered = settled + (constant + result.level * slope);
+    for (std::size_t k = 0; k < left.count.size(); ++k) {
+        double at = 0.0;
+        blockCoverage(left.block(k), left.count[k], &result.level, 1, &at);
+        result.covered += at;
+    }
+    return result;
 }
 
 }  // namespace voxlat::coverage

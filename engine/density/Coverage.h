@@ -62,13 +62,22 @@ double coveredVoxels(const std::vector<CoverageSample>& samples, double level);
 /// coveredVoxels() at each of @a levels into @a out (as many), one pass over the samples for all.
 void coveredVoxels(const std::vector<CoverageSample>& samples, std::span<const double> levels, std::span<double> out);
 
+/// What bisectCoverage() found.
+struct CoverageLevel {
+    double level = 0.0;    ///< where fullyBelow + the samples' coverage reaches `wanted`
+    double covered = 0.0;  ///< fullyBelow + the samples' coverage at `level`
+    /// d covered / d level over the middle half of [a, b] (voxels per unit of level; 0 when
+    /// that half is empty or unbounded)
+    double slope = 0.0;
+};
+
 /// The level in [a, b] at which fullyBelow + coveredVoxels(samples, level) reaches @a wanted
 /// (bisection; samples full, empty or linear over what is left of the bracket are set aside, so
 /// each step visits only the samples with a breakpoint inside it; the same level for any thread
-/// count).
+/// count). @a samples are reordered in place (hence taken by value: move them in).
 /// @a interrupt, when set, is called once per step and every 2^20 samples within one.
-double bisectCoverage(const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b,
-                      const std::function<void()>& interrupt = {});
+CoverageLevel bisectCoverage(std::vector<CoverageSample> samples, double fullyBelow, double wanted, double a, double b,
+                             const std::function<void()>& interrupt = {});
 
 /// The share of a voxel below @a level, the voxel's field taken as the plane through its value
 /// with its per-axis changes (exact for planes at any orientation).

@@ -98,7 +98,7 @@ struct CoarseCell {
 /// @a depth samples (BlockLattice::depth).
 std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int stride,
                                  const std::function<void()>& interrupt, std::vector<CoarseCell>* cells = nullptr,
-                                 int depth = 8)
+                                 int depth = 8, KnownSamples* known = nullptr, int margin = 0)
 {
     // Every stride-th voxel centre, from the middle of the first stride: min + (i stride + half + 1/2) voxel.
     BlockLattice lattice;
@@ -109,6 +109,16 @@ std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int s
     lattice.depth = depth;
     for (int a = 0; a < 3; ++a) lattice.count[a] = (domain.dims[a] + stride - 1) / stride;
     std::vector<std::vector<float>> perBlock(lattice.blockCount());
+    // Every sample, those past the domain too (values of the field all the same), at its place:
+    // the sparse cull's proofs (KnownSamples), in the indices of the domain @a margin voxels
+    // inside this one.
+    if (known) {
+        known->origin = openvdb::Coord(stride / 2 - margin);
+        known->stride = stride;
+        known->count = openvdb::Coord(lattice.count[0], lattice.count[1], lattice.count[2]);
+        known->values.assign(std::size_t(lattice.count[0]) * lattice.count[1] * lattice.count[2], 0.0f);
+        known->error = 0.0;
+    }
     std::vector<std::vector<CoarseCell>> blockCells(cells ? perBlock.size() : 0);
     sampleBlocks(g, lattice, [&](std::size_t b, const GridBatch& batch, auto index, std::span<const double> values) {
         // A plate's coarse pass takes seconds of strut sums: the cancel is checked per block.
@@ -129,6 +139,17 @@ std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int s
                         blockCells[b].push_back(
                             {float(std::min({c, dx, dy, dz})), float(std::max({c, dx, dy, dz})), float(step)});
                     }
+        }
+        if (known) {
+            std::size_t v = 0;
+            for (int i = 0; i < batch.nx; ++i)
+                for (int j = 0; j < batch.ny; ++j) {
+                    float* row = known->values.data() +
+                                 (std::size_t(index[0] + i) * lattice.count[1] + std::size_t(index[1] + j)) *
+                                     std::size_t(lattice.count[2]) +
+                                 std::size_t(index[2]);
+                    for (int k = 0; k < batch.nz; ++k, ++v) row[k] = float(values[v]);
+                }
         }
         // Drop samples past the domain (the last stride may overhang).
         auto& out = perBlock[b];
@@ -188,19 +209,6 @@ double countSlope(std::vector<float>& band, std::size_t m, std::size_t k, double
     if (hi > m) std::nth_element(band.begin() + m + 1, band.begin() + hi, band.end());
     const double width = double(band[hi]) - double(band[lo]);
     return width > 0.0 ? double(hi - lo) / total / width : 0.0;
-}
-
-/// The voxels covered at @a level, and d covered share / d level by coverage over
-/// [level - d, level + d], d a quarter of [a, b] (0 for an open bracket): one pass over the samples.
-std::pair<double, double> coveredAndSlope(const std::vector<CoverageSample>& samples, double level, double a, double b,
-                                          double total)
-{
-    const double d = 0.25 * (std::min(b, 1e30) - std::max(a, -1e30));
-    if (!(d > 0.0) || d > 1e29) return {coveredVoxels(samples, level), 0.0};
-    const std::array<double, 3> levels{level - d, level, level + d};
-    std::array<double, 3> covered{};
-    coveredVoxels(samples, levels, covered);
-    return {covered[1], (covered[2] - covered[0]) / (2.0 * d) / total};
 }
 
 /// splitByBand of the grid evaluateSparse(@a g, @a domain, @a options) would give, measured on
@@ -290,8 +298,14 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
     // blocks 64 samples tall: rows of 64 share a strut's row set-up that rows of 8 repeated eight
     // times (the coarse pass was a ninth of the 25 mm wireframe's run). Its samples move within
     // the rows' table bound; they only bracket the level and estimate the step near it.
-    std::vector<float> samples = coarseSamples(indicator, coarseDomain, stride, interrupt,
-                                               masked || subVoxel ? &coarseCells : nullptr, stackLeaves > 1 ? 64 : 8);
+    // The coarse samples, kept in place, also prove leaves straddling a band to the sparse passes
+    // below, which then skip their bounds (the same leaves: a wireframe's cull took an eighth of
+    // its solve in bounds for leaves nearly all of which the surface crosses).
+    KnownSamples known;
+    known.wholeBand = true;
+    std::vector<float> samples =
+        coarseSamples(indicator, coarseDomain, stride, interrupt, masked || subVoxel ? &coarseCells : nullptr,
+                      stackLeaves > 1 ? 64 : 8, &known, marginVoxels);
     // Share of the samples inside the mask: the quantiles of the target sit within that share.
     const double share =
         masked ? double(std::count_if(samples.begin(), samples.end(), [](float v) { return v < 1e30f; })) /
@@ -313,6 +327,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         options.outsideValue = std::numeric_limits<float>::max();
         options.stage = "solving density";
         options.stackLeaves = stackLeaves;
+        options.known = &known;
         // A coverage solve (masked or sub-voxel) measures in a band of the widest voxel step about the level
         // (below). Evaluating the bracket grown by an estimate of that step up front lets the
         // same grid serve both passes; splitting by the bracket ignores the extra values.
@@ -441,11 +456,12 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 if (options.band.lo <= -1e30) a = std::min(a == options.band.lo ? 1e300 : a, double(c.value) - c.step);
                 if (options.band.hi >= 1e30) b = std::max(b == 1e30 ? -1e300 : b, double(c.value) + c.step);
             }
-            sol.level = bisectCoverage(samples, double(fullyBelow), double(wanted), a, b, interrupt);
-            const auto [covered, slope] = coveredAndSlope(samples, sol.level, a, b, double(sol.domainVoxels));
-            sol.slope = slope;
+            const coverage::CoverageLevel found =
+                bisectCoverage(std::move(samples), double(fullyBelow), double(wanted), a, b, interrupt);
+            sol.level = found.level;
+            sol.slope = found.slope / double(sol.domainVoxels);
             sol.coverage = true;
-            sol.achieved = (double(fullyBelow) + covered) / double(sol.domainVoxels);
+            sol.achieved = found.covered / double(sol.domainVoxels);
         }
         return sol;
     }

@@ -110,6 +110,17 @@ public:
     /// A conservative bound of the value over @a box: every value inside lies in the interval.
     virtual Interval bound(const Box3& box) const = 0;
 
+    /// True only when values the node already holds prove that any bound over @a box meets
+    /// @a band: a point of the box valued at least band.lo and one valued at most band.hi (the
+    /// same or two). The sparse cull then takes the box as straddling without its bound. False:
+    /// nothing known (the default).
+    virtual bool meets(const Box3& box, const Interval& band) const
+    {
+        (void)box;
+        (void)band;
+        return false;
+    }
+
     /// A box outside which the field is positive (the solid lies inside it), or none when the
     /// solid is unbounded (a bare lattice). The engine uses it for the domain when none is given.
     virtual std::optional<Box3> support() const { return std::nullopt; }

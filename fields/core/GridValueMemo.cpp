@@ -46,6 +46,11 @@ Interval GridValueMemo::bound(const Box3& box) const
     return b;
 }
 
+bool GridValueMemo::meets(const Box3& box, const Interval& band) const
+{
+    return mLeaves && mLeaves->meets(box, band);
+}
+
 void GridValueMemo::keep(bool on, std::size_t maxBytes) const
 {
     mLeaves.reset();

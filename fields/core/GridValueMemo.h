@@ -37,6 +37,13 @@ public:
     /// Frees the leaves for which @a unread (the leaf's batch, its values) is true; @a unread is
     /// called from several threads.
     virtual void dropIf(const std::function<bool(const GridBatch&, const float*)>& unread) = 0;
+    /// FieldNode::meets() from the values held (none: false).
+    virtual bool meets(const Box3& box, const Interval& band) const
+    {
+        (void)box;
+        (void)band;
+        return false;
+    }
 };
 
 /// Passes everything to its operand, except that gridValues() gives the operand's grid values
@@ -77,6 +84,8 @@ public:
     /// cull of every evaluation of the grid at a moved level: the same leaf boxes, bit for bit)
     /// is answered from memory, the same interval.
     Interval bound(const Box3& box) const override;
+    /// From the leaves kept (keepLeaves()), when they hold values inside @a box that prove it.
+    bool meets(const Box3& box, const Interval& band) const override;
     /// The operand's planeValues (a slicer's planes are never kept); while keeping, gridValues
     /// with every tile 0.
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,

@@ -37,6 +37,7 @@ public:
         mChild->gridValuesShifted(batch, shift, plus, minus);
     }
     Interval bound(const Box3& box) const override { return mChild->bound(box); }
+    bool meets(const Box3& box, const Interval& band) const override { return mChild->meets(box, band); }
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
                      std::span<signed char> side, std::span<const TileNeed> need) const override
     {

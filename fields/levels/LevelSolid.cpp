@@ -148,6 +148,20 @@ Interval LevelSolid::bound(const Box3& box) const
     return r;
 }
 
+bool LevelSolid::meets(const Box3& box, const Interval& band) const
+{
+    requireSolved();
+    switch (mSide) {
+        case SolidSide::Below:  // raw - level in band: raw in band + level
+            return mRaw->meets(box, Interval(band.lo + mLevel, band.hi + mLevel));
+        case SolidSide::Above:  // level - raw in band: raw in level - band
+            return mRaw->meets(box, Interval(mLevel - band.hi, mLevel - band.lo));
+        case SolidSide::Band:
+            return false;
+    }
+    return false;
+}
+
 FieldPtr LevelSolid::indicator() const
 {
     switch (mSide) {

@@ -26,6 +26,8 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    /// The raw field's meets() over the band moved by the level (a sheet's |raw|: nothing known).
+    bool meets(const Box3& box, const Interval& band) const override;
     /// The raw field's planeValues with the band moved by the level (a network or a level above;
     /// a sheet and raw fields without them take gridValues, every tile 0).
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
