@@ -9,12 +9,36 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <memory>
 #include <random>
 #include <vector>
 
 namespace voxlat::test {
+
+/// @a f passed through, its gridValues() batches and bound() calls counted (meets() passed on).
+struct CountedField final : FieldNode {
+    FieldPtr f;
+    mutable std::atomic<int> batches{0}, bounds{0};
+    explicit CountedField(FieldPtr field) : f(std::move(field)) {}
+    void values(std::span<const Vec3d> p, std::span<double> out) const override { f->values(p, out); }
+    void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
+    {
+        f->gradients(p, out, g);
+    }
+    void gridValues(const GridBatch& batch, std::span<double> out) const override
+    {
+        ++batches;
+        f->gridValues(batch, out);
+    }
+    Interval bound(const Box3& box) const override
+    {
+        ++bounds;
+        return f->bound(box);
+    }
+    bool meets(const Box3& box, const Interval& band) const override { return f->meets(box, band); }
+};
 
 /// Exact signed distance to an axis-aligned box (the test's own).
 inline double boxDistance(const Vec3d& p, const Box3& b)

@@ -1,5 +1,6 @@
 // The density solve's coverage samples: what solveDensity's coverage pass relies on when it walks
 // the grid once per band instead of picking the bands' samples from the evaluated band's.
+#include "FieldChecks.h"
 #include "engine/core/GridMeasure.h"
 #include "engine/core/KeptGridLeaves.h"
 #include "engine/core/SparseEvaluator.h"
@@ -25,6 +26,7 @@
 #include <string>
 
 using namespace voxlat;
+using namespace voxlat::test;
 using namespace voxlat::coverage;
 
 TEST(Coverage, ANarrowerBandsSamplesAreTheWiderBandsPickedInOrder)
@@ -120,24 +122,6 @@ TEST(Coverage, SamplesAreEachBandVoxelsCentralDifferencesReadVoxelByVoxel)
 }
 
 namespace {
-/// A field passed through, its bound() calls counted (meets() passed on).
-struct CountedBounds final : FieldNode {
-    FieldPtr f;
-    mutable std::atomic<int> bounds{0};
-    explicit CountedBounds(FieldPtr field) : f(std::move(field)) {}
-    void values(std::span<const Vec3d> p, std::span<double> out) const override { f->values(p, out); }
-    void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
-    {
-        f->gradients(p, out, g);
-    }
-    void gridValues(const GridBatch& batch, std::span<double> out) const override { f->gridValues(batch, out); }
-    Interval bound(const Box3& box) const override
-    {
-        ++bounds;
-        return f->bound(box);
-    }
-    bool meets(const Box3& box, const Interval& band) const override { return f->meets(box, band); }
-};
 
 /// Same leaves (topology) and the same bits in every one.
 void expectSameGrid(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b, const std::string& what)
@@ -192,7 +176,7 @@ TEST(Coverage, KnownValuesProveLeavesStraddlingWithoutTheirBoundsAndFindTheSameG
     iso->values(points, v);
     known.values.assign(v.begin(), v.end());
 
-    const auto counted = std::make_shared<CountedBounds>(iso);
+    const auto counted = std::make_shared<CountedField>(iso);
     const auto plain = evaluateSparse(*counted, d, options);
     const int allBounds = counted->bounds.exchange(0);
     ASSERT_GT(plain->tree().leafCount(), 500u);
@@ -235,14 +219,14 @@ TEST(Coverage, KnownValuesProveLeavesStraddlingWithoutTheirBoundsAndFindTheSameG
     SparseOptions region = options;
     region.band = Interval(0.4, 0.7);
     auto grid = evaluateSparse(*std::make_shared<GridValueMemo>(iso), d, region);
-    const auto counter = std::make_shared<CountedBounds>(iso);
+    const auto counter = std::make_shared<CountedField>(iso);
     const auto memo = std::make_shared<GridValueMemo>(counter);
     memo->keep(true, 0);
     memo->keepLeaves(std::make_unique<KeptGridLeaves>(std::move(grid), d), std::size_t(1) << 30);
     SparseOptions clipped;
     clipped.clipToDomain = true;
     for (const double level : {0.45, 0.55, 0.65}) {
-        const auto fresh = std::make_shared<CountedBounds>(iso);
+        const auto fresh = std::make_shared<CountedField>(iso);
         const auto expected =
             evaluateSparse(LevelSolid(std::make_shared<GridValueMemo>(fresh), SolidSide::Below, level), d, clipped);
         counter->bounds = 0;

@@ -1,5 +1,6 @@
 // Strut lattices: the closed-form segment integral against quadrature, its cut-off bound, the
 // convolution and capsule nodes (gradients, bounds, fast path), unit cells, frames, recipes.
+#include "FieldChecks.h"
 #include "TestUtil.h"
 #include "engine/core/GridLeavesReused.h"
 #include "engine/core/KeptGridLeaves.h"
@@ -98,24 +99,6 @@ std::string runRecipe(const TempDir& dir, const std::string& text, int* status, 
         voxlatBinary() + " -q run " + recipe.string() + " --out " + (dir.path / "out").string() + extra, &out);
     return out;
 }
-
-/// A field that counts the grid batches asked of it (which leaves a pass evaluated again).
-struct CountedBatches final : FieldNode {
-    FieldPtr f;
-    mutable std::atomic<int> batches{0};
-    explicit CountedBatches(FieldPtr field) : f(std::move(field)) {}
-    void values(std::span<const Vec3d> p, std::span<double> out) const override { f->values(p, out); }
-    void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
-    {
-        f->gradients(p, out, g);
-    }
-    void gridValues(const GridBatch& batch, std::span<double> out) const override
-    {
-        ++batches;
-        f->gridValues(batch, out);
-    }
-    Interval bound(const Box3& box) const override { return f->bound(box); }
-};
 
 }  // namespace
 
@@ -1834,7 +1817,7 @@ void expectDropKeepsWhatAGridInTheBandReads(int stack)
 {
     const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
     const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
-    const auto counted = std::make_shared<CountedBatches>(iso);
+    const auto counted = std::make_shared<CountedField>(iso);
     // A corner off the voxel lattice's multiples, so that origins are not round numbers.
     const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
     const Interval band(0.58, 0.64);
@@ -1936,7 +1919,7 @@ void expectTheHandedGridServesTheGridAtTheLevel(const FieldNode* mask)
 {
     const auto raw = std::make_shared<StrutConvolution>(bccStruts(0.5, 2));
     const auto iso = std::make_shared<IsoRadius>(raw, raw->peak(0), 0.5, 2.0 * raw->cutoffRadius(0));
-    const auto counted = std::make_shared<CountedBatches>(iso);
+    const auto counted = std::make_shared<CountedField>(iso);
     const Domain d = Domain::fromBox(Box3{Vec3d(-0.37, 0.11, 0.05), Vec3d(9.63, 10.11, 8.05)}, 0.13);
     SparseOptions stacked;
     stacked.stackLeaves = 8;
@@ -2256,7 +2239,7 @@ TEST(GridLeavesReused, AWiderBandGivesTheGridOfAFreshEvaluation)
     wide.band = Interval(0.45, 0.80);
     const auto first = evaluateSparse(*iso, d, narrow);
     const auto fresh = evaluateSparse(*iso, d, wide);
-    const CountedBatches counted(iso);
+    const CountedField counted(iso);
     const auto reused = evaluateSparse(GridLeavesReused(counted, *first, d), d, wide);
     ASSERT_EQ(reused->tree().leafCount(), fresh->tree().leafCount());
     std::uint64_t inBoth = 0;
@@ -2364,7 +2347,7 @@ TEST(GridLeavesReused, AWiderBandInStacksGivesTheGridOfAFreshEvaluation)
     SparseStats firstStats, freshStats;
     const auto first = evaluateSparse(*iso, d, narrow, &firstStats);
     const auto fresh = evaluateSparse(*iso, d, wide, &freshStats);
-    const CountedBatches counted(iso);
+    const CountedField counted(iso);
     const auto reused = evaluateSparse(GridLeavesReused(counted, *first, d), d, wide);
     ASSERT_EQ(reused->tree().leafCount(), fresh->tree().leafCount());
     EXPECT_EQ(mismatchedVoxels(*fresh, *reused), 0u);
