@@ -1,6 +1,7 @@
 // The density solve's coverage samples: what solveDensity's coverage pass relies on when it walks
 // the grid once per band instead of picking the bands' samples from the evaluated band's.
 #include "FieldChecks.h"
+#include "GridChecks.h"
 #include "engine/core/GridMeasure.h"
 #include "engine/core/KeptGridLeaves.h"
 #include "engine/core/SparseEvaluator.h"
@@ -128,14 +129,7 @@ void expectSameGrid(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b, co
 {
     EXPECT_TRUE(a.tree().hasSameTopology(b.tree())) << what;
     ASSERT_EQ(a.tree().leafCount(), b.tree().leafCount()) << what;
-    auto acc = b.getConstAccessor();
-    std::uint64_t mismatched = 0;
-    for (auto leaf = a.tree().cbeginLeaf(); leaf; ++leaf)
-        for (int i = 0; i < 512; ++i) {
-            const float x = leaf->getValue(i), y = acc.getValue(leaf->offsetToGlobalCoord(i));
-            mismatched += std::memcmp(&x, &y, sizeof x) != 0;
-        }
-    EXPECT_EQ(mismatched, 0u) << what;
+    EXPECT_EQ(mismatchedVoxels(a, b), 0u) << what;
     // Tiles: the same sign everywhere the domain's index box reaches.
     const openvdb::CoordBBox box = a.evalActiveVoxelBoundingBox();
     EXPECT_EQ(countBelow(a, box, 0.6f), countBelow(b, box, 0.6f)) << what;

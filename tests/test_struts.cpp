@@ -1,6 +1,7 @@
 // Strut lattices: the closed-form segment integral against quadrature, its cut-off bound, the
 // convolution and capsule nodes (gradients, bounds, fast path), unit cells, frames, recipes.
 #include "FieldChecks.h"
+#include "GridChecks.h"
 #include "TestUtil.h"
 #include "engine/core/GridLeavesReused.h"
 #include "engine/core/KeptGridLeaves.h"
@@ -76,19 +77,6 @@ std::vector<ConvolutionStrut> bccStruts(double sigma, int cells = 2)
     std::vector<ConvolutionStrut> s;
     for (const auto& e : f.struts) s.push_back({f.nodes[e[0]], f.nodes[e[1]], sigma, 1.0, 1.0});
     return s;
-}
-
-/// Voxels of @a a's leaves whose float differs, bit for bit, from @a b's value there.
-std::uint64_t mismatchedVoxels(const openvdb::FloatGrid& a, const openvdb::FloatGrid& b)
-{
-    auto acc = b.getConstAccessor();
-    std::uint64_t mismatched = 0;
-    for (auto leaf = a.tree().cbeginLeaf(); leaf; ++leaf)
-        for (int i = 0; i < 512; ++i) {
-            const float x = leaf->getValue(i), y = acc.getValue(leaf->offsetToGlobalCoord(i));
-            mismatched += std::memcmp(&x, &y, sizeof x) != 0;
-        }
-    return mismatched;
 }
 
 std::string runRecipe(const TempDir& dir, const std::string& text, int* status, const std::string& extra = "")
