@@ -15,6 +15,7 @@
 #include <cstring>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <vector>
@@ -73,13 +74,12 @@ Side classify(const FieldNode& f, const BoxField* clip, const Domain& d, const C
     // voxel centres half a voxel within the grown box the bound is taken over). With the clip,
     // max(field, clip): a value at least band.lo stays so, and one at most band.hi stays so
     // where the clip's bound is at most band.hi.
-    if ((!clip || clip->bound(box).hi <= band.hi) &&
-        ((known &&
-          known->meets(CoordBBox(lo, lo + Coord(size - 1)), known->wholeBand ? Interval(band.hi, band.lo) : band)) ||
-         f.meets(box, band)))
+    const std::optional<Interval> clipBound = clip ? std::optional(clip->bound(box)) : std::nullopt;
+    if ((!clipBound || clipBound->hi <= band.hi) &&
+        ((known && known->meets(CoordBBox(lo, lo + Coord(size - 1)), band)) || f.meets(box, band)))
         return Side::Straddle;
     Interval b = f.bound(box);
-    if (clip) b = max(b, clip->bound(box));
+    if (clipBound) b = max(b, *clipBound);
     if (b.hi < band.lo) return Side::Inside;
     if (b.lo > band.hi) return Side::Outside;
     return Side::Straddle;
@@ -133,7 +133,7 @@ bool KnownSamples::meets(const CoordBBox& voxels, const Interval& band) const
         last[a] = std::min(count[a] - 1, hi >= 0 ? hi / stride : -((-hi + stride - 1) / stride));
         if (first[a] > last[a]) return false;
     }
-    BandMet met(band, error);
+    BandMet met(wholeBand ? Interval(band.hi, band.lo) : band, error);
     for (int i = first[0]; i <= last[0]; ++i)
         for (int j = first[1]; j <= last[1]; ++j) {
             const float* row = values.data() + (std::size_t(i) * count[1] + j) * std::size_t(count[2]);

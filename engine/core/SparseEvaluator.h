@@ -61,7 +61,7 @@ struct KnownSamples {
     bool wholeBand = false;
 
     /// Whether the samples at voxel indices within @a voxels prove that any enclosure of the
-    /// field over those voxels' centres meets @a band. Samples of +-1e30 and beyond (masks'
+    /// field over those voxels' centres meets @a band (spans it, with wholeBand). Samples of +-1e30 and beyond (masks'
     /// outside values) prove nothing.
     bool meets(const openvdb::CoordBBox& voxels, const Interval& band) const;
 };
