@@ -1,5 +1,7 @@
 #include "mesher/writers/AtomicFile.h"
 
+#include "mesher/writers/DirectWrites.h"
+
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/stat.h>
@@ -84,10 +86,16 @@ int writeDelayMs()
     return delay;
 }
 
+/// Bytes of a file written through the page cache before the rest goes direct (DirectWrites): a
+/// small file (a report, a recipe, a preview) never starts a thread.
+constexpr off_t kDirectFrom = off_t(8) << 20;
+
 /// The temporary's stream buffer: kWriteChunkBytes of buffer, written with write(2), the
 /// interrupter called before each chunk. A failed write (disk full) is kept (its errno) and the
 /// bytes after it dropped, so the stream goes bad only by an exception (the interrupter's), which
-/// the stream passes on; the failure is found by close().
+/// the stream passes on; the failure is found by close(). Past kDirectFrom bytes written in order
+/// from the start (no seek yet), the rest goes past the page cache (DirectWrites); a seek or
+/// close() first waits for those writes.
 class ChunkedFileBuffer : public std::streambuf {
 public:
     ChunkedFileBuffer(int fd, WriteInterrupter interrupter)
@@ -104,6 +112,7 @@ public:
         if (mFd < 0) return mError == 0;
         put(pbase(), std::size_t(pptr() - pbase()));
         setp(mBytes.data(), mBytes.data() + mBytes.size());
+        endDirect();
         if (::close(mFd) != 0 && mError == 0) mError = errno;
         mFd = -1;
         errno = mError;
@@ -161,6 +170,8 @@ protected:
     {
         put(pbase(), std::size_t(pptr() - pbase()));
         setp(mBytes.data(), mBytes.data() + mBytes.size());
+        endDirect();
+        mSeeked = true;
         if (mError != 0 || mFd < 0) return pos_type(off_type(-1));
         const int whence = dir == std::ios_base::beg ? SEEK_SET : dir == std::ios_base::cur ? SEEK_CUR : SEEK_END;
         const off_t at = ::lseek(mFd, off_t(offset), whence);
@@ -185,6 +196,29 @@ private:
     {
         if (const int delay = writeDelayMs(); delay > 0 && n > 0)
             std::this_thread::sleep_for(std::chrono::milliseconds(delay));
+        if (!mDirect && !mSeeked && mWritten >= kDirectFrom && mError == 0 && mFd >= 0) {
+            // Up to a block boundary through the page cache, the rest direct.
+            const auto pad = std::size_t((off_t(DirectWrites::kAlign) - mWritten % off_t(DirectWrites::kAlign)) %
+                                         off_t(DirectWrites::kAlign));
+            const std::size_t head = std::min(pad, n);
+            writeBuffered(p, head);
+            p += head;
+            n -= head;
+            if (mWritten % off_t(DirectWrites::kAlign) == 0) {
+                mDirect = DirectWrites::open(mFd, mWritten);
+                if (!mDirect) mSeeked = true;  // not again
+            }
+        }
+        if (mDirect) {
+            if (mError == 0) mDirect->append(p, n);
+            mWritten += off_t(n);
+            return;
+        }
+        writeBuffered(p, n);
+    }
+
+    void writeBuffered(const char* p, std::size_t n) noexcept
+    {
         while (n > 0 && mError == 0 && mFd >= 0) {
             const ssize_t written = ::write(mFd, p, n);
             if (written < 0) {
@@ -193,13 +227,27 @@ private:
             }
             p += written;
             n -= std::size_t(written);
+            mWritten += off_t(written);
         }
+    }
+
+    /// Waits for the direct writes and puts the descriptor's offset at the end of what was written.
+    void endDirect() noexcept
+    {
+        if (!mDirect) return;
+        const int error = mDirect->finish();
+        mDirect.reset();
+        if (error != 0 && mError == 0) mError = error;
+        if (mFd >= 0 && ::lseek(mFd, mWritten, SEEK_SET) < 0 && mError == 0) mError = errno;
     }
 
     int mFd;
     WriteInterrupter mInterrupter;
     std::vector<char> mBytes;
     int mError = 0;
+    off_t mWritten = 0;    ///< bytes written in order from the start (until a seek)
+    bool mSeeked = false;  ///< seeked once: no direct writes from then on
+    std::unique_ptr<DirectWrites> mDirect;
 };
 
 }  // namespace
