@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <functional>
 #include <memory>
 #include <random>
 #include <vector>
@@ -21,6 +22,8 @@ namespace voxlat::test {
 struct CountedField final : FieldNode {
     FieldPtr f;
     mutable std::atomic<int> batches{0}, bounds{0};
+    /// Called with each batch (from the evaluating threads) when set.
+    std::function<void(const GridBatch&)> seen;
     explicit CountedField(FieldPtr field) : f(std::move(field)) {}
     void values(std::span<const Vec3d> p, std::span<double> out) const override { f->values(p, out); }
     void gradients(std::span<const Vec3d> p, std::span<double> out, std::span<Vec3d> g) const override
@@ -30,6 +33,7 @@ struct CountedField final : FieldNode {
     void gridValues(const GridBatch& batch, std::span<double> out) const override
     {
         ++batches;
+        if (seen) seen(batch);
         f->gridValues(batch, out);
     }
     Interval bound(const Box3& box) const override

@@ -1898,7 +1898,7 @@ namespace {
 /// solveDensity's keepGrid: a coverage solve (in stacks, as the job's; with @a mask or without)
 /// hands over the grid of the memo's values it measured, once; the memo keeps it
 /// (KeptGridLeaves) and nothing of its own. A grid of the solve's region at the solved level
-/// then evaluates again only the stacks of leaves the mask cut (none without one), and with the
+/// then evaluates again only stacks of leaves wholly outside the mask (none without one), and with the
 /// mesher's margin (leaves past the region, evaluated) is a fresh evaluation's (a memo not
 /// keeping: the same rounding) bit for bit; after the drop to the band the level lies in, a
 /// grid at a level outside that band evaluates again, still the fresh grid. The level is the
@@ -1937,15 +1937,37 @@ void expectTheHandedGridServesTheGridAtTheLevel(const FieldNode* mask)
     const auto solid = LevelSolid::unsolved(memo, SolidSide::Below);
     solid->solve(s.level);
     counted->batches = 0;
+    // A stack evaluated again must read a leaf the solve never evaluated: one wholly outside
+    // the mask (no voxel centre inside). The leaves it cuts are handed over with the memo's values.
+    std::atomic<int> needless{0};
+    counted->seen = [&](const GridBatch& batch) {
+        bool outside = false;
+        for (int m = 0; m < batch.nz / 8 && !outside; ++m) {
+            if (batch.unread >> m & 1u) continue;
+            std::vector<Vec3d> points;
+            for (int i = 0; i < 8; ++i)
+                for (int j = 0; j < 8; ++j)
+                    for (int k = 0; k < 8; ++k) points.push_back(batch.point(i, j, 8 * m + k));
+            std::vector<double> v(points.size(), -1.0);
+            if (mask) mask->values(points, v);
+            outside = std::none_of(v.begin(), v.end(), [](double x) { return float(x) < 0.0f; });
+        }
+        if (!outside) ++needless;
+    };
     const auto inRegion = evaluateSparse(*solid, d, region);
-    // Each leaf not wholly inside the mask costs at most one stack's evaluation.
-    int cut = 0, inside = 0;
+    // Only a leaf wholly outside the mask (never evaluated by the solve) costs an evaluation, at
+    // most one stack's: the leaves the mask cuts are handed over with the memo's values too.
+    int cut = 0, inside = 0, outside = 0;
     for (auto leaf = inRegion->tree().cbeginLeaf(); leaf; ++leaf) {
         const Box3 box{d.worldOf(leaf->origin()), d.worldOf(leaf->origin() + openvdb::Coord(7))};
-        (!mask || float(mask->bound(box).hi) < 0.0f ? inside : cut) += 1;
+        const Interval m = mask ? mask->bound(box) : Interval(-1.0);
+        (float(m.hi) < 0.0f ? inside : float(m.lo) < 0.0f ? cut : outside) += 1;
     }
     EXPECT_GT(inside, 100);
-    EXPECT_LE(counted->batches.load(), cut);
+    EXPECT_GT(cut, mask ? 100 : -1);
+    EXPECT_LE(counted->batches.load(), outside);
+    counted->seen = nullptr;
+    EXPECT_EQ(needless.load(), 0);
     const auto atLevel = evaluateSparse(*solid, d, stacked);
     const auto expected = fresh(s.level);
     ASSERT_EQ(atLevel->tree().leafCount(), expected->tree().leafCount());
@@ -1977,8 +1999,8 @@ TEST(GridValueMemo, AnUnmaskedSolveHandsItsGridOverAndTheGridAtTheLevelReadsIt)
 
 TEST(GridValueMemo, AMaskedSolveHandsOverTheLeavesWhollyInsideItsMask)
 {
-    // The leaves with a voxel outside the mask hold the mask's value, not the memo's: they are
-    // left out of the grid handed over, and evaluated again.
+    // The leaves with a voxel outside the mask hold the mask's value in the solve's grid; the
+    // memo's values the solve made for them are put back before the grid is handed over.
     const Sphere mask(Vec3d(4.8, 5.0, 4.0), 3.7);
     expectTheHandedGridServesTheGridAtTheLevel(&mask);
 }

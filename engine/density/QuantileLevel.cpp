@@ -16,8 +16,11 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <deque>
 #include <functional>
 #include <limits>
+#include <optional>
+#include <unordered_map>
 #include <vector>
 
 // The quantile solve over a domain: a count of voxel centres, with sub-voxel coverage when value
@@ -29,11 +32,46 @@ using namespace coverage;
 
 namespace {
 
+/// A leaf's values of g (as floats: a GridValueMemo's) where the mask cut it.
+struct CutLeaf {
+    openvdb::Coord origin;
+    std::array<float, 512> values;
+};
+
 /// g where mask < 0, kOutsideMask elsewhere: a level below kOutsideMask then selects only voxels
 /// inside the mask, so the unmasked quantile machinery measures density relative to the mask.
 class MaskedIndicator final : public FieldNode {
 public:
     MaskedIndicator(const FieldNode& g, const FieldNode& mask) : mG(g), mMask(mask) {}
+
+    /// From now on, keeps g's values of each leaf of @a domain's grid that a batch evaluates and
+    /// the mask cuts (some voxels inside, some not; a leaf the caller does not read, never), so
+    /// that restoreCutLeaves() can put them back in place of the mask's.
+    void keepCutLeaves(const Domain& domain) { mCutDomain = domain; }
+
+    /// Puts g's values back into each leaf of @a grid holding kOutsideMask whose values were kept
+    /// (keepCutLeaves()); returns how many. The kept values are then freed.
+    std::size_t restoreCutLeaves(openvdb::FloatGrid& grid)
+    {
+        std::unordered_map<openvdb::Coord, const CutLeaf*, CoordHash> kept;
+        for (const std::deque<CutLeaf>& leaves : mCut)
+            for (const CutLeaf& leaf : leaves) kept.emplace(leaf.origin, &leaf);
+        std::vector<openvdb::FloatGrid::TreeType::LeafNodeType*> leaves;
+        grid.tree().getNodes(leaves);
+        std::atomic<std::size_t> restored{0};
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+            for (std::size_t n = range.begin(); n != range.end(); ++n) {
+                float* data = leaves[n]->buffer().data();
+                if (!data || std::none_of(data, data + 512, [](float v) { return v == float(kOutsideMask); })) continue;
+                const auto found = kept.find(leaves[n]->origin());
+                if (found == kept.end()) continue;
+                std::copy(found->second->values.begin(), found->second->values.end(), data);
+                ++restored;
+            }
+        });
+        mCut.clear();
+        return restored.load();
+    }
 
     void values(std::span<const Vec3d> points, std::span<double> out) const override
     {
@@ -67,6 +105,7 @@ public:
             return;
         }
         mG.gridValues(batch, out);
+        if (mCutDomain) keepCut(batch, out, m);
         for (std::size_t i = 0; i < batch.size(); ++i) out[i] = apply(out[i], m[i]);
     }
     Interval bound(const Box3& box) const override
@@ -78,11 +117,40 @@ public:
     }
 
 private:
+    struct CoordHash {
+        std::size_t operator()(const openvdb::Coord& c) const
+        {
+            return std::size_t(c.x()) * 73856093u ^ std::size_t(c.y()) * 19349663u ^ std::size_t(c.z()) * 83492791u;
+        }
+    };
+
     // The test is made in float, as the grid that counts the mask's voxels stores it.
     static double apply(double g, double mask) { return float(mask) < 0.0f ? g : kOutsideMask; }
 
+    /// keepCutLeaves()'s work for one batch: g's values @a g, the mask's @a m.
+    void keepCut(const GridBatch& batch, std::span<const double> g, std::span<const double> m) const
+    {
+        openvdb::Coord first;
+        if (!gridLeafOrigin(*mCutDomain, batch, first)) return;
+        const auto nz = std::size_t(batch.nz);
+        for (int leaf = 0; leaf < batch.nz / 8; ++leaf) {
+            if (batch.unread >> leaf & 1u) continue;
+            const auto k0 = std::size_t(8 * leaf);
+            int inside = 0;
+            for (std::size_t ij = 0; ij < 64; ++ij)
+                for (std::size_t k = 0; k < 8; ++k) inside += float(m[ij * nz + k0 + k]) < 0.0f;
+            if (inside == 0 || inside == 512) continue;
+            CutLeaf& kept = mCut.local().emplace_back();
+            kept.origin = first + openvdb::Coord(0, 0, int(k0));
+            for (std::size_t ij = 0; ij < 64; ++ij)
+                for (std::size_t k = 0; k < 8; ++k) kept.values[ij * 8 + k] = float(g[ij * nz + k0 + k]);
+        }
+    }
+
     const FieldNode& mG;
     const FieldNode& mMask;
+    std::optional<Domain> mCutDomain;
+    mutable tbb::enumerable_thread_specific<std::deque<CutLeaf>> mCut;
 };
 
 /// A cell of the coarse lattice (a sample and its three forward neighbours): the range of its
@@ -267,6 +335,8 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
     std::unique_ptr<MaskedIndicator> masked;
     if (mask) {
         masked = std::make_unique<MaskedIndicator>(rawIndicator, *mask);
+        // The grid handed over (keepGrid) then holds g's values where the mask cut its leaves too.
+        if (keepGrid) masked->keepCutLeaves(domain);
         SparseOptions options;
         options.context = context;
         options.margin = marginVoxels;
@@ -439,13 +509,16 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             // there, the freed grid's 0.4 GB resident beside it).
             if (keepGrid) {
                 // Handed over: no heap trim, which would split the huge pages of its leaves
-                // (each 4 KB page then faults again on its next first read). Masked, only the
-                // leaves wholly inside the mask hold the indicator's own values.
-                if (masked)
+                // (each 4 KB page then faults again on its next first read). Masked, the leaves
+                // the mask cut get back the values it hid (kept as they were evaluated); any
+                // other leaf holding its value is left out.
+                if (masked) {
+                    masked->restoreCutLeaves(*grid);
                     tileLeavesWhere(*grid, [](const auto& leaf) {
                         const float* data = leaf.buffer().data();
                         return std::any_of(data, data + 512, [](float v) { return v == float(kOutsideMask); });
                     });
+                }
                 keepGrid(std::move(grid));
             } else {
                 grid.reset();
