@@ -42,6 +42,7 @@
 #include <limits>
 #include <numbers>
 #include <random>
+#include <set>
 #include <sstream>
 
 using namespace voxlat;
@@ -1917,12 +1918,14 @@ void expectTheHandedGridServesTheGridAtTheLevel(const FieldNode* mask)
     memo->keep(true, 0);
     int handed = 0;
     std::size_t heldLeaves = 0;
+    openvdb::FloatGrid::Ptr held;  // the grid handed over, as the memo holds it
     Interval told;
     const DensitySolution s = solveDensity(
         *memo, d, 0.2, mask, true, nullptr, 0, [&](Interval levels) { told = levels; }, 8,
         [&](openvdb::FloatGrid::Ptr grid) {
             ++handed;
             heldLeaves = grid->tree().leafCount();
+            held = grid;
             memo->keepLeaves(std::make_unique<KeptGridLeaves>(std::move(grid), d), std::size_t(1) << 30);
         });
     const DensitySolution plain =
@@ -1988,6 +1991,26 @@ void expectTheHandedGridServesTheGridAtTheLevel(const FieldNode* mask)
         ASSERT_EQ(grid->tree().leafCount(), want->tree().leafCount()) << level;
         EXPECT_EQ(mismatchedVoxels(*want, *grid), 0u) << level;
     }
+    // The last evaluation (consumeLeaves) frees the held leaves of every stack it asks for as
+    // it takes them: the same grid, and none of its leaves still held after it. Evaluated once
+    // more, the memo gives the same grid from its store and its operand.
+    const auto allocated = [&] {
+        std::set<std::array<int, 3>> out;
+        for (auto leaf = held->tree().cbeginLeaf(); leaf; ++leaf)
+            if (!leaf->buffer().empty()) out.insert({leaf->origin().x(), leaf->origin().y(), leaf->origin().z()});
+        return out;
+    };
+    const std::size_t before = allocated().size();
+    memo->consumeLeaves();
+    const auto last = evaluateSparse(*solid, d, stacked);
+    ASSERT_EQ(last->tree().leafCount(), expected->tree().leafCount());
+    EXPECT_EQ(mismatchedVoxels(*expected, *last), 0u);
+    const std::set<std::array<int, 3>> after = allocated();
+    EXPECT_GT(before - after.size(), 100u);
+    for (auto leaf = last->tree().cbeginLeaf(); leaf; ++leaf)
+        EXPECT_FALSE(after.contains({leaf->origin().x(), leaf->origin().y(), leaf->origin().z()})) << leaf->origin();
+    const auto again = evaluateSparse(*solid, d, stacked);
+    EXPECT_EQ(mismatchedVoxels(*expected, *again), 0u);
     memo->keep(false);
 }
 }  // namespace

@@ -32,16 +32,31 @@ public:
         if (!gridLeafOrigin(mDomain, batch, first)) return;
         for (std::size_t m = 0; m < values.size(); ++m)
             if (const LeafT* leaf =
-                    mGrid->tree().probeConstLeaf(first + openvdb::Coord(0, 0, int(LeafT::DIM) * int(m))))
+                    mGrid->tree().probeConstLeaf(first + openvdb::Coord(0, 0, int(LeafT::DIM) * int(m)));
+                leaf && !leaf->buffer().empty())
                 values[m] = leaf->buffer().data();
+    }
+
+    void release(const GridBatch& batch, std::uint32_t leaves) override
+    {
+        openvdb::Coord first;
+        if (!gridLeafOrigin(mDomain, batch, first)) return;
+        // The tree's nodes stay as they are (other threads walk them): the buffer alone is
+        // swapped for an unallocated one, and freed with it.
+        for (int m = 0; m < 32; ++m)
+            if (leaves >> m & 1u)
+                if (LeafT* leaf = mGrid->tree().probeLeaf(first + openvdb::Coord(0, 0, int(LeafT::DIM) * m))) {
+                    typename LeafT::Buffer none(openvdb::PartialCreate(), 0.0f);
+                    leaf->buffer().swap(none);
+                }
     }
 
     void dropIf(const std::function<bool(const GridBatch&, const float*)>& unread) override
     {
         // A leaf-sized tile in place of each dropped leaf: not a leaf, so never served.
         tileLeavesWhere(*mGrid, [&](const LeafT& leaf) {
+            if (leaf.buffer().empty()) return false;
             const float* data = leaf.buffer().data();
-            if (!data) return false;
             GridBatch batch;
             batch.origin = mDomain.worldOf(leaf.origin());
             batch.spacing = Vec3d(mDomain.voxel);

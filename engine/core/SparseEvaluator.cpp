@@ -110,7 +110,7 @@ bool heldValuesMeet(const openvdb::FloatGrid& grid, const CoordBBox& voxels, con
         for (int y = first.y(); y <= voxels.max().y(); y += 8)
             for (int z = first.z(); z <= voxels.max().z(); z += 8) {
                 const LeafT* leaf = tree.probeConstLeaf(Coord(x, y, z));
-                if (!leaf || !leaf->buffer().data()) continue;
+                if (!leaf || leaf->buffer().empty()) continue;
                 const CoordBBox part(Coord::maxComponent(voxels.min(), Coord(x, y, z)),
                                      Coord::minComponent(voxels.max(), Coord(x + 7, y + 7, z + 7)));
                 const float* data = leaf->buffer().data();

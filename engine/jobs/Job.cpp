@@ -786,6 +786,9 @@ openvdb::FloatGrid::Ptr Job::evaluateResult(SparseStats& stats,
         options.context = mContext;
         options.leafVisitor = std::move(leafVisitor);
         options.stackLeaves = mStackLeaves;
+        // The last evaluation to read them: each leaf the solve handed over is freed as it is
+        // served, and the grid's new leaves take its memory (not pages fresh to the process).
+        for (const GridValueMemo* memo : mSolvedValues) memo->consumeLeaves();
         openvdb::FloatGrid::Ptr grid = evaluateSparse(*mResult, mDomain, options, &stats);
         releaseSolvedValues();  // the grid they were kept for is made
         return grid;

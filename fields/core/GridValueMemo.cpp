@@ -54,6 +54,7 @@ bool GridValueMemo::meets(const Box3& box, const Interval& band) const
 void GridValueMemo::keep(bool on, std::size_t maxBytes) const
 {
     mLeaves.reset();
+    mConsume = false;
     mShards.reset();
     mBytes = 0;
     mMaxBytes = maxBytes;
@@ -64,6 +65,7 @@ void GridValueMemo::keepLeaves(std::unique_ptr<KeptLeaves> leaves, std::size_t m
 {
     if (!mShards) throw std::logic_error("GridValueMemo::keepLeaves: the memo is not keeping");
     mLeaves = std::move(leaves);
+    mConsume = false;
     mMaxBytes = maxBytes;
 }
 
@@ -73,12 +75,19 @@ bool GridValueMemo::fromLeaves(const GridBatch& batch, std::span<double> out) co
     const int count = batch.nz / 8;
     std::array<const float*, 32> leaves{};
     mLeaves->leaves(batch, std::span<const float*>(leaves.data(), std::size_t(count)));
+    // The last evaluation to read them frees every leaf of the batch held, read or not, once its
+    // values are taken (or not taken: the batch is then served otherwise): none is read again.
+    std::uint32_t held = 0;
     for (int m = 0; m < count; ++m)
-        if (!(batch.unread >> m & 1u) && !leaves[std::size_t(m)]) return false;
-    for (int m = 0; m < count; ++m)
-        if (!(batch.unread >> m & 1u))
-            putLeaf(out, batch.nz, m, [data = leaves[std::size_t(m)]](std::size_t ij) { return data + 8 * ij; });
-    return true;
+        if (leaves[std::size_t(m)]) held |= std::uint32_t(1) << m;
+    const std::uint32_t read = (count == 32 ? ~std::uint32_t(0) : (std::uint32_t(1) << count) - 1u) & ~batch.unread;
+    const bool served = (read & ~held) == 0;
+    if (served)
+        for (int m = 0; m < count; ++m)
+            if (read >> m & 1u)
+                putLeaf(out, batch.nz, m, [data = leaves[std::size_t(m)]](std::size_t ij) { return data + 8 * ij; });
+    if (mConsume && held) mLeaves->release(batch, held);
+    return served;
 }
 
 std::size_t GridValueMemo::keptBytes() const

@@ -37,6 +37,10 @@ public:
     /// Frees the leaves for which @a unread (the leaf's batch, its values) is true; @a unread is
     /// called from several threads.
     virtual void dropIf(const std::function<bool(const GridBatch&, const float*)>& unread) = 0;
+    /// Frees the leaves m of @a batch with bit m of @a leaves set (each served by leaves() just
+    /// before, by the thread that calls this): leaves() then gives null for them. Each batch's
+    /// leaves are freed by one caller, while other threads read other batches' leaves.
+    virtual void release(const GridBatch& batch, std::uint32_t leaves) = 0;
     /// FieldNode::meets() from the values held (none: false).
     virtual bool meets(const Box3& box, const Interval& band) const
     {
@@ -113,6 +117,12 @@ public:
     /// 0.55 GB), so that the same values are not held twice while the solve measures them.
     /// Called between evaluations, never during one.
     void keepLeaves(std::unique_ptr<KeptLeaves> leaves, std::size_t maxBytes) const;
+    /// The next evaluation is the last to read the leaves keepLeaves() gave (keep(false) follows
+    /// it): the held leaves of each batch asked are freed once its values are given
+    /// (KeptLeaves::release), so the grid that evaluation makes reuses their memory instead of
+    /// pages fresh to the process. A batch asked again is served otherwise (the same values).
+    /// Called between evaluations, never during one; keep() and keepLeaves() end it.
+    void consumeLeaves() const { mConsume = mLeaves != nullptr; }
     /// Bytes of values kept now in the memo's own blocks (not counting keepLeaves()').
     std::size_t keptBytes() const;
     /// Bytes of memory mapped for them now (whole blocks).
@@ -213,6 +223,7 @@ private:
     FieldPtr mOperand;
     mutable std::unique_ptr<std::array<Shard, kShards>> mShards;  ///< set while keeping
     mutable std::unique_ptr<KeptLeaves> mLeaves;                  ///< keepLeaves()', while keeping
+    mutable bool mConsume = false;                                ///< consumeLeaves()
     mutable std::size_t mMaxBytes = 0;
     mutable std::atomic<std::size_t> mBytes{0};
 };
