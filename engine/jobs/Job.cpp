@@ -525,7 +525,6 @@ void Job::solveLevels()
             // wireframe: 0.55 GB each).
             std::function<void(openvdb::FloatGrid::Ptr)> keepGrid;
             const bool masked = onJobVoxels ? bool(boxMask) : bool(node.densityMask);
-            std::optional<Interval> lastBand;  // levelWithin's, for the grid handed over after it
             if (memo && recipeLattice && mKeepSolvedValues && node.solid->indicator().get() == memo) {
                 const bool gridHandedOver = masked || node.subVoxelDensity;
                 memo->keep(true, gridHandedOver ? 0 : memoBudget());
@@ -534,14 +533,18 @@ void Job::solveLevels()
                 // them, which would split the huge pages of the values kept (every later first read
                 // of one of their 4 KB pages then faults in the guest's host: a trimmed 50 mm
                 // frame 8.1-8.6 s without, 8.7-9.9 s with; 20 MB more at its peak).
-                levelWithin = [memo, &lastBand](Interval levels) {
-                    lastBand = levels;
-                    memo->dropOutside(levels);
-                };
+                levelWithin = [memo](Interval levels) { memo->dropOutside(levels); };
+                // The grid handed over is kept whole, not dropped to the band its level lies in:
+                // the leaves whose values miss the band each needed the field's bound to tell
+                // whether a grid in the band reads them, and those bounds cost more than the
+                // memory they freed (the drop alone took 0.17 s on W2g's 50 mm cylinder frame and
+                // 0.23 s on its trimmed one; their solves 3.48-3.58 -> 3.17-3.40 s and 2.43-3.01 ->
+                // 2.23-2.27 s, the trimmed frame's peak 1024-1061 -> 1073-1089 MB, the others' the
+                // same). The leaves the next evaluation reads are freed as it reads them
+                // (consumeLeaves), the others with the memo.
                 if (gridHandedOver)
-                    keepGrid = [memo, &lastBand, this](openvdb::FloatGrid::Ptr grid) {
+                    keepGrid = [memo, this](openvdb::FloatGrid::Ptr grid) {
                         memo->keepLeaves(std::make_unique<KeptGridLeaves>(std::move(grid), mDomain), memoBudget());
-                        if (lastBand) memo->dropOutside(*lastBand);
                     };
             }
             const DensitySolution s = timed("solve " + node.name, [&] {
