@@ -80,7 +80,7 @@ bool GridValueMemo::fromLeaves(const GridBatch& batch, std::span<double> out) co
     std::uint32_t held = 0;
     for (int m = 0; m < count; ++m)
         if (leaves[std::size_t(m)]) held |= std::uint32_t(1) << m;
-    const std::uint32_t read = (count == 32 ? ~std::uint32_t(0) : (std::uint32_t(1) << count) - 1u) & ~batch.unread;
+    const std::uint32_t read = allLeaves(count) & ~batch.unread;
     const bool served = (read & ~held) == 0;
     if (served)
         for (int m = 0; m < count; ++m)
@@ -206,7 +206,7 @@ void GridValueMemo::dropOutside(Interval levels) const
             if (isStack(k)) {
                 // Leaf by leaf: the stack's kept leaves that a grid in the band may read stay.
                 const int leaves = k.nz / 8;
-                const std::uint32_t all = leaves == 32 ? ~std::uint32_t(0) : (std::uint32_t(1) << leaves) - 1;
+                const std::uint32_t all = allLeaves(leaves);
                 gone = unreadLeaves(k, kept, levels);
                 dropped += std::size_t(std::popcount(gone) - std::popcount(kept.dropped)) * 512 * sizeof(float);
                 if (gone == all) {

@@ -196,6 +196,11 @@ private:
         const int before = std::popcount(kept.dropped & ((std::uint32_t(1) << m) - 1u));
         return kept.values + (std::size_t(m - before) * 64 + ij) * 8;
     }
+    /// The bits of a stack's @a count leaves (bit m: leaf m), @a count from 1 to 32.
+    static std::uint32_t allLeaves(int count)
+    {
+        return count == 32 ? ~std::uint32_t(0) : (std::uint32_t(1) << count) - 1u;
+    }
     /// Whether @a k is a stack of leaves (8 x 8 x 8m points, m from 2 to 32).
     static bool isStack(const Key& k) { return k.nx == 8 && k.ny == 8 && k.nz % 8 == 0 && k.nz >= 16 && k.nz <= 256; }
     /// Room for @a n values in @a shard's blocks (its mutex held).
