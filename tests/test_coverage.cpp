@@ -11,6 +11,8 @@
 #include "fields/core/BlockLattice.h"
 #include "fields/core/GridValueMemo.h"
 #include "fields/levels/LevelSolid.h"
+#include "fields/shapes/Boolean.h"
+#include "fields/shapes/Sphere.h"
 #include "fields/struts/IsoRadius.h"
 #include "fields/struts/StrutConvolution.h"
 
@@ -140,7 +142,7 @@ TEST(Coverage, KnownValuesProveLeavesStraddlingWithoutTheirBoundsAndFindTheSameG
 {
     // A strut lattice's iso-radius evaluated sparsely with and without values known in advance:
     // the coarse samples a density solve takes (KnownSamples, every third voxel, past the domain
-    // by the margin; proving a band met or, wholeBand, spanned), and a grid of the field's values
+    // by the margin; one sample in the band proves it met), and a grid of the field's values
     // held by a memo under a level (FieldNode::meets() through LevelSolid, GridValueMemo,
     // KeptGridLeaves; with the domain's clip). The grids are the same, bit for bit, tiles
     // included, and far fewer bounds are taken.
@@ -178,12 +180,7 @@ TEST(Coverage, KnownValuesProveLeavesStraddlingWithoutTheirBoundsAndFindTheSameG
     withKnown.known = &known;
     expectSameGrid(*plain, *evaluateSparse(*counted, d, withKnown), "band met");
     const int metBounds = counted->bounds.exchange(0);
-    known.wholeBand = true;
-    expectSameGrid(*plain, *evaluateSparse(*counted, d, withKnown), "band spanned");
-    const int spannedBounds = counted->bounds.exchange(0);
     EXPECT_LT(metBounds, allBounds * 3 / 4);
-    EXPECT_LT(spannedBounds, allBounds);
-    EXPECT_LE(metBounds, spannedBounds);
 
     // KnownSamples::meets against the samples in the box enumerated one by one.
     std::mt19937 rng(11);
@@ -191,32 +188,32 @@ TEST(Coverage, KnownValuesProveLeavesStraddlingWithoutTheirBoundsAndFindTheSameG
     for (int trial = 0; trial < 2000; ++trial) {
         const openvdb::Coord lo(corner(rng), corner(rng), corner(rng));
         const openvdb::CoordBBox box(lo, lo + openvdb::Coord(size(rng), size(rng), size(rng)));
-        for (const bool whole : {false, true}) {
-            known.wholeBand = whole;
-            const Interval asked = whole ? Interval(options.band.hi, options.band.lo) : options.band;
-            BandMet met(asked);
-            bool expected = false;
-            for (int i = 0; i < known.count[0]; ++i)
-                for (int j = 0; j < known.count[1]; ++j)
-                    for (int k = 0; k < known.count[2]; ++k)
-                        if (box.isInside(known.origin +
-                                         openvdb::Coord(i * known.stride, j * known.stride, k * known.stride)))
-                            expected =
-                                met.add(known.values[(std::size_t(i) * known.count[1] + j) * known.count[2] + k]) ||
-                                expected;
-            EXPECT_EQ(known.meets(box, options.band), expected) << "trial " << trial;
-        }
+        BandMet met(options.band);
+        bool expected = false;
+        for (int i = 0; i < known.count[0]; ++i)
+            for (int j = 0; j < known.count[1]; ++j)
+                for (int k = 0; k < known.count[2]; ++k)
+                    if (box.isInside(known.origin +
+                                     openvdb::Coord(i * known.stride, j * known.stride, k * known.stride)))
+                        expected = met.add(known.values[(std::size_t(i) * known.count[1] + j) * known.count[2] + k]) ||
+                                   expected;
+        EXPECT_EQ(known.meets(box, options.band), expected) << "trial " << trial;
     }
 
     // A level above a memo holding a grid of its values (as a density solve hands it over), with
     // the domain's clip, at levels within the grid's band: the grid a memo holding nothing gives.
     SparseOptions region = options;
     region.band = Interval(0.4, 0.7);
-    auto grid = evaluateSparse(*std::make_shared<GridValueMemo>(iso), d, region);
+    const auto grid = evaluateSparse(*std::make_shared<GridValueMemo>(iso), d, region);
+    // A memo of @a field holding a copy of the grid (and no bound yet).
+    auto holding = [&](const FieldPtr& field) {
+        const auto held = std::make_shared<GridValueMemo>(field);
+        held->keep(true, 0);
+        held->keepLeaves(std::make_unique<KeptGridLeaves>(grid->deepCopy(), d), std::size_t(1) << 30);
+        return held;
+    };
     const auto counter = std::make_shared<CountedField>(iso);
-    const auto memo = std::make_shared<GridValueMemo>(counter);
-    memo->keep(true, 0);
-    memo->keepLeaves(std::make_unique<KeptGridLeaves>(std::move(grid), d), std::size_t(1) << 30);
+    const auto memo = holding(counter);
     SparseOptions clipped;
     clipped.clipToDomain = true;
     for (const double level : {0.45, 0.55, 0.65}) {
@@ -228,6 +225,54 @@ TEST(Coverage, KnownValuesProveLeavesStraddlingWithoutTheirBoundsAndFindTheSameG
         expectSameGrid(*expected, *held, "held, level " + std::to_string(level));
         EXPECT_LT(counter->bounds.load(), fresh->bounds.load() * 3 / 4) << level;
     }
+
+    // The same level solid in a sharp boolean with a sphere (a lattice trimmed `within:` a part
+    // is its intersection): the held values prove through it (BooleanField::meets) where the
+    // sphere's bound keeps them. The same grid as a memo holding nothing gives, with fewer of the
+    // lattice's bounds; a blended boolean proves nothing and takes every bound.
+    // (The sphere keeps the held values where it is negative for an intersection, positive for a
+    // union or a difference: large for the one, small for the others.)
+    const auto large = std::make_shared<Sphere>(Vec3d(4.0, 4.0, 4.0), 5.5);
+    const auto small = std::make_shared<Sphere>(Vec3d(4.0, 4.0, 4.0), 1.5);
+    for (const BooleanOp op : {BooleanOp::Intersection, BooleanOp::Union, BooleanOp::Difference})
+        for (const double blend : {0.0, 0.3}) {
+            const FieldPtr sphere = op == BooleanOp::Intersection ? large : small;
+            const auto fresh = std::make_shared<CountedField>(iso);
+            const auto freshSolid =
+                std::make_shared<LevelSolid>(std::make_shared<GridValueMemo>(fresh), SolidSide::Below, 0.55);
+            const auto heldCounter = std::make_shared<CountedField>(iso);
+            const auto heldSolid = std::make_shared<LevelSolid>(holding(heldCounter), SolidSide::Below, 0.55);
+            const BooleanField expectedField(op, {freshSolid, sphere}, blend);
+            const BooleanField heldField(op, {heldSolid, sphere}, blend);
+            const auto expected = evaluateSparse(expectedField, d, clipped);
+            const auto held = evaluateSparse(heldField, d, clipped);
+            const std::string what = "boolean " + std::to_string(int(op)) + ", blend " + std::to_string(blend);
+            expectSameGrid(*expected, *held, what);
+            ASSERT_GT(fresh->bounds.load(), 200) << what;
+            if (blend > 0.0)
+                EXPECT_EQ(heldCounter->bounds.load(), fresh->bounds.load()) << what;
+            else
+                EXPECT_LT(heldCounter->bounds.load(), fresh->bounds.load() * 9 / 10) << what;
+        }
+
+    // BooleanField::meets against its bound: whenever it proves a box, the bound meets the band.
+    std::uniform_real_distribution<double> at(-0.5, 8.5), edge(0.05, 1.5), lowEnd(-0.3, 0.3);
+    int proved = 0;
+    for (int trial = 0; trial < 3000; ++trial) {
+        const Vec3d lo(at(rng), at(rng), at(rng));
+        const Box3 box{lo, lo + Vec3d(edge(rng), edge(rng), edge(rng))};
+        const double a = lowEnd(rng);
+        const Interval band(a, a + 0.1);
+        for (const BooleanOp op : {BooleanOp::Intersection, BooleanOp::Union, BooleanOp::Difference}) {
+            const BooleanField sharp(op, {std::make_shared<LevelSolid>(memo, SolidSide::Below, 0.55),
+                                          op == BooleanOp::Intersection ? large : small});
+            if (!sharp.meets(box, band)) continue;
+            ++proved;
+            const Interval b = sharp.bound(box);
+            EXPECT_TRUE(b.lo <= band.hi && b.hi >= band.lo) << "trial " << trial << ", op " << int(op);
+        }
+    }
+    EXPECT_GT(proved, 100);
 }
 
 TEST(Coverage, BisectionSetsAsideSamplesWithoutABreakpointInItsBracketAndFindsTheLevel)

@@ -70,13 +70,15 @@ Side classify(const FieldNode& f, const BoxField* clip, const Domain& d, const C
     // A band that takes every value needs no bound (they cost more than some evaluations).
     if (band.lo <= -1e30 && band.hi >= 1e30) return Side::Straddle;
     const Box3 box = grownBox(d, lo, size);
-    // Values known inside the box that meet the band: its bound would meet it too (the samples'
-    // voxel centres half a voxel within the grown box the bound is taken over). With the clip,
+    // Values known inside the box that meet the band: its bound would meet it too. The samples
+    // of the voxels one past the leaf count: their centres lie on the grown box the bound is
+    // taken over (a leaf of 8 voxels holds one or two samples of stride 5 along an axis, its
+    // grown box always two: on a 50 mm cylinder frame the ring proved a fifth more). With the clip,
     // max(field, clip): a value at least band.lo stays so, and one at most band.hi stays so
     // where the clip's bound is at most band.hi.
     const std::optional<Interval> clipBound = clip ? std::optional(clip->bound(box)) : std::nullopt;
     if ((!clipBound || clipBound->hi <= band.hi) &&
-        ((known && known->meets(CoordBBox(lo, lo + Coord(size - 1)), band)) || f.meets(box, band)))
+        ((known && known->meets(CoordBBox(lo - Coord(1), lo + Coord(size)), band)) || f.meets(box, band)))
         return Side::Straddle;
     Interval b = f.bound(box);
     if (clipBound) b = max(b, *clipBound);
@@ -133,7 +135,7 @@ bool KnownSamples::meets(const CoordBBox& voxels, const Interval& band) const
         last[a] = std::min(count[a] - 1, hi >= 0 ? hi / stride : -((-hi + stride - 1) / stride));
         if (first[a] > last[a]) return false;
     }
-    BandMet met(wholeBand ? Interval(band.hi, band.lo) : band, error);
+    BandMet met(band, error);
     for (int i = first[0]; i <= last[0]; ++i)
         for (int j = first[1]; j <= last[1]; ++j) {
             const float* row = values.data() + (std::size_t(i) * count[1] + j) * std::size_t(count[2]);

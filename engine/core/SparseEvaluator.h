@@ -54,14 +54,9 @@ struct KnownSamples {
     openvdb::Coord count{0, 0, 0};  ///< samples along each axis
     std::vector<float> values;      ///< x-major, z fastest (count.x() count.y() count.z())
     double error = 0.0;             ///< on top of a relative 1e-6 (rounding, float samples)
-    /// Prove only boxes whose samples span the whole band (one at most its low end, one at least
-    /// its high end), so that they meet every level in it: a later pass at a level within the
-    /// band, from a grid of the same values (FieldNode::meets()), proves them again, and the
-    /// bounds this pass does take are those it asks for (a memo keeps them).
-    bool wholeBand = false;
 
     /// Whether the samples at voxel indices within @a voxels prove that any enclosure of the
-    /// field over those voxels' centres meets @a band (spans it, with wholeBand). Samples of +-1e30 and beyond (masks'
+    /// field over those voxels' centres meets @a band. Samples of +-1e30 and beyond (masks'
     /// outside values) prove nothing.
     bool meets(const openvdb::CoordBBox& voxels, const Interval& band) const;
 };

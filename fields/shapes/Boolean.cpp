@@ -230,6 +230,28 @@ Interval BooleanField::bound(const Box3& box) const
     return r;
 }
 
+bool BooleanField::meets(const Box3& box, const Interval& band) const
+{
+    if (mBlend > 0.0) return false;
+    // The other operands' bounds must keep the proving operand's extreme point: below band.hi
+    // for a max, above band.lo for a min.
+    auto othersKeep = [&](std::size_t proving) {
+        for (std::size_t o = 0; o < mOperands.size(); ++o) {
+            if (o == proving) continue;
+            const Interval b = mOperands[o]->bound(box);
+            const bool keeps = mOp == BooleanOp::Union          ? b.lo >= band.lo
+                               : mOp == BooleanOp::Intersection ? b.hi <= band.hi
+                                                                : -b.lo <= band.hi;  // difference: -b
+            if (!keeps) return false;
+        }
+        return true;
+    };
+    const std::size_t candidates = mOp == BooleanOp::Difference ? 1 : mOperands.size();
+    for (std::size_t o = 0; o < candidates; ++o)
+        if (mOperands[o]->meets(box, band) && othersKeep(o)) return true;
+    return false;
+}
+
 std::optional<Box3> BooleanField::support() const
 {
     if (mOp == BooleanOp::Difference) return mOperands[0]->support();

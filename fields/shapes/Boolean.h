@@ -22,6 +22,14 @@ public:
     void gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const override;
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
+    /// Sharp operations only (no blend): one operand's held values meet the band (its meets())
+    /// where every other operand's bound keeps the result there. An intersection (max) takes the
+    /// operand's point valued at least band.lo as it is (the max only rises) and its point valued
+    /// at most band.hi where every other operand's bound is at most band.hi; a union (min) the
+    /// mirror image; a difference max(a, -b, ...) the first operand's, with each -b's bound at
+    /// most band.hi. False otherwise: the cull then takes the bound, which meets the band in every
+    /// case this proves (max and min of the operands' bounds, as bound() folds them).
+    bool meets(const Box3& box, const Interval& band) const override;
     /// The operands' planeValues, the cheap ones first (planeCheap): a tile one operand proves on
     /// the side that decides (a union's below, an intersection's or a difference's above) is
     /// skipped by the operands after it; one every operand proves on the other side (by the
