@@ -2392,9 +2392,10 @@ TEST(GridLeavesReused, AWiderBandInStacksGivesTheGridOfAFreshEvaluation)
 TEST(StrutIndex, GatherListsEveryReachingSegmentOnceInAscendingOrder)
 {
     // gather() against every segment tested by brute force (the distance from the box to the
-    // segment against its reach), on boxes from a pixel's to many bins across: the bins' lists
-    // are merged (a few bins) or sorted (many), and both must give every reaching segment once,
-    // in ascending order.
+    // segment against its reach), on boxes from a pixel's to many bins across: one bin's list is
+    // taken as it is, several bins' are gathered once each (stamps) and sorted; both must give
+    // every reaching segment once, in ascending order. A second, smaller index gathered from
+    // between the first one's calls (the stamps are shared by a thread's indexes) lists its own.
     std::mt19937 rng(380);
     std::uniform_real_distribution<double> coordinate(0.0, 20.0), offset(-1.5, 1.5), reachOf(0.2, 1.0);
     std::vector<Vec3d> a, b;
@@ -2406,18 +2407,25 @@ TEST(StrutIndex, GatherListsEveryReachingSegmentOnceInAscendingOrder)
         reach.push_back(reachOf(rng));
     }
     const StrutIndex index(a, b, reach);
+    const std::vector<Vec3d> a2(a.begin(), a.begin() + 1000), b2(b.begin(), b.begin() + 1000);
+    const std::vector<double> reach2(reach.begin(), reach.begin() + 1000);
+    const StrutIndex smaller(a2, b2, reach2);
     std::uniform_real_distribution<double> size(0.0, 1.0);
-    std::vector<std::uint32_t> got;
+    std::vector<std::uint32_t> got, gotSmaller;
     std::size_t listed = 0, merged = 0, sorted = 0;
     for (int trial = 0; trial < 300; ++trial) {
         const double side = trial % 3 == 0 ? 0.02 : trial % 3 == 1 ? 1.5 * size(rng) : 12.0 * size(rng);
         const Vec3d lo(coordinate(rng) - 1.0, coordinate(rng) - 1.0, coordinate(rng) - 1.0);
         const Box3 box{lo, lo + Vec3d(side, 0.8 * side, 1.1 * side)};
         index.gather(box, got);
-        std::vector<std::uint32_t> expected;
+        smaller.gather(box, gotSmaller);
+        std::vector<std::uint32_t> expected, expectedSmaller;
         for (std::uint32_t j = 0; j < a.size(); ++j)
             if (segmentBoxDistance(a[j], b[j], box) <= reach[j]) expected.push_back(j);
         ASSERT_EQ(got, expected) << "trial " << trial;
+        std::copy_if(expected.begin(), expected.end(), std::back_inserter(expectedSmaller),
+                     [](std::uint32_t j) { return j < 1000; });
+        ASSERT_EQ(gotSmaller, expectedSmaller) << "trial " << trial;
         // With the box distances: the same list, and each kept segment's segmentBoxDistance
         // bit for bit (StrutConvolution::bound sums its upper bounds from them).
         std::vector<std::uint32_t> again;
