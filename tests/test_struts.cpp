@@ -552,6 +552,7 @@ TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
     std::mt19937_64 rng(20261129);
     std::uniform_real_distribution<double> unit(-1.0, 1.0);
     std::uint64_t lanesAdded = 0, lanesCompared = 0;
+    int eightLaneRows = 0;
     for (int trial = 0; trial < 20000; ++trial) {
         const StrutRowConstants c = randomUnitStrut(rng);
         const int nz = 16 + int(rng() % 60);
@@ -621,6 +622,35 @@ TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
         addStrutRowTabledScalar(c, row, table, gauss.data(), scalar.data());
         addStrutRowTabledAvx2(c, row, table, gauss.data(), lanes.data());
         ASSERT_EQ(std::memcmp(scalar.data(), lanes.data(), scalar.size() * sizeof(double)), 0) << "trial " << trial;
+        // Eight lanes (AVX-512) where the CPU has them: the same doubles, with points proven within
+        // the cut-off (inLo..inHi, taken without the test by every form) or not, the row's
+        // Gaussians and table ending right after its last point (masked, never read past it),
+        // and nothing written past the row.
+        if (hasAvx512Rows()) {
+            // (Proven: the longest run of the row's points within the cut-off, on odd trials.)
+            StrutRow proven = row;
+            if (trial % 2) {
+                const double dx = row.x - c.ax, dy = row.y - c.ay;
+                for (int k = kLo, runLo = kLo; k <= kHi; ++k) {
+                    double h;
+                    if (!withinCutoff(c, dx, dy, (row.z0 + k * row.dz) - c.az, h)) {
+                        runLo = k + 1;
+                        continue;
+                    }
+                    if (k - runLo > proven.inHi - proven.inLo) {
+                        proven.inLo = runLo;
+                        proven.inHi = k;
+                    }
+                }
+            }
+            const std::vector<double> tight(gauss.begin(), gauss.begin() + kHi + 1);
+            std::vector<double> expected = before, eight = before;
+            addStrutRowTabledScalar(c, proven, table, tight.data(), expected.data());
+            addStrutRowTabledAvx512(c, proven, table, tight.data(), eight.data());
+            ASSERT_EQ(std::memcmp(expected.data(), eight.data(), eight.size() * sizeof(double)), 0) << trial;
+            for (std::size_t k = std::size_t(kHi) + 1; k < eight.size(); ++k) ASSERT_EQ(eight[k], before[k]) << trial;
+            ++eightLaneRows;
+        }
         // A table in phases (the next nodes in a table of their own): both forms read them alike,
         // and the next nodes one past value's (a single phase) read as without them.
         {
@@ -647,6 +677,9 @@ TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
         for (int k = kLo; k <= kHi; ++k) lanesAdded += scalar[k] != before[k] ? 1 : 0;
     }
     EXPECT_GT(lanesAdded, lanesCompared / 8);
+    if (hasAvx512Rows()) {
+        EXPECT_EQ(eightLaneRows, 20000);
+    }
 }
 
 TEST(StrutRows, SeededTabledRowsAddTheFilledRowsDoubles)

@@ -330,6 +330,9 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
     };
     thread_local std::vector<double> rangeLo, rangeHi;
     const bool avx2 = hasAvx2Rows();
+    // The tabled rows in eight lanes where the CPU has AVX-512 (the same doubles; the other
+    // row loops stay four lanes wide).
+    const bool avx512 = avx2 && hasAvx512Rows();
     const double dx = spacing.x(), dy = spacing.y(), dz = spacing.z();
     // Strut-outer, point-inner: each point still sums its struts in ascending index order. Along
     // a row (k) h is linear and r^2 quadratic in k, so exp(-r^2 / 2 sigma^2) follows from two
@@ -845,6 +848,8 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                                                   nodeSlope.data() + next};
                         if (fused)
                             addStrutRowTabledSeededAvx2(constants, part, table, fusedLanes, out.data() + n);
+                        else if (avx512)
+                            addStrutRowTabledAvx512(constants, part, table, g, out.data() + n);
                         else if (avx2)
                             addStrutRowTabledAvx2(constants, part, table, g, out.data() + n);
                         else

@@ -256,6 +256,16 @@ void strutRowNodesAvx2(const StrutRowConstants& s, double h0, double step, int f
 void addStrutRowTabledAvx2(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
                            const double* gauss, double* out);
 
+/// addStrutRowTabledScalar with eight lanes (AVX-512F, StrutRowsAvx512.cpp; no contraction); the
+/// same doubles, and it reads and writes only the row's points (masked). The scalar loop where the
+/// build has no AVX-512 form; call it only when hasAvx512Rows() says the CPU has AVX-512F.
+void addStrutRowTabledAvx512(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                             const double* gauss, double* out);
+
+/// Whether addStrutRowTabledAvx512's eight-lane form exists in this build and the CPU can run it
+/// (false when the environment sets VOXLAT_NO_AVX512).
+bool hasAvx512Rows();
+
 /// gauss[k + l] for k = 0, 4, 8, .. < count and l = 0..3: lane l starts at lanes[l] and is
 /// multiplied by steps[l] after each store, steps[l] by @a q16 (four interleaved geometric
 /// recurrences; writes count rounded up to four). Groups wholly before @a from are stepped

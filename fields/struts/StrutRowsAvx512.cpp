@@ -1,0 +1,91 @@
+/// @file StrutRowsAvx512.cpp
+/// addStrutRowTabledScalar (StrutRows.h) with eight lanes. This file alone is compiled for
+/// AVX-512F, without contraction: each lane makes the scalar loop's IEEE operations in its order,
+/// so all three forms give the same doubles (tests/test_struts.cpp compares them bit for bit).
+
+#include "fields/struts/StrutRows.h"
+
+#include <algorithm>
+#include <cstdlib>
+
+#ifdef VOXLAT_AVX512_ROWS
+// GCC 12 takes _mm512_undefined_pd() inside the unmasked intrinsics for a read of an
+// uninitialised value (-Wmaybe-uninitialized): a false positive of the headers, not of this file.
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include <immintrin.h>
+#endif
+
+namespace voxlat {
+
+#ifdef VOXLAT_AVX512_ROWS
+
+void addStrutRowTabledAvx512(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                             const double* gauss, double* out)
+{
+    // The parts of h and |d|^2 that do not change along the row, summed first as the scalar does.
+    const double dxs = row.x - s.ax, dys = row.y - s.ay;
+    const __m512d hxy = _mm512_set1_pd(dxs * s.ux + dys * s.uy), lxy = _mm512_set1_pd(dxs * dxs + dys * dys);
+    const __m512d uz = _mm512_set1_pd(s.uz), az = _mm512_set1_pd(s.az), z0 = _mm512_set1_pd(row.z0);
+    const __m512d stepZ = _mm512_set1_pd(row.dz), length = _mm512_set1_pd(s.length);
+    const __m512d cutoff = _mm512_set1_pd(s.cutoffSqr), zero = _mm512_setzero_pd();
+    const __m512d lane = _mm512_setr_pd(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
+    const __m512d w00 = _mm512_set1_pd(table.w00), w10 = _mm512_set1_pd(table.w10);
+    const __m512d w01 = _mm512_set1_pd(table.w01), w11 = _mm512_set1_pd(table.w11);
+    const double* nextValue = table.nextValue ? table.nextValue : table.value + 1;
+    const double* nextSlope = table.nextSlope ? table.nextSlope : table.slope + 1;
+    const int inHi = std::min(row.inHi, row.kHi);
+    for (int k = row.kLo; k <= row.kHi; k += 8) {
+        // Lanes past the row are masked: neither the table nor the row is read or written there.
+        const int count = std::min(8, row.kHi - k + 1);
+        const __mmask8 live = __mmask8((1u << count) - 1u);
+        __mmask8 add = live;
+        if (!(k >= row.inLo && k + 7 <= inHi)) {
+            // The cut-off test (withinCutoff) unless all eight points are proven within it.
+            const __m512d kk = _mm512_add_pd(_mm512_set1_pd(double(k)), lane);
+            const __m512d dz = _mm512_sub_pd(_mm512_add_pd(z0, _mm512_mul_pd(kk, stepZ)), az);
+            const __m512d h = _mm512_add_pd(hxy, _mm512_mul_pd(dz, uz));
+            const __m512d r2 =
+                _mm512_max_pd(_mm512_sub_pd(_mm512_add_pd(lxy, _mm512_mul_pd(dz, dz)), _mm512_mul_pd(h, h)), zero);
+            // beyond = h < 0 ? h : (h > L ? h - L : 0)
+            const __m512d past = _mm512_maskz_sub_pd(_mm512_cmp_pd_mask(h, length, _CMP_GT_OQ), h, length);
+            const __m512d beyond = _mm512_mask_blend_pd(_mm512_cmp_pd_mask(h, zero, _CMP_LT_OQ), past, h);
+            const __m512d dist2 = _mm512_add_pd(r2, _mm512_mul_pd(beyond, beyond));
+            add = _mm512_mask_cmp_pd_mask(live, dist2, cutoff, _CMP_LT_OQ);
+            if (add == 0) continue;
+        }
+        const int n = table.n0 + k;
+        // J at the lanes: ((w00 v + w10 s) + w01 v1) + w11 s1 (StrutRowTable::at).
+        const __m512d j0 =
+            _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(w00, _mm512_maskz_loadu_pd(add, table.value + n)),
+                                                      _mm512_mul_pd(w10, _mm512_maskz_loadu_pd(add, table.slope + n))),
+                                        _mm512_mul_pd(w01, _mm512_maskz_loadu_pd(add, nextValue + n))),
+                          _mm512_mul_pd(w11, _mm512_maskz_loadu_pd(add, nextSlope + n)));
+        const __m512d before = _mm512_maskz_loadu_pd(add, out + k);
+        const __m512d sum = _mm512_add_pd(before, _mm512_mul_pd(_mm512_maskz_loadu_pd(add, gauss + k), j0));
+        _mm512_mask_storeu_pd(out + k, add, sum);
+    }
+}
+
+bool hasAvx512Rows()
+{
+    // VOXLAT_NO_AVX512 keeps the four-lane form (to measure one against the other).
+    static const bool has = __builtin_cpu_supports("avx512f") && !std::getenv("VOXLAT_NO_AVX512");
+    return has;
+}
+
+#else
+
+void addStrutRowTabledAvx512(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                             const double* gauss, double* out)
+{
+    addStrutRowTabledScalar(s, row, table, gauss, out);
+}
+
+bool hasAvx512Rows()
+{
+    return false;
+}
+
+#endif
+
+}  // namespace voxlat
