@@ -73,7 +73,7 @@ Side classify(const FieldNode& f, const BoxField* clip, const Domain& d, const C
     // Values known inside the box that meet the band: its bound would meet it too. The samples
     // of the voxels one past the leaf count: their centres lie on the grown box the bound is
     // taken over (a leaf of 8 voxels holds one or two samples of stride 5 along an axis, its
-    // grown box always two: on a 50 mm cylinder frame the ring proved a fifth more). With the clip,
+    // grown box always two). With the clip,
     // max(field, clip): a value at least band.lo stays so, and one at most band.hi stays so
     // where the clip's bound is at most band.hi.
     const std::optional<Interval> clipBound = clip ? std::optional(clip->bound(box)) : std::nullopt;
