@@ -53,11 +53,11 @@ TEST(Coverage, ANarrowerBandsSamplesAreTheWiderBandsPickedInOrder)
     const auto grid = evaluateSparse(iso, d, options);
     const openvdb::CoordBBox region(openvdb::Coord(-2), d.dims - openvdb::Coord(-1));
     const float lo = 0.3f, hi = 0.9f;
-    const std::vector<CoverageSample> wide = coverageSamples(*grid, region, lo, hi);
+    const CoverageSamples wide = coverageSamples(*grid, region, lo, hi);
     ASSERT_GT(wide.size(), 10000u);
     for (const auto& [nlo, nhi] : {std::pair{0.45f, 0.62f}, std::pair{0.3f, 0.5f}, std::pair{0.61f, 0.9f}}) {
-        const std::vector<CoverageSample> narrow = coverageSamples(*grid, region, nlo, nhi);
-        std::vector<CoverageSample> picked;
+        const CoverageSamples narrow = coverageSamples(*grid, region, nlo, nhi);
+        CoverageSamples picked;
         std::uint64_t between = 0;
         for (const CoverageSample& c : wide) {
             if (!(c.value < nlo || c.value > nhi)) picked.push_back(c);
@@ -67,6 +67,56 @@ TEST(Coverage, ANarrowerBandsSamplesAreTheWiderBandsPickedInOrder)
         EXPECT_EQ(std::memcmp(narrow.data(), picked.data(), narrow.size() * sizeof(CoverageSample)), 0) << nlo;
         EXPECT_EQ(countBelow(*grid, region, nlo), countBelow(*grid, region, lo) + between) << nlo;
         EXPECT_GT(between + narrow.size(), 0u);
+    }
+}
+
+TEST(Coverage, TheBandSplitIsEachRegionVoxelReadVoxelByVoxel)
+{
+    // splitByBand against every voxel read through the grid one by one, leaf by leaf in the
+    // tree's order: those below the band counted (active tiles below it whole), those in it
+    // collected in order, NaN and those above dropped. Leaves cut by the region and leaves
+    // inside it, on several threads: the same values in the same order on one thread.
+    openvdb::FloatGrid grid(std::numeric_limits<float>::max());
+    auto acc = grid.getAccessor();
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> noise(-0.05f, 0.05f);
+    for (int x = -8; x < 40; ++x)
+        for (int y = -8; y < 32; ++y)
+            for (int z = -8; z < 24; ++z) {
+                float v = 0.02f * float(x) - 0.03f * float(y) + 0.025f * float(z) + noise(rng);
+                if (rng() % 89 == 0) v = std::numeric_limits<float>::quiet_NaN();
+                acc.setValue(openvdb::Coord(x, y, z), v);
+            }
+    // An active tile below the band (a level-2 node's, 128^3 voxels) partly in the region.
+    grid.tree().addTile(2, openvdb::Coord(-128, 0, 0), -1.0f, true);
+    const openvdb::CoordBBox region(openvdb::Coord(-13, -5, -2), openvdb::Coord(35, 27, 21));
+    const float lo = -0.2f, hi = 0.4f;
+    std::uint64_t below = 0;
+    std::vector<float> band;
+    std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
+    grid.tree().getNodes(leaves);
+    for (const auto* leaf : leaves)
+        for (int i = 0; i < 512; ++i) {
+            const float v = leaf->getValue(i);
+            if (!region.isInside(leaf->offsetToGlobalCoord(i))) continue;
+            if (v < lo)
+                ++below;
+            else if (v <= hi)
+                band.push_back(v);
+        }
+    // The tile's voxels in the region (it replaced the leaves it covers).
+    std::uint64_t inTile = 0;
+    for (auto it = region.begin(); it; ++it)
+        if (!grid.tree().probeConstLeaf(*it) && grid.tree().isValueOn(*it) && grid.tree().getValue(*it) < lo) ++inTile;
+    EXPECT_EQ(inTile, 13u * 28u * 22u);
+    below += inTile;
+    ASSERT_GT(band.size(), 1000u);
+    for (const int threads : {1, 2}) {
+        tbb::global_control control(tbb::global_control::max_allowed_parallelism, threads);
+        const BandSplit split = splitByBand(grid, region, lo, hi);
+        EXPECT_EQ(split.below, below) << threads;
+        ASSERT_EQ(split.band.size(), band.size()) << threads;
+        EXPECT_EQ(std::memcmp(split.band.data(), band.data(), band.size() * sizeof(float)), 0) << threads;
     }
 }
 
@@ -95,7 +145,7 @@ TEST(Coverage, SamplesAreEachBandVoxelsCentralDifferencesReadVoxelByVoxel)
     const float lo = -0.3f, hi = 0.6f;
     std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
     grid.tree().getNodes(leaves);
-    std::vector<CoverageSample> reference;
+    CoverageSamples reference;
     float widest = 0.0f;
     for (const auto* leaf : leaves)
         for (int i = 0; i < 512; ++i) {
@@ -117,7 +167,7 @@ TEST(Coverage, SamplesAreEachBandVoxelsCentralDifferencesReadVoxelByVoxel)
             reference.push_back({v, float(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))});
             widest = std::max(widest, reference.back().step);
         }
-    const std::vector<CoverageSample> samples = coverageSamples(grid, region, lo, hi);
+    const CoverageSamples samples = coverageSamples(grid, region, lo, hi);
     ASSERT_GT(reference.size(), 10000u);
     ASSERT_EQ(samples.size(), reference.size());
     EXPECT_EQ(std::memcmp(samples.data(), reference.data(), samples.size() * sizeof(CoverageSample)), 0);
@@ -285,12 +335,12 @@ TEST(Coverage, BisectionSetsAsideSamplesWithoutABreakpointInItsBracketAndFindsTh
     auto coverage = [](const CoverageSample& s, double level) {
         return s.step > 0.0f ? std::clamp(0.5 + (level - s.value) / s.step, 0.0, 1.0) : double(s.value < level);
     };
-    auto serialSum = [&](const std::vector<CoverageSample>& samples, double level) {
+    auto serialSum = [&](const CoverageSamples& samples, double level) {
         double covered = 0.0;
         for (const CoverageSample& s : samples) covered += coverage(s, level);
         return covered;
     };
-    auto plain = [&](const std::vector<CoverageSample>& samples, double fullyBelow, double wanted, double a, double b) {
+    auto plain = [&](const CoverageSamples& samples, double fullyBelow, double wanted, double a, double b) {
         for (int iteration = 0; iteration < 60; ++iteration) {
             const double mid = 0.5 * (a + b);
             (fullyBelow + serialSum(samples, mid) < wanted ? a : b) = mid;
@@ -304,7 +354,7 @@ TEST(Coverage, BisectionSetsAsideSamplesWithoutABreakpointInItsBracketAndFindsTh
     double worst = 0.0;
     for (int trial = 0; trial < 48; ++trial) {
         const std::size_t n = trial < 40 ? std::size_t(2000 + 500 * trial) : std::size_t(8192 * (trial - 35) - 7);
-        std::vector<CoverageSample> samples(n);
+        CoverageSamples samples(n);
         for (CoverageSample& s : samples) {
             s.value = float(value(rng));
             s.step = trial % 4 == 0 || rng() % 7 == 0 ? 0.0f : float(width(rng));

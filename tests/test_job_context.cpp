@@ -160,7 +160,7 @@ TEST(JobContext, TheDensitySolvesBandPassesCallTheirInterrupter)
     const BandSplit split = splitByBand(grid, box, -0.1f, 0.1f, [&] { ++calls; });
     EXPECT_GT(calls, 0);
     EXPECT_EQ(split.below, splitByBand(grid, box, -0.1f, 0.1f).below);
-    const std::vector<CoverageSample> samples = coverageSamples(grid, box, -0.1f, 0.1f);
+    const CoverageSamples samples = coverageSamples(grid, box, -0.1f, 0.1f);
     ASSERT_FALSE(samples.empty());
     int steps = 0;
     const double level = bisectCoverage(samples, double(split.below),

@@ -31,43 +31,52 @@ BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& 
 {
     std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
     grid.tree().getNodes(leaves);
-    std::vector<std::vector<float>> perLeaf(leaves.size());
+    // Two passes in parallel: each leaf's count below and in the band, then its band values
+    // written in place at the leaf's offset (leaf order, as one vector per leaf joined on one
+    // thread gave: a 50 mm frame's join and the vectors' allocations held one core 0.25 s).
     std::vector<std::uint64_t> belowPerLeaf(leaves.size(), 0);
+    std::vector<std::size_t> offset(leaves.size() + 1, 0);
+    // Calls in(v) for each of leaf n's values in the region, in order.
+    auto forEachValue = [&](std::size_t n, auto&& in) {
+        const auto* leaf = leaves[n];
+        const openvdb::CoordBBox box = leaf->getNodeBoundingBox();
+        if (!box.hasOverlap(region)) return;
+        const float* data = leaf->buffer().data();
+        if (region.isInside(box)) {
+            for (int i = 0; i < 512; ++i) in(data[i]);
+        } else {
+            for (int i = 0; i < 512; ++i)
+                if (region.isInside(leaf->offsetToGlobalCoord(i))) in(data[i]);
+        }
+    };
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
             // Per 64 leaves: a range of the partitioner can hold half the grid.
             if (interrupt && n % 64 == 0) interrupt();
-            const auto* leaf = leaves[n];
-            const openvdb::CoordBBox box = leaf->getNodeBoundingBox();
-            if (!box.hasOverlap(region)) continue;
-            const float* data = leaf->buffer().data();
-            if (region.isInside(box)) {
-                for (int i = 0; i < 512; ++i) {
-                    if (data[i] < lo)
-                        ++belowPerLeaf[n];
-                    else if (data[i] <= hi)
-                        perLeaf[n].push_back(data[i]);
-                }
-            } else {
-                for (int i = 0; i < 512; ++i) {
-                    if (!region.isInside(leaf->offsetToGlobalCoord(i))) continue;
-                    if (data[i] < lo)
-                        ++belowPerLeaf[n];
-                    else if (data[i] <= hi)
-                        perLeaf[n].push_back(data[i]);
-                }
-            }
+            std::uint64_t below = 0;
+            std::size_t inBand = 0;
+            forEachValue(n, [&](float v) {
+                below += v < lo;
+                inBand += !(v < lo) && v <= hi;
+            });
+            belowPerLeaf[n] = below;
+            offset[n + 1] = inBand;
         }
     });
+    for (std::size_t n = 0; n < leaves.size(); ++n) offset[n + 1] += offset[n];
     BandSplit split;
     split.below = countTilesBelow(grid, region, lo);
-    std::size_t total = 0;
-    for (const auto& v : perLeaf) total += v.size();
-    split.band.reserve(total);
-    for (std::size_t n = 0; n < leaves.size(); ++n) {
-        split.below += belowPerLeaf[n];
-        split.band.insert(split.band.end(), perLeaf[n].begin(), perLeaf[n].end());
-    }
+    for (const std::uint64_t below : belowPerLeaf) split.below += below;
+    split.band.resize(offset.back());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+        for (std::size_t n = range.begin(); n != range.end(); ++n) {
+            if (interrupt && n % 64 == 0) interrupt();
+            float* at = split.band.data() + offset[n];
+            forEachValue(n, [&](float v) {
+                if (!(v < lo) && v <= hi) *at++ = v;
+            });
+        }
+    });
     return split;
 }
 

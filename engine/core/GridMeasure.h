@@ -2,6 +2,8 @@
 /// @brief Counting voxels of a sparse grid inside a region, tiles included.
 #pragma once
 
+#include "engine/core/DefaultInitVector.h"
+
 #include <openvdb/openvdb.h>
 
 #include <cstdint>
@@ -15,7 +17,7 @@ namespace voxlat {
 /// active tile below lo counts whole.
 struct BandSplit {
     std::uint64_t below = 0;
-    std::vector<float> band;
+    DefaultInitVector<float> band;  ///< sized up front and filled in parallel, not zeroed first
 };
 /// @a interrupt, when set, is called every 64 leaves and throws to stop.
 BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,

@@ -139,7 +139,7 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
         }
     });
     for (std::size_t n = 0; n < leaves.size(); ++n) offset[n + 1] += offset[n];
-    std::vector<Sample> all(offset.back());
+    DefaultInitVector<Sample> all(offset.back());  // not zeroed: each sample is written below
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
         auto acc = grid.getConstAccessor();
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
@@ -168,8 +168,8 @@ double sampleCoverage(const CoverageSample& s, double level)
 }  // namespace
 
 /// Band voxels with the length of their per-voxel change, for the linear coverage estimate.
-std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo,
-                                            float hi, const std::function<void()>& interrupt)
+CoverageSamples coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
+                                const std::function<void()>& interrupt)
 {
     return bandSamples(
         grid, region, lo, hi, region, [](float v, const std::array<double, 3>& d) { return coverageSample(v, d); },
@@ -413,14 +413,14 @@ BlockStep stepBlock(const BlockedSamples& from, std::size_t k, double a, double 
 
 }  // namespace
 
-double coveredVoxels(const std::vector<CoverageSample>& samples, double level)
+double coveredVoxels(const CoverageSamples& samples, double level)
 {
     double covered = 0.0;
     coveredVoxels(samples, std::span<const double>(&level, 1), std::span<double>(&covered, 1));
     return covered;
 }
 
-void coveredVoxels(const std::vector<CoverageSample>& samples, std::span<const double> levels, std::span<double> out)
+void coveredVoxels(const CoverageSamples& samples, std::span<const double> levels, std::span<double> out)
 {
     const BlockedSamples blocks = wholeBlocks(samples.data(), samples.size());
     const std::size_t nLevels = levels.size();
@@ -448,7 +448,7 @@ void coveredVoxels(const std::vector<CoverageSample>& samples, std::span<const d
 /// parallel over fixed blocks and adds the blocks' sums in their order: the same level, bit for
 /// bit, for any thread count. The first pass serves the first two steps (three levels at once)
 /// and gives the slope over the bracket's middle half.
-CoverageLevel bisectCoverage(std::vector<CoverageSample> samples, double fullyBelow, double wanted, double a, double b,
+CoverageLevel bisectCoverage(CoverageSamples samples, double fullyBelow, double wanted, double a, double b,
                              const std::function<void()>& interrupt)
 {
     CoverageLevel result;

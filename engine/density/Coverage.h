@@ -4,6 +4,7 @@
 /// below the level, the field taken as linear across the voxel.
 #pragma once
 
+#include "engine/core/DefaultInitVector.h"
 #include "engine/core/Domain.h"
 
 #include <openvdb/openvdb.h>
@@ -23,6 +24,8 @@ struct CoverageSample {
     float value;
     float step;
 };
+/// A band's coverage samples (millions: sized up front and filled in parallel, not zeroed first).
+using CoverageSamples = DefaultInitVector<CoverageSample>;
 
 /// A voxel cut by the plane of its value and per-axis changes, counted `weight` times.
 struct PlaneSample {
@@ -45,8 +48,8 @@ inline double axisChange(float value, float up, bool hasUp, float down, bool has
 /// Band voxels (values in [@a lo, @a hi] inside @a region) with the length of their per-voxel
 /// change, for the linear coverage estimate. @a interrupt, when set, is called every 64
 /// leaves and throws to stop (a plate's band holds 10^7 voxels).
-std::vector<CoverageSample> coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo,
-                                            float hi, const std::function<void()>& interrupt = {});
+CoverageSamples coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
+                                const std::function<void()>& interrupt = {});
 
 /// The largest step coverageSamples() would give a band voxel (below 1e29), without keeping the
 /// samples: what decides how far the band is widened, read from a grid whose band's samples
@@ -57,10 +60,10 @@ float widestCoverageStep(const openvdb::FloatGrid& grid, const openvdb::CoordBBo
 /// Voxels below @a level counted with sub-voxel coverage: a voxel whose value is within half a
 /// step of the level is partly inside, linearly in the distance (a plane cutting the voxel).
 /// Summed in parallel over fixed blocks: the same double for any thread count.
-double coveredVoxels(const std::vector<CoverageSample>& samples, double level);
+double coveredVoxels(const CoverageSamples& samples, double level);
 
 /// coveredVoxels() at each of @a levels into @a out (as many), one pass over the samples for all.
-void coveredVoxels(const std::vector<CoverageSample>& samples, std::span<const double> levels, std::span<double> out);
+void coveredVoxels(const CoverageSamples& samples, std::span<const double> levels, std::span<double> out);
 
 /// What bisectCoverage() found.
 struct CoverageLevel {
@@ -76,7 +79,7 @@ struct CoverageLevel {
 /// each step visits only the samples with a breakpoint inside it; the same level for any thread
 /// count). @a samples are reordered in place (hence taken by value: move them in).
 /// @a interrupt, when set, is called once per step and every 2^20 samples within one.
-CoverageLevel bisectCoverage(std::vector<CoverageSample> samples, double fullyBelow, double wanted, double a, double b,
+CoverageLevel bisectCoverage(CoverageSamples samples, double fullyBelow, double wanted, double a, double b,
                              const std::function<void()>& interrupt = {});
 
 /// The share of a voxel below @a level, the voxel's field taken as the plane through its value

@@ -269,7 +269,7 @@ double quantile(std::vector<float>& samples, double q)
 /// d share / d level about the m-th smallest of @a band (whose values are already split at m by
 /// nth_element): the secant between the values @a k ranks either side (clamped to the band),
 /// over @a total voxels; 0 when they tie.
-double countSlope(std::vector<float>& band, std::size_t m, std::size_t k, double total)
+double countSlope(DefaultInitVector<float>& band, std::size_t m, std::size_t k, double total)
 {
     if (band.size() < 2) return 0.0;
     const std::size_t lo = m > k ? m - k : 0, hi = std::min(band.size() - 1, m + k);
@@ -429,7 +429,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             split = splitByBand(*grid, region, float(options.band.lo), float(options.band.hi), interrupt);
         }
         const std::uint64_t below = split.below;
-        std::vector<float>& band = split.band;
+        DefaultInitVector<float>& band = split.band;
         if (wanted < below || wanted > below + band.size()) continue;
 
         // A level with exactly `wanted` values below it: between the m-th and (m+1)-th smallest
@@ -465,9 +465,9 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             // depend on the band, so they are the evaluated band's samples picked in order,
             // without those (a 50 mm frame's 0.3 GB) held beside the grid and the raw values kept
             // for it. Of the bracket's, only their widest step is needed first: not held.
-            std::vector<float>().swap(band);  // the count's values: not read past here
+            DefaultInitVector<float>().swap(band);  // the count's values: not read past here
             const float evaluatedLo = float(evaluated.band.lo), evaluatedHi = float(evaluated.band.hi);
-            std::vector<CoverageSample> samples;
+            CoverageSamples samples;
             double a = options.band.lo, b = std::min(options.band.hi, 1e30);
             std::uint64_t fullyBelow = below;
             // The bracket (a share of the voxels) can be far narrower than a voxel's change, and
