@@ -1355,6 +1355,38 @@ TEST(StrutFrames, WireframeFilesAndTheirErrors)
     const auto huge = dir.write("huge.csv", "node,0,0,0\nnode,1,0,0\nstrut,0,1222222222222222222222222222222\n");
     EXPECT_NE(message(huge.string()).find("huge.csv:3: node index 1.22222e+30 is far past any node"), std::string::npos)
         << message(huge.string());
+    // Numbers as std::stod reads them (a leading +, exponents, no digit before or after the point,
+    // hexadecimal, blanks about the cell), whichever way the reader takes them.
+    const std::vector<std::string> written{" +1.5",
+                                           "1e-3 ",
+                                           ".5",
+                                           "5.",
+                                           "0x1p-2",
+                                           "-0.1",
+                                           "\t2.25",
+                                           "+0X3",
+                                           "1234567.8901234567",
+                                           "-7E+2",
+                                           "3.0000000000000004",
+                                           "0.1"};
+    std::string rows;
+    for (std::size_t k = 0; k < written.size(); k += 6) {
+        for (std::size_t c = 0; c < 6; ++c) rows += written[k + c] + (c < 5 ? "," : "\n");
+    }
+    const Frame numbers = readWireframe(dir.write("numbers.csv", rows).string());
+    ASSERT_EQ(numbers.struts.size(), 2u);
+    for (std::size_t k = 0; k < 2; ++k)
+        for (int end = 0; end < 2; ++end)
+            for (int a = 0; a < 3; ++a) {
+                std::string cell = written[6 * k + 3 * end + a];
+                cell.erase(0, cell.find_first_not_of(" \t"));
+                EXPECT_EQ(numbers.nodes[numbers.struts[k][end]][a], std::stod(cell)) << cell;
+            }
+    for (const char* bad : {"1.5abc", "nan", "inf", "", "+", "+-1", "1,,2"}) {
+        const auto file = dir.write("badnumber.csv", "0,0,0,1,1,1\n0,0," + std::string(bad) + ",1,0,0\n");
+        EXPECT_NE(message(file.string()).find("badnumber.csv:2: column "), std::string::npos)
+            << bad << ": " << message(file.string());
+    }
 }
 
 TEST(StrutLattice, DensityHitsTargetMeasuredOnTheMesh)
