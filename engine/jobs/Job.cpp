@@ -2207,6 +2207,9 @@ TriangleMesh Job::pageMesh()
     options.clipToDomain = true;
     options.stage = "evaluating " + mRecipe.result + " for report.html";
     options.context = mContext;
+    // In the stacks the result's grids take (a convolution lattice: a strut's row set-up shared
+    // by eight leaves, where a leaf of this grid holds a few points of each of its ~900 struts).
+    options.stackLeaves = mStackLeaves;
     const openvdb::FloatGrid::Ptr g = evaluateSparse(*mResult, coarse, options);
     return clusterDecimate(marchingCubes(*g, 0.0f), kTriangles);
 }
