@@ -70,6 +70,30 @@ TEST(Coverage, ANarrowerBandsSamplesAreTheWiderBandsPickedInOrder)
     }
 }
 
+namespace {
+
+/// Sets the voxels of [-8, 40) x [-8, 32) x [-8, 24) in @a grid, but those @a hole(x, y, z) leaves
+/// out, to a ramp of @a slope per voxel with noise of +-0.05, one in about @a every (at random,
+/// seeded by @a seed) to @a special instead.
+template <class Hole>
+void noisyRamp(openvdb::FloatGrid& grid, unsigned seed, const std::array<float, 3>& slope, unsigned every,
+               float special, Hole hole)
+{
+    auto acc = grid.getAccessor();
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> noise(-0.05f, 0.05f);
+    for (int x = -8; x < 40; ++x)
+        for (int y = -8; y < 32; ++y)
+            for (int z = -8; z < 24; ++z) {
+                if (hole(x, y, z)) continue;
+                float v = slope[0] * float(x) + slope[1] * float(y) + slope[2] * float(z) + noise(rng);
+                if (rng() % every == 0) v = special;
+                acc.setValue(openvdb::Coord(x, y, z), v);
+            }
+}
+
+}  // namespace
+
 TEST(Coverage, TheBandSplitIsEachRegionVoxelReadVoxelByVoxel)
 {
     // splitByBand against every voxel read through the grid one by one, leaf by leaf in the
@@ -77,16 +101,8 @@ TEST(Coverage, TheBandSplitIsEachRegionVoxelReadVoxelByVoxel)
     // collected in order, NaN and those above dropped. Leaves cut by the region and leaves
     // inside it, on several threads: the same values in the same order on one thread.
     openvdb::FloatGrid grid(std::numeric_limits<float>::max());
-    auto acc = grid.getAccessor();
-    std::mt19937 rng(11);
-    std::uniform_real_distribution<float> noise(-0.05f, 0.05f);
-    for (int x = -8; x < 40; ++x)
-        for (int y = -8; y < 32; ++y)
-            for (int z = -8; z < 24; ++z) {
-                float v = 0.02f * float(x) - 0.03f * float(y) + 0.025f * float(z) + noise(rng);
-                if (rng() % 89 == 0) v = std::numeric_limits<float>::quiet_NaN();
-                acc.setValue(openvdb::Coord(x, y, z), v);
-            }
+    noisyRamp(grid, 11, {0.02f, -0.03f, 0.025f}, 89, std::numeric_limits<float>::quiet_NaN(),
+              [](int, int, int) { return false; });
     // An active tile below the band (a level-2 node's, 128^3 voxels) partly in the region.
     grid.tree().addTile(2, openvdb::Coord(-128, 0, 0), -1.0f, true);
     const openvdb::CoordBBox region(openvdb::Coord(-13, -5, -2), openvdb::Coord(35, 27, 21));
@@ -129,18 +145,12 @@ TEST(Coverage, SamplesAreEachBandVoxelsCentralDifferencesReadVoxelByVoxel)
     // leaves' buffers): the grid mixes those with leaves cut by the region, leaves with no
     // neighbour leaf on some faces, and masked voxels.
     openvdb::FloatGrid grid(std::numeric_limits<float>::max());
-    auto acc = grid.getAccessor();
-    std::mt19937 rng(7);
-    std::uniform_real_distribution<float> noise(-0.05f, 0.05f);
-    for (int x = -8; x < 40; ++x)
-        for (int y = -8; y < 32; ++y)
-            for (int z = -8; z < 24; ++z) {
-                // Holes of whole leaves: the leaf at (16, 8, 8) and the row x in [32, 40) at y < 0.
-                if ((x >= 16 && x < 24 && y >= 8 && y < 16 && z >= 8 && z < 16) || (x >= 32 && y < 0)) continue;
-                float v = 0.02f * float(x) + 0.03f * float(y) - 0.025f * float(z) + noise(rng);
-                if (rng() % 97 == 0) v = 1e30f;  // masked
-                acc.setValue(openvdb::Coord(x, y, z), v);
-            }
+    // Holes of whole leaves: the leaf at (16, 8, 8) and the row x in [32, 40) at y < 0; masked
+    // voxels (1e30).
+    noisyRamp(grid, 7, {0.02f, 0.03f, -0.025f}, 97, 1e30f, [](int x, int y, int z) {
+        return (x >= 16 && x < 24 && y >= 8 && y < 16 && z >= 8 && z < 16) || (x >= 32 && y < 0);
+    });
+    const auto acc = grid.getConstAccessor();
     const openvdb::CoordBBox region(openvdb::Coord(-3, -5, -2), openvdb::Coord(35, 27, 21));
     const float lo = -0.3f, hi = 0.6f;
     std::vector<const openvdb::FloatTree::LeafNodeType*> leaves;
