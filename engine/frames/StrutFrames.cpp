@@ -271,18 +271,17 @@ Frame readWireframe(const std::string& path)
         auto num = [&](std::size_t i) {
             const std::string_view cell = i < cells.size() ? cells[i] : std::string_view();
             // std::from_chars reads the plain decimals a file holds; what it does not take whole
-            // (a leading +, hexadecimal) goes to std::stod as before: the same doubles either way.
+            // (a leading +, hexadecimal: it stops at the x) goes to std::stod as before: the same
+            // doubles either way. A missing or empty cell fails both.
             double v = 0.0;
             const char* first = cell.data() + (cell.size() > 1 && cell[0] == '+' && cell[1] != '-' ? 1 : 0);
             const auto [end, error] = std::from_chars(first, cell.data() + cell.size(), v);
-            if (!cell.empty() && error == std::errc() && end == cell.data() + cell.size() && std::isfinite(v) &&
-                std::find_if(first, end, [](char ch) { return ch == 'x' || ch == 'X'; }) == end)
-                return v;
+            if (!cell.empty() && error == std::errc() && end == cell.data() + cell.size() && std::isfinite(v)) return v;
             try {
                 std::size_t used = 0;
                 const std::string copy(cell);
                 v = std::stod(copy, &used);
-                if (i >= cells.size() || used != copy.size() || !std::isfinite(v)) throw std::invalid_argument("");
+                if (used != copy.size() || !std::isfinite(v)) throw std::invalid_argument("");
                 return v;
             } catch (const std::exception&) {
                 throw InputError(whereAt() + ": column " + std::to_string(i + 1) + " is not a finite number");
