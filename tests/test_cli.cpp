@@ -69,11 +69,12 @@ TEST(Cli, SameBytesForAnyThreadCount)
     EXPECT_EQ(one, readFile(dir.path / "t3.stl"));
 }
 
-TEST(Cli, HugePagesAreAskedForUnlessRefusedAndChangeNoByte)
+TEST(Cli, HugePagesAreAskedForUnlessRefusedOrTheHostTakesFreedMemoryAndChangeNoByte)
 {
     // tools/HugePages.h: the launcher asks glibc for huge pages through GLIBC_TUNABLES, appended to
-    // the caller's own tunables and put back as they were; VOXLAT_NO_HUGEPAGES or a hugetlb
-    // tunable of the caller's own leaves everything as it is; the outputs are the same bytes.
+    // the caller's own tunables and put back as they were, unless the machine reports its free
+    // memory to its host; VOXLAT_NO_HUGEPAGES or a hugetlb tunable of the caller's own leaves
+    // everything as it is; the outputs are the same bytes.
     const auto saved = [](const char* name) -> std::optional<std::string> {
         const char* v = std::getenv(name);
         return v ? std::optional<std::string>(v) : std::nullopt;
@@ -84,16 +85,20 @@ TEST(Cli, HugePagesAreAskedForUnlessRefusedAndChangeNoByte)
         else
             ::unsetenv(name);
     };
-    const auto tunables = saved("GLIBC_TUNABLES"), refused = saved("VOXLAT_NO_HUGEPAGES");
+    const auto tunables = saved("GLIBC_TUNABLES"), refused = saved("VOXLAT_NO_HUGEPAGES"),
+               forced = saved("VOXLAT_HUGEPAGES");
     ::unsetenv("GLIBC_TUNABLES");
     ::unsetenv("VOXLAT_NO_HUGEPAGES");
+    ::setenv("VOXLAT_HUGEPAGES", "1", 1);  // asked even on a machine that reports free memory
     std::string previous;
     bool hadPrevious = true;
     ASSERT_TRUE(voxlat::requestHugePages(previous, hadPrevious));
     EXPECT_FALSE(hadPrevious);
     EXPECT_STREQ(std::getenv("GLIBC_TUNABLES"), "glibc.malloc.hugetlb=1");
+    EXPECT_TRUE(voxlat::mallocOnHugePages());
     voxlat::restoreTunables(previous, hadPrevious);
     EXPECT_EQ(std::getenv("GLIBC_TUNABLES"), nullptr);
+    EXPECT_FALSE(voxlat::mallocOnHugePages());
     ::setenv("GLIBC_TUNABLES", "glibc.malloc.arena_max=2", 1);
     ASSERT_TRUE(voxlat::requestHugePages(previous, hadPrevious));
     EXPECT_STREQ(std::getenv("GLIBC_TUNABLES"), "glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1");
@@ -102,17 +107,44 @@ TEST(Cli, HugePagesAreAskedForUnlessRefusedAndChangeNoByte)
     ::setenv("GLIBC_TUNABLES", "glibc.malloc.hugetlb=0", 1);
     EXPECT_FALSE(voxlat::requestHugePages(previous, hadPrevious));
     EXPECT_STREQ(std::getenv("GLIBC_TUNABLES"), "glibc.malloc.hugetlb=0");
+    EXPECT_FALSE(voxlat::mallocOnHugePages());
+    ::setenv("GLIBC_TUNABLES", "glibc.malloc.hugetlb=0:glibc.malloc.arena_max=2:glibc.malloc.hugetlb=1", 1);
+    EXPECT_TRUE(voxlat::mallocOnHugePages());  // glibc keeps the last
     ::unsetenv("GLIBC_TUNABLES");
     ::setenv("VOXLAT_NO_HUGEPAGES", "1", 1);
     EXPECT_FALSE(voxlat::requestHugePages(previous, hadPrevious));
     EXPECT_EQ(std::getenv("GLIBC_TUNABLES"), nullptr);
+    ::unsetenv("VOXLAT_NO_HUGEPAGES");
+
+    // Not forced: declined (hugetlb=0, so the engine neither asks again nor advises its blocks)
+    // where the machine reports its free memory to its host, asked elsewhere.
+    ::unsetenv("VOXLAT_HUGEPAGES");
+    const bool reported = voxlat::freePagesReportedToHost();
+    EXPECT_EQ(voxlat::requestHugePages(previous, hadPrevious), !reported);
+    EXPECT_STREQ(std::getenv("GLIBC_TUNABLES"), reported ? "glibc.malloc.hugetlb=0" : "glibc.malloc.hugetlb=1");
+    EXPECT_EQ(voxlat::mallocOnHugePages(), !reported);
+    voxlat::restoreTunables(previous, hadPrevious);
     put("GLIBC_TUNABLES", tunables);
     put("VOXLAT_NO_HUGEPAGES", refused);
+    put("VOXLAT_HUGEPAGES", forced);
+
+    // The balloon devices' feature strings: bit 5 (free page reporting) on any virtio device.
+    TempDir drivers;
+    EXPECT_FALSE(voxlat::freePagesReportedToHost((drivers.path / "absent").c_str()));
+    std::filesystem::create_directories(drivers.path / "virtio0");
+    std::filesystem::create_directories(drivers.path / "virtio3");
+    drivers.write("virtio0/features", "0110000000000000\n");
+    drivers.write("bind", "");
+    EXPECT_FALSE(voxlat::freePagesReportedToHost(drivers.path.c_str()));
+    drivers.write("virtio3/features", "01100101000000000000\n");
+    EXPECT_TRUE(voxlat::freePagesReportedToHost(drivers.path.c_str()));
+    drivers.write("virtio3/features", "01100\n");
+    EXPECT_FALSE(voxlat::freePagesReportedToHost(drivers.path.c_str()));
 
     TempDir dir;
     const auto recipe = dir.write("small.yaml", kCliRecipe);
-    ASSERT_EQ(runCommand("env -u VOXLAT_NO_HUGEPAGES " + voxlatBinary() + " mesh " + recipe.string() + " -o " +
-                         (dir.path / "huge.stl").string()),
+    ASSERT_EQ(runCommand("env -u VOXLAT_NO_HUGEPAGES VOXLAT_HUGEPAGES=1 " + voxlatBinary() + " mesh " +
+                         recipe.string() + " -o " + (dir.path / "huge.stl").string()),
               0);
     ASSERT_EQ(runCommand("env VOXLAT_NO_HUGEPAGES=1 " + voxlatBinary() + " mesh " + recipe.string() + " -o " +
                          (dir.path / "small.stl").string()),

@@ -1769,6 +1769,40 @@ TEST(StrutLattice, SparseGridMatchesBruteForce)
     EXPECT_EQ(inside, insideBrute);
 }
 
+TEST(MappedBlock, AsksForHugePagesOnlyWhileTheAdviceIsOn)
+{
+    // adviseHugePages(): the mapping's VmFlags in /proc/self/smaps hold `hg` (MADV_HUGEPAGE) while
+    // the advice is on, and not once the command line has turned it off (fresh huge pages cost
+    // more than 4 KB pages on that host).
+    const auto flagsOf = [](const void* data) {
+        std::ifstream smaps("/proc/self/smaps");
+        const auto at = reinterpret_cast<std::uintptr_t>(data);
+        std::string line;
+        bool inside = false;
+        while (std::getline(smaps, line)) {
+            std::uintptr_t lo = 0, hi = 0;
+            char dash = 0;
+            std::istringstream head(line);
+            if (head >> std::hex >> lo >> dash >> hi && dash == '-' && line.find(' ') != std::string::npos &&
+                line.find(':') > line.find(' ')) {
+                inside = lo <= at && at < hi;
+                continue;
+            }
+            if (inside && line.rfind("VmFlags:", 0) == 0) return line;
+        }
+        return std::string();
+    };
+    const bool was = hugePageAdvice();
+    for (const bool on : {true, false}) {
+        setHugePageAdvice(on);
+        MappedBlock block(MappedBlock::kHugePage);
+        const std::string flags = flagsOf(block.data());
+        ASSERT_FALSE(flags.empty());
+        EXPECT_EQ(flags.find(" hg") != std::string::npos, on) << flags;
+    }
+    setHugePageAdvice(was);
+}
+
 TEST(MappedBlock, IsWholeHugePagesOnTheirBoundaryAndMovesItsMemory)
 {
     // The memo's blocks: mapped on their own in whole 2 MB pages, so malloc_trim never cuts

@@ -11,6 +11,7 @@
 #include "engine/recipe/RecipeParams.h"
 #include "engine/recipe/Schema.h"
 #include "engine/recipe/SliceSettings.h"
+#include "fields/core/HugePageAdvice.h"
 #include "mesher/writers/AtomicFile.h"
 #include "tools/HugePages.h"
 #include "tools/TerminalProgress.h"
@@ -380,6 +381,9 @@ void keepFreedMemory()
 int main(int argc, char** argv)
 {
     useHugePages(argv);
+    // The engine's own mapped blocks follow malloc: huge pages where they were asked for, none
+    // where refused (VOXLAT_NO_HUGEPAGES, the caller's hugetlb=0, a sanitizer's allocator).
+    voxlat::setHugePageAdvice(voxlat::mallocOnHugePages());
     keepFreedMemory();
     // An installed copy reads its profiles and examples from <prefix>/share/voxlat, never from a
     // source tree.

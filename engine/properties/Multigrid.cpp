@@ -1,10 +1,7 @@
 #include "engine/properties/Multigrid.h"
 
 #include "engine/core/Errors.h"
-
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
+#include "fields/core/HugePageAdvice.h"
 
 #define VOXLAT_MG_ISA baseline
 #include "engine/properties/MultigridKernels.h"
@@ -102,7 +99,7 @@ void parallelRange(std::size_t begin, std::size_t end, std::size_t grain, const 
 constexpr int kMaxLanes = 6;
 
 /// Allocates large blocks on 2 MB boundaries and asks Linux for transparent huge pages there
-/// (MADV_HUGEPAGE): the preconditioner's work vectors, megabytes each, then take one page fault
+/// (adviseHugePages()): the preconditioner's work vectors, megabytes each, then take one page fault
 /// and one TLB entry per 2 MB instead of per 4 kB.
 template <class T>
 struct HugePages {
@@ -119,9 +116,7 @@ struct HugePages {
         if (bytes < kHuge) return static_cast<T*>(::operator new(bytes));
         const std::size_t rounded = (bytes + kHuge - 1) / kHuge * kHuge;
         void* p = ::operator new(rounded, std::align_val_t(kHuge));
-#ifdef MADV_HUGEPAGE
-        madvise(p, rounded, MADV_HUGEPAGE);
-#endif
+        adviseHugePages(p, rounded);
         return static_cast<T*>(p);
     }
     void deallocate(T* p, std::size_t n)

@@ -2,6 +2,8 @@
 /// @brief A block of memory mapped on its own, in whole transparent huge pages.
 #pragma once
 
+#include "fields/core/HugePageAdvice.h"
+
 #include <cstddef>
 #include <new>
 
@@ -12,7 +14,7 @@
 namespace voxlat {
 
 /// At least @a bytes of uninitialised memory, 2 MB aligned and mapped on their own (mmap, not
-/// malloc's heaps), with transparent huge pages asked for (MADV_HUGEPAGE); unmapped whole when
+/// malloc's heaps), with transparent huge pages asked for (adviseHugePages()); unmapped whole when
 /// the block goes. Why: memory held for a while beside a stage that frees many small blocks
 /// (a strut lattice's kept raw values beside a solve's grid) stays in whole huge pages. In
 /// malloc's heaps, the stage's malloc_trim (releaseFreedMemory()) cut the free gaps between
@@ -37,9 +39,7 @@ public:
         if (aligned > raw) ::munmap(raw, std::size_t(aligned - raw));
         const std::size_t tail = std::size_t(raw + mBytes + kHugePage - (aligned + mBytes));
         if (tail > 0) ::munmap(aligned + mBytes, tail);
-#ifdef MADV_HUGEPAGE
-        ::madvise(aligned, mBytes, MADV_HUGEPAGE);
-#endif
+        adviseHugePages(aligned, mBytes);
         mData = aligned;
 #else
         mData = ::operator new(mBytes, std::align_val_t(kHugePage));
