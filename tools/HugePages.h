@@ -40,10 +40,10 @@ inline bool freePagesReportedToHost(const char* drivers = "/sys/bus/virtio/drive
 /// fifth of the acceptance gyroid's CPU time went to page faults, and huge pages cut its CPU
 /// time by a quarter. Except where the machine reports its free memory to its host
 /// (freePagesReportedToHost()): there a fresh huge page costs more than its 4 KB pages (a
-/// Firecracker guest: 7-10 ms against 1.0-1.4 ms for 2 MB; the acceptance gyroid run alone 1.6-1.8
-/// s against 1.0 s; `bench/history.md`, twenty-seventh round), so glibc.malloc.hugetlb=0 is added
-/// instead (the engine then neither asks again nor advises its own blocks). `VOXLAT_HUGEPAGES=1`
-/// asks even there. Nothing computed changes. Returns false, changing nothing, when
+/// Firecracker guest: 7-10 ms against 1.0-1.4 ms for 2 MB; the 50 mm trimmed frame run alone
+/// 9.2-9.6 s against 6.9-8.2 s; `bench/history.md`, twenty-seventh round), so
+/// glibc.malloc.hugetlb=0 is added instead (the engine then neither asks again nor advises its
+/// own blocks). `VOXLAT_HUGEPAGES=1` asks even there. Nothing computed changes. Returns false, changing nothing, when
 /// `VOXLAT_NO_HUGEPAGES` is set or a hugetlb tunable is already there, and false after adding
 /// hugetlb=0. @a previous receives the old value (empty if none) so a failed exec can put it back.
 inline bool requestHugePages(std::string& previous, bool& hadPrevious)
