@@ -6,6 +6,7 @@
 #include "engine/jobs/Job.h"
 #include "engine/recipe/RecipeParams.h"
 #include "engine/recipe/Schema.h"
+#include "fields/core/HugePageAdvice.h"
 #include "fields/maps/VectorField.h"
 
 #include <pybind11/numpy.h>
@@ -230,6 +231,9 @@ std::shared_ptr<Job> makeJob(const Recipe& recipe, py::object progress)
 PYBIND11_MODULE(_voxlat, m)
 {
     m.doc() = "voxlat engine core: recipes, jobs, fields (see the `voxlat` package for the graph builder)";
+    // The engine's mapped blocks in huge pages, except where the host takes freed memory back
+    // (the command line decides the same, tools/HugePages.h; Python's malloc is left as it is).
+    voxlat::setHugePageAdvice(!voxlat::freePagesReportedToHost());
     static py::exception<InputError> inputError(m, "InputError", PyExc_ValueError);
     static py::exception<JobError> jobError(m, "JobError", PyExc_RuntimeError);
     static py::exception<Cancelled> cancelled(m, "Cancelled", PyExc_RuntimeError);
