@@ -254,6 +254,10 @@ PYBIND11_MODULE(_voxlat, m)
           "where printer profiles and examples are read from (an installed package sets its own)");
     m.def("data_folder", &dataFolder, "where printer profiles and examples are read from");
     m.def(
+        "huge_page_advice", [] { return voxlat::hugePageAdvice(); },
+        "whether the engine's long-held blocks ask for transparent huge pages (not where the machine reports its "
+        "free memory to its host)");
+    m.def(
         "schema", [] { return recipeSchema().dump(2); }, "the recipe language as JSON Schema text");
 
     py::class_<Recipe>(m, "Recipe", "a loaded and checked recipe")
