@@ -8,6 +8,7 @@
 #include "engine/recipe/Schema.h"
 #include "fields/core/HugePageAdvice.h"
 #include "fields/maps/VectorField.h"
+#include "tools/HugePages.h"
 
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>

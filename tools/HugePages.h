@@ -1,13 +1,45 @@
-// Shared by the `voxlat` launcher and the engine program: how they ask for huge pages.
+// Shared by the `voxlat` launcher, the engine program and the Python module: how they ask for huge
+// pages.
 #pragma once
 
-#include "fields/core/HugePageAdvice.h"
+#if defined(__linux__)
+#include <dirent.h>
+#endif
 
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <string>
 
 namespace voxlat {
+
+/// Whether this machine is a virtual machine that reports its free memory to its host
+/// (virtio-balloon with VIRTIO_BALLOON_F_REPORTING, feature bit 5, negotiated): a device under
+/// @a drivers whose `features` string (one '0' or '1' per bit) has bit 5 set. The host then takes
+/// freed guest memory back, and the first touch of a huge page is a 2 MB block it must back again.
+inline bool freePagesReportedToHost(const char* drivers = "/sys/bus/virtio/drivers/virtio_balloon")
+{
+#if defined(__linux__)
+    DIR* folder = ::opendir(drivers);
+    if (!folder) return false;
+    bool reported = false;
+    while (const dirent* entry = ::readdir(folder)) {
+        if (std::strncmp(entry->d_name, "virtio", 6) != 0) continue;
+        const std::string path = std::string(drivers) + "/" + entry->d_name + "/features";
+        if (std::FILE* file = std::fopen(path.c_str(), "r")) {
+            char bits[8] = {};
+            const std::size_t read = std::fread(bits, 1, 6, file);
+            std::fclose(file);
+            reported = reported || (read == 6 && bits[5] == '1');
+        }
+    }
+    ::closedir(folder);
+    return reported;
+#else
+    (void)drivers;
+    return false;
+#endif
+}
 
 /// Asks glibc's malloc to back its large blocks with transparent huge pages, through the
 /// GLIBC_TUNABLES variable, for the next program this process executes (glibc reads tunables

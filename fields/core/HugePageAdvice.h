@@ -1,16 +1,11 @@
 /// @file HugePageAdvice.h
-/// @brief Whether large blocks held for a while ask Linux for transparent huge pages, and whether
-/// the machine's host makes fresh huge pages cost more than 4 KB pages.
+/// @brief Whether large blocks held for a while ask Linux for transparent huge pages.
 #pragma once
 
 #include <atomic>
 #include <cstddef>
-#include <cstdio>
-#include <cstring>
-#include <string>
 
 #if defined(__linux__)
-#include <dirent.h>
 #include <sys/mman.h>
 #endif
 
@@ -24,37 +19,10 @@ inline std::atomic<bool>& hugePageAdviceFlag()
 }
 }  // namespace detail
 
-/// Whether this machine is a virtual machine that reports its free memory to its host
-/// (virtio-balloon with VIRTIO_BALLOON_F_REPORTING, feature bit 5, negotiated): a device under
-/// @a drivers whose `features` string (one '0' or '1' per bit) has bit 5 set. The host then takes
-/// freed guest memory back, and the first touch of a huge page is a 2 MB block it must back again.
-inline bool freePagesReportedToHost(const char* drivers = "/sys/bus/virtio/drivers/virtio_balloon")
-{
-#if defined(__linux__)
-    DIR* folder = ::opendir(drivers);
-    if (!folder) return false;
-    bool reported = false;
-    while (const dirent* entry = ::readdir(folder)) {
-        if (std::strncmp(entry->d_name, "virtio", 6) != 0) continue;
-        const std::string path = std::string(drivers) + "/" + entry->d_name + "/features";
-        if (std::FILE* file = std::fopen(path.c_str(), "r")) {
-            char bits[8] = {};
-            const std::size_t read = std::fread(bits, 1, 6, file);
-            std::fclose(file);
-            reported = reported || (read == 6 && bits[5] == '1');
-        }
-    }
-    ::closedir(folder);
-    return reported;
-#else
-    (void)drivers;
-    return false;
-#endif
-}
-
 /// Turns the advice on or off for the whole process (on unless set). The command line turns it
-/// off with malloc's huge pages (tools/HugePages.h), the Python module where
-/// freePagesReportedToHost(): there a fresh huge page costs more than its 4 KB pages.
+/// off with malloc's huge pages, the Python module where the machine reports its free memory to
+/// its host (tools/HugePages.h, freePagesReportedToHost(): there a fresh huge page costs more than
+/// its 4 KB pages).
 inline void setHugePageAdvice(bool on)
 {
     detail::hugePageAdviceFlag().store(on, std::memory_order_relaxed);
