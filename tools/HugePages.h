@@ -51,9 +51,10 @@ inline bool freePagesReportedToHost(const char* drivers = "/sys/bus/virtio/drive
 /// Firecracker guest: 7-10 ms against 1.0-1.4 ms for 2 MB; the 50 mm trimmed frame run alone
 /// 9.2-9.6 s against 6.9-8.2 s; `bench/history.md`, twenty-seventh round), so
 /// glibc.malloc.hugetlb=0 is added instead (the engine then neither asks again nor advises its
-/// own blocks). `VOXLAT_HUGEPAGES=1` asks even there. Nothing computed changes. Returns false, changing nothing, when
-/// `VOXLAT_NO_HUGEPAGES` is set or a hugetlb tunable is already there, and false after adding
-/// hugetlb=0. @a previous receives the old value (empty if none) so a failed exec can put it back.
+/// own blocks). `VOXLAT_HUGEPAGES=1` asks even there. Nothing computed changes. Returns true only
+/// when it added hugetlb=1 (the engine then runs itself again); false after adding hugetlb=0, and
+/// false changing nothing when `VOXLAT_NO_HUGEPAGES` is set or a hugetlb tunable is already
+/// there. @a previous receives the old value (empty if none) so a failed exec can put it back.
 inline bool requestHugePages(std::string& previous, bool& hadPrevious)
 {
     const char* tunables = std::getenv("GLIBC_TUNABLES");
