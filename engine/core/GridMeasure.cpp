@@ -24,6 +24,21 @@ std::uint64_t countTilesBelow(const openvdb::FloatGrid& grid, const openvdb::Coo
     }
     return tiles;
 }
+
+/// Calls in(v) for each of @a leaf's values inside @a region, in the leaf's order.
+template <class In>
+void forEachValueIn(const openvdb::FloatTree::LeafNodeType& leaf, const openvdb::CoordBBox& region, In&& in)
+{
+    const openvdb::CoordBBox box = leaf.getNodeBoundingBox();
+    if (!box.hasOverlap(region)) return;
+    const float* data = leaf.buffer().data();
+    if (region.isInside(box)) {
+        for (int i = 0; i < 512; ++i) in(data[i]);
+    } else {
+        for (int i = 0; i < 512; ++i)
+            if (region.isInside(leaf.offsetToGlobalCoord(i))) in(data[i]);
+    }
+}
 }  // namespace
 
 BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
@@ -36,26 +51,13 @@ BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& 
     // thread gave: a 50 mm frame's join and the vectors' allocations held one core 0.25 s).
     std::vector<std::uint64_t> belowPerLeaf(leaves.size(), 0);
     std::vector<std::size_t> offset(leaves.size() + 1, 0);
-    // Calls in(v) for each of leaf n's values in the region, in order.
-    auto forEachValue = [&](std::size_t n, auto&& in) {
-        const auto* leaf = leaves[n];
-        const openvdb::CoordBBox box = leaf->getNodeBoundingBox();
-        if (!box.hasOverlap(region)) return;
-        const float* data = leaf->buffer().data();
-        if (region.isInside(box)) {
-            for (int i = 0; i < 512; ++i) in(data[i]);
-        } else {
-            for (int i = 0; i < 512; ++i)
-                if (region.isInside(leaf->offsetToGlobalCoord(i))) in(data[i]);
-        }
-    };
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
             // Per 64 leaves: a range of the partitioner can hold half the grid.
             if (interrupt && n % 64 == 0) interrupt();
             std::uint64_t below = 0;
             std::size_t inBand = 0;
-            forEachValue(n, [&](float v) {
+            forEachValueIn(*leaves[n], region, [&](float v) {
                 below += v < lo;
                 inBand += !(v < lo) && v <= hi;
             });
@@ -72,7 +74,7 @@ BandSplit splitByBand(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& 
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
             if (interrupt && n % 64 == 0) interrupt();
             float* at = split.band.data() + offset[n];
-            forEachValue(n, [&](float v) {
+            forEachValueIn(*leaves[n], region, [&](float v) {
                 if (!(v < lo) && v <= hi) *at++ = v;
             });
         }
@@ -87,15 +89,8 @@ double distanceCoverage(const openvdb::FloatGrid& grid, const openvdb::CoordBBox
     std::vector<double> perLeaf(leaves.size(), 0.0);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
-            const auto* leaf = leaves[n];
-            const openvdb::CoordBBox box = leaf->getNodeBoundingBox();
-            if (!box.hasOverlap(region)) continue;
-            const float* data = leaf->buffer().data();
-            const bool whole = region.isInside(box);
             double sum = 0.0;
-            for (int i = 0; i < 512; ++i)
-                if (whole || region.isInside(leaf->offsetToGlobalCoord(i)))
-                    sum += std::clamp(0.5 - double(data[i]) / voxel, 0.0, 1.0);
+            forEachValueIn(*leaves[n], region, [&](float v) { sum += std::clamp(0.5 - double(v) / voxel, 0.0, 1.0); });
             perLeaf[n] = sum;
         }
     });
@@ -112,15 +107,8 @@ std::uint64_t countBelow(const openvdb::FloatGrid& grid, const openvdb::CoordBBo
     const std::uint64_t inLeaves = tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, leaves.size()), std::uint64_t(0),
         [&](const auto& range, std::uint64_t sum) {
-            for (std::size_t n = range.begin(); n != range.end(); ++n) {
-                const auto* leaf = leaves[n];
-                const openvdb::CoordBBox box = leaf->getNodeBoundingBox();
-                if (!box.hasOverlap(region)) continue;
-                const float* data = leaf->buffer().data();
-                const bool whole = region.isInside(box);
-                for (int i = 0; i < 512; ++i)
-                    if (data[i] < threshold && (whole || region.isInside(leaf->offsetToGlobalCoord(i)))) ++sum;
-            }
+            for (std::size_t n = range.begin(); n != range.end(); ++n)
+                forEachValueIn(*leaves[n], region, [&](float v) { sum += v < threshold; });
             return sum;
         },
         std::plus<>());
