@@ -67,6 +67,17 @@ TEST(Coverage, ANarrowerBandsSamplesAreTheWiderBandsPickedInOrder)
         EXPECT_EQ(std::memcmp(narrow.data(), picked.data(), narrow.size() * sizeof(CoverageSample)), 0) << nlo;
         EXPECT_EQ(countBelow(*grid, region, nlo), countBelow(*grid, region, lo) + between) << nlo;
         EXPECT_GT(between + narrow.size(), 0u);
+        // The leaves' voxels below the band counted in the samples' pass, with the tiles': every
+        // voxel of the region (cut through leaves and the outside tiles) read one by one.
+        std::uint64_t leavesBelow = 0;
+        const CoverageSamples again = coverageSamples(*grid, region, nlo, nhi, {}, &leavesBelow);
+        ASSERT_EQ(again.size(), narrow.size()) << nlo;
+        std::uint64_t oneByOne = 0;
+        const auto acc = grid->getConstAccessor();
+        for (auto it = region.begin(); it; ++it) oneByOne += acc.getValue(*it) < nlo;
+        EXPECT_GT(leavesBelow, 0u) << nlo;
+        EXPECT_EQ(countTilesBelow(*grid, region, nlo) + leavesBelow, oneByOne) << nlo;
+        EXPECT_EQ(countBelow(*grid, region, nlo), oneByOne) << nlo;
     }
 }
 

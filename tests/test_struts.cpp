@@ -686,7 +686,8 @@ TEST(StrutRows, SeededTabledRowsAddTheFilledRowsDoubles)
 {
     // A seeded tabled row takes its Gaussians from the recurrences' lanes as it steps them
     // (addStrutRowTabledSeeded*), not from fillGaussians' array: the same sums, bit for bit, in
-    // both forms, over a row's parts (runs of points, in order) from any start of the lanes.
+    // all three forms (eight lanes where the CPU has AVX-512), over a row's parts (runs of points, in order) from any
+    // start of the lanes.
     if (!hasAvx2Rows()) GTEST_SKIP() << "this CPU (or build) has no AVX2 row loop to compare";
     std::mt19937_64 rng(20261201);
     std::uniform_real_distribution<double> unit(-1.0, 1.0);
@@ -726,24 +727,30 @@ TEST(StrutRows, SeededTabledRowsAddTheFilledRowsDoubles)
         fillGaussiansScalar(lanes0, steps0, q16, nz - k0, gauss.data() + k0);
         std::vector<double> before(static_cast<std::size_t>(nz));
         for (double& v : before) v = trial % 2 ? std::abs(unit(rng)) : 0.0;
-        std::vector<double> filledS = before, filledV = before, seededS = before, seededV = before;
-        GaussianLanes lanesS{}, lanesV{};
+        std::vector<double> filledS = before, filledV = before, seededS = before, seededV = before, seeded8 = before;
+        GaussianLanes lanesS{}, lanesV{}, lanes8{};
         for (int l = 0; l < 4; ++l) {
-            lanesS.e[l] = lanesV.e[l] = lanes0[l];
-            lanesS.r[l] = lanesV.r[l] = steps0[l];
+            lanesS.e[l] = lanesV.e[l] = lanes8.e[l] = lanes0[l];
+            lanesS.r[l] = lanesV.r[l] = lanes8.r[l] = steps0[l];
         }
-        lanesS.q16 = lanesV.q16 = q16;
-        lanesS.k = lanesV.k = k0;
+        lanesS.q16 = lanesV.q16 = lanes8.q16 = q16;
+        lanesS.k = lanesV.k = lanes8.k = k0;
         for (const StrutRow& part : parts) {
             addStrutRowTabledScalar(c, part, table, gauss.data(), filledS.data());
             addStrutRowTabledAvx2(c, part, table, gauss.data(), filledV.data());
             addStrutRowTabledSeededScalar(c, part, table, lanesS, seededS.data());
             addStrutRowTabledSeededAvx2(c, part, table, lanesV, seededV.data());
+            if (hasAvx512Rows())
+                addStrutRowTabledSeededAvx512(c, part, table, lanes8, seeded8.data());
+            else
+                addStrutRowTabledSeededScalar(c, part, table, lanes8, seeded8.data());
             ASSERT_LE(lanesV.k, part.kHi) << trial;
             ASSERT_LE(lanesS.k, part.kHi) << trial;
+            ASSERT_LE(lanes8.k, part.kHi) << trial;
         }
         ASSERT_EQ(std::memcmp(filledS.data(), seededS.data(), before.size() * sizeof(double)), 0) << trial;
         ASSERT_EQ(std::memcmp(filledV.data(), seededV.data(), before.size() * sizeof(double)), 0) << trial;
+        ASSERT_EQ(std::memcmp(filledS.data(), seeded8.data(), before.size() * sizeof(double)), 0) << trial;
         for (int k = 0; k < nz; ++k) {
             ++compared;
             added += seededV[std::size_t(k)] != before[std::size_t(k)] ? 1 : 0;

@@ -8,8 +8,6 @@
 
 namespace voxlat {
 
-namespace {
-/// Voxels of active tiles inside @a region whose value is below @a threshold.
 std::uint64_t countTilesBelow(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float threshold)
 {
     std::uint64_t tiles = 0;
@@ -24,6 +22,8 @@ std::uint64_t countTilesBelow(const openvdb::FloatGrid& grid, const openvdb::Coo
     }
     return tiles;
 }
+
+namespace {
 
 /// Calls in(v) for each of @a leaf's values inside @a region, in the leaf's order.
 template <class In>

@@ -32,4 +32,7 @@ double distanceCoverage(const openvdb::FloatGrid& grid, const openvdb::CoordBBox
 /// Number of voxels in @a region whose value is below @a threshold (tiles included).
 std::uint64_t countBelow(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float threshold);
 
+/// countBelow() of the active tiles alone (no leaf voxel visited).
+std::uint64_t countTilesBelow(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float threshold);
+
 }  // namespace voxlat

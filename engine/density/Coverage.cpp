@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <functional>
 #include <memory>
@@ -115,7 +116,8 @@ void leafBand(const Leaf& leaf, openvdb::FloatGrid::ConstAccessor& acc, float lo
 /// the sub-voxel coverage estimates, in leaf order (leafBand()).
 template <class Make>
 auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
-                 const openvdb::CoordBBox& around, Make make, const std::function<void()>& interrupt)
+                 const openvdb::CoordBBox& around, Make make, const std::function<void()>& interrupt,
+                 std::uint64_t* leavesBelow = nullptr)
 {
     using Sample = decltype(make(0.0f, std::array<double, 3>{}));
     std::vector<const Leaf*> leaves;
@@ -123,21 +125,33 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
     // Two passes: each leaf's count of band voxels, then the samples written in place at the
     // leaf's offset (leaf order, as before). Per-leaf vectors joined afterwards held the band
     // twice at once: a plate's solve peaked there.
+    // The same pass counts the values below the band (integers: the same total for any split).
     std::vector<std::size_t> offset(leaves.size() + 1, 0);
+    std::atomic<std::uint64_t> below{0};
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
+        std::uint64_t rangeBelow = 0;
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
             if (interrupt && n % 64 == 0) interrupt();
             const float* data = leaves[n]->buffer().data();
             std::size_t count = 0;
             const openvdb::Coord origin = leaves[n]->origin();
-            if (region.isInside(openvdb::CoordBBox(origin, origin + openvdb::Coord(7))))
-                for (int i = 0; i < 512; ++i) count += !(data[i] < lo || data[i] > hi);
-            else
-                for (int i = 0; i < 512; ++i)
-                    count += !(data[i] < lo || data[i] > hi) && region.isInside(leaves[n]->offsetToGlobalCoord(i));
+            if (region.isInside(openvdb::CoordBBox(origin, origin + openvdb::Coord(7)))) {
+                for (int i = 0; i < 512; ++i) {
+                    count += !(data[i] < lo || data[i] > hi);
+                    rangeBelow += data[i] < lo;
+                }
+            } else {
+                for (int i = 0; i < 512; ++i) {
+                    if (!region.isInside(leaves[n]->offsetToGlobalCoord(i))) continue;
+                    count += !(data[i] < lo || data[i] > hi);
+                    rangeBelow += data[i] < lo;
+                }
+            }
             offset[n + 1] = count;
         }
+        below.fetch_add(rangeBelow, std::memory_order_relaxed);
     });
+    if (leavesBelow) *leavesBelow = below.load();
     for (std::size_t n = 0; n < leaves.size(); ++n) offset[n + 1] += offset[n];
     DefaultInitVector<Sample> all(offset.back());  // not zeroed: each sample is written below
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
@@ -169,11 +183,11 @@ double sampleCoverage(const CoverageSample& s, double level)
 
 /// Band voxels with the length of their per-voxel change, for the linear coverage estimate.
 CoverageSamples coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
-                                const std::function<void()>& interrupt)
+                                const std::function<void()>& interrupt, std::uint64_t* leavesBelow)
 {
     return bandSamples(
         grid, region, lo, hi, region, [](float v, const std::array<double, 3>& d) { return coverageSample(v, d); },
-        interrupt);
+        interrupt, leavesBelow);
 }
 
 float widestCoverageStep(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,

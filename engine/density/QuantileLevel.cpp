@@ -490,14 +490,17 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 if (covered && evaluatedLo <= wideLo && wideHi <= evaluatedHi) {
                     // Every voxel valued in the wide band is in one of the grid's leaves (tiles hold
                     // +-FLT_MAX): below it, the region's voxels below its low end, tiles included.
-                    fullyBelow = countBelow(*grid, region, wideLo);
-                    samples = coverageSamples(*grid, region, wideLo, wideHi, interrupt);
+                    // (countBelow(), its leaves counted in the samples' own pass)
+                    std::uint64_t leavesBelow = 0;
+                    samples = coverageSamples(*grid, region, wideLo, wideHi, interrupt, &leavesBelow);
+                    fullyBelow = countTilesBelow(*grid, region, wideLo) + leavesBelow;
                 } else {
                     auto wideGrid =
                         covered ? grid : evaluateSparse(GridLeavesReused(indicator, *grid, domain), domain, wide);
                     if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
-                    fullyBelow = splitByBand(*wideGrid, region, wideLo, wideHi, interrupt).below;
-                    samples = coverageSamples(*wideGrid, region, wideLo, wideHi, interrupt);
+                    std::uint64_t leavesBelow = 0;
+                    samples = coverageSamples(*wideGrid, region, wideLo, wideHi, interrupt, &leavesBelow);
+                    fullyBelow = countTilesBelow(*wideGrid, region, wideLo) + leavesBelow;
                     // The grid the samples came from is the one handed over below.
                     grid = std::move(wideGrid);
                 }

@@ -754,12 +754,12 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 }
                 // A tabled row's points a step or more inside the capsule's range skip their
                 // cut-off test where both ends of that run are proven within it. Only runs of
-                // kProvenRun points or more among the points read: the proof (two distances,
-                // scalar) costs about what the four-lane tests of three groups do, and skips only
-                // tests that pass (the same sums either way).
-                constexpr int kProvenRun = 16;
+                // provenRun points or more among the points read: the proof (two distances,
+                // scalar) costs about what the tests of three groups of lanes do (12 points in
+                // four lanes, 24 in eight), and skips only tests that pass (the same sums either way).
+                const int provenRun = avx512 ? 32 : 16;
                 if (tabled && range.inLo <= range.inHi &&
-                    std::min(range.inHi, fillHi) - std::max(range.inLo, fillLo) + 1 >= kProvenRun &&
+                    std::min(range.inHi, fillHi) - std::max(range.inLo, fillLo) + 1 >= provenRun &&
                     provenWithinCutoff(constants, row, range.inLo, range.inHi, roundoff)) {
                     row.inLo = range.inLo;
                     row.inHi = range.inHi;
@@ -846,7 +846,9 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                                                   tw[3],
                                                   nodeValue.data() + next,
                                                   nodeSlope.data() + next};
-                        if (fused)
+                        if (fused && avx512)
+                            addStrutRowTabledSeededAvx512(constants, part, table, fusedLanes, out.data() + n);
+                        else if (fused)
                             addStrutRowTabledSeededAvx2(constants, part, table, fusedLanes, out.data() + n);
                         else if (avx512)
                             addStrutRowTabledAvx512(constants, part, table, g, out.data() + n);

@@ -320,6 +320,13 @@ inline void addStrutRowTabledSeededScalar(const StrutRowConstants& s, const Stru
 void addStrutRowTabledSeededAvx2(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
                                  GaussianLanes& lanes, double* out);
 
+/// addStrutRowTabledSeededScalar with eight lanes (AVX-512F, StrutRowsAvx512.cpp): the four
+/// recurrences stepped as there, the rest as addStrutRowTabledAvx512; the same doubles, only the
+/// row's points read and written, @a lanes left at or below the row's last point. The scalar
+/// loop where the build has no AVX-512 form; call it only when hasAvx512Rows() is true.
+void addStrutRowTabledSeededAvx512(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                                   GaussianLanes& lanes, double* out);
+
 /// fillGaussiansScalar with four lanes; the same doubles.
 void fillGaussiansAvx2(const double lanes[4], const double steps[4], double q16, int count, double* gauss,
                        int from = 0);

@@ -66,6 +66,78 @@ void addStrutRowTabledAvx512(const StrutRowConstants& s, const StrutRow& row, co
     }
 }
 
+void addStrutRowTabledSeededAvx512(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                                   GaussianLanes& lanes, double* out)
+{
+    // The four recurrences stay four lanes wide (GaussianLanes::step, the same products in order);
+    // each eight-point group of the row takes three of their groups: g(K), g(K + 4) and g(K + 8),
+    // K the recurrences' group at or below the row's group, its points shift..shift + 7 of them.
+    __m256d e = _mm256_loadu_pd(lanes.e), r = _mm256_loadu_pd(lanes.r);
+    const __m256d q = _mm256_set1_pd(lanes.q16);
+    int groupK = lanes.k;
+    while (groupK + 4 <= row.kLo) {
+        e = _mm256_mul_pd(e, r);
+        r = _mm256_mul_pd(r, q);
+        groupK += 4;
+    }
+    const int shift = row.kLo - groupK;
+    const __m512i pick = _mm512_add_epi64(_mm512_set1_epi64(shift), _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7));
+    const double dxs = row.x - s.ax, dys = row.y - s.ay;
+    const __m512d hxy = _mm512_set1_pd(dxs * s.ux + dys * s.uy), lxy = _mm512_set1_pd(dxs * dxs + dys * dys);
+    const __m512d uz = _mm512_set1_pd(s.uz), az = _mm512_set1_pd(s.az), z0 = _mm512_set1_pd(row.z0);
+    const __m512d stepZ = _mm512_set1_pd(row.dz), length = _mm512_set1_pd(s.length);
+    const __m512d cutoff = _mm512_set1_pd(s.cutoffSqr), zero = _mm512_setzero_pd();
+    const __m512d lane = _mm512_setr_pd(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
+    const __m512d w00 = _mm512_set1_pd(table.w00), w10 = _mm512_set1_pd(table.w10);
+    const __m512d w01 = _mm512_set1_pd(table.w01), w11 = _mm512_set1_pd(table.w11);
+    const double* nextValue = table.nextValue ? table.nextValue : table.value + 1;
+    const double* nextSlope = table.nextSlope ? table.nextSlope : table.slope + 1;
+    const int inHi = std::min(row.inHi, row.kHi);
+    for (int k = row.kLo; k <= row.kHi; k += 8) {
+        const __m256d e4 = _mm256_mul_pd(e, r), r4 = _mm256_mul_pd(r, q);
+        const __m256d e8 = _mm256_mul_pd(e4, r4), r8 = _mm256_mul_pd(r4, q);
+        const __m512d pair = _mm512_insertf64x4(_mm512_castpd256_pd512(e), e4, 1);
+        const __m512d gauss = shift == 0 ? pair : _mm512_permutex2var_pd(pair, pick, _mm512_castpd256_pd512(e8));
+        // Left at the group of the row's last group of eight (at or below its last point).
+        if (k + 8 <= row.kHi) {
+            e = e8;
+            r = r8;
+            groupK += 8;
+        }
+        const int count = std::min(8, row.kHi - k + 1);
+        const __mmask8 live = __mmask8((1u << count) - 1u);
+        // The points proven within the cut-off (row.inLo..inHi) take no test, as in the scalar loop.
+        const int provenLo = std::max(0, row.inLo - k), provenHi = std::min(7, inHi - k);
+        const __mmask8 proven =
+            live & (provenLo <= provenHi ? __mmask8(((2u << provenHi) - 1u) & ~((1u << provenLo) - 1u)) : 0);
+        __mmask8 add = live;
+        if (proven != live) {
+            // The cut-off test (withinCutoff) of the others.
+            const __m512d kk = _mm512_add_pd(_mm512_set1_pd(double(k)), lane);
+            const __m512d dz = _mm512_sub_pd(_mm512_add_pd(z0, _mm512_mul_pd(kk, stepZ)), az);
+            const __m512d h = _mm512_add_pd(hxy, _mm512_mul_pd(dz, uz));
+            const __m512d r2 =
+                _mm512_max_pd(_mm512_sub_pd(_mm512_add_pd(lxy, _mm512_mul_pd(dz, dz)), _mm512_mul_pd(h, h)), zero);
+            const __m512d past = _mm512_maskz_sub_pd(_mm512_cmp_pd_mask(h, length, _CMP_GT_OQ), h, length);
+            const __m512d beyond = _mm512_mask_blend_pd(_mm512_cmp_pd_mask(h, zero, _CMP_LT_OQ), past, h);
+            const __m512d dist2 = _mm512_add_pd(r2, _mm512_mul_pd(beyond, beyond));
+            add = _mm512_mask_cmp_pd_mask(live, dist2, cutoff, _CMP_LT_OQ) | proven;
+            if (add == 0) continue;
+        }
+        const int n = table.n0 + k;
+        const __m512d j0 =
+            _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(w00, _mm512_maskz_loadu_pd(add, table.value + n)),
+                                                      _mm512_mul_pd(w10, _mm512_maskz_loadu_pd(add, table.slope + n))),
+                                        _mm512_mul_pd(w01, _mm512_maskz_loadu_pd(add, nextValue + n))),
+                          _mm512_mul_pd(w11, _mm512_maskz_loadu_pd(add, nextSlope + n)));
+        const __m512d before = _mm512_maskz_loadu_pd(add, out + k);
+        _mm512_mask_storeu_pd(out + k, add, _mm512_add_pd(before, _mm512_mul_pd(gauss, j0)));
+    }
+    _mm256_storeu_pd(lanes.e, e);
+    _mm256_storeu_pd(lanes.r, r);
+    lanes.k = groupK;
+}
+
 bool hasAvx512Rows()
 {
     // VOXLAT_NO_AVX512 keeps the four-lane form (to measure one against the other).
@@ -79,6 +151,12 @@ void addStrutRowTabledAvx512(const StrutRowConstants& s, const StrutRow& row, co
                              const double* gauss, double* out)
 {
     addStrutRowTabledScalar(s, row, table, gauss, out);
+}
+
+void addStrutRowTabledSeededAvx512(const StrutRowConstants& s, const StrutRow& row, const StrutRowTable& table,
+                                   GaussianLanes& lanes, double* out)
+{
+    addStrutRowTabledSeededScalar(s, row, table, lanes, out);
 }
 
 bool hasAvx512Rows()
