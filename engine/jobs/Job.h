@@ -288,6 +288,11 @@ private:
         double indicatorLevel = 0.0;
         double slope = 0.0;
         double achieved = 0.0;
+        /// Measured on the job's own voxels (the domain, or a mask of it, at the job's voxel; not
+        /// a period's pieces at another voxel, a coarse trial or a box that leaves voxels out):
+        /// what the mesh's share is predicted from (estimateMeshOffset()).
+        bool onJobVoxels = false;
+        bool coverage = false;  ///< measured with sub-voxel coverage, not a count
     };
     std::map<std::string, SolvedDensity> mSolvedDensity;
     bool mMeshAimed = false;

@@ -26,8 +26,8 @@ void LevelSolid::solve(double level)
 
 void LevelSolid::correct(double level)
 {
-    if (!mSolved || mCorrections >= 2)
-        throw std::logic_error("LevelSolid::correct: only a solved level is corrected, at most twice");
+    if (!mSolved || mCorrections >= 3)
+        throw std::logic_error("LevelSolid::correct: only a solved level is corrected, at most three times");
     mLevel = level;
     ++mCorrections;
 }

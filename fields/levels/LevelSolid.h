@@ -44,8 +44,9 @@ public:
     }
     /// Gives an unsolved() solid its level (the density solve's result); once only.
     void solve(double level);
-    /// Moves a solved level, at most twice (the job's aim at the mesh's share after measuring the
-    /// grid the solved level gives, and its secant step after measuring the moved one). Called
+    /// Moves a solved level, at most three times (the job's aim at the mesh's share: to the level
+    /// its prediction gives, after measuring the first grid, and its secant step after measuring
+    /// the moved one). Called
     /// between evaluations, never during one: no node keeps values that depend on the level
     /// (tables and caches live below the solid).
     void correct(double level);
