@@ -992,7 +992,7 @@ void Job::aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::pat
         return m;
     };
     // The share the first mesh will hold, predicted before its grid is made (estimateMeshOffset():
-    // marching cubes' offset from the solve's sub-voxel coverage, sampled on about
+    // marching cubes' offset from the solve's measure of the voxels, sampled on about
     // kMeshOffsetBoxes boxes of the grid): where it misses the target by more than half the
     // tolerance, the level moves along the solve's slope first, so the grid and its mesh are made
     // once at a level whose mesh holds the target, not at the solved level and again (the 50 mm
