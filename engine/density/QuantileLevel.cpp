@@ -466,7 +466,6 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             // without those (a 50 mm frame's 0.3 GB) held beside the grid and the raw values kept
             // for it. Of the bracket's, only their widest step is needed first: not held.
             DefaultInitVector<float>().swap(band);  // the count's values: not read past here
-            const float evaluatedLo = float(evaluated.band.lo), evaluatedHi = float(evaluated.band.hi);
             CoverageSamples samples;
             double a = options.band.lo, b = std::min(options.band.hi, 1e30);
             std::uint64_t fullyBelow = below;
@@ -487,23 +486,17 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                 // The level is bisected in the wide band below.
                 if (levelWithin) levelWithin(wide.band);
                 const float wideLo = float(wide.band.lo), wideHi = float(wide.band.hi);
-                if (covered && evaluatedLo <= wideLo && wideHi <= evaluatedHi) {
-                    // Every voxel valued in the wide band is in one of the grid's leaves (tiles hold
-                    // +-FLT_MAX): below it, the region's voxels below its low end, tiles included.
-                    // (countBelow(), its leaves counted in the samples' own pass)
-                    std::uint64_t leavesBelow = 0;
-                    samples = coverageSamples(*grid, region, wideLo, wideHi, interrupt, &leavesBelow);
-                    fullyBelow = countTilesBelow(*grid, region, wideLo) + leavesBelow;
-                } else {
-                    auto wideGrid =
-                        covered ? grid : evaluateSparse(GridLeavesReused(indicator, *grid, domain), domain, wide);
-                    if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
-                    std::uint64_t leavesBelow = 0;
-                    samples = coverageSamples(*wideGrid, region, wideLo, wideHi, interrupt, &leavesBelow);
-                    fullyBelow = countTilesBelow(*wideGrid, region, wideLo) + leavesBelow;
-                    // The grid the samples came from is the one handed over below.
-                    grid = std::move(wideGrid);
-                }
+                // Every voxel valued in the wide band is in one of the measured grid's leaves
+                // (tiles hold +-FLT_MAX): below it, the region's voxels below its low end, tiles
+                // included (countBelow(), its leaves counted in the samples' own pass).
+                auto wideGrid =
+                    covered ? grid : evaluateSparse(GridLeavesReused(indicator, *grid, domain), domain, wide);
+                if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
+                std::uint64_t leavesBelow = 0;
+                samples = coverageSamples(*wideGrid, region, wideLo, wideHi, interrupt, &leavesBelow);
+                fullyBelow = countTilesBelow(*wideGrid, region, wideLo) + leavesBelow;
+                // The grid the samples came from is the one handed over below.
+                grid = std::move(wideGrid);
                 a = wide.band.lo;
                 b = wide.band.hi;
             } else {

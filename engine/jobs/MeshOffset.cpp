@@ -8,7 +8,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <stdexcept>
 #include <vector>
 
 namespace voxlat {
@@ -61,16 +60,15 @@ MeshOffset estimateMeshOffset(const FieldNode& result, const Domain& domain, int
     const openvdb::CoordBBox deepInside(openvdb::Coord(1), domain.dims - openvdb::Coord(2));
     const openvdb::CoordBBox domainIndex = domain.indexBox();
     const BoxField clip(domain.box);
+    // The boxes' origins: from floorToSide(-1) to dims - 1 on each axis (meshOffsetBoxes()).
     std::vector<openvdb::Coord> sample;
     const int first = floorToSide(-1);
     for (int x = first; x <= region.max().x() - 1; x += kSide)
         for (int y = first; y <= region.max().y() - 1; y += kSide)
-            for (int z = first; z <= region.max().z() - 1; z += kSide) {
-                ++m.boxes;
+            for (int z = first; z <= region.max().z() - 1; z += kSide)
                 if (placeHash(openvdb::Coord(x, y, z)) % std::uint64_t(every) == 0) sample.emplace_back(x, y, z);
-            }
+    m.boxes = meshOffsetBoxes(domain);
     m.sampled = sample.size();
-    if (m.boxes != meshOffsetBoxes(domain)) throw std::logic_error("estimateMeshOffset: box count");
     // Each sampled box's points as the grid would hold them (floats) with the ring around them:
     // the 9^3 for its mesh, and their sub-voxel coverage as the density solve measures it
     // (1/2 - value / step, the step the length of the central differences).
@@ -156,7 +154,6 @@ MeshOffset estimateMeshOffset(const FieldNode& result, const Domain& domain, int
     auto acc = grid->getAccessor();
     double offset = 0.0;
     for (std::size_t n = 0; n < sample.size(); ++n) {
-        m.evaluated += std::uint64_t(evaluated[n]);
         if (!evaluated[n]) continue;
         if (!crossed[n]) {
             const bool inside = values[n][0] < 0.0f;
