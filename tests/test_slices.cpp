@@ -201,12 +201,15 @@ std::vector<ConvolutionStrut> gradedBccStruts(double cell, double sigma, double 
 
 /// gradedBccStruts() (2 mm cells, sigma 0.2, level 1) as the engine builds a strut lattice: the
 /// convolution re-expressed as an isolated strut's radius (IsoRadius), the solid below the
-/// level's radius.
-std::shared_ptr<LevelSolid> gradedStrutLattice(const Vec3d& centre, double reach, int nx, int ny, int nz)
+/// level's radius. Its planes' columns are all exact (gridValues' doubles) unless @a
+/// planeTolerance is set (StrutConvolution::setPlaneTolerance; the engine's default interpolates).
+std::shared_ptr<LevelSolid> gradedStrutLattice(const Vec3d& centre, double reach, int nx, int ny, int nz,
+                                               double planeTolerance = 0.0)
 {
     const double sigma = 0.2, level = 1.0;
     auto convolution =
         std::make_shared<StrutConvolution>(gradedBccStruts(2.0, sigma, level, centre, reach, nx, ny, nz));
+    convolution->setPlaneTolerance(planeTolerance);
     const double peak = gaussianStrutWeight(0.3, sigma, level) * sigma * std::sqrt(2.0 * std::numbers::pi);
     auto iso = std::make_shared<IsoRadius>(convolution, peak, sigma, 2.0 * convolution->cutoffRadius(0));
     return std::make_shared<LevelSolid>(iso, SolidSide::Below, iso->radiusOf(level));
@@ -447,6 +450,81 @@ TEST(Slices, UnboundedBlocksWriteTheBytesOfBoundedOnes)
     EXPECT_GT(greyPixels, 1000u);
 }
 
+TEST(Slices, InterpolatedColumnsMissTheExactPlaneByLessThanTheirBound)
+{
+    // The raw convolution of a graded BCC lattice (radii 0.15 -> 0.3 mm, sigma 0.2) on planes at
+    // the Saturn 4's pitch: a block (66 x 66) and a stack of four (66 x 258). With the default
+    // tolerance, planeValues takes two columns in three from their neighbours (ColumnStencils);
+    // at every point of the open tiles and their halo the values must lie within the bound
+    // ColumnStencils.h states of the exact plane's (tolerance 0: gridValues' doubles): K sum_j
+    // peak_j exp(-d_j^2 / 4 sigma^2), d_j strut j's distance to the stencil's span, plus
+    // (1 + 2.5) eps peak_j for each strut whose cut-off reaches the span. The tiles' sides are
+    // the exact plane's.
+    const double sigma = 0.2, level = 1.0, px = 0.019, py = 0.024;
+    const auto struts = gradedBccStruts(2.0, sigma, level, Vec3d(3.0), 4.0, 3, 3, 3);
+    StrutConvolution interpolated(struts), exact(struts);
+    exact.setPlaneTolerance(0.0);
+    ASSERT_EQ(interpolated.planeTolerance(), StrutConvolution::kPlaneTolerance);
+    const double span = 7 * 3 * px;  // a stencil's nodes lie within 7 strides of its column
+    double worst = 0.0, worstSmooth = 0.0, worstShare = 0.0;
+    int open = 0;
+    for (const int rows : {66, 258})
+        for (const Vec3d origin : {Vec3d(2.1, 2.3, 1.025), Vec3d(3.3, 2.9, 3.475), Vec3d(0.45, 0.4, 0.975)}) {
+            GridBatch plane;
+            plane.origin = origin;
+            plane.spacing = Vec3d(px, py, 1.0);
+            plane.nx = 66;
+            plane.ny = rows;
+            plane.nz = 1;
+            const PlaneTiles tiles = PlaneTiles::of(plane, 8);
+            std::vector<double> a(plane.size()), b(plane.size());
+            std::vector<signed char> sideA(tiles.size()), sideB(tiles.size());
+            interpolated.planeValues(plane, 8, Interval{level, level}, a, sideA, {});
+            exact.planeValues(plane, 8, Interval{level, level}, b, sideB, {});
+            ASSERT_EQ(sideA, sideB);
+            for (int ta = 0; ta < tiles.nx; ++ta)
+                for (int tb = 0; tb < tiles.ny; ++tb) {
+                    if (sideA[std::size_t(ta) * tiles.ny + tb] != 0) continue;
+                    ++open;
+                    for (int i = 8 * ta; i <= 8 * ta + 9; ++i)
+                        for (int j = 8 * tb; j <= 8 * tb + 9; ++j) {
+                            const Vec3d p = plane.point(i, j, 0);
+                            double smooth = 0.0, steps = 0.0;
+                            for (std::size_t n = 0; n < interpolated.strutCount(); ++n) {
+                                double h, r2;
+                                const double d = std::sqrt(interpolated.segment(n).distanceSqr(p, h, r2));
+                                const double near = std::max(0.0, d - span);
+                                smooth += StrutConvolution::kPlaneTolerance * interpolated.peak(n) *
+                                          std::exp(-near * near / (4.0 * sigma * sigma));
+                                // A cut-off sphere that crosses the stencil's span (the distance
+                                // moves by at most the span along it).
+                                if (std::abs(d - interpolated.cutoffRadius(n)) <= span)
+                                    steps += 3.5 * interpolated.cutoffEpsilon() * interpolated.peak(n);
+                            }
+                            const std::size_t at = std::size_t(i) * plane.ny + j;
+                            const double miss = std::abs(a[at] - b[at]);
+                            ASSERT_LE(miss, smooth + steps) << "origin " << origin << " point " << i << ", " << j;
+                            worst = std::max(worst, miss);
+                            if (steps == 0.0) {
+                                worstSmooth = std::max(worstSmooth, miss);
+                                worstShare = std::max(worstShare, miss / smooth);
+                            }
+                        }
+                }
+        }
+    EXPECT_GT(open, 300);
+    // Measured (the level 1, peaks about 3): the worst miss 3.5e-4, by the cut-offs' steps (a
+    // strut's 1e-4 of its peak dropped on one side of its sphere, not the other); away from
+    // them 5.6e-6, 1 % of the bound.
+    EXPECT_GT(worstSmooth, 0.0);
+    EXPECT_LT(worstSmooth, 2e-5);
+    EXPECT_LT(worst, 1e-3);
+    std::printf(
+        "interpolated columns: worst miss %.3g (%.3g away from the cut-offs' steps, %.3g of its bound), "
+        "%d open tiles\n",
+        worst, worstSmooth, worstShare, open);
+}
+
 TEST(Slices, StrutPlanesLeaveOutOnlyTilesProvenOnOneSide)
 {
     // A graded BCC lattice (radii 0.15 -> 0.3 mm from the centre) as the engine builds it
@@ -515,50 +593,56 @@ TEST(Slices, ALatticeTrimmedByAShapeWithoutBandsIsAskedForItsPlanesOnce)
 TEST(Slices, StackedBlocksWriteTheBytesOfBlocksAlone)
 {
     // Radii graded from the middle in 3-D (nothing repeats, no row copied) at the Saturn 4's pitch
-    // (19 x 24 um). (1) A plane batch of four whole blocks one above another (a stack, what the
-    // slicer asks for) gives each block's tile sides, and on its open tiles and their halo the
-    // block's own values to within rounding (the points' coordinates are origin + j spacing from
-    // another origin). (2) Layers sliced with stacks of up to 8 blocks are the bytes of blocks
-    // evaluated alone (RasterOptions::stackBlocks 1), made where the slicer stops bounding blocks.
+    // (19 x 24 um), every column exact. (1) A plane batch of two columns of four whole blocks one
+    // above another (a stack, what the slicer asks for) gives each block's tile sides, and on its
+    // open tiles and their halo the block's own values to within rounding (the points'
+    // coordinates are origin + i spacing from another origin). (2) Layers sliced with stacks of
+    // up to 8 blocks, two across, are the bytes of blocks evaluated alone (RasterOptions::
+    // stackBlocks 1), made where the slicer stops bounding blocks.
     const auto lattice = gradedStrutLattice(Vec3d(3.0, 6.0, 1.0), 6.0, 3, 6, 1);
     const double px = 0.019, py = 0.024;
     GridBatch tall;
     tall.origin = Vec3d(1.1, 2.3, 1.025);
     tall.spacing = Vec3d(px, py, 1.0);
-    tall.nx = 66;
+    tall.nx = 2 * 64 + 2;
     tall.ny = 4 * 64 + 2;
     tall.nz = 1;
     std::vector<double> stackValues(tall.size()), blockValues(66 * 66);
-    std::vector<signed char> stackSides(8 * 32), blockSides(64);
+    std::vector<signed char> stackSides(16 * 32), blockSides(64);
     planeValuesOf(*lattice, tall, 8, Interval{0.0, 0.0}, stackValues, stackSides, {});
     int open = 0, proven = 0;
     double worst = 0.0;
-    for (int m = 0; m < 4; ++m) {
-        GridBatch block = tall;
-        block.origin = Vec3d(tall.origin.x(), tall.origin.y() + 64 * m * py, tall.origin.z());
-        block.ny = 66;
-        planeValuesOf(*lattice, block, 8, Interval{0.0, 0.0}, blockValues, blockSides, {});
-        for (int a = 0; a < 8; ++a)
-            for (int b = 0; b < 8; ++b) {
-                const signed char side = stackSides[std::size_t(a) * 32 + 8 * m + b];
-                ASSERT_EQ(side, blockSides[std::size_t(a) * 8 + b]) << "block " << m << " tile " << a << ", " << b;
-                if (side != 0) {
-                    ++proven;
-                    continue;
-                }
-                ++open;
-                for (int i = 8 * a; i <= 8 * a + 9; ++i)
-                    for (int j = 8 * b; j <= 8 * b + 9; ++j) {
-                        const double v = blockValues[std::size_t(i) * 66 + j];
-                        worst = std::max(worst, std::abs(stackValues[std::size_t(i) * tall.ny + 64 * m + j] - v));
+    for (int across = 0; across < 2; ++across)
+        for (int m = 0; m < 4; ++m) {
+            GridBatch block = tall;
+            block.origin = Vec3d(tall.origin.x() + 64 * across * px, tall.origin.y() + 64 * m * py, tall.origin.z());
+            block.nx = block.ny = 66;
+            planeValuesOf(*lattice, block, 8, Interval{0.0, 0.0}, blockValues, blockSides, {});
+            for (int a = 0; a < 8; ++a)
+                for (int b = 0; b < 8; ++b) {
+                    const signed char side = stackSides[std::size_t(a + 8 * across) * 32 + 8 * m + b];
+                    ASSERT_EQ(side, blockSides[std::size_t(a) * 8 + b])
+                        << "block " << across << ", " << m << " tile " << a << ", " << b;
+                    if (side != 0) {
+                        ++proven;
+                        continue;
                     }
-            }
-    }
-    EXPECT_GT(open, 40);  // of 256 tiles
-    EXPECT_GT(proven, 20);
+                    ++open;
+                    for (int i = 8 * a; i <= 8 * a + 9; ++i)
+                        for (int j = 8 * b; j <= 8 * b + 9; ++j) {
+                            const double v = blockValues[std::size_t(i) * 66 + j];
+                            worst = std::max(
+                                worst, std::abs(stackValues[std::size_t(i + 64 * across) * tall.ny + 64 * m + j] - v));
+                        }
+                }
+        }
+    EXPECT_GT(open, 80);  // of 512 tiles
+    EXPECT_GT(proven, 40);
     // mm of iso-radius (values 0 .. 1.7 mm): the stack's Gaussians run by recurrence over longer
-    // rows (a few ulps more drift). Measured: 1.2e-13 (74 open tiles, 182 proven outside).
-    EXPECT_LT(worst, 1e-11);
+    // rows (a few ulps more drift), and its right column's seeds across columns are taken afresh at
+    // other columns; the map to a radius steepens near a strut's axis. Measured: 1.2e-13 in the
+    // left column (74 of 256 tiles open, 182 proven outside), 4.3e-10 in the right.
+    EXPECT_LT(worst, 2e-9);
 
     Display d = testDisplay(px, 360, 560);
     d.heightMm = py * d.pixelsY;
@@ -860,8 +944,11 @@ outputs: {slices: {printer: saturn4, layer: 0.1, file: struts.goo, reuse: off, p
 
 namespace {
 /// Layers of @a field sliced within @a box on @a d (offset @a offset) with the slicer's repeat
-/// copies on and off: at most 2 pixels apart by one grey level (measured: 0), every copied pixel
-/// counted, and some exposed.
+/// copies on and off: no pixel more than one grey level apart and at most 4 % of the grey ones
+/// by one (a copied pixel's source lies elsewhere in its block, where a strut plane's columns
+/// are interpolated from other nodes: ColumnStencils; measured up to 2.2 %, 0 with every column
+/// exact),
+/// every copied pixel counted, and some exposed.
 void expectCopiesComputed(const FieldNode& field, const Box3& box, const Display& d, double offset)
 {
     RasterOptions off;
@@ -880,12 +967,15 @@ void expectCopiesComputed(const FieldNode& field, const Box3& box, const Display
         ASSERT_EQ(a.pixels.size(), b.pixels.size());
         EXPECT_EQ(copied.pixelsCopied.load(), copies);
         EXPECT_EQ(computed.pixelsCopied.load(), 0u);
-        std::size_t differing = 0, large = 0;
+        std::size_t differing = 0, large = 0, grey = 0;
         for (std::size_t k = 0; k < a.pixels.size(); ++k) {
             differing += a.pixels[k] != b.pixels[k];
             large += std::abs(int(a.pixels[k]) - int(b.pixels[k])) > 1;
+            grey += b.pixels[k] != 0 && b.pixels[k] != 255;
         }
-        EXPECT_LE(differing, 2u) << "z " << z;  // measured: 0
+        std::printf("copies against computed pixels, z %g: %zu of %zu grey pixels differ by one level\n", z, differing,
+                    grey);
+        EXPECT_LE(double(differing), 0.04 * double(grey)) << "z " << z;
         EXPECT_EQ(large, 0u) << "z " << z;
         EXPECT_GT(a.exposedPixels(), 0.05 * double(a.pixels.size())) << "z " << z;
     }

@@ -17,6 +17,7 @@
 #include "fields/levels/LevelSolid.h"
 #include "fields/maps/PeriodicTiling.h"
 #include "fields/shapes/Sphere.h"
+#include "fields/struts/ColumnStencils.h"
 #include "fields/struts/GaussianTable.h"
 #include "fields/struts/IsoRadius.h"
 #include "fields/struts/IsoRadiusAvx2.h"
@@ -2581,4 +2582,74 @@ TEST(StrutIndex, SegmentBoxDistanceIsTheExactMinimum)
         // Within half a sample step of the true minimum (the distance is 1-Lipschitz).
         ASSERT_GE(d, sampled - 0.5 * (b - a).length() / samples - 1e-9) << "case " << n;
     }
+}
+
+TEST(ColumnStencils, ReproduceDegreeSevenAndMissAGaussianByLessThanTheirBound)
+{
+    // (1) C8: sqrt(2) max |He8(t)| exp(-t^2 / 4) on a fine grid is below kEighthDerivativeBound
+    // (and within 0.1 % of it: the constant is the bound, not a loose one).
+    double he8Max = 0.0;
+    for (int n = -200000; n <= 200000; ++n) {
+        const double t = n * 6e-5, t2 = t * t;
+        const double he8 = (((t2 - 28.0) * t2 + 210.0) * t2 - 420.0) * t2 + 105.0;
+        he8Max = std::max(he8Max, std::abs(he8) * std::exp(-0.25 * t2));
+    }
+    EXPECT_LE(std::sqrt(2.0) * he8Max, kEighthDerivativeBound);
+    EXPECT_GT(std::sqrt(2.0) * he8Max, 0.999 * kEighthDerivativeBound);
+    // (2) The Saturn 4's 19 um columns and sigma 0.2: nodes every 3 columns, 30 of 66 exact (the
+    // 22 nodes, the two past the last, and two intervals at each end whose one-sided stencils
+    // bound too loosely), every stencil within the tolerance.
+    const double dx = 0.019, sigma = 0.2, tolerance = StrutConvolution::kPlaneTolerance;
+    const ColumnStencils s = columnStencils(66, dx, sigma, tolerance);
+    EXPECT_EQ(s.stride, 3);
+    EXPECT_EQ(s.exactCount(), 30u);
+    EXPECT_GT(s.worst, 0.0);
+    EXPECT_LE(s.worst, tolerance);
+    // Kernels narrower against the columns interpolate nothing.
+    EXPECT_EQ(columnStencils(66, dx, 0.05, tolerance).stride, 1);
+    EXPECT_EQ(columnStencils(66, dx, 0.05, tolerance).exactCount(), 66u);
+    // (3) Every interpolated column reproduces a polynomial of degree 7 and sums its weights' |.|
+    // to at most 2.5; (4) on a strut across the columns (F = peak exp(-(x - x0)^2 / 2 sigma^2),
+    // one unit peak near), no column misses by more than its K, and the worst misses by more than
+    // a tenth of it (the bound is the error's size).
+    const int ny = 3, tile = 8;
+    std::vector<double> poly(66 * ny), gauss(66 * ny);
+    auto p7 = [](double x) {
+        return ((((((0.3 * x - 1.1) * x + 0.7) * x - 2.0) * x + 0.5) * x - 1.0) * x + 3.0) * x - 4.0;
+    };
+    const double x0 = 0.331;
+    for (int i = 0; i < 66; ++i)
+        for (int k = 0; k < ny; ++k) {
+            const double x = i * dx + 0.001 * k;
+            poly[std::size_t(i) * ny + k] = s.first[std::size_t(i)] < 0 ? p7(i * 0.05 + k) : 0.0;
+            gauss[std::size_t(i) * ny + k] =
+                s.first[std::size_t(i)] < 0 ? std::exp(-(x - x0) * (x - x0) / (2.0 * sigma * sigma)) : 0.0;
+        }
+    const std::vector<std::uint64_t> tiles(66, 1);  // tile 0: points 0 .. 9 (the 3 points here)
+    interpolateColumns(s, ny, tiles.data(), tile, poly.data());
+    interpolateColumns(s, ny, tiles.data(), tile, gauss.data());
+    double worstRatio = 0.0;
+    for (int i = 0; i < 66; ++i) {
+        const int f = s.first[std::size_t(i)];
+        if (f < 0) continue;
+        double lebesgue = 0.0, product = 1.0;
+        for (int l = 0; l < 8; ++l) {
+            lebesgue += std::abs(s.weights[std::size_t(i)][std::size_t(l)]);
+            product *= double(i - (f + l * s.stride)) / s.stride;
+        }
+        EXPECT_LE(lebesgue, 2.5) << "column " << i;
+        const double k = std::abs(product) * std::pow(s.stride * dx / sigma, 8) * kEighthDerivativeBound / 40320.0;
+        EXPECT_LE(k, s.worst * (1.0 + 1e-12));
+        for (int r = 0; r < ny; ++r) {
+            const double x = i * dx + 0.001 * r;
+            EXPECT_NEAR(poly[std::size_t(i) * ny + r], p7(i * 0.05 + r),
+                        1e-9 * std::max(1.0, std::abs(p7(i * 0.05 + r))))
+                << "column " << i;
+            const double miss =
+                std::abs(gauss[std::size_t(i) * ny + r] - std::exp(-(x - x0) * (x - x0) / (2.0 * sigma * sigma)));
+            EXPECT_LE(miss, k) << "column " << i << " point " << r;
+            worstRatio = std::max(worstRatio, miss / k);
+        }
+    }
+    EXPECT_GT(worstRatio, 0.1);
 }

@@ -1,5 +1,6 @@
 #include "fields/struts/StrutConvolution.h"
 
+#include "fields/struts/ColumnStencils.h"
 #include "fields/struts/StrutRows.h"
 
 #include <algorithm>
@@ -329,6 +330,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         return (bHi == 63 ? ~std::uint64_t(0) : (std::uint64_t(1) << (bHi + 1)) - 1) & ~((std::uint64_t(1) << bLo) - 1);
     };
     thread_local std::vector<double> rangeLo, rangeHi;
+    thread_local std::vector<int> rangeColumns;
     const bool avx2 = hasAvx2Rows();
     // The tabled rows in eight lanes where the CPU has AVX-512 (the same doubles; the other
     // row loops stay four lanes wide).
@@ -394,7 +396,25 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         // columns at a time (the same doubles), at column i - iFirst of row jj's run of columns.
         const bool vectorRanges = avx2 && ranged && !shortRows && iFirst <= iLast;
         const std::size_t rangeRun = std::size_t(iLast - iFirst + 1) + 4;
-        if (vectorRanges) {
+        if (vectorRanges && columnTiles && ny == 1) {
+            // A plane's columns that make points (columnTiles: every third where planeValues
+            // interpolates the others), four at a time: each column's range is the same doubles.
+            rangeLo.resize(rangeRun);
+            rangeHi.resize(rangeRun);
+            rangeColumns.clear();
+            for (int i = iFirst; i <= iLast; ++i)
+                if (columnTiles[i] != 0) rangeColumns.push_back(i);
+            for (std::size_t m = 0; m < rangeColumns.size(); m += 4) {
+                double x[4], lo[4], hi[4];
+                const std::size_t count = std::min<std::size_t>(4, rangeColumns.size() - m);
+                for (std::size_t l = 0; l < 4; ++l) x[l] = d0.x() + rangeColumns[m + std::min(l, count - 1)] * dx;
+                capsuleRowRangesAvx2(capsule, x, d0.y(), d0.z(), lo, hi);
+                for (std::size_t l = 0; l < count; ++l) {
+                    rangeLo[std::size_t(rangeColumns[m + l] - iFirst)] = lo[l];
+                    rangeHi[std::size_t(rangeColumns[m + l] - iFirst)] = hi[l];
+                }
+            }
+        } else if (vectorRanges) {
             const std::size_t count = std::size_t(iLast - iFirst + 1);
             rangeLo.resize(rangeRun * std::size_t(ny));
             rangeHi.resize(rangeRun * std::size_t(ny));
@@ -1071,16 +1091,46 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
     // its rows' ranges are sought (on W10's plate, struts whose reach of the plane lies where
     // every tile is proven outside). Tested on the box of tiles it reaches, a superset.
     kept = 0;
+    double sigmaMin = std::numeric_limits<double>::infinity();
     for (std::size_t n = 0; n < cand.size(); ++n) {
         const int* r = &reach[4 * n];
         const std::uint64_t bits =
             (r[3] >= 63 ? ~std::uint64_t(0) : (std::uint64_t(2) << r[3]) - 1) & ~((std::uint64_t(1) << r[2]) - 1);
         bool meets = false;
         for (int a = r[0]; a <= r[1] && !meets; ++a) meets = (openTiles[std::size_t(a)] & bits) != 0;
-        if (meets) cand[kept++] = cand[n];
+        if (meets) {
+            sigmaMin = std::min(sigmaMin, mSegments[cand[n]].sigma);
+            cand[kept++] = cand[n];
+        }
     }
     cand.resize(kept);
-    evaluate(plane, out, cand, columnTiles.data(), tile);
+    // Columns between exact ones interpolated along x where the proven bound allows
+    // (ColumnStencils.h: below mPlaneTolerance of the peaks near, sigma the least of the struts
+    // kept): the nodes take the points their interpolated neighbours need as well.
+    thread_local ColumnStencils stencils;
+    thread_local std::vector<double> stencilKey;
+    const bool interpolated = mPlaneTolerance > 0.0 && kept > 0;
+    if (interpolated && (stencilKey.size() != 3 || stencilKey[0] != double(plane.nx) || stencilKey[1] != dx ||
+                         stencilKey[2] != sigmaMin)) {
+        stencils = columnStencils(plane.nx, dx, sigmaMin, mPlaneTolerance);
+        stencilKey = {double(plane.nx), dx, sigmaMin};
+    }
+    if (!interpolated || stencils.stride < 2) {
+        evaluate(plane, out, cand, columnTiles.data(), tile);
+        return;
+    }
+    thread_local std::vector<std::uint64_t> nodeTiles;
+    nodeTiles.assign(std::size_t(plane.nx), 0);
+    for (int i = 0; i < plane.nx; ++i) {
+        const int f = stencils.first[std::size_t(i)];
+        if (f < 0) {
+            nodeTiles[std::size_t(i)] |= columnTiles[std::size_t(i)];
+            continue;
+        }
+        for (int l = 0; l < 8; ++l) nodeTiles[std::size_t(f + l * stencils.stride)] |= columnTiles[std::size_t(i)];
+    }
+    evaluate(plane, out, cand, nodeTiles.data(), tile);
+    interpolateColumns(stencils, plane.ny, columnTiles.data(), tile, out.data());
 }
 
 Interval StrutConvolution::bound(const Box3& box) const

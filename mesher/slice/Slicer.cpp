@@ -460,11 +460,18 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     // (this call's own: a field's evaluation may run another layer on this thread).
     struct BlockStack {
         int bi = -1, bj = 0, rows = 0;  ///< window column and row of its first block, rows held
-        std::vector<double> values;     ///< (block + 2) x (rows + 2), as a plane batch's
+        int columns = 1;                ///< blocks across
+        std::vector<double> values;     ///< (columns block + 2) x (rows + 2), as a plane batch's
         std::vector<signed char> sides;
+        bool holds(int i, int j, int block) const
+        {
+            return bi >= 0 && i >= bi && i < bi + columns * block && j >= bj && j < bj + rows;
+        }
     };
     std::vector<BlockStack> stacks(std::size_t(mNx / block + 1));
     const int stackBlocks = std::clamp(mOptions.stackBlocks, 1, 8);
+    const int stackColumns = std::clamp(mOptions.stackColumns, 1, 4);
+    int columnLimit = mNx;   // columns [.., columnLimit) are made by the current rasterBlocks call
     int rowLimit = mNy;      // rows [.., rowLimit) are made by the current rasterRows call
     bool stackable = false;  // the block being decided may make a stack (rasterBlocks)
     auto decideBlock = [&](int bi, int bj, int bnx, int bny, int side) {
@@ -514,8 +521,14 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
             // lattice that fills the window, whose blocks below will be evaluated too); where
             // blocks are culled or split into quarters (a TPMS sheet, 3x the CPU when every
             // block made a stack) their values would go unused.
-            BlockStack& stack = stacks[std::size_t(bi / block)];
-            const bool held = stack.bi == bi && bj >= stack.bj && bj < stack.bj + stack.rows;
+            // A stack several blocks wide (stackColumns) is kept in its left block's slot: the
+            // blocks to its right find it there.
+            const std::size_t slot = std::size_t(bi / block);
+            std::size_t at = slot;
+            for (std::size_t left = 1; left < std::size_t(stackColumns) && left <= slot; ++left)
+                if (stacks[slot - left].holds(bi, bj, block)) at = slot - left;
+            BlockStack& stack = stacks[at];
+            const bool held = stack.holds(bi, bj, block);
             if (!rim && bnx == block && bny == block && (held || (stackable && stackBlocks > 1))) {
                 if (!held) {
                     int m = 1;
@@ -525,21 +538,35 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
                         if (!in) break;
                         ++m;
                     }
+                    // Up to stackColumns blocks across while the next block to the right is whole,
+                    // within the part's box and the columns this call makes, and held by no stack.
+                    int columns = 1;
+                    while (columns < stackColumns && bi + (columns + 1) * block <= columnLimit &&
+                           slot + columns < stacks.size() &&
+                           !stacks[slot + columns].holds(bi + columns * block, bj, block)) {
+                        bool in = true;
+                        for (int a = 0; a < ntx; ++a) in = in && mTileColumnsIn[bi + columns * block + a * tile];
+                        if (!in) break;
+                        ++columns;
+                    }
                     GridBatch tall = grid;
+                    tall.nx = columns * block + 2;
                     tall.ny = m * block + 2;
                     stack.values.resize(tall.size());
-                    stack.sides.resize(std::size_t(ntx) * nty * m);
+                    stack.sides.resize(std::size_t(ntx) * columns * nty * m);
                     bands->planeValues(tall, tile, Interval{0.0, 0.0}, stack.values, stack.sides, {});
                     stack.bi = bi;
                     stack.bj = bj;
                     stack.rows = m * block;
+                    stack.columns = columns;
                 }
                 const int tallNy = stack.rows + 2, rowsAbove = bj - stack.bj, tallTiles = stack.rows / tile;
+                const int columnsLeft = bi - stack.bi;
                 for (int i = 0; i < grid.nx; ++i)
-                    std::copy_n(&stack.values[std::size_t(i) * tallNy + rowsAbove], grid.ny,
+                    std::copy_n(&stack.values[std::size_t(i + columnsLeft) * tallNy + rowsAbove], grid.ny,
                                 &values[std::size_t(i) * grid.ny]);
                 for (int a = 0; a < ntx; ++a)
-                    std::copy_n(&stack.sides[std::size_t(a) * tallTiles + rowsAbove / tile], nty,
+                    std::copy_n(&stack.sides[std::size_t(a + columnsLeft / tile) * tallTiles + rowsAbove / tile], nty,
                                 &tileSides[std::size_t(a) * nty]);
             } else {
                 bands->planeValues(grid, tile, Interval{0.0, 0.0}, values, tileSides, tileNeeds);
@@ -602,6 +629,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     // side), otherwise quarter by quarter as the culling allows: here columns [colBegin, colEnd) of
     // the window's rows [bj, bj + bny).
     auto rasterBlocks = [&](int bj, int bny, int colBegin, int colEnd) {
+        columnLimit = colEnd;
         for (int bi = colBegin; bi < colEnd; bi += block) {
             const int bnx = std::min(block, colEnd - bi);
             // Blocks are bounded while that pays: in a lattice that fills the window no block has
