@@ -462,8 +462,9 @@ TEST(Slices, InterpolatedColumnsMissTheExactPlaneByLessThanTheirBound)
     // the exact plane's.
     const double sigma = 0.2, level = 1.0, px = 0.019, py = 0.024;
     const auto struts = gradedBccStruts(2.0, sigma, level, Vec3d(3.0), 4.0, 3, 3, 3);
-    StrutConvolution interpolated(struts), exact(struts);
+    StrutConvolution interpolated(struts), exact(struts), loose(struts);
     exact.setPlaneTolerance(0.0);
+    loose.setPlaneTolerance(1e-4);
     ASSERT_EQ(interpolated.planeTolerance(), StrutConvolution::kPlaneTolerance);
     const double span = 7 * 3 * px;  // a stencil's nodes lie within 7 strides of its column
     double worst = 0.0, worstSmooth = 0.0, worstShare = 0.0;
@@ -482,6 +483,13 @@ TEST(Slices, InterpolatedColumnsMissTheExactPlaneByLessThanTheirBound)
             interpolated.planeValues(plane, 8, Interval{level, level}, a, sideA, {});
             exact.planeValues(plane, 8, Interval{level, level}, b, sideB, {});
             ASSERT_EQ(sideA, sideB);
+            // A field of another tolerance on the same thread takes its own stencils (nodes every
+            // 4 columns at 1e-4), and the first field its own again: the same doubles.
+            std::vector<double> c(plane.size()), again(plane.size());
+            loose.planeValues(plane, 8, Interval{level, level}, c, sideB, {});
+            interpolated.planeValues(plane, 8, Interval{level, level}, again, sideB, {});
+            ASSERT_EQ(a, again);
+            EXPECT_NE(a, c);
             for (int ta = 0; ta < tiles.nx; ++ta)
                 for (int tb = 0; tb < tiles.ny; ++tb) {
                     if (sideA[std::size_t(ta) * tiles.ny + tb] != 0) continue;

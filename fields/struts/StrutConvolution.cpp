@@ -4,6 +4,7 @@
 #include "fields/struts/StrutRows.h"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <limits>
 #include <numbers>
@@ -1108,12 +1109,14 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
     // (ColumnStencils.h: below mPlaneTolerance of the peaks near, sigma the least of the struts
     // kept): the nodes take the points their interpolated neighbours need as well.
     thread_local ColumnStencils stencils;
-    thread_local std::vector<double> stencilKey;
+    thread_local std::array<double, 4> stencilKey{};
     const bool interpolated = mPlaneTolerance > 0.0 && kept > 0;
-    if (interpolated && (stencilKey.size() != 3 || stencilKey[0] != double(plane.nx) || stencilKey[1] != dx ||
-                         stencilKey[2] != sigmaMin)) {
+    // The stencils hang on the plane's width, its spacing, the least sigma and the tolerance
+    // (fields of different tolerances may run on one thread).
+    const std::array<double, 4> key{double(plane.nx), dx, sigmaMin, mPlaneTolerance};
+    if (interpolated && stencilKey != key) {
         stencils = columnStencils(plane.nx, dx, sigmaMin, mPlaneTolerance);
-        stencilKey = {double(plane.nx), dx, sigmaMin};
+        stencilKey = key;
     }
     if (!interpolated || stencils.stride < 2) {
         evaluate(plane, out, cand, columnTiles.data(), tile);
