@@ -10,6 +10,7 @@
 #include "fields/core/FieldNode.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <span>
@@ -51,6 +52,20 @@ enum class TileNeed : std::uint8_t {
     Exact,   ///< its values (and its halo's), side 0, even where a side could be proven
     Skip,    ///< nothing: neither values nor side (another operand decided it)
 };
+
+/// Calls @a f(b0, b1) for each run of set bits b0..b1 of @a bits, in increasing order (a column's
+/// runs of tiles).
+template <class F>
+void forEachTileRun(std::uint64_t bits, F&& f)
+{
+    while (bits != 0) {
+        const int b0 = std::countr_zero(bits);
+        const std::uint64_t from = bits >> b0;
+        const int b1 = b0 + (from == ~std::uint64_t(0) ? 64 : std::countr_zero(~from)) - 1;
+        bits = b1 >= 63 ? 0 : bits & ~((std::uint64_t(2) << b1) - 1);
+        f(b0, b1);
+    }
+}
 
 /// @a need's entry for tile @a t (an empty @a need: every tile Decide).
 inline TileNeed needOf(std::span<const TileNeed> need, std::size_t t)

@@ -2,8 +2,9 @@
 /// @brief Eight-point Lagrange stencils across a plane's columns, with their proven bound.
 #include "fields/struts/ColumnStencils.h"
 
+#include "fields/core/PlaneBands.h"
+
 #include <algorithm>
-#include <bit>
 #include <cmath>
 
 namespace voxlat {
@@ -98,19 +99,14 @@ void interpolateColumns(const ColumnStencils& stencils, int ny, const std::uint6
         for (int l = 0; l < kNodes; ++l) node[l] = values + std::size_t(f + l * m) * ny;
         double* out = values + c * std::size_t(ny);
         // Runs of needed tiles b0..b1: points b0 tile .. (b1 + 1) tile + 1 (evaluate()'s runs).
-        std::uint64_t needed = columnTiles[c];
-        while (needed != 0) {
-            const int b0 = std::countr_zero(needed);
-            const std::uint64_t from = needed >> b0;
-            const int b1 = b0 + (from == ~std::uint64_t(0) ? 64 : std::countr_zero(~from)) - 1;
-            needed = b1 >= 63 ? 0 : needed & ~((std::uint64_t(2) << b1) - 1);
-            const int kLo = b0 * tile, kHi = std::min(ny - 1, (b1 + 1) * tile + 1);
-            for (int k = kLo; k <= kHi; ++k) {
+        forEachTileRun(columnTiles[c], [&](int b0, int b1) {
+            const int kHi = std::min(ny - 1, (b1 + 1) * tile + 1);
+            for (int k = b0 * tile; k <= kHi; ++k) {
                 double v = 0.0;
                 for (int l = 0; l < kNodes; ++l) v += w[std::size_t(l)] * node[l][k];
                 out[k] = v;
             }
-        }
+        });
     }
 }
 

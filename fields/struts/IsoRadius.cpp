@@ -119,16 +119,12 @@ void IsoRadius::planeValues(const GridBatch& plane, int tile, Interval band, std
                 }
         double* column = out.data() + std::size_t(i) * plane.ny;
         int done = 0;  // points below this are mapped or filled
-        while (open != 0) {
-            const int b0 = std::countr_zero(open);
-            const std::uint64_t from = open >> b0;
-            const int b1 = b0 + (from == ~std::uint64_t(0) ? 64 : std::countr_zero(~from)) - 1;
-            open = b1 >= 63 ? 0 : open & ~((std::uint64_t(2) << b1) - 1);
+        forEachTileRun(open, [&](int b0, int b1) {
             const int lo = b0 * tile, hi = std::min(plane.ny - 1, (b1 + 1) * tile + 1);
             std::fill(column + done, column + std::max(done, lo), mRhoMax);
             if (hi >= std::max(done, lo)) radii(std::span<double>(column + std::max(done, lo), column + hi + 1));
             done = std::max(done, hi + 1);
-        }
+        });
         std::fill(column + done, column + plane.ny, mRhoMax);
     }
 }

@@ -888,16 +888,12 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     continue;
                 }
                 // Runs of needed tiles b0..b1: points b0 tile .. (b1 + 1) tile + 1.
-                while (needed != 0) {
-                    const int b0 = std::countr_zero(needed);
-                    const std::uint64_t from = needed >> b0;
-                    const int b1 = b0 + (from == ~std::uint64_t(0) ? 64 : std::countr_zero(~from)) - 1;
-                    needed = b1 >= 63 ? 0 : needed & ~((std::uint64_t(2) << b1) - 1);
+                forEachTileRun(needed, [&](int b0, int b1) {
                     StrutRow part = row;
                     part.kLo = std::max(kLo, b0 * tile);
                     part.kHi = std::min(kHi, (b1 + 1) * tile + 1);
                     if (part.kLo <= part.kHi) add(part);
-                }
+                });
             }
         }
     }
