@@ -548,8 +548,12 @@ TEST(Slices, StrutPlanesLeaveOutOnlyTilesProvenOnOneSide)
                 {Vec3d(2.1, 2.3, 1.025), Vec3d(3.3, 2.9, 3.475), Vec3d(1.7, 3.6, 2.0), Vec3d(0.45, 0.4, 0.975),
                  Vec3d(2.4, 2.4, 3.0)},
                 counts);
-    // Of 320 tiles, measured: 45 proven inside, 100 outside, 175 open.
-    EXPECT_GT(counts.below, 30);
+    std::printf("strut planes: of 320 tiles %d proven inside, %d outside, %d open\n", counts.below, counts.above,
+                counts.open);
+    // Of 320 tiles, measured: 57 proven inside, 100 outside, 163 open. The inside proofs take the
+    // line's distance at the footprint's farthest corner (45 inside with the centre's distance
+    // plus the half diagonal).
+    EXPECT_GT(counts.below, 50);
     EXPECT_GT(counts.above, 60);
     EXPECT_GT(counts.open, 40);
     expectSameLayersWithPlaneBands(*lattice, {1.025, 3.475}, 0.8);

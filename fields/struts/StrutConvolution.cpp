@@ -519,7 +519,8 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
             const double hLast = hFirst + (nx - 1) * dx * u.x() + (ny - 1) * dy * u.y();
             const double h0 = (hz > 0.0 ? std::min(hFirst, hLast) : std::max(hFirst, hLast)) - hz;
             int nLo = std::numeric_limits<int>::max(), nHi = -1;
-            for (int i = iFirst; i <= iLast; ++i)
+            for (int i = iFirst; i <= iLast; ++i) {
+                if (columnTiles && columnTiles[i] == 0) continue;  // empty rows (pass 1)
                 for (int jj = 0; jj < ny; ++jj) {
                     RowRange& r = rows[std::size_t(i) * ny + jj];
                     if (r.kLo > r.kHi) continue;
@@ -552,6 +553,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     nLo = std::min(nLo, r.n0 + needLo);
                     nHi = std::max(nHi, r.n0 + needHi + 1);
                 }
+            }
             if (nLo <= nHi) {
                 nodeLo = nLo;
                 const std::size_t count = std::size_t(nHi - nLo + 1);
@@ -698,6 +700,9 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     columnGauss[k] *= columnStep[k];
                     columnStep[k] *= columnQ;
                 }
+            // A plane's column that makes no points (interpolated, or far from every open tile)
+            // has only empty rows (pass 1): skipped before they are read.
+            if (columnTiles && columnTiles[i] == 0) continue;
             // The column's seeds (blockSeeds), at its row colRow.
             bool columnSeeded = false;
             int colK0 = 0, colRow = 0;
@@ -981,10 +986,21 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         const double invS2 = 1.0 / (s.sigma * std::numbers::sqrt2);
         auto tileLower = [&](double ex, double ey) {
             const double h = ex * ux + ey * uy + ez * uz;
-            // The line's distance squared loses up to a few ulps of |e|^2 to cancellation: 1e-12 of
-            // it more is above every rounding.
-            const double eSqr = ex * ex + ey * ey + ez * ez;
-            const double rMax = std::sqrt(std::max(0.0, eSqr - h * h) + 1e-12 * eSqr) + halfDiagonal + margin;
+            // The line's distance is convex (the norm of an affine map of the point): over the
+            // footprint it is largest at a corner, so the largest of the four corners' distances
+            // bounds it (the centre's plus the half diagonal was up to 1.7x looser across a
+            // strut's section, and left half the tiles within W10's sections open). Each distance
+            // squared loses up to a few ulps of |e|^2 to cancellation: 1e-12 of it more is above
+            // every rounding.
+            double rSqrMax = 0.0;
+            for (const double sx : {-halfX, halfX})
+                for (const double sy : {-halfY, halfY}) {
+                    const double cx = ex + sx, cy = ey + sy;
+                    const double hc = cx * ux + cy * uy + ez * uz;
+                    const double eSqr = cx * cx + cy * cy + ez * ez;
+                    rSqrMax = std::max(rSqrMax, std::max(0.0, eSqr - hc * hc) + 1e-12 * eSqr);
+                }
+            const double rMax = std::sqrt(rSqrMax) + margin;
             const double hLo = h - spreadH, hHi = h + spreadH;
             const double hFar = std::abs(hLo - 0.5 * length) > std::abs(hHi - 0.5 * length) ? hLo : hHi;
             const double i0 = s.sigma * std::sqrt(std::numbers::pi / 2.0) *

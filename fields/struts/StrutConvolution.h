@@ -45,7 +45,9 @@ public:
     /// A slicer's plane with the struts gathered once: each tile's upper bound (per strut, its peak
     /// times the kernel at the least distance from the tile's centre less its half diagonal, plus
     /// 2.5e-5 of the peaks counted: the table and Taylor paths' error) proves the tiles below
-    /// band.lo (-1), a lower bound those above band.hi (+1), and only the other tiles and their
+    /// band.lo (-1), a lower bound (per strut whose cut-off holds the footprint, its least weight
+    /// times the closed form at the line's distance from the footprint's farthest corner) those
+    /// above band.hi (+1), and only the other tiles and their
     /// halo are evaluated (the rest are 0; struts that reach no open tile are left out, as they
     /// add nothing there). Skipped tiles are left out and Exact ones evaluated (@a need). Where
     /// the struts' least sigma allows (ColumnStencils: every third column at the Saturn 4's 19 um
