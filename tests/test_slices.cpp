@@ -609,7 +609,7 @@ TEST(Slices, StackedBlocksWriteTheBytesOfBlocksAlone)
     // above another (a stack, what the slicer asks for) gives each block's tile sides, and on its
     // open tiles and their halo the block's own values to within rounding (the points'
     // coordinates are origin + i spacing from another origin). (2) Layers sliced with stacks of
-    // up to 8 blocks, two across, are the bytes of blocks evaluated alone (RasterOptions::
+    // up to 8 blocks tall and across, are the bytes of blocks evaluated alone (RasterOptions::
     // stackBlocks 1), made where the slicer stops bounding blocks.
     const auto lattice = gradedStrutLattice(Vec3d(3.0, 6.0, 1.0), 6.0, 3, 6, 1);
     const double px = 0.019, py = 0.024;

@@ -470,7 +470,7 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     };
     std::vector<BlockStack> stacks(std::size_t(mNx / block + 1));
     const int stackBlocks = std::clamp(mOptions.stackBlocks, 1, 8);
-    const int stackColumns = std::clamp(mOptions.stackColumns, 1, 4);
+    const int stackColumns = std::clamp(mOptions.stackColumns, 1, 8);
     int columnLimit = mNx;   // columns [.., columnLimit) are made by the current rasterBlocks call
     int rowLimit = mNy;      // rows [.., rowLimit) are made by the current rasterRows call
     bool stackable = false;  // the block being decided may make a stack (rasterBlocks)

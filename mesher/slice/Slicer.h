@@ -96,11 +96,11 @@ struct RasterOptions {
     /// W10 case measured). At most 8 (64 tiles a column).
     int stackBlocks = 8;
     /// Stacks are up to this many blocks wide where the blocks to the right are whole and within
-    /// the part's box too (1 to 4): a strut's set-up then serves more pixels, and a plane whose
+    /// the part's box too (1 to 8): a strut's set-up then serves more pixels, and a plane whose
     /// columns are interpolated (ColumnStencils) has fewer exact ones near its ends. The same
     /// points; their values differ by rounding and, where columns are interpolated, by the
     /// stencils' (below their bound).
-    int stackColumns = 4;
+    int stackColumns = 8;
     /// Called once per row of 64 x 64 blocks while a layer is made (none: never); it throws to
     /// stop the layer (a job's cancel check), so a layer of a large plate stops promptly.
     std::function<void()> interrupt;
