@@ -78,6 +78,12 @@ layers and the full plate extrapolated):
   (VOXLAT_W10_GRADIENT=spherical, nothing repeats), one cell (VOXLAT_W10_HEIGHT=2): struts 94.5 s,
   20.4 Mpixel/s, about 945 s for the plate (missed); TPMS 356.7 Mpixel/s: 17.5x (missed); area
   +0.0030 %, worst patch 0.018 % (met).
+- 2026-12-04, issue 38 thirtieth round (inside proofs at the footprint's farthest corner, stacks
+  eight blocks across), Intel Xeon host: the general case, one cell (VOXLAT_W10_HEIGHT=2, AREA=0):
+  struts 24.28 s and 24.93 s, 535-581 MB, against the gyroid sheet's 2.21 s and 2.15 s: 11.0x and
+  11.6x (target 10x: missed); about 243-249 s for the plate (met). With the area check: 23.08 s
+  against 2.25 s, 10.2x; area +0.0035 %, worst patch 0.018 % (met). W10 itself, the whole plate:
+  struts 34.09 s, 807 MB, 566.3 Mpixel/s; TPMS 11.62 s, 1661.9 Mpixel/s: 2.9x (met).
 Before issue 38 a 20 x 20 x 2 mm window took 32 s for 40 layers and the 2 mm plate did not finish
 in ten minutes (the issue's figures).
 
