@@ -291,6 +291,9 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
 {
     constexpr int kShortRow = 16;  // the longest rows counted as a pixel's sub-samples
     std::fill(out.begin(), out.begin() + batch.size(), 0.0);
+    // A plane's column that makes no points (planeValues: interpolated, or far from every open
+    // tile): its rows are empty, and neither their ranges nor their tables are sought.
+    auto makesNoPoints = [columnTiles](int i) { return columnTiles && columnTiles[i] == 0; };
     // Rows run along z (k, the fastest index). A plane of points (nz = 1, a slicer's layer) has
     // rows of one point, where the row machinery below costs more than the point: there the rows
     // run along y instead. The batch is seen with y and z swapped (the output's layout, i * ny + j,
@@ -404,7 +407,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
             rangeHi.resize(rangeRun);
             rangeColumns.clear();
             for (int i = iFirst; i <= iLast; ++i)
-                if (columnTiles[i] != 0) rangeColumns.push_back(i);
+                if (!makesNoPoints(i)) rangeColumns.push_back(i);
             for (std::size_t m = 0; m < rangeColumns.size(); m += 4) {
                 double x[4], lo[4], hi[4];
                 const std::size_t count = std::min<std::size_t>(4, rangeColumns.size() - m);
@@ -434,7 +437,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         rows.resize(std::size_t(nx) * ny);
         for (int i = shortRows ? 0 : iFirst; i <= (shortRows ? nx - 1 : iLast); ++i) {
             const double px = d0.x() + i * dx;
-            if (i < iFirst || i > iLast || (columnTiles && columnTiles[i] == 0)) {
+            if (i < iFirst || i > iLast || makesNoPoints(i)) {
                 for (int jj = 0; jj < ny; ++jj) rows[std::size_t(i) * ny + jj] = RowRange{1, 0, 0, 0.0};
                 continue;
             }
@@ -520,7 +523,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
             const double h0 = (hz > 0.0 ? std::min(hFirst, hLast) : std::max(hFirst, hLast)) - hz;
             int nLo = std::numeric_limits<int>::max(), nHi = -1;
             for (int i = iFirst; i <= iLast; ++i) {
-                if (columnTiles && columnTiles[i] == 0) continue;  // empty rows (pass 1)
+                if (makesNoPoints(i)) continue;  // empty rows (pass 1)
                 for (int jj = 0; jj < ny; ++jj) {
                     RowRange& r = rows[std::size_t(i) * ny + jj];
                     if (r.kLo > r.kHi) continue;
@@ -700,9 +703,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                     columnGauss[k] *= columnStep[k];
                     columnStep[k] *= columnQ;
                 }
-            // A plane's column that makes no points (interpolated, or far from every open tile)
-            // has only empty rows (pass 1): skipped before they are read.
-            if (columnTiles && columnTiles[i] == 0) continue;
+            if (makesNoPoints(i)) continue;  // empty rows (pass 1), skipped before they are read
             // The column's seeds (blockSeeds), at its row colRow.
             bool columnSeeded = false;
             int colK0 = 0, colRow = 0;
