@@ -453,8 +453,10 @@ TEST(Slices, UnboundedBlocksWriteTheBytesOfBoundedOnes)
 TEST(Slices, InterpolatedColumnsMissTheExactPlaneByLessThanTheirBound)
 {
     // The raw convolution of a graded BCC lattice (radii 0.15 -> 0.3 mm, sigma 0.2) on planes at
-    // the Saturn 4's pitch: a block (66 x 66) and a stack of four (66 x 258). With the default
-    // tolerance, planeValues takes two columns in three from their neighbours (ColumnStencils);
+    // the Saturn 4's pitch: a block (66 x 66) and stacks of four along y (66 x 258) and x (258 x
+    // 66). With the default tolerance, planeValues takes two columns in three from their
+    // neighbours in a block, three in four across the wider stack (ColumnStencils: the diagonals'
+    // C8 of 39);
     // at every point of the open tiles and their halo the values must lie within the bound
     // ColumnStencils.h states of the exact plane's (tolerance 0: gridValues' doubles): K sum_j
     // peak_j exp(-d_j^2 / 4 sigma^2), d_j strut j's distance to the stencil's span, plus
@@ -466,15 +468,15 @@ TEST(Slices, InterpolatedColumnsMissTheExactPlaneByLessThanTheirBound)
     exact.setPlaneTolerance(0.0);
     loose.setPlaneTolerance(1e-4);
     ASSERT_EQ(interpolated.planeTolerance(), StrutConvolution::kPlaneTolerance);
-    const double span = 7 * 3 * px;  // a stencil's nodes lie within 7 strides of its column
+    const double span = 7 * 4 * px;  // a stencil's nodes lie within 7 strides (of 3 or 4) of its column
     double worst = 0.0, worstSmooth = 0.0, worstShare = 0.0;
     int open = 0;
-    for (const int rows : {66, 258})
+    for (const auto& [cols, rows] : {std::pair{66, 66}, std::pair{66, 258}, std::pair{258, 66}})
         for (const Vec3d origin : {Vec3d(2.1, 2.3, 1.025), Vec3d(3.3, 2.9, 3.475), Vec3d(0.45, 0.4, 0.975)}) {
             GridBatch plane;
             plane.origin = origin;
             plane.spacing = Vec3d(px, py, 1.0);
-            plane.nx = 66;
+            plane.nx = cols;
             plane.ny = rows;
             plane.nz = 1;
             const PlaneTiles tiles = PlaneTiles::of(plane, 8);
@@ -483,13 +485,14 @@ TEST(Slices, InterpolatedColumnsMissTheExactPlaneByLessThanTheirBound)
             interpolated.planeValues(plane, 8, Interval{level, level}, a, sideA, {});
             exact.planeValues(plane, 8, Interval{level, level}, b, sideB, {});
             ASSERT_EQ(sideA, sideB);
-            // A field of another tolerance on the same thread takes its own stencils (nodes every
-            // 4 columns at 1e-4), and the first field its own again: the same doubles.
+            // A field of another tolerance on the same thread takes its own stencils (in a block,
+            // nodes every 4 columns at 1e-4, every 3 at the default), and the first field its own
+            // again: the same doubles.
             std::vector<double> c(plane.size()), again(plane.size());
             loose.planeValues(plane, 8, Interval{level, level}, c, sideB, {});
             interpolated.planeValues(plane, 8, Interval{level, level}, again, sideB, {});
             ASSERT_EQ(a, again);
-            EXPECT_NE(a, c);
+            if (cols == 66) EXPECT_NE(a, c);
             for (int ta = 0; ta < tiles.nx; ++ta)
                 for (int tb = 0; tb < tiles.ny; ++tb) {
                     if (sideA[std::size_t(ta) * tiles.ny + tb] != 0) continue;
@@ -521,11 +524,11 @@ TEST(Slices, InterpolatedColumnsMissTheExactPlaneByLessThanTheirBound)
                 }
         }
     EXPECT_GT(open, 300);
-    // Measured (the level 1, peaks about 3): the worst miss 3.5e-4, by the cut-offs' steps (a
+    // Measured (the level 1, peaks about 3): the worst miss 4.6e-4, by the cut-offs' steps (a
     // strut's 1e-4 of its peak dropped on one side of its sphere, not the other); away from
-    // them 5.6e-6, 1 % of the bound.
+    // them 3.2e-5, 7 % of the bound (every fourth column; 5.6e-6 and 1 % at every third).
     EXPECT_GT(worstSmooth, 0.0);
-    EXPECT_LT(worstSmooth, 2e-5);
+    EXPECT_LT(worstSmooth, 5e-5);
     EXPECT_LT(worst, 1e-3);
     std::printf(
         "interpolated columns: worst miss %.3g (%.3g away from the cut-offs' steps, %.3g of its bound), "

@@ -25,6 +25,7 @@
 #include "fields/struts/StrutConvolution.h"
 #include "fields/struts/StrutIndex.h"
 #include "fields/struts/StrutRows.h"
+#include "fields/struts/TileBounds.h"
 #include "fields/struts/TiledInterior.h"
 #include "mesher/checks/MeshCheck.h"
 #include "mesher/extract/MarchingCubes.h"
@@ -2652,4 +2653,186 @@ TEST(ColumnStencils, ReproduceDegreeSevenAndMissAGaussianByLessThanTheirBound)
         }
     }
     EXPECT_GT(worstRatio, 0.1);
+}
+
+namespace {
+
+/// He_n(t) by its recurrence.
+double hermiteE(int n, double t)
+{
+    double a = 1.0, b = t;
+    if (n == 0) return a;
+    for (int k = 1; k < n; ++k) {
+        const double c = t * b - k * a;
+        a = b;
+        b = c;
+    }
+    return b;
+}
+
+/// A ray's D_x^8 F / (w sigma sqrt(2 pi)) at (t_n, h) (sigma 1; ColumnStencils.h's sum of nine terms).
+double rayEighth(double b, double tn, double h)
+{
+    const double a = std::sqrt(std::max(0.0, 1.0 - b * b));
+    double sum = 0.0, binomial = 1.0;
+    for (int k = 0; k <= 8; ++k) {
+        const double normal = ((8 - k) % 2 ? -1.0 : 1.0) * hermiteE(8 - k, tn) * std::exp(-0.5 * tn * tn);
+        const double along =
+            k == 0 ? 0.5 * std::erfc(-h / std::sqrt(2.0))
+                   : ((k - 1) % 2 ? -1.0 : 1.0) * hermiteE(k - 1, h) * std::exp(-0.5 * h * h) / kSqrtTwoPi;
+        sum += binomial * std::pow(a, 8 - k) * std::pow(b, k) * normal * along;
+        binomial = binomial * (8 - k) / (k + 1);
+    }
+    return sum;
+}
+
+}  // namespace
+
+TEST(ColumnStencils, DirectionalBoundHoldsForRaysAndSegmentsAndTakesEveryFourthColumnAlongDiagonals)
+{
+    // (1) The table is a ray's sup: at b between its nodes, |D_x^8 F| exp(d^2 / 4) on a grid of
+    // (t_n, h) stays below rayEighthDerivativeBound(b) and reaches within 10 % of it.
+    for (int i = 0; i < 64; i += 3) {
+        const double b = (i + 0.37) / 64.0;
+        double sup = 0.0;
+        for (double tn = -8.0; tn <= 8.0; tn += 0.025)
+            for (double h = -10.0; h <= 10.0; h += 0.025) {
+                const double d2 = tn * tn + (h < 0.0 ? h * h : 0.0);
+                sup = std::max(sup, std::abs(rayEighth(b, tn, h)) * std::exp(0.25 * d2));
+            }
+        EXPECT_LE(sup, rayEighthDerivativeBound(b)) << "b " << b;
+        EXPECT_GT(sup, rayEighthDerivativeBound(b) / 1.1) << "b " << b;
+    }
+    EXPECT_NEAR(rayEighthDerivativeBound(0.0), kEighthDerivativeBound / std::sqrt(2.0), 0.015 * kEighthDerivativeBound);
+    // (2) On real segments (random directions, lengths 1..12 sigma, weights graded up to 3:1),
+    // the eighth difference of GaussianSegment::value along x (Richardson's of steps 0.04 and
+    // 0.08 sigma: within about 1 % of the derivative) stays below C8_j peak / sigma^8
+    // exp(-d^2 / 4 sigma^2), and the worst point reaches a third of it.
+    std::mt19937 rng(38);
+    std::uniform_real_distribution<double> unit(-1.0, 1.0), share(0.0, 1.0);
+    double worstRatio = 0.0;
+    for (int n = 0; n < 60; ++n) {
+        const double sigma = 0.1 + 0.3 * share(rng);
+        Vec3d dir(unit(rng), unit(rng), unit(rng));
+        if (n % 6 == 0) dir = Vec3d(1.0, 1.0, 1.0);  // a cube's diagonal
+        if (n % 6 == 1) dir = Vec3d(0.0, 1.0, 0.2);  // nearly across x
+        dir.normalize();
+        const double length = sigma * (1.0 + 11.0 * share(rng));
+        const double w0 = 1.0 + 2.0 * share(rng) * (n % 3 == 0 ? 0.0 : 1.0), w1 = n % 2 ? 1.0 : w0;
+        const GaussianSegment seg(Vec3d(0.0), length * dir, sigma, w0, w1);
+        const double c8 = segmentEighthDerivativeBound(seg), peak = std::max(w0, w1) * sigma * kSqrtTwoPi;
+        ASSERT_LE(c8, kEighthDerivativeBound);
+        auto difference = [&](const Vec3d& p, double step) {
+            double sum = 0.0, binomial = 1.0;
+            for (int k = 0; k <= 8; ++k) {
+                double h, r2;
+                seg.distanceSqr(p + Vec3d((k - 4) * step, 0.0, 0.0), h, r2);
+                sum += (k % 2 ? -1.0 : 1.0) * binomial * seg.value(h, r2);
+                binomial = binomial * (8 - k) / (k + 1);
+            }
+            return sum / std::pow(step, 8);
+        };
+        for (int m = 0; m < 400; ++m) {
+            const Vec3d p = share(rng) * length * dir + 3.0 * sigma * Vec3d(unit(rng), unit(rng), unit(rng));
+            const double d8 = (4.0 * difference(p, 0.04 * sigma) - difference(p, 0.08 * sigma)) / 3.0;
+            double h, r2;
+            const double d2 = seg.distanceSqr(p, h, r2);
+            const double bound = c8 * peak / std::pow(sigma, 8) * std::exp(-d2 / (4.0 * sigma * sigma));
+            EXPECT_LE(std::abs(d8), 1.01 * bound + 0.02 * peak / std::pow(sigma, 8)) << "segment " << n;
+            worstRatio = std::max(worstRatio, std::abs(d8) / bound);
+        }
+    }
+    EXPECT_GT(worstRatio, 1.0 / 3.0);
+    // (3) A cube's diagonal of a 2 mm cell (sigma 0.2, uniform): C8 about 39, so a plane four
+    // blocks across (258 of the Saturn 4's 19 um columns) takes nodes every fourth column, 78
+    // exact against C8's every third and 94, every stencil within the tolerance.
+    const GaussianSegment diagonal(Vec3d(0.0), Vec3d(1.0, 1.0, 1.0), 0.2, 1.0, 1.0);
+    const double c8 = segmentEighthDerivativeBound(diagonal);
+    EXPECT_GT(c8, 38.0);
+    EXPECT_LT(c8, 40.0);
+    const double tolerance = StrutConvolution::kPlaneTolerance;
+    const ColumnStencils s = columnStencils(258, 0.019, 0.2, tolerance, c8);
+    EXPECT_EQ(s.stride, 4);
+    EXPECT_EQ(s.exactCount(), 78u);
+    EXPECT_LE(s.worst, tolerance);
+    EXPECT_EQ(columnStencils(258, 0.019, 0.2, tolerance).stride, 3);
+    EXPECT_EQ(columnStencils(258, 0.019, 0.2, tolerance).exactCount(), 94u);
+}
+
+TEST(TileBounds, EightLanesGiveTheScalarLoopsDoubles)
+{
+    // TileBounds.h's contract, bit for bit: per tile within reach, upper += peak expUpper(near^2 /
+    // 2 sigma^2) and peaks += peak; the halo and inner bits. Random struts over a 64 x 64 grid of
+    // 8 x 8-pixel tiles at the Saturn 4's pitch, tile columns of every length from 1 to 64.
+    if (!hasTileBoundsAvx512()) GTEST_SKIP() << "no AVX-512F here";
+    std::vector<double> table(12 * 256 + 1);
+    for (std::size_t k = 0; k < table.size(); ++k) table[k] = std::exp(-double(k) / 256) * (1.0 + 1e-9);
+    const ExpUpperNodes nodes{table.data(), 256.0, int(table.size())};
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> unit(-1.0, 1.0), share(0.0, 1.0);
+    const int tilesX = 64, tilesY = 64;
+    int reached = 0, inner = 0;
+    for (int n = 0; n < 200; ++n) {
+        TileColumnStrut s{};
+        s.stepX = 8 * 0.019;
+        s.stepY = 8 * 0.024;
+        s.cx0 = 4.5 * 0.019;
+        s.cy0 = 4.5 * 0.024;
+        const int a0 = n % 32, a1 = std::min(63, a0 + 8 + n % 24), b0 = (3 * n) % 32,
+                  b1 = std::min(63, b0 + 4 + n % 60);
+        // The strut starts within the tiles' box.
+        s.ax = s.cx0 + (a0 + (a1 - a0) * share(rng)) * s.stepX;
+        s.ay = s.cy0 + (b0 + (b1 - b0) * share(rng)) * s.stepY;
+        Vec3d u(unit(rng), unit(rng), unit(rng));
+        u.normalize();
+        s.ux = u.x();
+        s.uy = u.y();
+        s.uz = u.z();
+        s.length = 0.5 + 2.0 * share(rng);
+        s.ez = 0.6 * unit(rng);
+        const double sigma = 0.1 + 0.2 * share(rng), rc = sigma * 4.29;
+        s.halfX = 0.5 * s.stepX;
+        s.halfY = 0.5 * s.stepY;
+        s.halfDiagonal = std::hypot(s.halfX, s.halfY);
+        s.margin = 1e-9 * rc;
+        const double far = rc + s.halfDiagonal + s.margin, halo = rc + std::hypot(s.halfX + 0.019, s.halfY + 0.024);
+        s.farSqr = far * far;
+        s.farHaloSqr = halo * halo;
+        s.innerSqr = n % 5 ? std::pow(2.5 * sigma - s.halfDiagonal, 2) : -1.0;
+        s.peak = 1.0 + share(rng);
+        s.inv2s2 = 0.5 / (sigma * sigma);
+        std::vector<double> upper(tilesX * tilesY, 0.25), peaks(tilesX * tilesY, 0.5);
+        std::vector<double> upperRef = upper, peaksRef = peaks;
+        std::vector<TileColumnReach> reach(std::size_t(a1 - a0 + 1));
+        addTileBoundsAvx512(s, a0, a1, b0, b1, tilesY, nodes, upper.data(), peaks.data(), reach.data());
+        for (int a = a0; a <= a1; ++a) {
+            TileColumnReach ref;
+            const double ex = s.cx0 + a * s.stepX - s.ax;
+            for (int b = b0; b <= b1; ++b) {
+                const double ey = s.cy0 + b * s.stepY - s.ay;
+                const double h = std::clamp(ex * s.ux + ey * s.uy + s.ez * s.uz, 0.0, s.length);
+                const double rx = ex - h * s.ux, ry = ey - h * s.uy, rz = s.ez - h * s.uz;
+                const double dSqr = rx * rx + ry * ry + rz * rz;
+                if (dSqr < s.farHaloSqr) ref.halo |= std::uint64_t(1) << b;
+                if (dSqr >= s.farSqr) continue;
+                if (dSqr < s.innerSqr) ref.inner |= std::uint64_t(1) << b;
+                const double d = std::sqrt(dSqr);
+                const double spread = std::min(s.halfDiagonal, (s.halfX * std::abs(rx) + s.halfY * std::abs(ry)) / d);
+                const double root = d - spread - s.margin;
+                const double near = 0.0 < root ? root : 0.0;
+                const double x = near * near * s.inv2s2, at = x * 256.0;
+                const double kernel = at < double(table.size() - 1) ? table[std::size_t(at)] : std::exp(-x);
+                upperRef[std::size_t(a) * tilesY + b] += s.peak * kernel;
+                peaksRef[std::size_t(a) * tilesY + b] += s.peak;
+            }
+            EXPECT_EQ(reach[std::size_t(a - a0)].halo, ref.halo) << "strut " << n << " column " << a;
+            EXPECT_EQ(reach[std::size_t(a - a0)].inner, ref.inner) << "strut " << n << " column " << a;
+            reached += std::popcount(ref.halo);
+            inner += std::popcount(ref.inner);
+        }
+        ASSERT_EQ(upper, upperRef) << "strut " << n;
+        ASSERT_EQ(peaks, peaksRef) << "strut " << n;
+    }
+    EXPECT_GT(reached, 1000);
+    EXPECT_GT(inner, 100);
 }

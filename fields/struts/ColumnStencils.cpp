@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 
 namespace voxlat {
 
@@ -15,6 +16,14 @@ constexpr int kNodes = 8;
 constexpr double kFactorial8 = 40320.0;
 /// The largest sum of |weights| a stencil may have (ColumnStencils.h).
 constexpr double kMaxLebesgue = 2.5;
+
+/// R(b) for b in [i / 64, (i + 1) / 64] (tests/scripts/directional_eighth_bound.py).
+constexpr std::array<double, 64> kRayBound{
+    145.76, 145.62, 145.19, 144.49, 143.50, 142.24, 140.71, 138.91, 136.86, 134.57, 132.04, 129.29, 126.32,
+    123.15, 119.80, 116.28, 112.60, 108.78, 104.84, 100.79, 96.66,  92.46,  88.22,  83.94,  79.66,  75.39,
+    71.15,  66.95,  62.81,  58.76,  54.79,  50.93,  47.18,  43.63,  41.89,  40.29,  38.90,  37.63,  36.45,
+    35.37,  34.35,  33.40,  32.51,  31.68,  30.88,  30.13,  29.42,  28.75,  28.11,  27.49,  26.91,  26.35,
+    25.81,  25.30,  24.81,  24.34,  23.88,  23.45,  23.03,  22.62,  22.23,  21.86,  21.49,  21.14};
 
 /// The stencils for nodes every @a m columns.
 ColumnStencils stencilsOf(int nx, int m, double scale, double tolerance)
@@ -67,16 +76,34 @@ std::size_t ColumnStencils::exactCount() const
     return std::size_t(std::count(first.begin(), first.end(), -1));
 }
 
-ColumnStencils columnStencils(int nx, double spacing, double sigma, double tolerance)
+double rayEighthDerivativeBound(double b)
+{
+    const double t = std::min(std::abs(b), 1.0) * 64.0;
+    return kRayBound[std::size_t(std::min(63.0, t))];
+}
+
+double segmentEighthDerivativeBound(const GaussianSegment& segment)
+{
+    const double sigma = segment.sigma, length = segment.length;
+    const double w1 = segment.w0 + segment.slope * length;
+    const double wMin = std::min(segment.w0, w1), wMax = std::max(segment.w0, w1);
+    if (!(wMin > 0.0) || !(length > 0.0)) return kEighthDerivativeBound;
+    const double farEnd = std::exp(-length * length / (16.0 * sigma * sigma));
+    const double ramp = std::min(1.0, 2.0 * std::sqrt(std::numbers::pi) * sigma / length);
+    const double c8 = rayEighthDerivativeBound(segment.u.x()) * (1.0 + (wMin * farEnd + (wMax - wMin) * ramp) / wMax);
+    return std::min(c8, kEighthDerivativeBound);
+}
+
+ColumnStencils columnStencils(int nx, double spacing, double sigma, double tolerance, double eighthBound)
 {
     ColumnStencils best;
     best.first.assign(std::size_t(std::max(nx, 0)), -1);
     best.weights.assign(std::size_t(std::max(nx, 0)), {});
-    if (!(spacing > 0.0) || !(sigma > 0.0) || !(tolerance > 0.0)) return best;
+    if (!(spacing > 0.0) || !(sigma > 0.0) || !(tolerance > 0.0) || !(eighthBound > 0.0)) return best;
     std::size_t bestExact = best.first.size();
     for (int m = 2; m <= 4; ++m) {
         // K = |prod (x - x_l)| in node steps times (m spacing / sigma)^8 C8 / 8!.
-        const double scale = std::pow(m * spacing / sigma, 8) * kEighthDerivativeBound / kFactorial8;
+        const double scale = std::pow(m * spacing / sigma, 8) * eighthBound / kFactorial8;
         ColumnStencils s = stencilsOf(nx, m, scale, tolerance);
         if (s.stride > 1 && s.exactCount() < bestExact) {
             bestExact = s.exactCount();

@@ -20,16 +20,41 @@
 /// value may miss the cut field by up to (1 + sum_l |L_l|) eps peak_j, against the uncut field's
 /// eps peak_j that every path drops: columns whose stencil has sum_l |L_l| above 2.5 (one-sided
 /// ones near the plane's ends) stay exact.
+///
+/// A strut's direction tightens C8 (segmentEighthDerivativeBound). Split x = b u + a n (b = |u.x|,
+/// a = sqrt(1 - b^2), n normal to the strut): D_x^8 = sum_k C(8, k) a^(8-k) b^k D_n^(8-k) D_u^k,
+/// and along the strut D_u^k integrates to the ends' terms, so the derivatives' signs cancel
+/// where the first bound took their absolute values. A ray (from A along u, weight w) has
+///     |D_x^8 F| <= R(b) w sigma sqrt(2 pi) / sigma^8 exp(-d^2 / 4 sigma^2),
+/// R(b) the sup of the nine Hermite terms' sum times exp(d^2 / 4) (rayEighthDerivativeBound:
+/// tabled per 1/64 of b, tests/scripts/directional_eighth_bound.py; 145.8 across x, 38.9 for a
+/// cube's diagonal, 21.1 along x). A segment is ray(A) - ray(B); at a point whose projection is
+/// nearer A, ray(A)'s distance is the segment's and ray(B)'s at least sqrt(d^2 + L^2 / 4), so
+/// a unit weight gives R(b) (1 + exp(-L^2 / 16 sigma^2)). A linear weight w_min + (wMax - w_min)
+/// s / L adds the ramp, the mean over t of the unit segments [t, L]: R(b) (1 + min(1, 2 sqrt(pi)
+/// sigma / L)). Per unit of the peak wMax sigma sqrt(2 pi):
+///     C8_j = R(b) (1 + (w_min exp(-L^2 / 16 sigma^2) + (wMax - w_min) min(1, 2 sqrt(pi) sigma / L)) / wMax),
+/// and the least of it and C8 holds (at 19 um and sigma 0.2, a cube's diagonals take nodes every
+/// fourth column where C8 allows every third).
 #pragma once
 
 #include <array>
 #include <cstdint>
 #include <vector>
 
+#include "fields/struts/GaussianSegment.h"
+
 namespace voxlat {
 
 /// C8 above: sqrt(2) times the largest |He8(t)| exp(-t^2 / 4) (144.32 at t = 2.27), rounded up.
 inline constexpr double kEighthDerivativeBound = 204.2;
+
+/// R(b) above: a ray's eighth derivative along x per unit of its peak and of exp(-d^2 / 4 sigma^2)
+/// sigma^-8, for |u.x| = @a b (the table's largest over b's 1/64 step, 1 % up).
+double rayEighthDerivativeBound(double b);
+
+/// C8_j above for one strut along x (weights > 0): at most kEighthDerivativeBound.
+double segmentEighthDerivativeBound(const GaussianSegment& segment);
 
 /// Which columns of a plane of @a nx columns are exact and how the others are interpolated.
 struct ColumnStencils {
@@ -47,8 +72,10 @@ struct ColumnStencils {
 /// other column interpolated from the eight nodes nearest it (shifted to stay inside the plane)
 /// where its K is at most @a tolerance and its weights' absolute sum at most 2.5, else exact (the
 /// columns past the last node, and those whose one-sided stencil near the plane's ends bounds
-/// too loosely). A deterministic function of its arguments.
-ColumnStencils columnStencils(int nx, double spacing, double sigma, double tolerance);
+/// too loosely), K taken with @a eighthBound for C8 (the largest of the struts'
+/// segmentEighthDerivativeBound). A deterministic function of its arguments.
+ColumnStencils columnStencils(int nx, double spacing, double sigma, double tolerance,
+                              double eighthBound = kEighthDerivativeBound);
 
 /// @a values (a plane's, column i at values[i * ny]) at each interpolated column's points: of
 /// runs of tiles whose bits @a columnTiles[i] holds (points b0 tile .. (b1 + 1) tile + 1, as

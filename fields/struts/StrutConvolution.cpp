@@ -2,6 +2,7 @@
 
 #include "fields/struts/ColumnStencils.h"
 #include "fields/struts/StrutRows.h"
+#include "fields/struts/TileBounds.h"
 
 #include <algorithm>
 #include <array>
@@ -32,6 +33,7 @@ StrutConvolution::StrutConvolution(const std::vector<ConvolutionStrut>& struts, 
         if (!((s.b - s.a).length() > 0.0)) throw std::invalid_argument("a strut has zero length");
         if (!(s.w0 > 0.0 && s.w1 > 0.0)) throw std::invalid_argument("strut weights must be greater than zero");
         mSegments.emplace_back(s.a, s.b, s.sigma, s.w0, s.w1);
+        mEighthBound = std::max(mEighthBound, segmentEighthDerivativeBound(mSegments.back()));
         mEnd.push_back(s.b);
         const double rc = gaussianCutoffRadius(s.sigma, eps);
         mCutoffSqr.push_back(rc * rc);
@@ -225,6 +227,7 @@ public:
         if (!(at < double(kSize - 1))) return std::exp(-x);
         return mValue[std::size_t(at)];  // truncation: the node at or below x
     }
+    ExpUpperNodes nodes() const { return {mValue, double(kSteps), kSize}; }
 
 private:
     static constexpr int kSteps = 256;
@@ -948,6 +951,9 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
     const double cx0 = plane.origin.x() + (0.5 + 0.5 * tile) * dx, cy0 = plane.origin.y() + (0.5 + 0.5 * tile) * dy;
     const double halfX = 0.5 * stepX, halfY = 0.5 * stepY, halfDiagonal = std::sqrt(halfX * halfX + halfY * halfY);
     const ExpUpperTable& expUpper = ExpUpperTable::instance();
+    const ExpUpperNodes expNodes = expUpper.nodes();
+    const bool eightLanes = hasTileBoundsAvx512();
+    thread_local std::vector<TileColumnReach> columnReach;
     const LowerTables& lowerTables = LowerTables::instance();
     // Per strut and tile of its reach, its peak times the kernel at the least distance from the
     // footprint, at least the centre's distance less the half diagonal (the kernel taken from a
@@ -1011,7 +1017,31 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         // The box of tiles whose footprint grown by a spacing the strut reaches: columns
         // reachA0..reachA1, rows reachB0..reachB1.
         int reachA0 = tiles.nx, reachA1 = -1, reachB0 = tiles.ny, reachB1 = -1;
-        for (int a = a0; a <= a1; ++a) {
+        if (eightLanes && a0 <= a1 && b0 <= b1) {
+            // Eight tiles at a time (TileBounds.h: the loop's doubles below), the lower bounds after.
+            const TileColumnStrut strut{cx0,   stepX, s.a.x(),      cy0,    stepY,    s.a.y(),    ux,
+                                        uy,    uz,    length,       ez,     farSqr,   farHaloSqr, innerSqr,
+                                        halfX, halfY, halfDiagonal, margin, mPeak[j], inv2s2};
+            columnReach.resize(std::size_t(a1 - a0 + 1));
+            addTileBoundsAvx512(strut, a0, a1, b0, b1, tiles.ny, expNodes, upper.data(), peaks.data(),
+                                columnReach.data());
+            for (int a = a0; a <= a1; ++a) {
+                const TileColumnReach& met = columnReach[std::size_t(a - a0)];
+                if (met.halo) {
+                    reachA0 = std::min(reachA0, a);
+                    reachA1 = a;
+                    reachB0 = std::min(reachB0, std::countr_zero(met.halo));
+                    reachB1 = std::max(reachB1, 63 - std::countl_zero(met.halo));
+                }
+                const double ex = cx0 + a * stepX - s.a.x();
+                const std::size_t row = std::size_t(a) * tiles.ny;
+                for (std::uint64_t inner = met.inner; inner; inner &= inner - 1) {
+                    const int b = std::countr_zero(inner);
+                    lower[row + b] += tileLower(ex, cy0 + b * stepY - s.a.y());
+                }
+            }
+        }
+        for (int a = eightLanes ? a1 + 1 : a0; a <= a1; ++a) {
             bool column = false;  // the strut reaches a tile of column a
             const double ex = cx0 + a * stepX - s.a.x();
             const std::size_t row = std::size_t(a) * tiles.ny;
@@ -1120,15 +1150,16 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
     cand.resize(kept);
     // Columns between exact ones interpolated along x where the proven bound allows
     // (ColumnStencils.h: below mPlaneTolerance of the peaks near, sigma the least of the struts
-    // kept): the nodes take the points their interpolated neighbours need as well.
+    // kept, C8 the largest of the field's struts along x): the nodes take the points their
+    // interpolated neighbours need as well.
     thread_local ColumnStencils stencils;
-    thread_local std::array<double, 4> stencilKey{};
+    thread_local std::array<double, 5> stencilKey{};
     const bool interpolated = mPlaneTolerance > 0.0 && kept > 0;
-    // The stencils hang on the plane's width, its spacing, the least sigma and the tolerance
-    // (fields of different tolerances may run on one thread).
-    const std::array<double, 4> key{double(plane.nx), dx, sigmaMin, mPlaneTolerance};
+    // The stencils hang on the plane's width, its spacing, the least sigma, the tolerance and C8
+    // (fields of different tolerances or struts may run on one thread).
+    const std::array<double, 5> key{double(plane.nx), dx, sigmaMin, mPlaneTolerance, mEighthBound};
     if (interpolated && stencilKey != key) {
-        stencils = columnStencils(plane.nx, dx, sigmaMin, mPlaneTolerance);
+        stencils = columnStencils(plane.nx, dx, sigmaMin, mPlaneTolerance, mEighthBound);
         stencilKey = key;
     }
     if (!interpolated || stencils.stride < 2) {

@@ -50,9 +50,9 @@ public:
     /// above band.hi (+1), and only the other tiles and their
     /// halo are evaluated (the rest are 0; struts that reach no open tile are left out, as they
     /// add nothing there). Skipped tiles are left out and Exact ones evaluated (@a need). Where
-    /// the struts' least sigma allows (ColumnStencils: every third column at the Saturn 4's 19 um
-    /// for sigma 0.2 mm), only the nodes' columns are evaluated and the others interpolated, within
-    /// planeTolerance() of the peaks near (and the cut-offs' steps: ColumnStencils.h); with
+    /// the struts' least sigma and their directions allow (ColumnStencils: every fourth column at
+    /// the Saturn 4's 19 um for a cube's diagonals of sigma 0.2 mm), only the nodes' columns are evaluated and the
+    /// others interpolated, within planeTolerance() of the peaks near (and the cut-offs' steps: ColumnStencils.h); with
     /// tolerance 0, every column is gridValues' own doubles.
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
                      std::span<signed char> side, std::span<const TileNeed> need) const override;
@@ -88,6 +88,8 @@ private:
     std::vector<double> mWMin;  ///< min(w0, w1)
     double mEps;
     double mPlaneTolerance = kPlaneTolerance;
+    /// The largest of the struts' C8 along x (segmentEighthDerivativeBound): planeValues' stencils.
+    double mEighthBound = 0.0;
     StrutIndex mIndex;
 };
 
