@@ -84,6 +84,13 @@ layers and the full plate extrapolated):
   11.6x (target 10x: missed); about 243-249 s for the plate (met). With the area check: 23.08 s
   against 2.25 s, 10.2x; area +0.0035 %, worst patch 0.018 % (met). W10 itself, the whole plate:
   struts 34.09 s, 807 MB, 566.3 Mpixel/s; TPMS 11.62 s, 1661.9 Mpixel/s: 2.9x (met).
+- 2026-12-04, issue 38 thirty-first round (C8 by each strut's direction: every fourth column exact
+  in W10's stacks; tile bounds eight at a time), the same host: the general case, one cell, five
+  runs: struts 19.21-22.74 s, 562-597 MB, against the gyroid sheet's 1.75-2.21 s in the same runs:
+  9.0x, 10.4x, 10.9x, 11.1x, 11.3x (target 10x: missed in four of five); about 192-227 s for the
+  plate (met); area +0.0034 %, worst patch 0.018 % (met). W10 itself, the whole plate: struts
+  36.21 s, 815 MB, 533.1 Mpixel/s; TPMS 11.67 s, 1653.8 Mpixel/s: 3.1x (met); info 1.74 s; area
+  -0.0003 %, worst patch 0.017 % (met).
 Before issue 38 a 20 x 20 x 2 mm window took 32 s for 40 layers and the 2 mm plate did not finish
 in ten minutes (the issue's figures).
 
