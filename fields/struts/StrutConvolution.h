@@ -51,9 +51,11 @@ public:
     /// halo are evaluated (the rest are 0; struts that reach no open tile are left out, as they
     /// add nothing there). Skipped tiles are left out and Exact ones evaluated (@a need). Where
     /// the struts' least sigma and their directions allow (ColumnStencils: every fourth column at
-    /// the Saturn 4's 19 um for a cube's diagonals of sigma 0.2 mm), only the nodes' columns are evaluated and the
-    /// others interpolated, within planeTolerance() of the peaks near (and the cut-offs' steps: ColumnStencils.h); with
-    /// tolerance 0, every column is gridValues' own doubles.
+    /// the Saturn 4's 19 um for a cube's diagonals of sigma 0.2 mm in planes four blocks across or
+    /// more, every third in one block), only the nodes' columns are evaluated and the others
+    /// interpolated, within planeTolerance() of the peaks near (and the cut-offs' steps:
+    /// ColumnStencils.h); with tolerance 0, every column is gridValues' own doubles. The upper
+    /// bounds go eight tiles at a time where the CPU has AVX-512F (TileBounds.h: the same doubles).
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
                      std::span<signed char> side, std::span<const TileNeed> need) const override;
 
