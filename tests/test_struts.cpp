@@ -2759,15 +2759,18 @@ TEST(ColumnStencils, DirectionalBoundHoldsForRaysAndSegmentsAndTakesEveryFourthC
     EXPECT_EQ(columnStencils(258, 0.019, 0.2, tolerance).exactCount(), 94u);
 }
 
-TEST(TileBounds, EightLanesGiveTheScalarLoopsDoubles)
+TEST(TileBounds, TwoAndEightLanesGiveTheScalarLoopsDoubles)
 {
-    // TileBounds.h's contract, bit for bit: per tile within reach, upper += peak expUpper(near^2 /
-    // 2 sigma^2) and peaks += peak; the halo and inner bits. Random struts over a 64 x 64 grid of
-    // 8 x 8-pixel tiles at the Saturn 4's pitch, tile columns of every length from 1 to 64.
-    if (!hasTileBoundsAvx512()) GTEST_SKIP() << "no AVX-512F here";
+    // TileBounds.h's contract, bit for bit, in both forms (eight lanes where the CPU has
+    // AVX-512F): per tile within reach, upper += peak expUpper(near^2 / 2 sigma^2) and peaks +=
+    // peak; the halo and inner bits. Random struts over a 64 x 64 grid of 8 x 8-pixel tiles at
+    // the Saturn 4's pitch, tile columns of 4 to 64 tiles.
     std::vector<double> table(12 * 256 + 1);
     for (std::size_t k = 0; k < table.size(); ++k) table[k] = std::exp(-double(k) / 256) * (1.0 + 1e-9);
-    const ExpUpperNodes nodes{table.data(), 256.0, int(table.size())};
+    const ExpUpperNodes nodes = expUpperNodes();
+    ASSERT_EQ(nodes.size, int(table.size()));
+    ASSERT_EQ(nodes.steps, 256.0);
+    ASSERT_TRUE(std::equal(table.begin(), table.end(), nodes.value));
     std::mt19937 rng(7);
     std::uniform_real_distribution<double> unit(-1.0, 1.0), share(0.0, 1.0);
     const int tilesX = 64, tilesY = 64;
@@ -2802,9 +2805,18 @@ TEST(TileBounds, EightLanesGiveTheScalarLoopsDoubles)
         s.peak = 1.0 + share(rng);
         s.inv2s2 = 0.5 / (sigma * sigma);
         std::vector<double> upper(tilesX * tilesY, 0.25), peaks(tilesX * tilesY, 0.5);
-        std::vector<double> upperRef = upper, peaksRef = peaks;
-        std::vector<TileColumnReach> reach(std::size_t(a1 - a0 + 1));
-        addTileBoundsAvx512(s, a0, a1, b0, b1, tilesY, nodes, upper.data(), peaks.data(), reach.data());
+        std::vector<double> upperRef = upper, peaksRef = peaks, upper8 = upper, peaks8 = peaks;
+        std::vector<TileColumnReach> reach(std::size_t(a1 - a0 + 1)), reach8(reach.size());
+        addTileBoundsScalar(s, a0, a1, b0, b1, tilesY, nodes, upper.data(), peaks.data(), reach.data());
+        if (hasAvx512Rows()) {
+            addTileBoundsAvx512(s, a0, a1, b0, b1, tilesY, nodes, upper8.data(), peaks8.data(), reach8.data());
+            ASSERT_EQ(upper8, upper) << "strut " << n;
+            ASSERT_EQ(peaks8, peaks) << "strut " << n;
+            for (std::size_t c = 0; c < reach.size(); ++c) {
+                ASSERT_EQ(reach8[c].halo, reach[c].halo) << "strut " << n;
+                ASSERT_EQ(reach8[c].inner, reach[c].inner) << "strut " << n;
+            }
+        }
         for (int a = a0; a <= a1; ++a) {
             TileColumnReach ref;
             const double ex = s.cx0 + a * s.stepX - s.ax;

@@ -11,10 +11,6 @@
 #include <numbers>
 #include <stdexcept>
 
-#if defined(__SSE2__)
-#include <emmintrin.h>
-#endif
-
 namespace voxlat {
 
 StrutConvolution::StrutConvolution(const std::vector<ConvolutionStrut>& struts, double eps,
@@ -189,55 +185,6 @@ void rowGaussians(double r0, double b, double c, double inv2s2, double q, double
     rowGaussiansFrom(std::exp(-(r0 + k0 * (b - c) + k0 * k0 * c) * inv2s2), std::exp(-(b + 2.0 * c * k0) * inv2s2), q,
                      q16, kLo, kHi, gauss);
 }
-
-/// Two doubles (GCC/Clang vector extensions) for planeValues' tile bounds, and the scalar
-/// operations it takes on them lane by lane: the same doubles as the scalar code.
-using Lanes2 = double __attribute__((vector_size(16)));
-
-/// std::clamp(v, 0, hi) per lane.
-inline Lanes2 clampLanes(Lanes2 v, double hi)
-{
-    const Lanes2 low = v < 0.0 ? Lanes2{} : v;
-    return hi < v ? Lanes2{} + hi : low;
-}
-
-/// std::sqrt per lane (IEEE square roots, correctly rounded either way).
-inline Lanes2 sqrtLanes(Lanes2 v)
-{
-#if defined(__SSE2__)
-    return Lanes2(_mm_sqrt_pd(__m128d(v)));
-#else
-    return Lanes2{std::sqrt(v[0]), std::sqrt(v[1])};
-#endif
-}
-
-/// exp(-x) from above for x >= 0: the exponential at x rounded down to a 256th (and 1e-9 more),
-/// so at most 0.4 % above it (std::exp past x = 12, beyond the cut-offs of eps >= 6e-6). A tile's
-/// bound needs one per strut and tile: a call of std::exp each was most of planeValues' own time.
-class ExpUpperTable {
-public:
-    static const ExpUpperTable& instance()
-    {
-        static const ExpUpperTable table;
-        return table;
-    }
-    double operator()(double x) const
-    {
-        const double at = x * kSteps;
-        if (!(at < double(kSize - 1))) return std::exp(-x);
-        return mValue[std::size_t(at)];  // truncation: the node at or below x
-    }
-    ExpUpperNodes nodes() const { return {mValue, double(kSteps), kSize}; }
-
-private:
-    static constexpr int kSteps = 256;
-    static constexpr int kSize = 12 * kSteps + 1;
-    ExpUpperTable()
-    {
-        for (int k = 0; k < kSize; ++k) mValue[std::size_t(k)] = std::exp(-double(k) / kSteps) * (1.0 + 1e-9);
-    }
-    double mValue[kSize];
-};
 
 /// Lower bounds of erf(x) and exp(-x) from tables, for planeValues' inside proofs: erf at the
 /// node at or nearer zero than |x| (erf is odd and increasing; 1/128 apart, so at most 0.9 % of a
@@ -950,9 +897,8 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
     const double stepX = tile * dx, stepY = tile * dy;
     const double cx0 = plane.origin.x() + (0.5 + 0.5 * tile) * dx, cy0 = plane.origin.y() + (0.5 + 0.5 * tile) * dy;
     const double halfX = 0.5 * stepX, halfY = 0.5 * stepY, halfDiagonal = std::sqrt(halfX * halfX + halfY * halfY);
-    const ExpUpperTable& expUpper = ExpUpperTable::instance();
-    const ExpUpperNodes expNodes = expUpper.nodes();
-    const bool eightLanes = hasTileBoundsAvx512();
+    const ExpUpperNodes expNodes = expUpperNodes();
+    const bool eightLanes = hasAvx512Rows();
     thread_local std::vector<TileColumnReach> columnReach;
     const LowerTables& lowerTables = LowerTables::instance();
     // Per strut and tile of its reach, its peak times the kernel at the least distance from the
@@ -1017,14 +963,15 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         // The box of tiles whose footprint grown by a spacing the strut reaches: columns
         // reachA0..reachA1, rows reachB0..reachB1.
         int reachA0 = tiles.nx, reachA1 = -1, reachB0 = tiles.ny, reachB1 = -1;
-        if (eightLanes && a0 <= a1 && b0 <= b1) {
-            // Eight tiles at a time (TileBounds.h: the loop's doubles below), the lower bounds after.
+        if (a0 <= a1 && b0 <= b1) {
+            // Per tile of the box, the strut's upper bound (TileBounds.h: two or eight tiles at a
+            // time, the same doubles), then the reach and the lower bounds of the tiles within.
             const TileColumnStrut strut{cx0,   stepX, s.a.x(),      cy0,    stepY,    s.a.y(),    ux,
                                         uy,    uz,    length,       ez,     farSqr,   farHaloSqr, innerSqr,
                                         halfX, halfY, halfDiagonal, margin, mPeak[j], inv2s2};
             columnReach.resize(std::size_t(a1 - a0 + 1));
-            addTileBoundsAvx512(strut, a0, a1, b0, b1, tiles.ny, expNodes, upper.data(), peaks.data(),
-                                columnReach.data());
+            (eightLanes ? addTileBoundsAvx512 : addTileBoundsScalar)(strut, a0, a1, b0, b1, tiles.ny, expNodes,
+                                                                     upper.data(), peaks.data(), columnReach.data());
             for (int a = a0; a <= a1; ++a) {
                 const TileColumnReach& met = columnReach[std::size_t(a - a0)];
                 if (met.halo) {
@@ -1039,65 +986,6 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
                     const int b = std::countr_zero(inner);
                     lower[row + b] += tileLower(ex, cy0 + b * stepY - s.a.y());
                 }
-            }
-        }
-        for (int a = eightLanes ? a1 + 1 : a0; a <= a1; ++a) {
-            bool column = false;  // the strut reaches a tile of column a
-            const double ex = cx0 + a * stepX - s.a.x();
-            const std::size_t row = std::size_t(a) * tiles.ny;
-            // Tile b's bound (a centre within far of the strut): its peak times the kernel at the
-            // least distance @a near, in strut order per tile.
-            auto add = [&](int b, double near) {
-                upper[row + b] += mPeak[j] * expUpper(near * near * inv2s2);
-                peaks[row + b] += mPeak[j];
-            };
-            int b = b0;
-            // Two tiles at a time: the operations below per lane, in their order (the same
-            // doubles), without a branch per tile on which of them the strut reaches.
-            for (; b < b1; b += 2) {
-                const Lanes2 ey = cy0 + Lanes2{double(b), double(b + 1)} * stepY - s.a.y();
-                const Lanes2 h = clampLanes(ex * ux + ey * uy + ez * uz, length);
-                const Lanes2 rx = ex - h * ux, ry = ey - h * uy, rz = ez - h * uz;
-                const Lanes2 dSqr = rx * rx + ry * ry + rz * rz;
-                const auto inHalo = dSqr < farHaloSqr, within = dSqr < farSqr;
-                if (inHalo[0] || inHalo[1]) {
-                    column = true;
-                    reachB0 = std::min(reachB0, inHalo[0] ? b : b + 1);
-                    reachB1 = std::max(reachB1, inHalo[1] ? b + 1 : b);
-                }
-                if (!(within[0] || within[1])) continue;
-                if (dSqr[0] < innerSqr) lower[row + b] += tileLower(ex, ey[0]);
-                if (dSqr[1] < innerSqr) lower[row + b + 1] += tileLower(ex, ey[1]);
-                const Lanes2 d = sqrtLanes(dSqr);
-                const Lanes2 spread = (halfX * (rx < 0.0 ? -rx : rx) + halfY * (ry < 0.0 ? -ry : ry)) / d;
-                const Lanes2 root = d - (spread < halfDiagonal ? spread : Lanes2{} + halfDiagonal) - margin;
-                const Lanes2 near = 0.0 < root ? root : Lanes2{};
-                if (within[0]) add(b, near[0]);
-                if (within[1]) add(b + 1, near[1]);
-            }
-            for (; b <= b1; ++b) {
-                const double ey = cy0 + b * stepY - s.a.y();
-                // The centre's distance to the segment (its nearest point a + h u, h clamped):
-                // rounding far below the margin.
-                const double h = std::clamp(ex * ux + ey * uy + ez * uz, 0.0, length);
-                const double rx = ex - h * ux, ry = ey - h * uy, rz = ez - h * uz;
-                const double dSqr = rx * rx + ry * ry + rz * rz;
-                if (dSqr < farHaloSqr) {
-                    column = true;
-                    reachB0 = std::min(reachB0, b);
-                    reachB1 = std::max(reachB1, b);
-                }
-                if (dSqr >= farSqr) continue;  // beyond the cut-off everywhere: nothing added there
-                if (dSqr < innerSqr) lower[row + b] += tileLower(ex, ey);
-                // Every point of the footprint lies at least this far from the segment.
-                const double d = std::sqrt(dSqr);
-                const double spread = std::min(halfDiagonal, (halfX * std::abs(rx) + halfY * std::abs(ry)) / d);
-                const double root = d - spread - margin;
-                add(b, 0.0 < root ? root : 0.0);
-            }
-            if (column) {
-                reachA0 = std::min(reachA0, a);
-                reachA1 = a;
             }
         }
         if (reachA1 >= 0) {

@@ -1,6 +1,6 @@
 /// @file TileBounds.h
-/// @brief StrutConvolution::planeValues' upper bounds of one strut over one column of a plane's
-/// tiles, eight tiles at a time (AVX-512F), the same doubles as its scalar loop.
+/// @brief StrutConvolution::planeValues' upper bounds of one strut over a box of a plane's tiles:
+/// two tiles at a time, or eight (AVX-512F), the same doubles either way.
 ///
 /// Per tile b of the column (centre ex, cy0 + b stepY, ez from the strut's start): h the centre's
 /// projection clamped to [0, L], r the centre less its nearest point of the segment,
@@ -30,6 +30,11 @@ struct ExpUpperNodes {
     int size;
 };
 
+/// exp(-x) from above for x >= 0: the exponential at x rounded down to a 256th (and 1e-9 more),
+/// so at most 0.4 % above it (std::exp past x = 12, beyond the cut-offs of eps >= 6e-6). A tile's
+/// bound needs one per strut and tile: a call of std::exp each was most of planeValues' own time.
+ExpUpperNodes expUpperNodes();
+
 /// Which tiles of the column the strut reaches: its halo (dSqr < farHaloSqr) and its inner
 /// tiles (within the cut-off and dSqr < innerSqr, where planeValues adds a lower bound), bit b
 /// for tile b.
@@ -38,13 +43,14 @@ struct TileColumnReach {
 };
 
 /// Adds the strut's bounds to @a upper and @a peaks (tile (a, b) at a * @a tilesY + b) for the
-/// tiles a0..a1 x b0..b1 (b1 < 64), as the scalar loop does, and gives column a's reach in
-/// @a reach[a - a0]. Call only where hasTileBoundsAvx512().
-void addTileBoundsAvx512(const TileColumnStrut& s, int a0, int a1, int b0, int b1, int tilesY,
+/// tiles a0..a1 x b0..b1 (b1 < 64), in increasing a and b, and gives column a's reach in
+/// @a reach[a - a0]. Two tiles at a time (vector extensions), on any CPU.
+void addTileBoundsScalar(const TileColumnStrut& s, int a0, int a1, int b0, int b1, int tilesY,
                          const ExpUpperNodes& table, double* upper, double* peaks, TileColumnReach* reach);
 
-/// Whether this build has the eight-lane form and the CPU runs it (AVX-512F; VOXLAT_NO_AVX512 keeps
-/// the scalar loop).
-bool hasTileBoundsAvx512();
+/// addTileBoundsScalar eight tiles at a time (TileBoundsAvx512.cpp, AVX-512F): the same doubles.
+/// Call only where hasAvx512Rows() (StrutRows.h: the build has AVX-512 forms and the CPU runs them).
+void addTileBoundsAvx512(const TileColumnStrut& s, int a0, int a1, int b0, int b1, int tilesY,
+                         const ExpUpperNodes& table, double* upper, double* peaks, TileColumnReach* reach);
 
 }  // namespace voxlat

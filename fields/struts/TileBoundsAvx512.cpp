@@ -93,23 +93,12 @@ void addTileBoundsAvx512(const TileColumnStrut& s, int a0, int a1, int b0, int b
     }
 }
 
-bool hasTileBoundsAvx512()
-{
-    static const bool has = __builtin_cpu_supports("avx512f") && !std::getenv("VOXLAT_NO_AVX512");
-    return has;
-}
-
 #else
 
 void addTileBoundsAvx512(const TileColumnStrut&, int, int, int, int, int, const ExpUpperNodes&, double*, double*,
                          TileColumnReach*)
 {
     std::abort();
-}
-
-bool hasTileBoundsAvx512()
-{
-    return false;
 }
 
 #endif
