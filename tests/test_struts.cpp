@@ -21,6 +21,7 @@
 #include "fields/struts/GaussianTable.h"
 #include "fields/struts/IsoRadius.h"
 #include "fields/struts/IsoRadiusAvx2.h"
+#include "fields/struts/IsoRadiusSingle.h"
 #include "fields/struts/StrutCapsules.h"
 #include "fields/struts/StrutConvolution.h"
 #include "fields/struts/StrutIndex.h"
@@ -987,6 +988,63 @@ TEST(IsoRadius, RadiiAreRadiusOfBitForBit)
     }
     EXPECT_GT(negative, 0u);  // joints above the peak map below zero
     EXPECT_GT(compared, 10'000u);
+}
+
+TEST(IsoRadius, SingleRadiiMissLnFByLessThanAMillionthAndAreTheSameOnEveryPath)
+{
+    // radiiSingle (the slicer's map where the plane's values are interpolated) against radiusOf,
+    // measured in u = ln(P / F) (rho = sigma sqrt(2 u): an error du in u is a relative error du
+    // in F wherever rho is) per unit of 1 + |u|: F log-uniform over fMin .. 20 P and the map's edge values;
+    // the baseline loop and the AVX-512F one give the same doubles, at every tail length.
+    const double sigma = 0.2, peak = 3.08, rhoMax = 1.8;
+    const IsoRadius iso(std::make_shared<ConstantField>(0.0), peak, sigma, rhoMax);
+    const double fMin = iso.valueOf(rhoMax);
+    std::mt19937 rng(1041);
+    std::uniform_real_distribution<double> exponent(std::log(fMin), std::log(20.0 * peak));
+    std::vector<double> f;
+    for (int n = 0; n < 200'000; ++n) f.push_back(std::exp(exponent(rng)));
+    for (const double v : {0.0, fMin, std::nextafter(fMin, 1.0), std::nextafter(fMin, 0.0), peak,
+                           std::nextafter(peak, 0.0), std::nextafter(peak, 10.0), 1e-300, -1.0, 1.0})
+        f.push_back(v);
+    std::vector<double> rho = f;
+    iso.radiiSingle(rho);
+    double worst = 0.0;
+    for (std::size_t n = 0; n < f.size(); ++n) {
+        ASSERT_TRUE(std::isfinite(rho[n])) << "F " << f[n];
+        ASSERT_LE(rho[n], rhoMax) << "F " << f[n];
+        if (f[n] <= fMin) {
+            EXPECT_EQ(rho[n], rhoMax) << "F " << f[n];
+            continue;
+        }
+        // u = ln(P / F) = sign(rho) rho^2 / 2 sigma^2: single precision misses it by its rounding
+        // near F's own scale (ln F about 1) and by rho's relative rounding (2 u 6e-8) far out.
+        const double exact = std::log(peak / f[n]),
+                     single = std::copysign(rho[n] * rho[n], rho[n]) / (2.0 * sigma * sigma);
+        if (iso.radiusOf(f[n]) < rhoMax) worst = std::max(worst, std::abs(single - exact) / (1.0 + std::abs(exact)));
+        // At the peak the exact rho is 0 and the single one at most sigma sqrt(2 du).
+        EXPECT_LE(std::abs(rho[n] - iso.radiusOf(f[n])), 1e-3 * sigma) << "F " << f[n];
+    }
+    EXPECT_LT(worst, 1e-6);  // measured 2.9e-7
+    EXPECT_GT(worst, 1e-9);  // single precision, not the double map
+    const SingleRadii m{float(std::log(peak)), float(sigma), fMin, rhoMax};
+    for (const std::size_t n : {std::size_t(1), std::size_t(7), std::size_t(15), std::size_t(16), std::size_t(17),
+                                std::size_t(33), f.size()}) {
+        std::vector<double> base(f.begin(), f.begin() + std::ptrdiff_t(n)), wide = base;
+        isoRadiiSingleLoop(base.data(), n, m);
+        if (hasAvx512Rows())
+            isoRadiiSingleAvx512(wide.data(), n, m);
+        else
+            isoRadiiSingleLoop(wide.data(), n, m);
+        ASSERT_EQ(0, std::memcmp(base.data(), wide.data(), n * sizeof(double))) << n << " values";
+        ASSERT_EQ(0, std::memcmp(base.data(), rho.data(), n * sizeof(double))) << n << " values";
+    }
+    // The slicer's planes take it where the convolution interpolates, not where they are exact.
+    std::vector<ConvolutionStrut> struts = {{Vec3d(0.0), Vec3d(2.0, 0.0, 0.0), sigma, 1.0, 1.0}};
+    auto convolution = std::make_shared<StrutConvolution>(struts);
+    const IsoRadius lattice(convolution, peak, sigma, rhoMax);
+    EXPECT_TRUE(lattice.planeSingle());
+    convolution->setPlaneTolerance(0.0);
+    EXPECT_FALSE(lattice.planeSingle());
 }
 
 TEST(StrutConvolution, GradientMatchesFiniteDifferences)

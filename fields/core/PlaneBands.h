@@ -88,13 +88,19 @@ public:
     /// (empty: every tile Decide) says per tile what the caller needs: a Skip tile's side is 0 and
     /// means nothing, an Exact tile's side is 0. The values of the tiles with side 0 that are not
     /// skipped, and of the points around them (the 3 x 3 neighbourhood of each of their points),
-    /// are gridValues' own, the same doubles; the others are finite and mean nothing.
+    /// are gridValues' own, the same doubles (unless planeTolerance() says otherwise); the others
+    /// are finite and mean nothing.
     virtual void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
                              std::span<signed char> side, std::span<const TileNeed> need) const = 0;
     /// Whether deciding a plane's tiles costs little next to a strut lattice's sums (a distance
     /// grid, a primitive): a boolean asks such operands first, so the costly ones skip the tiles
     /// the cheap ones decide.
     virtual bool planeCheap() const { return false; }
+    /// How far planeValues' values of the open tiles may be from gridValues', per unit of the
+    /// node's own scale (StrutConvolution: of the struts' peaks near; its interpolated columns):
+    /// 0, the same doubles. A node mapping such values may then map them more cheaply as well
+    /// (IsoRadius: in single precision).
+    virtual double planeTolerance() const { return 0.0; }
 
 protected:
     ~PlaneBands() = default;

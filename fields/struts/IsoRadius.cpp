@@ -1,6 +1,8 @@
 #include "fields/struts/IsoRadius.h"
 
 #include "fields/struts/IsoRadiusAvx2.h"
+#include "fields/struts/IsoRadiusSingle.h"
+#include "fields/struts/StrutRows.h"
 
 #include <algorithm>
 #include <bit>
@@ -62,6 +64,23 @@ void IsoRadius::radii(std::span<double> values) const
     }
 }
 
+void IsoRadius::radiiSingle(std::span<double> values) const
+{
+    const SingleRadii m{float(std::log(mPeak)), float(mSigma), mFMin, mRhoMax};
+    if (hasAvx512Rows())
+        isoRadiiSingleAvx512(values.data(), values.size(), m);
+    else
+        isoRadiiSingleLoop(values.data(), values.size(), m);
+}
+
+bool IsoRadius::planeSingle() const
+{
+    // Single precision holds its 1e-7 of sigma only for values within its range (fMin at or above
+    // 1e-30: rhoMax within about 11.6 sigma of the peak).
+    const auto* bands = dynamic_cast<const PlaneBands*>(mF.get());
+    return bands && bands->planeTolerance() > 0.0 && mFMin >= 1e-30;
+}
+
 void IsoRadius::values(std::span<const Vec3d> points, std::span<double> out) const
 {
     mF->values(points, out);
@@ -101,12 +120,19 @@ void IsoRadius::planeValues(const GridBatch& plane, int tile, Interval band, std
     const double d = 1e-9 * (mSigma + finiteScale(band));
     const double fLo = band.hi < mRhoMax ? valueOf(band.hi + d) : -std::numeric_limits<double>::infinity();
     bands->planeValues(plane, tile, Interval{fLo, valueOf(band.lo - d)}, out, side, need);
+    const bool single = planeSingle();
+    auto map = [&](std::span<double> values) {
+        if (single)
+            radiiSingle(values);
+        else
+            radii(values);
+    };
     for (std::size_t t = 0; t < tiles; ++t) side[t] = static_cast<signed char>(-side[t]);
     // Only the points the open tiles read are mapped (each open tile's points and its one-point
     // halo: runs of tiles along each column); the others mean nothing and take rhoMax.
     const PlaneTiles grid = PlaneTiles::of(plane, tile);
     if (grid.nx == 0 || grid.ny > 64 || plane.ny < 2) {
-        radii(out.first(plane.size()));
+        map(out.first(plane.size()));
         return;
     }
     for (int i = 0; i < plane.nx; ++i) {
@@ -122,7 +148,7 @@ void IsoRadius::planeValues(const GridBatch& plane, int tile, Interval band, std
         forEachTileRun(open, [&](int b0, int b1) {
             const int lo = b0 * tile, hi = std::min(plane.ny - 1, (b1 + 1) * tile + 1);
             std::fill(column + done, column + std::max(done, lo), mRhoMax);
-            if (hi >= std::max(done, lo)) radii(std::span<double>(column + std::max(done, lo), column + hi + 1));
+            if (hi >= std::max(done, lo)) map(std::span<double>(column + std::max(done, lo), column + hi + 1));
             done = std::max(done, hi + 1);
         });
         std::fill(column + done, column + plane.ny, mRhoMax);

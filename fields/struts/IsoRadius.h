@@ -26,7 +26,9 @@ public:
     void gridValues(const GridBatch& batch, std::span<double> out) const override;
     Interval bound(const Box3& box) const override;
     /// The convolution's planeValues with the band mapped to F (rho is decreasing, so the sides
-    /// swap), widened by 1e-9 of sigma against rounding; gridValues when it has none.
+    /// swap), widened by 1e-9 of sigma against rounding; gridValues when it has none. Where the
+    /// convolution's plane values are approximate (PlaneBands::planeTolerance() > 0) the open
+    /// tiles' values are mapped in single precision (radiiSingle).
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
                      std::span<signed char> side, std::span<const TileNeed> need) const override;
 
@@ -36,6 +38,11 @@ public:
     /// radiusOf() of every value in place, the same doubles (its divisions and square roots in
     /// loops of their own, apart from the logarithm's calls).
     void radii(std::span<double> values) const;
+    /// radiusOf() of every value in place in single precision (IsoRadiusSingle.h: within about
+    /// 1e-7 of sigma of it), the same doubles on every CPU.
+    void radiiSingle(std::span<double> values) const;
+    /// Whether planeValues maps its open tiles with radiiSingle.
+    bool planeSingle() const;
 
 private:
     FieldPtr mF;

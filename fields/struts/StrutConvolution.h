@@ -70,7 +70,7 @@ public:
     /// of the peaks near (0: every column exact, gridValues' doubles). Set before the field is
     /// shared across threads.
     void setPlaneTolerance(double tolerance) { mPlaneTolerance = tolerance; }
-    double planeTolerance() const { return mPlaneTolerance; }
+    double planeTolerance() const override { return mPlaneTolerance; }
     /// The default: 2.5e-5, the table and Taylor paths' own (see planeValues).
     static constexpr double kPlaneTolerance = 2.5e-5;
 
