@@ -170,17 +170,23 @@ struct ContactSheet {
             return layer == image.index || (period > 0 && layer >= period && layer % period == image.index);
         };
         if (std::none_of(layers.begin(), layers.end(), shows)) return;
-        std::vector<std::uint32_t> sum(std::size_t(cw) * ch, 0);
+        // Locals, not members: the sums' stores may alias `step`, which would be reloaded per
+        // pixel (1.4 % of slicing 40 layers of W10's plate, 12 of them sheet layers).
+        const int by = step, across = cw, nx = image.nx;
+        std::vector<std::uint32_t> sum(std::size_t(across) * ch, 0);
         for (int j = 0; j < image.ny; ++j) {
-            std::uint32_t* target = &sum[std::size_t(j / step) * cw];
-            const std::uint8_t* src = &image.pixels[std::size_t(j) * image.nx];
-            for (int i = 0, c = 0, k = 0; i < image.nx; ++i) {
-                target[c] += src[i];
-                if (++k == step) k = 0, ++c;  // c = i / step without a division per pixel
+            std::uint32_t* const target = &sum[std::size_t(j / by) * across];
+            const std::uint8_t* const src = &image.pixels[std::size_t(j) * nx];
+            const int whole = nx / by;  // cells of `by` pixels; the last one may be short
+            for (int c = 0; c < whole; ++c) {
+                std::uint32_t s = 0;
+                for (int k = 0; k < by; ++k) s += src[c * by + k];
+                target[c] += s;
             }
+            for (int i = whole * by; i < nx; ++i) target[whole] += src[i];
         }
         std::vector<std::uint8_t> cell(sum.size());
-        for (std::size_t k = 0; k < sum.size(); ++k) cell[k] = std::uint8_t(sum[k] / (step * step));
+        for (std::size_t k = 0; k < sum.size(); ++k) cell[k] = std::uint8_t(sum[k] / (by * by));
         for (std::size_t k = 0; k < layers.size(); ++k)
             if (shows(layers[k])) cells[k] = cell;
     }
