@@ -91,6 +91,14 @@ layers and the full plate extrapolated):
   plate (met); area +0.0034 %, worst patch 0.018 % (met). W10 itself, the whole plate: struts
   36.21 s, 815 MB, 533.1 Mpixel/s; TPMS 11.67 s, 1653.8 Mpixel/s: 3.1x (met); info 1.74 s; area
   -0.0003 %, worst patch 0.017 % (met).
+- 2026-12-05, issue 38 thirty-second round (the iso-radius map in single precision where the plane's
+  values are interpolated; a stack's blocks decided when it is made), AMD EPYC host: the general
+  case, one cell, five runs: struts 16.65-17.07 s, 551-561 MB, against the gyroid sheet's
+  1.42-1.53 s in the same runs: 11.2x, 11.6x, 11.7x, 11.7x, 12.0x (target 10x: missed; the sheet
+  gained more from the same slicer changes); about 167-171 s for the plate (met); with the area
+  check 16.36 s against 1.39 s, 11.7x, area +0.0034 %, worst patch 0.018 % (met). W10 itself, the
+  whole plate: struts 29.76 s, 776 MB, 648.6 Mpixel/s; TPMS 10.04 s, 1922.2 Mpixel/s: 3.0x (met);
+  info 1.58 s; area -0.0003 %, worst patch 0.017 % (met).
 Before issue 38 a 20 x 20 x 2 mm window took 32 s for 40 layers and the 2 mm plate did not finish
 in ten minutes (the issue's figures).
 

@@ -2148,10 +2148,11 @@ void expectTheHandedGridServesTheGridAtTheLevel(const FieldNode* mask)
         moved->solve(level);
         counted->batches = 0;
         evaluateSparse(*moved, d, region);
-        if (!told.contains(level))
+        if (!told.contains(level)) {
             EXPECT_GT(counted->batches.load(), 0) << level;
-        else if (!mask)
+        } else if (!mask) {
             EXPECT_EQ(counted->batches.load(), 0) << level;
+        }
         const auto grid = evaluateSparse(*moved, d, stacked);
         const auto want = fresh(level);
         ASSERT_EQ(grid->tree().leafCount(), want->tree().leafCount()) << level;
