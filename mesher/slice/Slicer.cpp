@@ -525,7 +525,8 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
     // another path then (a bound, its quarters) writes all its pixels again, so the bytes are
     // those of that path; the counts too. (Decided row of blocks by row of blocks, a stack's
     // values left the caches before its lower blocks came: their tile passes were 10 % of
-    // slicing W10's plate, twice the same passes on values in the caches.)
+    // slicing W10's plate, twice the same passes on values in the caches.) The slots and arrays
+    // are this call's own: a field's evaluation may run another layer on this thread.
     struct BlockStack {
         int bi = -1, bj = 0, rows = 0;          ///< window column and row of its first block, rows held
         int columns = 1;                        ///< blocks across
