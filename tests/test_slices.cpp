@@ -667,8 +667,8 @@ TEST(Slices, StackedBlocksWriteTheBytesOfBlocksAlone)
     RasterOptions stacks, alone;
     stacks.straddlingRun = alone.straddlingRun = 4;  // stacks where blocks go unbounded: after 4 here
     alone.stackBlocks = 1;
-    // Again with a hole through the lattice: a stack's blocks in the hole are bounded and filled
-    // when the layer reaches them (after the stack decided them), and the blocks after them bounded.
+    // Again with a hole through the lattice: blocks a stack already decided are bounded when the
+    // layer reaches them and split into quarters (or filled), writing their pixels again.
     const auto holed = std::make_shared<BooleanField>(
         BooleanOp::Difference, std::vector<FieldPtr>{lattice, std::make_shared<Sphere>(Vec3d(3.0, 7.0, 1.0), 2.0)});
     for (const FieldNode* field :

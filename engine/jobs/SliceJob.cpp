@@ -173,11 +173,11 @@ struct ContactSheet {
         // Locals, not members: the sums' stores may alias `step`, which would be reloaded per
         // pixel (1.4 % of slicing 40 layers of W10's plate, 12 of them sheet layers).
         const int by = step, across = cw, nx = image.nx;
+        const int whole = nx / by;  // cells of `by` pixels across; the last one may be short
         std::vector<std::uint32_t> sum(std::size_t(across) * ch, 0);
         for (int j = 0; j < image.ny; ++j) {
             std::uint32_t* const target = &sum[std::size_t(j / by) * across];
             const std::uint8_t* const src = &image.pixels[std::size_t(j) * nx];
-            const int whole = nx / by;  // cells of `by` pixels; the last one may be short
             for (int c = 0; c < whole; ++c) {
                 std::uint32_t s = 0;
                 for (int k = 0; k < by; ++k) s += src[c * by + k];

@@ -571,7 +571,6 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
         // The tiles the part's box cuts (the window's rim) ask for their values (TileNeed::Exact)
         // and take edgeTile's per-pixel rules as before; the block's other tiles may be decided.
         const bool banded = bands && tile == kLanes && bnx % tile == 0 && bny % tile == 0;
-        values.resize(grid.size());
         if (banded) {
             bool rim = false;
             for (int a = 0; a < ntx; ++a) rim = rim || !mTileColumnsIn[bi + a * tile];
@@ -650,18 +649,14 @@ void Slicer::rasterize(double z, LayerImage& out, RasterStats* stats) const
                                      stack.blockCounts[std::size_t(a) * m + b]);
                         }
                 }
-                const RasterCounts& made =
-                    stack.blockCounts[std::size_t((bi - stack.bi) / block) * (stack.rows / block) +
-                                      (bj - stack.bj) / block];
-                counts.tilesInside += made.tilesInside;
-                counts.tilesOutside += made.tilesOutside;
-                counts.tilesEdge += made.tilesEdge;
-                counts.pixelsEvaluated += made.pixelsEvaluated;
-                counts.pixelsSupersampled += made.pixelsSupersampled;
+                counts += stack.blockCounts[std::size_t((bi - stack.bi) / block) * (stack.rows / block) +
+                                            (bj - stack.bj) / block];
                 return;
             }
+            values.resize(grid.size());
             bands->planeValues(grid, tile, Interval{0.0, 0.0}, values, tileSides, tileNeeds);
         } else {
+            values.resize(grid.size());
             mField.gridValues(grid, values);
         }
         // Single precision and the largest difference between the four corners of each grid cell

@@ -171,6 +171,17 @@ struct RasterStats {
 struct RasterCounts {
     std::uint64_t tilesInside = 0, tilesOutside = 0, tilesEdge = 0, pixelsEvaluated = 0, pixelsSupersampled = 0;
     std::uint64_t blocksUnbounded = 0, pixelsCopied = 0;
+    RasterCounts& operator+=(const RasterCounts& o)
+    {
+        tilesInside += o.tilesInside;
+        tilesOutside += o.tilesOutside;
+        tilesEdge += o.tilesEdge;
+        pixelsEvaluated += o.pixelsEvaluated;
+        pixelsSupersampled += o.pixelsSupersampled;
+        blocksUnbounded += o.blocksUnbounded;
+        pixelsCopied += o.pixelsCopied;
+        return *this;
+    }
 };
 
 /// Rasterizes slices of one field (negative inside), clipped to the part box.
