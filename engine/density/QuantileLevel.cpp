@@ -7,6 +7,7 @@
 #include "engine/core/SystemInfo.h"
 #include "engine/density/Coverage.h"
 #include "fields/core/BlockLattice.h"
+#include "fields/core/Scratch.h"
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
@@ -93,12 +94,23 @@ public:
     }
     void gridValues(const GridBatch& batch, std::span<double> out) const override
     {
-        // The mask first: a batch wholly outside it needs no g. (A stack of leaves, more than
-        // kBatchSize points, takes the mask's values in a vector of its own.)
+        // The mask's bound first: a batch wholly inside it is g's alone (the mask cuts none of its
+        // leaves), one wholly outside needs no g; a float test on the bound holds for every value
+        // within it (rounding to float keeps order).
+        const Interval bound = mMask.bound(batch.bounds());
+        if (float(bound.hi) < 0.0f) {
+            mG.gridValues(batch, out);
+            return;
+        }
+        if (!(float(bound.lo) < 0.0f)) {
+            std::fill(out.begin(), out.begin() + batch.size(), kOutsideMask);
+            return;
+        }
+        // Then its values. (A stack of leaves, more than kBatchSize points, takes them in this
+        // thread's scratch: a vector of its own per stack was zeroed and faulted in every time.)
         std::array<double, kBatchSize> small;
-        std::vector<double> large(batch.size() > kBatchSize ? batch.size() : 0);
-        const std::span<double> m =
-            batch.size() > kBatchSize ? std::span<double>(large) : std::span<double>(small.data(), batch.size());
+        const ScratchLease large(batch.size() > kBatchSize ? batch.size() : 0);
+        const std::span<double> m(batch.size() > kBatchSize ? large.data() : small.data(), batch.size());
         mMask.gridValues(batch, m);
         if (std::none_of(m.begin(), m.end(), [](double v) { return float(v) < 0.0f; })) {
             std::fill(out.begin(), out.begin() + batch.size(), kOutsideMask);
