@@ -232,9 +232,10 @@ std::shared_ptr<Job> makeJob(const Recipe& recipe, py::object progress)
 PYBIND11_MODULE(_voxlat, m)
 {
     m.doc() = "voxlat engine core: recipes, jobs, fields (see the `voxlat` package for the graph builder)";
-    // The engine's mapped blocks in huge pages, except where the host takes freed memory back
-    // (the command line decides the same, tools/HugePages.h; Python's malloc is left as it is).
-    voxlat::setHugePageAdvice(!voxlat::freePagesReportedToHost());
+    // The engine's mapped blocks in huge pages, except where the host takes freed memory back and
+    // they fault in no faster there (the command line decides the same, tools/HugePages.h's
+    // hugePagesPay(); Python's malloc is left as it is).
+    voxlat::setHugePageAdvice(voxlat::hugePagesPay());
     static py::exception<InputError> inputError(m, "InputError", PyExc_ValueError);
     static py::exception<JobError> jobError(m, "JobError", PyExc_RuntimeError);
     static py::exception<Cancelled> cancelled(m, "Cancelled", PyExc_RuntimeError);

@@ -4,8 +4,12 @@
 
 #if defined(__linux__)
 #include <dirent.h>
+#include <sys/mman.h>
+#include <time.h>
 #endif
 
+#include <algorithm>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -41,16 +45,85 @@ inline bool freePagesReportedToHost(const char* drivers = "/sys/bus/virtio/drive
 #endif
 }
 
+/// The time in milliseconds to fault in one 2 MB-aligned region of 2 MB as a fresh transparent
+/// huge page (advised MADV_HUGEPAGE) and as 4 KB pages (MADV_NOHUGEPAGE), touched once per 4 KB
+/// and unmapped: the quicker of @a trials of each; negative where none was measured (no trial, a
+/// failed mapping or advice, or not Linux).
+struct HugePageFaultTimes {
+    double huge = -1.0, small = -1.0;
+};
+
+inline HugePageFaultTimes hugePageFaultTimes(int trials = 2)
+{
+    HugePageFaultTimes best;
+#if defined(__linux__) && defined(MADV_HUGEPAGE) && defined(MADV_NOHUGEPAGE)
+    constexpr std::size_t kHuge = std::size_t(2) << 20;
+    auto milliseconds = [] {
+        timespec t{};
+        ::clock_gettime(CLOCK_MONOTONIC, &t);
+        return double(t.tv_sec) * 1e3 + double(t.tv_nsec) * 1e-6;
+    };
+    auto touch = [&](int advice) {
+        void* mapped = ::mmap(nullptr, 2 * kHuge, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+        if (mapped == MAP_FAILED) return -1.0;
+        const auto start = (reinterpret_cast<std::uintptr_t>(mapped) + kHuge - 1) & ~std::uintptr_t(kHuge - 1);
+        volatile char* region = reinterpret_cast<volatile char*>(start);
+        double took = -1.0;
+        if (::madvise(reinterpret_cast<void*>(start), kHuge, advice) == 0) {
+            const double t0 = milliseconds();
+            for (std::size_t at = 0; at < kHuge; at += 4096) region[at] = 1;
+            took = milliseconds() - t0;
+        }
+        ::munmap(mapped, 2 * kHuge);
+        return took;
+    };
+    for (int trial = 0; trial < trials; ++trial) {
+        const double h = touch(MADV_HUGEPAGE), s = touch(MADV_NOHUGEPAGE);
+        if (h < 0.0 || s < 0.0) return HugePageFaultTimes{};
+        best.huge = best.huge < 0.0 ? h : std::min(best.huge, h);
+        best.small = best.small < 0.0 ? s : std::min(best.small, s);
+    }
+#else
+    (void)trials;
+#endif
+    return best;
+}
+
+/// Whether @a times show huge pages faulting in faster: at under half the 4 KB pages' time (a
+/// machine without them, THP `never`, times both alike), both measured.
+inline bool hugePagesFaster(const HugePageFaultTimes& times)
+{
+    return times.huge >= 0.0 && times.small >= 0.0 && 2.0 * times.huge < times.small;
+}
+
+/// hugePagesFaster() of this machine, measured (a few milliseconds; at most about 50 on the slow
+/// kinds). Why measured, not known from the machine: a Firecracker guest reporting its free memory
+/// to its host took 7-10 ms for a huge page against 1.0-1.4 ms for 2 MB of 4 KB pages, a PVM guest
+/// that reports it too took 0.12-0.20 ms against 5.2-14.6 ms (each 4 KB fault a trip to its host;
+/// the acceptance gyroid there 2.74-3.16 s of wall without huge pages, 1.67-2.14 s with).
+inline bool hugePagesFaultFaster(int trials = 2)
+{
+    return hugePagesFaster(hugePageFaultTimes(trials));
+}
+
+/// Whether this process should back its memory with huge pages: everywhere, except on a machine
+/// that reports its free memory to its host (freePagesReportedToHost()) where they do not fault in
+/// faster than 4 KB pages (hugePagesFaultFaster(), measured only there).
+inline bool hugePagesPay()
+{
+    return !freePagesReportedToHost() || hugePagesFaultFaster();
+}
+
 /// Asks glibc's malloc to back its large blocks with transparent huge pages, through the
 /// GLIBC_TUNABLES variable, for the next program this process executes (glibc reads tunables
 /// only at start-up). Why: a job touches gigabytes of freshly allocated memory (grid leaves, the
 /// mesh), and where THP is `madvise` (Debian's default) each 4 KiB page is a fault of its own: a
 /// fifth of the acceptance gyroid's CPU time went to page faults, and huge pages cut its CPU
 /// time by a quarter. Except where the machine reports its free memory to its host
-/// (freePagesReportedToHost()): there a fresh huge page costs more than its 4 KB pages (a
-/// Firecracker guest: 7-10 ms against 1.0-1.4 ms for 2 MB; the 50 mm trimmed frame run alone
-/// 9.2-9.6 s against 6.9-8.2 s; `bench/history.md`, twenty-seventh round), so
-/// glibc.malloc.hugetlb=0 is added instead (the engine then neither asks again nor advises its
+/// (freePagesReportedToHost()) and a fresh huge page does not fault in faster than its 4 KB pages
+/// there (hugePagesPay(): a Firecracker guest, 7-10 ms against 1.0-1.4 ms for 2 MB; the 50 mm
+/// trimmed frame run alone 9.2-9.6 s against 6.9-8.2 s; `bench/history.md`, twenty-seventh
+/// round), where glibc.malloc.hugetlb=0 is added instead (the engine then neither asks again nor advises its
 /// own blocks). `VOXLAT_HUGEPAGES=1` asks even there. Nothing computed changes. Returns true only
 /// when it added hugetlb=1 (the engine then runs itself again); false after adding hugetlb=0, and
 /// false changing nothing when `VOXLAT_NO_HUGEPAGES` is set or a hugetlb tunable is already
@@ -62,7 +135,7 @@ inline bool requestHugePages(std::string& previous, bool& hadPrevious)
     previous = tunables ? tunables : "";
     if (std::getenv("VOXLAT_NO_HUGEPAGES") || (tunables && std::strstr(tunables, "glibc.malloc.hugetlb"))) return false;
     const char* forced = std::getenv("VOXLAT_HUGEPAGES");
-    const bool ask = (forced && std::strcmp(forced, "1") == 0) || !freePagesReportedToHost();
+    const bool ask = (forced && std::strcmp(forced, "1") == 0) || hugePagesPay();
     const char* tunable = ask ? "glibc.malloc.hugetlb=1" : "glibc.malloc.hugetlb=0";
     const std::string value = tunables && *tunables ? previous + ":" + tunable : std::string(tunable);
     return ::setenv("GLIBC_TUNABLES", value.c_str(), 1) == 0 && ask;
