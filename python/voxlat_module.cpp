@@ -235,7 +235,8 @@ PYBIND11_MODULE(_voxlat, m)
     // The engine's mapped blocks in huge pages, except where the host takes freed memory back and
     // they fault in no faster there (the command line decides the same, tools/HugePages.h's
     // hugePagesPay(); Python's malloc is left as it is).
-    voxlat::setHugePageAdvice(voxlat::hugePagesPay());
+    static voxlat::HugePageFaultTimes probed;
+    voxlat::setHugePageAdvice(voxlat::hugePagesPay(&probed));
     static py::exception<InputError> inputError(m, "InputError", PyExc_ValueError);
     static py::exception<JobError> jobError(m, "JobError", PyExc_RuntimeError);
     static py::exception<Cancelled> cancelled(m, "Cancelled", PyExc_RuntimeError);
@@ -258,7 +259,11 @@ PYBIND11_MODULE(_voxlat, m)
     m.def(
         "huge_page_advice", [] { return voxlat::hugePageAdvice(); },
         "whether the engine's long-held blocks ask for transparent huge pages (not where the machine reports its "
-        "free memory to its host)");
+        "free memory to its host and a huge page faults in no faster there)");
+    m.def(
+        "huge_page_probe", [] { return py::make_tuple(probed.huge, probed.small); },
+        "the milliseconds the module's probe took to fault in 2 MB as a huge page and as 4 KB pages where the "
+        "machine reports its free memory to its host ((-1, -1): no probe)");
     m.def(
         "schema", [] { return recipeSchema().dump(2); }, "the recipe language as JSON Schema text");
 

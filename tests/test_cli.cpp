@@ -181,6 +181,17 @@ TEST(Cli, HugePagesAreAskedForWhereTheyFaultInAtUnderHalfTheTimeOfSmallPages)
     const voxlat::HugePageFaultTimes none = voxlat::hugePageFaultTimes(0);
     EXPECT_LT(none.huge, 0.0);
     EXPECT_FALSE(voxlat::hugePagesFaultFaster(0));
+    // The choice: asked without a probe where free memory is not reported to the host, else the
+    // probe's own answer.
+    voxlat::HugePageFaultTimes measured;
+    const bool pays = voxlat::hugePagesPay(&measured);
+    if (!voxlat::freePagesReportedToHost()) {
+        EXPECT_TRUE(pays);
+        EXPECT_LT(measured.huge, 0.0);
+    } else {
+        EXPECT_GE(measured.small, 0.0);
+        EXPECT_EQ(pays, voxlat::hugePagesFaster(measured));
+    }
 }
 
 TEST(Cli, BadInputExitsNonZeroAndWritesNothing)

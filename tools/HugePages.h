@@ -109,9 +109,13 @@ inline bool hugePagesFaultFaster(int trials = 2)
 /// Whether this process should back its memory with huge pages: everywhere, except on a machine
 /// that reports its free memory to its host (freePagesReportedToHost()) where they do not fault in
 /// faster than 4 KB pages (hugePagesFaultFaster(), measured only there).
-inline bool hugePagesPay()
+/// @a measured, when given, receives the probe's times (left unmeasured where there was no probe).
+inline bool hugePagesPay(HugePageFaultTimes* measured = nullptr)
 {
-    return !freePagesReportedToHost() || hugePagesFaultFaster();
+    if (!freePagesReportedToHost()) return true;
+    const HugePageFaultTimes times = hugePageFaultTimes();
+    if (measured) *measured = times;
+    return hugePagesFaster(times);
 }
 
 /// Asks glibc's malloc to back its large blocks with transparent huge pages, through the
