@@ -110,4 +110,34 @@ inline void expectBoundsContainValues(const FieldNode& f, double lo, double hi, 
     }
 }
 
+/// A stack of sixteen leaves (8 x 8 x 128 points from @a origin, @a spacing apart) with every
+/// other leaf unread: @a f's gridValues gives each read leaf's points values()'s doubles, bit for
+/// bit, and the unread leaves zero (pointValuesBySlab's contract).
+inline void expectStackLeafByLeaf(const FieldNode& f, const Vec3d& origin, double spacing)
+{
+    GridBatch stack;
+    stack.origin = origin;
+    stack.spacing = Vec3d(spacing);
+    stack.nz = 128;
+    stack.unread = 0xAAAAu;  // leaves 1, 3, .., 15
+    std::vector<double> grid(stack.size(), -7.0), point(stack.size());
+    std::vector<Vec3d> points;
+    for (int i = 0; i < stack.nx; ++i)
+        for (int j = 0; j < stack.ny; ++j)
+            for (int k = 0; k < stack.nz; ++k) points.push_back(stack.point(i, j, k));
+    f.gridValues(stack, grid);
+    f.values(points, point);
+    int nonZero = 0;
+    for (std::size_t n = 0; n < points.size(); ++n) {
+        const int leaf = int(n % 128) / 8;
+        if (leaf % 2 == 1) {
+            ASSERT_EQ(grid[n], 0.0) << "unread leaf " << leaf;
+        } else {
+            ASSERT_EQ(grid[n], point[n]) << "at " << points[n];
+            nonZero += point[n] != 0.0;
+        }
+    }
+    EXPECT_GT(nonZero, 0);
+}
+
 }  // namespace voxlat::test

@@ -151,6 +151,13 @@ TEST(CurveField, MatchesABruteForceDistance)
     }
 }
 
+TEST(CurveField, StacksAreEvaluatedLeafByLeafWithTheirUnreadLeavesLeftOut)
+{
+    const std::vector<FalloffSource> curves{{{Vec3d(0, 0, 0), Vec3d(5, 0, 0), Vec3d(5, 4, 1), Vec3d(2, 6, 3)}, 1.5},
+                                            {{Vec3d(8, 8, 8), Vec3d(3, 9, 2)}, 0.7}};
+    for (const Falloff f : kAll) expectStackLeafByLeaf(DistanceFalloff(curves, f, 1.2), Vec3d(3.0, 1.0, -4.0), 0.1);
+}
+
 TEST(PointField, RecipeSolidIsLevelMinusTheSum)
 {
     // An isolated point of weight w with an inverse falloff is a ball of radius w / level.

@@ -1166,6 +1166,16 @@ TEST(StrutCapsules, BoundsAndFastPathAgree)
     }
 }
 
+TEST(StrutCapsules, StacksAreEvaluatedLeafByLeafWithTheirUnreadLeavesLeftOut)
+{
+    // A stack 12.8 mm tall through an 8 mm octet frame: per leaf, the point path's doubles.
+    const Frame frame = boxFrame(presetUnitCell("octet"), Vec3d(0.0), Vec3d(4.0), {2, 2, 2});
+    std::vector<CapsuleStrut> struts;
+    for (const auto& e : frame.struts) struts.push_back({frame.nodes[e[0]], frame.nodes[e[1]], 0.4, 0.3});
+    for (const double blend : {0.0, 0.3})
+        expectStackLeafByLeaf(StrutCapsules(struts, blend, 3.0), Vec3d(1.03, 3.6, -2.1), 0.1);
+}
+
 TEST(UnitCells, EveryPresetIsValidWithExactCounts)
 {
     // nodes, struts after splitting crossings (X's diagonals meet at the centre, cross's and

@@ -8,11 +8,13 @@
 
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -367,6 +369,19 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
         *stats = s;
     }
     return grid;
+}
+
+int stackLeavesFor(const Domain& domain, int most)
+{
+    const long height = std::max(1, domain.dims.z());
+    int best = 1;
+    double bestCost = std::numeric_limits<double>::infinity();
+    for (int s = 1; s <= std::min(most, kBlockDim / kLeafDim); s *= 2) {
+        const long stack = long(kLeafDim) * s;
+        const double cost = double((height + stack - 1) / stack * stack) * (1.0 + 1.0 / s);
+        if (cost <= bestCost) best = s, bestCost = cost;
+    }
+    return best;
 }
 
 }  // namespace voxlat

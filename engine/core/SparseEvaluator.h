@@ -121,6 +121,16 @@ struct SparseStats {
 openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& domain, const SparseOptions& options,
                                        SparseStats* stats = nullptr);
 
+/// The stack height (SparseOptions::stackLeaves: 1, 2, 4, 8 or 16) for a field whose rows gain
+/// from tall stacks, at most @a most, on @a domain. A stack is evaluated whole, so stacks that
+/// overrun the domain's top make points nobody reads: the height s taken is the one of least
+/// covered(s) (1 + 1 / s), covered(s) the voxels along z of the stacks over the domain's height
+/// and 1 / s the share of a point in its rows' set-up (W2g's wireframe at 25 mm, CPU 16.3, 10.4,
+/// 9.3, 8.4 s for 1, 4, 8, 16 leaves: A + B / s with B about A), the taller on a tie. A 50 mm
+/// frame at 0.1 mm (500 voxels) takes 16, a 40 mm one 8 (16 would cover 512 voxels for 400), a
+/// 2 mm plate at 0.05 mm 8.
+int stackLeavesFor(const Domain& domain, int most);
+
 /// Bytes one evaluated leaf costs through evaluation and meshing (grid values plus mesh share).
 inline constexpr std::uint64_t kBytesPerLeaf = 6 * 1024;
 

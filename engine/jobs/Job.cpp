@@ -464,7 +464,7 @@ void Job::solveLevels()
     nlohmann::json fields = nlohmann::json::object();
     for (const LevelNode& node : mBuilder.levelNodes()) {
         // The result's grids in the stacks its lattices ask for, their levels solved or given.
-        mStackLeaves = std::max(mStackLeaves, node.stackLeaves);
+        mStackLeaves = std::max(mStackLeaves, stackLeavesFor(mDomain, node.stackLeaves));
         nlohmann::json entry{{"type", node.description}};
         if (node.density) {
             // A trial's result whose level the homogenized cell solves again: a coarse solve
@@ -521,7 +521,7 @@ void Job::solveLevels()
             const auto* memo = dynamic_cast<const GridValueMemo*>(node.solid->raw().get());
             // Solved on the recipe's lattice in the stacks the result's grids are evaluated in:
             // those then ask the memo for the solve's batches.
-            const int stackLeaves = recipeLattice ? node.stackLeaves : 1;
+            const int stackLeaves = recipeLattice ? stackLeavesFor(mDomain, node.stackLeaves) : 1;
             // A coverage solve (masked or sub-voxel) measures a grid of the memo's own values: it
             // hands that grid over (solveDensity's keepGrid) and the memo keeps nothing of its own
             // meanwhile, so the values are not held twice while the solve measures them (a 50 mm
@@ -2274,9 +2274,11 @@ TriangleMesh Job::pageMesh()
     options.clipToDomain = true;
     options.stage = "evaluating " + mRecipe.result + " for report.html";
     options.context = mContext;
-    // In the stacks the result's grids take (a convolution lattice: a strut's row set-up shared
-    // by eight leaves, where a leaf of this grid holds a few points of each of its ~900 struts).
-    options.stackLeaves = mStackLeaves;
+    // In stacks as the result's grids (a convolution lattice: a strut's row set-up shared by the
+    // leaves of a stack, where a leaf of this grid holds a few points of each of its ~900 struts),
+    // as tall as suits the coarse grid's height (a thin plate's stacks of eight, four coarse voxels
+    // deep, made seven leaves of points nobody reads: W10's page mesh 0.41-0.49 s, now 0.37 s).
+    options.stackLeaves = stackLeavesFor(coarse, mStackLeaves);
     const openvdb::FloatGrid::Ptr g = evaluateSparse(*mResult, coarse, options);
     return clusterDecimate(marchingCubes(*g, 0.0f), kTriangles);
 }

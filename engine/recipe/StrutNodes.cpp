@@ -990,6 +990,7 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     // every strut the trim removed or cut, the untrimmed box frame: its values there come from
     // that frame's tabled period (the same struts and weights, the same peak and cap), the rest
     // strut by strut (TiledInterior).
+    bool tiledInterior = false;
     if (uniform && uniform->fill && !graded && !sn.isSequence() && (sameStruts || gradedAxis >= 0)) {
         // The untrimmed frame's radii: the one radius, or the gradient over the trimmed frame's
         // box (so a strut both frames hold has the same radii in both).
@@ -1029,13 +1030,14 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
             return parts;
         };
         evaluated = std::make_shared<TiledInterior>(iso, std::move(parts));
+        tiledInterior = true;
     }
     // Evaluated strut by strut: in stacks of eight leaves along z (rows of 64 points: a strut row's
     // set-up, its table and the struts' gather shared by eight leaves). W2g's frames at 25 mm, user
     // + sys CPU, stacks of 4, 8 and 16 leaves: the wireframe 10.4, 9.3 and 8.4 s (16.3 s one leaf
     // at a time), the cylinder frame 3.6, 3.2 and 3.3 s (5.4 s); the wireframe's peak +10, +27 and
     // +69 MB (before the memo dropped a stack's leaves one by one).
-    if (!(periodic || partlyPeriodic)) node.stackLeaves = 8;
+    if (!(periodic || partlyPeriodic)) node.stackLeaves = tiledInterior ? 8 : 16;
     const double t = spec.has("level") ? spec["level"].positiveNumber() : 1.0;
     {
         std::ostringstream d;

@@ -12,6 +12,7 @@
 
 #include <openvdb/math/Vec3.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -165,6 +166,31 @@ template <typename Fn>
 void forEachChunk(std::size_t n, Fn&& fn)
 {
     for (std::size_t b = 0; b < n; b += kBatchSize) fn(b, std::min(kBatchSize, n - b));
+}
+
+/// A batch's values point by point from the elements near it: gather(box) once per run of its
+/// points along z (the points of the run in @a box), then out[n] = value(point) for the run's
+/// points. A stack of leaves (nz = 8m, SparseOptions::stackLeaves) runs leaf by leaf, and its
+/// leaves GridBatch::unread names are set to zero without a value; any other batch is one run.
+/// For nodes that scan what they gather for each point: a stack's box is m leaves tall, so
+/// each of its points would scan m leaves' worth.
+template <typename Gather, typename Value>
+void pointValuesBySlab(const GridBatch& batch, std::span<double> out, Gather&& gather, Value&& value)
+{
+    const int slab = batch.nz > 8 && batch.nz % 8 == 0 ? 8 : batch.nz;
+    for (int k0 = 0; k0 < batch.nz; k0 += slab) {
+        const bool unread = slab == 8 && k0 / 8 < 32 && ((batch.unread >> (k0 / 8)) & 1u) != 0;
+        if (!unread) {
+            const Vec3d lo = batch.point(0, 0, k0), hi = batch.point(batch.nx - 1, batch.ny - 1, k0 + slab - 1);
+            gather(Box3{Vec3d(std::min(lo.x(), hi.x()), std::min(lo.y(), hi.y()), std::min(lo.z(), hi.z())),
+                        Vec3d(std::max(lo.x(), hi.x()), std::max(lo.y(), hi.y()), std::max(lo.z(), hi.z()))});
+        }
+        for (int i = 0; i < batch.nx; ++i)
+            for (int j = 0; j < batch.ny; ++j) {
+                const std::size_t row = (std::size_t(i) * batch.ny + j) * batch.nz;
+                for (int k = k0; k < k0 + slab; ++k) out[row + k] = unread ? 0.0 : value(batch.point(i, j, k));
+            }
+    }
 }
 
 /// A period shared by two fields that repeat with periods @a a and @a b (FieldNode::period()):

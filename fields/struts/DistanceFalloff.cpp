@@ -140,12 +140,12 @@ void DistanceFalloff::gradients(std::span<const Vec3d> points, std::span<double>
 
 void DistanceFalloff::gridValues(const GridBatch& batch, std::span<double> out) const
 {
+    // Leaf by leaf in a stack (StrutCapsules::gridValues): the same doubles, since any box that
+    // holds a point gives its value (values() takes the point's own).
     thread_local std::vector<std::uint32_t> cand;
-    candidates(batch.bounds(), true, cand);
-    std::size_t n = 0;
-    for (int i = 0; i < batch.nx; ++i)
-        for (int j = 0; j < batch.ny; ++j)
-            for (int k = 0; k < batch.nz; ++k) out[n++] = pointValue(batch.point(i, j, k), cand, nullptr);
+    pointValuesBySlab(
+        batch, out, [&](const Box3& box) { candidates(box, true, cand); },
+        [&](const Vec3d& p) { return pointValue(p, cand, nullptr); });
 }
 
 Interval DistanceFalloff::bound(const Box3& box) const

@@ -121,12 +121,14 @@ void StrutCapsules::gradients(std::span<const Vec3d> points, std::span<double> o
 
 void StrutCapsules::gridValues(const GridBatch& batch, std::span<double> out) const
 {
+    // Leaf by leaf in a stack (a union with a convolution lattice hands its operands stacks):
+    // the struts gathered for a stack's whole height cost each point 16 leaves' worth, 1.5-1.8 s
+    // against 2.0-2.4 s for struts-radius-field.yaml. The same doubles: a strut beyond its reach
+    // of the point is skipped by pointValue, whichever box gathered it.
     thread_local std::vector<std::uint32_t> cand;
-    mIndex.gather(batch.bounds(), cand);
-    std::size_t n = 0;
-    for (int i = 0; i < batch.nx; ++i)
-        for (int j = 0; j < batch.ny; ++j)
-            for (int k = 0; k < batch.nz; ++k) out[n++] = pointValue(batch.point(i, j, k), cand, nullptr);
+    pointValuesBySlab(
+        batch, out, [&](const Box3& box) { mIndex.gather(box, cand); },
+        [&](const Vec3d& p) { return pointValue(p, cand, nullptr); });
 }
 
 Interval StrutCapsules::bound(const Box3& box) const
