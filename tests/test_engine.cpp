@@ -208,6 +208,37 @@ TEST(SparseEvaluator, RefusesJobsThatDoNotFitInMemory)
     }
 }
 
+TEST(SparseEvaluator, StacksAsTallAsTheDomainsHeightRepays)
+{
+    auto height = [](int nz) {
+        Domain d;
+        d.dims = openvdb::Coord(16, 16, nz);
+        return d;
+    };
+    // The frames the stacks serve: W2g's 50 mm at 0.1 mm, a 40 mm cube, a 2 mm plate at 0.05 mm,
+    // report.html's coarse grid of that plate (four voxels deep).
+    EXPECT_EQ(stackLeavesFor(height(500), 16), 16);
+    EXPECT_EQ(stackLeavesFor(height(400), 16), 8);
+    EXPECT_EQ(stackLeavesFor(height(40), 16), 8);
+    EXPECT_EQ(stackLeavesFor(height(4), 16), 1);
+    EXPECT_EQ(stackLeavesFor(height(500), 8), 8);
+    EXPECT_EQ(stackLeavesFor(height(500), 1), 1);
+    // Every height and cap: a power of two within the cap, and no allowed height costs less
+    // (the voxels along z its stacks cover, times 1 + 1/s), counted here stack by stack.
+    for (const int most : {1, 2, 4, 8, 16})
+        for (int nz = 1; nz <= 700; ++nz) {
+            const int s = stackLeavesFor(height(nz), most);
+            ASSERT_TRUE(s >= 1 && s <= most && (s & (s - 1)) == 0) << nz << " " << most << ": " << s;
+            auto cost = [nz](int t) {
+                int covered = 0;
+                while (covered < nz) covered += 8 * t;
+                return covered * (1.0 + 1.0 / t);
+            };
+            for (int t = 1; t <= most; t *= 2)
+                ASSERT_LE(cost(s), cost(t)) << nz << " " << most << ": " << s << " " << t;
+        }
+}
+
 TEST(SparseEvaluator, IdenticalForAnyThreadCount)
 {
     const Domain d = Domain::fromBox(Box3{Vec3d(0), Vec3d(16, 16, 12)}, 0.1);
