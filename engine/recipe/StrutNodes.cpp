@@ -1032,11 +1032,14 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
         evaluated = std::make_shared<TiledInterior>(iso, std::move(parts));
         tiledInterior = true;
     }
-    // Evaluated strut by strut: in stacks of eight leaves along z (rows of 64 points: a strut row's
-    // set-up, its table and the struts' gather shared by eight leaves). W2g's frames at 25 mm, user
-    // + sys CPU, stacks of 4, 8 and 16 leaves: the wireframe 10.4, 9.3 and 8.4 s (16.3 s one leaf
-    // at a time), the cylinder frame 3.6, 3.2 and 3.3 s (5.4 s); the wireframe's peak +10, +27 and
-    // +69 MB (before the memo dropped a stack's leaves one by one).
+    // Evaluated strut by strut: in stacks of up to sixteen leaves along z (rows of 128 points: a
+    // strut row's set-up, its table and the struts' gather shared by the stack's leaves), fewer
+    // where the domain is not tall enough to repay them (stackLeavesFor). W2g's frames at 25 mm,
+    // user + sys CPU, stacks of 4, 8 and 16 leaves: the wireframe 10.4, 9.3 and 8.4 s (16.3 s one
+    // leaf at a time), the cylinder frame 3.6, 3.2 and 3.3 s (5.4 s); at 50 mm, 8 against 16
+    // leaves: the wireframe 21.6-22.5 against 19.8-20.7 s, the cylinder frame's user CPU 6.6-6.8
+    // against 6.1-6.6 s, the same bytes. A trimmed frame stays at eight: its TiledInterior decides
+    // leaf by leaf within a stack which leaves read the tiling, and sixteen cost it 15 %.
     if (!(periodic || partlyPeriodic)) node.stackLeaves = tiledInterior ? 8 : 16;
     const double t = spec.has("level") ? spec["level"].positiveNumber() : 1.0;
     {

@@ -122,9 +122,10 @@ void StrutCapsules::gradients(std::span<const Vec3d> points, std::span<double> o
 void StrutCapsules::gridValues(const GridBatch& batch, std::span<double> out) const
 {
     // Leaf by leaf in a stack (a union with a convolution lattice hands its operands stacks):
-    // the struts gathered for a stack's whole height cost each point 16 leaves' worth, 1.5-1.8 s
-    // against 2.0-2.4 s for struts-radius-field.yaml. The same doubles: a strut beyond its reach
-    // of the point is skipped by pointValue, whichever box gathered it.
+    // the struts gathered for a stack's whole height cost each point a stack's worth
+    // (struts-radius-field.yaml 1.52-1.57 s in stacks of eight, 1.93-2.35 s of sixteen, 1.03-1.05
+    // s leaf by leaf). The same doubles: a strut beyond its reach of the point is skipped by
+    // pointValue, whichever box gathered it.
     thread_local std::vector<std::uint32_t> cand;
     pointValuesBySlab(
         batch, out, [&](const Box3& box) { mIndex.gather(box, cand); },
