@@ -463,8 +463,11 @@ void Job::solveLevels()
     if (mSolved) return;
     nlohmann::json fields = nlohmann::json::object();
     for (const LevelNode& node : mBuilder.levelNodes()) {
-        // The result's grids in the stacks its lattices ask for, their levels solved or given.
-        mStackLeaves = std::max(mStackLeaves, stackLeavesFor(mDomain, node.stackLeaves));
+        // The result's grids in the stacks its lattices ask for, their levels solved or given; a
+        // solve on the recipe's lattice in the same stacks (one height per node: the memo serves
+        // the grids the solve's batches only when both ask for the same).
+        const int nodeStackLeaves = stackLeavesFor(mDomain, node.stackLeaves);
+        mStackLeaves = std::max(mStackLeaves, nodeStackLeaves);
         nlohmann::json entry{{"type", node.description}};
         if (node.density) {
             // A trial's result whose level the homogenized cell solves again: a coarse solve
@@ -521,7 +524,7 @@ void Job::solveLevels()
             const auto* memo = dynamic_cast<const GridValueMemo*>(node.solid->raw().get());
             // Solved on the recipe's lattice in the stacks the result's grids are evaluated in:
             // those then ask the memo for the solve's batches.
-            const int stackLeaves = recipeLattice ? stackLeavesFor(mDomain, node.stackLeaves) : 1;
+            const int stackLeaves = recipeLattice ? nodeStackLeaves : 1;
             // A coverage solve (masked or sub-voxel) measures a grid of the memo's own values: it
             // hands that grid over (solveDensity's keepGrid) and the memo keeps nothing of its own
             // meanwhile, so the values are not held twice while the solve measures them (a 50 mm
