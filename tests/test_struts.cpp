@@ -258,7 +258,9 @@ TEST(StrutConvolution, StackedLeavesStayWithinTheTableBoundOfTheirLeaves)
     // graded weights, sigma 0.5 at 0.1 mm, and a coarser 0.137 mm; and struts in random
     // directions, so that h grows along x and falls along y for some (a block's rows then reach
     // past the hRow of its first and last rows: the row table's nodes of negative index, which
-    // went unmade and gave 1e226 before).
+    // went unmade and gave 1e226 before). And voxels of 0.31 and 0.73 (sigma over 1.6 and 0.7
+    // voxels): h steps by up to 1.46 sigma along a row, tabled in up to fifteen phases (rows of
+    // steps past 0.4 sigma took two look-ups per point before).
     std::mt19937 rng(38);
     std::vector<ConvolutionStrut> struts;
     const Frame frame = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(2.2), {3, 3, 3});
@@ -276,7 +278,7 @@ TEST(StrutConvolution, StackedLeavesStayWithinTheTableBoundOfTheirLeaves)
     for (int o = 0; o < 9; ++o) origins.push_back(randomVec(rng, -0.5, 5.5));
     double worstLeaf = 0.0, worstPoint = 0.0;
     std::uint64_t compared = 0;
-    for (const double voxel : {0.1, 0.137})
+    for (const double voxel : {0.1, 0.137, 0.31, 0.73})
         for (const Vec3d& origin : origins)
             for (const int stack : {2, 4, 8}) {
                 GridBatch batch;
@@ -312,7 +314,7 @@ TEST(StrutConvolution, StackedLeavesStayWithinTheTableBoundOfTheirLeaves)
                     }
                 }
             }
-    EXPECT_EQ(compared, 2u * 12u * (2u + 4u + 8u) * 512u);
+    EXPECT_EQ(compared, 4u * 12u * (2u + 4u + 8u) * 512u);
     // The case a wireframe met: a block that the second strut's cut-off cap touches at its corner
     // of least x, greatest y and least z, after a strut that fills the block's table first.
     {

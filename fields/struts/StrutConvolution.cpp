@@ -449,13 +449,19 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         // The table spans the batch's range of h: at most eight rows' worth of nodes (struts nearly
         // across the rows, whose h barely steps along them, keep the per-point look-ups).
         // A block's rows (not a plane's: a slicer's bytes stay) along which h steps by more than
-        // 0.1 sigma take a table of m = ceil(|hz| / 0.1 sigma) nodes per step (at most 4): delta =
-        // hz / m <= 0.1 sigma, the same bound. Point k of a row then sits at node n0 + m k + tau,
-        // so the nodes are kept in m phases (phase p: the nodes whose index is p modulo m), a
-        // row reads its own phase and the next one's, each in order. (Struts at 35 degrees or more
-        // from the rows, a BCC cell's diagonals along z at sigma = 5 voxels, were all untabled.)
+        // 0.1 sigma take a table of m = ceil(|hz| / 0.1 sigma) nodes per step (at most
+        // kRowPhases): delta = hz / m <= 0.1 sigma, the same bound. Point k of a row then sits at
+        // node n0 + m k + tau, so the nodes are kept in m phases (phase p: the nodes whose index is
+        // p modulo m), a row reads its own phase and the next one's, each in order. (Struts at 35
+        // degrees or more from the rows, a BCC cell's diagonals along z at sigma = 5 voxels, were
+        // all untabled.) The table's nodes are the rows' h range over delta whatever m is, against
+        // two look-ups per point untabled: sixteen phases table steps of up to 1.6 sigma, voxels
+        // down to sigma / 1.6 (four, up to 0.4 sigma, left untabled the rows of grids under 2.5
+        // voxels per sigma and the density solve's coarse samples: a quarter of the run of a
+        // cylinder frame at sigma = 2.5 voxels).
+        constexpr int kRowPhases = 16;
         const double spread = std::abs(dx * u.x()) * (nx - 1) + std::abs(dy * u.y()) * (ny - 1);
-        const int phases = batch.nz > 1 && hz != 0.0 && std::abs(hz) <= 0.4 * sigma
+        const int phases = batch.nz > 1 && hz != 0.0 && std::abs(hz) <= 0.1 * kRowPhases * sigma
                                ? std::max(1, int(std::ceil(std::abs(hz) / (0.1 * sigma))))
                                : 1;
         const bool tabled = !taylor && ranged && nz >= 16 && hz != 0.0 && std::abs(hz) <= 0.1 * sigma * phases &&
@@ -488,9 +494,14 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                         const double at = (hRow - h0) / (hz / phases);
                         const int n = int(std::floor(at));
                         r.tau = at - n;
-                        // q = floor(n / m), p = n - m q, for m = 2, 3 or 4: a shift or a division
-                        // by a constant (a multiply), not two divisions per row.
-                        const int index = phases == 2 ? n >> 1 : phases == 4 ? n >> 2 : n >= 0 ? n / 3 : -((2 - n) / 3);
+                        // q = floor(n / m), p = n - m q: a shift for m = 2 or 4, a division by a
+                        // constant (a multiply) for m = 3, not two divisions per row; past
+                        // four, one division rounded towards minus infinity.
+                        const int index = phases == 2   ? n >> 1
+                                          : phases == 4 ? n >> 2
+                                          : phases == 3 ? (n >= 0 ? n / 3 : -((2 - n) / 3))
+                                          : n >= 0      ? n / phases
+                                                        : -((phases - 1 - n) / phases);
                         r.phase = n - phases * index;
                         r.n0 = index;
                     }
