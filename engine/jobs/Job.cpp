@@ -566,15 +566,14 @@ void Job::solveLevels()
                                         : coarse > 1.0    ? Domain::fromBox(mDomain.box, voxel * coarse)
                                         : node.densityBox ? mDomain.subDomain(*node.densityBox)
                                                           : mDomain;
-                // A lattice of its own (a frame's box at its own voxel, no grid of the job's to
-                // serve) in the stacks its lattice asks for too, as tall as that domain repays: a
-                // strut row's set-up and table then serve sixteen leaves, not one (W2g's cylinder
-                // frame at 0.2 mm measures 1.16 times finer than the job, leaf by leaf before).
-                return solveDensity(
-                    *node.solid->indicator(), measured, *node.density, node.densityMask.get(), node.subVoxelDensity,
-                    mContext, 0, levelWithin,
-                    recipeLattice && !node.densityBox ? stackLeaves : stackLeavesFor(measured, node.stackLeaves),
-                    keepGrid);
+                // In the stacks its lattice asks for, as tall as the measured domain repays: on the
+                // recipe's lattice (measured is mDomain) the grids' own, stackLeaves; on a lattice of
+                // its own (a frame's box at its own voxel, no grid of the job's to serve) a strut
+                // row's set-up and table then serve sixteen leaves, not one (W2g's cylinder frame
+                // at 0.2 mm measures 1.16 times finer than the job, leaf by leaf before).
+                return solveDensity(*node.solid->indicator(), measured, *node.density, node.densityMask.get(),
+                                    node.subVoxelDensity, mContext, 0, levelWithin,
+                                    stackLeavesFor(measured, node.stackLeaves), keepGrid);
             });
             if (node.densityMask) entry["density_measured_in"] = node.densityOf;
             // The region's volume: the mask's voxels, or the box the density is measured over.

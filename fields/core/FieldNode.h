@@ -181,9 +181,10 @@ void pointValuesBySlab(const GridBatch& batch, std::span<double> out, Gather&& g
     for (int k0 = 0; k0 < batch.nz; k0 += slab) {
         const bool unread = slab == 8 && k0 / 8 < 32 && ((batch.unread >> (k0 / 8)) & 1u) != 0;
         if (!unread) {
-            const Vec3d lo = batch.point(0, 0, k0), hi = batch.point(batch.nx - 1, batch.ny - 1, k0 + slab - 1);
-            gather(Box3{Vec3d(std::min(lo.x(), hi.x()), std::min(lo.y(), hi.y()), std::min(lo.z(), hi.z())),
-                        Vec3d(std::max(lo.x(), hi.x()), std::max(lo.y(), hi.y()), std::max(lo.z(), hi.z()))});
+            GridBatch run = batch;  // the run's points as a batch of their own (the whole batch: itself)
+            run.origin = batch.point(0, 0, k0);
+            run.nz = slab;
+            gather(run.bounds());
         }
         for (int i = 0; i < batch.nx; ++i)
             for (int j = 0; j < batch.ny; ++j) {
