@@ -89,18 +89,31 @@ inline HugePageFaultTimes hugePageFaultTimes(int trials = 2)
     return best;
 }
 
-/// Whether @a times show huge pages faulting in faster: at under half the 4 KB pages' time (a
-/// machine without them, THP `never`, times both alike), both measured.
+/// What a huge page the host must back again costs on a machine that reports its free memory to
+/// its host, in milliseconds: 4.5-5.2 ms on the PVM guest (64 MB-1 GB touched after 20-45 s idle,
+/// against 0.06-0.3 ms for the probe's one page, which the guest had just freed), 7-10 ms on the
+/// Firecracker guest. 2 MB of 4 KB pages costs the same fresh or not (0.43-0.9 ms there).
+inline constexpr double kColdHugePageMs = 4.5;
+
+/// Whether @a times show huge pages faulting in faster: the probe's huge page at under half the
+/// 4 KB pages' time (a machine without them, THP `never`, times both alike), and the 4 KB pages
+/// slower than a huge page the host must back again (kColdHugePageMs): the probe's one huge page
+/// is one the guest has just freed, while a job of hundreds of megabytes soon takes pages the host
+/// took back (the 50 mm trimmed strut frame of W2g on the PVM guest with 4 KB pages at 0.6-0.9 ms
+/// per 2 MB: 4.8-5.1 s with huge pages, 2.6-2.7 s of it in the kernel, against 3.8-4.6 s without).
+/// Both measured.
 inline bool hugePagesFaster(const HugePageFaultTimes& times)
 {
-    return times.huge >= 0.0 && times.small >= 0.0 && 2.0 * times.huge < times.small;
+    return times.huge >= 0.0 && times.small >= 0.0 && 2.0 * times.huge < times.small && times.small > kColdHugePageMs;
 }
 
 /// hugePagesFaster() of this machine, measured (a few milliseconds; at most about 50 on the slow
 /// kinds). Why measured, not known from the machine: a Firecracker guest reporting its free memory
 /// to its host took 7-10 ms for a huge page against 1.0-1.4 ms for 2 MB of 4 KB pages, a PVM guest
-/// that reports it too took 0.12-0.20 ms against 5.2-14.6 ms (each 4 KB fault a trip to its host;
-/// the acceptance gyroid there 2.74-3.16 s of wall without huge pages, 1.67-2.14 s with).
+/// that reports it too took 0.12-0.20 ms against 5.2-14.6 ms one day (each 4 KB fault a trip to
+/// its host; the acceptance gyroid there 2.74-3.16 s of wall without huge pages, 1.67-2.14 s
+/// with) and 0.06-0.3 ms against 0.6-0.9 ms on another (the gyroid 0.66-0.78 s without, 1.00 s
+/// with: a job's fresh huge pages cost 4.5-5.2 ms there, kColdHugePageMs).
 inline bool hugePagesFaultFaster(int trials = 2)
 {
     return hugePagesFaster(hugePageFaultTimes(trials));
