@@ -19,6 +19,7 @@
 #include "fields/struts/IsoRadius.h"
 #include "fields/struts/StrutConvolution.h"
 #include "fields/tpms/TpmsField.h"
+#include "mesher/slice/LayerThumbnail.h"
 #include "mesher/slice/Slicer.h"
 #include "mesher/writers/BitPlanes.h"
 #include "mesher/writers/CtbWriter.h"
@@ -1220,6 +1221,22 @@ TEST(Slices, LayersAPeriodApartAreCopied)
     const auto [previewAny, previewLarge] = pixelsDiffering(readFile(dir.path / "computed" / "part.sl1s.preview.png"),
                                                             readFile(dir.path / "copied" / "part.sl1s.preview.png"));
     EXPECT_EQ(previewLarge, 0u);
+    // report.html's kept layers: 64 of the 100, from the first to the last; a copied layer's is its
+    // phase's. In cells of one pixel each is the layer's image, so its exposed area is the layer's.
+    for (const SliceResult* r : {&computed, &copied}) {
+        const LayerThumbnails& kept = r->thumbnails;
+        ASSERT_EQ(kept.layers.size(), 64u);
+        EXPECT_EQ(kept.layers.front(), 0);
+        EXPECT_EQ(kept.layers.back(), 99);
+        EXPECT_EQ(kept.step, 1);
+        for (std::size_t k = 0; k < kept.layers.size(); ++k) {
+            ASSERT_EQ(kept.images[k].size(), std::size_t(kept.width) * std::size_t(kept.height));
+            double exposed = 0.0;
+            for (const std::uint8_t v : kept.images[k]) exposed += v / 255.0;
+            EXPECT_NEAR(exposed * kept.cellMm[0] * kept.cellMm[1], r->layerAreas[std::size_t(kept.layers[k])], 1e-9)
+                << kept.layers[k];
+        }
+    }
 
     // A budget for the first 15 phases: 30 layers copied, the rest computed, the same bytes for 1
     // and 3 threads.
@@ -1246,6 +1263,69 @@ TEST(Slices, LayersAPeriodApartAreCopied)
     EXPECT_EQ(prism.layersPerPeriod, 1);
     EXPECT_EQ(prism.layersCopied, 99);
     for (double area : prism.layerAreas) EXPECT_NEAR(area, 3.0 * 5.0, 0.05);  // x <= 3 of a 6 x 5 mm part
+}
+
+TEST(Slices, LayerThumbnailsAverageTheirCellsPixels)
+{
+    // Cells of 7 x 7 pixels over a 100 x 37 image (the last column and row of cells short): read
+    // whole, the sums are the brute-force sums and the thumbnail their rounded means; read every
+    // third row, an image whose rows are all alike gives the same thumbnail, and a random one a
+    // grey within its cell's least and largest pixel.
+    LayerImage image;
+    image.nx = 100;
+    image.ny = 37;
+    image.pixels.resize(std::size_t(image.nx) * std::size_t(image.ny));
+    std::mt19937 random(7);
+    for (std::uint8_t& p : image.pixels) p = std::uint8_t(random() % 256);
+    const int step = 7, across = cellsAcross(image.nx, step), down = cellsAcross(image.ny, step);
+    ASSERT_EQ(across, 15);
+    ASSERT_EQ(down, 6);
+    std::vector<std::uint32_t> sums;
+    layerCellSums(image, step, 1, sums);
+    ASSERT_EQ(sums.size(), std::size_t(across * down));
+    const std::vector<std::uint8_t> whole = layerThumbnail(image, step, 1), sampled = layerThumbnail(image, step, 3);
+    for (int b = 0; b < down; ++b)
+        for (int c = 0; c < across; ++c) {
+            std::uint32_t sum = 0, count = 0;
+            int least = 255, largest = 0;
+            for (int j = b * step; j < std::min(image.ny, (b + 1) * step); ++j)
+                for (int i = c * step; i < std::min(image.nx, (c + 1) * step); ++i) {
+                    const int p = image.pixels[std::size_t(j) * image.nx + i];
+                    sum += std::uint32_t(p);
+                    ++count;
+                    least = std::min(least, p);
+                    largest = std::max(largest, p);
+                }
+            const std::size_t k = std::size_t(b) * across + c;
+            EXPECT_EQ(sums[k], sum) << c << ", " << b;
+            EXPECT_EQ(int(whole[k]), int(std::lround(double(sum) / count))) << c << ", " << b;
+            EXPECT_GE(int(sampled[k]), least);
+            EXPECT_LE(int(sampled[k]), largest);
+        }
+    for (int j = 0; j < image.ny; ++j)
+        std::copy_n(image.pixels.begin(), image.nx, image.pixels.begin() + std::ptrdiff_t(j) * image.nx);
+    EXPECT_EQ(layerThumbnail(image, step, 3), layerThumbnail(image, step, 1));
+    EXPECT_EQ(layerThumbnail(image, step, 5), layerThumbnail(image, step, 1));
+
+    // The kept layers: every one where they fit, else at most 64 and 2 MB of cells, from the
+    // first layer to the last, ascending; cells of at most 320 along the longer side.
+    LayerThumbnails kept;
+    kept.choose(40, 10526, 4583);
+    EXPECT_EQ(kept.step, 33);
+    EXPECT_EQ(kept.width, 319);
+    EXPECT_EQ(kept.layers.size(), 40u);
+    EXPECT_EQ(kept.indexOf(17), 17);
+    kept.choose(400, 10526, 4583);
+    EXPECT_LE(kept.layers.size() * std::size_t(kept.width) * std::size_t(kept.height), LayerThumbnails::kMaxBytes);
+    EXPECT_GE(kept.layers.size(), 40u);
+    EXPECT_EQ(kept.layers.front(), 0);
+    EXPECT_EQ(kept.layers.back(), 399);
+    EXPECT_TRUE(std::is_sorted(kept.layers.begin(), kept.layers.end()));
+    EXPECT_EQ(std::adjacent_find(kept.layers.begin(), kept.layers.end()), kept.layers.end());
+    EXPECT_EQ(kept.indexOf(1), -1);
+    kept.choose(1, 50, 40);
+    EXPECT_EQ(kept.layers, std::vector<int>{0});
+    EXPECT_EQ(kept.step, 1);
 }
 
 TEST(Slices, MemoryBoundedByAFewLayersForATallPart)

@@ -289,17 +289,55 @@
     const ctx = canvas.getContext("2d", { willReadFrequently: true });
     const scale = Math.min((canvas.width - 40) / Math.max(xhi - xlo, 1e-6), (canvas.height - 40) / Math.max(yhi - ylo, 1e-6));
     const X = (x) => 20 + (x - xlo) * scale, Y = (y) => canvas.height - 20 - (y - ylo) * scale;
+    // The first slices output's own layers, kept small (a few dozen, spread from the first to the
+    // last; every layer where they fit): each one's exposed pixels averaged over cells, row 0 at
+    // the least y. A kept layer shows them; another one the preview mesh cut at its height.
+    const keptNode = slices ? document.getElementById("voxlat-layers") : null;
+    const kept = keptNode ? JSON.parse(keptNode.textContent) : null;
+    const keptAt = new Map();
+    if (kept) kept.layers.forEach((l, k) => keptAt.set(l, k));
+    const keptCanvases = [];
+    function keptCanvas(k) {
+      if (keptCanvases[k]) return keptCanvases[k];
+      const w = kept.size[0], h = kept.size[1], bytes = atob(kept.images[k]);
+      const c = document.createElement("canvas");
+      c.width = w;
+      c.height = h;
+      const cc = c.getContext("2d");
+      const image = cc.createImageData(w, h);
+      for (let r = 0; r < h; ++r)
+        for (let x = 0; x < w; ++x) {
+          const v = bytes.charCodeAt((h - 1 - r) * w + x) / 255, o = 4 * (r * w + x);
+          image.data[o] = 255 - v * 203;  // exposed resin #34405c, the rest white
+          image.data[o + 1] = 255 - v * 191;
+          image.data[o + 2] = 255 - v * 163;
+          image.data[o + 3] = 255;
+        }
+      cc.putImageData(image, 0, 0);
+      return (keptCanvases[k] = c);
+    }
+    function nearestKept(layer) {
+      let best = kept.layers[0];
+      for (const l of kept.layers) if (Math.abs(l - layer) < Math.abs(best - layer)) best = l;
+      return best;
+    }
     function draw(layer) {
       const z = first + layer * height;
       ctx.fillStyle = "#ffffff";
       ctx.fillRect(0, 0, canvas.width, canvas.height);
+      const k = kept ? keptAt.get(layer) : undefined;
+      const image = k !== undefined && typeof kept.images[k] === "string" && kept.images[k].length > 0;
+      if (image) {
+        const w = kept.size[0], h = kept.size[1], o = kept.origin_mm, c = kept.cell_mm;
+        ctx.drawImage(keptCanvas(k), X(o[0]), Y(o[1] + h * c[1]), w * c[0] * scale, h * c[1] * scale);
+      }
       ctx.strokeStyle = "#ccc";
       ctx.strokeRect(X(box.min[0]), Y(box.max[1]), (box.max[0] - box.min[0]) * scale, (box.max[1] - box.min[1]) * scale);
-      // The preview mesh cut at the layer's height.
+      // Else the preview mesh cut at the layer's height.
       ctx.strokeStyle = "#333";
       ctx.lineWidth = 1;
       ctx.beginPath();
-      for (let t = 0; t < indices.length; t += 3) {
+      for (let t = 0; !image && t < indices.length; t += 3) {
         const cut = [];
         for (let e = 0; e < 3; ++e) {
           const p = 3 * indices[t + e], q = 3 * indices[t + (e + 1) % 3];
@@ -328,9 +366,14 @@
         ctx.arc(X(m.x), Y(m.y), 3, 0, 2 * Math.PI);
         ctx.fill();
       }
-      label.textContent = "Layer " + (layer + 1) + " of " + count + " at z " + fmt(z) + " mm" +
-        (slices ? "" : " (the preview mesh cut; no slices output)") + (here.length ? ": " + here.map((m) => m.text).join("; ") : "");
+      const how = !slices ? " (the preview mesh cut; no slices output)"
+        : image ? " (the slice, its pixels averaged over " + fmt(kept.cell_mm[0], 3) + " mm cells)"
+        : kept ? " (the preview mesh cut: slices kept for " + kept.layers.length + " of " + count + " layers, the nearest layer " + (nearestKept(layer) + 1) + ")"
+        : " (the preview mesh cut)";
+      label.textContent = "Layer " + (layer + 1) + " of " + count + " at z " + fmt(z) + " mm" + how +
+        (here.length ? ": " + here.map((m) => m.text).join("; ") : "");
       layers.shown = layer;
+      layers.imageShown = image;
       layers.marksShown = here.length;
     }
     slider.addEventListener("input", () => draw(Number(slider.value)));
@@ -339,6 +382,7 @@
       slider.dispatchEvent(new Event("input"));
     };
     layers.marks = marks;
+    layers.kept = kept ? kept.layers.length : 0;
     layers.countColour = function (hex) {
       const want = [1, 3, 5].map((i) => parseInt(hex.substr(i, 2), 16));
       const data = ctx.getImageData(0, 0, canvas.width, canvas.height).data;
@@ -368,7 +412,7 @@
         const l = Array.isArray(t.layers) ? t.layers[0] : 0;
         rows.push(["resin trap", l + 1, fmt(t.z) + " mm", fmt(t.x) + ", " + fmt(t.y), fmt(t.volume_mm3, 3) + " mm³", go(l)]);
       }
-      for (const t of (found.thin && found.thin.first) || []) rows.push(["thin feature", t.layer + 1, "", fmt(t.x) + ", " + fmt(t.y), "", go(t.layer)]);
+      for (const t of (found.thin && found.thin.first) || []) rows.push(["thin feature", t.layer + 1, t.z === undefined ? "" : fmt(t.z) + " mm", fmt(t.x) + ", " + fmt(t.y), t.pixels === undefined ? "" : t.pixels + " px", go(t.layer)]);
       const p = document.createElement("p");
       p.textContent = (found.island_count || 0) + " islands, " + (found.resin_traps_above_crumb || 0) + " resin traps, " +
         ((found.thin && found.thin.pixels) || 0) + " thin pixels" + (rows.length ? " (listed: the first or largest)" : "") + ".";
@@ -576,6 +620,10 @@
         result.island_marks = layers.marksShown;
         result.island_pixels = layers.countColour(COLORS.island);
       }
+      layers.setLayer(0);
+      result.layers_kept = layers.kept;
+      result.first_layer_image = !!layers.imageShown;
+      result.first_layer_dark = layers.countDark();
       layers.setLayer(Math.floor(layers.count / 2));
       result.outline_pixels = layers.countDark();
     }

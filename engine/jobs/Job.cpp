@@ -2252,7 +2252,8 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
     writeReport(outDir / "report.json");
     if (html) {
         AtomicFile file((outDir / "report.html").string());
-        file.stream() << reportPage(report(), *shown, pageScripts, colouring ? &*colouring : nullptr);
+        file.stream() << reportPage(report(), *shown, pageScripts, colouring ? &*colouring : nullptr,
+                                    mPageLayers ? &*mPageLayers : nullptr);
         file.commit();
     }
     // A cancel that came while the last files were written still keeps the folder as it was.
@@ -2594,9 +2595,8 @@ void Job::writeSlices(const SliceSettings& settings, const std::filesystem::path
         part.min.z() = timed("find the part's floor",
                              [&] { return lowestSolidZ(*mResult, part, 0.5 * mDomain.voxel, *mContext); });
     const std::string where = mRecipe.domainBox ? mRecipe.node("domain").where() : mRecipe.source->path;
-    const SliceResult result = timed("slice " + path.filename().string(), [&] {
-        return sliceToFile(*mResult, part, printer, settings, path, where, mContext);
-    });
+    SliceResult result = timed("slice " + path.filename().string(),
+                               [&] { return sliceToFile(*mResult, part, printer, settings, path, where, mContext); });
     nlohmann::json entry = result.report;
     entry["part_box"] = {{"from", mRecipe.domainBox ? "recipe domain"
                                   : support         ? "result's bounding box"
@@ -2604,6 +2604,7 @@ void Job::writeSlices(const SliceSettings& settings, const std::filesystem::path
                          {"min", vec(part.min)},
                          {"max", vec(part.max)}};
     mReport["slices"].push_back(entry);
+    if (!mPageLayers) mPageLayers = std::move(result.thumbnails);
     // The first slice job's findings also at the top (`printability.islands`, ...), where users look.
     if (result.report.contains("printability") && !mReport.contains("printability"))
         mReport["printability"] = result.report["printability"];

@@ -171,6 +171,8 @@ private:
         std::string stage;  ///< the aim's stage it measured
     };
     std::optional<StreamedAim> mStreamedAim;
+    /// The first slices output's layers kept small, for report.html's layer view.
+    std::optional<LayerThumbnails> mPageLayers;
     /// A projected mesh @a m of a result with creases (or cut by the domain box without the box
     /// cut) made sharp: crease vertices onto both surfaces, edges across split, straying triangles
     /// refined (CreaseSplit, CreaseRefinement); their counts into @a report.

@@ -112,7 +112,7 @@ std::vector<std::string> reportPageScripts()
 }
 
 std::string reportPage(const nlohmann::json& report, const TriangleMesh& mesh, const std::vector<std::string>& scripts,
-                       const PageColouring* colouring)
+                       const PageColouring* colouring, const LayerThumbnails* layers)
 {
     static_assert(sizeof(openvdb::Vec3f) == 12 && sizeof(openvdb::Vec3I) == 12);
     nlohmann::json meshJson = {
@@ -138,6 +138,17 @@ std::string reportPage(const nlohmann::json& report, const TriangleMesh& mesh, c
          << "<body>\n<div id=\"voxlat-page\"></div>\n"
          << "<script type=\"application/json\" id=\"voxlat-report\">" << scriptSafe(report.dump()) << "</script>\n"
          << "<script type=\"application/json\" id=\"voxlat-mesh\">" << scriptSafe(meshJson.dump()) << "</script>\n";
+    if (layers && !layers->layers.empty()) {
+        nlohmann::json images = nlohmann::json::array();
+        for (const std::vector<std::uint8_t>& image : layers->images)
+            images.push_back(base64(image.data(), image.size()));
+        const nlohmann::json kept = {{"layers", layers->layers},
+                                     {"size", {layers->width, layers->height}},
+                                     {"origin_mm", {layers->originMm[0], layers->originMm[1]}},
+                                     {"cell_mm", {layers->cellMm[0], layers->cellMm[1]}},
+                                     {"images", images}};
+        html << "<script type=\"application/json\" id=\"voxlat-layers\">" << scriptSafe(kept.dump()) << "</script>\n";
+    }
     for (const std::string& script : scripts) html << "<script>\n" << scriptSafe(script) << "\n</script>\n";
     html << "</body>\n</html>\n";
     return html.str();

@@ -3,12 +3,14 @@
 /// printability findings, density per slab, properties, warnings, timings), for any browser,
 /// offline.
 ///
-/// The page is the report's JSON, a small preview mesh and scripts, all inlined: three.js
+/// The page is the report's JSON, a small preview mesh, the first slices output's layers kept
+/// small (LayerThumbnails) and scripts, all inlined: three.js
 /// (Debian's libjs-three, or the copy an installed voxlat carries) draws the 3D views and
 /// `page/report.js` of the data folder everything else. Nothing is fetched when it opens.
 #pragma once
 
 #include "mesher/extract/TriangleMesh.h"
+#include "mesher/slice/LayerThumbnail.h"
 
 #include <nlohmann/json.hpp>
 
@@ -35,9 +37,11 @@ struct PageColouring {
 
 /// The page's HTML: @a report (report.json's content), @a mesh (drawn as it is; small: see
 /// clusterDecimate) and @a scripts (reportPageScripts()) inlined, so that the file opens offline.
-/// @a colouring, when given, colours the mesh by its values (one per vertex).
+/// @a colouring, when given, colours the mesh by its values (one per vertex). @a layers, when
+/// given (the first slices output's), are drawn in the layer view where a layer is kept, instead
+/// of the mesh cut.
 std::string reportPage(const nlohmann::json& report, const TriangleMesh& mesh, const std::vector<std::string>& scripts,
-                       const PageColouring* colouring = nullptr);
+                       const PageColouring* colouring = nullptr, const LayerThumbnails* layers = nullptr);
 
 /// How many of the job's voxels make one voxel of the coarse grid report.html's mesh is made on
 /// when no mesh is held: enough for at most 2^18 voxels of a domain of @a voxelCount, or, where

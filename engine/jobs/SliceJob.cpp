@@ -8,6 +8,7 @@
 #include "engine/core/Errors.h"
 #include "engine/core/Format.h"
 #include "engine/core/Version.h"
+#include "mesher/slice/LayerThumbnail.h"
 #include "mesher/slice/Slicer.h"
 #include "mesher/writers/AtomicFile.h"
 #include "mesher/writers/BitPlanes.h"
@@ -170,23 +171,10 @@ struct ContactSheet {
             return layer == image.index || (period > 0 && layer >= period && layer % period == image.index);
         };
         if (std::none_of(layers.begin(), layers.end(), shows)) return;
-        // Locals, not members: the sums' stores may alias `step`, which would be reloaded per
-        // pixel (1.4 % of slicing 40 layers of W10's plate, 12 of them sheet layers).
-        const int by = step, across = cw, nx = image.nx;
-        const int whole = nx / by;  // cells of `by` pixels across; the last one may be short
-        std::vector<std::uint32_t> sum(std::size_t(across) * ch, 0);
-        for (int j = 0; j < image.ny; ++j) {
-            std::uint32_t* const target = &sum[std::size_t(j / by) * across];
-            const std::uint8_t* const src = &image.pixels[std::size_t(j) * nx];
-            for (int c = 0; c < whole; ++c) {
-                std::uint32_t s = 0;
-                for (int k = 0; k < by; ++k) s += src[c * by + k];
-                target[c] += s;
-            }
-            for (int i = whole * by; i < nx; ++i) target[whole] += src[i];
-        }
+        std::vector<std::uint32_t> sum;
+        layerCellSums(image, step, 1, sum);
         std::vector<std::uint8_t> cell(sum.size());
-        for (std::size_t k = 0; k < sum.size(); ++k) cell[k] = std::uint8_t(sum[k] / (by * by));
+        for (std::size_t k = 0; k < sum.size(); ++k) cell[k] = std::uint8_t(sum[k] / (step * step));
         for (std::size_t k = 0; k < layers.size(); ++k)
             if (shows(layers[k])) cells[k] = cell;
     }
@@ -399,6 +387,22 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
     const bool checks = settings.checks != "off";
     PrintabilityCheck printability(geometry, count, period);
 
+    // report.html's layer view: a few dozen layers kept small, a phase's thumbnail standing for the
+    // layers copied from it (made in the parallel stage, where the layer's pixels are).
+    LayerThumbnails& thumbnails = result.thumbnails;
+    thumbnails.choose(count, slicer.nx(), slicer.ny());
+    thumbnails.originMm[0] = geometry.x(-0.5);
+    thumbnails.originMm[1] = geometry.y(-0.5);
+    thumbnails.cellMm[0] = thumbnails.step * geometry.pitchX;
+    thumbnails.cellMm[1] = thumbnails.step * geometry.pitchY;
+    std::vector<char> phaseShown(std::size_t(std::max(repeats.period, 0)), 0);
+    for (const int shown : thumbnails.layers)
+        if (repeats.period > 0 && shown >= repeats.period) phaseShown[std::size_t(shown % repeats.period)] = 1;
+    std::vector<std::vector<std::uint8_t>> phaseThumbnails(phaseShown.size());
+    auto thumbnailWanted = [&](int i) {
+        return thumbnails.indexOf(i) >= 0 || (i < repeats.period && phaseShown[std::size_t(i)]);
+    };
+
     struct Token {
         LayerImage image;
         bool copy = false;     ///< the layer's phase image is expected to be kept (LayerRepeats)
@@ -408,6 +412,7 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
         std::string bytes;
         std::uint32_t crc = 0;  ///< CRC-32 of bytes (PNG layers)
         std::vector<float> values;
+        std::vector<std::uint8_t> thumbnail;  ///< the layer small (thumbnailWanted), else empty
     };
     // Tokens are reused once written: a layer's image and encoded bytes keep their buffers, so no
     // layer allocates, clears and faults in 1.4 MB of pixels again (rasterize() writes every
@@ -429,6 +434,10 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
         const double z = part.min.z() + (t->image.index + 0.5) * layer;
         slicer.rasterize(z, t->image, &stats);
         heights.add(t->image, tops.local(), count);
+        if (thumbnailWanted(t->image.index))
+            t->thumbnail = layerThumbnail(t->image, thumbnails.step, thumbnails.rowStride);
+        else
+            t->thumbnail.clear();
         if (fieldValues) {
             t->exposedPixels = t->image.exposedPixels();
             slicer.fieldValues(z, t->values);
@@ -464,6 +473,8 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
         if (repeats.copies(i)) {
             const int phase = i % repeats.period;
             result.layerAreas[i] = repeats.exposed[phase] * pixelArea;
+            if (const int shown = thumbnails.indexOf(i); shown >= 0)
+                thumbnails.images[std::size_t(shown)] = phaseThumbnails[std::size_t(phase)];
             ++repeats.copied;
             if (encoding == LayerEncoding::png)
                 archive->addPngLayer(i, repeats.images[phase], repeats.crcs[phase]);
@@ -475,6 +486,8 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
         // The budget ran out while this layer waited as a copy: computed here.
         if (t.copy) render(&t);
         result.layerAreas[i] = t.exposedPixels * pixelArea;
+        if (i < repeats.period && phaseShown[std::size_t(i)]) phaseThumbnails[std::size_t(i)] = t.thumbnail;
+        if (const int shown = thumbnails.indexOf(i); shown >= 0) thumbnails.images[std::size_t(shown)] = t.thumbnail;
         const std::string* kept = i < repeats.period ? repeats.keep(t.bytes, t.exposedPixels, t.crc) : nullptr;
         if (kept) heights.addPhase(t.image, repeats.period, count);
         sheet.add(t.image, kept ? repeats.period : 0);

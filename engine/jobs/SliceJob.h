@@ -6,6 +6,7 @@
 #include "engine/jobs/PrinterProfile.h"
 #include "engine/recipe/SliceSettings.h"
 #include "fields/core/FieldNode.h"
+#include "mesher/slice/LayerThumbnail.h"
 
 #include <nlohmann/json.hpp>
 
@@ -24,6 +25,7 @@ struct SliceResult {
     int maxLayersHeld = 0;           ///< most layer images alive at once
     int layersPerPeriod = 0;         ///< layers in one z-period of the field (0: not periodic)
     int layersCopied = 0;            ///< layers copied from one a period below instead of computed
+    LayerThumbnails thumbnails;      ///< layers kept small for report.html's layer view
 };
 
 /// Slices @a field (negative inside) clipped to @a part for @a printer into @a path. @a recipeWhere

@@ -31,10 +31,19 @@ fields:
 result: ramped
 outputs: {mesh: ramped.stl}
 """
+# A thin plate sliced alone (no mesh output): the page's mesh is meshed on a coarse grid that a
+# plate 1 mm tall barely holds, so the layer view shows the slices' own layers, kept small.
+PLATE = """domain: {box: [[0, 0, 0], [20, 14, 1]]}
+fields:
+  plate: {tpms: gyroid, cell: 4, solid: sheet, level: 0.4}
+result: plate
+outputs: {slices: {printer: sl1s, layer: 0.05, file: plate.sl1s}}
+"""
 CASES = [
     ("gyroid-graded.yaml", ["voxel=0.4", "domain.box=[[0,0,0],[12,12,30]]",
                             "outputs.slices={printer: sl1s, layer: 0.1, file: graded.sl1s}"], {"graded", "islands"}),
     (WALLS, [], {"walls"}),
+    (PLATE, [], {"plate"}),
 ]
 
 
@@ -68,10 +77,11 @@ def main():
             if recipe.endswith(".yaml"):
                 path = os.path.join(args.source, "data", "recipes", recipe)
             else:
-                path = os.path.join(tmp, "walls.yaml")
+                name = "walls.yaml" if "walls" in shows else "plate.yaml"
+                path = os.path.join(tmp, name)
                 with open(path, "w") as f:
                     f.write(recipe)
-                recipe = "walls.yaml"
+                recipe = name
             out = os.path.join(tmp, recipe.replace(".yaml", ""))
             command = [args.voxlat, "run", path, "--out", out, "-q"]
             for s in sets:
@@ -122,6 +132,33 @@ def main():
                   recipe + ": the 3D view is blank (" + json.dumps(view) + ")")
             if "islands" in shows:
                 check(found.get("outline_pixels", 0) > 0, recipe + ": the layer view draws no cut of the part")
+            if "plate" in shows:
+                # Every layer kept (20 of them), the first one drawn from the slices: its exposed
+                # pixels cover part of the canvas. The kept layers' exposed area, read from the
+                # page's data (cells x cell area), against the slices' own mean layer area.
+                entry = report["slices"][0]
+                check(found.get("layers_kept") == entry["layers"] and found.get("first_layer_image") and
+                      found.get("first_layer_dark", 0) > 5000,
+                      recipe + ": the layer view does not show the first layer's slice (" + json.dumps(found) + ")")
+                kept = json.loads(re.search(r'<script type="application/json" id="voxlat-layers">(.*?)</script>', html,
+                                            re.S).group(1).replace("<\\/", "</"))
+                cell = kept["cell_mm"][0] * kept["cell_mm"][1]
+                areas = [np.frombuffer(base64.b64decode(im), np.uint8).astype(float).sum() / 255 * cell
+                         for im in kept["images"]]
+                mean = float(np.mean(areas)) if areas else 0.0
+                print("layer view: %d layers kept, mean exposed area %.3f mm2 against the slices' %.3f mm2" %
+                      (len(areas), mean, entry["mean_layer_area_mm2"]))
+                check(abs(mean - entry["mean_layer_area_mm2"]) <= 0.01 * entry["mean_layer_area_mm2"],
+                      recipe + ": the kept layers hold %.3f mm2 on average, the slices %.3f" % (mean, entry["mean_layer_area_mm2"]))
+                # Placed where the part is: the cells span the part's box in x and y (within a cell
+                # and a pixel).
+                box = entry["part_box"]
+                for a in range(2):
+                    lo = kept["origin_mm"][a]
+                    hi = lo + kept["size"][a] * kept["cell_mm"][a]
+                    check(abs(lo - box["min"][a]) <= kept["cell_mm"][a] and -0.1 <= hi - box["max"][a] <= 2 * kept["cell_mm"][a],
+                          recipe + ": the kept layers span %.3f..%.3f mm along axis %d, the part %.3f..%.3f" %
+                          (lo, hi, a, box["min"][a], box["max"][a]))
             if "graded" in shows:
                 # One colour per slab, and the legend.
                 legend = found.get("legend") or {}
