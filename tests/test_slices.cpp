@@ -25,6 +25,7 @@
 #include "mesher/writers/CtbWriter.h"
 #include "mesher/writers/PhotonWorkshopWriter.h"
 #include "mesher/writers/SliceWriters.h"
+#include "mesher/writers/WindowRuns.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/tools/LevelSetSphere.h>
@@ -1852,6 +1853,42 @@ TEST(Slices, NativeFormatsMatchTheReferencesWorkedExamples)
     EXPECT_EQ(ph.substr(0x127DC, 0x12808 - 0x127DC),
               fromHex("70 77 30 49 6D 67 00 00 00 00 00 00 00 00 00 00 10 00 00 00 07 00 00 00 CD CC 4C 3E CD CC 4C 3E "
                       "00 00 75 43 04 02 00 00 01 47 63 00"));
+}
+
+TEST(Slices, WindowRunsAreTheMaximalRunsOfTheDisplayPixelByPixel)
+{
+    // Windows of runs 1-40 long (the word scan's first, middle and last bytes), of greys that share
+    // a key without being equal, at every offset inside a display: the runs against the display's
+    // pixels walked one by one, for keys that keep every grey, halve it to 16 levels and threshold.
+    std::mt19937 rng(11);
+    const std::function<std::uint8_t(std::uint8_t)> keys[] = {[](std::uint8_t g) { return g; },
+                                                              [](std::uint8_t g) { return std::uint8_t(g >> 4); },
+                                                              [](std::uint8_t g) { return std::uint8_t(g >= 128); }};
+    const std::uint8_t greys[] = {0, 0, 255, 255, 7, 9, 128, 200, 201};
+    for (int trial = 0; trial < 60; ++trial) {
+        const int width = 20 + int(rng() % 60), height = 3 + int(rng() % 6);
+        const int w = 1 + int(rng() % unsigned(width)), h = 1 + int(rng() % unsigned(height));
+        const int col0 = int(rng() % unsigned(width - w + 1)), row0 = int(rng() % unsigned(height - h + 1));
+        std::vector<std::uint8_t> window;
+        while (window.size() < std::size_t(w) * h)
+            window.insert(window.end(), 1 + rng() % 40, greys[rng() % std::size(greys)]);
+        window.resize(std::size_t(w) * h);
+        for (const auto& key : keys) {
+            std::vector<std::pair<int, std::uint64_t>> runs, expected;
+            voxlat::windowRuns(width, height, window.data(), col0, row0, w, h, key,
+                               [&](std::uint8_t v, std::uint64_t n) { runs.emplace_back(v, n); });
+            for (int y = 0; y < height; ++y)
+                for (int x = 0; x < width; ++x) {
+                    const bool in = x >= col0 && x < col0 + w && y >= row0 && y < row0 + h;
+                    const int v = key(in ? window[std::size_t(y - row0) * w + (x - col0)] : 0);
+                    if (!expected.empty() && expected.back().first == v)
+                        ++expected.back().second;
+                    else
+                        expected.emplace_back(v, 1);
+                }
+            ASSERT_EQ(runs, expected) << "trial " << trial;
+        }
+    }
 }
 
 TEST(Slices, EdgePixelsLinearisedWhereTheFieldIsNearlyQuadratic)
