@@ -8,6 +8,8 @@
 #include <cmath>
 #include <functional>
 #include <numbers>
+#include <random>
+#include <tuple>
 
 using namespace voxlat;
 
@@ -180,4 +182,35 @@ TEST(Printability, PeriodicReplayMatchesAnalysingEveryLayer)
     EXPECT_GT(full["island_count"].get<int>(), 0);
     EXPECT_GT(full["resin_trap_count"].get<int>(), 0);
     EXPECT_EQ(full.dump(), replayed.dump());
+}
+
+TEST(Printability, RunsAreTheExposedPixelsOfWideLayersPixelByPixel)
+{
+    // Layers wider than a word of bits (the rows packed sixteen or eight pixels at a time, then one
+    // by one), greys on both sides of 128 in random runs: every row's solid and void runs against
+    // the row walked pixel by pixel (exposed = grey >= 128).
+    std::mt19937 rng(5);
+    const std::uint8_t greys[] = {0, 127, 128, 129, 255, 1, 200};
+    for (const int nx : {63, 64, 65, 131, 200, 257}) {
+        LayerImage image;
+        image.nx = nx;
+        image.ny = 6;
+        while (image.pixels.size() < std::size_t(nx) * image.ny)
+            image.pixels.insert(image.pixels.end(), 1 + rng() % 30, greys[rng() % std::size(greys)]);
+        image.pixels.resize(std::size_t(nx) * image.ny);
+        const LayerFeatures f = analyseLayer(image);
+        std::vector<std::tuple<int, int, int>> solid, hole, expectedSolid, expectedHole;
+        for (const auto& r : f.solidRuns) solid.emplace_back(r.row, r.begin, r.end);
+        for (const auto& r : f.voidRuns) hole.emplace_back(r.row, r.begin, r.end);
+        for (int j = 0; j < image.ny; ++j)
+            for (int i = 0; i < nx;) {
+                const bool exposed = image.pixels[std::size_t(j) * nx + i] >= 128;
+                int end = i + 1;
+                while (end < nx && (image.pixels[std::size_t(j) * nx + end] >= 128) == exposed) ++end;
+                (exposed ? expectedSolid : expectedHole).emplace_back(j, i, end);
+                i = end;
+            }
+        EXPECT_EQ(solid, expectedSolid) << "nx " << nx;
+        EXPECT_EQ(hole, expectedHole) << "nx " << nx;
+    }
 }
