@@ -1195,7 +1195,7 @@ TEST(Slices, LayersAPeriodApartAreCopied)
         settings.reuseBytes = reuseBytes;
         std::filesystem::create_directories(dir.path / folder);
         const tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
-        return sliceToFile(field, part, printer, settings, dir.path / folder / "part.sl1s", "test");
+        return sliceToFile(field, part, printer, settings, dir.path / folder / "part.sl1s", "test", nullptr, true);
     };
     const SliceResult computed = slice(solid, 0, 2, "computed");
     const SliceResult copied = slice(solid, std::size_t(64) << 20, 2, "copied");
@@ -1347,6 +1347,9 @@ TEST(Slices, MemoryBoundedByAFewLayersForATallPart)
     EXPECT_GE(r.maxLayersHeld, 1);
     EXPECT_LE(r.maxLayersHeld, 4);
     EXPECT_EQ(r.report["max_layers_held"], r.maxLayersHeld);
+    // No page asked for: no layer is kept small.
+    EXPECT_TRUE(r.thumbnails.layers.empty());
+    EXPECT_TRUE(r.thumbnails.images.empty());
 }
 
 TEST(Slices, WindowPngDecodesToTheSamePixels)

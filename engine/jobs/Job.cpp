@@ -2228,7 +2228,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
             });
             mReport["outputs"].push_back(path.string());
         } else if (out.kind == "slices") {
-            writeSlices(*out.slices, path);
+            writeSlices(*out.slices, path, html && !mPageLayers);
         } else if (out.kind == "properties") {
             writeProperties(path);
         } else if (out.kind == "frame") {
@@ -2571,7 +2571,7 @@ void Job::writePreview(const std::filesystem::path& path, const MeshOptions& opt
     mReport["preview"] = path.string();
 }
 
-void Job::writeSlices(const SliceSettings& settings, const std::filesystem::path& path)
+void Job::writeSlices(const SliceSettings& settings, const std::filesystem::path& path, bool pageLayers)
 {
     // Where the archive and its preview go, checked before any work (the preview is a relative
     // name beside the archive: checked when the recipe loads, resolved here).
@@ -2595,8 +2595,9 @@ void Job::writeSlices(const SliceSettings& settings, const std::filesystem::path
         part.min.z() = timed("find the part's floor",
                              [&] { return lowestSolidZ(*mResult, part, 0.5 * mDomain.voxel, *mContext); });
     const std::string where = mRecipe.domainBox ? mRecipe.node("domain").where() : mRecipe.source->path;
-    SliceResult result = timed("slice " + path.filename().string(),
-                               [&] { return sliceToFile(*mResult, part, printer, settings, path, where, mContext); });
+    SliceResult result = timed("slice " + path.filename().string(), [&] {
+        return sliceToFile(*mResult, part, printer, settings, path, where, mContext, pageLayers);
+    });
     nlohmann::json entry = result.report;
     entry["part_box"] = {{"from", mRecipe.domainBox ? "recipe domain"
                                   : support         ? "result's bounding box"
@@ -2604,7 +2605,7 @@ void Job::writeSlices(const SliceSettings& settings, const std::filesystem::path
                          {"min", vec(part.min)},
                          {"max", vec(part.max)}};
     mReport["slices"].push_back(entry);
-    if (!mPageLayers) mPageLayers = std::move(result.thumbnails);
+    if (pageLayers) mPageLayers = std::move(result.thumbnails);
     // The first slice job's findings also at the top (`printability.islands`, ...), where users look.
     if (result.report.contains("printability") && !mReport.contains("printability"))
         mReport["printability"] = result.report["printability"];

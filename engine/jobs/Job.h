@@ -98,8 +98,9 @@ public:
     void writePreview(const std::filesystem::path& path, const MeshOptions& options = {});
     /// Slices the result for a resin printer into @a path with @a settings (a `slices:` entry,
     /// parsed when the recipe loaded). Builds no grid and no mesh: every pixel is decided from the
-    /// field (engine/SliceJob).
-    void writeSlices(const SliceSettings& settings, const std::filesystem::path& path);
+    /// field (engine/SliceJob). With @a pageLayers the layers are also kept small for report.html's
+    /// layer view (the first such output's).
+    void writeSlices(const SliceSettings& settings, const std::filesystem::path& path, bool pageLayers = false);
 
     /// The effective stiffness and conductivity of one periodic cell of the result
     /// (engine/jobs/PropertiesJob), computed once; also report.json's `properties`.

@@ -157,9 +157,9 @@ struct ContactSheet {
     {
         const int n = std::min(count, 12);
         for (int k = 0; k < n; ++k) layers.push_back(int((k + 0.5) * count / n));
-        step = std::max(1, std::max((nx + cell - 1) / cell, (ny + cell - 1) / cell));
-        cw = std::max(1, (nx + step - 1) / step);
-        ch = std::max(1, (ny + step - 1) / step);
+        step = std::max(1, cellsAcross(std::max(nx, ny), cell));
+        cw = std::max(1, cellsAcross(nx, step));
+        ch = std::max(1, cellsAcross(ny, step));
         cells.resize(layers.size());
         columns = std::min<int>(columns, std::max<std::size_t>(1, layers.size()));
     }
@@ -312,7 +312,7 @@ void reportPrintability(const PrintabilityCheck& check, const SliceSettings& set
 
 SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterProfile& printer,
                         const SliceSettings& settings, const fs::path& path, const std::string& partWhere,
-                        const JobContext* context)
+                        const JobContext* context, bool pageLayers)
 {
     // Check everything before the first byte is written.
     const double layer = settings.layer.value_or(printer.layerMm);
@@ -388,9 +388,10 @@ SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterP
     PrintabilityCheck printability(geometry, count, period);
 
     // report.html's layer view: a few dozen layers kept small, a phase's thumbnail standing for the
-    // layers copied from it (made in the parallel stage, where the layer's pixels are).
+    // layers copied from it (made in the parallel stage, where the layer's pixels are); none
+    // where no page shows them.
     LayerThumbnails& thumbnails = result.thumbnails;
-    thumbnails.choose(count, slicer.nx(), slicer.ny());
+    if (pageLayers) thumbnails.choose(count, slicer.nx(), slicer.ny());
     thumbnails.originMm[0] = geometry.x(-0.5);
     thumbnails.originMm[1] = geometry.y(-0.5);
     thumbnails.cellMm[0] = thumbnails.step * geometry.pitchX;

@@ -30,9 +30,10 @@ struct SliceResult {
 
 /// Slices @a field (negative inside) clipped to @a part for @a printer into @a path. @a recipeWhere
 /// and @a partWhere name the recipe and its domain for messages. Validates everything before the
-/// first byte; the archive (or folder) appears whole or not at all.
+/// first byte; the archive (or folder) appears whole or not at all. With @a pageLayers the result
+/// holds some layers kept small (SliceResult::thumbnails), else none.
 SliceResult sliceToFile(const FieldNode& field, const Box3& part, const PrinterProfile& printer,
                         const SliceSettings& settings, const std::filesystem::path& path, const std::string& partWhere,
-                        const JobContext* context = nullptr);
+                        const JobContext* context = nullptr, bool pageLayers = false);
 
 }  // namespace voxlat
