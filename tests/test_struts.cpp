@@ -2425,6 +2425,36 @@ TEST(StrutLattice, DensityOnItsOwnLatticeInStacksHoldsByBruteForce)
     EXPECT_EQ(levels[0], levels[1]);
 }
 
+TEST(StrutLattice, LevelRadiusIsReportedOnlyWhereAnIsolatedStrutHasOne)
+{
+    // `level_radius_mm` is sigma sqrt(2 ln(P / t)), the radius of an isolated strut of peak P at
+    // the iso-value t (unit weights: P = sigma sqrt(2 pi)). A dense frame (sigma 1 on 4 mm cells)
+    // solves to a t above P: no strut has a radius there, so the report leaves the radius out and
+    // says why, rather than print a negative number under a radius's name.
+    const TempDir dir;
+    const std::string csv = bccWireframe(dir, 4.0, 2);
+    auto levels = [&](double sigma, double density) {
+        const std::string text =
+            "voxel: 0.2\ndomain: {box: [[0, 0, 0], [8, 8, 8]]}\nfields:\n  lattice: {struts: "
+            "{wireframe: " +
+            csv + "}, kernel: {gaussian: {sigma: " + std::to_string(sigma) + "}}, density: " + std::to_string(density) +
+            "}\nresult: lattice\nallow: [pieces]\n";
+        Job job(parseRecipe(text, "wire.yaml", "."));
+        job.solveLevels();
+        return job.report()["fields"]["lattice"];
+    };
+    const auto sparse = levels(0.4, 0.2);
+    const double t = sparse["level"].get<double>(), peak = 0.4 * std::sqrt(2.0 * std::numbers::pi);
+    ASSERT_LT(t, peak);
+    EXPECT_NEAR(sparse["level_radius_mm"].get<double>(), 0.4 * std::sqrt(2.0 * std::log(peak / t)), 1e-9);
+    EXPECT_FALSE(sparse.contains("level_above_strut_peak"));
+    const auto dense = levels(1.0, 0.3);
+    EXPECT_GT(dense["level"].get<double>(), std::sqrt(2.0 * std::numbers::pi));
+    EXPECT_FALSE(dense.contains("level_radius_mm")) << dense.dump();
+    EXPECT_TRUE(dense.contains("level_above_strut_peak"));
+    EXPECT_EQ(dense["thinnest_strut_mm"].get<double>(), 0.0);
+}
+
 TEST(GridValueMemo, AFrameBoxSolvedOnTheJobsVoxelsHandsTheGridItsValues)
 {
     // A wireframe's box [0, 8]^3 in a domain wider than it (the box a mask of the job's domain),

@@ -93,7 +93,8 @@ void printSummary(voxlat::Job& job)
                 parts.push_back("level " + text(f["level"]) +
                                 (f.contains("level_radius_mm")
                                      ? " (isolated strut radius " + text(f["level_radius_mm"]) + " mm)"
-                                     : ""));
+                                 : f.contains("level_above_strut_peak") ? " (above an isolated strut's peak)"
+                                                                        : ""));
             if (f.contains("achieved_density"))
                 parts.push_back("density " + text(f["achieved_density"]) +
                                 (f.contains("target_density") ? " (target " + text(f["target_density"]) + ")" : ""));

@@ -397,6 +397,30 @@ Job::Job(Recipe recipe, JobContext* context)
     }
 }
 
+namespace {
+
+/// @a node's level in @a entry: `level` as the recipe's key means it and, for a Gaussian lattice
+/// (whose solid's own level is the iso-radius rho, signed), `level_radius_mm`, the radius of an
+/// isolated strut at that iso-value, only where one exists: above an isolated strut's peak P
+/// (rho < 0: a dense frame whose struts show only where they overlap) no strut has a radius, and
+/// `level_above_strut_peak` says so instead of a negative number under a radius's name.
+void reportLevel(const LevelNode& node, double level, nlohmann::json& entry)
+{
+    entry["level"] = node.recipeLevel ? node.recipeLevel(level) : level;
+    if (!node.recipeLevel) return;
+    if (level >= 0.0) {
+        entry["level_radius_mm"] = level;
+        entry.erase("level_above_strut_peak");
+    } else {
+        entry.erase("level_radius_mm");
+        entry["level_above_strut_peak"] =
+            "the iso-value is above an isolated strut's peak P (in `type`): no isolated strut has a radius at it; "
+            "the solid is where struts overlap";
+    }
+}
+
+}  // namespace
+
 void Job::checkSheetWalls(const LevelNode& node, nlohmann::json& entry)
 {
     const LevelNode::WallCheck& w = *node.wallCheck;
@@ -613,8 +637,7 @@ void Job::solveLevels()
         if (mDesign.contains(node.name)) entry.update(mDesign[node.name]);
         // Under the recipe key's name, what the key means (a Gaussian lattice's iso-value t); the
         // solid's own level (an isolated strut's radius) under its own name.
-        entry["level"] = node.recipeLevel ? node.recipeLevel(node.solid->level()) : node.solid->level();
-        if (node.recipeLevel) entry["level_radius_mm"] = node.solid->level();
+        reportLevel(node, node.solid->level(), entry);
         if (node.thinnest) {
             // Known before any evaluation of the result: a strut or wall thinner than two voxels
             // breaks up or vanishes on the grid (and in the mesh and slices made from it).
@@ -1110,8 +1133,7 @@ void Job::aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::pat
     aim["moved"] = true;
     aim["steps"] = steps;  // moves after a measure (the prediction's not counted)
     aim["slope"] = solved.slope;
-    entry["level"] = node.recipeLevel ? node.recipeLevel(level) : level;
-    if (node.recipeLevel) entry["level_radius_mm"] = level;
+    reportLevel(node, level, entry);
     if (node.thinnest)
         entry[node.thinnestKind == "wall" ? "thinnest_wall_mm" : "thinnest_strut_mm"] = node.thinnest(level);
     // `achieved_density` stays the solve's (the target met on the voxels at the solved level); the
