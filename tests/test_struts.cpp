@@ -45,6 +45,7 @@
 #include <limits>
 #include <numbers>
 #include <random>
+#include <regex>
 #include <set>
 #include <sstream>
 
@@ -1742,6 +1743,9 @@ TEST(StrutRecipes, ALatticeThatFallsApartIsCountedOnTheGrid)
     const std::string allowed = runRecipe(dir, broken + "outputs: {mesh: a.stl}\nallow: [pieces]\n", &status);
     EXPECT_EQ(status, 0) << allowed;
     EXPECT_NE(allowed.find("warning: the result `lattice` falls apart into"), std::string::npos) << allowed;
+    // The largest free piece's centre in the message's own six digits (not a JSON dump's 17).
+    EXPECT_TRUE(std::regex_search(allowed, std::regex(R"(mm3 around \[-?[0-9.]{1,8}, -?[0-9.]{1,8}, -?[0-9.]{1,8}\])")))
+        << allowed;
     const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
     EXPECT_GT(report["pieces"]["count"].get<int>(), 1);
     EXPECT_GT(report["pieces"]["free"].get<int>(), 0);

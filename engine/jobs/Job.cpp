@@ -1938,7 +1938,9 @@ void Job::checkPieces(const std::vector<SolidBlock>& blocks)
     mReport["pieces"]["crumbs"] = {{"count", crumbs}, {"volume_mm3", double(crumbVoxels) * voxelVolume}};
     const Piece& main = count.pieces[0];
     auto centre = [&](const Piece& p) {
-        return vec(0.5 * (mDomain.worldOf(p.bounds.min()) + mDomain.worldOf(p.bounds.max()))).dump();
+        // Six significant digits, as the message's other numbers (a JSON dump gave 16.200000000000003).
+        const Vec3d c = 0.5 * (mDomain.worldOf(p.bounds.min()) + mDomain.worldOf(p.bounds.max()));
+        return "[" + formatNumber(c.x()) + ", " + formatNumber(c.y()) + ", " + formatNumber(c.z()) + "]";
     };
     std::ostringstream msg;
     msg << "the result `" << mRecipe.result << "` falls apart into " << count.pieces.size()
