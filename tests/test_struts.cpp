@@ -2459,6 +2459,49 @@ TEST(StrutLattice, LevelRadiusIsReportedOnlyWhereAnIsolatedStrutHasOne)
     EXPECT_EQ(dense["thinnest_strut_mm"].get<double>(), 0.0);
 }
 
+TEST(StrutLattice, WarningsOfALevelMovedForTheMeshGiveTheMovedLevelsNumbers)
+{
+    // A trimmed frame whose mesh misses the density at the solved level: the level moves for the
+    // mesh (mesh_aim), and the warnings that hang on the level (radii_shifted's iso-value,
+    // sub_voxel_features' thinnest strut) must give the numbers of the level the outputs are made
+    // at, once each in report.json, as `level` and `thinnest_strut_mm` do; the command line tells
+    // the updated ones as such. Checked at two minimum radii: some struts vanish (thinnest 0), and
+    // all hold but thinner than two voxels.
+    const TempDir dir;
+    for (const std::string rMin : {"0.25", "0.36"}) {
+        int status = 0;
+        const std::string out =
+            runRecipe(dir,
+                      "voxel: 0.1\ndomain: {box: [[0, 0, 0], [20, 20, 20]]}\nfields:\n  lattice: {struts: {cell: bcc, "
+                      "size: 4, within: {cylinder: {center: [10, 10, 10], radius: 10, height: 20}}}, kernel: "
+                      "{gaussian: {sigma: 0.4}}, radius: {gradient: linear, min: " +
+                          rMin +
+                          ", max: 0.6, axis: z}, density: 0.20}\nresult: lattice\nallow: [pieces]\noutputs: {mesh: "
+                          "a.stl}\n",
+                      &status, " --no-preview --no-html");
+        ASSERT_EQ(status, 0) << out;
+        const auto report = nlohmann::json::parse(readFile(dir.path / "out" / "report.json"));
+        const auto& entry = report["fields"]["lattice"];
+        ASSERT_TRUE(entry["mesh_aim"]["moved"].get<bool>()) << entry.dump();
+        ASSERT_NE(entry["mesh_aim"]["solved_level"].get<double>(), entry["level"].get<double>());
+        int shifted = 0, thin = 0;
+        for (const auto& w : report["warnings"]) {
+            if (w["code"] == "radii_shifted") {
+                ++shifted;
+                EXPECT_EQ(w["iso_value"].get<double>(), entry["level"].get<double>()) << rMin;
+            } else if (w["code"] == "sub_voxel_features") {
+                ++thin;
+                EXPECT_EQ(w["thinnest_mm"].get<double>(), entry["thinnest_strut_mm"].get<double>()) << rMin;
+            }
+        }
+        EXPECT_EQ(shifted, 1) << rMin;
+        EXPECT_EQ(thin, 1) << rMin;
+        EXPECT_NE(out.find("warning (updated, in place of the one above): field `lattice`: the density sets"),
+                  std::string::npos)
+            << out;
+    }
+}
+
 TEST(GridValueMemo, AFrameBoxSolvedOnTheJobsVoxelsHandsTheGridItsValues)
 {
     // A wireframe's box [0, 8]^3 in a domain wider than it (the box a mask of the job's domain),

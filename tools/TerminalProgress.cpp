@@ -69,7 +69,8 @@ void attachTerminal(JobContext& context, bool quiet)
         });
     }
     context.setWarningSink([](const Warning& w) {
-        std::fprintf(stderr, "warning: %s\n", w.message.c_str());
+        std::fprintf(stderr, "warning%s: %s\n", w.replaces ? " (updated, in place of the one above)" : "",
+                     w.message.c_str());
         std::fflush(stderr);
     });
 }

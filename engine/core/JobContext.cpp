@@ -2,6 +2,8 @@
 
 #include "engine/core/Errors.h"
 
+#include <algorithm>
+
 namespace voxlat {
 
 void JobContext::checkCancelled() const
@@ -14,6 +16,37 @@ void JobContext::warn(Warning w) const
     std::lock_guard<std::mutex> lock(mMutex);
     mWarnings.push_back(std::move(w));
     if (mWarningSink) mWarningSink(mWarnings.back());
+}
+
+namespace {
+
+bool aboutField(const Warning& w, const std::string& code, const nlohmann::json& field)
+{
+    return w.code == code && w.details.is_object() && w.details.contains("field") && w.details["field"] == field;
+}
+
+}  // namespace
+
+void JobContext::warnAgain(Warning w) const
+{
+    std::lock_guard<std::mutex> lock(mMutex);
+    const nlohmann::json field = w.details.is_object() && w.details.contains("field") ? w.details["field"] : nullptr;
+    auto kept = std::find_if(mWarnings.begin(), mWarnings.end(),
+                             [&](const Warning& k) { return !field.is_null() && aboutField(k, w.code, field); });
+    if (kept == mWarnings.end()) {
+        mWarnings.push_back(std::move(w));
+        kept = mWarnings.end() - 1;
+    } else {
+        *kept = std::move(w);
+        kept->replaces = true;
+    }
+    if (mWarningSink) mWarningSink(*kept);
+}
+
+void JobContext::withdraw(const std::string& code, const std::string& field) const
+{
+    std::lock_guard<std::mutex> lock(mMutex);
+    std::erase_if(mWarnings, [&](const Warning& k) { return aboutField(k, code, field); });
 }
 
 std::vector<Warning> JobContext::warnings() const

@@ -22,6 +22,9 @@ struct Warning {
     std::string code;
     std::string message;
     nlohmann::json details = nlohmann::json::object();
+    /// Set by JobContext::warnAgain() where it replaced an earlier warning of the same code and
+    /// field (the sink may say the numbers above are superseded).
+    bool replaces = false;
 };
 
 /// The caller's side of a job. Callbacks may be called from worker threads, one at a time (the
@@ -51,6 +54,13 @@ public:
     {
         warn(Warning{std::move(code), std::move(message), std::move(details)});
     }
+    /// A warning about one field's state that may change after it was raised (a level moved for
+    /// the mesh): replaces the kept warning of the same code whose details name the same `field`
+    /// (report.json then holds the numbers that hold now), or keeps @a w as a new one; either
+    /// way it goes to the sink.
+    void warnAgain(Warning w) const;
+    /// Drops the kept warning of @a code about @a field (its state no longer warrants it), if any.
+    void withdraw(const std::string& code, const std::string& field) const;
     /// Every warning so far, in the order raised.
     std::vector<Warning> warnings() const;
 

@@ -482,6 +482,39 @@ void Job::drainForSlices()
     }
 }
 
+void Job::reportThinnest(const LevelNode& node, double level, nlohmann::json& entry)
+{
+    if (!node.thinnest) return;
+    // Known before any evaluation of the result: a strut or wall thinner than two voxels breaks up
+    // or vanishes on the grid (and in the mesh and slices made from it). Told again when the level
+    // moves for the mesh (aimLevelsAtMesh): the warning gives the numbers of the level the outputs
+    // are made at, as `thinnest_*_mm` does.
+    const bool wall = node.thinnestKind == "wall";
+    const std::string features = wall ? "walls" : "struts";
+    const double thinnest = node.thinnest(level);
+    entry[wall ? "thinnest_wall_mm" : "thinnest_strut_mm"] = thinnest;
+    if (thinnest <= 0.0)
+        mContext->warnAgain({"sub_voxel_features",
+                             "field `" + node.name +
+                                 "`: at its level some struts vanish between their joints (the iso-value is "
+                                 "above their peak): only the joints remain there; lower sigma or raise the "
+                                 "density or radius",
+                             {{"field", node.name}, {"thinnest_mm", 0.0}, {"voxel_mm", mDomain.voxel}}});
+    else if (thinnest < 2.0 * mDomain.voxel)
+        mContext->warnAgain({"sub_voxel_features",
+                             "field `" + node.name + "`: its thinnest " + features + " are " + formatNumber(thinnest) +
+                                 " mm across, less than two voxels (" + formatNumber(2.0 * mDomain.voxel) +
+                                 " mm): on the grid they break apart or vanish; use `voxel: " +
+                                 formatNumber(std::max(thinnest, 1e-3) / 2.0) + "` or less, or thicken them (" +
+                                 (wall ? "thickness, level, density" : "radius, density") + ")",
+                             {{"field", node.name},
+                              {"thinnest_mm", thinnest},
+                              {"voxel_mm", mDomain.voxel},
+                              {"voxel_needed_mm", thinnest / 2.0}}});
+    else
+        mContext->withdraw("sub_voxel_features", node.name);
+}
+
 void Job::solveLevels()
 {
     if (mSolved) return;
@@ -638,33 +671,7 @@ void Job::solveLevels()
         // Under the recipe key's name, what the key means (a Gaussian lattice's iso-value t); the
         // solid's own level (an isolated strut's radius) under its own name.
         reportLevel(node, node.solid->level(), entry);
-        if (node.thinnest) {
-            // Known before any evaluation of the result: a strut or wall thinner than two voxels
-            // breaks up or vanishes on the grid (and in the mesh and slices made from it).
-            const bool wall = node.thinnestKind == "wall";
-            const std::string features = wall ? "walls" : "struts";
-            const double thinnest = node.thinnest(node.solid->level());
-            entry[wall ? "thinnest_wall_mm" : "thinnest_strut_mm"] = thinnest;
-            if (thinnest <= 0.0)
-                mContext->warn("sub_voxel_features",
-                               "field `" + node.name +
-                                   "`: at its level some struts vanish between their joints (the iso-value is "
-                                   "above their peak): only the joints remain there; lower sigma or raise the "
-                                   "density or radius",
-                               {{"field", node.name}, {"thinnest_mm", 0.0}, {"voxel_mm", mDomain.voxel}});
-            else if (thinnest < 2.0 * mDomain.voxel)
-                mContext->warn("sub_voxel_features",
-                               "field `" + node.name + "`: its thinnest " + features + " are " +
-                                   formatNumber(thinnest) + " mm across, less than two voxels (" +
-                                   formatNumber(2.0 * mDomain.voxel) +
-                                   " mm): on the grid they break apart or vanish; use `voxel: " +
-                                   formatNumber(std::max(thinnest, 1e-3) / 2.0) + "` or less, or thicken them (" +
-                                   (wall ? "thickness, level, density" : "radius, density") + ")",
-                               {{"field", node.name},
-                                {"thinnest_mm", thinnest},
-                                {"voxel_mm", mDomain.voxel},
-                                {"voxel_needed_mm", thinnest / 2.0}});
-        }
+        reportThinnest(node, node.solid->level(), entry);
         fields[node.name] = entry;
     }
     for (const GradedNode& node : mBuilder.gradedNodes()) {
@@ -1134,8 +1141,9 @@ void Job::aimLevelsAtMesh(const MeshOptions& options, const std::filesystem::pat
     aim["steps"] = steps;  // moves after a measure (the prediction's not counted)
     aim["slope"] = solved.slope;
     reportLevel(node, level, entry);
-    if (node.thinnest)
-        entry[node.thinnestKind == "wall" ? "thinnest_wall_mm" : "thinnest_strut_mm"] = node.thinnest(level);
+    // The level's own warnings, with the numbers of the level the outputs are made at.
+    reportThinnest(node, level, entry);
+    if (node.onSolved) node.onSolved(level);
     // `achieved_density` stays the solve's (the target met on the voxels at the solved level); the
     // voxels' share at the moved level, along the solve's slope, is what slices of the field hold.
     aim["density_on_voxels_at_level"] = solved.achieved + solved.slope * (indicatorLevel - solved.indicatorLevel);

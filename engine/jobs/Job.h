@@ -189,6 +189,9 @@ private:
     /// A sheet of a constant `thickness:`: its walls measured over one cell into @a entry
     /// (`walls_measured`), and a warning with the numbers when they miss the thickness.
     void checkSheetWalls(const LevelNode& node, nlohmann::json& entry);
+    /// @a node's thinnest strut or wall at @a level in @a entry, and the `sub_voxel_features`
+    /// warning it calls for (replacing the one told at an earlier level of the same field).
+    void reportThinnest(const LevelNode& node, double level, nlohmann::json& entry);
 
     template <typename Fn>
     auto timed(const std::string& stage, Fn&& fn);

@@ -35,7 +35,8 @@ struct LevelNode {
     /// Where a lattice laid out in cells of its own exists (a skin frame's cells, negative
     /// inside); its density is measured there (and an infill intersects it with its core).
     FieldPtr region{};
-    /// Called with the solved level after a density solve (checks and notes that need it).
+    /// Called with the solved level after a density solve, and again with the level moved for the
+    /// mesh (checks and notes that need it: their warnings by JobContext::warnAgain).
     std::function<void(double level)> onSolved{};
     /// The diameter (mm) of the thinnest strut (or wall) the solid has at a level, where the node
     /// knows it: the job warns before evaluating when it is below two voxels.

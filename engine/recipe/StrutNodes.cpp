@@ -1145,14 +1145,15 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     if (solved) {
         JobContext* context = &builder.context();
         if (radii)
-            node.onSolved = [context, name, iso, sigmaShown](double rho) {
-                const double t = iso->valueOf(rho);
+            // t as report.json's `level` gives it (the double whose radius is rho exactly).
+            node.onSolved = [context, name, recipeLevel = node.recipeLevel, sigmaShown](double rho) {
+                const double t = recipeLevel(rho);
                 std::ostringstream msg;
                 msg << "field `" << name << "`: the density sets the iso-value to t = " << t
                     << ", so the radii R hold up to a common shift: r^2 = R^2 + 2 sigma^2 ln(1/t) = R^2 "
                     << (t < 1 ? "+ " : "- ") << std::abs(2 * sigmaShown * sigmaShown * std::log(1 / t))
                     << " mm^2 (for sigma = " << sigmaShown << ")";
-                context->warn("radii_shifted", msg.str(), {{"field", name}, {"iso_value", t}});
+                context->warnAgain({"radii_shifted", msg.str(), {{"field", name}, {"iso_value", t}}});
             };
     }
     // Beyond the cut-off radius F = 0, below every iso-value (the value there is the cap 2 rcMax,
