@@ -90,6 +90,10 @@
   if (report.voxlat_version) summary.push("voxlat " + report.voxlat_version);
   if (report.result && typeof report.result.volume_mm3 === "number") summary.push("volume " + fmt(report.result.volume_mm3) + " mm³");
   if (report.result && typeof report.result.volume_fraction === "number") summary.push("relative density " + fmt(report.result.volume_fraction, 3));
+  // A slice-only job has no result volume: the first slices output's exposed volume instead.
+  const sliced = Array.isArray(report.slices) && report.slices.length ? report.slices[0] : null;
+  if (!(report.result && typeof report.result.volume_mm3 === "number") && sliced && typeof sliced.exposed_volume_mm3 === "number")
+    summary.push("exposed volume " + fmt(sliced.exposed_volume_mm3) + " mm³ (" + (sliced.layers || 0) + " layers of " + (sliced.file || "the slices") + ")");
   if (report.domain && report.domain.voxel) summary.push("voxel " + fmt(report.domain.voxel) + " mm");
   el("p", { class: "muted", text: summary.join(" · ") });
   if (Array.isArray(report.outputs) && report.outputs.length) el("p", { text: "Outputs: " + report.outputs.join(", ") });

@@ -137,6 +137,12 @@ def main():
                 # pixels cover part of the canvas. The kept layers' exposed area, read from the
                 # page's data (cells x cell area), against the slices' own mean layer area.
                 entry = report["slices"][0]
+                # A slice-only job has no result volume: the heading gives the slices' exposed one.
+                shown = re.search(r"exposed volume ([0-9.e+-]+) mm³", run.stdout)
+                check(shown is not None and
+                      abs(float(shown.group(1)) - entry["exposed_volume_mm3"]) <= 1e-3 * entry["exposed_volume_mm3"],
+                      recipe + ": the heading does not give the slices' exposed volume " +
+                      str(entry["exposed_volume_mm3"]) + " (" + (shown.group(0) if shown else "none") + ")")
                 check(found.get("layers_kept") == entry["layers"] and found.get("first_layer_image") and
                       found.get("first_layer_dark", 0) > 5000,
                       recipe + ": the layer view does not show the first layer's slice (" + json.dumps(found) + ")")
