@@ -1743,6 +1743,11 @@ TEST(StrutRecipes, ALatticeThatFallsApartIsCountedOnTheGrid)
     const std::string allowed = runRecipe(dir, broken + "outputs: {mesh: a.stl}\nallow: [pieces]\n", &status);
     EXPECT_EQ(status, 0) << allowed;
     EXPECT_NE(allowed.find("warning: the result `lattice` falls apart into"), std::string::npos) << allowed;
+    // Its struts vanish between their joints (thinnest 0): the advice says a finer voxel is no fix,
+    // and does not offer one.
+    EXPECT_NE(allowed.find("Struts of `lattice` vanish between their joints at the level"), std::string::npos)
+        << allowed;
+    EXPECT_EQ(allowed.find("use `voxel:"), std::string::npos) << allowed;
     // The largest free piece's centre in the message's own six digits (not a JSON dump's 17).
     EXPECT_TRUE(std::regex_search(allowed, std::regex(R"(mm3 around \[-?[0-9.]{1,8}, -?[0-9.]{1,8}, -?[0-9.]{1,8}\])")))
         << allowed;

@@ -1971,10 +1971,27 @@ void Job::checkPieces(const std::vector<SolidBlock>& blocks)
     }
     msg << "; " << free << " float free inside the domain, the largest of them "
         << formatNumber(double(firstFree->voxels) * voxelVolume) << " mm3 around " << centre(*firstFree);
-    msg << ". Struts or walls thinner than two voxels (" << formatNumber(2 * mDomain.voxel)
-        << " mm) break apart on the grid: use `voxel: " << formatNumber(mDomain.voxel / 2)
-        << "` or less, or raise the density, radius or thickness; a convolution lattice at low density "
-           "loses its struts to its joints when sigma is large: lower sigma";
+    // A field whose struts vanish between their joints at its level (`thinnest_strut_mm` 0: the
+    // iso-value above their peak) loses them whatever the voxel: a finer one is no fix there.
+    std::vector<std::string> vanishing;
+    if (mReport.contains("fields"))
+        for (const auto& [name, entry] : mReport["fields"].items())
+            if (entry.is_object() && entry.contains("thinnest_strut_mm") && entry["thinnest_strut_mm"].is_number() &&
+                entry["thinnest_strut_mm"].get<double>() <= 0.0)
+                vanishing.push_back("`" + name + "`");
+    if (!vanishing.empty()) {
+        msg << ". Struts of " << vanishing.front();
+        for (std::size_t k = 1; k < vanishing.size(); ++k)
+            msg << (k + 1 == vanishing.size() ? " and " : ", ") << vanishing[k];
+        msg << " vanish between their joints at the level (the iso-value is above their peak: "
+               "`thinnest_strut_mm` 0 in report.json), which no finer voxel brings back: lower sigma, or raise "
+               "the density or radius";
+    } else {
+        msg << ". Struts or walls thinner than two voxels (" << formatNumber(2 * mDomain.voxel)
+            << " mm) break apart on the grid: use `voxel: " << formatNumber(mDomain.voxel / 2)
+            << "` or less, or raise the density, radius or thickness; a convolution lattice at low density "
+               "loses its struts to its joints when sigma is large: lower sigma";
+    }
     if (mRecipe.allows("pieces")) {
         mContext->warn("pieces", msg.str(), {{"count", count.pieces.size()}, {"free", free}});
         return;
