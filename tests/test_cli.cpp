@@ -618,6 +618,14 @@ outputs: {mesh: two.stl}
     EXPECT_NE(out.find("break apart on the grid"), std::string::npos) << out;
     EXPECT_EQ(out.find("no finer voxel brings back"), std::string::npos) << out;
     EXPECT_TRUE(!std::filesystem::exists(dir.path / "out2") || listFolder(dir.path / "out2").empty());
+    // Allowed, the two balls (the smaller 30 % of the larger's volume) are parts apart by design:
+    // the warning says so and offers no finer voxel.
+    const auto allowed = dir.write("two-allowed.yaml", "allow: [pieces]\n" + readFile(two));
+    EXPECT_EQ(
+        runCommand(voxlatBinary() + " -q run " + allowed.string() + " --out " + (dir.path / "out3").string(), &out), 0)
+        << out;
+    EXPECT_NE(out.find("of the largest piece's volume: parts apart by design"), std::string::npos) << out;
+    EXPECT_EQ(out.find("use `voxel:"), std::string::npos) << out;
 }
 
 TEST(Cli, OutputsStayInsideTheOutputFolderAndReplaceOnlyFiles)

@@ -1979,7 +1979,14 @@ void Job::checkPieces(const std::vector<SolidBlock>& blocks)
             if (entry.is_object() && entry.contains("thinnest_strut_mm") && entry["thinnest_strut_mm"].is_number() &&
                 entry["thinnest_strut_mm"].get<double>() <= 0.0)
                 vanishing.push_back("`" + name + "`");
-    if (!vanishing.empty()) {
+    // Allowed pieces of a size with the largest (the next largest at least a tenth of it) are parts
+    // apart by design (a plate of lattices): struts lost to the grid leave small ones.
+    const bool partsApart = mRecipe.allows("pieces") && double(second.voxels) >= 0.1 * double(main.voxels);
+    if (partsApart && vanishing.empty()) {
+        msg << ". The largest free piece holds " << formatNumber(100.0 * double(second.voxels) / double(main.voxels))
+            << " % of the largest piece's volume: parts apart by design, as `allow: [pieces]` says (struts lost "
+               "to the grid leave small pieces)";
+    } else if (!vanishing.empty()) {
         msg << ". Struts of " << vanishing.front();
         for (std::size_t k = 1; k < vanishing.size(); ++k)
             msg << (k + 1 == vanishing.size() ? " and " : ", ") << vanishing[k];
