@@ -1971,28 +1971,26 @@ void Job::checkPieces(const std::vector<SolidBlock>& blocks)
     }
     msg << "; " << free << " float free inside the domain, the largest of them "
         << formatNumber(double(firstFree->voxels) * voxelVolume) << " mm3 around " << centre(*firstFree);
-    // A field whose struts vanish between their joints at its level (`thinnest_strut_mm` 0: the
-    // iso-value above their peak) loses them whatever the voxel: a finer one is no fix there.
+    // A field whose struts vanish between their joints at its level (thinnest 0: the iso-value
+    // above their peak) loses them whatever the voxel: a finer one is no fix there.
     std::vector<std::string> vanishing;
-    if (mReport.contains("fields"))
-        for (const auto& [name, entry] : mReport["fields"].items())
-            if (entry.is_object() && entry.contains("thinnest_strut_mm") && entry["thinnest_strut_mm"].is_number() &&
-                entry["thinnest_strut_mm"].get<double>() <= 0.0)
-                vanishing.push_back("`" + name + "`");
+    for (const LevelNode& node : mBuilder.levelNodes())
+        if (node.thinnest && node.thinnestKind != "wall" && node.thinnest(node.solid->level()) <= 0.0)
+            vanishing.push_back("`" + node.name + "`");
     // Allowed pieces of a size with the largest (the next largest at least a tenth of it) are parts
     // apart by design (a plate of lattices): struts lost to the grid leave small ones.
     const bool partsApart = mRecipe.allows("pieces") && double(second.voxels) >= 0.1 * double(main.voxels);
-    if (partsApart && vanishing.empty()) {
-        msg << ". The largest free piece holds " << formatNumber(100.0 * double(second.voxels) / double(main.voxels))
-            << " % of the largest piece's volume: parts apart by design, as `allow: [pieces]` says (struts lost "
-               "to the grid leave small pieces)";
-    } else if (!vanishing.empty()) {
+    if (!vanishing.empty()) {
         msg << ". Struts of " << vanishing.front();
         for (std::size_t k = 1; k < vanishing.size(); ++k)
             msg << (k + 1 == vanishing.size() ? " and " : ", ") << vanishing[k];
         msg << " vanish between their joints at the level (the iso-value is above their peak: "
                "`thinnest_strut_mm` 0 in report.json), which no finer voxel brings back: lower sigma, or raise "
                "the density or radius";
+    } else if (partsApart) {
+        msg << ". The largest free piece holds " << formatNumber(100.0 * double(second.voxels) / double(main.voxels))
+            << " % of the largest piece's volume: parts apart by design, as `allow: [pieces]` says (struts lost "
+               "to the grid leave small pieces)";
     } else {
         msg << ". Struts or walls thinner than two voxels (" << formatNumber(2 * mDomain.voxel)
             << " mm) break apart on the grid: use `voxel: " << formatNumber(mDomain.voxel / 2)
