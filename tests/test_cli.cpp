@@ -1,5 +1,6 @@
 // The `voxlat` command end to end: outputs, report, errors with no partial files, sampling.
 #include "TestUtil.h"
+#include "engine/core/SparseEvaluator.h"
 #include "mesher/writers/AtomicFile.h"
 #include "tools/HugePages.h"
 
@@ -626,6 +627,64 @@ outputs: {mesh: two.stl}
         << out;
     EXPECT_NE(out.find("of the largest piece's volume: parts apart by design"), std::string::npos) << out;
     EXPECT_EQ(out.find("use `voxel:"), std::string::npos) << out;
+}
+
+TEST(Cli, ADensitySolveIsRefusedOnWhatItHoldsOnceItsCoverageSamplesAreCounted)
+{
+    // A Gaussian frame trimmed within a cylinder solves its density on sub-voxel coverage: beside
+    // its evaluated leaves (kBytesPerLeaf each, checked during the cull) it holds the band's
+    // coverage samples, counted only once the leaves are evaluated and checked then. Charged up
+    // front at a whole leaf's samples (16 KB a leaf), such a frame was refused at 2.4-4.3 times the
+    // memory it takes. VOXLAT_MEMORY_MB caps the memory the job may take in place of the free memory.
+    TempDir dir;
+    const auto recipe = dir.write("r.yaml", R"(voxel: 0.1
+domain: {box: [[0, 0, 0], [15, 15, 15]]}
+fields:
+  lattice: {struts: {cell: bcc, size: 5, within: {cylinder: {center: [7.5, 7.5, 7.5], radius: 7.5, height: 15}}}, kernel: {gaussian: {sigma: 0.5}}, density: 0.2}
+result: lattice
+outputs: {vdb: lattice.vdb}
+)");
+    const std::string run = voxlatBinary() + " -q run " + recipe.string() + " --no-preview --out ";
+    std::string out;
+    ASSERT_EQ(runCommand(run + (dir.path / "free").string(), &out), 0) << out;
+    const auto report = nlohmann::json::parse(readFile(dir.path / "free" / "report.json"));
+    const auto& solve = report["fields"]["lattice"];
+    ASSERT_EQ(solve["density_measure"], "sub-voxel coverage");
+    const double mb = 1024.0 * 1024.0;
+    const double leavesMb = solve["evaluated_leaves"].get<double>() * double(voxlat::kBytesPerLeaf) / mb;
+    const double estimate = solve["memory_estimate_mb"].get<double>();
+    const double samplesMb = estimate - leavesMb;
+    // The samples: at least one per leaf (each evaluated leaf meets the band), at most all 512 of it.
+    ASSERT_GT(samplesMb, solve["evaluated_leaves"].get<double>() * 8.0 / mb);
+    ASSERT_LT(samplesMb, solve["evaluated_leaves"].get<double>() * 512.0 * 8.0 / mb);
+    EXPECT_GT(report["result"]["memory_estimate_mb"].get<double>(), 0.0);
+    EXPECT_LE(report["result"]["memory_estimate_mb"].get<double>(), estimate) << "the solve holds the most here";
+    const auto capped = [&](double capMb, const std::string& folder) {
+        std::ostringstream command;
+        command << "VOXLAT_MEMORY_MB=" << capMb << " " << run << (dir.path / folder).string();
+        return runCommand(command.str(), &out);
+    };
+    // 70 % of the cap between the leaves' share and the whole: the cull passes, the samples are
+    // refused once counted (exit 3, nothing written).
+    EXPECT_EQ(capped((leavesMb + 0.5 * samplesMb) / 0.7, "between"), 3) << out;
+    EXPECT_NE(out.find("this job's density solve needs about"), std::string::npos) << out;
+    EXPECT_NE(out.find("MB of coverage samples"), std::string::npos) << out;
+    EXPECT_NE(out.find("MB this machine can give: raise `voxel:`"), std::string::npos) << out;
+    EXPECT_TRUE(!std::filesystem::exists(dir.path / "between") || listFolder(dir.path / "between").empty());
+    // Below the leaves' share: refused in the cull, before the leaves are evaluated.
+    EXPECT_EQ(capped(0.5 * leavesMb / 0.7, "below"), 3) << out;
+    EXPECT_NE(out.find("surface leaves, more than the"), std::string::npos) << out;
+    // Just above the estimate: the job runs, where 16 KB a leaf would have refused it.
+    const double enough = 1.02 * estimate / 0.7;
+    ASSERT_GT(solve["evaluated_leaves"].get<double>() * 16384.0 / mb, 0.7 * enough);
+    EXPECT_EQ(capped(enough, "enough"), 0) << out;
+    EXPECT_EQ(readFile(dir.path / "enough" / "lattice.vdb"), readFile(dir.path / "free" / "lattice.vdb"));
+    // A cap that is not a number of MB is bad input (exit 2), named.
+    ::setenv("VOXLAT_MEMORY_MB", "lots", 1);
+    EXPECT_EQ(runCommand(run + (dir.path / "bad").string(), &out), 2) << out;
+    ::unsetenv("VOXLAT_MEMORY_MB");
+    EXPECT_NE(out.find("VOXLAT_MEMORY_MB=lots is not a number of MB"), std::string::npos) << out;
+    EXPECT_FALSE(std::filesystem::exists(dir.path / "bad"));
 }
 
 TEST(Cli, OutputsStayInsideTheOutputFolderAndReplaceOnlyFiles)

@@ -170,13 +170,16 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
     // a job whose surface cannot fit in memory is refused as soon as it is known (a 200 mm box at
     // 0.01 mm ran out of memory after four minutes), not after the whole cull.
     const std::uint64_t bytesPerLeaf = options.bytesPerLeaf ? options.bytesPerLeaf : kBytesPerLeaf;
+    const std::uint64_t budget = std::uint64_t(0.7 * double(availableMemoryBytes()));
+    const std::uint64_t beside = options.bytesBeside;
     const std::uint64_t maxLeaves =
-        options.maxLeaves ? options.maxLeaves : std::uint64_t(0.7 * double(availableMemoryBytes()) / bytesPerLeaf);
+        options.maxLeaves ? options.maxLeaves : (budget > beside ? budget - beside : 0) / bytesPerLeaf;
     auto tooMany = [&](std::uint64_t leaves, bool partial) {
         std::ostringstream msg;
-        msg << "this job needs " << (partial ? "more than " : "about ") << (leaves * bytesPerLeaf >> 20) << " MB for "
-            << (partial ? "more than " : "") << leaves << " surface leaves, more than the "
-            << (maxLeaves * bytesPerLeaf >> 20)
+        msg << "this job needs " << (partial ? "more than " : "about ") << ((leaves * bytesPerLeaf + beside) >> 20)
+            << " MB for " << (partial ? "more than " : "") << leaves << " surface leaves"
+            << (beside ? " and the mesh written beside them" : "") << ", more than the "
+            << ((maxLeaves * bytesPerLeaf + beside) >> 20)
             << " MB this machine can give: raise `voxel:` (memory grows as 1/voxel^2) or shrink the domain";
         return JobError(msg.str());
     };
@@ -365,7 +368,7 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
             for (const Coord& lo : results[b].insideLeafTiles) s.domainVoxelsBelowZero += tileVoxels(lo, kLeafDim);
         }
         for (const std::uint32_t below : belowPerLeaf) s.domainVoxelsBelowZero += below;
-        s.estimatedBytes = s.leaves * bytesPerLeaf;
+        s.estimatedBytes = s.leaves * bytesPerLeaf + beside;
         *stats = s;
     }
     return grid;

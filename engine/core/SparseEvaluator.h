@@ -80,6 +80,9 @@ struct SparseOptions {
     /// beside it (a coverage solve keeps each band voxel's value and samples). The estimate the
     /// refusal (and SparseStats::estimatedBytes) uses; 0: kBytesPerLeaf.
     std::uint64_t bytesPerLeaf = 0;
+    /// What the caller holds beside the leaves whatever their number (a streamed mesh's chunks in
+    /// flight, kStreamedMeshBytes): added to the estimate, and taken off the memory the leaves may use.
+    std::uint64_t bytesBeside = 0;
     /// When set, evaluated leaves are not kept: each is handed to this function (from any thread,
     /// once, in no fixed order) with its origin and its 512 values as the grid would hold them,
     /// and the grid returned holds the tiles only. For measures that need the values once (the
@@ -103,11 +106,12 @@ struct SparseOptions {
 };
 
 struct SparseStats {
-    std::uint64_t leaves = 0;          ///< evaluated 8^3 leaves (kept in the grid or visited)
-    std::uint64_t stackedLeaves = 0;   ///< leaves made in stacks (stackLeaves > 1), the dropped ones too
-    std::uint64_t estimatedBytes = 0;  ///< leaves times the options' bytes per leaf: the memory estimate
-    std::uint64_t insideTiles = 0;     ///< inside tiles (any level)
-    std::uint64_t culledBoxes = 0;     ///< boxes skipped as outside
+    std::uint64_t leaves = 0;         ///< evaluated 8^3 leaves (kept in the grid or visited)
+    std::uint64_t stackedLeaves = 0;  ///< leaves made in stacks (stackLeaves > 1), the dropped ones too
+    /// Leaves times the options' bytes per leaf, plus their bytes beside: the memory estimate.
+    std::uint64_t estimatedBytes = 0;
+    std::uint64_t insideTiles = 0;  ///< inside tiles (any level)
+    std::uint64_t culledBoxes = 0;  ///< boxes skipped as outside
     /// Voxels of the domain (index box [0, dims)) whose value is below 0, in leaves and inside
     /// tiles: countBelow(grid, domain.indexBox(), 0) counted as the leaves are made, while
     /// their values are in cache, instead of in a second pass over the grid.

@@ -8,7 +8,9 @@ namespace voxlat {
 
 /// Peak resident set size of this process in bytes (VmHWM).
 std::uint64_t peakMemoryBytes();
-/// Memory the machine can still give this process in bytes (MemAvailable).
+/// Memory the machine can still give this process in bytes (MemAvailable), or the cap
+/// `VOXLAT_MEMORY_MB` (a positive number of MB) sets in its place: every refusal on an estimate
+/// (70 % of it, or half for a frame's struts and a 3MF) then reads the cap.
 std::uint64_t availableMemoryBytes();
 /// Gives the memory freed into malloc's heaps back to the system (glibc's malloc_trim; nothing
 /// elsewhere). The command line keeps freed memory in the heaps for the next stage's arrays

@@ -117,7 +117,7 @@ void leafBand(const Leaf& leaf, openvdb::FloatGrid::ConstAccessor& acc, float lo
 template <class Make>
 auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
                  const openvdb::CoordBBox& around, Make make, const std::function<void()>& interrupt,
-                 std::uint64_t* leavesBelow = nullptr)
+                 std::uint64_t* leavesBelow = nullptr, const std::function<void(std::size_t)>& beforeHolding = {})
 {
     using Sample = decltype(make(0.0f, std::array<double, 3>{}));
     std::vector<const Leaf*> leaves;
@@ -153,6 +153,7 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
     });
     if (leavesBelow) *leavesBelow = below.load();
     for (std::size_t n = 0; n < leaves.size(); ++n) offset[n + 1] += offset[n];
+    if (beforeHolding) beforeHolding(offset.back());
     DefaultInitVector<Sample> all(offset.back());  // not zeroed: each sample is written below
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
         auto acc = grid.getConstAccessor();
@@ -183,11 +184,12 @@ double sampleCoverage(const CoverageSample& s, double level)
 
 /// Band voxels with the length of their per-voxel change, for the linear coverage estimate.
 CoverageSamples coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
-                                const std::function<void()>& interrupt, std::uint64_t* leavesBelow)
+                                const std::function<void()>& interrupt, std::uint64_t* leavesBelow,
+                                const std::function<void(std::size_t samples)>& beforeHolding)
 {
     return bandSamples(
         grid, region, lo, hi, region, [](float v, const std::array<double, 3>& d) { return coverageSample(v, d); },
-        interrupt, leavesBelow);
+        interrupt, leavesBelow, beforeHolding);
 }
 
 float widestCoverageStep(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,

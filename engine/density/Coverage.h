@@ -49,9 +49,12 @@ inline double axisChange(float value, float up, bool hasUp, float down, bool has
 /// change, for the linear coverage estimate. @a interrupt, when set, is called every 64
 /// leaves and throws to stop (a plate's band holds 10^7 voxels). @a leavesBelow, when set,
 /// receives the count of the region's leaf voxels below @a lo, taken in the pass that counts the
-/// band (countTilesBelow() adds the tiles: countBelow() without a walk of its own).
+/// band (countTilesBelow() adds the tiles: countBelow() without a walk of its own). @a beforeHolding,
+/// when set, is called with the number of samples once they are counted and before they are
+/// allocated: a memory check that throws to refuse them.
 CoverageSamples coverageSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
-                                const std::function<void()>& interrupt = {}, std::uint64_t* leavesBelow = nullptr);
+                                const std::function<void()>& interrupt = {}, std::uint64_t* leavesBelow = nullptr,
+                                const std::function<void(std::size_t samples)>& beforeHolding = {});
 
 /// The largest step coverageSamples() would give a band voxel (below 1e29), without keeping the
 /// samples: what decides how far the band is widened, read from a grid whose band's samples

@@ -31,8 +31,10 @@ struct DensitySolution {
     /// must move to change the share, for a correction aimed at another measure (the mesh's).
     double slope = 0.0;
     std::uint64_t evaluatedLeaves = 0;
-    /// The memory the solve's refusal estimated for its evaluated leaves (with what it keeps of
-    /// each beside the grid), in bytes: `memory_estimate_mb` in report.json.
+    /// The most memory the solve's checks found it holding, in bytes: its evaluated leaves
+    /// (kBytesPerLeaf each) and what it kept beside them once counted (the bracket's values, or
+    /// the band's coverage samples): `memory_estimate_mb` in report.json. The solve throws
+    /// JobError where that passes 70 % of the free memory.
     std::uint64_t estimatedBytes = 0;
 };
 

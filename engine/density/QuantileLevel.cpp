@@ -21,6 +21,7 @@
 #include <functional>
 #include <limits>
 #include <optional>
+#include <sstream>
 #include <unordered_map>
 #include <vector>
 
@@ -398,6 +399,20 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                      double(std::max<std::size_t>(1, samples.size()))
                : 1.0;
 
+    // The memory the solve may hold: its evaluated leaves (kBytesPerLeaf each, the cull's check)
+    // and, once counted, what it keeps beside them (the bracket's values, then the band's coverage
+    // samples). The largest sum held is the estimate report.json gives.
+    const std::uint64_t budget = std::uint64_t(0.7 * double(availableMemoryBytes()));
+    auto holding = [&](std::uint64_t leaves, std::uint64_t besideBytes, const char* what) {
+        const std::uint64_t bytes = leaves * kBytesPerLeaf + besideBytes;
+        sol.estimatedBytes = std::max(sol.estimatedBytes, bytes);
+        if (bytes <= budget) return;
+        std::ostringstream msg;
+        msg << "this job's density solve needs about " << (bytes >> 20) << " MB (" << leaves << " surface leaves and "
+            << (besideBytes >> 20) << " MB of " << what << "), more than the " << (budget >> 20)
+            << " MB this machine can give: raise `voxel:` (memory grows as 1/voxel^2) or shrink the domain";
+        throw JobError(msg.str());
+    };
     // Widen the bracket until the exact quantile falls inside it (usually the first round; the
     // last round brackets every value).
     for (const double margin : {0.01, 0.05, 1.0}) {
@@ -418,10 +433,12 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         // (below). Evaluating the bracket grown by an estimate of that step up front lets the
         // same grid serve both passes; splitting by the bracket ignores the extra values.
         SparseOptions evaluated = options;
-        // A coverage pass keeps, beside the grid, each band voxel's value and its coverage sample
-        // twice (all of the band's, then the bracket's): 14-16 KB a leaf were measured on a
-        // capsule octet, more than twice a grid's (bench/memory_estimates.py).
-        evaluated.bytesPerLeaf = kBytesPerLeaf + std::uint64_t(512) * (sizeof(float) + 2 * sizeof(CoverageSample));
+        // A coverage pass keeps, beside the grid (kBytesPerLeaf a leaf, the cull's refusal), the
+        // bracket's values and then the band's coverage samples: known only once the grid is
+        // evaluated, they are checked then (holding() below) against the same budget. Charged
+        // up front at a whole leaf's samples (16 KB a leaf), a 50 mm wireframe was estimated at
+        // 4094 MB and ran in 1025 MB.
+        evaluated.maxLeaves = budget / kBytesPerLeaf;
         const double coarseStep = stepNear(coarseCells, lo, hi);
         if ((masked || subVoxel) && margin < 1.0)
             evaluated.band =
@@ -433,12 +450,12 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         BandSplit split;
         if (!masked && !subVoxel) {
             split = streamedSplit(indicator, domain, region, options, sol.evaluatedLeaves);
-            sol.estimatedBytes = sol.evaluatedLeaves * kBytesPerLeaf;
+            holding(sol.evaluatedLeaves, split.band.size() * sizeof(float), "values of its bracket");
         } else {
             grid = evaluateSparse(indicator, domain, evaluated);
             sol.evaluatedLeaves = grid->tree().leafCount();
-            sol.estimatedBytes = sol.evaluatedLeaves * evaluated.bytesPerLeaf;
             split = splitByBand(*grid, region, float(options.band.lo), float(options.band.hi), interrupt);
+            holding(sol.evaluatedLeaves, split.band.size() * sizeof(float), "values of its bracket");
         }
         const std::uint64_t below = split.below;
         DefaultInitVector<float>& band = split.band;
@@ -471,7 +488,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             if (!grid) {
                 grid = evaluateSparse(indicator, domain, evaluated);
                 sol.evaluatedLeaves = grid->tree().leafCount();
-                sol.estimatedBytes = sol.evaluatedLeaves * evaluated.bytesPerLeaf;
+                holding(sol.evaluatedLeaves, band.size() * sizeof(float), "values of its bracket");
             }
             // The wide band's samples below, walked from the grid: a voxel's sample does not
             // depend on the band, so they are the evaluated band's samples picked in order,
@@ -505,14 +522,23 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
                     covered ? grid : evaluateSparse(GridLeavesReused(indicator, *grid, domain), domain, wide);
                 if (!covered) sol.evaluatedLeaves = wideGrid->tree().leafCount();
                 std::uint64_t leavesBelow = 0;
-                samples = coverageSamples(*wideGrid, region, wideLo, wideHi, interrupt, &leavesBelow);
+                // Both grids are held while the samples are made when the wide band needed its own.
+                const std::uint64_t leavesHeld =
+                    covered ? sol.evaluatedLeaves : grid->tree().leafCount() + wideGrid->tree().leafCount();
+                samples = coverageSamples(
+                    *wideGrid, region, wideLo, wideHi, interrupt, &leavesBelow,
+                    [&](std::size_t n) { holding(leavesHeld, n * sizeof(CoverageSample), "coverage samples"); });
                 fullyBelow = countTilesBelow(*wideGrid, region, wideLo) + leavesBelow;
                 // The grid the samples came from is the one handed over below.
                 grid = std::move(wideGrid);
                 a = wide.band.lo;
                 b = wide.band.hi;
             } else {
-                samples = coverageSamples(*grid, region, float(options.band.lo), float(options.band.hi), interrupt);
+                samples =
+                    coverageSamples(*grid, region, float(options.band.lo), float(options.band.hi), interrupt, nullptr,
+                                    [&](std::size_t n) {
+                                        holding(sol.evaluatedLeaves, n * sizeof(CoverageSample), "coverage samples");
+                                    });
             }
             // The bisection reads the samples alone: the grid is freed first (a plate's solve
             // peaked with the grid, the band's values and its samples held), and its leaves'

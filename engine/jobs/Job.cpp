@@ -832,6 +832,9 @@ openvdb::FloatGrid::Ptr Job::evaluateResult(SparseStats& stats,
         options.context = mContext;
         options.leafVisitor = std::move(leafVisitor);
         options.stackLeaves = mStackLeaves;
+        if (std::any_of(mRecipe.outputs.begin(), mRecipe.outputs.end(),
+                        [](const OutputSpec& o) { return o.kind == "mesh"; }))
+            options.bytesBeside = kStreamedMeshBytes;
         // The last evaluation to read them: each leaf the solve handed over is freed as it is
         // served, and the grid's new leaves take its memory (not pages fresh to the process).
         for (const GridValueMemo* memo : mSolvedValues) memo->consumeLeaves();

@@ -72,6 +72,13 @@ struct TriangleStream {
     std::function<void(std::size_t chunk, std::size_t slot)> write;
 };
 
+/// The memory a streamed run writing an STL (writeMarchingCubesStl) holds whatever the grid's
+/// size: its slots' chunks in flight (each slot a chunk's triangle corners and their STL bytes)
+/// and the file's direct-write buffers. Measured at 77 MB on the densest surface seen (capsule
+/// struts at 0.1 mm, 180 triangles a leaf; valgrind massif); the evaluation's memory estimate
+/// adds it for a job that writes a mesh (SparseOptions::bytesBeside).
+inline constexpr std::uint64_t kStreamedMeshBytes = std::uint64_t(96) << 20;
+
 /// Counts of a streamed run (the mesh marchingCubes() would return has these sizes).
 struct StreamedMeshCounts {
     std::uint64_t triangles = 0;
