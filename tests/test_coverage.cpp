@@ -81,6 +81,73 @@ TEST(Coverage, ANarrowerBandsSamplesAreTheWiderBandsPickedInOrder)
     }
 }
 
+TEST(Coverage, StraddlingSamplesCoverTheBracketAsTheBandOfItsWidestStepEitherSideDoes)
+{
+    // The density solve bisects within the count's bracket [a, b] over straddlingSamples(): the
+    // voxels whose coverage changes within it, the others counted (full) or left out (empty). At
+    // every level of the bracket they cover what the band of the widest step either side holds
+    // (its samples, and the voxels below it) covers; they are that band's samples whose ramp
+    // meets (a, b), in its order and bits, fewer of them; the same on one thread and on two.
+    const Frame f = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(4.0), {2, 2, 2});
+    std::vector<ConvolutionStrut> struts;
+    for (const auto& e : f.struts) struts.push_back({f.nodes[e[0]], f.nodes[e[1]], 0.4, 1.0, 1.3});
+    const auto raw = std::make_shared<StrutConvolution>(struts);
+    const IsoRadius iso(raw, raw->peak(0), 0.4, 2.0 * raw->cutoffRadius(0));
+    const Domain d = Domain::fromBox(Box3{Vec3d(-0.33, -0.27, -0.41), Vec3d(8.37, 8.21, 8.13)}, 0.1);
+    SparseOptions options;
+    options.band = Interval(0.2, 1.0);
+    options.margin = 2;
+    options.insideValue = -std::numeric_limits<float>::max();
+    options.outsideValue = std::numeric_limits<float>::max();
+    const auto grid = evaluateSparse(iso, d, options);
+    const openvdb::CoordBBox region(openvdb::Coord(-2), d.dims - openvdb::Coord(-1));
+    for (const auto& [a, b] : {std::pair{0.55, 0.6}, std::pair{0.4, 0.41}, std::pair{0.7, 0.75}}) {
+        const float reach = widestCoverageStep(*grid, region, float(a), float(b));
+        ASSERT_GT(reach, 0.0f);
+        ASSERT_LT(reach, 0.2f) << "the band must lie within the evaluated one";
+        const float lo = float(a - double(reach)), hi = float(b + double(reach));
+        std::uint64_t leavesBelow = 0;
+        const CoverageSamples band = coverageSamples(*grid, region, lo, hi, {}, &leavesBelow);
+        const double bandBelow = double(countTilesBelow(*grid, region, lo) + leavesBelow);
+        std::size_t told = 0;
+        StraddlingSamples found;
+        for (int threads : {1, 2}) {
+            tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
+            StraddlingSamples again =
+                straddlingSamples(*grid, region, a, b, reach, {}, [&](std::size_t n) { told = n; });
+            EXPECT_EQ(told, again.samples.size()) << a;
+            if (threads == 1) {
+                found = std::move(again);
+                continue;
+            }
+            ASSERT_EQ(again.samples.size(), found.samples.size()) << a;
+            EXPECT_EQ(
+                std::memcmp(again.samples.data(), found.samples.data(), found.samples.size() * sizeof(CoverageSample)),
+                0)
+                << a;
+            EXPECT_EQ(again.fullyBelow, found.fullyBelow) << a;
+        }
+        // The band's samples whose ramp meets (a, b), in order.
+        CoverageSamples meeting;
+        for (const CoverageSample& c : band) {
+            const double half = 0.5 * double(c.step);
+            if (half > 0.0 ? c.value + half > a && c.value - half < b : c.value >= a && c.value < b)
+                meeting.push_back(c);
+        }
+        ASSERT_EQ(found.samples.size(), meeting.size()) << a;
+        EXPECT_EQ(std::memcmp(found.samples.data(), meeting.data(), meeting.size() * sizeof(CoverageSample)), 0) << a;
+        EXPECT_GT(found.samples.size(), 100u) << a;
+        EXPECT_LT(found.samples.size(), band.size()) << a << ": no fewer held";
+        std::printf("bracket [%g, %g]: %zu samples held of the band's %zu\n", a, b, found.samples.size(), band.size());
+        const double below = double(countTilesBelow(*grid, region, lo) + found.fullyBelow);
+        for (double t : {0.0, 0.1, 0.5, 0.77, 1.0}) {
+            const double level = a + t * (b - a);
+            const double whole = bandBelow + coveredVoxels(band, level);
+            EXPECT_NEAR(below + coveredVoxels(found.samples, level), whole, 1e-9 * whole) << a << " at " << level;
+        }
+    }
+}
+
 namespace {
 
 /// Sets the voxels of [-8, 40) x [-8, 32) x [-8, 24) in @a grid, but those @a hole(x, y, z) leaves

@@ -192,6 +192,63 @@ CoverageSamples coverageSamples(const openvdb::FloatGrid& grid, const openvdb::C
         interrupt, leavesBelow, beforeHolding);
 }
 
+StraddlingSamples straddlingSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, double a,
+                                    double b, float reach, const std::function<void()>& interrupt,
+                                    const std::function<void(std::size_t samples)>& beforeHolding)
+{
+    std::vector<const Leaf*> leaves;
+    grid.tree().getNodes(leaves);
+    // Fixed chunks of leaves, each its own samples in leaf order: joined in chunk order.
+    constexpr std::size_t kChunk = 64;
+    const std::size_t chunks = (leaves.size() + kChunk - 1) / kChunk;
+    std::vector<CoverageSamples> parts(chunks);
+    std::vector<std::uint64_t> belowPerChunk(chunks, 0);
+    const float lo = float(a - double(reach)), hi = float(b + double(reach));
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1), [&](const auto& range) {
+        auto acc = grid.getConstAccessor();
+        for (std::size_t c = range.begin(); c != range.end(); ++c) {
+            if (interrupt) interrupt();
+            CoverageSamples& part = parts[c];
+            std::uint64_t below = 0;
+            const std::size_t end = std::min(leaves.size(), (c + 1) * kChunk);
+            for (std::size_t n = c * kChunk; n != end; ++n) {
+                const Leaf& leaf = *leaves[n];
+                const float* data = leaf.buffer().data();
+                const openvdb::Coord origin = leaf.origin();
+                // The voxels below the band, counted by value (as countBelow would).
+                if (region.isInside(openvdb::CoordBBox(origin, origin + openvdb::Coord(7)))) {
+                    for (int i = 0; i < 512; ++i) below += data[i] < lo;
+                } else {
+                    for (int i = 0; i < 512; ++i) below += data[i] < lo && region.isInside(leaf.offsetToGlobalCoord(i));
+                }
+                leafBand(leaf, acc, lo, hi, region, region, [&](float v, const std::array<double, 3>& d) {
+                    const CoverageSample sample = coverageSample(v, d);
+                    const double value = sample.value, half = 0.5 * double(sample.step);
+                    // As bisectCoverage's steps sort them over [a, b] (stepBlock).
+                    if (half > 0.0 ? value + half <= a : value < a)
+                        ++below;
+                    else if (half > 0.0 ? value - half < b : value < b)
+                        part.push_back(sample);
+                });
+            }
+            belowPerChunk[c] = below;
+        }
+    });
+    StraddlingSamples found;
+    std::size_t total = 0;
+    for (std::size_t c = 0; c < chunks; ++c) {
+        total += parts[c].size();
+        found.fullyBelow += belowPerChunk[c];
+    }
+    if (beforeHolding) beforeHolding(total);
+    found.samples.reserve(total);
+    for (CoverageSamples& part : parts) {
+        found.samples.insert(found.samples.end(), part.begin(), part.end());
+        CoverageSamples().swap(part);
+    }
+    return found;
+}
+
 float widestCoverageStep(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
                          const std::function<void()>& interrupt)
 {

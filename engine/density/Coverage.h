@@ -62,6 +62,27 @@ CoverageSamples coverageSamples(const openvdb::FloatGrid& grid, const openvdb::C
 float widestCoverageStep(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
                          const std::function<void()>& interrupt = {});
 
+/// What straddlingSamples() found.
+struct StraddlingSamples {
+    /// The region's leaf voxels whose coverage changes over [a, b] (their ramp, value -+ half
+    /// their step, meets (a, b); a step of 0 valued in [a, b)), in leaf order then offset order.
+    CoverageSamples samples;
+    /// The region's leaf voxels covered whole over [a, b]: ramp ending at or below a, or valued
+    /// below a - reach (taken by value, as coverageSamples()' callers take the voxels below its band).
+    std::uint64_t fullyBelow = 0;
+};
+
+/// The samples a bisection over [@a a, @a b] reads, and the voxels it counts as covered: the
+/// region's leaf voxels valued within [a - @a reach, b + @a reach] have their step taken (as
+/// coverageSamples()); those whose coverage is the same at every level of [a, b] are counted
+/// (full) or left out (empty) instead of held. For a bracket of a percent of the density,
+/// 37-42 % of what coverageSamples(level -+ reach) holds (W2g's 50 mm trimmed frame: 7.1 of 19.3
+/// million; its cylinder frame 7.9 of 18.6). One pass over the leaves in fixed chunks, joined in leaf order: the same
+/// samples for any thread count. @a beforeHolding is called with their count before they are joined.
+StraddlingSamples straddlingSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, double a,
+                                    double b, float reach, const std::function<void()>& interrupt = {},
+                                    const std::function<void(std::size_t samples)>& beforeHolding = {});
+
 /// Voxels below @a level counted with sub-voxel coverage: a voxel whose value is within half a
 /// step of the level is partly inside, linearly in the distance (a plane cutting the voxel).
 /// Summed in parallel over fixed blocks: the same double for any thread count.
