@@ -32,6 +32,39 @@ using namespace voxlat;
 using namespace voxlat::test;
 using namespace voxlat::coverage;
 
+namespace {
+
+/// The domain of isoRadiusGrid(): two 4 mm BCC cells a side at 0.1 mm, off the cells' lattice.
+Domain isoRadiusDomain()
+{
+    return Domain::fromBox(Box3{Vec3d(-0.33, -0.27, -0.41), Vec3d(8.37, 8.21, 8.13)}, 0.1);
+}
+
+/// The domain's voxels and two more on every side (the grid's margin).
+openvdb::CoordBBox isoRadiusRegion()
+{
+    return openvdb::CoordBBox(openvdb::Coord(-2), isoRadiusDomain().dims - openvdb::Coord(-1));
+}
+
+/// A strut lattice's iso-radius (graded end weights) evaluated over @a band with two voxels'
+/// margin: leaves, inside and outside tiles (+-FLT_MAX), as a density solve evaluates it.
+openvdb::FloatGrid::Ptr isoRadiusGrid(const Interval& band)
+{
+    const Frame f = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(4.0), {2, 2, 2});
+    std::vector<ConvolutionStrut> struts;
+    for (const auto& e : f.struts) struts.push_back({f.nodes[e[0]], f.nodes[e[1]], 0.4, 1.0, 1.3});
+    const auto raw = std::make_shared<StrutConvolution>(struts);
+    const IsoRadius iso(raw, raw->peak(0), 0.4, 2.0 * raw->cutoffRadius(0));
+    SparseOptions options;
+    options.band = band;
+    options.margin = 2;
+    options.insideValue = -std::numeric_limits<float>::max();
+    options.outsideValue = std::numeric_limits<float>::max();
+    return evaluateSparse(iso, isoRadiusDomain(), options);
+}
+
+}  // namespace
+
 TEST(Coverage, ANarrowerBandsSamplesAreTheWiderBandsPickedInOrder)
 {
     // A strut lattice's iso-radius evaluated over a band (leaves, inside and outside tiles), the
@@ -39,19 +72,8 @@ TEST(Coverage, ANarrowerBandsSamplesAreTheWiderBandsPickedInOrder)
     // that band's picks from the evaluated band's samples, in the same order and the same bits
     // (a voxel's step does not depend on the band), and the voxels below its low end are those
     // below the evaluated band's plus the evaluated samples between the two low ends.
-    const Frame f = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(4.0), {2, 2, 2});
-    std::vector<ConvolutionStrut> struts;
-    for (const auto& e : f.struts) struts.push_back({f.nodes[e[0]], f.nodes[e[1]], 0.4, 1.0, 1.3});
-    const auto raw = std::make_shared<StrutConvolution>(struts);
-    const IsoRadius iso(raw, raw->peak(0), 0.4, 2.0 * raw->cutoffRadius(0));
-    const Domain d = Domain::fromBox(Box3{Vec3d(-0.33, -0.27, -0.41), Vec3d(8.37, 8.21, 8.13)}, 0.1);
-    SparseOptions options;
-    options.band = Interval(0.3, 0.9);
-    options.margin = 2;
-    options.insideValue = -std::numeric_limits<float>::max();
-    options.outsideValue = std::numeric_limits<float>::max();
-    const auto grid = evaluateSparse(iso, d, options);
-    const openvdb::CoordBBox region(openvdb::Coord(-2), d.dims - openvdb::Coord(-1));
+    const openvdb::CoordBBox region = isoRadiusRegion();
+    const auto grid = isoRadiusGrid(Interval(0.3, 0.9));
     const float lo = 0.3f, hi = 0.9f;
     const CoverageSamples wide = coverageSamples(*grid, region, lo, hi);
     ASSERT_GT(wide.size(), 10000u);
@@ -88,19 +110,8 @@ TEST(Coverage, StraddlingSamplesCoverTheBracketAsTheBandOfItsWidestStepEitherSid
     // every level of the bracket they cover what the band of the widest step either side holds
     // (its samples, and the voxels below it) covers; they are that band's samples whose ramp
     // meets (a, b), in its order and bits, fewer of them; the same on one thread and on two.
-    const Frame f = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(4.0), {2, 2, 2});
-    std::vector<ConvolutionStrut> struts;
-    for (const auto& e : f.struts) struts.push_back({f.nodes[e[0]], f.nodes[e[1]], 0.4, 1.0, 1.3});
-    const auto raw = std::make_shared<StrutConvolution>(struts);
-    const IsoRadius iso(raw, raw->peak(0), 0.4, 2.0 * raw->cutoffRadius(0));
-    const Domain d = Domain::fromBox(Box3{Vec3d(-0.33, -0.27, -0.41), Vec3d(8.37, 8.21, 8.13)}, 0.1);
-    SparseOptions options;
-    options.band = Interval(0.2, 1.0);
-    options.margin = 2;
-    options.insideValue = -std::numeric_limits<float>::max();
-    options.outsideValue = std::numeric_limits<float>::max();
-    const auto grid = evaluateSparse(iso, d, options);
-    const openvdb::CoordBBox region(openvdb::Coord(-2), d.dims - openvdb::Coord(-1));
+    const openvdb::CoordBBox region = isoRadiusRegion();
+    const auto grid = isoRadiusGrid(Interval(0.2, 1.0));
     for (const auto& [a, b] : {std::pair{0.55, 0.6}, std::pair{0.4, 0.41}, std::pair{0.7, 0.75}}) {
         const float reach = widestCoverageStep(*grid, region, float(a), float(b));
         ASSERT_GT(reach, 0.0f);
