@@ -1,5 +1,6 @@
 // The `voxlat` command end to end: outputs, report, errors with no partial files, sampling.
 #include "TestUtil.h"
+#include "engine/core/Format.h"
 #include "engine/core/SparseEvaluator.h"
 #include "mesher/writers/AtomicFile.h"
 #include "tools/HugePages.h"
@@ -679,6 +680,20 @@ outputs: {vdb: lattice.vdb}
     ASSERT_GT(solve["evaluated_leaves"].get<double>() * 16384.0 / mb, 0.7 * enough);
     EXPECT_EQ(capped(enough, "enough"), 0) << out;
     EXPECT_EQ(readFile(dir.path / "enough" / "lattice.vdb"), readFile(dir.path / "free" / "lattice.vdb"));
+    // The summary gives the solve's density and the isolated strut's radius in six digits, as
+    // report.json's numbers rounded (the coverage sums' last bits are noise to a reader).
+    ASSERT_EQ(runCommand(voxlatBinary() + " run " + recipe.string() + " --no-preview --no-html --out " +
+                             (dir.path / "told").string(),
+                         &out),
+              0)
+        << out;
+    const auto told = nlohmann::json::parse(readFile(dir.path / "told" / "report.json"));
+    EXPECT_NE(
+        out.find("(isolated strut radius " +
+                 voxlat::formatNumber(told["fields"]["lattice"]["level_radius_mm"].get<double>()) + " mm), density " +
+                 voxlat::formatNumber(told["fields"]["lattice"]["achieved_density"].get<double>()) + " (target 0.2)"),
+        std::string::npos)
+        << out;
     // A cap that is not a number of MB is bad input (exit 2), named.
     ::setenv("VOXLAT_MEMORY_MB", "lots", 1);
     EXPECT_EQ(runCommand(run + (dir.path / "bad").string(), &out), 2) << out;

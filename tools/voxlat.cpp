@@ -92,14 +92,15 @@ void printSummary(voxlat::Job& job)
             if (f.contains("level"))
                 parts.push_back("level " + text(f["level"]) +
                                 (f.contains("level_radius_mm")
-                                     ? " (isolated strut radius " + text(f["level_radius_mm"]) + " mm)"
+                                     ? " (isolated strut radius " + shown(f["level_radius_mm"]) + " mm)"
                                  : f.contains("level_above_strut_peak") ? " (above an isolated strut's peak)"
                                                                         : ""));
             if (f.contains("achieved_density"))
-                parts.push_back("density " + text(f["achieved_density"]) +
-                                (f.contains("target_density") ? " (target " + text(f["target_density"]) + ")" : ""));
+                // Six digits, as the warnings: the coverage sums' last bits are noise to a reader.
+                parts.push_back("density " + shown(f["achieved_density"]) +
+                                (f.contains("target_density") ? " (target " + shown(f["target_density"]) + ")" : ""));
             else if (f.contains("target_density"))
-                parts.push_back("density " + text(f["target_density"]));
+                parts.push_back("density " + shown(f["target_density"]));
             std::cout << "field   " << name << " (" << f["type"].get<std::string>() << ")";
             for (std::size_t i = 0; i < parts.size(); ++i) std::cout << (i ? ", " : ": ") << parts[i];
             std::cout << "\n";
