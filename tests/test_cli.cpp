@@ -698,7 +698,7 @@ outputs: {vdb: lattice.vdb}
     ::setenv("VOXLAT_MEMORY_MB", "lots", 1);
     EXPECT_EQ(runCommand(run + (dir.path / "bad").string(), &out), 2) << out;
     ::unsetenv("VOXLAT_MEMORY_MB");
-    EXPECT_NE(out.find("VOXLAT_MEMORY_MB=lots is not a number of MB"), std::string::npos) << out;
+    EXPECT_NE(out.find("VOXLAT_MEMORY_MB=lots is not a positive number of MB"), std::string::npos) << out;
     EXPECT_FALSE(std::filesystem::exists(dir.path / "bad"));
 }
 

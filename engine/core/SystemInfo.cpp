@@ -36,8 +36,9 @@ std::uint64_t availableMemoryBytes()
         char* end = nullptr;
         const double mb = std::strtod(cap, &end);
         if (end != cap && *end == '\0' && mb > 0.0 && mb < 1e12) return std::uint64_t(mb * 1024.0 * 1024.0);
-        throw InputError(std::string("VOXLAT_MEMORY_MB=") + cap +
-                         " is not a number of MB: set it to the memory the job may take (e.g. 4000), or unset it");
+        throw InputError(
+            std::string("VOXLAT_MEMORY_MB=") + cap +
+            " is not a positive number of MB: set it to the memory the job may take (e.g. 4000), or unset it");
     }
     const std::uint64_t available = readKiloBytes("/proc/meminfo", "MemAvailable:");
     return available ? available : (std::uint64_t(4) << 30);
