@@ -642,10 +642,8 @@ int main(int argc, char** argv)
             if (!sliceFormat.empty()) set("format", sliceFormat);
             if (!slicePreview.empty()) set("preview", slicePreview);
             voxlat::Recipe recipe = voxlat::loadRecipe(sliceArgs.recipe, sets);
-            const auto spec = std::find_if(recipe.outputs.begin(), recipe.outputs.end(),
-                                           [](const voxlat::OutputSpec& o) { return o.kind == "slices"; });
-            if (spec == recipe.outputs.end())
-                throw voxlat::InputError(sliceArgs.recipe + ": no printer given; use --printer NAME -o FILE");
+            const voxlat::OutputSpec* spec = recipe.firstOutput("slices");
+            if (!spec) throw voxlat::InputError(sliceArgs.recipe + ": no printer given; use --printer NAME -o FILE");
             const voxlat::SliceSettings settings = *spec->slices;
             const std::string file = sliceFile.empty() ? spec->file : sliceFile;
             voxlat::Job& job = newJob(std::move(recipe), &context);

@@ -174,6 +174,18 @@ CoverageSample coverageSample(float v, const std::array<double, 3>& d)
     return CoverageSample{v, float(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))};
 }
 
+/// Where a sample's coverage stands over a bracket [a, b]: full at every level of it (its ramp,
+/// value -+ half its step, ends at or below a; a step of 0 valued below a), empty at every level
+/// (the ramp starts at or above b; a step of 0 valued at or above b), or changing within it.
+enum class OverBracket { Full, Empty, Changing };
+
+OverBracket overBracket(double value, double half, double a, double b)
+{
+    if (half > 0.0)
+        return value + half <= a ? OverBracket::Full : value - half >= b ? OverBracket::Empty : OverBracket::Changing;
+    return value < a ? OverBracket::Full : value < b ? OverBracket::Changing : OverBracket::Empty;
+}
+
 /// The share of sample @a s below @a level (coveredVoxels()' term).
 double sampleCoverage(const CoverageSample& s, double level)
 {
@@ -223,12 +235,17 @@ StraddlingSamples straddlingSamples(const openvdb::FloatGrid& grid, const openvd
                 }
                 leafBand(leaf, acc, lo, hi, region, region, [&](float v, const std::array<double, 3>& d) {
                     const CoverageSample sample = coverageSample(v, d);
-                    const double value = sample.value, half = 0.5 * double(sample.step);
                     // As bisectCoverage's steps sort them over [a, b] (stepBlock).
-                    if (half > 0.0 ? value + half <= a : value < a)
-                        ++below;
-                    else if (half > 0.0 ? value - half < b : value < b)
-                        part.push_back(sample);
+                    switch (overBracket(sample.value, 0.5 * double(sample.step), a, b)) {
+                        case OverBracket::Full:
+                            ++below;
+                            break;
+                        case OverBracket::Changing:
+                            part.push_back(sample);
+                            break;
+                        case OverBracket::Empty:
+                            break;
+                    }
                 });
             }
             belowPerChunk[c] = below;
@@ -460,25 +477,22 @@ BlockStep stepBlock(const BlockedSamples& from, std::size_t k, double a, double 
     const CoverageSample* s = from.block(k);
     for (std::size_t i = 0; i < from.count[k]; ++i) {
         const double value = s[i].value, half = 0.5 * double(s[i].step);
-        if (half > 0.0) {
-            const double start = value - half, end = value + half;
-            if (end <= a) {
+        switch (overBracket(value, half, a, b)) {
+            case OverBracket::Full:
                 ++f.settled;
-            } else if (start >= b) {
-                continue;
-            } else if (start < a && end > b) {
-                const double inverse = 1.0 / s[i].step;
-                f.constant += 0.5 - value * inverse;
-                f.slope += inverse;
-            } else {
-                keep(f.kept++, i);
-                f.cut += sampleCoverage(s[i], mid);
-            }
-        } else if (value < a) {
-            ++f.settled;
-        } else if (value < b) {
-            keep(f.kept++, i);
-            f.cut += double(value < mid);
+                break;
+            case OverBracket::Empty:
+                break;
+            case OverBracket::Changing:
+                if (half > 0.0 && value - half < a && value + half > b) {
+                    const double inverse = 1.0 / s[i].step;
+                    f.constant += 0.5 - value * inverse;
+                    f.slope += inverse;
+                } else {
+                    keep(f.kept++, i);
+                    f.cut += sampleCoverage(s[i], mid);
+                }
+                break;
         }
     }
     return f;

@@ -56,10 +56,11 @@ struct DensitySolution {
 /// domain is measured on the job's voxels, the box as the mask.
 ///
 /// @a levelWithin, when set, is called (at most once) with an interval the level will lie in,
-/// as soon as the solve knows one narrower than the band it evaluated: before its coverage pass,
-/// with the band that pass bisects in. A caller keeping the indicator's values for a grid at
-/// the level (GridValueMemo::dropOutside()) drops those that grid cannot read before that pass
-/// allocates its samples.
+/// as soon as the solve knows one narrower than the band it evaluated: the count's bracket once
+/// its straddling samples show it holds the target, else, before the wide band's coverage pass,
+/// the band that pass bisects in. A caller keeping the indicator's values for a grid at the
+/// level (GridValueMemo::dropOutside()) drops those that grid cannot read before the bisection
+/// (and before the wide band's samples are allocated).
 ///
 /// @a stackLeaves: the indicator's leaves are evaluated in stacks along z (SparseOptions::stackLeaves),
 /// as a grid of the same stacks will ask for them (a GridValueMemo then serves its batches).

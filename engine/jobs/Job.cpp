@@ -832,9 +832,7 @@ openvdb::FloatGrid::Ptr Job::evaluateResult(SparseStats& stats,
         options.context = mContext;
         options.leafVisitor = std::move(leafVisitor);
         options.stackLeaves = mStackLeaves;
-        if (std::any_of(mRecipe.outputs.begin(), mRecipe.outputs.end(),
-                        [](const OutputSpec& o) { return o.kind == "mesh"; }))
-            options.bytesBeside = kStreamedMeshBytes;
+        if (mRecipe.firstOutput("mesh")) options.bytesBeside = kStreamedMeshBytes;
         // The last evaluation to read them: each leaf the solve handed over is freed as it is
         // served, and the grid's new leaves take its memory (not pages fresh to the process).
         for (const GridValueMemo* memo : mSolvedValues) memo->consumeLeaves();
@@ -2223,8 +2221,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
     // All or none: every file is written under a temporary name and the renames wait for the
     // report; an output that fails (or a cancel) half-way leaves the folder as it was.
     OutputTransaction transaction(writeInterrupter());
-    const auto firstMesh = std::find_if(mRecipe.outputs.begin(), mRecipe.outputs.end(),
-                                        [](const OutputSpec& o) { return o.kind == "mesh"; });
+    const OutputSpec* firstMesh = mRecipe.firstOutput("mesh");
     // A raw marching-cubes STL whose mesh nothing else uses (no other output with the same mesh
     // settings, not the preview's) is written as it is made: the mesh is never held.
     auto onlyUse = [&](std::size_t n) {
@@ -2233,7 +2230,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
         std::string extension = paths[n].extension().string();
         for (char& c : extension) c = char(std::tolower(static_cast<unsigned char>(c)));
         if (extension != ".stl") return false;
-        if (preview && n == std::size_t(firstMesh - mRecipe.outputs.begin())) return false;
+        if (preview && &mRecipe.outputs[n] == firstMesh) return false;
         for (std::size_t m = 0; m < mRecipe.outputs.size(); ++m)
             if (m != n && mRecipe.outputs[m].kind == "mesh" && meshOptions(mRecipe.outputs[m]) == options) return false;
         return std::none_of(mMeshes.begin(), mMeshes.end(), [&](const auto& v) { return v->options == options; });
@@ -2241,8 +2238,8 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
     // The first mesh is the one whose share of its region `density:` is held to: its level is aimed
     // at it before any output is made, so every output has the same level (a streamed STL
     // is measured as it is written: aimLevelsAtMesh()).
-    if (firstMesh != mRecipe.outputs.end()) {
-        const std::size_t first = std::size_t(firstMesh - mRecipe.outputs.begin());
+    if (firstMesh) {
+        const auto first = std::size_t(firstMesh - mRecipe.outputs.data());
         aimLevelsAtMesh(meshOptions(*firstMesh), onlyUse(first) ? &paths[first] : nullptr);
     }
     // Whether an output after the n-th may read the recipe's grid: a VDB, or a mesh made otherwise
@@ -2295,7 +2292,7 @@ void Job::writeOutputs(const std::filesystem::path& outDir, bool preview, bool h
     }
     if (materialCard) writeMaterialCard(*materialCard);
     // A picture of what was meshed, next to the first mesh, so the part can be checked by eye.
-    if (preview && firstMesh != mRecipe.outputs.end()) {
+    if (preview && firstMesh) {
         const std::filesystem::path picture = outDir / (firstMesh->file + ".preview.png");
         checkReplaceable(picture, where);
         writePreview(picture, meshOptions(*firstMesh));

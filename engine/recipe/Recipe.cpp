@@ -194,9 +194,7 @@ Recipe build(YAML::Node root, const std::string& name, const std::filesystem::pa
                     MeshSettings settings = parseMeshSettings(one);  // parsed and checked once, here
                     OutputSpec out{kind, settings.file, one.yaml(), one.where()};
                     out.mesh = std::move(settings);
-                    if (std::none_of(r.outputs.begin(), r.outputs.end(),
-                                     [](const OutputSpec& o) { return o.kind == "mesh"; }))
-                        out.sideFiles.push_back(out.file + ".preview.png");
+                    if (!r.firstOutput("mesh")) out.sideFiles.push_back(out.file + ".preview.png");
                     r.outputs.push_back(std::move(out));
                     continue;
                 }

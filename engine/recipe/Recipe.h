@@ -55,6 +55,13 @@ struct Recipe {
     /// Checks the recipe turns from errors into warnings (`allow: [pieces]`).
     std::vector<std::string> allow;
     bool allows(const std::string& check) const { return std::find(allow.begin(), allow.end(), check) != allow.end(); }
+    /// The first output of @a kind ("mesh", "vdb", "slices", ...) in file order; null when none.
+    const OutputSpec* firstOutput(const std::string& kind) const
+    {
+        const auto it =
+            std::find_if(outputs.begin(), outputs.end(), [&](const OutputSpec& o) { return o.kind == kind; });
+        return it == outputs.end() ? nullptr : &*it;
+    }
     /// Effective parameter values (`params:` defaults after --set), by name.
     std::map<std::string, YAML::Node> params;
     /// The nodes of `fields:` by name (yaml-cpp looks map keys up linearly, converting each).
