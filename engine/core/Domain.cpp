@@ -42,6 +42,19 @@ Domain Domain::subDomain(const Box3& sub) const
         d.box.min[a] = box.min[a] + first[a] * voxel;
         d.box.max[a] = d.box.min[a] + d.dims[a] * voxel;
     }
+    d.latticeRoot = latticeMin();
+    d.latticeOffset = latticeOffset + openvdb::Coord(first[0], first[1], first[2]);
+    return d;
+}
+
+Domain Domain::grown(int voxels) const
+{
+    Domain d = *this;
+    d.box.min -= Vec3d(voxels * voxel);
+    d.box.max += Vec3d(voxels * voxel);
+    d.dims += openvdb::Coord(2 * voxels);
+    d.latticeRoot = latticeMin();
+    d.latticeOffset = latticeOffset - openvdb::Coord(voxels);
     return d;
 }
 

@@ -8,6 +8,7 @@
 #include <openvdb/math/Transform.h>
 
 #include <cstdint>
+#include <optional>
 
 namespace voxlat {
 
@@ -27,6 +28,10 @@ struct Domain {
     Box3 box;
     double voxel = 0.1;
     openvdb::Coord dims{0, 0, 0};
+    /// The lattice a sub-domain shares with the domain it was cut from (subDomain): that domain's
+    /// box.min, and the index there of this domain's voxel 0. Unset: this domain's own.
+    std::optional<Vec3d> latticeRoot{};
+    openvdb::Coord latticeOffset{0, 0, 0};
 
     /// Snaps the box to a whole number of voxels per axis (round to nearest, at least one); the
     /// returned box is the one actually sampled.
@@ -39,6 +44,12 @@ struct Domain {
     /// The voxels of this domain whose centres lie in @a box, as a domain of its own (same voxel
     /// lattice). Throws std::invalid_argument if none do.
     Domain subDomain(const Box3& box) const;
+    /// This domain with @a voxels more on every side, on the same voxel lattice.
+    Domain grown(int voxels) const;
+
+    /// The box.min of the domain whose voxel lattice this is (GridBatch::latticeMin): voxel c of
+    /// this domain is that lattice's voxel c + latticeOffset.
+    Vec3d latticeMin() const { return latticeRoot ? *latticeRoot : box.min; }
 
     /// Number of voxels inside the domain.
     std::uint64_t voxelCount() const { return std::uint64_t(dims.x()) * dims.y() * dims.z(); }

@@ -279,9 +279,14 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                 GridBatch stackBatch;
                 if (stack > 1) {
                     // The whole stack, whichever of its leaves are needed.
-                    stackBatch.origin = domain.worldOf(stackOf(leafOrigins[run.first]));
+                    const Coord first = stackOf(leafOrigins[run.first]);
+                    stackBatch.origin = domain.worldOf(first);
                     stackBatch.spacing = Vec3d(domain.voxel);
                     stackBatch.nz = stackDim;
+                    stackBatch.onLattice = true;
+                    stackBatch.latticeMin = domain.latticeMin();
+                    const Coord index = first + domain.latticeOffset;
+                    stackBatch.latticeIndex = {index.x(), index.y(), index.z()};
                     // The stack's leaves not needed here: their values are not read.
                     std::uint32_t needed = 0;
                     for (std::size_t n = run.first; n != run.first + run.count; ++n)
@@ -294,6 +299,10 @@ openvdb::FloatGrid::Ptr evaluateSparse(const FieldNode& field, const Domain& dom
                     GridBatch batch;
                     batch.origin = domain.worldOf(lo);
                     batch.spacing = Vec3d(domain.voxel);
+                    batch.onLattice = true;
+                    batch.latticeMin = domain.latticeMin();
+                    const Coord index = lo + domain.latticeOffset;
+                    batch.latticeIndex = {index.x(), index.y(), index.z()};
                     if (stack > 1) {
                         // Rows of the stack (x-major, z fastest): the leaf's eight points of each.
                         const int k0 = lo.z() - stackOf(lo).z();

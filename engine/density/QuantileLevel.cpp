@@ -189,6 +189,13 @@ std::vector<float> coarseSamples(const FieldNode& g, const Domain& domain, int s
     lattice.stride = {stride, stride, stride};
     lattice.depth = depth;
     for (int a = 0; a < 3; ++a) lattice.count[a] = (domain.dims[a] + stride - 1) / stride;
+    // Every voxel (stride 1): the samples are the domain's grid batches, on its lattice (a
+    // GridValueMemo keeps them for the grid, which must get the values its own batches would).
+    if (stride == 1) {
+        lattice.onLattice = true;
+        lattice.latticeMin = domain.latticeMin();
+        lattice.latticeOffset = {domain.latticeOffset.x(), domain.latticeOffset.y(), domain.latticeOffset.z()};
+    }
     std::vector<std::vector<float>> perBlock(lattice.blockCount());
     // Every sample, those past the domain too (values of the field all the same), at its place:
     // the sparse cull's proofs (KnownSamples), in the indices of the domain @a margin voxels
@@ -366,10 +373,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
     const auto wanted = std::uint64_t(std::llround(target * double(sol.domainVoxels)));
 
     // The coarse pass (a bracket and step estimates only) samples the region as a domain of its own.
-    Domain coarseDomain = domain;
-    coarseDomain.box.min -= Vec3d(marginVoxels * domain.voxel);
-    coarseDomain.box.max += Vec3d(marginVoxels * domain.voxel);
-    coarseDomain.dims += openvdb::Coord(2 * marginVoxels);
+    const Domain coarseDomain = domain.grown(marginVoxels);
     const int stride = std::max(1, int(std::ceil(std::cbrt(double(coarseDomain.voxelCount()) / 2.0e6))));
     // The coarse pass and the passes over the band after its evaluation (a split, the coverage
     // samples, the bisection) take seconds on a plate: each stops on cancel.

@@ -672,6 +672,14 @@ void Job::solveLevels()
         // solid's own level (an isolated strut's radius) under its own name.
         reportLevel(node, node.solid->level(), entry);
         reportThinnest(node, node.solid->level(), entry);
+        if (const double bound = node.gridNodesBound ? node.gridNodesBound(mDomain.voxel) : 0.0; bound > 0.0)
+            entry["grid_values"] = {
+                {"from", "exact nodes every second voxel, eight-point Lagrange stencils between them"},
+                {"node_spacing_mm", 2.0 * mDomain.voxel},
+                {"bound_per_peak", bound},
+                {"bound_of",
+                 "the struts' summed peaks within reach of a point: the most a value may miss the "
+                 "exact field's by"}};
         fields[node.name] = entry;
     }
     for (const GradedNode& node : mBuilder.gradedNodes()) {

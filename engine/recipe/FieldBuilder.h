@@ -58,6 +58,10 @@ struct LevelNode {
     /// evaluated strut by strut (nothing tiled), whether its level is solved or given, so that a
     /// solved job and one given the solved level evaluate the same batches.
     int stackLeaves = 1;
+    /// The bound CoarseNodes has on the job's lattice of a voxel (StrutConvolution::coarseBound),
+    /// where a strut lattice's grids take their values from nodes every second voxel at that voxel,
+    /// else 0: the report states it.
+    std::function<double(double voxel)> gridNodesBound{};
     /// The solid repeats with this period deeper than densityReach inside densityBox (a box frame
     /// of identical cells): the density is measured on one period of the interior, weighted
     /// (periodicPieces()), instead of the whole box.

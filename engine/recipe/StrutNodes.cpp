@@ -1041,6 +1041,13 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     // against 6.1-6.6 s, the same bytes. A trimmed frame stays at eight: its TiledInterior decides
     // leaf by leaf within a stack which leaves read the tiling, and sixteen cost it 15 %.
     if (!(periodic || partlyPeriodic)) node.stackLeaves = tiledInterior ? 8 : 16;
+    // Grids evaluated strut by strut (not tabled) take their values from nodes every second
+    // voxel where the struts are smooth at the voxel (CoarseNodes.h); the report says so.
+    if (!(periodic || partlyPeriodic))
+        node.gridNodesBound = [raw](double voxel) {
+            const double bound = raw->coarseBound(voxel);
+            return bound <= raw->gridTolerance() ? bound : 0.0;
+        };
     const double t = spec.has("level") ? spec["level"].positiveNumber() : 1.0;
     {
         std::ostringstream d;

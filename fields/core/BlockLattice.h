@@ -27,6 +27,11 @@ struct BlockLattice {
     /// Points of a block along z (8 x 8 x depth): 8, or a multiple of 8 for long rows along z (a
     /// convolution lattice's rows of 8 points are mostly their set-up).
     int depth = 8;
+    /// The points are a voxel lattice's centres (stride 1, offset 1/2, step the voxel): batches
+    /// say so (GridBatch::onLattice), their first point voxel latticeOffset + its index.
+    bool onLattice = false;
+    Vec3d latticeMin{0.0};
+    std::array<int, 3> latticeOffset{0, 0, 0};
 
     /// Blocks along each axis (the last one cut at the lattice's far face).
     std::array<int, 3> blocks() const
@@ -56,6 +61,11 @@ struct BlockLattice {
         g.nx = std::min(8, count[0] - first[0]);
         g.ny = std::min(8, count[1] - first[1]);
         g.nz = std::min(depth, count[2] - first[2]);
+        if (onLattice) {
+            g.onLattice = true;
+            g.latticeMin = latticeMin;
+            for (int a = 0; a < 3; ++a) g.latticeIndex[std::size_t(a)] = latticeOffset[std::size_t(a)] + first[a];
+        }
         return g;
     }
 };

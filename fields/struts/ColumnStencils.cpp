@@ -82,7 +82,7 @@ double rayEighthDerivativeBound(double b)
     return kRayBound[std::size_t(std::min(63.0, t))];
 }
 
-double segmentEighthDerivativeBound(const GaussianSegment& segment)
+double segmentEighthDerivativeBound(const GaussianSegment& segment, int axis)
 {
     const double sigma = segment.sigma, length = segment.length;
     const double w1 = segment.w0 + segment.slope * length;
@@ -90,7 +90,7 @@ double segmentEighthDerivativeBound(const GaussianSegment& segment)
     if (!(wMin > 0.0) || !(length > 0.0)) return kEighthDerivativeBound;
     const double farEnd = std::exp(-length * length / (16.0 * sigma * sigma));
     const double ramp = std::min(1.0, 2.0 * std::sqrt(std::numbers::pi) * sigma / length);
-    const double c8 = rayEighthDerivativeBound(segment.u.x()) * (1.0 + (wMin * farEnd + (wMax - wMin) * ramp) / wMax);
+    const double c8 = rayEighthDerivativeBound(segment.u[axis]) * (1.0 + (wMin * farEnd + (wMax - wMin) * ramp) / wMax);
     return std::min(c8, kEighthDerivativeBound);
 }
 

@@ -53,8 +53,9 @@ inline constexpr double kEighthDerivativeBound = 204.2;
 /// sigma^-8, for |u.x| = @a b (the table's largest over b's 1/64 step, 1 % up).
 double rayEighthDerivativeBound(double b);
 
-/// C8_j above for one strut along x (weights > 0): at most kEighthDerivativeBound.
-double segmentEighthDerivativeBound(const GaussianSegment& segment);
+/// C8_j above for one strut along @a axis (0, 1, 2: x, y, z; weights > 0): at most
+/// kEighthDerivativeBound.
+double segmentEighthDerivativeBound(const GaussianSegment& segment, int axis = 0);
 
 /// Which columns of a plane of @a nx columns are exact and how the others are interpolated.
 struct ColumnStencils {

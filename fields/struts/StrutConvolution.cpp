@@ -15,7 +15,7 @@ namespace voxlat {
 
 StrutConvolution::StrutConvolution(const std::vector<ConvolutionStrut>& struts, double eps,
                                    const std::function<void()>& interrupt)
-    : mEps(eps)
+    : mEps(eps), mCoarse(std::make_unique<CoarseNodes>())
 {
     if (!(eps > 0.0 && eps < 1.0)) throw std::invalid_argument("the convolution cut-off eps must be in (0, 1)");
     std::vector<Vec3d> a, b;
@@ -30,6 +30,10 @@ StrutConvolution::StrutConvolution(const std::vector<ConvolutionStrut>& struts, 
         if (!(s.w0 > 0.0 && s.w1 > 0.0)) throw std::invalid_argument("strut weights must be greater than zero");
         mSegments.emplace_back(s.a, s.b, s.sigma, s.w0, s.w1);
         mEighthBound = std::max(mEighthBound, segmentEighthDerivativeBound(mSegments.back()));
+        for (int axis = 0; axis < 3; ++axis)
+            mEighthBoundAxes[std::size_t(axis)] =
+                std::max(mEighthBoundAxes[std::size_t(axis)], segmentEighthDerivativeBound(mSegments.back(), axis));
+        mSigmaMin = std::min(mSigmaMin, s.sigma);
         mEnd.push_back(s.b);
         const double rc = gaussianCutoffRadius(s.sigma, eps);
         mCutoffSqr.push_back(rc * rc);
@@ -229,7 +233,47 @@ private:
 
 }  // namespace
 
+double StrutConvolution::coarseBound(double voxel) const
+{
+    return mSegments.empty() ? 0.0 : coarseNodesBound(2.0 * voxel, mSigmaMin, mEighthBoundAxes);
+}
+
+bool StrutConvolution::coarseServes(const GridBatch& batch) const
+{
+    if (!(mGridTolerance > 0.0) || !batch.onLattice || batch.exact || mSegments.empty()) return false;
+    const double voxel = batch.spacing.x();
+    if (!(voxel > 0.0) || batch.spacing.y() != voxel || batch.spacing.z() != voxel) return false;
+    // The origin is the lattice's voxel centre up to rounding (a stack's leaves at origin + 8 m
+    // voxels), else a node moved the batch: a billionth of a voxel, far below any move a node
+    // makes on purpose and far above the roundings of coordinates.
+    const Vec3d centre = batch.latticeMin + voxel * Vec3d(batch.latticeIndex[0] + 0.5, batch.latticeIndex[1] + 0.5,
+                                                          batch.latticeIndex[2] + 0.5);
+    for (int axis = 0; axis < 3; ++axis)
+        if (!(std::abs(centre[axis] - batch.origin[axis]) <= 1e-9 * voxel)) return false;
+    return coarseBound(voxel) <= mGridTolerance;
+}
+
+std::size_t StrutConvolution::coarseBytes() const
+{
+    return mCoarse ? mCoarse->bytes() : 0;
+}
+
+void StrutConvolution::releaseCoarseNodes() const
+{
+    if (mCoarse) mCoarse->clear();
+}
+
 void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out) const
+{
+    if (coarseServes(batch)) {
+        mCoarse->interpolate(
+            batch, out, [this](const GridBatch& nodes, std::span<double> values) { exactGridValues(nodes, values); });
+        return;
+    }
+    exactGridValues(batch, out);
+}
+
+void StrutConvolution::exactGridValues(const GridBatch& batch, std::span<double> out) const
 {
     thread_local std::vector<std::uint32_t> cand;
     mIndex.gather(batch.bounds(), cand);

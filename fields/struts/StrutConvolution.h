@@ -4,11 +4,15 @@
 #pragma once
 
 #include "fields/core/PlaneBands.h"
+#include "fields/struts/CoarseNodes.h"
 #include "fields/struts/GaussianSegment.h"
 #include "fields/struts/StrutIndex.h"
 
+#include <array>
 #include <cstdint>
 #include <functional>
+#include <limits>
+#include <memory>
 #include <vector>
 
 namespace voxlat {
@@ -73,6 +77,23 @@ public:
     double planeTolerance() const override { return mPlaneTolerance; }
     /// The default: 2.5e-5, the table and Taylor paths' own (see planeValues).
     static constexpr double kPlaneTolerance = 2.5e-5;
+    /// gridValues on a known lattice (GridBatch::onLattice) from exact nodes every second voxel
+    /// (CoarseNodes.h) where their bound, per unit of the peaks near, is at most @a tolerance
+    /// (0: every point exact). Set before the field is shared across threads.
+    void setGridTolerance(double tolerance) { mGridTolerance = tolerance; }
+    /// The default: 1e-3 (CoarseNodes.h: at sigma = 0.5 mm and 0.1 mm voxels, a cube's diagonals
+    /// bound 1.3e-4, any direction 4.9e-4; nodes once sigma spans about four voxels or more).
+    static constexpr double kGridTolerance = 1e-3;
+    double gridTolerance() const { return mGridTolerance; }
+    /// The bound CoarseNodes would have on a lattice of @a voxel (coarseNodesBound with the
+    /// least sigma and the largest C8 per axis of the field's struts).
+    double coarseBound(double voxel) const;
+    /// Whether gridValues takes @a batch from the coarse nodes.
+    bool coarseServes(const GridBatch& batch) const;
+    /// Bytes the coarse nodes hold; releaseCoarseNodes() drops them (not while another thread
+    /// evaluates).
+    std::size_t coarseBytes() const;
+    void releaseCoarseNodes() const;
 
 private:
     /// F at one point from the candidate struts @a cand (ascending).
@@ -82,6 +103,8 @@ private:
     /// columnTiles[i] holds and their one-point halo along y (PlaneBands' layout).
     void evaluate(const GridBatch& batch, std::span<double> out, const std::vector<std::uint32_t>& cand,
                   const std::uint64_t* columnTiles, int tile) const;
+    /// gridValues with every point exact.
+    void exactGridValues(const GridBatch& batch, std::span<double> out) const;
 
     std::vector<GaussianSegment> mSegments;
     std::vector<Vec3d> mEnd;
@@ -92,6 +115,11 @@ private:
     double mPlaneTolerance = kPlaneTolerance;
     /// The largest of the struts' C8 along x (segmentEighthDerivativeBound): planeValues' stencils.
     double mEighthBound = 0.0;
+    /// The largest C8 along x, y and z (CoarseNodes), and the least sigma.
+    std::array<double, 3> mEighthBoundAxes{0.0, 0.0, 0.0};
+    double mSigmaMin = std::numeric_limits<double>::infinity();
+    double mGridTolerance = kGridTolerance;
+    std::unique_ptr<CoarseNodes> mCoarse;
     StrutIndex mIndex;
 };
 

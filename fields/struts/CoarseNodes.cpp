@@ -1,0 +1,235 @@
+/// @file CoarseNodes.cpp
+/// @brief Exact nodes every second voxel, kept per lattice in blocks; eight-point midpoint
+/// stencils between them.
+#include "fields/struts/CoarseNodes.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <mutex>
+#include <unordered_map>
+#include <vector>
+
+namespace voxlat {
+
+namespace {
+
+constexpr int kBlockXY = 8, kBlockZ = 32;  // nodes per block along x and y, along z
+constexpr std::size_t kBlockSize = std::size_t(kBlockXY) * kBlockXY * kBlockZ;
+constexpr int kHalfStencil = 4;  // a midpoint between nodes m and m + 1 reads m - 3 .. m + 4
+/// The eight-point Lagrange weights at the midpoint of nodes 3 and 4 of 0..7.
+constexpr std::array<double, 8> kMidpoint{-5.0 / 2048,   49.0 / 2048,   -245.0 / 2048, 1225.0 / 2048,
+                                          1225.0 / 2048, -245.0 / 2048, 49.0 / 2048,   -5.0 / 2048};
+/// |prod_l (3.5 - l)| over l = 0..7, and 8!.
+constexpr double kMidpointProduct = 43.06640625, kFactorial8 = 40320.0;
+constexpr double kLebesgue = 3048.0 / 2048.0;
+
+int floorDiv(int a, int b)
+{
+    return a >= 0 ? a / b : -((b - 1 - a) / b);
+}
+
+std::uint64_t bitsOf(double v)
+{
+    std::uint64_t b;
+    std::memcpy(&b, &v, sizeof b);
+    return b;
+}
+
+}  // namespace
+
+namespace coarse_nodes {
+
+struct BlockKey {
+    std::array<std::uint64_t, 4> lattice;  ///< the bits of latticeMin and the voxel
+    int bx, by, bz;
+    bool operator==(const BlockKey&) const = default;
+};
+
+struct BlockKeyHash {
+    std::size_t operator()(const BlockKey& k) const
+    {
+        std::uint64_t h = 1469598103934665603ull;
+        auto mix = [&h](std::uint64_t v) { h ^= v + 0x9e3779b97f4a7c15ull + (h << 6) + (h >> 2); };
+        for (const std::uint64_t v : k.lattice) mix(v);
+        mix(std::uint64_t(std::uint32_t(k.bx)));
+        mix(std::uint64_t(std::uint32_t(k.by)));
+        mix(std::uint64_t(std::uint32_t(k.bz)));
+        return std::size_t(h);
+    }
+};
+
+struct Block {
+    std::once_flag made;
+    std::vector<float> values;  ///< x-major, z fastest: (x * 8 + y) * 32 + z (floats: half the memory)
+};
+
+}  // namespace coarse_nodes
+
+using coarse_nodes::Block;
+using coarse_nodes::BlockKey;
+using coarse_nodes::BlockKeyHash;
+
+double coarseNodesBound(double nodeSpacing, double sigma, const std::array<double, 3>& c8)
+{
+    const double k = kMidpointProduct / kFactorial8 * std::pow(nodeSpacing / sigma, 8);
+    return k * (c8[0] + kLebesgue * c8[1] + kLebesgue * kLebesgue * c8[2]);
+}
+
+struct CoarseNodes::Impl {
+    static constexpr int kShards = 64;
+    struct Shard {
+        std::mutex mutex;
+        std::unordered_map<BlockKey, std::shared_ptr<Block>, BlockKeyHash> blocks;
+    };
+    std::array<Shard, kShards> shards;
+    std::atomic<std::size_t> count{0};
+
+    std::shared_ptr<Block> blockOf(const BlockKey& key)
+    {
+        Shard& shard = shards[BlockKeyHash{}(key) % kShards];
+        std::lock_guard<std::mutex> lock(shard.mutex);
+        std::shared_ptr<Block>& b = shard.blocks[key];
+        if (!b) {
+            b = std::make_shared<Block>();
+            count.fetch_add(1, std::memory_order_relaxed);
+        }
+        return b;
+    }
+};
+
+CoarseNodes::CoarseNodes() : mImpl(std::make_unique<Impl>()) {}
+CoarseNodes::~CoarseNodes() = default;
+
+std::size_t CoarseNodes::bytes() const
+{
+    return mImpl->count.load() * kBlockSize * sizeof(float);
+}
+
+void CoarseNodes::clear()
+{
+    for (auto& shard : mImpl->shards) {
+        std::lock_guard<std::mutex> lock(shard.mutex);
+        shard.blocks.clear();
+    }
+    mImpl->count = 0;
+}
+
+void CoarseNodes::interpolate(const GridBatch& batch, std::span<double> out, const Exact& exact) const
+{
+    const double voxel = batch.spacing.x();
+    const std::array<int, 3> n{batch.nx, batch.ny, batch.nz};
+    BlockKey key{
+        {bitsOf(batch.latticeMin.x()), bitsOf(batch.latticeMin.y()), bitsOf(batch.latticeMin.z()), bitsOf(voxel)},
+        0,
+        0,
+        0};
+    // The nodes the batch reads, per axis: node m is voxel 2m.
+    std::array<int, 3> lo{}, count{};
+    for (int a = 0; a < 3; ++a) {
+        const int first = batch.latticeIndex[std::size_t(a)], last = first + n[std::size_t(a)] - 1;
+        lo[std::size_t(a)] = floorDiv(first, 2) - (kHalfStencil - 1);
+        count[std::size_t(a)] = floorDiv(last, 2) + kHalfStencil - lo[std::size_t(a)] + 1;
+    }
+    thread_local std::vector<double> nodes, alongZ, alongY;
+    const std::size_t cx = std::size_t(count[0]), cy = std::size_t(count[1]), cz = std::size_t(count[2]);
+    nodes.resize(cx * cy * cz);
+    // The nodes from their blocks.
+    const int bx0 = floorDiv(lo[0], kBlockXY), bx1 = floorDiv(lo[0] + count[0] - 1, kBlockXY);
+    const int by0 = floorDiv(lo[1], kBlockXY), by1 = floorDiv(lo[1] + count[1] - 1, kBlockXY);
+    const int bz0 = floorDiv(lo[2], kBlockZ), bz1 = floorDiv(lo[2] + count[2] - 1, kBlockZ);
+    for (int bx = bx0; bx <= bx1; ++bx)
+        for (int by = by0; by <= by1; ++by)
+            for (int bz = bz0; bz <= bz1; ++bz) {
+                key.bx = bx;
+                key.by = by;
+                key.bz = bz;
+                const std::shared_ptr<Block> block = mImpl->blockOf(key);
+                std::call_once(block->made, [&] {
+                    GridBatch nodesBatch;
+                    nodesBatch.spacing = Vec3d(2.0 * voxel);
+                    nodesBatch.nx = kBlockXY;
+                    nodesBatch.ny = kBlockXY;
+                    nodesBatch.nz = kBlockZ;
+                    const Vec3d first(2.0 * kBlockXY * bx + 0.5, 2.0 * kBlockXY * by + 0.5, 2.0 * kBlockZ * bz + 0.5);
+                    nodesBatch.origin = batch.latticeMin + voxel * first;
+                    thread_local std::vector<double> exactValues;
+                    exactValues.resize(kBlockSize);
+                    exact(nodesBatch, exactValues);
+                    block->values.assign(exactValues.begin(), exactValues.end());
+                });
+                // The part of the block within the nodes read.
+                const int x0 = std::max(lo[0], bx * kBlockXY), x1 = std::min(lo[0] + count[0], (bx + 1) * kBlockXY);
+                const int y0 = std::max(lo[1], by * kBlockXY), y1 = std::min(lo[1] + count[1], (by + 1) * kBlockXY);
+                const int z0 = std::max(lo[2], bz * kBlockZ), z1 = std::min(lo[2] + count[2], (bz + 1) * kBlockZ);
+                for (int x = x0; x < x1; ++x)
+                    for (int y = y0; y < y1; ++y) {
+                        const float* from =
+                            block->values.data() +
+                            (std::size_t(x - bx * kBlockXY) * kBlockXY + std::size_t(y - by * kBlockXY)) * kBlockZ +
+                            std::size_t(z0 - bz * kBlockZ);
+                        double* to = nodes.data() + (std::size_t(x - lo[0]) * cy + std::size_t(y - lo[1])) * cz +
+                                     std::size_t(z0 - lo[2]);
+                        std::copy(from, from + (z1 - z0), to);
+                    }
+            }
+    const int fx = batch.latticeIndex[0], fy = batch.latticeIndex[1], fz = batch.latticeIndex[2];
+    const std::size_t nz = std::size_t(n[2]), ny = std::size_t(n[1]), nx = std::size_t(n[0]);
+    // z: every node column (x, y) to the batch's voxels along z. Voxel k (lattice index fz + k)
+    // takes node m = floor((fz + k) / 2) where even, else the eight nodes m - 3 .. m + 4.
+    alongZ.resize(cx * cy * nz);
+    for (std::size_t c = 0; c < cx * cy; ++c) {
+        const double* line = nodes.data() + c * cz;
+        double* to = alongZ.data() + c * nz;
+        for (std::size_t k = 0; k < nz; ++k) {
+            const int voxelIndex = fz + int(k);
+            const int m = floorDiv(voxelIndex, 2) - lo[2];
+            if ((voxelIndex & 1) == 0) {
+                to[k] = line[m];
+                continue;
+            }
+            const double* p = line + (m - (kHalfStencil - 1));
+            double v = 0.0;
+            for (int l = 0; l < 8; ++l) v += kMidpoint[std::size_t(l)] * p[l];
+            to[k] = v;
+        }
+    }
+    // y: every node x to the batch's voxels along y (rows of nz, stride nz between node rows).
+    alongY.resize(cx * ny * nz);
+    for (std::size_t x = 0; x < cx; ++x)
+        for (std::size_t j = 0; j < ny; ++j) {
+            const int voxelIndex = fy + int(j);
+            const int m = floorDiv(voxelIndex, 2) - lo[1];
+            double* to = alongY.data() + (x * ny + j) * nz;
+            const double* plane = alongZ.data() + x * cy * nz;
+            if ((voxelIndex & 1) == 0) {
+                std::memcpy(to, plane + std::size_t(m) * nz, nz * sizeof(double));
+                continue;
+            }
+            std::fill(to, to + nz, 0.0);
+            for (int l = 0; l < 8; ++l) {
+                const double w = kMidpoint[std::size_t(l)];
+                const double* from = plane + std::size_t(m - (kHalfStencil - 1) + l) * nz;
+                for (std::size_t k = 0; k < nz; ++k) to[k] += w * from[k];
+            }
+        }
+    // x: the batch's voxels.
+    for (std::size_t i = 0; i < nx; ++i) {
+        const int voxelIndex = fx + int(i);
+        const int m = floorDiv(voxelIndex, 2) - lo[0];
+        double* to = out.data() + i * ny * nz;
+        if ((voxelIndex & 1) == 0) {
+            std::memcpy(to, alongY.data() + std::size_t(m) * ny * nz, ny * nz * sizeof(double));
+            continue;
+        }
+        std::fill(to, to + ny * nz, 0.0);
+        for (int l = 0; l < 8; ++l) {
+            const double w = kMidpoint[std::size_t(l)];
+            const double* from = alongY.data() + std::size_t(m - (kHalfStencil - 1) + l) * ny * nz;
+            for (std::size_t q = 0; q < ny * nz; ++q) to[q] += w * from[q];
+        }
+    }
+}
+
+}  // namespace voxlat
