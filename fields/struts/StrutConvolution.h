@@ -28,7 +28,9 @@ struct ConvolutionStrut {
 /// solid F >= t. Strut j contributes only where the distance to its segment is below
 /// r_c,j = sigma_j sqrt(2 ln(1/eps)); the dropped tail is below eps * w_j sigma_j sqrt(2 pi) per
 /// strut. Every evaluation path applies that same rule and sums in strut index order, so values,
-/// gridValues and bounds agree and results do not depend on threads.
+/// gridValues and bounds agree and results do not depend on threads; grid batches on a known
+/// lattice may instead come from nodes every second voxel (setGridTolerance, CoarseNodes.h),
+/// within their proven bound of those values (bounds are the exact field's).
 class StrutConvolution final : public FieldNode, public PlaneBands {
 public:
     /// @a interrupt, when set, is called every 2^14 struts and before the index is built (a
