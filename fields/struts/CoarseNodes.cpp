@@ -74,7 +74,7 @@ using coarse_nodes::BlockKeyHash;
 double coarseNodesBound(double nodeSpacing, double sigma, const std::array<double, 3>& c8)
 {
     const double k = kMidpointProduct / kFactorial8 * std::pow(nodeSpacing / sigma, 8);
-    return k * (c8[0] + kLebesgue * c8[1] + kLebesgue * kLebesgue * c8[2]);
+    return k * (c8[2] + kLebesgue * c8[1] + kLebesgue * kLebesgue * c8[0]);
 }
 
 struct CoarseNodes::Impl {
@@ -132,7 +132,7 @@ void CoarseNodes::interpolate(const GridBatch& batch, std::span<double> out, con
         lo[std::size_t(a)] = floorDiv(first, 2) - (kHalfStencil - 1);
         count[std::size_t(a)] = floorDiv(last, 2) + kHalfStencil - lo[std::size_t(a)] + 1;
     }
-    thread_local std::vector<double> nodes, alongZ, alongY;
+    thread_local std::vector<double> nodes, alongX, alongXY;
     const std::size_t cx = std::size_t(count[0]), cy = std::size_t(count[1]), cz = std::size_t(count[2]);
     nodes.resize(cx * cy * cz);
     // The nodes from their blocks.
@@ -176,12 +176,36 @@ void CoarseNodes::interpolate(const GridBatch& batch, std::span<double> out, con
             }
     const int fx = batch.latticeIndex[0], fy = batch.latticeIndex[1], fz = batch.latticeIndex[2];
     const std::size_t nz = std::size_t(n[2]), ny = std::size_t(n[1]), nx = std::size_t(n[0]);
-    // z: every node column (x, y) to the batch's voxels along z. Voxel k (lattice index fz + k)
-    // takes node m = floor((fz + k) / 2) where even, else the eight nodes m - 3 .. m + 4.
-    alongZ.resize(cx * cy * nz);
-    for (std::size_t c = 0; c < cx * cy; ++c) {
-        const double* line = nodes.data() + c * cz;
-        double* to = alongZ.data() + c * nz;
+    // Voxel v of an axis (lattice index first + v) takes node m = floor((first + v) / 2) where its
+    // index is even, else the eight nodes m - 3 .. m + 4: @a to gets @a count values of lines
+    // @a stride apart from @a from (line 0 the axis's first node read).
+    auto combine = [](int first, int lo0, int v, const double* from, std::size_t stride, std::size_t count,
+                      double* to) {
+        const int voxelIndex = first + v;
+        const int m = floorDiv(voxelIndex, 2) - lo0;
+        if ((voxelIndex & 1) == 0) {
+            std::memcpy(to, from + std::size_t(m) * stride, count * sizeof(double));
+            return;
+        }
+        std::fill(to, to + count, 0.0);
+        for (int l = 0; l < 8; ++l) {
+            const double w = kMidpoint[std::size_t(l)];
+            const double* line = from + std::size_t(m - (kHalfStencil - 1) + l) * stride;
+            for (std::size_t q = 0; q < count; ++q) to[q] += w * line[q];
+        }
+    };
+    // x first, then y, over the nodes' planes and rows (the fewest values: nodes along z), then z
+    // to the batch's voxels.
+    alongX.resize(nx * cy * cz);
+    for (std::size_t i = 0; i < nx; ++i)
+        combine(fx, lo[0], int(i), nodes.data(), cy * cz, cy * cz, alongX.data() + i * cy * cz);
+    alongXY.resize(nx * ny * cz);
+    for (std::size_t i = 0; i < nx; ++i)
+        for (std::size_t j = 0; j < ny; ++j)
+            combine(fy, lo[1], int(j), alongX.data() + i * cy * cz, cz, cz, alongXY.data() + (i * ny + j) * cz);
+    for (std::size_t r = 0; r < nx * ny; ++r) {
+        const double* line = alongXY.data() + r * cz;
+        double* to = out.data() + r * nz;
         for (std::size_t k = 0; k < nz; ++k) {
             const int voxelIndex = fz + int(k);
             const int m = floorDiv(voxelIndex, 2) - lo[2];
@@ -193,41 +217,6 @@ void CoarseNodes::interpolate(const GridBatch& batch, std::span<double> out, con
             double v = 0.0;
             for (int l = 0; l < 8; ++l) v += kMidpoint[std::size_t(l)] * p[l];
             to[k] = v;
-        }
-    }
-    // y: every node x to the batch's voxels along y (rows of nz, stride nz between node rows).
-    alongY.resize(cx * ny * nz);
-    for (std::size_t x = 0; x < cx; ++x)
-        for (std::size_t j = 0; j < ny; ++j) {
-            const int voxelIndex = fy + int(j);
-            const int m = floorDiv(voxelIndex, 2) - lo[1];
-            double* to = alongY.data() + (x * ny + j) * nz;
-            const double* plane = alongZ.data() + x * cy * nz;
-            if ((voxelIndex & 1) == 0) {
-                std::memcpy(to, plane + std::size_t(m) * nz, nz * sizeof(double));
-                continue;
-            }
-            std::fill(to, to + nz, 0.0);
-            for (int l = 0; l < 8; ++l) {
-                const double w = kMidpoint[std::size_t(l)];
-                const double* from = plane + std::size_t(m - (kHalfStencil - 1) + l) * nz;
-                for (std::size_t k = 0; k < nz; ++k) to[k] += w * from[k];
-            }
-        }
-    // x: the batch's voxels.
-    for (std::size_t i = 0; i < nx; ++i) {
-        const int voxelIndex = fx + int(i);
-        const int m = floorDiv(voxelIndex, 2) - lo[0];
-        double* to = out.data() + i * ny * nz;
-        if ((voxelIndex & 1) == 0) {
-            std::memcpy(to, alongY.data() + std::size_t(m) * ny * nz, ny * nz * sizeof(double));
-            continue;
-        }
-        std::fill(to, to + ny * nz, 0.0);
-        for (int l = 0; l < 8; ++l) {
-            const double w = kMidpoint[std::size_t(l)];
-            const double* from = alongY.data() + std::size_t(m - (kHalfStencil - 1) + l) * ny * nz;
-            for (std::size_t q = 0; q < ny * nz; ++q) to[q] += w * from[q];
         }
     }
 }

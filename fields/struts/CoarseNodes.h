@@ -1,17 +1,18 @@
 /// @file CoarseNodes.h
 /// @brief A smooth field's values on a voxel lattice from exact nodes every second voxel: the
 /// nodes are evaluated once per lattice in blocks shared by every batch, and each batch's points
-/// are interpolated from them by eight-point Lagrange stencils along z, then y, then x.
+/// are interpolated from them by eight-point Lagrange stencils along x, then y, then z.
 ///
 /// The bound. Along one axis, a point midway between nodes 2h apart takes the eight nodes nearest
 /// it (weights {-5, 49, -245, 1225, 1225, -245, 49, -5} / 2048, their absolute sum L = 1.488); a
 /// point on a node takes the node. With E_a the error of one axis's interpolation of the field
 /// (ColumnStencils.h: at most K_a sum_j peak_j exp(-d_j^2 / 4 sigma_j^2), K_a = |prod_l (x - x_l)|
 /// / 8! (2h / sigma)^8 C8_a, the product 43.07 in node steps at a midpoint, C8_a the struts' largest
-/// eighth-derivative factor along axis a), interpolating z, then y, then x misses by at most
-///     E_x + L E_y + L^2 E_z <= (K_x + L K_y + L^2 K_z) sum_j peak_j exp(-d_j^2 / 4 sigma_j^2),
-/// where I_x I_y I_z f - f = (I_x f - f) + I_x (I_y f - f) + I_x I_y (I_z f - f) and each I_a
-/// multiplies a function's largest value by at most L. coarseNodesBound() gives that factor per
+/// eighth-derivative factor along axis a), interpolating x, then y, then z misses by at most
+///     E_z + L E_y + L^2 E_x <= (K_z + L K_y + L^2 K_x) sum_j peak_j exp(-d_j^2 / 4 sigma_j^2),
+/// where I_z I_y I_x f - f = (I_z f - f) + I_z (I_y f - f) + I_z I_y (I_x f - f) and each I_a
+/// multiplies a function's largest value by at most L. (x first: the passes then run over the
+/// fewest values, the nodes along z until the last.) coarseNodesBound() gives that factor per
 /// unit of the peaks near; a field uses the nodes only where it is below its tolerance. A strut's
 /// cut-off (its contribution dropped beyond r_c, at most eps of its peak) is a step the stencils
 /// do not see: an interpolated value may miss the cut field by up to (1 + L^3) eps peak_j more
@@ -28,7 +29,7 @@
 
 namespace voxlat {
 
-/// The factor K_x + L K_y + L^2 K_z above for nodes @a nodeSpacing apart (twice the voxel), struts
+/// The factor K_z + L K_y + L^2 K_x above for nodes @a nodeSpacing apart (twice the voxel), struts
 /// of least kernel width @a sigma and eighth-derivative factors @a c8 (x, y, z).
 double coarseNodesBound(double nodeSpacing, double sigma, const std::array<double, 3>& c8);
 
