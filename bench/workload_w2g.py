@@ -82,6 +82,11 @@ wireframe 4.38 / 8.87 s (12.6x / 5.9x), cylinder 1.94 / 3.07 s (8.8x / 5.6x). Ta
 solve's grid kept for the mesh. At 50 mm, quiet: graded 119.9x, centred 110.3x, trimmed 35.0x (988 MB),
 wireframe 36.2x (1225 MB), cylinder 28.1x (871 MB): peak 1.5 GB met on every frame, 50x missed on
 trimmed, wireframe and cylinder.
+2026-12-07 (issue 38, fortieth round; bench/history.md): frames that nothing tiles take their grids
+from exact nodes every second voxel (fields/struts/CoarseNodes, within a proven bound) where sigma
+spans four voxels or more. At 50 mm, two runs: trimmed 27.9x / 29.4x, wireframe 46.5x / 49.5x
+(9.91 s against 490.35 s), cylinder 21.4x / 23.6x (the thirty-ninth round's 25.6-26.5x, 26.2x,
+14.6-17.8x); graded 56.0x / 50.8x and centred 52.2x / 46.0x (their paths unchanged); peak <= 1014 MB.
 """
 import json
 import math
