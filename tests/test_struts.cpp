@@ -86,6 +86,25 @@ std::vector<ConvolutionStrut> bccStruts(double sigma, int cells = 2)
     return s;
 }
 
+/// A jittered BCC frame (3 x 3 x 3 cells of 2.2 mm, every node moved by up to 0.22 mm: no two
+/// struts alike, as a wireframe) with graded weights, and 150 struts in random directions, all of
+/// sigma 0.5 (W2g's ratio at 0.1 mm voxels).
+std::vector<ConvolutionStrut> jitteredBccAndRandomStruts(std::mt19937& rng)
+{
+    std::vector<ConvolutionStrut> struts;
+    const Frame frame = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(2.2), {3, 3, 3});
+    std::vector<Vec3d> nodes = frame.nodes;
+    for (Vec3d& n : nodes) n += randomVec(rng, -0.22, 0.22);
+    for (std::size_t e = 0; e < frame.struts.size(); ++e)
+        struts.push_back({nodes[frame.struts[e][0]], nodes[frame.struts[e][1]], 0.5, 1.0 + 0.01 * double(e % 17),
+                          1.3 - 0.02 * double(e % 11)});
+    for (int e = 0; e < 150; ++e) {
+        const Vec3d a = randomVec(rng, 0.0, 6.6), b = a + randomVec(rng, -1.5, 1.5);
+        struts.push_back({a, b, 0.5, 0.8 + 0.01 * (e % 13), 1.1});
+    }
+    return struts;
+}
+
 std::string runRecipe(const TempDir& dir, const std::string& text, int* status, const std::string& extra = "")
 {
     const auto recipe = dir.write("recipe.yaml", text);
@@ -265,17 +284,7 @@ TEST(StrutConvolution, StackedLeavesStayWithinTheTableBoundOfTheirLeaves)
     // voxels): h steps by up to 1.46 sigma along a row, tabled in up to fifteen phases (rows of
     // steps past 0.4 sigma took two look-ups per point before).
     std::mt19937 rng(38);
-    std::vector<ConvolutionStrut> struts;
-    const Frame frame = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(2.2), {3, 3, 3});
-    std::vector<Vec3d> nodes = frame.nodes;
-    for (Vec3d& n : nodes) n += randomVec(rng, -0.22, 0.22);
-    for (std::size_t e = 0; e < frame.struts.size(); ++e)
-        struts.push_back({nodes[frame.struts[e][0]], nodes[frame.struts[e][1]], 0.5, 1.0 + 0.01 * double(e % 17),
-                          1.3 - 0.02 * double(e % 11)});
-    for (int e = 0; e < 150; ++e) {
-        const Vec3d a = randomVec(rng, 0.0, 6.6), b = a + randomVec(rng, -1.5, 1.5);
-        struts.push_back({a, b, 0.5, 0.8 + 0.01 * (e % 13), 1.1});
-    }
+    const std::vector<ConvolutionStrut> struts = jitteredBccAndRandomStruts(rng);
     const StrutConvolution f(struts);
     std::vector<Vec3d> origins{Vec3d(0.05, 0.05, 0.05), Vec3d(2.33, 1.1, -0.35), Vec3d(3.7, 4.15, 0.9)};
     for (int o = 0; o < 9; ++o) origins.push_back(randomVec(rng, -0.5, 5.5));
@@ -339,7 +348,7 @@ TEST(StrutConvolution, StackedLeavesStayWithinTheTableBoundOfTheirLeaves)
     }
     // Each random strut alone, in stacks of four anywhere its reach meets them (blocks that its
     // cut-off's cap touches at a corner among them): the one strut's table error.
-    for (std::size_t j = frame.struts.size(); j < struts.size(); ++j) {
+    for (std::size_t j = struts.size() - 150; j < struts.size(); ++j) {  // the random struts
         const StrutConvolution one({struts[j]});
         const double reach = one.cutoffRadius(0);
         Vec3d lo, hi;
@@ -3045,17 +3054,7 @@ TEST(CoarseNodes, LatticeValuesStayWithinTheirBoundOfTheExactOnesTheSameForAnyTh
     // rounding; batches off the lattice, and a tolerance of 0, are the exact doubles; and the
     // values are the same doubles on one thread and on two, the batches in any order.
     std::mt19937 rng(38);
-    std::vector<ConvolutionStrut> struts;
-    const Frame frame = boxFrame(presetUnitCell("bcc"), Vec3d(0.0), Vec3d(2.2), {3, 3, 3});
-    std::vector<Vec3d> nodes = frame.nodes;
-    for (Vec3d& n : nodes) n += randomVec(rng, -0.22, 0.22);
-    for (std::size_t e = 0; e < frame.struts.size(); ++e)
-        struts.push_back({nodes[frame.struts[e][0]], nodes[frame.struts[e][1]], 0.5, 1.0 + 0.01 * double(e % 17),
-                          1.3 - 0.02 * double(e % 11)});
-    for (int e = 0; e < 150; ++e) {
-        const Vec3d a = randomVec(rng, 0.0, 6.6), b = a + randomVec(rng, -1.5, 1.5);
-        struts.push_back({a, b, 0.5, 0.8 + 0.01 * (e % 13), 1.1});
-    }
+    const std::vector<ConvolutionStrut> struts = jitteredBccAndRandomStruts(rng);
     const StrutConvolution interpolated(struts);
     StrutConvolution exact(struts);
     exact.setGridTolerance(0.0);
