@@ -3135,6 +3135,24 @@ TEST(CoarseNodes, LatticeValuesStayWithinTheirBoundOfTheExactOnesTheSameForAnyTh
         batch.onLattice = false;
         EXPECT_FALSE(interpolated.coarseServes(batch));
     }
+    // A batch of another lattice drops the nodes held, and the first lattice's are made again the
+    // same: only one lattice's nodes are held at a time.
+    {
+        const std::size_t held = interpolated.coarseBytes();
+        ASSERT_GT(held, 0u);
+        GridBatch other = onLattice(0, 0, 0, 8, 8, 8);
+        other.latticeMin = latticeMin + Vec3d(0.05, 0.0, 0.0);
+        other.origin = other.latticeMin + voxel * Vec3d(0.5);
+        std::vector<double> v(other.size()), again(batches[0].size()), first(batches[0].size());
+        interpolated.gridValues(other, v);
+        EXPECT_LT(interpolated.coarseBytes(), held);
+        exact.gridValues(other, v);  // (exact: nothing held)
+        EXPECT_EQ(exact.coarseBytes(), 0u);
+        const StrutConvolution fresh(struts);
+        fresh.gridValues(batches[0], first);
+        interpolated.gridValues(batches[0], again);
+        EXPECT_EQ(again, first);
+    }
     // One thread and two, the batches in opposite orders, fresh nodes each: the same doubles.
     auto run = [&](int threads, bool reversed) {
         const StrutConvolution field(struts);

@@ -85,6 +85,23 @@ struct CoarseNodes::Impl {
     };
     std::array<Shard, kShards> shards;
     std::atomic<std::size_t> count{0};
+    std::mutex latticeMutex;
+    std::array<std::uint64_t, 4> lattice{};  ///< the lattice whose blocks are held (latticeMutex)
+    bool held = false;
+
+    /// Makes @a key the lattice held, dropping another's blocks (readers keep theirs alive).
+    void hold(const std::array<std::uint64_t, 4>& key)
+    {
+        std::lock_guard<std::mutex> lock(latticeMutex);
+        if (held && lattice == key) return;
+        for (Shard& shard : shards) {
+            std::lock_guard<std::mutex> shardLock(shard.mutex);
+            shard.blocks.clear();
+        }
+        count = 0;
+        lattice = key;
+        held = true;
+    }
 
     std::shared_ptr<Block> blockOf(const BlockKey& key)
     {
@@ -107,15 +124,6 @@ std::size_t CoarseNodes::bytes() const
     return mImpl->count.load() * kBlockSize * sizeof(float);
 }
 
-void CoarseNodes::clear()
-{
-    for (auto& shard : mImpl->shards) {
-        std::lock_guard<std::mutex> lock(shard.mutex);
-        shard.blocks.clear();
-    }
-    mImpl->count = 0;
-}
-
 void CoarseNodes::interpolate(const GridBatch& batch, std::span<double> out, const Exact& exact) const
 {
     const double voxel = batch.spacing.x();
@@ -125,6 +133,7 @@ void CoarseNodes::interpolate(const GridBatch& batch, std::span<double> out, con
         0,
         0,
         0};
+    mImpl->hold(key.lattice);
     // The nodes the batch reads, per axis: node m is voxel 2m.
     std::array<int, 3> lo{}, count{};
     for (int a = 0; a < 3; ++a) {

@@ -33,10 +33,13 @@ namespace voxlat {
 /// of least kernel width @a sigma and eighth-derivative factors @a c8 (x, y, z).
 double coarseNodesBound(double nodeSpacing, double sigma, const std::array<double, 3>& c8);
 
-/// The exact nodes of every lattice a field is evaluated on, in blocks of 8 x 8 x 32 nodes (16 x
-/// 16 x 64 voxels), each evaluated once, by whichever thread first needs it, with the same doubles
+/// The exact nodes of the lattice a field is evaluated on, in blocks of 8 x 8 x 32 nodes (16 x 16
+/// x 64 voxels), each evaluated once, by whichever thread first needs it, with the same doubles
 /// whichever does. Thread-safe. A block's values hang on the lattice and the block alone, so a
-/// batch's interpolated values hang on its points alone: the same for any thread count.
+/// batch's interpolated values hang on its points alone: the same for any thread count. Only the
+/// last lattice asked for is kept: a batch of another drops the blocks held (a batch still reading
+/// one keeps it until it is done), so a field evaluated on many grids in turn (a script's) holds
+/// one grid's nodes at most.
 class CoarseNodes {
 public:
     /// Evaluates the exact values of a batch of nodes (spacing twice the lattice's voxel).
@@ -50,10 +53,8 @@ public:
     /// The values at the points of @a batch (onLattice, spacing equal along the axes) from the
     /// lattice's nodes, the blocks not yet made evaluated by @a exact.
     void interpolate(const GridBatch& batch, std::span<double> out, const Exact& exact) const;
-    /// Bytes the blocks made so far hold.
+    /// Bytes the blocks held hold.
     std::size_t bytes() const;
-    /// Drops every block (not while another thread interpolates).
-    void clear();
 
 private:
     struct Impl;

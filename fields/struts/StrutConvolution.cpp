@@ -258,11 +258,6 @@ std::size_t StrutConvolution::coarseBytes() const
     return mCoarse ? mCoarse->bytes() : 0;
 }
 
-void StrutConvolution::releaseCoarseNodes() const
-{
-    if (mCoarse) mCoarse->clear();
-}
-
 void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out) const
 {
     if (coarseServes(batch)) {

@@ -92,10 +92,8 @@ public:
     double coarseBound(double voxel) const;
     /// Whether gridValues takes @a batch from the coarse nodes.
     bool coarseServes(const GridBatch& batch) const;
-    /// Bytes the coarse nodes hold; releaseCoarseNodes() drops them (not while another thread
-    /// evaluates).
+    /// Bytes the coarse nodes hold (the last lattice's: CoarseNodes).
     std::size_t coarseBytes() const;
-    void releaseCoarseNodes() const;
 
 private:
     /// F at one point from the candidate struts @a cand (ascending).
