@@ -1043,11 +1043,7 @@ FieldPtr buildStrutLattice(FieldBuilder& builder, const RecipeNode& spec, const 
     if (!(periodic || partlyPeriodic)) node.stackLeaves = tiledInterior ? 8 : 16;
     // Grids evaluated strut by strut (not tabled) take their values from nodes every second
     // voxel where the struts are smooth at the voxel (CoarseNodes.h); the report says so.
-    if (!(periodic || partlyPeriodic))
-        node.gridNodesBound = [raw](double voxel) {
-            const double bound = raw->coarseBound(voxel);
-            return bound <= raw->gridTolerance() ? bound : 0.0;
-        };
+    if (!(periodic || partlyPeriodic)) node.gridNodesBound = [raw](double voxel) { return raw->servedBound(voxel); };
     const double t = spec.has("level") ? spec["level"].positiveNumber() : 1.0;
     {
         std::ostringstream d;

@@ -29,7 +29,6 @@ StrutConvolution::StrutConvolution(const std::vector<ConvolutionStrut>& struts, 
         if (!((s.b - s.a).length() > 0.0)) throw std::invalid_argument("a strut has zero length");
         if (!(s.w0 > 0.0 && s.w1 > 0.0)) throw std::invalid_argument("strut weights must be greater than zero");
         mSegments.emplace_back(s.a, s.b, s.sigma, s.w0, s.w1);
-        mEighthBound = std::max(mEighthBound, segmentEighthDerivativeBound(mSegments.back()));
         for (int axis = 0; axis < 3; ++axis)
             mEighthBoundAxes[std::size_t(axis)] =
                 std::max(mEighthBoundAxes[std::size_t(axis)], segmentEighthDerivativeBound(mSegments.back(), axis));
@@ -250,12 +249,19 @@ bool StrutConvolution::coarseServes(const GridBatch& batch) const
                                                           batch.latticeIndex[2] + 0.5);
     for (int axis = 0; axis < 3; ++axis)
         if (!(std::abs(centre[axis] - batch.origin[axis]) <= 1e-9 * voxel)) return false;
-    return coarseBound(voxel) <= mGridTolerance;
+    return servedBound(voxel) > 0.0;
+}
+
+double StrutConvolution::servedBound(double voxel) const
+{
+    if (!(mGridTolerance > 0.0)) return 0.0;
+    const double bound = coarseBound(voxel);
+    return bound <= mGridTolerance ? bound : 0.0;
 }
 
 std::size_t StrutConvolution::coarseBytes() const
 {
-    return mCoarse ? mCoarse->bytes() : 0;
+    return mCoarse->bytes();
 }
 
 void StrutConvolution::gridValues(const GridBatch& batch, std::span<double> out) const
@@ -1096,9 +1102,10 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
     const bool interpolated = mPlaneTolerance > 0.0 && kept > 0;
     // The stencils hang on the plane's width, its spacing, the least sigma, the tolerance and C8
     // (fields of different tolerances or struts may run on one thread).
-    const std::array<double, 5> key{double(plane.nx), dx, sigmaMin, mPlaneTolerance, mEighthBound};
+    const double eighthBound = mEighthBoundAxes[0];  // along x, the planes' columns
+    const std::array<double, 5> key{double(plane.nx), dx, sigmaMin, mPlaneTolerance, eighthBound};
     if (interpolated && stencilKey != key) {
-        stencils = columnStencils(plane.nx, dx, sigmaMin, mPlaneTolerance, mEighthBound);
+        stencils = columnStencils(plane.nx, dx, sigmaMin, mPlaneTolerance, eighthBound);
         stencilKey = key;
     }
     if (!interpolated || stencils.stride < 2) {

@@ -90,6 +90,9 @@ public:
     /// The bound CoarseNodes would have on a lattice of @a voxel (coarseNodesBound with the
     /// least sigma and the largest C8 per axis of the field's struts).
     double coarseBound(double voxel) const;
+    /// coarseBound(@a voxel) where gridValues takes a lattice of that voxel from the coarse
+    /// nodes (at most gridTolerance()), else 0.
+    double servedBound(double voxel) const;
     /// Whether gridValues takes @a batch from the coarse nodes.
     bool coarseServes(const GridBatch& batch) const;
     /// Bytes the coarse nodes hold (the last lattice's: CoarseNodes).
@@ -113,9 +116,8 @@ private:
     std::vector<double> mWMin;  ///< min(w0, w1)
     double mEps;
     double mPlaneTolerance = kPlaneTolerance;
-    /// The largest of the struts' C8 along x (segmentEighthDerivativeBound): planeValues' stencils.
-    double mEighthBound = 0.0;
-    /// The largest C8 along x, y and z (CoarseNodes), and the least sigma.
+    /// The largest of the struts' C8 along x, y and z (segmentEighthDerivativeBound): along x
+    /// planeValues' stencils, all three CoarseNodes'; and the least sigma.
     std::array<double, 3> mEighthBoundAxes{0.0, 0.0, 0.0};
     double mSigmaMin = std::numeric_limits<double>::infinity();
     double mGridTolerance = kGridTolerance;
