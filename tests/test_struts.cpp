@@ -3170,3 +3170,73 @@ TEST(CoarseNodes, LatticeValuesStayWithinTheirBoundOfTheExactOnesTheSameForAnyTh
     };
     EXPECT_EQ(run(1, false), run(2, true));
 }
+
+TEST(CoarseNodes, StridedBatchesAtEvenVoxelsReadTheNodesTheGridReads)
+{
+    // The density solve's coarse pass (QuantileLevel: an even stride from voxels of even index)
+    // reads the nodes the band's grid batches read: each strided point's value is, bit for bit,
+    // the stride-1 batch's value at its voxel, whichever batch came first; an odd stride or an odd
+    // first voxel is not served (the exact doubles), nor is a stride the spacing does not match.
+    std::mt19937 rng(41);
+    const std::vector<ConvolutionStrut> struts = jitteredBccAndRandomStruts(rng);
+    StrutConvolution exact(struts);
+    exact.setGridTolerance(0.0);
+    const double voxel = 0.1;
+    const Vec3d latticeMin(-0.37, 0.21, -0.5);
+    auto batchAt = [&](std::array<int, 3> index, int stride, std::array<int, 3> n) {
+        GridBatch b;
+        b.onLattice = true;
+        b.latticeMin = latticeMin;
+        b.latticeIndex = index;
+        b.latticeStride = stride;
+        b.latticeVoxel = voxel;
+        b.origin = latticeMin + voxel * Vec3d(index[0] + 0.5, index[1] + 0.5, index[2] + 0.5);
+        b.spacing = Vec3d(voxel * stride);
+        b.nx = n[0];
+        b.ny = n[1];
+        b.nz = n[2];
+        return b;
+    };
+    int compared = 0;
+    for (const int stride : {2, 4, 6}) {
+        for (const std::array<int, 3> index : {std::array<int, 3>{0, 0, 0}, {-16, 22, 10}, {30, -4, -20}}) {
+            const GridBatch strided = batchAt(index, stride, {8, 5, 16});
+            // The stride-1 batch over the same voxels.
+            const GridBatch dense = batchAt(index, 1, {stride * 7 + 1, stride * 4 + 1, stride * 15 + 1});
+            for (const bool stridedFirst : {true, false}) {
+                const StrutConvolution field(struts);
+                ASSERT_TRUE(field.coarseServes(strided)) << "stride " << stride;
+                std::vector<double> s(strided.size()), d(dense.size());
+                if (stridedFirst) field.gridValues(strided, s);
+                field.gridValues(dense, d);
+                if (!stridedFirst) field.gridValues(strided, s);
+                bool differs = false;
+                for (int i = 0; i < strided.nx; ++i)
+                    for (int j = 0; j < strided.ny; ++j)
+                        for (int k = 0; k < strided.nz; ++k) {
+                            const double v = s[(std::size_t(i) * strided.ny + j) * strided.nz + k];
+                            const double w =
+                                d[(std::size_t(stride * i) * dense.ny + stride * j) * dense.nz + stride * k];
+                            ASSERT_EQ(v, w) << "stride " << stride << " point " << i << " " << j << " " << k;
+                            differs = differs || v != 0.0;
+                            ++compared;
+                        }
+                EXPECT_TRUE(differs);  // (the batches reach struts)
+            }
+        }
+    }
+    EXPECT_GT(compared, 3000);
+    // Not served: an odd stride, an odd first voxel, a spacing not the stride's; their values are
+    // the exact doubles.
+    const StrutConvolution field(struts);
+    GridBatch wrongSpacing = batchAt({0, 0, 0}, 2, {4, 4, 8});
+    wrongSpacing.spacing = Vec3d(voxel * 3);
+    for (const GridBatch& batch : {batchAt({0, 0, 0}, 3, {4, 4, 8}), batchAt({2, 1, 0}, 2, {4, 4, 8}),
+                                   batchAt({0, 0, -3}, 4, {4, 4, 8}), wrongSpacing}) {
+        EXPECT_FALSE(field.coarseServes(batch));
+        std::vector<double> a(batch.size()), b(batch.size());
+        field.gridValues(batch, a);
+        exact.gridValues(batch, b);
+        EXPECT_EQ(a, b);
+    }
+}

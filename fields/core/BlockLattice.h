@@ -27,8 +27,9 @@ struct BlockLattice {
     /// Points of a block along z (8 x 8 x depth): 8, or a multiple of 8 for long rows along z (a
     /// convolution lattice's rows of 8 points are mostly their set-up).
     int depth = 8;
-    /// The points are a voxel lattice's centres (stride 1, offset 1/2, step the voxel): batches
-    /// say so (GridBatch::onLattice), their first point voxel latticeOffset + its index.
+    /// The points are a voxel lattice's centres (step the voxel, offset 1/2 plus a whole number,
+    /// the same stride along every axis): batches say so (GridBatch::onLattice), their first
+    /// point voxel latticeOffset + stride times its index.
     bool onLattice = false;
     Vec3d latticeMin{0.0};
     std::array<int, 3> latticeOffset{0, 0, 0};
@@ -64,7 +65,10 @@ struct BlockLattice {
         if (onLattice) {
             g.onLattice = true;
             g.latticeMin = latticeMin;
-            for (int a = 0; a < 3; ++a) g.latticeIndex[std::size_t(a)] = latticeOffset[std::size_t(a)] + first[a];
+            g.latticeStride = stride[0];
+            g.latticeVoxel = step[0];
+            for (int a = 0; a < 3; ++a)
+                g.latticeIndex[std::size_t(a)] = latticeOffset[std::size_t(a)] + first[a] * stride[0];
         }
         return g;
     }

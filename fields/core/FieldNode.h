@@ -75,14 +75,20 @@ struct GridBatch {
     /// passes the operand's doubles through unrounded and unkept. Passed on like unread.
     bool exact = false;
     /// The voxel lattice the points lie on, where the caller knows it (SparseEvaluator's leaves
-    /// and stacks): point (i, j, k) is voxel latticeIndex + (i, j, k) of the lattice whose voxel c
-    /// is centred at latticeMin + spacing (c + 0.5), spacing the same along every axis. A node may
-    /// share work between the batches of one lattice (StrutConvolution's coarse nodes); it checks
-    /// that origin is that voxel's centre (within a billionth of a voxel), so a node that moves
-    /// the batch need not clear it. A node that passes on a part of the batch moves the index.
+    /// and stacks, the density solve's coarse pass): point (i, j, k) is voxel latticeIndex +
+    /// latticeStride (i, j, k) of the lattice whose voxel c is centred at latticeMin + voxel (c +
+    /// 0.5), spacing the same along every axis and latticeStride voxels (voxel: latticeVoxel, the
+    /// spacing where 0, as at stride 1; spacing / stride need not give its bits). A node may share
+    /// work between the batches of one lattice (StrutConvolution's coarse nodes); it checks that
+    /// origin is that voxel's centre (within a billionth of a voxel), so a node that moves the
+    /// batch need not clear it. A node that passes on a part of the batch moves the index.
     bool onLattice = false;
     Vec3d latticeMin{0.0};
     std::array<int, 3> latticeIndex{0, 0, 0};
+    int latticeStride = 1;
+    double latticeVoxel = 0.0;
+    /// The lattice's voxel (onLattice).
+    double voxel() const { return latticeVoxel > 0.0 ? latticeVoxel : spacing.x(); }
 
     std::size_t size() const { return std::size_t(nx) * ny * nz; }
     Vec3d point(int i, int j, int k) const

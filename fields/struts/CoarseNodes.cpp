@@ -126,7 +126,8 @@ std::size_t CoarseNodes::bytes() const
 
 void CoarseNodes::interpolate(const GridBatch& batch, std::span<double> out, const Exact& exact) const
 {
-    const double voxel = batch.spacing.x();
+    const int stride = batch.latticeStride;
+    const double voxel = batch.voxel();
     const std::array<int, 3> n{batch.nx, batch.ny, batch.nz};
     BlockKey key{
         {bitsOf(batch.latticeMin.x()), bitsOf(batch.latticeMin.y()), bitsOf(batch.latticeMin.z()), bitsOf(voxel)},
@@ -134,6 +135,59 @@ void CoarseNodes::interpolate(const GridBatch& batch, std::span<double> out, con
         0,
         0};
     mImpl->hold(key.lattice);
+    // Block (bx, by, bz), made by whichever thread asks first (the same doubles whichever).
+    auto blockAt = [&](int bx, int by, int bz) {
+        key.bx = bx;
+        key.by = by;
+        key.bz = bz;
+        std::shared_ptr<Block> block = mImpl->blockOf(key);
+        std::call_once(block->made, [&] {
+            GridBatch nodesBatch;
+            nodesBatch.spacing = Vec3d(2.0 * voxel);
+            nodesBatch.nx = kBlockXY;
+            nodesBatch.ny = kBlockXY;
+            nodesBatch.nz = kBlockZ;
+            const Vec3d first(2.0 * kBlockXY * bx + 0.5, 2.0 * kBlockXY * by + 0.5, 2.0 * kBlockZ * bz + 0.5);
+            nodesBatch.origin = batch.latticeMin + voxel * first;
+            thread_local std::vector<double> exactValues;
+            exactValues.resize(kBlockSize);
+            exact(nodesBatch, exactValues);
+            block->values.assign(exactValues.begin(), exactValues.end());
+        });
+        return block;
+    };
+    if (stride != 1) {
+        // Every point a node (an even stride from even voxels: StrutConvolution::coarseServes):
+        // node (first + stride v) / 2 along each axis, copied from its block.
+        const int step = stride / 2;
+        const std::array<int, 3> first{batch.latticeIndex[0] / 2, batch.latticeIndex[1] / 2, batch.latticeIndex[2] / 2};
+        const int bx0 = floorDiv(first[0], kBlockXY), bx1 = floorDiv(first[0] + step * (n[0] - 1), kBlockXY);
+        const int by0 = floorDiv(first[1], kBlockXY), by1 = floorDiv(first[1] + step * (n[1] - 1), kBlockXY);
+        const int bz0 = floorDiv(first[2], kBlockZ), bz1 = floorDiv(first[2] + step * (n[2] - 1), kBlockZ);
+        const int cy = by1 - by0 + 1, cz = bz1 - bz0 + 1;
+        thread_local std::vector<std::shared_ptr<Block>> blocks;
+        blocks.clear();
+        for (int bx = bx0; bx <= bx1; ++bx)
+            for (int by = by0; by <= by1; ++by)
+                for (int bz = bz0; bz <= bz1; ++bz) blocks.push_back(blockAt(bx, by, bz));
+        std::size_t v = 0;
+        for (int i = 0; i < n[0]; ++i) {
+            const int x = first[0] + step * i, bx = floorDiv(x, kBlockXY);
+            for (int j = 0; j < n[1]; ++j) {
+                const int y = first[1] + step * j, by = floorDiv(y, kBlockXY);
+                for (int k = 0; k < n[2]; ++k, ++v) {
+                    const int z = first[2] + step * k, bz = floorDiv(z, kBlockZ);
+                    const Block& block =
+                        *blocks[(std::size_t(bx - bx0) * cy + std::size_t(by - by0)) * cz + std::size_t(bz - bz0)];
+                    out[v] = block.values[(std::size_t(x - bx * kBlockXY) * kBlockXY + std::size_t(y - by * kBlockXY)) *
+                                              kBlockZ +
+                                          std::size_t(z - bz * kBlockZ)];
+                }
+            }
+        }
+        blocks.clear();
+        return;
+    }
     // The nodes the batch reads, per axis: node m is voxel 2m.
     std::array<int, 3> lo{}, count{};
     for (int a = 0; a < 3; ++a) {
@@ -151,23 +205,7 @@ void CoarseNodes::interpolate(const GridBatch& batch, std::span<double> out, con
     for (int bx = bx0; bx <= bx1; ++bx)
         for (int by = by0; by <= by1; ++by)
             for (int bz = bz0; bz <= bz1; ++bz) {
-                key.bx = bx;
-                key.by = by;
-                key.bz = bz;
-                const std::shared_ptr<Block> block = mImpl->blockOf(key);
-                std::call_once(block->made, [&] {
-                    GridBatch nodesBatch;
-                    nodesBatch.spacing = Vec3d(2.0 * voxel);
-                    nodesBatch.nx = kBlockXY;
-                    nodesBatch.ny = kBlockXY;
-                    nodesBatch.nz = kBlockZ;
-                    const Vec3d first(2.0 * kBlockXY * bx + 0.5, 2.0 * kBlockXY * by + 0.5, 2.0 * kBlockZ * bz + 0.5);
-                    nodesBatch.origin = batch.latticeMin + voxel * first;
-                    thread_local std::vector<double> exactValues;
-                    exactValues.resize(kBlockSize);
-                    exact(nodesBatch, exactValues);
-                    block->values.assign(exactValues.begin(), exactValues.end());
-                });
+                const std::shared_ptr<Block> block = blockAt(bx, by, bz);
                 // The part of the block within the nodes read.
                 const int x0 = std::max(lo[0], bx * kBlockXY), x1 = std::min(lo[0] + count[0], (bx + 1) * kBlockXY);
                 const int y0 = std::max(lo[1], by * kBlockXY), y1 = std::min(lo[1] + count[1], (by + 1) * kBlockXY);

@@ -51,7 +51,9 @@ public:
     CoarseNodes& operator=(const CoarseNodes&) = delete;
 
     /// The values at the points of @a batch (onLattice, spacing equal along the axes) from the
-    /// lattice's nodes, the blocks not yet made evaluated by @a exact.
+    /// lattice's nodes, the blocks not yet made evaluated by @a exact. A strided batch
+    /// (GridBatch::latticeStride above 1) must have every point a node (an even stride from even
+    /// voxel indices): its values are the nodes'.
     void interpolate(const GridBatch& batch, std::span<double> out, const Exact& exact) const;
     /// Bytes the blocks held hold.
     std::size_t bytes() const;

@@ -240,8 +240,16 @@ double StrutConvolution::coarseBound(double voxel) const
 bool StrutConvolution::coarseServes(const GridBatch& batch) const
 {
     if (!(mGridTolerance > 0.0) || !batch.onLattice || batch.exact || mSegments.empty()) return false;
-    const double voxel = batch.spacing.x();
-    if (!(voxel > 0.0) || batch.spacing.y() != voxel || batch.spacing.z() != voxel) return false;
+    const double spacing = batch.spacing.x(), voxel = batch.voxel();
+    if (!(voxel > 0.0) || batch.spacing.y() != spacing || batch.spacing.z() != spacing ||
+        !(std::abs(spacing - voxel * batch.latticeStride) <= 1e-9 * spacing))
+        return false;
+    // A strided batch (the density solve's coarse pass) is served where every point is a node:
+    // an even stride from a voxel of even index along each axis.
+    if (batch.latticeStride != 1 &&
+        (batch.latticeStride % 2 != 0 ||
+         std::any_of(batch.latticeIndex.begin(), batch.latticeIndex.end(), [](int i) { return i % 2 != 0; })))
+        return false;
     // The origin is the lattice's voxel centre up to rounding (a stack's leaves at origin + 8 m
     // voxels), else a node moved the batch: a billionth of a voxel, far below any move a node
     // makes on purpose and far above the roundings of coordinates.

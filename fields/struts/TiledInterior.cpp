@@ -163,7 +163,7 @@ void TiledInterior::gridValues(const GridBatch& batch, std::span<double> out) co
         sub.origin[2] += double(m * depth) * batch.spacing[2];
         sub.nz = (e - m) * depth;
         sub.unread = batch.unread >> m & ((e - m) == 32 ? ~0u : (1u << (e - m)) - 1u);
-        sub.latticeIndex[2] += m * depth;  // the same lattice (onLattice), its first voxel moved
+        sub.latticeIndex[2] += m * depth * batch.latticeStride;  // the same lattice (onLattice), its first voxel moved
         const std::span<double> part(scratch.data(), sub.size());
         (isFar ? same : mExact)->gridValues(sub, part);
         for (int i = 0; i < batch.nx; ++i)
