@@ -135,7 +135,13 @@ void TiledInterior::gridValues(const GridBatch& batch, std::span<double> out) co
         mExact->gridValues(batch, out);
         return;
     }
-    const FieldPtr& same = interior().same;
+    // The periodic field's values, exact for a strided batch (the density solve's coarse pass):
+    // its nodes are made for the grid's far leaves alone. The pass's samples past the trimming
+    // shape made node blocks no grid reads (W2g's trimmed frame: its solve 1.4 -> 1.6 s).
+    const auto sameValues = [this](GridBatch b, std::span<double> o) {
+        if (b.latticeStride > 1) b.onLattice = false;
+        interior().same->gridValues(b, o);
+    };
     // Leaves of a stack (8 x 8 x 8m), or the batch as one piece.
     const bool stack = batch.nx == 8 && batch.ny == 8 && batch.nz % 8 == 0 && batch.nz / 8 <= 32;
     const int pieces = stack ? batch.nz / 8 : 1;
@@ -149,7 +155,10 @@ void TiledInterior::gridValues(const GridBatch& batch, std::span<double> out) co
     }
     const std::uint32_t all = pieces == 32 ? ~0u : (1u << pieces) - 1u;
     if (farLeaves == 0 || farLeaves == all) {
-        (farLeaves ? same : mExact)->gridValues(batch, out);
+        if (farLeaves)
+            sameValues(batch, out);
+        else
+            mExact->gridValues(batch, out);
         return;
     }
     // Runs of leaves alike, each from its field as a sub-stack.
@@ -165,7 +174,10 @@ void TiledInterior::gridValues(const GridBatch& batch, std::span<double> out) co
         sub.unread = batch.unread >> m & ((e - m) == 32 ? ~0u : (1u << (e - m)) - 1u);
         sub.latticeIndex[2] += m * depth * batch.latticeStride;  // the same lattice (onLattice), its first voxel moved
         const std::span<double> part(scratch.data(), sub.size());
-        (isFar ? same : mExact)->gridValues(sub, part);
+        if (isFar)
+            sameValues(sub, part);
+        else
+            mExact->gridValues(sub, part);
         for (int i = 0; i < batch.nx; ++i)
             for (int j = 0; j < batch.ny; ++j)
                 std::copy_n(part.begin() + std::ptrdiff_t((i * sub.ny + j) * sub.nz), sub.nz,
