@@ -105,6 +105,25 @@ std::vector<ConvolutionStrut> jitteredBccAndRandomStruts(std::mt19937& rng)
     return struts;
 }
 
+/// A batch of nx x ny x nz points on the voxel lattice of @a voxel whose voxel 0 has its centre at
+/// latticeMin + voxel / 2: its first point voxel @a index, every @a stride-th voxel after it.
+GridBatch latticeBatch(const Vec3d& latticeMin, double voxel, std::array<int, 3> index, int stride,
+                       std::array<int, 3> n)
+{
+    GridBatch b;
+    b.onLattice = true;
+    b.latticeMin = latticeMin;
+    b.latticeIndex = index;
+    b.latticeStride = stride;
+    b.latticeVoxel = voxel;
+    b.origin = latticeMin + voxel * Vec3d(index[0] + 0.5, index[1] + 0.5, index[2] + 0.5);
+    b.spacing = Vec3d(voxel * stride);
+    b.nx = n[0];
+    b.ny = n[1];
+    b.nz = n[2];
+    return b;
+}
+
 std::string runRecipe(const TempDir& dir, const std::string& text, int* status, const std::string& extra = "")
 {
     const auto recipe = dir.write("recipe.yaml", text);
@@ -3064,16 +3083,7 @@ TEST(CoarseNodes, LatticeValuesStayWithinTheirBoundOfTheExactOnesTheSameForAnyTh
     const double lebesgue = 3048.0 / 2048.0, eps = exact.cutoffEpsilon();
     const Vec3d latticeMin(-0.37, 0.21, -0.5);
     auto onLattice = [&](int i, int j, int k, int nx, int ny, int nz) {
-        GridBatch b;
-        b.onLattice = true;
-        b.latticeMin = latticeMin;
-        b.latticeIndex = {i, j, k};
-        b.origin = latticeMin + voxel * Vec3d(i + 0.5, j + 0.5, k + 0.5);
-        b.spacing = Vec3d(voxel);
-        b.nx = nx;
-        b.ny = ny;
-        b.nz = nz;
-        return b;
+        return latticeBatch(latticeMin, voxel, {i, j, k}, 1, {nx, ny, nz});
     };
     std::vector<GridBatch> batches{onLattice(0, 0, 0, 8, 8, 64),     onLattice(24, 8, 0, 8, 8, 64),
                                    onLattice(-8, 40, -64, 8, 8, 64), onLattice(3, -5, 7, 5, 3, 11),
@@ -3184,18 +3194,7 @@ TEST(CoarseNodes, StridedBatchesAtEvenVoxelsReadTheNodesTheGridReads)
     const double voxel = 0.1;
     const Vec3d latticeMin(-0.37, 0.21, -0.5);
     auto batchAt = [&](std::array<int, 3> index, int stride, std::array<int, 3> n) {
-        GridBatch b;
-        b.onLattice = true;
-        b.latticeMin = latticeMin;
-        b.latticeIndex = index;
-        b.latticeStride = stride;
-        b.latticeVoxel = voxel;
-        b.origin = latticeMin + voxel * Vec3d(index[0] + 0.5, index[1] + 0.5, index[2] + 0.5);
-        b.spacing = Vec3d(voxel * stride);
-        b.nx = n[0];
-        b.ny = n[1];
-        b.nz = n[2];
-        return b;
+        return latticeBatch(latticeMin, voxel, index, stride, n);
     };
     int compared = 0;
     for (const int stride : {2, 4, 6}) {
