@@ -2350,19 +2350,17 @@ TriangleMesh Job::pageMesh()
     // leaves of a stack, where a leaf of this grid holds a few points of each of its ~900 struts),
     // as tall as suits the coarse grid's height (a thin plate's stacks of eight, four coarse voxels
     // deep, made seven leaves of points nobody reads: W10's page mesh 0.41-0.49 s, now 0.37 s).
-    options.stackLeaves = stackLeavesFor(coarse, mStackLeaves);
     // The recipe's grid held (a mesh streamed from it) and a result that does not repeat: the
     // grid's values read back where its leaves are, the result evaluated only where it has tiles
     // (the 50 mm wireframe's picture took 0.55 s of strut sums, ~900 struts a coarse leaf; now
     // 0.18 s, most of it the bounds of the leaves at the domain's faces, whose clip the cull
     // takes no held values for). A result that repeats reads its one-period table faster (W1's
     // gyroid: 0.014-0.023 s, read back 0.046 s).
-    if (mGrid && periods.empty()) {
-        options.stackLeaves = 1;
-        return clusterDecimate(marchingCubes(*evaluateSparse(HeldGridField(mResult, mGrid), coarse, options), 0.0f),
-                               kTriangles);
-    }
-    const openvdb::FloatGrid::Ptr g = evaluateSparse(*mResult, coarse, options);
+    std::optional<HeldGridField> held;
+    if (mGrid && periods.empty()) held.emplace(mResult, mGrid);
+    options.stackLeaves = held ? 1 : stackLeavesFor(coarse, mStackLeaves);
+    const openvdb::FloatGrid::Ptr g =
+        evaluateSparse(held ? static_cast<const FieldNode&>(*held) : *mResult, coarse, options);
     return clusterDecimate(marchingCubes(*g, 0.0f), kTriangles);
 }
 
