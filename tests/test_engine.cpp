@@ -4,9 +4,11 @@
 #include "engine/core/Errors.h"
 #include "engine/core/GridMeasure.h"
 #include "engine/core/HeldGridField.h"
+#include "engine/core/KeptGridLeaves.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/density/DensitySolver.h"
 #include "engine/jobs/Job.h"
+#include "fields/core/GridValueMemo.h"
 #include "fields/levels/LevelSolid.h"
 #include "fields/shapes/Boolean.h"
 #include "fields/shapes/BoxField.h"
@@ -510,6 +512,80 @@ TEST(HeldGridField, TrilinearWithinLeavesTheFieldElsewhereAndMeetsFromHeldVoxels
     EXPECT_TRUE(field.meets(box, {mid, mid}));
     EXPECT_FALSE(field.meets(box, {held.bound(box).hi + 0.01, held.bound(box).hi + 0.02}));
     EXPECT_FALSE(field.meets(Box3{Vec3d(-0.6), Vec3d(-0.2)}, {-1e9, 1e9}));  // no leaves there
+}
+
+TEST(HeldRange, KeptLeavesGiveTheRangeOfTheirVoxelsOnlyWhereTheyHoldEveryOne)
+{
+    // A memo holding a grid of a linear field's values (KeptGridLeaves) in the leaves of a
+    // 24 x 16 x 16 voxel block of a 0.1 mm domain, the leaf at (8, 8, 8) left without values.
+    const Domain d = Domain::fromBox(Box3{Vec3d(-0.2, 0.1, 0.0), Vec3d(3.0, 3.3, 3.2)}, 0.1);
+    const auto operand = std::make_shared<LinearTestField>(Vec3d(0.3, -0.2, 0.7), 0.1);
+    auto grid = openvdb::FloatGrid::create(std::numeric_limits<float>::max());
+    {
+        auto acc = grid->getAccessor();
+        for (auto ijk = openvdb::CoordBBox(openvdb::Coord(0), openvdb::Coord(23, 15, 15)).begin(); ijk; ++ijk)
+            acc.setValue(*ijk, float(operand->at(d.worldOf(*ijk))));
+        openvdb::FloatGrid::TreeType::LeafNodeType::Buffer none(openvdb::PartialCreate(), 0.0f);
+        grid->tree().probeLeaf(openvdb::Coord(8))->buffer().swap(none);
+    }
+    const auto memo = std::make_shared<GridValueMemo>(operand);
+    memo->keep(true, 0);
+    memo->keepLeaves(std::make_unique<KeptGridLeaves>(grid, d), 0);
+    auto pointsAt = [&](openvdb::Coord lo, int nx, int ny, int nz) {
+        GridBatch points;
+        points.origin = d.worldOf(lo);
+        points.spacing = Vec3d(d.voxel);
+        points.nx = nx;
+        points.ny = ny;
+        points.nz = nz;
+        return points;
+    };
+    // The range of the floats at the points, brute force.
+    auto brute = [&](const openvdb::Coord& first, const GridBatch& points) {
+        float lo = std::numeric_limits<float>::max(), hi = -lo;
+        for (int i = 0; i < points.nx; ++i)
+            for (int j = 0; j < points.ny; ++j)
+                for (int k = 0; k < points.nz; ++k) {
+                    const float v = float(operand->at(d.worldOf(first + openvdb::Coord(i, j, k))));
+                    lo = std::min(lo, v);
+                    hi = std::max(hi, v);
+                }
+        return Interval(lo, hi);
+    };
+    const GridBatch across = pointsAt(openvdb::Coord(3, 2, 9), 15, 5, 6);  // three leaves with values
+    // Their range widened by an eighth of its width either side (about a bound's: the cull keeps
+    // about the leaves a bound keeps).
+    const std::optional<Interval> held = memo->heldRange(across);
+    ASSERT_TRUE(held);
+    const Interval exact = brute(openvdb::Coord(3, 2, 9), across);
+    EXPECT_GT(exact.hi - exact.lo, 0.1);
+    EXPECT_EQ(held->lo, exact.lo - 0.125 * (exact.hi - exact.lo));
+    EXPECT_EQ(held->hi, exact.hi + 0.125 * (exact.hi - exact.lo));
+    // Past the leaves, into the leaf without values, off the voxel lattice, or at another
+    // spacing: nothing held.
+    EXPECT_FALSE(memo->heldRange(pointsAt(openvdb::Coord(20, 2, 2), 5, 3, 3)));
+    EXPECT_FALSE(memo->heldRange(pointsAt(openvdb::Coord(-1, 2, 2), 3, 3, 3)));
+    EXPECT_FALSE(memo->heldRange(pointsAt(openvdb::Coord(7, 7, 7), 2, 2, 2)));
+    GridBatch shifted = across;
+    shifted.origin += Vec3d(1e-9);
+    EXPECT_FALSE(memo->heldRange(shifted));
+    GridBatch coarse = across;
+    coarse.spacing = Vec3d(0.2);
+    EXPECT_FALSE(memo->heldRange(coarse));
+    // A solid at a level moves it as its bound; an intersection with a sphere folds the
+    // sphere's bound over the points' box in.
+    const auto below = std::make_shared<LevelSolid>(memo, SolidSide::Below, 0.25);
+    const LevelSolid above(memo, SolidSide::Above, 0.25);
+    EXPECT_EQ(below->heldRange(across)->lo, held->lo - 0.25);
+    EXPECT_EQ(above.heldRange(across)->hi, 0.25 - held->lo);
+    const auto ball = std::make_shared<Sphere>(Vec3d(1.0, 1.0, 1.0), 0.3);
+    const BooleanField cut(BooleanOp::Intersection, {below, ball});
+    const Interval folded = max(*below->heldRange(across), ball->bound(across.bounds()));
+    EXPECT_EQ(cut.heldRange(across)->lo, folded.lo);
+    EXPECT_EQ(cut.heldRange(across)->hi, folded.hi);
+    EXPECT_FALSE(BooleanField(BooleanOp::Union, {ball, ball}).heldRange(across));
+    memo->keep(false);
+    EXPECT_FALSE(memo->heldRange(across));
 }
 
 TEST(HeldGridField, APictureFromTheHeldGridMatchesOneFromTheField)

@@ -2183,15 +2183,19 @@ void expectTheHandedGridServesTheGridAtTheLevel(const FieldNode* mask)
         const Interval m = mask ? mask->bound(box) : Interval(-1.0);
         (float(m.hi) < 0.0f ? inside : float(m.lo) < 0.0f ? cut : outside) += 1;
     }
-    EXPECT_GT(inside, 100);
+    EXPECT_GT(inside, 50);
     EXPECT_GT(cut, mask ? 100 : -1);
     EXPECT_LE(counted->batches.load(), outside);
     counted->seen = nullptr;
     EXPECT_EQ(needless.load(), 0);
+    // At the level, the held values decide the leaves they hold with their ring (heldRange): a
+    // leaf whose voxels all lie on one side is a tile, the same to the mesher; its bound straddled.
     const auto atLevel = evaluateSparse(*solid, d, stacked);
     const auto expected = fresh(s.level);
-    ASSERT_EQ(atLevel->tree().leafCount(), expected->tree().leafCount());
-    EXPECT_EQ(mismatchedVoxels(*expected, *atLevel), 0u);
+    std::uint64_t leftOut = 0;
+    EXPECT_EQ(heldCullMismatches(*expected, *atLevel, &leftOut), 0u);
+    EXPECT_GT(leftOut, 0u);
+    EXPECT_LT(atLevel->tree().leafCount(), expected->tree().leafCount());
     // The band's drop: a grid at its ends reads held leaves only; one far outside evaluates.
     memo->dropOutside(told);
     for (const double level : {told.lo, told.hi, told.hi + 0.3}) {
@@ -2206,8 +2210,7 @@ void expectTheHandedGridServesTheGridAtTheLevel(const FieldNode* mask)
         }
         const auto grid = evaluateSparse(*moved, d, stacked);
         const auto want = fresh(level);
-        ASSERT_EQ(grid->tree().leafCount(), want->tree().leafCount()) << level;
-        EXPECT_EQ(mismatchedVoxels(*want, *grid), 0u) << level;
+        EXPECT_EQ(heldCullMismatches(*want, *grid), 0u) << level;
     }
     // The last evaluation (consumeLeaves) frees the held leaves of every stack it asks for as
     // it takes them: the same grid, and none of its leaves still held after it. Evaluated once
@@ -2221,14 +2224,13 @@ void expectTheHandedGridServesTheGridAtTheLevel(const FieldNode* mask)
     const std::size_t before = allocated().size();
     memo->consumeLeaves();
     const auto last = evaluateSparse(*solid, d, stacked);
-    ASSERT_EQ(last->tree().leafCount(), expected->tree().leafCount());
-    EXPECT_EQ(mismatchedVoxels(*expected, *last), 0u);
+    EXPECT_EQ(heldCullMismatches(*expected, *last), 0u);
     const std::set<std::array<int, 3>> after = allocated();
     EXPECT_GT(before - after.size(), 100u);
     for (auto leaf = last->tree().cbeginLeaf(); leaf; ++leaf)
         EXPECT_FALSE(after.contains({leaf->origin().x(), leaf->origin().y(), leaf->origin().z()})) << leaf->origin();
     const auto again = evaluateSparse(*solid, d, stacked);
-    EXPECT_EQ(mismatchedVoxels(*expected, *again), 0u);
+    EXPECT_EQ(heldCullMismatches(*expected, *again), 0u);
     memo->keep(false);
 }
 }  // namespace
@@ -2570,9 +2572,12 @@ TEST(GridValueMemo, AFrameBoxSolvedOnTheJobsVoxelsHandsTheGridItsValues)
         given << level;
         Job fresh(parseRecipe(head + "level: " + given.str() + "}\nresult: lattice\n", "given.yaml", "."));
         for (Job* job : {solved.get(), single.get()}) {
+            // The solve's held values decide the leaves they hold on one side (heldRange): tiles
+            // of the same signs, every other leaf bit for bit.
             const openvdb::FloatGrid &a = job->grid(), &b = fresh.grid();
-            ASSERT_EQ(a.tree().leafCount(), b.tree().leafCount());
-            EXPECT_EQ(mismatchedVoxels(a, b), 0u) << domain;
+            EXPECT_EQ(heldCullMismatches(b, a), 0u) << domain;
+            EXPECT_EQ(mismatchedVoxels(a, solved->grid()), 0u) << domain;
+            EXPECT_EQ(a.tree().leafCount(), solved->grid().tree().leafCount()) << domain;
             EXPECT_GT(a.tree().leafCount(), 100u);
         }
         EXPECT_NEAR(bruteForceShare(*solved->field("lattice"), Box3{Vec3d(0.0), Vec3d(8.0)}, 80), 0.20, 0.005 * 0.20)

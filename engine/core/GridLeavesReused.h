@@ -18,15 +18,23 @@
 
 namespace voxlat {
 
+/// The voxel of @a domain whose centre is @a points' origin, bit for bit (domain.worldOf()), into
+/// @a ijk; false when it is none or the spacing is not the voxel.
+inline bool gridPointIndex(const Domain& domain, const GridBatch& points, openvdb::Coord& ijk)
+{
+    if (points.spacing != Vec3d(domain.voxel)) return false;
+    for (int a = 0; a < 3; ++a) ijk[a] = int(std::lround((points.origin[a] - domain.box.min[a]) / domain.voxel - 0.5));
+    return domain.worldOf(ijk) == points.origin;
+}
+
 /// The index of the first leaf of @a batch as evaluateSparse() on @a domain makes it (8 x 8 x 8m
 /// points: a leaf, or a stack of m leaves along z; spacing the voxel; origin domain.worldOf() of
 /// a leaf's origin bit for bit) into @a ijk; false when it is no leaf's or stack's batch.
 inline bool gridLeafOrigin(const Domain& domain, const GridBatch& batch, openvdb::Coord& ijk)
 {
     constexpr int n = int(openvdb::FloatGrid::TreeType::LeafNodeType::DIM);
-    if (batch.nx != n || batch.ny != n || batch.nz % n != 0 || batch.spacing != Vec3d(domain.voxel)) return false;
-    for (int a = 0; a < 3; ++a) ijk[a] = int(std::lround((batch.origin[a] - domain.box.min[a]) / domain.voxel - 0.5));
-    return ((ijk.x() | ijk.y() | ijk.z()) & (n - 1)) == 0 && domain.worldOf(ijk) == batch.origin;
+    if (batch.nx != n || batch.ny != n || batch.nz % n != 0) return false;
+    return gridPointIndex(domain, batch, ijk) && ((ijk.x() | ijk.y() | ijk.z()) & (n - 1)) == 0;
 }
 
 /// Replaces each leaf of @a grid for which @a drop(leaf) is true (decided in parallel) by a

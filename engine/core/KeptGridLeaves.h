@@ -13,6 +13,7 @@
 #include <cmath>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <span>
 
 namespace voxlat {
@@ -76,6 +77,24 @@ public:
             if (lo[a] > hi[a]) return false;
         }
         return heldValuesMeet(*mGrid, openvdb::CoordBBox(lo, hi), band);
+    }
+
+    /// The range of the held values at @a points (the grid's voxels, spacing its voxel), when
+    /// leaves with values hold every one of them, widened by an eighth of its width either side:
+    /// a cull then keeps fewer leaves than a bound over the points' box keeps (W2g's 50 mm
+    /// frames: 247 of 261, 150 of 161 and 144 of 152 thousand), not every one whose voxels meet
+    /// or nearly meet a band. Its values are read back by those that interpolate between voxels:
+    /// report.html's picture evaluates the field in tiles (the wireframe's 0.29 -> 0.85 s with
+    /// the range unwidened, 0.44 s widened).
+    std::optional<Interval> heldRange(const GridBatch& points) const override
+    {
+        openvdb::Coord lo;
+        if (!gridPointIndex(mDomain, points, lo)) return std::nullopt;
+        const std::optional<Interval> held = heldValuesRange(
+            *mGrid, openvdb::CoordBBox(lo, lo + openvdb::Coord(points.nx - 1, points.ny - 1, points.nz - 1)));
+        if (!held) return std::nullopt;
+        const double half = 0.125 * (held->hi - held->lo);
+        return Interval(held->lo - half, held->hi + half);
     }
 
 private:

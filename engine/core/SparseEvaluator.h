@@ -7,6 +7,8 @@
 
 #include <openvdb/openvdb.h>
 
+#include <optional>
+
 #include <cmath>
 #include <cstdint>
 #include <functional>
@@ -41,6 +43,11 @@ private:
 /// Whether the values of @a grid's leaves at the voxels in @a voxels prove @a band met (BandMet):
 /// FieldNode::meets() for a node holding a grid of its values (KeptGridLeaves).
 bool heldValuesMeet(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& voxels, const Interval& band);
+
+/// The range of the values of @a grid's leaves at the voxels in @a voxels, when leaves with values
+/// hold every one of them (std::nullopt otherwise): FieldNode::heldRange() for a node holding a
+/// grid of its values (KeptGridLeaves).
+std::optional<Interval> heldValuesRange(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& voxels);
 
 /// A field's values already known at every stride-th voxel (a density solve's coarse pass): sample
 /// (i, j, k) is the value at the voxel centre of index origin + stride (i, j, k), within @a error

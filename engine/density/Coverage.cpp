@@ -206,7 +206,8 @@ CoverageSamples coverageSamples(const openvdb::FloatGrid& grid, const openvdb::C
 
 StraddlingSamples straddlingSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, double a,
                                     double b, float reach, const std::function<void()>& interrupt,
-                                    const std::function<void(std::size_t samples)>& beforeHolding)
+                                    const std::function<void(std::size_t samples)>& beforeHolding,
+                                    const Interval& countBand)
 {
     std::vector<const Leaf*> leaves;
     grid.tree().getNodes(leaves);
@@ -214,24 +215,32 @@ StraddlingSamples straddlingSamples(const openvdb::FloatGrid& grid, const openvd
     constexpr std::size_t kChunk = 64;
     const std::size_t chunks = (leaves.size() + kChunk - 1) / kChunk;
     std::vector<CoverageSamples> parts(chunks);
-    std::vector<std::uint64_t> belowPerChunk(chunks, 0);
+    std::vector<std::array<std::uint64_t, 3>> countsPerChunk(chunks, {0, 0, 0});  // below, count's below, within
     const float lo = float(a - double(reach)), hi = float(b + double(reach));
+    const float countLo = float(countBand.lo), countHi = float(countBand.hi);
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1), [&](const auto& range) {
         auto acc = grid.getConstAccessor();
         for (std::size_t c = range.begin(); c != range.end(); ++c) {
             if (interrupt) interrupt();
             CoverageSamples& part = parts[c];
-            std::uint64_t below = 0;
+            std::uint64_t below = 0, countBelow = 0, countWithin = 0;
             const std::size_t end = std::min(leaves.size(), (c + 1) * kChunk);
             for (std::size_t n = c * kChunk; n != end; ++n) {
                 const Leaf& leaf = *leaves[n];
                 const float* data = leaf.buffer().data();
                 const openvdb::Coord origin = leaf.origin();
-                // The voxels below the band, counted by value (as countBelow would).
+                // The voxels below the band, counted by value (as countBelow would), and the
+                // count's split of countBand.
+                auto count = [&](float v) {
+                    below += v < lo;
+                    countBelow += v < countLo;
+                    countWithin += !(v < countLo) && v <= countHi;
+                };
                 if (region.isInside(openvdb::CoordBBox(origin, origin + openvdb::Coord(7)))) {
-                    for (int i = 0; i < 512; ++i) below += data[i] < lo;
+                    for (int i = 0; i < 512; ++i) count(data[i]);
                 } else {
-                    for (int i = 0; i < 512; ++i) below += data[i] < lo && region.isInside(leaf.offsetToGlobalCoord(i));
+                    for (int i = 0; i < 512; ++i)
+                        if (region.isInside(leaf.offsetToGlobalCoord(i))) count(data[i]);
                 }
                 leafBand(leaf, acc, lo, hi, region, region, [&](float v, const std::array<double, 3>& d) {
                     const CoverageSample sample = coverageSample(v, d);
@@ -248,14 +257,16 @@ StraddlingSamples straddlingSamples(const openvdb::FloatGrid& grid, const openvd
                     }
                 });
             }
-            belowPerChunk[c] = below;
+            countsPerChunk[c] = {below, countBelow, countWithin};
         }
     });
     StraddlingSamples found;
     std::size_t total = 0;
     for (std::size_t c = 0; c < chunks; ++c) {
         total += parts[c].size();
-        found.fullyBelow += belowPerChunk[c];
+        found.fullyBelow += countsPerChunk[c][0];
+        found.countBelow += countsPerChunk[c][1];
+        found.countWithin += countsPerChunk[c][2];
     }
     if (beforeHolding) beforeHolding(total);
     found.samples.reserve(total);

@@ -6,6 +6,7 @@
 
 #include "engine/core/DefaultInitVector.h"
 #include "engine/core/Domain.h"
+#include "fields/core/Interval.h"
 
 #include <openvdb/openvdb.h>
 
@@ -70,6 +71,8 @@ struct StraddlingSamples {
     /// The region's leaf voxels covered whole over [a, b]: ramp ending at or below a, or valued
     /// below a - reach (taken by value, as coverageSamples()' callers take the voxels below its band).
     std::uint64_t fullyBelow = 0;
+    /// The region's leaf voxels valued below countBand.lo, and within it (splitByBand()'s count).
+    std::uint64_t countBelow = 0, countWithin = 0;
 };
 
 /// The samples a bisection over [@a a, @a b] reads, and the voxels it counts as covered: the
@@ -79,9 +82,12 @@ struct StraddlingSamples {
 /// 37-42 % of what coverageSamples(level -+ reach) holds (W2g's 50 mm trimmed frame: 7.1 of 19.3
 /// million; its cylinder frame 7.9 of 18.6). One pass over the leaves in fixed chunks, joined in leaf order: the same
 /// samples for any thread count. @a beforeHolding is called with their count before they are joined.
+/// The same pass counts the leaf voxels below and within @a countBand (floats, as splitByBand()
+/// compares them).
 StraddlingSamples straddlingSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, double a,
                                     double b, float reach, const std::function<void()>& interrupt = {},
-                                    const std::function<void(std::size_t samples)>& beforeHolding = {});
+                                    const std::function<void(std::size_t samples)>& beforeHolding = {},
+                                    const Interval& countBand = Interval(0.0));
 
 /// Voxels below @a level counted with sub-voxel coverage: a voxel whose value is within half a
 /// step of the level is partly inside, linearly in the distance (a plane cutting the voxel).

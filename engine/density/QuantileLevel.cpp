@@ -347,6 +347,20 @@ BandSplit streamedSplit(const FieldNode& g, const Domain& domain, const openvdb:
 
 }  // namespace
 
+/// What a coverage solve measured over its bracket first (solveDensity's coverBracket()).
+struct BracketCoverage {
+    float widest = 0.0f;   ///< the widest voxel step of the bracket's voxels
+    bool stepped = false;  ///< widest is a step (positive, finite)
+    /// The evaluated band holds the bracket grown by widest either side: the samples were taken.
+    bool measured = false;
+    StraddlingSamples straddling;
+    std::uint64_t bracketBelow = 0;  ///< voxels covered whole at every level of the bracket
+    /// splitByBand()'s count over the bracket: the voxels below it and within it.
+    std::uint64_t countBelow = 0, countInBracket = 0;
+    bool bracketed = false;  ///< the bracket's ends' coverage holds the target between them
+    double slope = 0.0;      ///< covered voxels per unit of level across the bracket
+};
+
 DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain, double target, const FieldNode* mask,
                              bool subVoxel, const JobContext* context, int marginVoxels,
                              const std::function<void(Interval)>& levelWithin, int stackLeaves,
@@ -426,6 +440,51 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             << " MB this machine can give: raise `voxel:` (memory grows as 1/voxel^2) or shrink the domain";
         throw JobError(msg.str());
     };
+    // The coverage's first steps over a bracket of a coverage solve's grid (evaluated over the
+    // band @a evaluatedBand). The bracket (a share of the voxels) can be far narrower than a
+    // voxel's change, and the coverage of the voxels just outside it then never reaches the
+    // target: a voxel is partly inside while the level is within half its step of its value.
+    // (Capsule struts, a distance field, in a 30 mm box: the bracket is a tenth of a step wide,
+    // and the level stopped at its end holding 0.0974 by this measure for 0.1 asked while the
+    // solid held 0.103.) So the widest voxel step about the bracket is measured first.
+    // The count's bracket (a percent of the density either side of the target) holds the
+    // coverage's level too unless the two measures differ by more: bisect there, over the
+    // voxels whose coverage changes within it alone, the others counted or left out as
+    // their step is taken (a 50 mm trimmed frame: 7.1 million samples held instead of the
+    // 19.3 million the band of the widest step either side of the level holds). Voxels
+    // valued more than the widest step outside the bracket are taken by their value, as
+    // the wide band below takes those outside it. Checked: the bracket's ends hold the
+    // target between them, or the wide band below is measured instead.
+    auto coverBracket = [&](const openvdb::FloatGrid& grid, const Interval& bracket, const Interval& evaluatedBand) {
+        BracketCoverage c;
+        c.widest = widestCoverageStep(grid, region, float(bracket.lo), float(bracket.hi), interrupt);
+        c.stepped = c.widest > 0.0f && c.widest < 1e29f;
+        if (!c.stepped || bracket.lo <= -1e30 || bracket.hi >= 1e30 || evaluatedBand.lo > bracket.lo - c.widest ||
+            bracket.hi + c.widest > evaluatedBand.hi)
+            return c;
+        c.measured = true;
+        c.straddling = straddlingSamples(
+            grid, region, bracket.lo, bracket.hi, c.widest, interrupt,
+            [&](std::size_t n) {
+                // Held in parts, then joined: twice, for a moment.
+                holding(sol.evaluatedLeaves, 2 * n * sizeof(CoverageSample), "coverage samples");
+            },
+            Interval(float(bracket.lo), float(bracket.hi)));
+        c.bracketBelow = countTilesBelow(grid, region, float(bracket.lo - c.widest)) + c.straddling.fullyBelow;
+        c.countBelow = countTilesBelow(grid, region, float(bracket.lo)) + c.straddling.countBelow;
+        c.countInBracket = c.straddling.countWithin;
+        const std::array<double, 2> ends{bracket.lo, bracket.hi};
+        std::array<double, 2> coveredAt{};
+        coveredVoxels(c.straddling.samples, ends, coveredAt);
+        if (double(c.bracketBelow) + coveredAt[0] <= double(wanted) &&
+            double(c.bracketBelow) + coveredAt[1] >= double(wanted)) {
+            c.bracketed = true;
+            // The secant across the whole bracket (a percent of the density either side): its
+            // middle half alone, the bisection's own, is noisier where values tie.
+            c.slope = (coveredAt[1] - coveredAt[0]) / (bracket.hi - bracket.lo);
+        }
+        return c;
+    };
     // Widen the bracket until the exact quantile falls inside it (usually the first round; the
     // last round brackets every value).
     for (const double margin : {0.01, 0.05, 1.0}) {
@@ -461,23 +520,42 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
         // for, masked, or value ties below) needs the grid, and evaluates it then.
         openvdb::FloatGrid::Ptr grid;
         BandSplit split;
+        // The coverage over the bracket (coverBracket() below), measured up front by a sub-voxel
+        // solve: when it brackets the target, the count's split of the bracket (its values, their
+        // selection) is not made; the count's test that the bracket holds the target is taken
+        // from the same pass (W2g's 50 mm trimmed frame: the split and its selection were 4 % of
+        // the run's CPU).
+        std::optional<BracketCoverage> early;
         if (!masked && !subVoxel) {
             split = streamedSplit(indicator, domain, region, options, sol.evaluatedLeaves);
             holding(sol.evaluatedLeaves, split.band.size() * sizeof(float), "values of its bracket");
         } else {
             grid = evaluateSparse(indicator, domain, evaluated);
             sol.evaluatedLeaves = grid->tree().leafCount();
-            split = splitByBand(*grid, region, float(options.band.lo), float(options.band.hi), interrupt);
-            holding(sol.evaluatedLeaves, split.band.size() * sizeof(float), "values of its bracket");
+            if (subVoxel) {
+                early = coverBracket(*grid, options.band, evaluated.band);
+                if (early->measured &&
+                    (wanted < early->countBelow || wanted > early->countBelow + early->countInBracket))
+                    continue;
+            }
+            if (!early || !early->bracketed) {
+                // Only the widest step is read past here: the samples go before the split is made.
+                if (early) CoverageSamples().swap(early->straddling.samples);
+                split = splitByBand(*grid, region, float(options.band.lo), float(options.band.hi), interrupt);
+                holding(sol.evaluatedLeaves, split.band.size() * sizeof(float), "values of its bracket");
+            }
         }
+        const bool counted = !(early && early->bracketed);
         const std::uint64_t below = split.below;
         DefaultInitVector<float>& band = split.band;
-        if (wanted < below || wanted > below + band.size()) continue;
+        if (counted && (wanted < below || wanted > below + band.size())) continue;
 
         // A level with exactly `wanted` values below it: between the m-th and (m+1)-th smallest
         // bracketed values (all values below the bracket are below it, all above are above).
-        const std::size_t m = wanted - below;
-        if (m == 0) {
+        const std::size_t m = counted ? wanted - below : 0;
+        if (!counted) {
+            // Bisected over the bracket below: the count's level is not needed.
+        } else if (m == 0) {
             sol.level = options.band.lo;
         } else if (m == band.size()) {
             sol.level = std::nextafter(float(options.band.hi), std::numeric_limits<float>::max());
@@ -511,47 +589,17 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             CoverageSamples samples;
             double a = options.band.lo, b = std::min(options.band.hi, 1e30);
             std::uint64_t fullyBelow = below;
-            // The bracket (a share of the voxels) can be far narrower than a voxel's change, and
-            // the coverage of the voxels just outside it then never reaches the target: a voxel
-            // is partly inside while the level is within half its step of its value. (Capsule
-            // struts, a distance field, in a 30 mm box: the bracket is a tenth of a step wide,
-            // and the level stopped at its end holding 0.0974 by this measure for 0.1 asked while
-            // the solid held 0.103.) Widen the band to the largest step either side and measure again.
-            const float widest =
-                widestCoverageStep(*grid, region, float(options.band.lo), float(options.band.hi), interrupt);
-            const bool stepped = widest > 0.0f && widest < 1e29f;
-            // The count's bracket (a percent of the density either side of the target) holds the
-            // coverage's level too unless the two measures differ by more: bisect there, over the
-            // voxels whose coverage changes within it alone, the others counted or left out as
-            // their step is taken (a 50 mm trimmed frame: 7.1 million samples held instead of the
-            // 19.3 million the band of the widest step either side of the level holds). Voxels
-            // valued more than the widest step outside the bracket are taken by their value, as
-            // the wide band below takes those outside it. Checked: the bracket's ends hold the
-            // target between them, or the wide band below is measured instead.
-            bool bracketed = false;
-            double bracketSlope = 0.0;  // covered voxels per unit of level across the bracket
-            if (stepped && options.band.lo > -1e30 && options.band.hi < 1e30 &&
-                evaluated.band.lo <= options.band.lo - widest && options.band.hi + widest <= evaluated.band.hi) {
-                StraddlingSamples straddling = straddlingSamples(
-                    *grid, region, options.band.lo, options.band.hi, widest, interrupt, [&](std::size_t n) {
-                        // Held in parts, then joined: twice, for a moment.
-                        holding(sol.evaluatedLeaves, 2 * n * sizeof(CoverageSample), "coverage samples");
-                    });
-                const std::uint64_t bracketBelow =
-                    countTilesBelow(*grid, region, float(options.band.lo - widest)) + straddling.fullyBelow;
-                const std::array<double, 2> ends{options.band.lo, options.band.hi};
-                std::array<double, 2> coveredAt{};
-                coveredVoxels(straddling.samples, ends, coveredAt);
-                if (double(bracketBelow) + coveredAt[0] <= double(wanted) &&
-                    double(bracketBelow) + coveredAt[1] >= double(wanted)) {
-                    bracketed = true;
-                    // The secant across the whole bracket (a percent of the density either side): its
-                    // middle half alone, the bisection's own, is noisier where values tie.
-                    bracketSlope = (coveredAt[1] - coveredAt[0]) / (options.band.hi - options.band.lo);
-                    samples = std::move(straddling.samples);
-                    fullyBelow = bracketBelow;
-                    if (levelWithin) levelWithin(options.band);
-                }
+            // Bisected over the bracket when its coverage holds the target (coverBracket()); else
+            // over the band of the widest step either side of the count's level, measured again.
+            BracketCoverage cover = early ? std::move(*early) : coverBracket(*grid, options.band, evaluated.band);
+            const float widest = cover.widest;
+            const bool stepped = cover.stepped;
+            const bool bracketed = cover.bracketed;
+            const double bracketSlope = cover.slope;  // covered voxels per unit of level across the bracket
+            if (bracketed) {
+                samples = std::move(cover.straddling.samples);
+                fullyBelow = cover.bracketBelow;
+                if (levelWithin) levelWithin(options.band);
             }
             if (bracketed) {
                 // a, b: the bracket already.

@@ -17,6 +17,7 @@
 #include <memory>
 #include <memory_resource>
 #include <mutex>
+#include <optional>
 #include <span>
 #include <unordered_map>
 #include <vector>
@@ -47,6 +48,12 @@ public:
         (void)box;
         (void)band;
         return false;
+    }
+    /// FieldNode::heldRange() from the values held (none: std::nullopt).
+    virtual std::optional<Interval> heldRange(const GridBatch& points) const
+    {
+        (void)points;
+        return std::nullopt;
     }
 };
 
@@ -90,6 +97,11 @@ public:
     Interval bound(const Box3& box) const override;
     /// From the leaves kept (keepLeaves()), when they hold values inside @a box that prove it.
     bool meets(const Box3& box, const Interval& band) const override;
+    /// From the leaves kept (keepLeaves()), when they hold every point of @a points.
+    std::optional<Interval> heldRange(const GridBatch& points) const override
+    {
+        return mLeaves ? mLeaves->heldRange(points) : std::nullopt;
+    }
     /// The operand's planeValues (a slicer's planes are never kept); while keeping, gridValues
     /// with every tile 0.
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,

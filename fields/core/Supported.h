@@ -38,6 +38,7 @@ public:
     }
     Interval bound(const Box3& box) const override { return mChild->bound(box); }
     bool meets(const Box3& box, const Interval& band) const override { return mChild->meets(box, band); }
+    std::optional<Interval> heldRange(const GridBatch& points) const override { return mChild->heldRange(points); }
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
                      std::span<signed char> side, std::span<const TileNeed> need) const override
     {

@@ -136,7 +136,18 @@ bool LevelSolid::planeCheap() const
 Interval LevelSolid::bound(const Box3& box) const
 {
     requireSolved();
-    const Interval r = mRaw->bound(box);
+    return atLevel(mRaw->bound(box));
+}
+
+std::optional<Interval> LevelSolid::heldRange(const GridBatch& points) const
+{
+    requireSolved();
+    const std::optional<Interval> r = mRaw->heldRange(points);
+    return r ? std::optional(atLevel(*r)) : std::nullopt;
+}
+
+Interval LevelSolid::atLevel(const Interval& r) const
+{
     switch (mSide) {
         case SolidSide::Below:
             return r - mLevel;

@@ -28,6 +28,8 @@ public:
     Interval bound(const Box3& box) const override;
     /// The raw field's meets() over the band moved by the level (a sheet's |raw|: nothing known).
     bool meets(const Box3& box, const Interval& band) const override;
+    /// The raw field's heldRange() moved by the level as bound() moves its bound.
+    std::optional<Interval> heldRange(const GridBatch& points) const override;
     /// The raw field's planeValues with the band moved by the level (a network or a level above;
     /// a sheet and raw fields without them take gridValues, every tile 0).
     void planeValues(const GridBatch& plane, int tile, Interval band, std::span<double> out,
@@ -60,6 +62,8 @@ public:
     double levelFromIndicator(double indicatorLevel) const;
 
 private:
+    /// A range of the raw field's values as this node's: moved by the level on its side.
+    Interval atLevel(const Interval& raw) const;
     /// Throws std::logic_error when the level is used before solve().
     void requireSolved() const
     {

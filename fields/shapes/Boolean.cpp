@@ -209,9 +209,30 @@ double BooleanField::period(int axis) const
 
 Interval BooleanField::bound(const Box3& box) const
 {
-    Interval r = mOperands[0]->bound(box);
+    return foldRanges([&](const FieldNode& operand) { return operand.bound(box); });
+}
+
+std::optional<Interval> BooleanField::heldRange(const GridBatch& points) const
+{
+    std::vector<std::optional<Interval>> held(mOperands.size());
+    bool any = false;
+    for (std::size_t o = 0; o < mOperands.size(); ++o) any = (held[o] = mOperands[o]->heldRange(points)) || any;
+    if (!any) return std::nullopt;
+    // The points lie in their box: an operand's bound there holds at each of them.
+    const Box3 box = points.bounds();
+    std::size_t o = 0;
+    return foldRanges([&](const FieldNode& operand) {
+        const std::optional<Interval>& h = held[o++];
+        return h ? *h : operand.bound(box);
+    });
+}
+
+template <class Of>
+Interval BooleanField::foldRanges(Of of) const
+{
+    Interval r = of(*mOperands[0]);
     for (std::size_t o = 1; o < mOperands.size(); ++o) {
-        const Interval b = mOperands[o]->bound(box);
+        const Interval b = of(*mOperands[o]);
         switch (mOp) {
             case BooleanOp::Union:
                 r = min(r, b);

@@ -30,6 +30,9 @@ public:
     /// most band.hi. False otherwise: the cull then takes the bound, which meets the band in every
     /// case this proves (max and min of the operands' bounds, as bound() folds them).
     bool meets(const Box3& box, const Interval& band) const override;
+    /// When an operand holds its values at @a points (heldRange()): the operands' held ranges,
+    /// or their bounds over the points' box where they hold none, folded as bound() folds them.
+    std::optional<Interval> heldRange(const GridBatch& points) const override;
     /// The operands' planeValues, the cheap ones first (planeCheap): a tile one operand proves on
     /// the side that decides (a union's below, an intersection's or a difference's above) is
     /// skipped by the operands after it; one every operand proves on the other side (by the
@@ -50,6 +53,10 @@ public:
     double blendRadius() const { return mBlend; }
 
 private:
+    /// The operands' ranges (@a of each) folded by the operation and the blend.
+    template <class Of>
+    Interval foldRanges(Of of) const;
+
     /// Combines accumulated value a (gradient ga) with operand b (gradient gb) in place.
     void combine(double& a, Vec3d* ga, double b, const Vec3d* gb) const;
     /// Folds operand @a o's values @a b (n of them) into @a out, as gridValues does.
