@@ -166,17 +166,43 @@ std::optional<Interval> heldValuesRange(const openvdb::FloatGrid& grid, const Co
         return false;
     });
     if (missing) return std::nullopt;
-    float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+    // Whole rows of eight (a whole leaf's, a face's across z) in eight lanes, one per z:
+    // independent chains the compiler keeps in registers; a face across z one value at a time.
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    std::array<float, 8> los, his;
+    los.fill(kInf);
+    his.fill(-kInf);
+    float lo = kInf, hi = -kInf;
+    auto rows = [&](const float* data, int first, int count, int stride) {
+        for (int r = 0; r < count; ++r) {
+            const float* row = data + first + r * stride;
+            for (std::size_t k = 0; k < 8; ++k) {
+                los[k] = row[k] < los[k] ? row[k] : los[k];
+                his[k] = row[k] > his[k] ? row[k] : his[k];
+            }
+        }
+    };
     for (std::size_t n = 0; n < count; ++n) {
         const auto& [data, part] = held[n];
+        const int k0 = part.min().z() & 7, k1 = part.max().z() & 7;
+        if (k0 == 0 && k1 == 7) {
+            // Rows of eight: the whole leaf (64 in turn), a face across x or y, an edge along z.
+            for (int i = part.min().x(); i <= part.max().x(); ++i)
+                rows(data, ((i & 7) << 6) | ((part.min().y() & 7) << 3), part.max().y() - part.min().y() + 1, 8);
+            continue;
+        }
         for (int i = part.min().x(); i <= part.max().x(); ++i)
             for (int j = part.min().y(); j <= part.max().y(); ++j) {
                 const float* row = data + (((i & 7) << 6) | ((j & 7) << 3));
-                for (int k = part.min().z() & 7; k <= (part.max().z() & 7); ++k) {
-                    lo = std::min(lo, row[k]);
-                    hi = std::max(hi, row[k]);
+                for (int k = k0; k <= k1; ++k) {
+                    lo = row[k] < lo ? row[k] : lo;
+                    hi = row[k] > hi ? row[k] : hi;
                 }
             }
+    }
+    for (std::size_t k = 0; k < 8; ++k) {
+        lo = std::min(lo, los[k]);
+        hi = std::max(hi, his[k]);
     }
     // A value that is no number (never held: the evaluator refuses them) leaves it unproven.
     if (!(lo <= hi)) return std::nullopt;
