@@ -124,9 +124,14 @@ TEST(Coverage, StraddlingSamplesCoverTheBracketAsTheBandOfItsWidestStepEitherSid
         StraddlingSamples found;
         for (int threads : {1, 2}) {
             tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::size_t(threads));
-            StraddlingSamples again =
-                straddlingSamples(*grid, region, a, b, reach, {}, [&](std::size_t n) { told = n; });
+            StraddlingSamples again = straddlingSamples(
+                *grid, region, a, b, reach, {}, [&](std::size_t n) { told = n; }, Interval(float(a), float(b)));
             EXPECT_EQ(told, again.samples.size()) << a;
+            // The same pass's count of the bracket: splitByBand()'s below (its leaves) and band.
+            const BandSplit split = splitByBand(*grid, region, float(a), float(b));
+            EXPECT_EQ(countTilesBelow(*grid, region, float(a)) + again.countBelow, split.below) << a;
+            EXPECT_EQ(again.countWithin, split.band.size()) << a;
+            EXPECT_GT(again.countWithin, 100u) << a;
             if (threads == 1) {
                 found = std::move(again);
                 continue;
