@@ -123,12 +123,11 @@ double cutoffReach(double rc)
     return rc * (1.0 + 1e-6) + 1e-12;
 }
 
-/// The columns (x index i) of a plane batch (nz = 1) that may hold points within @a rc of the
-/// segment @a s (planeSpan); false when none may.
-bool planeColumns(const GaussianSegment& s, double rc, const GridBatch& batch, int& iFirst, int& iLast)
+/// The columns (x index i) of a plane batch (nz = 1) that may hold points within the part
+/// [@a xLo, @a xHi] x [@a yLo, @a yHi] of the plane within a strut's reach (planeSpan); false when
+/// none may.
+bool planeColumns(double xLo, double xHi, double yLo, double yHi, const GridBatch& batch, int& iFirst, int& iLast)
 {
-    double xLo, xHi, yLo, yHi;
-    if (!planeSpan(s, cutoffReach(rc), batch.origin.z(), xLo, xHi, yLo, yHi)) return false;
     const double by0 = batch.origin.y(), by1 = batch.origin.y() + (batch.ny - 1) * batch.spacing.y();
     if (yHi < std::min(by0, by1) || yLo > std::max(by0, by1)) return false;
     const double ox = batch.origin.x(), dx = batch.spacing.x();
@@ -290,13 +289,25 @@ void StrutConvolution::exactGridValues(const GridBatch& batch, std::span<double>
 }
 
 void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, const std::vector<std::uint32_t>& cand,
-                                const std::uint64_t* columnTiles, int tile) const
+                                const std::uint64_t* columnTiles, int tile, const double* spans) const
 {
     constexpr int kShortRow = 16;  // the longest rows counted as a pixel's sub-samples
     std::fill(out.begin(), out.begin() + batch.size(), 0.0);
     // A plane's column that makes no points (planeValues: interpolated, or far from every open
     // tile): its rows are empty, and neither their ranges nor their tables are sought.
     auto makesNoPoints = [columnTiles](int i) { return columnTiles && columnTiles[i] == 0; };
+    // A plane's columns that make points are a few of its columns (every fourth where
+    // planeValues interpolates the others): pointColumn[i] is the first of them at or after
+    // column i (nx: none), so the loops over a strut's columns below visit only those, not the
+    // columns between them (the same rows and sums; a third of the rows' set-up went to walking
+    // past empty columns on W10's plate).
+    thread_local std::vector<int> pointColumn;
+    if (columnTiles) {
+        pointColumn.resize(std::size_t(batch.nx) + 1);
+        pointColumn[std::size_t(batch.nx)] = batch.nx;
+        for (int i = batch.nx - 1; i >= 0; --i)
+            pointColumn[std::size_t(i)] = columnTiles[i] != 0 ? i : pointColumn[std::size_t(i) + 1];
+    }
     // Rows run along z (k, the fastest index). A plane of points (nz = 1, a slicer's layer) has
     // rows of one point, where the row machinery below costs more than the point: there the rows
     // run along y instead. The batch is seen with y and z swapped (the output's layout, i * ny + j,
@@ -343,6 +354,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
     // row loops stay four lanes wide).
     const bool avx512 = avx2 && hasAvx512Rows();
     const double dx = spacing.x(), dy = spacing.y(), dz = spacing.z();
+    std::size_t candIndex = 0;
     // Strut-outer, point-inner: each point still sums its struts in ascending index order. Along
     // a row (k) h is linear and r^2 quadratic in k, so exp(-r^2 / 2 sigma^2) follows from two
     // exponentials per row by the recurrence E(k+1) = E(k) R(k), R(k+1) = R(k) Q (a few ulps of
@@ -350,12 +362,21 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
     for (const std::uint32_t j : cand) {
         const GaussianSegment& s = mSegments[j];
         const double rc2 = mCutoffSqr[j];
+        const double* planeSpanOf = spans ? spans + 4 * candIndex++ : nullptr;
         // A plane batch (a slicer's layer) sees a strut only near where it crosses the plane:
         // the columns beyond its reach there are left out before their rows' ranges are sought
         // (the gather's bins hold every strut whose box meets the batch's, most of them not
         // within reach of the plane). Their points would all fail the cut-off test: the same sums.
+        // The part of the plane within the strut's reach (planeSpan; planeValues' own, @a spans).
         int iFirst = 0, iLast = nx - 1;
-        if (batch.nz == 1 && !planeColumns(s, std::sqrt(rc2), batch, iFirst, iLast)) continue;
+        double span[4] = {0.0, 0.0, 0.0, 0.0};
+        if (batch.nz == 1) {
+            if (planeSpanOf)
+                std::copy(planeSpanOf, planeSpanOf + 4, span);
+            else if (!planeSpan(s, cutoffReach(std::sqrt(rc2)), batch.origin.z(), span[0], span[1], span[2], span[3]))
+                continue;
+            if (!planeColumns(span[0], span[1], span[2], span[3], batch, iFirst, iLast)) continue;
+        }
         const double sigma = s.sigma, invSigma = 1.0 / sigma, inv2s2 = 0.5 / (sigma * sigma);
         const double length = s.length, w0 = s.w0, slope = s.slope, s2 = sigma * sigma;
         const Vec3d sa = seen(s.a), u = seen(s.u);
@@ -401,6 +422,11 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         const CapsuleRows capsule(u.x(), u.y(), u.z(), length, dz, rcWide2);
         // A plane's rows (one per column), a block's (a row per column and y): their ranges four
         // columns at a time (the same doubles), at column i - iFirst of row jj's run of columns.
+        // The next column at or after i whose rows a loop over the strut's columns visits:
+        // every column where pass 1 writes every row (short rows, whose Gaussians step across
+        // every column) or nothing says which make points.
+        const bool skipColumns = columnTiles && !shortRows;
+        auto columnFrom = [skipColumns](int i) { return skipColumns ? pointColumn[std::size_t(i)] : i; };
         const bool vectorRanges = avx2 && ranged && !shortRows && iFirst <= iLast;
         const std::size_t rangeRun = std::size_t(iLast - iFirst + 1) + 4;
         if (vectorRanges && columnTiles && ny == 1) {
@@ -409,7 +435,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
             rangeLo.resize(rangeRun);
             rangeHi.resize(rangeRun);
             rangeColumns.clear();
-            for (int i = iFirst; i <= iLast; ++i)
+            for (int i = columnFrom(iFirst); i <= iLast; i = columnFrom(i + 1))
                 if (!makesNoPoints(i)) rangeColumns.push_back(i);
             for (std::size_t m = 0; m < rangeColumns.size(); m += 4) {
                 double x[4], lo[4], hi[4];
@@ -436,9 +462,11 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
             }
         }
         // Pass 1: each row's range of points (kLo > kHi: none). Only the columns iFirst..iLast
-        // are read after it, but by the short rows' Gaussians across every column.
+        // are read after it, but by the short rows' Gaussians across every column; of a plane's,
+        // only the columns that make points (the others' rows are neither written nor read).
         rows.resize(std::size_t(nx) * ny);
-        for (int i = shortRows ? 0 : iFirst; i <= (shortRows ? nx - 1 : iLast); ++i) {
+        for (int i = shortRows ? 0 : columnFrom(iFirst); i <= (shortRows ? nx - 1 : iLast);
+             i = shortRows ? i + 1 : columnFrom(i + 1)) {
             const double px = d0.x() + i * dx;
             if (i < iFirst || i > iLast || makesNoPoints(i)) {
                 for (int jj = 0; jj < ny; ++jj) rows[std::size_t(i) * ny + jj] = RowRange{1, 0, 0, 0.0};
@@ -532,7 +560,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
             const double hLast = hFirst + (nx - 1) * dx * u.x() + (ny - 1) * dy * u.y();
             const double h0 = (hz > 0.0 ? std::min(hFirst, hLast) : std::max(hFirst, hLast)) - hz;
             int nLo = std::numeric_limits<int>::max(), nHi = -1;
-            for (int i = iFirst; i <= iLast; ++i) {
+            for (int i = columnFrom(iFirst); i <= iLast; i = columnFrom(i + 1)) {
                 if (makesNoPoints(i)) continue;  // empty rows (pass 1)
                 for (int jj = 0; jj < ny; ++jj) {
                     RowRange& r = rows[std::size_t(i) * ny + jj];
@@ -637,14 +665,15 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         constexpr int kSeedSpan = 16;
         bool seeded = false;
         int k0 = 0, seedBase = -1, seedAt = -1;
-        double seedE[4] = {}, seedS[4] = {}, seedP[4] = {}, seedQx = 0.0, seedT4 = 0.0;
+        double seedE[4] = {}, seedS[4] = {}, seedP[4] = {}, seedQx = 0.0, seedT = 0.0, seedT4 = 0.0;
         int kSeedEnd = nz - 1;
         if (!acrossColumns && ny == 1 && batch.nz == 1) {
             // k0 and the seeds' columns come from the batch and the strut alone (the part of the
             // plane within reach of the strut, planeSpan; a grid of columns from iFirst), never
             // from which rows a band needs: planeValues gives gridValues' doubles.
-            double xLo, xHi, yLo, yHi;
-            if (planeSpan(s, cutoffReach(std::sqrt(rc2)), batch.origin.z(), xLo, xHi, yLo, yHi)) {
+            // (span: planeSpan's, found above: a plane batch that reaches here has one.)
+            {
+                const double yLo = span[2], yHi = span[3];
                 const double oy = batch.origin.y(), sy = batch.spacing.y();
                 k0 = int(std::clamp(std::floor((yLo - oy) / sy) - 1.0, 0.0, double(nz - 1)));
                 kSeedEnd = int(std::clamp(std::ceil((yHi - oy) / sy) + 1.0, double(k0), double(nz - 1)));
@@ -657,6 +686,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                                               std::max(r2At(iLast, k0), r2At(iLast, kSeedEnd + 4)));
                 seeded = worst * inv2s2 < 600.0;
                 seedQx = std::exp(-2.0 * dx * dx * (1.0 - u.x() * u.x()) * inv2s2);
+                seedT = std::exp(2.0 * hz * dx * u.x() * inv2s2);
                 seedT4 = std::exp(8.0 * hz * dx * u.x() * inv2s2);
             }
         }
@@ -679,9 +709,8 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 // S_l = S_0 T^l: D_l = D_0 - 2 l hz dx u_x.
                 const double across =
                     2.0 * dx * (x - u.x() * hRow) + dx * dx * (1.0 - u.x() * u.x()) - 2.0 * hz * dx * u.x() * kk;
-                const double t = std::exp(2.0 * hz * dx * u.x() * inv2s2);
                 seedS[0] = std::exp(-across * inv2s2);
-                for (int l = 1; l < 4; ++l) seedS[l] = seedS[l - 1] * t;
+                for (int l = 1; l < 4; ++l) seedS[l] = seedS[l - 1] * seedT;
                 seedBase = seedAt = base;
             }
             for (; seedAt < i; ++seedAt)
@@ -710,7 +739,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         // Columns beyond the strut's reach have no row (only the columns' Gaussians across
         // them step through every column).
         const int iBegin = acrossColumns ? 0 : iFirst, iEnd = acrossColumns ? nx - 1 : iLast;
-        for (int i = iBegin; i <= iEnd; ++i) {
+        for (int i = columnFrom(iBegin); i <= iEnd; i = columnFrom(i + 1)) {
             std::size_t n = std::size_t(i) * ny * nz;
             const double px = d0.x() + i * dx;
             if (acrossColumns && i > 0)
@@ -1054,6 +1083,7 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
             }
         }
         if (reachA1 >= 0) {
+            std::copy_n(&spans[4 * n], 4, &spans[4 * kept]);  // kept <= n: spans already read
             cand[kept++] = j;
             reach.insert(reach.end(), {reachA0, reachA1, reachB0, reachB1});
         }
@@ -1097,6 +1127,7 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         for (int a = r[0]; a <= r[1] && !meets; ++a) meets = (openTiles[std::size_t(a)] & bits) != 0;
         if (meets) {
             sigmaMin = std::min(sigmaMin, mSegments[cand[n]].sigma);
+            std::copy_n(&spans[4 * n], 4, &spans[4 * kept]);
             cand[kept++] = cand[n];
         }
     }
@@ -1117,7 +1148,7 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         stencilKey = key;
     }
     if (!interpolated || stencils.stride < 2) {
-        evaluate(plane, out, cand, columnTiles.data(), tile);
+        evaluate(plane, out, cand, columnTiles.data(), tile, spans.data());
         return;
     }
     thread_local std::vector<std::uint64_t> nodeTiles;
@@ -1130,7 +1161,7 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
         }
         for (int l = 0; l < 8; ++l) nodeTiles[std::size_t(f + l * stencils.stride)] |= columnTiles[std::size_t(i)];
     }
-    evaluate(plane, out, cand, nodeTiles.data(), tile);
+    evaluate(plane, out, cand, nodeTiles.data(), tile, spans.data());
     interpolateColumns(stencils, plane.ny, columnTiles.data(), tile, out.data());
 }
 

@@ -103,9 +103,11 @@ private:
     double pointValue(const Vec3d& p, const std::vector<std::uint32_t>& cand) const;
     /// gridValues from the gathered struts @a cand; with @a columnTiles (a plane batch, seen
     /// along y), column i makes only the points of the tiles (of @a tile points) whose bits
-    /// columnTiles[i] holds and their one-point halo along y (PlaneBands' layout).
+    /// columnTiles[i] holds and their one-point halo along y (PlaneBands' layout). @a spans, when
+    /// set (a plane batch), holds per strut of @a cand the part of the plane within its reach
+    /// (xLo, xHi, yLo, yHi: planeSpan's, which evaluate() otherwise finds itself).
     void evaluate(const GridBatch& batch, std::span<double> out, const std::vector<std::uint32_t>& cand,
-                  const std::uint64_t* columnTiles, int tile) const;
+                  const std::uint64_t* columnTiles, int tile, const double* spans = nullptr) const;
     /// gridValues with every point exact.
     void exactGridValues(const GridBatch& batch, std::span<double> out) const;
 
