@@ -138,11 +138,12 @@ public:
         return false;
     }
 
-    /// The range of the values a grid would hold at the points of @a points (a box of lattice
-    /// points: origin, spacing, nx x ny x nz), when values the node already holds give all of
-    /// them (a density solve's grid of its own values kept for the grids at its level): the
-    /// sparse cull then decides a leaf from those values, not from a bound over the box between
-    /// them (a grid reads the field at its points alone). None: not all held (the default).
+    /// An interval holding every value a grid would hold at the points of @a points (a box of
+    /// lattice points: origin, spacing, nx x ny x nz), when values the node already holds give
+    /// all of them (a density solve's grid of its own values kept for the grids at its level;
+    /// their range, or wider): the sparse cull then decides a leaf from it, not from a bound
+    /// over the box between the points (a grid reads the field at its points alone). None: not
+    /// all held (the default).
     virtual std::optional<Interval> heldRange(const GridBatch& points) const
     {
         (void)points;
