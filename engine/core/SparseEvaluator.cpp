@@ -173,8 +173,8 @@ std::optional<Interval> heldValuesRange(const openvdb::FloatGrid& grid, const Co
     los.fill(kInf);
     his.fill(-kInf);
     float lo = kInf, hi = -kInf;
-    auto rows = [&](const float* data, int first, int count, int stride) {
-        for (int r = 0; r < count; ++r) {
+    auto rows = [&](const float* data, int first, int rowCount, int stride) {
+        for (int r = 0; r < rowCount; ++r) {
             const float* row = data + first + r * stride;
             for (std::size_t k = 0; k < 8; ++k) {
                 los[k] = row[k] < los[k] ? row[k] : los[k];

@@ -593,17 +593,12 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             // over the band of the widest step either side of the count's level, measured again.
             BracketCoverage cover = early ? std::move(*early) : coverBracket(*grid, options.band, evaluated.band);
             const float widest = cover.widest;
-            const bool stepped = cover.stepped;
-            const bool bracketed = cover.bracketed;
-            const double bracketSlope = cover.slope;  // covered voxels per unit of level across the bracket
-            if (bracketed) {
+            if (cover.bracketed) {
+                // a, b: the bracket already.
                 samples = std::move(cover.straddling.samples);
                 fullyBelow = cover.bracketBelow;
                 if (levelWithin) levelWithin(options.band);
-            }
-            if (bracketed) {
-                // a, b: the bracket already.
-            } else if (stepped) {
+            } else if (cover.stepped) {
                 SparseOptions wide = options;
                 wide.band = Interval(sol.level - widest, sol.level + widest);
                 // Every voxel valued within the wide band lies in an evaluated leaf of a grid
@@ -667,7 +662,7 @@ DensitySolution solveDensity(const FieldNode& rawIndicator, const Domain& domain
             const coverage::CoverageLevel found =
                 bisectCoverage(std::move(samples), double(fullyBelow), double(wanted), a, b, interrupt);
             sol.level = found.level;
-            sol.slope = (bracketed ? bracketSlope : found.slope) / double(sol.domainVoxels);
+            sol.slope = (cover.bracketed ? cover.slope : found.slope) / double(sol.domainVoxels);
             sol.coverage = true;
             sol.achieved = found.covered / double(sol.domainVoxels);
         }
