@@ -6,6 +6,7 @@
 #include "engine/core/KeptGridLeaves.h"
 #include "engine/core/SparseEvaluator.h"
 #include "engine/density/Coverage.h"
+#include "engine/density/LeafSteps.h"
 #include "engine/frames/StrutFrames.h"
 #include "engine/frames/UnitCells.h"
 #include "fields/core/BlockLattice.h"
@@ -15,6 +16,7 @@
 #include "fields/shapes/Sphere.h"
 #include "fields/struts/IsoRadius.h"
 #include "fields/struts/StrutConvolution.h"
+#include "fields/struts/StrutRows.h"
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -560,5 +562,92 @@ TEST(Coverage, CoarseBlocksOfAnyDepthVisitEveryLatticePointOnce)
         });
         EXPECT_EQ(std::count(visits.begin(), visits.end(), 1), std::ptrdiff_t(visits.size())) << depth;
         EXPECT_LT(worst, 1e-12) << depth;
+    }
+}
+
+TEST(Coverage, LeafStepsInLanesAreTheVoxelByVoxelStepsAndSortsBitForBit)
+{
+    // LeafSteps.h's whole-leaf loops (the baseline build's, and the AVX-512F forms where the CPU
+    // has them) against each voxel's step taken one by one from its six neighbours (axisChange():
+    // one-sided where a neighbour is absent or 1e30 and up): the same floats, and the same sorting
+    // over a bracket as straddlingSamples()' voxel-by-voxel switch. Leaves of noise around a band,
+    // with masked values, tiles' +-FLT_MAX and absent neighbour leaves mixed in.
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<float> uniform(-1.0f, 1.0f);
+    auto randomLeaf = [&](std::vector<float>& values) {
+        values.resize(512);
+        for (float& v : values) {
+            const unsigned kind = rng() % 40;
+            v = kind == 0   ? 1e30f
+                : kind == 1 ? std::numeric_limits<float>::max()
+                : kind == 2 ? -std::numeric_limits<float>::max()
+                : kind == 3 ? 0.25f  // ties: steps of 0 where all neighbours share it
+                            : 0.3f * uniform(rng);
+        }
+    };
+    const int kStride[3] = {64, 8, 1}, kShift[3] = {6, 3, 0};
+    for (int round = 0; round < 40; ++round) {
+        std::vector<float> data, next[3][2];
+        randomLeaf(data);
+        LeafWithNeighbours leaf{data.data(), {}};
+        for (int a = 0; a < 3; ++a)
+            for (int side = 0; side < 2; ++side) {
+                randomLeaf(next[a][side]);
+                leaf.next[a][side] = rng() % 5 == 0 ? leafNoNeighbours() : next[a][side].data();
+            }
+        float steps[512], wide[512];
+        leafStepsLoop(leaf, steps);
+        for (int i = 0; i < 512; ++i) {
+            std::array<double, 3> d{};
+            for (int a = 0; a < 3; ++a) {
+                const int local = (i >> kShift[a]) & 7, stride = kStride[a];
+                const float up = local < 7 ? data[i + stride] : leaf.next[a][1][i - 7 * stride];
+                const float down = local > 0 ? data[i - stride] : leaf.next[a][0][i + 7 * stride];
+                d[a] = axisChange(data[i], up, up < 1e30f, down, down < 1e30f);
+            }
+            const float step = float(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]));
+            ASSERT_EQ(std::memcmp(&steps[i], &step, sizeof(float)), 0) << round << " voxel " << i;
+        }
+        const double a = 0.05 * uniform(rng), b = a + 0.02;
+        const StraddleBounds bounds{a, b, float(a - 0.1), float(b + 0.1), float(a), float(b)};
+        // The voxel-by-voxel sort (straddlingSamples()' own for leaves at the region's edge).
+        LeafStraddle expected;
+        for (int i = 0; i < 512; ++i) {
+            const float v = data[i];
+            expected.countBelow += v < bounds.countLo;
+            expected.countWithin += !(v < bounds.countLo) && v <= bounds.countHi;
+            expected.below += v < bounds.lo;
+            if (v < bounds.lo || v > bounds.hi) continue;
+            const double half = 0.5 * double(steps[i]);
+            const bool full = half > 0.0 ? v + half <= a : v < a;
+            const bool empty = half > 0.0 ? v - half >= b : !(v < b);
+            expected.below += full;
+            if (!full && !empty) expected.changing[i / 64] |= std::uint64_t(1) << (i % 64);
+        }
+        auto expectSorted = [&](const LeafStraddle& got, const char* form) {
+            EXPECT_EQ(got.below, expected.below) << form << " " << round;
+            EXPECT_EQ(got.countBelow, expected.countBelow) << form << " " << round;
+            EXPECT_EQ(got.countWithin, expected.countWithin) << form << " " << round;
+            for (int w = 0; w < 8; ++w) EXPECT_EQ(got.changing[w], expected.changing[w]) << form << " " << round;
+        };
+        expectSorted(leafStraddleLoop(data.data(), steps, bounds), "loop");
+        float widest = 0.0f;
+        bool meets = false;
+        for (int i = 0; i < 512; ++i)
+            if (!(data[i] < bounds.lo || data[i] > bounds.hi)) {
+                meets = true;
+                if (steps[i] < 1e29f) widest = std::max(widest, steps[i]);
+            }
+        EXPECT_EQ(leafWidestLoop(data.data(), steps, bounds.lo, bounds.hi), widest) << round;
+        EXPECT_EQ(leafMeetsLoop(data.data(), bounds.lo, bounds.hi), meets) << round;
+        // An empty band: no voxel meets it.
+        EXPECT_FALSE(leafMeetsLoop(data.data(), 2.0f, 3.0f)) << round;
+        if (!hasAvx512Rows()) continue;
+        avx512::leafSteps(leaf, wide);
+        EXPECT_EQ(std::memcmp(steps, wide, sizeof(steps)), 0) << round;
+        expectSorted(avx512::leafStraddle(data.data(), steps, bounds), "avx512");
+        EXPECT_EQ(avx512::leafWidest(data.data(), steps, bounds.lo, bounds.hi), widest) << round;
+        EXPECT_EQ(avx512::leafMeets(data.data(), bounds.lo, bounds.hi), meets) << round;
+        EXPECT_FALSE(avx512::leafMeets(data.data(), 2.0f, 3.0f)) << round;
     }
 }

@@ -1,11 +1,14 @@
 #include "engine/density/Coverage.h"
 
+#include "engine/density/LeafSteps.h"
+
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <functional>
 #include <memory>
@@ -23,55 +26,52 @@ constexpr int kLeafShift[3] = {6, 3, 0};
 namespace {
 
 using Leaf = openvdb::FloatTree::LeafNodeType;
+/// An accessor that caches the leaves' parents, not the leaves: caching a leaf asks its buffer for
+/// its data (a call that locks where the buffer may be unloaded), which the coverage passes' six
+/// neighbours a leaf paid in a tenth of their time.
+using NodeAccessor = openvdb::tree::ValueAccessor1<const openvdb::FloatTree, true, 1>;
 
-/// Calls emit(value, change) for each band voxel of @a leaf (values in [@a lo, @a hi] inside
-/// @a region), in offset order, with its per-voxel change along each axis. Neighbours that were
-/// not evaluated (tiles, background, outside @a around) fall back to one-sided differences.
-template <class Emit>
-void leafBand(const Leaf& leaf, openvdb::FloatGrid::ConstAccessor& acc, float lo, float hi,
-              const openvdb::CoordBBox& region, const openvdb::CoordBBox& around, Emit&& emit)
+/// The leaf with its six neighbours' buffers (leafNoNeighbours() where no leaf is), when every
+/// voxel of it is in @a region and every neighbour in @a around: the common case, whose steps
+/// leafSteps() takes for the whole leaf at once.
+bool withNeighbours(const Leaf& leaf, NodeAccessor& acc, const openvdb::CoordBBox& region,
+                    const openvdb::CoordBBox& around, LeafWithNeighbours& out)
 {
-    const float* data = leaf.buffer().data();
     const openvdb::CoordBBox box(leaf.origin(), leaf.origin() + openvdb::Coord(7));
     const openvdb::CoordBBox grown(box.min() - openvdb::Coord(1), box.max() + openvdb::Coord(1));
-    if (region.isInside(box) && around.isInside(grown)) {
-        // The common case: every voxel in the region and every neighbour around. A neighbour
-        // past the leaf's face is read from the neighbouring leaf's buffer, found once per face
-        // (the same value the accessor gives), none where no leaf is.
-        const float* next[3][2];
-        for (int a = 0; a < 3; ++a) {
-            openvdb::Coord down = box.min(), up = box.min();
-            down[a] -= 1;
-            up[a] += 8;
-            const Leaf* below = acc.probeConstLeaf(down);
-            const Leaf* above = acc.probeConstLeaf(up);
-            next[a][0] = below ? below->buffer().data() : nullptr;
-            next[a][1] = above ? above->buffer().data() : nullptr;
-        }
-        for (int i = 0; i < 512; ++i) {
-            if (data[i] < lo || data[i] > hi) continue;
-            std::array<double, 3> change{};
-            for (int a = 0; a < 3; ++a) {
-                const int local = (i >> kLeafShift[a]) & 7, stride = kLeafStride[a];
-                float upValue = 0.0f, downValue = 0.0f;
-                bool hasUp = true, hasDown = true;
-                if (local < 7)
-                    upValue = data[i + stride];
-                else if (next[a][1])
-                    upValue = next[a][1][i - 7 * stride];
-                else
-                    hasUp = false;
-                if (local > 0)
-                    downValue = data[i - stride];
-                else if (next[a][0])
-                    downValue = next[a][0][i + 7 * stride];
-                else
-                    hasDown = false;
-                change[a] =
-                    axisChange(data[i], upValue, hasUp && upValue < 1e30f, downValue, hasDown && downValue < 1e30f);
-            }
-            emit(data[i], change);
-        }
+    if (!region.isInside(box) || !around.isInside(grown)) return false;
+    out.data = leaf.buffer().data();
+    // A neighbour past the leaf's face is read from the neighbouring leaf's buffer, found once
+    // per face (the same value the accessor gives).
+    for (int a = 0; a < 3; ++a) {
+        openvdb::Coord down = box.min(), up = box.min();
+        down[a] -= 1;
+        up[a] += 8;
+        const Leaf* below = acc.probeConstLeaf(down);
+        const Leaf* above = acc.probeConstLeaf(up);
+        out.next[a][0] = below ? below->buffer().data() : leafNoNeighbours();
+        out.next[a][1] = above ? above->buffer().data() : leafNoNeighbours();
+    }
+    return true;
+}
+
+/// Calls emit(value, step) for each band voxel of @a leaf (values in [@a lo, @a hi] inside
+/// @a region), in offset order, with the length of its per-voxel change (coverageSample()'s
+/// step). Neighbours that were not evaluated (tiles, background, outside @a around) fall back to
+/// one-sided differences.
+template <class Emit>
+void leafBand(const Leaf& leaf, NodeAccessor& acc, float lo, float hi, const openvdb::CoordBBox& region,
+              const openvdb::CoordBBox& around, Emit&& emit)
+{
+    const float* data = leaf.buffer().data();
+    LeafWithNeighbours withNext{};
+    if (withNeighbours(leaf, acc, region, around, withNext)) {
+        // The common case: the whole leaf's steps at once, where any voxel is in the band.
+        if (!leafMeets(data, lo, hi)) return;
+        alignas(64) float steps[512];
+        leafSteps(withNext, steps);
+        for (int i = 0; i < 512; ++i)
+            if (!(data[i] < lo || data[i] > hi)) emit(data[i], steps[i]);
         return;
     }
     for (int i = 0; i < 512; ++i) {
@@ -108,18 +108,18 @@ void leafBand(const Leaf& leaf, openvdb::FloatGrid::ConstAccessor& acc, float lo
             }
             change[a] = axisChange(data[i], upValue, hasUp, downValue, hasDown);
         }
-        emit(data[i], change);
+        emit(data[i], float(std::sqrt(change[0] * change[0] + change[1] * change[1] + change[2] * change[2])));
     }
 }
 
-/// Band voxels with their per-voxel change along each axis (make(value, d) builds a sample), for
+/// Band voxels with the length of their per-voxel change (make(value, step) builds a sample), for
 /// the sub-voxel coverage estimates, in leaf order (leafBand()).
 template <class Make>
 auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& region, float lo, float hi,
                  const openvdb::CoordBBox& around, Make make, const std::function<void()>& interrupt,
                  std::uint64_t* leavesBelow = nullptr, const std::function<void(std::size_t)>& beforeHolding = {})
 {
-    using Sample = decltype(make(0.0f, std::array<double, 3>{}));
+    using Sample = decltype(make(0.0f, 0.0f));
     std::vector<const Leaf*> leaves;
     grid.tree().getNodes(leaves);
     // Two passes: each leaf's count of band voxels, then the samples written in place at the
@@ -156,22 +156,15 @@ auto bandSamples(const openvdb::FloatGrid& grid, const openvdb::CoordBBox& regio
     if (beforeHolding) beforeHolding(offset.back());
     DefaultInitVector<Sample> all(offset.back());  // not zeroed: each sample is written below
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size()), [&](const auto& range) {
-        auto acc = grid.getConstAccessor();
+        NodeAccessor acc(grid.tree());
         for (std::size_t n = range.begin(); n != range.end(); ++n) {
             // Per 64 leaves: a range of the partitioner can hold half the band.
             if (interrupt && n % 64 == 0) interrupt();
             std::size_t at = offset[n];
-            leafBand(*leaves[n], acc, lo, hi, region, around,
-                     [&](float v, const std::array<double, 3>& change) { all[at++] = make(v, change); });
+            leafBand(*leaves[n], acc, lo, hi, region, around, [&](float v, float step) { all[at++] = make(v, step); });
         }
     });
     return all;
-}
-
-/// A coverage sample's step: the length of its per-voxel change.
-CoverageSample coverageSample(float v, const std::array<double, 3>& d)
-{
-    return CoverageSample{v, float(std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))};
 }
 
 /// Where a sample's coverage stands over a bracket [a, b]: full at every level of it (its ramp,
@@ -200,7 +193,10 @@ CoverageSamples coverageSamples(const openvdb::FloatGrid& grid, const openvdb::C
                                 const std::function<void(std::size_t samples)>& beforeHolding)
 {
     return bandSamples(
-        grid, region, lo, hi, region, [](float v, const std::array<double, 3>& d) { return coverageSample(v, d); },
+        grid, region, lo, hi, region,
+        [](float v, float step) {
+            return CoverageSample{v, step};
+        },
         interrupt, leavesBelow, beforeHolding);
 }
 
@@ -218,8 +214,11 @@ StraddlingSamples straddlingSamples(const openvdb::FloatGrid& grid, const openvd
     std::vector<std::array<std::uint64_t, 3>> countsPerChunk(chunks, {0, 0, 0});  // below, count's below, within
     const float lo = float(a - double(reach)), hi = float(b + double(reach));
     const float countLo = float(countBand.lo), countHi = float(countBand.hi);
+    const StraddleBounds bounds{a, b, lo, hi, countLo, countHi};
+    // The steps of a leaf with no voxel in the band: read by no voxel (each out of it).
+    static const std::array<float, 512> kNoSteps{};
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1), [&](const auto& range) {
-        auto acc = grid.getConstAccessor();
+        NodeAccessor acc(grid.tree());
         for (std::size_t c = range.begin(); c != range.end(); ++c) {
             if (interrupt) interrupt();
             CoverageSamples& part = parts[c];
@@ -228,6 +227,24 @@ StraddlingSamples straddlingSamples(const openvdb::FloatGrid& grid, const openvd
             for (std::size_t n = c * kChunk; n != end; ++n) {
                 const Leaf& leaf = *leaves[n];
                 const float* data = leaf.buffer().data();
+                LeafWithNeighbours withNext{};
+                if (withNeighbours(leaf, acc, region, region, withNext)) {
+                    // The common case, the whole leaf at once: its steps where any voxel is in
+                    // the band (none of them read elsewhere).
+                    alignas(64) float steps[512];
+                    const bool meets = leafMeets(data, lo, hi);
+                    if (meets) leafSteps(withNext, steps);
+                    const LeafStraddle sorted = leafStraddle(data, meets ? steps : kNoSteps.data(), bounds);
+                    below += sorted.below;
+                    countBelow += sorted.countBelow;
+                    countWithin += sorted.countWithin;
+                    for (int w = 0; w < 8; ++w)
+                        for (std::uint64_t bits = sorted.changing[w]; bits != 0; bits &= bits - 1) {
+                            const int i = w * 64 + std::countr_zero(bits);
+                            part.push_back(CoverageSample{data[i], steps[i]});
+                        }
+                    continue;
+                }
                 const openvdb::Coord origin = leaf.origin();
                 // The voxels below the band, counted by value (as countBelow would), and the
                 // count's split of countBand.
@@ -242,15 +259,14 @@ StraddlingSamples straddlingSamples(const openvdb::FloatGrid& grid, const openvd
                     for (int i = 0; i < 512; ++i)
                         if (region.isInside(leaf.offsetToGlobalCoord(i))) count(data[i]);
                 }
-                leafBand(leaf, acc, lo, hi, region, region, [&](float v, const std::array<double, 3>& d) {
-                    const CoverageSample sample = coverageSample(v, d);
+                leafBand(leaf, acc, lo, hi, region, region, [&](float v, float step) {
                     // As bisectCoverage's steps sort them over [a, b] (stepBlock).
-                    switch (overBracket(sample.value, 0.5 * double(sample.step), a, b)) {
+                    switch (overBracket(v, 0.5 * double(step), a, b)) {
                         case OverBracket::Full:
                             ++below;
                             break;
                         case OverBracket::Changing:
-                            part.push_back(sample);
+                            part.push_back(CoverageSample{v, step});
                             break;
                         case OverBracket::Empty:
                             break;
@@ -286,11 +302,20 @@ float widestCoverageStep(const openvdb::FloatGrid& grid, const openvdb::CoordBBo
     return tbb::parallel_reduce(
         tbb::blocked_range<std::size_t>(0, leaves.size()), 0.0f,
         [&](const tbb::blocked_range<std::size_t>& range, float widest) {
-            auto acc = grid.getConstAccessor();
+            NodeAccessor acc(grid.tree());
             for (std::size_t n = range.begin(); n != range.end(); ++n) {
                 if (interrupt && n % 64 == 0) interrupt();
-                leafBand(*leaves[n], acc, lo, hi, region, region, [&](float v, const std::array<double, 3>& d) {
-                    const float step = coverageSample(v, d).step;
+                const float* data = leaves[n]->buffer().data();
+                LeafWithNeighbours withNext{};
+                if (withNeighbours(*leaves[n], acc, region, region, withNext)) {
+                    // The whole leaf's steps at once (the common case), where any voxel is in the band.
+                    if (!leafMeets(data, lo, hi)) continue;
+                    alignas(64) float steps[512];
+                    leafSteps(withNext, steps);
+                    widest = std::max(widest, leafWidest(data, steps, lo, hi));
+                    continue;
+                }
+                leafBand(*leaves[n], acc, lo, hi, region, region, [&](float, float step) {
                     if (step < 1e29f) widest = std::max(widest, step);
                 });
             }
