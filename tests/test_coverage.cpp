@@ -643,7 +643,15 @@ TEST(Coverage, LeafStepsInLanesAreTheVoxelByVoxelStepsAndSortsBitForBit)
         // An empty band: no voxel meets it.
         EXPECT_FALSE(leafMeetsLoop(data.data(), 2.0f, 3.0f)) << round;
         if (!hasAvx512Rows()) continue;
-        avx512::leafSteps(leaf, wide);
+        // The steps of the band's voxels (those the passes read), and of every voxel for a band
+        // holding them all.
+        avx512::leafSteps(leaf, wide, bounds.lo, bounds.hi);
+        for (int i = 0; i < 512; ++i) {
+            if (!(data[i] < bounds.lo || data[i] > bounds.hi)) {
+                EXPECT_EQ(std::memcmp(&steps[i], &wide[i], sizeof(float)), 0) << round << " voxel " << i;
+            }
+        }
+        avx512::leafSteps(leaf, wide, -kNoNeighbour, kNoNeighbour);
         EXPECT_EQ(std::memcmp(steps, wide, sizeof(steps)), 0) << round;
         expectSorted(avx512::leafStraddle(data.data(), steps, bounds), "avx512");
         EXPECT_EQ(avx512::leafWidest(data.data(), steps, bounds.lo, bounds.hi), widest) << round;

@@ -126,7 +126,10 @@ template <class Part>
 bool forEachLeafPart(const openvdb::FloatGrid& grid, const CoordBBox& voxels, Part part)
 {
     using LeafT = openvdb::FloatGrid::TreeType::LeafNodeType;
-    const auto& tree = grid.tree();
+    // Leaves found through their parent, cached (a box's leaves nearly always share it); not an
+    // accessor that caches leaves, which asks each leaf's buffer for its data (a call that
+    // locks), nor one registered with the tree (a box is asked of it per leaf of a grid).
+    openvdb::tree::ValueAccessor1<const openvdb::FloatTree, false, 1> tree(grid.tree());
     const Coord first(voxels.min().x() & ~7, voxels.min().y() & ~7, voxels.min().z() & ~7);
     for (int x = first.x(); x <= voxels.max().x(); x += 8)
         for (int y = first.y(); y <= voxels.max().y(); y += 8)

@@ -29,7 +29,7 @@ using Leaf = openvdb::FloatTree::LeafNodeType;
 /// An accessor that caches the leaves' parents, not the leaves: caching a leaf asks its buffer for
 /// its data (a call that locks where the buffer may be unloaded), which the coverage passes' six
 /// neighbours a leaf paid in a tenth of their time.
-using NodeAccessor = openvdb::tree::ValueAccessor1<const openvdb::FloatTree, true, 1>;
+using NodeAccessor = openvdb::tree::ValueAccessor1<const openvdb::FloatTree, false, 1>;
 
 /// The leaf with its six neighbours' buffers (leafNoNeighbours() where no leaf is), when every
 /// voxel of it is in @a region and every neighbour in @a around: the common case, whose steps
@@ -69,7 +69,7 @@ void leafBand(const Leaf& leaf, NodeAccessor& acc, float lo, float hi, const ope
         // The common case: the whole leaf's steps at once, where any voxel is in the band.
         if (!leafMeets(data, lo, hi)) return;
         alignas(64) float steps[512];
-        leafSteps(withNext, steps);
+        leafSteps(withNext, steps, lo, hi);
         for (int i = 0; i < 512; ++i)
             if (!(data[i] < lo || data[i] > hi)) emit(data[i], steps[i]);
         return;
@@ -233,7 +233,7 @@ StraddlingSamples straddlingSamples(const openvdb::FloatGrid& grid, const openvd
                     // the band (none of them read elsewhere).
                     alignas(64) float steps[512];
                     const bool meets = leafMeets(data, lo, hi);
-                    if (meets) leafSteps(withNext, steps);
+                    if (meets) leafSteps(withNext, steps, lo, hi);
                     const LeafStraddle sorted = leafStraddle(data, meets ? steps : kNoSteps.data(), bounds);
                     below += sorted.below;
                     countBelow += sorted.countBelow;
@@ -311,7 +311,7 @@ float widestCoverageStep(const openvdb::FloatGrid& grid, const openvdb::CoordBBo
                     // The whole leaf's steps at once (the common case), where any voxel is in the band.
                     if (!leafMeets(data, lo, hi)) continue;
                     alignas(64) float steps[512];
-                    leafSteps(withNext, steps);
+                    leafSteps(withNext, steps, lo, hi);
                     widest = std::max(widest, leafWidest(data, steps, lo, hi));
                     continue;
                 }

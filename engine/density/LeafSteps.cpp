@@ -16,9 +16,9 @@ const float* leafNoNeighbours()
     return none.data();
 }
 
-void leafSteps(const LeafWithNeighbours& leaf, float* steps)
+void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi)
 {
-    if (hasAvx512Rows()) return avx512::leafSteps(leaf, steps);
+    if (hasAvx512Rows()) return avx512::leafSteps(leaf, steps, lo, hi);
     leafStepsLoop(leaf, steps);
 }
 

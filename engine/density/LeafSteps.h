@@ -141,14 +141,17 @@ inline bool leafMeetsLoop(const float* data, float lo, float hi)
 }
 
 /// leafStepsLoop, leafStraddleLoop and leafWidestLoop, each built for AVX-512F where the CPU has it
-/// (hasAvx512Rows()), else for the baseline: the same results.
-void leafSteps(const LeafWithNeighbours& leaf, float* steps);
+/// (hasAvx512Rows()), else for the baseline: the same results. leafSteps() gives the steps of the
+/// voxels valued within [@a lo, @a hi] (what its callers read); the others' are unspecified (the
+/// AVX-512F form skips two rows at a time where none is in it: the widest step's pass reads a
+/// band a few voxels wide).
+void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi);
 LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s);
 float leafWidest(const float* data, const float* steps, float lo, float hi);
 bool leafMeets(const float* data, float lo, float hi);
 
 namespace avx512 {
-void leafSteps(const LeafWithNeighbours& leaf, float* steps);
+void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi);
 LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s);
 float leafWidest(const float* data, const float* steps, float lo, float hi);
 bool leafMeets(const float* data, float lo, float hi);

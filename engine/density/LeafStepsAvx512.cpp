@@ -62,9 +62,10 @@ __m512d change(const AxisDifferences& d, bool high)
 
 }  // namespace
 
-void leafSteps(const LeafWithNeighbours& leaf, float* steps)
+void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi)
 {
     const float* data = leaf.data;
+    const __m512 low = _mm512_set1_ps(lo), high = _mm512_set1_ps(hi);
     // Lane j of zUp takes lane j + 1, the last of each row the next leaf's (extra lane 0 or 1);
     // zDown lane j - 1, the first of each row the leaf below's (extra lane 2 or 3).
     const __m512i upIndex = _mm512_setr_epi32(1, 2, 3, 4, 5, 6, 7, 16, 9, 10, 11, 12, 13, 14, 15, 17);
@@ -76,6 +77,10 @@ void leafSteps(const LeafWithNeighbours& leaf, float* steps)
             const int r = x * 64 + y * 8;
             const float* row = data + r;
             const __m512 v = _mm512_loadu_ps(row);
+            if ((_mm512_cmp_ps_mask(v, low, _CMP_NLT_UQ) & _mm512_cmp_ps_mask(v, high, _CMP_NGT_UQ)) == 0) {
+                _mm512_storeu_ps(steps + r, _mm512_setzero_ps());  // no voxel of the two rows in the band
+                continue;
+            }
             const __m512 xu = _mm512_loadu_ps(xUp + y * 8), xd = _mm512_loadu_ps(xDown + y * 8);
             const __m512 yu = y < 6 ? _mm512_loadu_ps(row + 8) : twoRows(row + 8, leaf.next[1][1] + x * 64);
             const __m512 yd = y > 0 ? _mm512_loadu_ps(row - 8) : twoRows(leaf.next[1][0] + x * 64 + 56, row);
@@ -160,7 +165,7 @@ bool leafMeets(const float* data, float lo, float hi)
 
 #else
 
-void leafSteps(const LeafWithNeighbours& leaf, float* steps)
+void leafSteps(const LeafWithNeighbours& leaf, float* steps, float, float)
 {
     leafStepsLoop(leaf, steps);
 }
