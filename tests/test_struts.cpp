@@ -22,6 +22,7 @@
 #include "fields/struts/IsoRadius.h"
 #include "fields/struts/IsoRadiusAvx2.h"
 #include "fields/struts/IsoRadiusSingle.h"
+#include "fields/struts/NodeStencils.h"
 #include "fields/struts/StrutCapsules.h"
 #include "fields/struts/StrutConvolution.h"
 #include "fields/struts/StrutIndex.h"
@@ -3242,5 +3243,75 @@ TEST(CoarseNodes, StridedBatchesAtEvenVoxelsReadTheNodesTheGridReads)
         field.gridValues(batch, a);
         exact.gridValues(batch, b);
         EXPECT_EQ(a, b);
+    }
+}
+
+TEST(CoarseNodes, StencilPassesInLanesAreEachPointsStencilsBitForBit)
+{
+    // NodeStencils.h's passes (whole lines along x and y, a row's odd voxels at once along z; the
+    // baseline build's and, where the CPU has it, AVX-512F's) against each point interpolated on
+    // its own, x then y then z, each stencil summed from 0 first to last: the same doubles, for
+    // batches starting at even and odd voxels, of one voxel to 64 along z.
+    using namespace node_stencils;
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+    for (const std::array<int, 3> n : {std::array<int, 3>{8, 8, 64}, {3, 5, 1}, {8, 8, 8}, {2, 1, 63}}) {
+        for (int round = 0; round < 4; ++round) {
+            const std::array<int, 3> first{int(rng() % 9) - 4, int(rng() % 9) - 4, int(rng() % 9) - 4};
+            std::array<int, 3> lo{}, count{};
+            for (int a = 0; a < 3; ++a) {
+                lo[a] = floorDiv(first[a], 2) - (kHalfStencil - 1);
+                count[a] = floorDiv(first[a] + n[a] - 1, 2) + kHalfStencil - lo[a] + 1;
+            }
+            std::vector<double> nodes(std::size_t(count[0]) * count[1] * count[2]);
+            for (double& v : nodes) v = uniform(rng);
+            auto node = [&](int x, int y, int z) {
+                return nodes[(std::size_t(x) * count[1] + std::size_t(y)) * count[2] + std::size_t(z)];
+            };
+            // Along one axis, voxel v's nodes and weights: one node (weight 1, taken as is) or eight.
+            auto taps = [&](int a, int v, std::vector<std::pair<int, double>>& out) {
+                out.clear();
+                const int index = first[a] + v, m = floorDiv(index, 2) - lo[a];
+                if ((index & 1) == 0) {
+                    out.push_back({m, 1.0});
+                    return;
+                }
+                for (int l = 0; l < 8; ++l) out.push_back({m - (kHalfStencil - 1) + l, kMidpoint[std::size_t(l)]});
+            };
+            // x for each node line (y, z), then y, then z, each point on its own.
+            auto stencil = [](const std::vector<std::pair<int, double>>& t, auto value) {
+                if (t.size() == 1) return value(t[0].first);
+                double sum = 0.0;
+                for (const auto& [m, w] : t) sum += w * value(m);
+                return sum;
+            };
+            std::vector<double> expected(std::size_t(n[0]) * n[1] * n[2]);
+            std::vector<std::pair<int, double>> tx, ty, tz;
+            for (int i = 0; i < n[0]; ++i) {
+                taps(0, i, tx);
+                for (int j = 0; j < n[1]; ++j) {
+                    taps(1, j, ty);
+                    for (int k = 0; k < n[2]; ++k) {
+                        taps(2, k, tz);
+                        expected[(std::size_t(i) * n[1] + std::size_t(j)) * n[2] + std::size_t(k)] =
+                            stencil(tz, [&](int z) {
+                                return stencil(
+                                    ty, [&](int y) { return stencil(tx, [&](int x) { return node(x, y, z); }); });
+                            });
+                    }
+                }
+            }
+            std::vector<double> alongX(std::size_t(n[0]) * count[1] * count[2]),
+                alongXY(std::size_t(n[0]) * n[1] * count[2]), out(expected.size()), wide(expected.size());
+            NodePasses passes{nodes.data(), lo, count, first, n, alongX.data(), alongXY.data(), out.data()};
+            nodePassesLoop(passes);
+            EXPECT_EQ(std::memcmp(out.data(), expected.data(), out.size() * sizeof(double)), 0)
+                << n[2] << " from " << first[2];
+            if (!hasAvx512Rows()) continue;
+            passes.out = wide.data();
+            nodePassesAvx512(passes);
+            EXPECT_EQ(std::memcmp(wide.data(), expected.data(), wide.size() * sizeof(double)), 0)
+                << n[2] << " from " << first[2];
+        }
     }
 }

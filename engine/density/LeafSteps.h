@@ -30,9 +30,11 @@ constexpr float kNoNeighbour = std::numeric_limits<float>::max();
 /// 512 values of kNoNeighbour: an absent neighbour leaf's buffer.
 const float* leafNoNeighbours();
 
+// The loops are static: each build of them (the baseline's, AVX-512F's) keeps its own copy,
+// where an inline function's copies would be merged into one at link time, whichever's flags.
 /// A voxel's change along one axis from its neighbours' values @a up and @a down (absent when 1e30
 /// or more): axisChange()'s, branch-free.
-inline double laneChange(float value, float up, float down)
+static inline double laneChange(float value, float up, float down)
 {
     const bool hasUp = up < 1e30f, hasDown = down < 1e30f;
     const double both = 0.5 * double(up - down);
@@ -43,7 +45,7 @@ inline double laneChange(float value, float up, float down)
 }
 
 /// steps[i] for each of the leaf's 512 voxels (offset order): the length of its change.
-inline void leafStepsLoop(const LeafWithNeighbours& leaf, float* steps)
+static inline void leafStepsLoop(const LeafWithNeighbours& leaf, float* steps)
 {
     const float* data = leaf.data;
     for (int x = 0; x < 8; ++x) {
@@ -92,7 +94,7 @@ struct StraddleBounds {
 /// a voxel within [lo, hi] is covered whole when its ramp (value -+ half its step) ends at or
 /// below a (a step of 0: valued below a), changing when the ramp meets (a, b) (a step of 0:
 /// valued in [a, b)), else empty.
-inline LeafStraddle leafStraddleLoop(const float* data, const float* steps, const StraddleBounds& s)
+static inline LeafStraddle leafStraddleLoop(const float* data, const float* steps, const StraddleBounds& s)
 {
     LeafStraddle out;
     const double a = s.a, b = s.b;
@@ -121,7 +123,7 @@ inline LeafStraddle leafStraddleLoop(const float* data, const float* steps, cons
 }
 
 /// The largest step of a voxel valued within [lo, hi] (below 1e29; 0 when none).
-inline float leafWidestLoop(const float* data, const float* steps, float lo, float hi)
+static inline float leafWidestLoop(const float* data, const float* steps, float lo, float hi)
 {
     float widest = 0.0f;
     for (int i = 0; i < 512; ++i) {
@@ -133,7 +135,7 @@ inline float leafWidestLoop(const float* data, const float* steps, float lo, flo
 }
 
 /// Whether any of a leaf's 512 values lies within [lo, hi].
-inline bool leafMeetsLoop(const float* data, float lo, float hi)
+static inline bool leafMeetsLoop(const float* data, float lo, float hi)
 {
     bool meets = false;
     for (int i = 0; i < 512; ++i) meets |= !(data[i] < lo || data[i] > hi);

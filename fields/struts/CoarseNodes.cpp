@@ -3,6 +3,9 @@
 /// stencils between them.
 #include "fields/struts/CoarseNodes.h"
 
+#include "fields/struts/NodeStencils.h"
+#include "fields/struts/StrutRows.h"
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -17,18 +20,11 @@ namespace {
 
 constexpr int kBlockXY = 8, kBlockZ = 32;  // nodes per block along x and y, along z
 constexpr std::size_t kBlockSize = std::size_t(kBlockXY) * kBlockXY * kBlockZ;
-constexpr int kHalfStencil = 4;  // a midpoint between nodes m and m + 1 reads m - 3 .. m + 4
-/// The eight-point Lagrange weights at the midpoint of nodes 3 and 4 of 0..7.
-constexpr std::array<double, 8> kMidpoint{-5.0 / 2048,   49.0 / 2048,   -245.0 / 2048, 1225.0 / 2048,
-                                          1225.0 / 2048, -245.0 / 2048, 49.0 / 2048,   -5.0 / 2048};
+using node_stencils::floorDiv;
+using node_stencils::kHalfStencil;
 /// |prod_l (3.5 - l)| over l = 0..7, and 8!.
 constexpr double kMidpointProduct = 43.06640625, kFactorial8 = 40320.0;
 constexpr double kLebesgue = 3048.0 / 2048.0;
-
-int floorDiv(int a, int b)
-{
-    return a >= 0 ? a / b : -((b - 1 - a) / b);
-}
 
 std::uint64_t bitsOf(double v)
 {
@@ -221,51 +217,15 @@ void CoarseNodes::interpolate(const GridBatch& batch, std::span<double> out, con
                         std::copy(from, from + (z1 - z0), to);
                     }
             }
-    const int fx = batch.latticeIndex[0], fy = batch.latticeIndex[1], fz = batch.latticeIndex[2];
-    const std::size_t nz = std::size_t(n[2]), ny = std::size_t(n[1]), nx = std::size_t(n[0]);
-    // Voxel v of an axis (lattice index first + v) takes node m = floor((first + v) / 2) where its
-    // index is even, else the eight nodes m - 3 .. m + 4: @a to gets @a count values of lines
-    // @a stride apart from @a from (line 0 the axis's first node read).
-    auto combine = [](int first, int lo0, int v, const double* from, std::size_t stride, std::size_t count,
-                      double* to) {
-        const int voxelIndex = first + v;
-        const int m = floorDiv(voxelIndex, 2) - lo0;
-        if ((voxelIndex & 1) == 0) {
-            std::memcpy(to, from + std::size_t(m) * stride, count * sizeof(double));
-            return;
-        }
-        std::fill(to, to + count, 0.0);
-        for (int l = 0; l < 8; ++l) {
-            const double w = kMidpoint[std::size_t(l)];
-            const double* line = from + std::size_t(m - (kHalfStencil - 1) + l) * stride;
-            for (std::size_t q = 0; q < count; ++q) to[q] += w * line[q];
-        }
-    };
-    // x first, then y, over the nodes' planes and rows (the fewest values: nodes along z), then z
-    // to the batch's voxels.
+    const std::size_t ny = std::size_t(n[1]), nx = std::size_t(n[0]);
     alongX.resize(nx * cy * cz);
-    for (std::size_t i = 0; i < nx; ++i)
-        combine(fx, lo[0], int(i), nodes.data(), cy * cz, cy * cz, alongX.data() + i * cy * cz);
     alongXY.resize(nx * ny * cz);
-    for (std::size_t i = 0; i < nx; ++i)
-        for (std::size_t j = 0; j < ny; ++j)
-            combine(fy, lo[1], int(j), alongX.data() + i * cy * cz, cz, cz, alongXY.data() + (i * ny + j) * cz);
-    for (std::size_t r = 0; r < nx * ny; ++r) {
-        const double* line = alongXY.data() + r * cz;
-        double* to = out.data() + r * nz;
-        for (std::size_t k = 0; k < nz; ++k) {
-            const int voxelIndex = fz + int(k);
-            const int m = floorDiv(voxelIndex, 2) - lo[2];
-            if ((voxelIndex & 1) == 0) {
-                to[k] = line[m];
-                continue;
-            }
-            const double* p = line + (m - (kHalfStencil - 1));
-            double v = 0.0;
-            for (int l = 0; l < 8; ++l) v += kMidpoint[std::size_t(l)] * p[l];
-            to[k] = v;
-        }
-    }
+    const node_stencils::NodePasses passes{nodes.data(),   lo,        count, batch.latticeIndex, n, alongX.data(),
+                                           alongXY.data(), out.data()};
+    if (hasAvx512Rows())
+        node_stencils::nodePassesAvx512(passes);
+    else
+        node_stencils::nodePassesLoop(passes);
 }
 
 }  // namespace voxlat

@@ -27,8 +27,10 @@ struct SingleRadii {
     double fMin, rhoMax;
 };
 
+// The loops are static: each build of them (the baseline's, AVX-512F's) keeps its own copy,
+// where an inline function's copies would be merged into one at link time, whichever's flags.
 /// rho of @a n values in place; values at or below fMin take rhoMax, the others at most rhoMax.
-inline void isoRadiiSingleLoop(double* values, std::size_t n, const SingleRadii& m)
+static inline void isoRadiiSingleLoop(double* values, std::size_t n, const SingleRadii& m)
 {
     // Locals: the stores below may alias @a m's fields, which would be reloaded in the loop.
     const float lnPeak = m.lnPeak, sigma = m.sigma;
