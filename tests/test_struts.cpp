@@ -522,9 +522,10 @@ TEST(StrutRows, FourLanesAddTheSameDoublesAsTheScalarLoop)
     EXPECT_GT(lanesAdded, lanesCompared / 4);
 }
 
-TEST(IsoRadius, FourLaneRadiiAreTheScalarMapsDoubles)
+TEST(IsoRadius, FourAndEightLaneRadiiAreTheScalarMapsDoubles)
 {
-    // IsoRadius::radii four values at a time (its logarithm glibc's algorithm in lanes) against
+    // IsoRadius::radii four values at a time (AVX2 and FMA) and eight (AVX-512F), each called
+    // directly and through radii() (which picks the widest), its logarithm glibc's algorithm in lanes, against
     // radiusOf() value by value (std::log): bit for bit, on F at random magnitudes about the peak
     // (P / F from 1e-3 to 1e12, so every interval of the log's table and many exponents), F near
     // P (the library's other path), at and below the cap, 0, subnormal, infinite and NaN, and
@@ -546,12 +547,21 @@ TEST(IsoRadius, FourLaneRadiiAreTheScalarMapsDoubles)
     std::uint64_t compared = 0;
     for (std::size_t start = 0; start < f.size(); start += 997) {
         const std::size_t n = std::min<std::size_t>(start % 7 + 1 + (start % 5 == 0 ? 600 : 0), f.size() - start);
-        std::vector<double> lanes(f.begin() + std::ptrdiff_t(start), f.begin() + std::ptrdiff_t(start + n));
-        iso.radii(lanes);
-        for (std::size_t k = 0; k < n; ++k, ++compared) {
-            const double expected = iso.radiusOf(f[start + k]);
-            ASSERT_EQ(std::memcmp(&expected, &lanes[k], sizeof(double)), 0)
-                << "F = " << f[start + k] << ": " << lanes[k] << " against " << expected;
+        for (int form = 0; form < 3; ++form) {
+            std::vector<double> lanes(f.begin() + std::ptrdiff_t(start), f.begin() + std::ptrdiff_t(start + n));
+            if (form == 0)
+                iso.radii(lanes);
+            else if (form == 1)
+                isoRadiiAvx2(lanes.data(), n, peak, fMin, sigma, rhoMax);
+            else if (hasIsoRadiiAvx512())
+                isoRadiiAvx512(lanes.data(), n, peak, fMin, sigma, rhoMax);
+            else
+                continue;
+            for (std::size_t k = 0; k < n; ++k, ++compared) {
+                const double expected = iso.radiusOf(f[start + k]);
+                ASSERT_EQ(std::memcmp(&expected, &lanes[k], sizeof(double)), 0)
+                    << "form " << form << ", F = " << f[start + k] << ": " << lanes[k] << " against " << expected;
+            }
         }
     }
     std::vector<double> all = f;
