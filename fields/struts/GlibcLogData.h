@@ -5,6 +5,10 @@
 /// its operations in its order: the library's doubles.
 #pragma once
 
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+
 namespace voxlat::glibc_log {
 
 /// glibc's __log_data (LOG_TABLE_BITS = 7): ln 2 split in two, the polynomial of log1p(r) - r,
@@ -97,6 +101,47 @@ struct LogColumns {
         }
     }
 };
+
+/// std::log of the lanes of @a in off the table path (bit l of @a regular clear) into @a out; log 1
+/// is 0.
+template <int Lanes>
+void logOffPath(const double* in, double* out, unsigned regular)
+{
+    for (int l = 0; l < Lanes; ++l)
+        if (!(regular >> l & 1)) out[l] = in[l] == 1.0 ? 0.0 : std::log(in[l]);
+}
+
+/// Whether @a logLanes (the logarithms of Lanes values from x into y) gives std::log's doubles,
+/// bit for bit, on every interval of the table at several exponents and on a spread of values
+/// from an LCG (exponents around 1, where the map's P / F lies: 1 .. 1e6; mantissas at random).
+template <int Lanes, class LogLanes>
+bool logMatchesTheLibrary(LogLanes logLanes)
+{
+    std::uint64_t state = 0x9e3779b97f4a7c15ULL;
+    double x[Lanes], y[Lanes];
+    int filled = 0;
+    bool same = true;
+    auto check = [&](double v) {
+        x[filled++] = v;
+        if (filled < Lanes) return;
+        filled = 0;
+        logLanes(x, y);
+        for (int l = 0; l < Lanes; ++l) {
+            const double expected = std::log(x[l]);
+            same = same && std::memcmp(&expected, &y[l], sizeof(double)) == 0;
+        }
+    };
+    for (int e = -60; e <= 60; e += 3)
+        for (int m = 0; m < 512; ++m) check(std::ldexp(1.0 + (m + 0.37) / 512.0, e));
+    for (int n = 0; n < 40000; ++n) {
+        state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+        const std::uint64_t bits = (state >> 12) | (std::uint64_t(1013 + (state >> 59)) << 52);
+        double v;
+        std::memcpy(&v, &bits, sizeof v);
+        check(v);
+    }
+    return same;
+}
 
 }  // namespace
 

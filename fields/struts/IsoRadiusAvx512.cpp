@@ -82,39 +82,14 @@ __m512d logOf(__m512d x)
     alignas(64) double in[8], out[8];
     _mm512_store_pd(in, x);
     _mm512_store_pd(out, y);
-    for (int l = 0; l < 8; ++l)
-        if (!(regular >> l & 1)) out[l] = in[l] == 1.0 ? 0.0 : std::log(in[l]);
+    glibc_log::logOffPath<8>(in, out, regular);
     return _mm512_load_pd(out);
 }
 
 bool logMatchesTheLibrary()
 {
-    // Every interval of the table at several exponents, and a spread of values from an LCG (the
-    // values IsoRadiusAvx2.cpp checks).
-    std::uint64_t state = 0x9e3779b97f4a7c15ULL;
-    alignas(64) double x[8], y[8];
-    int filled = 0;
-    bool same = true;
-    auto check = [&](double v) {
-        x[filled++] = v;
-        if (filled < 8) return;
-        filled = 0;
-        _mm512_store_pd(y, logOf(_mm512_load_pd(x)));
-        for (int l = 0; l < 8; ++l) {
-            const double expected = std::log(x[l]);
-            same = same && std::memcmp(&expected, &y[l], sizeof(double)) == 0;
-        }
-    };
-    for (int e = -60; e <= 60; e += 3)
-        for (int m = 0; m < 512; ++m) check(std::ldexp(1.0 + (m + 0.37) / 512.0, e));
-    for (int n = 0; n < 40000; ++n) {
-        state = state * 6364136223846793005ULL + 1442695040888963407ULL;
-        const std::uint64_t bits = (state >> 12) | (std::uint64_t(1013 + (state >> 59)) << 52);
-        double v;
-        std::memcpy(&v, &bits, sizeof v);
-        check(v);
-    }
-    return same;
+    return glibc_log::logMatchesTheLibrary<8>(
+        [](const double* x, double* y) { _mm512_storeu_pd(y, logOf(_mm512_loadu_pd(x))); });
 }
 
 }  // namespace
@@ -130,9 +105,10 @@ void isoRadiiAvx512(double* f, std::size_t n, double peak, double fMin, double s
     const __m512d vPeak = _mm512_set1_pd(peak), vMin = _mm512_set1_pd(fMin), vSigma = _mm512_set1_pd(sigma),
                   vMax = _mm512_set1_pd(rhoMax), two = _mm512_set1_pd(2.0);
     const __m512i sign = _mm512_set1_epi64(std::int64_t(0x8000000000000000ULL));
-    std::size_t k = 0;
-    for (; k + 8 <= n; k += 8) {
-        const __m512d v = _mm512_loadu_pd(f + k);
+    // The last lanes masked: a lane past the end reads peak (its log 0) and is not stored.
+    for (std::size_t k = 0; k < n; k += 8) {
+        const auto lanes = __mmask8(n - k >= 8 ? 0xff : (1u << (n - k)) - 1u);
+        const __m512d v = _mm512_mask_loadu_pd(vPeak, lanes, f + k);
         const __mmask8 capped = _mm512_cmp_pd_mask(v, vMin, _CMP_LE_OQ);
         // radii(): u = peak / (f <= fMin ? peak : f), log u (0 where u == 1), then the root.
         const __m512d q = _mm512_div_pd(vPeak, _mm512_mask_blend_pd(capped, v, vPeak));
@@ -143,13 +119,7 @@ void isoRadiiAvx512(double* f, std::size_t n, double peak, double fMin, double s
         const __m512d rho = _mm512_castsi512_pd(
             _mm512_or_si512(_mm512_andnot_si512(sign, _mm512_castpd_si512(root)), _mm512_and_si512(sign, uBits)));
         // std::min(rhoMax, rho): rho where rho < rhoMax, else rhoMax (NaN too).
-        _mm512_storeu_pd(f + k, _mm512_mask_blend_pd(capped, _mm512_min_pd(rho, vMax), vMax));
-    }
-    for (; k < n; ++k) {
-        const double u0 = peak / (f[k] <= fMin ? peak : f[k]);
-        const double u = u0 == 1.0 ? 0.0 : std::log(u0);
-        const double rho = std::min(rhoMax, std::copysign(sigma * std::sqrt(2.0 * std::abs(u)), u));
-        f[k] = f[k] <= fMin ? rhoMax : rho;
+        _mm512_mask_storeu_pd(f + k, lanes, _mm512_mask_blend_pd(capped, _mm512_min_pd(rho, vMax), vMax));
     }
 }
 
