@@ -119,32 +119,54 @@ void addStrutRowTabledSeededAvx512(const StrutRowConstants& s, const StrutRow& r
     // K the recurrences' group at or below the row's group, its points shift..shift + 7 of them.
     __m256d e = _mm256_loadu_pd(lanes.e), r = _mm256_loadu_pd(lanes.r);
     const __m256d q = _mm256_set1_pd(lanes.q16);
+    // The row's bounds and the table's pointers in locals: the stores to @a out (doubles) might
+    // alias the structs' doubles, so read from them they were loaded again in every group.
+    const int kLo = row.kLo, kHi = row.kHi;
     int groupK = lanes.k;
-    while (groupK + 4 <= row.kLo) {
+    while (groupK + 4 <= kLo) {
         e = _mm256_mul_pd(e, r);
         r = _mm256_mul_pd(r, q);
         groupK += 4;
     }
-    const int shift = row.kLo - groupK;
+    const int shift = kLo - groupK;
     const __m512i pick = _mm512_add_epi64(_mm512_set1_epi64(shift), _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7));
     const RowCutoff8 cut(s, row);
-    const TabledLanes8 tabled(table);
-    const int inHi = std::min(row.inHi, row.kHi);
-    for (int k = row.kLo; k <= row.kHi; k += 8) {
+    const __m512d w00 = _mm512_set1_pd(table.w00), w10 = _mm512_set1_pd(table.w10), w01 = _mm512_set1_pd(table.w01),
+                  w11 = _mm512_set1_pd(table.w11);
+    const double *value = table.value, *slope = table.slope;
+    const double* nextValue = table.nextValue ? table.nextValue : table.value + 1;
+    const double* nextSlope = table.nextSlope ? table.nextSlope : table.slope + 1;
+    const int n0 = table.n0;
+    const int inLo = row.inLo, inHi = std::min(row.inHi, kHi);
+    // The groups whose eight points are all proven within the cut-off (inLo..inHi): no test, no
+    // mask (TabledLanes8 and accumulate8 with every lane added: the same operations).
+    const int provenFrom = kLo + std::max(0, (inLo - kLo + 7) / 8) * 8;
+    const int provenTo = inLo <= inHi ? inHi - 7 : kLo - 1;  // groups k with k <= provenTo
+    for (int k = kLo; k <= kHi; k += 8) {
         const __m256d e4 = _mm256_mul_pd(e, r), r4 = _mm256_mul_pd(r, q);
         const __m256d e8 = _mm256_mul_pd(e4, r4), r8 = _mm256_mul_pd(r4, q);
         const __m512d pair = _mm512_insertf64x4(_mm512_castpd256_pd512(e), e4, 1);
         const __m512d gauss = shift == 0 ? pair : _mm512_permutex2var_pd(pair, pick, _mm512_castpd256_pd512(e8));
         // Left at the group of the row's last group of eight (at or below its last point).
-        if (k + 8 <= row.kHi) {
+        if (k + 8 <= kHi) {
             e = e8;
             r = r8;
             groupK += 8;
         }
-        const int count = std::min(8, row.kHi - k + 1);
+        const int n = n0 + k;
+        if (k >= provenFrom && k <= provenTo) {
+            const __m512d j0 =
+                _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(w00, _mm512_loadu_pd(value + n)),
+                                                          _mm512_mul_pd(w10, _mm512_loadu_pd(slope + n))),
+                                            _mm512_mul_pd(w01, _mm512_loadu_pd(nextValue + n))),
+                              _mm512_mul_pd(w11, _mm512_loadu_pd(nextSlope + n)));
+            _mm512_storeu_pd(out + k, _mm512_add_pd(_mm512_loadu_pd(out + k), _mm512_mul_pd(gauss, j0)));
+            continue;
+        }
+        const int count = std::min(8, kHi - k + 1);
         const __mmask8 live = __mmask8((1u << count) - 1u);
         // The points proven within the cut-off (row.inLo..inHi) take no test, as in the scalar loop.
-        const int provenLo = std::max(0, row.inLo - k), provenHi = std::min(7, inHi - k);
+        const int provenLo = std::max(0, inLo - k), provenHi = std::min(7, inHi - k);
         const __mmask8 proven =
             live & (provenLo <= provenHi ? __mmask8(((2u << provenHi) - 1u) & ~((1u << provenLo) - 1u)) : 0);
         __mmask8 add = live;
@@ -152,7 +174,12 @@ void addStrutRowTabledSeededAvx512(const StrutRowConstants& s, const StrutRow& r
             add = cut.within(k, live) | proven;
             if (add == 0) continue;
         }
-        accumulate8(out, k, add, gauss, tabled(k, add));
+        const __m512d j0 =
+            _mm512_add_pd(_mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(w00, _mm512_maskz_loadu_pd(add, value + n)),
+                                                      _mm512_mul_pd(w10, _mm512_maskz_loadu_pd(add, slope + n))),
+                                        _mm512_mul_pd(w01, _mm512_maskz_loadu_pd(add, nextValue + n))),
+                          _mm512_mul_pd(w11, _mm512_maskz_loadu_pd(add, nextSlope + n)));
+        accumulate8(out, k, add, gauss, j0);
     }
     _mm256_storeu_pd(lanes.e, e);
     _mm256_storeu_pd(lanes.r, r);
