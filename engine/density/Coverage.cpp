@@ -56,7 +56,7 @@ bool withNeighbours(const Leaf& leaf, NodeAccessor& acc, const openvdb::CoordBBo
 }
 
 /// Calls emit(value, step) for each band voxel of @a leaf (values in [@a lo, @a hi] inside
-/// @a region), in offset order, with the length of its per-voxel change (coverageSample()'s
+/// @a region), in offset order, with the length of its per-voxel change (a CoverageSample's
 /// step). Neighbours that were not evaluated (tiles, background, outside @a around) fall back to
 /// one-sided differences.
 template <class Emit>

@@ -1,14 +1,14 @@
 /// @file LeafSteps.h
 /// @brief The coverage samples' steps of a whole 8^3 leaf at once: each voxel's per-voxel change
 /// along x, y and z (central differences, one-sided where a neighbour is absent) and its length,
-/// the step coverageSample() takes, for the 512 voxels of a leaf whose neighbours are all in the
+/// a CoverageSample's step, for the 512 voxels of a leaf whose neighbours are all in the
 /// region. The density solve's coverage passes walk the band leaf by leaf (W2g's 50 mm trimmed
-/// frame: 200 thousand leaves, twice); voxel by voxel, their branches were a sixth of its CPU.
+/// frame: 200 thousand leaves, twice); voxel by voxel, their branches were 13 % of its CPU.
 ///
-/// One loop of IEEE operations without contraction or reassociation, built both for the target's
-/// baseline and for AVX-512F (LeafStepsAvx512.cpp): the same floats either way, and the same as
-/// coverage's voxel-by-voxel form (axisChange(): float differences, their squares summed in
-/// double in x, y, z order, the square root rounded to float).
+/// The loops here are the baseline's: IEEE operations without contraction or reassociation, the
+/// same as coverage's voxel-by-voxel form (axisChange(): float differences, their squares summed
+/// in double in x, y, z order, the square root rounded to float). LeafStepsAvx512.cpp does the
+/// same operations in the same order in AVX-512F lanes, sixteen voxels at a time: the same floats.
 #pragma once
 
 #include <cstdint>
@@ -142,8 +142,8 @@ static inline bool leafMeetsLoop(const float* data, float lo, float hi)
     return meets;
 }
 
-/// leafStepsLoop, leafStraddleLoop and leafWidestLoop, each built for AVX-512F where the CPU has it
-/// (hasAvx512Rows()), else for the baseline: the same results. leafSteps() gives the steps of the
+/// The loops above, in AVX-512F lanes where the CPU has them (hasAvx512Rows()), else the
+/// baseline's: the same results. leafSteps() gives the steps of the
 /// voxels valued within [@a lo, @a hi] (what its callers read); the others' are unspecified (the
 /// AVX-512F form skips two rows at a time where none is in it: the widest step's pass reads a
 /// band a few voxels wide).
@@ -152,6 +152,8 @@ LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleB
 float leafWidest(const float* data, const float* steps, float lo, float hi);
 bool leafMeets(const float* data, float lo, float hi);
 
+/// The AVX-512F forms (LeafStepsAvx512.cpp; the loops where the build has no AVX-512F). Call only
+/// where hasAvx512Rows().
 namespace avx512 {
 void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi);
 LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s);
