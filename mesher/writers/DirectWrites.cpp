@@ -108,7 +108,7 @@ void DirectWrites::append(const char* p, std::size_t n)
         n -= take;
         if (b.size < kBufferBytes) break;
         // Full: to the writer thread, and the next free buffer filled. With none free (the disk
-        // behind), this one is written here through the page cache instead of waiting.
+        // behind), this one is written here, direct too: two writes in flight.
         const std::size_t next = (mFilling + 1) % kBuffers;
         std::unique_lock<std::mutex> lock(mMutex);
         if (mError != 0) {
@@ -118,7 +118,7 @@ void DirectWrites::append(const char* p, std::size_t n)
         }
         if (mBuffers[next].queued) {
             lock.unlock();
-            const int error = writeAt(b.bytes, b.size, b.at, false);
+            const int error = writeAt(b.bytes, b.size, b.at, mDirect);
             lock.lock();
             if (error != 0 && mError == 0) mError = error;
             b.size = 0;
