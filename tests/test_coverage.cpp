@@ -567,8 +567,8 @@ TEST(Coverage, CoarseBlocksOfAnyDepthVisitEveryLatticePointOnce)
 
 TEST(Coverage, LeafStepsInLanesAreTheVoxelByVoxelStepsAndSortsBitForBit)
 {
-    // LeafSteps.h's whole-leaf loops (the baseline build's, and the AVX-512F forms where the CPU
-    // has them) against each voxel's step taken one by one from its six neighbours (axisChange():
+    // LeafSteps.h's whole-leaf loops (the baseline build's, and the AVX-512F and AVX2 forms where
+    // the CPU has them) against each voxel's step taken one by one from its six neighbours (axisChange():
     // one-sided where a neighbour is absent or 1e30 and up): the same floats, and the same sorting
     // over a bracket as straddlingSamples()' voxel-by-voxel switch. Leaves of noise around a band,
     // with masked values, tiles' +-FLT_MAX and absent neighbour leaves mixed in.
@@ -642,20 +642,33 @@ TEST(Coverage, LeafStepsInLanesAreTheVoxelByVoxelStepsAndSortsBitForBit)
         EXPECT_EQ(leafMeetsLoop(data.data(), bounds.lo, bounds.hi), meets) << round;
         // An empty band: no voxel meets it.
         EXPECT_FALSE(leafMeetsLoop(data.data(), 2.0f, 3.0f)) << round;
-        if (!hasAvx512Rows()) continue;
-        // The steps of the band's voxels (those the passes read), and of every voxel for a band
-        // holding them all.
-        avx512::leafSteps(leaf, wide, bounds.lo, bounds.hi);
-        for (int i = 0; i < 512; ++i) {
-            if (!(data[i] < bounds.lo || data[i] > bounds.hi)) {
-                EXPECT_EQ(std::memcmp(&steps[i], &wide[i], sizeof(float)), 0) << round << " voxel " << i;
+        // The lane forms the CPU can run: the steps of the band's voxels (those the passes read),
+        // and of every voxel for a band holding them all.
+        struct Lanes {
+            const char* name;
+            bool runs;
+            void (*steps)(const LeafWithNeighbours&, float*, float, float);
+            LeafStraddle (*straddle)(const float*, const float*, const StraddleBounds&);
+            float (*widest)(const float*, const float*, float, float);
+            bool (*meets)(const float*, float, float);
+        };
+        const Lanes forms[] = {
+            {"avx512", hasAvx512Rows(), avx512::leafSteps, avx512::leafStraddle, avx512::leafWidest, avx512::leafMeets},
+            {"avx2", hasAvx2Rows(), avx2::leafSteps, avx2::leafStraddle, avx2::leafWidest, avx2::leafMeets}};
+        for (const Lanes& form : forms) {
+            if (!form.runs) continue;
+            form.steps(leaf, wide, bounds.lo, bounds.hi);
+            for (int i = 0; i < 512; ++i) {
+                if (!(data[i] < bounds.lo || data[i] > bounds.hi)) {
+                    EXPECT_EQ(std::memcmp(&steps[i], &wide[i], sizeof(float)), 0) << form.name << round << " voxel " << i;
+                }
             }
+            form.steps(leaf, wide, -kNoNeighbour, kNoNeighbour);
+            EXPECT_EQ(std::memcmp(steps, wide, sizeof(steps)), 0) << form.name << round;
+            expectSorted(form.straddle(data.data(), steps, bounds), form.name);
+            EXPECT_EQ(form.widest(data.data(), steps, bounds.lo, bounds.hi), widest) << form.name << round;
+            EXPECT_EQ(form.meets(data.data(), bounds.lo, bounds.hi), meets) << form.name << round;
+            EXPECT_FALSE(form.meets(data.data(), 2.0f, 3.0f)) << form.name << round;
         }
-        avx512::leafSteps(leaf, wide, -kNoNeighbour, kNoNeighbour);
-        EXPECT_EQ(std::memcmp(steps, wide, sizeof(steps)), 0) << round;
-        expectSorted(avx512::leafStraddle(data.data(), steps, bounds), "avx512");
-        EXPECT_EQ(avx512::leafWidest(data.data(), steps, bounds.lo, bounds.hi), widest) << round;
-        EXPECT_EQ(avx512::leafMeets(data.data(), bounds.lo, bounds.hi), meets) << round;
-        EXPECT_FALSE(avx512::leafMeets(data.data(), 2.0f, 3.0f)) << round;
     }
 }

@@ -3259,7 +3259,7 @@ TEST(CoarseNodes, StridedBatchesAtEvenVoxelsReadTheNodesTheGridReads)
 TEST(CoarseNodes, StencilPassesInLanesAreEachPointsStencilsBitForBit)
 {
     // NodeStencils.h's passes (whole lines along x and y, a row's odd voxels at once along z; the
-    // baseline build's and, where the CPU has it, AVX-512F's) against each point interpolated on
+    // baseline build's and, where the CPU has them, AVX-512F's and AVX2's) against each point interpolated on
     // its own, x then y then z, each stencil summed from 0 first to last: the same doubles, for
     // batches starting at even and odd voxels, of one voxel to 64 along z.
     using namespace node_stencils;
@@ -3317,11 +3317,19 @@ TEST(CoarseNodes, StencilPassesInLanesAreEachPointsStencilsBitForBit)
             nodePassesLoop(passes);
             EXPECT_EQ(std::memcmp(out.data(), expected.data(), out.size() * sizeof(double)), 0)
                 << n[2] << " from " << first[2];
-            if (!hasAvx512Rows()) continue;
             passes.out = wide.data();
-            nodePassesAvx512(passes);
-            EXPECT_EQ(std::memcmp(wide.data(), expected.data(), wide.size() * sizeof(double)), 0)
-                << n[2] << " from " << first[2];
+            if (hasAvx512Rows()) {
+                std::fill(wide.begin(), wide.end(), 0.0);
+                nodePassesAvx512(passes);
+                EXPECT_EQ(std::memcmp(wide.data(), expected.data(), wide.size() * sizeof(double)), 0)
+                    << "avx512 " << n[2] << " from " << first[2];
+            }
+            if (hasAvx2Rows()) {
+                std::fill(wide.begin(), wide.end(), 0.0);
+                nodePassesAvx2(passes);
+                EXPECT_EQ(std::memcmp(wide.data(), expected.data(), wide.size() * sizeof(double)), 0)
+                    << "avx2 " << n[2] << " from " << first[2];
+            }
         }
     }
 }

@@ -8,7 +8,8 @@
 /// The loops here are the baseline's: IEEE operations without contraction or reassociation, the
 /// same as coverage's voxel-by-voxel form (axisChange(): float differences, their squares summed
 /// in double in x, y, z order, the square root rounded to float). LeafStepsAvx512.cpp does the
-/// same operations in the same order in AVX-512F lanes, sixteen voxels at a time: the same floats.
+/// same operations in the same order in AVX-512F lanes, sixteen voxels at a time, and
+/// LeafStepsAvx2.cpp in AVX2 lanes, eight at a time (CPUs without AVX-512F): the same floats.
 #pragma once
 
 #include <cstdint>
@@ -142,11 +143,11 @@ static inline bool leafMeetsLoop(const float* data, float lo, float hi)
     return meets;
 }
 
-/// The loops above, in AVX-512F lanes where the CPU has them (hasAvx512Rows()), else the
-/// baseline's: the same results. leafSteps() gives the steps of the
-/// voxels valued within [@a lo, @a hi] (what its callers read); the others' are unspecified (the
-/// AVX-512F form skips two rows at a time where none is in it: the widest step's pass reads a
-/// band a few voxels wide).
+/// The loops above, in AVX-512F lanes where the CPU has them (hasAvx512Rows()), else in AVX2
+/// lanes where it has those (hasAvx2Rows()), else the baseline's: the same results. leafSteps()
+/// gives the steps of the voxels valued within [@a lo, @a hi] (what its callers read); the
+/// others' are unspecified (the lane forms skip rows where none is in it: the widest step's pass
+/// reads a band a few voxels wide).
 void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi);
 LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s);
 float leafWidest(const float* data, const float* steps, float lo, float hi);
@@ -160,5 +161,14 @@ LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleB
 float leafWidest(const float* data, const float* steps, float lo, float hi);
 bool leafMeets(const float* data, float lo, float hi);
 }  // namespace avx512
+
+/// The AVX2 forms (LeafStepsAvx2.cpp; the loops where the build has no AVX2). Call only where
+/// hasAvx2Rows().
+namespace avx2 {
+void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi);
+LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s);
+float leafWidest(const float* data, const float* steps, float lo, float hi);
+bool leafMeets(const float* data, float lo, float hi);
+}  // namespace avx2
 
 }  // namespace voxlat::coverage

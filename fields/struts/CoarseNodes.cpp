@@ -224,6 +224,8 @@ void CoarseNodes::interpolate(const GridBatch& batch, std::span<double> out, con
                                            alongXY.data(), out.data()};
     if (hasAvx512Rows())
         node_stencils::nodePassesAvx512(passes);
+    else if (hasAvx2Rows())
+        node_stencils::nodePassesAvx2(passes);
     else
         node_stencils::nodePassesLoop(passes);
 }

@@ -2,7 +2,8 @@
 /// @brief CoarseNodes' interpolation of a batch from the nodes it reads: eight-point midpoint
 /// stencils along x, then y, then z. One loop of IEEE operations in a fixed order (each value
 /// summed from 0 over the stencil's eight points, first to last; no contraction), built for the
-/// target's baseline and for AVX-512F (NodeStencilsAvx512.cpp): the same doubles either way.
+/// target's baseline, for AVX-512F (NodeStencilsAvx512.cpp) and for AVX2 (NodeStencilsAvx2.cpp):
+/// the same doubles any way.
 /// The passes run over whole lines of values (x and y) and over a row's odd voxels at once (z),
 /// the form the compiler puts in lanes.
 #pragma once
@@ -99,5 +100,9 @@ static inline void nodePassesLoop(const NodePasses& p)
 /// nodePassesLoop built for AVX-512F (NodeStencilsAvx512.cpp; the same doubles). Runs only where
 /// hasAvx512Rows().
 void nodePassesAvx512(const NodePasses& p);
+
+/// nodePassesLoop built for AVX2 (NodeStencilsAvx2.cpp; the same doubles), for CPUs without
+/// AVX-512F. Runs only where hasAvx2Rows().
+void nodePassesAvx2(const NodePasses& p);
 
 }  // namespace voxlat::node_stencils
