@@ -660,7 +660,8 @@ TEST(Coverage, LeafStepsInLanesAreTheVoxelByVoxelStepsAndSortsBitForBit)
             form.steps(leaf, wide, bounds.lo, bounds.hi);
             for (int i = 0; i < 512; ++i) {
                 if (!(data[i] < bounds.lo || data[i] > bounds.hi)) {
-                    EXPECT_EQ(std::memcmp(&steps[i], &wide[i], sizeof(float)), 0) << form.name << round << " voxel " << i;
+                    EXPECT_EQ(std::memcmp(&steps[i], &wide[i], sizeof(float)), 0)
+                        << form.name << round << " voxel " << i;
                 }
             }
             form.steps(leaf, wide, -kNoNeighbour, kNoNeighbour);

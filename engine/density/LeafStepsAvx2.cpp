@@ -84,10 +84,10 @@ void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi)
             const __m256 xu = _mm256_loadu_ps(xUp + y * 8), xd = _mm256_loadu_ps(xDown + y * 8);
             const __m256 yu = _mm256_loadu_ps(y < 7 ? row + 8 : leaf.next[1][1] + x * 64);
             const __m256 yd = _mm256_loadu_ps(y > 0 ? row - 8 : leaf.next[1][0] + x * 64 + 56);
-            const __m256 zu = _mm256_blend_ps(_mm256_permutevar8x32_ps(v, upIndex),
-                                              _mm256_set1_ps(leaf.next[2][1][r]), 0x80);
-            const __m256 zd = _mm256_blend_ps(_mm256_permutevar8x32_ps(v, downIndex),
-                                              _mm256_set1_ps(leaf.next[2][0][r + 7]), 0x01);
+            const __m256 zu =
+                _mm256_blend_ps(_mm256_permutevar8x32_ps(v, upIndex), _mm256_set1_ps(leaf.next[2][1][r]), 0x80);
+            const __m256 zd =
+                _mm256_blend_ps(_mm256_permutevar8x32_ps(v, downIndex), _mm256_set1_ps(leaf.next[2][0][r + 7]), 0x01);
             const AxisDifferences dx = differences(v, xu, xd), dy = differences(v, yu, yd), dz = differences(v, zu, zd);
             for (const bool upper : {false, true}) {
                 const __m256d cx = change(dx, upper), cy = change(dy, upper), cz = change(dz, upper);
@@ -157,7 +157,8 @@ bool leafMeets(const float* data, float lo, float hi)
     const __m256 low = _mm256_set1_ps(lo), high = _mm256_set1_ps(hi);
     for (int i = 0; i < 512; i += 64) {
         __m256 meets = _mm256_setzero_ps();
-        for (int j = i; j < i + 64; j += 8) meets = _mm256_or_ps(meets, withinBand(_mm256_loadu_ps(data + j), low, high));
+        for (int j = i; j < i + 64; j += 8)
+            meets = _mm256_or_ps(meets, withinBand(_mm256_loadu_ps(data + j), low, high));
         if (_mm256_movemask_ps(meets) != 0) return true;
     }
     return false;
