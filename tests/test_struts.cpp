@@ -1073,13 +1073,17 @@ TEST(IsoRadius, SingleRadiiMissLnFByLessThanAMillionthAndAreTheSameOnEveryPath)
     const SingleRadii m{float(std::log(peak)), float(sigma), fMin, rhoMax};
     for (const std::size_t n : {std::size_t(1), std::size_t(7), std::size_t(15), std::size_t(16), std::size_t(17),
                                 std::size_t(33), f.size()}) {
-        std::vector<double> base(f.begin(), f.begin() + std::ptrdiff_t(n)), wide = base;
+        std::vector<double> base(f.begin(), f.begin() + std::ptrdiff_t(n)), wide = base, four = base;
         isoRadiiSingleLoop(base.data(), n, m);
         if (hasAvx512Rows())
             isoRadiiSingleAvx512(wide.data(), n, m);
         else
             isoRadiiSingleLoop(wide.data(), n, m);
         ASSERT_EQ(0, std::memcmp(base.data(), wide.data(), n * sizeof(double))) << n << " values";
+        if (hasAvx2Rows()) {
+            isoRadiiSingleAvx2(four.data(), n, m);
+            ASSERT_EQ(0, std::memcmp(base.data(), four.data(), n * sizeof(double))) << n << " values, AVX2";
+        }
         ASSERT_EQ(0, std::memcmp(base.data(), rho.data(), n * sizeof(double))) << n << " values";
     }
     // The slicer's planes take it where the convolution interpolates, not where they are exact.
@@ -2990,10 +2994,10 @@ TEST(ColumnStencils, DirectionalBoundHoldsForRaysAndSegmentsAndTakesEveryFourthC
     EXPECT_EQ(columnStencils(258, 0.019, 0.2, tolerance).exactCount(), 94u);
 }
 
-TEST(TileBounds, TwoAndEightLanesGiveTheScalarLoopsDoubles)
+TEST(TileBounds, TwoFourAndEightLanesGiveTheScalarLoopsDoubles)
 {
-    // TileBounds.h's contract, bit for bit, in both forms (eight lanes where the CPU has
-    // AVX-512F): per tile within reach, upper += peak expUpper(near^2 / 2 sigma^2) and peaks +=
+    // TileBounds.h's contract, bit for bit, in every form (four lanes where the CPU has AVX2,
+    // eight where it has AVX-512F): per tile within reach, upper += peak expUpper(near^2 / 2 sigma^2) and peaks +=
     // peak; the halo and inner bits. Random struts over a 64 x 64 grid of 8 x 8-pixel tiles at
     // the Saturn 4's pitch, tile columns of 4 to 64 tiles.
     std::vector<double> table(12 * 256 + 1);
@@ -3036,9 +3040,19 @@ TEST(TileBounds, TwoAndEightLanesGiveTheScalarLoopsDoubles)
         s.peak = 1.0 + share(rng);
         s.inv2s2 = 0.5 / (sigma * sigma);
         std::vector<double> upper(tilesX * tilesY, 0.25), peaks(tilesX * tilesY, 0.5);
-        std::vector<double> upperRef = upper, peaksRef = peaks, upper8 = upper, peaks8 = peaks;
-        std::vector<TileColumnReach> reach(std::size_t(a1 - a0 + 1)), reach8(reach.size());
+        std::vector<double> upperRef = upper, peaksRef = peaks, upper8 = upper, peaks8 = peaks, upper4 = upper,
+                            peaks4 = peaks;
+        std::vector<TileColumnReach> reach(std::size_t(a1 - a0 + 1)), reach8(reach.size()), reach4(reach.size());
         addTileBoundsScalar(s, a0, a1, b0, b1, tilesY, nodes, upper.data(), peaks.data(), reach.data());
+        if (hasAvx2Rows()) {
+            addTileBoundsAvx2(s, a0, a1, b0, b1, tilesY, nodes, upper4.data(), peaks4.data(), reach4.data());
+            ASSERT_EQ(upper4, upper) << "strut " << n;
+            ASSERT_EQ(peaks4, peaks) << "strut " << n;
+            for (std::size_t c = 0; c < reach.size(); ++c) {
+                ASSERT_EQ(reach4[c].halo, reach[c].halo) << "strut " << n;
+                ASSERT_EQ(reach4[c].inner, reach[c].inner) << "strut " << n;
+            }
+        }
         if (hasAvx512Rows()) {
             addTileBoundsAvx512(s, a0, a1, b0, b1, tilesY, nodes, upper8.data(), peaks8.data(), reach8.data());
             ASSERT_EQ(upper8, upper) << "strut " << n;

@@ -74,6 +74,8 @@ void IsoRadius::radiiSingle(std::span<double> values) const
     const SingleRadii m{float(std::log(mPeak)), float(mSigma), mFMin, mRhoMax};
     if (hasAvx512Rows())
         isoRadiiSingleAvx512(values.data(), values.size(), m);
+    else if (hasAvx2Rows())
+        isoRadiiSingleAvx2(values.data(), values.size(), m);
     else
         isoRadiiSingleLoop(values.data(), values.size(), m);
 }

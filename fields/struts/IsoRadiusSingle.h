@@ -10,7 +10,8 @@
 /// of F as much: near the surface (u about 1) rho by about 4e-7 of sigma (8e-8 mm at sigma 0.2,
 /// four millionths of a 19 um pixel), against the interpolation's 2.5e-5 of the peaks. One loop
 /// of IEEE operations without contraction or reassociation, built both for the target's baseline
-/// and for AVX-512F (isoRadiiSingleAvx512): the same doubles either way, on any CPU.
+/// for AVX-512F (isoRadiiSingleAvx512) and for AVX2 (isoRadiiSingleAvx2): the same doubles any
+/// way, on any CPU.
 #pragma once
 
 #include <algorithm>
@@ -73,5 +74,9 @@ static inline void isoRadiiSingleLoop(double* values, std::size_t n, const Singl
 /// isoRadiiSingleLoop built for AVX-512F (sixteen lanes; the same doubles). Runs only where
 /// hasAvx512Rows().
 void isoRadiiSingleAvx512(double* values, std::size_t n, const SingleRadii& m);
+
+/// isoRadiiSingleLoop built for AVX2 (eight lanes; the same doubles), for CPUs without AVX-512F.
+/// Runs only where hasAvx2Rows().
+void isoRadiiSingleAvx2(double* values, std::size_t n, const SingleRadii& m);
 
 }  // namespace voxlat

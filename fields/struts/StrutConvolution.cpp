@@ -992,7 +992,9 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
     const double cx0 = plane.origin.x() + (0.5 + 0.5 * tile) * dx, cy0 = plane.origin.y() + (0.5 + 0.5 * tile) * dy;
     const double halfX = 0.5 * stepX, halfY = 0.5 * stepY, halfDiagonal = std::sqrt(halfX * halfX + halfY * halfY);
     const ExpUpperNodes expNodes = expUpperNodes();
-    const bool eightLanes = hasAvx512Rows();
+    const auto addTileBounds = hasAvx512Rows() ? addTileBoundsAvx512
+                               : hasAvx2Rows() ? addTileBoundsAvx2
+                                               : addTileBoundsScalar;
     thread_local std::vector<TileColumnReach> columnReach;
     const LowerTables& lowerTables = LowerTables::instance();
     // Per strut and tile of its reach, its peak times the kernel at the least distance from the
@@ -1064,8 +1066,7 @@ void StrutConvolution::planeValues(const GridBatch& plane, int tile, Interval ba
                                         uy,    uz,    length,       ez,     farSqr,   farHaloSqr, innerSqr,
                                         halfX, halfY, halfDiagonal, margin, mPeak[j], inv2s2};
             columnReach.resize(std::size_t(a1 - a0 + 1));
-            (eightLanes ? addTileBoundsAvx512 : addTileBoundsScalar)(strut, a0, a1, b0, b1, tiles.ny, expNodes,
-                                                                     upper.data(), peaks.data(), columnReach.data());
+            addTileBounds(strut, a0, a1, b0, b1, tiles.ny, expNodes, upper.data(), peaks.data(), columnReach.data());
             for (int a = a0; a <= a1; ++a) {
                 const TileColumnReach& met = columnReach[std::size_t(a - a0)];
                 if (met.halo) {

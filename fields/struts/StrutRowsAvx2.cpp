@@ -141,27 +141,28 @@ inline __m256i liveLanes(int lanes)
 
 /// A tabled row's J0 at points k..k + 3: the two phases' nodes and slopes weighted (Hermite).
 struct TabledLanes {
-    const StrutRowTable& table;
+    // The table's rows from its n0 on, held here (the stores to a row's sums may alias anything:
+    // the table's fields would be reloaded for each group).
+    const double *value, *slope, *nextValue, *nextSlope;
     __m256d w00, w10, w01, w11;
-    const double *nextValue, *nextSlope;
     explicit TabledLanes(const StrutRowTable& t)
-        : table(t),
+        : value(t.value + t.n0),
+          slope(t.slope + t.n0),
+          // Lanes past the row read nodes the table holds (its caller sizes it with a margin).
+          nextValue((t.nextValue ? t.nextValue : t.value + 1) + t.n0),
+          nextSlope((t.nextSlope ? t.nextSlope : t.slope + 1) + t.n0),
           w00(_mm256_set1_pd(t.w00)),
           w10(_mm256_set1_pd(t.w10)),
           w01(_mm256_set1_pd(t.w01)),
-          w11(_mm256_set1_pd(t.w11)),
-          // Lanes past the row read nodes the table holds (its caller sizes it with a margin).
-          nextValue(t.nextValue ? t.nextValue : t.value + 1),
-          nextSlope(t.nextSlope ? t.nextSlope : t.slope + 1)
+          w11(_mm256_set1_pd(t.w11))
     {
     }
     __m256d operator()(int k) const
     {
-        const int n = table.n0 + k;
-        return _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(w00, _mm256_loadu_pd(table.value + n)),
-                                                         _mm256_mul_pd(w10, _mm256_loadu_pd(table.slope + n))),
-                                           _mm256_mul_pd(w01, _mm256_loadu_pd(nextValue + n))),
-                             _mm256_mul_pd(w11, _mm256_loadu_pd(nextSlope + n)));
+        return _mm256_add_pd(_mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(w00, _mm256_loadu_pd(value + k)),
+                                                         _mm256_mul_pd(w10, _mm256_loadu_pd(slope + k))),
+                                           _mm256_mul_pd(w01, _mm256_loadu_pd(nextValue + k))),
+                             _mm256_mul_pd(w11, _mm256_loadu_pd(nextSlope + k)));
     }
 };
 
@@ -239,24 +240,26 @@ void addStrutRowTabledSeededAvx2(const StrutRowConstants& s, const StrutRow& row
     const __m256i rotate = _mm256_load_si256(reinterpret_cast<const __m256i*>(kRotate[shift]));
     const __m256d fromThis =
         _mm256_castsi256_pd(_mm256_cmpgt_epi64(_mm256_set1_epi64x(4 - shift), _mm256_setr_epi64x(0, 1, 2, 3)));
-    const int inHi = std::min(row.inHi, row.kHi);
-    for (int k = row.kLo; k <= row.kHi; k += 4) {
+    // The row's bounds and the recurrences' group in locals (the stores to out may alias them).
+    const int kHi = row.kHi, inLo = row.inLo, inHi = std::min(row.inHi, row.kHi);
+    int lanesK = lanes.k;
+    for (int k = row.kLo; k <= kHi; k += 4) {
         const __m256d next = _mm256_mul_pd(e, r);
         const __m256d gauss =
             _mm256_blendv_pd(_mm256_castps_pd(_mm256_permutevar8x32_ps(_mm256_castpd_ps(next), rotate)),
                              _mm256_castps_pd(_mm256_permutevar8x32_ps(_mm256_castpd_ps(e), rotate)), fromThis);
-        if (k + 4 <= row.kHi) {
+        if (k + 4 <= kHi) {
             e = next;
             r = _mm256_mul_pd(r, q);
-            lanes.k += 4;
+            lanesK += 4;
         }
-        if (k >= row.inLo && k + 3 <= inHi) {
+        if (k >= inLo && k + 3 <= inHi) {
             // Four points proven within the cut-off: no test (the same sums).
             const __m256d before = _mm256_loadu_pd(out + k);
             _mm256_storeu_pd(out + k, _mm256_add_pd(before, _mm256_mul_pd(gauss, tabled(k))));
             continue;
         }
-        const int count = std::min(4, row.kHi - k + 1);
+        const int count = std::min(4, kHi - k + 1);
         const __m256i live = liveLanes(count);
         const __m256d dz = cut.dz(k);
         const __m256d within = cut.within(dz, cut.h(dz), live);
@@ -273,6 +276,7 @@ void addStrutRowTabledSeededAvx2(const StrutRowConstants& s, const StrutRow& row
             for (int l = 0; l < count; ++l) out[k + l] = sum[l];
         }
     }
+    lanes.k = lanesK;
     _mm256_storeu_pd(lanes.e, e);
     _mm256_storeu_pd(lanes.r, r);
 }

@@ -1,6 +1,6 @@
 /// @file TileBounds.h
 /// @brief StrutConvolution::planeValues' upper bounds of one strut over a box of a plane's tiles:
-/// two tiles at a time, or eight (AVX-512F), the same doubles either way.
+/// two tiles at a time, four (AVX2) or eight (AVX-512F), the same doubles any way.
 ///
 /// Per tile b of the column (centre ex, cy0 + b stepY, ez from the strut's start): h the centre's
 /// projection clamped to [0, L], r the centre less its nearest point of the segment,
@@ -52,5 +52,10 @@ void addTileBoundsScalar(const TileColumnStrut& s, int a0, int a1, int b0, int b
 /// Call only where hasAvx512Rows() (StrutRows.h: the build has AVX-512 forms and the CPU runs them).
 void addTileBoundsAvx512(const TileColumnStrut& s, int a0, int a1, int b0, int b1, int tilesY,
                          const ExpUpperNodes& table, double* upper, double* peaks, TileColumnReach* reach);
+
+/// addTileBoundsScalar four tiles at a time (TileBoundsAvx2.cpp, AVX2 without FMA), for CPUs
+/// without AVX-512F: the same doubles. Call only where hasAvx2Rows().
+void addTileBoundsAvx2(const TileColumnStrut& s, int a0, int a1, int b0, int b1, int tilesY, const ExpUpperNodes& table,
+                       double* upper, double* peaks, TileColumnReach* reach);
 
 }  // namespace voxlat
