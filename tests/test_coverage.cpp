@@ -646,30 +646,24 @@ TEST(Coverage, LeafStepsInLanesAreTheVoxelByVoxelStepsAndSortsBitForBit)
         // and of every voxel for a band holding them all.
         struct Lanes {
             const char* name;
-            bool runs;
-            void (*steps)(const LeafWithNeighbours&, float*, float, float);
-            LeafStraddle (*straddle)(const float*, const float*, const StraddleBounds&);
-            float (*widest)(const float*, const float*, float, float);
-            bool (*meets)(const float*, float, float);
+            const LeafStepForms* form;
         };
-        const Lanes forms[] = {
-            {"avx512", hasAvx512Rows(), avx512::leafSteps, avx512::leafStraddle, avx512::leafWidest, avx512::leafMeets},
-            {"avx2", hasAvx2Rows(), avx2::leafSteps, avx2::leafStraddle, avx2::leafWidest, avx2::leafMeets}};
-        for (const Lanes& form : forms) {
-            if (!form.runs) continue;
-            form.steps(leaf, wide, bounds.lo, bounds.hi);
+        const Lanes lanes[] = {{"avx512", hasAvx512Rows() ? avx512LeafSteps() : nullptr},
+                               {"avx2", hasAvx2Rows() ? avx2LeafSteps() : nullptr}};
+        for (const auto& [name, form] : lanes) {
+            if (!form) continue;
+            form->steps(leaf, wide, bounds.lo, bounds.hi);
             for (int i = 0; i < 512; ++i) {
                 if (!(data[i] < bounds.lo || data[i] > bounds.hi)) {
-                    EXPECT_EQ(std::memcmp(&steps[i], &wide[i], sizeof(float)), 0)
-                        << form.name << round << " voxel " << i;
+                    EXPECT_EQ(std::memcmp(&steps[i], &wide[i], sizeof(float)), 0) << name << round << " voxel " << i;
                 }
             }
-            form.steps(leaf, wide, -kNoNeighbour, kNoNeighbour);
-            EXPECT_EQ(std::memcmp(steps, wide, sizeof(steps)), 0) << form.name << round;
-            expectSorted(form.straddle(data.data(), steps, bounds), form.name);
-            EXPECT_EQ(form.widest(data.data(), steps, bounds.lo, bounds.hi), widest) << form.name << round;
-            EXPECT_EQ(form.meets(data.data(), bounds.lo, bounds.hi), meets) << form.name << round;
-            EXPECT_FALSE(form.meets(data.data(), 2.0f, 3.0f)) << form.name << round;
+            form->steps(leaf, wide, -kNoNeighbour, kNoNeighbour);
+            EXPECT_EQ(std::memcmp(steps, wide, sizeof(steps)), 0) << name << round;
+            expectSorted(form->straddle(data.data(), steps, bounds), name);
+            EXPECT_EQ(form->widest(data.data(), steps, bounds.lo, bounds.hi), widest) << name << round;
+            EXPECT_EQ(form->meets(data.data(), bounds.lo, bounds.hi), meets) << name << round;
+            EXPECT_FALSE(form->meets(data.data(), 2.0f, 3.0f)) << name << round;
         }
     }
 }

@@ -16,32 +16,41 @@ const float* leafNoNeighbours()
     return none.data();
 }
 
+namespace {
+
+/// The fastest form the build has and the CPU runs, chosen once.
+const LeafStepForms& forms()
+{
+    static const LeafStepForms chosen = [] {
+        if (hasAvx512Rows() && avx512LeafSteps()) return *avx512LeafSteps();
+        if (hasAvx2Rows() && avx2LeafSteps()) return *avx2LeafSteps();
+        return LeafStepForms{
+            [](const LeafWithNeighbours& leaf, float* steps, float, float) { leafStepsLoop(leaf, steps); },
+            leafStraddleLoop, leafWidestLoop, leafMeetsLoop};
+    }();
+    return chosen;
+}
+
+}  // namespace
+
 void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi)
 {
-    if (hasAvx512Rows()) return avx512::leafSteps(leaf, steps, lo, hi);
-    if (hasAvx2Rows()) return avx2::leafSteps(leaf, steps, lo, hi);
-    leafStepsLoop(leaf, steps);
+    forms().steps(leaf, steps, lo, hi);
 }
 
 LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s)
 {
-    if (hasAvx512Rows()) return avx512::leafStraddle(data, steps, s);
-    if (hasAvx2Rows()) return avx2::leafStraddle(data, steps, s);
-    return leafStraddleLoop(data, steps, s);
+    return forms().straddle(data, steps, s);
 }
 
 float leafWidest(const float* data, const float* steps, float lo, float hi)
 {
-    if (hasAvx512Rows()) return avx512::leafWidest(data, steps, lo, hi);
-    if (hasAvx2Rows()) return avx2::leafWidest(data, steps, lo, hi);
-    return leafWidestLoop(data, steps, lo, hi);
+    return forms().widest(data, steps, lo, hi);
 }
 
 bool leafMeets(const float* data, float lo, float hi)
 {
-    if (hasAvx512Rows()) return avx512::leafMeets(data, lo, hi);
-    if (hasAvx2Rows()) return avx2::leafMeets(data, lo, hi);
-    return leafMeetsLoop(data, lo, hi);
+    return forms().meets(data, lo, hi);
 }
 
 }  // namespace voxlat::coverage

@@ -143,6 +143,21 @@ static inline bool leafMeetsLoop(const float* data, float lo, float hi)
     return meets;
 }
 
+/// One build of the loops above: the baseline's, or a lane form's.
+struct LeafStepForms {
+    void (*steps)(const LeafWithNeighbours& leaf, float* steps, float lo, float hi);
+    LeafStraddle (*straddle)(const float* data, const float* steps, const StraddleBounds& s);
+    float (*widest)(const float* data, const float* steps, float lo, float hi);
+    bool (*meets)(const float* data, float lo, float hi);
+};
+
+/// The AVX-512F forms (LeafStepsAvx512.cpp), null where the build has none; run them only where
+/// hasAvx512Rows().
+const LeafStepForms* avx512LeafSteps();
+/// The AVX2 forms (LeafStepsAvx2.cpp), null where the build has none; run them only where
+/// hasAvx2Rows().
+const LeafStepForms* avx2LeafSteps();
+
 /// The loops above, in AVX-512F lanes where the CPU has them (hasAvx512Rows()), else in AVX2
 /// lanes where it has those (hasAvx2Rows()), else the baseline's: the same results. leafSteps()
 /// gives the steps of the voxels valued within [@a lo, @a hi] (what its callers read); the
@@ -152,23 +167,5 @@ void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi)
 LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s);
 float leafWidest(const float* data, const float* steps, float lo, float hi);
 bool leafMeets(const float* data, float lo, float hi);
-
-/// The AVX-512F forms (LeafStepsAvx512.cpp; the loops where the build has no AVX-512F). Call only
-/// where hasAvx512Rows().
-namespace avx512 {
-void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi);
-LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s);
-float leafWidest(const float* data, const float* steps, float lo, float hi);
-bool leafMeets(const float* data, float lo, float hi);
-}  // namespace avx512
-
-/// The AVX2 forms (LeafStepsAvx2.cpp; the loops where the build has no AVX2). Call only where
-/// hasAvx2Rows().
-namespace avx2 {
-void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi);
-LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s);
-float leafWidest(const float* data, const float* steps, float lo, float hi);
-bool leafMeets(const float* data, float lo, float hi);
-}  // namespace avx2
 
 }  // namespace voxlat::coverage

@@ -2,7 +2,7 @@
 /// LeafSteps.h's loops in AVX2 lanes, for CPUs without AVX-512F: a leaf's row (eight floats) at a
 /// time, its doubles four at a time. The same IEEE operations in the same order as the loops (float
 /// differences, double squares summed in x, y, z order, no contraction, no FMA), so the same
-/// floats. Runs only where hasAvx2Rows(); a build for another processor gives the baseline loops.
+/// floats. Run only where hasAvx2Rows(); a build for another processor has none (avx2LeafSteps() is null).
 #include "engine/density/LeafSteps.h"
 
 #include <bit>
@@ -12,7 +12,7 @@
 #include <immintrin.h>
 #endif
 
-namespace voxlat::coverage::avx2 {
+namespace voxlat::coverage {
 
 #if defined(__AVX2__)
 
@@ -60,9 +60,7 @@ __m256d change(const AxisDifferences& d, bool high)
     return _mm256_blendv_pd(one, both, _mm256_and_pd(hasUp, hasDown));
 }
 
-}  // namespace
-
-void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi)
+void stepsInLanes(const LeafWithNeighbours& leaf, float* steps, float lo, float hi)
 {
     const float* data = leaf.data;
     const __m256 low = _mm256_set1_ps(lo), high = _mm256_set1_ps(hi);
@@ -99,7 +97,7 @@ void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi)
     }
 }
 
-LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s)
+LeafStraddle straddleInLanes(const float* data, const float* steps, const StraddleBounds& s)
 {
     LeafStraddle out;
     const __m256 lo = _mm256_set1_ps(s.lo), hi = _mm256_set1_ps(s.hi);
@@ -136,7 +134,7 @@ LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleB
     return out;
 }
 
-float leafWidest(const float* data, const float* steps, float lo, float hi)
+float widestInLanes(const float* data, const float* steps, float lo, float hi)
 {
     const __m256 low = _mm256_set1_ps(lo), high = _mm256_set1_ps(hi), cap = _mm256_set1_ps(1e29f);
     __m256 widest = _mm256_setzero_ps();
@@ -152,7 +150,7 @@ float leafWidest(const float* data, const float* steps, float lo, float hi)
     return out;
 }
 
-bool leafMeets(const float* data, float lo, float hi)
+bool meetsInLanes(const float* data, float lo, float hi)
 {
     const __m256 low = _mm256_set1_ps(lo), high = _mm256_set1_ps(hi);
     for (int i = 0; i < 512; i += 64) {
@@ -164,28 +162,21 @@ bool leafMeets(const float* data, float lo, float hi)
     return false;
 }
 
+}  // namespace
+
+const LeafStepForms* avx2LeafSteps()
+{
+    static const LeafStepForms forms{stepsInLanes, straddleInLanes, widestInLanes, meetsInLanes};
+    return &forms;
+}
+
 #else
 
-void leafSteps(const LeafWithNeighbours& leaf, float* steps, float, float)
+const LeafStepForms* avx2LeafSteps()
 {
-    leafStepsLoop(leaf, steps);
-}
-
-LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s)
-{
-    return leafStraddleLoop(data, steps, s);
-}
-
-float leafWidest(const float* data, const float* steps, float lo, float hi)
-{
-    return leafWidestLoop(data, steps, lo, hi);
-}
-
-bool leafMeets(const float* data, float lo, float hi)
-{
-    return leafMeetsLoop(data, lo, hi);
+    return nullptr;
 }
 
 #endif
 
-}  // namespace voxlat::coverage::avx2
+}  // namespace voxlat::coverage

@@ -1,8 +1,8 @@
 /// @file LeafStepsAvx512.cpp
 /// LeafSteps.h's loops in AVX-512F lanes, sixteen voxels (two rows of a leaf) at a time: the same
 /// IEEE operations in the same order as the loops (float differences, double squares summed in x,
-/// y, z order, no contraction), so the same floats. Runs only where hasAvx512Rows(); a build for
-/// another processor gives the baseline loops.
+/// y, z order, no contraction), so the same floats. Run only where hasAvx512Rows(); a build for
+/// another processor has none (avx512LeafSteps() is null).
 #include "engine/density/LeafSteps.h"
 
 #include <bit>
@@ -15,7 +15,7 @@
 #include <immintrin.h>
 #endif
 
-namespace voxlat::coverage::avx512 {
+namespace voxlat::coverage {
 
 #if defined(__AVX512F__)
 
@@ -60,9 +60,7 @@ __m512d change(const AxisDifferences& d, bool high)
     return _mm512_mask_mov_pd(one, __mmask8(hasUp & hasDown), both);
 }
 
-}  // namespace
-
-void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi)
+void stepsInLanes(const LeafWithNeighbours& leaf, float* steps, float lo, float hi)
 {
     const float* data = leaf.data;
     const __m512 low = _mm512_set1_ps(lo), high = _mm512_set1_ps(hi);
@@ -99,7 +97,7 @@ void leafSteps(const LeafWithNeighbours& leaf, float* steps, float lo, float hi)
     }
 }
 
-LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s)
+LeafStraddle straddleInLanes(const float* data, const float* steps, const StraddleBounds& s)
 {
     LeafStraddle out;
     const __m512 lo = _mm512_set1_ps(s.lo), hi = _mm512_set1_ps(s.hi);
@@ -136,7 +134,7 @@ LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleB
     return out;
 }
 
-float leafWidest(const float* data, const float* steps, float lo, float hi)
+float widestInLanes(const float* data, const float* steps, float lo, float hi)
 {
     const __m512 low = _mm512_set1_ps(lo), high = _mm512_set1_ps(hi), cap = _mm512_set1_ps(1e29f);
     __m512 widest = _mm512_setzero_ps();
@@ -149,7 +147,7 @@ float leafWidest(const float* data, const float* steps, float lo, float hi)
     return _mm512_reduce_max_ps(widest);  // a maximum: the same in any order
 }
 
-bool leafMeets(const float* data, float lo, float hi)
+bool meetsInLanes(const float* data, float lo, float hi)
 {
     const __m512 low = _mm512_set1_ps(lo), high = _mm512_set1_ps(hi);
     for (int i = 0; i < 512; i += 64) {
@@ -163,28 +161,21 @@ bool leafMeets(const float* data, float lo, float hi)
     return false;
 }
 
+}  // namespace
+
+const LeafStepForms* avx512LeafSteps()
+{
+    static const LeafStepForms forms{stepsInLanes, straddleInLanes, widestInLanes, meetsInLanes};
+    return &forms;
+}
+
 #else
 
-void leafSteps(const LeafWithNeighbours& leaf, float* steps, float, float)
+const LeafStepForms* avx512LeafSteps()
 {
-    leafStepsLoop(leaf, steps);
-}
-
-LeafStraddle leafStraddle(const float* data, const float* steps, const StraddleBounds& s)
-{
-    return leafStraddleLoop(data, steps, s);
-}
-
-float leafWidest(const float* data, const float* steps, float lo, float hi)
-{
-    return leafWidestLoop(data, steps, lo, hi);
-}
-
-bool leafMeets(const float* data, float lo, float hi)
-{
-    return leafMeetsLoop(data, lo, hi);
+    return nullptr;
 }
 
 #endif
 
-}  // namespace voxlat::coverage::avx512
+}  // namespace voxlat::coverage
