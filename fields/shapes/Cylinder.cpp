@@ -71,15 +71,28 @@ void Cylinder::gridValues(const GridBatch& batch, std::span<double> out) const
             const double r = std::sqrt(u * u + v * v);
             qr[std::size_t(i) * std::size_t(n[c]) + std::size_t(j)] = r - mRadius;
         }
-    std::size_t m = 0;
-    int idx[3];
-    for (idx[0] = 0; idx[0] < batch.nx; ++idx[0])
-        for (idx[1] = 0; idx[1] < batch.ny; ++idx[1])
-            for (idx[2] = 0; idx[2] < batch.nz; ++idx[2], ++m) {
+    // Per row (along z): either h changes along it (a cylinder along z) or q does (c is z).
+    // q q + h h is never negative, so its square root is taken in every lane and kept where
+    // both are positive (the same doubles): the rows vectorise.
+    auto value = [](double q, double h) {
+        const double corner = std::sqrt(q * q + h * h);
+        return q > 0 && h > 0 ? corner : q > h ? q : h;
+    };
+    const std::size_t nz = std::size_t(batch.nz);
+    for (int i = 0; i < batch.nx; ++i)
+        for (int j = 0; j < batch.ny; ++j) {
+            double* row = out.data() + (std::size_t(i) * std::size_t(batch.ny) + std::size_t(j)) * nz;
+            const int idx[3] = {i, j, 0};
+            if (along == 2) {
+                const double q = qr[std::size_t(i) * std::size_t(n[c]) + std::size_t(j)];
+                const double* h = qh.data();
+                for (std::size_t k = 0; k < nz; ++k) row[k] = value(q, h[k]);
+            } else {
                 const double h = qh[std::size_t(idx[along])];
-                const double q = qr[std::size_t(idx[b]) * std::size_t(n[c]) + std::size_t(idx[c])];
-                out[m] = q > 0 && h > 0 ? std::sqrt(q * q + h * h) : q > h ? q : h;
+                const double* q = qr.data() + std::size_t(idx[b]) * std::size_t(n[c]);
+                for (std::size_t k = 0; k < nz; ++k) row[k] = value(q[k], h);
             }
+        }
 }
 
 void Cylinder::gradients(std::span<const Vec3d> points, std::span<double> out, std::span<Vec3d> grad) const
