@@ -3040,26 +3040,23 @@ TEST(TileBounds, TwoFourAndEightLanesGiveTheScalarLoopsDoubles)
         s.peak = 1.0 + share(rng);
         s.inv2s2 = 0.5 / (sigma * sigma);
         std::vector<double> upper(tilesX * tilesY, 0.25), peaks(tilesX * tilesY, 0.5);
-        std::vector<double> upperRef = upper, peaksRef = peaks, upper8 = upper, peaks8 = peaks, upper4 = upper,
-                            peaks4 = peaks;
-        std::vector<TileColumnReach> reach(std::size_t(a1 - a0 + 1)), reach8(reach.size()), reach4(reach.size());
+        std::vector<double> upperRef = upper, peaksRef = peaks;
+        std::vector<TileColumnReach> reach(std::size_t(a1 - a0 + 1));
         addTileBoundsScalar(s, a0, a1, b0, b1, tilesY, nodes, upper.data(), peaks.data(), reach.data());
-        if (hasAvx2Rows()) {
-            addTileBoundsAvx2(s, a0, a1, b0, b1, tilesY, nodes, upper4.data(), peaks4.data(), reach4.data());
-            ASSERT_EQ(upper4, upper) << "strut " << n;
-            ASSERT_EQ(peaks4, peaks) << "strut " << n;
+        // The lane forms the CPU runs, from the same starting values: the scalar loop's results.
+        using Form = decltype(&addTileBoundsScalar);
+        for (const auto& [name, runs, form] :
+             {std::tuple<const char*, bool, Form>{"avx2", hasAvx2Rows(), addTileBoundsAvx2},
+              {"avx512", hasAvx512Rows(), addTileBoundsAvx512}}) {
+            if (!runs) continue;
+            std::vector<double> upperLanes = upperRef, peaksLanes = peaksRef;
+            std::vector<TileColumnReach> reachLanes(reach.size());
+            form(s, a0, a1, b0, b1, tilesY, nodes, upperLanes.data(), peaksLanes.data(), reachLanes.data());
+            ASSERT_EQ(upperLanes, upper) << name << " strut " << n;
+            ASSERT_EQ(peaksLanes, peaks) << name << " strut " << n;
             for (std::size_t c = 0; c < reach.size(); ++c) {
-                ASSERT_EQ(reach4[c].halo, reach[c].halo) << "strut " << n;
-                ASSERT_EQ(reach4[c].inner, reach[c].inner) << "strut " << n;
-            }
-        }
-        if (hasAvx512Rows()) {
-            addTileBoundsAvx512(s, a0, a1, b0, b1, tilesY, nodes, upper8.data(), peaks8.data(), reach8.data());
-            ASSERT_EQ(upper8, upper) << "strut " << n;
-            ASSERT_EQ(peaks8, peaks) << "strut " << n;
-            for (std::size_t c = 0; c < reach.size(); ++c) {
-                ASSERT_EQ(reach8[c].halo, reach[c].halo) << "strut " << n;
-                ASSERT_EQ(reach8[c].inner, reach[c].inner) << "strut " << n;
+                ASSERT_EQ(reachLanes[c].halo, reach[c].halo) << name << " strut " << n;
+                ASSERT_EQ(reachLanes[c].inner, reach[c].inner) << name << " strut " << n;
             }
         }
         for (int a = a0; a <= a1; ++a) {

@@ -45,13 +45,20 @@ static inline double laneChange(float value, float up, float down)
     return hasUp && hasDown ? both : one;
 }
 
+/// The 64 values of the x plane above (@a up) or below a leaf's plane @a x: the leaf's own, or
+/// the neighbour leaf's nearest plane at the leaf's x faces (each form of the steps reads them).
+static inline const float* xPlane(const LeafWithNeighbours& leaf, int x, bool up)
+{
+    if (up) return x < 7 ? leaf.data + (x + 1) * 64 : leaf.next[0][1];
+    return x > 0 ? leaf.data + (x - 1) * 64 : leaf.next[0][0] + 7 * 64;
+}
+
 /// steps[i] for each of the leaf's 512 voxels (offset order): the length of its change.
 static inline void leafStepsLoop(const LeafWithNeighbours& leaf, float* steps)
 {
     const float* data = leaf.data;
     for (int x = 0; x < 8; ++x) {
-        const float* xUp = x < 7 ? data + (x + 1) * 64 : leaf.next[0][1];
-        const float* xDown = x > 0 ? data + (x - 1) * 64 : leaf.next[0][0] + 7 * 64;
+        const float *xUp = xPlane(leaf, x, true), *xDown = xPlane(leaf, x, false);
         for (int y = 0; y < 8; ++y) {
             const int r = x * 64 + y * 8;
             const float* row = data + r;

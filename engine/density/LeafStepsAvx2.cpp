@@ -69,8 +69,7 @@ void stepsInLanes(const LeafWithNeighbours& leaf, float* steps, float lo, float 
     const __m256i upIndex = _mm256_setr_epi32(1, 2, 3, 4, 5, 6, 7, 7);
     const __m256i downIndex = _mm256_setr_epi32(0, 0, 1, 2, 3, 4, 5, 6);
     for (int x = 0; x < 8; ++x) {
-        const float* xUp = x < 7 ? data + (x + 1) * 64 : leaf.next[0][1];
-        const float* xDown = x > 0 ? data + (x - 1) * 64 : leaf.next[0][0] + 7 * 64;
+        const float *xUp = xPlane(leaf, x, true), *xDown = xPlane(leaf, x, false);
         for (int y = 0; y < 8; ++y) {
             const int r = x * 64 + y * 8;
             const float* row = data + r;

@@ -51,14 +51,13 @@ void addTileBoundsAvx2(const TileColumnStrut& s, int a0, int a1, int b0, int b1,
     // The lanes' ey (the same for every column), and which lanes are tiles (b <= b1).
     constexpr int kGroups = 16;
     __m256d eyOf[kGroups], eyuyOf[kGroups];
-    unsigned liveOf[kGroups];
+    __m256d liveOf[kGroups];
     for (int g = 0; g * 4 <= b1 - b0 && g < kGroups; ++g) {
         const __m256d b = _mm256_add_pd(_mm256_set1_pd(double(b0 + 4 * g)), lane);
         eyOf[g] = _mm256_sub_pd(_mm256_add_pd(cy0, _mm256_mul_pd(b, stepY)), ay);
         eyuyOf[g] = _mm256_mul_pd(eyOf[g], uy);
-        liveOf[g] = bits(_mm256_cmp_pd(b, _mm256_set1_pd(double(b1)), _CMP_LE_OQ));
+        liveOf[g] = _mm256_cmp_pd(b, _mm256_set1_pd(double(b1)), _CMP_LE_OQ);
     }
-    const __m256i laneBit = _mm256_setr_epi64x(1, 2, 4, 8);
     for (int a = a0; a <= a1; ++a) {
         TileColumnReach reach;
         double* upperA = upper + std::size_t(a) * tilesY;
@@ -66,7 +65,7 @@ void addTileBoundsAvx2(const TileColumnStrut& s, int a0, int a1, int b0, int b1,
         const double exs = s.cx0 + a * s.stepX - s.ax;
         const __m256d ex = _mm256_set1_pd(exs), exux = _mm256_set1_pd(exs * s.ux);
         for (int b = b0, g = 0; b <= b1; b += 4, ++g) {
-            const unsigned live = liveOf[g];
+            const __m256d live = liveOf[g];
             // ey = cy0 + b stepY - ay; h = ex ux + ey uy + ez uz clamped to [0, L].
             const __m256d ey = eyOf[g];
             const __m256d hRaw = _mm256_add_pd(_mm256_add_pd(exux, eyuyOf[g]), ezuz);
@@ -76,8 +75,9 @@ void addTileBoundsAvx2(const TileColumnStrut& s, int a0, int a1, int b0, int b1,
                           rz = _mm256_sub_pd(ez, _mm256_mul_pd(h, uz));
             const __m256d dSqr =
                 _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, rx), _mm256_mul_pd(ry, ry)), _mm256_mul_pd(rz, rz));
-            const unsigned halo = live & bits(_mm256_cmp_pd(dSqr, farHaloSqr, _CMP_LT_OQ));
-            const unsigned within = live & bits(_mm256_cmp_pd(dSqr, farSqr, _CMP_LT_OQ));
+            const __m256d withinMask = _mm256_and_pd(live, _mm256_cmp_pd(dSqr, farSqr, _CMP_LT_OQ));
+            const unsigned halo = bits(_mm256_and_pd(live, _mm256_cmp_pd(dSqr, farHaloSqr, _CMP_LT_OQ)));
+            const unsigned within = bits(withinMask);
             const unsigned inner = within & bits(_mm256_cmp_pd(dSqr, innerSqr, _CMP_LT_OQ));
             reach.halo |= std::uint64_t(halo) << b;
             reach.inner |= std::uint64_t(inner) << b;
@@ -91,10 +91,7 @@ void addTileBoundsAvx2(const TileColumnStrut& s, int a0, int a1, int b0, int b1,
             const __m256d near = select(_mm256_cmp_pd(zero, root, _CMP_LT_OQ), zero, root);
             const __m256d x = _mm256_mul_pd(_mm256_mul_pd(near, near), inv2s2);
             const __m256d at = _mm256_mul_pd(x, steps);
-            const __m256i withinMask =
-                _mm256_cmpeq_epi64(_mm256_and_si256(_mm256_set1_epi64x(within), laneBit), laneBit);
-            const __m256d tabledMask =
-                _mm256_and_pd(_mm256_castsi256_pd(withinMask), _mm256_cmp_pd(at, last, _CMP_LT_OQ));
+            const __m256d tabledMask = _mm256_and_pd(withinMask, _mm256_cmp_pd(at, last, _CMP_LT_OQ));
             const unsigned tabled = bits(tabledMask);
             // Truncation: the node at or below x (at >= 0).
             const __m128i index = _mm256_cvttpd_epi32(select(tabledMask, zero, at));
@@ -108,9 +105,9 @@ void addTileBoundsAvx2(const TileColumnStrut& s, int a0, int a1, int b0, int b1,
                 kernel = _mm256_load_pd(ks);
             }
             const __m256d add = _mm256_mul_pd(peak, kernel);
-            _mm256_maskstore_pd(upperA + b, withinMask, _mm256_add_pd(_mm256_maskload_pd(upperA + b, withinMask), add));
-            _mm256_maskstore_pd(peaksA + b, withinMask,
-                                _mm256_add_pd(_mm256_maskload_pd(peaksA + b, withinMask), peak));
+            const __m256i store = _mm256_castpd_si256(withinMask);
+            _mm256_maskstore_pd(upperA + b, store, _mm256_add_pd(_mm256_maskload_pd(upperA + b, store), add));
+            _mm256_maskstore_pd(peaksA + b, store, _mm256_add_pd(_mm256_maskload_pd(peaksA + b, store), peak));
         }
         reachOf[a - a0] = reach;
     }
