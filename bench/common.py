@@ -11,8 +11,21 @@ ROOT = Path(__file__).resolve().parent.parent
 PYTHON = "/usr/bin/python3" if Path("/usr/bin/python3").exists() else sys.executable
 
 
+#: The CPU seconds of the last measure()'s command and its children: {"user": .., "system": ..}.
+#: The system time shows what fresh memory cost: on a virtual machine that reports its free pages
+#: to its host, each page a run touches first is backed again by the host (bench/history.md,
+#: forty-fifth round: W2g's trimmed frame 1.2-2.2 s of system time cold, 0.16 s on pages just freed).
+LAST_CPU = {"user": 0.0, "system": 0.0}
+
+
+def cpu_text():
+    """LAST_CPU as a short phrase for a workload's report line."""
+    return f"user {LAST_CPU['user']:.2f} s, system {LAST_CPU['system']:.2f} s"
+
+
 def measure(cmd, env=None, cwd=None):
     """Runs cmd; returns (seconds, peak MB of the process, stdout+stderr). Exits on failure.
+    Its CPU times (user, system) are left in LAST_CPU.
 
     The dirty pages earlier runs left (a side's 1 GB STL) are written out first, so neither side
     of a comparison pays for the other's writeback (W2g's voxlat STL stage took 1.9 s instead of
@@ -33,6 +46,7 @@ def measure(cmd, env=None, cwd=None):
     out = proc.stdout.read().decode(errors="replace")
     _, status, usage = os.wait4(proc.pid, 0)
     seconds = time.perf_counter() - start
+    LAST_CPU["user"], LAST_CPU["system"] = usage.ru_utime, usage.ru_stime
     peak_mb = usage.ru_maxrss / 1024.0
     if peak_file:
         text = open(peak_file).read().split()

@@ -17,7 +17,7 @@ agents on the 2 cores): 6.0x, 8.3x, 7.9x (median 15.44 s vs 121.63 s), peak 385 
 run missed at that load."""
 import json
 
-from common import PYTHON, ROOT, measure, row, verdict
+from common import PYTHON, ROOT, cpu_text, measure, row, verdict
 
 TITLE = "W1  gyroid network 30 %, 50 mm cube, 0.1 mm voxels, recipe -> STL"
 
@@ -32,10 +32,11 @@ def run(voxlat, tmp):
     for i in range(REPEATS):
         out = tmp / f"w1-{i}"
         t_v, m_v, _ = measure([voxlat, "-q", "run", "--no-preview", ROOT / "data/recipes/gyroid.yaml", "--out", out])
+        cpu_v = cpu_text()
         report = json.loads((out / "report.json").read_text())
         t_r, m_r, out_r = measure([PYTHON, ROOT / "bench/reference/w1_openvdb_dense.py", "--out", tmp / "w1-ref.stl"])
         pairs.append((t_v, m_v, t_r, m_r, report, out_r))
-        print(f"  pair {i + 1}: voxlat {t_v:.2f} s, reference {t_r:.2f} s = {t_r / t_v:.1f}x; voxlat stages: "
+        print(f"  pair {i + 1}: voxlat {t_v:.2f} s ({cpu_v}), reference {t_r:.2f} s = {t_r / t_v:.1f}x; voxlat stages: "
               + ", ".join(f"{k} {v:.2f}s" for k, v in report["timings_s"].items()))
     ratios = sorted(p[2] / p[0] for p in pairs)
     ratio = ratios[len(ratios) // 2]
