@@ -18,9 +18,9 @@ PYTHON = "/usr/bin/python3" if Path("/usr/bin/python3").exists() else sys.execut
 LAST_CPU = {"user": 0.0, "system": 0.0}
 
 
-def cpu_text():
-    """LAST_CPU as a short phrase for a workload's report line."""
-    return f"user {LAST_CPU['user']:.2f} s, system {LAST_CPU['system']:.2f} s"
+def cpu_text(cpu=LAST_CPU):
+    """CPU times (LAST_CPU, or a copy of it kept past later runs) as a phrase for a report line."""
+    return f"user {cpu['user']:.2f} s, system {cpu['system']:.2f} s"
 
 
 def measure(cmd, env=None, cwd=None):

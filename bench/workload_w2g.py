@@ -94,8 +94,7 @@ import os
 
 import numpy as np
 
-import common
-from common import PYTHON, ROOT, cpu_text, measure, row, verdict
+from common import LAST_CPU, PYTHON, ROOT, cpu_text, measure, row, verdict
 
 TITLE = ("W2g BCC convolution lattices off the periodic path (graded radii, trimmed, cylinder frame, "
          "a 1e5-strut wireframe) vs numpy")
@@ -210,7 +209,7 @@ def case(voxlat, tmp, name, struts_yaml, box, struts, target, radius=LINEAR_Z):
                       f"  lattice: {{struts: {struts_yaml}, kernel: {{gaussian: {{sigma: {SIGMA}}}}}, radius: {radius}, "
                       f"density: 0.20}}\nresult: lattice\nallow: [pieces]\noutputs: {{mesh: {name}.stl}}\n")
     t_v, m_v, _ = measure([voxlat, "-q", "run", recipe, "--out", tmp / name, "--no-preview"])
-    cpu_v, cpu = cpu_text(), dict(common.LAST_CPU)
+    cpu = dict(LAST_CPU)  # the reference's run below replaces LAST_CPU
     report = json.loads((tmp / name / "report.json").read_text())
     frame = np.array([[a, b] for a, b in struts])
     np.save(tmp / f"{name}-frame.npy", frame)
@@ -230,7 +229,7 @@ def case(voxlat, tmp, name, struts_yaml, box, struts, target, radius=LINEAR_Z):
     print(f"  voxlat: density {report['fields']['lattice']['achieved_density']:.5f}, "
           f"{report['mesh']['triangles']} triangles; reference: {' | '.join(out_r.strip().splitlines()[-2:])}")
     print("  voxlat stages: " + ", ".join(f"{k} {v:.2f}s" for k, v in report["timings_s"].items()))
-    print(f"  voxlat CPU: {cpu_v}")
+    print(f"  voxlat CPU: {cpu_text(cpu)}")
     return {"voxlat_s": t_v, "reference_s": t_r, "ratio": ratio, "voxlat_mb": m_v, "reference_mb": m_r,
             "struts": len(struts), "voxlat_user_s": cpu["user"], "voxlat_system_s": cpu["system"]}
 
