@@ -400,8 +400,10 @@ TEST(StrutConvolution, PixelRowsStayWithinTheirTableBound)
 {
     // A slicer's block at a printer's pitch (W10: sigma 0.2, pixels 19 x 24 um, 66 x 66 with the
     // halo) over graded BCC struts: every row takes J from the strut's own table (h steps by
-    // 0.024 / sqrt 3 = 0.069 sigma). Against values() (std::erf per point), each point within
-    // 0.0128 (delta / sigma)^4 of the peaks of the struts within reach, delta = 0.024 / sqrt 3.
+    // 0.024 / sqrt 3 = 0.069 sigma), made from its even nodes (planeNodesFromEven: two steps,
+    // 0.139 sigma, within 0.15 sigma). Against values() (std::erf per point), each point within
+    // 0.0128 ((2 delta / sigma)^4 + (delta / sigma)^4) of the peaks of the struts within reach,
+    // delta = 0.024 / sqrt 3: the odd nodes' Hermite error, then the row's own.
     std::vector<ConvolutionStrut> struts = bccStruts(2.0);
     for (std::size_t j = 0; j < struts.size(); ++j) {
         struts[j].sigma = 0.2;
@@ -409,7 +411,8 @@ TEST(StrutConvolution, PixelRowsStayWithinTheirTableBound)
         struts[j].w1 = 2.5 - 0.03 * double(j % 5);
     }
     const StrutConvolution f(struts);
-    const double delta = 0.024 / std::sqrt(3.0), factor = 0.0128 * std::pow(delta / 0.2, 4);
+    const double delta = 0.024 / std::sqrt(3.0),
+                 factor = 0.0128 * (std::pow(2.0 * delta / 0.2, 4) + std::pow(delta / 0.2, 4));
     double worst = 0.0, worstShare = 0.0;
     for (const Vec3d& origin : {Vec3d(2.01, 2.02, 2.3), Vec3d(3.3, 2.9, 3.05), Vec3d(4.4, 5.1, 4.77)}) {
         GridBatch batch;
@@ -727,6 +730,72 @@ TEST(StrutRows, TabledFourLanesAddTheSameDoublesAsTheScalarLoop)
     if (hasAvx512Rows()) {
         EXPECT_EQ(eightLaneRows, 20000);
     }
+}
+
+TEST(StrutRows, PlaneNodesFromEvenNodesAreTheTablesOwnOrWithinTheirHermiteBound)
+{
+    // planeNodesFromEven (a plane's table from every second node): its even nodes are
+    // strutRowNodesScalar's doubles bit for bit (made at twice the step), its odd ones within
+    // 0.0128 (2 step / sigma)^4 of the strut's peak wMax sigma sqrt(2 pi) of the exact J (the
+    // value std::erf gives) and their slopes close to step J'; a node's doubles hang on its index
+    // alone (another first and count give the same), and the four-lane form gives the same.
+    std::mt19937_64 rng(20261208);
+    std::uniform_real_distribution<double> unit(-1.0, 1.0);
+    double worstShare = 0.0;
+    int odd = 0;
+    for (int trial = 0; trial < 2000; ++trial) {
+        StrutRowConstants c = randomUnitStrut(rng);
+        c.slope = trial % 3 == 0 ? 0.0 : 0.3 * unit(rng);
+        const double w1 = c.w0 + c.slope * c.length;
+        if (!(std::min(c.w0, w1) > 0.0)) continue;
+        const double step = (0.01 + 0.065 * std::abs(unit(rng))) * c.sigma * (trial % 2 ? 1.0 : -1.0);
+        const int count = 1 + int(rng() % 60), first = int(rng() % 80) - 40;
+        const double h0 = 0.0;
+        std::vector<double> value(std::size_t(count) + 4), slope(value.size()), exactV(value.size()),
+            exactS(value.size());
+        planeNodesFromEven(c, h0, step, first, count, false, value.data(), slope.data());
+        strutRowNodesScalar(c, h0, step, first, count, exactV.data(), exactS.data());
+        const double peak = std::max(c.w0, w1) * c.sigma * std::sqrt(2.0 * std::numbers::pi);
+        const double bound = 0.0128 * std::pow(2.0 * std::abs(step) / c.sigma, 4) * peak;
+        for (int m = 0; m < count; ++m) {
+            const int n = first + m;
+            if (n % 2 == 0) {
+                ASSERT_EQ(value[std::size_t(m)], exactV[std::size_t(m)]) << trial << " node " << n;
+                ASSERT_EQ(slope[std::size_t(m)], exactS[std::size_t(m)]) << trial << " node " << n;
+                continue;
+            }
+            ++odd;
+            // J itself from std::erf: the table's own nodes are within 1e-10 of a peak of it.
+            const double h = h0 + double(n) * step, s2 = c.sigma * std::numbers::sqrt2;
+            const double i0 =
+                c.sigma * std::sqrt(std::numbers::pi / 2.0) * (std::erf((c.length - h) / s2) + std::erf(h / s2));
+            const double gA = std::exp(-h * h / (2.0 * c.sigma * c.sigma)),
+                         gL = std::exp(-(c.length - h) * (c.length - h) / (2.0 * c.sigma * c.sigma));
+            const double j = (c.w0 + c.slope * h) * i0 + c.slope * c.sigma * c.sigma * (gA - gL);
+            const double miss = std::abs(value[std::size_t(m)] - j);
+            ASSERT_LE(miss, bound + 1e-10 * peak) << trial << " node " << n;
+            worstShare = std::max(worstShare, miss / bound);
+            // The slope (step J') to the same order: its leading error term vanishes at the midpoint.
+            EXPECT_NEAR(slope[std::size_t(m)], exactS[std::size_t(m)], bound + 1e-10 * peak) << trial;
+        }
+        // Another span over the same nodes: the same doubles node by node.
+        const int first2 = first - 1 - int(rng() % 3), count2 = count + 5;
+        std::vector<double> value2(std::size_t(count2) + 4), slope2(value2.size());
+        planeNodesFromEven(c, h0, step, first2, count2, false, value2.data(), slope2.data());
+        for (int m = 0; m < count; ++m) {
+            ASSERT_EQ(value[std::size_t(m)], value2[std::size_t(m + first - first2)]) << trial;
+            ASSERT_EQ(slope[std::size_t(m)], slope2[std::size_t(m + first - first2)]) << trial;
+        }
+        if (hasAvx2Rows()) {
+            std::vector<double> valueV(value.size()), slopeV(value.size());
+            planeNodesFromEven(c, h0, step, first, count, true, valueV.data(), slopeV.data());
+            ASSERT_EQ(std::memcmp(value.data(), valueV.data(), std::size_t(count) * sizeof(double)), 0) << trial;
+            ASSERT_EQ(std::memcmp(slope.data(), slopeV.data(), std::size_t(count) * sizeof(double)), 0) << trial;
+        }
+    }
+    EXPECT_GT(odd, 10000);
+    EXPECT_GT(worstShare, 0.0);
+    RecordProperty("worst_share_of_bound", std::to_string(worstShare));
 }
 
 TEST(StrutRows, SeededTabledRowsAddTheFilledRowsDoubles)
