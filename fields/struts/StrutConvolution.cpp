@@ -568,7 +568,7 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
             const double hFirst = d0.x() * u.x() + d0.y() * u.y() + d0.z() * u.z();
             const double hLast = hFirst + (nx - 1) * dx * u.x() + (ny - 1) * dy * u.y();
             const double h0 = halvedNodes ? 0.0 : (hz > 0.0 ? std::min(hFirst, hLast) : std::max(hFirst, hLast)) - hz;
-            int nLo = std::numeric_limits<int>::max(), nHi = -1;
+            int nLo = std::numeric_limits<int>::max(), nHi = std::numeric_limits<int>::min();
             for (int i = columnFrom(iFirst); i <= iLast; i = columnFrom(i + 1)) {
                 if (makesNoPoints(i)) continue;  // empty rows (pass 1)
                 for (int jj = 0; jj < ny; ++jj) {
