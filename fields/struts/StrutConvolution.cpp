@@ -559,12 +559,11 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         if (tabled) {
             // h at a row's point 0 is hRow (below); nodes h0 + n hz, with h0 one node past the
             // hRow of the batch's first or last row: a plane's rows (one per column) then all have
-            // n0 + tau of at least about 1. A block's rows (ny > 1) whose hRow grows along one of
-            // x and y and falls along the other reach past both: their n0 may be negative, and
-            // the table spans whichever nodes the rows read (nLo..nHi), of any sign. A plane's
-            // table taken from its even nodes (halvedNodes) has its nodes at n hz from the strut's
-            // start (h0 = 0), so its nodes, even and odd, are the same for every plane that reads
-            // them (a stack's and its blocks' alone, to the rows' own rounding).
+            // n0 + tau of at least about 1 (but for halvedNodes, below). A block's rows (ny > 1) whose hRow grows along
+            // one of x and y and falls along the other reach past both: their n0 may be negative, and the table spans
+            // whichever nodes the rows read (nLo..nHi), of any sign. A plane's table taken from its even nodes
+            // (halvedNodes) has its nodes at n hz from the strut's start (h0 = 0), so its nodes, even and odd, are the
+            // same for every plane that reads them (a stack's and its blocks' alone, to the rows' own rounding).
             const double hFirst = d0.x() * u.x() + d0.y() * u.y() + d0.z() * u.z();
             const double hLast = hFirst + (nx - 1) * dx * u.x() + (ny - 1) * dy * u.y();
             const double h0 = halvedNodes ? 0.0 : (hz > 0.0 ? std::min(hFirst, hLast) : std::max(hFirst, hLast)) - hz;
@@ -619,20 +618,17 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
                 nodeValue.resize(phaseStride * std::size_t(phases));
                 nodeSlope.resize(phaseStride * std::size_t(phases));
                 const std::size_t written = avx2 ? (count + 3) / 4 * 4 : count;
-                if (halvedNodes) {
-                    // A plane's table from its even nodes alone (planeNodesFromEven): nodes
-                    // nLo .. nLo + written - 1, the odd ones by the Hermite cubic of the two even
-                    // nodes beside them.
-                    planeNodesFromEven(constants, h0, hz, nLo, int(written), avx2, nodeValue.data(), nodeSlope.data());
-                    std::fill(nodeValue.data() + written, nodeValue.data() + phaseStride, 0.0);
-                    std::fill(nodeSlope.data() + written, nodeSlope.data() + phaseStride, 0.0);
-                }
-                for (int p = 0; p < (halvedNodes ? 0 : phases); ++p) {
+                for (int p = 0; p < phases; ++p) {
                     // Phase p's nodes h0 + (m q + p) hz / m, q = nLo.., with slopes of their step hz / m.
                     const double from = phases == 1 ? h0 : h0 + p * (hz / phases);
                     double* value = nodeValue.data() + std::size_t(p) * phaseStride;
                     double* slope = nodeSlope.data() + std::size_t(p) * phaseStride;
-                    if (avx2)
+                    // A plane's table (one phase) from its even nodes alone, the odd ones by the
+                    // Hermite cubic of the two even nodes beside them: the nodes the four-lane
+                    // form writes (written), each the same whichever span holds it.
+                    if (halvedNodes)
+                        planeNodesFromEven(constants, from, hz, nLo, int(written), avx2, value, slope);
+                    else if (avx2)
                         strutRowNodesAvx2(constants, from, hz, nLo, int(count), value, slope);
                     else
                         strutRowNodesScalar(constants, from, hz, nLo, int(count), value, slope);
