@@ -552,8 +552,8 @@ void StrutConvolution::evaluate(const GridBatch& batch, std::span<double> out, c
         // two steps stay within 0.15 sigma (planeNodesFromEven: the odd nodes at most
         // 0.0128 (2 hz / sigma)^4 <= 6.5e-6 of the peak off, the row's own 1.3e-6 on top): half
         // the table's erf and exponential look-ups, a plane's rows reading a hundred nodes each
-        // strut. A block's grids (the mesher's) keep every node.
-        const bool halvedNodes = tabled && batch.nz == 1 && phases == 1 && 2.0 * std::abs(hz) <= 0.15 * sigma;
+        // strut (a plane has one phase). A block's grids (the mesher's) keep every node.
+        const bool halvedNodes = tabled && batch.nz == 1 && 2.0 * std::abs(hz) <= 0.15 * sigma;
         int nodeLo = 0;
         std::size_t phaseStride = 0;
         if (tabled) {
